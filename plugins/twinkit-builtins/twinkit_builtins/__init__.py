@@ -1,0 +1,1 @@
+"""Built-in executors and generic steps of twinkit."""

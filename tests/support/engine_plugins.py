@@ -1,0 +1,119 @@
+"""Small real plugins for engine tests (loaded with TWINKIT_PLUGIN_MODULES=tests.support.engine_plugins).
+
+Each run of a step appends its name to the file named by $TWINKIT_TEST_COUNTER, so tests
+can count how often a step really ran, across processes.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from twinkit import hookimpl
+
+
+def _count(name: str) -> None:
+    path = os.environ.get("TWINKIT_TEST_COUNTER")
+    if path:
+        with open(path, "a") as f:
+            f.write(name + "\n")
+
+
+@dataclass
+class MakeParams:
+    value: int = 1
+    size_mb: float = 0.0
+    sleep_s: float = 0.0
+    fail: bool = False
+
+
+def make(params: MakeParams, ctx, *, out_data_txt: Path) -> dict:
+    """Write a number (and optional padding)."""
+    _count("make")
+    sleep = params.sleep_s or float(os.environ.get("TWINKIT_TEST_SLEEP", "0"))
+    if sleep:
+        Path(ctx.workdir, "started").write_text("x")
+        time.sleep(sleep)
+    if params.fail:
+        raise RuntimeError("boom on purpose")
+    with open(out_data_txt, "w") as f:
+        f.write(f"{params.value}\n")
+        if params.size_mb:
+            f.write("x" * int(params.size_mb * 2**20))
+    return {"value": params.value}
+
+
+def double(params, ctx, *, in_data_txt: Path, out_double_txt: Path) -> dict:
+    """Double the number."""
+    _count("double")
+    v = int(Path(in_data_txt).read_text().splitlines()[0])
+    out_double_txt.write_text(f"{2 * v}\n")
+    return {"value": 2 * v}
+
+
+@dataclass
+class ScaleParams:
+    factor: int = 3
+
+
+def scale(params: ScaleParams, ctx, *, in_double_txt: Path, out_scaled_txt: Path) -> dict:
+    """Multiply by a factor."""
+    _count("scale")
+    v = int(Path(in_double_txt).read_text().splitlines()[0])
+    out_scaled_txt.write_text(f"{params.factor * v}\n")
+    return {"value": params.factor * v}
+
+
+def read_seed(params, ctx, *, in_seed_txt: Path, out_data_txt: Path) -> None:
+    """Copy a site input."""
+    _count("read_seed")
+    out_data_txt.write_text(Path(in_seed_txt).read_text())
+
+
+def make_ply(params, ctx, *, out_mesh_ply: Path) -> None:
+    """A tiny ASCII PLY mesh (one triangle)."""
+    _count("make_ply")
+    out_mesh_ply.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 2 0\n3 0 1 2\n"
+    )
+
+
+@dataclass
+class TilesParams:
+    n: int = 3
+
+
+def tiles(params: TilesParams, ctx, *, in_data_txt: Path, out_tiles_json: Path) -> None:
+    """List n tiles."""
+    _count("tiles")
+    out_tiles_json.write_text(json.dumps([{"i": i} for i in range(params.n)]))
+
+
+def per_tile(params, ctx, *, in_data_txt: Path, item: dict, out_tile_txt: Path) -> dict:
+    """One fanned-out item: value + tile index; records the worker pid."""
+    _count(f"per_tile{item['i']}")
+    v = int(Path(in_data_txt).read_text().splitlines()[0])
+    out_tile_txt.write_text(f"{v + item['i']}\n{os.getpid()}\n")
+    return {"pid": os.getpid()}
+
+
+def gather(params, ctx, *, in_tile_txt: list, out_merged_txt: Path) -> None:
+    """Sum the tiles."""
+    _count("gather")
+    total = sum(int(Path(p).read_text().splitlines()[0]) for p in in_tile_txt)
+    out_merged_txt.write_text(f"{total}\n")
+
+
+@hookimpl
+def twinkit_register_steps(register):
+    register("make", make, params=MakeParams)
+    register("read_seed", read_seed)
+    register("make_ply", make_ply)
+    register("double", double)
+    register("scale", scale, params=ScaleParams)
+    register("tiles", tiles, params=TilesParams)
+    register("per_tile", per_tile)
+    register("gather", gather)

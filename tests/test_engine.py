@@ -1,0 +1,248 @@
+"""The step engine's rules, each exercised through the real ``twinkit`` command."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+
+def test_first_run_then_everything_reused(project):
+    r = project.run("site=t", "recipe=chain")
+    assert r.rc == 0, r.text
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "6\n"
+    assert [project.status_of(r, f) for f in ("01_make", "02_double", "03_scale")] == ["ran"] * 3
+    project.reset_counts()
+    r2 = project.run("site=t", "recipe=chain")
+    assert r2.rc == 0, r2.text
+    assert [project.status_of(r2, f) for f in ("01_make", "02_double", "03_scale")] == ["reused"] * 3
+    assert project.counts() == {}
+
+
+def test_parameter_change_reruns_only_what_depends_on_it(project):
+    assert project.run("site=t", "recipe=chain").rc == 0
+    project.reset_counts()
+    r = project.run("site=t", "recipe=chain", "steps.scale.factor=5")
+    assert r.rc == 0, r.text
+    assert project.counts() == {"scale": 1}
+    assert "factor 3 -> 5" in r.text
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "10\n"
+    # going back finds the earlier result by key, without computing
+    project.reset_counts()
+    r = project.run("site=t", "recipe=chain")
+    assert project.status_of(r, "03_scale") == "cached"
+    assert project.counts() == {}
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "6\n"
+
+
+def test_input_content_change_and_touch(project):
+    seed = project.tmp / "seed.txt"
+    seed.write_text("4\n")
+    project.site("s", f"name: t\ninputs:\n  seed: {seed}\n")
+    project.recipe("fromseed", ["{id: read, uses: step/read_seed}", "{id: double, uses: step/double}"])
+    assert project.run("site=s", "recipe=fromseed").rc == 0
+    assert (project.ws / "02_double" / "double.txt").read_text() == "8\n"
+    # touching without changing re-runs nothing
+    project.reset_counts()
+    future = time.time() + 100
+    os.utime(seed, (future, future))
+    r = project.run("site=s", "recipe=fromseed")
+    assert r.rc == 0 and project.counts() == {}, r.text
+    # changing the content re-runs both
+    seed.write_text("5\n")
+    r = project.run("site=s", "recipe=fromseed")
+    assert project.counts() == {"read_seed": 1, "double": 1}, r.text
+    assert "input changed: in_seed_txt" in r.text
+    assert (project.ws / "02_double" / "double.txt").read_text() == "10\n"
+
+
+def test_hand_edit_is_kept_and_downstream_reruns(project):
+    assert project.run("site=t", "recipe=chain").rc == 0
+    edited = project.ws / "02_double" / "double.txt"
+    edited.unlink()  # like an editor that saves a new file
+    edited.write_text("100\n")
+    project.reset_counts()
+    r = project.run("site=t", "recipe=chain")
+    assert r.rc == 0, r.text
+    assert project.status_of(r, "02_double") == "edited"
+    assert "kept hand-edited double.txt" in r.text
+    assert project.counts() == {"scale": 1}
+    assert edited.read_text() == "100\n"
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "300\n"
+    # the next run keeps the edit and reuses what depends on it
+    project.reset_counts()
+    r = project.run("site=t", "recipe=chain")
+    assert project.status_of(r, "02_double") == "edited" and project.counts() == {}
+    # forcing the step discards the edit, but sets it aside first
+    r = project.run("site=t", "recipe=chain", "rerun=[double]")
+    assert r.rc == 0, r.text
+    assert edited.read_text() == "2\n"
+    kept = list((project.ws / ".cache" / "edits").glob("02_double-*/double.txt"))
+    assert kept and kept[0].read_text() == "100\n"
+    # scale's first result (for the computed input) is still stored by key: found, not recomputed
+    assert project.counts() == {"double": 1}
+    assert project.status_of(r, "03_scale") == "cached"
+
+
+def test_in_place_edit_of_hardlinked_output_does_not_poison_the_cache(project):
+    assert project.run("site=t", "recipe=chain").rc == 0
+    with open(project.ws / "01_make" / "data.txt", "w") as f:  # in place: same inode as the stored copy
+        f.write("7\n")
+    r = project.run("site=t", "recipe=chain")
+    assert project.status_of(r, "01_make") == "edited"
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "42\n"
+    r = project.run("site=t", "recipe=chain", "rerun=[make]")
+    assert r.rc == 0, r.text
+    assert (project.ws / "01_make" / "data.txt").read_text() == "1\n"
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "6\n"
+
+
+def test_killed_step_is_not_taken_as_done(project):
+    p = project.popen("site=t", "recipe=chain", env=project.env(TWINKIT_TEST_SLEEP="60"))
+    store_tmp = project.ws / ".cache" / "steps" / ".tmp"
+    deadline = time.time() + 60
+    while not list(store_tmp.glob("*/started")) and time.time() < deadline:
+        time.sleep(0.1)
+    assert list(store_tmp.glob("*/started")), "step never started"
+    os.killpg(p.pid, signal.SIGKILL)
+    p.wait()
+    assert not (project.ws / "01_make").exists()
+    assert not [d for d in (project.ws / ".cache" / "steps").iterdir() if d.is_dir() and d.name != ".tmp"]
+    project.reset_counts()
+    r = project.run("site=t", "recipe=chain")
+    assert r.rc == 0, r.text
+    assert project.status_of(r, "01_make") == "ran" and project.counts()["make"] == 1
+    assert not list(store_tmp.iterdir()), "leftovers of the killed run were not cleaned"
+
+
+def test_failing_step_keeps_earlier_results(project):
+    assert project.run("site=t", "recipe=chain").rc == 0
+    before = (project.ws / "01_make" / "data.txt").read_text()
+    r = project.run("site=t", "recipe=chain", "steps.make.fail=true")
+    assert r.rc == 1
+    assert "step 'make' (step/make" in r.err and "boom on purpose" in r.err
+    assert "Traceback" not in r.err
+    assert (project.ws / "01_make" / "data.txt").read_text() == before
+    assert (project.ws / "03_scale" / "scaled.txt").exists()
+    runs = sorted((project.ws / "runs").iterdir())
+    assert "boom on purpose" in (runs[-1] / "run.log").read_text()
+    assert json.loads((runs[-1] / "manifest.json").read_text())["status"] == "failed"
+
+
+def test_manual_step_exits_then_resumes(project):
+    project.recipe("withmanual", ["{id: make, uses: step/make}",
+                                  "{id: pick, manual: {instructions: 'Write a number into {path}', outputs: [picked.txt]}}",
+                                  "{id: double, uses: step/double}"])
+    r = project.run("site=t", "recipe=withmanual")
+    assert r.rc == 3, r.text
+    assert "waits for" in r.err and "picked.txt" in r.err
+    assert (project.ws / "02_pick" / "INSTRUCTIONS.txt").exists()
+    assert not (project.ws / "03_double").exists()
+    (project.ws / "02_pick" / "picked.txt").write_text("9\n")
+    r = project.run("site=t", "recipe=withmanual")
+    assert r.rc == 0, r.text
+    assert project.status_of(r, "02_pick") == "manual"
+    assert project.status_of(r, "01_make") == "reused"
+
+
+def test_manual_step_waits_when_interactive(project):
+    project.recipe("withmanual", ["{id: make, uses: step/make}",
+                                  "{id: pick, manual: {instructions: 'Put it at {path}', outputs: [picked.txt]}}"])
+    p = project.popen("site=t", "recipe=withmanual", "engine.interactive=true", "engine.manual_timeout_s=60")
+    target = project.ws / "02_pick" / "picked.txt"
+    deadline = time.time() + 60
+    while not (project.ws / "02_pick" / "INSTRUCTIONS.txt").exists() and time.time() < deadline:
+        time.sleep(0.1)
+    assert p.poll() is None, "the run should be waiting"
+    target.write_text("1\n")
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 0, err
+    assert "manual" in err
+
+
+def test_fan_out_runs_items_in_parallel_and_caches_each(project):
+    project.recipe("fan", ["{id: make, uses: step/make}", "{id: tiles, uses: step/tiles}",
+                           "{id: per_tile, uses: step/per_tile, foreach: tiles.json}",
+                           "{id: gather, uses: step/gather}"])
+    r = project.run("site=t", "recipe=fan", "steps.tiles.n=4", "executor.workers=2")
+    assert r.rc == 0, r.text
+    assert (project.ws / "04_gather" / "merged.txt").read_text() == f"{4 * 1 + 0 + 1 + 2 + 3}\n"
+    pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(4)}
+    assert len(pids) == 2, "items should run in two worker processes"
+    project.reset_counts()
+    r = project.run("site=t", "recipe=fan", "steps.tiles.n=5", "executor.workers=2")
+    assert r.rc == 0, r.text
+    assert project.counts() == {"tiles": 1, "per_tile4": 1, "gather": 1}
+
+
+def test_multirun_computes_shared_upstream_once(project):
+    r = project.run("-m", "site=t", "recipe=chain", "steps.scale.factor=2,3,4", "steps.make.sleep_s=1")
+    assert r.rc == 0, r.text
+    c = project.counts()
+    assert c == {"make": 1, "double": 1, "scale": 3}, c
+    jobs = sorted((project.ws / "sweeps").glob("*/job*"))
+    assert len(jobs) == 3
+    values = sorted(int((j / "03_scale" / "scaled.txt").read_text()) for j in jobs)
+    assert values == [4, 6, 8]
+    for j in jobs:
+        assert json.loads((j / "manifest.json").read_text())["status"] == "ok"
+
+
+def test_two_runs_on_one_site_are_refused(project):
+    p = project.popen("site=t", "recipe=chain", env=project.env(TWINKIT_TEST_SLEEP="30"))
+    try:
+        deadline = time.time() + 60
+        while not list((project.ws / ".cache" / "steps" / ".tmp").glob("*/started")) and time.time() < deadline:
+            time.sleep(0.1)
+        r = project.run("site=t", "recipe=chain")
+        assert r.rc == 2
+        assert "another twinkit run is using" in r.err and str(project.ws) in r.err
+    finally:
+        os.killpg(p.pid, signal.SIGKILL)
+        p.wait()
+
+
+def test_status_shows_decisions_without_running(project):
+    assert project.run("site=t", "recipe=chain").rc == 0
+    project.reset_counts()
+    r = project.run("status", "site=t", "recipe=chain", "steps.scale.factor=7")
+    assert r.rc == 0, r.text
+    lines = {l.split()[0]: l for l in r.out.splitlines() if l.startswith("  ")}
+    assert "up to date" in lines["01_make"] and "up to date" in lines["02_double"]
+    assert "would run" in lines["03_scale"] and "factor 3 -> 7" in lines["03_scale"]
+    assert project.counts() == {}
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "6\n"
+
+
+def test_manifest_records_and_verifies(project):
+    r = project.run("site=t", "recipe=chain")
+    run_dir = sorted((project.ws / "runs").iterdir())[-1]
+    m = json.loads((run_dir / "manifest.json").read_text())
+    assert m["schema_version"] == 1 and m["status"] == "ok"
+    assert [s["status"] for s in m["steps"]] == ["ran", "ran", "ran"]
+    assert all(len(s["key"]) == 32 for s in m["steps"])
+    assert m["config"]["recipe"]["name"] == "chain"
+    assert "numpy" in m["libraries"] and m["python"]["version"]
+    assert any(p["name"] == "make" for p in m["plugins"])
+    assert "git" in m and "commit" in m["git"]
+    outs = {Path(o["path"]).name: o for o in m["outputs"]}
+    assert outs["scaled.txt"]["size"] == 2
+    raw = (run_dir / "manifest.json").read_text()
+    assert raw == json.dumps(m, indent=2, sort_keys=True) + "\n", "manifest keys must be sorted"
+    ok = project.run("verify", str(run_dir))
+    assert ok.rc == 0, ok.text
+    (project.ws / "03_scale" / "scaled.txt").unlink()
+    (project.ws / "03_scale" / "scaled.txt").write_text("99\n")
+    bad = project.run("verify", str(run_dir / "manifest.json"))
+    assert bad.rc == 1 and "scaled.txt" in bad.out
+
+
+def test_step_records_beside_outputs(project):
+    assert project.run("site=t", "recipe=chain", "steps.scale.factor=4").rc == 0
+    rec = json.loads((project.ws / "03_scale" / "step.json").read_text())
+    assert rec["plugin"] == "step/scale" and rec["params"] == {"factor": 4}
+    assert rec["status"] == "ran" and rec["files"]["scaled.txt"]["size"] == 2
+    assert rec["duration_s"] is not None

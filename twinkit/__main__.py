@@ -1,0 +1,5 @@
+import sys
+
+from twinkit.cli import main
+
+sys.exit(main())

@@ -1,0 +1,293 @@
+"""The ``twinkit`` command.
+
+    twinkit [recipe=<name>] [site=<name>] [key=value ...]     run a recipe on a site (Hydra overrides)
+    twinkit -m ... a=1,2                                       multirun sweep (joblib launcher)
+    twinkit ... --cfg job                                      print the composed config, run nothing
+    twinkit status [overrides]                                 what a run would do, per step, without running
+    twinkit plugins                                            loaded plugins with distributions and versions
+    twinkit verify <manifest.json | run folder>                check a run's manifest against the files on disk
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+
+from twinkit.errors import ConfigError, TwinkitError
+
+log = logging.getLogger("twinkit")
+
+SUBCOMMANDS = ("status", "plugins", "verify")
+
+EXIT_OK, EXIT_STEP_FAILED = 0, 1
+
+
+def _err(msg: str, code: int = 2) -> int:
+    print(f"twinkit: error: {msg}", file=sys.stderr)
+    return code
+
+
+def _setup_logging(run_log: Path | None) -> None:
+    root = logging.getLogger("twinkit")
+    root.setLevel(logging.DEBUG)
+    for h in list(root.handlers):
+        root.removeHandler(h)
+    console = logging.StreamHandler(sys.stderr)
+    console.setLevel(logging.INFO)
+    console.setFormatter(logging.Formatter("%(message)s"))
+    root.addHandler(console)
+    if run_log is not None:
+        run_log.parent.mkdir(parents=True, exist_ok=True)
+        fh = logging.FileHandler(run_log)
+        fh.setLevel(logging.DEBUG)
+        fh.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+        root.addHandler(fh)
+    root.propagate = False
+
+
+def _format_outcome(oc, i: int, n: int) -> str:
+    dur = f"{oc.duration_s:7.1f} s" if oc.status in ("ran",) or oc.duration_s >= 0.05 else " " * 9
+    mem = f"  peak {oc.peak_rss_mb:.0f} MB" if oc.status == "ran" and oc.peak_rss_mb else ""
+    return f"[{i}/{n}] {oc.folder:<24} {oc.status:<7} {dur}  {oc.why}{mem}"
+
+
+def _interactive(setting: str) -> bool:
+    if str(setting).lower() in ("true", "yes", "1"):
+        return True
+    if str(setting).lower() in ("false", "no", "0"):
+        return False
+    return sys.stdin.isatty() and sys.stderr.isatty()
+
+
+def _check_writable(overrides: list[str]) -> None:
+    outputs = "outputs"
+    for ov in overrides:
+        if ov.startswith("engine.outputs_dir="):
+            outputs = ov.split("=", 1)[1]
+    p = Path(outputs)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        probe = p / f".write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(
+            f"cannot write to the outputs folder {p.resolve()} ({exc.strerror}); "
+            f"choose another with engine.outputs_dir=<dir>"
+        ) from None
+
+
+# --------------------------------------------------------------------------- the Hydra job
+
+_STATE: dict = {}
+
+
+def _job(cfg) -> int:
+    """One Hydra job. A TwinkitError becomes a one-line message and an exit code, not a traceback."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    try:
+        return _job_body(cfg)
+    except TwinkitError as exc:
+        if HydraConfig.get().mode == RunMode.MULTIRUN:
+            from hydra.errors import CompactHydraException
+
+            raise CompactHydraException(f"twinkit: error: {exc}") from None
+        _STATE["error"] = exc
+        return exc.exit_code
+
+
+def _job_body(cfg) -> int:
+    """Compose -> plan -> run -> manifest."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from twinkit.engine import Engine
+    from twinkit.manifest import build_manifest, write_manifest
+    from twinkit.plugins import get_registry
+
+    hc = HydraConfig.get()
+    multirun = hc.mode == RunMode.MULTIRUN
+    run_dir = Path(hc.runtime.output_dir)
+    _setup_logging(run_dir / "run.log")
+    from twinkit.config import find_config_dir
+
+    conf_dir = Path(_STATE.get("conf_dir") or find_config_dir())
+    root = conf_dir.parent
+    container = OmegaConf.to_container(cfg, resolve=True)
+    site = container.get("site") or {}
+    if not site.get("name"):
+        raise ConfigError("the site config has no 'name'")
+    engine_cfg = container["engine"]
+    site_root = Path(engine_cfg["outputs_dir"]) / site["name"]
+    workspace = run_dir if multirun else site_root
+    registry = get_registry()
+    started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    t0 = time.perf_counter()
+    engine = Engine(
+        container, registry, workspace=workspace, site_root=site_root, rerun=container.get("rerun") or [],
+        interactive=_interactive(engine_cfg.get("interactive", "auto")),
+        threads=engine_cfg.get("threads") or None, config_root=root,
+        manual_timeout_s=engine_cfg.get("manual_timeout_s"),
+    )
+    recipe = container.get("recipe", {}).get("name", "?")
+    log.info("twinkit: recipe '%s' on site '%s' -> %s (run log %s)", recipe, site["name"], workspace,
+             run_dir / "run.log")
+    status, error = "ok", None
+    try:
+        engine.run(on_step=lambda oc, i, n: log.info(_format_outcome(oc, i, n)))
+    except TwinkitError as exc:
+        status, error = ("pending" if exc.exit_code == 3 else "failed"), str(exc)
+        if exc.__cause__ is not None:
+            import traceback
+
+            logging.getLogger("twinkit").debug("".join(traceback.format_exception(exc.__cause__)))
+        raise
+    finally:
+        if engine._lock is None and engine.outcomes is not None:
+            manifest = build_manifest(
+                argv=_STATE.get("argv", sys.argv), overrides=list(hc.overrides.task), config=container, site=site,
+                outcomes=engine.outcomes, engine=engine, registry=registry, project_root=root, status=status,
+                error=error, started=started,
+                finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                duration_s=time.perf_counter() - t0,
+            )
+            engine.hashes.close()
+            write_manifest(run_dir / "manifest.json", manifest)
+            if status == "ok":
+                log.info("twinkit: done in %.1f s; manifest %s", time.perf_counter() - t0, run_dir / "manifest.json")
+                if engine_cfg.get("report", True):
+                    _write_report(run_dir, manifest, engine)
+    return 0
+
+
+def _write_report(run_dir: Path, manifest: dict, engine) -> None:
+    try:
+        from twinkit.report import write_report
+    except ImportError:
+        return
+    path = write_report(run_dir, manifest, engine)
+    if path is not None:
+        log.info("twinkit: report file://%s", path.resolve())
+
+
+def _run_hydra(argv: list[str]) -> int:
+    import hydra
+
+    from twinkit.config import check_choices, find_config_dir, register_configs
+    from twinkit.plugins import get_registry
+
+    conf_dir = find_config_dir()
+    overrides = [a for a in argv if not a.startswith("-")]
+    check_choices(overrides, conf_dir)
+    if "--cfg" not in argv and "-c" not in argv and "--help" not in argv and "--info" not in argv:
+        _check_writable(overrides)
+    register_configs(get_registry())
+    _STATE.update(conf_dir=str(conf_dir), argv=["twinkit", *argv])
+    app = hydra.main(config_path=str(conf_dir), config_name="config", version_base="1.3")(_job)
+    saved = sys.argv
+    sys.argv = ["twinkit", *argv]
+    _STATE.pop("error", None)
+    try:
+        app()
+    finally:
+        sys.argv = saved
+    if _STATE.get("error") is not None:
+        raise _STATE.pop("error")
+    return 0
+
+
+# --------------------------------------------------------------------------- subcommands
+
+
+def _compose(overrides: list[str]):
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from twinkit.config import check_choices, find_config_dir, register_configs
+    from twinkit.plugins import get_registry
+
+    conf_dir = find_config_dir()
+    check_choices(overrides, conf_dir)
+    register_configs(get_registry())
+    with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=overrides)
+    return conf_dir, OmegaConf.to_container(cfg, resolve=True)
+
+
+def cmd_status(args: list[str]) -> int:
+    from twinkit.engine import Engine
+    from twinkit.plugins import get_registry
+
+    conf_dir, cfg = _compose(args)
+    site = cfg["site"]
+    site_root = Path(cfg["engine"]["outputs_dir"]) / site["name"]
+    engine = Engine(cfg, get_registry(), workspace=site_root, site_root=site_root, rerun=cfg.get("rerun"),
+                    config_root=conf_dir.parent)
+    rows = engine.status()
+    print(f"recipe '{cfg['recipe'].get('name')}' on site '{site['name']}' in {site_root}")
+    for folder, decision, why in rows:
+        print(f"  {folder:<24} {decision:<12} {why}")
+    return 0
+
+
+def cmd_plugins(args: list[str]) -> int:
+    from twinkit.plugins import get_registry
+
+    reg = get_registry()
+    rows = [(p.kind, p.name, p.version, p.distribution, p.description) for p in reg.all()]
+    if not rows:
+        print("no plugins loaded (TWINKIT_PLUGINS=%r)" % os.environ.get("TWINKIT_PLUGINS"))
+        return 0
+    w = [max(len(str(r[i])) for r in rows + [("kind", "name", "version", "distribution", "")]) for i in range(4)]
+    print(f"{'kind':<{w[0]}}  {'name':<{w[1]}}  {'version':<{w[2]}}  {'distribution':<{w[3]}}  description")
+    for r in rows:
+        print(f"{r[0]:<{w[0]}}  {r[1]:<{w[1]}}  {r[2]:<{w[2]}}  {r[3]:<{w[3]}}  {r[4]}")
+    return 0
+
+
+def cmd_verify(args: list[str]) -> int:
+    from twinkit.manifest import verify_manifest
+
+    if len(args) != 1:
+        return _err("usage: twinkit verify <manifest.json | run folder>")
+    p = Path(args[0])
+    if p.is_dir():
+        p = p / "manifest.json"
+    if not p.is_file():
+        return _err(f"{p}: no such manifest; runs write one to outputs/<site>/runs/<time>/manifest.json")
+    problems = verify_manifest(p)
+    if problems:
+        for line in problems:
+            print(line)
+        print(f"{len(problems)} difference(s) against {p}")
+        return 1
+    print(f"ok: every input and output of {p} matches")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if argv and argv[0] in ("-h", "--help", "help"):
+            print(__doc__.strip())
+            print("\nHydra's own help: twinkit --hydra-help")
+            return 0
+        if argv and argv[0] == "--hydra-help":
+            argv[0] = "--help"
+        if argv and argv[0] in SUBCOMMANDS:
+            return {"status": cmd_status, "plugins": cmd_plugins, "verify": cmd_verify}[argv[0]](argv[1:])
+        return _run_hydra(argv)
+    except TwinkitError as exc:
+        return _err(str(exc), exc.exit_code)
+    except KeyboardInterrupt:
+        return _err("interrupted; finished steps are kept, the interrupted one will run again", 130)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

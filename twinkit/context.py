@@ -1,0 +1,58 @@
+"""The object every step receives as ``ctx``."""
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Mapping, TypeVar
+
+T = TypeVar("T")
+
+
+@dataclass
+class StepContext:
+    """What a running step may know and use.
+
+    Attributes:
+        step_id: the recipe step's id (``"reconstruct"``).
+        workdir: temporary folder of this run of the step; the engine moves it into
+            place only when the step returns and every declared output exists.
+        site: the site's configuration as a plain dict (``name``, ``crs``, ``base_point``, ...).
+        config: the whole composed configuration as a plain dict.
+        threads: how many CPU threads the step may use.
+        log: a logger named after the step.
+    """
+
+    step_id: str
+    workdir: Path
+    site: Mapping[str, Any] = field(default_factory=dict)
+    config: Mapping[str, Any] = field(default_factory=dict)
+    threads: int = field(default_factory=lambda: os.cpu_count() or 1)
+    log: logging.Logger = field(default_factory=lambda: logging.getLogger("twinkit.step"))
+    _component_factory: Callable[[str, str | None], Any] | None = None
+    _executor_factory: Callable[[], Any] | None = None
+
+    def progress(self, iterable: Iterable[T], total: int | None = None, desc: str | None = None) -> Iterator[T]:
+        """Iterate with a progress bar on a terminal; plain and quiet otherwise."""
+        from twinkit.progress import track
+
+        return track(iterable, total=total, desc=desc or self.step_id)
+
+    def component(self, kind: str, name: str | None = None) -> Any:
+        """Build the component plugin of ``kind`` selected in the config (or ``name``) with its params."""
+        if self._component_factory is None:
+            from twinkit.plugins import build_component
+
+            return build_component(kind, name, self.config)
+        return self._component_factory(kind, name)
+
+    def map(self, fn: Callable[..., T], items: list[Any]) -> list[T]:
+        """Run ``fn(item)`` for every item on the configured executor; results in order."""
+        if self._executor_factory is None:
+            from twinkit.executors import LocalExecutor
+
+            ex = LocalExecutor(workers=self.threads)
+        else:
+            ex = self._executor_factory()
+        return list(ex.map(fn, items))

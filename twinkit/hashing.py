@@ -1,0 +1,112 @@
+"""Content hashes of files and artefacts, with a stat cache.
+
+A file's sha256 is computed once and remembered in a small SQLite database
+keyed by (device, inode, size, mtime in ns): a file that was not modified is
+never read again; a file touched without change is re-read once and found
+equal. Hard links share one entry.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import sqlite3
+import threading
+from pathlib import Path
+
+CHUNK = 1 << 20
+
+
+def sha256_file(path: Path) -> str:
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
+class HashCache:
+    """sha256 of files, remembered by stat signature. Safe across processes."""
+
+    def __init__(self, db_path: Path | None):
+        self.db_path = db_path
+        self._conn: sqlite3.Connection | None = None
+        self._lock = threading.Lock()
+        self._mem: dict[tuple[int, int, int, int], str] = {}
+        self.bytes_hashed = 0
+        self.files_hashed = 0
+
+    def _db(self) -> sqlite3.Connection | None:
+        if self.db_path is None:
+            return None
+        if self._conn is None:
+            self.db_path.parent.mkdir(parents=True, exist_ok=True)
+            self._conn = sqlite3.connect(str(self.db_path), timeout=60, isolation_level=None)
+            self._conn.execute("PRAGMA journal_mode=WAL")
+            self._conn.execute("PRAGMA synchronous=NORMAL")
+            self._conn.execute(
+                "CREATE TABLE IF NOT EXISTS hashes (dev INTEGER, ino INTEGER, size INTEGER, mtime INTEGER, "
+                "sha256 TEXT, PRIMARY KEY (dev, ino, size, mtime))"
+            )
+        return self._conn
+
+    def hash(self, path: Path) -> str:
+        st = os.stat(path)
+        sig = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+        if sig in self._mem:
+            return self._mem[sig]
+        with self._lock:
+            db = self._db()
+            if db is not None:
+                row = db.execute(
+                    "SELECT sha256 FROM hashes WHERE dev=? AND ino=? AND size=? AND mtime=?", sig
+                ).fetchone()
+                if row:
+                    self._mem[sig] = row[0]
+                    return row[0]
+        digest = sha256_file(path)
+        self.bytes_hashed += st.st_size
+        self.files_hashed += 1
+        # a file modified while we read it gets a new mtime: store under the stat we saw first only if unchanged
+        st2 = os.stat(path)
+        if (st2.st_size, st2.st_mtime_ns) == (st.st_size, st.st_mtime_ns):
+            self._mem[sig] = digest
+            with self._lock:
+                db = self._db()
+                if db is not None:
+                    db.execute("INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?)", (*sig, digest))
+        return digest
+
+    def close(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+
+def list_files(folder: Path) -> list[Path]:
+    """Every regular file below ``folder``, sorted, as relative paths."""
+    out = []
+    for root, dirs, files in os.walk(folder):
+        dirs.sort()
+        for f in sorted(files):
+            out.append((Path(root) / f).relative_to(folder))
+    return out
+
+
+def companions(path: Path) -> list[Path]:
+    """Files that travel with ``path``: same folder, same stem (``mesh.obj`` -> ``mesh.mtl``, ``mesh.png``)."""
+    stem = path.name.split(".", 1)[0]
+    if not path.parent.is_dir():
+        return []
+    return sorted(
+        p for p in path.parent.iterdir() if p != path and p.is_file() and p.name.split(".", 1)[0] == stem
+    )
+
+
+def artefact_hash(path: Path, cache: HashCache) -> str:
+    """Combined content hash of an artefact: a file with its companions, or a folder's files."""
+    h = hashlib.sha256()
+    if path.is_dir():
+        for rel in list_files(path):
+            h.update(f"{rel.as_posix()}:{cache.hash(path / rel)}\n".encode())
+        return h.hexdigest()
+    h.update(f"{path.name}:{cache.hash(path)}\n".encode())
+    for c in companions(path):
+        h.update(f"{c.name}:{cache.hash(c)}\n".encode())
+    return h.hexdigest()

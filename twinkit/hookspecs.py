@@ -1,0 +1,73 @@
+"""Hook specifications: the only way code becomes part of twinkit.
+
+Every registration hook receives a ``register`` callback::
+
+    register(name, run, params=None, version=None, description="", uses=())
+
+``name`` is what users type (``reconstructor=poisson``); ``run`` is the
+callable described per kind below; ``params`` is a dataclass whose fields are
+the plugin's parameters (turned into a Hydra structured config, so a typo or a
+wrong type fails at composition); ``version`` defaults to the version of the
+distribution that provides the plugin; ``uses`` names component kinds
+(``image_model``, ``view_sampler``, ``executor``) whose configuration becomes
+part of the step's cache key. Registering a name twice for one kind raises
+:class:`twinkit.errors.PluginError`; nothing is ever renamed.
+
+Step-like kinds (site generators, reconstructors, segmenters, road sources,
+exporters and generic steps) have ``run(params, ctx, **files)``: keyword
+arguments named ``in_<name>[_<ext>]`` receive input paths and
+``out_<name>[_<ext>]`` receive the paths the step must write (``_dir`` means
+a folder). Component kinds (view samplers, image models, executors) have
+``run(params)`` returning an object; steps obtain one with
+``ctx.component(kind)``.
+"""
+from __future__ import annotations
+
+import pluggy
+
+hookspec = pluggy.HookspecMarker("twinkit")
+
+
+@hookspec
+def twinkit_register_site_generators(register):
+    """Register generators that write a whole site's inputs (cloud, photos, roads, truth)."""
+
+
+@hookspec
+def twinkit_register_reconstructors(register):
+    """Register reconstructors: point cloud or photos in, mesh out."""
+
+
+@hookspec
+def twinkit_register_segmenters(register):
+    """Register segmenters: mesh in, per-vertex CityScapes labels out."""
+
+
+@hookspec
+def twinkit_register_view_samplers(register):
+    """Register view samplers (components): ``run(params)`` returns an object with ``sample(mesh, ctx) -> views``."""
+
+
+@hookspec
+def twinkit_register_image_models(register):
+    """Register 2D segmentation models (components): ``run(params)`` returns an object with ``predict(images)``."""
+
+
+@hookspec
+def twinkit_register_road_sources(register):
+    """Register road sources: site in, OpenStreetMap data out."""
+
+
+@hookspec
+def twinkit_register_exporters(register):
+    """Register exporters: labelled mesh (and roads) in, simulator files out."""
+
+
+@hookspec
+def twinkit_register_steps(register):
+    """Register generic steps that fit no other kind (cleanup, simplify, evaluate, ...)."""
+
+
+@hookspec
+def twinkit_register_executors(register):
+    """Register executors (components) that run fanned-out items: ``run(params)`` returns an object with ``map(fn, items)``."""

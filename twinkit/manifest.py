@@ -1,0 +1,133 @@
+"""Provenance: one manifest per run, and a check of a manifest against the files on disk."""
+from __future__ import annotations
+
+import importlib.metadata as md
+import json
+import platform
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from twinkit.hashing import sha256_file
+
+SCHEMA_VERSION = 1
+
+#: libraries whose versions are recorded when installed.
+LIBRARIES = [
+    "twinkit", "hydra-core", "omegaconf", "pluggy", "numpy", "scipy", "open3d", "torch", "pyproj", "laspy",
+    "pye57", "plyfile", "pillow", "fast-simplification", "pymeshlab", "xatlas", "bpy", "usd-core", "carla",
+    "eclipse-sumo", "pycolmap", "opencv-python-headless", "moderngl", "transformers", "dask", "distributed",
+]
+
+
+def library_versions() -> dict[str, str]:
+    out = {}
+    for name in LIBRARIES:
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            pass
+    return out
+
+
+def git_state(root: Path) -> dict[str, Any]:
+    def git(*args: str) -> str | None:
+        try:
+            r = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.TimeoutExpired):
+            return None
+        return r.stdout.strip() if r.returncode == 0 else None
+
+    commit = git("rev-parse", "HEAD")
+    dirty = git("status", "--porcelain", "--untracked-files=no")
+    return {"commit": commit, "dirty": bool(dirty) if dirty is not None else None}
+
+
+def _file_entry(path: Path, cache) -> dict:
+    return {"path": str(path), "sha256": cache.hash(path), "size": path.stat().st_size}
+
+
+def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site: dict, outcomes: list,
+                   engine, registry, project_root: Path, status: str, error: str | None,
+                   started: str, finished: str, duration_s: float) -> dict:
+    cache = engine.hashes
+    inputs = []
+    for ps in engine.plan:
+        for src in ps.inputs.values():
+            if src is not None and src.path is not None and src.path.is_file():
+                inputs.append(_file_entry(src.path, cache))
+    inputs = sorted({e["path"]: e for e in inputs}.values(), key=lambda e: e["path"])
+    steps = []
+    outputs = []
+    for oc in outcomes:
+        steps.append({
+            "id": oc.step, "folder": oc.folder, "plugin": oc.plugin, "status": oc.status, "why": oc.why,
+            "key": oc.key, "duration_s": round(oc.duration_s, 3), "peak_rss_mb": oc.peak_rss_mb,
+            "metrics": oc.metrics,
+        })
+        folder = engine.workspace / oc.folder
+        for fname, p in oc.outputs.items():
+            for path in (p if isinstance(p, list) else [p]):
+                path = Path(path)
+                files = [path] if path.is_file() else sorted(x for x in path.rglob("*") if x.is_file()) if path.is_dir() else []
+                for f in files:
+                    e = _file_entry(f, cache)
+                    e["step"] = oc.step
+                    outputs.append(e)
+        _ = folder
+    plugins = [
+        {"kind": p.kind, "name": p.name, "version": p.version, "distribution": p.distribution, "module": p.module}
+        for p in registry.all()
+    ]
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "status": status,
+        "error": error,
+        "argv": argv,
+        "overrides": overrides,
+        "config": config,
+        "site": {k: site.get(k) for k in ("name", "crs", "base_point", "bounds_m") if k in site},
+        "git": git_state(project_root),
+        "python": {"version": sys.version.split()[0], "implementation": platform.python_implementation(),
+                   "platform": platform.platform()},
+        "libraries": library_versions(),
+        "plugins": plugins,
+        "steps": steps,
+        "inputs": inputs,
+        "outputs": outputs,
+        "workspace": str(engine.workspace),
+        "started": started,
+        "finished": finished,
+        "duration_s": round(duration_s, 3),
+    }
+
+
+def write_manifest(path: Path, manifest: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=str) + "\n")
+    tmp.replace(path)
+
+
+def verify_manifest(path: Path) -> list[str]:
+    """Differences between a manifest and the files on disk (empty when everything matches)."""
+    try:
+        m = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        return [f"{path}: not a readable manifest ({exc})"]
+    if m.get("schema_version") != SCHEMA_VERSION:
+        return [f"{path}: schema version {m.get('schema_version')} (this twinkit reads {SCHEMA_VERSION})"]
+    problems = []
+    for section in ("inputs", "outputs"):
+        for e in m.get(section, []):
+            p = Path(e["path"])
+            if not p.is_file():
+                problems.append(f"{section[:-1]} missing: {p}")
+                continue
+            size = p.stat().st_size
+            if size != e["size"]:
+                problems.append(f"{section[:-1]} changed: {p} (size {e['size']} -> {size})")
+            elif sha256_file(p) != e["sha256"]:
+                problems.append(f"{section[:-1]} changed: {p} (same size, different content)")
+    return problems

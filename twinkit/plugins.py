@@ -1,0 +1,219 @@
+"""Plugin manager: loads entry points of group ``twinkit`` and keeps the registry.
+
+Environment variable ``TWINKIT_PLUGINS`` selects which entry points load:
+unset = all; empty = none; ``a,b`` = only those entry-point names.
+``TWINKIT_PLUGIN_MODULES=pkg.mod,other.mod`` also loads plain modules as plugins
+(handy while developing a plugin before packaging it).
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib.metadata as md
+import inspect
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import pluggy
+
+from twinkit import hookspecs
+from twinkit.errors import ConfigError, PluginError
+
+ENTRY_POINT_GROUP = "twinkit"
+
+#: kind -> hook name. Step-like kinds can be bound to recipe steps.
+KINDS: dict[str, str] = {
+    "site_generator": "twinkit_register_site_generators",
+    "reconstructor": "twinkit_register_reconstructors",
+    "segmenter": "twinkit_register_segmenters",
+    "view_sampler": "twinkit_register_view_samplers",
+    "image_model": "twinkit_register_image_models",
+    "road_source": "twinkit_register_road_sources",
+    "exporter": "twinkit_register_exporters",
+    "step": "twinkit_register_steps",
+    "executor": "twinkit_register_executors",
+}
+STEP_KINDS = ("site_generator", "reconstructor", "segmenter", "road_source", "exporter", "step")
+COMPONENT_KINDS = ("view_sampler", "image_model", "executor")
+
+
+@dataclass
+class Plugin:
+    """One registered plugin."""
+
+    kind: str
+    name: str
+    run: Callable[..., Any]
+    params: type | None
+    version: str
+    description: str = ""
+    uses: tuple[str, ...] = ()
+    distribution: str = "?"
+    module: str = ""
+
+    @property
+    def qualname(self) -> str:
+        return f"{self.kind}/{self.name}"
+
+    def default_params(self) -> Any:
+        return self.params() if self.params is not None else None
+
+    def code_hash(self) -> str:
+        """sha256 of the source file that defines ``run`` (code changes re-run the step)."""
+        try:
+            src = Path(inspect.getsourcefile(self.run) or "")
+            return hashlib.sha256(src.read_bytes()).hexdigest()[:16]
+        except (OSError, TypeError):
+            return "unknown"
+
+
+@dataclass
+class Registry:
+    plugins: dict[str, dict[str, Plugin]] = field(default_factory=lambda: {k: {} for k in KINDS})
+    sources: list[tuple[str, str, str]] = field(default_factory=list)  # (entry point, distribution, version)
+
+    def get(self, kind: str, name: str) -> Plugin:
+        if kind not in self.plugins:
+            raise PluginError(f"unknown plugin kind '{kind}'; kinds are: {', '.join(KINDS)}")
+        try:
+            return self.plugins[kind][name]
+        except KeyError:
+            have = ", ".join(sorted(self.plugins[kind])) or "none loaded"
+            raise PluginError(
+                f"no {kind} plugin named '{name}' (available: {have}); "
+                f"install the package that provides it or check TWINKIT_PLUGINS"
+            ) from None
+
+    def all(self) -> list[Plugin]:
+        return [p for kind in KINDS for p in sorted(self.plugins[kind].values(), key=lambda p: p.name)]
+
+
+def _make_register(registry: Registry, kind: str, dist: str, dist_version: str, module: str):
+    def register(
+        name: str,
+        run: Callable[..., Any],
+        params: type | None = None,
+        version: str | None = None,
+        description: str = "",
+        uses: tuple[str, ...] | list[str] = (),
+    ) -> None:
+        if not isinstance(name, str) or not name.replace("_", "").replace("-", "").isalnum():
+            raise PluginError(f"{dist}: plugin name {name!r} must be letters, digits, '_' or '-'")
+        if not callable(run):
+            raise PluginError(f"{dist}: {kind} plugin '{name}' registered a non-callable run")
+        if params is not None and not dataclasses.is_dataclass(params):
+            raise PluginError(f"{dist}: {kind} plugin '{name}': params must be a dataclass, got {params!r}")
+        for u in uses:
+            if u not in COMPONENT_KINDS:
+                raise PluginError(f"{dist}: {kind} plugin '{name}': uses={u!r} is not a component kind {COMPONENT_KINDS}")
+        existing = registry.plugins[kind].get(name)
+        if existing is not None:
+            raise PluginError(
+                f"{kind} plugin '{name}' is registered twice: by {existing.distribution} "
+                f"({existing.module}) and by {dist} ({module}); uninstall one or rename it"
+            )
+        registry.plugins[kind][name] = Plugin(
+            kind=kind,
+            name=name,
+            run=run,
+            params=params,
+            version=version or dist_version,
+            description=description or (inspect.getdoc(run) or "").split("\n")[0],
+            uses=tuple(uses),
+            distribution=dist,
+            module=getattr(run, "__module__", module),
+        )
+
+    return register
+
+
+def make_plugin_manager() -> pluggy.PluginManager:
+    pm = pluggy.PluginManager("twinkit")
+    pm.add_hookspecs(hookspecs)
+    return pm
+
+
+def _selected(ep_name: str) -> bool:
+    sel = os.environ.get("TWINKIT_PLUGINS")
+    if sel is None:
+        return True
+    return ep_name in {s.strip() for s in sel.split(",") if s.strip()}
+
+
+def load_registry(extra: list[tuple[str, object]] | None = None) -> Registry:
+    """Load every selected entry point of group ``twinkit`` (plus ``extra`` (name, module) pairs)."""
+    pm = make_plugin_manager()
+    registry = Registry()
+    modules: list[tuple[str, str, str, object]] = []
+    for ep in sorted(md.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        if not _selected(ep.name):
+            continue
+        try:
+            mod = ep.load()
+        except Exception as exc:  # a broken third-party plugin must say who it is
+            dist = ep.dist.name if ep.dist else "?"
+            raise PluginError(f"could not load twinkit plugin '{ep.name}' from {dist}: {exc!r}") from exc
+        dist_name = ep.dist.name if ep.dist else "?"
+        dist_version = ep.dist.version if ep.dist else "0"
+        modules.append((ep.name, dist_name, dist_version, mod))
+    import importlib
+
+    for modname in [m.strip() for m in os.environ.get("TWINKIT_PLUGIN_MODULES", "").split(",") if m.strip()]:
+        try:
+            modules.append((modname, modname, "0", importlib.import_module(modname)))
+        except ImportError as exc:
+            raise PluginError(f"TWINKIT_PLUGIN_MODULES names '{modname}', which does not import: {exc}") from exc
+    for name, mod in extra or []:
+        modules.append((name, name, "0", mod))
+    for ep_name, dist_name, dist_version, mod in modules:
+        try:
+            pm.register(mod, name=ep_name)
+        except ValueError as exc:
+            raise PluginError(f"plugin '{ep_name}' ({dist_name}) is registered twice: {exc}") from exc
+        registry.sources.append((ep_name, dist_name, dist_version))
+    try:
+        pm.check_pending()
+    except pluggy.PluginValidationError as exc:
+        raise PluginError(f"a plugin implements a hook that does not exist (misspelled?): {exc}") from exc
+    for kind, hook_name in KINDS.items():
+        hook = getattr(pm.hook, hook_name)
+        for impl in hook.get_hookimpls():
+            plugin_obj = impl.plugin
+            ep_name = pm.get_name(plugin_obj) or "?"
+            dist_name, dist_version = next(
+                ((d, v) for (e, d, v) in registry.sources if e == ep_name), (ep_name, "0")
+            )
+            register = _make_register(
+                registry, kind, dist_name, dist_version, getattr(plugin_obj, "__name__", ep_name)
+            )
+            impl.function(register=register)
+    return registry
+
+
+_REGISTRY: Registry | None = None
+
+
+def get_registry(reload: bool = False) -> Registry:
+    global _REGISTRY
+    if _REGISTRY is None or reload:
+        _REGISTRY = load_registry()
+    return _REGISTRY
+
+
+def build_component(kind: str, name: str | None, config: dict) -> Any:
+    """Instantiate a component plugin with its params from ``config[kind]`` (or defaults)."""
+    from omegaconf import OmegaConf
+
+    reg = get_registry()
+    node = dict(config.get(kind) or {})
+    chosen = name or node.get("plugin")
+    if not chosen:
+        raise ConfigError(f"no {kind} selected: add '{kind}=<name>' (available: {', '.join(sorted(reg.plugins[kind]))})")
+    plugin = reg.get(kind, chosen)
+    params = None
+    if plugin.params is not None:
+        values = {k: v for k, v in node.items() if k != "plugin"} if node.get("plugin") == chosen else {}
+        params = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(plugin.params), values))
+    return plugin.run(params)
