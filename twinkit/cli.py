@@ -102,23 +102,33 @@ def _job(cfg) -> int:
 
 
 def _job_body(cfg) -> int:
-    """Compose -> plan -> run -> manifest."""
+    """A Hydra (multirun) job: read Hydra's runtime state, then execute."""
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
+
+    hc = HydraConfig.get()
+    return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=hc.mode == RunMode.MULTIRUN,
+                    overrides=list(hc.overrides.task))
+
+
+def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
+    """Plan -> run -> manifest (-> report) for one composed config."""
     from omegaconf import OmegaConf
 
+    from twinkit.config import find_config_dir
     from twinkit.engine import Engine
     from twinkit.manifest import build_manifest, write_manifest
     from twinkit.plugins import get_registry
 
-    hc = HydraConfig.get()
-    multirun = hc.mode == RunMode.MULTIRUN
-    run_dir = Path(hc.runtime.output_dir)
     _setup_logging(run_dir / "run.log")
-    from twinkit.config import find_config_dir
-
     conf_dir = Path(_STATE.get("conf_dir") or find_config_dir())
     root = conf_dir.parent
+    from omegaconf import open_dict
+
+    if "hydra" in cfg:
+        cfg = cfg.copy()
+        with open_dict(cfg):
+            del cfg["hydra"]
     container = OmegaConf.to_container(cfg, resolve=True)
     site = container.get("site") or {}
     if not site.get("name"):
@@ -151,7 +161,7 @@ def _job_body(cfg) -> int:
     finally:
         if engine._lock is None and engine.outcomes is not None:
             manifest = build_manifest(
-                argv=_STATE.get("argv", sys.argv), overrides=list(hc.overrides.task), config=container, site=site,
+                argv=_STATE.get("argv", sys.argv), overrides=overrides, config=container, site=site,
                 outcomes=engine.outcomes, engine=engine, registry=registry, project_root=root, status=status,
                 error=error, started=started,
                 finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -176,19 +186,45 @@ def _write_report(run_dir: Path, manifest: dict, engine) -> None:
         log.info("twinkit: report file://%s", path.resolve())
 
 
+_VALUE_OPTIONS = {"--cfg", "-c", "--package", "-p", "--info", "-i", "--config-path", "-cp", "--config-name", "-cn",
+                  "--config-dir", "-cd", "--experimental-rerun", "--shell-completion", "-sc"}
+
+
+def options_first(argv: list[str]) -> list[str]:
+    """Hydra's parser wants options before overrides; accept them in any order."""
+    opts: list[str] = []
+    overrides: list[str] = []
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a.startswith("-") and "=" not in a.split(" ")[0][:2]:
+            opts.append(a)
+            if a in _VALUE_OPTIONS and i + 1 < len(argv) and not argv[i + 1].startswith("-") and "=" not in argv[i + 1]:
+                opts.append(argv[i + 1])
+                i += 1
+        else:
+            overrides.append(a)
+        i += 1
+    return opts + overrides
+
+
 def _run_hydra(argv: list[str]) -> int:
     import hydra
 
-    from twinkit.config import check_choices, find_config_dir, register_configs
+    from twinkit.config import check_choices, find_config_dir, register_configs, use_libyaml
     from twinkit.plugins import get_registry
 
+    use_libyaml()
     conf_dir = find_config_dir()
-    overrides = [a for a in argv if not a.startswith("-")]
+    argv = options_first(argv)
+    overrides = [a for a in argv if not a.startswith("-") and "=" in a]
     check_choices(overrides, conf_dir)
     if "--cfg" not in argv and "-c" not in argv and "--help" not in argv and "--info" not in argv:
         _check_writable(overrides)
     register_configs(get_registry())
     _STATE.update(conf_dir=str(conf_dir), argv=["twinkit", *argv])
+    if not any(a.startswith("-") for a in argv):
+        return _run_single(conf_dir, overrides)
     app = hydra.main(config_path=str(conf_dir), config_name="config", version_base="1.3")(_job)
     saved = sys.argv
     sys.argv = ["twinkit", *argv]
@@ -202,6 +238,38 @@ def _run_hydra(argv: list[str]) -> int:
     return 0
 
 
+def _composition_error(exc: Exception) -> ConfigError:
+    """Hydra/OmegaConf composition errors, folded into one line."""
+    parts = [str(exc)]
+    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
+        parts.append(str(exc.__cause__))
+    lines = []
+    for part in parts:
+        for line in part.splitlines():
+            t = line.strip()
+            if t and not t.startswith(("full_key", "object_type", "reference_type", "To append", "Set the environment")):
+                lines.append(t.rstrip("."))
+    return ConfigError(". ".join(dict.fromkeys(lines)))
+
+
+def _run_single(conf_dir: Path, overrides: list[str]) -> int:
+    """One run, composed once with Hydra's compose API (Hydra's own entry composes twice)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
+            cfg = compose(config_name="config", overrides=overrides, return_hydra_config=True)
+        HydraConfig.instance().set_config(cfg)
+        run_dir = Path(cfg.hydra.run.dir)
+    except (HydraException, OmegaConfBaseException) as exc:
+        raise _composition_error(exc) from None
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return _execute(cfg, run_dir=run_dir, multirun=False, overrides=overrides)
+
+
 # --------------------------------------------------------------------------- subcommands
 
 
@@ -209,9 +277,10 @@ def _compose(overrides: list[str]):
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from twinkit.config import check_choices, find_config_dir, register_configs
+    from twinkit.config import check_choices, find_config_dir, register_configs, use_libyaml
     from twinkit.plugins import get_registry
 
+    use_libyaml()
     conf_dir = find_config_dir()
     check_choices(overrides, conf_dir)
     register_configs(get_registry())

@@ -8,6 +8,7 @@ unset = all; empty = none; ``a,b`` = only those entry-point names.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import importlib.metadata as md
 import inspect
@@ -39,6 +40,11 @@ STEP_KINDS = ("site_generator", "reconstructor", "segmenter", "road_source", "ex
 COMPONENT_KINDS = ("view_sampler", "image_model", "executor")
 
 
+@functools.lru_cache(maxsize=256)
+def _file_digest(path: str, mtime_ns: int) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
 @dataclass
 class Plugin:
     """One registered plugin."""
@@ -64,7 +70,7 @@ class Plugin:
         """sha256 of the source file that defines ``run`` (code changes re-run the step)."""
         try:
             src = Path(inspect.getsourcefile(self.run) or "")
-            return hashlib.sha256(src.read_bytes()).hexdigest()[:16]
+            return _file_digest(str(src), src.stat().st_mtime_ns)
         except (OSError, TypeError):
             return "unknown"
 
@@ -142,13 +148,16 @@ def _selected(ep_name: str) -> bool:
     return ep_name in {s.strip() for s in sel.split(",") if s.strip()}
 
 
-def load_registry(extra: list[tuple[str, object]] | None = None) -> Registry:
-    """Load every selected entry point of group ``twinkit`` (plus ``extra`` (name, module) pairs)."""
+def load_registry(extra: list[tuple[str, object]] | None = None, entry_points: bool = True) -> Registry:
+    """Load every selected entry point of group ``twinkit`` (plus ``extra`` (name, module) pairs).
+
+    ``entry_points=False`` loads only ``extra`` (a plugin's own tests use this).
+    """
     pm = make_plugin_manager()
     registry = Registry()
     modules: list[tuple[str, str, str, object]] = []
     for ep in sorted(md.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
-        if not _selected(ep.name):
+        if not entry_points or not _selected(ep.name):
             continue
         try:
             mod = ep.load()
@@ -160,7 +169,8 @@ def load_registry(extra: list[tuple[str, object]] | None = None) -> Registry:
         modules.append((ep.name, dist_name, dist_version, mod))
     import importlib
 
-    for modname in [m.strip() for m in os.environ.get("TWINKIT_PLUGIN_MODULES", "").split(",") if m.strip()]:
+    env_modules = os.environ.get("TWINKIT_PLUGIN_MODULES", "") if entry_points else ""
+    for modname in [m.strip() for m in env_modules.split(",") if m.strip()]:
         try:
             modules.append((modname, modname, "0", importlib.import_module(modname)))
         except ImportError as exc:

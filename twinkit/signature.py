@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 #: extensions recognised at the end of a port name.
 KNOWN_EXTS = frozenset(
-    """ply obj mtl png jpg jpeg npy npz json csv md html txt yaml yml osm pbf bz2 xodr fbx usd usda usdc usdz
+    """bin ply obj mtl png jpg jpeg npy npz json csv md html txt yaml yml osm pbf bz2 xodr fbx usd usda usdc usdz
     glb gltf e57 las laz tif tiff xyz pts log pkl dir""".split()
 )
 

@@ -31,6 +31,13 @@ def make_context(workdir: Path, site: dict | None = None, config: dict | None = 
     )
 
 
+def plugin_from_module(module, kind: str, name: str):
+    """Register just ``module`` (no installed entry points) and return its plugin ``kind/name``."""
+    from twinkit.plugins import load_registry
+
+    return load_registry(extra=[(getattr(module, "__name__", "module"), module)], entry_points=False).get(kind, name)
+
+
 def check_plugin(plugin) -> None:
     """Contract checks every plugin must pass (raises AssertionError with the reason)."""
     from twinkit.signature import parse_signature

@@ -1,0 +1,30 @@
+# twinkit: two commands on a fresh machine.
+#   make demo    set up, then run the main job on the built-in demo site
+#   make test    set up, then run every test
+#   make bench   set up, then run the benchmarks (prints tables, writes bench/results/)
+PY      := .venv/bin/python
+STAMP   := .venv/.twinkit-setup
+SITE    ?= demo
+RECIPE  ?= pointcloud_site
+ARGS    ?=
+PYTEST_ARGS ?=
+
+.PHONY: setup demo test bench clean
+
+$(STAMP): scripts/setup.sh pyproject.toml $(wildcard plugins/*/pyproject.toml)
+	bash scripts/setup.sh
+	@touch $@
+
+setup: $(STAMP)
+
+demo: $(STAMP)
+	.venv/bin/twinkit recipe=$(RECIPE) site=$(SITE) $(ARGS)
+
+test: $(STAMP)
+	$(PY) -m pytest tests plugins examples -p no:cacheprovider $(PYTEST_ARGS)
+
+bench: $(STAMP)
+	$(PY) bench/run_all.py
+
+clean:
+	rm -rf outputs .pytest_cache

@@ -1,0 +1,35 @@
+"""Export a mesh's vertices as an XYZ text file (one "x y z" line per vertex).
+
+CloudCompare, MeshLab and most GIS tools open such point lists.
+"""
+from dataclasses import dataclass
+from pathlib import Path
+
+from twinkit import InputError, StepContext, hookimpl
+
+
+@dataclass
+class XyzParams:
+    decimals: int = 3  # digits after the point, in metres (3 = millimetres)
+    offset_m: float = 0.0  # added to z, e.g. to undo a height shift
+
+
+def export_xyz(params: XyzParams, ctx: StepContext, *, in_mesh_ply: Path, out_points_xyz: Path) -> dict:
+    """Write the vertices of ``mesh.ply`` as ``points.xyz``."""
+    import numpy as np
+    from plyfile import PlyData
+
+    try:
+        vertex = PlyData.read(str(in_mesh_ply))["vertex"]
+    except Exception as exc:
+        raise InputError(f"{in_mesh_ply}: not a readable PLY mesh ({exc}); re-export it from the previous step")
+    xyz = np.column_stack([vertex["x"], vertex["y"], vertex["z"]]).astype(np.float64)
+    xyz[:, 2] += params.offset_m
+    np.savetxt(out_points_xyz, xyz, fmt=f"%.{params.decimals}f")
+    ctx.log.info("wrote %d points to %s", len(xyz), out_points_xyz.name)
+    return {"points": int(len(xyz))}
+
+
+@hookimpl
+def twinkit_register_exporters(register):
+    register("xyz", export_xyz, params=XyzParams)

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Set up everything twinkit needs on a fresh Debian/Ubuntu machine with Python 3.11:
+# system libraries (as root, through apt), a virtualenv in .venv, twinkit and every plugin in plugins/.
+# Safe to run again: it only installs what is missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# 1. System libraries: open3d needs libusb; moderngl's headless EGL (Mesa llvmpipe) needs the EGL/DRI packages.
+APT_PACKAGES=(libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri libgomp1)
+missing=()
+for p in "${APT_PACKAGES[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then
+    echo "setup: installing system packages: ${missing[*]}"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  elif command -v sudo >/dev/null; then
+    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  else
+    echo "setup: please install these system packages first: ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+
+# 2. A virtualenv with Python 3.11 (bpy 5.0.1 has wheels for 3.11 only).
+PYTHON=${PYTHON:-}
+if [ -z "$PYTHON" ]; then
+  for c in python3.11 python3; do
+    if command -v "$c" >/dev/null && "$c" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then PYTHON=$c; break; fi
+  done
+fi
+[ -n "$PYTHON" ] || { echo "setup: twinkit needs Python 3.11 (set PYTHON=/path/to/python3.11)" >&2; exit 1; }
+[ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
+PIP=(.venv/bin/python -m pip install --quiet --disable-pip-version-check)
+
+# 3. PyTorch, CPU build (pinned: a plain 'torch' would pull a multi-GB CUDA build).
+.venv/bin/python -c 'import torch' 2>/dev/null || "${PIP[@]}" "torch==2.13.0"
+
+# 4. twinkit and every plugin package in plugins/, editable, so edits take effect at once.
+args=(-e .)
+for d in plugins/*/; do
+  [ -f "$d/pyproject.toml" ] && args+=(-e "$d")
+done
+"${PIP[@]}" "${args[@]}" pytest pytest-timeout
+echo "setup: done ($(.venv/bin/python --version); $(ls -d plugins/*/ | wc -l) plugin packages)"
