@@ -130,7 +130,7 @@ def check_yaml(path: Path) -> None:
 def check_choices(overrides: list[str], conf_dir: Path) -> None:
     """Fail in one line on an unknown or empty site/recipe, and on unparsable YAML of the chosen ones."""
     check_yaml(conf_dir / "config.yaml")
-    chosen = {"site": ["demo"], "recipe": ["demo"]}
+    chosen: dict[str, list[str]] = {"site": [], "recipe": []}
     defaults = yaml.safe_load((conf_dir / "config.yaml").read_text()).get("defaults", [])
     for d in defaults:
         if isinstance(d, dict):
