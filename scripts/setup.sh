@@ -43,5 +43,7 @@ args=(-e .)
 for d in plugins/*/; do
   [ -f "$d/pyproject.toml" ] && args+=(-e "$d")
 done
-"${PIP[@]}" "${args[@]}" pytest pytest-timeout
+# test tools; plyfile is the example plugin's dependency (its tests run in `make test`; the plugin itself is
+# installed only by the test that checks a third-party install)
+"${PIP[@]}" "${args[@]}" pytest pytest-timeout "plyfile>=1.0"
 echo "setup: done ($(.venv/bin/python --version); $(ls -d plugins/*/ | wc -l) plugin packages)"
