@@ -833,8 +833,11 @@ class Engine:
         status = "cached" if stored else "ran"
         if stored is None:
             log.debug("  %s: running %s ...", ps.folder, ps.label)
-            stored = compute_into_store(ps.plugin.run, ps.params, in_paths, ps.outputs, key, self.store,
-                                        self._ctx_kwargs(ps), force=forced, hash_db=self.hashes.db_path)
+            from twinkit.progress import step_status
+
+            with step_status(f"{ps.folder} ({ps.label})"):
+                stored = compute_into_store(ps.plugin.run, ps.params, in_paths, ps.outputs, key, self.store,
+                                            self._ctx_kwargs(ps), force=forced, hash_db=self.hashes.db_path)
             if not stored.pop("_computed_here", True):
                 status, why = "cached", why + " (computed by a concurrent job)"
         record = self._workspace_record(ps, key, desc, stored, status, why, in_paths)

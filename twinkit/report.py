@@ -1226,6 +1226,9 @@ def _stats_table(title: str, d: dict) -> str:
     return f"<h3>{_esc(title)}</h3>" + _table(["distance (m)"] + cols, rows)
 
 
+_STAT_KEYS = {"min", "max", "mean", "median", "p5", "p50", "p90", "p95", "p99", "rms", "std", "count"}
+
+
 def _sec_recon_metrics(run: RunView) -> str:
     hit = run.first("recon_metrics.json")
     if not hit:
@@ -1233,11 +1236,14 @@ def _sec_recon_metrics(run: RunView) -> str:
     s, f = hit
     d = _read_json(f) or {}
     parts = []
-    dist = {k: v for k, v in d.items() if k.endswith("_m") and isinstance(v, dict)}
+    def is_stats(v):
+        return isinstance(v, dict) and bool(v) and set(v) <= _STAT_KEYS
+
+    dist = {k: v for k, v in d.items() if is_stats(v)}
     gt = d.get("gt") if isinstance(d.get("gt"), dict) else {}
-    dist.update({f"gt: {k}": v for k, v in gt.items() if isinstance(v, dict)})
+    dist.update({f"gt: {k}": v for k, v in gt.items() if is_stats(v)})
     parts.append(_stats_table("Distances", dist))
-    scal = [[k, v] for k, v in _flatten(gt, "gt").items() if not isinstance(v, (dict, list))]
+    scal = [[f"gt: {k}", v] for k, v in gt.items() if isinstance(v, (int, float)) and not isinstance(v, bool)]
     within = d.get("cloud_within_m")
     if isinstance(within, dict):
         parts.append("<h3>Cloud points within a distance of the mesh</h3>" + _table(
