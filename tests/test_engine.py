@@ -246,3 +246,19 @@ def test_step_records_beside_outputs(project):
     assert rec["plugin"] == "step/scale" and rec["params"] == {"factor": 4}
     assert rec["status"] == "ran" and rec["files"]["scaled.txt"]["size"] == 2
     assert rec["duration_s"] is not None
+
+
+def test_ctrl_c_leaves_no_partial_result_and_says_so(project):
+    p = project.popen("site=t", "recipe=chain", env=project.env(TWINKIT_TEST_SLEEP="60"))
+    store_tmp = project.ws / ".cache" / "steps" / ".tmp"
+    deadline = time.time() + 60
+    while not list(store_tmp.glob("*/started")) and time.time() < deadline:
+        time.sleep(0.1)
+    os.kill(p.pid, signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    assert "interrupted" in err
+    assert not (project.ws / "01_make").exists()
+    assert not list(store_tmp.iterdir()), "the interrupted step's temporary folder must be removed"
+    manifest = json.loads(sorted((project.ws / "runs").glob("*/manifest.json"))[-1].read_text())
+    assert manifest["status"] == "interrupted"

@@ -158,6 +158,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
 
             logging.getLogger("twinkit").debug("".join(traceback.format_exception(exc.__cause__)))
         raise
+    except BaseException as exc:  # Ctrl-C, or a bug in twinkit itself: the manifest must not say "ok"
+        status, error = "interrupted", f"{type(exc).__name__}: {exc}"
+        raise
     finally:
         if engine._lock is None and engine.outcomes is not None:
             manifest = build_manifest(

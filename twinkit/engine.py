@@ -616,7 +616,7 @@ class Engine:
                     pid = -1
                 if not _pid_alive(pid):
                     shutil.rmtree(d, ignore_errors=True)
-        for d in self.workspace.glob(".*.tmp-*"):
+        for d in [*self.workspace.glob(".*.tmp-*"), *self.workspace.glob(".*.old-*")]:
             try:
                 pid = int(d.name.rsplit("-", 1)[1])
             except ValueError:

@@ -131,6 +131,40 @@ def _link_or_copy(src: Path, dst: Path) -> None:
         shutil.copy2(src, dst)
 
 
+def _write_text(path: Path, text: str) -> None:
+    """Atomic (parallel multirun jobs share the cache)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+
+
+CACHE_KEEP_DAYS = 30
+
+
+def _touch(p: Path) -> None:
+    try:
+        os.utime(p)
+    except OSError:
+        pass
+
+
+def prune_cache(cache: Path, keep_days: float = CACHE_KEEP_DAYS) -> int:
+    """Delete cached pictures and models not used for ``keep_days`` (reports keep their hard links)."""
+    if not cache.is_dir():
+        return 0
+    limit = time.time() - keep_days * 86400
+    n = 0
+    for p in cache.iterdir():
+        try:
+            if p.is_file() and p.stat().st_mtime < limit:
+                p.unlink()
+                n += 1
+        except OSError:
+            pass
+    return n
+
+
 def _rel(target: Path, start: Path) -> str:
     """A relative URL from folder ``start`` to ``target`` (quoted for HTML attributes)."""
     try:
@@ -419,7 +453,7 @@ def _save_png(img: np.ndarray, path: Path) -> None:
     from PIL import Image
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.png")
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
     Image.fromarray(img).save(tmp, optimize=False, compress_level=3)
     tmp.replace(path)
 
@@ -570,6 +604,7 @@ def vendor_three(dest: Path, cache: Path | None = None) -> bool:
     dest.mkdir(parents=True, exist_ok=True)
     cached = (cache / f"three-bundle-{key}.js") if cache else None
     if cached is not None and cached.is_file():
+        _touch(cached)
         _link_or_copy(cached, dest / "three-bundle.js")
     else:
         text = bundle_three(nm)
@@ -1001,11 +1036,13 @@ class _Pictures:
             if labels is not None:
                 seg = render_topdown(mesh.xyz, mesh.faces, palette()[labels], bounds, w, h, flat=True)
                 _save_png(seg, seg_c)
-            meta_c.write_text(json.dumps({"bounds": bounds, "size": [w, h], "mesh": str(f),
-                                          "segmentation": labels is not None}))
+            _write_text(meta_c, json.dumps({"bounds": bounds, "size": [w, h], "mesh": str(f),
+                                            "segmentation": labels is not None}))
             self.timings["ortho_total_s"] = round(time.perf_counter() - t0, 3)
         else:
             self.timings["ortho_cached"] = 1
+            for p in (tex_c, seg_c, meta_c):
+                _touch(p)
         meta = json.loads(meta_c.read_text())
         _link_or_copy(tex_c, self.img / "ortho.png")
         res = {"texture": "img/ortho.png", "segmentation": None, "bounds": meta["bounds"], "size": meta["size"],
@@ -1360,6 +1397,8 @@ def _sec_viewer(run: RunView, out: Path, pics: _Pictures) -> str:
             seg = palette()[labels[near]] if labels is not None else None
             write_glb(cached, xyz, faces, cols, seg)
             pics.timings["glb_s"] = round(time.perf_counter() - t, 3)
+        else:
+            _touch(cached)
         _link_or_copy(cached, vdir / "model.glb")
         source = f"{s.get('folder')}/{f.name} (decimated to at most {VIEWER_MAX_FACES:,} faces for the page)"
     if not vendor_three(vdir, cache):
@@ -1370,6 +1409,8 @@ def _sec_viewer(run: RunView, out: Path, pics: _Pictures) -> str:
     js_cached = cache / f"model-{glb_stat.st_ino}-{glb_stat.st_size}-{glb_stat.st_mtime_ns}.glb.js"
     if not js_cached.is_file():
         write_glb_js(vdir / "model.glb", js_cached)
+    else:
+        _touch(js_cached)
     _link_or_copy(js_cached, vdir / "model.glb.js")
     shutil.copyfile(ASSETS / VIEWER_FILE, vdir / VIEWER_FILE)
     return (
@@ -1447,6 +1488,7 @@ def build_report(run_dir: Path, manifest: dict, engine=None) -> Path:
     (tmp / "report.html").write_text(_render_page(title, page, sub), encoding="utf-8")
     timings.update(pics.timings)
     timings["total_s"] = round(time.perf_counter() - t0, 3)
+    prune_cache(run.cache_dir)
     (tmp / "report.json").write_text(json.dumps({"sections": [s for s, _, _ in page.sections],
                                                  "timings_s": timings}, indent=1) + "\n")
     old = Path(run_dir) / f".{REPORT_DIR}.old-{os.getpid()}"
