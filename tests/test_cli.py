@@ -146,3 +146,10 @@ def test_help_is_fast_and_imports_nothing_heavy():
             "print('HEAVY', heavy)")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert "HEAVY []" in p.stdout, p.stdout + p.stderr
+
+
+def test_unknown_plugin_on_the_command_line(project):
+    r = project.run("site=t", "recipe=chain", "executor=nope")
+    assert r.rc == 2
+    assert "no executor plugin named 'nope' (available: local)" in r.err
+    assert r.err.strip().count("\n") == 0, r.err

@@ -243,6 +243,14 @@ def _run_hydra(argv: list[str]) -> int:
 
 def _composition_error(exc: Exception) -> ConfigError:
     """Hydra/OmegaConf composition errors, folded into one line."""
+    import re
+
+    m = re.search(r"Could not find '([\w/]+)/([^']+)'\s*\nAvailable options in '[^']+':\s*\n(.*?)\nConfig search path",
+                  str(exc), re.S)
+    if m:
+        options = ", ".join(o.strip() for o in m.group(3).splitlines() if o.strip()) or "none"
+        return ConfigError(f"no {m.group(1).split('/')[-1]} plugin named '{m.group(2)}' (available: {options}); "
+                           f"install the package that provides it, or check TWINKIT_PLUGINS")
     parts = [str(exc)]
     if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
         parts.append(str(exc.__cause__))
