@@ -262,3 +262,22 @@ def test_ctrl_c_leaves_no_partial_result_and_says_so(project):
     assert not list(store_tmp.iterdir()), "the interrupted step's temporary folder must be removed"
     manifest = json.loads(sorted((project.ws / "runs").glob("*/manifest.json"))[-1].read_text())
     assert manifest["status"] == "interrupted"
+
+
+def test_gc_removes_only_unreferenced_results(project):
+    project.recipe("fan", ["{id: make, uses: step/make}", "{id: tiles, uses: step/tiles}",
+                           "{id: per_tile, uses: step/per_tile, foreach: tiles.json}", "{id: gather, uses: step/gather}"])
+    assert project.run("site=t", "recipe=fan", "steps.make.value=2").rc == 0
+    assert project.run("site=t", "recipe=fan").rc == 0  # value 1: make, per_tile x3, gather change; tiles too
+    store = project.ws / ".cache" / "steps"
+    before = {d.name for d in store.iterdir() if d.is_dir() and d.name != ".tmp"}
+    dry = project.run("gc", "--dry-run", "site=t", "recipe=fan")
+    assert dry.rc == 0 and "would remove" in dry.out
+    assert {d.name for d in store.iterdir() if d.is_dir() and d.name != ".tmp"} == before
+    r = project.run("gc", "site=t", "recipe=fan")
+    assert r.rc == 0, r.text
+    after = {d.name for d in store.iterdir() if d.is_dir() and d.name != ".tmp"}
+    assert len(after) == 1 + 1 + 3 + 1 and after < before
+    project.reset_counts()
+    r = project.run("site=t", "recipe=fan")
+    assert r.rc == 0 and project.counts() == {}, "gc removed a result still in use"

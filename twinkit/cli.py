@@ -6,6 +6,7 @@
     twinkit status [overrides]                                 what a run would do, per step, without running
     twinkit plugins                                            loaded plugins with distributions and versions
     twinkit verify <manifest.json | run folder>                check a run's manifest against the files on disk
+    twinkit gc [--dry-run] [site=<name>] [engine.outputs_dir=..] delete stored results no step folder refers to
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from twinkit.errors import ConfigError, TwinkitError
 
 log = logging.getLogger("twinkit")
 
-SUBCOMMANDS = ("status", "plugins", "verify")
+SUBCOMMANDS = ("status", "plugins", "verify", "gc")
 
 EXIT_OK, EXIT_STEP_FAILED = 0, 1
 
@@ -351,6 +352,31 @@ def cmd_verify(args: list[str]) -> int:
     return 0
 
 
+def cmd_gc(args: list[str]) -> int:
+    from twinkit.engine import collect_garbage
+
+    dry = "--dry-run" in args
+    overrides = [a for a in args if a != "--dry-run"]
+    conf_dir, cfg = _compose(overrides)
+    site_root = Path(cfg["engine"]["outputs_dir"]) / cfg["site"]["name"]
+    from filelock import FileLock, Timeout
+
+    lock = FileLock(str(site_root / ".twinkit.lock")) if site_root.is_dir() else None
+    try:
+        if lock is not None:
+            lock.acquire(timeout=0)
+    except Timeout:
+        return _err(f"a twinkit run is using {site_root}; run gc when it has finished")
+    try:
+        doomed, size = collect_garbage(site_root, dry_run=dry)
+    finally:
+        if lock is not None and lock.is_locked:
+            lock.release()
+    verb = "would remove" if dry else "removed"
+    print(f"{verb} {len(doomed)} stored result(s), {size / 2**20:.1f} MiB, from {site_root / '.cache' / 'steps'}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
@@ -361,7 +387,8 @@ def main(argv: list[str] | None = None) -> int:
         if argv and argv[0] == "--hydra-help":
             argv[0] = "--help"
         if argv and argv[0] in SUBCOMMANDS:
-            return {"status": cmd_status, "plugins": cmd_plugins, "verify": cmd_verify}[argv[0]](argv[1:])
+            return {"status": cmd_status, "plugins": cmd_plugins, "verify": cmd_verify,
+                    "gc": cmd_gc}[argv[0]](argv[1:])
         return _run_hydra(argv)
     except TwinkitError as exc:
         return _err(str(exc), exc.exit_code)

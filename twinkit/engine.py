@@ -933,6 +933,7 @@ class Engine:
         status = "ran" if tasks else "cached"
         record = self._workspace_record(ps, key, desc, {"files": files, "artefacts": artefacts, "metrics": metrics,
                                                         "duration_s": round(duration, 3)}, status, why, in_paths)
+        record["item_keys"] = keys
         self._materialize(folder, [(f"{i:03d}", self.store / k) for i, k in enumerate(keys)], record)
         outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
         return StepOutcome(ps.id, ps.folder, ps.label, status, why + f" ({len(tasks)}/{len(items)} items computed)",
@@ -1096,3 +1097,31 @@ def execute_plugin(plugin: Plugin, workdir: Path, inputs: dict[str, Path], param
         shutil.rmtree(result)
     os.replace(store / key, result)
     return {p.filename: result / p.filename for p in sig.outputs}
+
+
+# --------------------------------------------------------------------------- garbage collection
+
+
+def collect_garbage(site_root: Path, dry_run: bool = False) -> tuple[list[Path], int]:
+    """Stored results that no numbered folder (of the site or of any sweep job) refers to.
+
+    Returns (removed or removable entries, bytes). Entries in use by a running job are safe:
+    they are referenced by that job's folders only after it finishes, so run gc when nothing runs.
+    """
+    store = Path(site_root) / ".cache" / "steps"
+    if not store.is_dir():
+        return [], 0
+    keep: set[str] = set()
+    for rec_path in [*Path(site_root).glob(f"[0-9][0-9]_*/{RECORD}"),
+                     *Path(site_root).glob(f"sweeps/*/*/[0-9][0-9]_*/{RECORD}")]:
+        rec = read_record(rec_path.parent) or {}
+        if rec.get("key"):
+            keep.add(rec["key"])
+        keep.update(rec.get("item_keys") or [])
+    doomed = [d for d in store.iterdir() if d.is_dir() and d.name != ".tmp" and d.name not in keep]
+    size = sum(f.stat().st_size for d in doomed for f in d.rglob("*") if f.is_file())
+    if not dry_run:
+        for d in doomed:
+            shutil.rmtree(d, ignore_errors=True)
+            (store / f"{d.name}.lock").unlink(missing_ok=True)
+    return doomed, size

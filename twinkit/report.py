@@ -38,7 +38,7 @@ log = logging.getLogger("twinkit.report")
 REPORT_DIR = "report"
 ASSETS = Path(__file__).with_name("report_assets")
 #: bump when a cached picture or model would come out differently for the same inputs.
-RENDER_VERSION = "1"
+RENDER_VERSION = "2"
 ORTHO_PX = 2048            # long side of the orthophotos
 VIEWER_MAX_FACES = 200_000  # the light GLB written when the run has none
 CONTACT_ROWS = 6
@@ -358,8 +358,9 @@ out vec3 v_col;
 flat out vec3 f_col;
 void main() {
     vec2 xy = (in_pos.xy - bounds.xy) / (bounds.zw - bounds.xy) * 2.0 - 1.0;
-    float z = 1.0 - 2.0 * (in_pos.z - zr.x) / max(zr.y - zr.x, 1e-6);   // highest surface is nearest
-    gl_Position = vec4(xy, clamp(z, -1.0, 1.0), 1.0);
+    // highest surface nearest; kept inside (-1, 1) so the lowest one is not clipped by the far plane
+    float z = 0.98 - 1.96 * (in_pos.z - zr.x) / max(zr.y - zr.x, 1e-6);
+    gl_Position = vec4(xy, z, 1.0);
     v_col = in_col;
     f_col = in_col;
 }
@@ -1470,9 +1471,9 @@ def build_report(run_dir: Path, manifest: dict, engine=None) -> Path:
 
     section("summary", "Run", _sec_summary, run, out)
     section("timeline", "Step timeline", _sec_timeline, run)
+    section("view3d", "3D view", _sec_viewer, run, tmp, pics)
     section("pictures", "Pictures", _sec_pictures, run, tmp, pics)
     section("roads", "Road network", _sec_roads, run, tmp, pics)
-    section("view3d", "3D view", _sec_viewer, run, tmp, pics)
     section("samples", "Sample views and 2D predictions", _sec_contact, run, tmp)
     section("recon", "Reconstruction metrics", _sec_recon_metrics, run)
     section("segmetrics", "Segmentation metrics", _sec_seg_metrics, run)
