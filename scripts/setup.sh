@@ -46,4 +46,13 @@ done
 # test tools; plyfile is the example plugin's dependency (its tests run in `make test`; the plugin itself is
 # installed only by the test that checks a third-party install)
 "${PIP[@]}" "${args[@]}" pytest pytest-timeout "plyfile>=1.0"
+# 5. Blender as a module for the FBX exporter. bpy 5.0.1 (wheels for Python 3.11 only) declares numpy<2 but
+#    its FBX export runs with numpy 2 (tested), which other plugins need: install it without its pin.
+.venv/bin/python -c 'import bpy' 2>/dev/null || {
+  "${PIP[@]}" --no-deps "bpy==5.0.1"
+  "${PIP[@]}" cython zstandard requests
+}
+# readers used by the exporters' round-trip tests
+"${PIP[@]}" "ufbx>=0.0.5" "pygltflib>=1.16"
+
 echo "setup: done ($(.venv/bin/python --version); $(ls -d plugins/*/ | wc -l) plugin packages)"

@@ -1,0 +1,74 @@
+"""Session fixtures: the small demo site is generated once (and a second time for the determinism test)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from twinkit.testing import make_context
+
+OUTPUTS = ["gt_mesh.obj", "gt_mesh.ply", "cloud.e57", "cloud.las", "cloud.ply", "scanners.json", "photos",
+           "cameras.json", "roads.osm", "roads_truth.json", "site.json"]
+SITE = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
+
+
+def out_kwargs(folder: Path) -> dict[str, Path]:
+    kw = {}
+    for name in OUTPUTS:
+        stem, _, ext = name.partition(".")
+        kw[f"out_{stem}_{ext}" if ext else f"out_{stem}_dir"] = folder / name
+    return kw
+
+
+def generate(folder: Path, **params):
+    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site
+
+    ctx = make_context(folder, site=dict(SITE), step_id="demo_site")
+    metrics = generate_demo_site(DemoSiteParams(**params), ctx, **out_kwargs(folder))
+    return folder, metrics
+
+
+@pytest.fixture(scope="session")
+def demo(tmp_path_factory):
+    """(folder, metrics) of the small preset, seed 0."""
+    return generate(tmp_path_factory.mktemp("demo_a"), size="small", seed=0)
+
+
+@pytest.fixture(scope="session")
+def demo_again(tmp_path_factory):
+    return generate(tmp_path_factory.mktemp("demo_b"), size="small", seed=0)
+
+
+@pytest.fixture(scope="session")
+def site(demo):
+    return json.loads((demo[0] / "site.json").read_text())
+
+
+@pytest.fixture(scope="session")
+def gt(demo):
+    """Ground-truth mesh from gt_mesh.ply: vertices (n, 3), faces (m, 3), face labels, vertex labels, and a RaycastingScene."""
+    import numpy as np
+    import open3d as o3d
+    from plyfile import PlyData
+
+    ply = PlyData.read(str(demo[0] / "gt_mesh.ply"))
+    v = np.stack([ply["vertex"][k] for k in "xyz"], 1).astype(np.float64)
+    f = np.stack(ply["face"]["vertex_indices"]).astype(np.int64)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(v.astype(np.float32)), o3d.core.Tensor(f.astype(np.uint32)))
+    return {"v": v, "f": f, "face_label": np.asarray(ply["face"]["label"]), "vertex_label": np.asarray(ply["vertex"]["label"]),
+            "vertex_rgb": np.stack([ply["vertex"][k] for k in ("red", "green", "blue")], 1), "scene": scene}
+
+
+@pytest.fixture(scope="session")
+def cloud(demo):
+    import numpy as np
+    from plyfile import PlyData
+
+    ply = PlyData.read(str(demo[0] / "cloud.ply"))
+    el = ply["vertex"]
+    return {"xyz": np.stack([el[k] for k in "xyz"], 1).astype(np.float64),
+            "normals": np.stack([el[k] for k in ("nx", "ny", "nz")], 1),
+            "rgb": np.stack([el[k] for k in ("red", "green", "blue")], 1),
+            "label": np.asarray(el["label"]), "scanner": np.asarray(el["scanner"])}

@@ -1,0 +1,326 @@
+"""File writers (deterministic: no timestamps, no random GUIDs)."""
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import uuid
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from twinkit_demo_site.layout import LABELS
+from twinkit_demo_site.meshbuild import Mesh
+from twinkit_demo_site.textures import Atlas
+
+LABEL_NAMES = {v: k for k, v in LABELS.items()}
+FIXED_DATE = _dt.date(2024, 6, 1)
+SLICE = 2_000_000
+
+
+def det_guid(*parts) -> str:
+    """A GUID derived from ``parts`` (stable across runs)."""
+    h = hashlib.sha256(repr(parts).encode()).digest()[:16]
+    return "{%s}" % uuid.UUID(bytes=h)
+
+
+def write_json(path: Path, obj) -> None:
+    Path(path).write_text(json.dumps(obj, indent=1, sort_keys=True, default=_json_default) + "\n")
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o))
+
+
+# ---------------------------------------------------------------- mesh
+def _face_order(mesh: Mesh) -> np.ndarray:
+    return np.argsort(mesh.face_labels, kind="stable")
+
+
+def write_obj(path: Path, mesh: Mesh, atlas: Atlas) -> None:
+    """OBJ + MTL + PNG atlas (companions share the OBJ's stem). Faces grouped by class (``g road`` ...)."""
+    from PIL import Image
+
+    path = Path(path)
+    mtl = path.with_suffix(".mtl")
+    png = path.with_suffix(".png")
+    Image.fromarray(atlas.image).save(png, optimize=False, compress_level=6)
+    mtl.write_text(f"# twinkit demo site ground truth\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {png.name}\n")
+    order = _face_order(mesh)
+    with open(path, "w") as fh:
+        fh.write("# twinkit demo site: ground-truth mesh, site frame (metres, z up)\n")
+        fh.write(f"# {len(mesh.vertices)} vertices, {len(mesh.faces)} faces; groups are CityScapes classes (trainId in name)\n")
+        fh.write(f"mtllib {mtl.name}\n")
+        np.savetxt(fh, mesh.vertices, fmt="v %.5f %.5f %.5f")
+        np.savetxt(fh, mesh.uvs, fmt="vt %.6f %.6f")
+        fh.write("usemtl atlas\n")
+        f = mesh.faces[order] + 1
+        lab = mesh.face_labels[order]
+        bounds = np.flatnonzero(np.diff(lab)) + 1
+        for part in np.split(np.arange(len(f)), bounds):
+            if not len(part):
+                continue
+            lb = int(lab[part[0]])
+            fh.write(f"g {LABEL_NAMES.get(lb, 'class').replace(' ', '_')}_{lb}\n")
+            ff = f[part]
+            np.savetxt(fh, np.repeat(ff, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+
+
+def write_mesh_ply(path: Path, mesh: Mesh, atlas: Atlas) -> None:
+    """Binary PLY: vertex x y z (float32) u v red green blue label; face vertex_indices label.
+
+    Face order equals the OBJ's (grouped by class); vertex colours are the texture at the vertex UV.
+    """
+    col = np.clip(atlas.sample(mesh.uvs) * 255 + 0.5, 0, 255).astype(np.uint8)
+    vdt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("u", "<f4"), ("v", "<f4"),
+                    ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("label", "u1")])
+    va = np.empty(len(mesh.vertices), vdt)
+    for i, k in enumerate("xyz"):
+        va[k] = mesh.vertices[:, i]
+    va["u"], va["v"] = mesh.uvs[:, 0], mesh.uvs[:, 1]
+    va["red"], va["green"], va["blue"] = col[:, 0], col[:, 1], col[:, 2]
+    va["label"] = mesh.vertex_labels
+    order = _face_order(mesh)
+    fdt = np.dtype([("n", "u1"), ("i", "<i4", (3,)), ("label", "u1")])
+    fa = np.empty(len(order), fdt)
+    fa["n"] = 3
+    fa["i"] = mesh.faces[order]
+    fa["label"] = mesh.face_labels[order]
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        "comment twinkit demo site ground truth, site frame (metres, z up); label = CityScapes trainId\n"
+        f"element vertex {len(va)}\n"
+        "property float x\nproperty float y\nproperty float z\nproperty float u\nproperty float v\n"
+        "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar label\n"
+        f"element face {len(fa)}\nproperty list uchar int vertex_indices\nproperty uchar label\nend_header\n"
+    )
+    with open(path, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        fh.write(va.tobytes())
+        fh.write(fa.tobytes())
+
+
+# ---------------------------------------------------------------- point cloud
+CLOUD_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
+                        ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("label", "u1"), ("scanner", "<u4")])
+
+
+def write_cloud_ply(path: Path, cloud: dict) -> None:
+    """Binary PLY point cloud in the site frame; written in slices to bound memory."""
+    n = len(cloud["xyz"])
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        "comment twinkit demo site point cloud, site frame (metres, z up)\n"
+        "comment label = CityScapes trainId (11 = ghost points of a passing pedestrian); scanner = index into scanners.json\n"
+        f"element vertex {n}\n"
+        "property float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+        "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar label\nproperty uint scanner\nend_header\n"
+    )
+    with open(path, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        for a in range(0, n, SLICE):
+            b = min(n, a + SLICE)
+            s = np.empty(b - a, CLOUD_DTYPE)
+            for i, k in enumerate("xyz"):
+                s[k] = cloud["xyz"][a:b, i]
+            for i, k in enumerate(("nx", "ny", "nz")):
+                s[k] = cloud["normals"][a:b, i]
+            for i, k in enumerate(("red", "green", "blue")):
+                s[k] = cloud["rgb"][a:b, i]
+            s["label"] = cloud["label"][a:b]
+            s["scanner"] = cloud["scanner"][a:b]
+            fh.write(s.tobytes())
+
+
+ASPRS = {0: 11, 1: 2, 9: 2, 2: 6, 8: 5}  # trainId -> ASPRS class (road surface, ground, building, high vegetation)
+
+
+def write_las(path: Path, cloud: dict, geo, gps_time: np.ndarray) -> None:
+    """LAS 1.4, point format 7 (RGB, GPS time), CRS WKT in the header, scale 0.001, projected coordinates.
+
+    Extra dimensions: ``label`` (uint8 trainId), ``scanner`` (uint32), ``normal_x/y/z`` (float32).
+    """
+    import laspy
+    from pyproj import CRS
+
+    n = len(cloud["xyz"])
+    hdr = laspy.LasHeader(point_format=7, version="1.4")
+    hdr.scales = np.array([0.001, 0.001, 0.001])
+    hdr.offsets = np.array([np.floor(geo.easting / 1000) * 1000, np.floor(geo.northing / 1000) * 1000, 0.0])
+    hdr.add_extra_dims([
+        laspy.ExtraBytesParams(name="label", type=np.uint8, description="CityScapes trainId"),
+        laspy.ExtraBytesParams(name="scanner", type=np.uint32, description="scanner position index"),
+        laspy.ExtraBytesParams(name="normal_x", type=np.float32),
+        laspy.ExtraBytesParams(name="normal_y", type=np.float32),
+        laspy.ExtraBytesParams(name="normal_z", type=np.float32),
+    ])
+    hdr.add_crs(CRS.from_user_input(geo.crs))
+    hdr.creation_date = FIXED_DATE
+    hdr.system_identifier = "twinkit demo site"
+    hdr.generating_software = "twinkit-demo-site"
+    hdr.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
+    asprs = np.ones(256, np.uint8)
+    for k, v in ASPRS.items():
+        asprs[k] = v
+    with laspy.open(path, mode="w", header=hdr) as w:
+        for a in range(0, n, SLICE):
+            b = min(n, a + SLICE)
+            rec = laspy.ScaleAwarePointRecord.zeros(b - a, header=hdr)
+            xyz = cloud["xyz"][a:b]
+            rec.x = xyz[:, 0] + geo.easting
+            rec.y = xyz[:, 1] + geo.northing
+            rec.z = xyz[:, 2] + geo.alt
+            rec.red = cloud["rgb"][a:b, 0].astype(np.uint16) * 257
+            rec.green = cloud["rgb"][a:b, 1].astype(np.uint16) * 257
+            rec.blue = cloud["rgb"][a:b, 2].astype(np.uint16) * 257
+            rec.intensity = cloud["intensity"][a:b]
+            rec.classification = asprs[cloud["label"][a:b]]
+            rec.gps_time = gps_time[a:b]
+            rec.label = cloud["label"][a:b]
+            rec.scanner = cloud["scanner"][a:b]
+            rec.normal_x = cloud["normals"][a:b, 0]
+            rec.normal_y = cloud["normals"][a:b, 1]
+            rec.normal_z = cloud["normals"][a:b, 2]
+            w.write_points(rec)
+
+
+def write_e57(path: Path, cloud: dict, geo, guid_seed, scanner_xyz: np.ndarray) -> None:
+    """ASTM E57 with one scan: cartesianX/Y/Z (float64, projected CRS), RGB, intensity, normals (``nor:`` extension).
+
+    Written with libE57Format (via pye57's bindings) with fixed GUIDs and dates.
+    """
+    from pye57 import libe57
+    from pyproj import CRS
+
+    path = str(path)
+    n = len(cloud["xyz"])
+    imf = libe57.ImageFile(path, "w")
+    try:
+        imf.extensionsAdd("nor", "http://www.libe57.org/E57_NOR_surface_normals.txt")
+        root = imf.root()
+        root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
+        root.set("guid", libe57.StringNode(imf, det_guid("file", *guid_seed)))
+        root.set("versionMajor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MAJOR))
+        root.set("versionMinor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MINOR))
+        root.set("e57LibraryVersion", libe57.StringNode(imf, libe57.E57_LIBRARY_ID))
+        root.set("coordinateMetadata", libe57.StringNode(imf, CRS.from_user_input(geo.crs).to_wkt()))
+        cdt = libe57.StructureNode(imf)
+        cdt.set("dateTimeValue", libe57.FloatNode(imf, 1401235200.0))  # fixed GPS time (2024-06-01)
+        cdt.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
+        root.set("creationDateTime", cdt)
+        data3d = libe57.VectorNode(imf, True)
+        root.set("data3D", data3d)
+        root.set("images2D", libe57.VectorNode(imf, True))
+
+        scan = libe57.StructureNode(imf)
+        scan.set("guid", libe57.StringNode(imf, det_guid("scan", *guid_seed)))
+        scan.set("name", libe57.StringNode(imf, "twinkit demo site mobile mapping"))
+        scan.set("description", libe57.StringNode(imf, "simulated mobile mapping, coordinates in " + geo.crs))
+        X = cloud["xyz"][:, 0] + geo.easting
+        Y = cloud["xyz"][:, 1] + geo.northing
+        Z = cloud["xyz"][:, 2] + geo.alt
+        lo = [float(X.min()), float(Y.min()), float(Z.min())]
+        hi = [float(X.max()), float(Y.max()), float(Z.max())]
+        bb = libe57.StructureNode(imf)
+        for k, a, b in zip("xyz", lo, hi):
+            bb.set(f"{k}Minimum", libe57.FloatNode(imf, a))
+            bb.set(f"{k}Maximum", libe57.FloatNode(imf, b))
+        scan.set("cartesianBounds", bb)
+        cl = libe57.StructureNode(imf)
+        for c in ("Red", "Green", "Blue"):
+            cl.set(f"color{c}Minimum", libe57.IntegerNode(imf, 0))
+            cl.set(f"color{c}Maximum", libe57.IntegerNode(imf, 255))
+        scan.set("colorLimits", cl)
+        il = libe57.StructureNode(imf)
+        il.set("intensityMinimum", libe57.FloatNode(imf, 0.0))
+        il.set("intensityMaximum", libe57.FloatNode(imf, 1.0))
+        scan.set("intensityLimits", il)
+        pose = libe57.StructureNode(imf)
+        rot = libe57.StructureNode(imf)
+        for k, v in zip("wxyz", (1.0, 0.0, 0.0, 0.0)):
+            rot.set(k, libe57.FloatNode(imf, v))
+        tr = libe57.StructureNode(imf)
+        for k in "xyz":
+            tr.set(k, libe57.FloatNode(imf, 0.0))
+        pose.set("rotation", rot)
+        pose.set("translation", tr)
+        scan.set("pose", pose)
+        for key, val in (("acquisitionStart", 1401235200.0), ("acquisitionEnd", 1401235200.0 + 600)):
+            st = libe57.StructureNode(imf)
+            st.set("dateTimeValue", libe57.FloatNode(imf, val))
+            st.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
+            scan.set(key, st)
+
+        proto = libe57.StructureNode(imf)
+        for k, a, b in zip(("cartesianX", "cartesianY", "cartesianZ"), lo, hi):
+            proto.set(k, libe57.FloatNode(imf, a, libe57.E57_DOUBLE, a, b))
+        for c in ("colorRed", "colorGreen", "colorBlue"):
+            proto.set(c, libe57.IntegerNode(imf, 0, 0, 255))
+        proto.set("intensity", libe57.FloatNode(imf, 0.0, libe57.E57_SINGLE, 0.0, 1.0))
+        for k in ("nor:normalX", "nor:normalY", "nor:normalZ"):
+            proto.set(k, libe57.FloatNode(imf, 0.0, libe57.E57_SINGLE, -1.0, 1.0))
+        points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
+        scan.set("points", points)
+        data3d.append(scan)
+
+        cap = min(SLICE, max(n, 1))
+        arrs = {
+            "cartesianX": np.empty(cap, "d"), "cartesianY": np.empty(cap, "d"), "cartesianZ": np.empty(cap, "d"),
+            "colorRed": np.empty(cap, "B"), "colorGreen": np.empty(cap, "B"), "colorBlue": np.empty(cap, "B"),
+            "intensity": np.empty(cap, "f"),
+            "nor:normalX": np.empty(cap, "f"), "nor:normalY": np.empty(cap, "f"), "nor:normalZ": np.empty(cap, "f"),
+        }
+        bufs = libe57.VectorSourceDestBuffer()
+        for k, a in arrs.items():
+            bufs.append(libe57.SourceDestBuffer(imf, k, a, cap, True, True))
+        writer = points.writer(bufs)
+        for a in range(0, n, cap):
+            b = min(n, a + cap)
+            m = b - a
+            arrs["cartesianX"][:m] = X[a:b]
+            arrs["cartesianY"][:m] = Y[a:b]
+            arrs["cartesianZ"][:m] = Z[a:b]
+            for i, c in enumerate(("colorRed", "colorGreen", "colorBlue")):
+                arrs[c][:m] = cloud["rgb"][a:b, i]
+            arrs["intensity"][:m] = cloud["intensity"][a:b] / 65535.0
+            for i, k in enumerate(("nor:normalX", "nor:normalY", "nor:normalZ")):
+                arrs[k][:m] = cloud["normals"][a:b, i]
+            writer.write(m)
+        writer.close()
+    finally:
+        imf.close()
+
+
+# ---------------------------------------------------------------- OSM
+def write_osm(path: Path, nodes: dict[int, tuple[float, float, dict]], ways: list, geo) -> None:
+    """OpenStreetMap XML 0.6; node coordinates are site-frame metres converted with ``geo``."""
+    ids = sorted(nodes)
+    xy = np.array([[nodes[i][0], nodes[i][1]] for i in ids])
+    ll = geo.local_to_lonlat(xy)
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', '<osm version="0.6" generator="twinkit-demo-site">']
+    lines.append(f'  <bounds minlat="{ll[:, 1].min():.7f}" minlon="{ll[:, 0].min():.7f}" '
+                 f'maxlat="{ll[:, 1].max():.7f}" maxlon="{ll[:, 0].max():.7f}"/>')
+    for i, (lon, lat) in zip(ids, ll):
+        tags = nodes[i][2]
+        attrs = f'id="{i}" version="1" visible="true" lat="{lat:.8f}" lon="{lon:.8f}"'
+        if tags:
+            lines.append(f"  <node {attrs}>")
+            for k in sorted(tags):
+                lines.append(f"    <tag k={quoteattr(k)} v={quoteattr(str(tags[k]))}/>")
+            lines.append("  </node>")
+        else:
+            lines.append(f"  <node {attrs}/>")
+    for wid, refs, tags in ways:
+        lines.append(f'  <way id="{wid}" version="1" visible="true">')
+        for r in refs:
+            lines.append(f'    <nd ref="{r}"/>')
+        for k in sorted(tags):
+            lines.append(f"    <tag k={quoteattr(k)} v={quoteattr(str(tags[k]))}/>")
+        lines.append("  </way>")
+    lines.append("</osm>")
+    Path(path).write_text("\n".join(lines) + "\n")

@@ -1,0 +1,112 @@
+"""CARLA import package: layout, JSON, OpenDRIVE parsed offline with carla.Map, spawn points and frames."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from twinkit import InputError
+from twinkit.testing import run_step
+
+from conftest import HAS_BPY, SHARED, SITE, plugin
+
+carla = pytest.importorskip("carla")
+
+
+def _package(tmp_path, fbx_out, class_dir, xodr, params=None, site=SITE):
+    from twinkit_export.plugin import CarlaPackageParams
+
+    return run_step(plugin("exporter", "carla_package"), tmp_path / "run",
+                    {"in_twin_fbx": fbx_out, "in_class_meshes_dir": class_dir, "in_aligned_xodr": xodr},
+                    params or CarlaPackageParams(), site=site)
+
+
+@pytest.fixture(scope="module")
+def fake_fbx(tmp_path_factory, class_dir):
+    """Without bpy the package code is still tested, with a stand-in FBX file."""
+    if HAS_BPY:
+        from twinkit.testing import run_step as rs
+
+        return rs(plugin("exporter", "fbx"), tmp_path_factory.mktemp("fbx_pkg"), {"in_class_meshes_dir": class_dir},
+                  site=SITE)["twin.fbx"]
+    d = tmp_path_factory.mktemp("fakefbx")
+    (d / "twin.fbx").write_bytes(b"Kaydara FBX Binary  \x00")
+    return d / "twin.fbx"
+
+
+def test_package_layout_and_json(tmp_path, fake_fbx, class_dir, xodr_file):
+    out = _package(tmp_path, fake_fbx, class_dir, xodr_file)
+    root = out["carla_import"]
+    pkg = root / "Import" / "TeststreetTwin"
+    desc = json.loads((pkg / "TeststreetTwin.json").read_text())
+    assert desc == {"maps": [{"name": "Teststreet", "source": "./Teststreet.fbx", "use_carla_materials": False,
+                              "xodr": "./Teststreet.xodr"}], "props": []}
+    for name in ("Teststreet.fbx", "Teststreet.xodr", "README.md"):
+        assert (pkg / name).exists(), name
+    # make import reads every .json under Import/ as a package: only the package's own may be there
+    assert [p.name for p in (root / "Import").rglob("*.json")] == ["TeststreetTwin.json"]
+    assert (root / "spawn_points.json").exists()
+    if HAS_BPY:
+        assert (pkg / "twin.png").exists()  # the texture the FBX references by relative path
+    # the packaged OpenDRIVE parses offline and has driving lanes
+    m = carla.Map("Teststreet", (pkg / "Teststreet.xodr").read_text())
+    assert len(m.generate_waypoints(5.0)) > 0
+    readme = (pkg / "README.md").read_text()
+    assert "make import" in readme and "Road_Road" in readme
+
+
+def test_spawn_points_on_driving_lanes_and_frames(tmp_path, fake_fbx, class_dir, xodr_file):
+    out = _package(tmp_path, fake_fbx, class_dir, xodr_file)
+    sp = json.loads(out["spawn_points.json"].read_text())
+    pts = sp["spawn_points"]
+    # straight road along +x at y = 5 m (site frame), lanes 3.5 m wide, sidewalk not used
+    assert {p["lane_id"] for p in pts} == {-1, 1}
+    assert len(pts) == 2 * 5  # s = 0, 20, 40, 60, 80 on each lane
+    for p in pts:
+        site, c = p["site"], p["carla"]
+        # right lane (-1) centre at y = 5 - 1.75, left lane (+1) at y = 5 + 1.75, in the site frame
+        want_y = 5.0 - 1.75 if p["lane_id"] == -1 else 5.0 + 1.75
+        assert site["y"] == pytest.approx(want_y, abs=1e-3)
+        assert c["y"] == pytest.approx(-want_y, abs=1e-3)  # CARLA/Unreal mirror y
+        assert site["z"] == pytest.approx(0.5)
+        # right lane drives along +x (heading 0), left lane against it
+        assert site["heading_deg"] == pytest.approx(0.0 if p["lane_id"] == -1 else 180.0, abs=1e-3)
+        assert -180 < c["yaw"] <= 180 and -180 < c["pitch"] <= 180
+
+
+def test_missing_xodr_is_a_clear_error(tmp_path, fake_fbx, class_dir):
+    with pytest.raises(InputError, match="aligned.xodr"):
+        run_step(plugin("exporter", "carla_package"), tmp_path / "run",
+                 {"in_twin_fbx": fake_fbx, "in_class_meshes_dir": class_dir}, site=SITE)
+
+
+def test_names_that_would_mislead_carla_are_refused(tmp_path, fake_fbx, class_dir, xodr_file):
+    from twinkit_export.plugin import CarlaPackageParams
+
+    with pytest.raises(InputError, match="Terrain"):
+        _package(tmp_path, fake_fbx, class_dir, xodr_file, CarlaPackageParams(map_name="TerrainPark"))
+
+
+def test_not_opendrive(tmp_path, fake_fbx, class_dir):
+    bad = tmp_path / "aligned.xodr"
+    bad.write_text("<html/>")
+    with pytest.raises(InputError, match="OpenDRIVE"):
+        _package(tmp_path, fake_fbx, class_dir, bad)
+
+
+@pytest.mark.shared
+def test_real_opendrive_fabriksgatan(tmp_path, fake_fbx, class_dir):
+    xodr = SHARED / "data" / "opendrive" / "fabriksgatan.xodr"
+    if not xodr.exists():
+        pytest.skip(f"{xodr} not available")
+    out = _package(tmp_path, fake_fbx, class_dir, xodr)
+    sp = json.loads(out["spawn_points.json"].read_text())
+    assert sp["count"] > 20
+    m = carla.Map("x", xodr.read_text())
+    # every spawn point lies on a driving lane of the map (CARLA frame), outside junctions
+    for p in sp["spawn_points"][:40]:
+        c = p["carla"]
+        w = m.get_waypoint(carla.Location(c["x"], c["y"], c["z"] - 0.5), project_to_road=True,
+                           lane_type=carla.LaneType.Driving)
+        assert w is not None and not w.is_junction
+        assert w.transform.location.distance(carla.Location(c["x"], c["y"], c["z"] - 0.5)) < 0.05

@@ -1,0 +1,230 @@
+"""Round trips: FBX (read back with ufbx), USD (usd-core + UsdValidation), GLB (pygltflib + Khronos validator)."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from twinkit.testing import run_step
+
+from twinkit_export.classes import BY_ID, palette_lut
+from twinkit_export.split import load_class_set
+
+from conftest import SITE, plugin
+
+
+def _corner_sets(uv: np.ndarray) -> np.ndarray:
+    return np.unique(np.round(uv.reshape(-1, 2), 5), axis=0)
+
+
+# ----------------------------------------------------------------------------- FBX
+
+def test_fbx_round_trip(fbx_out, class_dir, tmp_path):
+    pytest.importorskip("ufbx")
+    cs = load_class_set(class_dir)
+    dump = tmp_path / "fbx.json"
+    for _attempt in range(3):  # ufbx 0.0.5's Python bindings crash now and then (not the file: it reads fine again)
+        proc = subprocess.run([os.sys.executable, str(Path(__file__).with_name("fbx_dump.py")), str(fbx_out),
+                               str(dump)], timeout=300, capture_output=True)
+        if proc.returncode == 0:
+            break
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    d = json.loads(dump.read_text())
+    # metres, Z up, front -Y, right +X: Unreal's FBX target system, so no rotation on import
+    assert d["unit_meters"] == pytest.approx(1.0)
+    assert d["axes"] == [0, 4, 3]  # ufbx: +X right, +Z up, -Y front
+    assert set(d["nodes"]) == {m.name for m in cs.meshes}
+    tex = fbx_out.with_suffix(".png")
+    # one material, its diffuse colour linked to the texture beside the FBX (per object: see the Blender test)
+    assert list(d["materials"]) == ["M_twinkit"]
+    assert ["DiffuseColor", tex.name] in d["materials"]["M_twinkit"]
+    assert tex.exists()
+    for m in cs.meshes:
+        n = d["nodes"][m.name]
+        assert (n["num_vertices"], n["num_faces"]) == (m.n_vertices, m.n_faces), m.name
+        assert n["scale"] == [1.0, 1.0, 1.0]
+        np.testing.assert_allclose(np.array(n["positions"]), m.vertices, atol=1e-4)  # site frame, metres
+        got_uv = np.array(n["corner_uv"]).reshape(-1, 3, 2)
+        np.testing.assert_allclose(got_uv, m.corner_uv, atol=1e-5)
+        assert n["uv_sets"] == ["UVMap"]
+        assert n["n_materials"] == 1
+        assert set(n["colors"]) >= {"segmentation", "class_id"}
+        np.testing.assert_array_equal(np.array(n["colors"]["segmentation"]), m.colors)
+        np.testing.assert_array_equal(np.array(n["colors"]["class_id"])[:, 0], m.vertex_class)
+
+
+def test_fbx_reads_back_in_blender(fbx_out, class_dir, tmp_path):
+    """Blender's own FBX importer sees the same names, counts, UV layer and texture link."""
+    script = tmp_path / "read.py"
+    script.write_text(
+        "import bpy, json, sys\n"
+        "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+        f"bpy.ops.import_scene.fbx(filepath={str(fbx_out)!r})\n"
+        "out = {}\n"
+        "for ob in bpy.data.objects:\n"
+        "    if ob.type != 'MESH': continue\n"
+        "    me = ob.data\n"
+        "    imgs = [n.image.filepath for m in me.materials for n in m.node_tree.nodes if n.type == 'TEX_IMAGE' and n.image]\n"
+        "    out[ob.name] = {'v': len(me.vertices), 'f': len(me.polygons), 'uv': [u.name for u in me.uv_layers],\n"
+        "                    'colors': [c.name for c in me.color_attributes], 'images': imgs, 'class_id': ob.get('class_id'),\n"
+        "                    'dims': list(ob.dimensions)}\n"
+        f"open({str(tmp_path / 'out.json')!r}, 'w').write(json.dumps(out))\n")
+    subprocess.run([os.sys.executable, str(script)], check=True, capture_output=True, timeout=300)
+    got = json.loads((tmp_path / "out.json").read_text())
+    cs = load_class_set(class_dir)
+    assert set(got) == {m.name for m in cs.meshes}
+    for m in cs.meshes:
+        g = got[m.name]
+        assert (g["v"], g["f"]) == (m.n_vertices, m.n_faces)
+        assert g["uv"] == ["UVMap"] and g["class_id"] == m.class_id
+        assert {"segmentation", "class_id"} <= set(g["colors"])
+        assert any(Path(p).name == "twin.png" for p in g["images"])
+        ext = m.vertices.max(0) - m.vertices.min(0)
+        np.testing.assert_allclose(g["dims"], ext, atol=1e-3)  # metres in, metres out
+
+
+# ----------------------------------------------------------------------------- USD
+
+@pytest.fixture(scope="module")
+def usd_out(class_dir, tmp_path_factory):
+    out = run_step(plugin("exporter", "usd"), tmp_path_factory.mktemp("usd"), {"in_class_meshes_dir": class_dir},
+                   site=SITE)
+    return out["twin.usd"]
+
+
+def test_usd_validates_with_zero_errors(usd_out):
+    from pxr import UsdValidation  # usd-core >= 24.11 provides it; the exporter falls back otherwise
+
+    from twinkit_export.usd import validation_report
+
+    rep = validation_report(usd_out)
+    assert rep["validators"] >= 20
+    assert rep["errors"] == 0, rep["messages"]
+
+
+def test_usd_round_trip(usd_out, class_dir):
+    from pxr import Usd, UsdGeom, UsdSemantics, UsdShade
+
+    cs = load_class_set(class_dir)
+    stage = Usd.Stage.Open(str(usd_out))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    geo = stage.GetRootLayer().customLayerData["twinkit:georeference"]
+    assert geo["crs"] == "EPSG:3067" and geo["lat"] == pytest.approx(60.16945) and "projected_x" in geo
+    root = stage.GetDefaultPrim()
+    assert root.GetPath().pathString == "/Site" and root.IsA(UsdGeom.Xform)
+    meshes = {p.GetName(): p for p in root.GetChildren() if p.IsA(UsdGeom.Mesh)}
+    assert set(meshes) == {m.name for m in cs.meshes}
+    lut = palette_lut()
+    for m in cs.meshes:
+        prim = meshes[m.name]
+        mesh = UsdGeom.Mesh(prim)
+        pts = np.array(mesh.GetPointsAttr().Get())
+        np.testing.assert_allclose(pts, m.vertices, atol=1e-4)
+        idx = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+        np.testing.assert_array_equal(idx, m.faces)
+        pv = UsdGeom.PrimvarsAPI(prim)
+        st = pv.GetPrimvar("st")
+        assert st.GetInterpolation() == UsdGeom.Tokens.faceVarying
+        np.testing.assert_allclose(np.array(st.ComputeFlattened()).reshape(-1, 3, 2), m.corner_uv, atol=1e-7)
+        np.testing.assert_array_equal(np.array(pv.GetPrimvar("class_id").Get()), m.vertex_class)
+        np.testing.assert_array_equal(np.array(pv.GetPrimvar("source_index").Get()), m.source_index)
+        dc = np.array(pv.GetPrimvar("displayColor").Get())
+        assert dc.shape == (m.n_vertices, 3)
+        labels = UsdSemantics.LabelsAPI(prim, "class").GetLabelsAttr().Get()
+        assert list(labels) == [BY_ID[m.class_id].name]
+        assert prim.GetAttribute("twinkit:classId").Get() == m.class_id
+        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        assert mat and mat.GetPath().name == "M_twinkit"
+    # material -> texture file next to the stage
+    tex = stage.GetPrimAtPath("/Site/Looks/M_twinkit/DiffuseTexture")
+    asset = UsdShade.Shader(tex).GetInput("file").Get()
+    assert (usd_out.parent / Path(asset.path).name).exists()
+    assert asset.resolvedPath and Path(asset.resolvedPath).exists()
+
+
+# ----------------------------------------------------------------------------- glTF
+
+@pytest.fixture(scope="module")
+def glb_out(class_dir, tmp_path_factory):
+    out = run_step(plugin("exporter", "gltf"), tmp_path_factory.mktemp("gltf"), {"in_class_meshes_dir": class_dir},
+                   site=SITE)
+    return out["twin.glb"]
+
+
+def _accessor(g, blob, i):
+    acc = g.accessors[i]
+    bv = g.bufferViews[acc.bufferView]
+    dt = {5126: np.float32, 5121: np.uint8, 5125: np.uint32}[acc.componentType]
+    n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc.type]
+    stride = bv.byteStride or np.dtype(dt).itemsize * n
+    raw = np.frombuffer(blob, np.uint8, bv.byteLength, bv.byteOffset + (acc.byteOffset or 0))
+    rows = raw[: acc.count * stride].reshape(acc.count, stride)[:, : np.dtype(dt).itemsize * n]
+    return np.ascontiguousarray(rows).view(dt).reshape(acc.count, n)
+
+
+def test_glb_round_trip(glb_out, class_dir):
+    pygltflib = pytest.importorskip("pygltflib")
+    from PIL import Image
+    import io
+
+    cs = load_class_set(class_dir)
+    g = pygltflib.GLTF2().load(str(glb_out))
+    blob = g.binary_blob()
+    assert g.asset.extras["twinkit:georeference"]["crs"] == "EPSG:3067"
+    nodes = {n.name: n for n in g.nodes}
+    assert set(nodes) == {m.name for m in cs.meshes}
+    lut = palette_lut()
+    for m in cs.meshes:
+        node = nodes[m.name]
+        assert node.extras["class_id"] == m.class_id
+        prim = g.meshes[node.mesh].primitives[0]
+        pos = _accessor(g, blob, prim.attributes.POSITION)
+        col = _accessor(g, blob, prim.attributes.COLOR_0)
+        cls = _accessor(g, blob, getattr(prim.attributes, "_CLASS_ID")).ravel()
+        uv = _accessor(g, blob, prim.attributes.TEXCOORD_0)
+        idx = _accessor(g, blob, prim.indices).ravel()
+        assert len(idx) == 3 * m.n_faces
+        # back to the site frame: glTF (x, y, z) = site (x, z, -y)
+        site = np.column_stack([pos[:, 0], -pos[:, 2], pos[:, 1]])
+        np.testing.assert_allclose(site[idx].reshape(-1, 3, 3), m.vertices[m.faces].astype(np.float32), atol=1e-4)
+        flip = uv.copy()
+        flip[:, 1] = 1 - flip[:, 1]
+        np.testing.assert_allclose(flip[idx].reshape(-1, 3, 2), m.corner_uv, atol=1e-6)
+        # palette colours and class ids per corner
+        lab_corner = m.vertex_class[m.faces].ravel()
+        np.testing.assert_array_equal(cls[idx], lab_corner)
+        np.testing.assert_array_equal(col[idx], lut[lab_corner])
+    mat = g.materials[0]
+    assert mat.pbrMetallicRoughness.baseColorTexture.index == 0
+    img = g.images[0]
+    bv = g.bufferViews[img.bufferView]
+    im = Image.open(io.BytesIO(blob[bv.byteOffset: bv.byteOffset + bv.byteLength]))
+    assert im.size == Image.open(cs.texture).size
+
+
+def _gltf_validator() -> Path | None:
+    for base in (os.environ.get("TWINKIT_GLTF_VALIDATOR", ""), "/tmp/gv"):
+        if base and (Path(base) / "node_modules" / "gltf-validator").exists():
+            return Path(base)
+    return None
+
+
+def test_glb_passes_khronos_validator(glb_out, tmp_path):
+    base = _gltf_validator()
+    if base is None or not shutil.which("node"):
+        pytest.skip("Khronos glTF validator not installed (npm install gltf-validator; TWINKIT_GLTF_VALIDATOR=<dir>)")
+    js = tmp_path / "val.js"
+    js.write_text(
+        "const v = require('gltf-validator'); const fs = require('fs');\n"
+        "v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2]))).then(r => "
+        "console.log(JSON.stringify({e: r.issues.numErrors, w: r.issues.numWarnings, m: r.issues.messages.slice(0, 5)})));\n")
+    res = subprocess.run(["node", str(js), str(glb_out)], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "NODE_PATH": str(base / "node_modules")})
+    rep = json.loads(res.stdout)
+    assert rep["e"] == 0, rep

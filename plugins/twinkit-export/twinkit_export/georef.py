@@ -1,0 +1,38 @@
+"""The site georeference written into every export."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Mapping
+
+FRAME = "site local: metres, x east, y north, z up; origin = base point; projected = local + base_point_projected"
+
+
+def site_georef(site: Mapping[str, Any] | None, site_json: Path | None = None) -> dict:
+    """{crs, lat, lon, alt, projected_x/y/z (when known), frame} from site.json or the site config."""
+    src: dict = {}
+    if site_json is not None and Path(site_json).exists():
+        src = json.loads(Path(site_json).read_text())
+    elif site:
+        src = dict(site)
+    bp = dict(src.get("base_point") or {})
+    out: dict = {"frame": FRAME}
+    if src.get("crs"):
+        out["crs"] = str(src["crs"])
+    for k in ("lat", "lon", "alt"):
+        if k in bp and bp[k] is not None:
+            out[k] = float(bp[k])
+    proj = src.get("base_point_projected")
+    if not proj and out.get("crs") and "lat" in out and "lon" in out:
+        try:  # pyproj is optional here
+            from pyproj import Transformer
+
+            x, y = Transformer.from_crs("EPSG:4326", out["crs"], always_xy=True).transform(out["lon"], out["lat"])
+            proj = {"x": x, "y": y, "z": out.get("alt", 0.0)}
+        except Exception:
+            proj = None
+    if proj:
+        for k in ("x", "y", "z"):
+            if k in proj:
+                out[f"projected_{k}"] = float(proj[k])
+    return out

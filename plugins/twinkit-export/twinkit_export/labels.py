@@ -1,0 +1,45 @@
+"""Ground-truth labels on the reconstructed mesh (stand-in until segmentation lands)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def read_labelled_ply(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices (n,3) f64, faces (m,3) i64, labels (n,) u8) of a PLY with a per-vertex ``label``."""
+    from plyfile import PlyData
+
+    ply = PlyData.read(str(path))
+    v = ply["vertex"]
+    names = v.data.dtype.names
+    key = next((k for k in ("label", "labels", "class", "class_id", "scalar_label") if k in names), None)
+    if key is None:
+        raise ValueError(f"{path}: no per-vertex label property (have {names})")
+    verts = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
+    f = ply["face"].data
+    fname = "vertex_indices" if "vertex_indices" in f.dtype.names else "vertex_index"
+    faces = np.vstack(f[fname]).astype(np.int64)
+    return verts, faces, np.asarray(v[key]).astype(np.uint8)
+
+
+def transfer_labels(gt_vertices: np.ndarray, gt_faces: np.ndarray, gt_labels: np.ndarray,
+                    query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Label each query point with the ground-truth label at its closest point on the GT surface.
+
+    The label is that of the closest triangle's corner nearest to the closest point (per-vertex
+    labels are constant inside a class). Returns (labels (q,) uint8, distances (q,) float32, metres).
+    """
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(gt_vertices.astype(np.float32)), o3d.core.Tensor(gt_faces.astype(np.uint32)))
+    res = scene.compute_closest_points(o3d.core.Tensor(query.astype(np.float32)))
+    prim = res["primitive_ids"].numpy().astype(np.int64)
+    pts = res["points"].numpy().astype(np.float64)
+    tri = gt_faces[prim]  # (q, 3)
+    d = np.linalg.norm(gt_vertices[tri] - pts[:, None, :], axis=2)
+    corner = np.argmin(d, axis=1)
+    lab = gt_labels[tri[np.arange(len(tri)), corner]]
+    dist = np.linalg.norm(pts - query, axis=1).astype(np.float32)
+    return lab.astype(np.uint8), dist

@@ -1,0 +1,350 @@
+"""twinkit export plugins (entry point ``export`` in group ``twinkit``).
+
+Steps: ``gt_labels`` (ground-truth labels on the reconstructed mesh, a stand-in for the
+segmentation), ``split_classes`` (one sub-mesh per class). Exporters: ``fbx``, ``usd``, ``gltf``,
+``carla_package``. Heavy libraries (bpy, pxr, carla, open3d, PIL) are imported inside the steps.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from twinkit import InputError, StepContext, hookimpl
+
+
+# ----------------------------------------------------------------------------- parameters
+
+@dataclass
+class GtLabelsParams:
+    """Transfer ground-truth labels to the reconstructed mesh."""
+
+    max_dist_m: float = 0.5  # vertices farther than this from the ground-truth surface stay unlabelled (255)
+
+
+@dataclass
+class SplitParams:
+    """Split the labelled, textured mesh into one sub-mesh per class."""
+
+    max_texture_px: int = 8192  # a larger atlas is downscaled to this size (Unreal's default limit); 0 = keep
+
+
+@dataclass
+class FbxParams:
+    """FBX through Blender (bpy) in a subprocess."""
+
+    embed_texture: bool = False  # True: the texture is embedded in the FBX too (bigger file)
+    python: str = ""  # interpreter that has bpy; empty = the one running twinkit
+    save_blend: bool = False  # also write twin.blend (for inspection in Blender)
+
+
+@dataclass
+class UsdParams:
+    """USD through usd-core."""
+
+    validate: bool = True  # run usd-core's validators; errors fail the step
+    semantics_taxonomy: str = "class"  # instance name of SemanticsLabelsAPI (semantics:labels:<taxonomy>)
+
+
+@dataclass
+class GltfParams:
+    """GLB for viewing in a browser."""
+
+    texture_format: str = "jpeg"  # jpeg (smaller, for the web) | png (lossless)
+    jpeg_quality: int = 90
+    unlit: bool = True  # KHR_materials_unlit: the texture already holds the captured light
+
+
+@dataclass
+class CarlaPackageParams:
+    """CARLA import package (``Import/<Package>/``)."""
+
+    package: str = ""  # package name; empty = "<Site>Twin" from the site name
+    map_name: str = ""  # map name (FBX and XODR names); empty = "<Site>"
+    use_carla_materials: bool = False  # True: CARLA replaces road/sidewalk/terrain materials by its own
+    spawn_spacing_m: float = 20.0  # distance between spawn points along a driving lane
+    spawn_height_m: float = 0.5  # spawn points are raised by this much above the lane
+    skip_junctions: bool = True  # no spawn points inside junctions
+    carla_version: str = "0.9.16"
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _georef(ctx: StepContext, in_site_json: Path | None) -> dict:
+    from .georef import site_georef
+
+    return site_georef(getattr(ctx, "site", None), in_site_json)
+
+
+def _load_set(in_class_meshes_dir: Path):
+    from .split import load_class_set
+
+    try:
+        return load_class_set(Path(in_class_meshes_dir))
+    except FileNotFoundError as exc:
+        raise InputError(str(exc)) from None
+
+
+def _link_or_copy(src: Path, dst: Path) -> None:
+    # a copy, not a hard link: the engine hard-links stored results into the numbered folders, and a
+    # link to an input would make a hand edit of one step's texture look like an edit of another's
+    shutil.copyfile(src, dst)
+
+
+def _size(p: Path) -> int:
+    p = Path(p)
+    if p.is_dir():
+        return sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
+    return p.stat().st_size if p.exists() else 0
+
+
+def _camel(name: str) -> str:
+    parts = [p for p in "".join(ch if ch.isalnum() else " " for ch in name).split() if p]
+    out = "".join(p[:1].upper() + p[1:] for p in parts)
+    return out if out and out[0].isalpha() else f"Site{out}"
+
+
+# ----------------------------------------------------------------------------- steps
+
+def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path, in_textured_mesh_obj: Path,
+              out_labels_npy: Path) -> dict:
+    """Per-vertex trainIds of the textured mesh from the ground-truth mesh (closest surface point)."""
+    import numpy as np
+
+    from .labels import read_labelled_ply, transfer_labels
+    from .meshio import read_obj
+
+    params = params or GtLabelsParams()
+    try:
+        gv, gf, gl = read_labelled_ply(Path(in_gt_mesh_ply))
+    except Exception as exc:
+        raise InputError(f"{in_gt_mesh_ply}: not a ground-truth mesh with per-vertex labels ({exc})") from None
+    try:
+        mesh = read_obj(Path(in_textured_mesh_obj))
+    except Exception as exc:
+        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    if len(gv) == len(mesh.vertices) and np.abs(gv - mesh.vertices).max() < 1e-4:
+        # the mesh *is* the ground-truth mesh (same vertices): copy, do not guess at coincident vertices
+        lab, dist = gl.copy(), np.zeros(len(gl), np.float32)
+    else:
+        lab, dist = transfer_labels(gv, gf, gl, mesh.vertices)
+    far = dist > params.max_dist_m
+    lab[far] = 255
+    np.save(out_labels_npy, lab.astype(np.uint8))
+    hist = {int(k): int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
+    ctx.log.info("labelled %d vertices (%d farther than %.2f m left unlabelled)", len(lab), int(far.sum()),
+                 params.max_dist_m)
+    return {"vertices": int(len(lab)), "unlabelled_far": int(far.sum()),
+            "median_dist_m": float(np.median(dist)), "histogram": hist}
+
+
+def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path, in_textured_mesh_obj: Path,
+                  out_class_meshes_dir: Path) -> dict:
+    """One PLY per class (palette colours, class_id, source_index, face UVs) + classes.json + the texture."""
+    import numpy as np
+
+    from .classes import info
+    from .meshio import read_obj, write_class_ply
+    from .split import MANIFEST, split_mesh
+
+    params = params or SplitParams()
+    t0 = time.perf_counter()
+    try:
+        labels = np.load(in_labels_npy)
+    except Exception as exc:
+        raise InputError(f"{in_labels_npy}: not a readable .npy ({exc})") from None
+    try:
+        mesh = read_obj(Path(in_textured_mesh_obj))
+    except Exception as exc:
+        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    if labels.ndim != 1 or len(labels) != len(mesh.vertices):
+        raise InputError(f"{Path(in_labels_npy).name}: {labels.shape} labels for {len(mesh.vertices)} vertices of "
+                         f"{Path(in_textured_mesh_obj).name}; the labels must be per vertex of this mesh "
+                         f"(re-run the segmentation on it)")
+    if labels.dtype.kind not in "ui" or labels.min() < 0 or labels.max() > 255:
+        raise InputError(f"{Path(in_labels_npy).name}: labels must be integers 0-255 (trainIds, 255 = unlabelled)")
+    t_read = time.perf_counter() - t0
+    res = split_mesh(mesh, labels.astype(np.uint8))
+    out = Path(out_class_meshes_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tex_name = None
+    tex_info = {}
+    if mesh.texture is not None:
+        from PIL import Image
+
+        Image.MAX_IMAGE_PIXELS = None
+        with Image.open(mesh.texture) as im:
+            w, h = im.size
+            tex_info = {"texture_px": [w, h]}
+            limit = int(params.max_texture_px)
+            tex_name = "texture" + mesh.texture.suffix.lower()
+            if limit > 0 and max(w, h) > limit:
+                s = limit / max(w, h)
+                im2 = im.convert("RGB").resize((max(1, round(w * s)), max(1, round(h * s))), Image.LANCZOS)
+                tex_name = "texture.png"
+                im2.save(out / tex_name)
+                tex_info["texture_downscaled_to"] = list(im2.size)
+                ctx.log.warning("texture %dx%d downscaled to %dx%d (max_texture_px=%d)", w, h, *im2.size, limit)
+            else:
+                _link_or_copy(mesh.texture, out / tex_name)
+    else:
+        ctx.log.warning("%s: no texture found (map_Kd in the .mtl); exports will be untextured",
+                        Path(in_textured_mesh_obj).name)
+    classes = []
+    for cm in res.meshes:
+        ci = info(cm.class_id)
+        fname = f"{cm.class_id:03d}_{cm.name}.ply"
+        write_class_ply(out / fname, cm, tex_name)
+        classes.append({"class_id": cm.class_id, "cityscapes": ci.name, "name": cm.name, "file": fname,
+                        "vertices": cm.n_vertices, "own_vertices": cm.own_vertices, "faces": cm.n_faces,
+                        "label_count": int(np.count_nonzero(labels == cm.class_id)),
+                        "carla_tag": ci.carla_tag, "carla_auto_tag": ci.auto_tag, "carla_folder": ci.carla_folder,
+                        "color": list(ci.color)})
+    manifest = {"source": Path(in_textured_mesh_obj).name, "texture": tex_name, **tex_info,
+                "frame": "site local: metres, x east, y north, z up", "stats": res.stats, "classes": classes}
+    (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+    ctx.log.info("split %d vertices / %d faces into %d classes (%d border copies)", res.stats["source_vertices"],
+                 res.stats["source_faces"], len(classes), res.stats["border_copies"])
+    return {**res.stats, "read_s": round(t_read, 2), "total_s": round(time.perf_counter() - t0, 2),
+            "per_class": {c["name"]: {"vertices": c["vertices"], "own": c["own_vertices"], "faces": c["faces"]}
+                          for c in classes}}
+
+
+# ----------------------------------------------------------------------------- exporters
+
+def export_fbx(params: FbxParams, ctx: StepContext, *, in_class_meshes_dir: Path, out_twin_fbx: Path,
+               in_site_json: Path | None = None) -> dict:
+    """twin.fbx (+ twin.png beside it): one object per class, CARLA names, metres, Z up / -Y front."""
+    from .fbx import FbxExportError, write_fbx
+
+    params = params or FbxParams()
+    t0 = time.perf_counter()
+    cs = _load_set(in_class_meshes_dir)
+    out = Path(out_twin_fbx)
+    tex = None
+    if cs.texture is not None:
+        tex = out.with_suffix(cs.texture.suffix)
+        _link_or_copy(cs.texture, tex)
+    files = [cs.folder / c["file"] for c in cs.manifest["classes"] if c["faces"] > 0]
+    blend = out.with_suffix(".blend") if params.save_blend else None
+    try:
+        write_fbx(files, tex, out, georef=_georef(ctx, in_site_json), embed_texture=params.embed_texture,
+                  python=params.python, log_path=Path(ctx.workdir) / "bpy.log", blend=blend)
+    except FbxExportError as exc:
+        raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
+    return {"objects": [c["name"] for c in cs.manifest["classes"] if c["faces"] > 0],
+            "fbx_bytes": _size(out), "texture_bytes": _size(tex) if tex else 0,
+            "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path, out_twin_usd: Path,
+               in_site_json: Path | None = None) -> dict:
+    """twin.usd (binary crate, + twin.png): Mesh prim per class, UsdPreviewSurface, semantic labels, georeference."""
+    from .usd import validation_report, write_usd
+
+    params = params or UsdParams()
+    t0 = time.perf_counter()
+    cs = _load_set(in_class_meshes_dir)
+    out = Path(out_twin_usd)
+    tex_name = None
+    if cs.texture is not None:
+        tex = out.with_suffix(cs.texture.suffix)
+        _link_or_copy(cs.texture, tex)
+        tex_name = tex.name
+    stats = write_usd(cs.meshes, tex_name, out, _georef(ctx, in_site_json),
+                      semantics_taxonomy=params.semantics_taxonomy)
+    t_write = time.perf_counter() - t0
+    metrics = {"prims": list(stats), "usd_bytes": _size(out), "write_s": round(t_write, 2)}
+    if params.validate:
+        rep = validation_report(out)
+        metrics.update({"validation_errors": rep["errors"], "validation_warnings": rep["warnings"],
+                        "validators": rep["validators"]})
+        for msg in rep["messages"]:
+            ctx.log.warning("usd validation: %s", msg)
+        if rep["errors"]:
+            raise RuntimeError(f"{out.name}: {rep['errors']} USD validation errors: {rep['messages'][:5]}")
+    metrics["seconds"] = round(time.perf_counter() - t0, 2)
+    return metrics
+
+
+def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Path, out_twin_glb: Path,
+                in_site_json: Path | None = None) -> dict:
+    """twin.glb: texture + CityScapes vertex colours (COLOR_0) + _CLASS_ID, one node per class."""
+    from .gltf import write_glb
+
+    params = params or GltfParams()
+    if params.texture_format not in ("jpeg", "png"):
+        raise InputError(f"gltf: texture_format={params.texture_format!r} must be jpeg or png")
+    t0 = time.perf_counter()
+    cs = _load_set(in_class_meshes_dir)
+    stats = write_glb(cs.meshes, cs.texture, Path(out_twin_glb), _georef(ctx, in_site_json),
+                      texture_format=params.texture_format, jpeg_quality=params.jpeg_quality, unlit=params.unlit)
+    return {"nodes": list(stats), "gltf_vertices": sum(s["vertices"] for s in stats.values()),
+            "glb_bytes": _size(out_twin_glb), "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path,
+                         in_class_meshes_dir: Path, out_carla_import_dir: Path, out_spawn_points_json: Path,
+                         in_aligned_xodr: Path | None = None, in_site_json: Path | None = None) -> dict:
+    """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points."""
+    from .carla_pkg import PackageError, check_names, load_map, spawn_points, write_package, xodr_georeference
+
+    params = params or CarlaPackageParams()
+    t0 = time.perf_counter()
+    if in_aligned_xodr is None:
+        raise InputError("carla_package needs the aligned road network aligned.xodr (OpenDRIVE in the site frame): "
+                         "add the road alignment step before it, or set site.inputs.aligned_xodr=/path/to/roads.xodr")
+    xodr = Path(in_aligned_xodr)
+    try:
+        text = xodr.read_text()
+    except Exception as exc:
+        raise InputError(f"{xodr}: cannot read ({exc})") from None
+    site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
+    map_name = params.map_name or _camel(site_name)
+    package = params.package or f"{map_name}Twin"
+    try:
+        check_names(package, map_name)
+        cmap = load_map(text, map_name)
+        spawn = spawn_points(cmap, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions)
+    except PackageError as exc:
+        raise InputError(f"carla_package: {exc}") from None
+    if not spawn:
+        raise InputError(f"{xodr.name}: carla.Map found no driving lane outside junctions; "
+                         f"check the OpenDRIVE (lanes of type 'driving')")
+    cs = _load_set(in_class_meshes_dir)
+    fbx = Path(in_twin_fbx)
+    tex = next((fbx.with_suffix(e) for e in (".png", ".jpg", ".jpeg") if fbx.with_suffix(e).exists()), None)
+    georef = _georef(ctx, in_site_json)
+    out = Path(out_carla_import_dir)
+    pkg = write_package(out, package=package, map_name=map_name, fbx=fbx, texture=tex, xodr_text=text,
+                        spawn=spawn, use_carla_materials=params.use_carla_materials, georef=georef,
+                        classes_present=[c["class_id"] for c in cs.manifest["classes"] if c["faces"] > 0],
+                        carla_version=params.carla_version)
+    shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
+    # the package must hold what `make import` needs, and its OpenDRIVE must parse
+    load_map((pkg / f"{map_name}.xodr").read_text(), map_name)
+    topo = cmap.get_topology()
+    return {"package": package, "map": map_name, "spawn_points": len(spawn), "topology_edges": len(topo),
+            "xodr_georeference": xodr_georeference(text), "package_bytes": _size(out),
+            "seconds": round(time.perf_counter() - t0, 2)}
+
+
+# ----------------------------------------------------------------------------- registration
+
+@hookimpl
+def twinkit_register_steps(register):
+    register("gt_labels", gt_labels, params=GtLabelsParams,
+             description="ground-truth labels on the reconstructed mesh (until segmentation lands)")
+    register("split_classes", split_classes, params=SplitParams,
+             description="one sub-mesh per CityScapes class, CARLA names, palette colours")
+
+
+@hookimpl
+def twinkit_register_exporters(register):
+    register("fbx", export_fbx, params=FbxParams, description="FBX via Blender (bpy): CARLA names, metres, Z up")
+    register("usd", export_usd, params=UsdParams, description="USD via usd-core: prims per class, semantics, geo")
+    register("gltf", export_gltf, params=GltfParams, description="GLB for browsers: texture + segmentation colours")
+    register("carla_package", export_carla_package, params=CarlaPackageParams,
+             description="CARLA 0.9.16 import package with OpenDRIVE and spawn points")

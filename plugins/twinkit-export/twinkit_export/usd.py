@@ -1,0 +1,175 @@
+"""USD export through usd-core (pxr), and validation with usd-core's own validators.
+
+Layout::
+
+    /Site                      Xform, kind=component, defaultPrim
+      /Site/Looks/M_twinkit    Material: UsdPreviewSurface <- UsdUVTexture(file=@./<texture>@) <- st reader
+      /Site/Road_Road          Mesh per class: points, normals, primvars:st (faceVarying, indexed),
+      /Site/Road_Sidewalk ...    primvars:displayColor (vertex, CityScapes palette, linear),
+                                 primvars:class_id / primvars:source_index (int, vertex),
+                                 SemanticsLabelsAPI:class  semantics:labels:class = ["road"],
+                                 twinkit:classId, twinkit:carlaName, material:binding
+
+Stage metadata: upAxis Z, metersPerUnit 1; the site georeference is the root layer's
+``customLayerData["twinkit:georeference"]`` (crs, lat/lon/alt of the base point, projected
+base point, frame description). Coordinates are the site frame (metres, x east, y north, z up).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .classes import info
+
+
+def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    c = c.astype(np.float32) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def _prim_name(name: str) -> str:
+    out = "".join(ch if (ch.isalnum() or ch == "_") else "_" for ch in name)
+    return out if out and not out[0].isdigit() else f"_{out}"
+
+
+def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root_name: str = "Site",
+              semantics_taxonomy: str = "class") -> dict:
+    """Write the stage to ``out`` (.usd = binary crate, .usda = text); ``texture_name`` is relative to ``out``."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
+
+    try:
+        from pxr import UsdSemantics
+    except ImportError:  # older usd-core: a documented plain attribute instead
+        UsdSemantics = None
+
+    out = Path(out)
+    stage = Usd.Stage.CreateNew(str(out))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdGeom.Xform.Define(stage, f"/{root_name}")
+    stage.SetDefaultPrim(root.GetPrim())
+    Usd.ModelAPI(root.GetPrim()).SetKind("component")
+    layer = stage.GetRootLayer()
+    layer.customLayerData = {"twinkit:georeference": {k: v for k, v in georef.items()}}
+    layer.documentation = "twinkit digital twin: one Mesh per CityScapes class (site frame, metres, z up)"
+
+    # material
+    looks = UsdGeom.Scope.Define(stage, f"/{root_name}/Looks")
+    mat = UsdShade.Material.Define(stage, looks.GetPath().AppendChild("M_twinkit"))
+    surf = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("PreviewSurface"))
+    surf.CreateIdAttr("UsdPreviewSurface")
+    surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(1.0)
+    surf.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+    if texture_name:
+        st_in = mat.CreateInput("frame:stPrimvarName", Sdf.ValueTypeNames.String)
+        st_in.Set("st")
+        reader = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("stReader"))
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).ConnectToSource(st_in)
+        reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+        tex = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("DiffuseTexture"))
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{texture_name}"))
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp")
+        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("clamp")
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+        surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.ConnectableAPI(), "rgb")
+    else:
+        surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.5, 0.5, 0.5))
+
+    stats = {}
+    for cm in meshes:
+        if cm.n_faces == 0:
+            continue
+        ci = info(cm.class_id)
+        mesh = UsdGeom.Mesh.Define(stage, root.GetPath().AppendChild(_prim_name(cm.name)))
+        prim = mesh.GetPrim()
+        pts = cm.vertices.astype(np.float32)
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
+        mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*pts.min(0).tolist()), Gf.Vec3f(*pts.max(0).tolist())]))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(cm.n_faces, 3, np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(cm.faces.astype(np.int32).ravel()))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+        mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(cm.normals.astype(np.float32)))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        pv = UsdGeom.PrimvarsAPI(prim)
+        # st: faceVarying, indexed (unique UVs)
+        uv = cm.corner_uv.reshape(-1, 2)
+        uniq, inv = np.unique(uv, axis=0, return_inverse=True)
+        st = pv.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+        st.Set(Vt.Vec2fArray.FromNumpy(uniq.astype(np.float32)))
+        st.SetIndices(Vt.IntArray.FromNumpy(inv.astype(np.int32).ravel()))
+        dc = pv.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+        dc.Set(Vt.Vec3fArray.FromNumpy(_srgb_to_linear(cm.colors)))
+        cid = pv.CreatePrimvar("class_id", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
+        cid.Set(Vt.IntArray.FromNumpy(cm.vertex_class.astype(np.int32)))
+        src = pv.CreatePrimvar("source_index", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
+        src.Set(Vt.IntArray.FromNumpy(cm.source_index.astype(np.int32)))
+        prim.CreateAttribute("twinkit:classId", Sdf.ValueTypeNames.Int, custom=True).Set(int(cm.class_id))
+        prim.CreateAttribute("twinkit:cityscapesName", Sdf.ValueTypeNames.String, custom=True).Set(ci.name)
+        prim.CreateAttribute("twinkit:carlaTag", Sdf.ValueTypeNames.String, custom=True).Set(ci.carla_tag)
+        if UsdSemantics is not None:
+            labels = UsdSemantics.LabelsAPI.Apply(prim, semantics_taxonomy)
+            labels.CreateLabelsAttr().Set(Vt.TokenArray([ci.name]))
+        else:
+            prim.CreateAttribute("twinkit:semanticLabel", Sdf.ValueTypeNames.Token, custom=True).Set(ci.name)
+        UsdShade.MaterialBindingAPI.Apply(prim).Bind(mat)
+        stats[cm.name] = {"points": cm.n_vertices, "faces": cm.n_faces}
+    layer.Save()
+    return stats
+
+
+def validate_usd(path: Path) -> list[str]:
+    """Run every validator usd-core registers (UsdValidation); returns the error messages.
+
+    Falls back to ``UsdUtils.ComplianceChecker`` only where this usd-core has no UsdValidation.
+    """
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(path))
+    try:
+        from pxr import UsdValidation
+    except ImportError:
+        from pxr import UsdUtils
+
+        checker = UsdUtils.ComplianceChecker(arkit=False, skipARKitRootLayerCheck=True)
+        checker.CheckCompliance(str(path))
+        return list(checker.GetErrors()) + list(checker.GetFailedChecks())
+    reg = UsdValidation.ValidationRegistry()
+    validators = reg.GetOrLoadAllValidators()
+    ctx = UsdValidation.ValidationContext(validators)
+    errors = ctx.Validate(stage)
+    return [f"{e.GetName()}: {e.GetMessage()}" for e in errors
+            if e.GetType() == UsdValidation.ValidationErrorType.Error]
+
+
+def validation_report(path: Path) -> dict:
+    """{errors, warnings, messages, validators} from UsdValidation (every registered validator).
+
+    On a usd-core without UsdValidation (before 24.11) this falls back to UsdUtils.ComplianceChecker.
+    """
+    from pxr import Usd
+
+    try:
+        from pxr import UsdValidation
+    except ImportError:
+        errs = validate_usd(path)
+        return {"validators": 0, "checker": "UsdUtils.ComplianceChecker", "errors": len(errs), "warnings": 0,
+                "messages": errs[:50]}
+
+    stage = Usd.Stage.Open(str(path))
+    reg = UsdValidation.ValidationRegistry()
+    validators = reg.GetOrLoadAllValidators()
+    res = UsdValidation.ValidationContext(validators).Validate(stage)
+    T = UsdValidation.ValidationErrorType
+    return {
+        "validators": len(validators),
+        "errors": sum(1 for e in res if e.GetType() == T.Error),
+        "warnings": sum(1 for e in res if e.GetType() == T.Warn),
+        "messages": [f"{e.GetType()} {e.GetName()}: {e.GetMessage()}" for e in res][:50],
+    }
