@@ -1,0 +1,155 @@
+"""netconvert + carla.Map on real OSM; alignment on the demo site; the photo-branch similarity."""
+import json
+import math
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from twinkit import InputError
+from twinkit.testing import plugin_from_module, run_step
+
+import twinkit_roads.plugin as roads
+from twinkit_roads.align import centreline_rmse, transform_xodr
+from twinkit_roads.frame import SiteFrame
+from twinkit_roads.osmio import read_osm, write_osm_xml
+from twinkit_roads.similarity import fit_similarity
+
+from conftest import DEMO_SITE, FIXTURES, need_shared
+
+HKI = {"name": "hki", "crs": "EPSG:3067", "base_point": {"lat": 60.1716, "lon": 24.9443, "alt": 0.0},
+       "osm_radius_m": 300.0}
+
+
+def _convert(tmp_path, osm, site, **kw):
+    plugin = plugin_from_module(roads, "step", "osm_to_opendrive")
+    return run_step(plugin, tmp_path, {"in_osm_osm": osm}, roads.ConvertParams(**kw), site=site)
+
+
+def test_helsinki_converts_and_carla_accepts_it(tmp_path):
+    pbf = need_shared("helsinki_center.osm.pbf")
+    osm = tmp_path / "osm.osm"
+    write_osm_xml(read_osm(pbf), osm)
+    out = _convert(tmp_path / "run", osm, HKI)
+    rep = json.loads(out["roads_check.json"].read_text())
+    assert rep["ok"] and rep["carla"]["topology_segments"] > 500
+    assert rep["junctions"] > 50 and rep["traffic_lights"] > 50
+    assert rep["carla"]["waypoints_inside"] > 1000
+    head = ET.parse(out["roads.xodr"]).getroot().find("header")
+    assert "+proj=tmerc" in head.find("geoReference").text and "+lon_0=27" in head.find("geoReference").text
+
+
+def test_netconvert_nodes_sit_where_the_site_frame_puts_them(tmp_path):
+    plain = tmp_path / "plain"
+    _convert(tmp_path / "run", FIXTURES / "tiny_roads.osm", DEMO_SITE, extra_args=["--plain-output-prefix", str(plain)])
+    frame = SiteFrame.from_site(DEMO_SITE)
+    osm = read_osm(FIXTURES / "tiny_roads.osm")
+    nodes = {n.get("id"): (float(n.get("x")), float(n.get("y")))
+             for n in ET.parse(f"{plain}.nod.xml").getroot().iter("node")}
+    assert nodes
+    for nid, xy in nodes.items():
+        lon, lat, _ = osm.nodes[int(nid)]
+        assert np.allclose(frame.lonlat_to_local([[lon, lat]])[0], xy, atol=0.006)  # netconvert writes 2 decimals
+
+
+def test_netconvert_failure_and_empty_networks_name_the_cause(tmp_path):
+    bad = tmp_path / "bad.osm"
+    bad.write_text("<osm version='0.6'><way id='1'><nd ref='5'/></way")
+    with pytest.raises(InputError, match="netconvert failed on bad.osm"):
+        _convert(tmp_path / "r1", bad, DEMO_SITE)
+    with pytest.raises(InputError, match="no georeference"):
+        _convert(tmp_path / "r2", FIXTURES / "tiny_roads.osm", {"name": "x"})
+    far = dict(DEMO_SITE, base_point={"lat": 60.30, "lon": 24.93, "alt": 0})  # 15 km away from the data
+    with pytest.raises(InputError, match="do not cover the site"):
+        _convert(tmp_path / "r3", FIXTURES / "tiny_roads.osm", far)
+
+
+def test_transform_xodr_moves_lanes_rigidly(tmp_path):
+    out = _convert(tmp_path / "run", FIXTURES / "tiny_roads.osm", DEMO_SITE)
+    text = out["roads.xodr"].read_text()
+    from twinkit_roads.align import lane_lines
+
+    a = np.concatenate([ln["centre"] for ln in lane_lines(text)])
+    yaw, t = math.radians(1.5), np.array([2.0, -3.0])
+    moved = transform_xodr(text, yaw, *t, dz=0.25)
+    b = np.concatenate([ln["centre"] for ln in lane_lines(moved)])
+    R = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
+    assert np.abs(a @ R.T + t - b).max() < 0.01
+    assert 'a="0.250000"' in moved
+
+
+@pytest.fixture(scope="module")
+def demo_net(demo_site, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("demo_net")
+    out = _convert(tmp / "conv", demo_site["roads.osm"], DEMO_SITE)
+    truth = [np.asarray(ln["points"]) for ln in json.loads(demo_site["roads_truth.json"].read_text())["lanes"]]
+    return out["roads.xodr"], truth
+
+
+@pytest.mark.parametrize("use_labels", [True, False])
+def test_alignment_recovers_the_known_shift_on_the_demo(demo_site, demo_net, tmp_path, use_labels):
+    xodr, truth = demo_net
+    mesh = demo_site["gt_mesh.ply"]
+    inputs = {"in_roads_xodr": xodr, "in_textured_mesh_ply": mesh}
+    if use_labels:
+        from plyfile import PlyData
+
+        np.save(tmp_path / "labels.npy", np.asarray(PlyData.read(str(mesh))["vertex"]["label"]).astype(np.uint8))
+        inputs["in_labels_npy"] = tmp_path / "labels.npy"
+    al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp_path / "al", inputs, site=DEMO_SITE)
+    a = json.loads(al["alignment.json"].read_text())
+    assert a["road_surface_from"] == ("labels" if use_labels else "ground")
+    assert a["residual_rmse_m"] < a["residual_rmse_before_m"]
+    ap = run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap",
+                  {"in_roads_xodr": xodr, "in_alignment_json": al["alignment.json"], "in_textured_mesh_ply": mesh,
+                   "in_roads_truth_json": demo_site["roads_truth.json"]}, roads.ApplyParams(qa_px_per_m=8),
+                  site=DEMO_SITE)
+    b = (-28.0, -28.0, 28.0, 28.0)
+    before, _ = centreline_rmse(xodr.read_text(), truth, b)
+    after, n = centreline_rmse(ap["aligned.xodr"].read_text(), truth, b)
+    assert before > 1.0, "the demo OSM is shifted by metres"
+    assert after < 0.3 and n > 100
+    assert ap["roads_qa.png"].stat().st_size > 10000
+
+
+def test_an_edited_alignment_file_is_applied(demo_site, demo_net, tmp_path):
+    xodr, truth = demo_net
+    site = json.loads(demo_site["site.json"].read_text())["osm_transform"]
+    # the generator's own inverse transform, written by hand
+    th = -math.radians(site["rotation_deg"])
+    R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    t = -R @ np.array([site["dx_m"], site["dy_m"]])
+    f = tmp_path / "alignment.json"
+    f.write_text(json.dumps({"yaw_deg": math.degrees(th), "tx_m": t[0], "ty_m": t[1]}))
+    ap = run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap",
+                  {"in_roads_xodr": xodr, "in_alignment_json": f, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]},
+                  roads.ApplyParams(qa_px_per_m=4), site=DEMO_SITE)
+    # with the generator's exact inverse, netconvert's lanes lie on the true ones (lane width 3.25 m as in the demo)
+    assert centreline_rmse(ap["aligned.xodr"].read_text(), truth, (-28, -28, 28, 28))[0] < 0.03
+    f.write_text("{not json")
+    with pytest.raises(InputError, match="alignment.json"):
+        run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap2",
+                 {"in_roads_xodr": xodr, "in_alignment_json": f, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]},
+                 site=DEMO_SITE)
+
+
+def test_similarity_from_camera_centres_to_gps(demo_site):
+    cams = json.loads(demo_site["cameras.json"].read_text())["cameras"]
+    centres = np.array([c["center"] for c in cams], float)
+    gps = np.array([c["gps"]["local_xyz"] for c in cams], float)  # the generator's noisy GPS, site frame
+    real = fit_similarity(centres, gps, threshold_m=8.0)
+    assert abs(math.degrees(real.yaw_rad)) < 10.0 and abs(real.scale - 1.0) < 0.15
+    # a reconstruction in its own frame: rotated 30 deg, scaled 0.5, shifted; GPS with 0.5 m noise and
+    # two wild fixes
+    rng = np.random.default_rng(1)
+    yaw, s, t = math.radians(30.0), 0.5, np.array([100.0, -40.0, 3.0])
+    R = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
+    recon = rng.uniform(-60, 60, (40, 3)) * [1, 1, 0.05]
+    fixes = s * recon @ R.T + t + rng.normal(0, 0.5, (40, 3))
+    fixes[:2, :2] += 60.0
+    sim = fit_similarity(recon, fixes, threshold_m=3.0)
+    assert abs(math.degrees(sim.yaw_rad) - 30.0) < 1.0
+    assert abs(sim.scale - 0.5) < 0.01
+    assert not sim.inliers[:2].any() and sim.inliers[2:].all()
+    with pytest.raises(InputError):
+        fit_similarity(recon[:1], fixes[:1])

@@ -1,0 +1,122 @@
+"""Site frame, OSM readers, bad input."""
+import math
+
+import numpy as np
+import pytest
+
+from twinkit import InputError
+from twinkit.testing import check_plugin, plugin_from_module, run_step
+
+import twinkit_roads.plugin as roads
+from twinkit_roads.frame import SiteFrame, check_bbox
+from twinkit_roads.osmio import crop, read_osm, write_osm_xml
+
+from conftest import DEMO_SITE, FIXTURES, need_shared
+
+
+def test_contracts():
+    for kind, name in [("road_source", "file"), ("road_source", "osm_api"), ("road_source", "overpass"),
+                       ("step", "osm_to_opendrive"), ("step", "align_roads"), ("step", "apply_alignment")]:
+        check_plugin(plugin_from_module(roads, kind, name))
+
+
+def test_site_frame_matches_the_demo_definition():
+    f = SiteFrame.from_site(DEMO_SITE)
+    # the demo generator's own numbers (site.json): local = projected - base_point_projected
+    assert f.easting == pytest.approx(385346.25059729954, abs=1e-6)
+    assert f.northing == pytest.approx(6672076.517834117, abs=1e-6)
+    xy = np.array([[0.0, 0.0], [123.4, -56.7], [-300.0, 300.0]])
+    back = f.lonlat_to_local(f.local_to_lonlat(xy))
+    assert np.abs(back - xy).max() < 1e-6
+    assert np.allclose(f.local_to_lonlat([[0, 0]])[0], [24.93365, 60.16945], atol=1e-10)
+    assert f.local_to_height([0.5])[0] == pytest.approx(12.5)
+
+
+def test_projected_base_point_gives_the_same_frame():
+    f = SiteFrame.from_site(DEMO_SITE)
+    g = SiteFrame.from_site({"crs": "EPSG:3067", "base_point": {"x": f.easting, "y": f.northing, "z": 12.0}})
+    assert g.lat == pytest.approx(f.lat, abs=1e-9) and g.lon == pytest.approx(f.lon, abs=1e-9) and g.alt == 12.0
+
+
+def test_netconvert_projection_reproduces_the_site_frame_but_tmerc_at_base_does_not():
+    f = SiteFrame.from_site(DEMO_SITE)
+    assert f.proj_string_error(f.proj_string(), 1000.0) < 1e-3
+    # a transverse Mercator at the base point is rotated by the meridian convergence (~1.8 deg here)
+    err300 = f.proj_string_error(f.tmerc_at_base(), 300.0)
+    assert err300 > 5.0
+
+
+@pytest.mark.parametrize("crs,bp", [("EPSG:2992", {"lat": 45.5, "lon": -122.6, "alt": 0}),  # Oregon Lambert, feet
+                                    ("EPSG:32633", {"lat": 48.19212, "lon": 16.2955, "alt": 200}),  # UTM 33N
+                                    ("EPSG:4326", {"lat": 48.19212, "lon": 16.2955, "alt": 200})])  # geographic
+def test_other_crs_kinds(crs, bp):
+    f = SiteFrame.from_site({"crs": crs, "base_point": bp})
+    assert f.proj_string_error(f.proj_string(), 500.0) < 1e-3
+    assert np.abs(f.lonlat_to_local([[bp["lon"], bp["lat"]]])).max() < 1e-6
+
+
+def test_bad_georeference():
+    with pytest.raises(InputError, match="unknown CRS"):
+        SiteFrame.from_site({"crs": "EPSG:999999", "base_point": {"lat": 0, "lon": 0}})
+    with pytest.raises(InputError, match="no georeference"):
+        SiteFrame.from_site({"name": "nowhere"})
+    with pytest.raises(InputError, match="pole"):
+        SiteFrame.from_site({"crs": "EPSG:4326", "base_point": {"lat": 89.95, "lon": 0}})
+
+
+def test_boxes_across_the_antimeridian_or_a_pole_are_refused():
+    f = SiteFrame.from_site({"crs": "EPSG:4326", "base_point": {"lat": -16.5, "lon": 179.9995}})  # Fiji
+    with pytest.raises(InputError, match="antimeridian"):
+        f.bbox_lonlat(200.0)
+    with pytest.raises(InputError, match="antimeridian"):
+        check_bbox(-17.0, 179.9, -16.0, -179.9)
+    with pytest.raises(InputError, match="pole"):
+        check_bbox(89.5, 0.0, 90.0, 1.0)
+    s, w, n, e = SiteFrame.from_site(DEMO_SITE).bbox_lonlat(150.0)
+    assert s < 60.16945 < n and w < 24.93365 < e
+
+
+def test_no_heights_without_a_vertical_datum():
+    f = SiteFrame.from_site(DEMO_SITE)
+    assert "undeclared" in f.vertical_datum
+    with pytest.raises(InputError, match="vertical datum"):
+        f.ellipsoidal_heights([[0, 0, 0]])
+    g = SiteFrame.from_site({"crs": "EPSG:3067+3900", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}})
+    assert "N2000" in g.vertical_datum
+
+
+@pytest.mark.parametrize("name,min_ways", [("helsinki_center.osm.pbf", 2600), ("west_oakland.osm.bz2", 31),
+                                           ("bavarian_village.osm", 19)])
+def test_readers_on_real_files(name, min_ways, tmp_path):
+    path = need_shared(name)
+    data = read_osm(path)
+    c = data.count()
+    assert c["highway_ways"] >= min_ways and c["nodes"] > 100
+    out = tmp_path / "x.osm"
+    write_osm_xml(data, out)
+    again = read_osm(out).count()
+    assert again["highway_ways"] == c["highway_ways"] and again["nodes"] == c["nodes"]
+
+
+def test_file_source_crops_around_the_base_point(tmp_path):
+    path = need_shared("helsinki_center.osm.pbf")
+    site = {"name": "hki", "crs": "EPSG:3067", "base_point": {"lat": 60.1716, "lon": 24.9443, "alt": 0}}
+    plugin = plugin_from_module(roads, "road_source", "file")
+    out = run_step(plugin, tmp_path / "run", {"in_osm": path}, roads.FileSourceParams(crop_radius_m=150.0), site=site)
+    small = read_osm(out["osm.osm"]).count()
+    assert 0 < small["highway_ways"] < 2650
+    full = read_osm(path)
+    everything = crop(full, (60.0, 24.0, 60.5, 25.5)).count()["highway_ways"]
+    assert everything >= 0.95 * full.count()["highway_ways"]  # ways cut to < 2 nodes by the extract are dropped
+
+
+def test_no_roads_is_a_clear_error(tmp_path):
+    plugin = plugin_from_module(roads, "road_source", "file")
+    with pytest.raises(InputError, match="no roads"):
+        run_step(plugin, tmp_path / "run", {"in_osm": FIXTURES / "no_roads.osm"}, site=DEMO_SITE)
+    with pytest.raises(InputError, match="needs an OSM file"):
+        run_step(plugin, tmp_path / "run2", {}, site=DEMO_SITE)
+    bad = tmp_path / "broken.osm"
+    bad.write_text("<osm><node id='1' lat='x'")
+    with pytest.raises(InputError, match="broken.osm"):
+        run_step(plugin, tmp_path / "run3", {"in_osm": bad}, site=DEMO_SITE)

@@ -1,0 +1,166 @@
+"""OSM -> OpenDRIVE with SUMO's netconvert (PyPI ``eclipse-sumo``), and the offline check with carla.Map."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from twinkit import InputError
+
+#: CARLA's Osm2OdrSettings default way types (carla/PythonAPI: settings.set_osm_way_types)
+CARLA_WAY_TYPES = ["motorway", "motorway_link", "trunk", "trunk_link", "primary", "primary_link", "secondary",
+                   "secondary_link", "tertiary", "tertiary_link", "unclassified", "residential"]
+
+
+@dataclass
+class ConvertParams:
+    lane_width_m: float = 3.25  # --default.lanewidth for ways without width tags (CARLA's importer: 4.0)
+    way_types: list[str] = field(default_factory=lambda: list(CARLA_WAY_TYPES))  # highway=* kept
+    traffic_lights: bool = True  # --tls.guess-signals from highway=traffic_signals nodes (CARLA: generate_traffic_lights)
+    all_junctions_traffic_lights: bool = False  # --tls.guess: signalise every junction (CARLA: all_junctions_with_traffic_lights)
+    sidewalks: bool = True  # --sidewalks.guess: sidewalk lanes beside urban streets (CARLA: default_sidewalk_width)
+    sidewalk_width_m: float = 2.0  # --default.sidewalk-width (CARLA's default)
+    osm_sidewalk_tags: bool = False  # --osm.sidewalks: use sidewalk=* tags (shifts one-way streets, see docs/roads.md)
+    layer_elevation_m: float = 0.0  # --osm.layer-elevation (CARLA: elevation_layer_height); 0 = flat
+    junction_corner_detail: int = 5  # points on junction corners
+    step_m: float = 2.0  # waypoint spacing of the check
+    check_radius_m: float = -1.0  # half-side of the site box for the check; <0: site.osm_radius_m (default 150)
+    min_waypoints_inside: int = 10  # fewer waypoints inside the site box fail the step
+    timeout_s: float = 600.0  # netconvert wall-clock limit
+    extra_args: list[str] = field(default_factory=list)  # more netconvert options, appended verbatim
+
+
+def netconvert_path() -> Path:
+    try:
+        import sumo  # the eclipse-sumo wheel
+    except ImportError:
+        raise InputError("netconvert not found: install SUMO from PyPI (pip install eclipse-sumo)") from None
+    base = Path(sumo.__file__).parent
+    exe = base / "bin" / ("netconvert.exe" if os.name == "nt" else "netconvert")
+    if not exe.is_file():
+        raise InputError(f"netconvert not found in the eclipse-sumo package at {exe}; reinstall eclipse-sumo")
+    return exe
+
+
+def netconvert_version() -> str:
+    r = subprocess.run([str(netconvert_path()), "--version"], capture_output=True, text=True, timeout=60)
+    m = re.search(r"netconvert\s+(\S+)", r.stdout)
+    return m.group(1) if m else "?"
+
+
+def netconvert_args(osm: Path, xodr: Path, proj: str, p: ConvertParams) -> list[str]:
+    """The option set of CARLA's OSM importer (Osm2Odr), with the projection of the site frame."""
+    args = [str(netconvert_path()),
+            "--osm-files", str(osm), "--opendrive-output", str(xodr),
+            "--proj", proj, "--offset.disable-normalization",  # coordinates = site frame, no recentring
+            "--geometry.remove", "--ramps.guess", "--edges.join", "--junctions.join", "--roundabouts.guess",
+            "--keep-edges.by-type", ",".join(f"highway.{t}" for t in p.way_types),
+            "--tls.discard-simple", "--tls.join",
+            "--default.lanewidth", repr(float(p.lane_width_m)),
+            "--junctions.corner-detail", str(int(p.junction_corner_detail)),
+            "--output.street-names", "--output.original-names",
+            "--no-warnings", "false", "--verbose", "false"]
+    if p.layer_elevation_m > 0:
+        args += ["--osm.layer-elevation", repr(float(p.layer_elevation_m))]
+    if p.traffic_lights:
+        args += ["--tls.guess-signals", "--tls.guess-signals.dist", "25"]
+    if p.all_junctions_traffic_lights:
+        args += ["--tls.guess", "--tls.guess.threshold", "0"]
+    if p.sidewalks:
+        args += ["--sidewalks.guess", "--default.sidewalk-width", repr(float(p.sidewalk_width_m))]
+    if p.osm_sidewalk_tags:
+        args += ["--osm.sidewalks"]
+    return args + [str(a) for a in p.extra_args]
+
+
+def _env() -> dict:
+    import sumo
+
+    env = dict(os.environ)
+    env.setdefault("SUMO_HOME", str(Path(sumo.__file__).parent))
+    return env
+
+
+def run_netconvert(osm: Path, xodr: Path, proj: str, p: ConvertParams, log=None) -> dict:
+    """Run netconvert; InputError naming the cause (with netconvert's own message) when it fails."""
+    args = netconvert_args(osm, xodr, proj, p)
+    t0 = time.perf_counter()
+    try:
+        r = subprocess.run(args, capture_output=True, text=True, timeout=p.timeout_s, env=_env())
+    except subprocess.TimeoutExpired:
+        raise InputError(f"netconvert did not finish in {p.timeout_s:g} s on {osm.name}; raise timeout_s or crop "
+                         "the OSM data (road_source.crop_radius_m)") from None
+    dt = time.perf_counter() - t0
+    # PROJ inside the wheel looks for proj.db at a build-time path; our +proj strings do not need it.
+    lines = [ln for ln in (r.stderr + r.stdout).splitlines() if ln.strip() and "proj.db" not in ln
+             and "SUMO_HOME" not in ln]
+    errors = [ln for ln in lines if ln.startswith("Error")]
+    if r.returncode != 0 or errors or not xodr.is_file() or xodr.stat().st_size == 0:
+        why = "; ".join(errors[-3:] or lines[-3:]) or f"exit code {r.returncode}"
+        raise InputError(f"netconvert failed on {osm.name} (exit {r.returncode}): {why}")
+    _make_deterministic(xodr, args)
+    warnings = [ln for ln in lines if ln.startswith("Warning")]
+    if log is not None:
+        for ln in warnings[:5]:
+            log.info("netconvert: %s", ln)
+    return {"netconvert_s": round(dt, 3), "netconvert_warnings": len(warnings)}
+
+
+def _make_deterministic(xodr: Path, args: list[str]) -> None:
+    """Drop netconvert's time stamp and temporary paths, so that the same input gives the same file
+    (and later steps are not re-run for nothing); keep the options as a comment."""
+    text = xodr.read_text(encoding="utf-8")
+    text = re.sub(r"<!--.*?-->\s*", "", text, count=1, flags=re.S)
+    shown = [Path(a).name if os.sep in a and not a.startswith("+") else a for a in args[1:]]
+    opts = " ".join(shown).replace("--", "- -")  # "--" is not allowed inside an XML comment
+    text = re.sub(r'(<header\b[^>]*?)\sdate="[^"]*"', r'\1 date=""', text, count=1)
+    head, sep, rest = text.partition("?>")
+    if sep:
+        text = f"{head}?>\n<!-- written by twinkit-roads with netconvert {netconvert_version()}: {opts} -->{rest}"
+    xodr.write_text(text, encoding="utf-8")
+
+
+def xodr_counts(text: str) -> dict:
+    """Roads, junctions, signals and traffic lights counted in the OpenDRIVE XML."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(text)
+    roads = root.findall("road")
+    signals = [s for r in roads for s in r.iter("signal")]
+    tl = [s for s in signals if s.get("type") in ("1000001", "1000002", "1000011") or
+          (s.get("name") or "").lower().startswith("traffic")]
+    lanes: dict[str, int] = {}
+    for ln in root.iter("lane"):
+        t = ln.get("type", "?")
+        if ln.get("id") != "0":
+            lanes[t] = lanes.get(t, 0) + 1
+    return {"roads": len(roads), "junctions": len(root.findall("junction")),
+            "junction_roads": sum(1 for r in roads if r.get("junction", "-1") != "-1"),
+            "signals": len(signals), "traffic_lights": len(tl), "controllers": len(root.findall("controller")),
+            "lanes_by_type": lanes}
+
+
+def check_xodr(xodr: Path, bounds_local: tuple[float, float, float, float], step_m: float = 2.0,
+               timeout_s: float = 300.0) -> dict:
+    """Parse with carla.Map offline in a child process (a malformed file cannot crash the step).
+
+    ``bounds_local`` = (xmin, ymin, xmax, ymax) in the site frame. Returns counts and timings.
+    """
+    cmd = [sys.executable, "-m", "twinkit_roads.xodrcheck", str(xodr), json.dumps(list(bounds_local)), str(step_m)]
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        raise InputError(f"carla.Map did not parse {xodr.name} within {timeout_s:g} s") from None
+    out = [ln for ln in r.stdout.splitlines() if ln.startswith("{")]
+    if r.returncode != 0 or not out:
+        tail = (r.stderr.strip().splitlines() or ["no output"])[-1]
+        raise InputError(f"carla.Map rejected {xodr.name} (exit {r.returncode}): {tail}")
+    res = json.loads(out[-1])
+    if "error" in res:
+        raise InputError(f"carla.Map rejected {xodr.name}: {res['error']}")
+    return res

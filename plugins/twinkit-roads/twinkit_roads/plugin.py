@@ -1,0 +1,196 @@
+"""twinkit-roads: road sources, OSM -> OpenDRIVE, alignment to the mesh, QA picture.
+
+Steps (recipes/roads_demo.yaml):
+  fetch_roads     road_source (file | osm_api | overpass)   -> osm.osm
+  osm_to_opendrive                                          -> roads.xodr, roads_check.json
+  align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
+  apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from twinkit import InputError, hookimpl
+
+from . import __version__
+from .convert import ConvertParams
+from .sources import DownloadParams, FileSourceParams, file_source, osm_api_source, overpass_source, site_radius
+
+
+def _source_version() -> str:
+    """Distribution version + a digest of every module of the package, so that a change in a helper
+    module (not only in this file, which the engine hashes) makes the steps run again."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for f in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(f.name.encode() + f.read_bytes())
+    return f"{__version__}+src.{h.hexdigest()[:12]}"
+
+
+VERSION = _source_version()
+
+
+def _bounds(site, radius_m: float) -> tuple[float, float, float, float]:
+    r = site_radius(site, radius_m)
+    return (-r, -r, r, r)
+
+
+def osm_to_opendrive(params: ConvertParams, ctx, *, in_osm_osm: Path, out_roads_xodr: Path,
+                     out_roads_check_json: Path) -> dict:
+    """Convert with netconvert into the site frame, then check with carla.Map offline."""
+    from .convert import check_xodr, netconvert_version, run_netconvert, xodr_counts
+    from .frame import SiteFrame
+
+    frame = SiteFrame.from_site(ctx.site)
+    proj = frame.proj_string()
+    t0 = time.perf_counter()
+    info = run_netconvert(in_osm_osm, out_roads_xodr, proj, params, ctx.log)
+    text = out_roads_xodr.read_text(encoding="utf-8")
+    counts = xodr_counts(text)
+    if counts["roads"] == 0:
+        raise InputError(f"netconvert produced no roads from {in_osm_osm.name}: none of its ways has a kept type "
+                         f"({', '.join(params.way_types)}); widen way_types")
+    bounds = _bounds(ctx.site, params.check_radius_m)
+    chk = check_xodr(out_roads_xodr, bounds, params.step_m)
+    total = time.perf_counter() - t0
+    ok = chk["topology_segments"] > 0 and chk["waypoints_inside"] >= params.min_waypoints_inside
+    report = {"ok": ok, "netconvert": netconvert_version(), "netconvert_args": "see roads.xodr header comment",
+              "proj": proj, "site_frame": frame.to_json(), "bounds_local": bounds, **info, **counts,
+              "carla": chk, "conversion_s": round(total, 3)}
+    out_roads_check_json.write_text(json.dumps(report, indent=1))
+    if not ok:
+        raise InputError(f"{out_roads_xodr.name}: carla.Map found {chk['topology_segments']} topology segments and "
+                         f"{chk['waypoints_inside']} waypoints inside the site box {bounds} (need "
+                         f"{params.min_waypoints_inside}); the OSM data do not cover the site")
+    ctx.log.info("%d roads, %d junctions, %d traffic lights; carla.Map: %d waypoints (%d inside the site)",
+                 counts["roads"], counts["junctions"], counts["traffic_lights"], chk["waypoints"], chk["waypoints_inside"])
+    return {"roads": counts["roads"], "junctions": counts["junctions"], "traffic_lights": counts["traffic_lights"],
+            "waypoints": chk["waypoints"], "waypoints_inside": chk["waypoints_inside"],
+            "conversion_s": round(total, 3), "netconvert_s": info["netconvert_s"]}
+
+
+@dataclass
+class AlignParams:
+    fit_scale: bool = False  # also estimate a uniform scale (reported; not applied to the OpenDRIVE)
+    search_m: float = 8.0  # coarse search radius for the translation (0: refine only)
+    yaw_range_deg: float = 3.0  # coarse search over yaw in +- this range
+    raster_m: float = 0.1  # resolution of the road masks
+    margin_m: float = 6.0  # how far beyond the network's carriageway edge to look for the mesh's road edge
+    huber_m: float = 0.3  # robust loss threshold
+    curb_tol_m: float = 0.07  # ground fallback: height above the lowest local level still counted as road
+    fit_height: bool = True  # shift the OpenDRIVE elevation to the median road-surface height
+    model: str = "middles"  # residuals: "middles" of the carriageway, or each "edges" with a free extra width per road
+
+
+def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_mesh_ply: Path,
+                out_alignment_json: Path, in_labels_npy: Path | None = None) -> dict:
+    """Rigid 2D fit (yaw, translation) of the network to the road surface (labels) or the ground."""
+    import numpy as np
+
+    from .align import fit, sample_sections
+    from .mesh2d import Grid, read_mesh, road_faces, road_mask
+
+    mesh = read_mesh(in_textured_mesh_ply)
+    labels = None
+    if in_labels_npy is not None:
+        labels = np.load(in_labels_npy)
+    fidx, how = road_faces(mesh, labels, curb_tol_m=params.curb_tol_m)
+    if len(fidx) < 10:
+        raise InputError(f"{in_textured_mesh_ply.name}: no road surface found ({how}); nothing to align to")
+    grid = Grid.around(mesh.v[:, :2], params.raster_m)
+    mask = road_mask(mesh, fidx, grid)
+    sec = sample_sections(in_roads_xodr.read_text(encoding="utf-8"), 1.0)
+    res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=params.search_m,
+              yaw_range_deg=params.yaw_range_deg, huber_m=params.huber_m, margin_m=params.margin_m,
+              model=params.model)
+    yaw, tx, ty, scale = res.tf.about_origin()
+    dz = 0.0
+    if params.fit_height:
+        rv = np.unique(mesh.f[fidx].ravel())
+        dz = float(np.median(mesh.v[rv, 2]) - np.median(sec.z))
+    doc = {
+        "yaw_deg": round(math.degrees(yaw), 6), "tx_m": round(tx, 4), "ty_m": round(ty, 4), "dz_m": round(dz, 4),
+        "scale_estimate": round(scale, 6),
+        "definition": "aligned_xy = Rz(yaw_deg) @ xy + [tx_m, ty_m] about the site origin; z += dz_m. "
+                      "Edit the numbers and re-run: later steps use your values.",
+        "residual_rmse_m": round(res.rmse_after, 4), "residual_rmse_before_m": round(res.rmse_before, 4),
+        "sections": res.n_sections, "sections_used": res.n_used, "iterations": res.iterations,
+        "degenerate": res.degenerate, "road_surface_from": how, "model": params.model,
+        "note": "residual = RMS offset between carriageway middles of the network and of the mesh's road surface",
+    }
+    if res.degenerate:
+        ctx.log.warning("alignment poorly constrained (parallel roads only?): check alignment.json")
+    out_alignment_json.write_text(json.dumps(doc, indent=1))
+    ctx.log.info("alignment: yaw %.3f deg, t (%.3f, %.3f) m, dz %.3f m; residual %.3f m (was %.3f) from %s",
+                 doc["yaw_deg"], tx, ty, dz, res.rmse_after, res.rmse_before, how)
+    return {k: doc[k] for k in ("yaw_deg", "tx_m", "ty_m", "dz_m", "residual_rmse_m", "residual_rmse_before_m",
+                                "sections_used", "road_surface_from")}
+
+
+@dataclass
+class ApplyParams:
+    qa_px_per_m: float = 20.0  # resolution of the QA picture
+    qa_max_px: int = 4096
+
+
+def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignment_json: Path,
+                    in_textured_mesh_ply: Path, out_aligned_xodr: Path, out_roads_qa_png: Path,
+                    in_roads_truth_json: Path | None = None) -> dict:
+    """Move the OpenDRIVE by alignment.json (never the mesh) and draw the top-down QA picture."""
+    import numpy as np
+
+    from .align import centreline_rmse, lane_lines, transform_xodr
+    from .qa import draw_qa
+
+    try:
+        a = json.loads(in_alignment_json.read_text())
+        yaw, tx, ty = math.radians(float(a["yaw_deg"])), float(a["tx_m"]), float(a["ty_m"])
+        dz = float(a.get("dz_m", 0.0))
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{in_alignment_json}: unreadable alignment ({exc}); it needs numbers yaw_deg, tx_m, ty_m "
+                         "(and dz_m)") from None
+    text = in_roads_xodr.read_text(encoding="utf-8")
+    moved = transform_xodr(text, yaw, tx, ty, dz)
+    out_aligned_xodr.write_text(moved, encoding="utf-8")
+    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz}
+    truth = None
+    if in_roads_truth_json is not None:
+        tj = json.loads(in_roads_truth_json.read_text())
+        truth = [np.asarray(ln["points"], float) for ln in tj.get("lanes", [])]
+    if truth:
+        allp = np.concatenate(truth)[:, :2]
+        lo, hi = allp.min(0) + 2.0, allp.max(0) - 2.0  # ignore the truncated ends at the site border
+        b = (lo[0], lo[1], hi[0], hi[1])
+        before, n0 = centreline_rmse(text, truth, b)
+        after, n1 = centreline_rmse(moved, truth, b)
+        metrics.update({"centreline_rmse_before_m": round(before, 4), "centreline_rmse_after_m": round(after, 4),
+                        "centreline_points": n1})
+        ctx.log.info("lane centre lines vs truth: RMSE %.3f m before, %.3f m after", before, after)
+    draw_qa(in_textured_mesh_ply, lane_lines(moved, 1.0, junctions=True), lane_lines(text, 1.0, junctions=True),
+            out_roads_qa_png, params.qa_px_per_m, params.qa_max_px, truth=truth)
+    return metrics
+
+
+@hookimpl
+def twinkit_register_road_sources(register):
+    register("file", file_source, params=FileSourceParams, version=VERSION,
+             description="local .osm / .osm.bz2 / .osm.pbf (site.inputs.osm or road_source.path)")
+    register("osm_api", osm_api_source, params=DownloadParams, version=VERSION,
+             description="OpenStreetMap API /map by box around the base point (cached)")
+    register("overpass", overpass_source, params=DownloadParams, version=VERSION,
+             description="Overpass API query for highways by box around the base point (cached)")
+
+
+@hookimpl
+def twinkit_register_steps(register):
+    register("osm_to_opendrive", osm_to_opendrive, params=ConvertParams, version=VERSION,
+             description="OSM -> OpenDRIVE with netconvert in the site frame; checked with carla.Map")
+    register("align_roads", align_roads, params=AlignParams, version=VERSION,
+             description="fit the road network to the mesh's road surface (yaw, translation); alignment.json")
+    register("apply_alignment", apply_alignment, params=ApplyParams, version=VERSION,
+             description="move the OpenDRIVE by alignment.json; top-down QA picture")

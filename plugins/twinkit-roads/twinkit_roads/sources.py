@@ -1,0 +1,141 @@
+"""Road sources: where the OpenStreetMap data for a site comes from.
+
+Every source writes one OSM XML file (``osm.osm``) holding the site's roads, and
+fails with an InputError naming the cause when the data hold no roads.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from twinkit import InputError
+
+from .frame import SiteFrame, check_bbox
+from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
+
+
+@dataclass
+class FileSourceParams:
+    path: str = ""  # a local .osm / .osm.bz2 / .osm.pbf; empty: the step's input (site.inputs.osm or a generated roads.osm)
+    crop_radius_m: float = 0.0  # >0: keep only ways with a node within this half-side box around the base point
+
+
+@dataclass
+class DownloadParams:
+    url: str = ""  # empty: the public default of the source
+    radius_m: float = -1.0  # half-side of the box around the base point; <0: site.osm_radius_m (default 150)
+    bbox: str = ""  # explicit "south,west,north,east" (degrees) instead of a box around the base point
+    timeout_s: float = 60.0
+    retries: int = 3
+    backoff_s: float = 2.0
+    user_agent: str = ""  # empty: twinkit-roads/<version> (+project URL); public servers require a real one
+    cache_dir: str = ""  # empty: $XDG_CACHE_HOME/twinkit/osm
+    cache_max_age_days: float = 30.0
+
+
+def site_radius(site, radius_m: float) -> float:
+    if radius_m is not None and radius_m > 0:
+        return float(radius_m)
+    return float((site or {}).get("osm_radius_m", 150.0) or 150.0)
+
+
+def _bbox(params: DownloadParams, site) -> tuple[float, float, float, float]:
+    if params.bbox.strip():
+        try:
+            s, w, n, e = (float(v) for v in params.bbox.split(","))
+        except ValueError:
+            raise InputError(f"road_source.bbox='{params.bbox}' must be 'south,west,north,east' in degrees") from None
+        return check_bbox(s, w, n, e)
+    frame = SiteFrame.from_site(site)  # InputError when the site has no georeference
+    return frame.bbox_lonlat(site_radius(site, params.radius_m))
+
+
+def finish(data: OsmData, out: Path, where: str, bbox=None) -> dict:
+    """Write ``data`` to ``out`` after checking it has roads."""
+    counts = data.count()
+    if counts["highway_ways"] == 0:
+        box = f" in the box {tuple(round(v, 6) for v in bbox)}" if bbox else ""
+        raise InputError(f"{where}: no roads (no highway=* ways){box}; {counts['ways']} ways, {counts['nodes']} nodes. "
+                         "Check the base point and osm_radius_m, or give a file that covers the site")
+    write_osm_xml(data, out, bbox)
+    return counts
+
+
+def file_source(params: FileSourceParams, ctx, *, out_osm_osm: Path, in_osm: Path | None = None,
+                in_roads_osm: Path | None = None) -> dict:
+    """Roads from a local OSM file (.osm, .osm.bz2, .osm.pbf), optionally cropped around the base point.
+
+    Which file: ``road_source.path``, else the site input ``osm`` (site.inputs.osm), else a
+    ``roads.osm`` written by an earlier step (the demo site generator).
+    """
+    src = Path(params.path).expanduser() if params.path else (in_osm or in_roads_osm)
+    if src is None:
+        raise InputError("road_source=file needs an OSM file: set site.inputs.osm=/path/to/area.osm.pbf or "
+                         "road_source.path=..., or choose road_source=overpass / osm_api to download by box")
+    data = read_osm(Path(src))
+    bbox = None
+    if params.crop_radius_m > 0:
+        bbox = SiteFrame.from_site(ctx.site).bbox_lonlat(params.crop_radius_m)
+        data = crop(data, bbox)
+    counts = finish(data, out_osm_osm, str(src), bbox)
+    ctx.log.info("read %s: %d highway ways, %d traffic signals", Path(src).name, counts["highway_ways"],
+                 counts["traffic_signals"])
+    return {"source": str(src), **counts}
+
+
+def _validate(body: bytes) -> str | None:
+    if not looks_like_osm_xml(body):
+        return "the answer is not OSM XML: " + body[:200].decode("utf-8", "replace").strip()
+    if b"<remark>" in body[:100000] and b"runtime error" in body[:100000]:
+        return "the server reported an error: " + body.split(b"<remark>")[1].split(b"</remark>")[0].decode()[:300]
+    return None
+
+
+def _client(params: DownloadParams):
+    from .http import CachedHttp
+
+    return CachedHttp(cache_dir=params.cache_dir or None, timeout_s=params.timeout_s, retries=params.retries,
+                      backoff_s=params.backoff_s, user_agent=params.user_agent, max_age_days=params.cache_max_age_days)
+
+
+def _store(body: bytes, ctx, out: Path, where: str, bbox, res) -> dict:
+    raw = out.with_suffix(".download.osm")
+    raw.write_bytes(body)
+    try:
+        data = read_osm(raw)
+    finally:
+        raw.unlink(missing_ok=True)
+    counts = finish(data, out, where, bbox)
+    ctx.log.info("%s: %d highway ways (%s)", where, counts["highway_ways"], "cache" if res.from_cache else "downloaded")
+    return {"url": res.url, "bbox": list(bbox), "from_cache": res.from_cache, "attempts": res.attempts, **counts}
+
+
+OSM_API_URL = "https://api.openstreetmap.org/api/0.6/map"
+OVERPASS_URL = "https://overpass-api.de/api/interpreter"
+
+
+def osm_api_source(params: DownloadParams, ctx, *, out_osm_osm: Path) -> dict:
+    """Everything in a box from the OpenStreetMap editing API (``/api/0.6/map?bbox=``; at most 0.25 square degrees)."""
+    s, w, n, e = bbox = _bbox(params, ctx.site)
+    if (n - s) * (e - w) > 0.25:
+        raise InputError(f"box {bbox} is larger than the OSM API's 0.25 square degrees; use road_source=overpass")
+    url = params.url or OSM_API_URL
+    res = _client(params).request("GET", url, params={"bbox": f"{w:.7f},{s:.7f},{e:.7f},{n:.7f}"}, validate=_validate)
+    return _store(res.body, ctx, out_osm_osm, url, bbox, res)
+
+
+def overpass_query(bbox, timeout_s: float) -> str:
+    s, w, n, e = bbox
+    b = f"{s:.7f},{w:.7f},{n:.7f},{e:.7f}"
+    return (f"[out:xml][timeout:{int(max(timeout_s, 25))}];"
+            f"(way[\"highway\"]({b});node[\"highway\"]({b});relation[\"type\"=\"restriction\"]({b}););"
+            "(._;>;);out body;")
+
+
+def overpass_source(params: DownloadParams, ctx, *, out_osm_osm: Path) -> dict:
+    """Roads in a box from an Overpass API server (highway ways, their nodes, turn restrictions)."""
+    bbox = _bbox(params, ctx.site)
+    url = params.url or OVERPASS_URL
+    res = _client(params).request("POST", url, data={"data": overpass_query(bbox, params.timeout_s)},
+                                  validate=_validate)
+    return _store(res.body, ctx, out_osm_osm, url, bbox, res)
