@@ -281,3 +281,19 @@ def test_gc_removes_only_unreferenced_results(project):
     project.reset_counts()
     r = project.run("site=t", "recipe=fan")
     assert r.rc == 0 and project.counts() == {}, "gc removed a result still in use"
+
+
+def test_optional_step_is_skipped_when_its_input_is_missing(project):
+    seed = project.tmp / "seed.txt"
+    seed.write_text("4\n")
+    project.recipe("opt", ["{id: make, uses: step/make}",
+                           "{id: read, uses: step/read_seed, optional: true}",
+                           "{id: double, uses: step/double}"])
+    r = project.run("site=t", "recipe=opt")
+    assert r.rc == 0, r.text
+    assert "read" in r.text and "skipped" in r.text and "no seed (in_seed_txt)" in r.text
+    assert (project.ws / "02_double" / "double.txt").read_text() == "2\n"
+    (project.conf / "site" / "s.yaml").write_text(f"name: t\ninputs:\n  seed: {seed}\n")
+    r = project.run("site=s", "recipe=opt")
+    assert r.rc == 0, r.text
+    assert (project.ws / "03_double" / "double.txt").read_text() == "8\n"

@@ -312,6 +312,8 @@ def cmd_status(args: list[str]) -> int:
                     config_root=conf_dir.parent)
     rows = engine.status()
     print(f"recipe '{cfg['recipe'].get('name')}' on site '{site['name']}' in {site_root}")
+    for sid, reason in engine.skipped:
+        print(f"  {'-- ' + sid:<24} {'skipped':<12} {reason}")
     for folder, decision, why in rows:
         print(f"  {folder:<24} {decision:<12} {why}")
     return 0

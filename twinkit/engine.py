@@ -42,7 +42,7 @@ log = logging.getLogger("twinkit")
 
 RECORD = "step.json"
 RECORD_SCHEMA = 1
-_STEP_SPEC_KEYS = {"id", "uses", "params", "inputs", "foreach", "manual", "description"}
+_STEP_SPEC_KEYS = {"id", "uses", "params", "inputs", "foreach", "manual", "description", "optional"}
 
 
 # --------------------------------------------------------------------------- planning
@@ -59,6 +59,7 @@ class StepSpec:
     foreach: str | None = None
     manual: dict | None = None
     description: str = ""
+    optional: bool = False  # skip the step (with a logged reason) when a required input is unavailable
 
 
 @dataclass
@@ -231,10 +232,13 @@ def _site_inputs(site: dict) -> dict[str, Any]:
     return dict(site.get("inputs") or {})
 
 
-def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None) -> list[PlannedStep]:
+def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
+               skipped: list[tuple[str, str]] | None = None) -> list[PlannedStep]:
     """Turn the composed config into an ordered list of steps with wired inputs.
 
-    Raises ConfigError naming the recipe, step, plugin, key or file at fault.
+    Steps marked ``optional: true`` whose required inputs are unavailable are left out and
+    appended to ``skipped`` as (step id, reason). Raises ConfigError naming the recipe, step,
+    plugin, key or file at fault.
     """
     site = cfg.get("site") or {}
     recipe = cfg.get("recipe") or {}
@@ -258,7 +262,9 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None) -
     site_name = site.get("name", "?")
     base_dir = config_root or Path.cwd()
 
-    for idx, spec in enumerate(specs, start=1):
+    idx = 0
+    for spec in specs:
+        idx += 1
         where = f"recipe '{rname}', step '{spec.id}'"
         plugin: Plugin | None = None
         params_obj, params_dict = None, {}
@@ -312,11 +318,19 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None) -
                 components[ckind] = cfg.get(ckind)
         # wire inputs
         inputs: dict[str, Source | None] = {}
-        for port in signature.inputs:
-            want = spec.inputs.get(port.param)
-            inputs[port.param] = _resolve_input(
-                port, want, produced, site_inputs, site_name, where, base_dir, optional=port.optional
-            )
+        try:
+            for port in signature.inputs:
+                want = spec.inputs.get(port.param)
+                inputs[port.param] = _resolve_input(
+                    port, want, produced, site_inputs, site_name, where, base_dir, optional=port.optional
+                )
+        except ConfigError as exc:
+            if not spec.optional or "needs input" in str(exc):
+                raise
+            if skipped is not None:
+                skipped.append((spec.id, f"no {port.name} ({port.param}) on this site"))
+            idx -= 1
+            continue
         unknown_wiring = set(spec.inputs) - {p.param for p in signature.inputs}
         if unknown_wiring:
             raise ConfigError(
@@ -573,7 +587,8 @@ class Engine:
         self.hashes = HashCache(self.site_root / ".cache" / "hashes.sqlite")
         self.executor_factory = executor_factory
         self.manual_timeout_s = manual_timeout_s
-        self.plan = build_plan(cfg, registry, config_root)
+        self.skipped: list[tuple[str, str]] = []
+        self.plan = build_plan(cfg, registry, config_root, skipped=self.skipped)
         known = {s.id for s in self.plan} | {s.folder for s in self.plan}
         bad = self.rerun - known
         if bad:
@@ -764,6 +779,8 @@ class Engine:
     # ---------------------------------------------------------------- the loop
     def run(self, on_step: Callable[[StepOutcome, int, int], None] | None = None) -> list[StepOutcome]:
         self._prepare()
+        for sid, reason in self.skipped:
+            log.info("[-] %-28s skipped  optional step: %s", sid, reason)
         try:
             n = len(self.plan)
             for ps in self.plan:

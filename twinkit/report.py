@@ -38,10 +38,12 @@ log = logging.getLogger("twinkit.report")
 REPORT_DIR = "report"
 ASSETS = Path(__file__).with_name("report_assets")
 #: bump when a cached picture or model would come out differently for the same inputs.
-RENDER_VERSION = "2"
+RENDER_VERSION = "3"
 ORTHO_PX = 2048            # long side of the orthophotos
 VIEWER_MAX_FACES = 200_000  # the light GLB written when the run has none
 CONTACT_ROWS = 6
+MAX_GLB_BYTES = 64 * 2**20  # a bigger GLB is linked, and the page gets the light one instead
+MAX_FILES_LISTED = 200      # per step folder; the folder itself is linked too
 
 #: CityScapes trainIds 0..18: names and colours (the official palette).
 CITYSCAPES = [
@@ -196,6 +198,7 @@ class RunView:
         self.workspace = Path(ws)
         site_root = getattr(engine, "site_root", None)
         self.site_root = Path(site_root) if site_root else self.workspace
+        self.report_dir = self.run_dir / REPORT_DIR
         self.steps: list[dict] = []
         for i, s in enumerate(self.manifest.get("steps") or []):
             if not isinstance(s, dict):
@@ -942,9 +945,9 @@ def _sec_files(run: RunView, out: Path) -> str:
                 size = 0
             rows.append([("html", f"<a href=\"{_rel(f, out)}\">{_esc(rel)}</a>"), _size(size),
                          (s["hashes"].get(str(rel)) or "")[:16]])
-        shown = rows if len(rows) <= 40 else rows[:40]
-        more = f"<p>and {len(rows) - 40} more in <a href=\"{_rel(s['dir'], out)}\">the folder</a></p>" \
-            if len(rows) > 40 else ""
+        shown = rows[:MAX_FILES_LISTED]
+        more = f"<p>and {len(rows) - len(shown)} more in <a href=\"{_rel(s['dir'], out)}\">the folder</a></p>" \
+            if len(rows) > len(shown) else ""
         metrics = s.get("metrics") or {}
         mt = ""
         if metrics:
@@ -970,15 +973,17 @@ def _mesh_for_ortho(run: RunView) -> tuple[dict, Path] | None:
     return None
 
 
-def _labels_for(run: RunView, n_vertices: int, mesh_path: Path) -> tuple[np.ndarray, str] | None:
+def _labels_for(run: RunView, n_vertices: int, mesh_path: Path) -> tuple[np.ndarray, str, str] | None:
     """Per-vertex trainIds for the mesh: a labels.npy of matching length, else a labelled PLY's property."""
-    for s, f in run.find("*labels*.npy"):
+    hits = run.find("labels.npy") + [h for h in run.find("*labels*.npy") if h[1].name != "labels.npy"]
+    for s, f in hits:
         try:
             a = np.load(f, mmap_mode="r")
         except (OSError, ValueError):
             continue
         if a.ndim == 1 and len(a) == n_vertices:
-            return np.asarray(a).astype(np.int64).clip(0, 255).astype(np.uint8), run.key_of(s, f)
+            return (np.asarray(a).astype(np.int64).clip(0, 255).astype(np.uint8), run.key_of(s, f),
+                    f"{s.get('folder')}/{f.name}")
     return None
 
 
@@ -1018,8 +1023,9 @@ class _Pictures:
         # labels.npy is matched by vertex count, which the header tells without reading the mesh
         nverts = _ply_vertex_count(f)
         lab = _labels_for(self.run, nverts, f) if nverts else None
+        labels_name = ""
         if lab is not None:
-            lab_hit, labels_key = lab
+            lab_hit, labels_key, labels_name = lab
         tag = hashlib.sha256(f"{RENDER_VERSION}|{ORTHO_PX}|{key}|{labels_key}".encode()).hexdigest()[:20]
         cache = self.run.cache_dir
         tex_c, seg_c, meta_c = cache / f"ortho-{tag}.png", cache / f"ortho-seg-{tag}.png", cache / f"ortho-{tag}.json"
@@ -1034,11 +1040,12 @@ class _Pictures:
             self.timings["ortho_render_s"] = round(time.perf_counter() - t, 3)
             _save_png(img, tex_c)
             labels = lab_hit if lab_hit is not None else mesh.labels
+            labels_name = labels_name or (f.name + " (vertex labels)")
             if labels is not None:
                 seg = render_topdown(mesh.xyz, mesh.faces, palette()[labels], bounds, w, h, flat=True)
                 _save_png(seg, seg_c)
             _write_text(meta_c, json.dumps({"bounds": bounds, "size": [w, h], "mesh": str(f),
-                                            "segmentation": labels is not None}))
+                                            "segmentation": labels is not None, "labels": labels_name}))
             self.timings["ortho_total_s"] = round(time.perf_counter() - t0, 3)
         else:
             self.timings["ortho_cached"] = 1
@@ -1051,6 +1058,7 @@ class _Pictures:
         if meta.get("segmentation") and seg_c.is_file():
             _link_or_copy(seg_c, self.img / "ortho_seg.png")
             res["segmentation"] = "img/ortho_seg.png"
+            res["labels"] = meta.get("labels") or ""
         self.frame = res
         return res
 
@@ -1083,7 +1091,8 @@ def _sec_pictures(run: RunView, out: Path, pics: _Pictures) -> str:
         ext = f" <span class=\"dim\">{b[2] - b[0]:.1f} × {b[3] - b[1]:.1f} m, north up, from {_esc(o['mesh'].name)}</span>"
         figs.append(_figure(o["texture"], "Top-down orthophoto of the textured mesh", ext))
         if o["segmentation"]:
-            figs.append(_figure(o["segmentation"], "The same in segmentation colours", _legend_html()))
+            src = f" <span class=\"dim\">from {_esc(o.get('labels'))}</span>" if o.get("labels") else ""
+            figs.append(_figure(o["segmentation"], "The same in segmentation colours", src + _legend_html()))
     for pattern, caption in (("recon_metrics.png", "Distance from the cloud to the mesh (heat map)"),
                              ("*distance*.png", "Distance heat map"), ("*heat*.png", "Heat map"),
                              ("clean_report.png", "Mesh cleaning: what was removed")):
@@ -1189,7 +1198,7 @@ def _sec_contact(run: RunView, out: Path) -> str:
 
     def role(d: Path) -> int:
         n = d.name.lower()
-        if any(k in n for k in ("pred", "seg", "mask", "label")):
+        if any(k in n for k in ("pred", "seg", "mask", "label", "gt", "truth")):
             return 1
         return 0
 
@@ -1213,6 +1222,16 @@ def _sec_contact(run: RunView, out: Path) -> str:
     from PIL import Image, ImageDraw
 
     cols = [vdir] + others
+    parts = [f"{RENDER_VERSION}|contact"] + [f"{d}|{st}|{_file_key(dirs[d][st])}" for st in stems for d in cols
+                                              if st in dirs[d]]
+    cached = run.cache_dir / f"contact-{hashlib.sha256(chr(10).join(parts).encode()).hexdigest()[:20]}.jpg"
+    cap = (f"{len(stems)} sample views ({_esc(owner[vdir].get('folder'))}/{_esc(vdir.name)}) with "
+           + ", ".join(f"{_esc(owner[o].get('folder'))}/{_esc(o.name)}" for o in others))
+    html_out = "<div class=\"figs\">" + _figure("img/contact_sheet.jpg", cap, _legend_html()) + "</div>"
+    if cached.is_file():
+        _touch(cached)
+        _link_or_copy(cached, out / "img" / "contact_sheet.jpg")
+        return html_out
     tw = 320
     cells = []
     th = 0
@@ -1240,11 +1259,12 @@ def _sec_contact(run: RunView, out: Path) -> str:
         for j, im in enumerate(row):
             if im is not None:
                 sheet.paste(im, (pad + j * (tw + pad), y + 14))
-    (out / "img").mkdir(parents=True, exist_ok=True)
-    sheet.save(out / "img" / "contact_sheet.jpg", quality=88)
-    cap = (f"{len(stems)} sample views ({_esc(owner[vdir].get('folder'))}/{_esc(vdir.name)}) with "
-           + ", ".join(f"{_esc(owner[o].get('folder'))}/{_esc(o.name)}" for o in others))
-    return "<div class=\"figs\">" + _figure("img/contact_sheet.jpg", cap, _legend_html()) + "</div>"
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    tmp = cached.with_name(f".{cached.stem}.{os.getpid()}.tmp.jpg")
+    sheet.save(tmp, quality=88)
+    tmp.replace(cached)
+    _link_or_copy(cached, out / "img" / "contact_sheet.jpg")
+    return html_out
 
 
 # --------------------------------------------------------------------------- metrics
@@ -1294,68 +1314,78 @@ def _sec_recon_metrics(run: RunView) -> str:
     return "".join(p for p in parts if p)
 
 
-def _find_per_class(d: Any, path: str = "") -> tuple[str, dict] | None:
-    """The first dict of class -> {iou, f1, ...} (or a list of such rows) inside a JSON document."""
+_SCORE_KEY = re.compile(r"(^|[_\-. ])(iou|f1)($|[_\-. ])", re.I)
+
+
+def _is_score(k: Any) -> bool:
+    return bool(_SCORE_KEY.search(str(k)))
+
+
+def _per_class_tables(d: Any, path: str = "", parent: Any = None) -> list[tuple[str, dict, dict]]:
+    """Every table of class -> {iou, f1, ...} (a dict of dicts, or a list of rows) inside a JSON document,
+    as (where, the numbers next to it (mIoU, accuracy...), the table)."""
+    def scalars(x):
+        return {k: v for k, v in x.items() if isinstance(v, (int, float)) and not isinstance(v, bool)} \
+            if isinstance(x, dict) else {}
+
     if isinstance(d, dict):
         vals = list(d.values())
         if vals and all(isinstance(v, dict) for v in vals) and sum(
-                any("iou" in str(k).lower() or "f1" in str(k).lower() for k in v) for v in vals) >= max(1, len(vals) // 2):
-            return path, d
+                any(_is_score(k) for k in v) for v in vals) >= max(1, len(vals) // 2):
+            return [(path, scalars(parent), d)]
+        out = []
         for k, v in d.items():
-            r = _find_per_class(v, f"{path}.{k}" if path else str(k))
-            if r:
-                return r
+            out += _per_class_tables(v, f"{path}.{k}" if path else str(k), d)
+        return out
     if isinstance(d, list) and d and all(isinstance(x, dict) for x in d) and any(
-            any("iou" in str(k).lower() for k in x) for x in d):
+            any(_is_score(k) for k in x) for x in d):
         rows = {}
         for i, x in enumerate(d):
             name = x.get("name") or x.get("class") or x.get("label") or x.get("id") or str(i)
             rows[str(name)] = {k: v for k, v in x.items() if k not in ("name", "class", "label")}
-        return path, rows
-    return None
+        return [(path, scalars(parent), rows)]
+    return []
 
 
 def _sec_seg_metrics(run: RunView) -> str:
     parts = []
-    seen = set()
     for s, f in run.find("*.json"):
         if f.name == "step.json" or f.stat().st_size > 2_000_000:
             continue
         d = _read_json(f)
-        hit = _find_per_class(d) if isinstance(d, (dict, list)) else None
-        if not hit or f in seen:
-            continue
-        seen.add(f)
-        where, per = hit
-        cols: list[str] = []
-        for v in per.values():
-            for k in v:
-                if isinstance(v[k], (int, float)) and k not in cols:
-                    cols.append(k)
-        rows = []
-        for name, v in per.items():
-            label = name
-            if str(name).isdigit() and int(name) < len(CITYSCAPES):
-                label = f"{name} {CITYSCAPES[int(name)][0]}"
-            col = None
-            for i, (n, c) in enumerate(CITYSCAPES):
-                if n == str(name).lower() or str(i) == str(name):
-                    col = c
-            sw = f"<i class=\"sw\" style=\"background:rgb{col}\"></i>" if col else ""
-            rows.append([("html", sw + _esc(label))] + [v.get(c, "") for c in cols])
-        summary = {k: v for k, v in (d.items() if isinstance(d, dict) else [])
-                   if isinstance(v, (int, float)) and not isinstance(v, bool)}
-        title = f"{s.get('folder')}/{f.name}" + (f" ({where})" if where else "")
-        parts.append(f"<h3>{_esc(title)}</h3>")
-        if summary:
-            parts.append(_table(["", ""], [[k, v] for k, v in summary.items()], "kv"))
-        parts.append(_table(["class"] + cols, rows))
+        tables = _per_class_tables(d) if isinstance(d, (dict, list)) else []
+        for where, summary, per in tables:
+            cols: list[str] = []
+            for v in per.values():
+                for k in v:
+                    if isinstance(v[k], (int, float)) and not isinstance(v[k], bool) and k not in cols:
+                        cols.append(k)
+            cols.sort(key=lambda k: (0 if _is_score(k) else 1))
+            rows = []
+            for name, v in per.items():
+                label = str(name)
+                if label.isdigit() and int(label) < len(CITYSCAPES):
+                    label = f"{label} {CITYSCAPES[int(label)][0]}"
+                col = next((c for i, (n, c) in enumerate(CITYSCAPES) if n == str(name).lower() or str(i) == str(name)),
+                           None)
+                sw = f"<i class=\"sw\" style=\"background:rgb{col}\"></i>" if col else ""
+                rows.append([("html", sw + _esc(label))] + [v.get(c, "") for c in cols])
+            parent = where.rsplit(".", 1)[0] if "." in where else ""
+            title = f"{s.get('folder')}/{f.name}" + (f" · {parent}" if parent else "")
+            parts.append(f"<h3>{_esc(title)}</h3>")
+            if summary:
+                parts.append(_table(["", ""], [[k, v] for k, v in summary.items()], "kv"))
+            parts.append(_table(["class"] + cols, rows))
+        md = f.with_suffix(".md")
+        if tables and md.is_file():
+            parts.append(f"<p class=\"dim\">also as text: <a href=\"{_rel(md, run.report_dir)}\">"
+                         f"{_esc(s.get('folder'))}/{_esc(md.name)}</a></p>")
     return "".join(parts)
 
 
 def _sec_alignment(run: RunView) -> str:
     parts = []
-    for s, f in run.find("*align*.json") + run.find("*residual*.json"):
+    for s, f in run.find("*align*.json") + run.find("*residual*.json") + run.find("*roads_check*.json"):
         d = _read_json(f)
         if not isinstance(d, dict):
             continue
@@ -1373,6 +1403,12 @@ def _sec_viewer(run: RunView, out: Path, pics: _Pictures) -> str:
     glbs = [(s, f) for s, f in run.find("*.glb") if not f.name.startswith("gt_")]
     source = None
     cache = run.cache_dir
+    note = ""
+    if glbs and glbs[0][1].stat().st_size > MAX_GLB_BYTES:
+        s, f = glbs[0]
+        note = (f" {_esc(s.get('folder'))}/{_esc(f.name)} ({_size(f.stat().st_size)}) is too heavy for the page; "
+                f"<a href=\"{_rel(f, out)}\">download it</a>.")
+        glbs = []
     if glbs:
         s, f = glbs[0]
         _link_or_copy(f, vdir / "model.glb")
@@ -1380,7 +1416,7 @@ def _sec_viewer(run: RunView, out: Path, pics: _Pictures) -> str:
     else:
         hit = _mesh_for_ortho(run)
         if hit is None:
-            return ""
+            return f"<p>{note}</p>" if note else ""
         s, f = hit
         nverts = _ply_vertex_count(f)
         lab = _labels_for(run, nverts, f)
@@ -1422,7 +1458,7 @@ def _sec_viewer(run: RunView, out: Path, pics: _Pictures) -> str:
         "</label><button id=\"view-reset\" type=\"button\">reset view</button>"
         "<span id=\"viewer-status\">loading…</span></div></div>"
         f"<p class=\"dim\">From {_esc(source)}: <a href=\"viewer/model.glb\">model.glb</a> "
-        f"({_size((vdir / 'model.glb').stat().st_size)}). Drag to orbit, right-drag to pan, wheel to zoom.</p>"
+        f"({_size((vdir / 'model.glb').stat().st_size)}).{note} Drag to orbit, right-drag to pan, wheel to zoom.</p>"
         "<script src=\"viewer/three-bundle.js\"></script><script src=\"viewer/model.glb.js\"></script>"
         "<script src=\"viewer/viewer.js\"></script>"
     )
@@ -1449,9 +1485,9 @@ def build_report(run_dir: Path, manifest: dict, engine=None) -> Path:
     t0 = time.perf_counter()
     run = RunView(run_dir, manifest, engine)
     out = Path(run_dir) / REPORT_DIR
+    for stale in list(Path(run_dir).glob(f".{REPORT_DIR}.tmp-*")) + list(Path(run_dir).glob(f".{REPORT_DIR}.old-*")):
+        shutil.rmtree(stale, ignore_errors=True)  # left by an interrupted report
     tmp = Path(run_dir) / f".{REPORT_DIR}.tmp-{os.getpid()}"
-    if tmp.exists():
-        shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
     # links in the page are computed from the final folder; files are written into the temporary one
     page = _Page(tmp)
@@ -1571,6 +1607,20 @@ def _job_num(name: str) -> int:
     return int(m.group()) if m else 0
 
 
+def _nice_ticks(lo: float, hi: float, n: int = 4) -> list[float]:
+    """Round tick values (1, 2, 5 x 10^k steps) covering [lo, hi]."""
+    raw = (hi - lo) / n
+    mag = 10 ** math.floor(math.log10(raw))
+    step = next(m * mag for m in (1, 2, 2.5, 5, 10) if m * mag >= raw)
+    start = math.floor(lo / step) * step
+    ticks = []
+    v = start
+    while v < hi + step * 0.999:
+        ticks.append(round(v, 12))
+        v += step
+    return ticks
+
+
 def _svg_plot(xs: list[float], ys: list[float], xlabel: str, ylabel: str, w: int = 360, h: int = 240,
               labels: list[str] | None = None) -> str:
     """A small line plot with axes and ticks, as inline SVG."""
@@ -1582,8 +1632,8 @@ def _svg_plot(xs: list[float], ys: list[float], xlabel: str, ylabel: str, w: int
         x0, x1 = x0 - 1, x1 + 1
     if y1 == y0:
         y0, y1 = y0 - (abs(y0) * 0.1 or 1), y1 + (abs(y1) * 0.1 or 1)
-    pad = (y1 - y0) * 0.08
-    y0, y1 = y0 - pad, y1 + pad
+    ticks = _nice_ticks(y0, y1)
+    y0, y1 = min(y0, ticks[0]), max(y1, ticks[-1])
 
     def X(v):
         return ml + (v - x0) / (x1 - x0) * pw
@@ -1594,8 +1644,7 @@ def _svg_plot(xs: list[float], ys: list[float], xlabel: str, ylabel: str, w: int
     out = [f"<svg class=\"plot\" viewBox=\"0 0 {w} {h}\" width=\"{w}\" height=\"{h}\" xmlns=\"http://www.w3.org/2000/svg\">",
            f"<text x=\"{ml}\" y=\"14\" class=\"t\">{_esc(ylabel)}</text>",
            f"<rect x=\"{ml}\" y=\"{mt}\" width=\"{pw}\" height=\"{ph}\" class=\"frame\"/>"]
-    for i in range(5):
-        yv = y0 + (y1 - y0) * i / 4
+    for yv in ticks:
         out.append(f"<line x1=\"{ml}\" x2=\"{ml + pw}\" y1=\"{Y(yv):.1f}\" y2=\"{Y(yv):.1f}\" class=\"grid\"/>"
                    f"<text x=\"{ml - 4}\" y=\"{Y(yv) + 4:.1f}\" class=\"tick\" text-anchor=\"end\">{_esc(_fmt(yv))}</text>")
     for xv in sorted(set(xs)):
@@ -1634,7 +1683,7 @@ def write_sweep_summary(sweep_dir: Path) -> Path:
         trs.append([job, r["status"] or "?"] + [_num(r["params"].get(k)) if _num(r["params"].get(k)) is not None
                                                  else r["params"].get(k, "") for k in swept]
                    + [r["duration_s"] or 0] + [r["metrics"].get(k, "") for k in shown])
-    page.add("table", "Sweep", _table(head, trs, "sweep") + (
+    page.add("table", "Sweep", "<div class=\"scroll\">" + _table(head, trs, "sweep") + "</div>" + (
         f"<p class=\"dim\">{len(names) - len(shown)} metric(s) that did not change are left out; "
         "each job's manifest has them all.</p>" if len(names) > len(shown) else ""))
     plots = []
@@ -1645,7 +1694,8 @@ def write_sweep_summary(sweep_dir: Path) -> Path:
         return (next((i for i, p in enumerate(PRIMARY_METRICS) if p in low), len(PRIMARY_METRICS)), name)
 
     for k in numeric:
-        for metric in sorted(varying, key=interest)[:MAX_PLOTS]:
+        same = [m for m in varying if all(_num(r["metrics"].get(m)) == _num(r["params"][k]) for r in rows)]
+        for metric in sorted((m for m in varying if m not in same), key=interest)[:MAX_PLOTS]:
             pts = [(_num(r["params"][k]), _num(r["metrics"].get(metric)), r["job"]) for r in rows]
             pts = [p for p in pts if p[1] is not None]
             if len(pts) >= 2:
@@ -1670,9 +1720,15 @@ except Exception:  # pragma: no cover - Hydra is a dependency; this keeps the mo
 class SweepSummaryCallback(_HydraCallback):  # type: ignore[misc, valid-type]
     """Writes the sweep summary when a multirun ends (never fails the sweep)."""
 
+    _done: set = set()
+
     def on_multirun_end(self, config, **kwargs) -> None:
+        sweep = Path(str(config.hydra.sweep.dir)).resolve()
+        if sweep in SweepSummaryCallback._done:  # Hydra may call a callback twice; write and say it once
+            return
+        SweepSummaryCallback._done.add(sweep)
         try:
-            path = write_sweep_summary(Path(str(config.hydra.sweep.dir)))
+            path = write_sweep_summary(sweep)
             print(f"twinkit: sweep summary file://{path.resolve()}")
         except Exception as exc:
             log.warning("twinkit: no sweep summary (%s: %s)", type(exc).__name__, exc)
