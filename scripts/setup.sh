@@ -52,7 +52,8 @@ done
   "${PIP[@]}" --no-deps "bpy==5.0.1"
   "${PIP[@]}" cython zstandard requests
 }
-# readers used by the exporters' round-trip tests
-"${PIP[@]}" "ufbx>=0.0.5" "pygltflib>=1.16"
+# optional extras whose tests run in CI: Hugging Face models (tested offline with tiny random models),
+# the TFLite CityScapes model, and the readers used by the exporters' round-trip tests
+"${PIP[@]}" "transformers>=4.40" "ai-edge-litert" "ufbx>=0.0.5" "pygltflib>=1.16"
 
 echo "setup: done ($(.venv/bin/python --version); $(ls -d plugins/*/ | wc -l) plugin packages)"

@@ -1,0 +1,158 @@
+"""Pieces shared by every image model in this package (numpy-only at import time).
+
+Contract of an image-model object (what ``twinkit_register_image_models`` builders return):
+
+- ``classes``: the 19 CityScapes trainId names, index = trainId;
+- ``predict(images (b, h, w, 3) uint8 RGB) -> (b, h, w) uint8`` trainIds at input
+  resolution (255 = a pixel whose best class has no CityScapes counterpart);
+- ``predict_proba(images) -> (b, 19, h, w) float16`` class probabilities.
+"""
+from __future__ import annotations
+
+import contextlib
+import re
+from typing import Iterator
+
+import numpy as np
+
+#: CityScapes trainId -> name (index = trainId).
+CITYSCAPES_CLASSES: list[str] = [
+    "road", "sidewalk", "building", "wall", "fence", "pole", "traffic light",
+    "traffic sign", "vegetation", "terrain", "sky", "person", "rider", "car",
+    "truck", "bus", "train", "motorcycle", "bicycle",
+]
+N_CLASSES = len(CITYSCAPES_CLASSES)
+IGNORE_ID = 255
+
+#: Other label names (lower case, words separated by one space) -> CityScapes trainId.
+#: Covers the spellings of CityScapes-, ADE20K-, COCO-stuff- and Mapillary-style label sets.
+LABEL_SYNONYMS: dict[str, int] = {
+    "road": 0, "street": 0, "roadway": 0, "road route": 0, "route": 0, "lane marking general": 0,
+    "sidewalk": 1, "pavement": 1, "sidewalk pavement": 1, "footway": 1,
+    "building": 2, "house": 2, "skyscraper": 2, "edifice": 2,
+    "wall": 3,
+    "fence": 4, "fencing": 4, "guard rail": 4, "railing": 4,
+    "pole": 5, "utility pole": 5, "street light": 5, "streetlight": 5, "street lamp": 5,
+    "traffic light": 6, "traffic signal": 6, "traffic light front": 6,
+    "traffic sign": 7, "traffic sign front": 7, "stop sign": 7,
+    "vegetation": 8, "tree": 8, "plant": 8, "flora": 8, "palm": 8, "palm tree": 8,
+    "terrain": 9, "grass": 9, "earth": 9, "ground": 9, "field": 9, "dirt": 9, "sand": 9,
+    "sky": 10,
+    "person": 11, "pedestrian": 11, "people": 11, "individual": 11,
+    "rider": 12, "bicyclist": 12, "motorcyclist": 12, "other rider": 12,
+    "car": 13, "automobile": 13, "auto": 13, "van": 13,
+    "truck": 14, "lorry": 14,
+    "bus": 15, "autobus": 15,
+    "train": 16, "on rails": 16, "tram": 16,
+    "motorcycle": 17, "motorbike": 17, "minibike": 17,
+    "bicycle": 18, "bike": 18,
+}
+
+
+def normalise_label(name: str) -> str:
+    """``"Traffic_Light"`` -> ``"traffic light"``."""
+    return re.sub(r"\s+", " ", re.sub(r"[_\-]", " ", str(name).lower())).strip()
+
+
+def cityscapes_id_for(name: str, extra: dict[str, int] | None = None) -> int:
+    """CityScapes trainId for a label name, or :data:`IGNORE_ID` if it has none.
+
+    ``extra`` (normalised name -> trainId, or -1/255 to ignore) overrides the table.
+    Names listing alternatives (``"person;individual"``, ``"road, route"``) match if
+    any alternative does.
+    """
+    table = {normalise_label(k): int(v) for k, v in (extra or {}).items()}
+    full = normalise_label(name)
+    for candidate in [full] + [normalise_label(p) for p in re.split(r"[;,/]", str(name)) if p.strip()]:
+        if candidate in table:
+            v = table[candidate]
+            return v if 0 <= v < N_CLASSES else IGNORE_ID
+        if candidate in LABEL_SYNONYMS:
+            return LABEL_SYNONYMS[candidate]
+    return IGNORE_ID
+
+
+def label_lookup(id2label: dict[int, str], extra: dict[str, int] | None = None) -> np.ndarray:
+    """Model class index -> CityScapes trainId (uint8, 255 = unmapped), as an array.
+
+    A model with exactly 19 generic names (``LABEL_0`` ...) is taken to be in
+    CityScapes trainId order.
+    """
+    n = max(int(k) for k in id2label) + 1 if id2label else 0
+    names = {int(k): v for k, v in id2label.items()}
+    if n == N_CLASSES and all(re.fullmatch(r"label_\d+", str(names.get(i, "")).lower()) for i in range(n)) and not extra:
+        return np.arange(N_CLASSES, dtype=np.uint8)
+    return np.array([cityscapes_id_for(names.get(i, ""), extra) for i in range(n)], dtype=np.uint8)
+
+
+def as_batch(images) -> np.ndarray:
+    """Check and return images as a C-contiguous ``(b, h, w, 3)`` uint8 array."""
+    arr = np.asarray(images)
+    if arr.ndim != 4 or arr.shape[-1] != 3:
+        raise ValueError(f"images must be (b, h, w, 3) RGB, got shape {arr.shape}; add a batch axis with images[None]")
+    if arr.dtype != np.uint8:
+        raise ValueError(f"images must be uint8 RGB (0-255), got dtype {arr.dtype}")
+    if arr.shape[0] == 0 or arr.shape[1] == 0 or arr.shape[2] == 0:
+        raise ValueError(f"images must not be empty, got shape {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def network_size(h: int, w: int, long_side_px: int, multiple_px: int) -> tuple[int, int]:
+    """Network input size for an ``h x w`` image: long side scaled to ``long_side_px``
+    (0 = keep the size), each side rounded to the nearest multiple of ``multiple_px`` (at least one)."""
+    scale = 1.0 if long_side_px <= 0 else long_side_px / max(h, w)
+    m = max(1, int(multiple_px))
+
+    def rnd(v: float) -> int:
+        return max(m, int(round(v / m)) * m)
+
+    return rnd(h * scale), rnd(w * scale)
+
+
+def chunks(n: int, size: int) -> Iterator[slice]:
+    size = max(1, int(size))
+    for start in range(0, n, size):
+        yield slice(start, min(n, start + size))
+
+
+@contextlib.contextmanager
+def torch_threads(threads: int):
+    """Run with ``torch.set_num_threads(threads)`` (0 = leave torch's setting), restoring it after."""
+    import torch
+
+    old = torch.get_num_threads()
+    if threads and threads > 0 and threads != old:
+        torch.set_num_threads(int(threads))
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != old:
+            torch.set_num_threads(old)
+
+
+def resolve_device(device: str):
+    """``"auto"`` -> cuda if available else cpu; ``"cpu"``/``"cuda"``/``"cuda:1"`` as given."""
+    import torch
+
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise RuntimeError(f"device={device!r} was asked for but torch sees no CUDA GPU; use device=cpu or auto")
+    return torch.device(device)
+
+
+def probs_to_cityscapes(probs, lookup: np.ndarray):
+    """Sum model-class probabilities ``(b, L, h, w)`` (torch) into 19 CityScapes channels.
+
+    Classes mapped to 255 are dropped (their mass is not redistributed).
+    """
+    import torch
+
+    if np.array_equal(lookup, np.arange(N_CLASSES)):
+        return probs
+    b, _, h, w = probs.shape
+    out = torch.zeros((b, N_CLASSES, h, w), dtype=probs.dtype, device=probs.device)
+    idx = torch.as_tensor(lookup.astype(np.int64), device=probs.device)
+    keep = idx < N_CLASSES
+    out.index_add_(1, idx[keep], probs[:, keep])
+    return out

@@ -1,0 +1,155 @@
+"""Image model ``efficientvit_b0``: EfficientViT-Seg-B0 trained on CityScapes (MIT Han Lab weights)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from twinkit.errors import InputError
+
+from twinkit_efficientvit.common import (
+    CITYSCAPES_CLASSES,
+    as_batch,
+    chunks,
+    network_size,
+    resolve_device,
+    torch_threads,
+)
+
+WEIGHTS_FILE = "efficientvit_seg_b0_cityscapes.pt"
+WEIGHTS_SHA256 = "923d6fdd5e93640cc0c2f3f213764f34e80b477cd98a6b294d870ea6df5acc50"
+HF_REPO = "han-cai/efficientvit-seg"
+WEIGHTS_URL = f"https://huggingface.co/{HF_REPO}/resolve/main/{WEIGHTS_FILE}"
+OFFICIAL = f"model id {HF_REPO}, file {WEIGHTS_FILE} ({WEIGHTS_URL})"
+
+
+@dataclass
+class EfficientViTParams:
+    """Parameters of image model ``efficientvit_b0``.
+
+    weights_path: checkpoint file or folder holding it; empty = search
+        ``$TWINKIT_MODELS_DIR``, ``../shared/models`` (cwd, then repo root) and the
+        download cache.
+    weights_sha256: expected sha256; empty = the official file's hash when
+        ``weights_path`` is empty, no check for a given path.
+    download_if_missing: fetch the official file (needs internet) if no copy is found.
+    threads: torch CPU threads during inference (0 = leave torch's default).
+    batch_size: images per forward pass; 0 = automatic (1 on CPU, where larger batches
+        gave no speed-up here but more memory; 8 on CUDA).
+    device: "auto" (cuda if available), "cpu", "cuda" or "cuda:N".
+    input_long_side_px: the network sees the image with its long side scaled to
+        this (0 = native size); logits are upsampled back to the input size.
+    size_multiple_px: each network side is rounded to a multiple of this (32 needed).
+    optimize: fold BatchNorm into the convs and run channels-last (about 2x faster
+        on CPU; same labels up to float rounding). False = the checkpoint's modules as loaded.
+    """
+
+    weights_path: str = ""
+    weights_sha256: str = ""
+    download_if_missing: bool = False
+    threads: int = 0
+    batch_size: int = 0
+    device: str = "auto"
+    input_long_side_px: int = 1024
+    size_multiple_px: int = 32
+    optimize: bool = True
+
+
+class EfficientViTModel:
+    """EfficientViT-Seg-B0 with the image-model contract (see :mod:`twinkit_efficientvit.common`)."""
+
+    classes = list(CITYSCAPES_CLASSES)
+
+    def __init__(self, params: EfficientViTParams):
+        import torch
+
+        from twinkit_efficientvit.model import (
+            IMAGENET_MEAN,
+            IMAGENET_STD,
+            efficientvit_seg_b0_cityscapes,
+            fuse_for_inference,
+        )
+        from twinkit_efficientvit.weights import resolve_weights
+
+        if params.size_multiple_px % 32:
+            raise ValueError(f"size_multiple_px must be a multiple of 32 for EfficientViT, got {params.size_multiple_px}")
+        self.params = params
+        self.weights_path = resolve_weights(
+            WEIGHTS_FILE, params.weights_path, params.weights_sha256, WEIGHTS_SHA256, OFFICIAL,
+            WEIGHTS_URL, params.download_if_missing, hf_repo=HF_REPO,
+        )
+        try:
+            ckpt = torch.load(self.weights_path, map_location="cpu", weights_only=True)
+        except Exception as exc:
+            raise InputError(
+                f"weights file {self.weights_path} could not be read as a PyTorch checkpoint ({exc.__class__.__name__}: "
+                f"{str(exc)[:200]}); replace it with the official file ({OFFICIAL}) or set weights_path"
+            ) from exc
+        state = ckpt.get("state_dict", ckpt) if isinstance(ckpt, dict) else None
+        if not isinstance(state, dict):
+            raise InputError(f"weights file {self.weights_path} holds no state dict; expected {OFFICIAL}")
+        self.device = resolve_device(params.device)
+        net = efficientvit_seg_b0_cityscapes()
+        try:
+            net.load_state_dict(state, strict=True)
+        except RuntimeError as exc:
+            raise InputError(
+                f"weights file {self.weights_path} does not fit EfficientViT-Seg-B0 (CityScapes): {str(exc)[:400]}; "
+                f"expected {OFFICIAL}"
+            ) from exc
+        net = net.eval()
+        self._memory_format = torch.contiguous_format
+        if params.optimize:
+            net = fuse_for_inference(net).to(memory_format=torch.channels_last)
+            self._memory_format = torch.channels_last
+        self.net = net.to(self.device)
+        self.batch_size = params.batch_size if params.batch_size > 0 else (8 if self.device.type == "cuda" else 1)
+        self._mean = torch.tensor(IMAGENET_MEAN, device=self.device).view(1, 3, 1, 1) * 255.0
+        self._std = torch.tensor(IMAGENET_STD, device=self.device).view(1, 3, 1, 1) * 255.0
+
+    def __repr__(self) -> str:
+        return f"EfficientViTModel(weights={self.weights_path}, device={self.device}, params={self.params})"
+
+    def _logits(self, batch: np.ndarray):
+        """``(b, h, w, 3)`` uint8 -> logits ``(b, 19, h, w)`` float32 (torch), at input resolution."""
+        import torch
+        import torch.nn.functional as F
+
+        b, h, w, _ = batch.shape
+        if not batch.flags.writeable:  # torch.from_numpy warns on read-only arrays (e.g. from PIL)
+            batch = batch.copy()
+        x = torch.from_numpy(batch).to(self.device).permute(0, 3, 1, 2).float()
+        nh, nw = network_size(h, w, self.params.input_long_side_px, self.params.size_multiple_px)
+        if (nh, nw) != (h, w):
+            x = F.interpolate(x, size=(nh, nw), mode="bilinear", align_corners=False, antialias=nh < h or nw < w)
+        x = ((x - self._mean) / self._std).contiguous(memory_format=self._memory_format)
+        logits = self.net(x).contiguous(memory_format=torch.channels_last)  # channels-last: faster upsample/argmax
+        return F.interpolate(logits, size=(h, w), mode="bilinear", align_corners=False)
+
+    def predict(self, images) -> np.ndarray:
+        """``images (b, h, w, 3) uint8 RGB -> (b, h, w) uint8`` CityScapes trainIds."""
+        import torch
+
+        batch = as_batch(images)
+        out = np.empty(batch.shape[:3], dtype=np.uint8)
+        with torch_threads(self.params.threads), torch.inference_mode():
+            for sl in chunks(len(batch), self.batch_size):
+                out[sl] = self._logits(batch[sl]).argmax(1).to(torch.uint8).cpu().numpy()
+        return out
+
+    def predict_proba(self, images) -> np.ndarray:
+        """``images (b, h, w, 3) uint8 RGB -> (b, 19, h, w) float16`` softmax probabilities."""
+        import torch
+
+        batch = as_batch(images)
+        b, h, w, _ = batch.shape
+        out = np.empty((b, len(self.classes), h, w), dtype=np.float16)
+        with torch_threads(self.params.threads), torch.inference_mode():
+            for sl in chunks(b, self.batch_size):
+                out[sl] = self._logits(batch[sl]).softmax(1).to(torch.float16).cpu().numpy()
+        return out
+
+
+def build_efficientvit(params: EfficientViTParams | None = None) -> EfficientViTModel:
+    """EfficientViT-Seg-B0 CityScapes (0.7 M parameters, 75.7 mIoU); default image model."""
+    return EfficientViTModel(params or EfficientViTParams())
