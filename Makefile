@@ -11,7 +11,7 @@ PYTEST_ARGS ?=
 
 .PHONY: setup demo test bench clean
 
-$(STAMP): scripts/setup.sh pyproject.toml $(wildcard plugins/*/pyproject.toml)
+$(STAMP): scripts/setup.sh pyproject.toml $(wildcard plugins/*/pyproject.toml) package.json package-lock.json
 	bash scripts/setup.sh
 	@touch $@
 

@@ -5,8 +5,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# 1. System libraries: open3d needs libusb; moderngl's headless EGL (Mesa llvmpipe) needs the EGL/DRI packages.
-APT_PACKAGES=(libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri libgomp1)
+# 1. System libraries: open3d needs libusb; moderngl's headless EGL (Mesa llvmpipe) needs the EGL/DRI packages;
+#    the report's browser tests use Debian's Chromium and ChromeDriver; three.js for the report comes from npm.
+APT_PACKAGES=(libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri libgomp1 chromium chromium-driver)
+command -v npm >/dev/null || APT_PACKAGES+=(nodejs npm)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
@@ -45,7 +47,7 @@ for d in plugins/*/; do
 done
 # test tools; plyfile is the example plugin's dependency (its tests run in `make test`; the plugin itself is
 # installed only by the test that checks a third-party install)
-"${PIP[@]}" "${args[@]}" pytest pytest-timeout "plyfile>=1.0"
+"${PIP[@]}" "${args[@]}" pytest pytest-timeout "plyfile>=1.0" "selenium>=4.20"
 # 5. Blender as a module for the FBX exporter. bpy 5.0.1 (wheels for Python 3.11 only) declares numpy<2 but
 #    its FBX export runs with numpy 2 (tested), which other plugins need: install it without its pin.
 .venv/bin/python -c 'import bpy' 2>/dev/null || {
@@ -55,5 +57,8 @@ done
 # optional extras whose tests run in CI: Hugging Face models (tested offline with tiny random models),
 # the TFLite CityScapes model, and the readers used by the exporters' round-trip tests
 "${PIP[@]}" "transformers>=4.40" "ai-edge-litert" "ufbx>=0.0.5" "pygltflib>=1.16"
+
+# 6. three.js for the report's 3D view (registry only; copied into each report, never fetched at view time)
+npm ci --no-audit --no-fund --loglevel=error
 
 echo "setup: done ($(.venv/bin/python --version); $(ls -d plugins/*/ | wc -l) plugin packages)"

@@ -791,19 +791,34 @@ def read_opendrive(path: Path) -> list[dict]:
         for g in road.findall("planView/geometry"):
             seg = _sample_geometry(g)
             pts.extend(seg if not pts else seg[1:])
-        width = 0.0
+        widths = {"left": 0.0, "right": 0.0}
         ls = road.find("lanes/laneSection")
         if ls is not None:
-            for side in ("left", "right"):
+            for side in widths:
                 for lane in ls.findall(f"{side}/lane"):
                     w = lane.find("width")
-                    if w is not None and lane.get("type", "driving") in ("driving", "bidirectional", "parking",
-                                                                         "shoulder", "biking", "entry", "exit",
-                                                                         "onRamp", "offRamp"):
-                        width += float(w.get("a", 0))
+                    if w is not None and lane.get("type", "driving") in _PAVED:
+                        widths[side] += float(w.get("a", 0))
+        lo = road.find("lanes/laneOffset")
+        offset = float(lo.get("a", 0)) if lo is not None else 0.0
         roads.append({"id": road.get("id"), "junction": road.get("junction", "-1"),
-                      "points": [(x + ox, y + oy) for x, y in pts], "width": width})
+                      "points": [(x + ox, y + oy) for x, y in pts], "width": widths["left"] + widths["right"],
+                      "left": widths["left"], "right": widths["right"], "offset": offset})
     return roads
+
+
+_PAVED = ("driving", "bidirectional", "parking", "shoulder", "biking", "entry", "exit", "onRamp", "offRamp")
+
+
+def offset_polyline(pts: list[tuple[float, float]], d: float) -> list[tuple[float, float]]:
+    """The polyline moved sideways by ``d`` metres (positive: to the left of its direction)."""
+    a = np.asarray(pts, float)
+    if len(a) < 2 or d == 0:
+        return [tuple(p) for p in a]
+    t = np.gradient(a, axis=0)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+    n = np.column_stack([-t[:, 1], t[:, 0]])
+    return [tuple(p) for p in a + n * d]
 
 
 # =========================================================================== the page
@@ -1121,12 +1136,23 @@ def _sec_roads(run: RunView, out: Path, pics: _Pictures) -> str:
             log.warning("twinkit: report: cannot read %s (%s)", f, exc)
             continue
         shift = _projected_shift(run, roads)
-        layers.append(("xodr", [([(x - shift[0], y - shift[1]) for x, y in r["points"]], r["width"]) for r in roads]))
+        items = []
+        for r in roads:
+            ref = [(x - shift[0], y - shift[1]) for x, y in r["points"]]
+            if r["junction"] in ("-1", "", None):  # paved bands of the normal roads, each side of the lane offset
+                for side, sign in (("left", 1), ("right", -1)):
+                    if r[side] > 0:
+                        items.append((offset_polyline(ref, r["offset"] + sign * r[side] / 2), r[side], "band"))
+                items.append((ref, 0.0, "xodr"))
+            else:
+                items.append((ref, 0.0, "xodr junction"))
+        layers.append(("xodr", items))
         sources.append(f"{s.get('folder')}/{f.name} ({len(roads)} roads)")
         break
     for s, f in run.find("roads_truth.json")[:1]:
         d = _read_json(f) or {}
-        lanes = [([tuple(p[:2]) for p in ln.get("points", [])], 0.0) for ln in d.get("lanes", []) if ln.get("points")]
+        lanes = [([tuple(p[:2]) for p in ln.get("points", [])], 0.0, "truth") for ln in d.get("lanes", [])
+                 if ln.get("points")]
         if lanes:
             layers.append(("truth", lanes))
             sources.append(f"{s.get('folder')}/{f.name} ({len(lanes)} lane centre lines, reference)")
@@ -1144,16 +1170,15 @@ def _sec_roads(run: RunView, out: Path, pics: _Pictures) -> str:
         sx, sy = w / (b[2] - b[0]), h / (b[3] - b[1])
         svg = [f"<svg class=\"roads\" viewBox=\"0 0 {w} {h}\" xmlns=\"http://www.w3.org/2000/svg\">",
                f"<image href=\"{frame['texture']}\" x=\"0\" y=\"0\" width=\"{w}\" height=\"{h}\" opacity=\"0.85\"/>"]
-        for cls, items in layers:
-            for pts, width in items:
-                if len(pts) < 2:
-                    continue
-                d = " ".join(f"{(x - b[0]) * sx:.1f},{(b[3] - y) * sy:.1f}" for x, y in pts)
-                if width > 0:
-                    svg.append(f"<polyline class=\"band\" points=\"{d}\" stroke-width=\"{width * sx:.1f}\"/>")
-                svg.append(f"<polyline class=\"{cls}\" points=\"{d}\"/>")
+        drawn = sorted((it for _, items in layers for it in items), key=lambda it: 0 if it[2] == "band" else 1)
+        for pts, width, cls in drawn:  # bands first, lines over them
+            if len(pts) < 2:
+                continue
+            d = " ".join(f"{(x - b[0]) * sx:.1f},{(b[3] - y) * sy:.1f}" for x, y in pts)
+            sw = f" stroke-width=\"{width * sx:.1f}\"" if cls == "band" else ""
+            svg.append(f"<polyline class=\"{cls}\" points=\"{d}\"{sw}/>")
         svg.append("</svg>")
-        keys = "<span class=\"key xodr\">OpenDRIVE reference lines (band: paved width)</span>" if any(
+        keys = "<span class=\"key xodr\">OpenDRIVE reference lines (band: paved lanes; thin: junctions)</span>" if any(
             c == "xodr" for c, _ in layers) else ""
         keys += "<span class=\"key truth\">site's reference lanes</span>" if any(c == "truth" for c, _ in layers) else ""
         parts.append(f"<figure class=\"wide\">{''.join(svg)}<figcaption>Road network over the orthophoto. "
@@ -1392,6 +1417,7 @@ def _sec_alignment(run: RunView) -> str:
         flat = [[k, v] for k, v in _flatten(d).items() if isinstance(v, (int, float, str, bool)) or
                 (isinstance(v, list) and len(v) <= 6 and all(isinstance(x, (int, float)) for x in v))]
         flat.sort(key=lambda r: (0 if "resid" in r[0].lower() or "rms" in r[0].lower() else 1))
+        flat = [[k, f"{v:.10g}" if isinstance(v, float) else v] for k, v in flat]  # coordinates keep their digits
         parts.append(f"<h3>{_esc(s.get('folder'))}/{_esc(f.name)}</h3>" + _table(["", ""], flat, "kv"))
     return "".join(parts)
 

@@ -175,8 +175,9 @@ def test_segmentation_metrics_table(future_run):
     sec = text.split("<section id=\"segmetrics\">", 1)[1].split("</section>", 1)[0]
     for name, v in (("road", 0.91), ("vegetation", 0.41), ("car", 0.19)):
         assert name in sec and R._fmt(v) in sec
-    assert "f1" in sec and "iou" in sec and "miou" in sec
+    assert "f1" in sec and "iou" in sec and "miou" in sec and R._fmt(0.612) in sec
     assert "rgb(128, 64, 128)" in sec  # road's colour swatch
+    assert "upper_bound" in sec and R._fmt(0.777) in sec  # every table of the file
 
 
 def test_alignment_residual(future_run):
@@ -268,6 +269,18 @@ def test_render_topdown_is_north_up_and_keeps_the_highest_surface():
     assert img[..., 3].min() == 255
 
 
+def test_without_gl_the_orthophoto_is_splatted(monkeypatch):
+    def no_gl(*a):
+        raise RuntimeError("no EGL here")
+
+    monkeypatch.setattr(R, "_render_gl", no_gl)
+    xyz = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [6, 6, 5]], float)
+    cols = np.array([[255, 0, 0]] * 3 + [[0, 0, 255]], np.uint8)
+    img = R.render_topdown(xyz, np.array([[0, 1, 2]]), cols, (0, 0, 10, 10), 20, 20)
+    assert tuple(img[8, 12, :3]) == (0, 0, 255)  # the high point at (6, 6), north-east of the centre
+    assert img[19, 19, 3] == 255 and img[0, 0, 3] == 0
+
+
 def test_ply_reader_matches_plyfile(demo_run):
     from plyfile import PlyData
 
@@ -295,6 +308,13 @@ def test_opendrive_geometry_sampling(tmp_path):
     x, y = roads[1]["points"][-1]
     assert x == pytest.approx(-(1 - np.cos(0.45)) / 0.03, abs=0.01)
     assert y == pytest.approx(15 + np.sin(0.45) / 0.03, abs=0.01)
+
+
+def test_lane_bands_follow_each_side_of_the_reference_line():
+    east = [(0.0, 0.0), (10.0, 0.0)]
+    assert R.offset_polyline(east, 2.0) == [(0.0, 2.0), (10.0, 2.0)]  # left of eastward = north
+    north = [(0.0, 0.0), (0.0, 10.0)]
+    assert R.offset_polyline(north, 1.5) == [(-1.5, 0.0), (-1.5, 10.0)]
 
 
 def test_three_bundle_is_a_classic_script(tmp_path):
