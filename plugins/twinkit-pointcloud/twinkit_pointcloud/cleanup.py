@@ -1,0 +1,211 @@
+"""Post-processing of a Poisson mesh (thesis 3.4.2 / 4.3.1), in this order:
+
+1. density trimming: drop vertices whose Poisson density is below a quantile (optional);
+2. distance trimming ("bubbles"): drop vertices farther than ``max_dist_m`` from every input point;
+3. keep the large connected components;
+4. repair non-manifold edges (drop the smallest faces around an edge shared by > 2 faces);
+5. close holes whose boundary loop has at most ``max_hole_edges`` edges (fan around the loop's centroid);
+6. per-vertex distance to the cloud (``dist_to_cloud_m``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .meshio import Mesh, compact, face_areas
+
+
+@dataclass
+class CleanOptions:
+    max_dist_m: float = 0.10
+    density_quantile: float = 0.0
+    min_component_faces: int = 200
+    min_component_ratio: float = 0.0
+    repair_non_manifold: bool = True
+    max_hole_edges: int = 60
+    threads: int = -1
+
+
+def vertex_cloud_distance(vertices: np.ndarray, points: np.ndarray, threads: int = -1, tree=None) -> np.ndarray:
+    """Distance (m) from every vertex to its nearest input point, (n,) float32."""
+    from scipy.spatial import cKDTree
+
+    tree = tree if tree is not None else cKDTree(points)
+    d, _ = tree.query(vertices, k=1, workers=threads)
+    return d.astype(np.float32)
+
+
+def remove_vertices(mesh: Mesh, drop: np.ndarray) -> Mesh:
+    keep_faces = ~drop[mesh.faces].any(axis=1)
+    return compact(mesh, keep_faces)
+
+
+def components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarray]:
+    """Connected components over shared vertices: (count, per-face label)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if len(faces) == 0:
+        return 0, np.zeros(0, np.int64)
+    i = np.concatenate([faces[:, 0], faces[:, 1]])
+    j = np.concatenate([faces[:, 1], faces[:, 2]])
+    g = coo_matrix((np.ones(len(i), np.int8), (i, j)), shape=(n_vertices, n_vertices))
+    n, lab = connected_components(g, directed=False)
+    return n, lab[faces[:, 0]]
+
+
+def keep_large_components(mesh: Mesh, min_faces: int, min_ratio: float = 0.0) -> tuple[Mesh, int, int]:
+    """Drop components with fewer faces than ``max(min_faces, min_ratio * largest)``.
+    Returns (mesh, components before, components kept)."""
+    n, lab = components(mesh.n_vertices, mesh.faces)
+    if n == 0:
+        return mesh, 0, 0
+    sizes = np.bincount(lab, minlength=n)
+    thr = max(int(min_faces), int(min_ratio * sizes.max()))
+    keep_c = sizes >= thr
+    if not keep_c.any():  # never empty the mesh by this rule: keep the largest
+        keep_c[np.argmax(sizes)] = True
+    return compact(mesh, keep_c[lab]), int(n), int(keep_c.sum())
+
+
+def edge_face_incidence(faces: np.ndarray):
+    """Undirected edges as sorted pairs: (unique edges (e, 2), edge id per face-edge (m, 3), counts (e,))."""
+    e = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2)
+    es = np.sort(e, axis=1)
+    key = es[:, 0].astype(np.int64) * (int(faces.max()) + 1) + es[:, 1]
+    uniq, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    edges = np.stack([uniq // (int(faces.max()) + 1), uniq % (int(faces.max()) + 1)], axis=1)
+    return edges, inv.reshape(-1, 3), counts
+
+
+def repair_non_manifold_edges(mesh: Mesh) -> tuple[Mesh, int]:
+    """Remove the smallest faces at every edge shared by more than two faces, until all edges
+    have at most two. Returns (mesh, faces removed)."""
+    removed = 0
+    for _ in range(10):
+        if mesh.n_faces == 0:
+            break
+        _, fe, counts = edge_face_incidence(mesh.faces)
+        bad_e = counts > 2
+        if not bad_e.any():
+            break
+        area = face_areas(mesh.vertices, mesh.faces)
+        drop = np.zeros(mesh.n_faces, bool)
+        fid = np.repeat(np.arange(mesh.n_faces), 3)
+        eid = fe.ravel()
+        sel = bad_e[eid]
+        fid, eid = fid[sel], eid[sel]
+        order = np.lexsort((-area[fid], eid))  # per edge, largest first
+        fid, eid = fid[order], eid[order]
+        first = np.r_[0, np.flatnonzero(np.diff(eid)) + 1]
+        rank = np.arange(len(eid)) - np.repeat(first, np.diff(np.r_[first, len(eid)]))
+        drop[fid[rank >= 2]] = True
+        removed += int(drop.sum())
+        mesh = compact(mesh, ~drop)
+    return mesh, removed
+
+
+def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Boundary loops as arrays of vertex ids, oriented as in the faces (half-edge a->b)."""
+    if len(faces) == 0:
+        return []
+    _, fe, counts = edge_face_incidence(faces)
+    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2)
+    b = he[counts[fe.ravel()] == 1]
+    if len(b) == 0:
+        return []
+    nxt: dict[int, list[int]] = {}
+    for a, c in b.tolist():
+        nxt.setdefault(a, []).append(c)
+    loops = []
+    for start in list(nxt.keys()):
+        while nxt.get(start):
+            loop = [start]
+            cur = nxt[start].pop()
+            steps = 0
+            while cur != start and steps < len(b):
+                loop.append(cur)
+                nx = nxt.get(cur)
+                if not nx:
+                    break
+                cur = nx.pop()
+                steps += 1
+            if cur == start and len(loop) >= 3:
+                loops.append(np.asarray(loop, np.int64))
+    return loops
+
+
+def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
+    """Fill every boundary loop of 3..``max_edges`` edges with a fan around a new centroid
+    vertex (attributes: mean of the loop). Returns (mesh, holes closed)."""
+    if max_edges < 3 or mesh.n_faces == 0:
+        return mesh, 0
+    loops = [lp for lp in boundary_loops(mesh.faces) if len(lp) <= max_edges]
+    if not loops:
+        return mesh, 0
+    new_v, new_f, new_attrs = [], [], {k: [] for k in mesh.attrs}
+    nv = mesh.n_vertices
+    for lp in loops:
+        if len(lp) == 3:
+            new_f.append([lp[2], lp[1], lp[0]])
+            continue
+        c = nv + len(new_v)
+        new_v.append(mesh.vertices[lp].mean(axis=0))
+        for k, a in mesh.attrs.items():
+            val = a[lp].astype(np.float64).mean(axis=0)
+            new_attrs[k].append(val.astype(a.dtype) if a.dtype.kind == "f" else np.rint(val).astype(a.dtype))
+        nb = np.roll(lp, -1)
+        new_f.extend(np.stack([nb, lp, np.full(len(lp), c)], axis=1).tolist())
+    verts = np.vstack([mesh.vertices] + ([np.asarray(new_v)] if new_v else []))
+    attrs = {}
+    for k, a in mesh.attrs.items():
+        attrs[k] = np.concatenate([a, np.asarray(new_attrs[k], dtype=a.dtype).reshape((-1,) + a.shape[1:])]) if new_v else a
+    faces = np.vstack([mesh.faces, np.asarray(new_f, np.int64)])
+    out = Mesh(vertices=verts, faces=faces, attrs=attrs, comments=list(mesh.comments))
+    if "normals" in out.attrs:
+        from .meshio import vertex_normals
+
+        out.attrs["normals"] = vertex_normals(out.vertices, out.faces)
+    return out, len(loops)
+
+
+def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None) -> tuple[Mesh, dict]:
+    """Run the whole clean-up; returns (clean mesh with ``dist_to_cloud_m``, report dict)."""
+    from scipy.spatial import cKDTree
+
+    rep: dict = {"input": {"vertices": mesh.n_vertices, "faces": mesh.n_faces}}
+    tree = cKDTree(points)
+    if opt.density_quantile > 0 and "density" in mesh.attrs:
+        thr = float(np.quantile(mesh.attrs["density"], opt.density_quantile))
+        mesh = remove_vertices(mesh, mesh.attrs["density"] < thr)
+        rep["density_trim"] = {"threshold": thr, "vertices": mesh.n_vertices, "faces": mesh.n_faces}
+    d = vertex_cloud_distance(mesh.vertices, points, opt.threads, tree)
+    rep["before_distance_trim"] = _dist_stats(d)
+    if opt.max_dist_m > 0:
+        mesh = remove_vertices(mesh, d > opt.max_dist_m)
+        rep["distance_trim"] = {"max_dist_m": opt.max_dist_m, "vertices": mesh.n_vertices, "faces": mesh.n_faces}
+    if mesh.n_faces == 0:
+        from twinkit import InputError
+
+        raise InputError(f"no face is within {opt.max_dist_m} m of the cloud after trimming; "
+                         f"raise max_dist_m or check that the mesh and the cloud share a frame")
+    mesh, n_before, n_kept = keep_large_components(mesh, opt.min_component_faces, opt.min_component_ratio)
+    rep["components"] = {"before": n_before, "kept": n_kept, "vertices": mesh.n_vertices, "faces": mesh.n_faces}
+    if opt.repair_non_manifold:
+        mesh, removed = repair_non_manifold_edges(mesh)
+        rep["non_manifold"] = {"faces_removed": removed, "faces": mesh.n_faces}
+    if opt.max_hole_edges >= 3:
+        mesh, closed = close_small_holes(mesh, opt.max_hole_edges)
+        rep["holes"] = {"closed": closed, "max_hole_edges": opt.max_hole_edges,
+                        "vertices": mesh.n_vertices, "faces": mesh.n_faces}
+    d = vertex_cloud_distance(mesh.vertices, points, opt.threads, tree)
+    mesh.attrs["dist_to_cloud_m"] = d
+    rep["output"] = {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "dist_to_cloud_m": _dist_stats(d)}
+    return mesh, rep
+
+
+def _dist_stats(d: np.ndarray) -> dict:
+    if len(d) == 0:
+        return {"mean": None, "p95": None, "max": None}
+    return {"mean": float(np.mean(d)), "p95": float(np.quantile(d, 0.95)), "max": float(np.max(d))}

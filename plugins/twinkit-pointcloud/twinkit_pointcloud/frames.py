@@ -1,0 +1,221 @@
+"""From file coordinates to the site frame (metres, z up, origin at the site base point).
+
+All arithmetic here is float64; callers convert to float32 only after :func:`to_site_frame`.
+
+Rules (in this order):
+
+1. The file has a CRS and the site names another one: reproject x, y (pyproj) into the site CRS;
+   z is scaled to metres when the file's CRS has no vertical part.
+2. The file has a CRS and the site names none (or the same one): horizontal (and vertical)
+   units are converted to metres with the CRS's own unit factors (US-foot LAS files, ...).
+3. The coordinates are projected (a projected CRS, or no CRS and values beyond
+   ``LARGE_COORD_M``): shift by the site base point (``x, y, z`` or ``lat, lon, alt``
+   projected into the target CRS); without a base point, by the cloud centre rounded to
+   100 m (z: to 1 m), and say so.
+4. Small coordinates with no CRS are taken as already in the site frame (shift 0).
+5. The result is checked against ``site.bounds_m`` (or, without bounds, against a maximum
+   distance from the base point): a cloud elsewhere is in the wrong CRS for the site.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+LARGE_COORD_M = 1.0e4
+
+
+@dataclass
+class FrameInfo:
+    shift: list[float]  # subtracted from (converted) file coordinates, metres, target CRS
+    source_crs: str | None  # WKT or user string of the file's CRS
+    target_crs: str | None  # CRS of the shifted frame before the shift (site CRS, or the file's)
+    reprojected: bool = False
+    unit_factor_xy: float = 1.0
+    unit_factor_z: float = 1.0
+    projected: bool = False
+    shift_source: str = "none"  # "base_point", "rounded_centre", "none"
+    notes: list[str] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "shift_m": self.shift,
+            "source_crs": _short_crs(self.source_crs),
+            "target_crs": _short_crs(self.target_crs),
+            "reprojected": self.reprojected,
+            "unit_factor_xy": self.unit_factor_xy,
+            "unit_factor_z": self.unit_factor_z,
+            "projected_input": self.projected,
+            "shift_source": self.shift_source,
+            "notes": self.notes,
+        }
+
+
+def _short_crs(crs: str | None) -> str | None:
+    if crs is None:
+        return None
+    try:
+        from pyproj import CRS
+
+        c = CRS.from_user_input(crs)
+        epsg = c.to_epsg(min_confidence=70)
+        return f"EPSG:{epsg}" if epsg else c.name
+    except Exception:
+        return str(crs)[:200]
+
+
+def _parse_crs(crs):
+    if crs is None or crs == "":
+        return None
+    from pyproj import CRS
+
+    return CRS.from_user_input(crs)
+
+
+def _unit_factors(crs) -> tuple[float, float]:
+    """(horizontal, vertical) metres per unit of a projected or compound CRS."""
+    fxy = 1.0
+    fz = None
+    try:
+        horiz = crs.sub_crs_list[0] if crs.is_compound else crs
+        for ax in horiz.axis_info:
+            if ax.direction in ("east", "north", "west", "south") and ax.unit_conversion_factor:
+                fxy = float(ax.unit_conversion_factor)
+                break
+        if crs.is_compound and len(crs.sub_crs_list) > 1:
+            for ax in crs.sub_crs_list[1].axis_info:
+                if ax.unit_conversion_factor:
+                    fz = float(ax.unit_conversion_factor)
+    except Exception:
+        pass
+    return fxy, (fz if fz is not None else fxy)
+
+
+def base_point_in(crs, site: Mapping[str, Any]) -> np.ndarray | None:
+    """The site base point as projected coordinates in ``crs`` (metres), or None."""
+    bp = site.get("base_point") or {}
+    if not bp:
+        return None
+    if "x" in bp and "y" in bp:
+        return np.array([float(bp["x"]), float(bp["y"]), float(bp.get("z", bp.get("alt", 0.0)) or 0.0)])
+    if "lat" in bp and "lon" in bp and crs is not None and not crs.is_geographic:
+        from pyproj import Transformer
+
+        t = Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+        x, y = t.transform(float(bp["lon"]), float(bp["lat"]))
+        fxy, _ = _unit_factors(crs)
+        return np.array([x * fxy, y * fxy, float(bp.get("alt", 0.0) or 0.0)])
+    return None
+
+
+def to_site_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], name: str,
+                  *, max_offset_m: float = 20000.0, bounds_margin_m: float = 50.0,
+                  min_inside_fraction: float = 0.05) -> tuple[np.ndarray, FrameInfo]:
+    """Return ``(local, info)``: ``local`` (n, 3) float64 metres in the site frame.
+
+    Raises :class:`twinkit.InputError` when the cloud cannot belong to the site (wrong CRS).
+    """
+    from twinkit import InputError
+
+    xyz = np.array(xyz, dtype=np.float64, copy=True)
+    src = _parse_crs(file_crs)
+    site_crs_s = site.get("crs")
+    site_crs = _parse_crs(site_crs_s) if site_crs_s else None
+    info = FrameInfo(shift=[0.0, 0.0, 0.0], source_crs=src.to_wkt() if src is not None else None,
+                     target_crs=None)
+    target = None
+    if src is not None:
+        fxy, fz = _unit_factors(src)
+        vertical_in_src = bool(src.is_compound)
+        if site_crs is not None and not src.equals(site_crs, ignore_axis_order=True):
+            from pyproj import Transformer
+
+            t = Transformer.from_crs(src, site_crs, always_xy=True)
+            x, y = t.transform(xyz[:, 0], xyz[:, 1])
+            sfxy, _ = _unit_factors(site_crs)
+            xyz[:, 0], xyz[:, 1] = np.asarray(x) * sfxy, np.asarray(y) * sfxy
+            if not vertical_in_src:
+                xyz[:, 2] *= fz
+            info.reprojected = True
+            info.unit_factor_z = fz if not vertical_in_src else 1.0
+            info.notes.append(f"reprojected from {_short_crs(src.to_wkt())} to {_short_crs(site_crs.to_wkt())}")
+            target = site_crs
+        else:
+            if src.is_geographic:
+                raise InputError(
+                    f"{name}: coordinates are geographic (degrees, {src.name}) and the site has no projected CRS; "
+                    f"set site.crs to a projected CRS (e.g. the local UTM zone)")
+            xyz[:, :2] *= fxy
+            xyz[:, 2] *= fz
+            info.unit_factor_xy, info.unit_factor_z = fxy, fz
+            if fxy != 1.0 or fz != 1.0:
+                info.notes.append(f"converted file units to metres (x, y x{fxy:g}, z x{fz:g})")
+            target = src
+        projected = True
+    else:
+        projected = bool(np.nanmax(np.abs(xyz[:, :2])) > LARGE_COORD_M) if len(xyz) else False
+        target = site_crs
+    info.projected = projected
+    info.target_crs = target.to_wkt() if target is not None else (str(site_crs_s) if site_crs_s else None)
+
+    base = base_point_in(target, site) if projected else None
+    if projected:
+        if base is not None:
+            shift = base
+            info.shift_source = "base_point"
+        else:
+            lo, hi = np.nanmin(xyz, axis=0), np.nanmax(xyz, axis=0)
+            c = 0.5 * (lo + hi)
+            shift = np.array([np.round(c[0] / 100.0) * 100.0, np.round(c[1] / 100.0) * 100.0, np.round(c[2])])
+            info.shift_source = "rounded_centre"
+            info.notes.append(
+                f"projected coordinates and no site base point: shifted by the rounded cloud centre "
+                f"{shift.tolist()} (record it; set site.base_point to use a fixed origin)")
+        xyz -= shift
+        info.shift = [float(v) for v in shift]
+    else:
+        info.notes.append("local coordinates (no CRS, small values): used as they are")
+
+    bounds = site.get("bounds_m")
+    finite = np.isfinite(xyz).all(axis=1)
+    pts = xyz[finite]
+    if len(pts) and bounds is not None:
+        b = np.asarray(bounds, dtype=np.float64)
+        lo, hi = b[0] - bounds_margin_m, b[1] + bounds_margin_m
+        inside = np.all((pts >= lo) & (pts <= hi), axis=1).mean()
+        if inside < min_inside_fraction:
+            clo, chi = pts.min(axis=0), pts.max(axis=0)
+            raise InputError(
+                f"{name}: only {inside:.1%} of the points lie within the site bounds {b.tolist()} (+{bounds_margin_m:g} m); "
+                f"the cloud spans {np.round(clo, 1).tolist()} .. {np.round(chi, 1).tolist()} in the site frame, "
+                f"so it is probably in the wrong CRS for this site (file CRS: {_short_crs(info.source_crs)}, "
+                f"site CRS: {site_crs_s}); reproject it or fix site.crs / site.base_point")
+    elif len(pts) and info.shift_source == "base_point":
+        centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        d = float(np.linalg.norm(centre[:2]))
+        if d > max_offset_m:
+            raise InputError(
+                f"{name}: the cloud centre is {d / 1000:.1f} km from the site base point (limit {max_offset_m / 1000:g} km); "
+                f"it is probably in the wrong CRS for this site (file CRS: {_short_crs(info.source_crs)}, "
+                f"site CRS: {site_crs_s}); reproject it or fix site.crs / site.base_point")
+    return xyz, info
+
+
+def apply_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], info: FrameInfo) -> np.ndarray:
+    """Apply the transform that :func:`to_site_frame` chose (``info``) to other points of the same file
+    (scanner positions). NaN rows stay NaN."""
+    xyz = np.array(xyz, dtype=np.float64, copy=True)
+    if info.reprojected:
+        from pyproj import Transformer
+
+        src = _parse_crs(file_crs)
+        dst = _parse_crs(site.get("crs"))
+        t = Transformer.from_crs(src, dst, always_xy=True)
+        x, y = t.transform(xyz[:, 0], xyz[:, 1])
+        sfxy, _ = _unit_factors(dst)
+        xyz[:, 0], xyz[:, 1] = np.asarray(x) * sfxy, np.asarray(y) * sfxy
+    else:
+        xyz[:, :2] *= info.unit_factor_xy
+    xyz[:, 2] *= info.unit_factor_z
+    return xyz - np.asarray(info.shift)

@@ -1,0 +1,396 @@
+"""Small, dependency-light PLY I/O on numpy arrays (binary little-endian, via plyfile).
+
+A mesh or cloud is passed around as plain arrays:
+
+- ``vertices``: (n, 3) float64, metres, site frame
+- ``faces``: (m, 3) int64 vertex indices (counter-clockwise seen from outside), or None for a cloud
+- ``attrs``: per-vertex arrays keyed by name; conventional names are
+  ``normals`` (n, 3) float32, ``colors`` (n, 3) uint8, and scalars such as
+  ``density``, ``dist_to_cloud_m``, ``intensity``, ``classification``, ``scanner``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class Mesh:
+    vertices: np.ndarray  # (n, 3) float64
+    faces: np.ndarray | None = None  # (m, 3) int64
+    attrs: dict[str, np.ndarray] = field(default_factory=dict)
+    face_attrs: dict[str, np.ndarray] = field(default_factory=dict)
+    comments: list[str] = field(default_factory=list)
+
+    @property
+    def n_vertices(self) -> int:
+        return int(len(self.vertices))
+
+    @property
+    def n_faces(self) -> int:
+        return 0 if self.faces is None else int(len(self.faces))
+
+    @property
+    def colors(self) -> np.ndarray | None:
+        return self.attrs.get("colors")
+
+    @property
+    def normals(self) -> np.ndarray | None:
+        return self.attrs.get("normals")
+
+
+_SCALAR_DTYPES = {
+    np.dtype("float32"): "f4",
+    np.dtype("float64"): "f8",
+    np.dtype("uint8"): "u1",
+    np.dtype("int8"): "i1",
+    np.dtype("uint16"): "u2",
+    np.dtype("int16"): "i2",
+    np.dtype("uint32"): "u4",
+    np.dtype("int32"): "i4",
+}
+
+
+def _write_ply_plyfile(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool = False) -> None:
+    """Write ``mesh`` as PLY with plyfile (slow for big meshes; used for ASCII)."""
+    from plyfile import PlyData, PlyElement
+
+    n = mesh.n_vertices
+    cols: list[tuple[str, str]] = [("x", xyz_dtype), ("y", xyz_dtype), ("z", xyz_dtype)]
+    data: dict[str, np.ndarray] = {
+        "x": mesh.vertices[:, 0], "y": mesh.vertices[:, 1], "z": mesh.vertices[:, 2]}
+    for name, arr in mesh.attrs.items():
+        arr = np.asarray(arr)
+        if name == "normals":
+            for i, c in enumerate(("nx", "ny", "nz")):
+                cols.append((c, "f4"))
+                data[c] = arr[:, i]
+        elif name == "colors":
+            for i, c in enumerate(("red", "green", "blue")):
+                cols.append((c, "u1"))
+                data[c] = arr[:, i]
+        else:
+            if arr.dtype == np.int64:
+                arr = arr.astype(np.int32)
+            elif arr.dtype == np.uint64:
+                arr = arr.astype(np.uint32)
+            elif arr.dtype == bool:
+                arr = arr.astype(np.uint8)
+            dt = _SCALAR_DTYPES.get(arr.dtype, "f4")
+            cols.append((name, dt))
+            data[name] = arr
+    vert = np.empty(n, dtype=cols)
+    for c, _ in cols:
+        vert[c] = data[c]
+    elements = [PlyElement.describe(vert, "vertex")]
+    if mesh.faces is not None:
+        fcols: list[tuple] = [("vertex_indices", "i4", (3,))]
+        for name, arr in mesh.face_attrs.items():
+            arr = np.asarray(arr)
+            if arr.ndim == 2:
+                fcols.append((name, "f4", (arr.shape[1],)))
+            else:
+                fcols.append((name, _SCALAR_DTYPES.get(arr.dtype, "f4")))
+        face = np.empty(len(mesh.faces), dtype=fcols)
+        face["vertex_indices"] = mesh.faces.astype(np.int32)
+        for name, arr in mesh.face_attrs.items():
+            face[name] = arr
+        # list properties: plyfile writes fixed-shape subarrays as lists with uchar counts
+        elements.append(PlyElement.describe(face, "face", len_types={k[0]: "u1" for k in fcols},
+                                            val_types={"vertex_indices": "i4"}))
+    PlyData(elements, text=text, comments=list(mesh.comments)).write(str(path))
+
+
+def _read_ply_plyfile(path: Path | str) -> Mesh:
+    from plyfile import PlyData
+
+    ply = PlyData.read(str(path))
+    return _mesh_from_arrays(ply["vertex"].data, _faces_from_plyfile(ply), list(ply.comments))
+
+
+def _faces_from_plyfile(ply):
+    if "face" not in ply:
+        return None
+    return ply["face"].data
+
+
+def _mesh_from_arrays(v, f, comments) -> Mesh:
+    names = v.dtype.names or ()
+    vertices = np.stack([np.asarray(v[c], dtype=np.float64) for c in ("x", "y", "z")], axis=1)
+    attrs: dict[str, np.ndarray] = {}
+    if all(c in names for c in ("nx", "ny", "nz")):
+        attrs["normals"] = np.stack([np.asarray(v[c], np.float32) for c in ("nx", "ny", "nz")], axis=1)
+    col = _find_colour_fields(names)
+    if col is not None:
+        attrs["colors"] = _colours_to_u8(np.stack([np.asarray(v[c]) for c in col], axis=1))
+    skip = {"x", "y", "z", "nx", "ny", "nz", "alpha"} | set(col or ())
+    for c in names:
+        if c not in skip and v[c].dtype.kind in "fiub" and v[c].ndim == 1:
+            attrs[c] = np.asarray(v[c])
+    faces = None
+    face_attrs: dict[str, np.ndarray] = {}
+    if f is not None and len(f) > 0:
+        key = "vertex_indices" if "vertex_indices" in f.dtype.names else "vertex_index"
+        raw = f[key]
+        try:
+            arr = np.stack(raw).astype(np.int64) if raw.dtype == object else np.asarray(raw, np.int64)
+        except ValueError:
+            arr = None
+        if arr is None or arr.ndim != 2 or arr.shape[1] != 3:
+            # polygons: fan-triangulate
+            tris = []
+            for poly in raw:
+                for k in range(1, len(poly) - 1):
+                    tris.append((poly[0], poly[k], poly[k + 1]))
+            arr = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+        faces = arr
+        for c in f.dtype.names:
+            if c == key:
+                continue
+            col_ = f[c]
+            try:
+                face_attrs[c] = np.stack(col_) if col_.dtype == object else np.asarray(col_)
+            except ValueError:
+                pass
+    elif f is not None:
+        faces = np.zeros((0, 3), np.int64)
+    return Mesh(vertices=vertices, faces=faces, attrs=attrs, face_attrs=face_attrs, comments=comments)
+
+
+def _find_colour_fields(names) -> tuple[str, str, str] | None:
+    for trip in (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue")):
+        if all(c in names for c in trip):
+            return trip
+    return None
+
+
+def _colours_to_u8(rgb: np.ndarray) -> np.ndarray:
+    """Colour channels of any dtype -> (n, 3) uint8. Floats in [0, 1] and 16-bit values are rescaled."""
+    if rgb.dtype == np.uint8:
+        return rgb
+    if rgb.dtype.kind == "f":
+        mx = float(np.nanmax(rgb)) if rgb.size else 0.0
+        scale = 255.0 if mx <= 1.0 + 1e-6 else (255.0 / 65535.0 if mx > 255.0 else 1.0)
+        return np.clip(np.rint(rgb * scale), 0, 255).astype(np.uint8)
+    mx = int(rgb.max()) if rgb.size else 0
+    if mx > 255:
+        return np.clip(np.rint(rgb.astype(np.float64) / 257.0), 0, 255).astype(np.uint8)
+    return rgb.astype(np.uint8)
+
+
+def to_o3d_mesh(mesh: Mesh):
+    import open3d as o3d
+
+    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.ascontiguousarray(mesh.vertices, np.float64)),
+                                  o3d.utility.Vector3iVector(np.ascontiguousarray(mesh.faces, np.int32)))
+    if mesh.colors is not None:
+        m.vertex_colors = o3d.utility.Vector3dVector(mesh.colors.astype(np.float64) / 255.0)
+    return m
+
+
+def to_o3d_cloud(points: np.ndarray, normals: np.ndarray | None = None, colors: np.ndarray | None = None):
+    import open3d as o3d
+
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points, np.float64)))
+    if normals is not None:
+        pcd.normals = o3d.utility.Vector3dVector(np.ascontiguousarray(normals, np.float64))
+    if colors is not None:
+        pcd.colors = o3d.utility.Vector3dVector(colors.astype(np.float64) / 255.0)
+    return pcd
+
+
+def compact(mesh: Mesh, keep_faces: np.ndarray | None = None) -> Mesh:
+    """Keep the faces selected by ``keep_faces`` (bool mask) and drop unreferenced vertices."""
+    faces = mesh.faces if keep_faces is None else mesh.faces[keep_faces]
+    face_attrs = {k: (v if keep_faces is None else v[keep_faces]) for k, v in mesh.face_attrs.items()}
+    used = np.zeros(mesh.n_vertices, bool)
+    used[faces.ravel()] = True
+    remap = np.full(mesh.n_vertices, -1, np.int64)
+    remap[used] = np.arange(int(used.sum()))
+    return Mesh(vertices=mesh.vertices[used], faces=remap[faces],
+                attrs={k: v[used] for k, v in mesh.attrs.items()}, face_attrs=face_attrs,
+                comments=list(mesh.comments))
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    n = np.cross(b - a, c - a)
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.maximum(ln, 1e-30)
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals, (n, 3) float32."""
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    fn = np.cross(b - a, c - a)
+    n = len(vertices)
+    vn = np.zeros_like(vertices)
+    for i in range(3):
+        for k in range(3):
+            vn[:, k] += np.bincount(faces[:, i], weights=fn[:, k], minlength=n)
+    ln = np.linalg.norm(vn, axis=1, keepdims=True)
+    return (vn / np.maximum(ln, 1e-30)).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- fast binary PLY
+
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+_PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint",
+              "f4": "float", "f8": "double"}
+
+
+def _vertex_columns(mesh: Mesh, xyz_dtype: str):
+    cols: list[tuple[str, str, np.ndarray]] = [(c, xyz_dtype, mesh.vertices[:, i]) for i, c in enumerate("xyz")]
+    for name, arr in mesh.attrs.items():
+        arr = np.asarray(arr)
+        if name == "normals":
+            cols += [(c, "f4", arr[:, i]) for i, c in enumerate(("nx", "ny", "nz"))]
+        elif name == "colors":
+            cols += [(c, "u1", arr[:, i]) for i, c in enumerate(("red", "green", "blue"))]
+        else:
+            if arr.dtype == np.int64:
+                arr = arr.astype(np.int32)
+            elif arr.dtype == np.uint64:
+                arr = arr.astype(np.uint32)
+            elif arr.dtype == bool:
+                arr = arr.astype(np.uint8)
+            cols.append((name, _SCALAR_DTYPES.get(arr.dtype, "f4"), arr))
+    return cols
+
+
+def write_ply(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool = False) -> None:
+    """Write ``mesh`` as binary little-endian PLY (vertex properties from ``attrs``; faces as
+    ``uchar int`` lists; fixed-size face attributes such as ``texcoord`` (m, 6) as ``uchar float`` lists).
+    ``xyz_dtype``: "f4" (float32, default) or "f8"."""
+    if text:
+        return _write_ply_plyfile(path, mesh, xyz_dtype=xyz_dtype, text=True)
+    cols = _vertex_columns(mesh, xyz_dtype)
+    vdt = np.dtype([(c, "<" + t) for c, t, _ in cols])
+    vert = np.empty(mesh.n_vertices, dtype=vdt)
+    for c, _, a in cols:
+        vert[c] = a
+    head = ["ply", "format binary_little_endian 1.0"] + [f"comment {c}" for c in mesh.comments]
+    head.append(f"element vertex {mesh.n_vertices}")
+    head += [f"property {_PLY_NAMES[t]} {c}" for c, t, _ in cols]
+    face = None
+    if mesh.faces is not None:
+        fcols = [("n", "<u1"), ("v", "<i4", (3,))]
+        head.append(f"element face {mesh.n_faces}")
+        head.append("property list uchar int vertex_indices")
+        for name, arr in mesh.face_attrs.items():
+            arr = np.asarray(arr)
+            if arr.ndim == 2:
+                fcols += [(name + "_n", "<u1"), (name, "<f4", (arr.shape[1],))]
+                head.append(f"property list uchar float {name}")
+            else:
+                t = _SCALAR_DTYPES.get(arr.dtype, "f4")
+                fcols.append((name, "<" + t))
+                head.append(f"property {_PLY_NAMES[t]} {name}")
+        face = np.empty(mesh.n_faces, dtype=fcols)
+        face["n"] = 3
+        face["v"] = mesh.faces
+        for name, arr in mesh.face_attrs.items():
+            arr = np.asarray(arr)
+            if arr.ndim == 2:
+                face[name + "_n"] = arr.shape[1]
+            face[name] = arr
+    head.append("end_header")
+    with open(path, "wb") as fh:
+        fh.write(("\n".join(head) + "\n").encode("ascii"))
+        vert.tofile(fh)
+        if face is not None:
+            face.tofile(fh)
+
+
+def read_ply(path: Path | str) -> Mesh:
+    """Read a PLY (cloud or triangle mesh) into a :class:`Mesh`; float64 vertices.
+
+    Binary little-endian files whose faces are all triangles are parsed directly with numpy;
+    anything else goes through plyfile."""
+    path = Path(path)
+    with open(path, "rb") as fh:
+        first = fh.readline()
+        if first.strip() != b"ply":
+            raise ValueError("not a PLY file (no 'ply' magic)")
+        lines = []
+        while True:
+            ln = fh.readline()
+            if not ln:
+                raise ValueError("truncated PLY header (no end_header)")
+            ln = ln.decode("ascii", "replace").strip()
+            if ln == "end_header":
+                break
+            lines.append(ln)
+        offset = fh.tell()
+    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format")), "")
+    elements: list[list] = []
+    comments = []
+    for ln in lines:
+        parts = ln.split()
+        if parts[0] == "comment":
+            comments.append(ln[len("comment "):])
+        elif parts[0] == "element":
+            elements.append([parts[1], int(parts[2]), []])
+        elif parts[0] == "property" and elements:
+            elements[-1][2].append(parts[1:])
+    names = [e[0] for e in elements]
+    simple = (fmt == "binary_little_endian" and names[:1] == ["vertex"]
+              and all(p[0] != "list" for p in elements[0][2])
+              and all(n == "face" for n in names[1:]) and len(names) <= 2)
+    if not simple:
+        return _read_ply_plyfile(path)
+    vdt = np.dtype([(p[1], "<" + _PLY_TYPES[p[0]]) for p in elements[0][2]])
+    nv = elements[0][1]
+    size = path.stat().st_size
+    face_arr = None
+    if len(elements) == 2:
+        # assume every list has the length it has in the first face; verified below
+        with open(path, "rb") as fh:
+            fh.seek(offset + vdt.itemsize * nv)
+            first_face = fh.read(4096)
+        fdt = []
+        pos = 0
+        for p in elements[1][2]:
+            if p[0] == "list":
+                ct, it = np.dtype("<" + _PLY_TYPES[p[1]]), np.dtype("<" + _PLY_TYPES[p[2]])
+                if pos + ct.itemsize > len(first_face):
+                    return _read_ply_plyfile(path)
+                cnt = int(np.frombuffer(first_face[pos:pos + ct.itemsize], ct)[0])
+                fdt += [(p[3] + "_n", ct), (p[3], it, (cnt,))]
+                pos += ct.itemsize + cnt * it.itemsize
+            else:
+                t = np.dtype("<" + _PLY_TYPES[p[0]])
+                fdt.append((p[1], t))
+                pos += t.itemsize
+        fdt = np.dtype(fdt)
+        nf = elements[1][1]
+        if offset + vdt.itemsize * nv + fdt.itemsize * nf != size:
+            return _read_ply_plyfile(path)  # polygons or variable lists (plyfile also detects truncation)
+    elif offset + vdt.itemsize * nv > size:
+        raise ValueError(f"truncated PLY: {nv} vertices declared, file too short")
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        v = np.fromfile(fh, dtype=vdt, count=nv)
+        if len(elements) == 2:
+            face_arr = np.fromfile(fh, dtype=fdt, count=nf)
+            key = "vertex_indices" if "vertex_indices" in fdt.names else "vertex_index"
+            if key not in fdt.names or face_arr[key].shape[1:] != (3,):
+                return _read_ply_plyfile(path)
+            for n in fdt.names:
+                if n.endswith("_n") and n[:-2] in fdt.names and not np.all(face_arr[n] == fdt[n[:-2]].shape[0]):
+                    return _read_ply_plyfile(path)
+    if len(v) < nv:
+        raise ValueError(f"truncated PLY: {nv} vertices declared, {len(v)} present")
+    if face_arr is not None:
+        keep = [n for n in face_arr.dtype.names if not n.endswith("_n")]
+        face_arr = face_arr[keep]
+    return _mesh_from_arrays(v, face_arr, comments)

@@ -1,0 +1,89 @@
+"""Reconstruction diagnostics: distances between cloud, mesh and (optional) ground truth,
+and a top-down distance colour map (PNG)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def stats(d: np.ndarray) -> dict:
+    d = np.asarray(d, np.float64)
+    if len(d) == 0:
+        return {"mean": None, "median": None, "p95": None, "max": None}
+    return {"mean": float(d.mean()), "median": float(np.median(d)), "p95": float(np.quantile(d, 0.95)),
+            "max": float(d.max())}
+
+
+def cloud_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, threads: int = 0) -> np.ndarray:
+    """Distance (m) from every point to the mesh surface, (n,) float32."""
+    from .surface import Surface
+
+    return Surface(vertices, faces, threads).distance(points)
+
+
+def sample_surface(vertices: np.ndarray, faces: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
+    """Area-weighted uniform samples on a triangle mesh, (n, 3) float64."""
+    from .meshio import face_areas
+
+    rng = np.random.default_rng(seed)
+    a = face_areas(vertices, faces)
+    f = rng.choice(len(faces), size=n, p=a / a.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    s = np.sqrt(r1)
+    w = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
+    tri = vertices[faces[f]]
+    return np.einsum("ij,ijk->ik", w, tri)
+
+
+def colormap(values: np.ndarray, vmax: float) -> np.ndarray:
+    """Blue (0) -> green -> yellow -> red (>= vmax), (n, 3) uint8."""
+    anchors = np.array([[48, 18, 160], [30, 150, 230], [60, 200, 90], [250, 220, 40], [220, 30, 30]], np.float64)
+    t = np.clip(np.asarray(values, np.float64) / max(vmax, 1e-12), 0, 1) * (len(anchors) - 1)
+    i = np.minimum(np.floor(t).astype(int), len(anchors) - 2)
+    f = (t - i)[:, None]
+    return np.rint(anchors[i] * (1 - f) + anchors[i + 1] * f).astype(np.uint8)
+
+
+def topdown_map(points: np.ndarray, values: np.ndarray, path: Path, vmax: float, size_px: int = 1024,
+                title: str = "") -> None:
+    """Orthographic top view: each pixel shows the largest value of the points in it."""
+    from PIL import Image, ImageDraw
+
+    lo, hi = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+    ext = max(float((hi - lo).max()), 1e-9)
+    W = size_px
+    H = max(1, int(round(size_px * (hi[1] - lo[1]) / ext))) if (hi[1] - lo[1]) < ext else size_px
+    W = max(1, int(round(size_px * (hi[0] - lo[0]) / ext)))
+    col = np.clip(((points[:, 0] - lo[0]) / ext * (size_px - 1)).astype(int), 0, W - 1)
+    row = np.clip(((hi[1] - points[:, 1]) / ext * (size_px - 1)).astype(int), 0, H - 1)
+    best = np.full(H * W, -1.0)
+    np.maximum.at(best, row * W + col, np.asarray(values, np.float64))
+    # close the gaps between points: empty pixels take the max of their 3 x 3 neighbourhood
+    from scipy.ndimage import maximum_filter
+
+    grid = best.reshape(H, W)
+    grown = maximum_filter(grid, size=3)
+    best = np.where(grid >= 0, grid, grown).ravel()
+    img = np.full((H * W, 3), 255, np.uint8)
+    has = best >= 0
+    img[has] = colormap(best[has], vmax)
+    img = img.reshape(H, W, 3)
+    # legend bar
+    bar_h = 24
+    legend = np.full((bar_h + 16, W, 3), 255, np.uint8)
+    ramp = colormap(np.linspace(0, vmax, W), vmax)
+    legend[4:4 + bar_h] = ramp[None]
+    im = Image.fromarray(np.vstack([img, legend]))
+    d = ImageDraw.Draw(im)
+    d.text((4, H + 6), "0 m", fill=(0, 0, 0))
+    d.text((max(0, W - 90), H + 6), f">= {vmax:.3f} m", fill=(0, 0, 0))
+    if title:
+        d.text((4, 4), title, fill=(0, 0, 0))
+    im.save(str(path))
+
+
+def mesh_with_distance_colors(vertices: np.ndarray, faces: np.ndarray, dist: np.ndarray, vmax: float):
+    from .meshio import Mesh
+
+    return Mesh(vertices=vertices, faces=faces, attrs={"colors": colormap(dist, vmax), "dist_to_cloud_m": dist})

@@ -1,0 +1,107 @@
+"""Normal estimation (PCA on k nearest neighbours, open3d) and consistent orientation.
+
+Orientation methods:
+
+- ``scanner``: each normal points towards the position of the scanner that saw the point
+  (E57 poses, gridded scans); the most reliable when known.
+- ``mst``: consistent propagation over a minimum spanning tree of the k-nearest-neighbour
+  graph weighted by 1 - |n_i . n_j| (Hoppe 1992; our own, open3d's version needs a Delaunay
+  triangulation that fails on planar scenes), then one sign per connected part so that its
+  near-horizontal surfaces face up (or, with none, its vertical ones face the street viewpoint).
+- ``up``: z-up for surfaces that are not vertical; vertical ones face a viewpoint at the
+  cloud's centre 1.8 m above its lowest decile (a street's axis), as a scanner driving the
+  street would see them. Cheap, for huge clouds.
+- ``auto``: ``scanner`` when every point has a known scanner position, else ``mst`` up to
+  ``mst_max_points``, else ``up``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def estimate_normals(points: np.ndarray, k: int = 24, radius_m: float = 0.0) -> np.ndarray:
+    """Unoriented unit normals, (n, 3) float32, from PCA of the k nearest neighbours
+    (optionally limited to ``radius_m``)."""
+    import open3d as o3d
+
+    from .meshio import to_o3d_cloud
+
+    pcd = to_o3d_cloud(points)
+    param = (o3d.geometry.KDTreeSearchParamHybrid(radius=radius_m, max_nn=k) if radius_m > 0
+             else o3d.geometry.KDTreeSearchParamKNN(knn=k))
+    pcd.estimate_normals(param)
+    return np.asarray(pcd.normals, dtype=np.float32)
+
+
+def orient_normals(points: np.ndarray, normals: np.ndarray, method: str = "auto", *,
+                   scanner_index: np.ndarray | None = None, scanner_positions: np.ndarray | None = None,
+                   k: int = 16, mst_max_points: int = 1_500_000) -> tuple[np.ndarray, str]:
+    """Return ``(oriented normals (n, 3) float32, method used)``."""
+    normals = np.asarray(normals, dtype=np.float32).copy()
+    have_scanner = (scanner_index is not None and scanner_positions is not None and len(scanner_positions) > 0
+                    and np.isfinite(scanner_positions[np.clip(scanner_index, 0, len(scanner_positions) - 1)]).all())
+    if method == "auto":
+        method = "scanner" if have_scanner else ("mst" if len(points) <= mst_max_points else "up")
+    if method == "scanner":
+        if not have_scanner:
+            raise ValueError("orientation 'scanner' needs a known scanner position for every point")
+        to_scanner = scanner_positions[scanner_index] - points
+        flip = np.einsum("ij,ij->i", to_scanner, normals) < 0
+        normals[flip] *= -1
+        return normals, method
+    if method == "mst":
+        return _orient_mst(points, normals, k), method
+    if method == "up":
+        z = points[:, 2]
+        view = np.array([points[:, 0].mean(), points[:, 1].mean(), np.quantile(z, 0.1) + 1.8])
+        vertical = np.abs(normals[:, 2]) < 0.3
+        flip = np.where(vertical, np.einsum("ij,ij->i", view - points, normals) < 0, normals[:, 2] < 0)
+        normals[flip] *= -1
+        return normals, method
+    raise ValueError(f"unknown normal orientation '{method}' (use auto, scanner, mst or up)")
+
+
+def _orient_mst(points: np.ndarray, normals: np.ndarray, k: int = 12) -> np.ndarray:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    k = int(min(k, n - 1))
+    _, nb = cKDTree(points).query(points, k=k + 1, workers=-1)
+    i = np.repeat(np.arange(n), k)
+    j = nb[:, 1:].ravel()
+    ok = j < n
+    i, j = i[ok], j[ok]
+    w = 1.0 - np.abs(np.einsum("ij,ij->i", normals[i], normals[j])) + 1e-6
+    g = coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
+    mst = minimum_spanning_tree(g)
+    mst = mst + mst.T
+    ncomp, comp = connected_components(mst, directed=False)
+    parity = np.zeros(n, bool)
+    seen = np.zeros(n, bool)
+    for root in range(n):
+        if seen[root]:
+            continue
+        order, pred = breadth_first_order(mst, root, directed=False, return_predecessors=True)
+        seen[order] = True
+        ch = order[1:]
+        par = pred[ch]
+        rel = np.einsum("ij,ij->i", normals[ch], normals[par]) < 0
+        pl = parity.tolist()
+        for c, p_, r in zip(ch.tolist(), par.tolist(), rel.tolist()):
+            pl[c] = pl[p_] ^ r
+        parity = np.asarray(pl, bool)
+    out = normals.copy()
+    out[parity] *= -1
+    # one sign per connected part
+    z = points[:, 2]
+    view = np.array([points[:, 0].mean(), points[:, 1].mean(), np.quantile(z, 0.1) + 1.8])
+    horiz = np.abs(out[:, 2]) > 0.7
+    up_score = np.bincount(comp, weights=np.where(horiz, np.sign(out[:, 2]), 0.0), minlength=ncomp)
+    view_score = np.bincount(comp, weights=np.where(horiz, 0.0, np.sign(np.einsum("ij,ij->i", view - points, out))),
+                             minlength=ncomp)
+    has_h = np.bincount(comp, weights=horiz.astype(float), minlength=ncomp) > 0
+    flip_c = np.where(has_h, up_score < 0, view_score < 0)
+    out[flip_c[comp]] *= -1
+    return out.astype(np.float32)

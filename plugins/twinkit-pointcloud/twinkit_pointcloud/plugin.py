@@ -1,0 +1,435 @@
+"""twinkit steps of the point-cloud branch (entry point ``pointcloud`` in group ``twinkit``).
+
+Heavy libraries are imported inside the step functions only.
+"""
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from twinkit import hookimpl
+
+
+# ----------------------------------------------------------------------------- parameters
+
+@dataclass
+class ReadCloudParams:
+    """Reading a cloud into the site frame."""
+
+    estimate_normals: bool = True  # estimate normals when the file has none
+    normals_k: int = 24  # neighbours for PCA normals
+    normals_orientation: str = "auto"  # auto | scanner | mst | up (see normals.py)
+    reorient_existing_normals: bool = False  # False: normals from the file are kept as they are
+    min_points: int = 10  # fewer points -> "too few points" error
+    drop_invalid_points: bool = True  # drop NaN/inf points with a warning (False: error)
+    max_offset_km: float = 20.0  # without site bounds: cloud centre farther from the base point = wrong CRS
+    bounds_margin_m: float = 50.0  # with site bounds: margin around them for the wrong-CRS check
+
+
+@dataclass
+class PoissonParams:
+    """Screened Poisson reconstruction."""
+
+    depth: int = 11  # octree depth; voxel = scene size * scale / 2**depth
+    voxel_m: float = 0.0  # > 0: derive the depth from this target voxel size (metres) instead
+    scale: float = 1.1  # reconstruction cube / bounding cube of the samples
+    point_weight: float = 4.0  # screening weight (interpolation vs smoothness)
+    samples_per_node: float = 1.5
+    linear_fit: bool = False
+    backend: str = "open3d"  # open3d | pymeshlab (optional dependency, the thesis's route)
+    normals_k: int = 24  # only used when the points have no normals
+    normals_orientation: str = "auto"
+
+
+@dataclass
+class CleanParams:
+    """Trimming and repair of the dense mesh."""
+
+    max_dist_m: float = 0.10  # remove vertices farther than this from every input point ("bubbles"); 0 = off
+    density_quantile: float = 0.0  # remove vertices below this quantile of Poisson density; 0 = off
+    min_component_faces: int = 200  # drop connected components smaller than this
+    min_component_ratio: float = 0.0  # ... or smaller than this fraction of the largest
+    repair_non_manifold: bool = True
+    max_hole_edges: int = 60  # close holes whose boundary has at most this many edges; < 3 = off
+    colormap_max_m: float = 0.0  # distance colour map saturates here; 0 = max_dist_m (or p99)
+
+
+@dataclass
+class SimplifyParams:
+    """Decimation to a target face count."""
+
+    target_faces: int = 500_000
+    method: str = "auto"  # auto | quadric | clustering
+    cluster_above_faces: int = 20_000_000  # auto: clustering first above this size
+    preserve_border: bool = True  # open boundaries never collapse
+    aggressiveness: float = 7.0  # fast-simplification's agg (lower = slower, more faithful)
+
+
+@dataclass
+class BakeParams:
+    """UV atlas and colour baking."""
+
+    texture_px: int = 8192  # 4096, 8192 or 16384 (any power of two from 256 accepted)
+    uv_method: str = "charts"  # charts (built in) | xatlas (optional dependency, slower)
+    pad_px: int = 2  # gutter around each chart, texels
+
+
+@dataclass
+class EvalParams:
+    """Distances between the cloud, the mesh and an optional ground-truth mesh."""
+
+    colormap_max_m: float = 0.0  # colour map saturates here; 0 = p95 of the cloud -> mesh distances
+    gt_samples: int = 1_000_000  # points sampled on the ground-truth surface
+    image_px: int = 1024
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _write_json(path: Path, obj: Any) -> None:
+    Path(path).write_text(json.dumps(obj, indent=2, sort_keys=True, default=_json_default))
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+class _Outputs:
+    """Removes whatever outputs (and companions) were written if the step fails: no partial outputs."""
+
+    def __init__(self, *paths: Path):
+        self.paths = [Path(p) for p in paths]
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None:
+            for p in self.paths:
+                for q in p.parent.glob(p.stem + ".*"):
+                    try:
+                        q.unlink()
+                    except OSError:
+                        pass
+        return False
+
+
+def _read_mesh_input(path: Path, what: str):
+    from twinkit import InputError
+
+    from .meshio import read_ply
+
+    try:
+        m = read_ply(path)
+    except Exception as exc:
+        raise InputError(f"{Path(path).name}: cannot read the {what} ({type(exc).__name__}: {exc}); "
+                         f"re-run the step that made it") from exc
+    if what.endswith("mesh") and (m.faces is None or m.n_faces == 0):
+        raise InputError(f"{Path(path).name}: the {what} has no faces; re-run the step that made it")
+    return m
+
+
+def _threads(ctx) -> int:
+    return max(1, int(getattr(ctx, "threads", 1) or 1))
+
+
+# ----------------------------------------------------------------------------- steps
+
+def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: Path,
+               out_points_meta_json: Path) -> dict:
+    """Read an E57 / LAS / LAZ / PLY cloud into the site frame (float64 shift, then float32 PLY)."""
+    import numpy as np
+
+    from .measure import Measure
+    from .meshio import Mesh, write_ply
+    from .normals import estimate_normals, orient_normals
+    from .readers import read_any, validate_and_frame
+
+    params = params or ReadCloudParams()
+    in_cloud = Path(in_cloud)
+    with Measure() as meas, _Outputs(out_points_ply, out_points_meta_json):
+        raw = read_any(in_cloud)
+        n_read = raw.n
+        cloud = validate_and_frame(raw, ctx.site, min_points=params.min_points,
+                                   drop_invalid=params.drop_invalid_points, log=ctx.log,
+                                   max_offset_m=params.max_offset_km * 1000.0,
+                                   bounds_margin_m=params.bounds_margin_m)
+        raw = cloud.raw
+        pts = cloud.points
+        normals = raw.normals
+        normals_source = "file" if normals is not None else None
+        orientation = None
+        if normals is not None and params.reorient_existing_normals:
+            normals, orientation = orient_normals(pts, normals, params.normals_orientation,
+                                                  scanner_index=raw.scanner, scanner_positions=raw.scanner_positions)
+        if normals is None and params.estimate_normals:
+            ctx.log.info("%s: no normals in the file: estimating them (k=%d)", in_cloud.name, params.normals_k)
+            normals = estimate_normals(pts, k=params.normals_k)
+            normals, orientation = orient_normals(pts, normals, params.normals_orientation,
+                                                  scanner_index=raw.scanner, scanner_positions=raw.scanner_positions)
+            normals_source = "estimated"
+        if raw.colors is None:
+            ctx.log.warning("%s: the cloud has no colours; the texture will be neutral grey", in_cloud.name)
+        attrs: dict[str, np.ndarray] = {}
+        if normals is not None:
+            attrs["normals"] = normals.astype(np.float32)
+        if raw.colors is not None:
+            attrs["colors"] = raw.colors
+        if raw.intensity is not None:
+            attrs["intensity"] = raw.intensity.astype(np.float32)
+        if raw.classification is not None:
+            attrs["classification"] = raw.classification
+        if raw.scanner is not None:
+            attrs["scanner"] = raw.scanner.astype(np.int32)
+        for k, v in raw.extra.items():
+            if k not in attrs and v.ndim == 1:
+                attrs[k] = v
+        comments = [f"twinkit-pointcloud read_cloud from {in_cloud.name}",
+                    f"site frame shift {cloud.frame.shift[0]:.3f} {cloud.frame.shift[1]:.3f} {cloud.frame.shift[2]:.3f}"]
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        meta = {
+            "source": {"file": in_cloud.name, "format": raw.format, "fields": raw.source_fields},
+            "counts": {"read": n_read, "dropped_invalid": cloud.dropped_invalid, "written": int(len(pts))},
+            "fields": {"normals": normals_source, "normals_orientation": orientation,
+                       "colors": raw.colors is not None, "intensity": raw.intensity is not None,
+                       "classification": raw.classification is not None, "scanner": raw.scanner is not None,
+                       "extra": sorted(raw.extra)},
+            "frame": cloud.frame.as_dict(),
+            "scanner_positions_m": (None if raw.scanner_positions is None else
+                                    [[None if not np.isfinite(c) else float(c) for c in row]
+                                     for row in raw.scanner_positions]),
+            "bounds_m": [lo.tolist(), hi.tolist()],
+            "notes": raw.notes,
+        }
+        for note in cloud.frame.notes:
+            ctx.log.info("%s: %s", in_cloud.name, note)
+        write_ply(out_points_ply, Mesh(vertices=pts, attrs=attrs, comments=comments))
+        meta["time"] = {"seconds": round(meas_now(meas), 3)}
+        _write_json(out_points_meta_json, meta)
+    out = {"points": int(len(pts)), "normals": normals_source, "colors": raw.colors is not None,
+           "shift_m": cloud.frame.shift, **meas.as_dict()}
+    return out
+
+
+def meas_now(m) -> float:
+    import time
+
+    return time.perf_counter() - m._t0
+
+
+def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_ply: Path) -> dict:
+    """Screened Poisson reconstruction of the cloud (normals estimated if absent)."""
+    import numpy as np
+    from twinkit import InputError
+
+    from .measure import Measure
+    from .meshio import read_ply, write_ply
+    from .normals import estimate_normals, orient_normals
+    from .poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth
+
+    params = params or PoissonParams()
+    with Measure() as meas, _Outputs(out_dense_mesh_ply):
+        cloud = _read_mesh_input(in_points_ply, "points")
+        pts = cloud.vertices
+        if len(pts) < 10:
+            raise InputError(f"{Path(in_points_ply).name}: too few points ({len(pts)}) for a surface")
+        normals = cloud.normals
+        if normals is None or not np.isfinite(normals).all() or (np.linalg.norm(normals, axis=1) < 0.5).mean() > 0.5:
+            ctx.log.info("points have no usable normals: estimating them")
+            normals = estimate_normals(pts, k=params.normals_k)
+            normals, _ = orient_normals(pts, normals, params.normals_orientation)
+        depth = depth_for_voxel(pts, params.voxel_m, params.scale) if params.voxel_m > 0 else int(params.depth)
+        voxel = voxel_for_depth(pts, depth, params.scale)
+        ctx.log.info("screened Poisson (%s) depth %d (voxel %.4f m) on %d points",
+                     params.backend, depth, voxel, len(pts))
+        kw = dict(depth=depth, scale=params.scale, point_weight=params.point_weight,
+                  samples_per_node=params.samples_per_node)
+        if params.backend == "open3d":
+            mesh = poisson_open3d(pts, normals, cloud.colors, linear_fit=params.linear_fit,
+                                  threads=_threads(ctx), **kw)
+        elif params.backend == "pymeshlab":
+            mesh = poisson_pymeshlab(pts, normals, cloud.colors, threads=_threads(ctx), **kw)
+        else:
+            raise InputError(f"poisson: unknown backend '{params.backend}' (open3d or pymeshlab)")
+        if mesh.n_faces == 0:
+            raise InputError(f"{Path(in_points_ply).name}: Poisson produced no surface (depth {depth}); "
+                             f"check the normals or lower the depth")
+        mesh.comments = [f"twinkit-pointcloud poisson depth {depth} voxel_m {voxel:.5f}"]
+        write_ply(out_dense_mesh_ply, mesh)
+    return {"depth": depth, "voxel_m": voxel, "vertices": mesh.n_vertices, "faces": mesh.n_faces, **meas.as_dict()}
+
+
+def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_ply: Path,
+               out_clean_mesh_ply: Path, out_clean_report_json: Path) -> dict:
+    """Trim bubbles (distance) and low-density parts, keep large components, repair, close small holes."""
+    import numpy as np
+
+    from .cleanup import CleanOptions, clean_mesh as _clean
+    from .measure import Measure
+    from .meshio import write_ply
+    from .metrics import topdown_map
+
+    params = params or CleanParams()
+    with Measure() as meas, _Outputs(out_clean_mesh_ply, out_clean_report_json):
+        dense = _read_mesh_input(in_dense_mesh_ply, "dense mesh")
+        cloud = _read_mesh_input(in_points_ply, "points")
+        opt = CleanOptions(max_dist_m=params.max_dist_m, density_quantile=params.density_quantile,
+                           min_component_faces=params.min_component_faces,
+                           min_component_ratio=params.min_component_ratio,
+                           repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
+                           threads=_threads(ctx))
+        mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log)
+        mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
+        write_ply(out_clean_mesh_ply, mesh)
+        d = mesh.attrs["dist_to_cloud_m"]
+        vmax = params.colormap_max_m or params.max_dist_m or float(np.quantile(d, 0.99))
+        topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
+                    title="clean mesh: vertex -> nearest point distance")
+        rep["colormap_png"] = Path(out_clean_report_json).with_suffix(".png").name
+        rep["time"] = {"seconds": round(meas_now(meas), 3)}
+        _write_json(out_clean_report_json, rep)
+    return {"vertices": mesh.n_vertices, "faces": mesh.n_faces,
+            "dist_mean_m": rep["output"]["dist_to_cloud_m"]["mean"], **meas.as_dict()}
+
+
+def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_ply: Path) -> dict:
+    """Decimate to a target face count; colours re-sampled from the dense mesh."""
+    from .measure import Measure
+    from .meshio import write_ply
+    from .simplify import simplify_mesh
+
+    params = params or SimplifyParams()
+    with Measure() as meas, _Outputs(out_mesh_ply):
+        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        mesh, method = simplify_mesh(dense, params.target_faces, method=params.method,
+                                     cluster_above_faces=params.cluster_above_faces,
+                                     preserve_border=params.preserve_border,
+                                     aggressiveness=params.aggressiveness, threads=_threads(ctx))
+        err = mesh.attrs.pop("dist_to_dense_m", None)
+        mesh.comments = [f"twinkit-pointcloud simplify {method} target {params.target_faces}"]
+        write_ply(out_mesh_ply, mesh)
+    out = {"method": method, "vertices": mesh.n_vertices, "faces": mesh.n_faces,
+           "input_faces": dense.n_faces, **meas.as_dict()}
+    if err is not None and len(err):
+        out["vertex_to_dense_mean_m"] = float(err.mean())
+        out["vertex_to_dense_max_m"] = float(err.max())
+    return out
+
+
+def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_ply: Path,
+                 out_textured_mesh_obj: Path, out_textured_mesh_ply: Path) -> dict:
+    """UV-unwrap the simplified mesh and bake the dense mesh's colours into a texture (OBJ+MTL+PNG, PLY)."""
+    import numpy as np
+    from twinkit import InputError
+
+    from .measure import Measure, StepTimer
+    from .meshio import write_ply
+    from .simplify import resample_attributes
+    from .texture import bake_colors, write_obj, write_png
+    from .uv import chart_uv, xatlas_uv
+
+    params = params or BakeParams()
+    size = int(params.texture_px)
+    if size < 256 or size > 16384 or size & (size - 1):
+        raise InputError(f"bake_texture: texture_px={size} must be a power of two from 256 to 16384 "
+                         f"(4096, 8192 or 16384 for a site)")
+    timer = StepTimer()
+    out_obj = Path(out_textured_mesh_obj)
+    png = out_obj.with_suffix(".png")
+    with Measure() as meas, _Outputs(out_textured_mesh_obj, out_textured_mesh_ply):
+        mesh = _read_mesh_input(in_mesh_ply, "mesh")
+        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        with timer("uv"):
+            if params.uv_method == "charts":
+                uv, uinfo = chart_uv(mesh.vertices, mesh.faces, size, pad_px=params.pad_px)
+            elif params.uv_method == "xatlas":
+                uv, uinfo = xatlas_uv(mesh.vertices, mesh.faces, size)
+            else:
+                raise InputError(f"bake_texture: unknown uv_method '{params.uv_method}' (charts or xatlas)")
+        colors = dense.colors
+        if colors is None:
+            ctx.log.warning("%s: the dense mesh has no colours (the cloud had none): neutral grey texture",
+                            Path(in_clean_mesh_ply).name)
+        with timer("bake"):
+            img, binfo = bake_colors(mesh.vertices, mesh.faces, uv, size, dense.vertices, dense.faces, colors,
+                                     threads=_threads(ctx),
+                                     progress=lambda it: ctx.progress(it, desc="bake texture"))
+        with timer("write"):
+            write_png(png, img)
+            if colors is not None:
+                mesh = resample_attributes(mesh, dense, _threads(ctx))
+                mesh.attrs.pop("dist_to_dense_m", None)
+            else:
+                mesh.attrs["colors"] = np.full((mesh.n_vertices, 3), 128, np.uint8)
+            normals = mesh.attrs.get("normals")
+            write_obj(out_obj, mesh.vertices, mesh.faces, uv, png.name, normals=normals)
+            mesh.face_attrs["texcoord"] = uv.reshape(-1, 6).astype(np.float32)
+            mesh.comments = [f"TextureFile {png.name}"]
+            write_ply(out_textured_mesh_ply, mesh)
+    return {"texture_px": size, "uv_method": params.uv_method, "neutral_texture": colors is None,
+            "vertices": mesh.n_vertices, "faces": mesh.n_faces, **{f"uv_{k}": v for k, v in uinfo.items()},
+            **binfo, "substeps": timer.table, **meas.as_dict()}
+
+
+def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_ply: Path,
+             out_recon_metrics_json: Path, in_gt_mesh_ply: Path | None = None) -> dict:
+    """Cloud <-> mesh distances (and against a ground-truth mesh when given), counts, a colour map."""
+    import numpy as np
+
+    from .measure import Measure
+    from .metrics import cloud_to_mesh, sample_surface, stats, topdown_map
+    from .surface import Surface
+
+    params = params or EvalParams()
+    with Measure() as meas, _Outputs(out_recon_metrics_json):
+        mesh = _read_mesh_input(in_textured_mesh_ply, "textured mesh")
+        cloud = _read_mesh_input(in_points_ply, "points")
+        from scipy.spatial import cKDTree
+
+        c2m = cloud_to_mesh(cloud.vertices, mesh.vertices, mesh.faces, _threads(ctx))
+        m2c, _ = cKDTree(cloud.vertices).query(mesh.vertices, workers=_threads(ctx))
+        res: dict[str, Any] = {
+            "counts": {"points": cloud.n_vertices, "vertices": mesh.n_vertices, "faces": mesh.n_faces},
+            "cloud_to_mesh_m": stats(c2m),
+            "mesh_to_cloud_m": stats(m2c),
+            "cloud_within_m": {str(t): float((c2m <= t).mean()) for t in (0.01, 0.02, 0.05, 0.1)},
+        }
+        if in_gt_mesh_ply is not None:
+            gt = _read_mesh_input(in_gt_mesh_ply, "ground-truth mesh")
+            gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
+            acc = gsurf.distance(mesh.vertices)
+            samples = sample_surface(gt.vertices, gt.faces, params.gt_samples)
+            comp = Surface(mesh.vertices, mesh.faces, _threads(ctx)).distance(samples)
+            res["gt"] = {"accuracy_mesh_to_gt_m": stats(acc), "completeness_gt_to_mesh_m": stats(comp),
+                         "chamfer_m": float(acc.mean() + comp.mean()) / 2.0,
+                         "gt_covered_within_5cm": float((comp <= 0.05).mean())}
+        vmax = params.colormap_max_m or float(np.quantile(c2m, 0.95)) or 0.01
+        png = Path(out_recon_metrics_json).with_suffix(".png")
+        topdown_map(cloud.vertices, c2m, png, vmax, size_px=params.image_px, title="cloud -> mesh distance")
+        res["colormap_png"] = png.name
+        res["colormap_max_m"] = vmax
+        res["time"] = {"seconds": round(meas_now(meas), 3)}
+        _write_json(out_recon_metrics_json, res)
+    return {"cloud_to_mesh_mean_m": res["cloud_to_mesh_m"]["mean"], "cloud_to_mesh_p95_m": res["cloud_to_mesh_m"]["p95"],
+            "vertices": mesh.n_vertices, "faces": mesh.n_faces, **meas.as_dict()}
+
+
+# ----------------------------------------------------------------------------- registration
+
+@hookimpl
+def twinkit_register_steps(register):
+    register("read_cloud", read_cloud, params=ReadCloudParams)
+    register("clean_mesh", clean_mesh, params=CleanParams)
+    register("simplify", simplify, params=SimplifyParams)
+    register("bake_texture", bake_texture, params=BakeParams)
+    register("evaluate_reconstruction", evaluate, params=EvalParams)
+
+
+@hookimpl
+def twinkit_register_reconstructors(register):
+    register("poisson", poisson, params=PoissonParams)

@@ -1,0 +1,393 @@
+"""Point cloud readers: E57 (libe57 through pye57, incl. the ``nor:`` normals extension and
+several posed scans), LAS/LAZ (laspy + lazrs), PLY (plyfile).
+
+Every reader returns a :class:`RawCloud` in the file's own coordinates (float64); call
+:func:`load_cloud` to also validate it and bring it into the site frame
+(:func:`twinkit_pointcloud.frames.to_site_frame`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+
+@dataclass
+class RawCloud:
+    """A cloud as read.
+
+    xyz: (n, 3) float64, file units and CRS (after E57 poses are applied).
+    normals: (n, 3) float32 unit vectors or None.  colors: (n, 3) uint8 or None.
+    intensity: (n,) float32 in [0, 1] (E57, normalised by its limits) or raw LAS values; or None.
+    classification: (n,) uint8 or None.  scanner: (n,) int32 scan index or None.
+    scanner_positions: (k, 3) float64, same frame as xyz; a row of NaN where unknown.
+    """
+
+    path: Path
+    format: str
+    xyz: np.ndarray
+    normals: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    intensity: np.ndarray | None = None
+    classification: np.ndarray | None = None
+    scanner: np.ndarray | None = None
+    scanner_positions: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+    crs: Any = None  # anything pyproj.CRS.from_user_input accepts
+    source_fields: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return int(len(self.xyz))
+
+    def take(self, mask: np.ndarray) -> "RawCloud":
+        def t(a):
+            return None if a is None else a[mask]
+
+        return RawCloud(self.path, self.format, self.xyz[mask], t(self.normals), t(self.colors), t(self.intensity),
+                        t(self.classification), t(self.scanner), self.scanner_positions,
+                        {k: v[mask] for k, v in self.extra.items()}, self.crs, self.source_fields, self.notes)
+
+
+def _input_error(msg: str):
+    from twinkit import InputError
+
+    return InputError(msg)
+
+
+# ----------------------------------------------------------------------------- E57
+
+def _node_value(node) -> float | str | None:
+    from pye57 import libe57
+
+    t = node.type()
+    if t == libe57.NodeType.E57_FLOAT:
+        return libe57.FloatNode(node).value()
+    if t == libe57.NodeType.E57_INTEGER:
+        return libe57.IntegerNode(node).value()
+    if t == libe57.NodeType.E57_SCALED_INTEGER:
+        return libe57.ScaledIntegerNode(node).scaledValue()
+    if t == libe57.NodeType.E57_STRING:
+        return libe57.StringNode(node).value()
+    return None
+
+
+def _child(struct, name):
+    from pye57 import libe57
+
+    if not struct.isDefined(name):
+        return None
+    return struct.get(name)
+
+
+def _quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
+    q = np.array([w, x, y, z], dtype=np.float64)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def read_e57(path: Path) -> RawCloud:
+    """Read every scan of an E57 file, apply each scan's pose, and merge them."""
+    from pye57 import libe57
+
+    path = Path(path)
+    try:
+        imf = libe57.ImageFile(str(path), "r")
+    except Exception as exc:  # libe57 raises E57Exception subclasses; message says what
+        raise _input_error(f"{path.name}: not a readable E57 file ({exc}); the file is corrupt or truncated - "
+                           f"re-export it from the scanner software") from exc
+    try:
+        root = imf.root()
+        crs = None
+        cm = _child(root, "coordinateMetadata")
+        if cm is not None:
+            s = _node_value(cm)
+            if isinstance(s, str) and s.strip():
+                try:
+                    from pyproj import CRS
+
+                    crs = CRS.from_user_input(s.strip()).to_wkt()
+                except Exception:
+                    crs = None
+        if not root.isDefined("data3D"):
+            raise _input_error(f"{path.name}: the E57 file has no data3D section (no point scans); "
+                               f"export the point cloud, not only images")
+        data3d = libe57.VectorNode(root.get("data3D"))
+        parts: list[dict[str, np.ndarray]] = []
+        positions = []
+        fields_seen: set[str] = set()
+        notes: list[str] = []
+        for i in range(data3d.childCount()):
+            scan = libe57.StructureNode(data3d.get(i))
+            points = libe57.CompressedVectorNode(scan.get("points"))
+            proto = libe57.StructureNode(points.prototype())
+            names = [proto.get(j).elementName() for j in range(proto.childCount())]
+            fields_seen.update(names)
+            n = points.childCount()
+            if n == 0:
+                positions.append([np.nan] * 3)
+                continue
+            out = {nm: np.empty(n, np.float64) for nm in names}
+            cap = int(min(n, 2_000_000))
+            bufs_np = {nm: np.empty(cap, np.float64) for nm in names}
+            bufs = libe57.VectorSourceDestBuffer()
+            for nm in names:
+                bufs.append(libe57.SourceDestBuffer(imf, nm, bufs_np[nm], cap, True, True))
+            reader = points.reader(bufs)
+            got = 0
+            try:
+                while got < n:
+                    k = reader.read()
+                    if k == 0:
+                        break
+                    for nm in names:
+                        out[nm][got:got + k] = bufs_np[nm][:k]
+                    got += k
+            finally:
+                reader.close()
+            if got < n:
+                raise _input_error(f"{path.name}: scan {i} declares {n} points but only {got} could be read; "
+                                   f"the file is truncated - re-export it")
+            # validity
+            valid = np.ones(n, bool)
+            for st in ("cartesianInvalidState", "sphericalInvalidState"):
+                if st in out:
+                    valid &= out[st] == 0
+            if "cartesianX" in out:
+                xyz = np.stack([out["cartesianX"], out["cartesianY"], out["cartesianZ"]], axis=1)
+            elif "sphericalRange" in out:
+                r, az, el = out["sphericalRange"], out["sphericalAzimuth"], out["sphericalElevation"]
+                xyz = np.stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)], axis=1)
+            else:
+                raise _input_error(f"{path.name}: scan {i} has neither cartesian nor spherical coordinates")
+            part: dict[str, np.ndarray] = {"xyz": xyz}
+            nor = [f"nor:normal{c}" for c in "XYZ"]
+            if all(c in out for c in nor):
+                part["normals"] = np.stack([out[c] for c in nor], axis=1)
+            if all(f"color{c}" in out for c in ("Red", "Green", "Blue")):
+                lim = _child(scan, "colorLimits")
+                cols = []
+                for c in ("Red", "Green", "Blue"):
+                    lo, hi = 0.0, 255.0
+                    if lim is not None:
+                        ls = libe57.StructureNode(lim)
+                        lo_n, hi_n = _child(ls, f"color{c}Minimum"), _child(ls, f"color{c}Maximum")
+                        lo = float(_node_value(lo_n)) if lo_n is not None else 0.0
+                        hi = float(_node_value(hi_n)) if hi_n is not None else float(out[f"color{c}"].max())
+                    else:
+                        hi = 255.0 if out[f"color{c}"].max() <= 255 else float(out[f"color{c}"].max())
+                    cols.append((out[f"color{c}"] - lo) / max(hi - lo, 1e-12))
+                part["colors"] = np.clip(np.rint(np.stack(cols, axis=1) * 255), 0, 255).astype(np.uint8)
+            if "intensity" in out:
+                lim = _child(scan, "intensityLimits")
+                v = out["intensity"]
+                lo, hi = float(v.min()), float(v.max())
+                if lim is not None:
+                    ls = libe57.StructureNode(lim)
+                    a, b = _child(ls, "intensityMinimum"), _child(ls, "intensityMaximum")
+                    lo = float(_node_value(a)) if a is not None else lo
+                    hi = float(_node_value(b)) if b is not None else hi
+                part["intensity"] = ((v - lo) / max(hi - lo, 1e-12)).astype(np.float32)
+            # pose
+            pose = _child(scan, "pose")
+            scanner_pos = [np.nan] * 3
+            if pose is not None:
+                ps = libe57.StructureNode(pose)
+                R = np.eye(3)
+                t = np.zeros(3)
+                rot = _child(ps, "rotation")
+                if rot is not None:
+                    rs = libe57.StructureNode(rot)
+                    R = _quat_to_matrix(*(float(_node_value(rs.get(c))) for c in "wxyz"))
+                tr = _child(ps, "translation")
+                if tr is not None:
+                    ts = libe57.StructureNode(tr)
+                    t = np.array([float(_node_value(ts.get(c))) for c in "xyz"])
+                part["xyz"] = part["xyz"] @ R.T + t
+                if "normals" in part:
+                    part["normals"] = part["normals"] @ R.T
+                scanner_pos = t.tolist()
+            elif "sphericalRange" in out or "rowIndex" in out:
+                # a structured (gridded) scan without a pose is in its scanner's own frame
+                scanner_pos = [0.0, 0.0, 0.0]
+                notes.append(f"scan {i}: no pose, gridded scan -> scanner assumed at its origin")
+            positions.append(scanner_pos)
+            for k in list(part):
+                part[k] = part[k][valid]
+            part["scanner"] = np.full(int(valid.sum()), i, np.int32)
+            parts.append(part)
+    finally:
+        try:
+            imf.close()
+        except Exception:
+            pass
+    if not parts:
+        return RawCloud(path, "e57", np.zeros((0, 3)), source_fields=sorted(fields_seen), crs=crs)
+
+    def cat(key, dtype=None):
+        if not all(key in p for p in parts):
+            if any(key in p for p in parts):
+                notes.append(f"'{key}' present in only some scans: dropped")
+            return None
+        a = np.concatenate([p[key] for p in parts])
+        return a.astype(dtype) if dtype else a
+
+    normals = cat("normals", np.float32)
+    if normals is not None:
+        ln = np.linalg.norm(normals, axis=1, keepdims=True)
+        normals = (normals / np.maximum(ln, 1e-12)).astype(np.float32)
+    return RawCloud(path=path, format="e57", xyz=cat("xyz"), normals=normals, colors=cat("colors"),
+                    intensity=cat("intensity"), scanner=cat("scanner"),
+                    scanner_positions=np.asarray(positions, np.float64).reshape(-1, 3),
+                    crs=crs, source_fields=sorted(fields_seen), notes=notes)
+
+
+# ----------------------------------------------------------------------------- LAS / LAZ
+
+def read_las(path: Path) -> RawCloud:
+    """LAS/LAZ through laspy (LAZ decompressed by lazrs). RGB 8- or 16-bit -> uint8."""
+    import laspy
+
+    path = Path(path)
+    try:
+        las = laspy.read(str(path))
+    except Exception as exc:
+        raise _input_error(f"{path.name}: not a readable LAS/LAZ file ({type(exc).__name__}: {exc}); "
+                           f"the file is corrupt or truncated - download or export it again") from exc
+    hdr = las.header
+    if hdr.point_count and len(las.points) < hdr.point_count:
+        raise _input_error(f"{path.name}: header declares {hdr.point_count} points but only {len(las.points)} "
+                           f"could be read; the file is truncated - download or export it again")
+    xyz = np.stack([np.asarray(las.x, np.float64), np.asarray(las.y, np.float64), np.asarray(las.z, np.float64)], axis=1)
+    dims = list(las.point_format.dimension_names)
+    colors = None
+    notes: list[str] = []
+    if all(c in dims for c in ("red", "green", "blue")):
+        rgb = np.stack([np.asarray(las.red), np.asarray(las.green), np.asarray(las.blue)], axis=1)
+        if rgb.size and rgb.max() > 255:
+            colors = np.clip(np.rint(rgb / 257.0), 0, 255).astype(np.uint8)
+            notes.append("16-bit RGB scaled to 8 bits")
+        elif rgb.size and rgb.max() > 0:
+            colors = rgb.astype(np.uint8)
+            notes.append("RGB stored as 8-bit values")
+        else:
+            notes.append("RGB fields present but all zero: treated as no colour")
+    intensity = np.asarray(las.intensity, np.float32) if "intensity" in dims else None
+    classification = np.asarray(las.classification, np.uint8) if "classification" in dims else None
+    normals = None
+    for trip in (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz"), ("NormalX", "NormalY", "NormalZ")):
+        if all(c in dims for c in trip):
+            normals = np.stack([np.asarray(las[c], np.float32) for c in trip], axis=1)
+    crs = None
+    try:
+        c = hdr.parse_crs()
+        crs = c.to_wkt() if c is not None else None
+    except Exception as exc:  # unparsable CRS VLR
+        notes.append(f"CRS in the file could not be parsed ({exc}); treated as unknown")
+    return RawCloud(path=path, format=path.suffix.lower().lstrip("."), xyz=xyz, normals=normals, colors=colors,
+                    intensity=intensity, classification=classification, crs=crs, source_fields=dims, notes=notes)
+
+
+# ----------------------------------------------------------------------------- PLY
+
+def read_ply_cloud(path: Path) -> RawCloud:
+    from .meshio import read_ply
+
+    path = Path(path)
+    try:
+        m = read_ply(path)
+    except Exception as exc:
+        raise _input_error(f"{path.name}: not a readable PLY file ({type(exc).__name__}: {exc}); "
+                           f"the file is corrupt or truncated - export it again") from exc
+    from plyfile import PlyData
+
+    a = dict(m.attrs)
+    normals = a.pop("normals", None)
+    colors = a.pop("colors", None)
+    intensity = None
+    for k in ("intensity", "scalar_intensity", "scalar_Intensity"):
+        if k in a:
+            intensity = np.asarray(a.pop(k), np.float32)
+            break
+    classification = None
+    for k in ("classification", "scalar_Classification", "class"):
+        if k in a:
+            classification = np.asarray(a.pop(k)).astype(np.uint8)
+            break
+    scanner = np.asarray(a.pop("scanner")).astype(np.int32) if "scanner" in a else None
+    fields = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals is not None else []) + \
+             (["red", "green", "blue"] if colors is not None else []) + list(m.attrs.keys() - {"normals", "colors"})
+    if normals is not None:
+        ln = np.linalg.norm(normals, axis=1, keepdims=True)
+        ok = ln[:, 0] > 1e-12
+        normals = np.where(ok[:, None], normals / np.maximum(ln, 1e-12), 0).astype(np.float32)
+    return RawCloud(path=path, format="ply", xyz=m.vertices, normals=normals, colors=colors, intensity=intensity,
+                    classification=classification, scanner=scanner, extra=a, source_fields=fields)
+
+
+READERS = {".e57": read_e57, ".las": read_las, ".laz": read_las, ".ply": read_ply_cloud}
+
+
+def read_any(path: Path) -> RawCloud:
+    path = Path(path)
+    if not path.exists():
+        raise _input_error(f"{path}: file not found; check the site's input paths")
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        raise _input_error(f"{path.name}: unsupported point cloud format '{path.suffix}'; "
+                           f"use E57, LAS, LAZ or PLY")
+    if path.stat().st_size == 0:
+        raise _input_error(f"{path.name}: the file is empty (0 bytes); export the cloud again")
+    return reader(path)
+
+
+# ----------------------------------------------------------------------------- validation + frame
+
+@dataclass
+class Cloud:
+    """A validated cloud in the site frame. points: (n, 3) float64 metres (site frame)."""
+
+    raw: RawCloud
+    points: np.ndarray
+    frame: Any
+    dropped_invalid: int = 0
+
+
+def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: int = 10,
+                       drop_invalid: bool = True, log=None, **frame_kw) -> Cloud:
+    """Check the cloud (empty, NaN/inf, degenerate) and move it into the site frame."""
+    from .frames import to_site_frame
+
+    name = raw.path.name
+    if raw.n == 0:
+        raise _input_error(f"{name}: the cloud is empty (0 points); check the export or the filter that produced it")
+    finite = np.isfinite(raw.xyz).all(axis=1)
+    n_bad = int((~finite).sum())
+    if n_bad:
+        if not drop_invalid or n_bad == raw.n:
+            raise _input_error(f"{name}: {n_bad} of {raw.n} points have NaN or infinite coordinates; "
+                               f"remove them (or set drop_invalid_points=true to skip them)")
+        if log is not None:
+            log.warning("%s: dropped %d of %d points with NaN or infinite coordinates", name, n_bad, raw.n)
+        raw = raw.take(finite)
+    if raw.n < min_points:
+        raise _input_error(f"{name}: too few points ({raw.n}; at least {min_points} are needed for a surface); "
+                           f"use a denser or larger capture")
+    ext = raw.xyz.max(axis=0) - raw.xyz.min(axis=0)
+    if float(ext.max()) <= 1e-9 * max(1.0, float(np.abs(raw.xyz).max())):
+        raise _input_error(f"{name}: all {raw.n} points are identical ({raw.xyz[0].tolist()}); "
+                           f"the capture is degenerate - check the export")
+    local, info = to_site_frame(raw.xyz, raw.crs, site, name, **frame_kw)
+    if raw.scanner_positions is not None and len(raw.scanner_positions):
+        from .frames import apply_frame
+
+        raw.scanner_positions = apply_frame(raw.scanner_positions, raw.crs, site, info)
+    return Cloud(raw=raw, points=local, frame=info, dropped_invalid=n_bad)
