@@ -85,6 +85,7 @@ class AlignParams:
     curb_tol_m: float = 0.07  # ground fallback: height above the lowest local level still counted as road
     fit_height: bool = True  # shift the OpenDRIVE elevation to the median road-surface height
     model: str = "middles"  # residuals: "middles" of the carriageway, or each "edges" with a free extra width per road
+    use_labels: bool = True  # fit to the road-labelled surface when labels.npy exists; false: always the ground (curbs)
 
 
 def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_mesh_ply: Path,
@@ -97,7 +98,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
 
     mesh = read_mesh(in_textured_mesh_ply)
     labels = None
-    if in_labels_npy is not None:
+    if in_labels_npy is not None and params.use_labels:
         labels = np.load(in_labels_npy)
     fidx, how = road_faces(mesh, labels, curb_tol_m=params.curb_tol_m)
     if len(fidx) < 10:
