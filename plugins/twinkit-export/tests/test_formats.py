@@ -13,6 +13,7 @@ import pytest
 from twinkit.testing import run_step
 
 from twinkit_export.classes import BY_ID, palette_lut
+from twinkit_export.gltf import srgb_to_linear
 from twinkit_export.split import load_class_set
 
 from conftest import SITE, plugin
@@ -199,7 +200,9 @@ def test_glb_round_trip(glb_out, class_dir):
         # palette colours and class ids per corner
         lab_corner = m.vertex_class[m.faces].ravel()
         np.testing.assert_array_equal(cls[idx], lab_corner)
-        np.testing.assert_array_equal(col[idx], lut[lab_corner])
+        # glTF vertex colours are linear: the sRGB palette through the sRGB transfer curve
+        np.testing.assert_allclose(col[idx], srgb_to_linear(lut[lab_corner]), atol=1e-6)
+        assert col.dtype == np.float32 and 0 <= col.min() and col.max() <= 1
     mat = g.materials[0]
     assert mat.pbrMetallicRoughness.baseColorTexture.index == 0
     img = g.images[0]

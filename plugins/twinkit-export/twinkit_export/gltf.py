@@ -5,7 +5,7 @@
 - axes: glTF is y up; vertices are converted from the site frame (x east, y north, z up) to
   glTF (x, z, -y), a rotation, so viewers need no node transform; metres stay metres;
 - attributes: POSITION, NORMAL, TEXCOORD_0 (v flipped: glTF UV origin is top left), COLOR_0 (the
-  CityScapes palette, normalized unsigned bytes, RGB) and _CLASS_ID (unsigned byte, each vertex's
+  CityScapes palette converted from sRGB to linear, float RGB, as glTF defines vertex colours) and _CLASS_ID (unsigned byte, each vertex's
   own label); vertices are split where UV charts meet (glTF has one UV per vertex);
 - one material with the texture as baseColorTexture (embedded, PNG or JPEG) and
   KHR_materials_unlit (the texture already holds the captured light). Note: per the glTF spec
@@ -70,6 +70,14 @@ class _Builder:
         return len(self.accessors) - 1
 
 
+
+def srgb_to_linear(rgb8) -> "np.ndarray":
+    """(n, 3) uint8 sRGB -> (n, 3) float32 linear RGB in [0, 1] (the IEC 61966-2-1 transfer curve)."""
+    import numpy as np
+
+    c = np.asarray(rgb8, dtype=np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
 def site_to_gltf(p: np.ndarray) -> np.ndarray:
     """(n, 3) site frame (x east, y north, z up) -> glTF (x, y up, z = -north)."""
     return np.column_stack([p[:, 0], p[:, 2], -p[:, 1]])
@@ -96,14 +104,14 @@ def write_glb(meshes, texture: Path | None, out: Path, georef: dict, *, texture_
         nrm = np.where(ln > 0, nrm / np.where(ln > 0, ln, 1), np.array([0, 1, 0], np.float32)).astype(np.float32)
         uv = corner_uv[first].astype(np.float32).copy()
         uv[:, 1] = 1.0 - uv[:, 1]
-        col = cm.colors[src_v].astype(np.uint8)
+        col = srgb_to_linear(cm.colors[src_v])  # glTF vertex colours are linear; the palette is sRGB
         cls = cm.vertex_class[src_v].astype(np.uint8)
         idx = inv.astype(np.uint32)
         attrs = {
             "POSITION": b.accessor(pos, _FLOAT, "VEC3", minmax=True),
             "NORMAL": b.accessor(nrm, _FLOAT, "VEC3"),
             "TEXCOORD_0": b.accessor(uv, _FLOAT, "VEC2"),
-            "COLOR_0": b.accessor(col, _UBYTE, "VEC3", normalized=True),
+            "COLOR_0": b.accessor(col, _FLOAT, "VEC3"),
             "_CLASS_ID": b.accessor(cls, _UBYTE, "SCALAR"),
         }
         ind = b.accessor(idx, _UINT, "SCALAR", target=_ELEMENT_ARRAY_BUFFER)
