@@ -1,0 +1,1 @@
+"""View-based 3D semantic segmentation of meshes for twinkit."""

@@ -1,0 +1,182 @@
+"""Scoring per-vertex labels against ground truth; back-projection of votes; label propagation.
+
+Command line (score any labelled mesh)::
+
+    python -m twinkit_segmentation.metrics LABELS(.npy|.ply) GT(.npy|.ply) [--segments segments.npy] [--json out.json]
+
+A PLY is read through its ``label`` vertex property, or (a repainted export) through its
+vertex colours mapped to the nearest CityScapes palette colour.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from twinkit_segmentation.meshio import CLASSES, IGNORE, N_CLASSES, PALETTE
+
+
+def confusion(pred: np.ndarray, gt: np.ndarray, n: int = N_CLASSES) -> np.ndarray:
+    """``(n, n+1)`` counts: rows = ground truth class, columns = predicted class (last = unlabelled)."""
+    pred = np.asarray(pred).astype(np.int64)
+    gt = np.asarray(gt).astype(np.int64)
+    valid = gt < n
+    p = np.where(pred < n, pred, n)[valid]
+    return np.bincount(gt[valid] * (n + 1) + p, minlength=n * (n + 1)).reshape(n, n + 1)
+
+
+def scores(pred: np.ndarray, gt: np.ndarray, classes: list[int] | None = None) -> dict:
+    """Per-class IoU / F1 / precision / recall (percent) and their means over ``classes``
+    (default: the classes present in the ground truth). Unlabelled predictions count as misses."""
+    cm = confusion(pred, gt)
+    tp = np.diag(cm[:, :N_CLASSES]).astype(np.float64)
+    gt_n = cm.sum(axis=1).astype(np.float64)
+    pred_n = cm[:, :N_CLASSES].sum(axis=0).astype(np.float64)
+    fp, fn = pred_n - tp, gt_n - tp
+    if classes is None:
+        classes = [int(c) for c in np.nonzero(gt_n)[0]]
+    per = {}
+    for c in classes:
+        iou = tp[c] / max(tp[c] + fp[c] + fn[c], 1)
+        prec = tp[c] / pred_n[c] if pred_n[c] else 0.0
+        rec = tp[c] / gt_n[c] if gt_n[c] else 0.0
+        f1 = 2 * prec * rec / (prec + rec) if prec + rec else 0.0
+        per[CLASSES[c]] = {"id": c, "iou": 100 * iou, "f1": 100 * f1, "precision": 100 * prec,
+                           "recall": 100 * rec, "gt_vertices": int(gt_n[c]), "pred_vertices": int(pred_n[c])}
+    valid = np.asarray(gt) < N_CLASSES
+    out = {
+        "miou": float(np.mean([v["iou"] for v in per.values()])) if per else 0.0,
+        "mf1": float(np.mean([v["f1"] for v in per.values()])) if per else 0.0,
+        "accuracy": 100.0 * float(tp.sum() / max(valid.sum(), 1)),
+        "labelled_fraction": float((np.asarray(pred)[valid] < N_CLASSES).mean()) if valid.any() else 0.0,
+        "classes": classes,
+        "per_class": per,
+        "confusion": {"rows_gt_cols_pred": CLASSES + ["unlabelled"], "matrix": cm.tolist()},
+    }
+    return out
+
+
+def majority_labels(segments: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Each segment takes its most frequent ground-truth class (the over-segmentation's upper bound)."""
+    segments = np.asarray(segments, dtype=np.int64)
+    s = int(segments.max()) + 1 if len(segments) else 0
+    g = np.asarray(gt).astype(np.int64)
+    valid = g < N_CLASSES
+    votes = np.bincount(segments[valid] * N_CLASSES + g[valid], minlength=s * N_CLASSES).reshape(s, N_CLASSES)
+    lab = votes.argmax(axis=1).astype(np.uint8)
+    lab[votes.sum(axis=1) == 0] = IGNORE
+    return lab[segments]
+
+
+def segment_votes(segments: np.ndarray, vertex_votes: np.ndarray) -> np.ndarray:
+    """Sum per-vertex class votes ``(n, 19)`` into per-segment votes ``(s, 19)`` (bincount per class)."""
+    segments = np.asarray(segments, dtype=np.int64)
+    s = int(segments.max()) + 1
+    return np.stack([np.bincount(segments, weights=vertex_votes[:, c], minlength=s)
+                     for c in range(vertex_votes.shape[1])], axis=1)
+
+
+def decide(votes: np.ndarray, ignore_classes=(10,), class_weights=None, min_votes: float = 0.0):
+    """(labels uint8 with 255 where nothing voted, confidence = winner's share of the votes)."""
+    v = np.asarray(votes, dtype=np.float64).copy()
+    for c in ignore_classes or ():
+        if 0 <= int(c) < v.shape[1]:
+            v[:, int(c)] = 0.0
+    if class_weights is not None and len(class_weights):
+        w = np.asarray(class_weights, dtype=np.float64)
+        if len(w) != v.shape[1]:
+            raise ValueError(f"class_weights needs {v.shape[1]} values (one per trainId), got {len(w)}")
+        v *= w[None, :]
+    total = v.sum(axis=1)
+    lab = v.argmax(axis=1).astype(np.uint8)
+    conf = np.where(total > 0, v.max(axis=1) / np.maximum(total, 1e-12), 0.0).astype(np.float32)
+    lab[(total <= 0) | (total < min_votes)] = IGNORE
+    return lab, conf
+
+
+def propagate(labels: np.ndarray, edges: np.ndarray, max_iter: int = 200) -> np.ndarray:
+    """Give unlabelled vertices the most common label of their labelled neighbours, repeatedly
+    (occluded parts take the label of what surrounds them)."""
+    from scipy import sparse
+
+    lab = labels.copy()
+    n = len(lab)
+    a = np.concatenate([edges[:, 0], edges[:, 1]])
+    b = np.concatenate([edges[:, 1], edges[:, 0]])
+    adj = sparse.csr_matrix((np.ones(len(a), np.float32), (a, b)), shape=(n, n))
+    for _ in range(max_iter):
+        miss = lab == IGNORE
+        if not miss.any():
+            break
+        known = ~miss
+        onehot = sparse.csr_matrix((np.ones(known.sum(), np.float32), (np.nonzero(known)[0], lab[known].astype(np.int64))),
+                                   shape=(n, N_CLASSES))
+        counts = (adj[miss] @ onehot).toarray()
+        got = counts.sum(axis=1) > 0
+        if not got.any():
+            break
+        idx = np.nonzero(miss)[0][got]
+        lab[idx] = counts[got].argmax(axis=1).astype(np.uint8)
+    return lab
+
+
+def palette_to_labels(colors: np.ndarray) -> np.ndarray:
+    """Nearest CityScapes palette colour -> trainId (black = 255, unlabelled)."""
+    pal = np.vstack([PALETTE.astype(np.int32), [[0, 0, 0]]])
+    ids = np.append(np.arange(N_CLASSES), IGNORE).astype(np.uint8)
+    c = np.asarray(colors, dtype=np.int32)
+    d = ((c[:, None, :] - pal[None, :, :]) ** 2).sum(axis=2)
+    return ids[d.argmin(axis=1)]
+
+
+def load_labels(path: Path, prefer_colors: bool = False) -> np.ndarray:
+    path = Path(path)
+    if path.suffix == ".npy":
+        return np.load(path).astype(np.uint8)
+    from twinkit_segmentation.meshio import read_mesh
+
+    m = read_mesh(path)
+    if m.vertex_labels is not None and not prefer_colors:
+        return m.vertex_labels
+    if m.colors is None:
+        raise ValueError(f"{path}: no 'label' property and no vertex colours")
+    return palette_to_labels(m.colors)
+
+
+def markdown_table(res: dict, upper: dict | None = None) -> str:
+    lines = ["| class | IoU | F1 | precision | recall |" + (" upper bound IoU |" if upper else ""),
+             "|---|---:|---:|---:|---:|" + ("---:|" if upper else "")]
+    for name, v in res["per_class"].items():
+        ub = f" {upper['per_class'].get(name, {}).get('iou', 0):.1f} |" if upper else ""
+        lines.append(f"| {name} | {v['iou']:.1f} | {v['f1']:.1f} | {v['precision']:.1f} | {v['recall']:.1f} |{ub}")
+    ub = f" {upper['miou']:.1f} |" if upper else ""
+    lines.append(f"| **mean** | **{res['miou']:.1f}** | **{res['mf1']:.1f}** | | |{ub}")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description="Score per-vertex labels against ground truth (mIoU, mF1, per class).")
+    ap.add_argument("labels", help="labels.npy, or a labelled / repainted PLY (same vertices as the ground truth)")
+    ap.add_argument("gt", help="ground-truth labels (gt_labels.npy or a PLY with a 'label' property)")
+    ap.add_argument("--segments", help="segments.npy: also report the over-segmentation's upper bound")
+    ap.add_argument("--colors", action="store_true", help="read the labels PLY by its palette colours, not 'label'")
+    ap.add_argument("--json", help="write the full result here")
+    a = ap.parse_args(argv)
+    pred, gt = load_labels(Path(a.labels), a.colors), load_labels(Path(a.gt))
+    if len(pred) != len(gt):
+        print(f"error: {a.labels} has {len(pred)} vertices, {a.gt} has {len(gt)}", file=sys.stderr)
+        return 2
+    res = scores(pred, gt)
+    upper = scores(majority_labels(np.load(a.segments), gt), gt, res["classes"]) if a.segments else None
+    print(markdown_table(res, upper))
+    print(f"mIoU {res['miou']:.1f}  mF1 {res['mf1']:.1f}  accuracy {res['accuracy']:.1f}")
+    if a.json:
+        Path(a.json).write_text(json.dumps({"scores": res, "upper_bound": upper}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

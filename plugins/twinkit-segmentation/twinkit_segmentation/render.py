@@ -1,0 +1,150 @@
+"""Unlit textured rendering of a mesh plus a per-pixel map to the nearest vertex (moderngl, headless EGL).
+
+One draw call per view writes two images: the texture colour (sky-blue background) and,
+per pixel, ``4 * (face + 1) + corner`` where ``corner`` (0..2) is the triangle corner with
+the largest (perspective-correct) barycentric coordinate, i.e. the nearest vertex of the
+hit triangle. ``vertex = faces[face, corner]``; 0 = background. No geometry shader is
+needed: the mesh is drawn unindexed (3 vertices per face), the corner index comes from
+``gl_VertexID % 3`` and the face from ``gl_PrimitiveID``.
+
+Cameras (see :mod:`twinkit_segmentation.views`): pinhole, ``hfov_deg`` horizontal field of view,
+position and heading/pitch in the site frame (z up).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+SKY_RGB = (135, 206, 235)  # "sky blue" background
+
+_VS = """
+#version 330
+uniform mat4 mvp;
+in vec3 in_pos;
+in vec2 in_uv;
+out vec2 v_uv;
+out vec3 v_bary;
+void main() {
+    int c = gl_VertexID % 3;
+    v_bary = vec3(c == 0 ? 1.0 : 0.0, c == 1 ? 1.0 : 0.0, c == 2 ? 1.0 : 0.0);
+    v_uv = in_uv;
+    gl_Position = mvp * vec4(in_pos, 1.0);
+}
+"""
+
+_FS = """
+#version 330
+uniform sampler2D tex;
+uniform bool textured;
+in vec2 v_uv;
+in vec3 v_bary;
+layout(location = 0) out vec4 f_color;
+layout(location = 1) out uint f_id;
+void main() {
+    f_color = textured ? vec4(texture(tex, v_uv).rgb, 1.0) : vec4(0.6, 0.6, 0.6, 1.0);
+    uint corner = (v_bary.x >= v_bary.y && v_bary.x >= v_bary.z) ? 0u : (v_bary.y >= v_bary.z ? 1u : 2u);
+    f_id = uint(gl_PrimitiveID + 1) * 4u + corner;
+}
+"""
+
+
+def look_matrix(position, heading_deg: float, pitch_deg: float) -> np.ndarray:
+    """World -> camera (OpenGL: x right, y up, looking down -z). Heading: degrees counter-clockwise
+    from +x (east); pitch: degrees above the horizon."""
+    h, p = np.radians(heading_deg), np.radians(pitch_deg)
+    f = np.array([np.cos(h) * np.cos(p), np.sin(h) * np.cos(p), np.sin(p)])
+    up = np.array([0.0, 0.0, 1.0])
+    r = np.cross(f, up)
+    if np.linalg.norm(r) < 1e-6:  # looking straight up or down
+        r = np.array([-np.sin(h), np.cos(h), 0.0]) if p < 0 else np.array([np.sin(h), -np.cos(h), 0.0])
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = r, u, -f
+    m[:3, 3] = -m[:3, :3] @ np.asarray(position, dtype=np.float64)
+    return m
+
+
+def projection_matrix(hfov_deg: float, width: int, height: int, near: float = 0.05, far: float = 1000.0) -> np.ndarray:
+    fx = 1.0 / np.tan(np.radians(hfov_deg) / 2)
+    fy = fx * width / height
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = fx, fy
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+class Renderer:
+    """Keeps the mesh on the (software) GPU; :meth:`render` returns ``(rgb (h,w,3) uint8, vertex (h,w) int32)``
+    with ``vertex = -1`` where no geometry was hit."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, face_uv: np.ndarray | None = None,
+                 texture: np.ndarray | None = None, width: int = 1024, height: int = 512,
+                 background=SKY_RGB, origin: np.ndarray | None = None):
+        import moderngl
+
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self.width, self.height = int(width), int(height)
+        self.background = tuple(c / 255.0 for c in background) + (1.0,)
+        # render relative to an origin near the data so float32 keeps millimetres
+        self.origin = np.asarray(origin if origin is not None else vertices.mean(axis=0), dtype=np.float64)
+        self.ctx = moderngl.create_context(standalone=True, backend="egl")
+        pos = (vertices[self.faces.reshape(-1)] - self.origin).astype(np.float32)
+        textured = face_uv is not None and texture is not None
+        uv = face_uv.reshape(-1, 2).astype(np.float32) if textured else np.zeros((len(pos), 2), np.float32)
+        self.prog = self.ctx.program(vertex_shader=_VS, fragment_shader=_FS)
+        self.prog["textured"].value = bool(textured)
+        buf = np.empty(len(pos), dtype=[("p", "f4", 3), ("t", "f4", 2)])
+        buf["p"], buf["t"] = pos, uv
+        self.vbo = self.ctx.buffer(buf.tobytes())
+        self.vao = self.ctx.vertex_array(self.prog, [(self.vbo, "3f 2f", "in_pos", "in_uv")])
+        if textured:
+            tex = np.ascontiguousarray(np.flipud(texture[..., :3]))  # image row 0 = v 1
+            self.tex = self.ctx.texture((tex.shape[1], tex.shape[0]), 3, tex.tobytes())
+            self.tex.build_mipmaps()
+            self.tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            self.tex.anisotropy = 1.0  # anisotropic filtering doubles the cost on llvmpipe
+            self.tex.use(0)
+            self.prog["tex"].value = 0
+        self.color_rb = self.ctx.renderbuffer((self.width, self.height), 4)
+        self.id_rb = self.ctx.renderbuffer((self.width, self.height), 1, dtype="u4")
+        self.depth_rb = self.ctx.depth_renderbuffer((self.width, self.height))
+        self.fbo = self.ctx.framebuffer([self.color_rb, self.id_rb], self.depth_rb)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+
+    def render(self, view_matrix: np.ndarray, proj_matrix: np.ndarray):
+        shift = np.eye(4)
+        shift[:3, 3] = self.origin
+        mvp = (proj_matrix @ view_matrix @ shift).astype(np.float32)
+        self.prog["mvp"].write(mvp.T.tobytes())  # column-major
+        self.fbo.use()
+        # clears every attachment (the id image to 0); the background colour is painted on the CPU
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self.vao.render()
+        w, h = self.width, self.height
+        ids = np.frombuffer(self.fbo.read(attachment=1, components=1, dtype="u4"), dtype=np.uint32).reshape(h, w)
+        rgb = np.frombuffer(self.fbo.read(attachment=0, components=3), dtype=np.uint8).reshape(h, w, 3)
+        ids = np.flipud(ids)
+        rgb = np.flipud(rgb).copy()
+        hit = ids > 0
+        face = (ids.astype(np.int64) >> 2) - 1
+        corner = ids & 3
+        vertex = np.full((h, w), -1, dtype=np.int32)
+        vertex[hit] = self.faces[face[hit], corner[hit]]
+        rgb[~hit] = np.array([int(round(c * 255)) for c in self.background[:3]], dtype=np.uint8)
+        return rgb, vertex
+
+    def release(self):
+        try:
+            self.ctx.release()
+        except Exception:
+            pass
+
+
+def load_texture(path) -> np.ndarray:
+    from PIL import Image
+
+    Image.MAX_IMAGE_PIXELS = None
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB"))

@@ -1,0 +1,433 @@
+"""The steps of view-based segmentation. Each writes files one can open:
+
+    oversegment           segments.npy (int32 per vertex), segments.ply (random colour per segment)
+    sample_views          views.json
+    render_views          renders/ (<view>.png, <view>_vertex.npz, index.json)
+    predict_views         predictions/ (<view>.png, palette PNG whose pixel values are trainIds),
+                          vertex_votes.npy (float32, vertices x 19)
+    backproject           labels.npy (uint8 per vertex, 255 = none), confidence.npy, labels.ply
+    transfer_gt_labels    gt_labels.npy, gt_labels.ply (ground truth on the reconstructed vertices)
+    evaluate_segmentation seg_metrics.json, seg_metrics.md
+    import_labels         labels.npy from a repainted labels.ply, label_changes.json
+
+Splitting them this way makes the cache pay: changing the over-segmentation re-runs only
+oversegment, backproject and evaluate (votes are stored per vertex, not per segment);
+changing the 2D model re-uses the renders.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import List
+
+from twinkit import InputError, StepContext
+
+
+# ----------------------------------------------------------------------------- over-segmentation
+@dataclass
+class FelzenszwalbParams:
+    k_threshold: float = 0.3  # larger = larger segments
+    min_vertices: int = 10  # merge smaller segments into a neighbour along the lightest edge (0 = off)
+    max_vertices: int = 5000  # never grow a segment beyond this (0 = unlimited)
+    normal_weight: float = 1.0  # weight of 1 - n1.n2 (squared on convex edges)
+    colour_weight: float = 1.0  # weight of the RGB distance (0..1)
+
+
+def oversegment(params: FelzenszwalbParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
+                out_segments_npy: Path, out_segments_ply: Path) -> dict:
+    """Felzenszwalb over-segmentation of the mesh graph (normals + colours); segments.npy per vertex."""
+    import numpy as np
+
+    from twinkit_segmentation.meshio import read_mesh, random_colors, write_colored_ply
+    from twinkit_segmentation.oversegment import felzenszwalb_mesh
+
+    mesh = read_mesh(in_textured_mesh_ply)
+    t0, c0 = time.perf_counter(), time.process_time()
+    seg = felzenszwalb_mesh(mesh.vertices, mesh.faces, mesh.vertex_normals(), mesh.colors,
+                            params.k_threshold, params.min_vertices, params.max_vertices,
+                            params.normal_weight, params.colour_weight)
+    secs, cpu = time.perf_counter() - t0, time.process_time() - c0
+    np.save(out_segments_npy, seg)
+    n = int(seg.max()) + 1
+    write_colored_ply(out_segments_ply, mesh.vertices, mesh.faces, random_colors(n)[seg],
+                      extra={"segment": seg.astype(np.int32)}, comment="twinkit-segmentation segments")
+    sizes = np.bincount(seg)
+    ctx.log.info("%d segments (mean %.1f vertices) in %.2f s", n, sizes.mean(), secs)
+    return {"segments": n, "mean_segment_vertices": float(sizes.mean()), "max_segment_vertices": int(sizes.max()),
+            "seconds": round(secs, 3), "cpu_seconds": round(cpu, 3), "vertices": int(len(seg))}
+
+
+@dataclass
+class NoSegmentsParams:
+    pass
+
+
+def no_oversegment(params: NoSegmentsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
+                   out_segments_npy: Path, out_segments_ply: Path) -> dict:
+    """No over-segmentation: every vertex is its own segment (the thesis's ablation)."""
+    import numpy as np
+
+    from twinkit_segmentation.meshio import read_mesh, write_colored_ply
+
+    mesh = read_mesh(in_textured_mesh_ply)
+    seg = np.arange(len(mesh.vertices), dtype=np.int32)
+    np.save(out_segments_npy, seg)
+    cols = mesh.colors if mesh.colors is not None else np.full((len(seg), 3), 128, np.uint8)
+    write_colored_ply(out_segments_ply, mesh.vertices, mesh.faces, cols, comment="twinkit-segmentation: no segments")
+    return {"segments": int(len(seg)), "mean_segment_vertices": 1.0}
+
+
+# ----------------------------------------------------------------------------- view sampling
+@dataclass
+class SampleViewsParams:
+    max_views: int = 0  # keep at most this many (evenly spread), 0 = all
+
+
+def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
+                 in_roads_osm: Path | None = None, in_street_points_txt: Path | None = None,
+                 out_views_json: Path) -> dict:
+    """Camera views from the selected view sampler (view_sampler=auto_street|street_points|uniform|random|combined)."""
+    import numpy as np
+
+    from twinkit_segmentation.meshio import read_mesh
+    from twinkit_segmentation.views import Scene
+
+    mesh = read_mesh(in_textured_mesh_ply)
+    scene = Scene(mesh.vertices, mesh.faces, mesh.vertex_normals(), site=ctx.site,
+                  roads_osm=in_roads_osm, street_points=in_street_points_txt)
+    sampler = ctx.component("view_sampler")
+    t0 = time.perf_counter()
+    views = sampler.sample(scene, ctx)
+    if params.max_views and len(views) > params.max_views:
+        keep = np.linspace(0, len(views) - 1, params.max_views).round().astype(int)
+        views = [views[i] for i in keep]
+    if not views:
+        raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
+    counts: dict[str, int] = {}
+    for v in views:
+        counts[v["sampler"]] = counts.get(v["sampler"], 0) + 1
+    sampler_name = (ctx.config.get("view_sampler") or {}).get("plugin", "?") if ctx.config else "?"
+    out_views_json.write_text(json.dumps({"sampler": sampler_name, "counts": counts, "views": views}, indent=1))
+    return {"views": len(views), "per_sampler": counts, "seconds": round(time.perf_counter() - t0, 3)}
+
+
+# ----------------------------------------------------------------------------- rendering
+@dataclass
+class RenderParams:
+    max_empty_fraction: float = 0.6  # drop views whose image is more than this much background
+
+
+def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
+                 out_renders_dir: Path) -> dict:
+    """Render every view unlit with a sky background; per pixel the nearest vertex (<view>_vertex.npz)."""
+    import numpy as np
+    from PIL import Image
+
+    from twinkit_segmentation.meshio import read_mesh
+    from twinkit_segmentation.render import Renderer, load_texture
+    from twinkit_segmentation.views import view_matrices
+
+    try:
+        views = json.loads(Path(in_views_json).read_text())["views"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
+    mesh = read_mesh(in_textured_mesh_ply)
+    tex = load_texture(mesh.texture_path) if mesh.texture_path is not None else None
+    if tex is None:
+        ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
+    out_renders_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    renderers: dict = {}
+    kept, dropped = [], []
+    t_render = 0.0
+    try:
+        for v in ctx.progress(views, total=len(views), desc="render"):
+            size = (int(v["width"]), int(v["height"]))
+            if size not in renderers:
+                renderers[size] = Renderer(mesh.vertices, mesh.faces, mesh.face_uv, tex, *size)
+            r = renderers[size]
+            vm, pm = view_matrices(v)
+            t1 = time.perf_counter()
+            rgb, vertex = r.render(vm, pm)
+            t_render += time.perf_counter() - t1
+            empty = float((vertex < 0).mean())
+            if empty > params.max_empty_fraction:
+                dropped.append({"id": v["id"], "empty_fraction": round(empty, 4)})
+                continue
+            Image.fromarray(rgb).save(out_renders_dir / f"{v['id']}.png", compress_level=1)
+            np.savez_compressed(out_renders_dir / f"{v['id']}_vertex.npz", vertex=vertex)
+            kept.append(dict(v, empty_fraction=round(empty, 4)))
+    finally:
+        for r in renderers.values():
+            r.release()
+    index = {"n_vertices": int(len(mesh.vertices)), "kept": kept, "dropped": dropped,
+             "max_empty_fraction": params.max_empty_fraction}
+    (out_renders_dir / "index.json").write_text(json.dumps(index, indent=1))
+    ctx.log.info("rendered %d views, kept %d, dropped %d (> %.0f %% empty)", len(views), len(kept), len(dropped),
+                 100 * params.max_empty_fraction)
+    if not kept:
+        raise InputError(f"{in_views_json}: every view is more than {100 * params.max_empty_fraction:.0f} % empty; "
+                         f"check the sampler's positions (views.json) against the mesh")
+    per = {}
+    for v in kept:
+        per[v["sampler"]] = per.get(v["sampler"], 0) + 1
+    return {"views": len(views), "kept": len(kept), "dropped_empty": len(dropped), "kept_per_sampler": per,
+            "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
+            "seconds_per_view": round(t_render / max(len(views), 1), 4)}
+
+
+# ----------------------------------------------------------------------------- 2D prediction
+@dataclass
+class PredictParams:
+    soft_votes: bool = False  # vote with the softmax probabilities instead of one vote per pixel
+    batch_views: int = 4
+    save_pngs: bool = True  # predictions/<view>.png (palette PNG, pixel value = trainId)
+
+
+def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Path,
+                  in_gt_labels_npy: Path | None = None, out_predictions_dir: Path,
+                  out_vertex_votes_npy: Path) -> dict:
+    """Segment every rendering with the selected image_model and sum its votes per vertex."""
+    import numpy as np
+    from PIL import Image
+
+    from twinkit_segmentation.meshio import N_CLASSES, PALETTE
+
+    index_path = Path(in_renders_dir) / "index.json"
+    try:
+        index = json.loads(index_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{index_path}: missing or unreadable ({exc}); re-run render_views") from None
+    n = int(index["n_vertices"])
+    model = ctx.component("image_model")
+    if getattr(model, "needs_ground_truth", False):
+        if in_gt_labels_npy is None:
+            raise InputError("image_model=oracle needs gt_labels.npy: add the transfer_gt_labels step before predict_views")
+        model.set_ground_truth(np.load(in_gt_labels_npy))
+    out_predictions_dir.mkdir(parents=True, exist_ok=True)
+    votes = np.zeros((n, N_CLASSES), dtype=np.float64)
+    pal = np.zeros(768, dtype=np.uint8)
+    pal[: 3 * N_CLASSES] = PALETTE.reshape(-1)
+    kept = index["kept"]
+    t_model = 0.0
+    t0 = time.perf_counter()
+    step = max(1, int(params.batch_views))
+    batches = [kept[i:i + step] for i in range(0, len(kept), step)]
+    for batch in ctx.progress(batches, total=len(batches), desc="predict"):
+        images = np.stack([np.asarray(Image.open(Path(in_renders_dir) / f"{v['id']}.png").convert("RGB")) for v in batch])
+        vmaps = np.stack([np.load(Path(in_renders_dir) / f"{v['id']}_vertex.npz")["vertex"] for v in batch])
+        t1 = time.perf_counter()
+        kw = {"vertex_maps": vmaps} if getattr(model, "needs_vertex_map", False) else {}
+        if params.soft_votes:
+            proba = np.asarray(model.predict_proba(images, **kw), dtype=np.float32)
+            labels = proba.argmax(axis=1).astype(np.uint8)
+        else:
+            labels = np.asarray(model.predict(images, **kw), dtype=np.uint8)
+        t_model += time.perf_counter() - t1
+        for j, v in enumerate(batch):
+            vm = vmaps[j].reshape(-1)
+            hit = vm >= 0
+            if params.soft_votes:
+                p = proba[j].reshape(N_CLASSES, -1)[:, hit]
+                for c in range(N_CLASSES):
+                    votes[:, c] += np.bincount(vm[hit], weights=p[c], minlength=n)
+            else:
+                lab = labels[j].reshape(-1)[hit].astype(np.int64)
+                ok = lab < N_CLASSES
+                votes += np.bincount(vm[hit][ok].astype(np.int64) * N_CLASSES + lab[ok],
+                                     minlength=n * N_CLASSES).reshape(n, N_CLASSES)
+            if params.save_pngs:
+                im = Image.fromarray(labels[j], mode="P")
+                im.putpalette(pal.tolist())
+                im.save(out_predictions_dir / f"{v['id']}.png")
+    np.save(out_vertex_votes_npy, votes.astype(np.float32))
+    (out_predictions_dir / "index.json").write_text(json.dumps(
+        {"model": (ctx.config.get("image_model") or {}).get("plugin", "?") if ctx.config else "?",
+         "views": [v["id"] for v in kept], "soft_votes": params.soft_votes}, indent=1))
+    seen = float((votes.sum(axis=1) > 0).mean())
+    return {"views": len(kept), "model_seconds": round(t_model, 3), "seconds": round(time.perf_counter() - t0, 3),
+            "seconds_per_view": round(t_model / max(len(kept), 1), 4), "vertices_seen": round(seen, 4)}
+
+
+# ----------------------------------------------------------------------------- back-projection
+@dataclass
+class BackprojectParams:
+    use_segments: bool = True  # vote per segment (False: per vertex)
+    ignore_classes: List[int] = field(default_factory=lambda: [10])  # outside the target set (sky)
+    class_weights: List[float] = field(default_factory=list)  # 19 weights (trainId order), empty = all 1
+    min_votes: float = 0.0  # fewer votes than this = unlabelled
+    fill_unlabelled: bool = True  # unseen vertices take their neighbours' label
+
+
+def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
+                in_vertex_votes_npy: Path, out_labels_npy: Path, out_confidence_npy: Path,
+                out_labels_ply: Path) -> dict:
+    """Votes per segment and class, argmax -> labels.npy (per vertex), confidence.npy, labels.ply (palette)."""
+    import numpy as np
+
+    from twinkit_segmentation.meshio import IGNORE, mesh_edges, read_mesh, write_labels_ply
+    from twinkit_segmentation.metrics import decide, propagate, segment_votes
+
+    t0 = time.perf_counter()
+    mesh = read_mesh(in_textured_mesh_ply)
+    seg = np.load(in_segments_npy)
+    votes = np.load(in_vertex_votes_npy).astype(np.float64)
+    if len(seg) != len(mesh.vertices) or len(votes) != len(mesh.vertices):
+        raise InputError(f"{in_segments_npy.name} ({len(seg)}), {in_vertex_votes_npy.name} ({len(votes)}) and "
+                         f"{in_textured_mesh_ply.name} ({len(mesh.vertices)}) disagree on the vertex count; re-run them")
+    if params.use_segments:
+        sv = segment_votes(seg, votes)
+        slab, sconf = decide(sv, params.ignore_classes, params.class_weights or None, params.min_votes)
+        labels, conf = slab[seg], sconf[seg]
+    else:
+        labels, conf = decide(votes, params.ignore_classes, params.class_weights or None, params.min_votes)
+    unlabelled_before = int((labels == IGNORE).sum())
+    if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
+        labels = propagate(labels, mesh_edges(mesh.faces, len(mesh.vertices)))
+    np.save(out_labels_npy, labels.astype(np.uint8))
+    np.save(out_confidence_npy, conf.astype(np.float32))
+    write_labels_ply(out_labels_ply, mesh, labels)
+    return {"unlabelled_before_fill": unlabelled_before, "unlabelled": int((labels == IGNORE).sum()),
+            "mean_confidence": float(conf[conf > 0].mean()) if (conf > 0).any() else 0.0,
+            "seconds": round(time.perf_counter() - t0, 3)}
+
+
+# ----------------------------------------------------------------------------- ground truth and evaluation
+@dataclass
+class TransferGtParams:
+    max_distance_m: float = 0.5  # farther from any ground-truth face = unlabelled (255)
+
+
+def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
+                       in_textured_mesh_ply: Path, out_gt_labels_npy: Path, out_gt_labels_ply: Path) -> dict:
+    """Ground truth on the reconstructed vertices: the label of the nearest ground-truth face."""
+    import numpy as np
+
+    from twinkit_segmentation.meshio import IGNORE, read_mesh, write_labels_ply
+
+    gt = read_mesh(in_gt_mesh_ply)
+    if gt.face_labels is None and gt.vertex_labels is None:
+        raise InputError(f"{in_gt_mesh_ply}: no 'label' property on faces or vertices")
+    mesh = read_mesh(in_textured_mesh_ply)
+    labels, dist = transfer_labels(gt, mesh.vertices)
+    labels[dist > params.max_distance_m] = IGNORE
+    np.save(out_gt_labels_npy, labels)
+    write_labels_ply(out_gt_labels_ply, mesh, labels, comment="ground truth transferred from the nearest gt face")
+    return {"vertices": int(len(labels)), "mean_distance_m": float(dist.mean()),
+            "unlabelled": int((labels == IGNORE).sum()),
+            "classes": sorted(int(c) for c in np.unique(labels) if c != IGNORE)}
+
+
+def transfer_labels(gt, points):
+    """(labels of the nearest ground-truth face (or nearest face corner's vertex label), distances)."""
+    import numpy as np
+    import open3d as o3d
+
+    tm = o3d.t.geometry.TriangleMesh()
+    tm.vertex.positions = o3d.core.Tensor(gt.vertices.astype(np.float32))
+    tm.triangle.indices = o3d.core.Tensor(gt.faces.astype(np.int32))
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(tm)
+    q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
+    ans = rc.compute_closest_points(q)
+    prim = ans["primitive_ids"].numpy().astype(np.int64)
+    closest = ans["points"].numpy()
+    dist = np.linalg.norm(closest - np.asarray(points, dtype=np.float32), axis=1)
+    if gt.face_labels is not None:
+        labels = gt.face_labels[prim].astype(np.uint8)
+    else:
+        f = gt.faces[prim]
+        d = np.linalg.norm(gt.vertices[f] - np.asarray(points)[:, None, :], axis=2)
+        labels = gt.vertex_labels[f[np.arange(len(f)), d.argmin(axis=1)]].astype(np.uint8)
+    return labels, dist
+
+
+@dataclass
+class EvaluateParams:
+    classes: List[int] = field(default_factory=list)  # trainIds to average over; empty = those in the ground truth
+
+
+def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels_npy: Path, in_gt_labels_npy: Path,
+                          in_segments_npy: Path | None = None, out_seg_metrics_json: Path,
+                          out_seg_metrics_md: Path) -> dict:
+    """Per-class IoU, F1, precision, recall; mIoU, mF1; confusion; the over-segmentation's upper bound."""
+    import numpy as np
+
+    from twinkit_segmentation.metrics import majority_labels, markdown_table, scores
+
+    pred, gt = np.load(in_labels_npy), np.load(in_gt_labels_npy)
+    if len(pred) != len(gt):
+        raise InputError(f"{in_labels_npy.name} has {len(pred)} vertices but {in_gt_labels_npy.name} has {len(gt)}")
+    res = scores(pred, gt, list(params.classes) or None)
+    upper = None
+    if in_segments_npy is not None:
+        upper = scores(majority_labels(np.load(in_segments_npy), gt), gt, res["classes"])
+    out_seg_metrics_json.write_text(json.dumps({"scores": res, "upper_bound": upper}, indent=1))
+    md = [f"# Segmentation vs ground truth\n", f"mIoU **{res['miou']:.1f}**, mF1 **{res['mf1']:.1f}**, "
+          f"accuracy {res['accuracy']:.1f} %, labelled {100 * res['labelled_fraction']:.1f} % of vertices"]
+    if upper:
+        md.append(f"; over-segmentation upper bound mIoU {upper['miou']:.1f}")
+    md.append("\n\n" + markdown_table(res, upper))
+    out_seg_metrics_md.write_text("".join(md))
+    ctx.log.info("mIoU %.1f  mF1 %.1f%s", res["miou"], res["mf1"],
+                 f"  (upper bound {upper['miou']:.1f})" if upper else "")
+    out = {"miou": round(res["miou"], 2), "mf1": round(res["mf1"], 2), "accuracy": round(res["accuracy"], 2),
+           "iou": {k: round(v["iou"], 2) for k, v in res["per_class"].items()}}
+    if upper:
+        out["upper_bound_miou"] = round(upper["miou"], 2)
+    return out
+
+
+# ----------------------------------------------------------------------------- manual correction
+@dataclass
+class ImportLabelsParams:
+    pass
+
+
+def import_labels(params: ImportLabelsParams, ctx: StepContext, *, in_labels_ply: Path, in_labels_npy: Path,
+                  in_textured_mesh_ply: Path | None = None, out_labels_npy: Path,
+                  out_label_changes_json: Path) -> dict:
+    """Read a repainted labels.ply back (nearest palette colour -> class); labels.npy for later steps."""
+    import numpy as np
+
+    before = np.load(in_labels_npy)
+    after = read_repainted(in_labels_ply, len(before), reference_ply=in_textured_mesh_ply)
+    changed = before != after
+    per = {}
+    from twinkit_segmentation.meshio import CLASSES
+
+    name = lambda c: CLASSES[c] if c < len(CLASSES) else "unlabelled"  # noqa: E731
+    for a, b in zip(before[changed].tolist(), after[changed].tolist()):
+        key = f"{name(a)} -> {name(b)}"
+        per[key] = per.get(key, 0) + 1
+    np.save(out_labels_npy, after)
+    out_label_changes_json.write_text(json.dumps({"changed": int(changed.sum()), "transitions": per}, indent=1))
+    ctx.log.info("%d vertices changed by hand", int(changed.sum()))
+    return {"changed": int(changed.sum())}
+
+
+def read_repainted(path: Path, n_vertices: int, reference_ply: Path | None = None, vertices=None):
+    """Labels from a repainted palette PLY; refuses a PLY whose vertex count or order changed."""
+    import numpy as np
+
+    from twinkit_segmentation.meshio import read_mesh
+    from twinkit_segmentation.metrics import palette_to_labels
+
+    m = read_mesh(path)
+    if len(m.vertices) != n_vertices:
+        raise InputError(f"{path}: has {len(m.vertices)} vertices, the labels have {n_vertices}; the editor changed "
+                         f"the mesh. Repaint vertex colours only (MeshLab: keep 'Save vertex order'; Blender: "
+                         f"no merge/split), or export again")
+    ref = vertices
+    if ref is None and reference_ply is not None:
+        ref = read_mesh(reference_ply).vertices
+    if ref is not None:
+        moved = np.linalg.norm(m.vertices - ref, axis=1)
+        if np.percentile(moved, 99) > 1e-3:
+            raise InputError(f"{path}: the vertices are no longer in the original order (or moved); repaint colours "
+                             f"only and save without reordering")
+    if m.colors is None:
+        raise InputError(f"{path}: no vertex colours to read labels from")
+    return palette_to_labels(m.colors)

@@ -1,0 +1,394 @@
+"""View samplers (component kind ``view_sampler``) and the scene they sample.
+
+A view is a plain dict (what ``views.json`` holds)::
+
+    {"id": "auto_street_0007", "sampler": "auto_street", "position": [x, y, z],
+     "heading_deg": 45.0, "pitch_deg": -5.0, "hfov_deg": 75.0, "width": 1024, "height": 512}
+
+heading: degrees counter-clockwise from +x (east) in the site frame; pitch: degrees above
+the horizon. Every sampler object has ``sample(scene, ctx) -> list[dict]``.
+"""
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import List
+
+import numpy as np
+
+from twinkit.errors import InputError
+
+
+@dataclass
+class CameraParams:
+    width_px: int = 1024
+    height_px: int = 512
+    hfov_deg: float = 75.0
+    pitch_deg: float = -8.0
+
+
+class Scene:
+    """What samplers may look at: the mesh, a ray caster, the site, optional road / point files."""
+
+    def __init__(self, vertices, faces, normals, site=None, roads_osm: Path | None = None,
+                 street_points: Path | None = None):
+        self.vertices = np.asarray(vertices, dtype=np.float64)
+        self.faces = np.asarray(faces, dtype=np.int64)
+        self.normals = np.asarray(normals, dtype=np.float64)
+        self.site = dict(site or {})
+        self.roads_osm = roads_osm
+        self.street_points = street_points
+        self.lo = self.vertices.min(axis=0)
+        self.hi = self.vertices.max(axis=0)
+        self._rc = None
+
+    @property
+    def raycaster(self):
+        if self._rc is None:
+            import open3d as o3d
+
+            mesh = o3d.t.geometry.TriangleMesh()
+            mesh.vertex.positions = o3d.core.Tensor(self.vertices.astype(np.float32))
+            mesh.triangle.indices = o3d.core.Tensor(self.faces.astype(np.int32))
+            self._rc = o3d.t.geometry.RaycastingScene()
+            self._rc.add_triangles(mesh)
+        return self._rc
+
+    def cast(self, origins: np.ndarray, dirs: np.ndarray):
+        """(t_hit (inf = miss), unit normal of the hit triangle (n, 3))."""
+        import open3d as o3d
+
+        rays = np.concatenate([origins, dirs], axis=1).astype(np.float32)
+        ans = self.raycaster.cast_rays(o3d.core.Tensor(rays))
+        return ans["t_hit"].numpy().astype(np.float64), ans["primitive_normals"].numpy().astype(np.float64)
+
+    def ground_below(self, xy: np.ndarray):
+        """Topmost surface under each (x, y): (z (nan = none), upward normal z component)."""
+        top = self.hi[2] + 10.0
+        o = np.column_stack([xy, np.full(len(xy), top)])
+        d = np.tile([0.0, 0.0, -1.0], (len(xy), 1))
+        t, n = self.cast(o, d)
+        z = np.where(np.isfinite(t), top - t, np.nan)
+        return z, np.abs(n[:, 2])
+
+    def clearance(self, points: np.ndarray, n_dirs: int = 8, up: bool = True):
+        """Smallest free distance from each point along ``n_dirs`` horizontal rays (and up)."""
+        dists = []
+        for i in range(n_dirs):
+            a = 2 * np.pi * i / n_dirs
+            d = np.tile([np.cos(a), np.sin(a), 0.0], (len(points), 1))
+            dists.append(self.cast(points, d)[0])
+        horiz = np.min(np.stack(dists), axis=0) if dists else np.full(len(points), np.inf)
+        upd = self.cast(points, np.tile([0.0, 0.0, 1.0], (len(points), 1)))[0] if up else np.full(len(points), np.inf)
+        return horiz, upd
+
+
+def _views_at(points, heights, headings: int, cam: CameraParams, sampler: str, start: int = 0) -> list[dict]:
+    views = []
+    i = start
+    for p in np.asarray(points, dtype=np.float64).reshape(-1, 3):
+        for h in heights:
+            for k in range(int(headings)):
+                views.append({
+                    "id": f"{sampler}_{i:05d}", "sampler": sampler,
+                    "position": [round(float(p[0]), 4), round(float(p[1]), 4), round(float(p[2] + h), 4)],
+                    "heading_deg": round(360.0 * k / headings, 4), "pitch_deg": float(cam.pitch_deg),
+                    "hfov_deg": float(cam.hfov_deg), "width": int(cam.width_px), "height": int(cam.height_px),
+                })
+                i += 1
+    return views
+
+
+def _thin(points: np.ndarray, min_dist: float) -> np.ndarray:
+    """Greedy subset with at least ``min_dist`` between kept points (in input order)."""
+    if len(points) == 0 or min_dist <= 0:
+        return points
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points[:, :2])
+    taken = np.zeros(len(points), bool)
+    alive = np.ones(len(points), bool)
+    for i in range(len(points)):
+        if not alive[i]:
+            continue
+        taken[i] = True
+        alive[tree.query_ball_point(points[i, :2], min_dist)] = False
+    return points[taken]
+
+
+# ----------------------------------------------------------------------------- uniform
+@dataclass
+class UniformParams(CameraParams):
+    spacing_m: float = 4.0
+    heights_m: List[float] = field(default_factory=lambda: [2.0])  # above the lowest ground level
+    headings: int = 8
+    margin_m: float = 2.0
+
+
+class UniformSampler:
+    """Grid over the mesh's bounding box every ``spacing_m``, at ``heights_m`` above the ground level
+    (2nd percentile of vertex z), ``headings`` directions each (the thesis's uniform sampling)."""
+
+    def __init__(self, params: UniformParams):
+        self.p = params
+
+    def sample(self, scene: Scene, ctx=None) -> list[dict]:
+        p = self.p
+        ground = float(np.percentile(scene.vertices[:, 2], 2))
+        xs = np.arange(scene.lo[0] + p.margin_m, scene.hi[0] - p.margin_m + 1e-9, p.spacing_m)
+        ys = np.arange(scene.lo[1] + p.margin_m, scene.hi[1] - p.margin_m + 1e-9, p.spacing_m)
+        gx, gy = np.meshgrid(xs, ys)
+        pts = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, ground)])
+        return _views_at(pts, p.heights_m, p.headings, p, "uniform")
+
+
+# ----------------------------------------------------------------------------- random
+@dataclass
+class RandomParams(CameraParams):
+    n_views: int = 300
+    offset_min_m: float = 2.0
+    offset_max_m: float = 6.0
+    seed: int = 0
+
+
+class RandomSampler:
+    """A random vertex, the camera moved ``offset`` metres along its normal, looking back at it."""
+
+    def __init__(self, params: RandomParams):
+        self.p = params
+
+    def sample(self, scene: Scene, ctx=None) -> list[dict]:
+        p = self.p
+        rng = np.random.default_rng(p.seed)
+        idx = rng.integers(0, len(scene.vertices), size=p.n_views)
+        off = rng.uniform(p.offset_min_m, p.offset_max_m, size=p.n_views)
+        n = scene.normals[idx]
+        pos = scene.vertices[idx] + n * off[:, None]
+        look = -n
+        views = []
+        for i in range(p.n_views):
+            dx, dy, dz = look[i]
+            horiz = math.hypot(dx, dy)
+            heading = math.degrees(math.atan2(dy, dx)) if horiz > 1e-3 else float(rng.uniform(0, 360))
+            pitch = math.degrees(math.atan2(dz, horiz))
+            pitch = max(-89.0, min(89.0, pitch))
+            views.append({
+                "id": f"random_{i:05d}", "sampler": "random",
+                "position": [round(float(v), 4) for v in pos[i]],
+                "heading_deg": round(heading, 4), "pitch_deg": round(pitch, 4),
+                "hfov_deg": float(p.hfov_deg), "width": int(p.width_px), "height": int(p.height_px),
+            })
+        return views
+
+
+# ----------------------------------------------------------------------------- street points (file)
+@dataclass
+class StreetPointsParams(CameraParams):
+    points_file: str = ""  # CloudCompare point list ("x y z" per line); empty = the step's street_points.txt
+    heights_m: List[float] = field(default_factory=lambda: [1.5, 3.0, 4.5])
+    headings: int = 8
+
+
+def read_point_list(path: Path) -> np.ndarray:
+    """CloudCompare point-list text: one point per line, first three numbers x y z
+    (commas, semicolons or spaces; lines starting with # or // and blank lines skipped)."""
+    pts = []
+    for no, line in enumerate(Path(path).read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#") or line.startswith("//"):
+            continue
+        nums = [t for t in re.split(r"[\s,;]+", line) if t]
+        try:
+            vals = [float(t) for t in nums[:3]]
+        except ValueError:
+            if not pts:  # a header line
+                continue
+            raise InputError(f"{path}:{no}: expected 'x y z', got {line!r}") from None
+        if len(vals) < 3:
+            raise InputError(f"{path}:{no}: expected 'x y z', got {line!r}")
+        pts.append(vals)
+    if not pts:
+        raise InputError(f"{path}: no points; write one 'x y z' line per street point (site frame, metres)")
+    return np.asarray(pts, dtype=np.float64)
+
+
+class StreetPointsSampler:
+    """User-picked street points (file), cameras at 1.5 / 3 / 4.5 m, 8 headings 45 degrees apart."""
+
+    def __init__(self, params: StreetPointsParams):
+        self.p = params
+
+    def sample(self, scene: Scene, ctx=None) -> list[dict]:
+        path = Path(self.p.points_file) if self.p.points_file else scene.street_points
+        if path is None or not Path(path).is_file():
+            raise InputError(
+                f"view_sampler=street_points needs a point list: set view_sampler.points_file=<file> or provide "
+                f"street_points.txt (CloudCompare: pick points on the road, 'Save' as ASCII x y z); got {path}"
+            )
+        pts = read_point_list(Path(path))
+        return _views_at(pts, self.p.heights_m, self.p.headings, self.p, "street")
+
+
+# ----------------------------------------------------------------------------- automatic street points
+@dataclass
+class AutoStreetParams(CameraParams):
+    spacing_m: float = 6.0  # between camera positions along roads / on the ground grid
+    heights_m: List[float] = field(default_factory=lambda: [1.5, 3.0, 4.5])
+    headings: int = 8
+    use_roads: bool = True  # use the road network (roads.osm) when available
+    min_clearance_m: float = 1.0  # free space around a camera position (horizontal rays at 1.5 m)
+    min_headroom_m: float = 5.0  # nothing overhead (trees, roofs) within this height
+    max_ground_step_m: float = 0.35  # ground points higher than the lowest ground level + this are not street
+
+
+def osm_roads_local(path: Path, site: dict) -> list[np.ndarray]:
+    """Polylines (x, y) in the site frame of the drivable OSM ways in ``path``."""
+    from pyproj import Transformer
+
+    crs = site.get("crs")
+    bp = site.get("base_point") or {}
+    if not crs or "lat" not in bp:
+        return []
+    root = ET.parse(path).getroot()
+    nodes = {n.get("id"): (float(n.get("lon")), float(n.get("lat"))) for n in root.iter("node")}
+    tr = Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    bx, by = tr.transform(float(bp["lon"]), float(bp["lat"]))
+    skip = {"footway", "path", "cycleway", "steps", "pedestrian", "crossing", "bridleway", "corridor"}
+    lines = []
+    for way in root.iter("way"):
+        tags = {t.get("k"): t.get("v") for t in way.iter("tag")}
+        if "highway" not in tags or tags["highway"] in skip:
+            continue
+        ll = np.array([nodes[nd.get("ref")] for nd in way.iter("nd") if nd.get("ref") in nodes])
+        if len(ll) < 2:
+            continue
+        x, y = tr.transform(ll[:, 0], ll[:, 1])
+        lines.append(np.column_stack([np.asarray(x) - bx, np.asarray(y) - by]))
+    return lines
+
+
+def _resample(line: np.ndarray, step: float) -> np.ndarray:
+    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return line[:1]
+    t = np.arange(step / 2, s[-1], step)
+    return np.column_stack([np.interp(t, s, line[:, 0]), np.interp(t, s, line[:, 1])])
+
+
+class AutoStreetSampler:
+    """Street points with no manual step: along the road network (roads.osm) when available,
+    else on the reconstructed ground (low, upward-facing, open areas of the mesh)."""
+
+    def __init__(self, params: AutoStreetParams):
+        self.p = params
+
+    def candidates(self, scene: Scene, log=None) -> tuple[np.ndarray, str]:
+        p = self.p
+        source = "ground"
+        xy = np.zeros((0, 2))
+        if p.use_roads and scene.roads_osm is not None and Path(scene.roads_osm).is_file():
+            try:
+                lines = osm_roads_local(Path(scene.roads_osm), scene.site)
+            except Exception as exc:  # a broken OSM file: fall back to the ground, say so
+                if log:
+                    log.warning("roads.osm not usable (%s); sampling street points from the ground", exc)
+                lines = []
+            if lines:
+                xy = np.concatenate([_resample(l, p.spacing_m) for l in lines])
+                inside = np.all((xy >= scene.lo[:2] + 1.0) & (xy <= scene.hi[:2] - 1.0), axis=1)
+                xy = xy[inside]
+                source = "roads"
+        if len(xy) == 0:
+            xs = np.arange(scene.lo[0] + p.spacing_m / 2, scene.hi[0], p.spacing_m)
+            ys = np.arange(scene.lo[1] + p.spacing_m / 2, scene.hi[1], p.spacing_m)
+            gx, gy = np.meshgrid(xs, ys)
+            xy = np.column_stack([gx.ravel(), gy.ravel()])
+            source = "ground"
+        z, nz = scene.ground_below(xy)
+        ok = np.isfinite(z) & (nz > 0.85)
+        if ok.any():
+            level = float(np.percentile(z[ok], 10))
+            ok &= z <= level + p.max_ground_step_m
+        pts = np.column_stack([xy, np.nan_to_num(z)])[ok]
+        if len(pts):
+            horiz, up = scene.clearance(pts + [0, 0, 1.5])
+            free = (horiz >= p.min_clearance_m) & (up >= p.min_headroom_m)
+            pts = pts[free]
+        pts = _thin(pts, 0.75 * p.spacing_m)
+        return pts, source
+
+    def sample(self, scene: Scene, ctx=None) -> list[dict]:
+        log = getattr(ctx, "log", None)
+        pts, source = self.candidates(scene, log)
+        if len(pts) == 0 and source == "roads":
+            self.p.use_roads = False
+            pts, source = self.candidates(scene, log)
+        if log:
+            log.info("auto_street: %d street points from the %s", len(pts), source)
+        views = _views_at(pts, self.p.heights_m, self.p.headings, self.p, "auto_street")
+        for v in views:
+            v["source"] = source
+        return views
+
+
+# ----------------------------------------------------------------------------- combined
+@dataclass
+class CombinedParams:
+    use: List[str] = field(default_factory=lambda: ["auto_street", "uniform", "random"])
+    auto_street: AutoStreetParams = field(default_factory=AutoStreetParams)
+    street_points: StreetPointsParams = field(default_factory=StreetPointsParams)
+    uniform: UniformParams = field(default_factory=UniformParams)
+    random: RandomParams = field(default_factory=RandomParams)
+
+
+SAMPLERS = {
+    "auto_street": (AutoStreetSampler, AutoStreetParams),
+    "street_points": (StreetPointsSampler, StreetPointsParams),
+    "uniform": (UniformSampler, UniformParams),
+    "random": (RandomSampler, RandomParams),
+}
+
+
+class CombinedSampler:
+    """The union of several samplers' views (the thesis's "combined" configurations)."""
+
+    def __init__(self, params: CombinedParams):
+        self.p = params
+        for name in params.use:
+            if name not in SAMPLERS:
+                raise InputError(f"view_sampler=combined: unknown sampler {name!r} in 'use' (choose from {sorted(SAMPLERS)})")
+
+    def sample(self, scene: Scene, ctx=None) -> list[dict]:
+        views = []
+        for name in self.p.use:
+            cls, _ = SAMPLERS[name]
+            views += cls(getattr(self.p, name)).sample(scene, ctx)
+        return views
+
+
+def build(kind: str):
+    def make(params=None):
+        if kind == "combined":
+            return CombinedSampler(params or CombinedParams())
+        cls, pcls = SAMPLERS[kind]
+        return cls(params or pcls())
+
+    make.__doc__ = {
+        "auto_street": "Automatic street points from the road network (roads.osm) or the ground; 3 heights x 8 headings (default)",
+        "street_points": "User-picked street points from a CloudCompare point list; 1.5/3/4.5 m x 8 headings",
+        "uniform": "Grid over the site every spacing_m at fixed heights, 8 headings",
+        "random": "Random vertex + offset along its normal, looking back at it",
+        "combined": "Union of several samplers (use: [auto_street, uniform, random])",
+    }[kind]
+    return make
+
+
+def view_matrices(view: dict):
+    from twinkit_segmentation.render import look_matrix, projection_matrix
+
+    return (look_matrix(view["position"], view["heading_deg"], view["pitch_deg"]),
+            projection_matrix(view["hfov_deg"], view["width"], view["height"]))
