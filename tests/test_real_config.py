@@ -48,7 +48,10 @@ def test_real_site_template_names_the_file_to_provide(tmp_path):
 
 
 FAST = ["+site.photo_count=3", "reconstructor.depth=8", "steps.bake_texture.texture_px=1024",
-        "steps.evaluate_reconstruction.gt_samples=50000"]
+        "steps.evaluate_reconstruction.gt_samples=50000", "steps.simplify.target_faces=60000",
+        "steps.sample_views.max_views=12", "view_sampler.width_px=512", "view_sampler.height_px=256",
+        "image_model.input_long_side_px=512", "steps.split_classes.max_texture_px=1024"]
+STEPS = 23
 
 
 @pytest.mark.slow
@@ -58,15 +61,19 @@ def test_demo_site_end_to_end_then_reused(tmp_path):
     assert p.returncode == 0, p.stderr[-3000:]
     ws = out / "demo"
     for f in ("01_site/cloud.e57", "02_read_cloud/points.ply", "03_reconstruct/dense_mesh.ply",
-              "06_texture/textured_mesh.obj", "06_texture/textured_mesh.png", "07_evaluate/recon_metrics.json"):
+              "06_texture/textured_mesh.obj", "06_texture/textured_mesh.png", "07_evaluate/recon_metrics.json",
+              "13_backproject/labels.npy", "14_evaluate_segmentation/seg_metrics.json",
+              "18_apply_alignment/aligned.xodr", "20_fbx/twin.fbx", "21_usd/twin.usd", "22_gltf/twin.glb"):
         assert (ws / f).is_file(), f
+    assert list((ws / "23_carla").rglob("Import/*/*.json")), "no CARLA import package"
     metrics = json.loads((ws / "07_evaluate" / "recon_metrics.json").read_text())
     assert metrics["counts"]["faces"] > 1000
     run = sorted((ws / "runs").iterdir())[-1]
     manifest = json.loads((run / "manifest.json").read_text())
-    assert [s["status"] for s in manifest["steps"]] == ["ran"] * 7
+    assert [s["status"] for s in manifest["steps"]] == ["ran"] * STEPS
+    assert (run / "report" / "report.html").is_file()
     assert any(i["path"].endswith("cloud.e57") for i in manifest["outputs"])
     assert twinkit("verify", str(run), cwd=tmp_path).returncode == 0
     again = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *FAST, cwd=tmp_path)
     assert again.returncode == 0, again.stderr[-3000:]
-    assert again.stderr.count(" reused ") == 7, again.stderr
+    assert again.stderr.count(" reused ") == STEPS, again.stderr
