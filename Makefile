@@ -21,7 +21,7 @@ demo: $(STAMP)
 	.venv/bin/twinkit recipe=$(RECIPE) site=$(SITE) $(ARGS)
 
 test: $(STAMP)
-	$(PY) -m pytest tests plugins examples -p no:cacheprovider $(PYTEST_ARGS)
+	$(PY) scripts/run_tests.py $(PYTEST_ARGS)
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
