@@ -68,17 +68,13 @@ def _check_writable(overrides: list[str]) -> None:
     for ov in overrides:
         if ov.startswith("engine.outputs_dir="):
             outputs = ov.split("=", 1)[1]
+    from twinkit.engine import unwritable
+
     p = Path(outputs)
-    try:
-        p.mkdir(parents=True, exist_ok=True)
-        probe = p / f".write-test-{os.getpid()}"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise ConfigError(
-            f"cannot write to the outputs folder {p.resolve()} ({exc.strerror}); "
-            f"choose another with engine.outputs_dir=<dir>"
-        ) from None
+    problem = unwritable(p)
+    if problem:
+        raise ConfigError(f"cannot write to the outputs folder {p.resolve()} ({problem}); "
+                          f"choose another with engine.outputs_dir=<dir>")
 
 
 # --------------------------------------------------------------------------- the Hydra job

@@ -480,6 +480,18 @@ def _link_or_copy(src: Path, dst: Path) -> None:
         shutil.copy2(src, dst)
 
 
+def unwritable(folder: Path) -> str | None:
+    """Why ``folder`` cannot be created or written to, or None when it can (a probe file is written and removed)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".write-test-{os.getpid()}"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
 def _pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -599,15 +611,9 @@ class Engine:
     # ---------------------------------------------------------------- workspace and locking
     def _prepare(self) -> None:
         for d in (self.workspace, self.store):
-            try:
-                d.mkdir(parents=True, exist_ok=True)
-                probe = d / f".write-test-{os.getpid()}"
-                probe.write_text("ok")
-                probe.unlink()
-            except OSError as exc:
-                raise InputError(
-                    f"cannot write to {d} ({exc.strerror}); choose a writable folder with engine.outputs_dir=<dir>"
-                ) from None
+            problem = unwritable(d)
+            if problem:
+                raise InputError(f"cannot write to {d} ({problem}); choose a writable folder with engine.outputs_dir=<dir>")
         from filelock import FileLock, Timeout
 
         lock = FileLock(str(self.workspace / ".twinkit.lock"))
