@@ -50,14 +50,23 @@ def test_real_site_template_names_the_file_to_provide(tmp_path):
 FAST = ["+site.photo_count=3", "reconstructor.depth=8", "steps.bake_texture.texture_px=1024",
         "steps.evaluate_reconstruction.gt_samples=50000", "steps.simplify.target_faces=60000",
         "steps.sample_views.max_views=12", "view_sampler.width_px=512", "view_sampler.height_px=256",
-        "image_model.input_long_side_px=512", "steps.split_classes.max_texture_px=1024"]
+        "steps.split_classes.max_texture_px=1024"]
 STEPS = 23
 
 
+WEIGHTS = ROOT.parent / "shared" / "models" / "efficientvit_seg_b0_cityscapes.pt"
+
+
 @pytest.mark.slow
-def test_demo_site_end_to_end_then_reused(tmp_path):
+@pytest.mark.parametrize("model", [
+    "oracle",  # ground truth through the renderer: the whole chain, no data needed
+    pytest.param("efficientvit_b0", marks=pytest.mark.skipif(
+        not WEIGHTS.exists(), reason=f"needs {WEIGHTS} (real CityScapes weights, not on this machine)")),
+])
+def test_demo_site_end_to_end_then_reused(model, tmp_path):
     out = tmp_path / "outputs"
-    p = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *FAST, cwd=tmp_path)
+    fast = [*FAST, f"image_model={model}"] + (["image_model.input_long_side_px=512"] if model != "oracle" else [])
+    p = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *fast, cwd=tmp_path)
     assert p.returncode == 0, p.stderr[-3000:]
     ws = out / "demo"
     for f in ("01_site/cloud.e57", "02_read_cloud/points.ply", "03_reconstruct/dense_mesh.ply",
@@ -72,8 +81,11 @@ def test_demo_site_end_to_end_then_reused(tmp_path):
     manifest = json.loads((run / "manifest.json").read_text())
     assert [s["status"] for s in manifest["steps"]] == ["ran"] * STEPS
     assert (run / "report" / "report.html").is_file()
+    seg = json.loads((ws / "14_evaluate_segmentation" / "seg_metrics.json").read_text())["scores"]
+    if model == "oracle":  # exact labels through the views: proves rendering and back-projection end to end
+        assert seg["miou"] > 60, seg["miou"]
     assert any(i["path"].endswith("cloud.e57") for i in manifest["outputs"])
     assert twinkit("verify", str(run), cwd=tmp_path).returncode == 0
-    again = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *FAST, cwd=tmp_path)
+    again = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *fast, cwd=tmp_path)
     assert again.returncode == 0, again.stderr[-3000:]
     assert again.stderr.count(" reused ") == STEPS, again.stderr
