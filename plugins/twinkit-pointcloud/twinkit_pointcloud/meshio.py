@@ -53,6 +53,17 @@ _SCALAR_DTYPES = {
 }
 
 
+
+def _ply_scalar(arr):
+    """PLY has no 64-bit integers or booleans: narrow them to int32 / uint32 / uint8."""
+    if arr.dtype == np.int64:
+        return arr.astype(np.int32)
+    if arr.dtype == np.uint64:
+        return arr.astype(np.uint32)
+    if arr.dtype == bool:
+        return arr.astype(np.uint8)
+    return arr
+
 def _write_ply_plyfile(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool = False) -> None:
     """Write ``mesh`` as PLY with plyfile (slow for big meshes; used for ASCII)."""
     from plyfile import PlyData, PlyElement
@@ -72,12 +83,7 @@ def _write_ply_plyfile(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", t
                 cols.append((c, "u1"))
                 data[c] = arr[:, i]
         else:
-            if arr.dtype == np.int64:
-                arr = arr.astype(np.int32)
-            elif arr.dtype == np.uint64:
-                arr = arr.astype(np.uint32)
-            elif arr.dtype == bool:
-                arr = arr.astype(np.uint8)
+            arr = _ply_scalar(arr)
             dt = _SCALAR_DTYPES.get(arr.dtype, "f4")
             cols.append((name, dt))
             data[name] = arr
@@ -257,12 +263,7 @@ def _vertex_columns(mesh: Mesh, xyz_dtype: str):
         elif name == "colors":
             cols += [(c, "u1", arr[:, i]) for i, c in enumerate(("red", "green", "blue"))]
         else:
-            if arr.dtype == np.int64:
-                arr = arr.astype(np.int32)
-            elif arr.dtype == np.uint64:
-                arr = arr.astype(np.uint32)
-            elif arr.dtype == bool:
-                arr = arr.astype(np.uint8)
+            arr = _ply_scalar(arr)
             cols.append((name, _SCALAR_DTYPES.get(arr.dtype, "f4"), arr))
     return cols
 
