@@ -79,6 +79,20 @@ def test_site_input_left_for_the_user(project):
     assert (project.out / "m" / "01_read" / "data.txt").read_text() == "3\n"
 
 
+def test_site_input_not_in_the_site_file_is_added_from_the_command_line(project):
+    # a site file without an 'inputs' section: the input is still given with a plain override
+    project.site("bare", "name: bare\n")
+    project.recipe("fromseed", ["{id: read, uses: step/read_seed}"])
+    seed = project.tmp / "seed.txt"
+    seed.write_text("5\n")
+    r = project.run("site=bare", "recipe=fromseed", f"site.inputs.seed={seed}")
+    assert r.rc == 0, r.text
+    assert (project.out / "bare" / "01_read" / "data.txt").read_text() == "5\n"
+    # other site keys stay strict: a typo is refused, not silently added
+    r = project.run("site=bare", "recipe=fromseed", f"site.inputs.seed={seed}", "site.sede=3")
+    assert r.rc == 2 and "sede" in r.err
+
+
 def test_unwritable_outputs_folder(project):
     blocker = project.tmp / "a_file"
     blocker.write_text("")

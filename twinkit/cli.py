@@ -208,6 +208,16 @@ def options_first(argv: list[str]) -> list[str]:
     return opts + overrides
 
 
+def open_site_inputs(args: list[str]) -> list[str]:
+    """``site.inputs.<name>=value`` adds the input when the site file does not list it.
+
+    Site inputs are open-ended (a recipe may want photos, a GCP file, an OSM extract...), so a
+    plain override adds or replaces the key (Hydra's ``++``); every other key stays strict, so a
+    misspelled ``site.sede=3`` still fails at composition.
+    """
+    return [("++" + a) if a.startswith("site.inputs.") and "=" in a else a for a in args]
+
+
 def _run_hydra(argv: list[str]) -> int:
     import hydra
 
@@ -216,7 +226,7 @@ def _run_hydra(argv: list[str]) -> int:
 
     use_libyaml()
     conf_dir = find_config_dir()
-    argv = options_first(argv)
+    argv = open_site_inputs(options_first(argv))
     overrides = [a for a in argv if not a.startswith("-") and "=" in a]
     check_choices(overrides, conf_dir)
     if "--cfg" not in argv and "-c" not in argv and "--help" not in argv and "--info" not in argv:
@@ -290,6 +300,7 @@ def _compose(overrides: list[str]):
 
     use_libyaml()
     conf_dir = find_config_dir()
+    overrides = open_site_inputs(overrides)
     check_choices(overrides, conf_dir)
     register_configs(get_registry())
     with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
