@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
+import sqlite3
 import time
 from pathlib import Path
 
@@ -274,10 +276,16 @@ def test_gc_removes_only_unreferenced_results(project):
     dry = project.run("gc", "--dry-run", "site=t", "recipe=fan")
     assert dry.rc == 0 and "would remove" in dry.out
     assert {d.name for d in store.iterdir() if d.is_dir() and d.name != ".tmp"} == before
+    db = project.ws / ".cache" / "hashes.sqlite"
+    rows_before = sqlite3.connect(db).execute("SELECT count(*) FROM hashes").fetchone()[0]
     r = project.run("gc", "site=t", "recipe=fan")
     assert r.rc == 0, r.text
     after = {d.name for d in store.iterdir() if d.is_dir() and d.name != ".tmp"}
     assert len(after) == 1 + 1 + 3 + 1 and after < before
+    # the hashes of the removed results are forgotten; those of files still there are kept
+    rows_after = sqlite3.connect(db).execute("SELECT count(*) FROM hashes").fetchone()[0]
+    m = re.search(r"forgot (\d+) remembered", r.out)
+    assert m and int(m.group(1)) > 0 and rows_after == rows_before - int(m.group(1)), r.out
     project.reset_counts()
     r = project.run("site=t", "recipe=fan")
     assert r.rc == 0 and project.counts() == {}, "gc removed a result still in use"

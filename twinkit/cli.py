@@ -362,7 +362,7 @@ def cmd_verify(args: list[str]) -> int:
 
 
 def cmd_gc(args: list[str]) -> int:
-    from twinkit.engine import collect_garbage
+    from twinkit.engine import collect_garbage, prune_hash_cache
 
     dry = "--dry-run" in args
     overrides = [a for a in args if a != "--dry-run"]
@@ -378,11 +378,14 @@ def cmd_gc(args: list[str]) -> int:
         return _err(f"a twinkit run is using {site_root}; run gc when it has finished")
     try:
         doomed, size = collect_garbage(site_root, dry_run=dry)
+        forgotten = 0 if dry else prune_hash_cache(site_root)
     finally:
         if lock is not None and lock.is_locked:
             lock.release()
     verb = "would remove" if dry else "removed"
     print(f"{verb} {len(doomed)} stored result(s), {size / 2**20:.1f} MiB, from {site_root / '.cache' / 'steps'}")
+    if not dry:
+        print(f"forgot {forgotten} remembered file hash(es) of files that are gone")
     return 0
 
 

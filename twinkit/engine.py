@@ -1148,3 +1148,43 @@ def collect_garbage(site_root: Path, dry_run: bool = False) -> tuple[list[Path],
             shutil.rmtree(d, ignore_errors=True)
             (store / f"{d.name}.lock").unlink(missing_ok=True)
     return doomed, size
+
+
+def prune_hash_cache(site_root: Path) -> int:
+    """Forget remembered hashes of files that are gone or changed; returns how many were forgotten.
+
+    Kept: every file under the site's folder (results, the store, runs) and every input file that a
+    run manifest names and that still exists, so a large scan outside the workspace is not read again.
+    """
+    site_root = Path(site_root)
+    db = site_root / ".cache" / "hashes.sqlite"
+    if not db.is_file():
+        return 0
+
+    def sig(p: Path):
+        try:
+            st = os.stat(p)
+        except OSError:
+            return None
+        return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+    keep: set = set()
+    for root, dirs, files in os.walk(site_root):
+        for f in files:
+            s = sig(Path(root) / f)
+            if s is not None:
+                keep.add(s)
+    for m in site_root.glob("**/runs/*/manifest.json"):
+        try:
+            entries = json.loads(m.read_text()).get("inputs", [])
+        except (OSError, ValueError):
+            continue
+        for e in entries:
+            s = sig(Path(e.get("path", "")))
+            if s is not None:
+                keep.add(s)
+    cache = HashCache(db)
+    try:
+        return cache.prune(keep)
+    finally:
+        cache.close()

@@ -73,6 +73,20 @@ class HashCache:
                     db.execute("INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?)", (*sig, digest))
         return digest
 
+    def prune(self, keep: set[tuple[int, int, int, int]]) -> int:
+        """Forget every remembered hash whose stat signature is not in ``keep``; returns how many."""
+        with self._lock:
+            db = self._db()
+            if db is None:
+                return 0
+            rows = db.execute("SELECT dev, ino, size, mtime FROM hashes").fetchall()
+            doomed = [r for r in rows if tuple(r) not in keep]
+            db.execute("BEGIN")
+            db.executemany("DELETE FROM hashes WHERE dev=? AND ino=? AND size=? AND mtime=?", doomed)
+            db.execute("COMMIT")
+            self._mem = {k: v for k, v in self._mem.items() if k in keep}
+            return len(doomed)
+
     def close(self) -> None:
         if self._conn is not None:
             self._conn.close()
