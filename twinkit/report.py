@@ -33,6 +33,8 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from twinkit import cityscapes
+
 log = logging.getLogger("twinkit.report")
 
 REPORT_DIR = "report"
@@ -45,25 +47,14 @@ CONTACT_ROWS = 6
 MAX_GLB_BYTES = 64 * 2**20  # a bigger GLB is linked, and the page gets the light one instead
 MAX_FILES_LISTED = 200      # per step folder; the folder itself is linked too
 
-#: CityScapes trainIds 0..18: names and colours (the official palette).
-CITYSCAPES = [
-    ("road", (128, 64, 128)), ("sidewalk", (244, 35, 232)), ("building", (70, 70, 70)), ("wall", (102, 102, 156)),
-    ("fence", (190, 153, 153)), ("pole", (153, 153, 153)), ("traffic light", (250, 170, 30)),
-    ("traffic sign", (220, 220, 0)), ("vegetation", (107, 142, 35)), ("terrain", (152, 251, 152)),
-    ("sky", (70, 130, 180)), ("person", (220, 20, 60)), ("rider", (255, 0, 0)), ("car", (0, 0, 142)),
-    ("truck", (0, 0, 70)), ("bus", (0, 60, 100)), ("train", (0, 80, 100)), ("motorcycle", (0, 0, 230)),
-    ("bicycle", (119, 11, 32)),
-]
-IGNORE_COLOR = (0, 0, 0)
+#: CityScapes trainIds 0..18: names and colours (the official palette, from twinkit.cityscapes).
+CITYSCAPES = [(name, tuple(int(v) for v in cityscapes.PALETTE[i])) for i, name in enumerate(cityscapes.NAMES)]
+IGNORE_COLOR = cityscapes.IGNORE_RGB
 
 
 def palette() -> np.ndarray:
     """256 x 3 uint8: CityScapes colours for trainIds 0..18, black for everything else (255 = ignore)."""
-    pal = np.zeros((256, 3), np.uint8)
-    pal[:] = IGNORE_COLOR
-    for i, (_, c) in enumerate(CITYSCAPES):
-        pal[i] = c
-    return pal
+    return cityscapes.lut()
 
 
 # =========================================================================== small helpers

@@ -22,7 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-UNLABELLED = 255
+from twinkit import cityscapes
+
+UNLABELLED = cityscapes.IGNORE
 
 
 @dataclass(frozen=True)
@@ -37,30 +39,34 @@ class ClassInfo:
     auto_tag: str  # tag CARLA 0.9.16's `make import` gives the mesh by name alone
 
 
-# CityScapes trainIds 0-18 (cityscapesScripts labels.py) and their CARLA 0.9.16 counterparts
-# (carla.CityObjectLabel values as reported by the carla==0.9.16 Python module).
-CLASSES: tuple[ClassInfo, ...] = (
-    ClassInfo(0, "road", (128, 64, 128), "Road_Road", "Road", "Roads", 1, "Roads"),
-    ClassInfo(1, "sidewalk", (244, 35, 232), "Road_Sidewalk", "SideWalk", "Sidewalks", 2, "Sidewalks"),
-    ClassInfo(2, "building", (70, 70, 70), "Building", "Building", "Buildings", 3, "Terrain"),
-    ClassInfo(3, "wall", (102, 102, 156), "Wall", "Wall", "Walls", 4, "Terrain"),
-    ClassInfo(4, "fence", (190, 153, 153), "Fence", "Fence", "Fences", 5, "Terrain"),
-    ClassInfo(5, "pole", (153, 153, 153), "Pole", "Pole", "Poles", 6, "Terrain"),
-    ClassInfo(6, "traffic light", (250, 170, 30), "TrafficLight", "TrafficLight", "TrafficLight", 7, "Terrain"),
-    ClassInfo(7, "traffic sign", (220, 220, 0), "TrafficSign", "TrafficSign", "TrafficSigns", 8, "Terrain"),
-    ClassInfo(8, "vegetation", (107, 142, 35), "Vegetation", "Vegetation", "Vegetation", 9, "Terrain"),
-    ClassInfo(9, "terrain", (152, 251, 152), "Terrain", "Terrain", "Terrain", 10, "Terrain"),
-    ClassInfo(10, "sky", (70, 130, 180), "Sky", "Sky", "Sky", 11, "Terrain"),
-    ClassInfo(11, "person", (220, 20, 60), "Pedestrian", "Pedestrian", "Pedestrians", 12, "Terrain"),
-    ClassInfo(12, "rider", (255, 0, 0), "Rider", "Rider", "Rider", 13, "Terrain"),
-    ClassInfo(13, "car", (0, 0, 142), "Car", "Car", "Car", 14, "Terrain"),
-    ClassInfo(14, "truck", (0, 0, 70), "Truck", "Truck", "Truck", 15, "Terrain"),
-    ClassInfo(15, "bus", (0, 60, 100), "Bus", "Bus", "Bus", 16, "Terrain"),
-    ClassInfo(16, "train", (0, 80, 100), "Train", "Train", "Train", 17, "Terrain"),
-    ClassInfo(17, "motorcycle", (0, 0, 230), "Motorcycle", "Motorcycle", "Motorcycle", 18, "Terrain"),
-    ClassInfo(18, "bicycle", (119, 11, 32), "Bicycle", "Bicycle", "Bicycle", 19, "Terrain"),
-    ClassInfo(UNLABELLED, "unlabelled", (0, 0, 0), "Unlabeled", "(none)", "NONE", 0, "Terrain"),
-)
+# CARLA 0.9.16 counterparts of the CityScapes trainIds 0-18 (carla.CityObjectLabel values as reported by the
+# carla==0.9.16 Python module): (sub-mesh name, Static/<folder>, intended tag, its id, tag given by name alone).
+# The class names and colours are the shared definition in twinkit.cityscapes.
+_CARLA: dict[int, tuple[str, str, str, int, str]] = {
+    0: ("Road_Road", "Road", "Roads", 1, "Roads"),  # road
+    1: ("Road_Sidewalk", "SideWalk", "Sidewalks", 2, "Sidewalks"),  # sidewalk
+    2: ("Building", "Building", "Buildings", 3, "Terrain"),  # building
+    3: ("Wall", "Wall", "Walls", 4, "Terrain"),  # wall
+    4: ("Fence", "Fence", "Fences", 5, "Terrain"),  # fence
+    5: ("Pole", "Pole", "Poles", 6, "Terrain"),  # pole
+    6: ("TrafficLight", "TrafficLight", "TrafficLight", 7, "Terrain"),  # traffic light
+    7: ("TrafficSign", "TrafficSign", "TrafficSigns", 8, "Terrain"),  # traffic sign
+    8: ("Vegetation", "Vegetation", "Vegetation", 9, "Terrain"),  # vegetation
+    9: ("Terrain", "Terrain", "Terrain", 10, "Terrain"),  # terrain
+    10: ("Sky", "Sky", "Sky", 11, "Terrain"),  # sky
+    11: ("Pedestrian", "Pedestrian", "Pedestrians", 12, "Terrain"),  # person
+    12: ("Rider", "Rider", "Rider", 13, "Terrain"),  # rider
+    13: ("Car", "Car", "Car", 14, "Terrain"),  # car
+    14: ("Truck", "Truck", "Truck", 15, "Terrain"),  # truck
+    15: ("Bus", "Bus", "Bus", 16, "Terrain"),  # bus
+    16: ("Train", "Train", "Train", 17, "Terrain"),  # train
+    17: ("Motorcycle", "Motorcycle", "Motorcycle", 18, "Terrain"),  # motorcycle
+    18: ("Bicycle", "Bicycle", "Bicycle", 19, "Terrain"),  # bicycle
+}
+CLASSES: tuple[ClassInfo, ...] = tuple(
+    ClassInfo(i, cityscapes.NAMES[i], tuple(int(v) for v in cityscapes.PALETTE[i]), *_CARLA[i])
+    for i in range(cityscapes.N_CLASSES)
+) + (ClassInfo(UNLABELLED, "unlabelled", cityscapes.IGNORE_RGB, "Unlabeled", "(none)", "NONE", 0, "Terrain"),)
 
 BY_ID: dict[int, ClassInfo] = {c.train_id: c for c in CLASSES}
 

@@ -1,0 +1,51 @@
+"""The CityScapes label set every plugin shares: trainIds 0-18, names, the official palette.
+
+One definition for segmenters, image models, exporters and the report, so a class id means the
+same thing and has the same colour everywhere. 255 is "unlabelled / ignore" (black).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: trainId -> class name (cityscapesScripts' trainIds 0-18).
+NAMES: tuple[str, ...] = (
+    "road", "sidewalk", "building", "wall", "fence", "pole", "traffic light",
+    "traffic sign", "vegetation", "terrain", "sky", "person", "rider", "car",
+    "truck", "bus", "train", "motorcycle", "bicycle",
+)
+N_CLASSES = len(NAMES)
+IGNORE = 255
+IGNORE_RGB = (0, 0, 0)
+
+#: trainId -> sRGB colour of the official CityScapes palette, (19, 3) uint8.
+PALETTE = np.array([
+    (128, 64, 128), (244, 35, 232), (70, 70, 70), (102, 102, 156), (190, 153, 153),
+    (153, 153, 153), (250, 170, 30), (220, 220, 0), (107, 142, 35), (152, 251, 152),
+    (70, 130, 180), (220, 20, 60), (255, 0, 0), (0, 0, 142), (0, 0, 70),
+    (0, 60, 100), (0, 80, 100), (0, 0, 230), (119, 11, 32),
+], dtype=np.uint8)
+PALETTE.setflags(write=False)
+
+
+def lut() -> np.ndarray:
+    """(256, 3) uint8 lookup table: palette colours for 0-18, black for every other id."""
+    table = np.empty((256, 3), np.uint8)
+    table[:] = IGNORE_RGB
+    table[:N_CLASSES] = PALETTE
+    return table
+
+
+def colorize(labels: np.ndarray) -> np.ndarray:
+    """trainIds of any shape -> RGB uint8 of the same shape plus a last axis of 3 (ignore/unknown -> black)."""
+    labels = np.asarray(labels)
+    ids = np.where((labels >= 0) & (labels < 256), labels, IGNORE).astype(np.uint8)
+    return lut()[ids]
+
+
+def nearest_class(rgb: np.ndarray) -> np.ndarray:
+    """RGB (..., 3) -> trainId of the nearest palette colour (black and near-black -> 255)."""
+    rgb = np.asarray(rgb, np.int32)
+    cand = np.vstack([PALETTE.astype(np.int32), np.array([IGNORE_RGB], np.int32)])
+    d = ((rgb[..., None, :] - cand) ** 2).sum(-1)
+    idx = d.argmin(-1)
+    return np.where(idx == N_CLASSES, IGNORE, idx).astype(np.uint8)
