@@ -174,6 +174,10 @@ def test_fan_out_runs_items_in_parallel_and_caches_each(project):
     assert (project.ws / "04_gather" / "merged.txt").read_text() == f"{4 * 1 + 0 + 1 + 2 + 3}\n"
     pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(4)}
     assert len(pids) == 2, "items should run in two worker processes"
+    per_item = json.loads((project.ws / "03_per_tile" / "step.json").read_text())["metrics"]["per_item"]
+    assert len(per_item) == 4
+    for m in per_item:  # each item reports its worker's memory: before the item and at its peak
+        assert 0 < m["start_rss_mb"] <= m["peak_rss_mb"] and m["duration_s"] >= 0
     project.reset_counts()
     r = project.run("site=t", "recipe=fan", "steps.tiles.n=5", "executor.workers=2")
     assert r.rc == 0, r.text

@@ -15,12 +15,13 @@ __version__ = "0.1.0"
 hookimpl = pluggy.HookimplMarker("twinkit")
 
 from twinkit.context import StepContext  # noqa: E402
-from twinkit.errors import TwinkitError, PluginError, InputError, StepError  # noqa: E402
+from twinkit.errors import ConfigError, TwinkitError, PluginError, InputError, StepError  # noqa: E402
 
 __all__ = [
     "hookimpl",
     "StepContext",
     "TwinkitError",
+    "ConfigError",
     "PluginError",
     "InputError",
     "StepError",

@@ -1,5 +1,7 @@
+"""``python -m twinkit`` = the ``twinkit`` command."""
 import sys
 
 from twinkit.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":
+    sys.exit(main())

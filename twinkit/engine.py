@@ -415,7 +415,7 @@ class _PeakRSS:
 
     def __init__(self, interval: float = 0.05):
         self.interval = interval
-        self.peak = 0
+        self.peak = self.start = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
 
@@ -432,7 +432,7 @@ class _PeakRSS:
             self._stop.wait(self.interval)
 
     def __enter__(self):
-        self.peak = self._rss()
+        self.peak = self.start = self._rss()
         self._thread.start()
         return self
 
@@ -550,6 +550,8 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
             "key": key,
             "duration_s": round(duration, 3),
             "peak_rss_mb": round(mem.peak / 2**20, 1) if mem.peak else None,
+            # what the process held before the step began (a pooled worker keeps memory from earlier items)
+            "start_rss_mb": round(mem.start / 2**20, 1) if mem.start else None,
             "metrics": metrics if isinstance(metrics, dict) else {},
             "files": files,
             "artefacts": {p.filename: artefact_hash(tmp / p.filename, cache) for p in outputs},
@@ -951,7 +953,7 @@ class Engine:
                     files[f"{i:03d}/{rel}"] = info
         artefacts = {p.filename: [r["artefacts"][p.filename] for r in stored] for p in ps.outputs}
         metrics = {"items": len(items), "computed": len(tasks),
-                   "per_item": [r.get("metrics", {}) | {"peak_rss_mb": r.get("peak_rss_mb"),
+                   "per_item": [r.get("metrics", {}) | {"peak_rss_mb": r.get("peak_rss_mb"), "start_rss_mb": r.get("start_rss_mb"),
                                                         "duration_s": r.get("duration_s")} for r in stored]}
         status = "ran" if tasks else "cached"
         record = self._workspace_record(ps, key, desc, {"files": files, "artefacts": artefacts, "metrics": metrics,

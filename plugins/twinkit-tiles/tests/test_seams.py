@@ -1,0 +1,156 @@
+"""Cut, stitch and merge on analytic meshes and on a real (open3d Poisson) synthetic street block."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from twinkit_pointcloud.meshio import Mesh, face_areas
+
+from twinkit_tiles.seams import (boundary_half_edges, close_seam_holes, cut_halfspace, cut_to_box, edge_counts,
+                                 faces_outside_core, merge_grid, plane_chains, seam_boundary_edges, seam_planes,
+                                 stitch)
+
+
+def grid_mesh(x0, x1, y0, y1, step, z=lambda x, y: 0.1 * np.sin(x) * np.cos(y), jitter=0.0, seed=0):
+    """A height-field triangulation (counter-clockwise seen from above), optionally jittered in xy."""
+    xs = np.arange(x0, x1 + step / 2, step)
+    ys = np.arange(y0, y1 + step / 2, step)
+    X, Y = np.meshgrid(xs, ys)
+    if jitter:
+        rng = np.random.default_rng(seed)
+        X = X + rng.uniform(-jitter, jitter, X.shape)
+        Y = Y + rng.uniform(-jitter, jitter, Y.shape)
+    V = np.stack([X.ravel(), Y.ravel(), z(X.ravel(), Y.ravel())], axis=1)
+    nx = len(xs)
+    F = []
+    for j in range(len(ys) - 1):
+        for i in range(nx - 1):
+            a, b, c, d = j * nx + i, j * nx + i + 1, (j + 1) * nx + i + 1, (j + 1) * nx + i
+            F += [(a, b, c), (a, c, d)]
+    col = np.full((len(V), 3), 200, np.uint8)
+    return Mesh(vertices=V, faces=np.asarray(F, np.int64), attrs={"colors": col, "density": V[:, 2].astype(np.float32)})
+
+
+def test_cut_puts_border_exactly_on_plane_and_keeps_area():
+    m = grid_mesh(0, 4, 0, 3, 0.37, jitter=0.1)
+    lo = cut_halfspace(m, 0, 1.913, "below")
+    hi = cut_halfspace(m, 0, 1.913, "above")
+    assert lo.vertices[:, 0].max() == 1.913 and hi.vertices[:, 0].min() == 1.913
+    area = face_areas(m.vertices, m.faces).sum()
+    assert abs(face_areas(lo.vertices, lo.faces).sum() + face_areas(hi.vertices, hi.faces).sum() - area) < 1e-9
+    # both halves' borders on the plane are the same polyline, traversed in opposite directions
+    ca, cb = plane_chains(lo, 0, 1.913), plane_chains(hi, 0, 1.913)
+    assert len(ca) == 1 and len(cb) == 1
+    np.testing.assert_allclose(lo.vertices[ca[0]], hi.vertices[cb[0][::-1]], atol=1e-12)
+    assert set(lo.attrs) == {"colors", "density"} and len(lo.attrs["density"]) == lo.n_vertices
+
+
+def test_cut_to_box_leaves_outer_sides_alone():
+    m = grid_mesh(0, 4, 0, 4, 0.5)
+    c = cut_to_box(m, [1.25, None, None, 2.75])
+    assert c.vertices[:, 0].min() == 1.25 and c.vertices[:, 1].max() == 2.75
+    assert c.vertices[:, 0].max() == 4.0 and c.vertices[:, 1].min() == 0.0
+
+
+def test_stitch_closes_the_seam_between_different_triangulations():
+    a = cut_halfspace(grid_mesh(0, 3.2, 0, 3, 0.2, jitter=0.05, seed=1), 0, 2.0, "below")
+    b = cut_halfspace(grid_mesh(1.0, 4, 0, 3, 0.27, jitter=0.05, seed=2), 0, 2.0, "above")
+    before = edge_counts(np.vstack([a.faces, b.faces + a.n_vertices]))
+    m, st = stitch(a, b, 0, 2.0, max_gap_m=0.5)
+    assert st.pairs == 1 and st.stitched_faces > 0
+    assert seam_boundary_edges(m, [(0, 2.0)]) == 2  # only the two strip ends on the outer border (y=0, y=3)
+    ec = edge_counts(m.faces)
+    assert ec["non_manifold_edges"] == 0
+    assert ec["boundary_edges"] < before["boundary_edges"]
+    # consistent orientation: every interior edge is used once in each direction
+    he = np.stack([m.faces[:, [0, 1]], m.faces[:, [1, 2]], m.faces[:, [2, 0]]], axis=1).reshape(-1, 2)
+    assert len(np.unique(he, axis=0)) == len(he)
+
+
+def test_stitch_leaves_far_apart_borders_open():
+    a = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2), 0, 1.5, "below")
+    b = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2, z=lambda x, y: 1.0 + 0 * x), 0, 1.5, "above")  # 1 m higher
+    m, st = stitch(a, b, 0, 1.5, max_gap_m=0.1)
+    assert st.pairs == 0 and st.stitched_faces == 0
+    assert seam_boundary_edges(m, [(0, 1.5)]) > 0
+
+
+def test_grid_of_four_is_closed_at_the_corner():
+    tiles, meshes = [], []
+    steps = [0.21, 0.17, 0.19, 0.23]
+    for k, (ix, iy) in enumerate([(0, 0), (1, 0), (0, 1), (1, 1)]):
+        core = [2.0 if ix else None, 2.0 if iy else None, None if ix else 2.0, None if iy else 2.0]
+        full = grid_mesh(-0.5 + 2 * ix, 2.5 + 2 * ix, -0.5 + 2 * iy, 2.5 + 2 * iy, steps[k], jitter=0.04, seed=k)
+        tiles.append({"ix": ix, "iy": iy, "core": core})
+        meshes.append(cut_to_box(full, core))
+    merged, seams = merge_grid(tiles, meshes, 0.3)
+    planes = seam_planes(tiles)
+    assert planes == [(0, 2.0), (1, 2.0)]
+    assert seam_boundary_edges(merged, planes, tile_faces_only=True) == 0
+    assert faces_outside_core(merged, tiles) == 0
+    assert edge_counts(merged.faces)["non_manifold_edges"] == 0
+    assert len(seams) == 3
+
+
+def test_close_seam_holes_only_touches_seams():
+    m = grid_mesh(0, 4, 0, 4, 0.25)
+    # punch a hole at the seam x = 2 and another away from it
+    c = m.vertices[m.faces].mean(axis=1)
+    hole1 = (c[:, 0] > 2.0) & (c[:, 0] < 2.3) & (np.abs(c[:, 1] - 2.0) < 0.3)  # one side on x = 2
+    hole2 = (np.abs(c[:, 0] - 0.9) < 0.3) & (np.abs(c[:, 1] - 2.0) < 0.3)
+    from twinkit_tiles.seams import compact_mesh
+
+    m = compact_mesh(m, ~(hole1 | hole2))
+    m.face_attrs = {"tile": np.zeros(m.n_faces, np.int32)}
+    assert seam_boundary_edges(m, [(0, 2.0)], tol_m=1e-6) > 0
+    out, n = close_seam_holes(m, [(0, 2.0)], 60, tol_m=1e-6)
+    assert n == 1
+    assert seam_boundary_edges(out, [(0, 2.0)], tol_m=1e-6) == 0
+    assert edge_counts(out.faces)["boundary_edges"] > edge_counts(grid_mesh(0, 4, 0, 4, 0.25).faces)["boundary_edges"]
+
+
+@pytest.mark.parametrize("tile_m", [7.0])
+def test_poisson_tiles_merge_without_cracks(tile_m):
+    """Real open3d Poisson per padded tile on the synthetic street block, against the untiled run."""
+    from twinkit_pointcloud.cleanup import CleanOptions, clean_mesh
+    from twinkit_pointcloud.metrics import cloud_to_mesh
+
+    from twinkit_tiles.synthetic import street_block
+    from twinkit_tiles.tiling import choose_grid, exact_voxel_poisson, in_box
+
+    P, N, C = street_block(size_m=20.0, spacing_m=0.1)
+    grid, why = choose_grid(P[:, :2], tile_m, 1.5, 4.0, 0.1)
+    tiles = grid.tiles()
+    assert (why["nx"], why["ny"]) == (3, 3)
+    meshes = []
+    for t in tiles:
+        s = in_box(P[:, :2], t["padded"])
+        m, _, _ = exact_voxel_poisson(P[s], N[s], C[s], 0.1, threads=1)
+        m, _ = clean_mesh(m, P[s], CleanOptions(max_dist_m=0.15, threads=1))
+        meshes.append(cut_to_box(m, t["core"]))
+    planes = seam_planes(tiles)
+    merged, seams = merge_grid(tiles, meshes, 0.1)
+    merged, _ = close_seam_holes(merged, planes, 120)
+    assert seam_boundary_edges(merged, planes, tile_faces_only=True) == 0
+    assert faces_outside_core(merged, tiles) == 0
+    whole, _, _ = exact_voxel_poisson(P, N, C, 0.1, threads=1)
+    whole, _ = clean_mesh(whole, P, CleanOptions(max_dist_m=0.15, threads=1))
+    d_tiled = cloud_to_mesh(P, merged.vertices, merged.faces).mean()
+    d_whole = cloud_to_mesh(P, whole.vertices, whole.faces).mean()
+    assert abs(d_tiled - d_whole) < 0.001, (d_tiled, d_whole)
+    # same amount of open border as the untiled mesh, within 10 %
+    bt, bw = edge_counts(merged.faces)["boundary_edges"], edge_counts(whole.faces)["boundary_edges"]
+    assert bt <= 1.1 * bw + 20, (bt, bw)
+
+
+def test_boundary_half_edges_of_a_single_triangle():
+    he, fid = boundary_half_edges(np.array([[0, 1, 2]]))
+    assert sorted(map(tuple, he.tolist())) == [(0, 1), (1, 2), (2, 0)] and (fid == 0).all()
+
+
+def test_figure_eight_loops_are_split_into_simple_loops():
+    from twinkit_tiles.seams import _simple_loops
+
+    parts = _simple_loops(np.array([1, 2, 3, 4, 2, 5, 6]))
+    assert [p.tolist() for p in parts] == [[2, 3, 4], [1, 2, 5, 6]]
+    assert [p.tolist() for p in _simple_loops(np.array([7, 8, 9]))] == [[7, 8, 9]]

@@ -1,0 +1,1 @@
+"""twinkit-tiles: tiled reconstruction of large scenes."""

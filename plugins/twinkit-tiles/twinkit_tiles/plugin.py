@@ -1,0 +1,267 @@
+"""twinkit steps for large scenes (entry point ``tiles`` in group ``twinkit``):
+
+- ``plan_tiles``: points.ply -> tiles.json + tile_points/ (one chunk per padded tile)
+- ``reconstruct_tile`` (run with ``foreach: tiles.json``): one chunk -> tile_mesh.ply cut to the core
+- ``merge_tiles``: every tile_mesh.ply -> clean_mesh.ply (stitched, crack-free) + tile_seams.json
+- executor ``dask``: fanned-out items on a Dask distributed cluster (local, existing, or SLURM)
+
+Heavy libraries are imported inside the functions only.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+from twinkit import hookimpl
+
+
+@dataclass
+class PlanTilesParams:
+    """How the site is cut into tiles."""
+
+    tile_m: float = 0.0  # core size of a tile (metres); 0 = automatic from memory_budget_gb and the point density
+    overlap_m: float = 2.0  # each tile also reconstructs this much of its neighbours (guides the cut only)
+    memory_budget_gb: float = 4.0  # automatic tile size: predicted peak memory of one tile stays below this
+    voxel_m: float = 0.03  # finest Poisson voxel of every tile (passed to reconstruct_tile in tiles.json)
+    max_tiles: int = 256  # refuse a plan with more tiles than this
+
+
+@dataclass
+class ReconstructTileParams:
+    """Poisson + clean-up of one padded tile, then the exact cut to its core."""
+
+    point_weight: float = 4.0
+    samples_per_node: float = 1.5
+    max_dist_m: float = 0.10  # trim vertices farther than this from every point of the tile ("bubbles")
+    density_quantile: float = 0.0  # trim vertices below this quantile of Poisson density; 0 = off
+    min_component_faces: int = 200  # drop smaller connected components (judged on the padded tile)
+    max_hole_edges: int = 60  # close holes up to this many edges (before the cut, so no cap on a seam)
+    threads: int = 1  # threads per tile (1 = parallelism comes from the workers); 0 = all the step may use
+
+
+@dataclass
+class MergeTilesParams:
+    """Stitching of the tiles into one mesh."""
+
+    max_gap_m: float = 0.10  # borders farther apart than this are not stitched (counted as open)
+    seam_tol_m: float = 0.001  # an edge within this of a seam plane counts as a seam edge in the statistics
+    max_hole_edges: int = 120  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
+
+
+@dataclass
+class DaskExecutorParams:
+    """Run fanned-out items on a Dask distributed cluster."""
+
+    address: Optional[str] = None  # tcp://host:8786 of an existing scheduler; null = start a local cluster
+    n_workers: int = 2  # worker processes of the local cluster (or SLURM jobs)
+    threads_per_worker: int = 1
+    memory_limit: str = "auto"  # per worker, e.g. 6GiB; auto = RAM / n_workers; 0 = no limit
+    cluster: str = "local"  # local | slurm (dask-jobqueue; used when address is null)
+    slurm_queue: str = ""
+    slurm_cores: int = 4
+    slurm_memory: str = "16GB"
+    slurm_walltime: str = "02:00:00"
+    slurm_account: str = ""
+
+
+# ----------------------------------------------------------------------------- steps
+
+def _input_error(msg: str):
+    from twinkit import InputError
+
+    return InputError(msg)
+
+
+def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_json: Path,
+               out_tile_points_dir: Path) -> dict:
+    """Split the site into overlapping XY tiles; write one point chunk per padded tile and tiles.json."""
+    import numpy as np
+    from twinkit_pointcloud.measure import Measure
+    from twinkit_pointcloud.meshio import Mesh, read_ply, write_ply
+
+    from .tiling import choose_grid, estimate_tile_mb, in_box
+
+    params = params or PlanTilesParams()
+    if params.voxel_m <= 0:
+        raise _input_error(f"plan_tiles: voxel_m must be > 0 (got {params.voxel_m})")
+    if params.overlap_m < 0:
+        raise _input_error(f"plan_tiles: overlap_m must be >= 0 (got {params.overlap_m})")
+    with Measure() as meas:
+        try:
+            cloud = read_ply(in_points_ply)
+        except Exception as exc:
+            raise _input_error(f"{Path(in_points_ply).name}: cannot read the points ({exc}); re-run read_cloud") from exc
+        if cloud.n_vertices < 10:
+            raise _input_error(f"{Path(in_points_ply).name}: too few points ({cloud.n_vertices}) to tile")
+        if cloud.normals is None:
+            raise _input_error(f"{Path(in_points_ply).name}: the points have no normals; run read_cloud with "
+                               f"estimate_normals=true")
+        xy = cloud.vertices[:, :2]
+        grid, why = choose_grid(xy, params.tile_m, params.overlap_m, params.memory_budget_gb, params.voxel_m,
+                                params.max_tiles)
+        tiles = grid.tiles()
+        out_tile_points_dir.mkdir(parents=True, exist_ok=True)
+        items = []
+        for t in ctx.progress(tiles, total=len(tiles), desc="plan_tiles"):
+            sel = in_box(xy, t["padded"])
+            n = int(sel.sum())
+            name = f"tile_{t['index']:03d}.ply"
+            if n < 10:
+                ctx.log.info("tile %d has %d points: skipped", t["index"], n)
+                continue
+            chunk = Mesh(vertices=cloud.vertices[sel], attrs={k: v[sel] for k, v in cloud.attrs.items()})
+            write_ply(out_tile_points_dir / name, chunk, xyz_dtype="f8")
+            pxy = cloud.vertices[sel, :2]
+            ext = pxy.max(axis=0) - pxy.min(axis=0)
+            items.append(t | {"chunk": name, "points": n, "voxel_m": params.voxel_m,
+                              "predicted_mb": round(estimate_tile_mb(n, float(ext[0] * ext[1]), params.voxel_m), 1)})
+        plan = {"grid": why | {"x0": grid.x0, "y0": grid.y0, "x1": grid.x1, "y1": grid.y1,
+                               "overlap_m": grid.overlap_m, "voxel_m": params.voxel_m},
+                "items": items}
+        Path(out_tiles_json).write_text(json.dumps(plan, indent=2))
+    ctx.log.info("%d x %d tiles of %.1f m (overlap %.1f m), %d with points", grid.nx, grid.ny, why["tile_m"],
+                 params.overlap_m, len(items))
+    return {"tiles": len(items), "nx": grid.nx, "ny": grid.ny, "tile_m": why["tile_m"],
+            "max_tile_points": max(i["points"] for i in items),
+            "max_predicted_mb": max(i["predicted_mb"] for i in items), **meas.as_dict()}
+
+
+def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: Path, item: dict,
+                     out_tile_mesh_ply: Path) -> dict:
+    """Poisson on one padded tile at the plan's voxel size, clean-up, exact cut to the tile's core."""
+    import os
+
+    from twinkit_pointcloud.cleanup import CleanOptions, clean_mesh
+    from twinkit_pointcloud.measure import Measure
+    from twinkit_pointcloud.meshio import read_ply, write_ply
+
+    from .seams import cut_to_box, edge_counts
+    from .tiling import exact_voxel_poisson
+
+    params = params or ReconstructTileParams()
+    threads = params.threads if params.threads > 0 else max(1, int(getattr(ctx, "threads", 1) or 1))
+    chunk_path = Path(in_tile_points_dir) / item["chunk"]
+    with Measure() as meas:
+        try:
+            cloud = read_ply(chunk_path)
+        except Exception as exc:
+            raise _input_error(f"{chunk_path}: cannot read the tile's points ({exc}); re-run plan_tiles") from exc
+        pts = cloud.vertices
+        mesh, depth, scale = exact_voxel_poisson(pts, cloud.normals, cloud.colors, float(item["voxel_m"]),
+                                                 point_weight=params.point_weight,
+                                                 samples_per_node=params.samples_per_node, threads=threads)
+        dense_faces = mesh.n_faces
+        opt = CleanOptions(max_dist_m=params.max_dist_m, density_quantile=params.density_quantile,
+                           min_component_faces=params.min_component_faces, max_hole_edges=params.max_hole_edges,
+                           threads=threads)
+        if mesh.n_faces:
+            try:
+                mesh, _ = clean_mesh(mesh, pts, opt)
+            except Exception as exc:  # e.g. nothing within max_dist_m: an empty tile
+                ctx.log.warning("tile %d: clean-up left nothing (%s)", item["index"], exc)
+                mesh.faces = mesh.faces[:0]
+        padded_faces = mesh.n_faces
+        mesh = cut_to_box(mesh, item["core"]) if mesh.n_faces else mesh
+        mesh.comments = [f"twinkit-tiles tile {item['index']} depth {depth} voxel_m {item['voxel_m']}"]
+        write_ply(out_tile_mesh_ply, mesh, xyz_dtype="f8")
+    ec = edge_counts(mesh.faces) if mesh.n_faces else {}
+    return {"tile": item["index"], "points": int(len(pts)), "depth": depth, "scale": round(scale, 4),
+            "dense_faces": int(dense_faces), "padded_clean_faces": int(padded_faces), "faces": mesh.n_faces,
+            "boundary_edges": ec.get("boundary_edges", 0), "pid": os.getpid(),
+            "tile_peak_rss_mb": round(meas.peak_rss_mb, 1), "tile_delta_peak_mb": round(meas.delta_peak_mb, 1),
+            "seconds": round(meas.seconds, 3)}
+
+
+def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_mesh_ply: list,
+                out_clean_mesh_ply: Path, out_tile_seams_json: Path) -> dict:
+    """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
+    import numpy as np
+    from twinkit_pointcloud.measure import Measure
+    from twinkit_pointcloud.meshio import read_ply, write_ply
+
+    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, seam_boundary_edges,
+                        seam_planes)
+
+    params = params or MergeTilesParams()
+    plan = json.loads(Path(in_tiles_json).read_text())
+    tiles = plan["items"]
+    paths = in_tile_mesh_ply if isinstance(in_tile_mesh_ply, list) else [in_tile_mesh_ply]
+    if len(paths) != len(tiles):
+        raise _input_error(f"{Path(in_tiles_json).name}: {len(tiles)} tiles but {len(paths)} tile meshes; "
+                           f"re-run the tile steps")
+    with Measure() as meas:
+        meshes = [read_ply(p) for p in paths]
+        for m in meshes:
+            if m.faces is None:
+                m.faces = np.zeros((0, 3), np.int64)
+        keep = [k for k, m in enumerate(meshes) if m.n_faces]
+        if not keep:
+            raise _input_error("merge_tiles: every tile is empty; check the cloud and max_dist_m")
+        tiles_k = [tiles[k] for k in keep]
+        meshes_k = [meshes[k] for k in keep]
+        planes = seam_planes(tiles)
+        cat = meshes_k[0]
+        for m in meshes_k[1:]:
+            cat = _concat(cat, m)
+        before = seam_boundary_edges(cat, planes, params.seam_tol_m)
+        before_total = edge_counts(cat.faces)
+        del cat
+        merged, seams = merge_grid(tiles_k, meshes_k, params.max_gap_m, log=ctx.log)
+        after_zipper = seam_boundary_edges(merged, planes, params.seam_tol_m, tile_faces_only=True)
+        merged, holes = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
+        tile_attr = merged.face_attrs["tile"]
+        cracks = seam_boundary_edges(merged, planes, params.seam_tol_m, tile_faces_only=True)
+        ends = seam_boundary_edges(merged, planes, params.seam_tol_m) - cracks
+        # doubled surface: tile faces outside their own core (0 by construction of the cut)
+        outside = faces_outside_core(merged, tiles_k)
+        after_total = edge_counts(merged.faces)
+        merged.face_attrs = {}
+        merged.comments = [f"twinkit-tiles merge of {len(keep)} tiles"]
+        write_ply(out_clean_mesh_ply, merged)
+        report = {
+            "tiles": len(tiles), "tiles_with_faces": len(keep), "planes": [["xyz"[a], v] for a, v in planes],
+            "seam_boundary_edges_before": before, "seam_boundary_edges_after_zipper": after_zipper,
+            "seam_holes_closed": holes, "seam_boundary_edges_after": cracks,
+            "seam_border_crossings": ends, "faces_outside_core": outside,
+            "non_manifold_edges": after_total["non_manifold_edges"],
+            "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
+            "boundary_edges_before": before_total["boundary_edges"], "boundary_edges_after": after_total["boundary_edges"],
+            "stitched_faces": int((tile_attr < 0).sum()), "vertices": merged.n_vertices, "faces": merged.n_faces,
+            "seams": seams,
+        }
+        gaps = [s["gap_mean_mm"] for s in seams if s["gap_mean_mm"] is not None]
+        report["gap_mean_mm"] = round(float(np.mean(gaps)), 3) if gaps else None
+        report["gap_max_mm"] = max((s["gap_max_mm"] for s in seams if s["gap_max_mm"] is not None), default=None)
+        Path(out_tile_seams_json).write_text(json.dumps(report, indent=2))
+    ctx.log.info("merged %d tiles: %d faces; seam boundary edges %d -> %d, %d stitch faces", len(keep),
+                 merged.n_faces, before, cracks, report["stitched_faces"])
+    return {k: report[k] for k in ("tiles", "faces", "vertices", "seam_boundary_edges_before",
+                                   "seam_boundary_edges_after", "seam_holes_closed", "seam_border_crossings", "faces_outside_core",
+                                   "non_manifold_edges", "non_manifold_edges_in_tiles", "boundary_edges_before", "boundary_edges_after", "stitched_faces", "gap_mean_mm",
+                                   "gap_max_mm")} | meas.as_dict()
+
+
+def dask_executor(params: DaskExecutorParams):
+    """Run fanned-out items on a Dask distributed cluster (a local one on 127.0.0.1 by default)."""
+    from .dask_executor import DaskExecutor
+
+    return DaskExecutor(address=params.address, n_workers=params.n_workers,
+                        threads_per_worker=params.threads_per_worker, memory_limit=params.memory_limit,
+                        cluster=params.cluster,
+                        slurm={"queue": params.slurm_queue, "cores": params.slurm_cores,
+                               "memory": params.slurm_memory, "walltime": params.slurm_walltime,
+                               "account": params.slurm_account})
+
+
+@hookimpl
+def twinkit_register_steps(register):
+    register("plan_tiles", plan_tiles, params=PlanTilesParams)
+    register("reconstruct_tile", reconstruct_tile, params=ReconstructTileParams)
+    register("merge_tiles", merge_tiles, params=MergeTilesParams)
+
+
+@hookimpl
+def twinkit_register_executors(register):
+    register("dask", dask_executor, params=DaskExecutorParams)

@@ -1,0 +1,569 @@
+"""Exact planar cuts of a tile mesh to its core, and zipper stitching of neighbouring tiles.
+
+A tile is reconstructed on its padded box (core + overlap) and then cut to its core box with
+:func:`cut_to_box`: triangles crossing a cut plane are split, and every border vertex lies
+exactly on the plane (its coordinate along the plane's axis is set to the plane's value).
+Two neighbouring tiles therefore meet on a shared plane with two border polylines that nearly
+coincide (both tiles saw the same points in the overlap). :func:`stitch` joins them with a
+strip of triangles (greedy shortest-diagonal zipper) so the merged mesh has no crack there.
+
+:func:`merge_grid` merges a whole grid hierarchically: tiles of a row left to right along the
+x planes, then the rows bottom to top along the y planes. The x-stitch strips end on the
+y planes, so when rows are joined the corner where four tiles meet is closed by the same
+zipper (no special case for corners).
+
+Everything is numpy on :class:`twinkit_pointcloud.meshio.Mesh`; no extra dependency.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from twinkit_pointcloud.meshio import Mesh
+
+ON_PLANE_M = 1e-6  # a vertex this close to a cut plane is on it
+
+
+# ----------------------------------------------------------------------------- small helpers
+
+def compact_mesh(mesh: Mesh, keep_faces: np.ndarray | None = None) -> Mesh:
+    """Keep the selected faces (with their face attributes) and drop unreferenced vertices."""
+    faces = mesh.faces if keep_faces is None else mesh.faces[keep_faces]
+    fa = {k: (v if keep_faces is None else v[keep_faces]) for k, v in mesh.face_attrs.items()}
+    used = np.zeros(mesh.n_vertices, bool)
+    used[faces.ravel()] = True
+    remap = np.full(mesh.n_vertices, -1, np.int64)
+    remap[used] = np.arange(int(used.sum()))
+    return Mesh(vertices=mesh.vertices[used], faces=remap[faces], attrs={k: v[used] for k, v in mesh.attrs.items()},
+                face_attrs=fa, comments=list(mesh.comments))
+
+
+def _interp_attr(arr: np.ndarray, a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Attribute of points at parameter t on edges a->b: linear for floats/colours, nearest for labels."""
+    if arr.dtype.kind == "f":
+        tt = t.reshape((-1,) + (1,) * (arr.ndim - 1))
+        return (arr[a] * (1 - tt) + arr[b] * tt).astype(arr.dtype)
+    if arr.dtype == np.uint8 and arr.ndim == 2:  # colours
+        tt = t[:, None]
+        return np.clip(np.rint(arr[a] * (1 - tt) + arr[b] * tt), 0, 255).astype(np.uint8)
+    return np.where((t < 0.5).reshape((-1,) + (1,) * (arr.ndim - 1)), arr[a], arr[b])
+
+
+def _edge_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    lo, hi = np.minimum(a, b).astype(np.int64), np.maximum(a, b).astype(np.int64)
+    return lo * (1 << 32) + hi
+
+
+def boundary_half_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Half-edges (a, b) that belong to exactly one face, and the index of that face."""
+    if len(faces) == 0:
+        return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2)
+    key = _edge_keys(he[:, 0], he[:, 1])
+    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    sel = counts[inv.ravel()] == 1
+    return he[sel], np.repeat(np.arange(len(faces)), 3)[sel]
+
+
+def edge_counts(faces: np.ndarray) -> dict:
+    """Boundary edges (1 face) and non-manifold edges (> 2 faces) of a triangle mesh."""
+    if len(faces) == 0:
+        return {"edges": 0, "boundary_edges": 0, "non_manifold_edges": 0}
+    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2)
+    _, counts = np.unique(_edge_keys(he[:, 0], he[:, 1]), return_counts=True)
+    return {"edges": int(len(counts)), "boundary_edges": int((counts == 1).sum()),
+            "non_manifold_edges": int((counts > 2).sum())}
+
+
+# ----------------------------------------------------------------------------- the cut
+
+def cut_halfspace(mesh: Mesh, axis: int, value: float, keep: str) -> Mesh:
+    """Keep the part of ``mesh`` with ``coord[axis] >= value`` (``keep='above'``) or ``<= value``
+    (``keep='below'``). Triangles crossing the plane are split; new vertices are placed on the
+    plane exactly (their ``axis`` coordinate is ``value``) and shared by the two faces of their edge.
+    Attributes are interpolated (floats, colours) or taken from the nearer end (labels)."""
+    if mesh.n_faces == 0:
+        return mesh
+    v = mesh.vertices.astype(np.float64, copy=True)
+    s = v[:, axis] - value
+    if keep == "below":
+        s = -s
+    elif keep != "above":
+        raise ValueError("keep must be 'above' or 'below'")
+    snap = np.abs(s) <= ON_PLANE_M
+    v[snap, axis] = value
+    s[snap] = 0.0
+    f = mesh.faces
+    sf = s[f]
+    inside = (sf >= 0).all(axis=1) & ~(sf == 0).all(axis=1)
+    cross = (sf > 0).any(axis=1) & (sf < 0).any(axis=1)
+    keep_f = f[inside]
+    keep_fa = {k: a[inside] for k, a in mesh.face_attrs.items()}
+    attrs = dict(mesh.attrs)
+    if cross.any():
+        cf = f[cross]
+        cfa = {k: a[cross] for k, a in mesh.face_attrs.items()}
+        # one new vertex per crossing edge, shared by both faces of that edge
+        ea = np.concatenate([cf[:, 0], cf[:, 1], cf[:, 2]])
+        eb = np.concatenate([cf[:, 1], cf[:, 2], cf[:, 0]])
+        straddle = (s[ea] * s[eb]) < 0
+        lo, hi = np.minimum(ea, eb)[straddle], np.maximum(ea, eb)[straddle]
+        pairs, inv = np.unique(np.stack([lo, hi], axis=1), axis=0, return_inverse=True)
+        a, b = pairs[:, 0], pairs[:, 1]
+        t = s[a] / (s[a] - s[b])
+        newv = v[a] + (v[b] - v[a]) * t[:, None]
+        newv[:, axis] = value
+        base = len(v)
+        edge_vertex = np.full(len(ea), -1, np.int64)
+        edge_vertex[straddle] = base + inv.ravel()
+        nc = len(cf)
+        ev = edge_vertex.reshape(3, nc).T  # ev[k, i]: new vertex on edge i -> i+1 of face k (or -1)
+        tris, owner = [], []
+        for k in range(nc):
+            poly = []
+            for i in range(3):
+                vi = cf[k, i]
+                if s[vi] >= 0:
+                    poly.append(vi)
+                if ev[k, i] >= 0:
+                    poly.append(ev[k, i])
+            for j in range(1, len(poly) - 1):
+                tris.append((poly[0], poly[j], poly[j + 1]))
+                owner.append(k)
+        v = np.vstack([v, newv])
+        attrs = {k: np.concatenate([arr, _interp_attr(arr, a, b, t)]) for k, arr in mesh.attrs.items()}
+        if tris:
+            owner = np.asarray(owner, np.int64)
+            keep_f = np.vstack([keep_f, np.asarray(tris, np.int64)])
+            keep_fa = {k: np.concatenate([keep_fa[k], cfa[k][owner]]) for k in keep_fa}
+    out = Mesh(vertices=v, faces=keep_f, attrs=attrs, face_attrs=keep_fa, comments=list(mesh.comments))
+    return compact_mesh(out)
+
+
+def cut_to_box(mesh: Mesh, core: list) -> Mesh:
+    """Cut a tile mesh to its core box ``[xmin, ymin, xmax, ymax]`` (``None`` = unbounded side,
+    i.e. the outer border of the site: nothing is cut there)."""
+    xmin, ymin, xmax, ymax = core
+    for axis, val, keep in ((0, xmin, "above"), (0, xmax, "below"), (1, ymin, "above"), (1, ymax, "below")):
+        if val is not None and mesh.n_faces:
+            mesh = cut_halfspace(mesh, axis, float(val), keep)
+    return mesh
+
+
+# ----------------------------------------------------------------------------- chains on a plane
+
+def plane_chains(mesh: Mesh, axis: int, value: float, tol: float = 1e-5) -> list[np.ndarray]:
+    """Boundary polylines of ``mesh`` lying on the plane ``coord[axis] == value``, as vertex-index
+    arrays following the faces' half-edge direction. A closed loop repeats its first vertex at the end."""
+    he, _ = _plane_half_edges(mesh.vertices, mesh.faces, axis, value, tol)
+    return _chains(he)
+
+
+def _plane_half_edges(X: np.ndarray, faces: np.ndarray, axis: int, value: float, tol: float):
+    """Boundary half-edges with both ends on the plane, and the index of their face."""
+    on = np.abs(X[:, axis] - value) <= tol
+    near = np.flatnonzero(on[faces].sum(axis=1) >= 2)  # every face with an edge on the plane
+    he, fid = boundary_half_edges(faces[near])
+    if len(he) == 0:
+        return he, fid
+    keep = on[he[:, 0]] & on[he[:, 1]]
+    return he[keep], near[fid[keep]]
+
+
+def _chains(he: np.ndarray) -> list[np.ndarray]:
+    if len(he) == 0:
+        return []
+    nxt: dict[int, list[int]] = {}
+    indeg: dict[int, int] = {}
+    for a, b in he.tolist():
+        nxt.setdefault(a, []).append(b)
+        indeg[b] = indeg.get(b, 0) + 1
+    chains = []
+
+    def walk(start):
+        chain = [start]
+        cur = start
+        while nxt.get(cur):
+            cur = nxt[cur].pop()
+            chain.append(cur)
+            if cur == start:
+                break
+        return chain
+
+    for s0 in [a for a in nxt if indeg.get(a, 0) == 0]:
+        while nxt.get(s0):
+            chains.append(np.asarray(walk(s0), np.int64))
+    for s0 in list(nxt):
+        while nxt.get(s0):
+            chains.append(np.asarray(walk(s0), np.int64))
+    return [c for c in chains if len(c) >= 2]
+
+
+def _zipper(P: np.ndarray, Q: np.ndarray, X: np.ndarray) -> list[tuple[int, int, int]]:
+    """Triangles between polylines P (half-edges P[i] -> P[i+1]) and Q (half-edges Q[j+1] -> Q[j]),
+    both running the same way, choosing the shorter diagonal at each step. Orientation matches the
+    faces on both sides (each border half-edge is used once, reversed)."""
+    tris = []
+    i = j = 0
+    m, n = len(P), len(Q)
+    while i < m - 1 or j < n - 1:
+        if i == m - 1:
+            adv_p = False
+        elif j == n - 1:
+            adv_p = True
+        else:
+            adv_p = np.sum((X[P[i + 1]] - X[Q[j]]) ** 2) <= np.sum((X[P[i]] - X[Q[j + 1]]) ** 2)
+        if adv_p:
+            tris.append((int(P[i + 1]), int(P[i]), int(Q[j])))
+            i += 1
+        else:
+            tris.append((int(Q[j]), int(Q[j + 1]), int(P[i])))
+            j += 1
+    return tris
+
+
+@dataclass
+class SeamStats:
+    axis: str
+    value: float
+    chains_a: int = 0
+    chains_b: int = 0
+    pairs: int = 0
+    border_edges_a: int = 0
+    border_edges_b: int = 0
+    stitched_faces: int = 0
+    rejected_faces: int = 0
+    gap_mm: list = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        g = np.asarray(self.gap_mm, np.float64)
+        return {"axis": self.axis, "value_m": round(self.value, 6), "chains_a": self.chains_a,
+                "chains_b": self.chains_b, "pairs": self.pairs, "border_edges_a": self.border_edges_a,
+                "border_edges_b": self.border_edges_b, "stitched_faces": self.stitched_faces,
+                "rejected_faces": self.rejected_faces,
+                "gap_mean_mm": round(float(g.mean()), 3) if len(g) else None,
+                "gap_p95_mm": round(float(np.quantile(g, 0.95)), 3) if len(g) else None,
+                "gap_max_mm": round(float(g.max()), 3) if len(g) else None}
+
+
+def _concat(a: Mesh, b: Mesh) -> Mesh:
+    names = [k for k in a.attrs if k in b.attrs and a.attrs[k].shape[1:] == b.attrs[k].shape[1:]]
+    fnames = [k for k in a.face_attrs if k in b.face_attrs]
+    return Mesh(vertices=np.vstack([a.vertices, b.vertices]),
+                faces=np.vstack([a.faces, b.faces + a.n_vertices]),
+                attrs={k: np.concatenate([a.attrs[k], b.attrs[k].astype(a.attrs[k].dtype)]) for k in names},
+                face_attrs={k: np.concatenate([a.face_attrs[k], b.face_attrs[k].astype(a.face_attrs[k].dtype)])
+                            for k in fnames},
+                comments=list(a.comments))
+
+
+def stitch(a: Mesh, b: Mesh, axis: int, value: float, max_gap_m: float = 0.1, tol: float = 1e-5,
+           passes: int = 3) -> tuple[Mesh, SeamStats]:
+    """Join mesh ``a`` (the side ``coord[axis] <= value``) and ``b`` (``>= value``), both cut exactly on
+    the plane, into one mesh: their border polylines on the plane are paired by proximity and joined by
+    a zipper strip. Strip triangles with an edge longer than ``max_gap_m`` are not made (that part stays
+    open and is counted). Leftover pieces of border (where a pairing covered only part of a polyline)
+    are paired again, up to ``passes`` times. Strip faces get face attribute ``tile = -1``."""
+    st = SeamStats("xyz"[axis], float(value))
+    if a.n_faces == 0 or b.n_faces == 0:
+        m = a if b.n_faces == 0 else b
+        return m, st
+    merged = _concat(a, b)
+    na_f, nb_f = a.n_faces, b.n_faces
+    for k in range(passes):
+        he, fid = _plane_half_edges(merged.vertices, merged.faces, axis, value, tol)
+        ca = _chains(he[fid < na_f])
+        cb = [c[::-1] for c in _chains(he[(fid >= na_f) & (fid < na_f + nb_f)])]  # reversed: same direction as a's
+        if k == 0:
+            st.chains_a, st.chains_b = len(ca), len(cb)
+            st.border_edges_a = int(sum(len(c) - 1 for c in ca))
+            st.border_edges_b = int(sum(len(c) - 1 for c in cb))
+        if not ca or not cb:
+            break
+        T = _pair_and_zip(merged.vertices, ca, cb, axis, max_gap_m, st, first=(k == 0))
+        if len(T) == 0:
+            break
+        T = _drop_duplicate_half_edges(merged.faces, T)
+        if len(T) == 0:
+            break
+        st.stitched_faces += int(len(T))
+        merged.faces = np.vstack([merged.faces, T])
+        for name, arr in merged.face_attrs.items():
+            fill = np.full((len(T),) + arr.shape[1:], -1 if arr.dtype.kind == "i" else 0, dtype=arr.dtype)
+            merged.face_attrs[name] = np.concatenate([arr, fill])
+    return merged, st
+
+
+def _pair_and_zip(X, ca, cb, axis, max_gap_m, st, first: bool) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    other = [k for k in range(3) if k != axis]
+    va = np.concatenate(ca)
+    vb = np.concatenate(cb)
+    la = np.concatenate([np.full(len(c), i) for i, c in enumerate(ca)])
+    lb = np.concatenate([np.full(len(c), i) for i, c in enumerate(cb)])
+    ia = np.concatenate([np.arange(len(c)) for c in ca])
+    ib = np.concatenate([np.arange(len(c)) for c in cb])
+    ta, tb = cKDTree(X[va][:, other]), cKDTree(X[vb][:, other])
+    da, na = tb.query(X[va][:, other], distance_upper_bound=max_gap_m)  # a vertex -> nearest b vertex
+    db, nb = ta.query(X[vb][:, other], distance_upper_bound=max_gap_m)
+    if first:
+        st.gap_mm = (_polyline_gap(X[:, other], va, la, na, da, vb, lb) * 1000).tolist()
+    new_tris: list[tuple[int, int, int]] = []
+    for i, c in enumerate(ca):
+        sel = (la == i) & np.isfinite(da)
+        if not sel.any():
+            continue
+        for j in np.unique(lb[na[sel]]):
+            q = cb[j]
+            pa = ia[sel & (lb[np.minimum(na, len(vb) - 1)] == j)]
+            selb = (lb == j) & np.isfinite(db)
+            pb = ib[selb & (la[np.minimum(nb, len(va) - 1)] == i)]
+            if len(pa) == 0 or len(pb) == 0:
+                continue
+            closed_a = c[0] == c[-1] and len(c) > 3
+            closed_b = q[0] == q[-1] and len(q) > 3
+            if closed_a and closed_b:
+                P = c
+                qq = q[:-1]
+                k0 = int(np.argmin(np.sum((X[qq][:, other] - X[c[0]][other]) ** 2, axis=1)))
+                Q = np.concatenate([np.roll(qq, -k0), [qq[k0]]])
+            else:
+                a0, a1, b0, b1 = int(pa.min()), int(pa.max()), int(pb.min()), int(pb.max())
+                # extend a range to its chain's end when that end is within reach of the other range's end
+                near = lambda u, v: float(np.linalg.norm(X[u] - X[v])) <= max_gap_m  # noqa: E731
+                if a0 > 0 and near(c[0], q[b0]):
+                    a0 = 0
+                if b0 > 0 and near(q[0], c[a0]):
+                    b0 = 0
+                if a1 < len(c) - 1 and near(c[-1], q[b1]):
+                    a1 = len(c) - 1
+                if b1 < len(q) - 1 and near(q[-1], c[a1]):
+                    b1 = len(q) - 1
+                P, Q = c[a0: a1 + 1], q[b0: b1 + 1]
+            if len(P) < 2 and len(Q) < 2:
+                continue
+            dp, dq = X[P[-1]] - X[P[0]], X[Q[-1]] - X[Q[0]]
+            if len(P) > 2 and len(Q) > 2 and float(np.dot(dp, dq)) < 0:
+                continue  # opposite directions: not the same surface
+            st.pairs += 1
+            new_tris.extend(_zipper(P, Q, X))
+    if not new_tris:
+        return np.zeros((0, 3), np.int64)
+    T = np.asarray(new_tris, np.int64)
+    degenerate = (T[:, 0] == T[:, 1]) | (T[:, 1] == T[:, 2]) | (T[:, 0] == T[:, 2])
+    L = np.stack([np.linalg.norm(X[T[:, k]] - X[T[:, (k + 1) % 3]], axis=1) for k in range(3)], axis=1)
+    too_long = L.max(axis=1) > max_gap_m * 1.5 + 1e-9
+    st.rejected_faces += int((too_long & ~degenerate).sum())
+    return T[~degenerate & ~too_long]
+
+
+def _polyline_gap(Y, va, la, na, da, vb, lb) -> np.ndarray:
+    """Distance from each border vertex of a to the nearest border segment of b (2D, in the plane),
+    for the vertices that have a partner within range."""
+    ok = np.isfinite(da)
+    if not ok.any():
+        return np.zeros(0)
+    k = na[ok]
+    p = Y[va[ok]]
+    best = da[ok].copy()
+    for d in (-1, 1):
+        k2 = np.clip(k + d, 0, len(vb) - 1)
+        same = lb[k2] == lb[k]
+        a, b = Y[vb[k]], Y[vb[k2]]
+        ab = b - a
+        t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18), 0, 1)
+        dist = np.linalg.norm(a + ab * t[:, None] - p, axis=1)
+        best = np.where(same, np.minimum(best, dist), best)
+    return best
+
+
+def _drop_duplicate_half_edges(faces: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Remove strip triangles that would reuse a half-edge already present (non-manifold or flipped)."""
+    def hes(F):
+        return np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2)
+
+    touch = np.zeros(int(max(faces.max(), T.max())) + 1, bool)
+    touch[T.ravel()] = True
+    near = faces[touch[faces].sum(axis=1) >= 2]
+    h = hes(near)
+    used = set((h[:, 0].astype(np.int64) * (1 << 32) + h[:, 1]).tolist())
+    th = hes(T)
+    th = (th[:, 0].astype(np.int64) * (1 << 32) + th[:, 1]).reshape(-1, 3)
+    keep = np.ones(len(T), bool)
+    for k in range(len(T)):
+        hk = th[k].tolist()
+        if any(x in used for x in hk):
+            keep[k] = False
+            continue
+        used.update(hk)
+    return T[keep]
+
+
+# ----------------------------------------------------------------------------- whole grid
+
+def merge_grid(tiles: list[dict], meshes: list[Mesh], max_gap_m: float = 0.1, log=None) -> tuple[Mesh, list[dict]]:
+    """Merge tile meshes cut to their cores. ``tiles[k]`` has ``ix``, ``iy`` and ``core``
+    ``[xmin, ymin, xmax, ymax]`` (None on the site's outer border). Returns the merged mesh (face
+    attribute ``tile``: tile index, -1 for stitch faces) and per-seam statistics."""
+    by = {(int(t["ix"]), int(t["iy"])): k for k, t in enumerate(tiles)}
+    nx = max(int(t["ix"]) for t in tiles) + 1
+    ny = max(int(t["iy"]) for t in tiles) + 1
+    seams = []
+    for k, m in enumerate(meshes):
+        m.face_attrs = {"tile": np.full(m.n_faces, k, np.int32)}
+    rows = []
+    for iy in range(ny):
+        row = None
+        for ix in range(nx):
+            k = by.get((ix, iy))
+            if k is None:
+                continue
+            m = meshes[k]
+            if row is None:
+                row = m
+                continue
+            x = float(tiles[k]["core"][0])
+            row, st = stitch(row, m, 0, x, max_gap_m)
+            seams.append(st.as_dict() | {"between": f"row {iy}: tiles x{ix - 1}|x{ix}"})
+            if log:
+                log.info("seam x=%.3f row %d: %d pairs, %d strip faces", x, iy, st.pairs, st.stitched_faces)
+        rows.append((iy, row))
+    merged = None
+    for iy, row in rows:
+        if row is None:
+            continue
+        if merged is None:
+            merged = row
+            continue
+        k = next(by[(ix, iy)] for ix in range(nx) if (ix, iy) in by)
+        y = float(tiles[k]["core"][1])
+        merged, st = stitch(merged, row, 1, y, max_gap_m)
+        seams.append(st.as_dict() | {"between": f"rows {iy - 1}|{iy}"})
+        if log:
+            log.info("seam y=%.3f: %d pairs, %d strip faces", y, st.pairs, st.stitched_faces)
+    return merged, seams
+
+
+def seam_planes(tiles: list[dict]) -> list[tuple[int, float]]:
+    """The interior cut planes of a grid: (axis, value)."""
+    planes = set()
+    for t in tiles:
+        xmin, ymin, _, _ = t["core"]
+        if xmin is not None:
+            planes.add((0, float(xmin)))
+        if ymin is not None:
+            planes.add((1, float(ymin)))
+    return sorted(planes)
+
+
+def seam_boundary_edges(mesh: Mesh, planes: list[tuple[int, float]], tol_m: float = 1e-3,
+                        tile_faces_only: bool = False) -> int:
+    """Boundary edges with both ends within ``tol_m`` of an interior seam plane (cracks).
+    ``tile_faces_only``: count only edges of tile faces (face attribute ``tile >= 0``), not the
+    outer ends of stitch strips, which continue the mesh's own outer border across a seam."""
+    he, fid = boundary_half_edges(mesh.faces)
+    if len(he) == 0 or not planes:
+        return 0
+    if tile_faces_only and "tile" in mesh.face_attrs:
+        keep = mesh.face_attrs["tile"][fid] >= 0
+        he = he[keep]
+    X = mesh.vertices
+    hit = np.zeros(len(he), bool)
+    for axis, val in planes:
+        hit |= (np.abs(X[he[:, 0], axis] - val) <= tol_m) & (np.abs(X[he[:, 1], axis] - val) <= tol_m)
+    return int(hit.sum())
+
+
+def faces_outside_core(mesh: Mesh, tiles: list[dict], tol_m: float = 1e-5) -> int:
+    """Doubled-surface check: tile faces whose centroid lies outside their own tile's core box."""
+    if "tile" not in mesh.face_attrs:
+        return 0
+    t = mesh.face_attrs["tile"]
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    bad = 0
+    for k, tile in enumerate(tiles):
+        sel = t == k
+        if not sel.any():
+            continue
+        xmin, ymin, xmax, ymax = tile["core"]
+        cc = c[sel]
+        out = np.zeros(len(cc), bool)
+        if xmin is not None:
+            out |= cc[:, 0] < xmin - tol_m
+        if xmax is not None:
+            out |= cc[:, 0] > xmax + tol_m
+        if ymin is not None:
+            out |= cc[:, 1] < ymin - tol_m
+        if ymax is not None:
+            out |= cc[:, 1] > ymax + tol_m
+        bad += int(out.sum())
+    return bad
+
+
+def close_seam_holes(mesh: Mesh, planes: list[tuple[int, float]], max_edges: int = 120,
+                     tol_m: float = 1e-3) -> tuple[Mesh, int]:
+    """Fill the small boundary loops left at the seams (where the two tiles' borders could not be
+    paired, e.g. in trees or at the corner where four tiles meet): each loop with at most
+    ``max_edges`` edges and at least one edge on a seam plane gets a fan around its centroid.
+    Face attribute ``tile`` of the new faces is -1. Returns (mesh, loops closed)."""
+    from twinkit_pointcloud.cleanup import boundary_loops
+
+    if max_edges < 3 or mesh.n_faces == 0 or not planes:
+        return mesh, 0
+    X = mesh.vertices
+    on = np.zeros(mesh.n_vertices, bool)
+    for axis, val in planes:
+        on |= np.abs(X[:, axis] - val) <= tol_m
+    loops = []
+    for lp in boundary_loops(mesh.faces):
+        if len(lp) > max_edges:
+            continue
+        nxt = np.roll(lp, -1)
+        if (on[lp] & on[nxt]).any():
+            # a loop through a pinch vertex (figure-8) is filled as its simple loops, so that no edge
+            # gets more than two faces
+            loops.extend(sub for sub in _simple_loops(lp) if len(sub) >= 3)
+    if not loops:
+        return mesh, 0
+    new_v, new_f, new_attr = [], [], {k: [] for k in mesh.attrs}
+    nv = mesh.n_vertices
+    for lp in loops:
+        if len(lp) == 3:
+            new_f.append([lp[2], lp[1], lp[0]])
+            continue
+        c = nv + len(new_v)
+        new_v.append(X[lp].mean(axis=0))
+        for k, a in mesh.attrs.items():
+            val = a[lp].astype(np.float64).mean(axis=0)
+            new_attr[k].append(val.astype(a.dtype) if a.dtype.kind == "f" else np.rint(val).astype(a.dtype))
+        nb = np.roll(lp, -1)
+        new_f.extend(np.stack([nb, lp, np.full(len(lp), c)], axis=1).tolist())
+    F = np.asarray(new_f, np.int64)
+    attrs = {k: (np.concatenate([a, np.asarray(new_attr[k], a.dtype).reshape((-1,) + a.shape[1:])]) if new_v else a)
+             for k, a in mesh.attrs.items()}
+    fa = {k: np.concatenate([a, np.full((len(F),) + a.shape[1:], -1 if a.dtype.kind == "i" else 0, a.dtype)])
+          for k, a in mesh.face_attrs.items()}
+    out = Mesh(vertices=np.vstack([X] + ([np.asarray(new_v)] if new_v else [])), faces=np.vstack([mesh.faces, F]),
+               attrs=attrs, face_attrs=fa, comments=list(mesh.comments))
+    return out, len(loops)
+
+
+def _simple_loops(lp: np.ndarray) -> list[np.ndarray]:
+    """Split a closed vertex loop that visits a vertex more than once into simple loops (same orientation)."""
+    stack: list[int] = []
+    pos: dict[int, int] = {}
+    out = []
+    for v in lp.tolist():
+        if v in pos:
+            i = pos[v]
+            out.append(np.asarray(stack[i:], np.int64))
+            for w in stack[i + 1:]:
+                del pos[w]
+            stack = stack[: i + 1]
+        else:
+            pos[v] = len(stack)
+            stack.append(v)
+    out.append(np.asarray(stack, np.int64))
+    return out
