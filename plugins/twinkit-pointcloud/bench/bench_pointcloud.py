@@ -1,6 +1,6 @@
 """Benchmark of the point-cloud branch against the thesis's route (pymeshlab), side by side.
 
-    .venv/bin/python plugins/twinkit-pointcloud/bench/bench_pointcloud.py [--cloud PATH] [--depths 10 11 12]
+    .venv/bin/python plugins/twinkit-pointcloud/bench/bench_pointcloud.py [--cloud PATH | --demo small|default|large] [--depths 10 11 12]
 
 For each depth, two fresh processes run the same settings:
 
@@ -57,6 +57,64 @@ def prep(cloud: Path, work: Path, threads: int) -> dict:
     return {"read_cloud": r, "points": m.n_vertices}
 
 
+def prep_demo(preset: str, work: Path, threads: int) -> dict:
+    """Generate the demo site (``preset``; one photo, no shadows: the geometry and the cloud are those
+    of the preset) into ``work/site`` and read its E57 cloud like the recipe does."""
+    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site
+    from twinkit_pointcloud import plugin as P
+    from twinkit_pointcloud.measure import Measure
+    from twinkit_pointcloud.meshio import read_ply
+
+    site = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
+    out = work / "site"
+    out.mkdir(parents=True, exist_ok=True)
+    ctx = _ctx(work, threads)
+    ctx.site = site
+    with Measure() as m:
+        generate_demo_site(DemoSiteParams(size=preset, photo_count=1, shadows=False), ctx,
+                           out_gt_mesh_obj=out / "gt_mesh.obj", out_gt_mesh_ply=out / "gt_mesh.ply",
+                           out_cloud_e57=out / "cloud.e57", out_cloud_las=out / "cloud.las",
+                           out_cloud_ply=out / "cloud.ply", out_scanners_json=out / "scanners.json",
+                           out_photos_dir=out / "photos", out_cameras_json=out / "cameras.json",
+                           out_roads_osm=out / "roads.osm", out_roads_truth_json=out / "roads_truth.json",
+                           out_site_json=out / "site.json")
+    r = P.read_cloud(P.ReadCloudParams(), ctx, in_cloud=out / "cloud.e57", out_points_ply=work / "points.ply",
+                     out_points_meta_json=work / "points_meta.json")
+    for f in ("cloud.las", "cloud.ply"):  # only the E57 is read; keep the disk free
+        (out / f).unlink(missing_ok=True)
+    return {"read_cloud": r, "points": read_ply(work / "points.ply").n_vertices, "site_seconds": m.seconds,
+            "gt_mesh": str(out / "gt_mesh.ply")}
+
+
+def gt_eval(mesh_ply: Path, work: Path, threads: int, samples: int = 300_000) -> dict | None:
+    """Mesh -> ground truth accuracy and per-class GT area coverage (demo sites only)."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from twinkit_pointcloud.meshio import read_ply
+    from twinkit_pointcloud.metrics import (coverage_by_label, distance_near_exact, sample_surface,
+                                            sample_surface_by_label, stats)
+    from twinkit_pointcloud.surface import Surface
+
+    gt_ply = work / "site" / "gt_mesh.ply"
+    if not gt_ply.exists():
+        return None
+    gt = read_ply(gt_ply)
+    m = read_ply(mesh_ply)
+    gsurf = Surface(gt.vertices, gt.faces, threads)
+    acc = gsurf.distance(m.vertices)
+    # area-weighted: a decimated mesh keeps many vertices where the surface is rough (vegetation), few on
+    # flat ground, so its per-vertex mean is not comparable with the dense mesh's; samples are
+    acc_area = gsurf.distance(sample_surface(m.vertices, m.faces, samples, seed=2))
+    S, L, areas = sample_surface_by_label(gt.vertices, gt.faces, gt.face_attrs["label"], samples, 20_000, seed=1)
+    dm = distance_near_exact(Surface(m.vertices, m.faces, threads), m.vertices, S, 0.5, threads)
+    dc, _ = cKDTree(read_ply(work / "points.ply").vertices).query(S, workers=threads, distance_upper_bound=0.2)
+    cov = coverage_by_label(dm, L, areas, dist_to_cloud=dc, observed_m=0.10)
+    tot = sum(areas.values())
+    return {"accuracy_m": stats(acc_area), "accuracy_per_vertex_m": stats(acc), "per_class": cov,
+            "covered_all": sum(r["covered"] * r["area_m2"] for r in cov.values()) / tot}
+
+
 def run_ours(work: Path, depth: int, a) -> dict:
     from twinkit_pointcloud import plugin as P
 
@@ -68,7 +126,8 @@ def run_ours(work: Path, depth: int, a) -> dict:
     res["poisson"] = P.poisson(P.PoissonParams(depth=depth, scale=a.scale, point_weight=a.point_weight), ctx,
                                in_points_ply=pts, out_dense_mesh_ply=d / "dense_mesh.ply")
     res["clean"] = P.clean_mesh(P.CleanParams(max_dist_m=a.max_dist_m, max_hole_edges=a.max_hole_edges,
-                                              min_component_faces=a.min_component_faces), ctx,
+                                              min_component_faces=a.min_component_faces,
+                                              **({} if a.gap_dist_m is None else {"gap_dist_m": a.gap_dist_m})), ctx,
                                 in_dense_mesh_ply=d / "dense_mesh.ply", in_points_ply=pts,
                                 out_clean_mesh_ply=d / "clean_mesh.ply", out_clean_report_json=d / "clean_report.json")
     res["simplify"] = P.simplify(P.SimplifyParams(target_faces=a.target_faces), ctx,
@@ -78,8 +137,19 @@ def run_ours(work: Path, depth: int, a) -> dict:
                                      in_clean_mesh_ply=d / "clean_mesh.ply",
                                      out_textured_mesh_obj=d / "textured_mesh.obj",
                                      out_textured_mesh_ply=d / "textured_mesh.ply")
+        res["evaluate"] = P.evaluate(P.EvalParams(), ctx, in_textured_mesh_ply=d / "textured_mesh.ply",
+                                     in_points_ply=pts, out_recon_metrics_json=d / "recon_metrics.json",
+                                     in_gt_mesh_ply=(work / "site" / "gt_mesh.ply")
+                                     if (work / "site" / "gt_mesh.ply").exists() else None)
     res["dist"] = distances(pts, d / "clean_mesh.ply", d / "mesh.ply", a.threads)
+    _add_gt(res, work, d, a)
     return res
+
+
+def _add_gt(res: dict, work: Path, d: Path, a) -> None:
+    g = {k: gt_eval(d / f, work, a.threads) for k, f in (("dense", "clean_mesh.ply"), ("simplified", "mesh.ply"))}
+    if g["dense"] is not None:
+        res["gt"] = g
 
 
 def run_meshlab(work: Path, depth: int, a) -> dict:
@@ -121,6 +191,7 @@ def run_meshlab(work: Path, depth: int, a) -> dict:
     res["simplify"] = {**m.as_dict(), "vertices": sm.vertex_number(), "faces": sm.face_number()}
     write_ply(d / "mesh.ply", Mesh(sm.vertex_matrix().copy(), sm.face_matrix().astype(np.int64)))
     res["dist"] = distances(work / "points.ply", d / "clean_mesh.ply", d / "mesh.ply", a.threads)
+    _add_gt(res, work, d, a)
     return res
 
 
@@ -172,7 +243,8 @@ def _common(a) -> list[str]:
     return ["--work", str(a.work), "--threads", str(a.threads), "--target-faces", str(a.target_faces),
             "--texture-px", str(a.texture_px), "--max-dist-m", str(a.max_dist_m), "--scale", str(a.scale),
             "--point-weight", str(a.point_weight), "--max-hole-edges", str(a.max_hole_edges),
-            "--min-component-faces", str(a.min_component_faces), "--uv-faces", str(a.uv_faces)] + (["--no-bake"] if a.no_bake else [])
+            "--min-component-faces", str(a.min_component_faces), "--uv-faces", str(a.uv_faces)] + (
+        ["--no-bake"] if a.no_bake else []) + ([] if a.gap_dist_m is None else ["--gap-dist-m", str(a.gap_dist_m)])
 
 
 def _f(x, nd=2):
@@ -198,12 +270,52 @@ def report(cloud: Path, prep_res: dict, results: dict, uvres: dict | None, a) ->
             if "error" in r:
                 L.append(f"| {depth} | {route} | error | {r['error']} | | | |")
                 continue
-            for step in ("poisson", "clean", "simplify", "bake"):
+            for step in ("poisson", "clean", "simplify", "bake", "evaluate"):
                 s = r.get(step)
                 if not s:
                     continue
                 L.append(f"| {depth} | {route} | {step} | {_f(s['seconds'])} | {s['peak_rss_mb']:.0f} | "
                          f"{s.get('vertices', 0):,} | {s.get('faces', 0):,} |")
+    L.append("")
+    L.append("Whole branch, ours (read_cloud + poisson + clean + simplify + bake + evaluate):")
+    L.append("")
+    L.append("| depth | seconds | minutes | peak RSS MiB |")
+    L.append("|---|---:|---:|---:|")
+    for depth, rr in results.items():
+        r = rr.get("ours", {})
+        steps = [r.get(k) for k in ("poisson", "clean", "simplify", "bake", "evaluate")]
+        if any(x is None for x in steps):
+            continue
+        tot = prep_res["read_cloud"]["seconds"] + sum(x["seconds"] for x in steps)
+        peak = max([prep_res["read_cloud"]["peak_rss_mb"]] + [x["peak_rss_mb"] for x in steps])
+        L.append(f"| {depth} | {tot:.0f} | {tot / 60:.1f} | {peak:.0f} |")
+    if any("gt" in rr.get(route, {}) for rr in results.values() for route in ("ours", "meshlab")):
+        L.append("")
+        L.append("Against the ground-truth mesh: accuracy = mesh surface (area-weighted samples) -> GT surface, mm; coverage = share of the "
+                 "GT area of a class with reconstructed surface within 5 cm, % (all of it / the part the scan saw, "
+                 "i.e. with an input point within 10 cm):")
+        L.append("")
+        cls = ("road", "sidewalk", "terrain", "pole", "traffic sign", "traffic light", "building", "car")
+        L.append("| depth | route | mesh | acc mean | acc median | acc p95 | GT covered all | "
+                 + " | ".join(cls) + " |")
+        L.append("|---|---|---|" + "---:|" * (4 + len(cls)))
+        for depth, rr in results.items():
+            for route in ("ours", "meshlab"):
+                g = rr.get(route, {}).get("gt")
+                if not g:
+                    continue
+                for mesh in ("dense", "simplified"):
+                    x = g[mesh]
+                    pc = x["per_class"]
+
+                    def cv(c):
+                        if c not in pc:
+                            return "-"
+                        co = pc[c]["covered_observed"]
+                        return f"{pc[c]['covered'] * 100:.1f} / {'-' if co is None else f'{co * 100:.1f}'}"
+                    L.append(f"| {depth} | {route} | {mesh} | {_mm(x['accuracy_m']['mean'])} | "
+                             f"{_mm(x['accuracy_m']['median'])} | {_mm(x['accuracy_m']['p95'])} | "
+                             f"{x['covered_all'] * 100:.1f} | " + " | ".join(cv(c) for c in cls) + " |")
     L.append("")
     L.append("Cloud -> mesh surface distance, mm (same code for both routes):")
     L.append("")
@@ -220,8 +332,10 @@ def report(cloud: Path, prep_res: dict, results: dict, uvres: dict | None, a) ->
     L.append("")
     L.append("Ratios ours / meshlab (time: < 1 = ours faster; distance: < 1 = ours closer to the cloud):")
     L.append("")
-    L.append("| depth | poisson time | clean time | simplify time | poisson+clean+simplify time | dense mean dist | simplified mean dist |")
-    L.append("|---|---:|---:|---:|---:|---:|---:|")
+    has_gt = any("gt" in rr.get("ours", {}) and "gt" in rr.get("meshlab", {}) for rr in results.values())
+    L.append("| depth | poisson time | clean time | simplify time | poisson+clean+simplify time | dense mean dist | simplified mean dist |"
+             + (" dense GT accuracy | simplified GT accuracy | GT covered (ours/meshlab) |" if has_gt else ""))
+    L.append("|---|---:|---:|---:|---:|---:|---:|" + ("---:|---:|---:|" if has_gt else ""))
     for depth, rr in results.items():
         o, m = rr.get("ours", {}), rr.get("meshlab", {})
         if "dist" not in o or "dist" not in m:
@@ -232,9 +346,14 @@ def report(cloud: Path, prep_res: dict, results: dict, uvres: dict | None, a) ->
 
         tot = sum(o[s]["seconds"] for s in ("poisson", "clean", "simplify")) / max(
             sum(m[s]["seconds"] for s in ("poisson", "clean", "simplify")), 1e-9)
+        gr = ""
+        if "gt" in o and "gt" in m:
+            gr = (f" {o['gt']['dense']['accuracy_m']['mean'] / m['gt']['dense']['accuracy_m']['mean']:.2f} |"
+                  f" {o['gt']['simplified']['accuracy_m']['mean'] / m['gt']['simplified']['accuracy_m']['mean']:.2f} |"
+                  f" {o['gt']['dense']['covered_all'] / m['gt']['dense']['covered_all']:.2f} |")
         L.append(f"| {depth} | {ratio('poisson'):.2f} | {ratio('clean'):.2f} | {ratio('simplify'):.2f} | {tot:.2f} | "
                  f"{o['dist']['dense']['mean'] / m['dist']['dense']['mean']:.2f} | "
-                 f"{o['dist']['simplified']['mean'] / m['dist']['simplified']['mean']:.2f} |")
+                 f"{o['dist']['simplified']['mean'] / m['dist']['simplified']['mean']:.2f} |" + gr)
     if uvres:
         L.append("")
         L.append(f"UV unwrap of the simplified mesh ({uvres['faces']:,} faces):")
@@ -250,6 +369,11 @@ def report(cloud: Path, prep_res: dict, results: dict, uvres: dict | None, a) ->
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cloud", type=Path, default=DEFAULT_CLOUD)
+    ap.add_argument("--demo", choices=["small", "default", "large"], default=None,
+                    help="benchmark a generated demo site of this preset (with ground truth) instead of --cloud")
+    ap.add_argument("--gap-dist-m", type=float, default=None, help="clean_mesh gap_dist_m (default: the step's)")
+    ap.add_argument("--meshlab-depths", type=int, nargs="*", default=None,
+                    help="depths at which the pymeshlab route also runs (default: all of --depths)")
     ap.add_argument("--depths", type=int, nargs="+", default=[10, 11, 12])
     ap.add_argument("--target-faces", type=int, default=200_000)
     ap.add_argument("--texture-px", type=int, default=4096)
@@ -270,7 +394,7 @@ def main() -> None:
     if a.one:
         route, depth = a.one
         if route == "prep":
-            res = prep(a.cloud, a.work, a.threads)
+            res = prep_demo(a.demo, a.work, a.threads) if a.demo else prep(a.cloud, a.work, a.threads)
         elif route == "ours":
             res = run_ours(a.work, int(depth), a)
         elif route == "meshlab":
@@ -284,7 +408,9 @@ def main() -> None:
         res = {int(k): v for k, v in saved["results"].items()}
         print(report(a.cloud, saved["prep"], res, saved.get("uv"), a))
         return
-    if not a.cloud.exists():
+    if a.demo:
+        a.cloud = Path(f"demo site '{a.demo}' (cloud.e57)")
+    elif not a.cloud.exists():
         sys.exit(f"{a.cloud}: not found (the shared sample data is in ../shared/data/pointclouds)")
     tmp = None
     if a.work is None:
@@ -292,13 +418,13 @@ def main() -> None:
         a.work = Path(tmp.name)
     a.work.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
-    prep_res = _sub(["--one", "prep", "0", "--cloud", str(a.cloud)], a)
+    prep_res = _sub(["--one", "prep", "0", "--cloud", str(a.cloud)] + (["--demo", a.demo] if a.demo else []), a)
     if "error" in prep_res:
         sys.exit(f"prep failed: {prep_res['error']}")
     results: dict = {}
     for depth in a.depths:
         results[depth] = {"ours": _sub(["--one", "ours", str(depth)], a)}
-        if not a.no_meshlab:
+        if not a.no_meshlab and (a.meshlab_depths is None or depth in a.meshlab_depths):
             results[depth]["meshlab"] = _sub(["--one", "meshlab", str(depth)], a)
         print(f"depth {depth} done ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
         # partial results survive an interrupted run

@@ -169,3 +169,113 @@ def test_import_is_light():
     code = "import sys, twinkit_pointcloud.plugin; print(any(m in sys.modules for m in ('open3d', 'pymeshlab', 'laspy', 'pye57', 'scipy')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "False"
+
+
+def test_gap_rule_keeps_plane_between_sparse_scan_lines():
+    """Far-range ground: scan lines 0.8 m apart, 2 cm apart along each line. Poisson's surface
+    between the lines is on the ground plane (kept with the gap rule, cut by the plain distance
+    trim); a flap 0.3 m above the ground is off the plane and goes either way."""
+    ground = grid_mesh(81, size=4.0)  # 5 cm grid over 4 x 4 m
+    flap = grid_mesh(9, size=0.4, z=0.3)
+    flap.vertices[:, :2] += 1.8
+    m = Mesh(np.vstack([ground.vertices, flap.vertices]),
+             np.vstack([ground.faces, flap.faces + ground.n_vertices]))
+    xs = np.arange(0, 4.0001, 0.02)
+    pts = np.vstack([np.c_[xs, np.full_like(xs, y), np.zeros_like(xs)] for y in np.arange(0, 4.0001, 0.8)])
+    nrm = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    opt = dict(max_dist_m=0.10, min_component_faces=1, max_hole_edges=0, repair_non_manifold=False)
+    plain, _ = C.clean_mesh(m, pts, C.CleanOptions(**opt), normals=nrm)
+    gap, rep = C.clean_mesh(m, pts, C.CleanOptions(gap_dist_m=0.5, gap_plane_m=0.02, **opt), normals=nrm)
+    assert rep["distance_trim"]["kept_on_plane"] > 0
+    assert (np.abs(plain.vertices[:, 2]) < 1e-9).mean() == 1.0  # flap gone
+    assert (np.abs(gap.vertices[:, 2]) < 1e-9).mean() == 1.0  # flap gone with the gap rule too
+    # plain trim keeps only 10 cm strips around the lines; the gap rule keeps the whole ground
+    assert plain.n_faces < 0.4 * ground.n_faces
+    assert gap.n_faces == ground.n_faces
+    # without normals the gap rule is off (same as plain)
+    nonorm, _ = C.clean_mesh(m, pts, C.CleanOptions(gap_dist_m=0.5, **opt))
+    assert nonorm.n_faces == plain.n_faces
+
+
+def test_vertex_plane_distance():
+    pts = np.c_[np.linspace(0, 1, 50), np.zeros(50), np.zeros(50)]
+    nrm = np.tile([0.0, 0.0, 1.0], (50, 1))
+    v = np.array([[0.5, 0.3, 0.0], [0.5, 0.3, 0.2], [0.5, 3.0, 0.0]])
+    d = C.vertex_plane_distance(v, pts, nrm, k=4, max_dist_m=1.0)
+    assert d[0] < 1e-6 and abs(d[1] - 0.2) < 1e-6 and np.isinf(d[2])
+
+
+def test_coverage_by_label():
+    from twinkit_pointcloud.metrics import coverage_by_label, sample_surface_by_label
+
+    a, b = grid_mesh(11, size=1.0), grid_mesh(11, size=0.1)  # areas 1 and 0.01 m^2
+    v = np.vstack([a.vertices, b.vertices + [5, 0, 0]])
+    f = np.vstack([a.faces, b.faces + a.n_vertices])
+    lab = np.r_[np.zeros(a.n_faces, np.int32), np.full(b.n_faces, 5, np.int32)]
+    S, L, areas = sample_surface_by_label(v, f, lab, 1000, min_per_label=500)
+    assert (L == 5).sum() == 500 and (L == 0).sum() == 990 and abs(areas[0] - 1.0) < 1e-9
+    dist = np.where(L == 0, 0.0, np.where(S[:, 0] < 5.05, 0.01, 0.5))  # half of the small one covered
+    seen = np.where(L == 0, 0.0, 1.0)  # the small one was never seen
+    cov = coverage_by_label(dist, L, areas, dist_to_cloud=seen, observed_m=0.1)
+    assert cov["road"]["covered"] == 1.0 and cov["road"]["observed"] == 1.0
+    assert 0.4 < cov["pole"]["covered"] < 0.6 and cov["pole"]["covered_observed"] is None
+
+
+def _ground_scene():
+    """Ground points (5 cm) on 12 x 12 m at z = 0 with (a) a 2 x 2 m shadow at x, y in [2, 4] with no
+    points and (b) a 3 x 3 m building at x, y in [7, 10]: walls (horizontal normals, 3 m high), no
+    ground inside."""
+    g = np.arange(0, 12.0001, 0.05)
+    X, Y = np.meshgrid(g, g)
+    p = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
+    shadow = (p[:, 0] > 2) & (p[:, 0] < 4) & (p[:, 1] > 2) & (p[:, 1] < 4)
+    inside = (p[:, 0] >= 7) & (p[:, 0] <= 10) & (p[:, 1] >= 7) & (p[:, 1] <= 10)
+    p = p[~shadow & ~inside]
+    n = np.tile([0.0, 0.0, 1.0], (len(p), 1))
+    walls, wn = [], []
+    s = np.arange(7, 10.0001, 0.05)
+    for z in np.arange(0.05, 3.0, 0.1):
+        for xy, nn in (((s, np.full_like(s, 7.0)), (0, -1)), ((s, np.full_like(s, 10.0)), (0, 1)),
+                       ((np.full_like(s, 7.0), s), (-1, 0)), ((np.full_like(s, 10.0), s), (1, 0))):
+            walls.append(np.c_[xy[0], xy[1], np.full_like(s, z)])
+            wn.append(np.tile([nn[0], nn[1], 0.0], (len(s), 1)))
+    return np.vstack([p] + walls), np.vstack([n] + wn)
+
+
+def test_ground_fill_fills_shadow_not_building():
+    from twinkit_pointcloud.groundfill import GroundFillOptions, fill_ground_holes
+
+    pts, nrm = _ground_scene()
+    mesh = grid_mesh(121, size=12.0)
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    gone = ((c[:, 0] > 2) & (c[:, 0] < 4) & (c[:, 1] > 2) & (c[:, 1] < 4)) | (
+        (c[:, 0] > 7) & (c[:, 0] < 10) & (c[:, 1] > 7) & (c[:, 1] < 10))
+    from twinkit_pointcloud.meshio import compact
+
+    mesh = compact(mesh, ~gone)
+    cols = np.full((len(pts), 3), 77, np.uint8)
+    out, rep = fill_ground_holes(mesh, pts, nrm, cols, GroundFillOptions(cell_m=0.1))
+    new = out.vertices[mesh.n_vertices:]
+    assert 2.5 < rep["area_m2"] < 4.5  # the 2 x 2 m shadow (cells touching its border included)
+    assert (np.abs(new[:, 2]) < 0.01).all()  # on the ground plane
+    assert ((new[:, 0] > 1.8) & (new[:, 0] < 4.2) & (new[:, 1] > 1.8) & (new[:, 1] < 4.2)).all()  # nowhere else
+    assert (out.colors[mesh.n_vertices:] == 77).all()
+    # through clean_mesh (off by default there, on with fill_ground_cell_m)
+    plain, rep0 = C.clean_mesh(mesh, pts, C.CleanOptions(max_dist_m=0, max_hole_edges=0), normals=nrm)
+    filled, rep1 = C.clean_mesh(mesh, pts, C.CleanOptions(max_dist_m=0, max_hole_edges=0, fill_ground_cell_m=0.1),
+                                normals=nrm)
+    assert "ground_fill" not in rep0 and rep1["ground_fill"]["faces_added"] > 0
+    assert filled.n_faces > plain.n_faces
+
+
+def test_distance_near_exact():
+    from twinkit_pointcloud.metrics import distance_near_exact
+    from twinkit_pointcloud.surface import Surface
+
+    m = grid_mesh(11, size=1.0)  # 10 cm edges
+    s = Surface(m.vertices, m.faces)
+    q = np.array([[0.55, 0.55, 0.03], [0.5, 0.5, 3.0], [5.0, 0.5, 0.0]])
+    d = distance_near_exact(s, m.vertices, q, near_m=0.5)
+    exact = s.distance(q)
+    assert abs(d[0] - 0.03) < 1e-5  # near: exact
+    assert (d >= exact - 1e-6).all() and (d - exact < 0.08).all()  # far: nearest vertex, within an edge

@@ -192,6 +192,7 @@ def test_evaluate_against_ground_truth_mesh(pipeline, tmp_path):
     gv = np.array([[-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]], float)
     gf = np.array([[0, 1, 2], [0, 2, 3]])
     gt = Mesh(np.vstack([gv, bv]), np.vstack([gf, bf[keep] + 4]))
+    gt.face_attrs["label"] = np.r_[np.zeros(len(gf)), np.full(int(keep.sum()), 2)].astype(np.uint8)  # road, building
     write_ply(tmp_path / "gt_mesh.ply", gt)
     ctx = make_context(tmp_path / "w")
     r = P.evaluate(P.EvalParams(gt_samples=50_000), ctx, in_textured_mesh_ply=w / "textured_mesh.ply",
@@ -200,4 +201,9 @@ def test_evaluate_against_ground_truth_mesh(pipeline, tmp_path):
     met = json.loads((ctx.workdir / "recon_metrics.json").read_text())
     assert met["gt"]["accuracy_mesh_to_gt_m"]["mean"] < 0.01
     assert met["gt"]["gt_covered_within_5cm"] > 0.9
+    pc = met["gt"]["per_class"]
+    assert set(pc) == {"road", "building"}
+    assert abs(pc["road"]["area_m2"] - 100.0) < 1e-6 and abs(pc["building"]["area_m2"] - 20.0) < 1e-6
+    assert pc["road"]["covered"] > 0.9 and pc["building"]["covered"] > 0.9 and pc["road"]["observed"] > 0.9
+    assert met["gt"]["accuracy_by_class_mean_m"]["road"] < 0.01
     assert (ctx.workdir / "recon_metrics.png").exists()

@@ -1,11 +1,21 @@
 """Post-processing of a Poisson mesh (thesis 3.4.2 / 4.3.1), in this order:
 
 1. density trimming: drop vertices whose Poisson density is below a quantile (optional);
-2. distance trimming ("bubbles"): drop vertices farther than ``max_dist_m`` from every input point;
+2. distance trimming ("bubbles"): drop vertices farther than ``max_dist_m`` from every input point,
+   except (``gap_dist_m`` > 0) vertices that lie on the tangent plane of the nearby points
+   (within ``gap_plane_m`` of it), no farther than ``gap_dist_m`` from them and with points on both
+   sides (``two_sided``, so nothing grows past the edge of the scan): the surface that
+   Poisson interpolates across the gaps between far-range scan lines on the ground (sparse,
+   anisotropic sampling) is kept, bubbles (off the local plane) still go;
 3. keep the large connected components;
 4. repair non-manifold edges (drop the smallest faces around an edge shared by > 2 faces);
 5. close holes whose boundary loop has at most ``max_hole_edges`` edges (fan around the loop's centroid);
-6. per-vertex distance to the cloud (``dist_to_cloud_m``).
+6. (``fill_ground_cell_m`` > 0, needs the points' normals) fill the ground's occlusion shadows
+   (behind parked cars, bicycles, ...) with grid patches, see ``groundfill.py``;
+7. per-vertex distance to the cloud (``dist_to_cloud_m``).
+
+The module-level defaults keep the thesis's plain clean-up (no gap rule, no ground fill); the
+``clean_mesh`` step turns both on (``CleanParams``).
 """
 from __future__ import annotations
 
@@ -19,11 +29,17 @@ from .meshio import Mesh, compact, face_areas
 @dataclass
 class CleanOptions:
     max_dist_m: float = 0.10
+    gap_dist_m: float = 0.0
+    gap_plane_m: float = 0.02
+    gap_k: int = 8
+    gap_min_normal_z: float = 0.0
     density_quantile: float = 0.0
     min_component_faces: int = 200
     min_component_ratio: float = 0.0
     repair_non_manifold: bool = True
     max_hole_edges: int = 60
+    fill_ground_cell_m: float = 0.0
+    fill_ground_max_gap_m: float = 8.0
     threads: int = -1
 
 
@@ -34,6 +50,57 @@ def vertex_cloud_distance(vertices: np.ndarray, points: np.ndarray, threads: int
     tree = tree if tree is not None else cKDTree(points)
     d, _ = tree.query(vertices, k=1, workers=threads)
     return d.astype(np.float32)
+
+
+def vertex_plane_distance(vertices: np.ndarray, points: np.ndarray, normals: np.ndarray, *, k: int = 8,
+                          max_dist_m: float = 1.0, tree=None, threads: int = -1, min_normal_z: float = 0.0,
+                          chunk: int = 500_000) -> np.ndarray:
+    """Per vertex, the median distance to the tangent planes (point + normal) of its ``k`` nearest
+    input points within ``max_dist_m`` (inf where none is that near; points whose normal has
+    |z| < ``min_normal_z`` are ignored), (n,) float32."""
+    from scipy.spatial import cKDTree
+
+    tree = tree if tree is not None else cKDTree(points)
+    out = np.full(len(vertices), np.inf, np.float32)
+    nrm = np.asarray(normals, np.float32)
+    for s in range(0, len(vertices), chunk):
+        v = vertices[s:s + chunk]
+        d, idx = tree.query(v, k=k, distance_upper_bound=max_dist_m, workers=threads)
+        if k == 1:
+            d, idx = d[:, None], idx[:, None]
+        ok = np.isfinite(d)
+        idx = np.where(ok, idx, 0)
+        n = nrm[idx]
+        pd = np.abs(np.einsum("ijk,ijk->ij", (v[:, None, :] - points[idx]).astype(np.float32), n))
+        if min_normal_z > 0:
+            ok &= np.abs(n[..., 2]) >= min_normal_z
+        pd[~ok] = np.inf
+        out[s:s + chunk] = np.median(pd, axis=1)  # inf when more than half are missing
+    return out
+
+
+def two_sided(vertices: np.ndarray, points: np.ndarray, normals: np.ndarray, reach_m: float, tree=None,
+              threads: int = -1) -> np.ndarray:
+    """True where a vertex has input points on both sides along its tangent plane: the nearest
+    point is on one side; looking ``reach_m`` the other way, the point nearest there must lie
+    within 60 degrees of that opposite direction and within ``2 * reach_m``. Separates the gap between two scan lines (kept)
+    from the surface Poisson extends past the last scan line (not kept)."""
+    from scipy.spatial import cKDTree
+
+    tree = tree if tree is not None else cKDTree(points)
+    if len(vertices) == 0:
+        return np.zeros(0, bool)
+    _, i1 = tree.query(vertices, workers=threads)
+    u = points[i1] - vertices
+    n = np.asarray(normals, np.float64)[i1]
+    u -= np.sum(u * n, axis=1, keepdims=True) * n
+    ln = np.linalg.norm(u, axis=1, keepdims=True)
+    u = u / np.maximum(ln, 1e-12)
+    _, i2 = tree.query(vertices - u * reach_m, workers=threads)
+    w = points[i2] - vertices
+    lw = np.linalg.norm(w, axis=1)
+    # opposite: within 60 degrees of the direction away from the nearest point
+    return (np.sum(w * u, axis=1) < -0.5 * lw) & (lw <= 2 * reach_m) & (ln[:, 0] > 1e-9)
 
 
 def remove_vertices(mesh: Mesh, drop: np.ndarray) -> Mesh:
@@ -170,8 +237,11 @@ def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
     return out, len(loops)
 
 
-def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None) -> tuple[Mesh, dict]:
-    """Run the whole clean-up; returns (clean mesh with ``dist_to_cloud_m``, report dict)."""
+def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
+               normals: np.ndarray | None = None, colors: np.ndarray | None = None) -> tuple[Mesh, dict]:
+    """Run the whole clean-up; returns (clean mesh with ``dist_to_cloud_m``, report dict).
+    ``normals`` (of the points) enable the gap rule of the distance trim (``opt.gap_dist_m``) and
+    the ground fill (``opt.fill_ground_cell_m``); ``colors`` colour the ground patches."""
     from scipy.spatial import cKDTree
 
     rep: dict = {"input": {"vertices": mesh.n_vertices, "faces": mesh.n_faces}}
@@ -183,8 +253,21 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None) -> t
     d = vertex_cloud_distance(mesh.vertices, points, opt.threads, tree)
     rep["before_distance_trim"] = _dist_stats(d)
     if opt.max_dist_m > 0:
-        mesh = remove_vertices(mesh, d > opt.max_dist_m)
-        rep["distance_trim"] = {"max_dist_m": opt.max_dist_m, "vertices": mesh.n_vertices, "faces": mesh.n_faces}
+        drop = d > opt.max_dist_m
+        kept_gap = 0
+        if opt.gap_dist_m > opt.max_dist_m and normals is not None and drop.any():
+            cand = np.flatnonzero(drop & (d <= opt.gap_dist_m))
+            pd = vertex_plane_distance(mesh.vertices[cand], points, normals, k=opt.gap_k, max_dist_m=opt.gap_dist_m,
+                                       tree=tree, threads=opt.threads, min_normal_z=opt.gap_min_normal_z)
+            on_plane = cand[pd <= opt.gap_plane_m]
+            on_plane = on_plane[two_sided(mesh.vertices[on_plane], points, normals, opt.gap_dist_m, tree,
+                                          opt.threads)]
+            drop[on_plane] = False
+            kept_gap = int(len(on_plane))
+        mesh = remove_vertices(mesh, drop)
+        rep["distance_trim"] = {"max_dist_m": opt.max_dist_m, "gap_dist_m": opt.gap_dist_m,
+                                "gap_plane_m": opt.gap_plane_m, "kept_on_plane": kept_gap,
+                                "vertices": mesh.n_vertices, "faces": mesh.n_faces}
     if mesh.n_faces == 0:
         from twinkit import InputError
 
@@ -199,6 +282,18 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None) -> t
         mesh, closed = close_small_holes(mesh, opt.max_hole_edges)
         rep["holes"] = {"closed": closed, "max_hole_edges": opt.max_hole_edges,
                         "vertices": mesh.n_vertices, "faces": mesh.n_faces}
+    if opt.fill_ground_cell_m > 0 and normals is not None:
+        from .groundfill import GroundFillOptions, fill_ground_holes
+
+        mesh, frep = fill_ground_holes(mesh, points, normals, colors,
+                                       GroundFillOptions(cell_m=opt.fill_ground_cell_m,
+                                                         max_gap_m=opt.fill_ground_max_gap_m, threads=opt.threads),
+                                       tree=tree)
+        frep.update(vertices=mesh.n_vertices, faces=mesh.n_faces)
+        rep["ground_fill"] = frep
+        if log is not None:
+            log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled", frep.get("filled_cells", 0),
+                     frep.get("area_m2", 0.0))
     d = vertex_cloud_distance(mesh.vertices, points, opt.threads, tree)
     mesh.attrs["dist_to_cloud_m"] = d
     rep["output"] = {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "dist_to_cloud_m": _dist_stats(d)}

@@ -46,11 +46,15 @@ class CleanParams:
     """Trimming and repair of the dense mesh."""
 
     max_dist_m: float = 0.10  # remove vertices farther than this from every input point ("bubbles"); 0 = off
+    gap_dist_m: float = 0.5  # ... but keep those up to this far that lie on the points' tangent planes; 0 = off
+    gap_plane_m: float = 0.02  # "on the plane": median distance to the tangent planes of the k nearest points
     density_quantile: float = 0.0  # remove vertices below this quantile of Poisson density; 0 = off
     min_component_faces: int = 200  # drop connected components smaller than this
     min_component_ratio: float = 0.0  # ... or smaller than this fraction of the largest
     repair_non_manifold: bool = True
     max_hole_edges: int = 60  # close holes whose boundary has at most this many edges; < 3 = off
+    fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on a grid of this cell size; 0 = off
+    fill_ground_max_gap_m: float = 8.0  # ... when ground lies on both sides at most this far apart
     colormap_max_m: float = 0.0  # distance colour map saturates here; 0 = max_dist_m (or p99)
 
 
@@ -80,6 +84,10 @@ class EvalParams:
 
     colormap_max_m: float = 0.0  # colour map saturates here; 0 = p95 of the cloud -> mesh distances
     gt_samples: int = 1_000_000  # points sampled on the ground-truth surface
+    gt_min_samples_per_class: int = 20_000  # per-class coverage: at least this many samples per GT label
+    coverage_within_m: float = 0.05  # a GT sample is covered when the mesh is within this distance
+    observed_m: float = 0.10  # a GT sample was seen by the scan when an input point is within this distance
+    exact_within_m: float = 0.5  # GT -> mesh distances are exact up to here, nearest-vertex distances beyond
     image_px: int = 1024
 
 
@@ -278,12 +286,14 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     with Measure() as meas, _Outputs(out_clean_mesh_ply, out_clean_report_json):
         dense = _read_mesh_input(in_dense_mesh_ply, "dense mesh")
         cloud = _read_mesh_input(in_points_ply, "points")
-        opt = CleanOptions(max_dist_m=params.max_dist_m, density_quantile=params.density_quantile,
+        opt = CleanOptions(max_dist_m=params.max_dist_m, gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
+                           density_quantile=params.density_quantile,
                            min_component_faces=params.min_component_faces,
                            min_component_ratio=params.min_component_ratio,
                            repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
+                           fill_ground_cell_m=params.fill_ground_cell_m, fill_ground_max_gap_m=params.fill_ground_max_gap_m,
                            threads=_threads(ctx))
-        mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log)
+        mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
         write_ply(out_clean_mesh_ply, mesh)
         d = mesh.attrs["dist_to_cloud_m"]
@@ -382,7 +392,8 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
     import numpy as np
 
     from .measure import Measure
-    from .metrics import cloud_to_mesh, sample_surface, stats, topdown_map
+    from .metrics import (TRAIN_ID_NAMES, cloud_to_mesh, coverage_by_label, distance_near_exact, sample_surface,
+                          sample_surface_by_label, stats, topdown_map)
     from .surface import Surface
 
     params = params or EvalParams()
@@ -392,7 +403,8 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
         from scipy.spatial import cKDTree
 
         c2m = cloud_to_mesh(cloud.vertices, mesh.vertices, mesh.faces, _threads(ctx))
-        m2c, _ = cKDTree(cloud.vertices).query(mesh.vertices, workers=_threads(ctx))
+        ctree = cKDTree(cloud.vertices)
+        m2c, _ = ctree.query(mesh.vertices, workers=_threads(ctx))
         res: dict[str, Any] = {
             "counts": {"points": cloud.n_vertices, "vertices": mesh.n_vertices, "faces": mesh.n_faces},
             "cloud_to_mesh_m": stats(c2m),
@@ -404,10 +416,29 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
             gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
             acc = gsurf.distance(mesh.vertices)
             samples = sample_surface(gt.vertices, gt.faces, params.gt_samples)
-            comp = Surface(mesh.vertices, mesh.faces, _threads(ctx)).distance(samples)
-            res["gt"] = {"accuracy_mesh_to_gt_m": stats(acc), "completeness_gt_to_mesh_m": stats(comp),
+            msurf = Surface(mesh.vertices, mesh.faces, _threads(ctx))
+            vtree = cKDTree(mesh.vertices)
+            comp = distance_near_exact(msurf, mesh.vertices, samples, params.exact_within_m, _threads(ctx), vtree)
+            # area-weighted accuracy: comparable between a dense and a decimated mesh (per-vertex is not)
+            acc_area = gsurf.distance(sample_surface(mesh.vertices, mesh.faces, min(params.gt_samples, 500_000), seed=2))
+            res["gt"] = {"accuracy_mesh_to_gt_m": stats(acc), "accuracy_area_weighted_m": stats(acc_area),
+                         "completeness_gt_to_mesh_m": stats(comp),
                          "chamfer_m": float(acc.mean() + comp.mean()) / 2.0,
                          "gt_covered_within_5cm": float((comp <= 0.05).mean())}
+            glab = gt.face_attrs.get("label")
+            if glab is not None and len(glab) == gt.n_faces:
+                s2, l2, areas = sample_surface_by_label(gt.vertices, gt.faces, np.asarray(glab), params.gt_samples,
+                                                        params.gt_min_samples_per_class, seed=1)
+                d_mesh = distance_near_exact(msurf, mesh.vertices, s2, params.exact_within_m, _threads(ctx), vtree)
+                # bounded: a kd-tree query for a sample metres from every point (an unseen roof) is slow
+                d_cloud, _ = ctree.query(s2, workers=_threads(ctx), distance_upper_bound=2 * params.observed_m)
+                res["gt"]["per_class"] = coverage_by_label(d_mesh, l2, areas, within_m=params.coverage_within_m,
+                                                           dist_to_cloud=d_cloud, observed_m=params.observed_m)
+                res["gt"]["per_class_settings"] = {"covered_within_m": params.coverage_within_m,
+                                                   "observed_m": params.observed_m}
+                acc_lab = np.asarray(glab)[gsurf.closest(mesh.vertices)[0]]
+                res["gt"]["accuracy_by_class_mean_m"] = {
+                    TRAIN_ID_NAMES.get(int(c), str(int(c))): float(acc[acc_lab == c].mean()) for c in np.unique(acc_lab)}
         vmax = params.colormap_max_m or float(np.quantile(c2m, 0.95)) or 0.01
         png = Path(out_recon_metrics_json).with_suffix(".png")
         topdown_map(cloud.vertices, c2m, png, vmax, size_px=params.image_px, title="cloud -> mesh distance")
