@@ -114,3 +114,19 @@ def test_network_size_rounding():
     assert network_size(2128, 2832, 1024, 32) == (768, 1024)
     assert network_size(101, 203, 0, 32) == (96, 192)
     assert network_size(10, 10, 0, 32) == (32, 32)
+
+
+def test_flip_tta_is_mirror_equivariant(evit_weights, lund_images):
+    """With flip_tta the logits are averaged over the image and its mirror image, so the
+    labels of a mirrored photo are the mirrored labels (without it they differ a little)."""
+    from twinkit_efficientvit.efficientvit import EfficientViTParams, build_efficientvit
+
+    _, images = lund_images
+    sub = np.ascontiguousarray(images[:2, ::4, ::4])  # 192x256
+    kw = dict(weights_path=str(evit_weights), threads=1, device="cpu", input_long_side_px=256)
+    tta = build_efficientvit(EfficientViTParams(flip_tta=True, **kw))
+    plain = build_efficientvit(EfficientViTParams(**kw))
+    a = tta.predict(sub)
+    b = tta.predict(np.ascontiguousarray(sub[:, :, ::-1]))[:, :, ::-1]
+    assert float((a == b).mean()) > 0.999  # float-rounding ties only
+    assert float((a == plain.predict(sub)).mean()) > 0.8  # the same model, not another one

@@ -42,6 +42,8 @@ class EfficientViTParams:
     size_multiple_px: each network side is rounded to a multiple of this (32 needed).
     optimize: fold BatchNorm into the convs and run channels-last (about 2x faster
         on CPU; same labels up to float rounding). False = the checkpoint's modules as loaded.
+    flip_tta: test-time augmentation: average the logits of the image and of its mirror
+        image (twice the inference time).
     """
 
     weights_path: str = ""
@@ -53,6 +55,7 @@ class EfficientViTParams:
     input_long_side_px: int = 1024
     size_multiple_px: int = 32
     optimize: bool = True
+    flip_tta: bool = False
 
 
 class EfficientViTModel:
@@ -123,7 +126,10 @@ class EfficientViTModel:
         if (nh, nw) != (h, w):
             x = F.interpolate(x, size=(nh, nw), mode="bilinear", align_corners=False, antialias=nh < h or nw < w)
         x = ((x - self._mean) / self._std).contiguous(memory_format=self._memory_format)
-        logits = self.net(x).contiguous(memory_format=torch.channels_last)  # channels-last: faster upsample/argmax
+        logits = self.net(x)
+        if self.params.flip_tta:  # mirror image: the network is not exactly mirror-symmetric
+            logits = 0.5 * (logits + self.net(x.flip(-1)).flip(-1))
+        logits = logits.contiguous(memory_format=torch.channels_last)  # channels-last: faster upsample/argmax
         return F.interpolate(logits, size=(h, w), mode="bilinear", align_corners=False)
 
     def predict(self, images) -> np.ndarray:

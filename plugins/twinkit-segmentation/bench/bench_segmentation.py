@@ -49,6 +49,10 @@ def main(argv=None) -> int:
     ap.add_argument("--random-views", type=int, default=250)
     ap.add_argument("--k-threshold", type=float, default=None, help="default: the segmenter's default")
     ap.add_argument("--max-views", type=int, default=0, help="subsample the union of views (0 = all)")
+    ap.add_argument("--reuse-renders", action="store_true",
+                    help="take the renders and vertex maps an earlier run left in --work (same site and sampler options)")
+    ap.add_argument("--segment-weight", type=float, default=None,
+                    help="back-projection blend of segment and vertex votes (default: backproject's default)")
     a = ap.parse_args(argv)
 
     os.environ.setdefault("TWINKIT_PLUGINS", "builtins,efficientvit,segmentation")
@@ -57,10 +61,12 @@ def main(argv=None) -> int:
     from twinkit.plugins import build_component
     from twinkit_segmentation import views as V
     from twinkit_segmentation.meshio import CLASSES, N_CLASSES, mesh_edges, read_mesh
-    from twinkit_segmentation.metrics import decide, majority_labels, propagate, scores, segment_votes
+    from twinkit_segmentation.metrics import blend_decide, decide, majority_labels, propagate, scores
     from twinkit_segmentation.oversegment import felzenszwalb_mesh
     from twinkit_segmentation.render import Renderer, load_texture
-    from twinkit_segmentation.steps import FelzenszwalbParams, transfer_labels
+    from twinkit_segmentation.steps import BackprojectParams, FelzenszwalbParams, transfer_labels
+
+    alpha = BackprojectParams().segment_weight if a.segment_weight is None else a.segment_weight
 
     site = Path(a.site_dir)
     work = Path(a.work)
@@ -103,6 +109,11 @@ def main(argv=None) -> int:
     vmaps_dir.mkdir(exist_ok=True)
     with T("rendering", views=len(views)):
         for i, v in enumerate(views):
+            if a.reuse_renders and (work / f"{v['id']}.png").is_file() and (vmaps_dir / f"{v['id']}.npy").is_file():
+                kept.append(v)
+                continue
+            if a.reuse_renders and (vmaps_dir / ".complete").is_file():
+                continue  # dropped (too empty) in the earlier run
             rgb, vid = r.render(*view_matrices(v))
             if (vid < 0).mean() > 0.6:
                 continue
@@ -110,6 +121,7 @@ def main(argv=None) -> int:
             np.save(vmaps_dir / f"{v['id']}.npy", vid)
             kept.append(v)
     r.release()
+    (vmaps_dir / ".complete").write_text(str(len(kept)))
     print(f"kept {len(kept)} of {len(views)} views", file=sys.stderr)
 
     n = len(mesh.vertices)
@@ -118,7 +130,8 @@ def main(argv=None) -> int:
         model = build_component("image_model", model_name, {})
         if getattr(model, "needs_ground_truth", False):
             model.set_ground_truth(gt)
-        votes = {k: np.zeros((n, N_CLASSES)) for k in sets}
+        votes = {k: np.zeros((n, N_CLASSES)) for k in sets}  # one vote per view and vertex (predict_views default)
+        votes_px = {k: np.zeros((n, N_CLASSES)) for k in sets}  # one vote per pixel
         with T(f"inference ({model_name})", views=len(kept)):
             for j in range(0, len(kept), 4):
                 batch = kept[j:j + 4]
@@ -130,9 +143,13 @@ def main(argv=None) -> int:
                     hit = vm.reshape(-1) >= 0
                     l = lab.reshape(-1)[hit].astype(np.int64)
                     ok = l < N_CLASSES
-                    votes[v["sampler"]] += np.bincount(vm.reshape(-1)[hit][ok].astype(np.int64) * N_CLASSES + l[ok],
-                                                       minlength=n * N_CLASSES).reshape(n, N_CLASSES)
+                    vv = np.bincount(vm.reshape(-1)[hit][ok].astype(np.int64) * N_CLASSES + l[ok],
+                                     minlength=n * N_CLASSES).reshape(n, N_CLASSES).astype(np.float64)
+                    votes_px[v["sampler"]] += vv
+                    tot = vv.sum(axis=1, keepdims=True)
+                    votes[v["sampler"]] += np.divide(vv, tot, out=np.zeros_like(vv), where=tot > 0)
         votes["combined"] = sum(votes[k] for k in sets)
+        votes_px["combined"] = sum(votes_px[k] for k in sets)
         for sname, vv in votes.items():
             if sname == "combined":
                 ctx_t = T(f"back-projection ({model_name}, combined)")
@@ -141,14 +158,19 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             if ctx_t:
                 ctx_t.__enter__()
-            slab, _ = decide(segment_votes(seg, vv), ignore_classes=[10])
-            lab = propagate(slab[seg], edges)
+            lab, _ = blend_decide(seg, vv, alpha, ignore_classes=[10])
+            lab = propagate(lab, edges)
             if ctx_t:
                 ctx_t.__exit__(None, None, None)
+            np.save(work / f"votes_{model_name}_{sname}.npy", vv.astype(np.float32))
             res = scores(lab, gt)
+            slab, _ = blend_decide(seg, vv, 1.0, ignore_classes=[10])
+            res_seg = scores(propagate(slab, edges), gt, res["classes"])
             vlab, _ = decide(vv, ignore_classes=[10])
             res_nos = scores(propagate(vlab, edges), gt, res["classes"])
-            results[(model_name, sname)] = (res, res_nos)
+            plab, _ = blend_decide(seg, votes_px[sname], alpha, ignore_classes=[10])
+            res_px = scores(propagate(plab, edges), gt, res["classes"])
+            results[(model_name, sname)] = (res, res_nos, res_seg, res_px)
     ub = scores(majority_labels(seg, gt), gt)
 
     print("## Stage times\n")
@@ -164,17 +186,20 @@ def main(argv=None) -> int:
         total_w += w
         total_c += c
     print(f"| **total** | **{total_w:.1f}** | **{total_c:.1f}** | |\n")
-    print(f"## Quality (demo site, over-segmentation k={fp.k_threshold}, min {fp.min_vertices}, max {fp.max_vertices}; "
-          f"upper bound mIoU {ub['miou']:.1f})\n")
-    print("| model | sampler | views kept | mIoU | mF1 | mIoU without over-seg. | mF1 without |\n|---|---|---:|---:|---:|---:|---:|")
+    print(f"## Quality (demo site, over-segmentation k={fp.k_threshold}, min {fp.min_vertices}, max {fp.max_vertices}, "
+          f"{int(seg.max()) + 1} segments; upper bound mIoU {ub['miou']:.1f}; segment_weight {alpha})\n")
+    print("| model | sampler | views kept | mIoU | mF1 | mIoU segments only | mF1 segments only "
+          "| mIoU without over-seg. | mF1 without | mIoU per-pixel votes | mF1 per-pixel |"
+          "\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     count = {k: sum(1 for v in kept if v["sampler"] == k) for k in sets}
     count["combined"] = len(kept)
-    for (m, s), (res, nos) in results.items():
-        print(f"| {m} | {s} | {count[s]} | {res['miou']:.1f} | {res['mf1']:.1f} | {nos['miou']:.1f} | {nos['mf1']:.1f} |")
+    for (m, s), (res, nos, sego, px) in results.items():
+        print(f"| {m} | {s} | {count[s]} | {res['miou']:.1f} | {res['mf1']:.1f} | {sego['miou']:.1f} | {sego['mf1']:.1f} "
+              f"| {nos['miou']:.1f} | {nos['mf1']:.1f} | {px['miou']:.1f} | {px['mf1']:.1f} |")
     classes = [c for c in ub["per_class"]]
     print("\n## Per-class IoU\n")
     print("| model / sampler | " + " | ".join(classes) + " |\n|---|" + "---:|" * len(classes))
-    for (m, s), (res, _) in results.items():
+    for (m, s), (res, *_) in results.items():
         print(f"| {m} / {s} | " + " | ".join(f"{res['per_class'][c]['iou']:.1f}" for c in classes) + " |")
     print("| upper bound | " + " | ".join(f"{ub['per_class'][c]['iou']:.1f}" for c in classes) + " |")
     (work / "bench.json").write_text(json.dumps({f"{m}/{s}": {"scores": r[0]["per_class"], "miou": r[0]["miou"],

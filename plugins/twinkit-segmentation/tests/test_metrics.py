@@ -4,7 +4,7 @@ import pytest
 
 from twinkit_segmentation.meshio import IGNORE, PALETTE, colorize
 from twinkit_segmentation.metrics import (
-    confusion, decide, majority_labels, palette_to_labels, propagate, scores, segment_votes,
+    blend_decide, confusion, decide, majority_labels, palette_to_labels, propagate, scores, segment_votes,
 )
 
 
@@ -71,3 +71,24 @@ def test_propagate_fills_holes():
     lab = np.array([0, IGNORE, IGNORE, IGNORE, 2], np.uint8)
     out = propagate(lab, edges)
     assert (out != IGNORE).all() and out[0] == 0 and out[4] == 2 and out[1] == 0 and out[3] == 2
+
+
+def test_blend_keeps_confident_segments_and_repairs_straddling_ones():
+    # segment 0: vertices 0-3; three vertices voted road, vertex 3 clearly sidewalk (a segment
+    # straddling a boundary). segment 1: vertices 4-5; vertex 5 has a noisy, split vote.
+    votes = np.zeros((7, 19))
+    votes[0:3, 0] = 4
+    votes[3, 1] = 4
+    votes[4, 2] = 6
+    votes[5, 2], votes[5, 8] = 2, 3  # leans vegetation, but only 60/40
+    # vertex 6 (segment 1) was seen by no view: it takes its segment's vote
+    seg = np.array([0, 0, 0, 0, 1, 1, 1])
+    only_seg, _ = blend_decide(seg, votes, 1.0)
+    assert only_seg.tolist() == [0, 0, 0, 0, 2, 2, 2]  # the plain per-segment vote
+    assert np.array_equal(only_seg, decide(segment_votes(seg, votes))[0][seg])
+    half, conf = blend_decide(seg, votes, 0.5)
+    assert half.tolist() == [0, 0, 0, 1, 2, 2, 2]  # vertex 3 repaired, vertex 5 follows its segment
+    assert conf[6] == pytest.approx(8 / 11)  # unseen vertex: its segment's share (6 + 2 of 6 + 2 + 3)
+    assert blend_decide(seg, votes, 0.0)[0].tolist()[:6] == [0, 0, 0, 1, 2, 8]  # per vertex
+    lab, _ = blend_decide(seg, votes, 0.5, min_votes=12)  # segment 1 has 11 votes
+    assert lab.tolist() == [0, 0, 0, 1, IGNORE, IGNORE, IGNORE]

@@ -134,6 +134,14 @@ def test_oracle_chain_end_to_end(scene_files, tmp_path):
 
     im = Image.open(pred["predictions"] / f"{first}.png")
     assert im.mode == "P" and im.size == (256, 128)
+    votes = np.load(pred["vertex_votes.npy"])
+    seen_by = np.zeros(len(vlab))
+    for v in index["kept"]:
+        u = np.unique(np.load(ren["renders"] / f"{v['id']}_vertex.npz")["vertex"])
+        seen_by[u[u >= 0]] += 1
+    known = vlab < 19
+    assert np.allclose(votes.sum(axis=1)[known], seen_by[known], atol=1e-3)  # one vote per view that sees the vertex
+    assert seen_by.max() > 1
     bp = run_step(_plugin("step", "backproject"), tmp_path / "bp",
                   {"in_textured_mesh_ply": mesh_ply, "in_segments_npy": seg["segments.npy"],
                    "in_vertex_votes_npy": pred["vertex_votes.npy"]})

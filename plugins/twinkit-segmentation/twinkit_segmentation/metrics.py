@@ -97,6 +97,41 @@ def decide(votes: np.ndarray, ignore_classes=(10,), class_weights=None, min_vote
     return lab, conf
 
 
+def blend_decide(segments: np.ndarray, vertex_votes: np.ndarray, segment_weight: float = 1.0, ignore_classes=(10,),
+                 class_weights=None, min_votes: float = 0.0):
+    """Segment vote blended with each vertex's own vote: per vertex the class distribution
+    ``segment_weight * p(segment) + (1 - segment_weight) * p(vertex)`` (each normalised to
+    sum 1; a vertex no view saw uses its segment's alone), argmax. ``segment_weight`` 1 is
+    the plain per-segment vote, 0 the plain per-vertex vote. In between, a vertex keeps the
+    segment's label unless its own votes clearly disagree, which repairs segments that
+    straddle a class boundary (the over-segmentation's upper bound stops being a cap) while
+    noisy, split vertex votes still follow the segment. Returns (labels, confidence)."""
+    v = np.asarray(vertex_votes, dtype=np.float64).copy()
+    for c in ignore_classes or ():
+        if 0 <= int(c) < v.shape[1]:
+            v[:, int(c)] = 0.0
+    if class_weights is not None and len(class_weights):
+        w = np.asarray(class_weights, dtype=np.float64)
+        if len(w) != v.shape[1]:
+            raise ValueError(f"class_weights needs {v.shape[1]} values (one per trainId), got {len(w)}")
+        v *= w[None, :]
+    segments = np.asarray(segments, dtype=np.int64)
+    sv = segment_votes(segments, v)
+    s_total = sv.sum(axis=1)
+    p = sv / np.maximum(s_total, 1e-12)[:, None]
+    p = p[segments]
+    a = float(np.clip(segment_weight, 0.0, 1.0))
+    if a < 1.0:
+        v_total = v.sum(axis=1)
+        seen = v_total > 0
+        p[seen] = a * p[seen] + (1.0 - a) * v[seen] / v_total[seen, None]
+    total = p.sum(axis=1)
+    lab = p.argmax(axis=1).astype(np.uint8)
+    conf = np.where(total > 0, p.max(axis=1) / np.maximum(total, 1e-12), 0.0).astype(np.float32)
+    lab[(total <= 0) | (s_total[segments] < min_votes)] = IGNORE
+    return lab, conf
+
+
 def propagate(labels: np.ndarray, edges: np.ndarray, max_iter: int = 200) -> np.ndarray:
     """Give unlabelled vertices the most common label of their labelled neighbours, repeatedly
     (occluded parts take the label of what surrounds them)."""

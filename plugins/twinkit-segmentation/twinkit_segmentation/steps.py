@@ -182,6 +182,7 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
 @dataclass
 class PredictParams:
     soft_votes: bool = False  # vote with the softmax probabilities instead of one vote per pixel
+    vote_per_view: bool = True  # each view gives each vertex it sees one vote, shared by its pixels' classes
     batch_views: int = 4
     save_pngs: bool = True  # predictions/<view>.png (palette PNG, pixel value = trainId)
 
@@ -231,13 +232,16 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
             hit = vm >= 0
             if params.soft_votes:
                 p = proba[j].reshape(N_CLASSES, -1)[:, hit]
-                for c in range(N_CLASSES):
-                    votes[:, c] += np.bincount(vm[hit], weights=p[c], minlength=n)
+                vv = np.stack([np.bincount(vm[hit], weights=p[c], minlength=n) for c in range(N_CLASSES)], axis=1)
             else:
                 lab = labels[j].reshape(-1)[hit].astype(np.int64)
                 ok = lab < N_CLASSES
-                votes += np.bincount(vm[hit][ok].astype(np.int64) * N_CLASSES + lab[ok],
-                                     minlength=n * N_CLASSES).reshape(n, N_CLASSES)
+                vv = np.bincount(vm[hit][ok].astype(np.int64) * N_CLASSES + lab[ok],
+                                 minlength=n * N_CLASSES).reshape(n, N_CLASSES).astype(np.float64)
+            if params.vote_per_view:  # a close-up covers a vertex with hundreds of pixels, a far view with one
+                tot = vv.sum(axis=1, keepdims=True)
+                vv = np.divide(vv, tot, out=np.zeros_like(vv), where=tot > 0)
+            votes += vv
             if params.save_pngs:
                 im = Image.fromarray(labels[j], mode="P")
                 im.putpalette(pal.tolist())
@@ -245,7 +249,8 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     np.save(out_vertex_votes_npy, votes.astype(np.float32))
     (out_predictions_dir / "index.json").write_text(json.dumps(
         {"model": (ctx.config.get("image_model") or {}).get("plugin", "?") if ctx.config else "?",
-         "views": [v["id"] for v in kept], "soft_votes": params.soft_votes}, indent=1))
+         "views": [v["id"] for v in kept], "soft_votes": params.soft_votes,
+         "vote_per_view": params.vote_per_view}, indent=1))
     seen = float((votes.sum(axis=1) > 0).mean())
     return {"views": len(kept), "model_seconds": round(t_model, 3), "seconds": round(time.perf_counter() - t0, 3),
             "seconds_per_view": round(t_model / max(len(kept), 1), 4), "vertices_seen": round(seen, 4)}
@@ -255,6 +260,7 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
 @dataclass
 class BackprojectParams:
     use_segments: bool = True  # vote per segment (False: per vertex)
+    segment_weight: float = 0.5  # share of the segment's vote against the vertex's own (1 = segment only)
     ignore_classes: List[int] = field(default_factory=lambda: [10])  # outside the target set (sky)
     class_weights: List[float] = field(default_factory=list)  # 19 weights (trainId order), empty = all 1
     min_votes: float = 0.0  # fewer votes than this = unlabelled
@@ -268,7 +274,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     import numpy as np
 
     from twinkit_segmentation.meshio import IGNORE, mesh_edges, read_mesh, write_labels_ply
-    from twinkit_segmentation.metrics import decide, propagate, segment_votes
+    from twinkit_segmentation.metrics import blend_decide, decide, propagate
 
     t0 = time.perf_counter()
     mesh = read_mesh(in_textured_mesh_ply)
@@ -278,9 +284,8 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
         raise InputError(f"{in_segments_npy.name} ({len(seg)}), {in_vertex_votes_npy.name} ({len(votes)}) and "
                          f"{in_textured_mesh_ply.name} ({len(mesh.vertices)}) disagree on the vertex count; re-run them")
     if params.use_segments:
-        sv = segment_votes(seg, votes)
-        slab, sconf = decide(sv, params.ignore_classes, params.class_weights or None, params.min_votes)
-        labels, conf = slab[seg], sconf[seg]
+        labels, conf = blend_decide(seg, votes, params.segment_weight, params.ignore_classes,
+                                    params.class_weights or None, params.min_votes)
     else:
         labels, conf = decide(votes, params.ignore_classes, params.class_weights or None, params.min_votes)
     unlabelled_before = int((labels == IGNORE).sum())
