@@ -15,14 +15,12 @@ from typing import Iterator
 
 import numpy as np
 
-#: CityScapes trainId -> name (index = trainId).
-CITYSCAPES_CLASSES: list[str] = [
-    "road", "sidewalk", "building", "wall", "fence", "pole", "traffic light",
-    "traffic sign", "vegetation", "terrain", "sky", "person", "rider", "car",
-    "truck", "bus", "train", "motorcycle", "bicycle",
-]
-N_CLASSES = len(CITYSCAPES_CLASSES)
-IGNORE_ID = 255
+from twinkit import cityscapes  # noqa: E402  (numpy-only, like this module)
+
+#: CityScapes trainId -> name (index = trainId; the shared definition, twinkit.cityscapes).
+CITYSCAPES_CLASSES: list[str] = list(cityscapes.NAMES)
+N_CLASSES = cityscapes.N_CLASSES
+IGNORE_ID = cityscapes.IGNORE
 
 #: Other label names (lower case, words separated by one space) -> CityScapes trainId.
 #: Covers the spellings of CityScapes-, ADE20K-, COCO-stuff- and Mapillary-style label sets.

@@ -14,22 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
+from twinkit import cityscapes
 from twinkit_efficientvit.common import CITYSCAPES_CLASSES, IGNORE_ID
 
-#: trainId -> RGB, the official CityScapes colours (index 19 unused; 255 -> black).
-CITYSCAPES_PALETTE = np.array([
-    (128, 64, 128), (244, 35, 232), (70, 70, 70), (102, 102, 156), (190, 153, 153),
-    (153, 153, 153), (250, 170, 30), (220, 220, 0), (107, 142, 35), (152, 251, 152),
-    (70, 130, 180), (220, 20, 60), (255, 0, 0), (0, 0, 142), (0, 0, 70),
-    (0, 60, 100), (0, 80, 100), (0, 0, 230), (119, 11, 32),
-], dtype=np.uint8)
+#: trainId -> RGB, the official CityScapes colours (shared: twinkit.cityscapes; 255 -> black).
+CITYSCAPES_PALETTE = cityscapes.PALETTE
 
 
 def colorize(labels: np.ndarray) -> np.ndarray:
     """``labels (h, w) uint8 trainIds -> (h, w, 3) uint8 RGB``; 255 and unknown ids are black."""
-    lut = np.zeros((256, 3), dtype=np.uint8)
-    lut[: len(CITYSCAPES_PALETTE)] = CITYSCAPES_PALETTE
-    return lut[np.asarray(labels, dtype=np.uint8)]
+    return cityscapes.colorize(labels)
 
 
 def overlay(image: np.ndarray, labels: np.ndarray, alpha: float = 0.5) -> np.ndarray:

@@ -13,32 +13,22 @@ import numpy as np
 
 from twinkit.errors import InputError
 
-#: CityScapes trainId -> name.
-CLASSES: list[str] = [
-    "road", "sidewalk", "building", "wall", "fence", "pole", "traffic light",
-    "traffic sign", "vegetation", "terrain", "sky", "person", "rider", "car",
-    "truck", "bus", "train", "motorcycle", "bicycle",
-]
-N_CLASSES = len(CLASSES)
-IGNORE = 255
+from twinkit import cityscapes
+
+#: CityScapes trainId -> name (the shared definition, twinkit.cityscapes).
+CLASSES: list[str] = list(cityscapes.NAMES)
+N_CLASSES = cityscapes.N_CLASSES
+IGNORE = cityscapes.IGNORE
 
 #: trainId -> RGB, the official CityScapes colours.
-PALETTE = np.array([
-    (128, 64, 128), (244, 35, 232), (70, 70, 70), (102, 102, 156), (190, 153, 153),
-    (153, 153, 153), (250, 170, 30), (220, 220, 0), (107, 142, 35), (152, 251, 152),
-    (70, 130, 180), (220, 20, 60), (255, 0, 0), (0, 0, 142), (0, 0, 70),
-    (0, 60, 100), (0, 80, 100), (0, 0, 230), (119, 11, 32),
-], dtype=np.uint8)
+PALETTE = cityscapes.PALETTE
 #: colour of unlabelled vertices (255) in palette exports.
-UNLABELLED_RGB = (0, 0, 0)
+UNLABELLED_RGB = cityscapes.IGNORE_RGB
 
 
 def colorize(labels: np.ndarray) -> np.ndarray:
     """trainIds (any shape) -> RGB uint8 (unlabelled and unknown ids black)."""
-    lut = np.zeros((256, 3), dtype=np.uint8)
-    lut[:N_CLASSES] = PALETTE
-    lut[N_CLASSES:] = UNLABELLED_RGB
-    return lut[np.asarray(labels, dtype=np.uint8)]
+    return cityscapes.colorize(labels)
 
 
 @dataclass

@@ -160,11 +160,9 @@ def propagate(labels: np.ndarray, edges: np.ndarray, max_iter: int = 200) -> np.
 
 def palette_to_labels(colors: np.ndarray) -> np.ndarray:
     """Nearest CityScapes palette colour -> trainId (black = 255, unlabelled)."""
-    pal = np.vstack([PALETTE.astype(np.int32), [[0, 0, 0]]])
-    ids = np.append(np.arange(N_CLASSES), IGNORE).astype(np.uint8)
-    c = np.asarray(colors, dtype=np.int32)
-    d = ((c[:, None, :] - pal[None, :, :]) ** 2).sum(axis=2)
-    return ids[d.argmin(axis=1)]
+    from twinkit import cityscapes
+
+    return cityscapes.nearest_class(np.asarray(colors).reshape(-1, 3))
 
 
 def load_labels(path: Path, prefer_colors: bool = False) -> np.ndarray:
