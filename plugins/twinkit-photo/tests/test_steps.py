@@ -1,0 +1,160 @@
+"""The georeference, roi and dense steps on a synthetic SfM model; bad input gives clear errors."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from twinkit import InputError
+from twinkit.testing import plugin_from_module, run_step
+
+import twinkit_photo.plugin as photo
+from twinkit_photo.georef import Transform
+
+SITE = {"name": "t", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
+K = [[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]]
+
+
+def _step(name):
+    return plugin_from_module(photo, "step", name)
+
+
+def _truth(n=8):
+    """Cameras walking along +x at 1.6 m, looking +y (OpenCV: y down), site frame."""
+    R_wc = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], float)
+    C = np.c_[np.linspace(-7, 7, n), np.zeros(n), np.full(n, 1.6)]
+    return R_wc, C
+
+
+def _model_dir(tmp_path, T_model_from_site: Transform, gps=None):
+    """An sfm/ folder as the sfm step writes it, for a scene of ground + a facade."""
+    R_wc, C = _truth()
+    rng = np.random.default_rng(0)
+    ground = np.c_[rng.uniform(-12, 12, 600), rng.uniform(0, 10, 600), np.zeros(600)]
+    facade = np.c_[rng.uniform(-12, 12, 300), np.full(300, 10.0), rng.uniform(0, 8, 300)]
+    pts = np.vstack([ground, facade])
+    d = tmp_path / "sfm"
+    d.mkdir()
+    cams = []
+    for k, c in enumerate(C):
+        cams.append({"image": f"{k:02d}.jpg", "model": "PINHOLE", "width": 640, "height": 480,
+                     "params": [800, 800, 320, 240], "K": K,
+                     "R_world_from_camera": (T_model_from_site.R @ R_wc).tolist(),
+                     "center": T_model_from_site.apply(c)[0].tolist()})
+    doc = {"cameras": cams, "exif_gps": gps or {}}
+    (d / "cameras_model.json").write_text(json.dumps(doc))
+    np.savez_compressed(d / "sparse.npz", xyz=T_model_from_site.apply(pts), rgb=np.zeros((len(pts), 3), np.uint8),
+                        error=np.zeros(len(pts)), vis_image=np.array([], str), vis_point=np.array([], np.int64))
+    truth = {"cameras": [{"image": f"{k:02d}.jpg", "center": c.tolist()} for k, c in enumerate(C)]}
+    (tmp_path / "cameras.json").write_text(json.dumps(truth))
+    return d, pts, C
+
+
+def _arbitrary():
+    a = 0.7
+    Rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    b = -1.1
+    Rz = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    return Transform(0.37, Rz @ Rx, np.array([3.0, -2.0, 5.0]))
+
+
+def test_gcp_georeference_recovers_the_site_frame(tmp_path):
+    T = _arbitrary()
+    sfm_dir, pts, C = _model_dir(tmp_path, T)
+    R_wc, _ = _truth()
+    # five GCPs on the facade and ground, observed in pixels by the photos that see them
+    gcp_pts = [[-3, 10, 2], [0, 10, 4], [4, 10, 1], [-2, 9, 0], [3, 9.5, 0]]
+    points = []
+    for g, X in enumerate(gcp_pts):
+        obs = []
+        for k, c in enumerate(C):
+            xc = R_wc.T @ (np.array(X, float) - c)
+            if xc[2] <= 0:
+                continue
+            p = np.asarray(K) @ xc
+            u, v = p[0] / p[2], p[1] / p[2]
+            if 0 <= u < 640 and 0 <= v < 480:
+                obs.append({"image": f"{k:02d}.jpg", "pixel": [u, v]})
+        points.append({"id": f"g{g}", "site_xyz": X, "observations": obs})
+    (tmp_path / "gcp.json").write_text(json.dumps({"points": points}))
+    out = run_step(_step("georeference"), tmp_path / "run",
+                   {"in_sfm_dir": sfm_dir, "in_gcp_json": tmp_path / "gcp.json", "in_cameras_json": tmp_path / "cameras.json"},
+                   photo.GeorefParams(), site=SITE)
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["method"] == "gcp" and rep["gcp"]["used"] == 5
+    assert rep["camera_centre_error_m"]["max"] < 1e-4
+    cams = json.loads(out["cameras_site.json"].read_text())["cameras"]
+    np.testing.assert_allclose(np.asarray(cams[0]["R_world_from_camera"]), R_wc, atol=1e-6)
+
+
+def test_gps_georeference_levels_and_scales(tmp_path):
+    from twinkit_roads.frame import SiteFrame
+
+    T = _arbitrary()
+    _, C = _truth()
+    frame = SiteFrame.from_site(SITE)
+    rng = np.random.default_rng(5)
+    noisy = C[:, :2] + rng.normal(0, 0.3, (len(C), 2))
+    ll = frame.local_to_lonlat(noisy)
+    gps = {f"{k:02d}.jpg": [float(ll[k, 1]), float(ll[k, 0]), 12.0 + 1.6] for k in range(len(C))}
+    sfm_dir, _, _ = _model_dir(tmp_path, T, gps)
+    out = run_step(_step("georeference"), tmp_path / "run", {"in_sfm_dir": sfm_dir, "in_cameras_json": tmp_path / "cameras.json"},
+                   photo.GeorefParams(), site=SITE)
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["method"] == "gps" and rep["level"]["up_from"] == "ground_plane"
+    assert rep["camera_centre_error_m"]["mean"] < 0.5  # 0.3 m GPS noise, 8 photos
+    assert rep["transform"]["scale"] == pytest.approx(1 / 0.37, rel=0.05)
+
+
+def test_no_gps_falls_back_or_fails_clearly(tmp_path):
+    sfm_dir, _, _ = _model_dir(tmp_path, _arbitrary())
+    with pytest.raises(InputError, match="EXIF GPS"):
+        run_step(_step("georeference"), tmp_path / "a", {"in_sfm_dir": sfm_dir}, photo.GeorefParams(method="gps"),
+                 site=SITE)
+    out = run_step(_step("georeference"), tmp_path / "b", {"in_sfm_dir": sfm_dir}, photo.GeorefParams(), site=SITE)
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["method"] == "none"
+    cams = json.loads(out["cameras_site.json"].read_text())["cameras"]
+    R = np.asarray(cams[0]["R_world_from_camera"])
+    assert R[2, 1] == pytest.approx(-1.0, abs=0.02)  # levelled: the camera's y (down) points to -z
+
+
+def test_roi_and_a_hand_edited_roi(tmp_path):
+    sfm_dir, _, _ = _model_dir(tmp_path, Transform(1.0, np.eye(3), np.zeros(3)))
+    g = run_step(_step("georeference"), tmp_path / "g", {"in_sfm_dir": sfm_dir}, photo.GeorefParams(method="none"),
+                 site=SITE)
+    r = run_step(_step("roi"), tmp_path / "r", {"in_cameras_site_json": g["cameras_site.json"],
+                                               "in_sparse_site_ply": g["sparse_site.ply"]}, photo.RoiParams())
+    doc = json.loads(r["roi.json"].read_text())
+    assert doc["ground"]["source"].startswith("RANSAC")
+    assert doc["ground"]["z_m"] == pytest.approx(-1.6, abs=0.05)  # centred on the cameras at 1.6 m
+    doc["box"]["max"][2] = doc["box"]["min"][2] - 1  # a broken hand edit
+    bad = tmp_path / "roi.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="roi.json"):
+        run_step(_step("dense"), tmp_path / "d", {"in_photos_dir": tmp_path, "in_cameras_site_json": g["cameras_site.json"],
+                                                  "in_sparse_site_ply": g["sparse_site.ply"], "in_roi_json": bad})
+
+
+def test_sfm_rejects_a_corrupt_photo_by_name(tmp_path):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(3):
+        Image.fromarray(rng.integers(0, 255, (48, 64, 3), dtype=np.uint8)).save(folder / f"{k}.jpg")
+    data = (folder / "2.jpg").read_bytes()
+    (folder / "2.jpg").write_bytes(data[:200])
+    with pytest.raises(InputError, match="2.jpg"):
+        run_step(_step("sfm"), tmp_path / "run", {"in_photos_dir": folder})
+
+
+def test_sfm_unrelated_photos_fail_clearly(tmp_path):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for k in range(3):
+        rng = np.random.default_rng(k)
+        Image.fromarray(rng.integers(0, 255, (240, 320, 3), dtype=np.uint8)).save(folder / f"{k}.jpg")
+    with pytest.raises(InputError, match="photos"):
+        run_step(_step("sfm"), tmp_path / "run", {"in_photos_dir": folder}, photo.SfmParams(max_features=512))

@@ -1,0 +1,194 @@
+"""Photo folders, EXIF, georeferencing maths and the plane-sweep stereo on synthetic data."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from twinkit import InputError
+from twinkit_photo import dense as D
+from twinkit_photo.georef import Transform, level, rotation_between, triangulate, umeyama
+from twinkit_photo.images import list_images, read_info
+
+
+def _rat(x, den=10000):
+    return (int(round(x * den)), den)
+
+
+def _dms(deg):
+    d = int(deg)
+    m = int((deg - d) * 60)
+    s = ((deg - d) * 60 - m) * 60
+    return ((d, 1), (m, 1), _rat(s))
+
+
+def _jpeg(path, lat=None, lon=None, alt=None, size=(64, 48)):
+    import piexif
+
+    exif = {"0th": {}, "Exif": {piexif.ExifIFD.FocalLengthIn35mmFilm: 28}, "GPS": {}}
+    if lat is not None:
+        exif["GPS"] = {1: b"S" if lat < 0 else b"N", 2: _dms(abs(lat)), 3: b"W" if lon < 0 else b"E",
+                       4: _dms(abs(lon)), 5: 0, 6: _rat(alt or 0.0, 100)}
+    Image.fromarray(np.random.default_rng(0).integers(0, 255, (size[1], size[0], 3), dtype=np.uint8)).save(
+        path, exif=piexif.dump(exif))
+
+
+def test_exif_gps_and_focal(tmp_path):
+    _jpeg(tmp_path / "a.jpg", 60.16945, -24.93365, 12.5)
+    info = read_info(tmp_path / "a.jpg")
+    assert info.has_gps
+    assert info.lat == pytest.approx(60.16945, abs=1e-7)
+    assert info.lon == pytest.approx(-24.93365, abs=1e-7)  # west is negative
+    assert info.alt == pytest.approx(12.5)
+    assert info.focal_35mm == 28
+
+
+def test_no_gps_is_a_note_not_an_error(tmp_path):
+    _jpeg(tmp_path / "b.jpg")
+    info = read_info(tmp_path / "b.jpg")
+    assert not info.has_gps and info.width == 64
+
+
+def test_corrupt_jpeg_names_the_file(tmp_path):
+    _jpeg(tmp_path / "good.jpg")
+    data = (tmp_path / "good.jpg").read_bytes()
+    (tmp_path / "broken.jpg").write_bytes(data[: len(data) // 3])
+    with pytest.raises(InputError, match="broken.jpg"):
+        read_info(tmp_path / "broken.jpg")
+
+
+def test_empty_or_missing_folder(tmp_path):
+    with pytest.raises(InputError, match="no photos"):
+        list_images(tmp_path)
+    with pytest.raises(InputError, match="not a folder"):
+        list_images(tmp_path / "nope")
+
+
+def _rand_rot(rng):
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def test_umeyama_recovers_similarity():
+    rng = np.random.default_rng(1)
+    src = rng.normal(size=(20, 3))
+    T = Transform(2.5, _rand_rot(rng), np.array([10.0, -3.0, 1.0]))
+    est = umeyama(src, T.apply(src))
+    assert est.scale == pytest.approx(2.5, rel=1e-9)
+    np.testing.assert_allclose(est.R, T.R, atol=1e-9)
+    np.testing.assert_allclose(est.apply(src), T.apply(src), atol=1e-9)
+
+
+def test_level_finds_up_from_ground_and_cameras():
+    rng = np.random.default_rng(2)
+    ground = np.c_[rng.uniform(-10, 10, 400), rng.uniform(-10, 10, 400), rng.normal(0, 0.005, 400)]
+    walls = np.c_[rng.uniform(-10, 10, 200), np.full(200, 6.0), rng.uniform(0, 8, 200)]
+    C = np.c_[np.linspace(-5, 5, 8), np.zeros(8), np.full(8, 1.6)]
+    # cameras look along +y, level: camera y (down) = world -z
+    R_wc = np.array([[[1, 0, 0], [0, 0, 1], [0, -1, 0]]] * 8, float)
+    Rm = _rand_rot(rng)  # an arbitrary model frame
+    pts_m = np.vstack([ground, walls]) @ Rm.T
+    R_lvl, info = level(C @ Rm.T, Rm @ R_wc, pts_m)
+    assert info["up_from"] == "ground_plane"
+    up = R_lvl @ (Rm @ np.array([0, 0, 1.0]))
+    assert up[2] > math.cos(math.radians(0.5))
+
+
+def test_rotation_between_handles_opposite():
+    R = rotation_between([0, 0, -1.0], [0, 0, 1.0])
+    np.testing.assert_allclose(R @ [0, 0, -1.0], [0, 0, 1.0], atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_triangulate_gcp_from_pixels():
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    X = np.array([1.0, 2.0, 10.0])
+    rows, obs = {}, []
+    for k, cx in enumerate((-1.0, 0.0, 1.5)):
+        C = np.array([cx, 0.0, 0.0])
+        R_wc = np.eye(3)
+        p = K @ (R_wc.T @ (X - C))
+        rows[f"{k}.jpg"] = {"K": K.tolist(), "width": 640, "height": 480, "R_world_from_camera": R_wc.tolist(),
+                            "center": C.tolist()}
+        obs.append({"image": f"{k}.jpg", "pixel": [p[0] / p[2], p[1] / p[2]]})
+    est, n = triangulate(rows, obs)
+    assert n == 3
+    np.testing.assert_allclose(est, X, atol=1e-6)
+    est2, n2 = triangulate(rows, obs[:1] + [{"image": "unregistered.jpg", "pixel": [0, 0]}])
+    assert est2 is None and n2 == 1
+
+
+def _render_plane_views(tex, K, centres, depth):
+    """Images of a textured fronto-parallel plane at z = depth seen from cameras at ``centres`` looking +z."""
+    import cv2
+
+    h, w = 240, 320
+    views = []
+    # texture covers x, y in [-s, s] at z = depth
+    s = 6.0
+    T = np.array([[tex.shape[1] / (2 * s), 0, tex.shape[1] / 2], [0, tex.shape[0] / (2 * s), tex.shape[0] / 2],
+                  [0, 0, 1]])
+    for C in centres:
+        # pixel -> plane point: X = C + depth * K^-1 x  (cameras axis-aligned)
+        A = np.linalg.inv(K)
+        M = T @ np.array([[depth * A[0, 0], 0, depth * A[0, 2] + C[0]], [0, depth * A[1, 1], depth * A[1, 2] + C[1]],
+                          [0, 0, 1]])
+        img = cv2.warpPerspective(tex, M, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+        views.append(D.View(name=f"{len(views)}", K=K.copy(), R_wc=np.eye(3), C=np.asarray(C, float),
+                            gray=img.astype(np.float32) / 255.0, rgb=np.dstack([img] * 3)))
+    return views
+
+
+def test_plane_sweep_recovers_a_textured_plane():
+    import cv2
+
+    rng = np.random.default_rng(3)
+    tex = cv2.GaussianBlur(rng.integers(0, 255, (600, 600)).astype(np.uint8), (0, 0), 1.5)
+    tex = cv2.normalize(tex, None, 0, 255, cv2.NORM_MINMAX)
+    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+    depth = 8.0
+    views = _render_plane_views(tex, K, [(0, 0, 0), (0.6, 0, 0), (-0.5, 0.2, 0)], depth)
+    for v in views:
+        v.dmin, v.dmax = 3.0, 30.0
+    opt = D.DenseOptions(coarse_scale=0.5, planes=128, up=(0.0, -1.0, 0.0), min_consistent=1)
+    for i, v in enumerate(views):
+        v.depth, score = D.plane_sweep(v, [w for j, w in enumerate(views) if j != i], opt)
+    d = views[0].depth
+    inner = d[40:-40, 60:-60]
+    assert (inner > 0).mean() > 0.5
+    assert np.median(np.abs(inner[inner > 0] - depth)) / depth < 0.01
+    xyz, rgb, nrm, src = D.fuse(views, opt)
+    assert len(xyz) > 1000
+    assert np.median(np.abs(xyz[:, 2] - depth)) < 0.05
+    # normals of a plane facing the cameras point back at them (-z)
+    assert np.median(nrm[:, 2]) < -0.9
+
+
+def test_reads_opensfm_gcp_file_of_berlin():
+    from conftest import shared_photos
+    from twinkit_roads.frame import SiteFrame
+
+    from twinkit_photo.georef import read_gcp_file
+
+    folder = shared_photos("berlin_gcp")
+    frame = SiteFrame.from_site({"name": "berlin", "crs": "EPSG:25833",
+                                 "base_point": {"lat": 52.5192, "lon": 13.4007, "alt": 0.0}})
+    gcps = read_gcp_file(folder / "ground_control_points.json", frame)
+    assert len(gcps) >= 2  # points without a position are skipped
+    for g in gcps:
+        assert np.linalg.norm(g["site_xyz"][:2]) < 100  # metres from the base point, not degrees
+        assert all("normalized" in o and o["image"].endswith(".jpg") for o in g["observations"])
+
+
+def test_bad_gcp_file_names_the_file(tmp_path):
+    from twinkit_photo.georef import read_gcp_file
+
+    (tmp_path / "gcp.json").write_text("[1, 2]")
+    with pytest.raises(InputError, match="gcp.json"):
+        read_gcp_file(tmp_path / "gcp.json", None)

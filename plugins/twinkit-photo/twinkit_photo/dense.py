@@ -1,0 +1,412 @@
+"""CPU dense reconstruction: plane-sweep stereo per photo, then multi-view consistency fusion.
+
+Why plane sweep and not rectified-pair block matching: walked photo sets move mostly forward (the
+epipole lies inside the image), where rectification degenerates; a plane sweep handles any motion.
+
+Per reference photo r and its best neighbours n (triangulation angle 3-30 degrees, similar viewing
+direction, many shared SfM points):
+  coarse: at ``coarse_scale`` of the working resolution, four plane families (fronto-parallel, the
+  ground, the two street sides; Gallup et al. 2007) spaced one pixel of parallax apart; each plane warps
+  every neighbour with its homography K_n (R + t n^T / d) K_r^-1 and scores a zero-mean NCC over a
+  window (box filters); the best neighbour's cost counts; winner takes all.
+  fine: passes at full working resolution with 9 per-pixel depth hypotheses around the current depth
+  (cv2.remap), a parabola for sub-sample precision; weak, textureless or edge-of-search pixels dropped.
+Fusion: every depth is projected into the other photos' depth maps; a pixel survives when at least
+``min_consistent`` other depth maps agree within ``rel_tol`` of the depth. Normals come from the depth
+map (cross product of neighbouring points), oriented towards the photo; colours from the photo.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class DenseOptions:
+    max_image_px: int = 640
+    planes: int = 192  # most planes per family of the coarse sweep
+    neighbors: int = 4
+    window_px: int = 7
+    min_ncc: float = 0.55
+    min_angle_deg: float = 3.0
+    max_angle_deg: float = 30.0
+    min_consistent: int = 2
+    rel_tol: float = 0.01
+    max_depth_m: float = 0.0  # 0 = from the SfM points only
+    plane_step_px: float = 1.0  # coarse sweep: planes this many pixels of parallax apart
+    refine_passes: int = 2  # full-resolution refinements (9 hypotheses each, shrinking)
+    up: tuple = (0.0, 0.0, 1.0)  # world up (the site frame's z)
+    coarse_scale: float = 0.25  # resolution of the coarse sweep (0.5 = half: 4x faster, less reliable)
+    threads: int = 2
+
+
+@dataclass
+class View:
+    name: str
+    K: np.ndarray  # at the working resolution
+    R_wc: np.ndarray
+    C: np.ndarray
+    gray: np.ndarray  # float32 0..1
+    rgb: np.ndarray  # uint8
+    dmin: float = 0.0
+    dmax: float = 0.0
+    depth: np.ndarray | None = None
+    pts_cam: np.ndarray | None = None  # SfM points seen by the photo, camera frame
+    normal: np.ndarray | None = None
+
+    @property
+    def R_cw(self):
+        return self.R_wc.T
+
+    def to_cam(self, X):
+        return (X - self.C) @ self.R_wc  # == R_cw @ (X - C)
+
+
+def load_views(image_dir: Path, cams: list[dict], max_px: int) -> list[View]:
+    import cv2
+
+    views = []
+    for c in cams:
+        path = Path(image_dir) / c["image"]
+        img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if img is None:
+            from twinkit import InputError
+
+            raise InputError(f"{path}: cannot read the photo for dense matching; restore the file or re-run sfm")
+        h, w = img.shape[:2]
+        K = np.asarray(c["K"], float).copy()
+        # undistort with the SfM radial term (SIMPLE_RADIAL / RADIAL), to the same pinhole K
+        params = c.get("params", [])
+        model = c.get("model", "")
+        dist = None
+        if model in ("SIMPLE_RADIAL", "RADIAL") and len(params) >= 4 and abs(params[3]) > 1e-9:
+            dist = np.array([params[3], params[4] if model == "RADIAL" else 0.0, 0, 0], float)
+        s = min(1.0, max_px / max(w, h))
+        if dist is not None:
+            img = cv2.undistort(img, K, dist)
+        if s < 1.0:
+            img = cv2.resize(img, (int(round(w * s)), int(round(h * s))), interpolation=cv2.INTER_AREA)
+            K[:2] *= s
+            K[0, 2] = (c["K"][0][2] + 0.5) * s - 0.5
+            K[1, 2] = (c["K"][1][2] + 0.5) * s - 0.5
+        rgb = img[:, :, ::-1].copy()
+        gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255.0
+        views.append(View(c["image"], K, np.asarray(c["R_world_from_camera"], float),
+                          np.asarray(c["center"], float), gray, rgb))
+    return views
+
+
+def depth_ranges(views: list[View], sparse: np.ndarray, vis: dict[str, np.ndarray], max_depth: float) -> None:
+    for v in views:
+        idx = vis.get(v.name)
+        P = sparse[idx] if idx is not None and len(idx) >= 10 else sparse
+        Xc = v.to_cam(P)
+        z = Xc[:, 2]
+        h, w = v.gray.shape
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = Xc @ v.K.T
+            u, vv = uv[:, 0] / z, uv[:, 1] / z
+        z = z[(z > 1e-6) & (u >= 0) & (u < w) & (vv >= 0) & (vv < h)]
+        if len(z) < 5:
+            v.dmin, v.dmax = 0.0, 0.0
+            continue
+        lo, hi = np.quantile(z, [0.01, 0.99])
+        v.dmin, v.dmax = float(lo * 0.75), float(hi * 1.3)
+        v.pts_cam = Xc[(Xc[:, 2] > 1e-6) & (Xc[:, 2] < v.dmax)]
+        if max_depth > 0:
+            v.dmax = min(v.dmax, max_depth)
+            v.dmin = min(v.dmin, 0.5 * v.dmax)
+
+
+def choose_neighbors(views: list[View], vis: dict[str, np.ndarray], opt: DenseOptions) -> dict[int, list[int]]:
+    out = {}
+    sets = {v.name: set(vis.get(v.name, np.zeros(0, int)).tolist()) for v in views}
+    for i, r in enumerate(views):
+        depth = 0.5 * (r.dmin / 0.75 + r.dmax / 1.3) if r.dmax > 0 else 10.0
+        cand = []
+        for j, n in enumerate(views):
+            if j == i:
+                continue
+            b = float(np.linalg.norm(n.C - r.C))
+            ang = np.degrees(2 * np.arctan2(b / 2, depth))
+            dir_ang = np.degrees(np.arccos(np.clip(r.R_wc[:, 2] @ n.R_wc[:, 2], -1, 1)))
+            if ang < opt.min_angle_deg or ang > opt.max_angle_deg or dir_ang > 50:
+                continue
+            shared = len(sets[r.name] & sets[n.name])
+            cand.append((shared * np.exp(-((ang - 10.0) / 10.0) ** 2), j))
+        cand.sort(reverse=True)
+        out[i] = [j for _, j in cand[: opt.neighbors]]
+    return out
+
+
+def _box(img, k):
+    import cv2
+
+    return cv2.boxFilter(img, -1, (k, k), normalize=True, borderType=cv2.BORDER_REFLECT)
+
+
+def _ncc_cost(r: View, warped: np.ndarray, stats, k: int) -> np.ndarray:
+    mr, vr = stats
+    valid = _box((warped >= 0).astype(np.float32), k) > 0.999
+    warped = np.maximum(warped, 0)
+    mn = _box(warped, k)
+    vn = np.maximum(_box(warped * warped, k) - mn * mn, 0)
+    cov = _box(warped * r.gray, k) - mr * mn
+    ncc = cov / np.sqrt(vr * vn + 1e-8)
+    return np.where(valid & (vn > 1e-5), 1.0 - ncc, 2.0).astype(np.float32)
+
+
+AGG = "min"
+
+
+def _aggregate(per: np.ndarray) -> np.ndarray:
+    """Best neighbour's cost (a neighbour that cannot see the pixel at this depth is ignored, so the
+    hypotheses are not biased towards depths that stay inside every neighbour's frame)."""
+    if AGG == "min" or len(per) < 2:
+        return per.min(0)
+    part = np.partition(per, 1, axis=0)
+    return np.where(part[1] < 1.5, 0.5 * (part[0] + part[1]), part[0] + 0.1)
+
+
+def _wta(cost: np.ndarray, inv: np.ndarray):
+    """Winner takes all over axis 0 with a parabola; ``inv`` (P,) or (P, h, w) inverse depths per slice."""
+    P, h, w = cost.shape
+    best = np.argmin(cost, axis=0)
+    ii, jj = np.indices((h, w))
+    c0 = cost[best, ii, jj]
+    lo = np.clip(best - 1, 0, P - 1)
+    hi = np.clip(best + 1, 0, P - 1)
+    cl, ch = cost[lo, ii, jj], cost[hi, ii, jj]
+    den = cl - 2 * c0 + ch
+    off = np.where((best > 0) & (best < P - 1) & (den > 1e-6), 0.5 * (cl - ch) / np.maximum(den, 1e-6), 0.0)
+    off = np.clip(off, -0.5, 0.5)
+    if inv.ndim == 1:
+        step = inv[1] - inv[0]
+        invd = inv[best] + off * step
+    else:
+        step = inv[1] - inv[0]
+        invd = inv[best, ii, jj] + off * step
+    interior = (best > 0) & (best < P - 1)
+    return invd, 1.0 - c0, interior
+
+
+def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (0 = unknown) and NCC score for the reference view: a coarse homography sweep at half
+    resolution, then a per-pixel refinement at full resolution (remap by the hypothesised depth)."""
+    import cv2
+
+    h, w = r.gray.shape
+    k = int(opt.window_px) | 1
+    inv = np.linspace(1.0 / r.dmin, 1.0 / r.dmax, opt.planes).astype(np.float64)  # near -> far
+    e3 = np.array([0.0, 0.0, 1.0])
+    rel = [(n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C), n) for n in nbrs]
+
+    # ---- coarse: (optionally reduced resolution) homographies
+    f = float(opt.coarse_scale)
+
+    def _scaled(gray, K):
+        if f >= 1.0:
+            return gray, K
+        hh, ww = gray.shape
+        g = cv2.resize(gray, (int(round(ww * f)), int(round(hh * f))), interpolation=cv2.INTER_AREA)
+        K2 = K.copy()
+        K2[:2, :2] *= f
+        K2[0, 2] = (K[0, 2] + 0.5) * f - 0.5
+        K2[1, 2] = (K[1, 2] + 0.5) * f - 0.5
+        return g, K2
+
+    g_r, Kr = _scaled(r.gray, r.K)
+    hs, ws = g_r.shape
+    small = View(r.name, Kr, r.R_wc, r.C, g_r, r.rgb)
+    ks = k if f >= 1.0 else max(5, int(k * f) | 1)
+    mr = _box(g_r, ks)
+    stats_s = (mr, np.maximum(_box(g_r * g_r, ks) - mr * mr, 0))
+    g_n, Kn_s = [], []
+    for _, _, n in rel:
+        g, K2 = _scaled(n.gray, n.K)
+        g_n.append(g)
+        Kn_s.append(K2)
+    Kinv = np.linalg.inv(Kr)
+    # plane families (Gallup et al.): fronto-parallel, the ground, and the two street sides; normals in the
+    # reference camera frame, offsets d (n . X = d) from the SfM points the photo sees
+    up_cam = r.R_cw @ np.asarray(opt.up, float)
+    fwd = r.R_wc[:, 2] - np.asarray(opt.up, float) * (r.R_wc[:, 2] @ np.asarray(opt.up, float))
+    fam = [np.array([0.0, 0.0, 1.0])]
+    if np.linalg.norm(fwd) > 0.3:
+        side = np.cross(fwd, np.asarray(opt.up, float))
+        side_cam = r.R_cw @ (side / np.linalg.norm(side))
+        fam += [-up_cam, side_cam, -side_cam]
+    planes = []
+    f_c = 0.5 * (Kr[0, 0] + Kr[1, 1])
+    max_parallax = f_c * max(float(np.linalg.norm(n.C - r.C)) for _, _, n in rel)  # px per unit of 1/depth
+    dinv = opt.plane_step_px / max_parallax  # inverse-depth step of the coarse sweep
+    for nrm in fam:
+        if r.pts_cam is not None and len(r.pts_cam) >= 10:
+            dd = r.pts_cam @ nrm
+            dd = dd[dd > 1e-3]
+            if len(dd) < 5:
+                continue
+            lo, hi = np.quantile(dd, [0.01, 0.99])
+            lo, hi = lo * 0.75, hi * 1.3
+        else:
+            lo, hi = r.dmin, r.dmax
+        if nrm is not fam[0]:
+            lo = max(lo, 0.05 * r.dmax / 40.0)
+        # one plane per ``plane_step_px`` of parallax at the coarse scale for the widest baseline
+        span = abs(1.0 / lo - 1.0 / hi) * max_parallax
+        cap = opt.planes if nrm is fam[0] else max(16, opt.planes // 2)
+        npl = int(np.clip(np.ceil(span / opt.plane_step_px), 8, cap))
+        for idep in np.linspace(1.0 / lo, 1.0 / hi, npl):
+            planes.append((nrm, idep))
+    cost = np.empty((len(planes), hs, ws), np.float32)
+    per = np.empty((len(rel), hs, ws), np.float32)
+    us, vs = np.meshgrid(np.arange(ws, dtype=np.float64), np.arange(hs, dtype=np.float64))
+    rays_s = np.stack([us, vs, np.ones_like(us)], -1) @ Kinv.T
+    zmin, zmax = 0.5 * r.dmin, r.dmax
+    for di, (nrm, idep) in enumerate(planes):
+        inv_z = rays_s @ nrm * idep  # 1 / depth where the pixel's ray meets this plane
+        hit = (inv_z > 1.0 / zmax) & (inv_z < 1.0 / zmin)
+        if not hit.any():
+            cost[di] = 2.0
+            continue
+        for ni, (R_nr, t_nr, _) in enumerate(rel):
+            H = Kn_s[ni] @ (R_nr + np.outer(t_nr, nrm) * idep) @ Kinv
+            warped = cv2.warpPerspective(g_n[ni], H, (ws, hs), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                         borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+            per[ni] = _ncc_cost(small, warped, stats_s, ks)
+        cost[di] = np.where(hit, _aggregate(per), 2.0)
+    best = np.argmin(cost, axis=0)
+    del cost
+    N = np.array([p[0] for p in planes])[best]
+    ID = np.array([p[1] for p in planes])[best]
+    ndot = np.sum(rays_s * N, -1)
+    invd_s = np.where(ndot > 1e-6, ID * ndot, 1.0 / r.dmax)  # 1/depth = (n . ray) / d
+
+    # ---- fine: full resolution, per-pixel hypotheses around the coarse estimate
+    invd0 = cv2.resize(invd_s.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR).astype(np.float64)
+    mr = _box(r.gray, k)
+    stats = (mr, np.maximum(_box(r.gray * r.gray, k) - mr * mr, 0))
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(r.K).T  # (h, w, 3), z = 1
+    invd = invd0
+    width = 1.5 * dinv
+    for _pass in range(opt.refine_passes):
+        offs = np.linspace(-width, width, 9)
+        hyp = np.empty((len(offs), h, w), np.float64)
+        fcost = np.empty((len(offs), h, w), np.float32)
+        per = np.empty((len(rel), h, w), np.float32)
+        for oi, o in enumerate(offs):
+            idep = np.clip(invd + o, 1e-6, None)
+            hyp[oi] = idep
+            X = rays / idep[..., None]
+            for ni, (R_nr, t_nr, n) in enumerate(rel):
+                Xn = X @ R_nr.T + t_nr
+                z = Xn[..., 2]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    uv = Xn @ n.K.T
+                    mu = np.where(z > 1e-6, uv[..., 0] / z, -10).astype(np.float32)
+                    mv = np.where(z > 1e-6, uv[..., 1] / z, -10).astype(np.float32)
+                warped = cv2.remap(n.gray, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                                   borderValue=-1.0)
+                per[ni] = _ncc_cost(r, warped, stats, k)
+            fcost[oi] = _aggregate(per)
+        invd, score, interior = _wta(fcost, hyp)
+        width = width * 1.5 / 4.0
+    depth = 1.0 / np.maximum(invd, 1e-9)
+    textured = stats[1] > 1e-4
+    ok = textured & (score >= opt.min_ncc) & interior & (depth > r.dmin) & (depth < r.dmax)
+    depth = np.where(ok, depth, 0.0).astype(np.float32)
+    return depth, score.astype(np.float32)
+
+
+def backproject(v: View, depth: np.ndarray) -> np.ndarray:
+    h, w = depth.shape
+    u, vv = np.meshgrid(np.arange(w), np.arange(h))
+    rays = np.stack([u, vv, np.ones_like(u)], -1).reshape(-1, 3) @ np.linalg.inv(v.K).T
+    Xc = rays * depth.reshape(-1, 1)
+    return (Xc @ v.R_wc.T + v.C).reshape(h, w, 3)
+
+
+def depth_normals(v: View, pts: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Normals (world) from neighbouring back-projected points, facing the camera; NaN where undefined."""
+    dx = np.zeros_like(pts)
+    dy = np.zeros_like(pts)
+    dx[:, 1:-1] = pts[:, 2:] - pts[:, :-2]
+    dy[1:-1] = pts[2:] - pts[:-2]
+    nrm = np.cross(dx, dy)
+    ln = np.linalg.norm(nrm, axis=-1, keepdims=True)
+    good = np.zeros(depth.shape, bool)
+    good[1:-1, 1:-1] = ((depth[1:-1, 2:] > 0) & (depth[1:-1, :-2] > 0) & (depth[2:, 1:-1] > 0)
+                        & (depth[:-2, 1:-1] > 0) & (depth[1:-1, 1:-1] > 0))
+    nrm = nrm / np.maximum(ln, 1e-12)
+    tocam = v.C - pts
+    flip = np.sum(nrm * tocam, -1) < 0
+    nrm[flip] *= -1
+    nrm[~good] = np.nan
+    return nrm
+
+
+def fuse(views: list[View], opt: DenseOptions, progress=None):
+    """Consistent points of every depth map: xyz, rgb, normals, source view index."""
+    out_xyz, out_rgb, out_n, out_src = [], [], [], []
+    it = range(len(views)) if progress is None else progress(range(len(views)))
+    for i in it:
+        v = views[i]
+        if v.depth is None:
+            continue
+        d = v.depth
+        valid = d > 0
+        if not valid.any():
+            continue
+        pts = backproject(v, d)
+        nrm = depth_normals(v, pts, d)
+        P = pts[valid]
+        cnt = np.zeros(len(P), np.int32)
+        for j, o in enumerate(views):
+            if j == i or o.depth is None:
+                continue
+            Xc = o.to_cam(P)
+            z = Xc[:, 2]
+            front = z > 1e-6
+            uv = (Xc @ o.K.T)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = np.round(uv[:, 0] / z).astype(np.int64, copy=False) if front.any() else None
+                vv = np.round(uv[:, 1] / z).astype(np.int64, copy=False) if front.any() else None
+            if u is None:
+                continue
+            hh, ww = o.depth.shape
+            inside = front & (u >= 0) & (u < ww) & (vv >= 0) & (vv < hh)
+            dz = np.zeros(len(P), np.float32)
+            dz[inside] = o.depth[vv[inside], u[inside]]
+            ok = inside & (dz > 0) & (np.abs(dz - z) < opt.rel_tol * z)
+            cnt += ok
+        keep = cnt >= opt.min_consistent
+        n = nrm[valid][keep]
+        good = np.isfinite(n).all(1)
+        out_xyz.append(P[keep][good])
+        out_rgb.append(v.rgb[valid][keep][good])
+        out_n.append(n[good])
+        out_src.append(np.full(int(good.sum()), i, np.int32))
+    if not out_xyz:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.uint8), np.zeros((0, 3)), np.zeros(0, np.int32)
+    return np.concatenate(out_xyz), np.concatenate(out_rgb), np.concatenate(out_n), np.concatenate(out_src)
+
+
+def voxel_merge(xyz, rgb, nrm, voxel: float):
+    """Average points, colours and normals per voxel (duplicates from overlapping depth maps)."""
+    if voxel <= 0 or len(xyz) == 0:
+        return xyz, rgb, nrm
+    key = np.floor((xyz - xyz.min(0)) / voxel).astype(np.int64)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    m = len(cnt)
+    sx = np.zeros((m, 3))
+    np.add.at(sx, inv, xyz)
+    sc = np.zeros((m, 3))
+    np.add.at(sc, inv, rgb.astype(float))
+    sn = np.zeros((m, 3))
+    np.add.at(sn, inv, nrm)
+    ln = np.linalg.norm(sn, axis=1, keepdims=True)
+    return sx / cnt[:, None], np.clip(np.round(sc / cnt[:, None]), 0, 255).astype(np.uint8), sn / np.maximum(ln, 1e-12)

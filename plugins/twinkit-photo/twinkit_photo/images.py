@@ -1,0 +1,115 @@
+"""Photo folders: listing, validation and EXIF (GPS, focal length)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from twinkit import InputError
+
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff"}
+
+
+@dataclass
+class PhotoInfo:
+    name: str
+    width: int
+    height: int
+    lat: float | None = None
+    lon: float | None = None
+    alt: float | None = None
+    focal_35mm: float | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def has_gps(self) -> bool:
+        return self.lat is not None and self.lon is not None
+
+
+def list_images(folder: Path) -> list[Path]:
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: not a folder of photos; set site.inputs.photos to a folder of JPG/PNG files")
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    if not files:
+        raise InputError(f"{folder}: no photos (.jpg, .jpeg, .png, .tif) in this folder; "
+                         f"point site.inputs.photos at the folder that holds them")
+    return files
+
+
+def _rational(v) -> float:
+    if isinstance(v, tuple) and len(v) == 2:
+        return float(v[0]) / float(v[1]) if v[1] else 0.0
+    return float(v)
+
+
+def _dms(v) -> float:
+    d, m, s = (_rational(x) for x in v)
+    return d + m / 60.0 + s / 3600.0
+
+
+def read_info(path: Path) -> PhotoInfo:
+    """Open the image fully (a truncated or corrupt file fails here) and read its EXIF."""
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    try:
+        with Image.open(path) as im:
+            im.load()
+            w, h = im.size
+            exif_bytes = im.info.get("exif")
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        raise InputError(f"{path}: not a readable image ({type(exc).__name__}: {exc}); "
+                         f"re-export or remove this file from the photo folder") from None
+    info = PhotoInfo(path.name, int(w), int(h))
+    if not exif_bytes:
+        info.notes.append("no EXIF")
+        return info
+    try:
+        import piexif
+
+        ex = piexif.load(exif_bytes)
+    except Exception as exc:  # noqa: BLE001 - broken EXIF is a note, not a failure
+        info.notes.append(f"unreadable EXIF ({exc})")
+        return info
+    gps = ex.get("GPS") or {}
+    try:
+        if 2 in gps and 4 in gps:
+            lat, lon = _dms(gps[2]), _dms(gps[4])
+            if gps.get(1, b"N") in (b"S", "S"):
+                lat = -lat
+            if gps.get(3, b"E") in (b"W", "W"):
+                lon = -lon
+            if abs(lat) > 1e-9 or abs(lon) > 1e-9:
+                info.lat, info.lon = lat, lon
+            if 6 in gps:
+                alt = _rational(gps[6])
+                if gps.get(5, 0) in (1, b"\x01"):
+                    alt = -alt
+                info.alt = alt
+    except (TypeError, ValueError, ZeroDivisionError) as exc:
+        info.notes.append(f"bad GPS tags ({exc})")
+    f35 = (ex.get("Exif") or {}).get(41989)  # FocalLengthIn35mmFilm
+    if f35:
+        info.focal_35mm = float(f35)
+    return info
+
+
+def focal_px_from_35mm(info: PhotoInfo) -> float | None:
+    """Focal length in pixels from the 35 mm equivalent (36 mm wide frame, long side)."""
+    if not info.focal_35mm:
+        return None
+    return info.focal_35mm / 36.0 * max(info.width, info.height)
+
+
+def read_k_txt(folder: Path) -> list[list[float]] | None:
+    """A ``K.txt`` (3x3 intrinsics, as shipped with openMVG sample sets) beside the photos, if any."""
+    p = Path(folder) / "K.txt"
+    if not p.exists():
+        return None
+    try:
+        vals = [float(v) for v in p.read_text().split()]
+    except ValueError:
+        raise InputError(f"{p}: expected 9 numbers (a 3x3 intrinsics matrix); fix or remove the file") from None
+    if len(vals) != 9:
+        raise InputError(f"{p}: expected 9 numbers (a 3x3 intrinsics matrix), found {len(vals)}")
+    return [vals[0:3], vals[3:6], vals[6:9]]

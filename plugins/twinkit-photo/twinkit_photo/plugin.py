@@ -1,0 +1,532 @@
+"""twinkit steps of the photo branch (entry point ``photo`` in group ``twinkit``).
+
+photos -> sfm -> georeference -> roi -> dense -> (the point-cloud branch: poisson, clean_mesh, simplify,
+bake_texture, evaluate_reconstruction). Heavy libraries are imported inside the step functions only.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from twinkit import InputError, hookimpl
+
+
+# ----------------------------------------------------------------------------- parameters
+
+@dataclass
+class SfmParams:
+    """Structure from motion (pycolmap, CPU)."""
+
+    matching: str = "auto"  # auto | exhaustive | sequential | spatial | sequential+spatial
+    exhaustive_max: int = 40  # auto: exhaustive matching up to this many photos
+    overlap: int = 10  # sequential: each photo with its next N photos (file-name order)
+    spatial_neighbors: int = 12  # spatial: nearest photos by EXIF GPS
+    mapper: str = "incremental"  # incremental | global (GLOMAP)
+    max_image_px: int = 1600  # features are found on photos downscaled to this long side (0 = full size)
+    max_features: int = 4096
+    camera_model: str = "SIMPLE_RADIAL"
+    single_camera: bool = True  # all photos from one camera with one set of intrinsics
+    intrinsics: str = "auto"  # auto (K.txt beside the photos, else the site's cameras.json, else EXIF) | exif
+    min_registered_ratio: float = 0.5  # fewer registered photos -> error
+    seed: int = 0
+
+
+@dataclass
+class GeorefParams:
+    """Model frame -> site frame."""
+
+    method: str = "auto"  # auto (gcp, else gps, else none) | gcp | gps | none
+    gps_threshold_m: float = 8.0  # RANSAC inlier distance for GPS fixes (about 3 sigma of phone GPS)
+    gps_use_z: bool = False  # scale from x, y only (GPS heights are the noisiest)
+    height_from: str = "gps"  # gps | ground: ground puts the sparse ground plane at ground_z_m
+    ground_z_m: float = 0.0
+    scale: float = 1.0  # method none: metres per model unit
+    min_gcp_views: int = 2
+
+
+@dataclass
+class RoiParams:
+    """Automatic region of interest and ground plane (edit roi.json to override)."""
+
+    margin_m: float = 12.0  # around the camera positions, horizontally
+    below_ground_m: float = 1.0
+    above_ground_m: float = 25.0
+    ground_threshold_m: float = 0.10  # RANSAC inlier distance for the ground plane
+    max_depth_m: float = 40.0  # dense matching ignores anything farther from a photo
+
+
+@dataclass
+class DenseParams:
+    """Dense reconstruction: CPU plane-sweep stereo + consistency fusion (pycolmap patch-match with CUDA)."""
+
+    backend: str = "auto"  # auto (patchmatch when pycolmap has CUDA, else cpu) | cpu | patchmatch
+    max_image_px: int = 640  # working resolution (long side)
+    planes: int = 192  # most planes per plane family of the coarse sweep
+    neighbors: int = 4
+    window_px: int = 7
+    min_ncc: float = 0.55
+    min_consistent: int = 1  # other depth maps that must agree
+    rel_tol: float = 0.01  # agreement: |depth difference| < rel_tol * depth
+    voxel_m: float = 0.02  # merge duplicate points per voxel (0 = off)
+    coarse_scale: float = 0.25
+    refine_passes: int = 2
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _write_json(path: Path, obj: Any) -> None:
+    Path(path).write_text(json.dumps(obj, indent=2, sort_keys=True, default=_json_default))
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def _threads(ctx) -> int:
+    return max(1, int(getattr(ctx, "threads", 1) or 1))
+
+
+def _read_json(path: Path, what: str) -> dict:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: cannot read the {what} ({exc}); re-run the step that made it") from None
+
+
+def _frame(ctx):
+    """The site frame (roads plugin), or None when the site has no CRS / base point."""
+    from twinkit_roads.frame import SiteFrame
+
+    site = dict(ctx.site or {})
+    if not site.get("crs") or not site.get("base_point"):
+        return None
+    return SiteFrame.from_site(site)
+
+
+def _photo_infos(folder: Path, log):
+    from .images import list_images, read_info
+
+    files = list_images(folder)
+    infos = [read_info(p) for p in files]
+    for i in infos:
+        for note in i.notes:
+            log.debug("%s: %s", i.name, note)
+    return infos
+
+
+def _write_cloud(path: Path, xyz, rgb=None, normals=None, comments=()):
+    import numpy as np
+    from twinkit_pointcloud.meshio import Mesh, write_ply
+
+    attrs = {}
+    if normals is not None:
+        attrs["normals"] = np.asarray(normals, np.float32)
+    if rgb is not None:
+        attrs["colors"] = np.asarray(rgb, np.uint8)
+    write_ply(path, Mesh(vertices=np.asarray(xyz, float), attrs=attrs, comments=list(comments)))
+
+
+# ----------------------------------------------------------------------------- sfm
+
+def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_sfm_report_json: Path,
+        in_cameras_json: Path | None = None) -> dict:
+    """Features, matching and mapping with pycolmap; a COLMAP model folder and a report."""
+    import numpy as np
+
+    from .images import read_k_txt
+    from .sfm import SfmOptions, camera_table, run_sfm, sparse_points
+
+    params = params or SfmParams()
+    t_all = time.perf_counter()
+    folder = Path(in_photos_dir)
+    infos = _photo_infos(folder, ctx.log)
+    if len(infos) < 2:
+        raise InputError(f"{folder}: only {len(infos)} photo; structure from motion needs at least 2 "
+                         f"overlapping photos (better 10 or more)")
+    sizes = {(i.width, i.height) for i in infos}
+    n_gps = sum(i.has_gps for i in infos)
+    K = None
+    k_source = "exif"
+    if params.intrinsics == "auto":
+        K = read_k_txt(folder)
+        if K is not None:
+            k_source = "K.txt"
+        elif in_cameras_json is not None and len(sizes) == 1:
+            cams = _read_json(in_cameras_json, "camera file")
+            intr = cams.get("intrinsics") or {}
+            if "K" in intr and (intr.get("width"), intr.get("height")) in sizes:
+                K, k_source = intr["K"], Path(in_cameras_json).name
+    elif params.intrinsics != "exif":
+        raise InputError(f"sfm: intrinsics='{params.intrinsics}' must be auto or exif")
+    if K is not None and len(sizes) != 1:
+        K, k_source = None, "exif"
+    ctx.log.info("sfm: %d photos in %s (%d with GPS), intrinsics from %s", len(infos), folder.name, n_gps, k_source)
+    import shutil
+    import tempfile
+
+    work = Path(tempfile.mkdtemp(prefix="twinkit_sfm_"))  # COLMAP database and attempts; removed afterwards
+    opt = SfmOptions(matching=params.matching, exhaustive_max=params.exhaustive_max, overlap=params.overlap,
+                     spatial_neighbors=params.spatial_neighbors, mapper=params.mapper,
+                     max_image_px=params.max_image_px, max_features=params.max_features,
+                     camera_model=params.camera_model, single_camera=params.single_camera, intrinsics=K,
+                     threads=_threads(ctx), seed=params.seed)
+    try:
+        res = run_sfm(folder, [i.name for i in infos], work, opt, has_gps=n_gps >= max(3, len(infos) // 2),
+                      log=ctx.log)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    rec = res.reconstruction
+    n_reg = len(res.registered)
+    ratio = n_reg / len(infos)
+    missing = sorted(set(i.name for i in infos) - set(res.registered))
+    if ratio < params.min_registered_ratio:
+        raise InputError(f"{folder}: structure from motion registered only {n_reg} of {len(infos)} photos "
+                         f"({100 * ratio:.0f} % < sfm.min_registered_ratio {100 * params.min_registered_ratio:.0f} %); "
+                         f"unregistered: {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}. Take more "
+                         f"overlapping photos, try sfm.matching=exhaustive or sequential, or lower the ratio")
+    out = Path(out_sfm_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rec.write(str(out))
+    cams = camera_table(rec)
+    xyz, rgb, err = sparse_points(rec)
+    # visibility: which sparse point each registered photo sees (for dense depth ranges and neighbours)
+    pid = {p: k for k, p in enumerate(rec.points3D.keys())}
+    vis_img, vis_pt = [], []
+    for iid in rec.reg_image_ids():
+        im = rec.images[iid]
+        ids = [pid[p.point3D_id] for p in im.points2D if p.has_point3D()]
+        vis_img += [im.name] * len(ids)
+        vis_pt += ids
+    np.savez_compressed(out / "sparse.npz", xyz=xyz, rgb=rgb, error=err, vis_image=np.array(vis_img),
+                        vis_point=np.array(vis_pt, np.int64))
+    gps = {i.name: [i.lat, i.lon, i.alt] for i in infos if i.has_gps}
+    _write_json(out / "cameras_model.json", {"frame": "SfM model frame (arbitrary scale and orientation)",
+                                             "convention": "OpenCV camera, R_world_from_camera, center",
+                                             "cameras": cams, "exif_gps": gps})
+    _write_cloud(out / "sparse_model.ply", xyz, rgb, comments=["twinkit-photo sfm sparse points, model frame"])
+    reproj = float(rec.compute_mean_reprojection_error()) if n_reg else float("nan")
+    track = float(np.mean([rec.points3D[p].track.length() for p in rec.points3D])) if len(xyz) else 0.0
+    report = {
+        "photos": len(infos), "registered": n_reg, "registered_ratio": round(ratio, 4),
+        "unregistered": missing, "mean_reprojection_error_px": round(reproj, 4),
+        "sparse_points": int(len(xyz)), "mean_track_length": round(track, 3),
+        "matching": res.matching, "mapper": params.mapper, "attempts": res.attempts,
+        "intrinsics_from": k_source, "photos_with_gps": n_gps,
+        "cameras": [{"id": int(cid), "model": c.model.name, "params": [float(v) for v in c.params]}
+                    for cid, c in rec.cameras.items()],
+        "timings_s": {**res.timings_s, "total": round(time.perf_counter() - t_all, 3)},
+    }
+    _write_json(out_sfm_report_json, report)
+    ctx.log.info("sfm: registered %d / %d photos (%.1f %%), mean reprojection error %.3f px, %d sparse points",
+                 n_reg, len(infos), 100 * ratio, reproj, len(xyz))
+    return {"registered": n_reg, "photos": len(infos), "registered_ratio": round(ratio, 4),
+            "mean_reprojection_error_px": round(reproj, 4), "sparse_points": int(len(xyz)),
+            "timings_s": report["timings_s"]}
+
+
+# ----------------------------------------------------------------------------- georeference
+
+def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_site_json: Path,
+                 out_georef_json: Path, out_sparse_site_ply: Path, in_gcp_json: Path | None = None,
+                 in_cameras_json: Path | None = None) -> dict:
+    """Level the model, then map it into the site frame from GCPs, EXIF GPS or (without either) as is."""
+    import numpy as np
+
+    from .georef import Transform, level, read_gcp_file, triangulate, umeyama
+
+    params = params or GeorefParams()
+    t0 = time.perf_counter()
+    sfm_dir = Path(in_sfm_dir)
+    model = _read_json(sfm_dir / "cameras_model.json", "SfM cameras")
+    sp = np.load(sfm_dir / "sparse.npz")
+    rows = {c["image"]: c for c in model["cameras"]}
+    names = sorted(rows)
+    C = np.array([rows[n]["center"] for n in names], float)
+    Rwc = np.array([rows[n]["R_world_from_camera"] for n in names], float)
+    frame = _frame(ctx)
+    info: dict[str, Any] = {}
+    method = params.method
+    gcps = []
+    if in_gcp_json is not None and method in ("auto", "gcp"):
+        gcps = read_gcp_file(in_gcp_json, frame)
+    if method == "gcp" and in_gcp_json is None:
+        raise InputError("georeference.method=gcp needs a ground-control-point file: set site.inputs.gcp=<file.json>")
+    # ---- GCPs
+    gcp_rows = []
+    for g in gcps:
+        X, nv = triangulate(rows, g["observations"])
+        if X is not None and nv >= params.min_gcp_views:
+            gcp_rows.append((g["id"], X, g["site_xyz"], nv))
+    if method == "auto":
+        gps_ok = [n for n in names if n in model.get("exif_gps", {})]
+        if len(gcp_rows) >= 3:
+            method = "gcp"
+        elif len(gps_ok) >= 3 and frame is not None:
+            method = "gps"
+        else:
+            method = "none"
+            ctx.log.warning("georeference: no usable GCPs and fewer than 3 registered photos with EXIF GPS "
+                            "(or no site CRS): the model is only levelled and centred (scale %.3f); give "
+                            "site.inputs.gcp for a metric, georeferenced result", params.scale)
+    if method == "gcp":
+        if len(gcp_rows) < 3:
+            raise InputError(f"{in_gcp_json}: only {len(gcp_rows)} ground-control points are seen in "
+                             f">= {params.min_gcp_views} registered photos with a known position; need 3")
+        src = np.array([r[1] for r in gcp_rows])
+        dst = np.array([r[2] for r in gcp_rows])
+        T = umeyama(src, dst)
+        res = np.linalg.norm(T.apply(src) - dst, axis=1)
+        info["gcp"] = {"used": len(gcp_rows), "residual_m": {r[0]: float(e) for r, e in zip(gcp_rows, res)},
+                       "rmse_m": float(np.sqrt(np.mean(res ** 2)))}
+    elif method == "gps":
+        from twinkit_roads.similarity import fit_similarity
+
+        if frame is None:
+            raise InputError("georeference.method=gps needs the site's crs and base_point (conf/site/<site>.yaml)")
+        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log)
+        info["level"] = linfo
+        gps_names = [n for n in names if n in model.get("exif_gps", {})]
+        if len(gps_names) < 3:
+            raise InputError(f"{sfm_dir}: only {len(gps_names)} registered photos carry EXIF GPS; need 3 for "
+                             f"method=gps (give a GCP file with site.inputs.gcp, or georeference.method=none)")
+        ll = np.array([model["exif_gps"][n] for n in gps_names], dtype=float)
+        xy = frame.lonlat_to_local(ll[:, [1, 0]])
+        z = np.where(np.isfinite(ll[:, 2]), ll[:, 2] - frame.alt, 0.0)
+        dst = np.c_[xy, z]
+        far = float(np.linalg.norm(np.median(dst[:, :2], 0)))
+        if far > 20000.0:
+            raise InputError(f"{sfm_dir.parent.name}: the photos' EXIF GPS lies {far / 1000:.0f} km from the site's "
+                             f"base point; set site.base_point (and site.crs) to the place the photos show")
+        src = (C[[names.index(n) for n in gps_names]]) @ R_lvl.T
+        sim = fit_similarity(src, dst, threshold_m=params.gps_threshold_m, use_z=params.gps_use_z)
+        c, s = np.cos(sim.yaw_rad), np.sin(sim.yaw_rad)
+        Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+        T = Transform(sim.scale, Rz @ R_lvl, np.asarray(sim.t, float))
+        info["gps"] = {**sim.to_json(), "photos_with_gps": len(gps_names)}
+    elif method == "none":
+        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log)
+        info["level"] = linfo
+        T = Transform(float(params.scale), R_lvl, -float(params.scale) * R_lvl @ C.mean(0))
+    else:
+        raise InputError(f"georeference: unknown method '{params.method}' (auto, gcp, gps or none)")
+    xyz = T.apply(sp["xyz"]) if len(sp["xyz"]) else np.zeros((0, 3))
+    if params.height_from == "ground" and len(xyz) >= 50:
+        from .georef import ransac_plane
+
+        plane, inl = ransac_plane(xyz, 0.1, normal_hint=np.array([0, 0, 1.0]), max_angle_deg=20)
+        if plane is not None:
+            gz = float(np.median(xyz[inl, 2]))
+            T = Transform(T.scale, T.R, T.t + np.array([0, 0, params.ground_z_m - gz]))
+            xyz = T.apply(sp["xyz"])
+            info["height_shift_m"] = params.ground_z_m - gz
+    cams_out = []
+    for n in names:
+        r = rows[n]
+        cams_out.append({**{k: r[k] for k in ("image", "model", "width", "height", "params", "K")},
+                         "R_world_from_camera": (T.R @ np.asarray(r["R_world_from_camera"])).tolist(),
+                         "center": T.apply(r["center"])[0].tolist()})
+    centres = np.array([c["center"] for c in cams_out])
+    report: dict[str, Any] = {"method": method, "transform": T.to_json(), **info,
+                              "cameras": len(cams_out)}
+    if in_cameras_json is not None:
+        truth = _read_json(in_cameras_json, "camera truth")
+        tmap = {c["image"]: np.asarray(c.get("center", c.get("t_world_from_camera")), float)
+                for c in truth.get("cameras", [])}
+        common = [k for k, n in enumerate(names) if n in tmap]
+        if len(common) >= 3:
+            est = centres[common]
+            tru = np.array([tmap[names[k]] for k in common])
+            e = np.linalg.norm(est - tru, axis=1)
+            # the SfM shape alone: best similarity onto the truth (what GCPs could reach at best)
+            Tb = umeyama(est, tru)
+            eb = np.linalg.norm(Tb.apply(est) - tru, axis=1)
+            report["camera_centre_error_m"] = {"mean": float(e.mean()), "median": float(np.median(e)),
+                                               "max": float(e.max()), "n": len(common),
+                                               "within_5cm": float((e <= 0.05).mean())}
+            report["camera_centre_error_after_best_similarity_m"] = {"mean": float(eb.mean()),
+                                                                     "max": float(eb.max())}
+            ctx.log.info("georeference (%s): camera centres %.3f m from the truth on average (max %.3f); "
+                         "SfM shape alone %.3f m", method, e.mean(), e.max(), eb.mean())
+    _write_json(out_cameras_site_json, {
+        "frame": "site local (metres, x east, y north, z up)" if method != "none" else "levelled model frame",
+        "convention": "OpenCV pinhole: X_world = R_world_from_camera @ X_cam + center; K at full photo size",
+        "cameras": cams_out})
+    _write_cloud(out_sparse_site_ply, xyz, sp["rgb"], comments=[f"twinkit-photo georeference ({method})"])
+    np.savez_compressed(Path(out_sparse_site_ply).with_suffix(".npz"), vis_image=sp["vis_image"],
+                        vis_point=sp["vis_point"])
+    report["time_s"] = round(time.perf_counter() - t0, 3)
+    _write_json(out_georef_json, report)
+    out = {"method": method, "scale": float(T.scale)}
+    if "camera_centre_error_m" in report:
+        out["camera_centre_error_mean_m"] = report["camera_centre_error_m"]["mean"]
+        out["camera_centre_error_shape_m"] = report["camera_centre_error_after_best_similarity_m"]["mean"]
+    return out
+
+
+# ----------------------------------------------------------------------------- roi
+
+def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_ply: Path, out_roi_json: Path) -> dict:
+    """Region of interest: a box around the camera positions, standing on a RANSAC ground plane."""
+    import numpy as np
+    from twinkit_pointcloud.meshio import read_ply
+
+    from .georef import ransac_plane
+
+    params = params or RoiParams()
+    cams = _read_json(in_cameras_site_json, "site-frame cameras")["cameras"]
+    C = np.array([c["center"] for c in cams], float)
+    pts = read_ply(in_sparse_site_ply).vertices
+    ground = {"z_m": float(np.median(C[:, 2]) - 1.6), "normal": [0.0, 0.0, 1.0], "source": "cameras - 1.6 m"}
+    if len(pts) >= 50:
+        near = pts[np.linalg.norm(pts[:, :2] - C[:, :2].mean(0), axis=1) < 3 * max(5.0, np.ptp(C[:, :2], 0).max())]
+        below = near[near[:, 2] < np.median(C[:, 2])]
+        plane, inl = ransac_plane(below if len(below) >= 30 else near, params.ground_threshold_m,
+                                  normal_hint=np.array([0, 0, 1.0]), max_angle_deg=20.0)
+        if plane is not None and inl.sum() >= 20:
+            nv, d = plane
+            cx, cy = C[:, :2].mean(0)
+            z0 = float(-(d + nv[0] * cx + nv[1] * cy) / nv[2])
+            ground = {"z_m": z0, "normal": nv.tolist(), "source": "RANSAC on the sparse points",
+                      "inliers": int(inl.sum()),
+                      "tilt_deg": float(np.degrees(np.arccos(min(1.0, abs(nv[2])))))}
+    lo = C[:, :2].min(0) - params.margin_m
+    hi = C[:, :2].max(0) + params.margin_m
+    zlo, zhi = ground["z_m"] - params.below_ground_m, ground["z_m"] + params.above_ground_m
+    if len(pts) >= 50:
+        # what the photos look at: the sparse points (within max_depth_m of a camera), 2nd-98th percentile
+        from scipy.spatial import cKDTree
+
+        seen = pts
+        if params.max_depth_m > 0:
+            dist, _ = cKDTree(C).query(pts)
+            seen = pts[dist <= params.max_depth_m]
+        if len(seen) >= 50:
+            q0, q1 = np.quantile(seen, [0.02, 0.98], axis=0)
+            lo, hi = np.minimum(lo, q0[:2]), np.maximum(hi, q1[:2])
+            zhi = max(zhi, float(q1[2]))
+    box = {"min": [float(lo[0]), float(lo[1]), zlo], "max": [float(hi[0]), float(hi[1]), zhi]}
+    inside = np.all((pts >= box["min"]) & (pts <= box["max"]), axis=1).mean() if len(pts) else 0.0
+    doc = {"_comment": "Edit this file to change what the dense step keeps (the thesis's manual step 3.8.2): "
+                       "box min/max in site metres, ground z, max_depth_m. The next run keeps your edit and "
+                       "re-runs only the steps after it.",
+           "box": box, "ground": ground, "max_depth_m": params.max_depth_m,
+           "cameras_xy_extent_m": np.ptp(C[:, :2], 0).tolist(), "sparse_inside_ratio": float(inside)}
+    _write_json(out_roi_json, doc)
+    ctx.log.info("roi: box %s .. %s, ground z %.2f m (%s)", np.round(box["min"], 1), np.round(box["max"], 1),
+                 ground["z_m"], ground["source"])
+    return {"ground_z_m": ground["z_m"], "sparse_inside_ratio": float(inside)}
+
+
+# ----------------------------------------------------------------------------- dense
+
+def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json: Path, in_sparse_site_ply: Path,
+          in_roi_json: Path, out_points_ply: Path, out_points_meta_json: Path) -> dict:
+    """Depth map per photo (plane sweep), fused to a coloured cloud with normals (what read_cloud writes)."""
+    import cv2
+    import numpy as np
+    from twinkit_pointcloud.meshio import read_ply
+
+    from . import dense as D
+
+    params = params or DenseParams()
+    backend = params.backend
+    if backend in ("auto", "patchmatch"):
+        import pycolmap
+
+        cuda = bool(getattr(pycolmap, "has_cuda", False))
+        if backend == "patchmatch" and not cuda:
+            raise InputError("dense.backend=patchmatch needs pycolmap built with CUDA (this one has none); "
+                             "use dense.backend=cpu")
+        if cuda:
+            ctx.log.warning("dense: pycolmap has CUDA, but the patch-match route is not wired yet; using the CPU "
+                            "plane sweep")
+        backend = "cpu"
+    if backend != "cpu":
+        raise InputError(f"dense: unknown backend '{params.backend}' (auto, cpu or patchmatch)")
+    t0 = time.perf_counter()
+    cv2.setNumThreads(_threads(ctx))
+    cams = _read_json(in_cameras_site_json, "site-frame cameras")["cameras"]
+    roi_doc = _read_json(in_roi_json, "region of interest")
+    try:
+        bmin = np.asarray(roi_doc["box"]["min"], float)
+        bmax = np.asarray(roi_doc["box"]["max"], float)
+        max_depth = float(roi_doc.get("max_depth_m", 0.0) or 0.0)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{in_roi_json}: needs box.min and box.max (3 numbers each) ({exc}); fix the file or "
+                         f"delete it to get the automatic one back") from None
+    if np.any(bmax <= bmin):
+        raise InputError(f"{in_roi_json}: box.max must exceed box.min on every axis")
+    sp = read_ply(in_sparse_site_ply).vertices
+    visz = np.load(Path(in_sparse_site_ply).with_suffix(".npz"))
+    vis: dict[str, list] = {}
+    for name, p in zip(visz["vis_image"].tolist(), visz["vis_point"].tolist()):
+        vis.setdefault(name, []).append(p)
+    vis_arr = {k: np.asarray(v, np.int64) for k, v in vis.items()}
+    opt = D.DenseOptions(max_image_px=params.max_image_px, planes=params.planes, neighbors=params.neighbors,
+                         window_px=params.window_px, min_ncc=params.min_ncc, min_consistent=params.min_consistent,
+                         rel_tol=params.rel_tol, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
+                         refine_passes=params.refine_passes, threads=_threads(ctx))
+    views = D.load_views(Path(in_photos_dir), cams, opt.max_image_px)
+    D.depth_ranges(views, sp, vis_arr, max_depth)
+    nb = D.choose_neighbors(views, vis_arr, opt)
+    t_sweep = time.perf_counter()
+    n_maps = 0
+    for i in ctx.progress(range(len(views)), total=len(views), desc="depth maps"):
+        v = views[i]
+        if not nb[i] or v.dmax <= v.dmin or v.dmin <= 0:
+            ctx.log.info("dense: %s has no usable neighbour; no depth map", v.name)
+            continue
+        v.depth, _ = D.plane_sweep(v, [views[j] for j in nb[i]], opt)
+        n_maps += 1
+    t_sweep = time.perf_counter() - t_sweep
+    if n_maps == 0:
+        raise InputError(f"{in_cameras_site_json}: no photo has a neighbour with a usable baseline "
+                         f"({opt.min_angle_deg}-{opt.max_angle_deg} degrees); take photos a step or two apart")
+    t_fuse = time.perf_counter()
+    xyz, rgb, nrm, src = D.fuse(views, opt)
+    n_fused = len(xyz)
+    keep = np.all((xyz >= bmin) & (xyz <= bmax), axis=1)
+    xyz, rgb, nrm = xyz[keep], rgb[keep], nrm[keep]
+    xyz, rgb, nrm = D.voxel_merge(xyz, rgb, nrm, params.voxel_m)
+    t_fuse = time.perf_counter() - t_fuse
+    if len(xyz) < 100:
+        raise InputError(f"{in_photos_dir}: dense matching kept only {len(xyz)} points inside the region of "
+                         f"interest; check roi.json (box) and the photos' overlap")
+    _write_cloud(out_points_ply, xyz, rgb, nrm, comments=["twinkit-photo dense (plane sweep + fusion)"])
+    lo, hi = xyz.min(0), xyz.max(0)
+    meta = {"source": {"file": Path(in_photos_dir).name, "format": "photos (dense stereo)", "fields": ["x", "y", "z",
+                                                                                                        "normals", "colors"]},
+            "counts": {"read": int(n_fused), "dropped_invalid": int(n_fused - keep.sum()), "written": int(len(xyz))},
+            "fields": {"normals": "depth maps", "normals_orientation": "towards the photo", "colors": True,
+                       "intensity": False, "classification": False, "scanner": False, "extra": []},
+            "frame": {"kind": "site", "note": "from the georeference step"},
+            "bounds_m": [lo.tolist(), hi.tolist()],
+            "dense": {"depth_maps": n_maps, "photos": len(views), "working_px": params.max_image_px,
+                      "neighbours": {views[i].name: [views[j].name for j in nb[i]] for i in nb},
+                      "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean())) for v in views}},
+            "time": {"seconds": round(time.perf_counter() - t0, 3), "depth_maps_s": round(t_sweep, 3),
+                     "fusion_s": round(t_fuse, 3)}}
+    _write_json(out_points_meta_json, meta)
+    ctx.log.info("dense: %d depth maps, %d fused points, %d after the region of interest and %.3f m voxels",
+                 n_maps, n_fused, len(xyz), params.voxel_m)
+    return {"points": int(len(xyz)), "depth_maps": n_maps, "fused": int(n_fused),
+            "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)}
+
+
+# ----------------------------------------------------------------------------- registration
+
+@hookimpl
+def twinkit_register_steps(register):
+    register("sfm", sfm, params=SfmParams)
+    register("georeference", georeference, params=GeorefParams)
+    register("roi", roi, params=RoiParams)
+    register("dense", dense, params=DenseParams)

@@ -1,0 +1,219 @@
+"""Structure from motion with pycolmap (CPU): SIFT features, matching, incremental or global mapping.
+
+Matching modes:
+  exhaustive  every pair (small sets, unordered photos)
+  sequential  each photo with its next ``overlap`` photos in file-name order (walked sequences)
+  spatial     each photo with its nearest neighbours by EXIF GPS (pose priors in the database)
+  auto        exhaustive up to ``exhaustive_max`` photos, otherwise sequential, plus spatial when
+              most photos have GPS.
+
+Walked forward-motion sequences (lund_street) defeat COLMAP's default initialisation (it asks for a
+16 degree triangulation angle between the first two views and rejects pure forward motion); when the
+first attempt registers too few photos, mapping is retried with a relaxed initialisation and the
+model that registers the most photos wins.
+"""
+from __future__ import annotations
+
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from twinkit import InputError
+
+
+@dataclass
+class SfmOptions:
+    matching: str = "auto"
+    exhaustive_max: int = 40
+    overlap: int = 10
+    spatial_neighbors: int = 12
+    mapper: str = "incremental"  # incremental | global
+    max_image_px: int = 1600
+    max_features: int = 8192
+    camera_model: str = "SIMPLE_RADIAL"
+    single_camera: bool = True
+    intrinsics: list | None = None  # 3x3 K to start from (pixels of the full-size image)
+    retry_below_ratio: float = 0.9
+    threads: int = 2
+    seed: int = 0
+
+
+@dataclass
+class SfmResult:
+    reconstruction: object  # pycolmap.Reconstruction
+    n_images: int
+    registered: list[str]
+    attempts: list[dict] = field(default_factory=list)
+    timings_s: dict = field(default_factory=dict)
+    matching: str = ""
+
+
+def _pairing_counts(db_path: Path) -> dict:
+    import sqlite3
+
+    con = sqlite3.connect(str(db_path))
+    try:
+        n_pairs = con.execute("select count(*) from two_view_geometries where rows > 0").fetchone()[0]
+        n_priors = 0
+        try:
+            n_priors = con.execute("select count(*) from pose_priors").fetchone()[0]
+        except sqlite3.Error:
+            pass
+    finally:
+        con.close()
+    return {"verified_pairs": int(n_pairs), "pose_priors": int(n_priors)}
+
+
+def _best_model(recs: dict):
+    if not recs:
+        return None
+    return max(recs.values(), key=lambda r: r.num_reg_images())
+
+
+def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, has_gps: bool, log) -> SfmResult:
+    import pycolmap
+
+    work = Path(work)
+    work.mkdir(parents=True, exist_ok=True)
+    db = work / "database.db"
+    if db.exists():
+        db.unlink()
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.num_threads = opt.threads
+    ext.max_image_size = int(opt.max_image_px) if opt.max_image_px > 0 else -1
+    ext.sift.max_num_features = int(opt.max_features)
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = opt.camera_model
+    if opt.intrinsics is not None:
+        K = np.asarray(opt.intrinsics, float)
+        f, cx, cy = 0.5 * (K[0, 0] + K[1, 1]), K[0, 2], K[1, 2]
+        params = {"SIMPLE_PINHOLE": [f, cx, cy], "PINHOLE": [K[0, 0], K[1, 1], cx, cy],
+                  "SIMPLE_RADIAL": [f, cx, cy, 0.0], "RADIAL": [f, cx, cy, 0.0, 0.0]}.get(opt.camera_model)
+        if params is None:
+            raise InputError(f"sfm: known intrinsics need camera_model SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL or "
+                             f"RADIAL, not {opt.camera_model}")
+        reader.camera_params = ",".join(f"{v:.6f}" for v in params)
+    mode = pycolmap.CameraMode.SINGLE if opt.single_camera else pycolmap.CameraMode.AUTO
+    pycolmap.extract_features(db, image_dir, image_names=list(names), camera_mode=mode, reader_options=reader,
+                              extraction_options=ext, device=pycolmap.Device.cpu)
+    timings["features"] = round(time.perf_counter() - t0, 3)
+
+    t0 = time.perf_counter()
+    n = len(names)
+    matching = opt.matching
+    if matching == "auto":
+        matching = "exhaustive" if n <= opt.exhaustive_max else "sequential"
+        if has_gps and matching == "sequential":
+            matching = "sequential+spatial"
+    mopt = pycolmap.FeatureMatchingOptions()
+    mopt.num_threads = opt.threads
+    for part in matching.split("+"):
+        if part == "exhaustive":
+            pycolmap.match_exhaustive(db, matching_options=mopt, device=pycolmap.Device.cpu)
+        elif part == "sequential":
+            po = pycolmap.SequentialPairingOptions()
+            po.overlap = int(opt.overlap)
+            po.quadratic_overlap = True
+            pycolmap.match_sequential(db, matching_options=mopt, pairing_options=po, device=pycolmap.Device.cpu)
+        elif part == "spatial":
+            if not has_gps:
+                raise InputError("sfm: matching=spatial needs EXIF GPS in the photos; none of them has it. "
+                                 "Use matching=sequential or exhaustive")
+            po = pycolmap.SpatialPairingOptions()
+            po.max_num_neighbors = int(opt.spatial_neighbors)
+            po.ignore_z = True
+            po.max_distance = 1000.0
+            pycolmap.match_spatial(db, matching_options=mopt, pairing_options=po, device=pycolmap.Device.cpu)
+        else:
+            raise InputError(f"sfm: unknown matching '{part}' (exhaustive, sequential, spatial, "
+                             f"sequential+spatial or auto)")
+    timings["matching"] = round(time.perf_counter() - t0, 3)
+    counts = _pairing_counts(db)
+    log.info("sfm: %d photos, matching %s: %d verified pairs", n, matching, counts["verified_pairs"])
+    if counts["verified_pairs"] == 0:
+        raise InputError(f"{image_dir}: no two photos share enough features to be matched; the photos must "
+                         f"overlap (take one every few steps, 60-80 % overlap)")
+
+    t0 = time.perf_counter()
+    attempts = []
+    best = None
+    plan = ["default", "relaxed_init"] + (["relaxed_init+gps_prior"] if has_gps and opt.mapper == "incremental" else [])
+    for attempt in plan:
+        out = work / f"sparse_{attempt}"
+        if out.exists():
+            shutil.rmtree(out)
+        out.mkdir()
+        if opt.mapper == "global":
+            gopt = pycolmap.GlobalPipelineOptions()
+            gopt.num_threads = opt.threads
+            recs = pycolmap.global_mapping(db, image_dir, out, options=gopt)
+        elif opt.mapper == "incremental":
+            popt = pycolmap.IncrementalPipelineOptions()
+            popt.num_threads = opt.threads
+            popt.random_seed = int(opt.seed)
+            popt.min_model_size = 3
+            if opt.intrinsics is not None:
+                popt.ba_refine_focal_length = False  # a known calibration stays fixed
+            if attempt.startswith("relaxed_init"):
+                # forward motion: accept a small initial triangulation angle and weaker image registrations
+                popt.mapper.init_min_tri_angle = 4.0
+                popt.mapper.init_max_forward_motion = 0.999
+                popt.mapper.init_min_num_inliers = 30
+                popt.mapper.abs_pose_min_num_inliers = 15
+                popt.mapper.abs_pose_min_inlier_ratio = 0.1
+                popt.mapper.filter_min_tri_angle = 0.5
+                popt.min_num_matches = 10
+                popt.init_num_trials = 400
+            if attempt.endswith("gps_prior"):
+                popt.use_prior_position = True  # EXIF GPS as position priors in bundle adjustment
+            recs = pycolmap.incremental_mapping(db, image_dir, out, options=popt)
+        else:
+            raise InputError(f"sfm: unknown mapper '{opt.mapper}' (incremental or global)")
+        rec = _best_model(recs)
+        k = rec.num_reg_images() if rec is not None else 0
+        attempts.append({"init": attempt, "models": len(recs), "registered": int(k)})
+        log.info("sfm: mapping (%s, %s init): %d models, best registers %d of %d photos",
+                 opt.mapper, attempt, len(recs), k, n)
+        if rec is not None and (best is None or k > best.num_reg_images()):
+            best = rec
+        if best is not None and best.num_reg_images() >= opt.retry_below_ratio * n:
+            break
+    timings["mapping"] = round(time.perf_counter() - t0, 3)
+    if best is None:
+        raise InputError(f"{image_dir}: structure from motion registered no photos ({counts['verified_pairs']} "
+                         f"matched pairs); take more overlapping photos or try sfm.matching=exhaustive")
+    registered = sorted(best.images[i].name for i in best.reg_image_ids())
+    return SfmResult(best, n, registered, attempts, timings, matching)
+
+
+def camera_table(rec) -> list[dict]:
+    """Per registered image: name, K, world-from-camera R and centre (model frame), OpenCV convention."""
+    rows = []
+    for iid in sorted(rec.reg_image_ids()):
+        im = rec.images[iid]
+        cam = rec.cameras[im.camera_id]
+        cfw = im.cam_from_world() if callable(getattr(im, "cam_from_world", None)) else im.cam_from_world
+        R_cw = np.asarray(cfw.rotation.matrix(), float)
+        t_cw = np.asarray(cfw.translation, float)
+        R_wc = R_cw.T
+        centre = -R_wc @ t_cw
+        K = np.asarray(cam.calibration_matrix(), float)
+        rows.append({"image": im.name, "camera_id": int(im.camera_id), "model": cam.model.name,
+                     "width": int(cam.width), "height": int(cam.height), "params": [float(v) for v in cam.params],
+                     "K": K.tolist(), "R_world_from_camera": R_wc.tolist(), "center": centre.tolist(),
+                     "num_points3D": int(im.num_points3D)})
+    return rows
+
+
+def sparse_points(rec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ids = list(rec.points3D.keys())
+    xyz = np.array([rec.points3D[i].xyz for i in ids], float).reshape(-1, 3)
+    rgb = np.array([rec.points3D[i].color for i in ids], np.uint8).reshape(-1, 3)
+    err = np.array([rec.points3D[i].error for i in ids], float)
+    return xyz, rgb, err
