@@ -24,7 +24,6 @@ import json
 import logging
 import os
 import shutil
-import sys
 import threading
 import time
 import traceback
@@ -35,6 +34,7 @@ from typing import Any, Callable
 from twinkit.context import StepContext
 from twinkit.errors import ConfigError, InputError, LockedError, ManualActionPending, StepError, TwinkitError
 from twinkit.hashing import HashCache, artefact_hash, list_files
+from twinkit.jsonio import write_json as write_json_atomic
 from twinkit.plugins import STEP_KINDS, Plugin, Registry
 from twinkit.signature import Port, Signature, parse_signature
 
@@ -444,22 +444,6 @@ class _PeakRSS:
 
 def _now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-
-
-def _json_default(o: Any):
-    if isinstance(o, Path):
-        return str(o)
-    if hasattr(o, "item"):
-        return o.item()
-    if hasattr(o, "tolist"):
-        return o.tolist()
-    return str(o)
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=_json_default) + "\n")
-    os.replace(tmp, path)
 
 
 def read_record(folder: Path) -> dict | None:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from twinkit import InputError, hookimpl
+from twinkit.jsonio import write_json
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -77,18 +78,6 @@ class DenseParams:
 
 # ----------------------------------------------------------------------------- helpers
 
-def _write_json(path: Path, obj: Any) -> None:
-    Path(path).write_text(json.dumps(obj, indent=2, sort_keys=True, default=_json_default))
-
-
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 def _threads(ctx) -> int:
@@ -209,7 +198,7 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
     np.savez_compressed(out / "sparse.npz", xyz=xyz, rgb=rgb, error=err, vis_image=np.array(vis_img),
                         vis_point=np.array(vis_pt, np.int64))
     gps = {i.name: [i.lat, i.lon, i.alt] for i in infos if i.has_gps}
-    _write_json(out / "cameras_model.json", {"frame": "SfM model frame (arbitrary scale and orientation)",
+    write_json(out / "cameras_model.json", {"frame": "SfM model frame (arbitrary scale and orientation)",
                                              "convention": "OpenCV camera, R_world_from_camera, center",
                                              "cameras": cams, "exif_gps": gps})
     _write_cloud(out / "sparse_model.ply", xyz, rgb, comments=["twinkit-photo sfm sparse points, model frame"])
@@ -225,7 +214,7 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
                     for cid, c in rec.cameras.items()],
         "timings_s": {**res.timings_s, "total": round(time.perf_counter() - t_all, 3)},
     }
-    _write_json(out_sfm_report_json, report)
+    write_json(out_sfm_report_json, report)
     ctx.log.info("sfm: registered %d / %d photos (%.1f %%), mean reprojection error %.3f px, %d sparse points",
                  n_reg, len(infos), 100 * ratio, reproj, len(xyz))
     return {"registered": n_reg, "photos": len(infos), "registered_ratio": round(ratio, 4),
@@ -356,7 +345,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
                                                                      "max": float(eb.max())}
             ctx.log.info("georeference (%s): camera centres %.3f m from the truth on average (max %.3f); "
                          "SfM shape alone %.3f m", method, e.mean(), e.max(), eb.mean())
-    _write_json(out_cameras_site_json, {
+    write_json(out_cameras_site_json, {
         "frame": "site local (metres, x east, y north, z up)" if method != "none" else "levelled model frame",
         "convention": "OpenCV pinhole: X_world = R_world_from_camera @ X_cam + center; K at full photo size",
         "cameras": cams_out})
@@ -364,7 +353,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     np.savez_compressed(Path(out_sparse_site_ply).with_suffix(".npz"), vis_image=sp["vis_image"],
                         vis_point=sp["vis_point"])
     report["time_s"] = round(time.perf_counter() - t0, 3)
-    _write_json(out_georef_json, report)
+    write_json(out_georef_json, report)
     out = {"method": method, "scale": float(T.scale)}
     if "camera_centre_error_m" in report:
         out["camera_centre_error_mean_m"] = report["camera_centre_error_m"]["mean"]
@@ -420,7 +409,7 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
                        "re-runs only the steps after it.",
            "box": box, "ground": ground, "max_depth_m": params.max_depth_m,
            "cameras_xy_extent_m": np.ptp(C[:, :2], 0).tolist(), "sparse_inside_ratio": float(inside)}
-    _write_json(out_roi_json, doc)
+    write_json(out_roi_json, doc)
     ctx.log.info("roi: box %s .. %s, ground z %.2f m (%s)", np.round(box["min"], 1), np.round(box["max"], 1),
                  ground["z_m"], ground["source"])
     return {"ground_z_m": ground["z_m"], "sparse_inside_ratio": float(inside)}
@@ -515,7 +504,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                       "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean())) for v in views}},
             "time": {"seconds": round(time.perf_counter() - t0, 3), "depth_maps_s": round(t_sweep, 3),
                      "fusion_s": round(t_fuse, 3)}}
-    _write_json(out_points_meta_json, meta)
+    write_json(out_points_meta_json, meta)
     ctx.log.info("dense: %d depth maps, %d fused points, %d after the region of interest and %.3f m voxels",
                  n_maps, n_fused, len(xyz), params.voxel_m)
     return {"points": int(len(xyz)), "depth_maps": n_maps, "fused": int(n_fused),

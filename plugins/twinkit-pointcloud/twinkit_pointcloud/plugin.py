@@ -2,12 +2,12 @@
 
 Heavy libraries are imported inside the step functions only.
 """
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from twinkit import hookimpl
+from twinkit.jsonio import write_json
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -93,18 +93,6 @@ class EvalParams:
 
 # ----------------------------------------------------------------------------- helpers
 
-def _write_json(path: Path, obj: Any) -> None:
-    Path(path).write_text(json.dumps(obj, indent=2, sort_keys=True, default=_json_default))
-
-
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 class _Outputs:
@@ -218,7 +206,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
             ctx.log.info("%s: %s", in_cloud.name, note)
         write_ply(out_points_ply, Mesh(vertices=pts, attrs=attrs, comments=comments))
         meta["time"] = {"seconds": round(meas_now(meas), 3)}
-        _write_json(out_points_meta_json, meta)
+        write_json(out_points_meta_json, meta)
     out = {"points": int(len(pts)), "normals": normals_source, "colors": raw.colors is not None,
            "shift_m": cloud.frame.shift, **meas.as_dict()}
     return out
@@ -302,7 +290,7 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                     title="clean mesh: vertex -> nearest point distance")
         rep["colormap_png"] = Path(out_clean_report_json).with_suffix(".png").name
         rep["time"] = {"seconds": round(meas_now(meas), 3)}
-        _write_json(out_clean_report_json, rep)
+        write_json(out_clean_report_json, rep)
     return {"vertices": mesh.n_vertices, "faces": mesh.n_faces,
             "dist_mean_m": rep["output"]["dist_to_cloud_m"]["mean"], **meas.as_dict()}
 
@@ -445,7 +433,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
         res["colormap_png"] = png.name
         res["colormap_max_m"] = vmax
         res["time"] = {"seconds": round(meas_now(meas), 3)}
-        _write_json(out_recon_metrics_json, res)
+        write_json(out_recon_metrics_json, res)
     return {"cloud_to_mesh_mean_m": res["cloud_to_mesh_m"]["mean"], "cloud_to_mesh_p95_m": res["cloud_to_mesh_m"]["p95"],
             "vertices": mesh.n_vertices, "faces": mesh.n_faces, **meas.as_dict()}
 
