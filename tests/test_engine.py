@@ -178,10 +178,16 @@ def test_fan_out_runs_items_in_parallel_and_caches_each(project):
     assert len(per_item) == 4
     for m in per_item:  # each item reports its worker's memory: before the item and at its peak
         assert 0 < m["start_rss_mb"] <= m["peak_rss_mb"] and m["duration_s"] >= 0
+        # two workers share the cores: each worker's OpenMP/BLAS pools are capped at cores / 2
+        assert m["omp_threads"] == str(max(1, (os.cpu_count() or 1) // 2))
     project.reset_counts()
     r = project.run("site=t", "recipe=fan", "steps.tiles.n=5", "executor.workers=2")
     assert r.rc == 0, r.text
     assert project.counts() == {"tiles": 1, "per_tile4": 1, "gather": 1}
+    r = project.run("site=t", "recipe=fan", "steps.tiles.n=7", "executor.workers=2", "executor.threads_per_worker=3")
+    assert r.rc == 0, r.text
+    per_item = json.loads((project.ws / "03_per_tile" / "step.json").read_text())["metrics"]["per_item"]
+    assert [m["omp_threads"] for m in per_item[5:]] == ["3", "3"]
 
 
 def test_multirun_computes_shared_upstream_once(project):

@@ -97,7 +97,7 @@ def per_tile(params, ctx, *, in_data_txt: Path, item: dict, out_tile_txt: Path) 
     _count(f"per_tile{item['i']}")
     v = int(Path(in_data_txt).read_text().splitlines()[0])
     out_tile_txt.write_text(f"{v + item['i']}\n{os.getpid()}\n")
-    return {"pid": os.getpid()}
+    return {"pid": os.getpid(), "omp_threads": os.environ.get("OMP_NUM_THREADS")}
 
 
 def gather(params, ctx, *, in_tile_txt: list, out_merged_txt: Path) -> None:

@@ -9,13 +9,14 @@ from twinkit import hookimpl
 @dataclass
 class LocalExecutorParams:
     workers: int = 2  # worker processes for fanned-out items (1 = run in the main process)
+    threads_per_worker: int = 0  # cap on each worker's native thread pools (OpenMP, BLAS); 0 = cores / workers
 
 
 def local_executor(params: LocalExecutorParams):
     """Run fanned-out items in local worker processes."""
     from twinkit.executors import LocalExecutor
 
-    return LocalExecutor(workers=params.workers)
+    return LocalExecutor(workers=params.workers, threads_per_worker=params.threads_per_worker)
 
 
 @hookimpl
