@@ -203,14 +203,13 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     return loops
 
 
-def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
-    """Fill every boundary loop of 3..``max_edges`` edges with a fan around a new centroid
-    vertex (attributes: mean of the loop). Returns (mesh, holes closed)."""
-    if max_edges < 3 or mesh.n_faces == 0:
-        return mesh, 0
-    loops = [lp for lp in boundary_loops(mesh.faces) if len(lp) <= max_edges]
+def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute_normals: bool = True) -> Mesh:
+    """Close each given boundary loop (vertex indices in boundary order): a triangle as one face,
+    longer loops with a fan around a new centroid vertex whose attributes are the loop's mean.
+    Face attributes of the new faces get ``face_fill`` (integers) or 0. Vertex normals, if any, are
+    recomputed from the faces unless ``recompute_normals`` is false (new vertices then get the mean)."""
     if not loops:
-        return mesh, 0
+        return mesh
     new_v, new_f, new_attrs = [], [], {k: [] for k in mesh.attrs}
     nv = mesh.n_vertices
     for lp in loops:
@@ -228,13 +227,26 @@ def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
     attrs = {}
     for k, a in mesh.attrs.items():
         attrs[k] = np.concatenate([a, np.asarray(new_attrs[k], dtype=a.dtype).reshape((-1,) + a.shape[1:])]) if new_v else a
-    faces = np.vstack([mesh.faces, np.asarray(new_f, np.int64)])
-    out = Mesh(vertices=verts, faces=faces, attrs=attrs, comments=list(mesh.comments))
-    if "normals" in out.attrs:
+    faces_new = np.asarray(new_f, np.int64)
+    face_attrs = {k: np.concatenate([a, np.full((len(faces_new),) + a.shape[1:],
+                                                face_fill if a.dtype.kind == "i" else 0, a.dtype)])
+                  for k, a in mesh.face_attrs.items()}
+    out = Mesh(vertices=verts, faces=np.vstack([mesh.faces, faces_new]), attrs=attrs, face_attrs=face_attrs,
+               comments=list(mesh.comments))
+    if recompute_normals and "normals" in out.attrs:
         from .meshio import vertex_normals
 
         out.attrs["normals"] = vertex_normals(out.vertices, out.faces)
-    return out, len(loops)
+    return out
+
+
+def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
+    """Fill every boundary loop of 3..``max_edges`` edges with a fan around a new centroid
+    vertex (attributes: mean of the loop). Returns (mesh, holes closed)."""
+    if max_edges < 3 or mesh.n_faces == 0:
+        return mesh, 0
+    loops = [lp for lp in boundary_loops(mesh.faces) if len(lp) <= max_edges]
+    return fan_fill(mesh, loops), len(loops)
 
 
 def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,

@@ -508,7 +508,7 @@ def close_seam_holes(mesh: Mesh, planes: list[tuple[int, float]], max_edges: int
     paired, e.g. in trees or at the corner where four tiles meet): each loop with at most
     ``max_edges`` edges and at least one edge on a seam plane gets a fan around its centroid.
     Face attribute ``tile`` of the new faces is -1. Returns (mesh, loops closed)."""
-    from twinkit_pointcloud.cleanup import boundary_loops
+    from twinkit_pointcloud.cleanup import boundary_loops, fan_fill
 
     if max_edges < 3 or mesh.n_faces == 0 or not planes:
         return mesh, 0
@@ -525,29 +525,7 @@ def close_seam_holes(mesh: Mesh, planes: list[tuple[int, float]], max_edges: int
             # a loop through a pinch vertex (figure-8) is filled as its simple loops, so that no edge
             # gets more than two faces
             loops.extend(sub for sub in _simple_loops(lp) if len(sub) >= 3)
-    if not loops:
-        return mesh, 0
-    new_v, new_f, new_attr = [], [], {k: [] for k in mesh.attrs}
-    nv = mesh.n_vertices
-    for lp in loops:
-        if len(lp) == 3:
-            new_f.append([lp[2], lp[1], lp[0]])
-            continue
-        c = nv + len(new_v)
-        new_v.append(X[lp].mean(axis=0))
-        for k, a in mesh.attrs.items():
-            val = a[lp].astype(np.float64).mean(axis=0)
-            new_attr[k].append(val.astype(a.dtype) if a.dtype.kind == "f" else np.rint(val).astype(a.dtype))
-        nb = np.roll(lp, -1)
-        new_f.extend(np.stack([nb, lp, np.full(len(lp), c)], axis=1).tolist())
-    F = np.asarray(new_f, np.int64)
-    attrs = {k: (np.concatenate([a, np.asarray(new_attr[k], a.dtype).reshape((-1,) + a.shape[1:])]) if new_v else a)
-             for k, a in mesh.attrs.items()}
-    fa = {k: np.concatenate([a, np.full((len(F),) + a.shape[1:], -1 if a.dtype.kind == "i" else 0, a.dtype)])
-          for k, a in mesh.face_attrs.items()}
-    out = Mesh(vertices=np.vstack([X] + ([np.asarray(new_v)] if new_v else [])), faces=np.vstack([mesh.faces, F]),
-               attrs=attrs, face_attrs=fa, comments=list(mesh.comments))
-    return out, len(loops)
+    return fan_fill(mesh, loops, face_fill=-1, recompute_normals=False), len(loops)
 
 
 def _simple_loops(lp: np.ndarray) -> list[np.ndarray]:
