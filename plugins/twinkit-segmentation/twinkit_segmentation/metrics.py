@@ -79,8 +79,8 @@ def segment_votes(segments: np.ndarray, vertex_votes: np.ndarray) -> np.ndarray:
                      for c in range(vertex_votes.shape[1])], axis=1)
 
 
-def decide(votes: np.ndarray, ignore_classes=(10,), class_weights=None, min_votes: float = 0.0):
-    """(labels uint8 with 255 where nothing voted, confidence = winner's share of the votes)."""
+def _weighted_votes(votes, ignore_classes=(10,), class_weights=None) -> np.ndarray:
+    """Votes as float64 with the ignored classes zeroed and the class weights applied."""
     v = np.asarray(votes, dtype=np.float64).copy()
     for c in ignore_classes or ():
         if 0 <= int(c) < v.shape[1]:
@@ -90,6 +90,12 @@ def decide(votes: np.ndarray, ignore_classes=(10,), class_weights=None, min_vote
         if len(w) != v.shape[1]:
             raise ValueError(f"class_weights needs {v.shape[1]} values (one per trainId), got {len(w)}")
         v *= w[None, :]
+    return v
+
+
+def decide(votes: np.ndarray, ignore_classes=(10,), class_weights=None, min_votes: float = 0.0):
+    """(labels uint8 with 255 where nothing voted, confidence = winner's share of the votes)."""
+    v = _weighted_votes(votes, ignore_classes, class_weights)
     total = v.sum(axis=1)
     lab = v.argmax(axis=1).astype(np.uint8)
     conf = np.where(total > 0, v.max(axis=1) / np.maximum(total, 1e-12), 0.0).astype(np.float32)
@@ -106,15 +112,7 @@ def blend_decide(segments: np.ndarray, vertex_votes: np.ndarray, segment_weight:
     segment's label unless its own votes clearly disagree, which repairs segments that
     straddle a class boundary (the over-segmentation's upper bound stops being a cap) while
     noisy, split vertex votes still follow the segment. Returns (labels, confidence)."""
-    v = np.asarray(vertex_votes, dtype=np.float64).copy()
-    for c in ignore_classes or ():
-        if 0 <= int(c) < v.shape[1]:
-            v[:, int(c)] = 0.0
-    if class_weights is not None and len(class_weights):
-        w = np.asarray(class_weights, dtype=np.float64)
-        if len(w) != v.shape[1]:
-            raise ValueError(f"class_weights needs {v.shape[1]} values (one per trainId), got {len(w)}")
-        v *= w[None, :]
+    v = _weighted_votes(vertex_votes, ignore_classes, class_weights)
     segments = np.asarray(segments, dtype=np.int64)
     sv = segment_votes(segments, v)
     s_total = sv.sum(axis=1)
