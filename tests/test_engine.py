@@ -188,6 +188,12 @@ def test_fan_out_runs_items_in_parallel_and_caches_each(project):
     assert r.rc == 0, r.text
     per_item = json.loads((project.ws / "03_per_tile" / "step.json").read_text())["metrics"]["per_item"]
     assert [m["omp_threads"] for m in per_item[5:]] == ["3", "3"]
+    # a fresh worker process per item: no item inherits another's memory
+    r = project.run("site=t", "recipe=fan", "steps.tiles.n=9", "executor.workers=2", "executor.max_items_per_worker=1",
+                    "rerun=[per_tile]")
+    assert r.rc == 0, r.text
+    pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(9)}
+    assert len(pids) == 9, pids
 
 
 def test_multirun_computes_shared_upstream_once(project):

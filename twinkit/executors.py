@@ -30,9 +30,10 @@ class LocalExecutor:
     25 s capped for the same four tiles.
     """
 
-    def __init__(self, workers: int = 2, threads_per_worker: int = 0):
+    def __init__(self, workers: int = 2, threads_per_worker: int = 0, max_items_per_worker: int = 0):
         self.workers = max(1, int(workers))
         self.threads_per_worker = int(threads_per_worker)
+        self.max_items_per_worker = max(0, int(max_items_per_worker))
 
     def _threads(self, n_workers: int) -> int:
         if self.threads_per_worker > 0:
@@ -45,6 +46,7 @@ class LocalExecutor:
                 yield fn(it)
             return
         n = min(self.workers, len(items))
+        extra = {"max_tasks_per_child": self.max_items_per_worker} if self.max_items_per_worker else {}
         with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"),
-                                 initializer=_limit_threads, initargs=(self._threads(n),)) as pool:
+                                 initializer=_limit_threads, initargs=(self._threads(n),), **extra) as pool:
             yield from pool.map(fn, items)

@@ -10,13 +10,15 @@ from twinkit import hookimpl
 class LocalExecutorParams:
     workers: int = 2  # worker processes for fanned-out items (1 = run in the main process)
     threads_per_worker: int = 0  # cap on each worker's native thread pools (OpenMP, BLAS); 0 = cores / workers
+    max_items_per_worker: int = 0  # > 0: a fresh worker process after this many items (bounds memory carried over)
 
 
 def local_executor(params: LocalExecutorParams):
     """Run fanned-out items in local worker processes."""
     from twinkit.executors import LocalExecutor
 
-    return LocalExecutor(workers=params.workers, threads_per_worker=params.threads_per_worker)
+    return LocalExecutor(workers=params.workers, threads_per_worker=params.threads_per_worker,
+                         max_items_per_worker=params.max_items_per_worker)
 
 
 @hookimpl

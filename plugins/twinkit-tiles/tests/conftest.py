@@ -51,3 +51,19 @@ class Project:
 @pytest.fixture
 def project(tmp_path, synth_cloud) -> Project:
     return Project(tmp_path, synth_cloud)
+
+
+HOLE = (5.0, -5.0, 1.2)  # an occlusion shadow inside one tile of the 2 x 2 grid
+
+
+@pytest.fixture(scope="session")
+def holed_cloud(tmp_path_factory) -> Path:
+    """The synthetic block with a disc of ground left unscanned (``HOLE``)."""
+    from twinkit_pointcloud.meshio import Mesh, write_ply
+
+    from twinkit_tiles.synthetic import street_block
+
+    P, N, C = street_block(size_m=20.0, spacing_m=0.1, ground_hole=HOLE)
+    path = tmp_path_factory.mktemp("holed") / "cloud.ply"
+    write_ply(path, Mesh(vertices=P, attrs={"normals": N, "colors": C}))
+    return path

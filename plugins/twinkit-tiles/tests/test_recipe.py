@@ -78,3 +78,41 @@ def test_bad_plan_parameters_fail_with_the_key(tmp_path, synth_cloud):
     r = p.run("recipe=tiled_site", "site=synth", *[c for c in COARSE if "voxel_m" not in c], "steps.plan_tiles.voxel_m=0")
     assert r.returncode == 2, r.stderr[-2000:]
     assert "voxel_m" in r.stderr
+
+
+def test_tiles_simplified_before_merge_stay_crack_free_and_ground_is_filled(tmp_path, holed_cloud):
+    """plan_tiles.target_faces shares a face budget between the tiles (each simplified after its cut,
+    borders kept), the zipper still closes every seam, and the merge fills the ground's occlusion
+    shadow over the whole site; with the fill off the shadow stays open."""
+    import numpy as np
+    from conftest import HOLE, Project
+    from twinkit_pointcloud.meshio import read_ply
+    from twinkit_pointcloud.surface import Surface
+
+    p = Project(tmp_path, holed_cloud)
+    args = ["recipe=tiled_site", "site=synth", "executor=local", "executor.workers=2", *COARSE,
+            "steps.plan_tiles.target_faces=24000"]
+    r = p.run(*args)
+    assert r.returncode == 0, r.stderr[-3000:]
+    ws = p.out / "synth"
+    plan = json.loads((ws / "02_plan_tiles" / "tiles.json").read_text())
+    targets = [it["target_faces"] for it in plan["items"]]
+    assert abs(sum(targets) - 24000) < 10 * len(targets)
+    per_item = _record(p, "03_reconstruct_tiles")["metrics"]["per_item"]
+    for it, t in zip(per_item, targets):
+        assert it["cut_faces"] > t, "the test needs tiles larger than their share"
+        assert it["faces"] <= 1.05 * t
+    seams = json.loads((ws / "04_merge_tiles" / "tile_seams.json").read_text())
+    assert seams["seam_boundary_edges_before"] > 0 and seams["seam_boundary_edges_after"] == 0
+    assert seams["ground_fill"]["filled_cells"] > 0
+    centre = np.array([[HOLE[0], HOLE[1], 0.15 * np.sin(HOLE[0] / 3) * np.cos(HOLE[1] / 4)]])
+
+    def gap_at_centre():
+        m = read_ply(ws / "04_merge_tiles" / "clean_mesh.ply")
+        return float(Surface(m.vertices, m.faces).distance(centre)[0])
+
+    assert gap_at_centre() < 0.05
+    r = p.run(*args, "steps.merge_tiles.fill_ground_cell_m=0")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert json.loads((ws / "04_merge_tiles" / "tile_seams.json").read_text())["ground_fill"] is None
+    assert gap_at_centre() > 0.3

@@ -26,6 +26,9 @@ class PlanTilesParams:
     memory_budget_gb: float = 4.0  # automatic tile size: predicted peak memory of one tile stays below this
     voxel_m: float = 0.03  # finest Poisson voxel of every tile (passed to reconstruct_tile in tiles.json)
     max_tiles: int = 256  # refuse a plan with more tiles than this
+    target_faces: int = 0  # > 0: each tile is simplified after its cut to its share of this many faces
+    #                        (shared by the points in its core; seam borders are kept), which bounds
+    #                        the memory of the merge and of the steps after it; 0 = full resolution
 
 
 @dataclass
@@ -35,6 +38,8 @@ class ReconstructTileParams:
     point_weight: float = 4.0
     samples_per_node: float = 1.5
     max_dist_m: float = 0.10  # trim vertices farther than this from every point of the tile ("bubbles")
+    gap_dist_m: float = 0.5  # ... but keep those up to this far on the points' tangent planes (clean_mesh's gap rule)
+    gap_plane_m: float = 0.02
     density_quantile: float = 0.0  # trim vertices below this quantile of Poisson density; 0 = off
     min_component_faces: int = 200  # drop smaller connected components (judged on the padded tile)
     max_hole_edges: int = 60  # close holes up to this many edges (before the cut, so no cap on a seam)
@@ -48,6 +53,8 @@ class MergeTilesParams:
     max_gap_m: float = 0.10  # borders farther apart than this are not stitched (counted as open)
     seam_tol_m: float = 0.001  # an edge within this of a seam plane counts as a seam edge in the statistics
     max_hole_edges: int = 120  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
+    fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on the merged mesh (clean_mesh's
+    fill_ground_max_gap_m: float = 8.0  # ground fill, over the whole site at once so it has no tile edges); 0 = off
 
 
 @dataclass
@@ -103,7 +110,10 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
                                 params.max_tiles)
         tiles = grid.tiles()
         out_tile_points_dir.mkdir(parents=True, exist_ok=True)
+        if params.target_faces < 0:
+            raise _input_error(f"plan_tiles: target_faces must be >= 0 (got {params.target_faces})")
         items = []
+        inf = float("inf")
         for t in ctx.progress(tiles, total=len(tiles), desc="plan_tiles"):
             sel = in_box(xy, t["padded"])
             n = int(sel.sum())
@@ -115,10 +125,17 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
             write_ply(out_tile_points_dir / name, chunk, xyz_dtype="f8")
             pxy = cloud.vertices[sel, :2]
             ext = pxy.max(axis=0) - pxy.min(axis=0)
-            items.append(t | {"chunk": name, "points": n, "voxel_m": params.voxel_m,
+            core = [-inf if c is None else c for c in t["core"][:2]] + [inf if c is None else c for c in t["core"][2:]]
+            items.append(t | {"chunk": name, "points": n, "core_points": int(in_box(xy, core).sum()),
+                              "voxel_m": params.voxel_m,
                               "predicted_mb": round(estimate_tile_mb(n, float(ext[0] * ext[1]), params.voxel_m), 1)})
+        if params.target_faces > 0:
+            total = max(1, sum(i["core_points"] for i in items))
+            for i in items:
+                i["target_faces"] = max(1000, int(round(params.target_faces * i["core_points"] / total)))
         plan = {"grid": why | {"x0": grid.x0, "y0": grid.y0, "x1": grid.x1, "y1": grid.y1,
-                               "overlap_m": grid.overlap_m, "voxel_m": params.voxel_m},
+                               "overlap_m": grid.overlap_m, "voxel_m": params.voxel_m,
+                               "target_faces": params.target_faces},
                 "items": items}
         Path(out_tiles_json).write_text(json.dumps(plan, indent=2))
     ctx.log.info("%d x %d tiles of %.1f m (overlap %.1f m), %d with points", grid.nx, grid.ny, why["tile_m"],
@@ -136,6 +153,7 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
     from twinkit_pointcloud.cleanup import CleanOptions, clean_mesh
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply, write_ply
+    from twinkit_pointcloud.simplify import simplify_mesh
 
     from .seams import cut_to_box, edge_counts
     from .tiling import exact_voxel_poisson
@@ -153,28 +171,35 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
                                                  point_weight=params.point_weight,
                                                  samples_per_node=params.samples_per_node, threads=threads)
         dense_faces = mesh.n_faces
-        opt = CleanOptions(max_dist_m=params.max_dist_m, density_quantile=params.density_quantile,
+        opt = CleanOptions(max_dist_m=params.max_dist_m, gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
+                           density_quantile=params.density_quantile,
                            min_component_faces=params.min_component_faces, max_hole_edges=params.max_hole_edges,
                            threads=threads)
         if mesh.n_faces:
             try:
-                mesh, _ = clean_mesh(mesh, pts, opt)
+                mesh, _ = clean_mesh(mesh, pts, opt, normals=cloud.normals)
             except Exception as exc:  # e.g. nothing within max_dist_m: an empty tile
                 ctx.log.warning("tile %d: clean-up left nothing (%s)", item["index"], exc)
                 mesh.faces = mesh.faces[:0]
         padded_faces = mesh.n_faces
         mesh = cut_to_box(mesh, item["core"]) if mesh.n_faces else mesh
+        cut_faces = mesh.n_faces
+        target = int(item.get("target_faces") or 0)
+        if target and mesh.n_faces > target:
+            # borders kept: the cut vertices stay exactly on the seam planes for the zipper
+            mesh, _ = simplify_mesh(mesh, target, method="quadric", preserve_border=True, threads=threads)
+            mesh.attrs.pop("dist_to_dense_m", None)
         mesh.comments = [f"twinkit-tiles tile {item['index']} depth {depth} voxel_m {item['voxel_m']}"]
         write_ply(out_tile_mesh_ply, mesh, xyz_dtype="f8")
     ec = edge_counts(mesh.faces) if mesh.n_faces else {}
     return {"tile": item["index"], "points": int(len(pts)), "depth": depth, "scale": round(scale, 4),
-            "dense_faces": int(dense_faces), "padded_clean_faces": int(padded_faces), "faces": mesh.n_faces,
+            "dense_faces": int(dense_faces), "padded_clean_faces": int(padded_faces), "cut_faces": int(cut_faces), "faces": mesh.n_faces,
             "boundary_edges": ec.get("boundary_edges", 0), "pid": os.getpid(),
             "tile_peak_rss_mb": round(meas.peak_rss_mb, 1), "tile_delta_peak_mb": round(meas.delta_peak_mb, 1),
             "seconds": round(meas.seconds, 3)}
 
 
-def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_mesh_ply: list,
+def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_mesh_ply: list, in_points_ply: Path,
                 out_clean_mesh_ply: Path, out_tile_seams_json: Path) -> dict:
     """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
     import numpy as np
@@ -216,8 +241,25 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         ends = seam_boundary_edges(merged, planes, params.seam_tol_m) - cracks
         # doubled surface: tile faces outside their own core (0 by construction of the cut)
         outside = faces_outside_core(merged, tiles_k)
-        after_total = edge_counts(merged.faces)
         merged.face_attrs = {}
+        ground = None
+        if params.fill_ground_cell_m > 0:
+            from twinkit_pointcloud.groundfill import GroundFillOptions, fill_ground_holes
+
+            try:
+                cloud = read_ply(in_points_ply)
+            except Exception as exc:
+                raise _input_error(f"{Path(in_points_ply).name}: cannot read the points ({exc}); re-run read_cloud") from exc
+            if cloud.normals is not None:
+                threads = max(1, int(getattr(ctx, "threads", 1) or 1))
+                merged, ground = fill_ground_holes(merged, cloud.vertices, cloud.normals, cloud.colors,
+                                                   GroundFillOptions(cell_m=params.fill_ground_cell_m,
+                                                                     max_gap_m=params.fill_ground_max_gap_m,
+                                                                     threads=threads))
+                ctx.log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled",
+                             ground.get("filled_cells", 0), ground.get("area_m2", 0.0))
+            del cloud
+        after_total = edge_counts(merged.faces)
         merged.comments = [f"twinkit-tiles merge of {len(keep)} tiles"]
         write_ply(out_clean_mesh_ply, merged)
         report = {
@@ -229,7 +271,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
             "boundary_edges_before": before_total["boundary_edges"], "boundary_edges_after": after_total["boundary_edges"],
             "stitched_faces": int((tile_attr < 0).sum()), "vertices": merged.n_vertices, "faces": merged.n_faces,
-            "seams": seams,
+            "ground_fill": ground, "seams": seams,
         }
         gaps = [s["gap_mean_mm"] for s in seams if s["gap_mean_mm"] is not None]
         report["gap_mean_mm"] = round(float(np.mean(gaps)), 3) if gaps else None

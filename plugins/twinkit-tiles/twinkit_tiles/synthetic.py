@@ -1,12 +1,14 @@
 """A small synthetic street block for tests: wavy ground, a box building, a pole and a low wall,
 sampled as points with outward normals (no holes under objects: the ground is only sampled
-outside them). Deterministic from ``seed``."""
+outside them). ``ground_hole=(x, y, r)`` leaves a disc of ground unsampled, like the occlusion
+shadow of a parked car. Deterministic from ``seed``."""
 from __future__ import annotations
 
 import numpy as np
 
 
-def street_block(size_m: float = 20.0, spacing_m: float = 0.08, seed: int = 0, noise_m: float = 0.002):
+def street_block(size_m: float = 20.0, spacing_m: float = 0.08, seed: int = 0, noise_m: float = 0.002,
+                 ground_hole: tuple | None = None):
     rng = np.random.default_rng(seed)
     h = size_m / 2
     pts, nrm = [], []
@@ -20,6 +22,10 @@ def street_block(size_m: float = 20.0, spacing_m: float = 0.08, seed: int = 0, n
     bx0, bx1, by0, by1, bh = -6.0, -1.0, 2.0, 7.5, 6.0  # building
     inside_b = (X > bx0) & (X < bx1) & (Y > by0) & (Y < by1)
     X, Y = X[~inside_b], Y[~inside_b]
+    if ground_hole is not None:
+        hx, hy, hr = ground_hole
+        keep = np.hypot(X - hx, Y - hy) > hr
+        X, Y = X[keep], Y[keep]
     Z = ground_z(X, Y)
     dzdx = 0.15 / 3.0 * np.cos(X / 3.0) * np.cos(Y / 4.0)
     dzdy = -0.15 / 4.0 * np.sin(X / 3.0) * np.sin(Y / 4.0)
