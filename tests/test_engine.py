@@ -194,6 +194,11 @@ def test_fan_out_runs_items_in_parallel_and_caches_each(project):
     assert r.rc == 0, r.text
     pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(9)}
     assert len(pids) == 9, pids
+    # items that carry a "cost" start costliest first (here in one process, so strictly in that order)
+    r = project.run("site=t", "recipe=fan", "steps.tiles.n=5", "steps.tiles.costs=true", "executor.workers=1")
+    assert r.rc == 0, r.text
+    started = [m["started"] for m in json.loads((project.ws / "03_per_tile" / "step.json").read_text())["metrics"]["per_item"]]
+    assert started == sorted(started, reverse=True), started
 
 
 def test_multirun_computes_shared_upstream_once(project):

@@ -551,6 +551,11 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
         return record
 
 
+def _item_cost(item: Any) -> float:
+    c = item.get("cost") if isinstance(item, dict) else None
+    return float(c) if isinstance(c, (int, float)) and not isinstance(c, bool) else 0.0
+
+
 def _run_item_task(task: dict) -> dict:
     """Executor entry point for one fan-out item (picklable, top level)."""
     try:
@@ -933,6 +938,9 @@ class Engine:
                                    key, 0.0, outputs, hashes, rec.get("metrics", {}))
         why = "forced by rerun" if forced else self._why(rec, desc)
         todo = [i for i, k in enumerate(keys) if forced or self._store_valid(k) is None]
+        # items that say what they cost ("cost": any number) start costliest first, so that a big
+        # item does not start last and leave the other workers idle (results are keyed, not ordered)
+        todo.sort(key=lambda i: -_item_cost(items[i]))
         tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
                       store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
                       item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path) for i in todo]

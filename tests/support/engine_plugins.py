@@ -84,12 +84,13 @@ def make_ply(params, ctx, *, out_mesh_ply: Path) -> None:
 @dataclass
 class TilesParams:
     n: int = 3
+    costs: bool = False  # give each item a "cost" (the last tile costs most)
 
 
 def tiles(params: TilesParams, ctx, *, in_data_txt: Path, out_tiles_json: Path) -> None:
     """List n tiles."""
     _count("tiles")
-    out_tiles_json.write_text(json.dumps([{"i": i} for i in range(params.n)]))
+    out_tiles_json.write_text(json.dumps([{"i": i} | ({"cost": i} if params.costs else {}) for i in range(params.n)]))
 
 
 def per_tile(params, ctx, *, in_data_txt: Path, item: dict, out_tile_txt: Path) -> dict:
@@ -97,7 +98,7 @@ def per_tile(params, ctx, *, in_data_txt: Path, item: dict, out_tile_txt: Path) 
     _count(f"per_tile{item['i']}")
     v = int(Path(in_data_txt).read_text().splitlines()[0])
     out_tile_txt.write_text(f"{v + item['i']}\n{os.getpid()}\n")
-    return {"pid": os.getpid(), "omp_threads": os.environ.get("OMP_NUM_THREADS")}
+    return {"pid": os.getpid(), "omp_threads": os.environ.get("OMP_NUM_THREADS"), "started": time.time()}
 
 
 def gather(params, ctx, *, in_tile_txt: list, out_merged_txt: Path) -> None:

@@ -126,9 +126,10 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
             pxy = cloud.vertices[sel, :2]
             ext = pxy.max(axis=0) - pxy.min(axis=0)
             core = [-inf if c is None else c for c in t["core"][:2]] + [inf if c is None else c for c in t["core"][2:]]
+            predicted = round(estimate_tile_mb(n, float(ext[0] * ext[1]), params.voxel_m), 1)
+            # "cost" makes the engine start the biggest tiles first (better balance between workers)
             items.append(t | {"chunk": name, "points": n, "core_points": int(in_box(xy, core).sum()),
-                              "voxel_m": params.voxel_m,
-                              "predicted_mb": round(estimate_tile_mb(n, float(ext[0] * ext[1]), params.voxel_m), 1)})
+                              "voxel_m": params.voxel_m, "predicted_mb": predicted, "cost": predicted})
         if params.target_faces > 0:
             total = max(1, sum(i["core_points"] for i in items))
             for i in items:
