@@ -154,3 +154,28 @@ def test_figure_eight_loops_are_split_into_simple_loops():
     parts = _simple_loops(np.array([1, 2, 3, 4, 2, 5, 6]))
     assert [p.tolist() for p in parts] == [[2, 3, 4], [1, 2, 5, 6]]
     assert [p.tolist() for p in _simple_loops(np.array([7, 8, 9]))] == [[7, 8, 9]]
+
+
+def test_open_seam_edges_are_told_apart_by_what_lies_across():
+    """An open edge on a seam faces either the other tile's surface (a real gap) or nothing (the
+    other tile trimmed that surface away, so the mesh simply ends on the seam)."""
+    from twinkit_tiles.seams import _concat, boundary_half_edges, classify_open_seam_edges
+
+    a = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2), 0, 2.0, "below")
+    b = cut_halfspace(grid_mesh(1, 4, 0, 3, 0.25), 0, 2.0, "above")
+    bc = b.vertices[b.faces].mean(axis=1)
+    from twinkit_tiles.seams import compact_mesh
+    b = compact_mesh(b, bc[:, 1] < 1.5)  # the neighbour has surface only for y < 1.5
+    a.face_attrs = {"tile": np.zeros(a.n_faces, np.int64)}
+    b.face_attrs = {"tile": np.ones(b.n_faces, np.int64)}
+    m = _concat(a, b)
+    planes = [(0, 2.0)]
+    total = seam_boundary_edges(m, planes, tile_faces_only=True)
+    k = classify_open_seam_edges(m, planes, reach_m=0.3)
+    assert k["facing_surface"] + k["surface_ends"] == total
+    he, _ = boundary_half_edges(m.faces)
+    X = m.vertices
+    on = (np.abs(X[he[:, 0], 0] - 2.0) < 1e-6) & (np.abs(X[he[:, 1], 0] - 2.0) < 1e-6)
+    y = X[he[on]].mean(axis=1)[:, 1]
+    assert k["surface_ends"] >= int((y > 1.8).sum()) > 0
+    assert k["facing_surface"] >= int((y < 1.2).sum()) > 0

@@ -207,8 +207,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply, write_ply
 
-    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, seam_boundary_edges,
-                        seam_planes)
+    from .seams import (_concat, classify_open_seam_edges, close_seam_holes, edge_counts, faces_outside_core,
+                        merge_grid, seam_boundary_edges, seam_planes)
 
     params = params or MergeTilesParams()
     plan = json.loads(Path(in_tiles_json).read_text())
@@ -240,6 +240,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         tile_attr = merged.face_attrs["tile"]
         cracks = seam_boundary_edges(merged, planes, params.seam_tol_m, tile_faces_only=True)
         ends = seam_boundary_edges(merged, planes, params.seam_tol_m) - cracks
+        kinds = classify_open_seam_edges(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
         # doubled surface: tile faces outside their own core (0 by construction of the cut)
         outside = faces_outside_core(merged, tiles_k)
         merged.face_attrs = {}
@@ -267,6 +268,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             "tiles": len(tiles), "tiles_with_faces": len(keep), "planes": [["xyz"[a], v] for a, v in planes],
             "seam_boundary_edges_before": before, "seam_boundary_edges_after_zipper": after_zipper,
             "seam_holes_closed": holes, "seam_boundary_edges_after": cracks,
+            "seam_open_facing_surface": kinds["facing_surface"], "seam_open_surface_ends": kinds["surface_ends"],
             "seam_border_crossings": ends, "faces_outside_core": outside,
             "non_manifold_edges": after_total["non_manifold_edges"],
             "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
@@ -281,7 +283,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     ctx.log.info("merged %d tiles: %d faces; seam boundary edges %d -> %d, %d stitch faces", len(keep),
                  merged.n_faces, before, cracks, report["stitched_faces"])
     return {k: report[k] for k in ("tiles", "faces", "vertices", "seam_boundary_edges_before",
-                                   "seam_boundary_edges_after", "seam_holes_closed", "seam_border_crossings", "faces_outside_core",
+                                   "seam_boundary_edges_after", "seam_open_facing_surface", "seam_open_surface_ends",
+                                   "seam_holes_closed", "seam_border_crossings", "faces_outside_core",
                                    "non_manifold_edges", "non_manifold_edges_in_tiles", "boundary_edges_before", "boundary_edges_after", "stitched_faces", "gap_mean_mm",
                                    "gap_max_mm")} | meas.as_dict()
 

@@ -476,6 +476,45 @@ def seam_boundary_edges(mesh: Mesh, planes: list[tuple[int, float]], tol_m: floa
     return int(hit.sum())
 
 
+def classify_open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float = 0.2,
+                             tol_m: float = 1e-3) -> dict:
+    """Split the open seam edges of tile faces (the cracks counted by ``seam_boundary_edges``) by what
+    lies across the plane: ``facing_surface`` when the mesh on the other side has a vertex within
+    ``reach_m`` of the edge (a real gap between two surfaces), ``surface_ends`` when it has none (the
+    neighbouring tile trimmed that surface away, so the mesh's own edge falls on the seam)."""
+    from scipy.spatial import cKDTree
+
+    out = {"facing_surface": 0, "surface_ends": 0, "reach_m": reach_m}
+    he, fid = boundary_half_edges(mesh.faces)
+    if len(he) == 0 or not planes:
+        return out
+    if "tile" in mesh.face_attrs:
+        keep = mesh.face_attrs["tile"][fid] >= 0
+        he, fid = he[keep], fid[keep]
+    X = mesh.vertices
+    cen = X[mesh.faces[fid]].mean(axis=1)
+    for axis, val in planes:
+        on = (np.abs(X[he[:, 0], axis] - val) <= tol_m) & (np.abs(X[he[:, 1], axis] - val) <= tol_m)
+        if not on.any():
+            continue
+        mid = X[he[on]].mean(axis=1)
+        side = np.sign(cen[on, axis] - val)  # the side of the plane the open edge's face is on
+        slab = np.abs(X[:, axis] - val) <= reach_m
+        for sgn in (-1.0, 1.0):
+            sel = side == sgn
+            if not sel.any():
+                continue
+            other = slab & ((X[:, axis] - val) * sgn < -tol_m)  # strictly across the plane
+            if not other.any():
+                out["surface_ends"] += int(sel.sum())
+                continue
+            d, _ = cKDTree(X[other]).query(mid[sel], distance_upper_bound=reach_m)
+            near = np.isfinite(d)
+            out["facing_surface"] += int(near.sum())
+            out["surface_ends"] += int((~near).sum())
+    return out
+
+
 def faces_outside_core(mesh: Mesh, tiles: list[dict], tol_m: float = 1e-5) -> int:
     """Doubled-surface check: tile faces whose centroid lies outside their own tile's core box."""
     if "tile" not in mesh.face_attrs:
