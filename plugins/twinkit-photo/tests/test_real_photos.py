@@ -42,7 +42,7 @@ def test_sceaux_registers_all_11(tmp_path):
 def test_lund_walk_registers_at_least_25_of_29(tmp_path):
     folder = shared_photos("lund_street")
     out = run_step(_sfm(), tmp_path / "run", {"in_photos_dir": folder},
-                   photo.SfmParams(max_features=2048, matching="exhaustive"))
+                   photo.SfmParams(max_features=4096, matching="exhaustive"))
     rep = json.loads(out["sfm_report.json"].read_text())
     assert rep["photos"] == 29 and rep["photos_with_gps"] == 29
     assert rep["registered"] >= 25, rep["attempts"]

@@ -33,6 +33,7 @@ class SfmParams:
     intrinsics: str = "auto"  # auto (K.txt beside the photos, else the site's cameras.json, else EXIF) | exif
     min_registered_ratio: float = 0.5  # fewer registered photos -> error
     seed: int = 0
+    deterministic: bool = True  # one thread for matching and mapping, so a re-run gives the same model (false: faster)
 
 
 @dataclass
@@ -167,7 +168,7 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
                      spatial_neighbors=params.spatial_neighbors, mapper=params.mapper,
                      max_image_px=params.max_image_px, max_features=params.max_features,
                      camera_model=params.camera_model, single_camera=params.single_camera, intrinsics=K,
-                     threads=_threads(ctx), seed=params.seed)
+                     threads=_threads(ctx), seed=params.seed, deterministic=params.deterministic)
     try:
         res = run_sfm(folder, [i.name for i in infos], work, opt, has_gps=n_gps >= max(3, len(infos) // 2),
                       log=ctx.log)
