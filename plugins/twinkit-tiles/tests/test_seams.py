@@ -98,7 +98,7 @@ def test_close_seam_holes_only_touches_seams():
     c = m.vertices[m.faces].mean(axis=1)
     hole1 = (c[:, 0] > 2.0) & (c[:, 0] < 2.3) & (np.abs(c[:, 1] - 2.0) < 0.3)  # one side on x = 2
     hole2 = (np.abs(c[:, 0] - 0.9) < 0.3) & (np.abs(c[:, 1] - 2.0) < 0.3)
-    from twinkit_tiles.seams import compact_mesh
+    from twinkit_pointcloud.meshio import compact as compact_mesh
 
     m = compact_mesh(m, ~(hole1 | hole2))
     m.face_attrs = {"tile": np.zeros(m.n_faces, np.int32)}
@@ -164,7 +164,7 @@ def test_open_seam_edges_are_told_apart_by_what_lies_across():
     a = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2), 0, 2.0, "below")
     b = cut_halfspace(grid_mesh(1, 4, 0, 3, 0.25), 0, 2.0, "above")
     bc = b.vertices[b.faces].mean(axis=1)
-    from twinkit_tiles.seams import compact_mesh
+    from twinkit_pointcloud.meshio import compact as compact_mesh
     b = compact_mesh(b, bc[:, 1] < 1.5)  # the neighbour has surface only for y < 1.5
     a.face_attrs = {"tile": np.zeros(a.n_faces, np.int64)}
     b.face_attrs = {"tile": np.ones(b.n_faces, np.int64)}

@@ -238,9 +238,10 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         after_zipper = seam_boundary_edges(merged, planes, params.seam_tol_m, tile_faces_only=True)
         merged, holes = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
         tile_attr = merged.face_attrs["tile"]
-        cracks = seam_boundary_edges(merged, planes, params.seam_tol_m, tile_faces_only=True)
-        ends = seam_boundary_edges(merged, planes, params.seam_tol_m) - cracks
+        # the cracks (open seam edges of tile faces), split by what lies across the plane
         kinds = classify_open_seam_edges(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
+        cracks = kinds["facing_surface"] + kinds["surface_ends"]
+        ends = seam_boundary_edges(merged, planes, params.seam_tol_m) - cracks
         # doubled surface: tile faces outside their own core (0 by construction of the cut)
         outside = faces_outside_core(merged, tiles_k)
         merged.face_attrs = {}

@@ -20,24 +20,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twinkit_pointcloud.meshio import Mesh
+from twinkit_pointcloud.meshio import Mesh, compact
 
 ON_PLANE_M = 1e-6  # a vertex this close to a cut plane is on it
 
 
 # ----------------------------------------------------------------------------- small helpers
-
-def compact_mesh(mesh: Mesh, keep_faces: np.ndarray | None = None) -> Mesh:
-    """Keep the selected faces (with their face attributes) and drop unreferenced vertices."""
-    faces = mesh.faces if keep_faces is None else mesh.faces[keep_faces]
-    fa = {k: (v if keep_faces is None else v[keep_faces]) for k, v in mesh.face_attrs.items()}
-    used = np.zeros(mesh.n_vertices, bool)
-    used[faces.ravel()] = True
-    remap = np.full(mesh.n_vertices, -1, np.int64)
-    remap[used] = np.arange(int(used.sum()))
-    return Mesh(vertices=mesh.vertices[used], faces=remap[faces], attrs={k: v[used] for k, v in mesh.attrs.items()},
-                face_attrs=fa, comments=list(mesh.comments))
-
 
 def _interp_attr(arr: np.ndarray, a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Attribute of points at parameter t on edges a->b: linear for floats/colours, nearest for labels."""
@@ -138,7 +126,7 @@ def cut_halfspace(mesh: Mesh, axis: int, value: float, keep: str) -> Mesh:
             keep_f = np.vstack([keep_f, np.asarray(tris, np.int64)])
             keep_fa = {k: np.concatenate([keep_fa[k], cfa[k][owner]]) for k in keep_fa}
     out = Mesh(vertices=v, faces=keep_f, attrs=attrs, face_attrs=keep_fa, comments=list(mesh.comments))
-    return compact_mesh(out)
+    return compact(out)
 
 
 def cut_to_box(mesh: Mesh, core: list) -> Mesh:
