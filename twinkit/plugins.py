@@ -13,6 +13,7 @@ import hashlib
 import importlib.metadata as md
 import inspect
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -67,11 +68,22 @@ class Plugin:
         return self.params() if self.params is not None else None
 
     def code_hash(self) -> str:
-        """sha256 of the source file that defines ``run`` (code changes re-run the step)."""
+        """sha256 of the plugin's source: every ``.py`` file of the top-level package that defines
+        ``run`` (a change in a helper module of the plugin re-runs its steps too), or the one
+        source file when ``run`` lives in a plain module."""
         try:
             src = Path(inspect.getsourcefile(self.run) or "")
-            return _file_digest(str(src), src.stat().st_mtime_ns)
-        except (OSError, TypeError):
+            top = sys.modules.get(getattr(self.run, "__module__", "").split(".")[0])
+            roots = list(getattr(top, "__path__", []) or [])
+            if not roots:
+                return _file_digest(str(src), src.stat().st_mtime_ns)
+            root = Path(roots[0])
+            h = hashlib.sha256()
+            for f in sorted(root.rglob("*.py")):
+                h.update(f.relative_to(root).as_posix().encode() + b"\0")
+                h.update(_file_digest(str(f), f.stat().st_mtime_ns).encode())
+            return h.hexdigest()[:16]
+        except (OSError, TypeError, ValueError):
             return "unknown"
 
 

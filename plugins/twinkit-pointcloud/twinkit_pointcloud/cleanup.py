@@ -41,6 +41,7 @@ class CleanOptions:
     fill_ground_cell_m: float = 0.0
     fill_ground_max_gap_m: float = 8.0
     threads: int = -1
+    loose_dist_m: float = 0.0  # vertices flagged by clean_mesh's ``loose`` mask are trimmed at this distance instead
 
 
 def vertex_cloud_distance(vertices: np.ndarray, points: np.ndarray, threads: int = -1, tree=None) -> np.ndarray:
@@ -250,10 +251,15 @@ def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
 
 
 def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
-               normals: np.ndarray | None = None, colors: np.ndarray | None = None) -> tuple[Mesh, dict]:
+               normals: np.ndarray | None = None, colors: np.ndarray | None = None,
+               loose=None) -> tuple[Mesh, dict]:
     """Run the whole clean-up; returns (clean mesh with ``dist_to_cloud_m``, report dict).
     ``normals`` (of the points) enable the gap rule of the distance trim (``opt.gap_dist_m``) and
-    the ground fill (``opt.fill_ground_cell_m``); ``colors`` colour the ground patches."""
+    the ground fill (``opt.fill_ground_cell_m``); ``colors`` colour the ground patches.
+    ``loose`` (a function of the vertices giving a bool mask, with ``opt.loose_dist_m`` > 0): the
+    vertices it flags are only trimmed beyond ``loose_dist_m`` (tiles keep the surface near their
+    seams loosely trimmed; the exact trim is done once on the merged mesh, so both sides of a
+    seam get the same decision)."""
     from scipy.spatial import cKDTree
 
     rep: dict = {"input": {"vertices": mesh.n_vertices, "faces": mesh.n_faces}}
@@ -266,6 +272,9 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
     rep["before_distance_trim"] = _dist_stats(d)
     if opt.max_dist_m > 0:
         drop = d > opt.max_dist_m
+        if loose is not None and opt.loose_dist_m > 0:
+            lm = np.asarray(loose(mesh.vertices), bool)
+            drop[lm] = d[lm] > opt.loose_dist_m
         kept_gap = 0
         if opt.gap_dist_m > opt.max_dist_m and normals is not None and drop.any():
             cand = np.flatnonzero(drop & (d <= opt.gap_dist_m))

@@ -179,3 +179,35 @@ def test_open_seam_edges_are_told_apart_by_what_lies_across():
     y = X[he[on]].mean(axis=1)[:, 1]
     assert k["surface_ends"] >= int((y > 1.8).sum()) > 0
     assert k["facing_surface"] >= int((y < 1.2).sum()) > 0
+
+
+def test_cut_moves_near_plane_vertices_onto_it_so_no_sliver_edge_stays_on_the_seam():
+    from twinkit_tiles.seams import ON_PLANE_M
+
+    m = grid_mesh(0, 2, 0, 2, 0.25)
+    m.vertices[m.vertices[:, 0] == 1.0, 0] = 1.0 + 2e-4  # a column of vertices 0.2 mm off the plane
+    assert ON_PLANE_M > 2e-4
+    lo = cut_halfspace(m, 0, 1.0, "below")
+    on = np.abs(lo.vertices[:, 0] - 1.0) <= 1e-12
+    assert on.sum() == 9  # the snapped column, no extra crossing vertex beside each of them
+    he, _ = boundary_half_edges(lo.faces)
+    L = np.linalg.norm(lo.vertices[he[:, 0]] - lo.vertices[he[:, 1]], axis=1)
+    assert L.min() > 0.1
+
+
+def test_seam_band_trim_applies_the_distance_rule_near_seams_only():
+    from twinkit_tiles.seams import trim_seam_bands
+
+    m = grid_mesh(-2, 2, 0, 2, 0.05, z=lambda x, y: 0 * x)
+    m.face_attrs = {"tile": np.where(m.vertices[m.faces].mean(axis=1)[:, 0] < 0, 0, 1).astype(np.int32)}
+    rng = np.random.default_rng(1)
+    P = np.c_[rng.uniform(-2, 2, 40000), rng.uniform(0, 1, 40000), np.zeros(40000)]  # points only for y < 1
+    N = np.tile([0.0, 0.0, 1.0], (len(P), 1))
+    out, rep = trim_seam_bands(m, [(0, 0.0)], P, N, band_m=0.5, max_dist_m=0.1, max_hole_edges=0,
+                               min_component_faces=0)
+    X = out.vertices
+    band = np.abs(X[:, 0]) <= 0.5
+    assert rep["vertices_trimmed"] > 0
+    assert X[band, 1].max() <= 1.1 + 1e-9  # trimmed near the seam ...
+    assert X[~band, 1].max() == pytest.approx(2.0)  # ... and nowhere else
+    assert X[band, 1].max() >= 1.0  # the surface near the points stays

@@ -44,6 +44,8 @@ class ReconstructTileParams:
     min_component_faces: int = 200  # drop smaller connected components (judged on the padded tile)
     max_hole_edges: int = 60  # close holes up to this many edges (before the cut, so no cap on a seam)
     threads: int = 1  # threads per tile (1 = parallelism comes from the workers); 0 = all the step may use
+    seam_band_m: float = 1.0  # within this of an interior seam the tile trims only loosely (seam_loose_dist_m);
+    seam_loose_dist_m: float = 1.0  # merge_tiles then applies the trim above once, to both sides; 0 = off
 
 
 @dataclass
@@ -176,9 +178,17 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
                            density_quantile=params.density_quantile,
                            min_component_faces=params.min_component_faces, max_hole_edges=params.max_hole_edges,
                            threads=threads)
+        loose = None
+        core = item["core"]
+        planes = [(a, float(core[k])) for k, a in ((0, 0), (1, 1), (2, 0), (3, 1)) if core[k] is not None]
+        if params.seam_band_m > 0 and params.seam_loose_dist_m > 0 and planes:
+            from .seams import near_planes
+
+            opt.loose_dist_m = max(params.seam_loose_dist_m, params.max_dist_m)
+            loose = lambda V: near_planes(V, planes, params.seam_band_m)  # noqa: E731
         if mesh.n_faces:
             try:
-                mesh, _ = clean_mesh(mesh, pts, opt, normals=cloud.normals)
+                mesh, _ = clean_mesh(mesh, pts, opt, normals=cloud.normals, loose=loose)
             except Exception as exc:  # e.g. nothing within max_dist_m: an empty tile
                 ctx.log.warning("tile %d: clean-up left nothing (%s)", item["index"], exc)
                 mesh.faces = mesh.faces[:0]
@@ -190,7 +200,12 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
             # borders kept: the cut vertices stay exactly on the seam planes for the zipper
             mesh, _ = simplify_mesh(mesh, target, method="quadric", preserve_border=True, threads=threads)
             mesh.attrs.pop("dist_to_dense_m", None)
-        mesh.comments = [f"twinkit-tiles tile {item['index']} depth {depth} voxel_m {item['voxel_m']}"]
+        band = params.seam_band_m if loose is not None else 0.0
+        mesh.comments = [f"twinkit-tiles tile {item['index']} depth {depth} voxel_m {item['voxel_m']}",
+                         # what merge_tiles needs to finish the trim near the seams the same way
+                         f"twinkit-tiles trim max_dist_m {params.max_dist_m} gap_dist_m {params.gap_dist_m} "
+                         f"gap_plane_m {params.gap_plane_m} seam_band_m {band} "
+                         f"min_component_faces {params.min_component_faces} max_hole_edges {params.max_hole_edges}"]
         write_ply(out_tile_mesh_ply, mesh, xyz_dtype="f8")
     ec = edge_counts(mesh.faces) if mesh.n_faces else {}
     return {"tile": item["index"], "points": int(len(pts)), "depth": depth, "scale": round(scale, 4),
@@ -208,7 +223,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     from twinkit_pointcloud.meshio import read_ply, write_ply
 
     from .seams import (_concat, classify_open_seam_edges, close_seam_holes, edge_counts, faces_outside_core,
-                        merge_grid, seam_boundary_edges, seam_planes)
+                        merge_grid, seam_boundary_edges, seam_planes, trim_seam_bands)
 
     params = params or MergeTilesParams()
     plan = json.loads(Path(in_tiles_json).read_text())
@@ -237,6 +252,21 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         merged, seams = merge_grid(tiles_k, meshes_k, params.max_gap_m, log=ctx.log)
         after_zipper = seam_boundary_edges(merged, planes, params.seam_tol_m, tile_faces_only=True)
         merged, holes = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
+        trim = _tile_trim(meshes_k[0].comments)
+        band_rep = None
+        cloud = None
+        if trim.get("seam_band_m", 0) > 0:
+            cloud = _read_points(in_points_ply)
+            threads = max(1, int(getattr(ctx, "threads", 1) or 1))
+            merged, band_rep = trim_seam_bands(
+                merged, planes, cloud.vertices, cloud.normals, trim["seam_band_m"], trim["max_dist_m"],
+                trim.get("gap_dist_m", 0.0), trim.get("gap_plane_m", 0.02), int(trim.get("min_component_faces", 200)),
+                int(trim.get("max_hole_edges", 60)), threads)
+            merged, holes2 = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
+            holes += holes2
+            ctx.log.info("seam bands (%.2f m): %d of %d vertices trimmed, %d small components removed, %d holes closed",
+                         band_rep["band_m"], band_rep["vertices_trimmed"], band_rep["vertices_in_band"],
+                         band_rep["components_removed"], band_rep["holes_closed"])
         tile_attr = merged.face_attrs["tile"]
         # the cracks (open seam edges of tile faces), split by what lies across the plane
         kinds = classify_open_seam_edges(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
@@ -249,10 +279,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         if params.fill_ground_cell_m > 0:
             from twinkit_pointcloud.groundfill import GroundFillOptions, fill_ground_holes
 
-            try:
-                cloud = read_ply(in_points_ply)
-            except Exception as exc:
-                raise _input_error(f"{Path(in_points_ply).name}: cannot read the points ({exc}); re-run read_cloud") from exc
+            if cloud is None:
+                cloud = _read_points(in_points_ply)
             if cloud.normals is not None:
                 threads = max(1, int(getattr(ctx, "threads", 1) or 1))
                 merged, ground = fill_ground_holes(merged, cloud.vertices, cloud.normals, cloud.colors,
@@ -275,7 +303,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
             "boundary_edges_before": before_total["boundary_edges"], "boundary_edges_after": after_total["boundary_edges"],
             "stitched_faces": int((tile_attr < 0).sum()), "vertices": merged.n_vertices, "faces": merged.n_faces,
-            "ground_fill": ground, "seams": seams,
+            "ground_fill": ground, "seam_band_trim": band_rep, "seams": seams,
         }
         gaps = [s["gap_mean_mm"] for s in seams if s["gap_mean_mm"] is not None]
         report["gap_mean_mm"] = round(float(np.mean(gaps)), 3) if gaps else None
@@ -288,6 +316,27 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                                    "seam_holes_closed", "seam_border_crossings", "faces_outside_core",
                                    "non_manifold_edges", "non_manifold_edges_in_tiles", "boundary_edges_before", "boundary_edges_after", "stitched_faces", "gap_mean_mm",
                                    "gap_max_mm")} | meas.as_dict()
+
+
+def _read_points(path: Path):
+    from twinkit_pointcloud.meshio import read_ply
+
+    try:
+        return read_ply(path)
+    except Exception as exc:
+        raise _input_error(f"{Path(path).name}: cannot read the points ({exc}); re-run read_cloud") from exc
+
+
+def _tile_trim(comments: list) -> dict:
+    """The trim parameters a tile mesh was made with (its ``twinkit-tiles trim ...`` comment); {} if absent."""
+    for c in comments or []:
+        if c.startswith("twinkit-tiles trim "):
+            w = c.split()[2:]
+            try:
+                return {w[i]: float(w[i + 1]) for i in range(0, len(w) - 1, 2)}
+            except ValueError:
+                return {}
+    return {}
 
 
 def dask_executor(params: DaskExecutorParams):

@@ -22,7 +22,7 @@ import numpy as np
 
 from twinkit_pointcloud.meshio import Mesh, compact
 
-ON_PLANE_M = 1e-6  # a vertex this close to a cut plane is on it
+ON_PLANE_M = 5e-4  # a vertex this close to a cut plane is moved onto it (no sliver edges along the seam)
 
 
 # ----------------------------------------------------------------------------- small helpers
@@ -572,3 +572,72 @@ def _simple_loops(lp: np.ndarray) -> list[np.ndarray]:
             stack.append(v)
     out.append(np.asarray(stack, np.int64))
     return out
+
+
+def near_planes(X: np.ndarray, planes: list[tuple[int, float]], band_m: float) -> np.ndarray:
+    """Bool mask of the rows of ``X`` within ``band_m`` of any of the planes."""
+    m = np.zeros(len(X), bool)
+    for axis, val in planes:
+        m |= np.abs(X[:, axis] - val) <= band_m
+    return m
+
+
+def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndarray, normals, band_m: float,
+                    max_dist_m: float, gap_dist_m: float = 0.0, gap_plane_m: float = 0.02,
+                    min_component_faces: int = 200, max_hole_edges: int = 60, threads: int = 1) -> tuple[Mesh, dict]:
+    """The distance trim of the clean-up (``max_dist_m``, and the gap rule when ``normals`` are given),
+    applied once to the merged mesh within ``band_m`` of the seams, where the tiles trimmed only
+    loosely: a surface that ends near a seam then ends at the same place on both sides, instead of
+    where each tile's own vertices happened to fall. Then the small components and holes that
+    touch the bands are removed / closed as the tiles did. Only the points near the bands are used."""
+    from scipy.spatial import cKDTree
+    from twinkit_pointcloud.cleanup import (boundary_loops, components, fan_fill, remove_vertices, two_sided,
+                                            vertex_cloud_distance, vertex_plane_distance)
+
+    rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "components_removed": 0, "holes_closed": 0}
+    X = mesh.vertices
+    inb = near_planes(X, planes, band_m)
+    if not inb.any() or mesh.n_faces == 0:
+        return mesh, rep
+    near = near_planes(points, planes, band_m + max(gap_dist_m, max_dist_m) + 0.05)
+    P = points[near]
+    N = normals[near] if normals is not None else None
+    if len(P) == 0:
+        return mesh, rep
+    tree = cKDTree(P)
+    idx = np.flatnonzero(inb)
+    d = vertex_cloud_distance(X[idx], P, threads, tree)
+    drop = d > max_dist_m
+    if gap_dist_m > max_dist_m and N is not None and drop.any():
+        cand = np.flatnonzero(drop & (d <= gap_dist_m))
+        pd = vertex_plane_distance(X[idx[cand]], P, N, k=8, max_dist_m=gap_dist_m, tree=tree, threads=threads,
+                                   min_normal_z=0.0)
+        on = cand[pd <= gap_plane_m]
+        on = on[two_sided(X[idx[on]], P, N, gap_dist_m, tree, threads)]
+        drop[on] = False
+    full = np.zeros(len(X), bool)
+    full[idx[drop]] = True
+    rep.update(vertices_in_band=int(len(idx)), vertices_trimmed=int(full.sum()))
+    mesh = remove_vertices(mesh, full)
+    # small components touching a band (pieces the trim cut off)
+    if min_component_faces > 0 and mesh.n_faces:
+        _, flab = components(mesh.n_vertices, mesh.faces)  # per-face component label
+        size = np.bincount(flab)
+        touch = np.zeros(len(size), bool)
+        touch[flab[near_planes(mesh.vertices, planes, band_m)[mesh.faces].any(axis=1)]] = True
+        small = touch & (size < min_component_faces)
+        if small.any():
+            from twinkit_pointcloud.meshio import compact
+
+            rep["components_removed"] = int(small.sum())
+            mesh = compact(mesh, ~small[flab])
+    if max_hole_edges >= 3 and mesh.n_faces:
+        inb = near_planes(mesh.vertices, planes, band_m)
+        loops = []
+        for lp in boundary_loops(mesh.faces):
+            if len(lp) <= max_hole_edges and inb[lp].any():
+                loops.extend(sub for sub in _simple_loops(lp) if len(sub) >= 3)
+        if loops:
+            mesh = fan_fill(mesh, loops, face_fill=-1, recompute_normals=False)
+        rep["holes_closed"] = len(loops)
+    return mesh, rep
