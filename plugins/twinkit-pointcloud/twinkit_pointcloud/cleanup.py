@@ -250,6 +250,24 @@ def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
     return fan_fill(mesh, loops), len(loops)
 
 
+def trim_mask(vertices: np.ndarray, d: np.ndarray, points: np.ndarray, normals, opt: CleanOptions,
+              tree) -> tuple[np.ndarray, int]:
+    """The distance trim's decision: which vertices go (``d``: their distance to the points, ``tree``
+    a cKDTree of ``points``). Farther than ``max_dist_m`` goes, unless the gap rule keeps it (up to
+    ``gap_dist_m`` away, on the points' tangent plane, with points on both sides). Returns the mask
+    and how many vertices the gap rule kept."""
+    drop = d > opt.max_dist_m
+    if not (opt.gap_dist_m > opt.max_dist_m and normals is not None and drop.any()):
+        return drop, 0
+    cand = np.flatnonzero(drop & (d <= opt.gap_dist_m))
+    pd = vertex_plane_distance(vertices[cand], points, normals, k=opt.gap_k, max_dist_m=opt.gap_dist_m,
+                               tree=tree, threads=opt.threads, min_normal_z=opt.gap_min_normal_z)
+    on_plane = cand[pd <= opt.gap_plane_m]
+    on_plane = on_plane[two_sided(vertices[on_plane], points, normals, opt.gap_dist_m, tree, opt.threads)]
+    drop[on_plane] = False
+    return drop, int(len(on_plane))
+
+
 def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
                normals: np.ndarray | None = None, colors: np.ndarray | None = None,
                loose=None) -> tuple[Mesh, dict]:
@@ -271,20 +289,10 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
     d = vertex_cloud_distance(mesh.vertices, points, opt.threads, tree)
     rep["before_distance_trim"] = _dist_stats(d)
     if opt.max_dist_m > 0:
-        drop = d > opt.max_dist_m
+        drop, kept_gap = trim_mask(mesh.vertices, d, points, normals, opt, tree)
         if loose is not None and opt.loose_dist_m > 0:
             lm = np.asarray(loose(mesh.vertices), bool)
             drop[lm] = d[lm] > opt.loose_dist_m
-        kept_gap = 0
-        if opt.gap_dist_m > opt.max_dist_m and normals is not None and drop.any():
-            cand = np.flatnonzero(drop & (d <= opt.gap_dist_m))
-            pd = vertex_plane_distance(mesh.vertices[cand], points, normals, k=opt.gap_k, max_dist_m=opt.gap_dist_m,
-                                       tree=tree, threads=opt.threads, min_normal_z=opt.gap_min_normal_z)
-            on_plane = cand[pd <= opt.gap_plane_m]
-            on_plane = on_plane[two_sided(mesh.vertices[on_plane], points, normals, opt.gap_dist_m, tree,
-                                          opt.threads)]
-            drop[on_plane] = False
-            kept_gap = int(len(on_plane))
         mesh = remove_vertices(mesh, drop)
         rep["distance_trim"] = {"max_dist_m": opt.max_dist_m, "gap_dist_m": opt.gap_dist_m,
                                 "gap_plane_m": opt.gap_plane_m, "kept_on_plane": kept_gap,

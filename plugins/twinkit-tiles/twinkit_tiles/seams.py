@@ -591,8 +591,8 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     where each tile's own vertices happened to fall. Then the small components and holes that
     touch the bands are removed / closed as the tiles did. Only the points near the bands are used."""
     from scipy.spatial import cKDTree
-    from twinkit_pointcloud.cleanup import (boundary_loops, components, fan_fill, remove_vertices, two_sided,
-                                            vertex_cloud_distance, vertex_plane_distance)
+    from twinkit_pointcloud.cleanup import (CleanOptions, boundary_loops, components, fan_fill, remove_vertices,
+                                            trim_mask, vertex_cloud_distance)
 
     rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "components_removed": 0, "holes_closed": 0}
     X = mesh.vertices
@@ -607,14 +607,8 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     tree = cKDTree(P)
     idx = np.flatnonzero(inb)
     d = vertex_cloud_distance(X[idx], P, threads, tree)
-    drop = d > max_dist_m
-    if gap_dist_m > max_dist_m and N is not None and drop.any():
-        cand = np.flatnonzero(drop & (d <= gap_dist_m))
-        pd = vertex_plane_distance(X[idx[cand]], P, N, k=8, max_dist_m=gap_dist_m, tree=tree, threads=threads,
-                                   min_normal_z=0.0)
-        on = cand[pd <= gap_plane_m]
-        on = on[two_sided(X[idx[on]], P, N, gap_dist_m, tree, threads)]
-        drop[on] = False
+    opt = CleanOptions(max_dist_m=max_dist_m, gap_dist_m=gap_dist_m, gap_plane_m=gap_plane_m, threads=threads)
+    drop, _ = trim_mask(X[idx], d, P, N, opt, tree)
     full = np.zeros(len(X), bool)
     full[idx[drop]] = True
     rep.update(vertices_in_band=int(len(idx)), vertices_trimmed=int(full.sum()))
