@@ -212,7 +212,8 @@ def test_glb_round_trip(glb_out, class_dir):
 
 
 def _gltf_validator() -> Path | None:
-    for base in (os.environ.get("TWINKIT_GLTF_VALIDATOR", ""), "/tmp/gv"):
+    repo = Path(__file__).resolve().parents[3]  # package.json installs it there (scripts/setup.sh: npm ci)
+    for base in (os.environ.get("TWINKIT_GLTF_VALIDATOR", ""), str(repo), "/tmp/gv"):
         if base and (Path(base) / "node_modules" / "gltf-validator").exists():
             return Path(base)
     return None
