@@ -9,7 +9,7 @@ import pytest
 from twinkit.testing import make_context
 
 OUTPUTS = ["gt_mesh.obj", "gt_mesh.ply", "cloud.e57", "cloud.las", "cloud.ply", "scanners.json", "photos",
-           "cameras.json", "roads.osm", "roads_truth.json", "site.json"]
+           "cameras.json", "gcp.json", "roads.osm", "roads_truth.json", "site.json"]
 SITE = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
 
 

@@ -312,7 +312,7 @@ def test_photos_exif_gps_reads_back(demo, site):
     folder = demo[0]
     cams = json.loads((folder / "cameras.json").read_text())
     assert "OpenCV" in cams["convention"] and "world-from-camera" in cams["convention"]
-    assert len(cams["cameras"]) == demo[1]["photos"] == 20
+    assert len(cams["cameras"]) == demo[1]["photos"] == 40
     errs = []
     for cam in cams["cameras"]:
         img = Image.open(folder / "photos" / cam["image"])
@@ -355,6 +355,72 @@ def test_camera_poses_and_label_renders(demo):
     c = np.array(centers)
     step = np.linalg.norm(np.diff(c[:, :2], axis=0), axis=1)
     assert step.max() < 5.0  # strong overlap: consecutive photos a few metres apart
+    # the heading sweeps smoothly (photogrammetric capture): consecutive views turn by less than the 64 degree
+    # field of view, except where the walk turns a street corner
+    fwd = np.array([np.array(cam["R_world_from_camera"])[:, 2] for cam in cams["cameras"]])
+    turn = np.degrees(np.arccos(np.clip((fwd[1:] * fwd[:-1]).sum(1), -1, 1)))
+    assert np.median(turn) < 35.0 and (turn < 60.0).mean() > 0.8
+
+
+def test_weathering_makes_repeated_texture_unique():
+    """Two points with the same atlas UV (one facade tile repeated) differ once weathered, and not without."""
+    from twinkit_demo_site.layout import build_scene
+    from twinkit_demo_site.raycast import Tracer
+    from twinkit_demo_site.textures import build_atlas
+    from twinkit_demo_site.weathering import weathering
+
+    atlas = build_atlas(0)
+    scene = build_scene(30.0, 0, atlas)
+    prim = np.zeros(2000, np.int64)  # the same face, the same barycentrics ...
+    bary = np.random.default_rng(1).uniform(0, 0.5, (2000, 2)).astype(np.float32)
+    pts_a = np.random.default_rng(2).uniform(-20, 20, (2000, 3)).astype(np.float32)
+    pts_b = pts_a + np.float32([3.7, 0.0, 0.0])  # ... seen at two places 3.7 m apart
+    plain = Tracer(scene.mesh, atlas, threads=1)
+    assert np.array_equal(plain.albedo(prim, bary, pts_a), plain.albedo(prim, bary, pts_b))
+    worn = Tracer(scene.mesh, atlas, threads=1, weathering=0.6, seed=0)
+    a, b = worn.albedo(prim, bary, pts_a), worn.albedo(prim, bary, pts_b)
+    assert np.abs(a - b).mean() > 0.02
+    assert np.allclose(a, worn.albedo(prim, bary, pts_a))  # deterministic
+    n = weathering(pts_a.astype(np.float64), 0)
+    assert 0.1 < n.std() < 0.3 and np.abs(n).max() <= 1.0
+    assert not np.allclose(n, weathering(pts_a.astype(np.float64), 1))  # the site seed changes it
+
+
+def test_gcp_file_is_consistent_with_photos_and_mesh(demo, gt):
+    """gcp.json: zebra corners that exist in the mesh, surveyed to mm, seen where the true cameras project them."""
+    folder = demo[0]
+    doc = json.loads((folder / "gcp.json").read_text())
+    cams = {c["image"]: c for c in json.loads((folder / "cameras.json").read_text())["cameras"]}
+    K = np.array(json.loads((folder / "cameras.json").read_text())["intrinsics"]["K"])
+    pts = doc["points"]
+    assert len(pts) == 16
+    xyz = np.array([p["site_xyz"] for p in pts])
+    # each GCP is a mesh vertex (a stripe corner) within survey noise
+    d = np.linalg.norm(gt["v"][None, :, :] - xyz[:, None, :], axis=2).min(1)
+    assert d.max() < 0.03
+    seen = [p for p in pts if len(p["observations"]) >= 2]
+    assert len(seen) >= 8
+    # triangulating each GCP from its pixels with the true poses lands on its surveyed position
+    errs = []
+    for p in seen:
+        A = []
+        for o in p["observations"]:
+            c = cams[o["image"]]
+            R, C = np.array(c["R_world_from_camera"]), np.array(c["center"])
+            P = K @ np.hstack([R.T, (-R.T @ C)[:, None]])
+            u, v = o["pixel"]
+            A += [u * P[2] - P[0], v * P[2] - P[1]]
+        X = np.linalg.svd(np.array(A))[2][-1]
+        errs.append(np.linalg.norm(X[:3] / X[3] - np.array(p["site_xyz"])))
+    assert np.median(errs) < 0.03
+    # and the photo shows a painted corner there: the 9x9 pixels around it hold both paint and asphalt
+    from PIL import Image
+
+    o = seen[0]["observations"][0]
+    img = np.asarray(Image.open(folder / "photos" / o["image"]).convert("L"), float)
+    u, v = (int(round(x - 0.5)) for x in o["pixel"])
+    patch = img[v - 4:v + 5, u - 4:u + 5]
+    assert patch.max() - patch.min() > 40
 
 
 def test_site_json_georeference(site):

@@ -81,6 +81,7 @@ class Scene:
     osm: dict = field(default_factory=dict)  # nodes/ways in the true site frame
     scan_passes: list[np.ndarray] = field(default_factory=list)  # (k, 2) polylines driven by the scanner car
     walk_path: np.ndarray | None = None  # (k, 2) polyline walked for photos
+    gcp_points: list[dict] = field(default_factory=list)  # {"id", "xyz", "what"}: natural ground-control points
     pedestrian: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
 
@@ -403,6 +404,21 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
         while x + 0.5 <= rs - 0.2:
             R(("marking", x, x + 0.5, *sorted((sy * zy0, sy * zy1))))
             x += 1.0
+    # natural ground-control points: the outer corners of each zebra's first and last stripe (road level),
+    # the kind of painted corner a surveyor measures and a user clicks in the photos
+    gcps = []
+    for sx in (-1, 1):
+        ys = [-rm + 0.25 + k for k in range(int((2 * rm - 0.45 - 0.5) // 1.0) + 1)]
+        for yy in (ys[0], ys[-1] + 0.5):
+            for xx in (zx0, zx1):
+                gcps.append(((sx * xx, yy), f"{'east' if sx > 0 else 'west'} zebra corner"))
+    for sy in (-1, 1):
+        xs_ = [-rs + 0.25 + k for k in range(int((2 * rs - 0.45 - 0.5) // 1.0) + 1)]
+        for xx in (xs_[0], xs_[-1] + 0.5):
+            for yy in (zy0, zy1):
+                gcps.append(((xx, sy * yy), f"{'north' if sy > 0 else 'south'} zebra corner"))
+    gcp_points = [{"id": f"Z{k + 1:02d}", "xyz": [float(x), float(y), 0.0], "what": w}
+                  for k, ((x, y), w) in enumerate(gcps)]
     # stop lines (traffic towards the junction)
     sl_x = zx1 + 1.0
     R(("marking", sl_x, sl_x + 0.3, 0.0, d.main_traffic))            # east arm, westbound
@@ -655,6 +671,7 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
     zx = (zx0 + zx1) / 2
     loop = [(zx, -swm), (zx, swm), (-sws, zym), (-zx, swm), (-zx, -swm), (sws, -zym), (zx, -swm)]
     scene.walk_path = np.array(loop, float)
+    scene.gcp_points = gcp_points
     # bigger presets: out and back along every main-road sidewalk (crossing the main road on the zebras)
     ys_ = -rm - 0.85  # south sidewalk, clear of the street trees and lamps
     scene.walk_extra = np.array([

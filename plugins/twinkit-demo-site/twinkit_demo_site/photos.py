@@ -16,21 +16,23 @@ SENSOR_WIDTH_MM = 6.4
 def walk_poses(path: np.ndarray, count: int, rng: np.random.Generator) -> list[dict]:
     """``count`` camera poses spread evenly along the polyline ``path`` (k, 2).
 
-    Heights 1.45-1.95 m, headings along the walk turned by up to +-40 degrees
-    (cycled, plus jitter), pitch -10..+4 degrees.
+    Heights 1.45-1.95 m. The heading sweeps smoothly from 40 degrees left of the walking direction to
+    40 degrees right and back (a period of eight photos, plus 3 degrees of jitter), as a photographer
+    capturing a street for photogrammetry would, so that each photo overlaps its neighbours; pitch
+    -10..+4 degrees.
     """
     seg = np.diff(path, axis=0)
     lens = np.linalg.norm(seg, axis=1)
     cum = np.concatenate([[0], np.cumsum(lens)])
     total = cum[-1]
-    offsets = np.radians([0.0, -35.0, 30.0, 0.0, 40.0, -20.0])
     poses = []
     for i in range(count):
         d = (i + 0.5) * total / count
         k = int(np.clip(np.searchsorted(cum, d, side="right") - 1, 0, len(seg) - 1))
         xy = path[k] + seg[k] * (d - cum[k]) / lens[k]
         xy = xy + rng.normal(0, 0.15, 2)
-        heading = math.atan2(seg[k, 1], seg[k, 0]) + offsets[i % len(offsets)] + rng.normal(0, math.radians(4))
+        sweep = math.radians(40.0) * math.sin(2 * math.pi * i / 8.0)
+        heading = math.atan2(seg[k, 1], seg[k, 0]) + sweep + rng.normal(0, math.radians(3))
         pitch = math.radians(rng.uniform(-10.0, 4.0))
         h = rng.uniform(1.45, 1.95)
         poses.append({"xy": xy, "height": h, "yaw": heading, "pitch": pitch})
@@ -132,4 +134,48 @@ def render_photos(tracer: Tracer, poses: list[dict], out_dir: Path, geo, rng: np
         "gps_noise_sigma_m": {"horizontal": gps_noise_m, "vertical": gps_noise_m * 1.6},
         "label_images": "PNG, uint8 CityScapes trainId per pixel, 255 = sky/nothing; image paths are relative to the photos folder",
         "cameras": cams,
+    }
+
+
+def gcp_observations(tracer: Tracer, cameras: dict, points: list[dict], rng: np.random.Generator, *,
+                     survey_noise_m: float = 0.005, pixel_noise_px: float = 0.5, margin_px: float = 8.0) -> dict:
+    """Ground-control points as a surveyor and a user would deliver them, in twinkit's GCP format.
+
+    ``site_xyz`` is the surveyed position (the true point plus ``survey_noise_m`` of noise, as RTK GNSS or
+    a total station gives); each observation is the pixel where the point appears in a photo that sees
+    it (projection with the photo's true pose, unoccluded by a ray cast, ``pixel_noise_px`` of clicking
+    noise). Pixels are continuous image coordinates: (0, 0) is the top-left corner of the top-left pixel,
+    so the centre of pixel (i, j) is (i + 0.5, j + 0.5), as in COLMAP.
+    """
+    intr = cameras["intrinsics"]
+    K = np.asarray(intr["K"], float)
+    w, h = intr["width"], intr["height"]
+    out = []
+    for g in points:
+        X = np.asarray(g["xyz"], float)
+        obs = []
+        for cam in cameras["cameras"]:
+            R = np.asarray(cam["R_world_from_camera"], float)
+            c = np.asarray(cam["center"], float)
+            xc = R.T @ (X - c)
+            if xc[2] < 0.5:
+                continue
+            uv = (K @ xc)[:2] / xc[2]
+            if not (margin_px <= uv[0] <= w - margin_px and margin_px <= uv[1] <= h - margin_px):
+                continue
+            d = X - c
+            dist = float(np.linalg.norm(d))
+            t, _, _ = tracer.cast(c[None].astype(np.float32), (d / dist)[None].astype(np.float32))
+            if not np.isfinite(t[0]) or t[0] < dist - 0.02:
+                continue  # something stands in front of it
+            px = uv + rng.normal(0, pixel_noise_px, 2)
+            obs.append({"image": cam["image"], "pixel": [round(float(px[0]), 3), round(float(px[1]), 3)]})
+        surveyed = X + rng.normal(0, survey_noise_m, 3)
+        out.append({"id": g["id"], "what": g.get("what", ""), "site_xyz": surveyed.round(4).tolist(),
+                    "observations": obs})
+    return {
+        "format": "twinkit ground-control points (docs/photo.md): site_xyz in the site frame (metres); "
+                  "pixel = continuous image coordinates, pixel (i, j) spans [i, i + 1) x [j, j + 1)",
+        "survey_noise_sigma_m": survey_noise_m, "pixel_noise_sigma_px": pixel_noise_px,
+        "points": out,
     }

@@ -13,7 +13,7 @@ from twinkit import StepContext, hookimpl
 
 #: size presets: site half size, scanner sampling (profile spacing, rays per profile), photo count
 PRESETS = {
-    "small": {"half_m": 30.0, "profile_spacing_m": 0.18, "rays_per_profile": 330, "photos": 20},
+    "small": {"half_m": 30.0, "profile_spacing_m": 0.18, "rays_per_profile": 330, "photos": 40},
     "default": {"half_m": 30.0, "profile_spacing_m": 0.045, "rays_per_profile": 1320, "photos": 80},
     "large": {"half_m": 75.0, "profile_spacing_m": 0.03, "rays_per_profile": 2200, "photos": 200},
 }
@@ -36,6 +36,9 @@ class DemoSiteParams:
     osm_shift_m: float = 3.5  # length of the known OSM translation
     osm_rotation_deg: float = 0.8  # magnitude of the known OSM rotation about the base point
     shadows: bool = True
+    weathering: float = 0.6  # world-space albedo variation (stains, wear) so no two places look alike; 0 = off
+    gcp_survey_noise_m: float = 0.005  # noise of the surveyed ground-control points (gcp.json)
+    gcp_pixel_noise_px: float = 0.5  # noise of their pixel observations (a user clicking them)
 
 
 def _osm_transform(params: DemoSiteParams, seed: int) -> dict:
@@ -66,6 +69,7 @@ def apply_osm_transform(xy, tf: dict, inverse: bool = False):
 def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                        out_gt_mesh_obj: Path, out_gt_mesh_ply: Path, out_cloud_e57: Path, out_cloud_las: Path,
                        out_cloud_ply: Path, out_scanners_json: Path, out_photos_dir: Path, out_cameras_json: Path,
+                       out_gcp_json: Path,
                        out_roads_osm: Path, out_roads_truth_json: Path, out_site_json: Path) -> dict:
     """Write a procedural four-way intersection with exact ground truth."""
     import numpy as np
@@ -73,7 +77,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     from twinkit_demo_site import writers
     from twinkit_demo_site.geo import GeoRef
     from twinkit_demo_site.layout import LABELS, build_scene
-    from twinkit_demo_site.photos import render_photos, walk_poses
+    from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
     from twinkit_demo_site.raycast import Tracer
     from twinkit_demo_site.scanner import ScanSettings, scan, trajectory
     from twinkit_demo_site.textures import build_atlas
@@ -104,7 +108,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     writers.write_mesh_ply(out_gt_mesh_ply, mesh, atlas)
     lap("mesh_files")
 
-    tracer = Tracer(mesh, atlas, threads=ctx.threads)
+    tracer = Tracer(mesh, atlas, threads=ctx.threads, weathering=params.weathering, seed=seed)
     dens = math.sqrt(max(params.density_scale, 1e-3))
     settings = ScanSettings(profile_spacing_m=pre["profile_spacing_m"] / dens,
                             rays_per_profile=int(round(pre["rays_per_profile"] * dens)),
@@ -139,6 +143,9 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                          gps_noise_m=params.gps_noise_m, supersample=params.photo_supersample,
                          shadows=params.shadows, progress=ctx.progress)
     writers.write_json(out_cameras_json, cams)
+    writers.write_json(out_gcp_json, gcp_observations(
+        tracer, cams, scene.gcp_points, np.random.default_rng([seed, 8]),
+        survey_noise_m=params.gcp_survey_noise_m, pixel_noise_px=params.gcp_pixel_noise_px))
     lap("photos")
 
     tf = _osm_transform(params, seed)
@@ -166,7 +173,8 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
         "label_names": {str(v): k for k, v in sorted(LABELS.items(), key=lambda kv: kv[1])},
         "solids": [{"min": np.round(s["min"], 4), "max": np.round(s["max"], 4)} for s in scene.solids],
         "files": {"gt_mesh": "gt_mesh.obj (+ .mtl, .png) and gt_mesh.ply", "cloud": "cloud.e57, cloud.las, cloud.ply",
-                  "photos": "photos/ (+ photos/labels/)", "cameras": "cameras.json", "roads": "roads.osm, roads_truth.json"},
+                  "photos": "photos/ (+ photos/labels/)", "cameras": "cameras.json",
+                  "gcp": "gcp.json (zebra-corner ground-control points with their pixels in the photos)", "roads": "roads.osm, roads_truth.json"},
         "params": {k: getattr(params, k) for k in params.__dataclass_fields__},
     }
     writers.write_json(out_site_json, site)

@@ -10,6 +10,7 @@ import numpy as np
 
 from twinkit_demo_site.meshbuild import Mesh
 from twinkit_demo_site.textures import Atlas
+from twinkit_demo_site.weathering import apply_weathering
 
 SUN_DIR = np.array([-0.45, -0.55, 0.70])
 SUN_DIR = SUN_DIR / np.linalg.norm(SUN_DIR)
@@ -17,8 +18,12 @@ SKY_ID = 255
 
 
 class Tracer:
-    def __init__(self, mesh: Mesh, atlas: Atlas, threads: int | None = None):
+    def __init__(self, mesh: Mesh, atlas: Atlas, threads: int | None = None, weathering: float = 0.0,
+                 seed: int = 0):
         import open3d as o3d
+
+        self.weathering = float(weathering)
+        self.seed = int(seed)
 
         self.o3d = o3d
         self.mesh = mesh
@@ -49,12 +54,16 @@ class Tracer:
         ans = self.scene.compute_closest_points(self.o3d.core.Tensor(points.astype(np.float32)))
         return ans["primitive_ids"].numpy().astype(np.int64)
 
-    def albedo(self, prim: np.ndarray, bary: np.ndarray) -> np.ndarray:
-        """Texture colour (n, 3) float32 in [0, 1] at hits."""
+    def albedo(self, prim: np.ndarray, bary: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """Surface colour (n, 3) float32 in [0, 1] at hits: the texture, times the world-space
+        weathering at ``points`` (n, 3) when the tracer has some (see :mod:`weathering`)."""
         uv3 = self.face_uv[prim]
         b = bary.astype(np.float32)
         uv = uv3[:, 0] * (1 - b[:, :1] - b[:, 1:]) + uv3[:, 1] * b[:, :1] + uv3[:, 2] * b[:, 1:]
-        return self._sample(uv)
+        col = self._sample(uv)
+        if points is not None and self.weathering > 0:
+            col = apply_weathering(col, points, self.weathering, self.seed)
+        return col
 
     def _sample(self, uv: np.ndarray) -> np.ndarray:
         img = self.atlas_f
@@ -134,7 +143,7 @@ class Tracer:
                 dh = dw[hi]
                 p = rays[hi, :3] + dh * t[hi, None]
                 nrm = self.facing_normals(ph, dh)
-                col[hi] = self.shade(p, nrm, self.albedo(ph, ans["primitive_uvs"].numpy()[hi]), shadows=shadows)
+                col[hi] = self.shade(p, nrm, self.albedo(ph, ans["primitive_uvs"].numpy()[hi], p), shadows=shadows)
             rgb_acc += col
             if k == 0:
                 label = np.full(n, SKY_ID, np.uint8)

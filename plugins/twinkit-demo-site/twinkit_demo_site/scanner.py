@@ -162,7 +162,7 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
         lab = np.empty(len(sel), np.uint8)
         nrm[ps] = tracer.facing_normals(prim_s, dirs[sel][ps].astype(np.float32))
         exact = (org[sel][ps] + dirs[sel][ps] * t[sel][ps, None]).astype(np.float32)
-        alb = tracer.albedo(prim_s, bary[sel][ps])
+        alb = tracer.albedo(prim_s, bary[sel][ps], exact)
         col[ps] = tracer.shade(exact, nrm[ps], alb, shadows=s.shadows)
         lab[ps] = tracer.face_labels[prim_s]
         # ghost part

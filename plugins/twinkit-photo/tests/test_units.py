@@ -9,7 +9,7 @@ from PIL import Image
 
 from twinkit import InputError
 from twinkit_photo import dense as D
-from twinkit_photo.georef import Transform, level, rotation_between, triangulate, umeyama
+from twinkit_photo.georef import Transform, level, robust_umeyama, rotation_between, triangulate, umeyama
 from twinkit_photo.images import list_images, read_info
 
 
@@ -83,6 +83,23 @@ def test_umeyama_recovers_similarity():
     assert est.scale == pytest.approx(2.5, rel=1e-9)
     np.testing.assert_allclose(est.R, T.R, atol=1e-9)
     np.testing.assert_allclose(est.apply(src), T.apply(src), atol=1e-9)
+
+
+def test_robust_umeyama_leaves_out_a_misclicked_gcp():
+    rng = np.random.default_rng(3)
+    T = Transform(1.7, rotation_between([0, 0, 1.0], [0.3, -0.2, 0.9]), np.array([4.0, -1.0, 2.0]))
+    src = rng.uniform(-10, 10, (10, 3))
+    dst = T.apply(src) + rng.normal(0, 0.005, (10, 3))
+    dst[4] += [0.4, 0.0, 0.0]  # one point clicked on the wrong corner
+    plain = umeyama(src, dst)
+    est, keep = robust_umeyama(src, dst, outlier_m=0.05)
+    assert keep.sum() == 9 and not keep[4]
+    err_plain = np.abs(plain.apply(src[keep]) - dst[keep]).max()
+    err_robust = np.abs(est.apply(src[keep]) - dst[keep]).max()
+    assert err_robust < 0.02 < err_plain
+    # clean data: nothing is left out
+    _, keep2 = robust_umeyama(src, T.apply(src), outlier_m=0.05)
+    assert keep2.all()
 
 
 def test_level_finds_up_from_ground_and_cameras():

@@ -40,6 +40,7 @@ class DenseOptions:
     up: tuple = (0.0, 0.0, 1.0)  # world up (the site frame's z)
     coarse_scale: float = 0.25  # resolution of the coarse sweep (0.5 = half: 4x faster, less reliable)
     threads: int = 2
+    average_depths: bool = True  # fuse: average each point's depth with the depth maps that agree
 
 
 @dataclass
@@ -364,6 +365,7 @@ def fuse(views: list[View], opt: DenseOptions, progress=None):
         nrm = depth_normals(v, pts, d)
         P = pts[valid]
         cnt = np.zeros(len(P), np.int32)
+        ratio_sum = np.ones(len(P), np.float64)  # this view's own depth counts once (ratio 1)
         for j, o in enumerate(views):
             if j == i or o.depth is None:
                 continue
@@ -382,7 +384,12 @@ def fuse(views: list[View], opt: DenseOptions, progress=None):
             dz[inside] = o.depth[vv[inside], u[inside]]
             ok = inside & (dz > 0) & (np.abs(dz - z) < opt.rel_tol * z)
             cnt += ok
+            ratio_sum[ok] += dz[ok] / z[ok]
         keep = cnt >= opt.min_consistent
+        if opt.average_depths:
+            # average the agreeing depth maps: the other view's depth over the predicted one is, for the
+            # small baselines of neighbouring photos, the same ratio along this view's ray; noise falls ~1/sqrt(n)
+            P = v.C + (P - v.C) * (ratio_sum / (cnt + 1))[:, None]
         n = nrm[valid][keep]
         good = np.isfinite(n).all(1)
         out_xyz.append(P[keep][good])

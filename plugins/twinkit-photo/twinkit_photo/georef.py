@@ -62,6 +62,24 @@ def umeyama(src, dst, with_scale: bool = True) -> Transform:
     return Transform(s, R, md - s * R @ ms)
 
 
+def robust_umeyama(src, dst, outlier_m: float, min_keep: int = 3) -> tuple[Transform, np.ndarray]:
+    """Umeyama similarity that drops, one at a time, the worst correspondence while its residual exceeds
+    ``max(outlier_m, 3 x the median residual)`` and more than ``min_keep`` remain (a ground-control point
+    triangulated from two grazing views, or one clicked on the wrong corner). Returns the transform and
+    the mask of the points kept."""
+    src, dst = np.asarray(src, float), np.asarray(dst, float)
+    keep = np.ones(len(src), bool)
+    T = umeyama(src, dst)
+    while keep.sum() > min_keep:
+        res = np.linalg.norm(T.apply(src) - dst, axis=1)
+        worst = int(np.argmax(np.where(keep, res, -1.0)))
+        if res[worst] <= max(outlier_m, 3.0 * float(np.median(res[keep]))):
+            break
+        keep[worst] = False
+        T = umeyama(src[keep], dst[keep])
+    return T, keep
+
+
 def rotation_between(a, b) -> np.ndarray:
     a = np.asarray(a, float) / np.linalg.norm(a)
     b = np.asarray(b, float) / np.linalg.norm(b)

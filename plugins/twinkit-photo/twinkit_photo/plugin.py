@@ -47,6 +47,7 @@ class GeorefParams:
     ground_z_m: float = 0.0
     scale: float = 1.0  # method none: metres per model unit
     min_gcp_views: int = 2
+    gcp_outlier_m: float = 0.05  # a GCP whose residual exceeds this (and 3x the median) is left out of the fit
 
 
 @dataclass
@@ -70,11 +71,22 @@ class DenseParams:
     neighbors: int = 4
     window_px: int = 7
     min_ncc: float = 0.55
-    min_consistent: int = 1  # other depth maps that must agree
-    rel_tol: float = 0.01  # agreement: |depth difference| < rel_tol * depth
+    min_consistent: int = 2  # other depth maps that must agree
+    rel_tol: float = 0.003  # agreement: |depth difference| < rel_tol * depth
+    average_depths: bool = True  # a kept point's depth is the mean of the depth maps that agree with it
     voxel_m: float = 0.02  # merge duplicate points per voxel (0 = off)
     coarse_scale: float = 0.25
     refine_passes: int = 2
+
+
+@dataclass
+class PhotoTextureParams:
+    """Texture from the photos (project and blend the best views per texel)."""
+
+    max_views: int = 3  # photos blended per face (the best ones)
+    sharpness: float = 4.0  # blend weight = score ** sharpness (score = cos(view angle) / distance)
+    min_cos: float = 0.15  # ignore views more grazing than about 81 degrees
+    max_dist_m: float = 40.0  # ignore views farther than this
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -231,7 +243,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     """Level the model, then map it into the site frame from GCPs, EXIF GPS or (without either) as is."""
     import numpy as np
 
-    from .georef import Transform, level, read_gcp_file, triangulate, umeyama
+    from .georef import Transform, level, read_gcp_file, robust_umeyama, triangulate, umeyama
 
     params = params or GeorefParams()
     t0 = time.perf_counter()
@@ -273,10 +285,17 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
                              f">= {params.min_gcp_views} registered photos with a known position; need 3")
         src = np.array([r[1] for r in gcp_rows])
         dst = np.array([r[2] for r in gcp_rows])
-        T = umeyama(src, dst)
+        T, keep = robust_umeyama(src, dst, params.gcp_outlier_m)
         res = np.linalg.norm(T.apply(src) - dst, axis=1)
-        info["gcp"] = {"used": len(gcp_rows), "residual_m": {r[0]: float(e) for r, e in zip(gcp_rows, res)},
-                       "rmse_m": float(np.sqrt(np.mean(res ** 2)))}
+        left_out = [r[0] for r, k in zip(gcp_rows, keep) if not k]
+        if left_out:
+            ctx.log.warning("georeference: %d of %d ground-control points left out of the fit (residual over "
+                            "%.3f m and 3x the median): %s; check their positions and clicks",
+                            len(left_out), len(gcp_rows), params.gcp_outlier_m, ", ".join(left_out))
+        info["gcp"] = {"used": int(keep.sum()), "left_out": left_out,
+                       "residual_m": {r[0]: float(e) for r, e in zip(gcp_rows, res)},
+                       "views": {r[0]: int(r[3]) for r in gcp_rows},
+                       "rmse_m": float(np.sqrt(np.mean(res[keep] ** 2)))}
     elif method == "gps":
         from twinkit_roads.similarity import fit_similarity
 
@@ -463,7 +482,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
     vis_arr = {k: np.asarray(v, np.int64) for k, v in vis.items()}
     opt = D.DenseOptions(max_image_px=params.max_image_px, planes=params.planes, neighbors=params.neighbors,
                          window_px=params.window_px, min_ncc=params.min_ncc, min_consistent=params.min_consistent,
-                         rel_tol=params.rel_tol, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
+                         rel_tol=params.rel_tol, average_depths=params.average_depths, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
                          refine_passes=params.refine_passes, threads=_threads(ctx))
     views = D.load_views(Path(in_photos_dir), cams, opt.max_image_px)
     D.depth_ranges(views, sp, vis_arr, max_depth)
@@ -512,6 +531,65 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
             "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)}
 
 
+# ----------------------------------------------------------------------------- texture from the photos
+
+def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path, in_photos_dir: Path,
+                  in_cameras_site_json: Path, out_textured_mesh_obj: Path, out_textured_mesh_ply: Path) -> dict:
+    """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel."""
+    import numpy as np
+    from PIL import Image
+    from twinkit_pointcloud.meshio import read_ply as read_mesh_ply, write_ply
+    from twinkit_pointcloud.texture import write_obj, write_png
+
+    from .projtex import PhotoView, project_texture
+
+    params = params or PhotoTextureParams()
+    t0 = time.perf_counter()
+    src = Path(in_textured_mesh_ply)
+    try:
+        mesh = read_mesh_ply(src)
+    except Exception as exc:  # noqa: BLE001 - any parse error is the file's fault
+        raise InputError(f"{src}: cannot read the textured mesh ({exc}); re-run the texture step") from None
+    tc = mesh.face_attrs.get("texcoord")
+    png_name = next((c.split(None, 1)[1] for c in mesh.comments if c.startswith("TextureFile")), src.stem + ".png")
+    png = src.parent / png_name
+    if tc is None or mesh.faces is None or not png.exists():
+        raise InputError(f"{src}: needs per-face texture coordinates and its texture image ({png.name}) beside it; "
+                         f"give it the output of bake_texture")
+    uv = np.asarray(tc, np.float64).reshape(-1, 3, 2)
+    base = np.asarray(Image.open(png).convert("RGB"))
+    doc = _read_json(in_cameras_site_json, "site-frame cameras")
+    views = []
+    for c in doc["cameras"]:
+        path = Path(in_photos_dir) / c["image"]
+        try:
+            img = np.asarray(Image.open(path).convert("RGB"))
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read the photo ({exc}); re-export or remove it") from None
+        K = np.asarray(c["K"], float)
+        if img.shape[1] != int(c["width"]) or img.shape[0] != int(c["height"]):
+            sx, sy = img.shape[1] / float(c["width"]), img.shape[0] / float(c["height"])
+            K = np.diag([sx, sy, 1.0]) @ K
+        views.append(PhotoView(c["image"], K, np.asarray(c["R_world_from_camera"], float),
+                               np.asarray(c["center"], float), img))
+    if not views:
+        raise InputError(f"{in_cameras_site_json}: no cameras")
+    img, info = project_texture(mesh.vertices, mesh.faces, uv, base, views, max_views=params.max_views,
+                                min_cos=params.min_cos, max_dist_m=params.max_dist_m, sharpness=params.sharpness,
+                                threads=_threads(ctx), progress=ctx.progress)
+    out_obj = Path(out_textured_mesh_obj)
+    out_png = out_obj.with_suffix(".png")
+    write_png(out_png, img)
+    write_obj(out_obj, mesh.vertices, mesh.faces, uv, out_png.name, normals=mesh.attrs.get("normals"))
+    mesh.comments = [f"TextureFile {out_png.name}"]
+    write_ply(out_textured_mesh_ply, mesh)
+    info["seconds"] = round(time.perf_counter() - t0, 3)
+    ctx.log.info("photo texture: %.1f %% of the texels from %d photos (%.1f %% of the faces seen), %.1f s",
+                 100 * info["texels_from_photos_ratio"], len(views), 100 * info["faces_seen_ratio"], info["seconds"])
+    info.pop("best_view_faces", None)
+    return info
+
+
 # ----------------------------------------------------------------------------- registration
 
 @hookimpl
@@ -520,3 +598,4 @@ def twinkit_register_steps(register):
     register("georeference", georeference, params=GeorefParams)
     register("roi", roi, params=RoiParams)
     register("dense", dense, params=DenseParams)
+    register("photo_texture", photo_texture, params=PhotoTextureParams)

@@ -1,0 +1,66 @@
+"""Weathering: a world-space albedo variation that makes every square metre of the site unique.
+
+The atlas tiles repeat (a facade shows one tile per floor and bay, a road one asphalt tile per few
+metres), which no real street does: grime, stains, repairs and wear differ everywhere. Without that,
+photos of the demo site match look-alike windows of different bays and buildings, and structure from
+motion builds a consistent but wrong model. This layer multiplies the albedo by ``1 + amount * n(p)``
+where ``n`` is fractal value noise evaluated at the 3-D surface point ``p`` (site frame, metres), so
+the scanner's colours and the photos see the same, non-repeating surface.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: octaves: (wavelength m, weight). Coarse stains down to 2 cm grain (a photo pixel at 10 m is 1.2 cm).
+OCTAVES = ((1.6, 0.30), (0.55, 0.28), (0.19, 0.22), (0.07, 0.13), (0.025, 0.07))
+
+_P1, _P2, _P3 = np.uint64(0x9E3779B185EBCA87), np.uint64(0xC2B2AE3D27D4EB4F), np.uint64(0x165667B19E3779F9)
+
+
+def _hash01(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, salt: int) -> np.ndarray:
+    """Deterministic lattice hash -> float32 in [-1, 1)."""
+    h = ix.astype(np.uint64) * _P1 ^ iy.astype(np.uint64) * _P2 ^ iz.astype(np.uint64) * _P3 ^ np.uint64(salt)
+    h ^= h >> np.uint64(29)
+    h *= np.uint64(0xBF58476D1CE4E5B9)
+    h ^= h >> np.uint64(32)
+    return ((h >> np.uint64(40)).astype(np.float32) * np.float32(1.0 / (1 << 23))) - np.float32(1.0)
+
+
+def value_noise(points: np.ndarray, wavelength: float, salt: int) -> np.ndarray:
+    """Trilinear value noise (smoothstep weights) at ``points`` (n, 3) -> (n,) float32 in [-1, 1]."""
+    q = np.asarray(points, np.float64) / wavelength
+    base = np.floor(q)
+    f = (q - base).astype(np.float32)
+    w = f * f * (np.float32(3.0) - np.float32(2.0) * f)
+    i = base.astype(np.int64)
+    out = np.zeros(len(q), np.float32)
+    with np.errstate(over="ignore"):
+        for dx in (0, 1):
+            wx = w[:, 0] if dx else 1 - w[:, 0]
+            for dy in (0, 1):
+                wy = w[:, 1] if dy else 1 - w[:, 1]
+                for dz in (0, 1):
+                    wz = w[:, 2] if dz else 1 - w[:, 2]
+                    out += wx * wy * wz * _hash01(i[:, 0] + dx, i[:, 1] + dy, i[:, 2] + dz, salt)
+    return out
+
+
+def weathering(points: np.ndarray, seed: int) -> np.ndarray:
+    """Fractal noise (n,) float32, roughly in [-1, 1] (standard deviation about 0.3), at ``points`` (n, 3)."""
+    out = np.zeros(len(points), np.float32)
+    for k, (wl, wt) in enumerate(OCTAVES):
+        out += np.float32(wt) * value_noise(points, wl, (int(seed) * 7919 + k * 104729) & 0xFFFFFFFF)
+    return out
+
+
+def apply_weathering(albedo: np.ndarray, points: np.ndarray, amount: float, seed: int) -> np.ndarray:
+    """``albedo`` (n, 3) in [0, 1] times ``1 + amount * noise``, with a slight warm/cool tint, clipped."""
+    if amount <= 0 or len(points) == 0:
+        return albedo
+    n = weathering(points, seed)
+    tint = np.float32(0.25 * amount) * value_noise(points, 0.9, (int(seed) * 31 + 5) & 0xFFFFFFFF)
+    f = 1.0 + np.float32(amount) * n
+    out = albedo * f[:, None]
+    out[:, 0] *= 1.0 + tint
+    out[:, 2] *= 1.0 - tint
+    return np.clip(out, 0.0, 1.0)
