@@ -102,3 +102,24 @@ def test_projected_texture_reproduces_the_pattern_and_respects_occlusion():
     # under the box no photo sees the plane: the base colour stays
     under = inside & (np.abs(x) < 0.45) & (np.abs(y) < 0.45)
     assert (tex[under] == 7).all()
+
+
+def test_photo_texture_step_refuses_a_mesh_without_uvs(tmp_path):
+    import json
+
+    import pytest
+    from twinkit import InputError
+    from twinkit.testing import plugin_from_module, run_step
+    from twinkit_pointcloud.meshio import Mesh, write_ply
+
+    import twinkit_photo.plugin as photo
+
+    pv, pf, _ = plane(4)
+    src = tmp_path / "in"
+    src.mkdir()
+    write_ply(src / "textured_mesh.ply", Mesh(vertices=pv, faces=pf))
+    (src / "cameras_site.json").write_text(json.dumps({"cameras": []}))
+    with pytest.raises(InputError, match="textured_mesh.ply.*texture coordinates"):
+        run_step(plugin_from_module(photo, "step", "photo_texture"), tmp_path / "run",
+                 {"in_textured_mesh_ply": src / "textured_mesh.ply", "in_photos_dir": src,
+                  "in_cameras_site_json": src / "cameras_site.json"})

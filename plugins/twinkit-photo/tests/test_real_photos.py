@@ -24,7 +24,7 @@ def _sfm():
 
 
 def test_contracts():
-    for name in ("sfm", "georeference", "roi", "dense"):
+    for name in ("sfm", "georeference", "roi", "dense", "photo_texture"):
         check_plugin(plugin_from_module(photo, "step", name))
 
 

@@ -438,8 +438,10 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
 # ----------------------------------------------------------------------------- dense
 
 def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json: Path, in_sparse_site_ply: Path,
-          in_roi_json: Path, out_points_ply: Path, out_points_meta_json: Path) -> dict:
-    """Depth map per photo (plane sweep), fused to a coloured cloud with normals (what read_cloud writes)."""
+          in_roi_json: Path, out_points_ply: Path, out_points_meta_json: Path, in_sfm_dir: Path | None = None,
+          in_georef_json: Path | None = None) -> dict:
+    """Depth map per photo, fused to a coloured cloud with normals (what read_cloud writes): our CPU plane
+    sweep, or COLMAP's patch-match stereo where pycolmap has CUDA (needs the sfm model and georef.json)."""
     import cv2
     import numpy as np
     from twinkit_pointcloud.meshio import read_ply
@@ -455,12 +457,12 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
         if backend == "patchmatch" and not cuda:
             raise InputError("dense.backend=patchmatch needs pycolmap built with CUDA (this one has none); "
                              "use dense.backend=cpu")
-        if cuda:
-            ctx.log.warning("dense: pycolmap has CUDA, but the patch-match route is not wired yet; using the CPU "
-                            "plane sweep")
-        backend = "cpu"
-    if backend != "cpu":
+        backend = "patchmatch" if cuda else "cpu"
+    if backend not in ("cpu", "patchmatch"):
         raise InputError(f"dense: unknown backend '{params.backend}' (auto, cpu or patchmatch)")
+    if backend == "patchmatch" and (in_sfm_dir is None or in_georef_json is None):
+        raise InputError("dense.backend=patchmatch needs the sfm step's model (sfm/) and the georeference step's "
+                         "georef.json; run the image_site recipe, or use dense.backend=cpu")
     t0 = time.perf_counter()
     cv2.setNumThreads(_threads(ctx))
     cams = _read_json(in_cameras_site_json, "site-frame cameras")["cameras"]
@@ -484,6 +486,9 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                          window_px=params.window_px, min_ncc=params.min_ncc, min_consistent=params.min_consistent,
                          rel_tol=params.rel_tol, average_depths=params.average_depths, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
                          refine_passes=params.refine_passes, threads=_threads(ctx))
+    if backend == "patchmatch":
+        return _dense_patchmatch(params, ctx, in_photos_dir, in_sfm_dir, in_georef_json, bmin, bmax,
+                                 out_points_ply, out_points_meta_json, t0)
     views = D.load_views(Path(in_photos_dir), cams, opt.max_image_px)
     D.depth_ranges(views, sp, vis_arr, max_depth)
     nb = D.choose_neighbors(views, vis_arr, opt)
@@ -529,6 +534,50 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                  n_maps, n_fused, len(xyz), params.voxel_m)
     return {"points": int(len(xyz)), "depth_maps": n_maps, "fused": int(n_fused),
             "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)}
+
+
+def _dense_patchmatch(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_georef_json, bmin, bmax,
+                      out_points_ply, out_points_meta_json, t0) -> dict:
+    """COLMAP patch-match + fusion in a throw-away workspace, then the same region of interest, voxel
+    merge and outputs as the CPU route."""
+    import tempfile
+
+    import numpy as np
+
+    from . import dense as D
+    from .mvs import colmap_dense
+
+    tf = _read_json(in_georef_json, "georeference")
+    try:
+        T = tf["transform"]
+        scale, R, t = float(T["scale"]), np.asarray(T["R"], float), np.asarray(T["t"], float)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{in_georef_json}: no usable 'transform' ({exc}); re-run the georeference step") from None
+    with tempfile.TemporaryDirectory(prefix="twinkit-mvs-") as tmp:
+        xyz, rgb, nrm, info = colmap_dense(Path(in_sfm_dir), scale, R, t, Path(in_photos_dir), Path(tmp),
+                                           max_image_px=params.max_image_px, min_consistent=params.min_consistent,
+                                           threads=_threads(ctx), log=ctx.log)
+    n_fused = len(xyz)
+    keep = np.all((xyz >= bmin) & (xyz <= bmax), axis=1)
+    xyz, rgb, nrm = D.voxel_merge(xyz[keep], rgb[keep], nrm[keep], params.voxel_m)
+    if len(xyz) < 100:
+        raise InputError(f"{in_photos_dir}: patch-match stereo kept only {len(xyz)} points inside the region of "
+                         f"interest; check roi.json (box) and the photos' overlap")
+    _write_cloud(out_points_ply, xyz, rgb, nrm, comments=["twinkit-photo dense (COLMAP patch-match + fusion)"])
+    lo, hi = xyz.min(0), xyz.max(0)
+    write_json(out_points_meta_json, {
+        "source": {"file": Path(in_photos_dir).name, "format": "photos (dense stereo)",
+                   "fields": ["x", "y", "z", "normals", "colors"]},
+        "counts": {"read": int(n_fused), "dropped_invalid": int(n_fused - keep.sum()), "written": int(len(xyz))},
+        "fields": {"normals": "COLMAP patch-match", "normals_orientation": "towards the photo", "colors": True,
+                   "intensity": False, "classification": False, "scanner": False, "extra": []},
+        "frame": {"kind": "site", "note": "SfM model moved by the georeference transform"},
+        "bounds_m": [lo.tolist(), hi.tolist()],
+        "dense": {"backend": "patchmatch", "depth_maps": info["depth_maps"], "working_px": params.max_image_px},
+        "time": {"seconds": round(time.perf_counter() - t0, 3)}})
+    ctx.log.info("dense (patch-match): %d depth maps, %d fused points, %d after the region of interest and "
+                 "%.3f m voxels", info["depth_maps"], n_fused, len(xyz), params.voxel_m)
+    return {"backend": "patchmatch", "points": int(len(xyz)), "depth_maps": info["depth_maps"], "fused": int(n_fused)}
 
 
 # ----------------------------------------------------------------------------- texture from the photos
