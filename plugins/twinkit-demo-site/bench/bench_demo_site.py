@@ -15,10 +15,7 @@ import time
 from pathlib import Path
 
 from twinkit.testing import make_context
-from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site
-
-OUTPUTS = ["gt_mesh.obj", "gt_mesh.ply", "cloud.e57", "cloud.las", "cloud.ply", "scanners.json", "photos",
-           "cameras.json", "roads.osm", "roads_truth.json", "site.json"]
+from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
 
 
 def _size(p: Path) -> int:
@@ -33,10 +30,7 @@ def _mb(n: int) -> str:
 
 def run(preset: str, folder: Path, seed: int) -> dict:
     folder.mkdir(parents=True, exist_ok=True)
-    kw = {}
-    for name in OUTPUTS:
-        stem, _, ext = name.partition(".")
-        kw[f"out_{stem}_{ext}" if ext else f"out_{stem}_dir"] = folder / name
+    kw = output_paths(folder)
     ctx = make_context(folder, site={"name": "demo"}, step_id="bench")
     t = time.perf_counter()
     m = generate_demo_site(DemoSiteParams(size=preset, seed=seed), ctx, **kw)

@@ -8,17 +8,13 @@ import pytest
 
 from twinkit.testing import make_context
 
-OUTPUTS = ["gt_mesh.obj", "gt_mesh.ply", "cloud.e57", "cloud.las", "cloud.ply", "scanners.json", "photos",
-           "cameras.json", "gcp.json", "roads.osm", "roads_truth.json", "site.json"]
 SITE = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
 
 
 def out_kwargs(folder: Path) -> dict[str, Path]:
-    kw = {}
-    for name in OUTPUTS:
-        stem, _, ext = name.partition(".")
-        kw[f"out_{stem}_{ext}" if ext else f"out_{stem}_dir"] = folder / name
-    return kw
+    from twinkit_demo_site.plugin import output_paths
+
+    return output_paths(folder)
 
 
 def generate(folder: Path, **params):

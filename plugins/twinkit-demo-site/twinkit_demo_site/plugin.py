@@ -184,6 +184,14 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
             "photos": n_photos, "ghost_points": counts["ghost_points"], "timings_s": timings}
 
 
+def output_paths(folder: Path) -> dict[str, Path]:
+    """Keyword arguments naming every output of :func:`generate_demo_site` inside ``folder`` (for scripts and
+    tests that call the generator directly; the engine does the same from the signature)."""
+    from twinkit.signature import parse_signature
+
+    return {o.param: Path(folder) / o.filename for o in parse_signature(generate_demo_site).outputs}
+
+
 @hookimpl
 def twinkit_register_site_generators(register):
     register("demo_intersection", generate_demo_site, params=DemoSiteParams,

@@ -35,15 +35,10 @@ def demo_site(tmp_path_factory):
         return Path(given)
     if importlib.util.find_spec("twinkit_demo_site") is None:
         pytest.skip("twinkit-demo-site is not installed")
-    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site
+    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
 
     d = tmp_path_factory.mktemp("demo_site")
-    names = ["gt_mesh.obj", "gt_mesh.ply", "cloud.e57", "cloud.las", "cloud.ply", "scanners.json", "photos",
-             "cameras.json", "roads.osm", "roads_truth.json", "site.json"]
-    kw = {}
-    for n in names:
-        stem, _, ext = n.partition(".")
-        kw[f"out_{stem}_{ext}" if ext else f"out_{stem}_dir"] = d / n
+    kw = output_paths(d)
     generate_demo_site(DemoSiteParams(size="small", seed=0, photo_count=0), make_context(d, site=dict(DEMO_SITE)), **kw)
     return d
 

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit.signature import parse_signature
 from twinkit.testing import make_context, plugin_from_module, run_step
 
 import twinkit_photo.plugin as photo
@@ -18,11 +17,10 @@ SITE = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon
 
 
 def _demo_site(folder):
-    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site
+    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
 
-    sig = parse_signature(generate_demo_site)
-    kw = {o.param: folder / o.filename for o in sig.outputs}
-    generate_demo_site(DemoSiteParams(size="small", seed=0), make_context(folder, site=dict(SITE), step_id="site"), **kw)
+    generate_demo_site(DemoSiteParams(size="small", seed=0), make_context(folder, site=dict(SITE), step_id="site"),
+                       **output_paths(folder))
     return folder
 
 

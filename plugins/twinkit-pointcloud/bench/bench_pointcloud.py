@@ -60,7 +60,7 @@ def prep(cloud: Path, work: Path, threads: int) -> dict:
 def prep_demo(preset: str, work: Path, threads: int) -> dict:
     """Generate the demo site (``preset``; one photo, no shadows: the geometry and the cloud are those
     of the preset) into ``work/site`` and read its E57 cloud like the recipe does."""
-    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site
+    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
     from twinkit_pointcloud import plugin as P
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply
@@ -71,13 +71,7 @@ def prep_demo(preset: str, work: Path, threads: int) -> dict:
     ctx = _ctx(work, threads)
     ctx.site = site
     with Measure() as m:
-        generate_demo_site(DemoSiteParams(size=preset, photo_count=1, shadows=False), ctx,
-                           out_gt_mesh_obj=out / "gt_mesh.obj", out_gt_mesh_ply=out / "gt_mesh.ply",
-                           out_cloud_e57=out / "cloud.e57", out_cloud_las=out / "cloud.las",
-                           out_cloud_ply=out / "cloud.ply", out_scanners_json=out / "scanners.json",
-                           out_photos_dir=out / "photos", out_cameras_json=out / "cameras.json",
-                           out_roads_osm=out / "roads.osm", out_roads_truth_json=out / "roads_truth.json",
-                           out_site_json=out / "site.json")
+        generate_demo_site(DemoSiteParams(size=preset, photo_count=1, shadows=False), ctx, **output_paths(out))
     r = P.read_cloud(P.ReadCloudParams(), ctx, in_cloud=out / "cloud.e57", out_points_ply=work / "points.ply",
                      out_points_meta_json=work / "points_meta.json")
     for f in ("cloud.las", "cloud.ply"):  # only the E57 is read; keep the disk free
