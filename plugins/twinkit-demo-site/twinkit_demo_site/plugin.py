@@ -36,7 +36,8 @@ class DemoSiteParams:
     osm_shift_m: float = 3.5  # length of the known OSM translation
     osm_rotation_deg: float = 0.8  # magnitude of the known OSM rotation about the base point
     shadows: bool = True
-    weathering: float = 0.6  # world-space albedo variation (stains, wear) so no two places look alike; 0 = off
+    weathering: float = 0.6  # world-space stains in the photos so no two places look alike; 0 = off
+    weathering_scan: bool = False  # the scanner's colours weathered too (changes the segmentation demo's input)
     gcp_survey_noise_m: float = 0.005  # noise of the surveyed ground-control points (gcp.json)
     gcp_pixel_noise_px: float = 0.5  # noise of their pixel observations (a user clicking them)
 
@@ -113,7 +114,8 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     settings = ScanSettings(profile_spacing_m=pre["profile_spacing_m"] / dens,
                             rays_per_profile=int(round(pre["rays_per_profile"] * dens)),
                             scanner_height_m=params.scanner_height_m, noise_mm=params.noise_mm,
-                            max_range_m=params.max_range_m, shadows=params.shadows)
+                            max_range_m=params.max_range_m, shadows=params.shadows,
+                            weathered=bool(params.weathering_scan))
     traj = trajectory(scene, settings, np.random.default_rng([seed, 2]))
     chunks = list(scan(scene, tracer, settings, traj, np.random.default_rng([seed, 3]), progress=ctx.progress))
     cloud = {k: np.concatenate([getattr(c, k) for c in chunks]) for k in ("xyz", "normals", "rgb", "label", "scanner", "intensity")}

@@ -36,6 +36,7 @@ class ScanSettings:
     noise_mm: float = 3.0
     max_range_m: float = 80.0
     shadows: bool = True
+    weathered: bool = False  # colour the points with the tracer's weathering too (off: the plain atlas)
 
 
 @dataclass
@@ -162,7 +163,7 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
         lab = np.empty(len(sel), np.uint8)
         nrm[ps] = tracer.facing_normals(prim_s, dirs[sel][ps].astype(np.float32))
         exact = (org[sel][ps] + dirs[sel][ps] * t[sel][ps, None]).astype(np.float32)
-        alb = tracer.albedo(prim_s, bary[sel][ps], exact)
+        alb = tracer.albedo(prim_s, bary[sel][ps], exact if s.weathered else None)
         col[ps] = tracer.shade(exact, nrm[ps], alb, shadows=s.shadows)
         lab[ps] = tracer.face_labels[prim_s]
         # ghost part

@@ -4,8 +4,8 @@ The atlas tiles repeat (a facade shows one tile per floor and bay, a road one as
 metres), which no real street does: grime, stains, repairs and wear differ everywhere. Without that,
 photos of the demo site match look-alike windows of different bays and buildings, and structure from
 motion builds a consistent but wrong model. This layer multiplies the albedo by ``1 + amount * n(p)``
-where ``n`` is fractal value noise evaluated at the 3-D surface point ``p`` (site frame, metres), so
-the scanner's colours and the photos see the same, non-repeating surface.
+where ``n`` is fractal value noise evaluated at the 3-D surface point ``p`` (site frame, metres).
+The photos are weathered; the scanner's colours only with ``weathering_scan`` (see docs/demo-site.md).
 """
 from __future__ import annotations
 
