@@ -393,30 +393,27 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
     R(("asphalt", -rs, rs, -BIG, BIG))
     # zebra crossings
     zx0, zx1 = rs + 0.5, rs + 3.5  # across the main road, on both arms
+    gcps = []  # natural ground-control points: the outer corners of each zebra's first and last stripe
     for sx in (-1, 1):
         y = -rm + 0.25
+        stripes = []
         while y + 0.5 <= rm - 0.2:
             R(("marking", *sorted((sx * zx0, sx * zx1)), y, y + 0.5))
+            stripes.append(y)
             y += 1.0
+        gcps += [((sx * xx, yy), f"{'east' if sx > 0 else 'west'} zebra corner")
+                 for yy in (stripes[0], stripes[-1] + 0.5) for xx in (zx0, zx1)]
     zy0, zy1 = rm + 0.5, rm + 3.5
     for sy in (-1, 1):
         x = -rs + 0.25
+        stripes = []
         while x + 0.5 <= rs - 0.2:
             R(("marking", x, x + 0.5, *sorted((sy * zy0, sy * zy1))))
+            stripes.append(x)
             x += 1.0
-    # natural ground-control points: the outer corners of each zebra's first and last stripe (road level),
-    # the kind of painted corner a surveyor measures and a user clicks in the photos
-    gcps = []
-    for sx in (-1, 1):
-        ys = [-rm + 0.25 + k for k in range(int((2 * rm - 0.45 - 0.5) // 1.0) + 1)]
-        for yy in (ys[0], ys[-1] + 0.5):
-            for xx in (zx0, zx1):
-                gcps.append(((sx * xx, yy), f"{'east' if sx > 0 else 'west'} zebra corner"))
-    for sy in (-1, 1):
-        xs_ = [-rs + 0.25 + k for k in range(int((2 * rs - 0.45 - 0.5) // 1.0) + 1)]
-        for xx in (xs_[0], xs_[-1] + 0.5):
-            for yy in (zy0, zy1):
-                gcps.append(((xx, sy * yy), f"{'north' if sy > 0 else 'south'} zebra corner"))
+        gcps += [((xx, sy * yy), f"{'north' if sy > 0 else 'south'} zebra corner")
+                 for xx in (stripes[0], stripes[-1] + 0.5) for yy in (zy0, zy1)]
+    # (road level: the painted corners a surveyor measures and a user clicks in the photos)
     gcp_points = [{"id": f"Z{k + 1:02d}", "xyz": [float(x), float(y), 0.0], "what": w}
                   for k, ((x, y), w) in enumerate(gcps)]
     # stop lines (traffic towards the junction)

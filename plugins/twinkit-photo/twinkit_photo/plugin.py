@@ -476,6 +476,9 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                          f"delete it to get the automatic one back") from None
     if np.any(bmax <= bmin):
         raise InputError(f"{in_roi_json}: box.max must exceed box.min on every axis")
+    if backend == "patchmatch":
+        return _dense_patchmatch(params, ctx, in_photos_dir, in_sfm_dir, in_georef_json, bmin, bmax,
+                                 out_points_ply, out_points_meta_json, t0)
     sp = read_ply(in_sparse_site_ply).vertices
     visz = np.load(Path(in_sparse_site_ply).with_suffix(".npz"))
     vis: dict[str, list] = {}
@@ -486,9 +489,6 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                          window_px=params.window_px, min_ncc=params.min_ncc, min_consistent=params.min_consistent,
                          rel_tol=params.rel_tol, average_depths=params.average_depths, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
                          refine_passes=params.refine_passes, threads=_threads(ctx))
-    if backend == "patchmatch":
-        return _dense_patchmatch(params, ctx, in_photos_dir, in_sfm_dir, in_georef_json, bmin, bmax,
-                                 out_points_ply, out_points_meta_json, t0)
     views = D.load_views(Path(in_photos_dir), cams, opt.max_image_px)
     D.depth_ranges(views, sp, vis_arr, max_depth)
     nb = D.choose_neighbors(views, vis_arr, opt)
@@ -506,34 +506,49 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
         raise InputError(f"{in_cameras_site_json}: no photo has a neighbour with a usable baseline "
                          f"({opt.min_angle_deg}-{opt.max_angle_deg} degrees); take photos a step or two apart")
     t_fuse = time.perf_counter()
-    xyz, rgb, nrm, src = D.fuse(views, opt)
-    n_fused = len(xyz)
-    keep = np.all((xyz >= bmin) & (xyz <= bmax), axis=1)
-    xyz, rgb, nrm = xyz[keep], rgb[keep], nrm[keep]
-    xyz, rgb, nrm = D.voxel_merge(xyz, rgb, nrm, params.voxel_m)
+    xyz, rgb, nrm, _src = D.fuse(views, opt)
     t_fuse = time.perf_counter() - t_fuse
-    if len(xyz) < 100:
-        raise InputError(f"{in_photos_dir}: dense matching kept only {len(xyz)} points inside the region of "
-                         f"interest; check roi.json (box) and the photos' overlap")
-    _write_cloud(out_points_ply, xyz, rgb, nrm, comments=["twinkit-photo dense (plane sweep + fusion)"])
-    lo, hi = xyz.min(0), xyz.max(0)
-    meta = {"source": {"file": Path(in_photos_dir).name, "format": "photos (dense stereo)", "fields": ["x", "y", "z",
-                                                                                                        "normals", "colors"]},
-            "counts": {"read": int(n_fused), "dropped_invalid": int(n_fused - keep.sum()), "written": int(len(xyz))},
-            "fields": {"normals": "depth maps", "normals_orientation": "towards the photo", "colors": True,
-                       "intensity": False, "classification": False, "scanner": False, "extra": []},
-            "frame": {"kind": "site", "note": "from the georeference step"},
-            "bounds_m": [lo.tolist(), hi.tolist()],
-            "dense": {"depth_maps": n_maps, "photos": len(views), "working_px": params.max_image_px,
-                      "neighbours": {views[i].name: [views[j].name for j in nb[i]] for i in nb},
-                      "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean())) for v in views}},
-            "time": {"seconds": round(time.perf_counter() - t0, 3), "depth_maps_s": round(t_sweep, 3),
-                     "fusion_s": round(t_fuse, 3)}}
-    write_json(out_points_meta_json, meta)
+    written, n_fused = _write_dense(xyz, rgb, nrm, bmin, bmax, params.voxel_m, in_photos_dir, out_points_ply,
+                                    out_points_meta_json, "plane sweep + fusion", "depth maps", dense_info={
+                                        "backend": "cpu", "depth_maps": n_maps, "photos": len(views),
+                                        "working_px": params.max_image_px,
+                                        "neighbours": {views[i].name: [views[j].name for j in nb[i]] for i in nb},
+                                        "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean()))
+                                                        for v in views}},
+                                    times={"seconds": round(time.perf_counter() - t0, 3),
+                                           "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)})
     ctx.log.info("dense: %d depth maps, %d fused points, %d after the region of interest and %.3f m voxels",
-                 n_maps, n_fused, len(xyz), params.voxel_m)
-    return {"points": int(len(xyz)), "depth_maps": n_maps, "fused": int(n_fused),
+                 n_maps, n_fused, written, params.voxel_m)
+    return {"points": written, "depth_maps": n_maps, "fused": n_fused,
             "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)}
+
+
+def _write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_points_ply, out_points_meta_json,
+                 method: str, normals_from: str, dense_info: dict, times: dict) -> tuple[int, int]:
+    """Both routes' end: keep the points inside the region of interest, merge duplicates per voxel, write
+    points.ply and points_meta.json (the format read_cloud writes). Returns (points written, points fused)."""
+    import numpy as np
+
+    from . import dense as D
+
+    n_fused = int(len(xyz))
+    keep = np.all((xyz >= bmin) & (xyz <= bmax), axis=1)
+    xyz, rgb, nrm = D.voxel_merge(xyz[keep], rgb[keep], nrm[keep], voxel_m)
+    if len(xyz) < 100:
+        raise InputError(f"{in_photos_dir}: dense matching ({method}) kept only {len(xyz)} points inside the region "
+                         f"of interest; check roi.json (box) and the photos' overlap")
+    _write_cloud(out_points_ply, xyz, rgb, nrm, comments=[f"twinkit-photo dense ({method})"])
+    lo, hi = xyz.min(0), xyz.max(0)
+    write_json(out_points_meta_json, {
+        "source": {"file": Path(in_photos_dir).name, "format": "photos (dense stereo)",
+                   "fields": ["x", "y", "z", "normals", "colors"]},
+        "counts": {"read": n_fused, "dropped_invalid": int(n_fused - keep.sum()), "written": int(len(xyz))},
+        "fields": {"normals": normals_from, "normals_orientation": "towards the photo", "colors": True,
+                   "intensity": False, "classification": False, "scanner": False, "extra": []},
+        "frame": {"kind": "site", "note": "from the georeference step"},
+        "bounds_m": [lo.tolist(), hi.tolist()],
+        "dense": dense_info, "time": times})
+    return int(len(xyz)), n_fused
 
 
 def _dense_patchmatch(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_georef_json, bmin, bmax,
@@ -544,7 +559,6 @@ def _dense_patchmatch(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_ge
 
     import numpy as np
 
-    from . import dense as D
     from .mvs import colmap_dense
 
     tf = _read_json(in_georef_json, "georeference")
@@ -557,27 +571,14 @@ def _dense_patchmatch(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_ge
         xyz, rgb, nrm, info = colmap_dense(Path(in_sfm_dir), scale, R, t, Path(in_photos_dir), Path(tmp),
                                            max_image_px=params.max_image_px, min_consistent=params.min_consistent,
                                            threads=_threads(ctx), log=ctx.log)
-    n_fused = len(xyz)
-    keep = np.all((xyz >= bmin) & (xyz <= bmax), axis=1)
-    xyz, rgb, nrm = D.voxel_merge(xyz[keep], rgb[keep], nrm[keep], params.voxel_m)
-    if len(xyz) < 100:
-        raise InputError(f"{in_photos_dir}: patch-match stereo kept only {len(xyz)} points inside the region of "
-                         f"interest; check roi.json (box) and the photos' overlap")
-    _write_cloud(out_points_ply, xyz, rgb, nrm, comments=["twinkit-photo dense (COLMAP patch-match + fusion)"])
-    lo, hi = xyz.min(0), xyz.max(0)
-    write_json(out_points_meta_json, {
-        "source": {"file": Path(in_photos_dir).name, "format": "photos (dense stereo)",
-                   "fields": ["x", "y", "z", "normals", "colors"]},
-        "counts": {"read": int(n_fused), "dropped_invalid": int(n_fused - keep.sum()), "written": int(len(xyz))},
-        "fields": {"normals": "COLMAP patch-match", "normals_orientation": "towards the photo", "colors": True,
-                   "intensity": False, "classification": False, "scanner": False, "extra": []},
-        "frame": {"kind": "site", "note": "SfM model moved by the georeference transform"},
-        "bounds_m": [lo.tolist(), hi.tolist()],
-        "dense": {"backend": "patchmatch", "depth_maps": info["depth_maps"], "working_px": params.max_image_px},
-        "time": {"seconds": round(time.perf_counter() - t0, 3)}})
+    written, n_fused = _write_dense(xyz, rgb, nrm, bmin, bmax, params.voxel_m, in_photos_dir, out_points_ply,
+                                    out_points_meta_json, "COLMAP patch-match + fusion", "COLMAP patch-match",
+                                    dense_info={"backend": "patchmatch", "depth_maps": info["depth_maps"],
+                                                "working_px": params.max_image_px},
+                                    times={"seconds": round(time.perf_counter() - t0, 3)})
     ctx.log.info("dense (patch-match): %d depth maps, %d fused points, %d after the region of interest and "
-                 "%.3f m voxels", info["depth_maps"], n_fused, len(xyz), params.voxel_m)
-    return {"backend": "patchmatch", "points": int(len(xyz)), "depth_maps": info["depth_maps"], "fused": int(n_fused)}
+                 "%.3f m voxels", info["depth_maps"], n_fused, written, params.voxel_m)
+    return {"backend": "patchmatch", "points": written, "depth_maps": info["depth_maps"], "fused": n_fused}
 
 
 # ----------------------------------------------------------------------------- texture from the photos
