@@ -43,6 +43,20 @@ def test_parameter_typo_and_wrong_type_fail_at_composition(project):
     assert not (project.ws / "01_make").exists()
 
 
+def test_command_line_step_params_beat_the_recipes_fixed_params(project):
+    """A recipe fixes make.value=5; steps.make.value=7 on the command line wins; without it the recipe's
+    value holds (not the plugin's default 1)."""
+    project.recipe("fixed", ["{id: make, uses: step/make, params: {value: 5}}", "{id: double, uses: step/double}"])
+    r = project.run("site=t", "recipe=fixed")
+    assert r.rc == 0, r.err
+    assert (project.ws / "02_double" / "double.txt").read_text().strip() == "10"
+    r = project.run("site=t", "recipe=fixed", "steps.make.value=7")
+    assert r.rc == 0, r.err
+    assert (project.ws / "02_double" / "double.txt").read_text().strip() == "14"
+    r = project.run("status", "site=t", "recipe=fixed", "steps.make.value=9")  # status reads the same way
+    assert r.rc == 0 and "value 7 -> 9" in r.out
+
+
 def test_recipe_step_params_are_checked_against_the_plugin(project):
     project.recipe("badparam", ["{id: make, uses: step/make, params: {valeu: 3}}"])
     r = project.run("site=t", "recipe=badparam")

@@ -127,6 +127,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
         with open_dict(cfg):
             del cfg["hydra"]
     container = OmegaConf.to_container(cfg, resolve=True)
+    from twinkit.engine import GIVEN_KEY, given_params
+
+    container[GIVEN_KEY] = given_params(container, overrides)
     site = container.get("site") or {}
     if not site.get("name"):
         raise ConfigError("the site config has no 'name'")
@@ -305,7 +308,11 @@ def _compose(overrides: list[str]):
     register_configs(get_registry())
     with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
         cfg = compose(config_name="config", overrides=overrides)
-    return conf_dir, OmegaConf.to_container(cfg, resolve=True)
+    from twinkit.engine import GIVEN_KEY, given_params
+
+    container = OmegaConf.to_container(cfg, resolve=True)
+    container[GIVEN_KEY] = given_params(container, overrides)
+    return conf_dir, container
 
 
 def cmd_status(args: list[str]) -> int:

@@ -232,6 +232,33 @@ def _site_inputs(site: dict) -> dict[str, Any]:
     return dict(site.get("inputs") or {})
 
 
+#: key of the composed config holding the step parameters given on the command line (see ``given_params``)
+GIVEN_KEY = "command_line_params"
+
+
+def given_params(cfg: dict, overrides: list[str]) -> dict:
+    """The step parameters among the command-line ``overrides`` (``steps.<name>.<param>=...`` and
+    ``<kind>.<param>=...``), with their composed values: ``{"steps": {name: {param: v}}, kind: {param: v}}``.
+
+    Every parameter is already in the composed config (the plugins' defaults fill it), so a value there
+    cannot tell a default from a choice; this keeps the choices, which then override a recipe's fixed
+    ``params:``, as a user who types ``reconstructor.depth=11`` expects."""
+    out: dict = {}
+    for ov in overrides:
+        if "=" not in ov or ov.startswith("~"):
+            continue
+        parts = ov.split("=", 1)[0].lstrip("+").split(".")
+        if parts[0] == "steps" and len(parts) == 3:
+            node = (cfg.get("steps") or {}).get(parts[1]) or {}
+            if parts[2] in node:
+                out.setdefault("steps", {}).setdefault(parts[1], {})[parts[2]] = node[parts[2]]
+        elif parts[0] in STEP_KINDS and parts[0] not in ("step", "site_generator") and len(parts) == 2:
+            node = cfg.get(parts[0]) or {}
+            if parts[1] != "plugin" and parts[1] in node:
+                out.setdefault(parts[0], {})[parts[1]] = node[parts[1]]
+    return out
+
+
 def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                skipped: list[tuple[str, str]] | None = None) -> list[PlannedStep]:
     """Turn the composed config into an ordered list of steps with wired inputs.
@@ -259,6 +286,7 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
     plan: list[PlannedStep] = []
     produced: list[tuple[str, bool, int]] = []  # (filename, is_dir, producer index)
     site_inputs = _site_inputs(site)
+    given = cfg.get(GIVEN_KEY) or {}
     site_name = site.get("name", "?")
     base_dir = config_root or Path.cwd()
 
@@ -309,6 +337,11 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
             elif node.get("plugin") == name:
                 layers.append(node)
             layers.append(spec.params)
+            # what the user typed on the command line beats the recipe's fixed params
+            if kind == "step":
+                layers.append(dict((given.get("steps") or {}).get(name) or {}))
+            elif kind != "site_generator" and node.get("plugin") == name:
+                layers.append(dict(given.get(kind) or {}))
             params_obj, params_dict = resolve_params(plugin, *layers, where=where)
             try:
                 signature = parse_signature(plugin.run)
