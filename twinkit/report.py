@@ -1101,7 +1101,9 @@ def _sec_pictures(run: RunView, out: Path, pics: _Pictures) -> str:
             figs.append(_figure(o["segmentation"], "The same in segmentation colours", src + _legend_html()))
     for pattern, caption in (("recon_metrics.png", "Distance from the cloud to the mesh (heat map)"),
                              ("*distance*.png", "Distance heat map"), ("*heat*.png", "Heat map"),
-                             ("clean_report.png", "Mesh cleaning: what was removed")):
+                             ("clean_report.png", "Mesh cleaning: what was removed"),
+                             ("tile_seams.png", "Tile seams: open edges on the seams circled (red: facing surface, "
+                                                "orange: the surface ends on the seam)")):
         for s, f in run.find(pattern)[:1]:
             name = f"{s.get('folder')}_{f.name}"
             if any(name in x for x in figs):

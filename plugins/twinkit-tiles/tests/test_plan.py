@@ -48,3 +48,26 @@ def test_too_many_tiles_is_a_config_error():
 
     with pytest.raises(ConfigError, match="max_tiles"):
         choose_grid(_xy(), 1.0, 0.5, 4.0, 0.03, max_tiles=10)
+
+
+def test_seams_move_off_poles_and_trunks_within_the_search_width():
+    from twinkit_tiles.tiling import Grid, place_seams
+
+    rng = np.random.default_rng(1)
+    ground = np.c_[rng.uniform(0, 60, 50_000), rng.uniform(0, 60, 50_000)]
+    # a row of poles (upright points) right on the line x = 20, none elsewhere within 1 m of it
+    poles = np.c_[rng.normal(20.05, 0.08, 3000), rng.uniform(0, 60, 3000)]
+    x = np.r_[ground[:, 0], poles[:, 0]]
+    upright = np.r_[np.zeros(len(ground), bool), np.ones(len(poles), bool)]
+    lines, rep = place_seams(x, upright, np.array([0.0, 20.0, 40.0, 60.0]), search_m=1.0)
+    assert lines[0] == 0.0 and lines[-1] == 60.0  # the outer lines stay
+    assert 0.3 <= abs(lines[1] - 20.05) <= 1.0 and rep[0]["upright_points_after"] < 0.01 * rep[0]["upright_points_before"]
+    assert lines[2] == 40.0 and rep[1]["moved_m"] == 0.0  # nothing upright there: not moved
+    # the moved lines are the grid's: cores and padded boxes follow them
+    g = Grid(0.0, 0.0, 60.0, 60.0, 3, 1, 2.0, xs=lines)
+    t = g.tiles()
+    assert t[0]["core"][2] == lines[1] and t[1]["core"][0] == lines[1]
+    assert t[1]["padded"][0] == pytest.approx(lines[1] - 2.0)
+    # nothing to search: unchanged
+    same, rep0 = place_seams(x, upright, np.array([0.0, 20.0, 40.0]), search_m=0.0)
+    assert same.tolist() == [0.0, 20.0, 40.0] and rep0 == []

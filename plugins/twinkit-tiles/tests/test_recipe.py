@@ -78,6 +78,8 @@ def test_bad_plan_parameters_fail_with_the_key(tmp_path, synth_cloud):
     r = p.run("recipe=tiled_site", "site=synth", *[c for c in COARSE if "voxel_m" not in c], "steps.plan_tiles.voxel_m=0")
     assert r.returncode == 2, r.stderr[-2000:]
     assert "voxel_m" in r.stderr
+    r = p.run("recipe=tiled_site", "site=synth", *COARSE, "steps.plan_tiles.seam_search_m=5")
+    assert r.returncode == 2 and "seam_search_m" in r.stderr and "overlap_m" in r.stderr, r.stderr[-2000:]
 
 
 def test_tiles_simplified_before_merge_stay_crack_free_and_ground_is_filled(tmp_path, holed_cloud):

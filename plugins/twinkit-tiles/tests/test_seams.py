@@ -181,6 +181,42 @@ def test_open_seam_edges_are_told_apart_by_what_lies_across():
     assert k["facing_surface"] >= int((y < 1.2).sum()) > 0
 
 
+def test_open_seam_runs_locate_and_measure_the_gaps_and_the_map_marks_them(tmp_path):
+    """The open edges on a seam come back as runs with a place, a length and a kind, and the seam
+    map circles them: the neighbour below has surface up to y = 1.5 only, so a run of the upper tile's
+    border with nothing across starts there, and the seam map shows it in orange."""
+    from PIL import Image
+
+    from twinkit_pointcloud.meshio import compact as compact_mesh
+    from twinkit_tiles.seams import _concat, open_seam_runs, seam_border_length, seam_map_png
+
+    a = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2), 0, 2.0, "below")
+    b = cut_halfspace(grid_mesh(1, 4, 0, 3, 0.25), 0, 2.0, "above")
+    b = compact_mesh(b, b.vertices[b.faces].mean(axis=1)[:, 1] < 1.5)
+    a.face_attrs = {"tile": np.zeros(a.n_faces, np.int64)}
+    b.face_attrs = {"tile": np.ones(b.n_faces, np.int64)}
+    m, st = stitch(a, b, 0, 2.0, max_gap_m=0.3)
+    planes = [(0, 2.0)]
+    runs = open_seam_runs(m, planes, reach_m=0.2)
+    ends = [r for r in runs if r["kind"] == "surface_ends"]
+    assert len(ends) == 1
+    r = ends[0]
+    # the upper tile's border from about y = 1.5 to 3 is open, nothing lies across it
+    assert r["plane"] == ["x", 2.0] and 1.2 < r["length_m"] < 1.8 and r["tile_edges"] >= r["edges"] - 1  # (+ the strip's last edge)
+    assert 2.0 < r["centre"][1] < 2.5
+    assert abs(sum(x["length_m"] for x in runs) - seam_border_length(m, planes)) < 1e-3
+    # before the stitch both borders are open: the lower tile's 1.5 m and the upper tile's 3 m
+    assert abs(seam_border_length(_concat(a, b), planes) - 4.5) < 0.15
+    png = tmp_path / "tile_seams.png"
+    seam_map_png(m, planes, runs, png, title="test")
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    orange = (img[..., 0] > 230) & (np.abs(img[..., 1] - 140) < 20) & (img[..., 2] < 30)
+    assert orange.sum() > 20
+    cols = np.flatnonzero(orange.any(axis=0))
+    # the circle sits on the seam plane (x = 2 of an x extent 0..4, 1600 px wide)
+    assert abs(cols.mean() / img.shape[1] - 0.5) < 0.05
+
+
 def test_cut_moves_near_plane_vertices_onto_it_so_no_sliver_edge_stays_on_the_seam():
     from twinkit_tiles.seams import ON_PLANE_M
 

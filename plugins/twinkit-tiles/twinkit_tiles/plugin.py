@@ -2,7 +2,8 @@
 
 - ``plan_tiles``: points.ply -> tiles.json + tile_points/ (one chunk per padded tile)
 - ``reconstruct_tile`` (run with ``foreach: tiles.json``): one chunk -> tile_mesh.ply cut to the core
-- ``merge_tiles``: every tile_mesh.ply -> clean_mesh.ply (stitched, crack-free) + tile_seams.json
+- ``merge_tiles``: every tile_mesh.ply -> clean_mesh.ply (stitched, crack-free) + tile_seams.json (+ .png)
+- ``evaluate_seam_labels``: labels.npy of the merged mesh -> seam_labels.json (do labels change at seams?)
 - executor ``dask``: fanned-out items on a Dask distributed cluster (local, existing, or SLURM)
 
 Heavy libraries are imported inside the functions only.
@@ -10,9 +11,9 @@ Heavy libraries are imported inside the functions only.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 from twinkit import hookimpl
 
@@ -26,6 +27,8 @@ class PlanTilesParams:
     memory_budget_gb: float = 4.0  # automatic tile size: predicted peak memory of one tile stays below this
     voxel_m: float = 0.03  # finest Poisson voxel of every tile (passed to reconstruct_tile in tiles.json)
     max_tiles: int = 256  # refuse a plan with more tiles than this
+    seam_search_m: float = 1.0  # move each seam by up to this to where the fewest upright surfaces (poles,
+    #                              trunks, crowns, cars) cross it; 0 = evenly spaced seams
     target_faces: int = 0  # > 0: each tile is simplified after its cut to its share of this many faces
     #                        (shared by the points in its core; seam borders are kept), which bounds
     #                        the memory of the merge and of the steps after it; 0 = full resolution
@@ -57,6 +60,15 @@ class MergeTilesParams:
     max_hole_edges: int = 120  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
     fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on the merged mesh (clean_mesh's
     fill_ground_max_gap_m: float = 8.0  # ground fill, over the whole site at once so it has no tile edges); 0 = off
+
+
+@dataclass
+class EvaluateSeamLabelsParams:
+    """Label agreement across the seams of a tiled, segmented mesh."""
+
+    band_m: float = 1.0  # accuracy within this of a seam vs. farther away (with ground truth)
+    planes: List[str] = field(default_factory=list)  # e.g. ["x=-10", "y=10"]: check these planes instead of
+    #                                                  tiles.json's seams (the same lines on an untiled run)
 
 
 @dataclass
@@ -110,6 +122,21 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
         xy = cloud.vertices[:, :2]
         grid, why = choose_grid(xy, params.tile_m, params.overlap_m, params.memory_budget_gb, params.voxel_m,
                                 params.max_tiles)
+        moved = []
+        if params.seam_search_m > 0:
+            from .tiling import place_seams
+
+            if params.seam_search_m > params.overlap_m:
+                raise _input_error(f"plan_tiles: seam_search_m ({params.seam_search_m}) must not exceed overlap_m "
+                                   f"({params.overlap_m}): a seam must stay inside both tiles' overlap")
+            upright = np.abs(cloud.normals[:, 2]) < 0.7
+            xs, ys = grid.lines()
+            grid.xs, rx = place_seams(cloud.vertices[:, 0], upright, xs, params.seam_search_m)
+            grid.ys, ry = place_seams(cloud.vertices[:, 1], upright, ys, params.seam_search_m)
+            moved = [{"axis": "x"} | r for r in rx] + [{"axis": "y"} | r for r in ry]
+            for r in moved:
+                ctx.log.info("seam %s=%.2f moved %+.2f m: %d -> %d upright points on it", r["axis"], r["line"],
+                             r["moved_m"], r["upright_points_before"], r["upright_points_after"])
         tiles = grid.tiles()
         out_tile_points_dir.mkdir(parents=True, exist_ok=True)
         if params.target_faces < 0:
@@ -138,7 +165,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
                 i["target_faces"] = max(1000, int(round(params.target_faces * i["core_points"] / total)))
         plan = {"grid": why | {"x0": grid.x0, "y0": grid.y0, "x1": grid.x1, "y1": grid.y1,
                                "overlap_m": grid.overlap_m, "voxel_m": params.voxel_m,
-                               "target_faces": params.target_faces},
+                               "target_faces": params.target_faces, "seams_moved": moved},
                 "items": items}
         Path(out_tiles_json).write_text(json.dumps(plan, indent=2))
     ctx.log.info("%d x %d tiles of %.1f m (overlap %.1f m), %d with points", grid.nx, grid.ny, why["tile_m"],
@@ -223,7 +250,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     from twinkit_pointcloud.meshio import read_ply, write_ply
 
     from .seams import (_concat, classify_open_seam_edges, close_seam_holes, edge_counts, faces_outside_core,
-                        merge_grid, seam_boundary_edges, seam_planes, trim_seam_bands)
+                        merge_grid, open_seam_runs, seam_border_length, seam_boundary_edges, seam_map_png, seam_planes, trim_seam_bands)
 
     params = params or MergeTilesParams()
     plan = json.loads(Path(in_tiles_json).read_text())
@@ -247,6 +274,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         for m in meshes_k[1:]:
             cat = _concat(cat, m)
         before = seam_boundary_edges(cat, planes, params.seam_tol_m)
+        seam_len = seam_border_length(cat, planes, params.seam_tol_m) / 2  # each tile brings one border
         before_total = edge_counts(cat.faces)
         del cat
         merged, seams = merge_grid(tiles_k, meshes_k, params.max_gap_m, log=ctx.log)
@@ -272,6 +300,16 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         kinds = classify_open_seam_edges(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
         cracks = kinds["facing_surface"] + kinds["surface_ends"]
         ends = seam_boundary_edges(merged, planes, params.seam_tol_m) - cracks
+        runs = open_seam_runs(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
+        # lengths of the open edges of tile faces (the cracks), split by what lies across, and of strip edges
+        facing_len = sum(r["facing_length_m"] for r in runs)
+        open_len = {"facing_surface": round(facing_len, 3),
+                    "surface_ends": round(sum(r["tile_edges_length_m"] for r in runs) - facing_len, 3),
+                    "strip_edges": round(sum(r["length_m"] - r["tile_edges_length_m"] for r in runs), 3)}
+        png = Path(out_tile_seams_json).with_suffix(".png")
+        seam_map_png(merged, planes, runs, png,
+                     title=f"{len(keep)} tiles: {cracks} open seam edges of {before} "
+                           f"({kinds['facing_surface']} facing surface, red; {kinds['surface_ends']} surface ends, orange)")
         # doubled surface: tile faces outside their own core (0 by construction of the cut)
         outside = faces_outside_core(merged, tiles_k)
         merged.face_attrs = {}
@@ -298,7 +336,9 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             "seam_boundary_edges_before": before, "seam_boundary_edges_after_zipper": after_zipper,
             "seam_holes_closed": holes, "seam_boundary_edges_after": cracks,
             "seam_open_facing_surface": kinds["facing_surface"], "seam_open_surface_ends": kinds["surface_ends"],
-            "seam_border_crossings": ends, "faces_outside_core": outside,
+            "seam_border_crossings": ends, "seam_length_m": round(seam_len, 3), "seam_open_length_m": open_len,
+            "seam_open_runs": [r for r in runs if r["kind"] != "border_crossing"], "seam_map_png": png.name,
+            "faces_outside_core": outside,
             "non_manifold_edges": after_total["non_manifold_edges"],
             "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
             "boundary_edges_before": before_total["boundary_edges"], "boundary_edges_after": after_total["boundary_edges"],
@@ -309,13 +349,56 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         report["gap_mean_mm"] = round(float(np.mean(gaps)), 3) if gaps else None
         report["gap_max_mm"] = max((s["gap_max_mm"] for s in seams if s["gap_max_mm"] is not None), default=None)
         Path(out_tile_seams_json).write_text(json.dumps(report, indent=2))
-    ctx.log.info("merged %d tiles: %d faces; seam boundary edges %d -> %d, %d stitch faces", len(keep),
-                 merged.n_faces, before, cracks, report["stitched_faces"])
+    ctx.log.info("merged %d tiles: %d faces; seam boundary edges %d -> %d (%.2f m of %.1f m of seam open), "
+                 "%d stitch faces; seam map %s", len(keep), merged.n_faces, before, cracks,
+                 open_len["facing_surface"] + open_len["surface_ends"], seam_len, report["stitched_faces"], png.name)
     return {k: report[k] for k in ("tiles", "faces", "vertices", "seam_boundary_edges_before",
                                    "seam_boundary_edges_after", "seam_open_facing_surface", "seam_open_surface_ends",
-                                   "seam_holes_closed", "seam_border_crossings", "faces_outside_core",
+                                   "seam_holes_closed", "seam_border_crossings", "seam_length_m", "faces_outside_core",
                                    "non_manifold_edges", "non_manifold_edges_in_tiles", "boundary_edges_before", "boundary_edges_after", "stitched_faces", "gap_mean_mm",
                                    "gap_max_mm")} | meas.as_dict()
+
+
+def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json: Path, in_textured_mesh_ply: Path,
+                         in_labels_npy: Path, in_gt_labels_npy: Path | None = None,
+                         out_seam_labels_json: Path) -> dict:
+    """Do the semantic labels change where the tiles meet? Label changes along mesh edges crossing the
+    seam planes vs. crossing control planes through the tiles' interiors (and, with ground truth, the
+    changes the ground truth does not have; accuracy near the seams vs. elsewhere) -> seam_labels.json."""
+    import numpy as np
+    from twinkit_pointcloud.meshio import read_ply
+
+    from .seam_labels import seam_label_stats
+    from .seams import seam_planes
+
+    params = params or EvaluateSeamLabelsParams()
+    planes = seam_planes(json.loads(Path(in_tiles_json).read_text())["items"])
+    if params.planes:
+        planes = []
+        for text in params.planes:
+            axis, _, val = str(text).replace(" ", "").partition("=")
+            try:
+                planes.append(("xy".index(axis), float(val)))
+            except ValueError:
+                raise _input_error(f"evaluate_seam_labels.planes: {text!r} is not like 'x=-10' or 'y=12.5'") from None
+    mesh = read_ply(in_textured_mesh_ply)
+    labels = np.load(in_labels_npy)
+    gt = np.load(in_gt_labels_npy) if in_gt_labels_npy is not None else None
+    for name, arr in (("labels", labels), ("ground truth", gt)):
+        if arr is not None and len(arr) != mesh.n_vertices:
+            raise _input_error(f"{Path(in_textured_mesh_ply).name} has {mesh.n_vertices} vertices but the {name} "
+                               f"have {len(arr)}; re-run the segmentation steps on this mesh")
+    rep = seam_label_stats(mesh.vertices, mesh.faces, labels, planes, gt, params.band_m)
+    rep["seam_planes"] = len(planes)
+    Path(out_seam_labels_json).write_text(json.dumps(rep, indent=1))
+    if not planes:
+        ctx.log.info("one tile: no seam to check")
+    else:
+        ctx.log.info("labels change on %.2f %% of the edges crossing a seam, %.2f %% at control planes%s",
+                     rep["seam_change_pct"] or 0.0, rep["control_change_pct"] or 0.0,
+                     "" if gt is None else f" (not in the ground truth: {rep['seam_changes_not_in_gt_pct']} % vs "
+                                           f"{rep['control_changes_not_in_gt_pct']} %)")
+    return {k: v for k, v in rep.items() if not isinstance(v, list)}
 
 
 def _read_points(path: Path):
@@ -356,6 +439,7 @@ def twinkit_register_steps(register):
     register("plan_tiles", plan_tiles, params=PlanTilesParams)
     register("reconstruct_tile", reconstruct_tile, params=ReconstructTileParams)
     register("merge_tiles", merge_tiles, params=MergeTilesParams)
+    register("evaluate_seam_labels", evaluate_seam_labels, params=EvaluateSeamLabelsParams)
 
 
 @hookimpl

@@ -464,43 +464,178 @@ def seam_boundary_edges(mesh: Mesh, planes: list[tuple[int, float]], tol_m: floa
     return int(hit.sum())
 
 
+def _open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float, tol_m: float) -> dict:
+    """Every open half-edge lying on a seam plane, with what tells a crack from a border crossing:
+    ``plane`` (index into ``planes``), ``tile_face`` (the edge's face is a tile face, not a stitch strip
+    or fill), and for tile faces ``facing`` (the mesh across the plane has a vertex within ``reach_m``
+    of the edge's midpoint)."""
+    from scipy.spatial import cKDTree
+
+    he, fid = boundary_half_edges(mesh.faces)
+    out = {"he": np.zeros((0, 2), np.int64), "plane": np.zeros(0, np.int64), "tile_face": np.zeros(0, bool),
+           "facing": np.zeros(0, bool)}
+    if len(he) == 0 or not planes:
+        return out
+    X = mesh.vertices
+    tile = mesh.face_attrs.get("tile")
+    is_tile = tile[fid] >= 0 if tile is not None else np.ones(len(fid), bool)
+    cen = X[mesh.faces[fid]].mean(axis=1)
+    parts = {k: [] for k in out}
+    for p, (axis, val) in enumerate(planes):
+        on = (np.abs(X[he[:, 0], axis] - val) <= tol_m) & (np.abs(X[he[:, 1], axis] - val) <= tol_m)
+        if not on.any():
+            continue
+        idx = np.flatnonzero(on)
+        facing = np.zeros(len(idx), bool)
+        mid = X[he[idx]].mean(axis=1)
+        side = np.sign(cen[idx, axis] - val)  # the side of the plane the open edge's face is on
+        slab = np.abs(X[:, axis] - val) <= reach_m
+        for sgn in (-1.0, 1.0):
+            sel = (side == sgn) & is_tile[idx]
+            other = slab & ((X[:, axis] - val) * sgn < -tol_m)  # strictly across the plane
+            if not sel.any() or not other.any():
+                continue
+            d, _ = cKDTree(X[other]).query(mid[sel], distance_upper_bound=reach_m)
+            facing[sel] = np.isfinite(d)
+        parts["he"].append(he[idx])
+        parts["plane"].append(np.full(len(idx), p, np.int64))
+        parts["tile_face"].append(is_tile[idx])
+        parts["facing"].append(facing)
+    return {k: np.concatenate(v) if v else out[k] for k, v in parts.items()}
+
+
+def seam_border_length(mesh: Mesh, planes: list[tuple[int, float]], tol_m: float = 1e-3) -> float:
+    """Total length of the open edges lying on the seam planes (metres)."""
+    he, _ = boundary_half_edges(mesh.faces)
+    if len(he) == 0 or not planes:
+        return 0.0
+    X = mesh.vertices
+    hit = np.zeros(len(he), bool)
+    for axis, val in planes:
+        hit |= (np.abs(X[he[:, 0], axis] - val) <= tol_m) & (np.abs(X[he[:, 1], axis] - val) <= tol_m)
+    return float(np.linalg.norm(X[he[hit, 0]] - X[he[hit, 1]], axis=1).sum())
+
+
 def classify_open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float = 0.2,
                              tol_m: float = 1e-3) -> dict:
     """Split the open seam edges of tile faces (the cracks counted by ``seam_boundary_edges``) by what
     lies across the plane: ``facing_surface`` when the mesh on the other side has a vertex within
     ``reach_m`` of the edge (a real gap between two surfaces), ``surface_ends`` when it has none (the
     neighbouring tile trimmed that surface away, so the mesh's own edge falls on the seam)."""
-    from scipy.spatial import cKDTree
+    e = _open_seam_edges(mesh, planes, reach_m, tol_m)
+    t = e["tile_face"]
+    return {"facing_surface": int((t & e["facing"]).sum()), "surface_ends": int((t & ~e["facing"]).sum()),
+            "reach_m": reach_m}
 
-    out = {"facing_surface": 0, "surface_ends": 0, "reach_m": reach_m}
-    he, fid = boundary_half_edges(mesh.faces)
-    if len(he) == 0 or not planes:
-        return out
-    if "tile" in mesh.face_attrs:
-        keep = mesh.face_attrs["tile"][fid] >= 0
-        he, fid = he[keep], fid[keep]
+
+def open_seam_runs(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float = 0.2, tol_m: float = 1e-3) -> list[dict]:
+    """The open edges on the seam planes as connected runs (polylines in a plane), longest first: where
+    each lies (``plane``, ``centre``), its ``length_m`` and ``edges`` (and those of tile faces:
+    ``tile_edges``, ``tile_edges_length_m``, of which ``facing_length_m`` face surface), and its ``kind``: ``facing_surface``
+    (a tile's border with the other tile's surface across: a crack), ``surface_ends`` (a tile's border
+    with nothing across: the mesh ends on the seam) or ``border_crossing`` (only edges of stitch strips
+    and fills: the mesh's own outer border crossing the seam)."""
+    e = _open_seam_edges(mesh, planes, reach_m, tol_m)
     X = mesh.vertices
-    cen = X[mesh.faces[fid]].mean(axis=1)
-    for axis, val in planes:
-        on = (np.abs(X[he[:, 0], axis] - val) <= tol_m) & (np.abs(X[he[:, 1], axis] - val) <= tol_m)
-        if not on.any():
+    runs = []
+    for p, (axis, val) in enumerate(planes):
+        sel = np.flatnonzero(e["plane"] == p)
+        if len(sel) == 0:
             continue
-        mid = X[he[on]].mean(axis=1)
-        side = np.sign(cen[on, axis] - val)  # the side of the plane the open edge's face is on
-        slab = np.abs(X[:, axis] - val) <= reach_m
-        for sgn in (-1.0, 1.0):
-            sel = side == sgn
-            if not sel.any():
+        key = {(int(a), int(b)): i for i, (a, b) in zip(sel.tolist(), e["he"][sel].tolist())}
+        for ch in _chains(e["he"][sel]):
+            idx = [key[(int(a), int(b))] for a, b in zip(ch[:-1], ch[1:]) if (int(a), int(b)) in key]
+            if not idx:
                 continue
-            other = slab & ((X[:, axis] - val) * sgn < -tol_m)  # strictly across the plane
-            if not other.any():
-                out["surface_ends"] += int(sel.sum())
-                continue
-            d, _ = cKDTree(X[other]).query(mid[sel], distance_upper_bound=reach_m)
-            near = np.isfinite(d)
-            out["facing_surface"] += int(near.sum())
-            out["surface_ends"] += int((~near).sum())
-    return out
+            idx = np.asarray(idx)
+            P = X[ch]
+            t, f = e["tile_face"][idx], e["facing"][idx]
+            kind = "facing_surface" if (t & f).any() else ("surface_ends" if t.any() else "border_crossing")
+            H = e["he"][idx]
+            L = np.linalg.norm(X[H[:, 0]] - X[H[:, 1]], axis=1)
+            runs.append({"plane": ["xyz"[axis], round(float(val), 4)], "centre": np.round(P.mean(axis=0), 3).tolist(),
+                         "length_m": round(float(L.sum()), 4), "edges": int(len(idx)), "tile_edges": int(t.sum()),
+                         "tile_edges_length_m": round(float(L[t].sum()), 4),
+                         "facing_length_m": round(float(L[t & f].sum()), 4), "kind": kind})
+    runs.sort(key=lambda r: -r["length_m"])
+    return runs
+
+
+def seam_map_png(mesh: Mesh, planes: list[tuple[int, float]], runs: list[dict], path, title: str = "",
+                 size_px: int = 1600) -> None:
+    """Top view of the merged mesh for checking the seams: each tile's faces in its own colour (shaded
+    by slope), stitch strips and fills dark, seam planes dashed, and every open run on a seam circled
+    (red: facing surface, orange: the surface ends on the seam; strip-only border crossings are not
+    marked)."""
+    from PIL import Image, ImageDraw
+
+    X, F = mesh.vertices, mesh.faces
+    if F is None or len(F) == 0:
+        return
+    lo, hi = X[:, :2].min(axis=0), X[:, :2].max(axis=0)
+    ext = max(float((hi - lo).max()), 1e-6)
+    W = max(1, int(round(size_px * (hi[0] - lo[0]) / ext)))
+    H = max(1, int(round(size_px * (hi[1] - lo[1]) / ext)))
+    px = ext / (size_px - 1)
+    tile = mesh.face_attrs.get("tile", np.zeros(len(F), np.int64))
+    pal = np.array([[141, 211, 199], [255, 255, 179], [190, 186, 218], [251, 128, 114], [128, 177, 211],
+                    [253, 180, 98], [179, 222, 105], [252, 205, 229], [217, 217, 217], [188, 128, 189],
+                    [204, 235, 197], [255, 237, 111]], np.float64)
+    col = np.where(tile[:, None] >= 0, pal[np.maximum(tile, 0) % len(pal)], np.array([[60.0, 60.0, 60.0]]))
+    T = X[F]
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    nn = np.linalg.norm(n, axis=1)
+    col *= (0.55 + 0.45 * np.abs(n[:, 2]) / np.maximum(nn, 1e-12))[:, None]
+    # samples: every vertex (in the colour of one of its faces), and one point per pixel of face area
+    # (at least one per face)
+    area_px = 0.5 * nn / px ** 2
+    extra = np.minimum(np.ceil(area_px).astype(np.int64), 64)
+    rng = np.random.default_rng(0)
+    fi = np.repeat(np.arange(len(F)), extra)
+    r1, r2 = np.sqrt(rng.random(len(fi))), rng.random(len(fi))
+    S = T[fi, 0] * (1 - r1)[:, None] + T[fi, 1] * (r1 * (1 - r2))[:, None] + T[fi, 2] * (r1 * r2)[:, None]
+    del T
+    vf = np.full(len(X), -1, np.int64)
+    vf[F.ravel()] = np.repeat(np.arange(len(F)), 3)
+    used = vf >= 0
+    S = np.vstack([S, X[used]])
+    fi = np.concatenate([fi, vf[used]])
+    c = np.clip(((S[:, 0] - lo[0]) / px).astype(np.int64), 0, W - 1)
+    r = np.clip(((hi[1] - S[:, 1]) / px).astype(np.int64), 0, H - 1)
+    pix = r * W + c
+    order = np.lexsort((S[:, 2], pix))  # per pixel, the highest sample last
+    last = np.r_[pix[order][1:] != pix[order][:-1], True]
+    img = np.full((H * W, 3), 255, np.uint8)
+    img[pix[order][last]] = np.clip(col[fi[order][last]], 0, 255).astype(np.uint8)
+    img = img.reshape(H, W, 3)
+    # close the pinholes between samples: an empty pixel takes a filled neighbour's colour (one pass)
+    empty = (img == 255).all(axis=2)
+    grown = img.copy()
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        src = np.roll(img, (dy, dx), axis=(0, 1))
+        take = empty & ~(src == 255).all(axis=2) & (grown == 255).all(axis=2)
+        grown[take] = src[take]
+    im = Image.fromarray(grown)
+    d = ImageDraw.Draw(im)
+    for axis, val in planes:
+        for s in np.arange(0.0, ext, 2.0):
+            if axis == 0:
+                x = (val - lo[0]) / px
+                d.line([(x, s / px), (x, min(s + 1.0, ext) / px)], fill=(90, 90, 90), width=1)
+            else:
+                y = (hi[1] - val) / px
+                d.line([(s / px, y), (min(s + 1.0, ext) / px, y)], fill=(90, 90, 90), width=1)
+    colours = {"facing_surface": (220, 0, 0), "surface_ends": (255, 140, 0)}
+    for run in runs:
+        if run["kind"] not in colours:
+            continue
+        x, y = (run["centre"][0] - lo[0]) / px, (hi[1] - run["centre"][1]) / px
+        rad = max(6.0, 0.5 * run["length_m"] / px + 4)
+        d.ellipse([x - rad, y - rad, x + rad, y + rad], outline=colours[run["kind"]], width=2)
+    if title:
+        d.rectangle([0, 0, min(W, 8 + 6 * len(title)), 16], fill=(255, 255, 255))
+        d.text((4, 3), title, fill=(0, 0, 0))
+    im.save(str(path))
 
 
 def faces_outside_core(mesh: Mesh, tiles: list[dict], tol_m: float = 1e-5) -> int:

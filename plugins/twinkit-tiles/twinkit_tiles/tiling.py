@@ -43,10 +43,16 @@ class Grid:
     nx: int
     ny: int
     overlap_m: float
+    xs: np.ndarray | None = None  # the grid lines (nx + 1 values); None = evenly spaced
+    ys: np.ndarray | None = None
+
+    def lines(self) -> tuple[np.ndarray, np.ndarray]:
+        xs = self.xs if self.xs is not None else np.linspace(self.x0, self.x1, self.nx + 1)
+        ys = self.ys if self.ys is not None else np.linspace(self.y0, self.y1, self.ny + 1)
+        return np.asarray(xs, np.float64), np.asarray(ys, np.float64)
 
     def tiles(self) -> list[dict]:
-        xs = np.linspace(self.x0, self.x1, self.nx + 1)
-        ys = np.linspace(self.y0, self.y1, self.ny + 1)
+        xs, ys = self.lines()
         out = []
         for iy in range(self.ny):
             for ix in range(self.nx):
@@ -95,6 +101,40 @@ def choose_grid(xy: np.ndarray, tile_m: float, overlap_m: float, memory_budget_g
                           f"raise tile_m or memory_budget_gb")
     return Grid(float(x0), float(y0), float(x1), float(y1), nx, ny, float(overlap_m)), \
         why | {"tile_m": round(float(tile_m), 3), "nx": nx, "ny": ny, "mean_density_pts_m2": round(density, 2)}
+
+
+def place_seams(coord: np.ndarray, upright: np.ndarray, lines: np.ndarray, search_m: float,
+                step_m: float = 0.05, slab_m: float = 0.2) -> tuple[np.ndarray, list[dict]]:
+    """Move each interior grid line by up to ``search_m`` to where the fewest upright surfaces cross it.
+
+    ``coord``: the points' coordinate across the lines (x for the x lines); ``upright``: points on
+    non-horizontal surfaces (poles, trunks, tree crowns, car sides, walls along the line). A seam
+    through such an object is where two tiles' independent reconstructions disagree most (thin
+    objects come out with different cross-sections), while flat ground is stitched cleanly; walls
+    crossing the line count the same at every offset. The cost of an offset is the number of upright
+    points within ``slab_m / 2`` of the line; ties go to the smallest move. The outer lines stay.
+    Returns the new lines and a report per moved line."""
+    out = np.asarray(lines, np.float64).copy()
+    rep = []
+    if search_m <= 0 or len(out) < 3:
+        return out, rep
+    c = coord[upright]
+    offs = np.arange(-search_m, search_m + step_m / 2, step_m)
+    for i in range(1, len(out) - 1):
+        v = out[i]
+        near = c[np.abs(c - v) <= search_m + slab_m]
+        cost = np.array([np.count_nonzero(np.abs(near - (v + o)) <= slab_m / 2) for o in offs])
+        best = np.flatnonzero(cost == cost.min())
+        o = float(offs[best[np.argmin(np.abs(offs[best]))]])
+        # keep every core at least 2 search widths wide (never move towards a neighbour that is too close)
+        lo = min(0.0, out[i - 1] + 2 * search_m - v)
+        hi = max(0.0, out[i + 1] - 2 * search_m - v)
+        o = float(np.clip(o, lo, hi))
+        k0 = int(np.argmin(np.abs(offs)))
+        rep.append({"line": round(float(v), 3), "moved_m": round(o, 3), "upright_points_before": int(cost[k0]),
+                    "upright_points_after": int(np.count_nonzero(np.abs(near - (v + o)) <= slab_m / 2))})
+        out[i] = v + o
+    return out, rep
 
 
 def in_box(xy: np.ndarray, box: list) -> np.ndarray:
