@@ -55,3 +55,42 @@ def test_labels_that_break_at_a_seam_are_caught():
     assert r["seam_changes_not_in_gt_pct"] > 20.0 and r["control_changes_not_in_gt_pct"] < 1.0
     with pytest.raises(ValueError, match="labels"):
         seam_label_stats(V, F, pred[:-1], PLANES)
+
+
+def _step_inputs(tmp_path, tiles):
+    import json
+
+    from twinkit_pointcloud.meshio import Mesh, write_ply
+
+    V, F = _grid()
+    write_ply(tmp_path / "textured_mesh.ply", Mesh(vertices=V, faces=F))
+    labels = np.where(V[:, 0] > 10.0, 1, 0).astype(np.uint8)  # breaks at x = 10
+    np.save(tmp_path / "labels.npy", labels)
+    (tmp_path / "tiles.json").write_text(json.dumps({"items": tiles}))
+    return {"in_tiles_json": tmp_path / "tiles.json", "in_textured_mesh_ply": tmp_path / "textured_mesh.ply",
+            "in_labels_npy": tmp_path / "labels.npy"}
+
+
+def test_the_step_checks_the_seams_of_tiles_json_or_the_lines_it_is_given(tmp_path):
+    import json
+
+    import twinkit_tiles.plugin as P
+    from twinkit import InputError
+    from twinkit.testing import check_plugin, plugin_from_module, run_step
+
+    plugin = plugin_from_module(P, "step", "evaluate_seam_labels")
+    check_plugin(plugin)
+    two = [{"ix": 0, "iy": 0, "core": [None, None, 10.0, None]}, {"ix": 1, "iy": 0, "core": [10.0, None, None, None]}]
+    out = run_step(plugin, tmp_path / "a", _step_inputs(tmp_path, two))
+    rep = json.loads(out["seam_labels.json"].read_text())
+    assert rep["seam_planes"] == 1 and rep["seams"][0]["label_changes"] == rep["seams"][0]["edges"] > 0
+    # one tile: no seam, unless lines are given
+    one = [{"ix": 0, "iy": 0, "core": [None, None, None, None]}]
+    out = run_step(plugin, tmp_path / "b", _step_inputs(tmp_path, one))
+    rep = json.loads(out["seam_labels.json"].read_text())
+    assert rep["seam_planes"] == 0 and rep["seam_change_pct"] is None
+    out = run_step(plugin, tmp_path / "c", _step_inputs(tmp_path, one), P.EvaluateSeamLabelsParams(planes=["x=10", "y = -5"]))
+    rep = json.loads(out["seam_labels.json"].read_text())
+    assert rep["seam_planes"] == 2 and rep["seam_change_pct"] > 40.0
+    with pytest.raises(InputError, match="evaluate_seam_labels.planes.*'z=3'"):
+        run_step(plugin, tmp_path / "d", _step_inputs(tmp_path, one), P.EvaluateSeamLabelsParams(planes=["z=3"]))
