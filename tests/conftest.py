@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import textwrap
@@ -10,6 +11,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -84,9 +90,12 @@ class Project:
         return CliResult(p.returncode, p.stdout, p.stderr)
 
     def popen(self, *args: str, env: dict | None = None) -> subprocess.Popen:
+        # Ctrl-C must reach the run as it would from a terminal, even when the test suite itself was
+        # started in the background (a shell starts background jobs with SIGINT ignored, and children
+        # inherit that)
         return subprocess.Popen(self.cmd(*args, f"engine.outputs_dir={self.out}"), env=env or self.env(),
                                 cwd=self.tmp, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                start_new_session=True)
+                                start_new_session=True, preexec_fn=_default_sigint)
 
     def counts(self) -> dict[str, int]:
         if not self.counter.exists():

@@ -249,8 +249,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply, write_ply
 
-    from .seams import (_concat, classify_open_seam_edges, close_seam_holes, edge_counts, faces_outside_core,
-                        merge_grid, open_seam_runs, seam_border_length, seam_boundary_edges, seam_map_png, seam_planes, trim_seam_bands)
+    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, open_seam_runs,
+                        seam_border_length, seam_boundary_edges, seam_map_png, seam_planes, trim_seam_bands)
 
     params = params or MergeTilesParams()
     plan = json.loads(Path(in_tiles_json).read_text())
@@ -296,11 +296,13 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                          band_rep["band_m"], band_rep["vertices_trimmed"], band_rep["vertices_in_band"],
                          band_rep["components_removed"], band_rep["holes_closed"])
         tile_attr = merged.face_attrs["tile"]
-        # the cracks (open seam edges of tile faces), split by what lies across the plane
-        kinds = classify_open_seam_edges(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
-        cracks = kinds["facing_surface"] + kinds["surface_ends"]
-        ends = seam_boundary_edges(merged, planes, params.seam_tol_m) - cracks
+        # the open edges on the seams as runs; cracks are the open edges of tile faces, split by what
+        # lies across the plane; the rest are strip edges (the mesh's own border crossing a seam)
         runs = open_seam_runs(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
+        cracks = sum(r["tile_edges"] for r in runs)
+        kinds = {"facing_surface": sum(r["facing_edges"] for r in runs)}
+        kinds["surface_ends"] = cracks - kinds["facing_surface"]
+        ends = sum(r["edges"] for r in runs) - cracks
         # lengths of the open edges of tile faces (the cracks), split by what lies across, and of strip edges
         facing_len = sum(r["facing_length_m"] for r in runs)
         open_len = {"facing_surface": round(facing_len, 3),

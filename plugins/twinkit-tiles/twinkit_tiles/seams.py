@@ -531,7 +531,8 @@ def classify_open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_
 def open_seam_runs(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float = 0.2, tol_m: float = 1e-3) -> list[dict]:
     """The open edges on the seam planes as connected runs (polylines in a plane), longest first: where
     each lies (``plane``, ``centre``), its ``length_m`` and ``edges`` (and those of tile faces:
-    ``tile_edges``, ``tile_edges_length_m``, of which ``facing_length_m`` face surface), and its ``kind``: ``facing_surface``
+    ``tile_edges``, ``tile_edges_length_m``, of which ``facing_edges`` / ``facing_length_m`` face
+    surface), and its ``kind``: ``facing_surface``
     (a tile's border with the other tile's surface across: a crack), ``surface_ends`` (a tile's border
     with nothing across: the mesh ends on the seam) or ``border_crossing`` (only edges of stitch strips
     and fills: the mesh's own outer border crossing the seam)."""
@@ -555,7 +556,7 @@ def open_seam_runs(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float =
             L = np.linalg.norm(X[H[:, 0]] - X[H[:, 1]], axis=1)
             runs.append({"plane": ["xyz"[axis], round(float(val), 4)], "centre": np.round(P.mean(axis=0), 3).tolist(),
                          "length_m": round(float(L.sum()), 4), "edges": int(len(idx)), "tile_edges": int(t.sum()),
-                         "tile_edges_length_m": round(float(L[t].sum()), 4),
+                         "tile_edges_length_m": round(float(L[t].sum()), 4), "facing_edges": int((t & f).sum()),
                          "facing_length_m": round(float(L[t & f].sum()), 4), "kind": kind})
     runs.sort(key=lambda r: -r["length_m"])
     return runs
