@@ -81,9 +81,9 @@ def seam_label_stats(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray
     if gt is not None:
         out["seam_changes_not_in_gt_pct"] = _rate(seam_rows, "changes_not_in_gt", "edges_with_gt")
         out["control_changes_not_in_gt_pct"] = _rate(ctrl_rows, "changes_not_in_gt", "edges_with_gt")
-        near = np.zeros(len(X), bool)
-        for axis, val in planes:
-            near |= np.abs(X[:, axis] - val) <= band_m
+        from .seams import near_planes
+
+        near = near_planes(X, planes, band_m)
         ok = (labels != IGNORE) & (gt != IGNORE)
 
         def acc(m):
