@@ -48,6 +48,24 @@ def test_distance_trim_removes_bubbles():
     assert out.attrs["dist_to_cloud_m"].max() < 0.01
 
 
+def test_loose_region_trimmed_loosely_and_its_exact_verdict_reported():
+    m = grid_mesh(30)  # 1 x 1 m; the cloud covers only x < 0.5
+    pts = m.vertices[m.vertices[:, 0] < 0.5]
+    loose = lambda V: V[:, 1] > 0.7  # noqa: E731
+    opt = C.CleanOptions(max_dist_m=0.05, min_component_faces=1, max_hole_edges=0, loose_dist_m=1.0)
+    out, rep = C.clean_mesh(m, pts, opt, loose=loose)
+    X = out.vertices
+    assert X[X[:, 1] <= 0.7, 0].max() < 0.55  # trimmed exactly outside the loose region ...
+    assert X[X[:, 1] > 0.7, 0].max() == pytest.approx(1.0)  # ... and only beyond 1 m in it
+    s = rep["loose_samples"]
+    assert len(s["points"]) == int(loose(m.vertices).sum()) == len(s["keep"]) == len(s["normals"])
+    np.testing.assert_allclose(np.abs(s["normals"][:, 2]), 1.0, atol=1e-5)  # the flat grid's normal
+    # the verdict the exact rule would have given there: keep where the cloud is, drop elsewhere
+    assert np.array_equal(s["keep"], s["points"][:, 0] < 0.5 + 0.05)
+    _, rep2 = C.clean_mesh(m, pts, C.CleanOptions(max_dist_m=0.05, min_component_faces=1))
+    assert "loose_samples" not in rep2
+
+
 def test_small_components_removed():
     m = grid_mesh(20)
     small = grid_mesh(3, size=0.05)

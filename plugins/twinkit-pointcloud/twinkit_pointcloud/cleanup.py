@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .meshio import Mesh, compact, face_areas
+from .meshio import Mesh, compact, face_areas, vertex_normals
 
 
 @dataclass
@@ -277,7 +277,8 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
     ``loose`` (a function of the vertices giving a bool mask, with ``opt.loose_dist_m`` > 0): the
     vertices it flags are only trimmed beyond ``loose_dist_m`` (tiles keep the surface near their
     seams loosely trimmed; the exact trim is done once on the merged mesh, so both sides of a
-    seam get the same decision)."""
+    seam get the same decision). The report then has ``loose_samples``: the flagged vertices, their
+    normals, and whether the exact rule would have kept them."""
     from scipy.spatial import cKDTree
 
     rep: dict = {"input": {"vertices": mesh.n_vertices, "faces": mesh.n_faces}}
@@ -292,6 +293,13 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
         drop, kept_gap = trim_mask(mesh.vertices, d, points, normals, opt, tree)
         if loose is not None and opt.loose_dist_m > 0:
             lm = np.asarray(loose(mesh.vertices), bool)
+            # what the exact rule said there, for the caller (tiles pass it on to the merge)
+            if "normals" in mesh.attrs and len(mesh.attrs["normals"]) == mesh.n_vertices:
+                nrm = mesh.attrs["normals"][lm]
+            else:
+                nrm = vertex_normals(mesh.vertices, mesh.faces[lm[mesh.faces].any(axis=1)])[lm]  # faces there only
+            rep["loose_samples"] = {"points": mesh.vertices[lm].copy(), "normals": np.asarray(nrm, np.float32),
+                                    "keep": ~drop[lm]}
             drop[lm] = d[lm] > opt.loose_dist_m
         mesh = remove_vertices(mesh, drop)
         rep["distance_trim"] = {"max_dist_m": opt.max_dist_m, "gap_dist_m": opt.gap_dist_m,

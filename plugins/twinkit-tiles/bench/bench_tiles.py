@@ -52,7 +52,7 @@ def collect(ws: Path) -> dict:
                       "faces": p.get("faces"), "seconds": p.get("duration_s"), "peak_rss_mb": p.get("peak_rss_mb"),
                       "pid": p.get("pid")} for p in per],
         "merge_s": rec(ws, "05_merge_tiles")["duration_s"], "merge_peak_mb": rec(ws, "05_merge_tiles")["peak_rss_mb"],
-        "seams": {k: v for k, v in seams.items() if k not in ("seams", "planes")},
+        "seams": {k: v for k, v in seams.items() if k != "seams"},
         "accuracy_mean_mm": 1000 * m["gt"]["accuracy_mesh_to_gt_m"]["mean"] if m.get("gt") else None,
         "accuracy_median_mm": 1000 * m["gt"]["accuracy_mesh_to_gt_m"]["median"] if m.get("gt") else None,
         "cloud_to_mesh_median_mm": 1000 * m["cloud_to_mesh_m"]["median"],
@@ -62,6 +62,19 @@ def collect(ws: Path) -> dict:
         "peaks": {f.name: rec(ws, f.name).get("peak_rss_mb") for f in sorted(ws.iterdir())
                   if (f / "step.json").exists()},
     }
+
+
+def near_lines_untiled(ws: Path, tiled_seams: dict, band_m: float) -> dict:
+    """The untiled mesh's open border near the tiled run's seam lines and control lines (same measure
+    as tile_seams.json's ``open_near_lines``): what a seam should not exceed."""
+    from twinkit_pointcloud.meshio import read_ply
+    from twinkit_tiles.seams import open_near_lines
+
+    m = read_ply(ws / "05_merge_tiles" / "clean_mesh.ply")
+    ax = {"x": 0, "y": 1}
+    planes = [(ax[a], float(v)) for a, v in tiled_seams["planes"]]
+    controls = [(ax[a], float(v)) for a, v in tiled_seams["open_near_lines"]["control_planes"]]
+    return {"seams": open_near_lines(m, planes, band_m), "controls": open_near_lines(m, controls, band_m)}
 
 
 def main() -> None:
@@ -104,6 +117,9 @@ def main() -> None:
             dt, _ = twinkit(out, preset, "steps.plan_tiles.tile_m=100000", "executor=local", "executor.workers=1",
                             *common)
             R["untiled"] = collect(ws) | {"wall_s": round(dt, 1), "load_avg": os.getloadavg()}
+            tiled = R["tiled_2_workers"]["seams"]
+            if tiled.get("open_near_lines"):
+                R["untiled"]["open_near_lines"] = near_lines_untiled(ws, tiled, tiled["open_near_lines"]["seams"]["band_m"])
             print(f"[{preset}] untiled: {R['untiled']['tile_step_s']} s", flush=True)
         results["presets"][preset] = R
         Path(a.json).write_text(json.dumps(results, indent=2))
@@ -135,6 +151,18 @@ def report(results: dict) -> str:
         if "untiled" in R:
             d = R["tiled_2_workers"]["accuracy_mean_mm"] - R["untiled"]["accuracy_mean_mm"]
             lines.append(f"\nMean distance to ground truth, tiled - untiled: **{d:+.2f} mm**")
+        t_near = R["tiled_2_workers"]["seams"].get("open_near_lines")
+        if t_near:
+            b = t_near["seams"]["band_m"]
+            lines.append(f"\nOpen border within {b} m of a line, per metre of surface the lines cut (seam lines: "
+                         f"{t_near['seams']['planes']}, control lines half-way between them: {t_near['controls']['planes']}):\n")
+            lines.append("| mesh | at the seam lines | at the control lines |\n|---|---:|---:|")
+            rows = [("tiled", t_near)] + ([("untiled, same lines", R["untiled"]["open_near_lines"])]
+                                          if "open_near_lines" in R.get("untiled", {}) else [])
+            for name, nl in rows:
+                lines.append(f"| {name} | {nl['seams']['open_per_section']} ({nl['seams']['open_m']} m / "
+                             f"{nl['seams']['section_m']} m) | {nl['controls']['open_per_section']} "
+                             f"({nl['controls']['open_m']} m / {nl['controls']['section_m']} m) |")
         lines.append("\nPer tile (2 local workers):\n\n| tile | points | depth | faces | s | peak RSS MiB | worker pid |")
         lines.append("|---:|---:|---:|---:|---:|---:|---:|")
         for p in R["tiled_2_workers"]["per_tile"]:

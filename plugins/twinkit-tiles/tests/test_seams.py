@@ -247,3 +247,80 @@ def test_seam_band_trim_applies_the_distance_rule_near_seams_only():
     assert X[band, 1].max() <= 1.1 + 1e-9  # trimmed near the seam ...
     assert X[~band, 1].max() == pytest.approx(2.0)  # ... and nowhere else
     assert X[band, 1].max() >= 1.0  # the surface near the points stays
+
+
+def test_a_strip_left_bare_on_one_side_counts_as_a_crack():
+    """A strip's along-the-border edge left open (the faces of that tile beside the seam were trimmed
+    away) is a crack, like an open edge of a tile face; only strip edges crossing the gap are not."""
+    from twinkit_tiles.seams import classify_open_seam_edges, open_seam_runs
+
+    a = cut_halfspace(grid_mesh(0, 3.2, 0, 3, 0.2, jitter=0.05, seed=1), 0, 2.0, "below")
+    b = cut_halfspace(grid_mesh(1.0, 4, 0, 3, 0.27, jitter=0.05, seed=2), 0, 2.0, "above")
+    m, _ = merge_grid([{"ix": 0, "iy": 0, "core": [None, None, 2.0, None]},
+                       {"ix": 1, "iy": 0, "core": [2.0, None, None, None]}], [a, b], max_gap_m=0.5)
+    planes = [(0, 2.0)]
+    assert seam_boundary_edges(m, planes, tile_faces_only=True) == 0
+    # tile 1 loses its faces along the seam for 1 < y < 2, as a trim would take them
+    X, F, t = m.vertices, m.faces, m.face_attrs["tile"]
+    c = X[F].mean(axis=1)
+    on = np.abs(X[:, 0] - 2.0) <= 1e-9
+    gone = (t == 1) & on[F].any(axis=1) & (c[:, 1] > 1.0) & (c[:, 1] < 2.0)
+    m.faces, m.face_attrs = F[~gone], {"tile": t[~gone]}
+    he, fid = boundary_half_edges(m.faces)
+    on_seam = on[he[:, 0]] & on[he[:, 1]]
+    assert (on_seam & (m.face_attrs["tile"][fid] >= 0)).sum() == 0  # no tile face is open on the seam ...
+    n = seam_boundary_edges(m, planes, tile_faces_only=True)
+    assert n >= 3  # ... but the strip is: about 1 m of tile 1's border is bare
+    k = classify_open_seam_edges(m, planes)
+    assert k["facing_surface"] + k["surface_ends"] == n and k["facing_surface"] > 0  # tile 0 lies across
+    runs = open_seam_runs(m, planes)
+    crack = [r for r in runs if r["kind"] == "facing_surface"]
+    assert len(crack) == 1 and 0.8 < crack[0]["tile_edges_length_m"] < 1.4 and 1.0 < crack[0]["centre"][1] < 2.0
+
+
+def test_open_near_lines_sees_a_slot_along_a_line_only():
+    from twinkit_tiles.seams import _section_length, open_near_lines
+
+    m = grid_mesh(0, 4, 0, 2, 0.1, z=lambda x, y: 0 * x)
+    assert _section_length(m.vertices, m.faces, 0, 2.03) == pytest.approx(2.0)
+    c = m.vertices[m.faces].mean(axis=1)
+    slot = (np.abs(c[:, 0] - 2.0) < 0.1) & (c[:, 1] < 1.0)  # a 20 cm wide gap along x = 2 for y < 1
+    m.faces = m.faces[~slot]
+    at_slot = open_near_lines(m, [(0, 2.0)], 0.05)
+    elsewhere = open_near_lines(m, [(0, 1.0), (0, 3.0)], 0.05)
+    assert at_slot["section_m"] == pytest.approx(1.0, abs=0.01)  # the line cuts only the surface above y = 1
+    # in the band: the slot's end (10 cm) and the mesh's outer border at y = 2 (10 cm); the slot's sides lie outside
+    assert at_slot["open_m"] == pytest.approx(0.2, abs=0.01)
+    wide = open_near_lines(m, [(0, 2.0)], 0.15)
+    assert wide["open_m"] > 2.0  # with a wider band both 1 m sides of the slot count
+    # elsewhere only the mesh's outer border crosses the lines: 2 x 10 cm per line, per 2 m of surface
+    assert elsewhere["open_m"] == pytest.approx(0.4, abs=1e-6) and elsewhere["open_per_section"] == pytest.approx(0.1)
+    assert wide["open_per_section"] > 10 * elsewhere["open_per_section"]
+
+
+def test_seam_band_trim_keeps_what_a_tile_voted_for():
+    from twinkit_tiles.seams import trim_seam_bands
+
+    m = grid_mesh(-2, 2, 0, 2, 0.05, z=lambda x, y: 0 * x)
+    m.face_attrs = {"tile": np.where(m.vertices[m.faces].mean(axis=1)[:, 0] < 0, 0, 1).astype(np.int32)}
+    rng = np.random.default_rng(1)
+    P = np.c_[rng.uniform(-2, 2, 40000), rng.uniform(0, 1, 40000), np.zeros(40000)]
+    N = np.tile([0.0, 0.0, 1.0], (len(P), 1))
+    # a tile whose own surface passed the trim up to y = 1.5 on both sides of the seam
+    vy, vx = np.meshgrid(np.arange(1.0, 1.5, 0.02), np.arange(-0.6, 0.6, 0.02))
+    votes = np.c_[vx.ravel(), vy.ravel(), np.zeros(vx.size), np.tile([0.0, 0.0, 1.0], (vx.size, 1))]
+    kw = dict(band_m=0.5, max_dist_m=0.1, max_hole_edges=0, min_component_faces=0)
+    plain, _ = trim_seam_bands(m, [(0, 0.0)], P, N, **kw)
+    voted, rep = trim_seam_bands(m, [(0, 0.0)], P, N, votes=votes, vote_radius_m=0.05, **kw)
+    band = lambda X: np.abs(X[:, 0]) <= 0.5  # noqa: E731
+    assert plain.vertices[band(plain.vertices), 1].max() <= 1.1 + 1e-9
+    assert voted.vertices[band(voted.vertices), 1].max() >= 1.45
+    assert rep["vertices_kept_by_votes"] > 0
+    far = voted.vertices[band(voted.vertices)]
+    assert far[:, 1].max() <= 1.55  # beyond the votes the points decide as before
+    # a vote keeps surface on its own tangent plane, not a bubble 4 cm above it
+    lifted = Mesh(vertices=m.vertices + [0.0, 0.0, 0.04], faces=m.faces, attrs=dict(m.attrs),
+                  face_attrs=dict(m.face_attrs))
+    bubble, rep_b = trim_seam_bands(lifted, [(0, 0.0)], P, N, votes=votes, vote_radius_m=0.05, vote_plane_m=0.02, **kw)
+    assert rep_b["vertices_kept_by_votes"] == 0
+    assert bubble.vertices[band(bubble.vertices), 1].max() <= 1.1 + 1e-9

@@ -58,6 +58,13 @@ class MergeTilesParams:
     max_gap_m: float = 0.10  # borders farther apart than this are not stitched (counted as open)
     seam_tol_m: float = 0.001  # an edge within this of a seam plane counts as a seam edge in the statistics
     max_hole_edges: int = 120  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
+    vote_radius_m: float = 0.05  # the seam-band trim keeps a vertex with a tile's "keep" vote this close
+    #                              (either tile's full-resolution surface passed the exact trim there) ...
+    vote_plane_m: float = 0.05  # ... and within this of the vote's tangent plane (not a bubble above it).
+    #                             A wider radius (0.15-0.25: Poisson's vertices in sparse ground are 10-20 cm
+    #                             apart) closes more seam holes but keeps surface the trim would drop, at a
+    #                             cost in accuracy (docs/tiles.md, seventh session); 0 = off
+    line_band_m: float = 0.05  # open border within this of the seams vs. of control lines (tile_seams.json)
     fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on the merged mesh (clean_mesh's
     fill_ground_max_gap_m: float = 8.0  # ground fill, over the whole site at once so it has no tile edges); 0 = off
 
@@ -176,7 +183,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
 
 
 def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: Path, item: dict,
-                     out_tile_mesh_ply: Path) -> dict:
+                     out_tile_mesh_ply: Path, out_seam_votes_npz: Path) -> dict:
     """Poisson on one padded tile at the plan's voxel size, clean-up, exact cut to the tile's core."""
     import os
 
@@ -184,6 +191,8 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply, write_ply
     from twinkit_pointcloud.simplify import simplify_mesh
+
+    import numpy as np
 
     from .seams import cut_to_box, edge_counts
     from .tiling import exact_voxel_poisson
@@ -213,12 +222,21 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
 
             opt.loose_dist_m = max(params.seam_loose_dist_m, params.max_dist_m)
             loose = lambda V: near_planes(V, planes, params.seam_band_m)  # noqa: E731
+        votes = {"points": np.zeros((0, 3), np.float32), "normals": np.zeros((0, 3), np.float32),
+                 "keep": np.zeros(0, bool)}
         if mesh.n_faces:
             try:
-                mesh, _ = clean_mesh(mesh, pts, opt, normals=cloud.normals, loose=loose)
+                mesh, crep = clean_mesh(mesh, pts, opt, normals=cloud.normals, loose=loose)
+                if "loose_samples" in crep:
+                    votes = crep["loose_samples"]
             except Exception as exc:  # e.g. nothing within max_dist_m: an empty tile
                 ctx.log.warning("tile %d: clean-up left nothing (%s)", item["index"], exc)
                 mesh.faces = mesh.faces[:0]
+        # the exact trim's verdict on this tile's full-resolution surface near the seams, on both sides
+        # of them (the padded tile reaches into its neighbours): merge_tiles keeps a place near a seam
+        # when either tile's surface there passes, so the two sides decide alike
+        np.savez_compressed(out_seam_votes_npz, points=np.asarray(votes["points"], np.float32),
+                            normals=np.asarray(votes["normals"], np.float16), keep=np.asarray(votes["keep"], bool))
         padded_faces = mesh.n_faces
         mesh = cut_to_box(mesh, item["core"]) if mesh.n_faces else mesh
         cut_faces = mesh.n_faces
@@ -238,18 +256,19 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
     return {"tile": item["index"], "points": int(len(pts)), "depth": depth, "scale": round(scale, 4),
             "dense_faces": int(dense_faces), "padded_clean_faces": int(padded_faces), "cut_faces": int(cut_faces), "faces": mesh.n_faces,
             "boundary_edges": ec.get("boundary_edges", 0), "pid": os.getpid(),
+            "seam_votes": int(len(votes["keep"])), "seam_votes_keep": int(np.count_nonzero(votes["keep"])),
             "tile_peak_rss_mb": round(meas.peak_rss_mb, 1), "tile_delta_peak_mb": round(meas.delta_peak_mb, 1),
             "seconds": round(meas.seconds, 3)}
 
 
 def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_mesh_ply: list, in_points_ply: Path,
-                out_clean_mesh_ply: Path, out_tile_seams_json: Path) -> dict:
+                out_clean_mesh_ply: Path, out_tile_seams_json: Path, in_seam_votes_npz: list | None = None) -> dict:
     """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
     import numpy as np
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply, write_ply
 
-    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, open_seam_runs,
+    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, open_near_lines, open_seam_runs,
                         seam_border_length, seam_boundary_edges, seam_map_png, seam_planes, trim_seam_bands)
 
     params = params or MergeTilesParams()
@@ -286,14 +305,19 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         if trim.get("seam_band_m", 0) > 0:
             cloud = _read_points(in_points_ply)
             threads = max(1, int(getattr(ctx, "threads", 1) or 1))
+            votes = _read_votes(in_seam_votes_npz) if params.vote_radius_m > 0 else None
             merged, band_rep = trim_seam_bands(
                 merged, planes, cloud.vertices, cloud.normals, trim["seam_band_m"], trim["max_dist_m"],
                 trim.get("gap_dist_m", 0.0), trim.get("gap_plane_m", 0.02), int(trim.get("min_component_faces", 200)),
-                int(trim.get("max_hole_edges", 60)), threads)
+                int(trim.get("max_hole_edges", 60)), threads, votes=votes, vote_radius_m=params.vote_radius_m,
+                vote_plane_m=params.vote_plane_m)
+            del votes
             merged, holes2 = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
             holes += holes2
-            ctx.log.info("seam bands (%.2f m): %d of %d vertices trimmed, %d small components removed, %d holes closed",
+            ctx.log.info("seam bands (%.2f m): %d of %d vertices trimmed (%d kept by the tiles' votes), "
+                         "%d small components removed, %d holes closed",
                          band_rep["band_m"], band_rep["vertices_trimmed"], band_rep["vertices_in_band"],
+                         band_rep["vertices_kept_by_votes"],
                          band_rep["components_removed"], band_rep["holes_closed"])
         tile_attr = merged.face_attrs["tile"]
         # the open edges on the seams as runs; cracks are the open edges of tile faces, split by what
@@ -331,6 +355,14 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                              ground.get("filled_cells", 0), ground.get("area_m2", 0.0))
             del cloud
         after_total = edge_counts(merged.faces)
+        # open border near the seams vs. near lines half-way between them, per metre of surface cut: the
+        # seams add cracks where their figure is higher (compare with an untiled mesh at the same lines)
+        from .seam_labels import control_planes
+
+        controls = control_planes(planes, merged.vertices.min(axis=0), merged.vertices.max(axis=0))
+        near_lines = {"seams": open_near_lines(merged, planes, params.line_band_m),
+                      "controls": open_near_lines(merged, controls, params.line_band_m),
+                      "control_planes": [["xyz"[a], round(v, 4)] for a, v in controls]}
         merged.comments = [f"twinkit-tiles merge of {len(keep)} tiles"]
         write_ply(out_clean_mesh_ply, merged)
         report = {
@@ -345,7 +377,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
             "boundary_edges_before": before_total["boundary_edges"], "boundary_edges_after": after_total["boundary_edges"],
             "stitched_faces": int((tile_attr < 0).sum()), "vertices": merged.n_vertices, "faces": merged.n_faces,
-            "ground_fill": ground, "seam_band_trim": band_rep, "seams": seams,
+            "ground_fill": ground, "seam_band_trim": band_rep, "open_near_lines": near_lines, "seams": seams,
         }
         gaps = [s["gap_mean_mm"] for s in seams if s["gap_mean_mm"] is not None]
         report["gap_mean_mm"] = round(float(np.mean(gaps)), 3) if gaps else None
@@ -354,11 +386,17 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     ctx.log.info("merged %d tiles: %d faces; seam boundary edges %d -> %d (%.2f m of %.1f m of seam open), "
                  "%d stitch faces; seam map %s", len(keep), merged.n_faces, before, cracks,
                  open_len["facing_surface"] + open_len["surface_ends"], seam_len, report["stitched_faces"], png.name)
+    ns, nc = near_lines["seams"], near_lines["controls"]
+    if ns["open_per_section"] is not None and nc["open_per_section"] is not None:
+        ctx.log.info("open border within %.2f m of a line, per m of surface it cuts: seams %.3f, control lines %.3f",
+                     params.line_band_m, ns["open_per_section"], nc["open_per_section"])
     return {k: report[k] for k in ("tiles", "faces", "vertices", "seam_boundary_edges_before",
                                    "seam_boundary_edges_after", "seam_open_facing_surface", "seam_open_surface_ends",
                                    "seam_holes_closed", "seam_border_crossings", "seam_length_m", "faces_outside_core",
                                    "non_manifold_edges", "non_manifold_edges_in_tiles", "boundary_edges_before", "boundary_edges_after", "stitched_faces", "gap_mean_mm",
-                                   "gap_max_mm")} | meas.as_dict()
+                                   "gap_max_mm")} | {
+        "open_near_seams_per_m": near_lines["seams"]["open_per_section"],
+        "open_near_controls_per_m": near_lines["controls"]["open_per_section"]} | meas.as_dict()
 
 
 def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json: Path, in_textured_mesh_ply: Path,
@@ -401,6 +439,25 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
                      "" if gt is None else f" (not in the ground truth: {rep['seam_changes_not_in_gt_pct']} % vs "
                                            f"{rep['control_changes_not_in_gt_pct']} %)")
     return {k: v for k, v in rep.items() if not isinstance(v, list)}
+
+
+def _read_votes(paths):
+    """The tiles' "keep" votes near the seams (points where a tile's own surface passed the exact trim),
+    all tiles together, as rows (x, y, z, nx, ny, nz); None when no tile list is given."""
+    import numpy as np
+
+    if not paths:
+        return None
+    out = []
+    for p in (paths if isinstance(paths, list) else [paths]):
+        try:
+            with np.load(p) as z:
+                k = np.asarray(z["keep"], bool)
+                out.append(np.hstack([np.asarray(z["points"], np.float64)[k], np.asarray(z["normals"], np.float64)[k]]))
+        except Exception as exc:
+            raise _input_error(f"{p}: cannot read the tile's seam votes ({exc}); re-run reconstruct_tiles "
+                               f"(twinkit ... 'rerun=[reconstruct_tiles]')") from exc
+    return np.vstack(out) if out else None
 
 
 def _read_points(path: Path):

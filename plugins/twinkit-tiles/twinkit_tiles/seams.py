@@ -449,13 +449,15 @@ def seam_planes(tiles: list[dict]) -> list[tuple[int, float]]:
 def seam_boundary_edges(mesh: Mesh, planes: list[tuple[int, float]], tol_m: float = 1e-3,
                         tile_faces_only: bool = False) -> int:
     """Boundary edges with both ends within ``tol_m`` of an interior seam plane (cracks).
-    ``tile_faces_only``: count only edges of tile faces (face attribute ``tile >= 0``), not the
-    outer ends of stitch strips, which continue the mesh's own outer border across a seam."""
+    ``tile_faces_only``: count only the tiles' borders (edges of tile faces, face attribute ``tile >= 0``,
+    and the along-the-border edges of strips and fills), not the strip edges that cross the
+    millimetre gap between the tiles where the mesh's own outer border passes the seam."""
     he, fid = boundary_half_edges(mesh.faces)
     if len(he) == 0 or not planes:
         return 0
     if tile_faces_only and "tile" in mesh.face_attrs:
-        keep = mesh.face_attrs["tile"][fid] >= 0
+        along = (mesh.faces[fid, 0] == he[:, 0]) & (mesh.faces[fid, 1] == he[:, 1])  # see _open_seam_edges
+        keep = (mesh.face_attrs["tile"][fid] >= 0) | along
         he = he[keep]
     X = mesh.vertices
     hit = np.zeros(len(he), bool)
@@ -466,8 +468,9 @@ def seam_boundary_edges(mesh: Mesh, planes: list[tuple[int, float]], tol_m: floa
 
 def _open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float, tol_m: float) -> dict:
     """Every open half-edge lying on a seam plane, with what tells a crack from a border crossing:
-    ``plane`` (index into ``planes``), ``tile_face`` (the edge's face is a tile face, not a stitch strip
-    or fill), and for tile faces ``facing`` (the mesh across the plane has a vertex within ``reach_m``
+    ``plane`` (index into ``planes``), ``tile_face`` (the edge is a tile's border: an edge of a tile
+    face, or the along-the-border edge of a stitch strip or fill face; not one crossing the gap between
+    the tiles), and for those ``facing`` (the mesh across the plane has a vertex within ``reach_m``
     of the edge's midpoint)."""
     from scipy.spatial import cKDTree
 
@@ -479,6 +482,13 @@ def _open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float
     X = mesh.vertices
     tile = mesh.face_attrs.get("tile")
     is_tile = tile[fid] >= 0 if tile is not None else np.ones(len(fid), bool)
+    if tile is not None:
+        # a strip or fill face's first edge runs along a tile's border (the zipper makes (P[i+1], P[i], q)
+        # and (Q[j], Q[j+1], p); a fan fill (loop[i+1], loop[i], centre)): open, it is that border left
+        # bare -- a crack like a tile face's own edge. Its other two edges cross the gap between the
+        # tiles (millimetres): open, they are where the mesh's outer border passes the seam.
+        along = (mesh.faces[fid, 0] == he[:, 0]) & (mesh.faces[fid, 1] == he[:, 1])
+        is_tile = is_tile | along
     cen = X[mesh.faces[fid]].mean(axis=1)
     parts = {k: [] for k in out}
     for p, (axis, val) in enumerate(planes):
@@ -486,17 +496,21 @@ def _open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float
         if not on.any():
             continue
         idx = np.flatnonzero(on)
-        facing = np.zeros(len(idx), bool)
         mid = X[he[idx]].mean(axis=1)
-        side = np.sign(cen[idx, axis] - val)  # the side of the plane the open edge's face is on
+        off = cen[idx, axis] - val
+        side = np.where(np.abs(off) <= tol_m, 0.0, np.sign(off))  # the side of the plane the edge's face is on
         slab = np.abs(X[:, axis] - val) <= reach_m
+        near = {}  # near[s]: surface within reach_m strictly on side s of the plane
+        sel = is_tile[idx]
         for sgn in (-1.0, 1.0):
-            sel = (side == sgn) & is_tile[idx]
-            other = slab & ((X[:, axis] - val) * sgn < -tol_m)  # strictly across the plane
-            if not sel.any() or not other.any():
-                continue
-            d, _ = cKDTree(X[other]).query(mid[sel], distance_upper_bound=reach_m)
-            facing[sel] = np.isfinite(d)
+            near[sgn] = np.zeros(len(idx), bool)
+            there = slab & ((X[:, axis] - val) * sgn > tol_m)
+            if sel.any() and there.any():
+                d, _ = cKDTree(X[there]).query(mid[sel], distance_upper_bound=reach_m)
+                near[sgn][sel] = np.isfinite(d)
+        # a tile face's edge faces surface when the other side has some; a strip's or fill's edge (its face
+        # lies in the plane) when both sides have (the tile it hangs on, and the one whose border is bare)
+        facing = np.where(side < 0, near[1.0], np.where(side > 0, near[-1.0], near[1.0] & near[-1.0])) & sel
         parts["he"].append(he[idx])
         parts["plane"].append(np.full(len(idx), p, np.int64))
         parts["tile_face"].append(is_tile[idx])
@@ -720,17 +734,29 @@ def near_planes(X: np.ndarray, planes: list[tuple[int, float]], band_m: float) -
 
 def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndarray, normals, band_m: float,
                     max_dist_m: float, gap_dist_m: float = 0.0, gap_plane_m: float = 0.02,
-                    min_component_faces: int = 200, max_hole_edges: int = 60, threads: int = 1) -> tuple[Mesh, dict]:
+                    min_component_faces: int = 200, max_hole_edges: int = 60, threads: int = 1,
+                    votes: np.ndarray | None = None, vote_radius_m: float = 0.05,
+                    vote_plane_m: float = 0.05) -> tuple[Mesh, dict]:
     """The distance trim of the clean-up (``max_dist_m``, and the gap rule when ``normals`` are given),
     applied once to the merged mesh within ``band_m`` of the seams, where the tiles trimmed only
     loosely: a surface that ends near a seam then ends at the same place on both sides, instead of
     where each tile's own vertices happened to fall. Then the small components and holes that
-    touch the bands are removed / closed as the tiles did. Only the points near the bands are used."""
+    touch the bands are removed / closed as the tiles did. Only the points near the bands are used.
+
+    ``votes``: rows (x, y, z, nx, ny, nz), points where a tile's own full-resolution surface passed
+    the same trim, with that surface's normal (each tile judges the whole band around its core, its
+    neighbours' side included). A vertex with a vote within ``vote_radius_m`` whose tangent plane it
+    lies within ``vote_plane_m`` of is kept (the plane test keeps a bubble above kept ground out). Without them the verdict rests on the simplified tiles'
+    vertices alone, and two tiles whose surfaces sit a couple of centimetres apart in sparse data
+    (one on the points' tangent planes, one just off them) get opposite verdicts: a hole that
+    ends straight along the seam. With them a place is kept when either tile's surface there
+    passes, on both sides of the seam alike."""
     from scipy.spatial import cKDTree
     from twinkit_pointcloud.cleanup import (CleanOptions, boundary_loops, components, fan_fill, remove_vertices,
                                             trim_mask, vertex_cloud_distance)
 
-    rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "components_removed": 0, "holes_closed": 0}
+    rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "vertices_kept_by_votes": 0,
+           "components_removed": 0, "holes_closed": 0}
     X = mesh.vertices
     inb = near_planes(X, planes, band_m)
     if not inb.any() or mesh.n_faces == 0:
@@ -745,6 +771,22 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     d = vertex_cloud_distance(X[idx], P, threads, tree)
     opt = CleanOptions(max_dist_m=max_dist_m, gap_dist_m=gap_dist_m, gap_plane_m=gap_plane_m, threads=threads)
     drop, _ = trim_mask(X[idx], d, P, N, opt, tree)
+    if votes is not None and len(votes) and vote_radius_m > 0 and drop.any():
+        vnear = votes[near_planes(votes[:, :3], planes, band_m + vote_radius_m)]
+        if len(vnear):
+            sub = np.flatnonzero(drop)
+            q = X[idx[sub]]
+            k = min(8, len(vnear))
+            dv, iv = cKDTree(vnear[:, :3]).query(q, k=k, distance_upper_bound=vote_radius_m, workers=threads)
+            dv, iv = dv.reshape(len(q), k), iv.reshape(len(q), k)
+            ok = np.isfinite(dv)
+            if vote_plane_m > 0 and vnear.shape[1] >= 6:
+                j = np.where(ok, iv, 0)
+                off = np.abs(np.einsum("ikj,ikj->ik", q[:, None, :] - vnear[j, :3], vnear[j, 3:6]))
+                ok &= off <= vote_plane_m
+            saved = ok.any(axis=1)
+            rep["vertices_kept_by_votes"] = int(saved.sum())
+            drop[sub[saved]] = False
     full = np.zeros(len(X), bool)
     full[idx[drop]] = True
     rep.update(vertices_in_band=int(len(idx)), vertices_trimmed=int(full.sum()))
@@ -771,3 +813,60 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
             mesh = fan_fill(mesh, loops, face_fill=-1, recompute_normals=False)
         rep["holes_closed"] = len(loops)
     return mesh, rep
+
+
+def _slab_fraction(sa: np.ndarray, sb: np.ndarray, band_m: float) -> np.ndarray:
+    """Fraction of each segment (signed plane distances ``sa`` -> ``sb``) lying within ``band_m`` of the plane."""
+    d = sb - sa
+    flat = np.abs(d) < 1e-12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (-band_m - sa) / d, (band_m - sa) / d
+    lo = np.clip(np.minimum(t1, t2), 0.0, 1.0)
+    hi = np.clip(np.maximum(t1, t2), 0.0, 1.0)
+    return np.where(flat, (np.abs(sa) <= band_m).astype(np.float64), np.maximum(hi - lo, 0.0))
+
+
+def _section_length(X: np.ndarray, F: np.ndarray, axis: int, val: float) -> float:
+    """Length of the mesh's cross-section by the plane ``coord[axis] == val`` (faces lying in it excluded)."""
+    s = X[:, axis][F] - val
+    cut = (s.min(axis=1) < 0) & (s.max(axis=1) > 0)
+    if not cut.any():
+        return 0.0
+    T, s = X[F[cut]], s[cut]
+    pts = []
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b = s[:, i], s[:, j]
+        cross = (a < 0) != (b < 0)
+        t = np.where(cross, a / np.where(cross, a - b, 1.0), np.nan)
+        pts.append(T[:, i] + (T[:, j] - T[:, i]) * t[:, None])
+    P = np.stack(pts, axis=1)  # (n, 3 edges, 3); exactly two edges cross (a vertex on the plane: one, skipped)
+    ok = np.isfinite(P[:, :, 0]).sum(axis=1) == 2
+    P = P[ok]
+    fin = np.isfinite(P[:, :, 0])
+    first = np.argmax(fin, axis=1)
+    last = 2 - np.argmax(fin[:, ::-1], axis=1)
+    idx = np.arange(len(P))
+    return float(np.linalg.norm(P[idx, first] - P[idx, last], axis=1).sum())
+
+
+def open_near_lines(mesh: Mesh, planes: list[tuple[int, float]], band_m: float = 0.1) -> dict:
+    """How much open border lies near the given vertical planes, for comparing seams with lines where
+    there is no seam (control planes, or the same planes on an untiled mesh): the length of boundary
+    edges within ``band_m`` of the planes (the part of each edge inside the slab), per metre of surface
+    the planes cut (the mesh's cross-section length, taken ``band_m`` / 2 either side of each plane so
+    that faces lying in a seam plane do not count). A seam adds no cracks when its figure is no higher
+    than that of the control planes."""
+    out = {"planes": len(planes), "band_m": band_m, "open_m": 0.0, "section_m": 0.0, "open_per_section": None}
+    if mesh.n_faces == 0 or not planes:
+        return out
+    X, F = mesh.vertices, mesh.faces
+    he, _ = boundary_half_edges(F)
+    L = np.linalg.norm(X[he[:, 0]] - X[he[:, 1]], axis=1) if len(he) else np.zeros(0)
+    open_m = section = 0.0
+    for axis, val in planes:
+        if len(he):
+            open_m += float((L * _slab_fraction(X[he[:, 0], axis] - val, X[he[:, 1], axis] - val, band_m)).sum())
+        section += 0.5 * (_section_length(X, F, axis, val - band_m / 2) + _section_length(X, F, axis, val + band_m / 2))
+    out.update(open_m=round(open_m, 3), section_m=round(section, 3),
+               open_per_section=round(open_m / section, 5) if section > 0 else None)
+    return out
