@@ -449,21 +449,32 @@ def seam_planes(tiles: list[dict]) -> list[tuple[int, float]]:
 def seam_boundary_edges(mesh: Mesh, planes: list[tuple[int, float]], tol_m: float = 1e-3,
                         tile_faces_only: bool = False) -> int:
     """Boundary edges with both ends within ``tol_m`` of an interior seam plane (cracks).
-    ``tile_faces_only``: count only the tiles' borders (edges of tile faces, face attribute ``tile >= 0``,
-    and the along-the-border edges of strips and fills), not the strip edges that cross the
-    millimetre gap between the tiles where the mesh's own outer border passes the seam."""
+    ``tile_faces_only``: count only the tiles' borders (:func:`_tile_border`), not the strip edges
+    that cross from one tile's border to the other's where the mesh's own outer border passes the seam."""
     he, fid = boundary_half_edges(mesh.faces)
     if len(he) == 0 or not planes:
         return 0
     if tile_faces_only and "tile" in mesh.face_attrs:
-        along = (mesh.faces[fid, 0] == he[:, 0]) & (mesh.faces[fid, 1] == he[:, 1])  # see _open_seam_edges
-        keep = (mesh.face_attrs["tile"][fid] >= 0) | along
-        he = he[keep]
+        he = he[_tile_border(mesh, he, fid)]
     X = mesh.vertices
     hit = np.zeros(len(he), bool)
     for axis, val in planes:
         hit |= (np.abs(X[he[:, 0], axis] - val) <= tol_m) & (np.abs(X[he[:, 1], axis] - val) <= tol_m)
     return int(hit.sum())
+
+
+def _tile_border(mesh: Mesh, he: np.ndarray, fid: np.ndarray) -> np.ndarray:
+    """Which open half-edges ``he`` (of faces ``fid``) are a tile's border: every edge of a tile face
+    (face attribute ``tile >= 0``), and the first edge of a stitch strip or fill face (``tile < 0``).
+    The zipper makes (P[i+1], P[i], q) and (Q[j], Q[j+1], p), a fan fill (loop[i+1], loop[i], centre):
+    the first edge runs along a tile's border, and open it is that border left bare, a crack like a
+    tile face's own edge. A strip's other two edges go from one tile's border to the other's; open,
+    they are where the mesh's own outer border passes the seam."""
+    tile = mesh.face_attrs.get("tile")
+    if tile is None:
+        return np.ones(len(fid), bool)
+    along = (mesh.faces[fid, 0] == he[:, 0]) & (mesh.faces[fid, 1] == he[:, 1])
+    return (tile[fid] >= 0) | along
 
 
 def _open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float, tol_m: float) -> dict:
@@ -480,15 +491,7 @@ def _open_seam_edges(mesh: Mesh, planes: list[tuple[int, float]], reach_m: float
     if len(he) == 0 or not planes:
         return out
     X = mesh.vertices
-    tile = mesh.face_attrs.get("tile")
-    is_tile = tile[fid] >= 0 if tile is not None else np.ones(len(fid), bool)
-    if tile is not None:
-        # a strip or fill face's first edge runs along a tile's border (the zipper makes (P[i+1], P[i], q)
-        # and (Q[j], Q[j+1], p); a fan fill (loop[i+1], loop[i], centre)): open, it is that border left
-        # bare -- a crack like a tile face's own edge. Its other two edges cross the gap between the
-        # tiles (millimetres): open, they are where the mesh's outer border passes the seam.
-        along = (mesh.faces[fid, 0] == he[:, 0]) & (mesh.faces[fid, 1] == he[:, 1])
-        is_tile = is_tile | along
+    is_tile = _tile_border(mesh, he, fid)
     cen = X[mesh.faces[fid]].mean(axis=1)
     parts = {k: [] for k in out}
     for p, (axis, val) in enumerate(planes):
@@ -746,8 +749,9 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     ``votes``: rows (x, y, z, nx, ny, nz), points where a tile's own full-resolution surface passed
     the same trim, with that surface's normal (each tile judges the whole band around its core, its
     neighbours' side included). A vertex with a vote within ``vote_radius_m`` whose tangent plane it
-    lies within ``vote_plane_m`` of is kept (the plane test keeps a bubble above kept ground out). Without them the verdict rests on the simplified tiles'
-    vertices alone, and two tiles whose surfaces sit a couple of centimetres apart in sparse data
+    lies within ``vote_plane_m`` of is kept (the plane test keeps a bubble above kept ground out).
+    Without them the verdict rests on the simplified tiles' vertices alone, and two tiles whose
+    surfaces sit a couple of centimetres apart in sparse data
     (one on the points' tangent planes, one just off them) get opposite verdicts: a hole that
     ends straight along the seam. With them a place is kept when either tile's surface there
     passes, on both sides of the seam alike."""
