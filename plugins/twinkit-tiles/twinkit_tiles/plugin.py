@@ -268,7 +268,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply, write_ply
 
-    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, open_near_lines, open_seam_runs,
+    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, open_near_line_sets, open_seam_runs,
                         seam_border_length, seam_boundary_edges, seam_map_png, seam_planes, trim_seam_bands)
 
     params = params or MergeTilesParams()
@@ -360,9 +360,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         from .seam_labels import control_planes
 
         controls = control_planes(planes, merged.vertices.min(axis=0), merged.vertices.max(axis=0))
-        near_lines = {"seams": open_near_lines(merged, planes, params.line_band_m),
-                      "controls": open_near_lines(merged, controls, params.line_band_m),
-                      "control_planes": [["xyz"[a], round(v, 4)] for a, v in controls]}
+        near_lines = open_near_line_sets(merged, {"seams": planes, "controls": controls}, params.line_band_m)
+        near_lines["control_planes"] = [["xyz"[a], round(v, 4)] for a, v in controls]
         merged.comments = [f"twinkit-tiles merge of {len(keep)} tiles"]
         write_ply(out_clean_mesh_ply, merged)
         report = {

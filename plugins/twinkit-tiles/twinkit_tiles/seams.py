@@ -860,17 +860,28 @@ def open_near_lines(mesh: Mesh, planes: list[tuple[int, float]], band_m: float =
     the planes cut (the mesh's cross-section length, taken ``band_m`` / 2 either side of each plane so
     that faces lying in a seam plane do not count). A seam adds no cracks when its figure is no higher
     than that of the control planes."""
-    out = {"planes": len(planes), "band_m": band_m, "open_m": 0.0, "section_m": 0.0, "open_per_section": None}
-    if mesh.n_faces == 0 or not planes:
-        return out
+    return open_near_line_sets(mesh, {"lines": planes}, band_m)["lines"]
+
+
+def open_near_line_sets(mesh: Mesh, sets: dict, band_m: float = 0.1) -> dict:
+    """:func:`open_near_lines` for several sets of planes (e.g. seams and controls), finding the mesh's
+    boundary once. Returns one result per key of ``sets``."""
+    res = {k: {"planes": len(pl), "band_m": band_m, "open_m": 0.0, "section_m": 0.0, "open_per_section": None}
+           for k, pl in sets.items()}
+    if mesh.n_faces == 0:
+        return res
     X, F = mesh.vertices, mesh.faces
     he, _ = boundary_half_edges(F)
     L = np.linalg.norm(X[he[:, 0]] - X[he[:, 1]], axis=1) if len(he) else np.zeros(0)
-    open_m = section = 0.0
-    for axis, val in planes:
-        if len(he):
-            open_m += float((L * _slab_fraction(X[he[:, 0], axis] - val, X[he[:, 1], axis] - val, band_m)).sum())
-        section += 0.5 * (_section_length(X, F, axis, val - band_m / 2) + _section_length(X, F, axis, val + band_m / 2))
-    out.update(open_m=round(open_m, 3), section_m=round(section, 3),
-               open_per_section=round(open_m / section, 5) if section > 0 else None)
-    return out
+    for key, planes in sets.items():
+        if not planes:
+            continue
+        open_m = section = 0.0
+        for axis, val in planes:
+            if len(he):
+                open_m += float((L * _slab_fraction(X[he[:, 0], axis] - val, X[he[:, 1], axis] - val, band_m)).sum())
+            section += 0.5 * (_section_length(X, F, axis, val - band_m / 2) +
+                              _section_length(X, F, axis, val + band_m / 2))
+        res[key].update(open_m=round(open_m, 3), section_m=round(section, 3),
+                        open_per_section=round(open_m / section, 5) if section > 0 else None)
+    return res
