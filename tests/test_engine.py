@@ -194,6 +194,12 @@ def test_fan_out_runs_items_in_parallel_and_caches_each(project):
     assert r.rc == 0, r.text
     pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(9)}
     assert len(pids) == 9, pids
+    # ... with one worker too (not this process): each item's peak memory is its own
+    r = project.run("site=t", "recipe=fan", "steps.tiles.n=3", "executor.workers=1", "executor.max_items_per_worker=1",
+                    "rerun=[per_tile]")
+    assert r.rc == 0, r.text
+    pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(3)}
+    assert len(pids) == 3, pids
     # items that carry a "cost" start costliest first (here in one process, so strictly in that order)
     r = project.run("site=t", "recipe=fan", "steps.tiles.n=5", "steps.tiles.costs=true", "executor.workers=1")
     assert r.rc == 0, r.text

@@ -22,7 +22,8 @@ def _limit_threads(n: int) -> None:
 
 
 class LocalExecutor:
-    """Run items in up to ``workers`` local processes (in this process when ``workers <= 1``).
+    """Run items in up to ``workers`` local processes (in this process when ``workers <= 1``, unless
+    ``max_items_per_worker`` asks for fresh processes).
 
     Each worker's native thread pools are capped at ``threads_per_worker`` (0 = the cores divided
     among the workers), so that two workers on two cores do not each start an OpenMP pool of two
@@ -41,7 +42,11 @@ class LocalExecutor:
         return max(1, (os.cpu_count() or 1) // n_workers)
 
     def map(self, fn: Callable[[Any], Any], items: list[Any]) -> Iterator[Any]:
-        if self.workers <= 1 or len(items) <= 1:
+        # one worker runs in this process, unless every item must have a fresh process of its own
+        # (max_items_per_worker): then one worker process, so that each item's peak memory is its own
+        if not items:
+            return
+        if (self.workers <= 1 or len(items) <= 1) and not self.max_items_per_worker:
             for it in items:
                 yield fn(it)
             return

@@ -324,3 +324,41 @@ def test_seam_band_trim_keeps_what_a_tile_voted_for():
     bubble, rep_b = trim_seam_bands(lifted, [(0, 0.0)], P, N, votes=votes, vote_radius_m=0.05, vote_plane_m=0.02, **kw)
     assert rep_b["vertices_kept_by_votes"] == 0
     assert bubble.vertices[band(bubble.vertices), 1].max() <= 1.1 + 1e-9
+
+
+def _vote_grid(x0, x1, y0, y1, step, keep, tile):
+    vy, vx = np.meshgrid(np.arange(y0, y1 + 1e-9, step), np.arange(x0, x1 + 1e-9, step))
+    n = vx.size
+    return np.c_[vx.ravel(), vy.ravel(), np.zeros(n), np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, float(keep)),
+                 np.full(n, float(tile))]
+
+
+def test_seam_band_trim_takes_each_tiles_nearest_vote():
+    from twinkit_tiles.seams import trim_seam_bands
+
+    m = grid_mesh(-1, 1, 0, 2, 0.05, z=lambda x, y: 0 * x)
+    m.face_attrs = {"tile": np.where(m.vertices[m.faces].mean(axis=1)[:, 0] < 0, 0, 1).astype(np.int32)}
+    rng = np.random.default_rng(2)
+    P = np.c_[rng.uniform(-1, 1, 20000), rng.uniform(0, 1, 20000), np.zeros(20000)]
+    N = np.tile([0.0, 0.0, 1.0], (len(P), 1))
+    # tile 0's full-resolution surface (a vertex every 12 cm, as in sparse ground) passed the trim up to
+    # y = 1.5 and failed beyond; tile 1's failed where the points are (y 0.2..0.5)
+    votes = np.vstack([_vote_grid(-0.6, 0.6, 1.02, 1.5, 0.12, True, 0), _vote_grid(-0.6, 0.6, 1.62, 1.98, 0.12, False, 0),
+                       _vote_grid(-0.6, 0.6, 0.2, 0.5, 0.12, False, 1)])
+    kw = dict(band_m=0.5, max_dist_m=0.1, max_hole_edges=0, min_component_faces=0, votes=votes)
+    band = lambda X: np.abs(X[:, 0]) <= 0.5  # noqa: E731
+    rows = lambda X: np.count_nonzero((X[:, 1] > 1.12) & (X[:, 1] < 1.45))  # noqa: E731
+    all_rows = rows(m.vertices[band(m.vertices)])
+    near, _ = trim_seam_bands(m, [(0, 0.0)], P, N, vote_radius_m=0.05, vote_reach_m=0.0, **kw)
+    # a 5 cm radius misses between votes 12 cm apart: holes between 1.1 and 1.5
+    assert rows(near.vertices[band(near.vertices)]) < 0.8 * all_rows
+    reach, rep = trim_seam_bands(m, [(0, 0.0)], P, N, **kw)  # the default: each tile's nearest vote within 15 cm
+    X = reach.vertices[band(reach.vertices)]
+    assert rows(X) == all_rows  # every vertex kept, nothing missing
+    assert X[:, 1].max() <= 1.55 + 1e-9  # the nearest vote beyond 1.56 says drop
+    # where tile 1's surface failed and no tile passed, the points' verdict is overruled
+    assert np.count_nonzero((X[:, 1] > 0.25) & (X[:, 1] < 0.45)) == 0
+    assert rep["vertices_dropped_by_votes"] >= 4 * 20 and rep["vertices_kept_by_votes"] > 0
+    # outside the band nothing is judged here (the tiles trimmed it themselves)
+    out = reach.vertices[~band(reach.vertices)]
+    assert np.count_nonzero((out[:, 1] > 0.25) & (out[:, 1] < 0.45)) > 0

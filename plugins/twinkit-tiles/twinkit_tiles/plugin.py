@@ -58,12 +58,13 @@ class MergeTilesParams:
     max_gap_m: float = 0.10  # borders farther apart than this are not stitched (counted as open)
     seam_tol_m: float = 0.001  # an edge within this of a seam plane counts as a seam edge in the statistics
     max_hole_edges: int = 120  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
-    vote_radius_m: float = 0.05  # the seam-band trim keeps a vertex with a tile's "keep" vote this close
-    #                              (either tile's full-resolution surface passed the exact trim there) ...
-    vote_plane_m: float = 0.05  # ... and within this of the vote's tangent plane (not a bubble above it).
-    #                             A wider radius (0.15-0.25: Poisson's vertices in sparse ground are 10-20 cm
-    #                             apart) closes more seam holes but keeps surface the trim would drop, at a
-    #                             cost in accuracy (docs/tiles.md, seventh session); 0 = off
+    vote_reach_m: float = 0.15  # the seam-band trim asks each tile's full-resolution surface: the tile's nearest
+    #                             vote within this (and within vote_plane_m of its tangent plane) is that tile's
+    #                             verdict; a vertex is kept when some tile's verdict is "keep", dropped when every
+    #                             tile's is "drop", and judged on its own only where no tile voted; 0 = off
+    vote_plane_m: float = 0.05  # a vote counts for vertices this close to its tangent plane (not a bubble above)
+    vote_radius_m: float = 0.0  # also keep a vertex with any "keep" vote this close (the seventh session's rule:
+    #                             0.05 there; wider radii keep surface the trim would drop, docs/tiles.md)
     line_band_m: float = 0.05  # open border within this of the seams vs. of control lines (tile_seams.json)
     fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on the merged mesh (clean_mesh's
     fill_ground_max_gap_m: float = 8.0  # ground fill, over the whole site at once so it has no tile edges); 0 = off
@@ -305,19 +306,19 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         if trim.get("seam_band_m", 0) > 0:
             cloud = _read_points(in_points_ply)
             threads = max(1, int(getattr(ctx, "threads", 1) or 1))
-            votes = _read_votes(in_seam_votes_npz) if params.vote_radius_m > 0 else None
+            votes = _read_votes(in_seam_votes_npz) if params.vote_radius_m > 0 or params.vote_reach_m > 0 else None
             merged, band_rep = trim_seam_bands(
                 merged, planes, cloud.vertices, cloud.normals, trim["seam_band_m"], trim["max_dist_m"],
                 trim.get("gap_dist_m", 0.0), trim.get("gap_plane_m", 0.02), int(trim.get("min_component_faces", 200)),
                 int(trim.get("max_hole_edges", 60)), threads, votes=votes, vote_radius_m=params.vote_radius_m,
-                vote_plane_m=params.vote_plane_m)
+                vote_plane_m=params.vote_plane_m, vote_reach_m=params.vote_reach_m)
             del votes
             merged, holes2 = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
             holes += holes2
-            ctx.log.info("seam bands (%.2f m): %d of %d vertices trimmed (%d kept by the tiles' votes), "
+            ctx.log.info("seam bands (%.2f m): %d of %d vertices trimmed (the tiles' votes kept %d and dropped %d), "
                          "%d small components removed, %d holes closed",
                          band_rep["band_m"], band_rep["vertices_trimmed"], band_rep["vertices_in_band"],
-                         band_rep["vertices_kept_by_votes"],
+                         band_rep["vertices_kept_by_votes"], band_rep["vertices_dropped_by_votes"],
                          band_rep["components_removed"], band_rep["holes_closed"])
         tile_attr = merged.face_attrs["tile"]
         # the open edges on the seams as runs; cracks are the open edges of tile faces, split by what
@@ -442,17 +443,18 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
 
 def _read_votes(paths):
     """The tiles' "keep" votes near the seams (points where a tile's own surface passed the exact trim),
-    all tiles together, as rows (x, y, z, nx, ny, nz); None when no tile list is given."""
+    all tiles together, as rows (x, y, z, nx, ny, nz, keep, tile); None when no tile list is given."""
     import numpy as np
 
     if not paths:
         return None
     out = []
-    for p in (paths if isinstance(paths, list) else [paths]):
+    for t, p in enumerate(paths if isinstance(paths, list) else [paths]):
         try:
             with np.load(p) as z:
-                k = np.asarray(z["keep"], bool)
-                out.append(np.hstack([np.asarray(z["points"], np.float64)[k], np.asarray(z["normals"], np.float64)[k]]))
+                k = np.asarray(z["keep"], np.float64)
+                P = np.asarray(z["points"], np.float64)
+                out.append(np.hstack([P, np.asarray(z["normals"], np.float64), k[:, None], np.full((len(P), 1), t)]))
         except Exception as exc:
             raise _input_error(f"{p}: cannot read the tile's seam votes ({exc}); re-run reconstruct_tiles "
                                f"(twinkit ... 'rerun=[reconstruct_tiles]')") from exc

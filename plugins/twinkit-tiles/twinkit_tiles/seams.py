@@ -738,29 +738,29 @@ def near_planes(X: np.ndarray, planes: list[tuple[int, float]], band_m: float) -
 def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndarray, normals, band_m: float,
                     max_dist_m: float, gap_dist_m: float = 0.0, gap_plane_m: float = 0.02,
                     min_component_faces: int = 200, max_hole_edges: int = 60, threads: int = 1,
-                    votes: np.ndarray | None = None, vote_radius_m: float = 0.05,
-                    vote_plane_m: float = 0.05) -> tuple[Mesh, dict]:
+                    votes: np.ndarray | None = None, vote_radius_m: float = 0.0,
+                    vote_plane_m: float = 0.05, vote_reach_m: float = 0.15) -> tuple[Mesh, dict]:
     """The distance trim of the clean-up (``max_dist_m``, and the gap rule when ``normals`` are given),
     applied once to the merged mesh within ``band_m`` of the seams, where the tiles trimmed only
     loosely: a surface that ends near a seam then ends at the same place on both sides, instead of
     where each tile's own vertices happened to fall. Then the small components and holes that
     touch the bands are removed / closed as the tiles did. Only the points near the bands are used.
 
-    ``votes``: rows (x, y, z, nx, ny, nz), points where a tile's own full-resolution surface passed
-    the same trim, with that surface's normal (each tile judges the whole band around its core, its
-    neighbours' side included). A vertex with a vote within ``vote_radius_m`` whose tangent plane it
-    lies within ``vote_plane_m`` of is kept (the plane test keeps a bubble above kept ground out).
-    Without them the verdict rests on the simplified tiles' vertices alone, and two tiles whose
-    surfaces sit a couple of centimetres apart in sparse data
-    (one on the points' tangent planes, one just off them) get opposite verdicts: a hole that
-    ends straight along the seam. With them a place is kept when either tile's surface there
-    passes, on both sides of the seam alike."""
+    ``votes``: rows (x, y, z, nx, ny, nz, keep, tile): each tile's own full-resolution surface near
+    its core's interior sides (its neighbours' side included), with that surface's normal and its
+    verdict under the same trim. Without them the verdict rests on the simplified tiles' vertices
+    alone, and two tiles whose surfaces sit a couple of centimetres apart in sparse data (one on the
+    points' tangent planes, one just off them) get opposite verdicts: a hole that ends straight
+    along the seam. With ``vote_reach_m`` > 0 each tile's nearest vote within reach (whose tangent
+    plane the vertex lies within ``vote_plane_m`` of) is that tile's verdict, and a place is kept
+    when either tile's surface there passes, on both sides of the seam alike (``_apply_votes``).
+    Rows of six columns are "keep" votes only, for the ``vote_radius_m`` rule."""
     from scipy.spatial import cKDTree
     from twinkit_pointcloud.cleanup import (CleanOptions, boundary_loops, components, fan_fill, remove_vertices,
                                             trim_mask, vertex_cloud_distance)
 
     rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "vertices_kept_by_votes": 0,
-           "components_removed": 0, "holes_closed": 0}
+           "vertices_dropped_by_votes": 0, "components_removed": 0, "holes_closed": 0}
     X = mesh.vertices
     inb = near_planes(X, planes, band_m)
     if not inb.any() or mesh.n_faces == 0:
@@ -775,22 +775,9 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     d = vertex_cloud_distance(X[idx], P, threads, tree)
     opt = CleanOptions(max_dist_m=max_dist_m, gap_dist_m=gap_dist_m, gap_plane_m=gap_plane_m, threads=threads)
     drop, _ = trim_mask(X[idx], d, P, N, opt, tree)
-    if votes is not None and len(votes) and vote_radius_m > 0 and drop.any():
-        vnear = votes[near_planes(votes[:, :3], planes, band_m + vote_radius_m)]
-        if len(vnear):
-            sub = np.flatnonzero(drop)
-            q = X[idx[sub]]
-            k = min(8, len(vnear))
-            dv, iv = cKDTree(vnear[:, :3]).query(q, k=k, distance_upper_bound=vote_radius_m, workers=threads)
-            dv, iv = dv.reshape(len(q), k), iv.reshape(len(q), k)
-            ok = np.isfinite(dv)
-            if vote_plane_m > 0 and vnear.shape[1] >= 6:
-                j = np.where(ok, iv, 0)
-                off = np.abs(np.einsum("ikj,ikj->ik", q[:, None, :] - vnear[j, :3], vnear[j, 3:6]))
-                ok &= off <= vote_plane_m
-            saved = ok.any(axis=1)
-            rep["vertices_kept_by_votes"] = int(saved.sum())
-            drop[sub[saved]] = False
+    if votes is not None and len(votes) and (vote_radius_m > 0 or vote_reach_m > 0):
+        drop = _apply_votes(X[idx], drop, votes, planes, band_m, vote_radius_m, vote_plane_m, vote_reach_m,
+                            threads, rep)
     full = np.zeros(len(X), bool)
     full[idx[drop]] = True
     rep.update(vertices_in_band=int(len(idx)), vertices_trimmed=int(full.sum()))
@@ -818,6 +805,58 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
         rep["holes_closed"] = len(loops)
     return mesh, rep
 
+
+def _apply_votes(Q: np.ndarray, drop: np.ndarray, votes: np.ndarray, planes, band_m: float, radius_m: float,
+                 plane_m: float, reach_m: float, threads: int, rep: dict, chunk: int = 200_000) -> np.ndarray:
+    """The tiles' verdicts on the band vertices ``Q`` (see ``trim_seam_bands``); returns the new drop mask.
+
+    ``votes`` rows: x, y, z, nx, ny, nz[, keep, tile]. Only votes whose tangent plane the vertex lies
+    within ``plane_m`` of count. A "keep" vote within ``radius_m`` keeps the vertex. With
+    ``reach_m`` > 0 (and the keep / tile columns), each tile's nearest vote within ``reach_m`` gives
+    that tile's verdict and the vertex is kept when some tile's verdict is "keep", dropped otherwise,
+    whatever its own verdict: the simplified surface inherits the full-resolution surface's trim, as
+    it does away from the seams, where each tile trims before it simplifies. ``chunk`` vertices are
+    judged at a time (bounded memory)."""
+    from scipy.spatial import cKDTree
+
+    full = votes.shape[1] >= 8
+    keepcol = votes[:, 6] > 0.5 if full else np.ones(len(votes), bool)
+    if not full:
+        reach_m = 0.0
+    r = max(radius_m, reach_m)
+    sel = near_planes(votes[:, :3], planes, band_m + r)
+    V, vkeep = votes[sel], keepcol[sel]
+    if not len(V) or r <= 0:
+        return drop
+    tree = cKDTree(V[:, :3])
+    k = min(16 if reach_m > 0 else 8, len(V))
+    near_keep = np.zeros(len(Q), bool)  # a "keep" vote within radius_m
+    decided = np.zeros(len(Q), bool)  # some tile voted within reach_m
+    says_keep = np.zeros(len(Q), bool)  # ... and some tile's nearest vote says "keep"
+    for s in range(0, len(Q), chunk):
+        q = Q[s:s + chunk]
+        dv, iv = tree.query(q, k=k, distance_upper_bound=r, workers=threads)
+        dv, iv = dv.reshape(len(q), k), iv.reshape(len(q), k)
+        ok = np.isfinite(dv)
+        j = np.where(ok, iv, 0)
+        if plane_m > 0 and V.shape[1] >= 6:
+            off = np.abs(np.einsum("ikj,ikj->ik", q[:, None, :] - V[j, :3], V[j, 3:6]))
+            ok &= off <= plane_m
+        if radius_m > 0:
+            near_keep[s:s + chunk] = (ok & vkeep[j] & (dv <= radius_m)).any(axis=1)
+        if reach_m > 0:
+            ok &= dv <= reach_m
+            tile = np.where(ok, V[j, 7], -1.0)
+            first = ok.copy()  # the nearest usable vote of each tile
+            for c in range(1, k):
+                first[:, c] &= (tile[:, :c] != tile[:, c:c + 1]).all(axis=1)
+            decided[s:s + chunk] = first.any(axis=1)
+            says_keep[s:s + chunk] = (first & vkeep[j]).any(axis=1)
+    keep = near_keep | (decided & says_keep)
+    new = np.where(decided & ~keep, True, drop & ~keep)
+    rep["vertices_kept_by_votes"] = int((drop & ~new).sum())
+    rep["vertices_dropped_by_votes"] = int((~drop & new).sum())
+    return new
 
 def _slab_fraction(sa: np.ndarray, sb: np.ndarray, band_m: float) -> np.ndarray:
     """Fraction of each segment (signed plane distances ``sa`` -> ``sb``) lying within ``band_m`` of the plane."""
