@@ -298,14 +298,20 @@ def test_open_near_lines_sees_a_slot_along_a_line_only():
     assert wide["open_per_section"] > 10 * elsewhere["open_per_section"]
 
 
+def _two_tile_ground(half_m: float, n_points: int, seed: int):
+    """A flat 5 cm grid over x -half_m..half_m, y 0..2 (tile 0 west of x = 0, tile 1 east), and
+    points with upward normals that cover it only up to y = 1."""
+    m = grid_mesh(-half_m, half_m, 0, 2, 0.05, z=lambda x, y: 0 * x)
+    m.face_attrs = {"tile": np.where(m.vertices[m.faces].mean(axis=1)[:, 0] < 0, 0, 1).astype(np.int32)}
+    rng = np.random.default_rng(seed)
+    P = np.c_[rng.uniform(-half_m, half_m, n_points), rng.uniform(0, 1, n_points), np.zeros(n_points)]
+    return m, P, np.tile([0.0, 0.0, 1.0], (n_points, 1))
+
+
 def test_seam_band_trim_keeps_what_a_tile_voted_for():
     from twinkit_tiles.seams import trim_seam_bands
 
-    m = grid_mesh(-2, 2, 0, 2, 0.05, z=lambda x, y: 0 * x)
-    m.face_attrs = {"tile": np.where(m.vertices[m.faces].mean(axis=1)[:, 0] < 0, 0, 1).astype(np.int32)}
-    rng = np.random.default_rng(1)
-    P = np.c_[rng.uniform(-2, 2, 40000), rng.uniform(0, 1, 40000), np.zeros(40000)]
-    N = np.tile([0.0, 0.0, 1.0], (len(P), 1))
+    m, P, N = _two_tile_ground(2, 40000, 1)
     # a tile whose own surface passed the trim up to y = 1.5 on both sides of the seam
     vy, vx = np.meshgrid(np.arange(1.0, 1.5, 0.02), np.arange(-0.6, 0.6, 0.02))
     votes = np.c_[vx.ravel(), vy.ravel(), np.zeros(vx.size), np.tile([0.0, 0.0, 1.0], (vx.size, 1))]
@@ -336,11 +342,7 @@ def _vote_grid(x0, x1, y0, y1, step, keep, tile):
 def test_seam_band_trim_takes_each_tiles_nearest_vote():
     from twinkit_tiles.seams import trim_seam_bands
 
-    m = grid_mesh(-1, 1, 0, 2, 0.05, z=lambda x, y: 0 * x)
-    m.face_attrs = {"tile": np.where(m.vertices[m.faces].mean(axis=1)[:, 0] < 0, 0, 1).astype(np.int32)}
-    rng = np.random.default_rng(2)
-    P = np.c_[rng.uniform(-1, 1, 20000), rng.uniform(0, 1, 20000), np.zeros(20000)]
-    N = np.tile([0.0, 0.0, 1.0], (len(P), 1))
+    m, P, N = _two_tile_ground(1, 20000, 2)
     # tile 0's full-resolution surface (a vertex every 12 cm, as in sparse ground) passed the trim up to
     # y = 1.5 and failed beyond; tile 1's failed where the points are (y 0.2..0.5)
     votes = np.vstack([_vote_grid(-0.6, 0.6, 1.02, 1.5, 0.12, True, 0), _vote_grid(-0.6, 0.6, 1.62, 1.98, 0.12, False, 0),
