@@ -853,7 +853,7 @@ def _apply_votes(Q: np.ndarray, drop: np.ndarray, votes: np.ndarray, planes, ban
             decided[s:s + chunk] = first.any(axis=1)
             says_keep[s:s + chunk] = (first & vkeep[j]).any(axis=1)
     keep = near_keep | (decided & says_keep)
-    new = np.where(decided & ~keep, True, drop & ~keep)
+    new = (drop | decided) & ~keep  # where a tile voted, the votes alone decide
     rep["vertices_kept_by_votes"] = int((drop & ~new).sum())
     rep["vertices_dropped_by_votes"] = int((~drop & new).sum())
     return new
