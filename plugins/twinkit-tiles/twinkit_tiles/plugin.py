@@ -442,8 +442,9 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
 
 
 def _read_votes(paths):
-    """The tiles' "keep" votes near the seams (points where a tile's own surface passed the exact trim),
-    all tiles together, as rows (x, y, z, nx, ny, nz, keep, tile); None when no tile list is given."""
+    """The tiles' votes near the seams (a tile's own full-resolution surface and its verdict under the
+    exact trim), all tiles together, as rows (x, y, z, nx, ny, nz, keep, tile); None when no tile list
+    is given."""
     import numpy as np
 
     if not paths:
