@@ -34,7 +34,7 @@ def test_tiled_segment_recipe_on_small_demo_site(tmp_path):
     assert seams["seam_boundary_edges_after"] <= 0.05 * seams["seam_boundary_edges_before"], seams
     # every open seam edge is in a listed run, and the seam map was drawn
     assert sum(r["tile_edges"] for r in seams["seam_open_runs"]) == seams["seam_boundary_edges_after"]
-    assert 0 < seams["seam_open_length_m"]["facing_surface"] + seams["seam_open_length_m"]["surface_ends"] \
+    assert 0 <= seams["seam_open_length_m"]["facing_surface"] + seams["seam_open_length_m"]["surface_ends"] \
         < 0.1 * seams["seam_length_m"]
     png = ws / "05_merge_tiles" / seams["seam_map_png"]
     assert png.exists() and png.stat().st_size > 10_000

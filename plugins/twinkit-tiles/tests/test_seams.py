@@ -364,3 +364,45 @@ def test_seam_band_trim_takes_each_tiles_nearest_vote():
     # outside the band nothing is judged here (the tiles trimmed it themselves)
     out = reach.vertices[~band(reach.vertices)]
     assert np.count_nonzero((out[:, 1] > 0.25) & (out[:, 1] < 0.45)) > 0
+
+
+def test_seam_band_trim_never_leaves_the_surface_ending_on_a_seam():
+    """Where the trim removes one tile's side of a seam and keeps the other's, the kept faces hanging
+    on the seam go too (the trim's boundary crosses the seam instead of running along it); a border
+    the zipper could not pair (open before the trim) stays open and counted."""
+    from twinkit_tiles.seams import _tile_border, trim_seam_bands
+
+    lift = lambda x, y: np.where((y > 0.4) & (y < 1.1), 0.03, 0.0)  # noqa: E731  tile 1 floats 3 cm up there
+    a = cut_halfspace(grid_mesh(0, 3.2, 0, 3, 0.1, z=lambda x, y: 0 * x, jitter=0.02, seed=1), 0, 2.0, "below")
+    b = cut_halfspace(grid_mesh(1.0, 4, 0, 3, 0.13, z=lift, jitter=0.02, seed=2), 0, 2.0, "above")
+    # tile 1 has no surface beside the seam for 1.5 < y < 1.8: nothing for the zipper to pair there
+    cb = b.vertices[b.faces].mean(axis=1)
+    hole = (cb[:, 0] < 2.3) & (cb[:, 1] > 1.5) & (cb[:, 1] < 1.8)
+    b.faces = b.faces[~hole]
+    m, _ = merge_grid([{"ix": 0, "iy": 0, "core": [None, None, 2.0, None]},
+                       {"ix": 1, "iy": 0, "core": [2.0, None, None, None]}], [a, b], max_gap_m=0.1)
+    planes = [(0, 2.0)]
+
+    def open_on_seam(mesh, y0, y1):
+        he, fid = boundary_half_edges(mesh.faces)
+        X = mesh.vertices
+        on = (np.abs(X[he[:, 0], 0] - 2.0) <= 1e-6) & (np.abs(X[he[:, 1], 0] - 2.0) <= 1e-6)
+        y = X[he, 1].mean(axis=1)
+        return int((on & (y > y0) & (y < y1) & _tile_border(mesh, he, fid)).sum())  # the cracks there
+
+    unpaired = open_on_seam(m, 1.4, 1.9)
+    assert unpaired >= 2 and open_on_seam(m, 0.3, 1.2) == 0
+    rng = np.random.default_rng(3)
+    P = np.c_[rng.uniform(0, 4, 120_000), rng.uniform(0, 3, 120_000), np.zeros(120_000)]
+    kw = dict(band_m=0.5, max_dist_m=0.02, max_hole_edges=0, min_component_faces=0)
+    plain, rep0 = trim_seam_bands(m, planes, P, None, **kw)
+    assert rep0["hanging_faces_removed"] == 0
+    assert open_on_seam(plain, 0.3, 1.2) >= 5  # tile 0's border left bare where tile 1 was trimmed away
+    fixed, rep = trim_seam_bands(m, planes, P, None, hanging_tol_m=1e-3, **kw)
+    assert open_on_seam(fixed, 0.3, 1.2) == 0
+    assert open_on_seam(fixed, 1.4, 1.9) == unpaired  # the zipper's leftovers are not hidden
+    assert 0 < rep["hanging_faces_removed"] <= 2 * open_on_seam(plain, 0.3, 1.2) + 4
+    # only the faces on the seam went: tile 0's surface 10 cm back from it is whole
+    back = lambda mesh: (mesh.vertices[mesh.faces][:, :, 0].max(axis=1) < 1.89).sum()  # noqa: E731
+    assert back(fixed) == back(plain) == back(m)
+    assert edge_counts(fixed.faces)["non_manifold_edges"] == 0

@@ -63,6 +63,9 @@ class MergeTilesParams:
     #                             verdict; a vertex is kept when some tile's verdict is "keep", dropped when every
     #                             tile's is "drop", and judged on its own only where no tile voted; 0 = off
     vote_plane_m: float = 0.05  # a vote counts for vertices this close to its tangent plane (not a bubble above)
+    drop_hanging_faces: bool = True  # after the trim near the seams, remove a face left on a seam edge whose
+    #                                  other side the trim removed, so that the trim's boundary crosses the seam
+    #                                  instead of running along it (docs/tiles.md)
     vote_radius_m: float = 0.0  # also keep a vertex with any "keep" vote this close (the seventh session's rule:
     #                             0.05 there; wider radii keep surface the trim would drop, docs/tiles.md)
     line_band_m: float = 0.05  # open border within this of the seams vs. of control lines (tile_seams.json)
@@ -311,15 +314,17 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                 merged, planes, cloud.vertices, cloud.normals, trim["seam_band_m"], trim["max_dist_m"],
                 trim.get("gap_dist_m", 0.0), trim.get("gap_plane_m", 0.02), int(trim.get("min_component_faces", 200)),
                 int(trim.get("max_hole_edges", 60)), threads, votes=votes, vote_radius_m=params.vote_radius_m,
-                vote_plane_m=params.vote_plane_m, vote_reach_m=params.vote_reach_m)
+                vote_plane_m=params.vote_plane_m, vote_reach_m=params.vote_reach_m,
+                hanging_tol_m=params.seam_tol_m if params.drop_hanging_faces else 0.0)
             del votes
             merged, holes2 = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
             holes += holes2
             ctx.log.info("seam bands (%.2f m): %d of %d vertices trimmed (the tiles' votes kept %d and dropped %d), "
-                         "%d small components removed, %d holes closed",
+                         "%d small components removed, %d faces left hanging on a seam removed, %d holes closed",
                          band_rep["band_m"], band_rep["vertices_trimmed"], band_rep["vertices_in_band"],
                          band_rep["vertices_kept_by_votes"], band_rep["vertices_dropped_by_votes"],
-                         band_rep["components_removed"], band_rep["holes_closed"])
+                         band_rep["components_removed"], band_rep.get("hanging_faces_removed", 0),
+                         band_rep["holes_closed"])
         tile_attr = merged.face_attrs["tile"]
         # the open edges on the seams as runs; cracks are the open edges of tile faces, split by what
         # lies across the plane; the rest are strip edges (the mesh's own border crossing a seam)
