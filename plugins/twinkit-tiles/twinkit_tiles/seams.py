@@ -876,7 +876,8 @@ def drop_hanging_faces(mesh: Mesh, planes, tol_m: float, closed_before: np.ndarr
     trim's boundary crosses the seam like it crosses any other line. Removing a strip face can bare
     the along-edge of a fill face beside it, hence a few ``rounds``. Edges that were open before the
     trim (where the zipper could not pair the borders) are left open and counted.
-    Returns (mesh, faces removed); ``vid`` is carried along as vertex attribute ``_vid``."""
+    Returns (mesh, faces removed). ``vid`` rides through the removals as a temporary vertex
+    attribute, which the returned mesh no longer has."""
     from twinkit_pointcloud.meshio import compact
 
     mesh = _with_attr(mesh, "_vid", vid)
