@@ -41,3 +41,44 @@ def test_a_plain_module_hashes_its_own_file(tmp_path, monkeypatch):
         assert len(h) == 16 and h != "unknown"
     finally:
         sys.modules.pop("hashdemo_mod", None)
+
+
+def test_the_shared_library_a_plugin_imports_is_in_its_code_hash(tmp_path, monkeypatch):
+    """Editing shared core code (mesh I/O, site frame, ...) re-runs the steps of the plugins that import it,
+    directly or through another shared module, and no others; framework modules do not count."""
+    import twinkit.plugins as plugins
+
+    core = tmp_path / "core"
+    (core / "mesh").mkdir(parents=True)
+    (core / "mesh" / "__init__.py").write_text("from twinkit.mesh.ply import read\n")
+    (core / "mesh" / "ply.py").write_text("def read():\n    from twinkit.geo import frame\n    return frame\n")
+    (core / "geo.py").write_text("frame = 1\n")
+    (core / "engine.py").write_text("x = 1\n")
+    monkeypatch.setattr(plugins, "_CORE", core)
+    for name, body in {"user_pkg": "def run(params, ctx):\n    from twinkit.mesh import read\n    return read()\n",
+                       "other_pkg": "from twinkit import engine, hookimpl\n\ndef run(params, ctx):\n    return 0\n"}.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "__init__.py").write_text("")
+        (tmp_path / name / "steps.py").write_text(body)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    user = importlib.import_module("user_pkg.steps")
+    other = importlib.import_module("other_pkg.steps")
+    try:
+        pu = Plugin(kind="step", name="u", run=user.run, params=None, version="0")
+        po = Plugin(kind="step", name="o", run=other.run, params=None, version="0")
+        used = plugins.shared_sources([tmp_path / "user_pkg" / "steps.py"])
+        assert sorted(f.relative_to(core).as_posix() for f in used) == ["geo.py", "mesh/__init__.py", "mesh/ply.py"]
+        assert plugins.shared_sources([tmp_path / "other_pkg" / "steps.py"]) == []
+        hu, ho = pu.code_hash(), po.code_hash()
+        later = time.time() + 5
+        (core / "geo.py").write_text("frame = 2\n")  # reached only through mesh/ply.py
+        os.utime(core / "geo.py", (later, later))
+        assert pu.code_hash() != hu
+        assert po.code_hash() == ho  # imports no shared module
+        hu = pu.code_hash()
+        (core / "engine.py").write_text("x = 2\n")  # framework code is not part of any plugin's hash
+        os.utime(core / "engine.py", (later, later))
+        assert pu.code_hash() == hu and po.code_hash() == ho
+    finally:
+        for name in [n for n in sys.modules if n.startswith(("user_pkg", "other_pkg"))]:
+            del sys.modules[name]

@@ -13,6 +13,7 @@ import hashlib
 import importlib.metadata as md
 import inspect
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +47,57 @@ def _file_digest(path: str, mtime_ns: int) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
+#: Core modules whose code shapes what steps write: the shared library that plugins build on (site frame,
+#: mesh I/O and operations, surface algorithms, the CityScapes classes). A plugin's code hash covers those
+#: it imports; the framework's own modules (engine, CLI, report) do not change results and are left out.
+SHARED_LIBRARY: tuple[str, ...] = ("cityscapes", "geo", "mesh", "surface")
+_CORE = Path(__file__).resolve().parent
+_TWINKIT_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+twinkit((?:\.\w+)*)[ \t]+import[ \t]+\(?([\w \t,]+)"
+                             r"|import[ \t]+twinkit\.(\w+))", re.M)
+
+
+def _shared_root(name: str) -> list[Path]:
+    """The files of one shared-library module (a package's every ``.py`` file, or the one module file)."""
+    pkg = _CORE / name
+    if pkg.is_dir():
+        return sorted(pkg.rglob("*.py"))
+    f = _CORE / f"{name}.py"
+    return [f] if f.is_file() else []
+
+
+def _shared_names(text: str) -> set[str]:
+    """Names of :data:`SHARED_LIBRARY` modules that source ``text`` imports (``from twinkit.mesh import x``,
+    ``from twinkit import geo``, ``import twinkit.surface.cleanup``; also inside functions)."""
+    found = set()
+    for dotted, names, plain in _TWINKIT_IMPORT.findall(text):
+        if plain:
+            found.add(plain)
+        elif dotted:
+            found.add(dotted.split(".")[1])
+        else:
+            found.update(n.strip() for n in names.replace("\t", " ").split(","))
+    return found & set(SHARED_LIBRARY)
+
+
+def shared_sources(files: list[Path]) -> list[Path]:
+    """The shared-library files that ``files`` use, followed through the library's own imports; sorted."""
+    seen: set[str] = set()
+    todo = [f for f in files]
+    out: set[Path] = set()
+    while todo:
+        f = todo.pop()
+        try:
+            text = f.read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            continue
+        for name in _shared_names(text) - seen:
+            seen.add(name)
+            for g in _shared_root(name):
+                out.add(g)
+                todo.append(g)
+    return sorted(out)
+
+
 @dataclass
 class Plugin:
     """One registered plugin."""
@@ -70,17 +122,21 @@ class Plugin:
     def code_hash(self) -> str:
         """sha256 of the plugin's source: every ``.py`` file of the top-level package that defines
         ``run`` (a change in a helper module of the plugin re-runs its steps too), or the one
-        source file when ``run`` lives in a plain module."""
+        source file when ``run`` lives in a plain module; plus the modules of the core's shared library
+        (:data:`SHARED_LIBRARY`) that this code imports, directly or through each other, so a change in
+        the shared clean-up, mesh I/O or site frame re-runs the steps that use it, and only those."""
         try:
             src = Path(inspect.getsourcefile(self.run) or "")
             top = sys.modules.get(getattr(self.run, "__module__", "").split(".")[0])
             roots = list(getattr(top, "__path__", []) or [])
-            if not roots:
-                return _file_digest(str(src), src.stat().st_mtime_ns)
-            root = Path(roots[0])
+            own = sorted(Path(roots[0]).rglob("*.py")) if roots else [src]
+            base = Path(roots[0]) if roots else src.parent
             h = hashlib.sha256()
-            for f in sorted(root.rglob("*.py")):
-                h.update(f.relative_to(root).as_posix().encode() + b"\0")
+            for f in own:
+                h.update(f.relative_to(base).as_posix().encode() + b"\0")
+                h.update(_file_digest(str(f), f.stat().st_mtime_ns).encode())
+            for f in shared_sources(own):
+                h.update(b"twinkit/" + f.relative_to(_CORE).as_posix().encode() + b"\0")
                 h.update(_file_digest(str(f), f.stat().st_mtime_ns).encode())
             return h.hexdigest()[:16]
         except (OSError, TypeError, ValueError):
