@@ -17,23 +17,21 @@ folder is then swapped in atomically.
 
 Where each part lives (``twinkit/engine/``):
 
-=================  ===============================================================================
-``plan.py``        a recipe's steps -> ordered :class:`PlannedStep` list: plugin, params, wired inputs
-``params.py``      a plugin's parameters from its dataclass defaults and the config / recipe layers
-``runner.py``      :class:`Engine`: the loop over the plan and the decision run / reuse / cached per step
-``keys.py``        a step's cache key: its descriptor (plugin, params, components, input hashes) and why it changed
-``store.py``       the content store ``.cache/steps/<key>``: atomic compute into it, validity of an entry
-``records.py``     ``step.json`` records and the :class:`StepOutcome` of a step
-``workspace.py``   the numbered folders: swapping stored results in atomically, their records and outputs
-``edits.py``       hand-edit detection in a numbered folder, and setting edits aside
-``locks.py``       one run per workspace (lock file), writability, leftovers of killed runs
-``fanout.py``      ``foreach`` steps: one keyed store entry per item, run through an executor
-``manual.py``      manual steps: instructions, waiting for the files a person provides
-``status.py``      the dry run (``twinkit status``): what a run would do, writing nothing
-``memory.py``      a step's peak memory, and handing freed memory back between items
-``single_step.py`` one plugin run through the same atomic write path, outside any recipe (tests)
-``garbage.py``     ``twinkit gc``: unreferenced store entries, stale remembered hashes
-=================  ===============================================================================
+- ``plan.py``: a recipe's steps -> ordered :class:`PlannedStep` list: plugin, params, wired inputs
+- ``params.py``: a plugin's parameters from its dataclass defaults and the config / recipe layers
+- ``runner.py``: :class:`Engine`: the loop over the plan and the decision run / reuse / cached per step
+- ``keys.py``: a step's cache key: its descriptor (plugin, params, components, input hashes) and why it changed
+- ``store.py``: the content store ``.cache/steps/<key>``: atomic compute into it, validity of an entry
+- ``records.py``: ``step.json`` records and the :class:`StepOutcome` of a step
+- ``workspace.py``: the numbered folders: swapping stored results in atomically, their records and outputs
+- ``edits.py``: hand-edit detection in a numbered folder, and setting edits aside
+- ``locks.py``: one run per workspace (lock file), writability, leftovers of killed runs
+- ``fanout.py``: ``foreach`` steps: one keyed store entry per item, run through an executor
+- ``manual.py``: manual steps: instructions, waiting for the files a person provides
+- ``status.py``: the dry run (``twinkit status``): what a run would do, writing nothing
+- ``memory.py``: a step's peak memory, and handing freed memory back between items
+- ``single_step.py``: one plugin run through the same atomic write path, outside any recipe (tests)
+- ``garbage.py``: ``twinkit gc``: unreferenced store entries, stale remembered hashes
 """
 from twinkit.engine.garbage import collect_garbage, prune_hash_cache
 from twinkit.engine.locks import unwritable
