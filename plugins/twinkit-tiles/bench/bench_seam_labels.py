@@ -41,7 +41,7 @@ def main() -> int:
     out = Path(a.out)
     secs = {"tiled": run(out / "tiled", f"steps.plan_tiles.tile_m={a.tile_m}", *model)}
     tiles = json.loads((out / "tiled" / "demo" / "03_plan_tiles" / "tiles.json").read_text())["items"]
-    from twinkit_tiles.seams import seam_planes
+    from twinkit_tiles.edges import seam_planes
 
     lines = [f"{'xyz'[ax]}={v:.4f}" for ax, v in seam_planes(tiles)]
     secs["untiled"] = run(out / "untiled", "steps.plan_tiles.tile_m=100000", *model,

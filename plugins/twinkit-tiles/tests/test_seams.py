@@ -6,9 +6,10 @@ import pytest
 
 from twinkit_pointcloud.meshio import Mesh, face_areas
 
-from twinkit_tiles.seams import (boundary_half_edges, close_seam_holes, cut_halfspace, cut_to_box, edge_counts,
-                                 faces_outside_core, merge_grid, plane_chains, seam_boundary_edges, seam_planes,
-                                 stitch)
+from twinkit_tiles.cut import cut_halfspace, cut_to_box
+from twinkit_tiles.edges import boundary_half_edges, edge_counts, seam_planes
+from twinkit_tiles.seam_stats import faces_outside_core, seam_boundary_edges
+from twinkit_tiles.stitch import close_seam_holes, merge_grid, plane_chains, stitch
 
 
 def grid_mesh(x0, x1, y0, y1, step, z=lambda x, y: 0.1 * np.sin(x) * np.cos(y), jitter=0.0, seed=0):
@@ -149,7 +150,7 @@ def test_boundary_half_edges_of_a_single_triangle():
 
 
 def test_figure_eight_loops_are_split_into_simple_loops():
-    from twinkit_tiles.seams import _simple_loops
+    from twinkit_tiles.edges import _simple_loops
 
     parts = _simple_loops(np.array([1, 2, 3, 4, 2, 5, 6]))
     assert [p.tolist() for p in parts] == [[2, 3, 4], [1, 2, 5, 6]]
@@ -159,7 +160,9 @@ def test_figure_eight_loops_are_split_into_simple_loops():
 def test_open_seam_edges_are_told_apart_by_what_lies_across():
     """An open edge on a seam faces either the other tile's surface (a real gap) or nothing (the
     other tile trimmed that surface away, so the mesh simply ends on the seam)."""
-    from twinkit_tiles.seams import _concat, boundary_half_edges, classify_open_seam_edges
+    from twinkit_tiles.edges import boundary_half_edges
+    from twinkit_tiles.seam_stats import classify_open_seam_edges
+    from twinkit_tiles.stitch import _concat
 
     a = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2), 0, 2.0, "below")
     b = cut_halfspace(grid_mesh(1, 4, 0, 3, 0.25), 0, 2.0, "above")
@@ -188,7 +191,9 @@ def test_open_seam_runs_locate_and_measure_the_gaps_and_the_map_marks_them(tmp_p
     from PIL import Image
 
     from twinkit_pointcloud.meshio import compact as compact_mesh
-    from twinkit_tiles.seams import _concat, open_seam_runs, seam_border_length, seam_map_png
+    from twinkit_tiles.seam_map import seam_map_png
+    from twinkit_tiles.seam_stats import open_seam_runs, seam_border_length
+    from twinkit_tiles.stitch import _concat
 
     a = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2), 0, 2.0, "below")
     b = cut_halfspace(grid_mesh(1, 4, 0, 3, 0.25), 0, 2.0, "above")
@@ -218,7 +223,7 @@ def test_open_seam_runs_locate_and_measure_the_gaps_and_the_map_marks_them(tmp_p
 
 
 def test_cut_moves_near_plane_vertices_onto_it_so_no_sliver_edge_stays_on_the_seam():
-    from twinkit_tiles.seams import ON_PLANE_M
+    from twinkit_tiles.cut import ON_PLANE_M
 
     m = grid_mesh(0, 2, 0, 2, 0.25)
     m.vertices[m.vertices[:, 0] == 1.0, 0] = 1.0 + 2e-4  # a column of vertices 0.2 mm off the plane
@@ -232,7 +237,7 @@ def test_cut_moves_near_plane_vertices_onto_it_so_no_sliver_edge_stays_on_the_se
 
 
 def test_seam_band_trim_applies_the_distance_rule_near_seams_only():
-    from twinkit_tiles.seams import trim_seam_bands
+    from twinkit_tiles.seam_trim import trim_seam_bands
 
     m = grid_mesh(-2, 2, 0, 2, 0.05, z=lambda x, y: 0 * x)
     m.face_attrs = {"tile": np.where(m.vertices[m.faces].mean(axis=1)[:, 0] < 0, 0, 1).astype(np.int32)}
@@ -252,7 +257,7 @@ def test_seam_band_trim_applies_the_distance_rule_near_seams_only():
 def test_a_strip_left_bare_on_one_side_counts_as_a_crack():
     """A strip's along-the-border edge left open (the faces of that tile beside the seam were trimmed
     away) is a crack, like an open edge of a tile face; only strip edges crossing the gap are not."""
-    from twinkit_tiles.seams import classify_open_seam_edges, open_seam_runs
+    from twinkit_tiles.seam_stats import classify_open_seam_edges, open_seam_runs
 
     a = cut_halfspace(grid_mesh(0, 3.2, 0, 3, 0.2, jitter=0.05, seed=1), 0, 2.0, "below")
     b = cut_halfspace(grid_mesh(1.0, 4, 0, 3, 0.27, jitter=0.05, seed=2), 0, 2.0, "above")
@@ -279,7 +284,7 @@ def test_a_strip_left_bare_on_one_side_counts_as_a_crack():
 
 
 def test_open_near_lines_sees_a_slot_along_a_line_only():
-    from twinkit_tiles.seams import _section_length, open_near_lines
+    from twinkit_tiles.seam_stats import _section_length, open_near_lines
 
     m = grid_mesh(0, 4, 0, 2, 0.1, z=lambda x, y: 0 * x)
     assert _section_length(m.vertices, m.faces, 0, 2.03) == pytest.approx(2.0)
@@ -309,7 +314,7 @@ def _two_tile_ground(half_m: float, n_points: int, seed: int):
 
 
 def test_seam_band_trim_keeps_what_a_tile_voted_for():
-    from twinkit_tiles.seams import trim_seam_bands
+    from twinkit_tiles.seam_trim import trim_seam_bands
 
     m, P, N = _two_tile_ground(2, 40000, 1)
     # a tile whose own surface passed the trim up to y = 1.5 on both sides of the seam
@@ -340,7 +345,7 @@ def _vote_grid(x0, x1, y0, y1, step, keep, tile):
 
 
 def test_seam_band_trim_takes_each_tiles_nearest_vote():
-    from twinkit_tiles.seams import trim_seam_bands
+    from twinkit_tiles.seam_trim import trim_seam_bands
 
     m, P, N = _two_tile_ground(1, 20000, 2)
     # tile 0's full-resolution surface (a vertex every 12 cm, as in sparse ground) passed the trim up to
@@ -370,7 +375,8 @@ def test_seam_band_trim_never_leaves_the_surface_ending_on_a_seam():
     """Where the trim removes one tile's side of a seam and keeps the other's, the kept faces hanging
     on the seam go too (the trim's boundary crosses the seam instead of running along it); a border
     the zipper could not pair (open before the trim) stays open and counted."""
-    from twinkit_tiles.seams import _tile_border, trim_seam_bands
+    from twinkit_tiles.seam_stats import _tile_border
+    from twinkit_tiles.seam_trim import trim_seam_bands
 
     lift = lambda x, y: np.where((y > 0.4) & (y < 1.1), 0.03, 0.0)  # noqa: E731  tile 1 floats 3 cm up there
     a = cut_halfspace(grid_mesh(0, 3.2, 0, 3, 0.1, z=lambda x, y: 0 * x, jitter=0.02, seed=1), 0, 2.0, "below")

@@ -198,7 +198,8 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
 
     import numpy as np
 
-    from .seams import cut_to_box, edge_counts
+    from .cut import cut_to_box
+    from .edges import edge_counts
     from .tiling import exact_voxel_poisson
 
     params = params or ReconstructTileParams()
@@ -222,7 +223,7 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
         core = item["core"]
         planes = [(a, float(core[k])) for k, a in ((0, 0), (1, 1), (2, 0), (3, 1)) if core[k] is not None]
         if params.seam_band_m > 0 and params.seam_loose_dist_m > 0 and planes:
-            from .seams import near_planes
+            from .edges import near_planes
 
             opt.loose_dist_m = max(params.seam_loose_dist_m, params.max_dist_m)
             loose = lambda V: near_planes(V, planes, params.seam_band_m)  # noqa: E731
@@ -272,8 +273,12 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply, write_ply
 
-    from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, open_near_line_sets, open_seam_runs,
-                        seam_border_length, seam_boundary_edges, seam_map_png, seam_planes, trim_seam_bands)
+    from .edges import edge_counts, seam_planes
+    from .seam_map import seam_map_png
+    from .seam_stats import (faces_outside_core, open_near_line_sets, open_seam_runs, seam_border_length,
+                             seam_boundary_edges)
+    from .seam_trim import trim_seam_bands
+    from .stitch import _concat, close_seam_holes, merge_grid
 
     params = params or MergeTilesParams()
     plan = json.loads(Path(in_tiles_json).read_text())
@@ -414,7 +419,7 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
     from twinkit_pointcloud.meshio import read_ply
 
     from .seam_labels import seam_label_stats
-    from .seams import seam_planes
+    from .edges import seam_planes
 
     params = params or EvaluateSeamLabelsParams()
     planes = seam_planes(json.loads(Path(in_tiles_json).read_text())["items"])

@@ -81,7 +81,7 @@ def seam_label_stats(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray
     if gt is not None:
         out["seam_changes_not_in_gt_pct"] = _rate(seam_rows, "changes_not_in_gt", "edges_with_gt")
         out["control_changes_not_in_gt_pct"] = _rate(ctrl_rows, "changes_not_in_gt", "edges_with_gt")
-        from .seams import near_planes
+        from .edges import near_planes
 
         near = near_planes(X, planes, band_m)
         ok = (labels != IGNORE) & (gt != IGNORE)

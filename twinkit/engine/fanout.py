@@ -1,0 +1,116 @@
+"""Fan-out (``foreach``): a step runs once per item of a JSON list, each item keyed by its own content and
+the step's other inputs, so adding an item computes only that item. Items go to an executor
+(``map(fn, tasks)``) as picklable tasks for :func:`_run_item_task`."""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+from twinkit.engine.memory import release_memory
+from twinkit.engine.records import RECORD, StepOutcome, read_record
+from twinkit.engine.store import compute_into_store
+from twinkit.errors import InputError
+from twinkit.hashing import artefact_hash
+
+log = logging.getLogger("twinkit")
+
+
+def _item_cost(item: Any) -> float:
+    c = item.get("cost") if isinstance(item, dict) else None
+    return float(c) if isinstance(c, (int, float)) and not isinstance(c, bool) else 0.0
+
+
+def _run_item_task(task: dict) -> dict:
+    """Executor entry point for one fan-out item (picklable, top level)."""
+    try:
+        return compute_into_store(**task)
+    finally:
+        release_memory()
+
+
+class FanoutMixin:
+    """Part of :class:`~twinkit.engine.runner.Engine`: run a ``foreach`` step through the executor
+    (``self.executor_factory``, or the configured ``executor``, or a local pool)."""
+
+    def _executor(self):
+        if self.executor_factory is not None:
+            return self.executor_factory()
+        from twinkit.plugins import build_component
+
+        if self.cfg.get("executor"):
+            return build_component("executor", None, self.cfg)
+        from twinkit.executors import LocalExecutor
+
+        return LocalExecutor(workers=min(2, self.threads))
+
+    def _run_fanout(self, ps, folder, key, desc, rec, in_paths, forced) -> StepOutcome:
+        items_path = in_paths.pop("__foreach__")
+        try:
+            items = json.loads(Path(items_path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError(f"{items_path}: the 'foreach' list of step '{ps.id}' is not readable JSON ({exc})") from None
+        if isinstance(items, dict) and "items" in items:
+            items = items["items"]
+        if not isinstance(items, list):
+            raise InputError(f"{items_path}: 'foreach' of step '{ps.id}' needs a JSON list (or {{\"items\": [...]}})")
+        # each item is keyed by its own content and the step's other inputs, not by the whole list,
+        # so adding a tile computes only the new tile
+        base = dict(desc, inputs={k: v for k, v in desc["inputs"].items() if k != "__foreach__"})
+        keys = [self._key({"step": base, "item": it}) for it in items]
+        if rec is not None and rec.get("key") == key and not forced:
+            state, files = self._check_workspace(folder, rec)
+            if state in ("unchanged", "edited"):
+                outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
+                if state == "unchanged":
+                    hashes = rec["artefacts"]
+                else:
+                    hashes = {f: [artefact_hash(x, self.hashes) for x in paths] for f, paths in outputs.items()}
+                status = "reused" if state == "unchanged" else "edited"
+                return StepOutcome(ps.id, ps.folder, ps.label, status,
+                                   "unchanged" if state == "unchanged" else f"kept hand-edited {', '.join(files)}",
+                                   key, 0.0, outputs, hashes, rec.get("metrics", {}))
+        why = "forced by rerun" if forced else self._why(rec, desc)
+        todo = [i for i, k in enumerate(keys) if forced or self._store_valid(k) is None]
+        # items that say what they cost ("cost": any number) start costliest first, so that a big
+        # item does not start last and leave the other workers idle (results are keyed, not ordered)
+        todo.sort(key=lambda i: -_item_cost(items[i]))
+        tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
+                      store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
+                      item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path) for i in todo]
+        for t in tasks:
+            t["ctx_kwargs"].pop("log")
+        t0 = time.perf_counter()
+        if tasks:
+            log.debug("  %s: running %s on %d of %d items ...", ps.folder, ps.label, len(tasks), len(items))
+            ex = self._executor()
+            results = ex.map(_run_item_task, tasks)
+            for _ in _track(results, len(tasks), ps.id):
+                pass
+        duration = time.perf_counter() - t0
+        stored = [read_record(self.store / k) for k in keys]
+        files: dict[str, Any] = {}
+        for i, r in enumerate(stored):
+            for rel, info in r["files"].items():
+                if rel != RECORD:
+                    files[f"{i:03d}/{rel}"] = info
+        artefacts = {p.filename: [r["artefacts"][p.filename] for r in stored] for p in ps.outputs}
+        metrics = {"items": len(items), "computed": len(tasks),
+                   "per_item": [r.get("metrics", {}) | {"peak_rss_mb": r.get("peak_rss_mb"), "start_rss_mb": r.get("start_rss_mb"),
+                                                        "duration_s": r.get("duration_s")} for r in stored]}
+        status = "ran" if tasks else "cached"
+        record = self._workspace_record(ps, key, desc, {"files": files, "artefacts": artefacts, "metrics": metrics,
+                                                        "duration_s": round(duration, 3)}, status, why, in_paths)
+        record["item_keys"] = keys
+        self._materialize(folder, [(f"{i:03d}", self.store / k) for i, k in enumerate(keys)], record)
+        outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
+        return StepOutcome(ps.id, ps.folder, ps.label, status, why + f" ({len(tasks)}/{len(items)} items computed)",
+                           key, duration, outputs, artefacts, metrics)
+
+
+def _track(iterable, total, desc):
+    from twinkit.progress import track
+
+    return track(iterable, total=total, desc=desc)

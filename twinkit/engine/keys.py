@@ -1,0 +1,84 @@
+"""A step's cache key: the sha256 of its descriptor (plugin kind, name, version and code hash; resolved
+parameters; the configuration of the components it uses; the content hashes of its inputs), and the
+reason a key changed, in words, for the log."""
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Any
+
+from twinkit.engine.plan import PlannedStep
+from twinkit.errors import InputError
+from twinkit.hashing import artefact_hash
+
+
+class KeysMixin:
+    """Part of :class:`~twinkit.engine.runner.Engine`: inputs, descriptor and key of a planned step
+    (``self.outcomes`` of the steps before it, ``self.hashes``)."""
+
+    def _input_values(self, ps: PlannedStep) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Paths and content hashes of a step's inputs."""
+        paths: dict[str, Any] = {}
+        hashes: dict[str, Any] = {}
+        sources = dict(ps.inputs)
+        if ps.foreach is not None:
+            sources["__foreach__"] = ps.foreach
+        for param, src in sources.items():
+            if src is None:
+                paths[param], hashes[param] = None, None
+                continue
+            if src.path is not None:
+                if not src.path.exists():
+                    raise InputError(
+                        f"site input {src.path} does not exist (needed by step '{ps.id}'); "
+                        f"fix the path in the site config or on the command line"
+                    )
+                paths[param] = src.path
+                hashes[param] = artefact_hash(src.path, self.hashes) if src.path.is_dir() else self.hashes.hash(src.path)
+            else:
+                prod = self.outcomes[src.step_index - 1]
+                paths[param] = prod.outputs[src.filename]
+                hashes[param] = prod.hashes[src.filename]
+        return paths, hashes
+
+    def _descriptor(self, ps: PlannedStep, input_hashes: dict[str, Any]) -> dict:
+        if ps.plugin is None:
+            plugin = {"kind": "manual", "instructions": ps.spec.manual.get("instructions")}
+        else:
+            plugin = {"kind": ps.plugin.kind, "name": ps.plugin.name, "version": ps.plugin.version,
+                      "code": ps.plugin.code_hash()}
+        return {
+            "plugin": plugin,
+            "params": ps.params_dict,
+            "components": ps.components,
+            "inputs": input_hashes,
+            "outputs": [o.filename for o in ps.outputs],
+        }
+
+    @staticmethod
+    def _key(descriptor: dict) -> str:
+        return hashlib.sha256(json.dumps(descriptor, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+    @staticmethod
+    def _why(old: dict | None, new: dict) -> str:
+        if old is None or "descriptor" not in old:
+            return "no earlier result"
+        o = old["descriptor"]
+        reasons = []
+        if o.get("plugin", {}).get("name") != new["plugin"].get("name"):
+            reasons.append(f"plugin {o['plugin'].get('name')} -> {new['plugin'].get('name')}")
+        elif o.get("plugin", {}).get("version") != new["plugin"].get("version"):
+            reasons.append(f"plugin version {o['plugin'].get('version')} -> {new['plugin'].get('version')}")
+        elif o.get("plugin", {}).get("code") != new["plugin"].get("code"):
+            reasons.append("plugin code changed")
+        for k in sorted(set(o.get("params", {})) | set(new["params"])):
+            a, b = o.get("params", {}).get(k), new["params"].get(k)
+            if a != b:
+                reasons.append(f"{k} {a!r} -> {b!r}")
+        changed = [k for k in sorted(set(o.get("inputs", {})) | set(new["inputs"]))
+                   if o.get("inputs", {}).get(k) != new["inputs"].get(k)]
+        if changed:
+            reasons.append("input changed: " + ", ".join(changed))
+        if o.get("components") != new["components"]:
+            reasons.append("component config changed")
+        return "; ".join(reasons) or "key changed"

@@ -1,0 +1,284 @@
+"""Planning: a recipe's steps become an ordered list of :class:`PlannedStep`, each bound to its plugin,
+its resolved parameters and the sources of its inputs (an earlier step's output or a site input).
+
+Nothing runs and nothing is written here; a wrong recipe fails before the first step."""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from twinkit.engine.params import resolve_params
+from twinkit.errors import ConfigError, TwinkitError
+from twinkit.plugins import STEP_KINDS, Plugin, Registry
+from twinkit.signature import Port, Signature, parse_signature
+
+_STEP_SPEC_KEYS = {"id", "uses", "params", "inputs", "foreach", "manual", "description", "optional"}
+
+
+@dataclass
+class StepSpec:
+    """One entry of a recipe's ``steps`` list."""
+
+    id: str
+    uses: str | None = None
+    params: dict = field(default_factory=dict)
+    inputs: dict = field(default_factory=dict)
+    foreach: str | None = None
+    manual: dict | None = None
+    description: str = ""
+    optional: bool = False  # skip the step (with a logged reason) when a required input is unavailable
+
+
+@dataclass
+class Source:
+    """Where an input comes from: an earlier step's output, or a site input file."""
+
+    filename: str
+    step_index: int | None = None  # producer's index in the plan
+    path: Path | None = None  # site input
+
+
+@dataclass
+class PlannedStep:
+    index: int
+    spec: StepSpec
+    plugin: Plugin | None
+    params: Any
+    params_dict: dict
+    signature: Signature
+    inputs: dict[str, Source | None]
+    outputs: tuple[Port, ...]
+    components: dict[str, Any]
+    foreach: Source | None = None
+
+    @property
+    def id(self) -> str:
+        return self.spec.id
+
+    @property
+    def folder(self) -> str:
+        return f"{self.index:02d}_{self.spec.id}"
+
+    @property
+    def label(self) -> str:
+        return self.plugin.qualname if self.plugin else "manual"
+
+
+def _spec_from(raw: Any, recipe_name: str, i: int) -> StepSpec:
+    if isinstance(raw, str):
+        raw = {"id": raw.split("/")[-1], "uses": raw}
+    if not isinstance(raw, dict) or "id" not in raw:
+        raise ConfigError(f"recipe '{recipe_name}': step #{i + 1} must be a mapping with an 'id' (got {raw!r})")
+    unknown = set(raw) - _STEP_SPEC_KEYS
+    if unknown:
+        raise ConfigError(
+            f"recipe '{recipe_name}', step '{raw['id']}': unknown key(s) {sorted(unknown)}; "
+            f"allowed: {sorted(_STEP_SPEC_KEYS)}"
+        )
+    spec = StepSpec(**{k: v for k, v in raw.items()})
+    spec.params = dict(spec.params or {})
+    spec.inputs = dict(spec.inputs or {})
+    if not spec.id.replace("_", "").isalnum():
+        raise ConfigError(f"recipe '{recipe_name}': step id {spec.id!r} must be letters, digits and '_'")
+    if (spec.uses is None) == (spec.manual is None):
+        raise ConfigError(f"recipe '{recipe_name}', step '{spec.id}': give exactly one of 'uses' or 'manual'")
+    return spec
+
+
+def _site_inputs(site: dict) -> dict[str, Any]:
+    return dict(site.get("inputs") or {})
+
+
+#: key of the composed config holding the step parameters given on the command line (see ``given_params``)
+GIVEN_KEY = "command_line_params"
+
+
+def given_params(cfg: dict, overrides: list[str]) -> dict:
+    """The step parameters among the command-line ``overrides`` (``steps.<name>.<param>=...`` and
+    ``<kind>.<param>=...``), with their composed values: ``{"steps": {name: {param: v}}, kind: {param: v}}``.
+
+    Every parameter is already in the composed config (the plugins' defaults fill it), so a value there
+    cannot tell a default from a choice; this keeps the choices, which then override a recipe's fixed
+    ``params:``, as a user who types ``reconstructor.depth=11`` expects."""
+    out: dict = {}
+    for ov in overrides:
+        if "=" not in ov or ov.startswith("~"):
+            continue
+        parts = ov.split("=", 1)[0].lstrip("+").split(".")
+        if parts[0] == "steps" and len(parts) == 3:
+            node = (cfg.get("steps") or {}).get(parts[1]) or {}
+            if parts[2] in node:
+                out.setdefault("steps", {}).setdefault(parts[1], {})[parts[2]] = node[parts[2]]
+        elif parts[0] in STEP_KINDS and parts[0] not in ("step", "site_generator") and len(parts) == 2:
+            node = cfg.get(parts[0]) or {}
+            if parts[1] != "plugin" and parts[1] in node:
+                out.setdefault(parts[0], {})[parts[1]] = node[parts[1]]
+    return out
+
+
+def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
+               skipped: list[tuple[str, str]] | None = None) -> list[PlannedStep]:
+    """Turn the composed config into an ordered list of steps with wired inputs.
+
+    Steps marked ``optional: true`` whose required inputs are unavailable are left out and
+    appended to ``skipped`` as (step id, reason). Raises ConfigError naming the recipe, step,
+    plugin, key or file at fault.
+    """
+    site = cfg.get("site") or {}
+    recipe = cfg.get("recipe") or {}
+    rname = recipe.get("name", "?")
+    raw_steps = list(recipe.get("steps") or [])
+    if not raw_steps:
+        raise ConfigError(f"recipe '{rname}' has no steps")
+    specs: list[StepSpec] = []
+    gen = site.get("generator")
+    if gen:
+        specs.append(StepSpec(id="site", uses=f"site_generator/{gen}", description="generate the site's inputs"))
+    specs += [_spec_from(r, rname, i) for i, r in enumerate(raw_steps)]
+    ids = [s.id for s in specs]
+    dup = {i for i in ids if ids.count(i) > 1}
+    if dup:
+        raise ConfigError(f"recipe '{rname}': step ids used twice: {sorted(dup)}")
+
+    plan: list[PlannedStep] = []
+    produced: list[tuple[str, bool, int]] = []  # (filename, is_dir, producer index)
+    site_inputs = _site_inputs(site)
+    given = cfg.get(GIVEN_KEY) or {}
+    site_name = site.get("name", "?")
+    base_dir = config_root or Path.cwd()
+
+    idx = 0
+    for spec in specs:
+        idx += 1
+        where = f"recipe '{rname}', step '{spec.id}'"
+        plugin: Plugin | None = None
+        params_obj, params_dict = None, {}
+        components: dict[str, Any] = {}
+        if spec.manual is not None:
+            outs = spec.manual.get("outputs") or []
+            if not outs or not spec.manual.get("instructions"):
+                raise ConfigError(f"{where}: a manual step needs 'instructions' and 'outputs'")
+            ports = []
+            for o in outs:
+                stem, _, ext = str(o).partition(".")
+                ports.append(Port(f"out_{stem}_{ext}", stem, ext or "dir"))
+            signature = Signature((), tuple(ports), False)
+            in_names = spec.manual.get("inputs") or []
+            for n in in_names:
+                stem, _, ext = str(n).partition(".")
+                ext = ext or None
+                signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{ext}" if ext else ""), stem, ext),), signature.outputs, False)
+        else:
+            uses = str(spec.uses)
+            if "/" in uses:
+                kind, name = uses.split("/", 1)
+            else:
+                kind, name = uses, None
+            if kind not in STEP_KINDS:
+                raise ConfigError(f"{where}: 'uses: {uses}' — kind must be one of {', '.join(STEP_KINDS)}")
+            node = dict(cfg.get(kind) or {}) if kind != "step" else {}
+            if name is None:
+                name = node.get("plugin")
+                if not name:
+                    raise ConfigError(f"{where}: no {kind} selected; add '{kind}=<name>' or 'uses: {kind}/<name>'")
+            try:
+                plugin = registry.get(kind, name)
+            except TwinkitError as exc:
+                raise ConfigError(f"{where}: {exc}") from None
+            layers: list[dict] = []
+            if kind == "site_generator":
+                fields = [f.name for f in dataclasses.fields(plugin.params)] if plugin.params else []
+                layers.append({k: site[k] for k in fields if k in site})
+            elif kind == "step":
+                layers.append(dict((cfg.get("steps") or {}).get(name) or {}))
+            elif node.get("plugin") == name:
+                layers.append(node)
+            layers.append(spec.params)
+            # what the user typed on the command line beats the recipe's fixed params
+            if kind == "step":
+                layers.append(dict((given.get("steps") or {}).get(name) or {}))
+            elif kind != "site_generator" and node.get("plugin") == name:
+                layers.append(dict(given.get(kind) or {}))
+            params_obj, params_dict = resolve_params(plugin, *layers, where=where)
+            try:
+                signature = parse_signature(plugin.run)
+            except ValueError as exc:
+                raise ConfigError(f"{where}: {exc}") from None
+            for ckind in plugin.uses:
+                components[ckind] = cfg.get(ckind)
+        # wire inputs
+        inputs: dict[str, Source | None] = {}
+        try:
+            for port in signature.inputs:
+                want = spec.inputs.get(port.param)
+                inputs[port.param] = _resolve_input(
+                    port, want, produced, site_inputs, site_name, where, base_dir, optional=port.optional
+                )
+        except ConfigError as exc:
+            if not spec.optional or "needs input" in str(exc):
+                raise
+            if skipped is not None:
+                skipped.append((spec.id, f"no {port.name} ({port.param}) on this site"))
+            idx -= 1
+            continue
+        unknown_wiring = set(spec.inputs) - {p.param for p in signature.inputs}
+        if unknown_wiring:
+            raise ConfigError(
+                f"{where}: 'inputs' names {sorted(unknown_wiring)}, but {plugin.qualname if plugin else 'the step'} "
+                f"reads only {[p.param for p in signature.inputs]}"
+            )
+        foreach_src = None
+        if spec.foreach:
+            fport = Port("foreach", str(spec.foreach).partition(".")[0], str(spec.foreach).partition(".")[2] or None)
+            foreach_src = _resolve_input(fport, spec.foreach, produced, site_inputs, site_name, where, base_dir, False)
+            if not signature.wants_item:
+                raise ConfigError(f"{where}: 'foreach' needs a plugin whose run() takes an 'item' parameter")
+        ps = PlannedStep(idx, spec, plugin, params_obj, params_dict, signature, inputs, signature.outputs,
+                         components, foreach_src)
+        plan.append(ps)
+        for o in ps.outputs:
+            produced.append((o.filename, o.is_dir, idx))
+    return plan
+
+
+def _resolve_input(port: Port, want: str | None, produced, site_inputs: dict, site_name: str, where: str,
+                   base_dir: Path, optional: bool) -> Source | None:
+    # 1. latest earlier step that writes it
+    for filename, is_dir, idx in reversed(produced):
+        if want is not None:
+            ok = filename == want
+        else:
+            ok = port.accepts(filename, is_dir)
+        if ok:
+            # ambiguity within the same producer (cloud.e57 / cloud.las / cloud.ply for in_cloud)
+            same = [f for f, d, i in produced if i == idx and (f == want if want else port.accepts(f, d))]
+            if len(same) > 1:
+                raise ConfigError(
+                    f"{where}: input '{port.param}' matches {same} of one step; choose one with "
+                    f"'inputs: {{{port.param}: <file>}}' in the recipe"
+                )
+            return Source(filename=filename, step_index=idx)
+    # 2. a site input
+    key = (want or port.name).partition(".")[0]
+    if key in site_inputs:
+        value = site_inputs[key]
+        if value is None or value == "???" or value == "":
+            raise ConfigError(
+                f"site '{site_name}' needs input '{key}' (for {where}): give it on the command line "
+                f"(site.inputs.{key}=/path/to/file) or in conf/local/{site_name}.yaml"
+            )
+        path = Path(str(value)).expanduser()
+        if not path.is_absolute():
+            path = (base_dir / path).resolve()
+        if port.ext not in (None, "dir") and path.suffix.lower() != f".{port.ext}":
+            raise ConfigError(f"{where}: site input '{key}' is {path.name}, but '{port.param}' reads .{port.ext} files")
+        return Source(filename=path.name, path=path)
+    if optional:
+        return None
+    have = sorted({f for f, _, _ in produced}) + [f"site input '{k}'" for k in site_inputs]
+    raise ConfigError(
+        f"{where}: nothing provides input '{port.param}' ({want or port.name}); no earlier step writes it and site "
+        f"'{site_name}' has no input '{key}'. Available: {', '.join(have) or 'nothing'}"
+    )

@@ -1,0 +1,157 @@
+"""The step runner: :class:`Engine` walks the plan and decides per step whether to reuse the numbered
+folder, keep a hand edit, link a stored result or run the step (see docs/engine.md, "When a step runs").
+
+The parts of its work live beside it, one concern per module, as mix-ins of :class:`Engine`:
+``locks`` (the workspace), ``keys`` (cache keys), ``store`` (the content store), ``edits`` (hand edits),
+``workspace`` (numbered folders), ``fanout``, ``manual`` and ``status`` (the dry run)."""
+from __future__ import annotations
+
+import logging
+import os
+import time
+import traceback
+from pathlib import Path
+from typing import Any, Callable
+
+from twinkit.engine.edits import EditsMixin
+from twinkit.engine.fanout import FanoutMixin
+from twinkit.engine.keys import KeysMixin
+from twinkit.engine.locks import LockMixin
+from twinkit.engine.manual import ManualMixin
+from twinkit.engine.plan import PlannedStep, build_plan
+from twinkit.engine.records import StepOutcome, read_record
+from twinkit.engine.status import StatusMixin
+from twinkit.engine.store import StoreMixin, compute_into_store
+from twinkit.engine.workspace import WorkspaceMixin
+from twinkit.errors import ConfigError, StepError, TwinkitError
+from twinkit.hashing import HashCache
+from twinkit.plugins import Registry
+
+log = logging.getLogger("twinkit")
+
+
+class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, FanoutMixin, ManualMixin, StatusMixin):
+    """Runs a plan in a workspace with a shared store.
+
+    Args:
+        cfg: the composed configuration (plain dict, resolved).
+        registry: loaded plugins.
+        workspace: where numbered step folders live (``outputs/<site>`` or a multirun job folder).
+        site_root: ``outputs/<site>``; its ``.cache`` is shared by runs and jobs.
+        rerun: step ids (or folder names) to force.
+        interactive: manual steps wait for their files when true; exit with code 3 otherwise.
+    """
+
+    def __init__(self, cfg: dict, registry: Registry, workspace: Path, site_root: Path,
+                 rerun: list[str] | None = None, interactive: bool = False, threads: int | None = None,
+                 config_root: Path | None = None, executor_factory: Callable[[], Any] | None = None,
+                 manual_timeout_s: float | None = None):
+        self.cfg = cfg
+        self.registry = registry
+        self.workspace = Path(workspace)
+        self.site_root = Path(site_root)
+        self.rerun = set(rerun or [])
+        self.interactive = interactive
+        self.threads = threads or os.cpu_count() or 1
+        self.config_root = config_root
+        self.store = self.site_root / ".cache" / "steps"
+        self.edits_dir = self.site_root / ".cache" / "edits"
+        self.hashes = HashCache(self.site_root / ".cache" / "hashes.sqlite")
+        self.executor_factory = executor_factory
+        self.manual_timeout_s = manual_timeout_s
+        self.skipped: list[tuple[str, str]] = []
+        self.plan = build_plan(cfg, registry, config_root, skipped=self.skipped)
+        known = {s.id for s in self.plan} | {s.folder for s in self.plan}
+        bad = self.rerun - known
+        if bad:
+            raise ConfigError(f"rerun names unknown step(s) {sorted(bad)}; steps are: {', '.join(s.id for s in self.plan)}")
+        self.outcomes: list[StepOutcome] = []
+        self._lock = None
+
+    def _ctx_kwargs(self, ps: PlannedStep) -> dict:
+        return {
+            "step_id": ps.id,
+            "site": self.cfg.get("site") or {},
+            "config": self.cfg,
+            "threads": self.threads,
+            "log": logging.getLogger(f"twinkit.step.{ps.id}"),
+        }
+
+    def run(self, on_step: Callable[[StepOutcome, int, int], None] | None = None) -> list[StepOutcome]:
+        self._prepare()
+        for sid, reason in self.skipped:
+            log.info("[-] %-28s skipped  optional step: %s", sid, reason)
+        try:
+            n = len(self.plan)
+            for ps in self.plan:
+                t0 = time.perf_counter()
+                try:
+                    outcome = self._run_step(ps)
+                except TwinkitError:
+                    raise
+                except Exception as exc:
+                    tb = traceback.format_exc()
+                    log.debug(tb)
+                    raise StepError(
+                        f"step '{ps.id}' ({ps.label} {ps.plugin.version if ps.plugin else ''}) failed: "
+                        f"{type(exc).__name__}: {exc}. Earlier results are kept; the traceback is in the run log"
+                    ) from exc
+                if outcome.status not in ("ran",):
+                    outcome.duration_s = time.perf_counter() - t0
+                self.outcomes.append(outcome)
+                if on_step:
+                    on_step(outcome, ps.index, n)
+            return self.outcomes
+        finally:
+            self._release()
+
+    def _run_step(self, ps: PlannedStep) -> StepOutcome:
+        folder = self.workspace / ps.folder
+        in_paths, in_hashes = self._input_values(ps)
+        desc = self._descriptor(ps, in_hashes)
+        key = self._key(desc)
+        rec = read_record(folder)
+        forced = ps.id in self.rerun or ps.folder in self.rerun
+        if ps.plugin is None:
+            return self._run_manual(ps, folder, key, desc, rec)
+        if ps.foreach is not None:
+            return self._run_fanout(ps, folder, key, desc, rec, in_paths, forced)
+
+        if rec is not None and rec.get("key") == key and not forced:
+            state, files = self._check_workspace(folder, rec)
+            if state == "unchanged":
+                outputs, hashes = self._outputs_of(folder, ps, rec, current=False)
+                return StepOutcome(ps.id, ps.folder, ps.label, "reused", "unchanged", key, 0.0, outputs, hashes,
+                                   rec.get("metrics", {}), rec.get("peak_rss_mb"))
+            if state == "edited":
+                outputs, hashes = self._outputs_of(folder, ps, rec, current=True)
+                return StepOutcome(ps.id, ps.folder, ps.label, "edited",
+                                   f"kept hand-edited {', '.join(files)}; later steps re-run", key, 0.0, outputs,
+                                   hashes, rec.get("metrics", {}), rec.get("peak_rss_mb"))
+            why = f"output missing: {', '.join(files)}"
+        elif forced:
+            why = "forced by rerun"
+        else:
+            why = self._why(rec, desc)
+        if rec is not None and folder.is_dir():
+            state, files = self._check_workspace(folder, rec)
+            if state == "edited":
+                self._set_aside(folder, files, "forced re-run" if forced else f"its step re-runs ({why})")
+
+        stored = None if forced else self._store_valid(key)
+        status = "cached" if stored else "ran"
+        if stored is None:
+            log.debug("  %s: running %s ...", ps.folder, ps.label)
+            from twinkit.progress import step_status
+
+            with step_status(f"{ps.folder} ({ps.label})"):
+                stored = compute_into_store(ps.plugin.run, ps.params, in_paths, ps.outputs, key, self.store,
+                                            self._ctx_kwargs(ps), force=forced, hash_db=self.hashes.db_path)
+            if not stored.pop("_computed_here", True):
+                status, why = "cached", why + " (computed by a concurrent job)"
+        record = self._workspace_record(ps, key, desc, stored, status, why, in_paths)
+        self._materialize(folder, [("", self.store / key)], record)
+        outputs, hashes = self._outputs_of(folder, ps, stored, current=False)
+        return StepOutcome(ps.id, ps.folder, ps.label, status, why, key,
+                           stored.get("duration_s", 0.0) if status == "ran" else 0.0, outputs, hashes,
+                           stored.get("metrics", {}), stored.get("peak_rss_mb"))

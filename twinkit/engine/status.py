@@ -1,0 +1,67 @@
+"""The dry run (``twinkit status``): what a run would do for each step, computing keys but running and
+writing nothing."""
+from __future__ import annotations
+
+from twinkit.engine.records import StepOutcome, read_record
+from twinkit.errors import TwinkitError
+from twinkit.hashing import artefact_hash
+
+
+class StatusMixin:
+    """Part of :class:`~twinkit.engine.runner.Engine`."""
+
+    def status(self) -> list[tuple[str, str, str]]:
+        """What a run would do, without running or writing anything: (folder, decision, why)."""
+        rows = []
+        dirty = False
+        for ps in self.plan:
+            folder = self.workspace / ps.folder
+            rec = read_record(folder)
+            if dirty:
+                rows.append((ps.folder, "would run", "an earlier step re-runs"))
+                self.outcomes.append(None)  # type: ignore[arg-type]
+                continue
+            try:
+                in_paths, in_hashes = self._input_values(ps)
+            except TwinkitError as exc:
+                rows.append((ps.folder, "blocked", str(exc)))
+                dirty = True
+                continue
+            key = self._key(self._descriptor(ps, in_hashes))
+            forced = ps.id in self.rerun
+            if ps.plugin is None:
+                done = all((folder / p.filename).exists() for p in ps.outputs)
+                rows.append((ps.folder, "manual done" if done else "waits for you",
+                             ", ".join(p.filename for p in ps.outputs)))
+                if not done:
+                    dirty = True
+                    continue
+                hashes = {p.filename: artefact_hash(folder / p.filename, self.hashes) for p in ps.outputs}
+            elif rec is not None and rec.get("key") == key and not forced:
+                state, files = self._check_workspace(folder, rec)
+                if state == "missing":
+                    rows.append((ps.folder, "would run", f"output missing: {', '.join(files)}"))
+                    dirty = True
+                    continue
+                rows.append((ps.folder, "up to date" if state == "unchanged" else "edited",
+                             "" if state == "unchanged" else ", ".join(files)))
+                if ps.foreach is not None:
+                    hashes = rec["artefacts"] if state == "unchanged" else None
+                    if hashes is None:
+                        dirty = True
+                        continue
+                else:
+                    _, hashes = self._outputs_of(folder, ps, rec, current=state == "edited")
+            else:
+                stored = None if forced else read_record(self.store / key)
+                if stored is not None:
+                    rows.append((ps.folder, "cached", "result stored for this key"))
+                    hashes = stored["artefacts"]
+                else:
+                    rows.append((ps.folder, "would run", "forced by rerun" if forced else self._why(rec, self._descriptor(ps, in_hashes))))
+                    dirty = True
+                    continue
+            outputs = {p.filename: folder / p.filename for p in ps.outputs}
+            self.outcomes.append(StepOutcome(ps.id, ps.folder, ps.label, "status", "", key, 0, outputs, hashes))
+        self.hashes.close()
+        return rows
