@@ -1,9 +1,11 @@
 """Helpers for plugin authors' tests (also a pytest plugin: fixtures ``twinkit_context``).
 
-    from twinkit.testing import make_context, run_step, check_plugin
+    from twinkit.testing import make_context, run_step, run_plugin, check_plugin
 
 ``run_step`` runs one step-like plugin through the same code path as the engine
 (temporary folder, declared outputs checked, atomic move) without a recipe.
+``run_plugin`` does the same for an installed plugin named by kind and name (the registry),
+so a package never imports another plugin's modules to use it.
 """
 from __future__ import annotations
 
@@ -63,6 +65,43 @@ def run_step(plugin, workdir: Path, inputs: dict[str, Path] | None = None, param
     from twinkit.engine import execute_plugin
 
     return execute_plugin(plugin, Path(workdir), inputs or {}, params, site=site, config=config)
+
+
+def installed_plugin(kind: str, name: str):
+    """The installed plugin ``kind/name``, looked up in the registry as a recipe would (``uses: kind/name``).
+
+    Raises :class:`twinkit.PluginError` when no installed package provides it; tests that need
+    another package's plugin call :func:`need_plugin` instead, which skips.
+    """
+    from twinkit.plugins import get_registry
+
+    return get_registry().get(kind, name)
+
+
+def need_plugin(kind: str, name: str):
+    """:func:`installed_plugin`, or skip the calling test when no installed package provides it."""
+    from twinkit.errors import PluginError
+
+    try:
+        return installed_plugin(kind, name)
+    except PluginError as exc:
+        pytest.skip(f"plugin {kind}/{name} is not installed ({exc})")
+
+
+def run_plugin(kind: str, name: str, workdir: Path, inputs: dict[str, Path] | None = None, params: Any = None,
+               *, site: dict | None = None, config: dict | None = None, **overrides: Any) -> dict[str, Path]:
+    """Run the installed plugin ``kind/name`` once, found through the registry, never by importing its package.
+
+    This is how a plugin's tests and benches use another plugin (the demo site generator, a
+    reconstructor, ...): ``run_plugin("site_generator", "demo_intersection", tmp, size="small")``.
+    ``params`` is the plugin's params object (default: its defaults); keyword ``overrides`` replace
+    single fields of it. Runs like :func:`run_step` (the engine's code path); returns
+    {artefact file name: path} of its outputs.
+    """
+    plugin = installed_plugin(kind, name)
+    if overrides:
+        params = dataclasses.replace(params if params is not None else plugin.default_params(), **overrides)
+    return run_step(plugin, workdir, inputs, params, site=site, config=config)
 
 
 @pytest.fixture

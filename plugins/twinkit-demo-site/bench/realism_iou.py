@@ -40,9 +40,9 @@ def main() -> None:
         site, _ = generate(Path(tempfile.mkdtemp(prefix="twinkit-realism-")), size="small", seed=0)
     cams = json.loads((site / "cameras.json").read_text())["cameras"]
     idx = np.linspace(0, len(cams) - 1, min(a.count, len(cams))).round().astype(int)
-    from twinkit_efficientvit.efficientvit import build_efficientvit
+    from twinkit.plugins import build_component  # the registry: image_model/efficientvit_b0, default params
 
-    model = build_efficientvit()
+    model = build_component("image_model", "efficientvit_b0", {})
     inter = np.zeros(19)
     union = np.zeros(19)
     gt_pix = np.zeros(19)

@@ -11,6 +11,11 @@ from pathlib import Path
 
 from twinkit import StepContext, hookimpl
 
+#: where the demo site is when the site config gives no georeference: a four-way junction in central
+#: Helsinki (Finland); ETRS89 / TM35FIN is the national metric CRS
+DEFAULT_CRS = "EPSG:3067"
+DEFAULT_BASE = {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}
+
 #: size presets: site half size, scanner sampling (profile spacing, rays per profile), photo count
 PRESETS = {
     "small": {"half_m": 30.0, "profile_spacing_m": 0.18, "rays_per_profile": 330, "photos": 40},
@@ -67,6 +72,18 @@ def apply_osm_transform(xy, tf: dict, inverse: bool = False):
     return xy @ R.T + t
 
 
+def site_frame(site):
+    """The site frame (twinkit.geo) of the demo site: the site's ``crs`` and ``base_point``, or the defaults."""
+    from twinkit.geo import SiteFrame, site_dict
+
+    s = site_dict(site)
+    if not s.get("crs"):
+        s["crs"] = DEFAULT_CRS
+    if not s.get("base_point"):
+        s["base_point"] = dict(DEFAULT_BASE)
+    return SiteFrame.from_site(s)
+
+
 def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                        out_gt_mesh_obj: Path, out_gt_mesh_ply: Path, out_cloud_e57: Path, out_cloud_las: Path,
                        out_cloud_ply: Path, out_scanners_json: Path, out_photos_dir: Path, out_cameras_json: Path,
@@ -76,7 +93,6 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     import numpy as np
 
     from twinkit_demo_site import writers
-    from twinkit_demo_site.geo import GeoRef
     from twinkit_demo_site.layout import LABELS, build_scene
     from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
     from twinkit_demo_site.raycast import Tracer
@@ -98,7 +114,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
         timings[name] = round(t - t0, 3)
         t0 = t
 
-    geo = GeoRef.from_site(ctx.site)
+    geo = site_frame(ctx.site)
     ctx.log.info("demo site '%s' seed %d at lat %.6f lon %.6f (%s)", params.size, seed, geo.lat, geo.lon, geo.crs)
 
     atlas = build_atlas(seed)
@@ -165,7 +181,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     counts = {**scene.counts, "points": n_points, "ghost_points": int((cloud["label"] == 11).sum()),
               "photos": n_photos, "scanner_positions": int(len(traj["xyz"]))}
     site = {
-        **geo.to_json(),
+        **geo.georef_json(),
         "frame": "site local: metres, x east, y north, z up; origin = base point; "
                  "projected = local + base_point_projected (LAS and E57 are in projected coordinates, z + alt)",
         "bounds_local": {"min": [-H, -H, 0.0], "max": [H, H, round(zmax, 4)]},

@@ -7,7 +7,6 @@ the package parses with carla.Map.
 """
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -16,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twinkit.testing import make_context, run_step
+from twinkit.testing import need_plugin, run_plugin, run_step
 
 from twinkit_export.classes import BY_ID
 
@@ -33,14 +32,10 @@ def demo_site(tmp_path_factory):
     given = os.environ.get("TWINKIT_DEMO_SITE_DIR")  # e.g. an existing outputs/demo/01_site (saves ~40 s)
     if given and (Path(given) / "gt_mesh.obj").exists():
         return Path(given)
-    if importlib.util.find_spec("twinkit_demo_site") is None:
-        pytest.skip("twinkit-demo-site is not installed")
-    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
-
-    d = tmp_path_factory.mktemp("demo_site")
-    kw = output_paths(d)
-    generate_demo_site(DemoSiteParams(size="small", seed=0, photo_count=0), make_context(d, site=dict(DEMO_SITE)), **kw)
-    return d
+    need_plugin("site_generator", "demo_intersection")  # the twinkit-demo-site package
+    out = run_plugin("site_generator", "demo_intersection", tmp_path_factory.mktemp("demo_site"),
+                     site=dict(DEMO_SITE), size="small", seed=0, photo_count=0)
+    return out["site.json"].parent
 
 
 @pytest.fixture(scope="module")

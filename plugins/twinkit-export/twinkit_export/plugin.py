@@ -73,7 +73,7 @@ class CarlaPackageParams:
 # ----------------------------------------------------------------------------- helpers
 
 def _georef(ctx: StepContext, in_site_json: Path | None) -> dict:
-    from .georef import site_georef
+    from twinkit.geo import site_georef
 
     return site_georef(getattr(ctx, "site", None), in_site_json)
 

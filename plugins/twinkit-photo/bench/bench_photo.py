@@ -4,8 +4,8 @@
 
 Demo: runs ``twinkit recipe=image_site site=demo`` into <out>/outputs (a fresh folder, so every step runs)
 and reads each step's step.json. Sceaux (../shared/data/photos/sceaux_castle, skipped when absent): runs
-the steps one by one through twinkit.testing.run_step (no georeference: the model is levelled and
-kept at its own scale). Prints markdown tables. Heavy: several minutes on 2 cores.
+the steps one by one through twinkit.testing.run_plugin (installed plugins by name; no georeference: the
+model is levelled and kept at its own scale). Prints markdown tables. Heavy: several minutes on 2 cores.
 """
 from __future__ import annotations
 
@@ -57,15 +57,15 @@ def bench_demo(out: Path) -> str:
 def bench_sceaux(out: Path) -> str:
     if not SCEAUX.exists():
         return "### Sceaux: skipped (../shared/data/photos/sceaux_castle not present)"
-    from twinkit.testing import plugin_from_module, run_step
+    from twinkit.testing import run_plugin
     import twinkit_photo.plugin as photo
-    import twinkit_pointcloud.plugin as pc
 
     rows = []
 
-    def step(mod, kind, name, inputs, params, label=None):
+    def step(kind, name, inputs, params=None, label=None, **overrides):
+        """One plugin run through the registry (the point-cloud steps are the twinkit-pointcloud package's)."""
         t = time.perf_counter()
-        res = run_step(plugin_from_module(mod, kind, name), out / "sceaux" / (label or name), inputs, params)
+        res = run_plugin(kind, name, out / "sceaux" / (label or name), inputs, params, **overrides)
         rows.append({"step": label or name, "seconds": round(time.perf_counter() - t, 1)})
         return res
 
@@ -74,28 +74,28 @@ def bench_sceaux(out: Path) -> str:
         s = {"sfm": prev / "sfm", "sfm_report.json": prev / "sfm_report.json"}
         rows.append({"step": "sfm (reused)", "seconds": json.loads(s["sfm_report.json"].read_text())["timings_s"]["total"]})
     else:
-        s = step(photo, "step", "sfm", {"in_photos_dir": SCEAUX}, photo.SfmParams())
+        s = step("step", "sfm", {"in_photos_dir": SCEAUX}, photo.SfmParams())
     rep = json.loads(s["sfm_report.json"].read_text())
     rows[-1]["result"] = (f"{rep['registered']}/{rep['photos']} registered, reprojection "
                           f"{rep['mean_reprojection_error_px']:.3f} px, {rep['sparse_points']} points; "
                           f"features {rep['timings_s']['features']} s, matching {rep['timings_s']['matching']} s, "
                           f"mapping {rep['timings_s']['mapping']} s")
-    g = step(photo, "step", "georeference", {"in_sfm_dir": s["sfm"]}, photo.GeorefParams(method="none"))
-    r = step(photo, "step", "roi", {"in_cameras_site_json": g["cameras_site.json"],
+    g = step("step", "georeference", {"in_sfm_dir": s["sfm"]}, photo.GeorefParams(method="none"))
+    r = step("step", "roi", {"in_cameras_site_json": g["cameras_site.json"],
                                     "in_sparse_site_ply": g["sparse_site.ply"]},
              photo.RoiParams(margin_m=1.0, above_ground_m=5.0, below_ground_m=5.0, max_depth_m=0.0,
                              ground_threshold_m=0.02))
-    d = step(photo, "step", "dense", {"in_photos_dir": SCEAUX, "in_cameras_site_json": g["cameras_site.json"],
+    d = step("step", "dense", {"in_photos_dir": SCEAUX, "in_cameras_site_json": g["cameras_site.json"],
                                       "in_sparse_site_ply": g["sparse_site.ply"], "in_roi_json": r["roi.json"]},
              photo.DenseParams(voxel_m=0.0))
     meta = json.loads(d["points_meta.json"].read_text())
     rows[-1]["result"] = f"{meta['counts']['written']} points from {meta['dense']['depth_maps']} depth maps"
-    p = step(pc, "reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, pc.PoissonParams(depth=9))
-    c = step(pc, "step", "clean_mesh", {"in_dense_mesh_ply": p["dense_mesh.ply"], "in_points_ply": d["points.ply"]},
-             pc.CleanParams(max_dist_m=0.0, density_quantile=0.05))
-    m = step(pc, "step", "simplify", {"in_clean_mesh_ply": c["clean_mesh.ply"]}, pc.SimplifyParams(target_faces=100000))
-    step(pc, "step", "bake_texture", {"in_mesh_ply": m["mesh.ply"], "in_clean_mesh_ply": c["clean_mesh.ply"]},
-         pc.BakeParams(texture_px=2048), label="bake_texture")
+    p = step("reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, depth=9)
+    c = step("step", "clean_mesh", {"in_dense_mesh_ply": p["dense_mesh.ply"], "in_points_ply": d["points.ply"]},
+             max_dist_m=0.0, density_quantile=0.05)
+    m = step("step", "simplify", {"in_clean_mesh_ply": c["clean_mesh.ply"]}, target_faces=100000)
+    step("step", "bake_texture", {"in_mesh_ply": m["mesh.ply"], "in_clean_mesh_ply": c["clean_mesh.ply"]},
+         label="bake_texture", texture_px=2048)
     total = sum(r["seconds"] for r in rows)
     return f"### Sceaux castle (11 photos, 2832 x 2128; total {total:.0f} s)\n\n" + _table(rows, ["step", "seconds", "result"])
 
@@ -106,9 +106,8 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     import numpy as np
     import open3d as o3d
     from plyfile import PlyData
-    from twinkit.testing import plugin_from_module, run_step
+    from twinkit.testing import run_plugin
     import twinkit_photo.plugin as photo
-    import twinkit_pointcloud.plugin as pc
 
     cj = json.loads((site_dir / "cameras.json").read_text())
     intr = cj["intrinsics"]
@@ -124,20 +123,21 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     np.savez_compressed(work / "sparse_site.npz", vis_image=np.array([], str), vis_point=np.array([], np.int64))
     rows = []
 
-    def step(mod, kind, name, inputs, params):
+    def step(kind, name, inputs, params=None, **overrides):
+        """One plugin run through the registry (the point-cloud steps are the twinkit-pointcloud package's)."""
         t = time.perf_counter()
-        res = run_step(plugin_from_module(mod, kind, name), work / name, inputs, params)
+        res = run_plugin(kind, name, work / name, inputs, params, **overrides)
         rows.append({"step": name, "seconds": round(time.perf_counter() - t, 1)})
         return res
 
-    r = step(photo, "step", "roi", {"in_cameras_site_json": work / "cameras_site.json",
+    r = step("step", "roi", {"in_cameras_site_json": work / "cameras_site.json",
                                     "in_sparse_site_ply": work / "sparse_site.ply"}, photo.RoiParams())
-    d = step(photo, "step", "dense", {"in_photos_dir": site_dir / "photos", "in_cameras_site_json": work / "cameras_site.json",
+    d = step("step", "dense", {"in_photos_dir": site_dir / "photos", "in_cameras_site_json": work / "cameras_site.json",
                                       "in_sparse_site_ply": work / "sparse_site.ply", "in_roi_json": r["roi.json"]},
              photo.DenseParams())
-    p = step(pc, "reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, pc.PoissonParams(depth=10))
-    c = step(pc, "step", "clean_mesh", {"in_dense_mesh_ply": p["dense_mesh.ply"], "in_points_ply": d["points.ply"]},
-             pc.CleanParams(max_dist_m=0.08))
+    p = step("reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, depth=10)
+    c = step("step", "clean_mesh", {"in_dense_mesh_ply": p["dense_mesh.ply"], "in_points_ply": d["points.ply"]},
+             max_dist_m=0.08)
     gt = o3d.io.read_triangle_mesh(str(site_dir / "gt_mesh.ply"))
     sc = o3d.t.geometry.RaycastingScene()
     sc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(gt))

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit.testing import make_context, plugin_from_module, run_step
+from twinkit.testing import need_plugin, plugin_from_module, run_plugin, run_step
 
 import twinkit_photo.plugin as photo
 
@@ -17,11 +17,10 @@ SITE = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon
 
 
 def _demo_site(folder):
-    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
-
-    generate_demo_site(DemoSiteParams(size="small", seed=0), make_context(folder, site=dict(SITE), step_id="site"),
-                       **output_paths(folder))
-    return folder
+    """The small demo site (the twinkit-demo-site package's generator, through the registry); its folder."""
+    need_plugin("site_generator", "demo_intersection")
+    out = run_plugin("site_generator", "demo_intersection", folder, site=dict(SITE), size="small", seed=0)
+    return out["site.json"].parent
 
 
 def _patch_match_stand_in(gt_mesh_ply):

@@ -90,7 +90,7 @@ def test_gcp_georeference_recovers_the_site_frame(tmp_path):
 
 
 def test_gps_georeference_levels_and_scales(tmp_path):
-    from twinkit_roads.frame import SiteFrame
+    from twinkit.geo import SiteFrame
 
     T = _arbitrary()
     _, C = _truth()

@@ -189,7 +189,7 @@ def test_plane_sweep_recovers_a_textured_plane():
 
 def test_reads_opensfm_gcp_file_of_berlin():
     from conftest import shared_photos
-    from twinkit_roads.frame import SiteFrame
+    from twinkit.geo import SiteFrame
 
     from twinkit_photo.georef import read_gcp_file
 

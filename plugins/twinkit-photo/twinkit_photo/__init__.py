@@ -4,7 +4,7 @@ Modules (each usable without twinkit's engine):
 
 - :mod:`images`  photo folders, validation, EXIF GPS and focal length
 - :mod:`sfm`     pycolmap features, matching (exhaustive / sequential / spatial), incremental or global mapping
-- :mod:`georef`  levelling, GPS similarity (the roads plugin's RANSAC), ground-control points (Umeyama)
+- :mod:`georef`  levelling, GPS similarity (twinkit.geo's RANSAC), ground-control points (Umeyama)
 - :mod:`dense`   CPU plane-sweep stereo with multi-view consistency fusion
 - :mod:`plugin`  the twinkit steps ``sfm``, ``georeference``, ``roi``, ``dense``
 """

@@ -6,8 +6,8 @@ Routes, best first:
         surveyed positions. Needs >= 3 GCPs seen in >= 2 registered photos. Centimetre-level when the
         GCPs are.
   gps   EXIF GPS: the model is levelled first (up = RANSAC ground-plane normal of the sparse cloud,
-        checked against the photos' mean "up"), then the roads plugin's robust yaw-only similarity
-        (twinkit_roads.similarity) maps the camera centres onto the GPS fixes. Consumer GPS is metres off,
+        checked against the photos' mean "up"), then the robust yaw-only similarity
+        (twinkit.geo.similarity) maps the camera centres onto the GPS fixes. Consumer GPS is metres off,
         so the site frame is only as good as the average of the fixes (about sigma / sqrt(n)).
   base_point  no GPS: levelled and centred on the mean camera position, scale from ``scale`` (1 = the
         model's arbitrary unit; give a known distance's ratio).

@@ -105,8 +105,8 @@ def _read_json(path: Path, what: str) -> dict:
 
 
 def _frame(ctx):
-    """The site frame (roads plugin), or None when the site has no CRS / base point."""
-    from twinkit_roads.frame import SiteFrame
+    """The site frame (twinkit.geo), or None when the site has no CRS / base point."""
+    from twinkit.geo import SiteFrame
 
     site = dict(ctx.site or {})
     if not site.get("crs") or not site.get("base_point"):
@@ -297,7 +297,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
                        "views": {r[0]: int(r[3]) for r in gcp_rows},
                        "rmse_m": float(np.sqrt(np.mean(res[keep] ** 2)))}
     elif method == "gps":
-        from twinkit_roads.similarity import fit_similarity
+        from twinkit.geo import fit_similarity
 
         if frame is None:
             raise InputError("georeference.method=gps needs the site's crs and base_point (conf/site/<site>.yaml)")

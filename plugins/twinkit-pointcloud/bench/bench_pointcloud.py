@@ -59,19 +59,25 @@ def prep(cloud: Path, work: Path, threads: int) -> dict:
 
 def prep_demo(preset: str, work: Path, threads: int) -> dict:
     """Generate the demo site (``preset``; one photo, no shadows: the geometry and the cloud are those
-    of the preset) into ``work/site`` and read its E57 cloud like the recipe does."""
-    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
+    of the preset) into ``work/site`` and read its E57 cloud like the recipe does. The generator is the
+    twinkit-demo-site package's, run through the registry (with the engine's default thread count)."""
+    import shutil
+
+    from twinkit.testing import run_plugin
     from twinkit_pointcloud import plugin as P
     from twinkit_pointcloud.measure import Measure
     from twinkit_pointcloud.meshio import read_ply
 
     site = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
     out = work / "site"
-    out.mkdir(parents=True, exist_ok=True)
     ctx = _ctx(work, threads)
     ctx.site = site
     with Measure() as m:
-        generate_demo_site(DemoSiteParams(size=preset, photo_count=1, shadows=False), ctx, **output_paths(out))
+        res = run_plugin("site_generator", "demo_intersection", work / "site_run", site=site,
+                         size=preset, photo_count=1, shadows=False)
+    shutil.rmtree(out, ignore_errors=True)
+    os.replace(res["site.json"].parent, out)
+    shutil.rmtree(work / "site_run", ignore_errors=True)
     r = P.read_cloud(P.ReadCloudParams(), ctx, in_cloud=out / "cloud.e57", out_points_ply=work / "points.ply",
                      out_points_meta_json=work / "points_meta.json")
     for f in ("cloud.las", "cloud.ply"):  # only the E57 is read; keep the disk free

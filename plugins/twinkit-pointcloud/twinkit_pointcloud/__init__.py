@@ -2,8 +2,7 @@
 
 Modules (each usable without twinkit's engine):
 
-- :mod:`readers`  E57 / LAS / LAZ / PLY -> :class:`readers.Cloud` in the site frame
-- :mod:`frames`   projected coordinates -> site-local metres (float64 shift)
+- :mod:`readers`  E57 / LAS / LAZ / PLY -> :class:`readers.Cloud` in the site frame (rules: twinkit.geo.crs)
 - :mod:`normals`  estimation and orientation of normals
 - :mod:`poisson`  screened Poisson (open3d, optionally pymeshlab)
 - :mod:`cleanup`  density / distance trimming, components, non-manifold repair, hole filling

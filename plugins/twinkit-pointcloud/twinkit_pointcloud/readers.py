@@ -3,7 +3,7 @@ several posed scans), LAS/LAZ (laspy + lazrs), PLY (plyfile).
 
 Every reader returns a :class:`RawCloud` in the file's own coordinates (float64); call
 :func:`load_cloud` to also validate it and bring it into the site frame
-(:func:`twinkit_pointcloud.frames.to_site_frame`).
+(:func:`twinkit.geo.to_site_frame`).
 """
 from __future__ import annotations
 
@@ -364,7 +364,7 @@ class Cloud:
 def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: int = 10,
                        drop_invalid: bool = True, log=None, **frame_kw) -> Cloud:
     """Check the cloud (empty, NaN/inf, degenerate) and move it into the site frame."""
-    from .frames import to_site_frame
+    from twinkit.geo import to_site_frame
 
     name = raw.path.name
     if raw.n == 0:
@@ -387,7 +387,7 @@ def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: in
                            f"the capture is degenerate - check the export")
     local, info = to_site_frame(raw.xyz, raw.crs, site, name, **frame_kw)
     if raw.scanner_positions is not None and len(raw.scanner_positions):
-        from .frames import apply_frame
+        from twinkit.geo import apply_frame
 
         raw.scanner_positions = apply_frame(raw.scanner_positions, raw.crs, site, info)
     return Cloud(raw=raw, points=local, frame=info, dropped_invalid=n_bad)

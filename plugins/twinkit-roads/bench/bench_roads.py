@@ -68,10 +68,9 @@ def bench_alignment(demo: Path | None, tmp: Path) -> None:
         gt = demo / "01_site" / "gt_mesh.ply"
         label = f"reconstructed mesh of {demo}"
     else:
-        import twinkit_demo_site.plugin as demo_plugin
+        from twinkit.testing import run_plugin  # the twinkit-demo-site package's generator, through the registry
 
-        site = run_step(plugin_from_module(demo_plugin, "site_generator", "demo_intersection"), tmp / "site", {},
-                        site=dict(site_cfg, size="small"))
+        site = run_plugin("site_generator", "demo_intersection", tmp / "site", site=dict(site_cfg, size="small"))
         truth_json, gt = site["roads_truth.json"], site["gt_mesh.ply"]
         xodr = run_step(plugin_from_module(roads, "step", "osm_to_opendrive"), tmp / "conv",
                         {"in_osm_osm": site["roads.osm"]}, site=site_cfg)["roads.xodr"]

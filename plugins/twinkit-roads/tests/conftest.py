@@ -19,11 +19,9 @@ def need_shared(name: str) -> Path:
 @pytest.fixture(scope="session")
 def demo_site(tmp_path_factory):
     """The demo site generated once (roads.osm shifted and rotated by a known amount, truth, gt mesh)."""
-    demo = pytest.importorskip("twinkit_demo_site.plugin")
-    from twinkit.testing import plugin_from_module, run_step
+    from twinkit.testing import need_plugin, run_plugin
 
-    plugin = plugin_from_module(demo, "site_generator", "demo_intersection")
+    need_plugin("site_generator", "demo_intersection")  # the twinkit-demo-site package
     # roads, truth, ground-truth mesh and cameras do not depend on the scan: a sparse scan keeps this fast
-    params = demo.DemoSiteParams(size="small", density_scale=0.02, shadows=False)
-    out = run_step(plugin, tmp_path_factory.mktemp("demo_site"), {}, params, site=dict(DEMO_SITE, size="small"))
-    return out
+    return run_plugin("site_generator", "demo_intersection", tmp_path_factory.mktemp("demo_site"),
+                      site=dict(DEMO_SITE, size="small"), size="small", density_scale=0.02, shadows=False)

@@ -1,4 +1,4 @@
-"""netconvert + carla.Map on real OSM; alignment on the demo site; the photo-branch similarity."""
+"""netconvert + carla.Map on real OSM; alignment on the demo site."""
 import json
 import math
 import xml.etree.ElementTree as ET
@@ -7,13 +7,12 @@ import numpy as np
 import pytest
 
 from twinkit import InputError
+from twinkit.geo import SiteFrame
 from twinkit.testing import plugin_from_module, run_step
 
 import twinkit_roads.plugin as roads
 from twinkit_roads.align import centreline_rmse, transform_xodr
-from twinkit_roads.frame import SiteFrame
 from twinkit_roads.osmio import read_osm, write_osm_xml
-from twinkit_roads.similarity import fit_similarity
 
 from conftest import DEMO_SITE, FIXTURES, need_shared
 
@@ -131,25 +130,3 @@ def test_an_edited_alignment_file_is_applied(demo_site, demo_net, tmp_path):
         run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap2",
                  {"in_roads_xodr": xodr, "in_alignment_json": f, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]},
                  site=DEMO_SITE)
-
-
-def test_similarity_from_camera_centres_to_gps(demo_site):
-    cams = json.loads(demo_site["cameras.json"].read_text())["cameras"]
-    centres = np.array([c["center"] for c in cams], float)
-    gps = np.array([c["gps"]["local_xyz"] for c in cams], float)  # the generator's noisy GPS, site frame
-    real = fit_similarity(centres, gps, threshold_m=8.0)
-    assert abs(math.degrees(real.yaw_rad)) < 10.0 and abs(real.scale - 1.0) < 0.15
-    # a reconstruction in its own frame: rotated 30 deg, scaled 0.5, shifted; GPS with 0.5 m noise and
-    # two wild fixes
-    rng = np.random.default_rng(1)
-    yaw, s, t = math.radians(30.0), 0.5, np.array([100.0, -40.0, 3.0])
-    R = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
-    recon = rng.uniform(-60, 60, (40, 3)) * [1, 1, 0.05]
-    fixes = s * recon @ R.T + t + rng.normal(0, 0.5, (40, 3))
-    fixes[:2, :2] += 60.0
-    sim = fit_similarity(recon, fixes, threshold_m=3.0)
-    assert abs(math.degrees(sim.yaw_rad) - 30.0) < 1.0
-    assert abs(sim.scale - 0.5) < 0.01
-    assert not sim.inliers[:2].any() and sim.inliers[2:].all()
-    with pytest.raises(InputError):
-        fit_similarity(recon[:1], fixes[:1])

@@ -1,2 +1,2 @@
-"""twinkit-roads: site frames, OpenStreetMap road sources, OSM -> OpenDRIVE and road alignment."""
+"""twinkit-roads: OpenStreetMap road sources, OSM -> OpenDRIVE and road alignment."""
 __version__ = "0.1.0"

@@ -44,7 +44,7 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, in_osm_osm: Path, out_roads_
                      out_roads_check_json: Path) -> dict:
     """Convert with netconvert into the site frame, then check with carla.Map offline."""
     from .convert import check_xodr, netconvert_version, run_netconvert, xodr_counts
-    from .frame import SiteFrame
+    from twinkit.geo import SiteFrame
 
     frame = SiteFrame.from_site(ctx.site)
     proj = frame.proj_string()

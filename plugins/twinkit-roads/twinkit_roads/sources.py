@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError
+from twinkit.geo import SiteFrame, check_bbox
 
-from .frame import SiteFrame, check_bbox
 from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
 
 

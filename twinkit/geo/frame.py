@@ -1,6 +1,6 @@
 """The site frame: one local metric frame per site, shared by every step and export.
 
-Definition (the same as the demo site's ``geo.py``)::
+Definition (the one frame of every step and export, the demo site generator's included)::
 
     local x = (E - E0) * f      E, N: coordinates in the site's projected CRS
     local y = (N - N0) * f      E0, N0: the base point in that CRS
@@ -23,27 +23,18 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from twinkit import InputError
+from twinkit.errors import InputError
+from twinkit.geo.crs import base_height, horizontal, parse_crs, site_dict, unit_factors
 
 #: largest acceptable error of the netconvert projection string against the site frame (metres)
 PROJ_TOLERANCE_M = 1e-3
 
 
-def _plain(site: Any) -> dict:
-    if site is None:
-        return {}
-    try:
-        from omegaconf import OmegaConf
-
-        if OmegaConf.is_config(site):
-            return OmegaConf.to_container(site, resolve=True)  # type: ignore[return-value]
-    except ImportError:  # pragma: no cover
-        pass
-    return dict(site)
-
-
 @dataclass(frozen=True)
 class SiteFrame:
+    """The site frame of one site: build it with :meth:`from_site`; converts site-frame metres to and from
+    projected coordinates, WGS84 lon/lat and heights, and gives the PROJ string for netconvert."""
+
     crs: str  # the site's CRS as the user gave it (EPSG code or PROJ string)
     lat: float  # base point, WGS84 degrees
     lon: float
@@ -60,7 +51,7 @@ class SiteFrame:
         from pyproj import CRS, Transformer
         from pyproj.exceptions import CRSError
 
-        s = _plain(site)
+        s = site_dict(site)
         name = s.get("name", "?")
         crs_in = s.get("crs")
         bp = s.get("base_point")
@@ -71,12 +62,12 @@ class SiteFrame:
                 f"site.base_point ({{lat, lon, alt}} or projected {{x, y, z}}) in conf/site/{name}.yaml"
             )
         try:
-            crs = CRS.from_user_input(str(crs_in))
+            crs = parse_crs(str(crs_in))
         except CRSError as exc:
             raise InputError(f"site '{name}': unknown CRS '{crs_in}' ({str(exc).splitlines()[0]}); "
                              "give an EPSG code such as EPSG:3067 or a PROJ string") from None
         bp = dict(bp)
-        horiz = crs.sub_crs_list[0] if crs.is_compound else crs
+        horiz = horizontal(crs)
         if "lat" in bp and "lon" in bp:
             lat, lon = float(bp["lat"]), float(bp["lon"])
             if not (-90 < lat < 90 and -180 <= lon <= 180):
@@ -89,7 +80,7 @@ class SiteFrame:
                 lon, lat = (float(v) for v in t.transform(float(bp["x"]), float(bp["y"])))
         else:
             raise InputError(f"site '{name}': base_point needs lat/lon or x/y, got keys {sorted(bp)}")
-        alt = float(bp.get("alt", bp.get("z", 0.0)))
+        alt = base_height(bp)
         if abs(lat) > 89.0:
             raise InputError(f"site '{name}': base point latitude {lat} is at a pole; no projected site frame is "
                              "defined there (choose a polar stereographic CRS and give the base point in it)")
@@ -99,11 +90,7 @@ class SiteFrame:
             pcrs = CRS.from_user_input(projected)
         else:
             pcrs, projected = horiz, horiz.to_string()
-        unit = 1.0
-        try:
-            unit = float(pcrs.axis_info[0].unit_conversion_factor or 1.0)
-        except (IndexError, TypeError):
-            pass
+        unit = unit_factors(pcrs)[0]
         t = Transformer.from_crs("EPSG:4326", pcrs, always_xy=True)
         e, n = t.transform(lon, lat)
         if not (math.isfinite(e) and math.isfinite(n)):
@@ -250,7 +237,13 @@ class SiteFrame:
         return (f"+proj=tmerc +lat_0={self.lat!r} +lon_0={self.lon!r} +k=1 +x_0=0 +y_0=0 "
                 "+ellps=GRS80 +units=m +no_defs")
 
+    def georef_json(self) -> dict:
+        """The georeference keys of a site.json: ``crs``, ``base_point`` and ``base_point_projected``."""
+        return {"crs": self.crs, "base_point": {"lat": self.lat, "lon": self.lon, "alt": self.alt},
+                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self.alt}}
+
     def to_json(self) -> dict:
+        """Everything about the frame (for reports): :meth:`georef_json`, the projected CRS, the vertical datum."""
         return {"crs": self.crs, "projected_crs": self.projected,
                 "base_point": {"lat": self.lat, "lon": self.lon, "alt": self.alt},
                 "base_point_projected": {"x": self.easting, "y": self.northing, "z": self.alt},

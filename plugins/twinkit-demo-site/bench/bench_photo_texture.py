@@ -1,14 +1,17 @@
 """Texture from the photos vs. texture baked from the dense cloud, judged from viewpoints no photo was taken from.
 
-    .venv/bin/python plugins/twinkit-photo/bench/bench_photo_texture.py [<outputs>/demo] [--views 6] [--png out.png]
+    .venv/bin/python plugins/twinkit-demo-site/bench/bench_photo_texture.py [<outputs>/demo] [--views 6] [--png out.png]
 
-Reads a finished ``twinkit recipe=image_site site=demo`` run (by default the one bench_photo.py leaves in
-/tmp/twinkit_photo_bench/outputs/demo; the recipe is run there first, cached steps reused): the site (``01_site``), the baked texture
-(``*_texture``) and the projected one (``*_photo_texture``). New viewpoints halfway between consecutive
-photos are rendered three ways: the ground truth (the demo site's own renderer, the same lighting and
-weathering as the photos), and the reconstructed mesh with each texture (ray cast, nearest texel).
-Prints the mean absolute colour error and PSNR over the pixels where both the truth and the mesh show
-a surface, and writes a side-by-side picture.
+Reads a finished ``twinkit recipe=image_site site=demo`` run (by default one in
+/tmp/twinkit_photo_texture_bench/outputs/demo; the recipe is run there first, cached steps reused): the site
+(``01_site``), the baked texture (``*_texture``) and the projected one (``*_photo_texture``). New viewpoints
+halfway between consecutive photos are rendered three ways: the ground truth (this package's own renderer,
+the same lighting and weathering as the photos), and the reconstructed mesh with each texture (ray cast,
+nearest texel). Prints the mean absolute colour error and PSNR over the pixels where both the truth and the
+mesh show a surface, and writes a side-by-side picture.
+
+It lives in the demo-site package because the truth needs the generator's scene and renderer; the photo
+branch is reached only through the ``twinkit`` command.
 """
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[3]
-DEFAULT_RUN = Path("/tmp/twinkit_photo_bench/outputs/demo")
+DEFAULT_RUN = Path("/tmp/twinkit_photo_texture_bench/outputs/demo")
 
 
 def _mesh_render(scene, o3d, uv_faces, tex, K, R, C, w, h):

@@ -1,4 +1,4 @@
-"""The site georeference written into every export."""
+"""The site georeference block written into every export (FBX/USD/glTF metadata, the CARLA package)."""
 from __future__ import annotations
 
 import json
@@ -9,7 +9,12 @@ FRAME = "site local: metres, x east, y north, z up; origin = base point; project
 
 
 def site_georef(site: Mapping[str, Any] | None, site_json: Path | None = None) -> dict:
-    """{crs, lat, lon, alt, projected_x/y/z (when known), frame} from site.json or the site config."""
+    """{crs, lat, lon, alt, projected_x/y/z (when known), frame} from site.json or the site config.
+
+    The projected base point is site.json's ``base_point_projected``; without it, that of
+    :class:`twinkit.geo.SiteFrame` for the site (left out when the site has no lat/lon base point
+    or the frame cannot be built).
+    """
     src: dict = {}
     if site_json is not None and Path(site_json).exists():
         src = json.loads(Path(site_json).read_text())
@@ -24,11 +29,10 @@ def site_georef(site: Mapping[str, Any] | None, site_json: Path | None = None) -
             out[k] = float(bp[k])
     proj = src.get("base_point_projected")
     if not proj and out.get("crs") and "lat" in out and "lon" in out:
-        try:  # pyproj is optional here
-            from pyproj import Transformer
+        try:  # a site the frame refuses (unknown CRS, a pole) still gets the rest of the block
+            from twinkit.geo.frame import SiteFrame
 
-            x, y = Transformer.from_crs("EPSG:4326", out["crs"], always_xy=True).transform(out["lon"], out["lat"])
-            proj = {"x": x, "y": y, "z": out.get("alt", 0.0)}
+            proj = SiteFrame.from_site(src).georef_json()["base_point_projected"]
         except Exception:
             proj = None
     if proj:

@@ -1,17 +1,20 @@
-"""From file coordinates to the site frame (metres, z up, origin at the site base point).
+"""CRS rules: parsing, unit factors, the base point in a CRS, and file coordinates -> the site frame.
 
-All arithmetic here is float64; callers convert to float32 only after :func:`to_site_frame`.
+The one place that says how coordinates in some CRS become site-frame metres (x east, y north, z up,
+origin at the site base point; see :mod:`twinkit.geo.frame` for the frame itself). All arithmetic
+here is float64; callers convert to float32 only after :func:`to_site_frame`. pyproj is imported
+inside the functions.
 
-Rules (in this order):
+Rules for a file's coordinates (in this order):
 
 1. The file has a CRS and the site names another one: reproject x, y (pyproj) into the site CRS;
    z is scaled to metres when the file's CRS has no vertical part.
 2. The file has a CRS and the site names none (or the same one): horizontal (and vertical)
    units are converted to metres with the CRS's own unit factors (US-foot LAS files, ...).
 3. The coordinates are projected (a projected CRS, or no CRS and values beyond
-   ``LARGE_COORD_M``): shift by the site base point (``x, y, z`` or ``lat, lon, alt``
-   projected into the target CRS); without a base point, by the cloud centre rounded to
-   100 m (z: to 1 m), and say so.
+   ``LARGE_COORD_M``): shift by the site base point (:func:`base_point_in`: ``x, y`` in the CRS's
+   units, or ``lat, lon`` projected into the target CRS, both converted to metres); without a
+   base point, by the cloud centre rounded to 100 m (z: to 1 m), and say so.
 4. Small coordinates with no CRS are taken as already in the site frame (shift 0).
 5. The result is checked against ``site.bounds_m`` (or, without bounds, against a maximum
    distance from the base point): a cloud elsewhere is in the wrong CRS for the site.
@@ -41,8 +44,8 @@ class FrameInfo:
     def as_dict(self) -> dict[str, Any]:
         return {
             "shift_m": self.shift,
-            "source_crs": _short_crs(self.source_crs),
-            "target_crs": _short_crs(self.target_crs),
+            "source_crs": short_crs(self.source_crs),
+            "target_crs": short_crs(self.target_crs),
             "reprojected": self.reprojected,
             "unit_factor_xy": self.unit_factor_xy,
             "unit_factor_z": self.unit_factor_z,
@@ -52,7 +55,22 @@ class FrameInfo:
         }
 
 
-def _short_crs(crs: str | None) -> str | None:
+def site_dict(site: Any) -> dict:
+    """A site config (dict, mapping or OmegaConf node; None = empty) as a plain dict."""
+    if site is None:
+        return {}
+    try:
+        from omegaconf import OmegaConf
+
+        if OmegaConf.is_config(site):
+            return OmegaConf.to_container(site, resolve=True)  # type: ignore[return-value]
+    except ImportError:  # pragma: no cover
+        pass
+    return dict(site)
+
+
+def short_crs(crs: str | None) -> str | None:
+    """``EPSG:<code>`` when the CRS has one, else its name (for messages and metadata)."""
     if crs is None:
         return None
     try:
@@ -65,7 +83,8 @@ def _short_crs(crs: str | None) -> str | None:
         return str(crs)[:200]
 
 
-def _parse_crs(crs):
+def parse_crs(crs):
+    """``pyproj.CRS`` of anything ``CRS.from_user_input`` accepts; None for None or ""."""
     if crs is None or crs == "":
         return None
     from pyproj import CRS
@@ -73,13 +92,17 @@ def _parse_crs(crs):
     return CRS.from_user_input(crs)
 
 
-def _unit_factors(crs) -> tuple[float, float]:
-    """(horizontal, vertical) metres per unit of a projected or compound CRS."""
+def horizontal(crs):
+    """The horizontal part of a compound CRS (the CRS itself otherwise)."""
+    return crs.sub_crs_list[0] if crs.is_compound else crs
+
+
+def unit_factors(crs) -> tuple[float, float]:
+    """(horizontal, vertical) metres per unit of a projected or compound CRS (1.0 where not stated)."""
     fxy = 1.0
     fz = None
     try:
-        horiz = crs.sub_crs_list[0] if crs.is_compound else crs
-        for ax in horiz.axis_info:
+        for ax in horizontal(crs).axis_info:
             if ax.direction in ("east", "north", "west", "south") and ax.unit_conversion_factor:
                 fxy = float(ax.unit_conversion_factor)
                 break
@@ -92,20 +115,32 @@ def _unit_factors(crs) -> tuple[float, float]:
     return fxy, (fz if fz is not None else fxy)
 
 
+def base_height(bp: Mapping[str, Any]) -> float:
+    """The base point's height: ``alt``, else ``z``, else 0 (used as given, never converted)."""
+    return float(bp.get("alt", bp.get("z", 0.0)) or 0.0)
+
+
 def base_point_in(crs, site: Mapping[str, Any]) -> np.ndarray | None:
-    """The site base point as projected coordinates in ``crs`` (metres), or None."""
+    """The site base point in ``crs`` as metres (x, y times the CRS's unit factor; z: :func:`base_height`),
+    or None when the site has none (or gives lat/lon and ``crs`` is None or geographic).
+
+    ``x, y`` are taken in ``crs``'s units, ``lat, lon`` are projected into ``crs`` -- the same rule as
+    :class:`twinkit.geo.SiteFrame`, so ``base_point_in(site CRS, site)`` is the frame's
+    ``(easting, northing) * unit_m``.
+    """
     bp = site.get("base_point") or {}
     if not bp:
         return None
     if "x" in bp and "y" in bp:
-        return np.array([float(bp["x"]), float(bp["y"]), float(bp.get("z", bp.get("alt", 0.0)) or 0.0)])
+        fxy = unit_factors(crs)[0] if crs is not None else 1.0
+        return np.array([float(bp["x"]) * fxy, float(bp["y"]) * fxy, base_height(bp)])
     if "lat" in bp and "lon" in bp and crs is not None and not crs.is_geographic:
         from pyproj import Transformer
 
         t = Transformer.from_crs("EPSG:4326", crs, always_xy=True)
         x, y = t.transform(float(bp["lon"]), float(bp["lat"]))
-        fxy, _ = _unit_factors(crs)
-        return np.array([x * fxy, y * fxy, float(bp.get("alt", 0.0) or 0.0)])
+        fxy, _ = unit_factors(crs)
+        return np.array([x * fxy, y * fxy, base_height(bp)])
     return None
 
 
@@ -119,27 +154,27 @@ def to_site_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], name: str,
     from twinkit import InputError
 
     xyz = np.array(xyz, dtype=np.float64, copy=True)
-    src = _parse_crs(file_crs)
+    src = parse_crs(file_crs)
     site_crs_s = site.get("crs")
-    site_crs = _parse_crs(site_crs_s) if site_crs_s else None
+    site_crs = parse_crs(site_crs_s) if site_crs_s else None
     info = FrameInfo(shift=[0.0, 0.0, 0.0], source_crs=src.to_wkt() if src is not None else None,
                      target_crs=None)
     target = None
     if src is not None:
-        fxy, fz = _unit_factors(src)
+        fxy, fz = unit_factors(src)
         vertical_in_src = bool(src.is_compound)
         if site_crs is not None and not src.equals(site_crs, ignore_axis_order=True):
             from pyproj import Transformer
 
             t = Transformer.from_crs(src, site_crs, always_xy=True)
             x, y = t.transform(xyz[:, 0], xyz[:, 1])
-            sfxy, _ = _unit_factors(site_crs)
+            sfxy, _ = unit_factors(site_crs)
             xyz[:, 0], xyz[:, 1] = np.asarray(x) * sfxy, np.asarray(y) * sfxy
             if not vertical_in_src:
                 xyz[:, 2] *= fz
             info.reprojected = True
             info.unit_factor_z = fz if not vertical_in_src else 1.0
-            info.notes.append(f"reprojected from {_short_crs(src.to_wkt())} to {_short_crs(site_crs.to_wkt())}")
+            info.notes.append(f"reprojected from {short_crs(src.to_wkt())} to {short_crs(site_crs.to_wkt())}")
             target = site_crs
         else:
             if src.is_geographic:
@@ -189,7 +224,7 @@ def to_site_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], name: str,
             raise InputError(
                 f"{name}: only {inside:.1%} of the points lie within the site bounds {b.tolist()} (+{bounds_margin_m:g} m); "
                 f"the cloud spans {np.round(clo, 1).tolist()} .. {np.round(chi, 1).tolist()} in the site frame, "
-                f"so it is probably in the wrong CRS for this site (file CRS: {_short_crs(info.source_crs)}, "
+                f"so it is probably in the wrong CRS for this site (file CRS: {short_crs(info.source_crs)}, "
                 f"site CRS: {site_crs_s}); reproject it or fix site.crs / site.base_point")
     elif len(pts) and info.shift_source == "base_point":
         centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
@@ -197,7 +232,7 @@ def to_site_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], name: str,
         if d > max_offset_m:
             raise InputError(
                 f"{name}: the cloud centre is {d / 1000:.1f} km from the site base point (limit {max_offset_m / 1000:g} km); "
-                f"it is probably in the wrong CRS for this site (file CRS: {_short_crs(info.source_crs)}, "
+                f"it is probably in the wrong CRS for this site (file CRS: {short_crs(info.source_crs)}, "
                 f"site CRS: {site_crs_s}); reproject it or fix site.crs / site.base_point")
     return xyz, info
 
@@ -209,11 +244,11 @@ def apply_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], info: FrameI
     if info.reprojected:
         from pyproj import Transformer
 
-        src = _parse_crs(file_crs)
-        dst = _parse_crs(site.get("crs"))
+        src = parse_crs(file_crs)
+        dst = parse_crs(site.get("crs"))
         t = Transformer.from_crs(src, dst, always_xy=True)
         x, y = t.transform(xyz[:, 0], xyz[:, 1])
-        sfxy, _ = _unit_factors(dst)
+        sfxy, _ = unit_factors(dst)
         xyz[:, 0], xyz[:, 1] = np.asarray(x) * sfxy, np.asarray(y) * sfxy
     else:
         xyz[:, :2] *= info.unit_factor_xy

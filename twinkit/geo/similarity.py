@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twinkit import InputError
+from twinkit.errors import InputError
 
 
 @dataclass
