@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError, hookimpl
+from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 
 from . import __version__
 from .convert import ConvertParams
