@@ -7,8 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from twinkit import hookimpl
-from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from twinkit.jsonio import write_json
+
+from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 
 
 # ----------------------------------------------------------------------------- parameters

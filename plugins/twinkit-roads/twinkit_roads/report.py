@@ -9,8 +9,6 @@ import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-import numpy as np
-
 from twinkit import hookimpl
 
 
@@ -23,6 +21,7 @@ def twinkit_register_report_sections(register):
 # --------------------------------------------------------------------------- OpenDRIVE, sampled for drawing
 
 def _sample_geometry(g: ET.Element, step: float = 0.5) -> list[tuple[float, float]]:
+    import numpy as np
     x0, y0 = float(g.get("x", 0)), float(g.get("y", 0))
     hdg, length = float(g.get("hdg", 0)), float(g.get("length", 0))
     n = max(2, int(math.ceil(length / step)) + 1)
@@ -94,6 +93,7 @@ _PAVED = ("driving", "bidirectional", "parking", "shoulder", "biking", "entry", 
 
 def offset_polyline(pts: list[tuple[float, float]], d: float) -> list[tuple[float, float]]:
     """The polyline moved sideways by ``d`` metres (positive: to the left of its direction)."""
+    import numpy as np
     a = np.asarray(pts, float)
     if len(a) < 2 or d == 0:
         return [tuple(p) for p in a]

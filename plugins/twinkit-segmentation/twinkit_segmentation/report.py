@@ -11,8 +11,6 @@ import re
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from twinkit import hookimpl
 
 CONTACT_ROWS = 6
@@ -31,6 +29,7 @@ _IMG_EXT = (".png", ".jpg", ".jpeg", ".webp")
 
 def _colourise(im, lut):
     """A label image (mode L/P/I of trainIds) in CityScapes colours; other images unchanged."""
+    import numpy as np
     from PIL import Image
 
     if im.mode in ("L", "I", "I;16", "P"):
@@ -42,6 +41,8 @@ def _colourise(im, lut):
 
 def sec_contact(ctx) -> str:
     """Sample views next to their 2D predictions (and ground truth), paired by file stem."""
+    import numpy as np
+
     dirs: dict[Path, dict[str, Path]] = {}
     owner: dict[Path, dict] = {}
     for s, f in ((s, f) for s in ctx.steps for f in s["files"]):
