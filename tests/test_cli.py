@@ -155,6 +155,10 @@ def test_example_plugin_installed_and_selected_from_the_command_line(project, tm
     assert r.rc == 0, r.text
     assert (project.ws / "02_export" / "points.xyz").read_text().splitlines() == ["0.0 0.0 0.0", "1.0 0.0 0.0",
                                                                                   "0.0 2.0 0.0"]
+    # its report section (hook twinkit_register_report_sections) finds its own step's output
+    report = (sorted((project.ws / "runs").iterdir())[-1] / "report" / "report.html").read_text()
+    sec = report.split("<section id=\"xyz_points\">", 1)[1].split("</section>", 1)[0]
+    assert "<h2>Exported points</h2>" in sec and "02_export" in sec and ">3</td>" in sec and "points.xyz" in sec
     r = project.run("site=t", "recipe=export", "exporter.decimls=1", env=env)
     assert r.rc != 0 and "decimls" in r.err
 

@@ -20,6 +20,10 @@ arguments named ``in_<name>[_<ext>]`` receive input paths and
 a folder). Component kinds (view samplers, image models, executors) have
 ``run(params)`` returning an object; steps obtain one with
 ``ctx.component(kind)``.
+
+Report sections are no plugin kind (a recipe cannot bind one): their hook's
+``register(name, render, title="", order=500)`` adds a section to the run
+report (see :func:`twinkit_register_report_sections`).
 """
 from __future__ import annotations
 
@@ -71,3 +75,19 @@ def twinkit_register_steps(register):
 @hookspec
 def twinkit_register_executors(register):
     """Register executors (components) that run fanned-out items: ``run(params)`` returns an object with ``map(fn, items)``."""
+
+
+@hookspec
+def twinkit_register_report_sections(register):
+    """Register sections of the run report: ``register(name, render, title="", order=500)``.
+
+    ``name`` is the section's id in the page (``report.json`` lists them); ``render(ctx)`` returns an
+    HTML fragment, or ``None``/``""`` to leave the section out (e.g. when the run has none of the
+    plugin's files); ``ctx`` is a :class:`twinkit.report.context.SectionContext` (the run's manifest,
+    its step folders and ``step.json`` records, HTML helpers, the cached top-down picture, writing a
+    picture into the report). ``title`` heads the section; ``order`` places it among the others
+    (core: summary 100, timeline 200, 3D view 300, pictures 400, provenance 1000, files 1100).
+    Plugins that register the same ``name`` add parts to one section (e.g. their pictures to
+    ``pictures``, whose parts return ``<figure>`` elements). A section that raises is left out of the
+    page with a note, and the run does not fail.
+    """

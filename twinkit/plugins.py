@@ -38,6 +38,9 @@ KINDS: dict[str, str] = {
     "step": "twinkit_register_steps",
     "executor": "twinkit_register_executors",
 }
+#: report sections are not a plugin kind (no recipe can bind one): plugins add them to the run report
+#: through this hook, into ``Registry.report_sections`` (see twinkit.report and docs/report.md).
+REPORT_SECTIONS_HOOK = "twinkit_register_report_sections"
 STEP_KINDS = ("site_generator", "reconstructor", "segmenter", "road_source", "exporter", "step")
 COMPONENT_KINDS = ("view_sampler", "image_model", "executor")
 
@@ -144,8 +147,21 @@ class Plugin:
 
 
 @dataclass
+class ReportSection:
+    """One section (or one part of a section) of the run report: ``render(ctx) -> str | None``."""
+
+    name: str
+    render: Callable[..., Any]
+    title: str = ""
+    order: float = 500.0
+    distribution: str = "?"
+    module: str = ""
+
+
+@dataclass
 class Registry:
     plugins: dict[str, dict[str, Plugin]] = field(default_factory=lambda: {k: {} for k in KINDS})
+    report_sections: list[ReportSection] = field(default_factory=list)
     sources: list[tuple[str, str, str]] = field(default_factory=list)  # (entry point, distribution, version)
 
     def get(self, kind: str, name: str) -> Plugin:
@@ -203,6 +219,21 @@ def _make_register(registry: Registry, kind: str, dist: str, dist_version: str, 
     return register
 
 
+def _make_section_register(registry: Registry, dist: str, module: str):
+    def register(name: str, render: Callable[..., Any], title: str = "", order: float = 500.0) -> None:
+        if not isinstance(name, str) or not name.replace("_", "").replace("-", "").isalnum():
+            raise PluginError(f"{dist}: report section name {name!r} must be letters, digits, '_' or '-'")
+        if not callable(render):
+            raise PluginError(f"{dist}: report section '{name}' registered a non-callable render")
+        if any(s.name == name and s.distribution == dist for s in registry.report_sections):
+            raise PluginError(f"report section '{name}' is registered twice by {dist} ({module})")
+        registry.report_sections.append(ReportSection(
+            name=name, render=render, title=title, order=float(order), distribution=dist,
+            module=getattr(render, "__module__", module)))
+
+    return register
+
+
 def make_plugin_manager() -> pluggy.PluginManager:
     pm = pluggy.PluginManager("twinkit")
     pm.add_hookspecs(hookspecs)
@@ -255,7 +286,7 @@ def load_registry(extra: list[tuple[str, object]] | None = None, entry_points: b
         pm.check_pending()
     except pluggy.PluginValidationError as exc:
         raise PluginError(f"a plugin implements a hook that does not exist (misspelled?): {exc}") from exc
-    for kind, hook_name in KINDS.items():
+    for kind, hook_name in [*KINDS.items(), ("report_section", REPORT_SECTIONS_HOOK)]:
         hook = getattr(pm.hook, hook_name)
         for impl in hook.get_hookimpls():
             plugin_obj = impl.plugin
@@ -263,9 +294,11 @@ def load_registry(extra: list[tuple[str, object]] | None = None, entry_points: b
             dist_name, dist_version = next(
                 ((d, v) for (e, d, v) in registry.sources if e == ep_name), (ep_name, "0")
             )
-            register = _make_register(
-                registry, kind, dist_name, dist_version, getattr(plugin_obj, "__name__", ep_name)
-            )
+            module = getattr(plugin_obj, "__name__", ep_name)
+            if hook_name == REPORT_SECTIONS_HOOK:
+                register = _make_section_register(registry, dist_name, module)
+            else:
+                register = _make_register(registry, kind, dist_name, dist_version, module)
             impl.function(register=register)
     return registry
 

@@ -138,7 +138,7 @@ class FutureRun(DemoRun):
 def future_run(demo_run) -> FutureRun:
     from PIL import Image
 
-    from twinkit.report import read_ply
+    from twinkit.report._meshbridge import read_ply
 
     ws = demo_run.ws
     seg = ws / "08_segment"
@@ -212,7 +212,7 @@ def browser():
         from selenium.webdriver.chrome.service import Service
     except ImportError:
         pytest.skip("Selenium is not installed (pip install selenium; scripts/setup.sh should do it)")
-    from twinkit.report import find_node_modules
+    from twinkit.report.viewer import find_node_modules
 
     if find_node_modules() is None:
         pytest.skip("three.js is not installed: run 'npm ci' in the repository root")

@@ -16,6 +16,9 @@ import numpy as np
 import pytest
 
 from twinkit import report as R
+from twinkit.report import _meshbridge as meshbridge
+from twinkit.report import render, viewer
+from twinkit.report.page import fmt
 
 
 class _Links(HTMLParser):
@@ -120,8 +123,8 @@ def test_recon_metrics_tables(demo_run):
     sec = text.split("<section id=\"recon\">", 1)[1].split("</section>", 1)[0]
     metrics = json.loads((demo_run.ws / "07_evaluate" / "recon_metrics.json").read_text())
     assert "cloud_to_mesh_m" in sec and "mesh_to_cloud_m" in sec
-    assert R._fmt(metrics["cloud_to_mesh_m"]["mean"]) in sec
-    assert R._fmt(metrics["counts"]["faces"]) in sec
+    assert fmt(metrics["cloud_to_mesh_m"]["mean"]) in sec
+    assert fmt(metrics["counts"]["faces"]) in sec
     assert "recon_metrics.png" in text  # the distance heat map
 
 
@@ -174,10 +177,10 @@ def test_segmentation_metrics_table(future_run):
     text = future_run.report.read_text()
     sec = text.split("<section id=\"segmetrics\">", 1)[1].split("</section>", 1)[0]
     for name, v in (("road", 0.91), ("vegetation", 0.41), ("car", 0.19)):
-        assert name in sec and R._fmt(v) in sec
-    assert "f1" in sec and "iou" in sec and "miou" in sec and R._fmt(0.612) in sec
+        assert name in sec and fmt(v) in sec
+    assert "f1" in sec and "iou" in sec and "miou" in sec and fmt(0.612) in sec
     assert "rgb(128, 64, 128)" in sec  # road's colour swatch
-    assert "upper_bound" in sec and R._fmt(0.777) in sec  # every table of the file
+    assert "upper_bound" in sec and fmt(0.777) in sec  # every table of the file
 
 
 def test_alignment_residual(future_run):
@@ -237,7 +240,7 @@ def test_glb_writer_roundtrip(tmp_path):
     cols = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 255]], np.uint8)
     seg = R.palette()[[0, 0, 2, 2]]
     p = tmp_path / "m.glb"
-    R.write_glb(p, xyz, faces, cols, seg)
+    meshbridge.write_glb(p, xyz, faces, cols, seg)
     g = read_glb_json(p)
     data = p.read_bytes()
     n = struct.unpack_from("<I", data, 12)[0]
@@ -262,7 +265,7 @@ def test_render_topdown_is_north_up_and_keeps_the_highest_surface():
     xyz = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [6, 6, 5], [10, 6, 5], [10, 10, 5]], float)
     faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]])
     cols = np.array([[255, 0, 0]] * 4 + [[0, 0, 255]] * 3, np.uint8)
-    img = R.render_topdown(xyz, faces, cols, (0, 0, 10, 10), 100, 100)
+    img = render.render_topdown(xyz, faces, cols, (0, 0, 10, 10), 100, 100)
     assert img.shape == (100, 100, 4)
     assert tuple(img[5, 95, :3]) == (0, 0, 255)  # top right = north-east: the high triangle wins
     assert tuple(img[95, 5, :3]) == (255, 0, 0)  # south-west: the square
@@ -273,10 +276,10 @@ def test_without_gl_the_orthophoto_is_splatted(monkeypatch):
     def no_gl(*a):
         raise RuntimeError("no EGL here")
 
-    monkeypatch.setattr(R, "_render_gl", no_gl)
+    monkeypatch.setattr(render, "_render_gl", no_gl)
     xyz = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [6, 6, 5]], float)
     cols = np.array([[255, 0, 0]] * 3 + [[0, 0, 255]], np.uint8)
-    img = R.render_topdown(xyz, np.array([[0, 1, 2]]), cols, (0, 0, 10, 10), 20, 20)
+    img = render.render_topdown(xyz, np.array([[0, 1, 2]]), cols, (0, 0, 10, 10), 20, 20)
     assert tuple(img[8, 12, :3]) == (0, 0, 255)  # the high point at (6, 6), north-east of the centre
     assert img[19, 19, 3] == 255 and img[0, 0, 3] == 0
 
@@ -285,7 +288,7 @@ def test_ply_reader_matches_plyfile(demo_run):
     from plyfile import PlyData
 
     path = demo_run.ws / "06_texture" / "textured_mesh.ply"
-    mesh = R.read_ply(path)
+    mesh = meshbridge.read_ply(path)
     ref = PlyData.read(str(path))
     v = ref["vertex"]
     np.testing.assert_allclose(mesh.xyz[:, 0], np.asarray(v["x"], float))
@@ -294,34 +297,11 @@ def test_ply_reader_matches_plyfile(demo_run):
     np.testing.assert_array_equal(mesh.faces, faces)
 
 
-def test_opendrive_geometry_sampling(tmp_path):
-    from tests.report.conftest import XODR
-
-    p = tmp_path / "r.xodr"
-    p.write_text(XODR)
-    roads = R.read_opendrive(p)
-    assert [r["id"] for r in roads] == ["1", "2"]
-    assert roads[0]["width"] == pytest.approx(13.0)
-    x, y = roads[0]["points"][-1]
-    assert (x, y) == pytest.approx((30, 0), abs=1e-6)
-    # arc of curvature 0.03 over 15 m from (0, 15) heading north: ends at x = -(1 - cos(0.45)) / 0.03
-    x, y = roads[1]["points"][-1]
-    assert x == pytest.approx(-(1 - np.cos(0.45)) / 0.03, abs=0.01)
-    assert y == pytest.approx(15 + np.sin(0.45) / 0.03, abs=0.01)
-
-
-def test_lane_bands_follow_each_side_of_the_reference_line():
-    east = [(0.0, 0.0), (10.0, 0.0)]
-    assert R.offset_polyline(east, 2.0) == [(0.0, 2.0), (10.0, 2.0)]  # left of eastward = north
-    north = [(0.0, 0.0), (0.0, 10.0)]
-    assert R.offset_polyline(north, 1.5) == [(-1.5, 0.0), (-1.5, 10.0)]
-
-
 def test_three_bundle_is_a_classic_script(tmp_path):
-    nm = R.find_node_modules()
+    nm = viewer.find_node_modules()
     if nm is None:
         pytest.skip("three.js is not installed: run 'npm ci' in the repository root")
-    text = R.bundle_three(nm)
+    text = viewer.bundle_three(nm)
     assert not re.search(r"^\s*(import|export)\s*[{*]", text, re.M)
     assert "window.TWINKIT_THREE" in text
     node = shutil.which("node")
@@ -336,7 +316,7 @@ def test_three_bundle_is_a_classic_script(tmp_path):
 
 
 def test_without_three_the_report_is_written_without_its_3d_view(demo_run, tmp_path, monkeypatch, caplog):
-    monkeypatch.setattr(R, "find_node_modules", lambda start=None: None)
+    monkeypatch.setattr(viewer, "find_node_modules", lambda start=None: None)
     run_dir = tmp_path / "run"
     run_dir.mkdir()
     with caplog.at_level(logging.WARNING, logger="twinkit"):
@@ -360,18 +340,6 @@ def test_write_report_never_raises(tmp_path, caplog):
     run.mkdir()
     page = R.write_report(run, {"steps": ["junk", {"folder": "01_x", "status": "ran"}], "workspace": str(tmp_path)})
     assert page is not None and "01_x" in page.read_text()
-
-
-def test_a_failing_section_is_left_out_with_a_note(demo_run, tmp_path, monkeypatch):
-    def boom(*a):
-        raise RuntimeError("kaputt")
-
-    monkeypatch.setattr(R, "_sec_recon_metrics", boom)
-    run = tmp_path / "run"
-    run.mkdir()
-    page = R.write_report(run, demo_run.manifest, demo_run.engine())
-    text = page.read_text()
-    assert "kaputt" in text and "id=\"recon\"" not in text and "id=\"timeline\"" in text
 
 
 # --------------------------------------------------------------------------- sweeps

@@ -1,6 +1,7 @@
 """Export a mesh's vertices as an XYZ text file (one "x y z" line per vertex).
 
-CloudCompare, MeshLab and most GIS tools open such point lists.
+CloudCompare, MeshLab and most GIS tools open such point lists. The run report
+gets a section with the number of points each export wrote.
 """
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,3 +34,20 @@ def export_xyz(params: XyzParams, ctx: StepContext, *, in_mesh_ply: Path, out_po
 @hookimpl
 def twinkit_register_exporters(register):
     register("xyz", export_xyz, params=XyzParams)
+
+
+def points_section(ctx) -> str | None:
+    """The report section: the points each of this plugin's steps exported."""
+    rows = []
+    for step in ctx.own_steps():  # the steps run by this distribution's plugins
+        out = ctx.outputs(step).get("points.xyz")  # declared outputs, from step.json
+        if out is not None:
+            points = (step.get("metrics") or {}).get("points", "?")
+            link = ("html", f'<a href="{ctx.href(out)}">{ctx.esc(out.name)}</a>')
+            rows.append([step["folder"], points, link])
+    return ctx.table(["step", "points", "file"], rows) if rows else None  # None: no section
+
+
+@hookimpl
+def twinkit_register_report_sections(register):
+    register("xyz_points", points_section, title="Exported points", order=950)

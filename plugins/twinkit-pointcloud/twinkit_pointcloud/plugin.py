@@ -9,6 +9,8 @@ from typing import Any
 from twinkit import hookimpl
 from twinkit.jsonio import write_json
 
+from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
+
 
 # ----------------------------------------------------------------------------- parameters
 

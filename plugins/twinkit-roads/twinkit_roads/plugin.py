@@ -18,6 +18,7 @@ from twinkit import InputError, hookimpl
 
 from . import __version__
 from .convert import ConvertParams
+from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from .sources import DownloadParams, FileSourceParams, file_source, osm_api_source, overpass_source, site_radius
 
 

@@ -9,6 +9,7 @@ from twinkit import hookimpl
 from twinkit_segmentation import steps as S
 from twinkit_segmentation import views as V
 from twinkit_segmentation.oracle import OracleParams, build_oracle
+from twinkit_segmentation.report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 
 
 @hookimpl

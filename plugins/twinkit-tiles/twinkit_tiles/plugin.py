@@ -17,6 +17,8 @@ from typing import List, Optional
 
 from twinkit import hookimpl
 
+from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
+
 
 @dataclass
 class PlanTilesParams:
