@@ -82,3 +82,27 @@ def test_the_shared_library_a_plugin_imports_is_in_its_code_hash(tmp_path, monke
     finally:
         for name in [n for n in sys.modules if n.startswith(("user_pkg", "other_pkg"))]:
             del sys.modules[name]
+
+
+def test_a_plugins_report_sections_are_not_part_of_its_code_hash(tmp_path, monkeypatch):
+    """Editing how a plugin shows its results in the report re-runs none of its steps; editing its steps does."""
+    pkg = tmp_path / "hashrep_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "steps.py").write_text("def run(params, ctx):\n    return 1\n")
+    (pkg / "report.py").write_text("def section(ctx):\n    return '<p>a</p>'\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    mod = importlib.import_module("hashrep_pkg.steps")
+    try:
+        p = Plugin(kind="step", name="r", run=mod.run, params=None, version="0")
+        before = p.code_hash()
+        later = time.time() + 5
+        (pkg / "report.py").write_text("def section(ctx):\n    return '<p>b</p>'\n")
+        os.utime(pkg / "report.py", (later, later))
+        assert p.code_hash() == before
+        (pkg / "steps.py").write_text("def run(params, ctx):\n    return 2\n")
+        os.utime(pkg / "steps.py", (later, later))
+        assert p.code_hash() != before
+    finally:
+        for name in [n for n in sys.modules if n.startswith("hashrep_pkg")]:
+            del sys.modules[name]

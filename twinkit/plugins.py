@@ -59,6 +59,13 @@ _TWINKIT_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+twinkit((?:\.\w+)*)[ \t]+impo
                              r"|import[ \t]+twinkit\.(\w+))", re.M)
 
 
+def _report_only(f: Path, root: Path) -> bool:
+    """Whether ``f`` is a plugin's report code (``<pkg>/report.py`` or ``<pkg>/report/...``), which shows
+    results and never changes them, so it is left out of the code hash."""
+    rel = f.relative_to(root).parts
+    return rel[0] in ("report.py", "report")
+
+
 def _shared_root(name: str) -> list[Path]:
     """The files of one shared-library module (a package's every ``.py`` file, or the one module file)."""
     pkg = _CORE / name
@@ -127,12 +134,15 @@ class Plugin:
         ``run`` (a change in a helper module of the plugin re-runs its steps too), or the one
         source file when ``run`` lives in a plain module; plus the modules of the core's shared library
         (:data:`SHARED_LIBRARY`) that this code imports, directly or through each other, so a change in
-        the shared clean-up, mesh I/O or site frame re-runs the steps that use it, and only those."""
+        the shared clean-up, mesh I/O or site frame re-runs the steps that use it, and only those.
+        A plugin's report sections (its ``report.py`` module or ``report/`` package) only show results,
+        so editing them re-runs nothing."""
         try:
             src = Path(inspect.getsourcefile(self.run) or "")
             top = sys.modules.get(getattr(self.run, "__module__", "").split(".")[0])
             roots = list(getattr(top, "__path__", []) or [])
-            own = sorted(Path(roots[0]).rglob("*.py")) if roots else [src]
+            own = [f for f in sorted(Path(roots[0]).rglob("*.py")) if not _report_only(f, Path(roots[0]))] \
+                if roots else [src]
             base = Path(roots[0]) if roots else src.parent
             h = hashlib.sha256()
             for f in own:
