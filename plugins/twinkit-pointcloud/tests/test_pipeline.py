@@ -11,7 +11,7 @@ import pytest
 from twinkit.testing import make_context
 
 from twinkit_pointcloud import plugin as P
-from twinkit_pointcloud.meshio import Mesh, read_ply, write_ply
+from twinkit.mesh import Mesh, read_ply, write_ply
 from twinkit_pointcloud.texture import read_obj
 
 from conftest import box_scene, checker_colour
@@ -175,7 +175,7 @@ def test_bad_texture_size_no_outputs(tmp_path):
 
 
 def test_voxel_size_sets_depth(tmp_path):
-    from twinkit_pointcloud.poisson import depth_for_voxel
+    from twinkit.surface.poisson import depth_for_voxel
 
     pts = np.array([[0, 0, 0], [50, 10, 5]], float)
     assert depth_for_voxel(pts, 0.012, scale=1.1) == 13  # 55 m / 2^13 = 6.7 mm; 2^12 -> 13.4 mm
