@@ -16,8 +16,8 @@ from .core import Mesh
 def _floats(lines: list[str], ncols: int, what: str, path: Path) -> np.ndarray:
     if not lines:
         return np.zeros((0, ncols), np.float64)
-    arr = np.array(" ".join(lines).split(), dtype=np.float64)
-    if arr.size % ncols:
+    arr = np.fromstring(" ".join(lines), dtype=np.float64, sep=" ")  # C parser: 10x faster than float() per token
+    if arr.size != len(lines) * ncols:
         # rows with a different column count (e.g. "vt u v w" or "v x y z r g b"): slow path
         rows = [ln.split()[:ncols] for ln in lines]
         try:
@@ -28,7 +28,7 @@ def _floats(lines: list[str], ncols: int, what: str, path: Path) -> np.ndarray:
     return arr.reshape(-1, ncols)
 
 
-def read_obj(path: Path) -> TexturedMesh:
+def read_obj(path: Path) -> Mesh:
     """Read a triangulated (or polygonal: fan-triangulated) OBJ with its MTL's ``map_Kd`` texture.
 
     Returns a :class:`Mesh`: vertices (n, 3) float64; faces (m, 3) int64; per-corner UVs (when the
@@ -61,11 +61,10 @@ def read_obj(path: Path) -> TexturedMesh:
     has_vt = nslash >= 1 and "//" not in first
     has_vn = nslash == 2
     ncomp = 1 + int(has_vt) + int(has_vn)
-    flat = " ".join(f).replace("//", " ").replace("/", " ").split()
-    n_corner_rows = [len(s.split()) for s in f[:1]]
-    tri = len(flat) == len(f) * 3 * ncomp and n_corner_rows[0] == 3
+    flat = np.fromstring(" ".join(f).replace("//", " ").replace("/", " "), dtype=np.int64, sep=" ")
+    tri = flat.size == len(f) * 3 * ncomp and len(f[0].split()) == 3
     if tri:
-        idx = np.array(flat, dtype=np.int64).reshape(len(f), 3, ncomp)
+        idx = flat.reshape(len(f), 3, ncomp)
     else:  # polygons: fan triangulation
         rows = []
         for s in f:

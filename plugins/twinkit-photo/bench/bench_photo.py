@@ -54,18 +54,34 @@ def bench_demo(out: Path) -> str:
     return f"### demo site (exit code {rc}, wall {wall:.0f} s)\n\n" + _table(rows, ["step", "status", "seconds", "peak MB", "result"]) + gt
 
 
+class _Registered:
+    """The point-cloud steps by name through the plugin registry (this plugin does not import another's modules)."""
+
+    def __init__(self):
+        from twinkit.plugins import load_registry
+
+        self.reg = load_registry()
+
+    def get(self, kind: str, name: str):
+        return self.reg.get(kind, name)
+
+    def params(self, kind: str, name: str, **kw):
+        return self.reg.get(kind, name).params(**kw)
+
+
 def bench_sceaux(out: Path) -> str:
     if not SCEAUX.exists():
         return "### Sceaux: skipped (../shared/data/photos/sceaux_castle not present)"
     from twinkit.testing import plugin_from_module, run_step
     import twinkit_photo.plugin as photo
-    import twinkit_pointcloud.plugin as pc
 
+    pc = _Registered()
     rows = []
 
     def step(mod, kind, name, inputs, params, label=None):
         t = time.perf_counter()
-        res = run_step(plugin_from_module(mod, kind, name), out / "sceaux" / (label or name), inputs, params)
+        plug = pc.get(kind, name) if mod is pc else plugin_from_module(mod, kind, name)
+        res = run_step(plug, out / "sceaux" / (label or name), inputs, params)
         rows.append({"step": label or name, "seconds": round(time.perf_counter() - t, 1)})
         return res
 
@@ -90,12 +106,12 @@ def bench_sceaux(out: Path) -> str:
              photo.DenseParams(voxel_m=0.0))
     meta = json.loads(d["points_meta.json"].read_text())
     rows[-1]["result"] = f"{meta['counts']['written']} points from {meta['dense']['depth_maps']} depth maps"
-    p = step(pc, "reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, pc.PoissonParams(depth=9))
+    p = step(pc, "reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, pc.params("reconstructor", "poisson", depth=9))
     c = step(pc, "step", "clean_mesh", {"in_dense_mesh_ply": p["dense_mesh.ply"], "in_points_ply": d["points.ply"]},
-             pc.CleanParams(max_dist_m=0.0, density_quantile=0.05))
-    m = step(pc, "step", "simplify", {"in_clean_mesh_ply": c["clean_mesh.ply"]}, pc.SimplifyParams(target_faces=100000))
+             pc.params("step", "clean_mesh", max_dist_m=0.0, density_quantile=0.05))
+    m = step(pc, "step", "simplify", {"in_clean_mesh_ply": c["clean_mesh.ply"]}, pc.params("step", "simplify", target_faces=100000))
     step(pc, "step", "bake_texture", {"in_mesh_ply": m["mesh.ply"], "in_clean_mesh_ply": c["clean_mesh.ply"]},
-         pc.BakeParams(texture_px=2048), label="bake_texture")
+         pc.params("step", "bake_texture", texture_px=2048), label="bake_texture")
     total = sum(r["seconds"] for r in rows)
     return f"### Sceaux castle (11 photos, 2832 x 2128; total {total:.0f} s)\n\n" + _table(rows, ["step", "seconds", "result"])
 
@@ -108,8 +124,8 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     from plyfile import PlyData
     from twinkit.testing import plugin_from_module, run_step
     import twinkit_photo.plugin as photo
-    import twinkit_pointcloud.plugin as pc
 
+    pc = _Registered()
     cj = json.loads((site_dir / "cameras.json").read_text())
     intr = cj["intrinsics"]
     cams = [{"image": c["image"], "model": "PINHOLE", "width": intr["width"], "height": intr["height"],
@@ -126,7 +142,8 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
 
     def step(mod, kind, name, inputs, params):
         t = time.perf_counter()
-        res = run_step(plugin_from_module(mod, kind, name), work / name, inputs, params)
+        plug = pc.get(kind, name) if mod is pc else plugin_from_module(mod, kind, name)
+        res = run_step(plug, work / name, inputs, params)
         rows.append({"step": name, "seconds": round(time.perf_counter() - t, 1)})
         return res
 
@@ -135,9 +152,9 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     d = step(photo, "step", "dense", {"in_photos_dir": site_dir / "photos", "in_cameras_site_json": work / "cameras_site.json",
                                       "in_sparse_site_ply": work / "sparse_site.ply", "in_roi_json": r["roi.json"]},
              photo.DenseParams())
-    p = step(pc, "reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, pc.PoissonParams(depth=10))
+    p = step(pc, "reconstructor", "poisson", {"in_points_ply": d["points.ply"]}, pc.params("reconstructor", "poisson", depth=10))
     c = step(pc, "step", "clean_mesh", {"in_dense_mesh_ply": p["dense_mesh.ply"], "in_points_ply": d["points.ply"]},
-             pc.CleanParams(max_dist_m=0.08))
+             pc.params("step", "clean_mesh", max_dist_m=0.08))
     gt = o3d.io.read_triangle_mesh(str(site_dir / "gt_mesh.ply"))
     sc = o3d.t.geometry.RaycastingScene()
     sc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(gt))

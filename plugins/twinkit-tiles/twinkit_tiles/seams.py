@@ -12,7 +12,7 @@ x planes, then the rows bottom to top along the y planes. The x-stitch strips en
 y planes, so when rows are joined the corner where four tiles meet is closed by the same
 zipper (no special case for corners).
 
-Everything is numpy on :class:`twinkit_pointcloud.meshio.Mesh`; no extra dependency.
+Everything is numpy on :class:`twinkit.mesh.Mesh`; no extra dependency.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twinkit_pointcloud.meshio import Mesh, compact
+from twinkit.mesh import Mesh, compact
 
 ON_PLANE_M = 5e-4  # a vertex this close to a cut plane is moved onto it (no sliver edges along the seam)
 
@@ -688,7 +688,7 @@ def close_seam_holes(mesh: Mesh, planes: list[tuple[int, float]], max_edges: int
     paired, e.g. in trees or at the corner where four tiles meet): each loop with at most
     ``max_edges`` edges and at least one edge on a seam plane gets a fan around its centroid.
     Face attribute ``tile`` of the new faces is -1. Returns (mesh, loops closed)."""
-    from twinkit_pointcloud.cleanup import boundary_loops, fan_fill
+    from twinkit.mesh import boundary_loops, fan_fill
 
     if max_edges < 3 or mesh.n_faces == 0 or not planes:
         return mesh, 0
@@ -762,8 +762,8 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     within ``hanging_tol_m`` of a plane is on it), so that the trim's boundary crosses a seam and
     never runs along it."""
     from scipy.spatial import cKDTree
-    from twinkit_pointcloud.cleanup import (CleanOptions, boundary_loops, components, fan_fill, remove_vertices,
-                                            trim_mask, vertex_cloud_distance)
+    from twinkit.mesh import boundary_loops, components, fan_fill, remove_vertices
+    from twinkit.surface.cleanup import CleanOptions, trim_mask, vertex_cloud_distance
 
     rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "vertices_kept_by_votes": 0,
            "vertices_dropped_by_votes": 0, "components_removed": 0, "hanging_faces_removed": 0, "holes_closed": 0}
@@ -801,7 +801,7 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
         touch[flab[near_planes(mesh.vertices, planes, band_m)[mesh.faces].any(axis=1)]] = True
         small = touch & (size < min_component_faces)
         if small.any():
-            from twinkit_pointcloud.meshio import compact
+            from twinkit.mesh import compact
 
             rep["components_removed"] = int(small.sum())
             mesh = compact(mesh, ~small[flab])
@@ -878,7 +878,7 @@ def drop_hanging_faces(mesh: Mesh, planes, tol_m: float, closed_before: np.ndarr
     trim (where the zipper could not pair the borders) are left open and counted.
     Returns (mesh, faces removed). ``vid`` rides through the removals as a temporary vertex
     attribute, which the returned mesh no longer has."""
-    from twinkit_pointcloud.meshio import compact
+    from twinkit.mesh import compact
 
     mesh = _with_attr(mesh, "_vid", vid)
     removed = 0
