@@ -93,6 +93,7 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
     import numpy as np
 
     from twinkit.mesh import read_mesh
+    from twinkit_segmentation.segmesh import unit_normals
     from twinkit_segmentation.views import Scene
 
     mesh = read_mesh(in_textured_mesh_ply)
