@@ -125,16 +125,24 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarra
     with open(path, "w") as fh:
         fh.write(f"# twinkit-pointcloud textured mesh: {len(vertices)} vertices, {m} faces\n")
         fh.write(f"mtllib {mtl.name}\n")
-        np.savetxt(fh, vertices, fmt="v %.6f %.6f %.6f")
-        np.savetxt(fh, uniq, fmt="vt %.7f %.7f")
+        _rows(fh, vertices, "v %.6f %.6f %.6f")
+        _rows(fh, uniq, "vt %.7f %.7f")
         if normals is not None:
-            np.savetxt(fh, normals, fmt="vn %.4f %.4f %.4f")
+            _rows(fh, normals, "vn %.4f %.4f %.4f")
         fh.write(f"usemtl {material}\n")
         f1 = faces + 1
         t1 = inv + 1
         if normals is not None:
             arr = np.stack([f1[:, 0], t1[:, 0], f1[:, 0], f1[:, 1], t1[:, 1], f1[:, 1], f1[:, 2], t1[:, 2], f1[:, 2]], axis=1)
-            np.savetxt(fh, arr, fmt="f %d/%d/%d %d/%d/%d %d/%d/%d")
+            _rows(fh, arr, "f %d/%d/%d %d/%d/%d %d/%d/%d")
         else:
             arr = np.stack([f1[:, 0], t1[:, 0], f1[:, 1], t1[:, 1], f1[:, 2], t1[:, 2]], axis=1)
-            np.savetxt(fh, arr, fmt="f %d/%d %d/%d %d/%d")
+            _rows(fh, arr, "f %d/%d %d/%d %d/%d")
+
+
+def _rows(fh, arr: np.ndarray, fmt: str, chunk: int = 100_000) -> None:
+    """``np.savetxt(fh, arr, fmt=fmt)`` with the same bytes, 2-3x faster: one %-format per chunk of rows."""
+    line = fmt + "\n"
+    for s in range(0, len(arr), chunk):
+        part = arr[s:s + chunk]
+        fh.write((line * len(part)) % tuple(part.ravel().tolist()))
