@@ -588,8 +588,7 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel."""
     import numpy as np
     from PIL import Image
-    from twinkit.mesh import read_ply as read_mesh_ply, write_ply
-    from twinkit.mesh import write_obj
+    from twinkit.mesh import read_ply as read_mesh_ply, write_obj, write_ply
     from twinkit.surface.texture import write_png
 
     from .projtex import PhotoView, project_texture

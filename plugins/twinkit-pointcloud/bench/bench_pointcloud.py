@@ -62,8 +62,8 @@ def prep_demo(preset: str, work: Path, threads: int) -> dict:
     of the preset) into ``work/site`` and read its E57 cloud like the recipe does."""
     from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site, output_paths
     from twinkit_pointcloud import plugin as P
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import read_ply
+    from twinkit.surface.measure import Measure
 
     site = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
     out = work / "site"
@@ -150,8 +150,8 @@ def run_meshlab(work: Path, depth: int, a) -> dict:
     import numpy as np
     import pymeshlab
 
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import Mesh, read_ply, write_ply
+    from twinkit.surface.measure import Measure
 
     d = work / f"meshlab_{depth}"
     d.mkdir(exist_ok=True)
@@ -203,8 +203,8 @@ def distances(points_ply: Path, dense_ply: Path, simple_ply: Path, threads: int)
 
 
 def uv_compare(work: Path, depth: int, a) -> dict:
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import read_ply
+    from twinkit.surface.measure import Measure
     from twinkit_pointcloud.uv import chart_uv, xatlas_uv
 
     from twinkit.surface.simplify import simplify_quadric

@@ -141,8 +141,8 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     """Read an E57 / LAS / LAZ / PLY cloud into the site frame (float64 shift, then float32 PLY)."""
     import numpy as np
 
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import Mesh, write_ply
+    from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
     from .readers import read_any, validate_and_frame
 
@@ -223,8 +223,8 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import read_ply, write_ply
+    from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
     from twinkit.surface.poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth
 
@@ -265,9 +265,9 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     """Trim bubbles (distance) and low-density parts, keep large components, repair, close small holes."""
     import numpy as np
 
+    from twinkit.mesh import write_ply
     from twinkit.surface.cleanup import CleanOptions, clean_mesh as _clean
     from twinkit.surface.measure import Measure
-    from twinkit.mesh import write_ply
     from .metrics import topdown_map
 
     params = params or CleanParams()
@@ -297,8 +297,8 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
 
 def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_ply: Path) -> dict:
     """Decimate to a target face count; colours re-sampled from the dense mesh."""
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import write_ply
+    from twinkit.surface.measure import Measure
     from twinkit.surface.simplify import simplify_mesh
 
     params = params or SimplifyParams()

@@ -110,8 +110,8 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
                out_tile_points_dir: Path) -> dict:
     """Split the site into overlapping XY tiles; write one point chunk per padded tile and tiles.json."""
     import numpy as np
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import Mesh, read_ply, write_ply
+    from twinkit.surface.measure import Measure
 
     from .tiling import choose_grid, estimate_tile_mb, in_box
 
@@ -191,9 +191,9 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
     """Poisson on one padded tile at the plan's voxel size, clean-up, exact cut to the tile's core."""
     import os
 
+    from twinkit.mesh import read_ply, write_ply
     from twinkit.surface.cleanup import CleanOptions, clean_mesh
     from twinkit.surface.measure import Measure
-    from twinkit.mesh import read_ply, write_ply
     from twinkit.surface.simplify import simplify_mesh
 
     import numpy as np
@@ -269,8 +269,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                 out_clean_mesh_ply: Path, out_tile_seams_json: Path, in_seam_votes_npz: list | None = None) -> dict:
     """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
     import numpy as np
-    from twinkit.surface.measure import Measure
     from twinkit.mesh import read_ply, write_ply
+    from twinkit.surface.measure import Measure
 
     from .seams import (_concat, close_seam_holes, edge_counts, faces_outside_core, merge_grid, open_near_line_sets, open_seam_runs,
                         seam_border_length, seam_boundary_edges, seam_map_png, seam_planes, trim_seam_bands)
