@@ -25,7 +25,7 @@ def components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarray]:
         return 0, np.zeros(0, np.int64)
     i = np.concatenate([faces[:, 0], faces[:, 1]])
     j = np.concatenate([faces[:, 1], faces[:, 2]])
-    g = coo_matrix((np.ones(len(i), np.int8), (i, j)), shape=(n_vertices, n_vertices))
+    g = coo_matrix((np.ones(len(i), bool), (i, j)), shape=(n_vertices, n_vertices))
     n, lab = connected_components(g, directed=False)
     return n, lab[faces[:, 0]]
 
