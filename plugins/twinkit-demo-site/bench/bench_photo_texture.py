@@ -54,7 +54,7 @@ def main() -> int:
     from twinkit_demo_site.plugin import PRESETS
     from twinkit_demo_site.raycast import Tracer
     from twinkit_demo_site.textures import build_atlas
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
 
     ap = argparse.ArgumentParser()
     ap.add_argument("run", nargs="?", default=str(DEFAULT_RUN),

@@ -49,7 +49,7 @@ def demo_split(demo_site, tmp_path_factory):
 
 
 def test_labels_and_counts_add_up(demo_site, demo_split):
-    from twinkit_export.meshio import read_obj
+    from twinkit.mesh import read_obj
 
     obj, labels, class_dir = demo_split
     man = json.loads((class_dir / "classes.json").read_text())

@@ -13,7 +13,7 @@ import pytest
 from twinkit.testing import run_step
 
 from twinkit_export.classes import BY_ID, palette_lut
-from twinkit_export.gltf import srgb_to_linear
+from twinkit.mesh.glb import srgb_to_linear
 from twinkit_export.split import load_class_set
 
 from conftest import SITE, plugin

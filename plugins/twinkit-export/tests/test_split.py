@@ -10,7 +10,8 @@ from twinkit import InputError
 from twinkit.testing import check_plugin, run_step
 
 from twinkit_export.classes import BY_ID, CLASSES, carla_auto_folder, palette_lut
-from twinkit_export.meshio import read_class_ply, read_obj, write_class_ply
+from twinkit.mesh import Mesh, read_obj
+from twinkit_export.classmesh import read_class_ply, write_class_ply
 from twinkit_export.split import face_classes, load_class_set, split_mesh
 
 from conftest import SITE, plugin
@@ -49,9 +50,7 @@ def test_face_classes_majority_and_lone_vertices():
     # nobody; vertex 4 (label 2) has only face 2, which vertex 3 now needs: it stays lone
     assert fc.tolist() == [0, 1, 0]
     assert st == {"mixed_faces": 3, "faces_given_to_lone_vertices": 1, "lone_vertices_left": 1}
-    from twinkit_export.meshio import TexturedMesh
-
-    mesh = TexturedMesh(np.eye(5, 3) + np.arange(5)[:, None], faces, np.zeros((3, 3, 2), np.float32))
+    mesh = Mesh(np.eye(5, 3) + np.arange(5)[:, None], faces, face_attrs={"texcoord": np.zeros((3, 6), np.float32)})
     res = split_mesh(mesh, labels)
     assert [(m.name, m.n_faces, m.own_vertices) for m in res.meshes] == [("Road_Road", 2, 3), ("Road_Sidewalk", 1, 1)]
     # a class with no face at all cannot be drawn: its vertex is reported, not hidden
@@ -62,10 +61,8 @@ def test_loose_vertices_travel_with_their_class():
     # a triangle with three labels next to a class-0 quad: the unplaced corner becomes a loose point
     faces = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2]])
     labels = np.array([0, 0, 0, 0, 1], np.uint8)
-    from twinkit_export.meshio import TexturedMesh
-
     labels2 = np.array([0, 0, 1, 0, 0], np.uint8)
-    mesh = TexturedMesh(np.random.default_rng(0).random((5, 3)), faces, np.zeros((3, 3, 2), np.float32))
+    mesh = Mesh(np.random.default_rng(0).random((5, 3)), faces, face_attrs={"texcoord": np.zeros((3, 6), np.float32)})
     for lab in (labels, labels2):
         res = split_mesh(mesh, lab)
         assert sum(m.own_vertices for m in res.meshes) + res.stats["vertices_dropped"] == 5

@@ -81,7 +81,7 @@ def main(job_path: str) -> int:
     import bpy  # heavy: only in this process
 
     from twinkit_export.classes import info
-    from twinkit_export.meshio import read_class_ply
+    from twinkit_export.classmesh import read_class_ply
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene

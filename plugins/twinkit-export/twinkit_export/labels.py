@@ -8,19 +8,15 @@ import numpy as np
 
 def read_labelled_ply(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(vertices (n,3) f64, faces (m,3) i64, labels (n,) u8) of a PLY with a per-vertex ``label``."""
-    from plyfile import PlyData
+    from twinkit.mesh import read_ply
 
-    ply = PlyData.read(str(path))
-    v = ply["vertex"]
-    names = v.data.dtype.names
-    key = next((k for k in ("label", "labels", "class", "class_id", "scalar_label") if k in names), None)
+    m = read_ply(path)
+    key = next((k for k in ("label", "labels", "class", "class_id", "scalar_label") if k in m.attrs), None)
     if key is None:
-        raise ValueError(f"{path}: no per-vertex label property (have {names})")
-    verts = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
-    f = ply["face"].data
-    fname = "vertex_indices" if "vertex_indices" in f.dtype.names else "vertex_index"
-    faces = np.vstack(f[fname]).astype(np.int64)
-    return verts, faces, np.asarray(v[key]).astype(np.uint8)
+        raise ValueError(f"{path}: no per-vertex label property (have {sorted(m.attrs)})")
+    if m.faces is None:
+        raise ValueError(f"{path}: no faces")
+    return m.vertices, m.faces, np.asarray(m.attrs[key]).astype(np.uint8)
 
 
 def transfer_labels(gt_vertices: np.ndarray, gt_faces: np.ndarray, gt_labels: np.ndarray,

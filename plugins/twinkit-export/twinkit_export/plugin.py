@@ -114,7 +114,7 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
     import numpy as np
 
     from .labels import read_labelled_ply, transfer_labels
-    from .meshio import read_obj
+    from twinkit.mesh import read_obj
 
     params = params or GtLabelsParams()
     try:
@@ -146,7 +146,9 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
     import numpy as np
 
     from .classes import info
-    from .meshio import read_obj, write_class_ply
+    from twinkit.mesh import read_obj
+
+    from .classmesh import write_class_ply
     from .split import MANIFEST, split_mesh
 
     params = params or SplitParams()

@@ -20,8 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+from twinkit.mesh import Mesh, vertex_normals
+
 from .classes import info, palette_lut
-from .meshio import ClassMesh, TexturedMesh, read_class_ply, vertex_normals
+from .classmesh import ClassMesh, read_class_ply
 
 
 def face_classes(faces: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -80,7 +82,7 @@ class SplitResult:
     stats: dict
 
 
-def split_mesh(mesh: TexturedMesh, labels: np.ndarray) -> SplitResult:
+def split_mesh(mesh: Mesh, labels: np.ndarray) -> SplitResult:
     """Split ``mesh`` by per-vertex ``labels`` ((n,) uint8 trainIds, 255 unlabelled)."""
     labels = np.asarray(labels)
     n = len(mesh.vertices)

@@ -109,8 +109,8 @@ def test_photo_texture_step_refuses_a_mesh_without_uvs(tmp_path):
 
     import pytest
     from twinkit import InputError
+    from twinkit.mesh import Mesh, write_ply
     from twinkit.testing import plugin_from_module, run_step
-    from twinkit_pointcloud.meshio import Mesh, write_ply
 
     import twinkit_photo.plugin as photo
 

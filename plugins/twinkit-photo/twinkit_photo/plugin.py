@@ -127,7 +127,7 @@ def _photo_infos(folder: Path, log):
 
 def _write_cloud(path: Path, xyz, rgb=None, normals=None, comments=()):
     import numpy as np
-    from twinkit_pointcloud.meshio import Mesh, write_ply
+    from twinkit.mesh import Mesh, write_ply
 
     attrs = {}
     if normals is not None:
@@ -386,7 +386,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
 def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_ply: Path, out_roi_json: Path) -> dict:
     """Region of interest: a box around the camera positions, standing on a RANSAC ground plane."""
     import numpy as np
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
 
     from .georef import ransac_plane
 
@@ -444,7 +444,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
     sweep, or COLMAP's patch-match stereo where pycolmap has CUDA (needs the sfm model and georef.json)."""
     import cv2
     import numpy as np
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
 
     from . import dense as D
 
@@ -588,8 +588,8 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel."""
     import numpy as np
     from PIL import Image
-    from twinkit_pointcloud.meshio import read_ply as read_mesh_ply, write_ply
-    from twinkit_pointcloud.texture import write_obj, write_png
+    from twinkit.mesh import read_ply as read_mesh_ply, write_obj, write_ply
+    from twinkit.surface.texture import write_png
 
     from .projtex import PhotoView, project_texture
 

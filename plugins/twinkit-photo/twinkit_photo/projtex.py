@@ -75,7 +75,7 @@ def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bas
                     threads: int = 0, progress=None) -> tuple[np.ndarray, dict]:
     """Return (texture (s, s, 3) uint8, info): ``base`` with every texel a photo sees replaced by the blend of
     its best photos. ``uv`` per face corner (m, 3, 2) in [0, 1], v up; ``base`` the current texture (s, s, 3)."""
-    from twinkit_pointcloud.texture import rasterize
+    from twinkit.surface.texture import rasterize
 
     size = base.shape[0]
     vis = _Visibility(vertices, faces, threads)

@@ -42,7 +42,7 @@ def prep(cloud: Path, work: Path, threads: int) -> dict:
     import numpy as np
 
     from twinkit_pointcloud import plugin as P
-    from twinkit_pointcloud.meshio import read_ply, write_ply
+    from twinkit.mesh import read_ply, write_ply
     from twinkit_pointcloud.metrics import colormap
 
     ctx = _ctx(work, threads)
@@ -65,8 +65,8 @@ def prep_demo(preset: str, work: Path, threads: int) -> dict:
 
     from twinkit.testing import run_plugin
     from twinkit_pointcloud import plugin as P
-    from twinkit_pointcloud.measure import Measure
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
+    from twinkit.surface.measure import Measure
 
     site = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
     out = work / "site"
@@ -91,10 +91,10 @@ def gt_eval(mesh_ply: Path, work: Path, threads: int, samples: int = 300_000) ->
     import numpy as np
     from scipy.spatial import cKDTree
 
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
     from twinkit_pointcloud.metrics import (coverage_by_label, distance_near_exact, sample_surface,
                                             sample_surface_by_label, stats)
-    from twinkit_pointcloud.surface import Surface
+    from twinkit.surface.closest import Surface
 
     gt_ply = work / "site" / "gt_mesh.ply"
     if not gt_ply.exists():
@@ -156,8 +156,8 @@ def run_meshlab(work: Path, depth: int, a) -> dict:
     import numpy as np
     import pymeshlab
 
-    from twinkit_pointcloud.measure import Measure
-    from twinkit_pointcloud.meshio import Mesh, read_ply, write_ply
+    from twinkit.mesh import Mesh, read_ply, write_ply
+    from twinkit.surface.measure import Measure
 
     d = work / f"meshlab_{depth}"
     d.mkdir(exist_ok=True)
@@ -196,8 +196,9 @@ def run_meshlab(work: Path, depth: int, a) -> dict:
 
 
 def distances(points_ply: Path, dense_ply: Path, simple_ply: Path, threads: int) -> dict:
-    from twinkit_pointcloud.meshio import read_ply
-    from twinkit_pointcloud.metrics import cloud_to_mesh, stats
+    from twinkit.mesh import read_ply
+    from twinkit.surface.metrics import cloud_to_mesh
+    from twinkit_pointcloud.metrics import stats
 
     p = read_ply(points_ply).vertices
     out = {}
@@ -208,11 +209,11 @@ def distances(points_ply: Path, dense_ply: Path, simple_ply: Path, threads: int)
 
 
 def uv_compare(work: Path, depth: int, a) -> dict:
-    from twinkit_pointcloud.measure import Measure
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
+    from twinkit.surface.measure import Measure
     from twinkit_pointcloud.uv import chart_uv, xatlas_uv
 
-    from twinkit_pointcloud.simplify import simplify_quadric
+    from twinkit.surface.simplify import simplify_quadric
 
     m = simplify_quadric(read_ply(work / f"ours_{depth}" / "clean_mesh.ply"), a.uv_faces)
     out = {"faces": m.n_faces}

@@ -11,8 +11,7 @@ import pytest
 from twinkit.testing import make_context
 
 from twinkit_pointcloud import plugin as P
-from twinkit_pointcloud.meshio import Mesh, read_ply, write_ply
-from twinkit_pointcloud.texture import read_obj
+from twinkit.mesh import Mesh, read_obj, read_ply, write_ply
 
 from conftest import box_scene, checker_colour
 
@@ -108,21 +107,21 @@ def test_textured_obj_round_trip(pipeline):
 
     w, res = pipeline
     obj = read_obj(w / "textured_mesh.obj")
-    assert obj["mtllib"] == "textured_mesh.mtl"
+    assert "mtllib textured_mesh.mtl" in (w / "textured_mesh.obj").read_text()
     mtl = (w / "textured_mesh.mtl").read_text()
     assert "map_Kd textured_mesh.png" in mtl
+    assert obj.texture == w / "textured_mesh.png"
     img = np.asarray(Image.open(w / "textured_mesh.png").convert("RGB"))
     assert img.shape == (1024, 1024, 3)
     ply = read_ply(w / "textured_mesh.ply")
-    assert len(obj["faces"]) == ply.n_faces and np.array_equal(obj["faces"], ply.faces)
-    assert np.allclose(obj["vertices"], ply.vertices, atol=1e-5)
-    uv = obj["uv"]
-    assert uv.min() >= 0 and uv.max() <= 1
-    tuv = obj["uv"][obj["face_uv"]]  # (m, 3, 2)
+    assert obj.n_faces == ply.n_faces and np.array_equal(obj.faces, ply.faces)
+    assert np.allclose(obj.vertices, ply.vertices, atol=1e-5)
+    tuv = obj.corner_uv  # (m, 3, 2)
+    assert tuv.min() >= 0 and tuv.max() <= 1
     assert np.allclose(ply.face_attrs["texcoord"].reshape(-1, 3, 2), tuv, atol=1e-5)
     # colours: at points inside ground faces, away from checker edges, the texture shows the checker
     rng = np.random.default_rng(3)
-    V, F = obj["vertices"], obj["faces"]
+    V, F = obj.vertices, obj.faces
     b = rng.dirichlet([4, 4, 4], size=len(F))
     p3 = np.einsum("ij,ijk->ik", b, V[F])
     puv = np.einsum("ij,ijk->ik", b, tuv)
@@ -175,7 +174,7 @@ def test_bad_texture_size_no_outputs(tmp_path):
 
 
 def test_voxel_size_sets_depth(tmp_path):
-    from twinkit_pointcloud.poisson import depth_for_voxel
+    from twinkit.surface.poisson import depth_for_voxel
 
     pts = np.array([[0, 0, 0], [50, 10, 5]], float)
     assert depth_for_voxel(pts, 0.012, scale=1.1) == 13  # 55 m / 2^13 = 6.7 mm; 2^12 -> 13.4 mm

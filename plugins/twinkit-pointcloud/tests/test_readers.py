@@ -11,7 +11,7 @@ from twinkit import InputError
 from twinkit.testing import make_context
 
 from twinkit_pointcloud import plugin as P
-from twinkit_pointcloud.meshio import Mesh, read_ply, write_ply
+from twinkit.mesh import Mesh, read_ply, write_ply
 from twinkit_pointcloud.readers import read_e57
 
 from conftest import shared_file

@@ -15,16 +15,9 @@ def stats(d: np.ndarray) -> dict:
             "max": float(d.max())}
 
 
-def cloud_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, threads: int = 0) -> np.ndarray:
-    """Distance (m) from every point to the mesh surface, (n,) float32."""
-    from .surface import Surface
-
-    return Surface(vertices, faces, threads).distance(points)
-
-
 def sample_surface(vertices: np.ndarray, faces: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
     """Area-weighted uniform samples on a triangle mesh, (n, 3) float64."""
-    from .meshio import face_areas
+    from twinkit.mesh import face_areas
 
     rng = np.random.default_rng(seed)
     a = face_areas(vertices, faces)
@@ -84,7 +77,7 @@ def topdown_map(points: np.ndarray, values: np.ndarray, path: Path, vmax: float,
 
 
 def mesh_with_distance_colors(vertices: np.ndarray, faces: np.ndarray, dist: np.ndarray, vmax: float):
-    from .meshio import Mesh
+    from twinkit.mesh import Mesh
 
     return Mesh(vertices=vertices, faces=faces, attrs={"colors": colormap(dist, vmax), "dist_to_cloud_m": dist})
 
@@ -99,7 +92,7 @@ def sample_surface_by_label(vertices: np.ndarray, faces: np.ndarray, face_labels
                             min_per_label: int = 20_000, seed: int = 0):
     """Area-weighted samples per face label: each label gets its share of ``n_total`` by area, at
     least ``min_per_label``. Returns (samples (q, 3), label per sample (q,), area m^2 per label dict)."""
-    from .meshio import face_areas
+    from twinkit.mesh import face_areas
 
     a = face_areas(vertices, faces)
     total = float(a.sum()) or 1.0

@@ -24,7 +24,7 @@ def estimate_normals(points: np.ndarray, k: int = 24, radius_m: float = 0.0) -> 
     (optionally limited to ``radius_m``)."""
     import open3d as o3d
 
-    from .meshio import to_o3d_cloud
+    from twinkit.mesh import to_o3d_cloud
 
     pcd = to_o3d_cloud(points)
     param = (o3d.geometry.KDTreeSearchParamHybrid(radius=radius_m, max_nn=k) if radius_m > 0

@@ -120,7 +120,7 @@ class _Outputs:
 def _read_mesh_input(path: Path, what: str):
     from twinkit import InputError
 
-    from .meshio import read_ply
+    from twinkit.mesh import read_ply
 
     try:
         m = read_ply(path)
@@ -143,8 +143,8 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     """Read an E57 / LAS / LAZ / PLY cloud into the site frame (float64 shift, then float32 PLY)."""
     import numpy as np
 
-    from .measure import Measure
-    from .meshio import Mesh, write_ply
+    from twinkit.mesh import Mesh, write_ply
+    from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
     from .readers import read_any, validate_and_frame
 
@@ -225,10 +225,10 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
     import numpy as np
     from twinkit import InputError
 
-    from .measure import Measure
-    from .meshio import read_ply, write_ply
+    from twinkit.mesh import read_ply, write_ply
+    from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
-    from .poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth
+    from twinkit.surface.poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth
 
     params = params or PoissonParams()
     with Measure() as meas, _Outputs(out_dense_mesh_ply):
@@ -267,9 +267,9 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     """Trim bubbles (distance) and low-density parts, keep large components, repair, close small holes."""
     import numpy as np
 
-    from .cleanup import CleanOptions, clean_mesh as _clean
-    from .measure import Measure
-    from .meshio import write_ply
+    from twinkit.mesh import write_ply
+    from twinkit.surface.cleanup import CleanOptions, clean_mesh as _clean
+    from twinkit.surface.measure import Measure
     from .metrics import topdown_map
 
     params = params or CleanParams()
@@ -299,9 +299,9 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
 
 def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_ply: Path) -> dict:
     """Decimate to a target face count; colours re-sampled from the dense mesh."""
-    from .measure import Measure
-    from .meshio import write_ply
-    from .simplify import simplify_mesh
+    from twinkit.mesh import write_ply
+    from twinkit.surface.measure import Measure
+    from twinkit.surface.simplify import simplify_mesh
 
     params = params or SimplifyParams()
     with Measure() as meas, _Outputs(out_mesh_ply):
@@ -327,10 +327,12 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     import numpy as np
     from twinkit import InputError
 
-    from .measure import Measure, StepTimer
-    from .meshio import write_ply
-    from .simplify import resample_attributes
-    from .texture import bake_colors, write_obj, write_png
+    from twinkit.mesh import write_obj, write_ply
+    from twinkit.surface.measure import Measure, StepTimer
+    from twinkit.surface.simplify import resample_attributes
+    from twinkit.surface.texture import write_png
+
+    from .texture import bake_colors
     from .uv import chart_uv, xatlas_uv
 
     params = params or BakeParams()
@@ -381,10 +383,12 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
     """Cloud <-> mesh distances (and against a ground-truth mesh when given), counts, a colour map."""
     import numpy as np
 
-    from .measure import Measure
-    from .metrics import (TRAIN_ID_NAMES, cloud_to_mesh, coverage_by_label, distance_near_exact, sample_surface,
+    from twinkit.surface.closest import Surface
+    from twinkit.surface.measure import Measure
+    from twinkit.surface.metrics import cloud_to_mesh
+
+    from .metrics import (TRAIN_ID_NAMES, coverage_by_label, distance_near_exact, sample_surface,
                           sample_surface_by_label, stats, topdown_map)
-    from .surface import Surface
 
     params = params or EvalParams()
     with Measure() as meas, _Outputs(out_recon_metrics_json):

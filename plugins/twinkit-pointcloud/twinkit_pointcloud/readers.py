@@ -299,7 +299,7 @@ def read_las(path: Path) -> RawCloud:
 # ----------------------------------------------------------------------------- PLY
 
 def read_ply_cloud(path: Path) -> RawCloud:
-    from .meshio import read_ply
+    from twinkit.mesh import read_ply
 
     path = Path(path)
     try:

@@ -22,8 +22,8 @@ def _face_charts(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from .cleanup import edge_face_incidence
-    from .meshio import face_normals
+    from twinkit.mesh import edge_face_incidence
+    from twinkit.mesh import face_normals
 
     fn = face_normals(vertices, faces)
     ax = np.argmax(np.abs(fn), axis=1)

@@ -27,12 +27,13 @@ def main() -> None:
     a = ap.parse_args()
 
     from twinkit_segmentation import oversegment as o
-    from twinkit_segmentation.meshio import mesh_edges, read_mesh
+    from twinkit.mesh import edges as mesh_edges, read_mesh
+    from twinkit_segmentation.segmesh import unit_normals
     from twinkit_segmentation.synthetic import grid
 
     if a.mesh:
         m = read_mesh(a.mesh)
-        v, f, n, col = m.vertices, m.faces, m.vertex_normals(), m.colors
+        v, f, n, col = m.vertices, m.faces, unit_normals(m), m.colors
         what = a.mesh
     else:
         v, f, n = grid(0, 100, 0, 100, 0.0, 100 / (a.side - 1))

@@ -60,7 +60,9 @@ def main(argv=None) -> int:
 
     from twinkit.plugins import build_component
     from twinkit_segmentation import views as V
-    from twinkit_segmentation.meshio import CLASSES, N_CLASSES, mesh_edges, read_mesh
+    from twinkit.cityscapes import NAMES as CLASSES, N_CLASSES
+    from twinkit.mesh import edges as mesh_edges, read_mesh
+    from twinkit_segmentation.segmesh import unit_normals
     from twinkit_segmentation.metrics import blend_decide, decide, majority_labels, propagate, scores
     from twinkit_segmentation.oversegment import felzenszwalb_mesh
     from twinkit_segmentation.render import Renderer, load_texture
@@ -75,7 +77,7 @@ def main(argv=None) -> int:
     mesh_path = site / "06_texture" / "textured_mesh.ply"
     with T("read mesh"):
         mesh = read_mesh(mesh_path)
-        normals = mesh.vertex_normals()
+        normals = unit_normals(mesh)
     gt_mesh = read_mesh(site / "01_site" / "gt_mesh.ply")
     gt, _ = transfer_labels(gt_mesh, mesh.vertices)
     site_json = json.loads((site / "01_site" / "site.json").read_text())
@@ -100,9 +102,9 @@ def main(argv=None) -> int:
         views = [v for i, v in enumerate(views) if i in keep]
     print(f"views: {len(views)} ({', '.join(f'{k} {len(v)}' for k, v in sets.items())})", file=sys.stderr)
 
-    tex = load_texture(mesh.texture_path)
+    tex = load_texture(mesh.texture)
     with T("renderer set-up (texture, mipmaps, upload)"):
-        r = Renderer(mesh.vertices, mesh.faces, mesh.face_uv, tex, 1024, 512)
+        r = Renderer(mesh.vertices, mesh.faces, mesh.corner_uv, tex, 1024, 512)
     from twinkit_segmentation.views import view_matrices
 
     kept, vmaps_dir = [], work / "vmaps"

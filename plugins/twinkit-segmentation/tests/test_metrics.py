@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from twinkit_segmentation.meshio import IGNORE, PALETTE, colorize
+from twinkit.cityscapes import IGNORE, PALETTE, colorize
 from twinkit_segmentation.metrics import (
     blend_decide, confusion, decide, majority_labels, palette_to_labels, propagate, scores, segment_votes,
 )

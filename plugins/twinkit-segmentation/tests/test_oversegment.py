@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from twinkit_segmentation.synthetic import grid, street_scene
-from twinkit_segmentation.meshio import mesh_edges
+from twinkit.mesh import edges as mesh_edges
 from twinkit_segmentation.oversegment import edge_weights, felzenszwalb_mesh
 
 

@@ -8,7 +8,9 @@ from twinkit import InputError
 from twinkit.testing import check_plugin, plugin_from_module, run_step
 
 import twinkit_segmentation.plugin as P
-from twinkit_segmentation.meshio import IGNORE, read_mesh
+from twinkit.cityscapes import IGNORE
+from twinkit.mesh import read_mesh
+from twinkit_segmentation.segmesh import vertex_labels
 from twinkit_segmentation.synthetic import egl_available, street_scene
 
 needs_egl = pytest.mark.skipif(not egl_available(), reason="no headless EGL (Mesa) for moderngl")
@@ -147,7 +149,7 @@ def test_oracle_chain_end_to_end(scene_files, tmp_path):
                    "in_vertex_votes_npy": pred["vertex_votes.npy"]})
     labels = np.load(bp["labels.npy"])
     assert labels.dtype == np.uint8 and labels.shape == vlab.shape
-    assert read_mesh(bp["labels.ply"]).vertex_labels.tolist() == labels.tolist()
+    assert vertex_labels(read_mesh(bp["labels.ply"])).tolist() == labels.tolist()
     ev = run_step(_plugin("step", "evaluate_segmentation"), tmp_path / "ev",
                   {"in_labels_npy": bp["labels.npy"], "in_gt_labels_npy": gt["gt_labels.npy"],
                    "in_segments_npy": seg["segments.npy"]})
@@ -165,7 +167,8 @@ def test_manual_correction_round_trip(scene_files, tmp_path):
 
     mesh_ply, _, vlab = scene_files
     mesh = read_mesh(mesh_ply)
-    from twinkit_segmentation.meshio import PALETTE, write_labels_ply
+    from twinkit.cityscapes import PALETTE
+    from twinkit_segmentation.segmesh import write_labels_ply
 
     labels_npy = tmp_path / "labels.npy"
     np.save(labels_npy, vlab)
@@ -184,7 +187,8 @@ def test_manual_correction_round_trip(scene_files, tmp_path):
     changes = json.loads(out["label_changes.json"].read_text())
     assert changes == {"changed": 25, "transitions": {"road -> sidewalk": 25}}
     # a PLY with a vertex removed, or reordered, is refused
-    from twinkit_segmentation.meshio import write_colored_ply, colorize
+    from twinkit.cityscapes import colorize
+    from twinkit.mesh import write_colored_ply
 
     bad = tmp_path / "bad" / "labels.ply"
     bad.parent.mkdir()

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit_segmentation.meshio import CLASSES, IGNORE, N_CLASSES, PALETTE
+from twinkit.cityscapes import IGNORE, N_CLASSES, NAMES
 
 
 def confusion(pred: np.ndarray, gt: np.ndarray, n: int = N_CLASSES) -> np.ndarray:
@@ -44,7 +44,7 @@ def scores(pred: np.ndarray, gt: np.ndarray, classes: list[int] | None = None) -
         prec = tp[c] / pred_n[c] if pred_n[c] else 0.0
         rec = tp[c] / gt_n[c] if gt_n[c] else 0.0
         f1 = 2 * prec * rec / (prec + rec) if prec + rec else 0.0
-        per[CLASSES[c]] = {"id": c, "iou": 100 * iou, "f1": 100 * f1, "precision": 100 * prec,
+        per[NAMES[c]] = {"id": c, "iou": 100 * iou, "f1": 100 * f1, "precision": 100 * prec,
                            "recall": 100 * rec, "gt_vertices": int(gt_n[c]), "pred_vertices": int(pred_n[c])}
     valid = np.asarray(gt) < N_CLASSES
     out = {
@@ -54,7 +54,7 @@ def scores(pred: np.ndarray, gt: np.ndarray, classes: list[int] | None = None) -
         "labelled_fraction": float((np.asarray(pred)[valid] < N_CLASSES).mean()) if valid.any() else 0.0,
         "classes": classes,
         "per_class": per,
-        "confusion": {"rows_gt_cols_pred": CLASSES + ["unlabelled"], "matrix": cm.tolist()},
+        "confusion": {"rows_gt_cols_pred": list(NAMES) + ["unlabelled"], "matrix": cm.tolist()},
     }
     return out
 
@@ -167,11 +167,13 @@ def load_labels(path: Path, prefer_colors: bool = False) -> np.ndarray:
     path = Path(path)
     if path.suffix == ".npy":
         return np.load(path).astype(np.uint8)
-    from twinkit_segmentation.meshio import read_mesh
+    from twinkit.mesh import read_mesh
+
+    from twinkit_segmentation.segmesh import vertex_labels
 
     m = read_mesh(path)
-    if m.vertex_labels is not None and not prefer_colors:
-        return m.vertex_labels
+    if vertex_labels(m) is not None and not prefer_colors:
+        return vertex_labels(m)
     if m.colors is None:
         raise ValueError(f"{path}: no 'label' property and no vertex colours")
     return palette_to_labels(m.colors)

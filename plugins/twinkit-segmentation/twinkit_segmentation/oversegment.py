@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit_segmentation.meshio import mesh_edges
+from twinkit.mesh import edges as mesh_edges
 
 
 def edge_weights(vertices: np.ndarray, normals: np.ndarray, colors: np.ndarray | None, edges: np.ndarray,

@@ -40,12 +40,13 @@ def oversegment(params: FelzenszwalbParams, ctx: StepContext, *, in_textured_mes
     """Felzenszwalb over-segmentation of the mesh graph (normals + colours); segments.npy per vertex."""
     import numpy as np
 
-    from twinkit_segmentation.meshio import read_mesh, random_colors, write_colored_ply
+    from twinkit.mesh import read_mesh, write_colored_ply
+    from twinkit_segmentation.segmesh import random_colors, unit_normals
     from twinkit_segmentation.oversegment import felzenszwalb_mesh
 
     mesh = read_mesh(in_textured_mesh_ply)
     t0, c0 = time.perf_counter(), time.process_time()
-    seg = felzenszwalb_mesh(mesh.vertices, mesh.faces, mesh.vertex_normals(), mesh.colors,
+    seg = felzenszwalb_mesh(mesh.vertices, mesh.faces, unit_normals(mesh), mesh.colors,
                             params.k_threshold, params.min_vertices, params.max_vertices,
                             params.normal_weight, params.colour_weight)
     secs, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -69,7 +70,7 @@ def no_oversegment(params: NoSegmentsParams, ctx: StepContext, *, in_textured_me
     """No over-segmentation: every vertex is its own segment (the thesis's ablation)."""
     import numpy as np
 
-    from twinkit_segmentation.meshio import read_mesh, write_colored_ply
+    from twinkit.mesh import read_mesh, write_colored_ply
 
     mesh = read_mesh(in_textured_mesh_ply)
     seg = np.arange(len(mesh.vertices), dtype=np.int32)
@@ -91,11 +92,12 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
     """Camera views from the selected view sampler (view_sampler=auto_street|street_points|uniform|random|combined)."""
     import numpy as np
 
-    from twinkit_segmentation.meshio import read_mesh
+    from twinkit.mesh import read_mesh
+    from twinkit_segmentation.segmesh import unit_normals
     from twinkit_segmentation.views import Scene
 
     mesh = read_mesh(in_textured_mesh_ply)
-    scene = Scene(mesh.vertices, mesh.faces, mesh.vertex_normals(), site=ctx.site,
+    scene = Scene(mesh.vertices, mesh.faces, unit_normals(mesh), site=ctx.site,
                   roads_osm=in_roads_osm, street_points=in_street_points_txt)
     sampler = ctx.component("view_sampler")
     t0 = time.perf_counter()
@@ -125,7 +127,7 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     import numpy as np
     from PIL import Image
 
-    from twinkit_segmentation.meshio import read_mesh
+    from twinkit.mesh import read_mesh
     from twinkit_segmentation.render import Renderer, load_texture
     from twinkit_segmentation.views import view_matrices
 
@@ -134,7 +136,7 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
     mesh = read_mesh(in_textured_mesh_ply)
-    tex = load_texture(mesh.texture_path) if mesh.texture_path is not None else None
+    tex = load_texture(mesh.texture) if mesh.texture is not None else None
     if tex is None:
         ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
     out_renders_dir.mkdir(parents=True, exist_ok=True)
@@ -146,7 +148,7 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
         for v in ctx.progress(views, total=len(views), desc="render"):
             size = (int(v["width"]), int(v["height"]))
             if size not in renderers:
-                renderers[size] = Renderer(mesh.vertices, mesh.faces, mesh.face_uv, tex, *size)
+                renderers[size] = Renderer(mesh.vertices, mesh.faces, mesh.corner_uv, tex, *size)
             r = renderers[size]
             vm, pm = view_matrices(v)
             t1 = time.perf_counter()
@@ -194,7 +196,7 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     import numpy as np
     from PIL import Image
 
-    from twinkit_segmentation.meshio import N_CLASSES, PALETTE
+    from twinkit.cityscapes import N_CLASSES, PALETTE
 
     index_path = Path(in_renders_dir) / "index.json"
     try:
@@ -273,7 +275,9 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     """Votes per segment and class, argmax -> labels.npy (per vertex), confidence.npy, labels.ply (palette)."""
     import numpy as np
 
-    from twinkit_segmentation.meshio import IGNORE, mesh_edges, read_mesh, write_labels_ply
+    from twinkit.cityscapes import IGNORE
+    from twinkit.mesh import edges as mesh_edges, read_mesh
+    from twinkit_segmentation.segmesh import write_labels_ply
     from twinkit_segmentation.metrics import blend_decide, decide, propagate
 
     t0 = time.perf_counter()
@@ -310,10 +314,12 @@ def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh
     """Ground truth on the reconstructed vertices: the label of the nearest ground-truth face."""
     import numpy as np
 
-    from twinkit_segmentation.meshio import IGNORE, read_mesh, write_labels_ply
+    from twinkit.cityscapes import IGNORE
+    from twinkit.mesh import read_mesh
+    from twinkit_segmentation.segmesh import face_labels, vertex_labels, write_labels_ply
 
     gt = read_mesh(in_gt_mesh_ply)
-    if gt.face_labels is None and gt.vertex_labels is None:
+    if face_labels(gt) is None and vertex_labels(gt) is None:
         raise InputError(f"{in_gt_mesh_ply}: no 'label' property on faces or vertices")
     mesh = read_mesh(in_textured_mesh_ply)
     labels, dist = transfer_labels(gt, mesh.vertices)
@@ -340,12 +346,14 @@ def transfer_labels(gt, points):
     prim = ans["primitive_ids"].numpy().astype(np.int64)
     closest = ans["points"].numpy()
     dist = np.linalg.norm(closest - np.asarray(points, dtype=np.float32), axis=1)
-    if gt.face_labels is not None:
-        labels = gt.face_labels[prim].astype(np.uint8)
+    from twinkit_segmentation.segmesh import face_labels, vertex_labels
+
+    if face_labels(gt) is not None:
+        labels = face_labels(gt)[prim].astype(np.uint8)
     else:
         f = gt.faces[prim]
         d = np.linalg.norm(gt.vertices[f] - np.asarray(points)[:, None, :], axis=2)
-        labels = gt.vertex_labels[f[np.arange(len(f)), d.argmin(axis=1)]].astype(np.uint8)
+        labels = vertex_labels(gt)[f[np.arange(len(f)), d.argmin(axis=1)]].astype(np.uint8)
     return labels, dist
 
 
@@ -401,7 +409,7 @@ def import_labels(params: ImportLabelsParams, ctx: StepContext, *, in_labels_ply
     after = read_repainted(in_labels_ply, len(before), reference_ply=in_textured_mesh_ply)
     changed = before != after
     per = {}
-    from twinkit_segmentation.meshio import CLASSES
+    from twinkit.cityscapes import NAMES as CLASSES
 
     name = lambda c: CLASSES[c] if c < len(CLASSES) else "unlabelled"  # noqa: E731
     for a, b in zip(before[changed].tolist(), after[changed].tolist()):
@@ -417,7 +425,7 @@ def read_repainted(path: Path, n_vertices: int, reference_ply: Path | None = Non
     """Labels from a repainted palette PLY; refuses a PLY whose vertex count or order changed."""
     import numpy as np
 
-    from twinkit_segmentation.meshio import read_mesh
+    from twinkit.mesh import read_mesh
     from twinkit_segmentation.metrics import palette_to_labels
 
     m = read_mesh(path)

@@ -67,7 +67,7 @@ def collect(ws: Path) -> dict:
 def near_lines_untiled(ws: Path, tiled_seams: dict, band_m: float) -> dict:
     """The untiled mesh's open border near the tiled run's seam lines and control lines (same measure
     as tile_seams.json's ``open_near_lines``): what a seam should not exceed."""
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
     from twinkit_tiles.seam_stats import open_near_line_sets
 
     m = read_ply(ws / "05_merge_tiles" / "clean_mesh.ply")

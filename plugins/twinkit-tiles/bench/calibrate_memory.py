@@ -18,8 +18,8 @@ def one(path: str, crop_m: float, voxel_m: float) -> dict:
     import resource
 
     import numpy as np
-    from twinkit_pointcloud.cleanup import CleanOptions, clean_mesh
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
+    from twinkit.surface.cleanup import CleanOptions, clean_mesh
 
     from twinkit_tiles.tiling import exact_voxel_poisson
 

@@ -15,7 +15,7 @@ REPO = Path(__file__).resolve().parents[3]
 @pytest.fixture(scope="session")
 def synth_cloud(tmp_path_factory) -> Path:
     """The synthetic street block as a site-frame PLY cloud with normals and colours."""
-    from twinkit_pointcloud.meshio import Mesh, write_ply
+    from twinkit.mesh import Mesh, write_ply
 
     from twinkit_tiles.synthetic import street_block
 
@@ -59,7 +59,7 @@ HOLE = (5.0, -5.0, 1.2)  # an occlusion shadow inside one tile of the 2 x 2 grid
 @pytest.fixture(scope="session")
 def holed_cloud(tmp_path_factory) -> Path:
     """The synthetic block with a disc of ground left unscanned (``HOLE``)."""
-    from twinkit_pointcloud.meshio import Mesh, write_ply
+    from twinkit.mesh import Mesh, write_ply
 
     from twinkit_tiles.synthetic import street_block
 

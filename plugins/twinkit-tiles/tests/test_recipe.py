@@ -107,8 +107,8 @@ def test_tiles_simplified_before_merge_stay_crack_free_and_ground_is_filled(tmp_
     shadow over the whole site; with the fill off the shadow stays open."""
     import numpy as np
     from conftest import HOLE, Project
-    from twinkit_pointcloud.meshio import read_ply
-    from twinkit_pointcloud.surface import Surface
+    from twinkit.mesh import read_ply
+    from twinkit.surface.closest import Surface
 
     p = Project(tmp_path, holed_cloud)
     args = ["recipe=tiled_site", "site=synth", "executor=local", "executor.workers=2", *COARSE,

@@ -60,7 +60,7 @@ def test_labels_that_break_at_a_seam_are_caught():
 def _step_inputs(tmp_path, tiles):
     import json
 
-    from twinkit_pointcloud.meshio import Mesh, write_ply
+    from twinkit.mesh import Mesh, write_ply
 
     V, F = _grid()
     write_ply(tmp_path / "textured_mesh.ply", Mesh(vertices=V, faces=F))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twinkit_pointcloud.meshio import Mesh, face_areas
+from twinkit.mesh import Mesh, face_areas
 
 from twinkit_tiles.cut import cut_halfspace, cut_to_box
 from twinkit_tiles.edges import boundary_half_edges, edge_counts, seam_planes
@@ -99,7 +99,7 @@ def test_close_seam_holes_only_touches_seams():
     c = m.vertices[m.faces].mean(axis=1)
     hole1 = (c[:, 0] > 2.0) & (c[:, 0] < 2.3) & (np.abs(c[:, 1] - 2.0) < 0.3)  # one side on x = 2
     hole2 = (np.abs(c[:, 0] - 0.9) < 0.3) & (np.abs(c[:, 1] - 2.0) < 0.3)
-    from twinkit_pointcloud.meshio import compact as compact_mesh
+    from twinkit.mesh import compact as compact_mesh
 
     m = compact_mesh(m, ~(hole1 | hole2))
     m.face_attrs = {"tile": np.zeros(m.n_faces, np.int32)}
@@ -113,8 +113,8 @@ def test_close_seam_holes_only_touches_seams():
 @pytest.mark.parametrize("tile_m", [7.0])
 def test_poisson_tiles_merge_without_cracks(tile_m):
     """Real open3d Poisson per padded tile on the synthetic street block, against the untiled run."""
-    from twinkit_pointcloud.cleanup import CleanOptions, clean_mesh
-    from twinkit_pointcloud.metrics import cloud_to_mesh
+    from twinkit.surface.cleanup import CleanOptions, clean_mesh
+    from twinkit.surface.metrics import cloud_to_mesh
 
     from twinkit_tiles.synthetic import street_block
     from twinkit_tiles.tiling import choose_grid, exact_voxel_poisson, in_box
@@ -167,7 +167,7 @@ def test_open_seam_edges_are_told_apart_by_what_lies_across():
     a = cut_halfspace(grid_mesh(0, 3, 0, 3, 0.2), 0, 2.0, "below")
     b = cut_halfspace(grid_mesh(1, 4, 0, 3, 0.25), 0, 2.0, "above")
     bc = b.vertices[b.faces].mean(axis=1)
-    from twinkit_pointcloud.meshio import compact as compact_mesh
+    from twinkit.mesh import compact as compact_mesh
     b = compact_mesh(b, bc[:, 1] < 1.5)  # the neighbour has surface only for y < 1.5
     a.face_attrs = {"tile": np.zeros(a.n_faces, np.int64)}
     b.face_attrs = {"tile": np.ones(b.n_faces, np.int64)}
@@ -190,7 +190,7 @@ def test_open_seam_runs_locate_and_measure_the_gaps_and_the_map_marks_them(tmp_p
     border with nothing across starts there, and the seam map shows it in orange."""
     from PIL import Image
 
-    from twinkit_pointcloud.meshio import compact as compact_mesh
+    from twinkit.mesh import compact as compact_mesh
     from twinkit_tiles.seam_map import seam_map_png
     from twinkit_tiles.seam_stats import open_seam_runs, seam_border_length
     from twinkit_tiles.stitch import _concat

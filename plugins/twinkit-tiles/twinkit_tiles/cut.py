@@ -6,13 +6,13 @@ exactly on the plane (its coordinate along the plane's axis is set to the plane'
 Two neighbouring tiles therefore meet on a shared plane with two border polylines that nearly
 coincide (both tiles saw the same points in the overlap); :mod:`twinkit_tiles.stitch` joins them.
 
-Everything is numpy on :class:`twinkit_pointcloud.meshio.Mesh`; no extra dependency.
+Everything is numpy on :class:`twinkit.mesh.Mesh`; no extra dependency.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from twinkit_pointcloud.meshio import Mesh, compact
+from twinkit.mesh import Mesh, compact
 
 ON_PLANE_M = 5e-4  # a vertex this close to a cut plane is moved onto it (no sliver edges along the seam)
 

@@ -112,8 +112,8 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
                out_tile_points_dir: Path) -> dict:
     """Split the site into overlapping XY tiles; write one point chunk per padded tile and tiles.json."""
     import numpy as np
-    from twinkit_pointcloud.measure import Measure
-    from twinkit_pointcloud.meshio import Mesh, read_ply, write_ply
+    from twinkit.mesh import Mesh, read_ply, write_ply
+    from twinkit.surface.measure import Measure
 
     from .tiling import choose_grid, estimate_tile_mb, in_box
 
@@ -193,10 +193,10 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
     """Poisson on one padded tile at the plan's voxel size, clean-up, exact cut to the tile's core."""
     import os
 
-    from twinkit_pointcloud.cleanup import CleanOptions, clean_mesh
-    from twinkit_pointcloud.measure import Measure
-    from twinkit_pointcloud.meshio import read_ply, write_ply
-    from twinkit_pointcloud.simplify import simplify_mesh
+    from twinkit.mesh import read_ply, write_ply
+    from twinkit.surface.cleanup import CleanOptions, clean_mesh
+    from twinkit.surface.measure import Measure
+    from twinkit.surface.simplify import simplify_mesh
 
     import numpy as np
 
@@ -272,8 +272,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                 out_clean_mesh_ply: Path, out_tile_seams_json: Path, in_seam_votes_npz: list | None = None) -> dict:
     """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
     import numpy as np
-    from twinkit_pointcloud.measure import Measure
-    from twinkit_pointcloud.meshio import read_ply, write_ply
+    from twinkit.mesh import read_ply, write_ply
+    from twinkit.surface.measure import Measure
 
     from .edges import edge_counts, seam_planes
     from .seam_map import seam_map_png
@@ -354,7 +354,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         merged.face_attrs = {}
         ground = None
         if params.fill_ground_cell_m > 0:
-            from twinkit_pointcloud.groundfill import GroundFillOptions, fill_ground_holes
+            from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
 
             if cloud is None:
                 cloud = _read_points(in_points_ply)
@@ -418,7 +418,7 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
     seam planes vs. crossing control planes through the tiles' interiors (and, with ground truth, the
     changes the ground truth does not have; accuracy near the seams vs. elsewhere) -> seam_labels.json."""
     import numpy as np
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
 
     from .seam_labels import seam_label_stats
     from .edges import seam_planes
@@ -475,7 +475,7 @@ def _read_votes(paths):
 
 
 def _read_points(path: Path):
-    from twinkit_pointcloud.meshio import read_ply
+    from twinkit.mesh import read_ply
 
     try:
         return read_ply(path)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit_pointcloud.meshio import Mesh, compact
+from twinkit.mesh import Mesh
 
 
 def seam_map_png(mesh: Mesh, planes: list[tuple[int, float]], runs: list[dict], path, title: str = "",

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit_pointcloud.meshio import Mesh, compact
+from twinkit.mesh import Mesh
 
 from .edges import _chains, boundary_half_edges
 

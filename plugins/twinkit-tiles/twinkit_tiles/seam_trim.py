@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit_pointcloud.meshio import Mesh, compact
+from twinkit.mesh import Mesh, compact
 
 from .edges import _simple_loops, near_planes
 from .seam_votes import _apply_votes
@@ -38,8 +38,8 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     within ``hanging_tol_m`` of a plane is on it), so that the trim's boundary crosses a seam and
     never runs along it."""
     from scipy.spatial import cKDTree
-    from twinkit_pointcloud.cleanup import (CleanOptions, boundary_loops, components, fan_fill, remove_vertices,
-                                            trim_mask, vertex_cloud_distance)
+    from twinkit.mesh import boundary_loops, components, fan_fill, remove_vertices
+    from twinkit.surface.cleanup import CleanOptions, trim_mask, vertex_cloud_distance
 
     rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "vertices_kept_by_votes": 0,
            "vertices_dropped_by_votes": 0, "components_removed": 0, "hanging_faces_removed": 0, "holes_closed": 0}
@@ -77,7 +77,6 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
         touch[flab[near_planes(mesh.vertices, planes, band_m)[mesh.faces].any(axis=1)]] = True
         small = touch & (size < min_component_faces)
         if small.any():
-            from twinkit_pointcloud.meshio import compact
 
             rep["components_removed"] = int(small.sum())
             mesh = compact(mesh, ~small[flab])
@@ -154,7 +153,6 @@ def drop_hanging_faces(mesh: Mesh, planes, tol_m: float, closed_before: np.ndarr
     trim (where the zipper could not pair the borders) are left open and counted.
     Returns (mesh, faces removed). ``vid`` rides through the removals as a temporary vertex
     attribute, which the returned mesh no longer has."""
-    from twinkit_pointcloud.meshio import compact
 
     mesh = _with_attr(mesh, "_vid", vid)
     removed = 0

@@ -147,7 +147,7 @@ def exact_voxel_poisson(points: np.ndarray, normals: np.ndarray, colors, voxel_m
     size * 1.1 / 2**depth <= voxel_m, then the cube scale is raised so that size * scale / 2**depth
     equals ``voxel_m``. Every tile (and an untiled run) thus uses the same voxel, whatever its size.
     Returns (mesh, depth, scale)."""
-    from twinkit_pointcloud.poisson import poisson_open3d
+    from twinkit.surface.poisson import poisson_open3d
 
     size = float((points.max(axis=0) - points.min(axis=0)).max())
     depth = int(min(16, max(5, math.ceil(math.log2(max(size, 1e-9) * min_scale / voxel_m)))))

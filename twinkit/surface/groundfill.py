@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .meshio import Mesh
+from twinkit.mesh import Mesh
 
 
 @dataclass
@@ -148,7 +148,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
     jj, ii = np.nonzero(hole)
     centres = np.c_[lo[0] + (ii + 0.5) * c, lo[1] + (jj + 0.5) * c, hz[jj, ii]]
     if mesh.n_faces:
-        from .surface import Surface
+        from .closest import Surface
 
         d = Surface(mesh.vertices, mesh.faces, opt.threads).distance(centres)
         fill = d > opt.keep_if_mesh_within_m

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .meshio import Mesh, compact, face_areas
+from twinkit.mesh import Mesh, compact, face_areas
 
 
 def simplify_quadric(mesh: Mesh, target_faces: int, *, preserve_border: bool = True, aggressiveness: float = 7.0) -> Mesh:
@@ -33,7 +33,7 @@ def simplify_quadric(mesh: Mesh, target_faces: int, *, preserve_border: bool = T
 def simplify_clustering(mesh: Mesh, target_faces: int) -> Mesh:
     import open3d as o3d
 
-    from .meshio import to_o3d_mesh
+    from twinkit.mesh import to_o3d_mesh
 
     area = float(face_areas(mesh.vertices, mesh.faces).sum())
     # a regular triangulation with spacing h has about 2 * area / h^2 faces
@@ -53,8 +53,8 @@ def _drop_degenerate(mesh: Mesh) -> Mesh:
 
 def resample_attributes(simple: Mesh, dense: Mesh, threads: int = 0, names=("colors",)) -> Mesh:
     """Copy per-vertex attributes from ``dense`` to ``simple`` at the closest dense surface point."""
-    from .meshio import vertex_normals
-    from .surface import Surface
+    from twinkit.mesh import vertex_normals
+    from .closest import Surface
 
     surf = Surface(dense.vertices, dense.faces, threads)
     fid, bary, dist = surf.closest(simple.vertices)

@@ -1,45 +1,21 @@
-"""Small, dependency-light PLY I/O on numpy arrays (binary little-endian, via plyfile).
+"""The one PLY path of twinkit: read and write a :class:`~twinkit.mesh.core.Mesh` (cloud or triangle mesh).
 
-A mesh or cloud is passed around as plain arrays:
+Binary PLY (little- or big-endian) whose faces are all triangles is parsed directly with numpy
+(``np.fromfile``, one pass); anything else (ASCII, polygons, variable lists, extra elements)
+goes through plyfile. Files are written binary little-endian (ASCII through plyfile on request).
 
-- ``vertices``: (n, 3) float64, metres, site frame
-- ``faces``: (m, 3) int64 vertex indices (counter-clockwise seen from outside), or None for a cloud
-- ``attrs``: per-vertex arrays keyed by name; conventional names are
-  ``normals`` (n, 3) float32, ``colors`` (n, 3) uint8, and scalars such as
-  ``density``, ``dist_to_cloud_m``, ``intensity``, ``classification``, ``scanner``.
+Vertex properties map to ``Mesh.attrs``: ``nx ny nz`` -> ``normals`` (n, 3) float32,
+``red green blue`` (also ``r g b``, ``diffuse_*``; floats in [0, 1] and 16-bit values rescaled) ->
+``colors`` (n, 3) uint8, any other scalar property under its own name. Face list properties
+other than the indices (e.g. ``texcoord``, 6 floats per face) map to ``Mesh.face_attrs``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-
-@dataclass
-class Mesh:
-    vertices: np.ndarray  # (n, 3) float64
-    faces: np.ndarray | None = None  # (m, 3) int64
-    attrs: dict[str, np.ndarray] = field(default_factory=dict)
-    face_attrs: dict[str, np.ndarray] = field(default_factory=dict)
-    comments: list[str] = field(default_factory=list)
-
-    @property
-    def n_vertices(self) -> int:
-        return int(len(self.vertices))
-
-    @property
-    def n_faces(self) -> int:
-        return 0 if self.faces is None else int(len(self.faces))
-
-    @property
-    def colors(self) -> np.ndarray | None:
-        return self.attrs.get("colors")
-
-    @property
-    def normals(self) -> np.ndarray | None:
-        return self.attrs.get("normals")
-
+from .core import Mesh
 
 _SCALAR_DTYPES = {
     np.dtype("float32"): "f4",
@@ -134,7 +110,7 @@ def _mesh_from_arrays(v, f, comments) -> Mesh:
     skip = {"x", "y", "z", "nx", "ny", "nz", "alpha"} | set(col or ())
     for c in names:
         if c not in skip and v[c].dtype.kind in "fiub" and v[c].ndim == 1:
-            attrs[c] = np.asarray(v[c])
+            attrs[c] = _native(np.asarray(v[c]))
     faces = None
     face_attrs: dict[str, np.ndarray] = {}
     if f is not None and len(f) > 0:
@@ -157,12 +133,17 @@ def _mesh_from_arrays(v, f, comments) -> Mesh:
                 continue
             col_ = f[c]
             try:
-                face_attrs[c] = np.stack(col_) if col_.dtype == object else np.asarray(col_)
+                face_attrs[c] = _native(np.stack(col_) if col_.dtype == object else np.asarray(col_))
             except ValueError:
                 pass
     elif f is not None:
         faces = np.zeros((0, 3), np.int64)
     return Mesh(vertices=vertices, faces=faces, attrs=attrs, face_attrs=face_attrs, comments=comments)
+
+
+def _native(a: np.ndarray) -> np.ndarray:
+    """The array in the machine's byte order (big-endian files)."""
+    return a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("="))
 
 
 def _find_colour_fields(names) -> tuple[str, str, str] | None:
@@ -184,65 +165,6 @@ def _colours_to_u8(rgb: np.ndarray) -> np.ndarray:
     if mx > 255:
         return np.clip(np.rint(rgb.astype(np.float64) / 257.0), 0, 255).astype(np.uint8)
     return rgb.astype(np.uint8)
-
-
-def to_o3d_mesh(mesh: Mesh):
-    import open3d as o3d
-
-    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.ascontiguousarray(mesh.vertices, np.float64)),
-                                  o3d.utility.Vector3iVector(np.ascontiguousarray(mesh.faces, np.int32)))
-    if mesh.colors is not None:
-        m.vertex_colors = o3d.utility.Vector3dVector(mesh.colors.astype(np.float64) / 255.0)
-    return m
-
-
-def to_o3d_cloud(points: np.ndarray, normals: np.ndarray | None = None, colors: np.ndarray | None = None):
-    import open3d as o3d
-
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points, np.float64)))
-    if normals is not None:
-        pcd.normals = o3d.utility.Vector3dVector(np.ascontiguousarray(normals, np.float64))
-    if colors is not None:
-        pcd.colors = o3d.utility.Vector3dVector(colors.astype(np.float64) / 255.0)
-    return pcd
-
-
-def compact(mesh: Mesh, keep_faces: np.ndarray | None = None) -> Mesh:
-    """Keep the faces selected by ``keep_faces`` (bool mask) and drop unreferenced vertices."""
-    faces = mesh.faces if keep_faces is None else mesh.faces[keep_faces]
-    face_attrs = {k: (v if keep_faces is None else v[keep_faces]) for k, v in mesh.face_attrs.items()}
-    used = np.zeros(mesh.n_vertices, bool)
-    used[faces.ravel()] = True
-    remap = np.full(mesh.n_vertices, -1, np.int64)
-    remap[used] = np.arange(int(used.sum()))
-    return Mesh(vertices=mesh.vertices[used], faces=remap[faces],
-                attrs={k: v[used] for k, v in mesh.attrs.items()}, face_attrs=face_attrs,
-                comments=list(mesh.comments))
-
-
-def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-
-def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    n = np.cross(b - a, c - a)
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.maximum(ln, 1e-30)
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals, (n, 3) float32."""
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    fn = np.cross(b - a, c - a)
-    n = len(vertices)
-    vn = np.zeros_like(vertices)
-    for i in range(3):
-        for k in range(3):
-            vn[:, k] += np.bincount(faces[:, i], weights=fn[:, k], minlength=n)
-    ln = np.linalg.norm(vn, axis=1, keepdims=True)
-    return (vn / np.maximum(ln, 1e-30)).astype(np.float32)
 
 
 # ----------------------------------------------------------------------------- fast binary PLY
@@ -315,8 +237,8 @@ def write_ply(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool
 def read_ply(path: Path | str) -> Mesh:
     """Read a PLY (cloud or triangle mesh) into a :class:`Mesh`; float64 vertices.
 
-    Binary little-endian files whose faces are all triangles are parsed directly with numpy;
-    anything else goes through plyfile."""
+    Binary files (either byte order) whose faces are all triangles are parsed directly with numpy;
+    anything else goes through plyfile (polygons are fan-triangulated)."""
     path = Path(path)
     with open(path, "rb") as fh:
         first = fh.readline()
@@ -344,12 +266,13 @@ def read_ply(path: Path | str) -> Mesh:
         elif parts[0] == "property" and elements:
             elements[-1][2].append(parts[1:])
     names = [e[0] for e in elements]
-    simple = (fmt == "binary_little_endian" and names[:1] == ["vertex"]
+    end = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
+    simple = (end is not None and names[:1] == ["vertex"]
               and all(p[0] != "list" for p in elements[0][2])
               and all(n == "face" for n in names[1:]) and len(names) <= 2)
     if not simple:
         return _read_ply_plyfile(path)
-    vdt = np.dtype([(p[1], "<" + _PLY_TYPES[p[0]]) for p in elements[0][2]])
+    vdt = np.dtype([(p[1], end + _PLY_TYPES[p[0]]) for p in elements[0][2]])
     nv = elements[0][1]
     size = path.stat().st_size
     face_arr = None
@@ -362,14 +285,14 @@ def read_ply(path: Path | str) -> Mesh:
         pos = 0
         for p in elements[1][2]:
             if p[0] == "list":
-                ct, it = np.dtype("<" + _PLY_TYPES[p[1]]), np.dtype("<" + _PLY_TYPES[p[2]])
+                ct, it = np.dtype(end + _PLY_TYPES[p[1]]), np.dtype(end + _PLY_TYPES[p[2]])
                 if pos + ct.itemsize > len(first_face):
                     return _read_ply_plyfile(path)
                 cnt = int(np.frombuffer(first_face[pos:pos + ct.itemsize], ct)[0])
                 fdt += [(p[3] + "_n", ct), (p[3], it, (cnt,))]
                 pos += ct.itemsize + cnt * it.itemsize
             else:
-                t = np.dtype("<" + _PLY_TYPES[p[0]])
+                t = np.dtype(end + _PLY_TYPES[p[0]])
                 fdt.append((p[1], t))
                 pos += t.itemsize
         fdt = np.dtype(fdt)
@@ -395,3 +318,46 @@ def read_ply(path: Path | str) -> Mesh:
         keep = [n for n in face_arr.dtype.names if not n.endswith("_n")]
         face_arr = face_arr[keep]
     return _mesh_from_arrays(v, face_arr, comments)
+
+
+def read_mesh(path: Path | str) -> Mesh:
+    """Read a triangle mesh PLY for a pipeline step, with checks that name the file: a
+    :class:`twinkit.InputError` when it is not a readable PLY, has non-triangle faces or
+    indices out of range. The texture (``Mesh.texture``) is the file named by the PLY's
+    ``comment TextureFile``, else, when faces carry ``texcoord``, a PNG with the same stem beside it."""
+    from twinkit.errors import InputError
+
+    path = Path(path)
+    if path.suffix.lower() != ".ply":
+        raise InputError(f"{path}: expected a .ply mesh")
+    try:
+        mesh = read_ply(path)
+    except Exception as exc:
+        raise InputError(f"{path}: not a readable PLY mesh ({exc}); re-export it from the previous step") from None
+    if mesh.faces is None:
+        mesh.faces = np.zeros((0, 3), np.int64)
+    if "texcoord" in mesh.face_attrs and np.asarray(mesh.face_attrs["texcoord"]).shape[1:] != (6,):
+        raise InputError(f"{path}: only triangle meshes are supported")
+    for c in mesh.comments:
+        if c.startswith("TextureFile"):
+            cand = path.parent / c.split(None, 1)[1].strip()
+            if cand.is_file():
+                mesh.texture = cand
+    if mesh.texture is None and "texcoord" in mesh.face_attrs and path.with_suffix(".png").is_file():
+        mesh.texture = path.with_suffix(".png")
+    if len(mesh.faces) and (mesh.faces.min() < 0 or mesh.faces.max() >= mesh.n_vertices):
+        raise InputError(f"{path}: face indices out of range")
+    return mesh
+
+
+def write_colored_ply(path: Path | str, vertices: np.ndarray, faces: np.ndarray, colors: np.ndarray,
+                      labels: np.ndarray | None = None, extra: dict[str, np.ndarray] | None = None,
+                      comment: str = "") -> None:
+    """Binary PLY of a triangle mesh with vertex colours ((n, 3) uint8), an optional uchar ``label``
+    ((n,) trainIds) and other scalar vertex properties (``extra``, written in their own dtype)."""
+    attrs: dict[str, np.ndarray] = {"colors": np.asarray(colors).astype(np.uint8, copy=False)}
+    if labels is not None:
+        attrs["label"] = np.asarray(labels).astype(np.uint8, copy=False)
+    attrs.update(extra or {})
+    write_ply(path, Mesh(vertices=vertices, faces=np.asarray(faces), attrs=attrs,
+                         comments=[comment] if comment else []))

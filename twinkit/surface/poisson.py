@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .meshio import Mesh
+from twinkit.mesh import Mesh
 
 
 def depth_for_voxel(points: np.ndarray, voxel_m: float, scale: float = 1.1) -> int:
@@ -31,7 +31,7 @@ def poisson_open3d(points: np.ndarray, normals: np.ndarray, colors: np.ndarray |
     the samples that support the vertex; low = extrapolated)."""
     import open3d as o3d
 
-    from .meshio import to_o3d_cloud
+    from twinkit.mesh import to_o3d_cloud
 
     pcd = to_o3d_cloud(points, normals, colors)
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):

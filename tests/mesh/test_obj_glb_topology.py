@@ -1,0 +1,90 @@
+"""Textured OBJ, the one GLB writer and the topology helpers of twinkit.mesh."""
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+
+from twinkit.mesh import Mesh, boundary_loops, components, edges, fan_fill, read_obj, write_obj
+from twinkit.mesh.glb import GlbPart, srgb_to_linear, write_colored_glb, write_textured_glb
+
+from tests.mesh.meshes import grid_mesh
+
+
+def _glb(path):
+    data = path.read_bytes()
+    magic, version, total = struct.unpack("<4sII", data[:12])
+    assert magic == b"glTF" and version == 2 and total == len(data)
+    jlen, jtype = struct.unpack("<I4s", data[12:20])
+    assert jtype == b"JSON" and jlen % 4 == 0
+    doc = json.loads(data[20:20 + jlen])
+    blen, btype = struct.unpack("<I4s", data[20 + jlen:28 + jlen])
+    assert btype == b"BIN\0" and blen == doc["buffers"][0]["byteLength"] and blen % 4 == 0
+    return doc, data[28 + jlen:28 + jlen + blen]
+
+
+def test_obj_round_trip(tmp_path):
+    m = grid_mesh(8)
+    uv = np.random.default_rng(0).random((m.n_faces, 3, 2))
+    nrm = np.tile(np.float32([0, 0, 1]), (m.n_vertices, 1))
+    write_obj(tmp_path / "m.obj", m.vertices, m.faces, uv, "m.png", normals=nrm)
+    (tmp_path / "m.png").write_bytes(b"")
+    r = read_obj(tmp_path / "m.obj")
+    assert np.array_equal(r.faces, m.faces) and np.allclose(r.vertices, m.vertices, atol=1e-6)
+    assert np.allclose(r.corner_uv, uv, atol=1e-6) and np.allclose(r.normals, nrm)
+    assert r.texture == tmp_path / "m.png"
+    # polygons and negative indices
+    (tmp_path / "q.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf -4 -3 -2 -1\n")
+    q = read_obj(tmp_path / "q.obj")
+    assert q.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and q.corner_uv is None
+
+
+def test_colored_glb_layout(tmp_path):
+    m = grid_mesh(5)
+    seg = np.zeros((m.n_vertices, 3), np.uint8)
+    write_colored_glb(tmp_path / "v.glb", m.vertices, m.faces, m.colors, seg)
+    doc, binary = _glb(tmp_path / "v.glb")
+    attrs = doc["meshes"][0]["primitives"][0]["attributes"]
+    assert list(attrs) == ["POSITION", "COLOR_0", "_TEXCOLOR"]
+    acc = doc["accessors"][attrs["_TEXCOLOR"]]
+    view = doc["bufferViews"][acc["bufferView"]]
+    got = np.frombuffer(binary, "<u2", acc["count"] * 4, view["byteOffset"]).reshape(-1, 4)
+    want = np.round(srgb_to_linear(m.colors).astype(np.float64) * 65535)
+    assert np.abs(got[:, :3] - want).max() <= 1 and (got[:, 3] == 65535).all()
+    assert doc["nodes"][0]["extras"]["site_origin_m"] == [0.5, 0.5, 0.0]
+
+
+def test_textured_glb_splits_uv_seams(tmp_path):
+    m = grid_mesh(4)
+    uv = np.zeros((m.n_faces, 3, 2), np.float32)
+    uv[: m.n_faces // 2] = 0.25  # two charts: vertices on the border get two glTF vertices
+    part = GlbPart("ground", m.vertices, m.faces, np.tile(np.float32([0, 0, 1]), (m.n_vertices, 1)), uv, m.colors,
+                   ubyte_attrs={"_CLASS_ID": np.ones(m.n_vertices, np.uint8)}, extras={"class_id": 1})
+    empty = GlbPart("none", m.vertices[:0], m.faces[:0], m.vertices[:0], uv[:0], m.colors[:0])
+    stats = write_textured_glb(tmp_path / "t.glb", [part, empty], None, generator="test", asset_extras={"a": 1})
+    doc, _ = _glb(tmp_path / "t.glb")
+    assert list(stats) == ["ground"] and stats["ground"]["vertices"] > m.n_vertices
+    assert doc["asset"] == {"version": "2.0", "generator": "test", "extras": {"a": 1}}
+    assert doc["nodes"] == [{"name": "ground", "mesh": 0, "extras": {"class_id": 1}}]
+    cls = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["_CLASS_ID"]]
+    assert doc["bufferViews"][cls["bufferView"]]["byteStride"] == 4
+    trimesh = pytest.importorskip("trimesh")
+    scene = trimesh.load(str(tmp_path / "t.glb"))
+    assert sum(len(g.faces) for g in scene.geometry.values()) == m.n_faces
+
+
+def test_topology_components_loops_fan():
+    a, b = grid_mesh(5), grid_mesh(3)
+    b.vertices = b.vertices + [5, 0, 0]
+    m = Mesh(np.vstack([a.vertices, b.vertices]), np.vstack([a.faces, b.faces + a.n_vertices]),
+             attrs={"colors": np.vstack([a.colors, b.colors])})
+    n, lab = components(m.n_vertices, m.faces)
+    assert n == 2 and np.bincount(lab).tolist() == [a.n_faces, b.n_faces]
+    loops = boundary_loops(m.faces)
+    assert sorted(len(lp) for lp in loops) == [8, 16]
+    closed = fan_fill(m, loops)
+    assert boundary_loops(closed.faces) == [] and closed.n_vertices == m.n_vertices + 2
+    e = edges(m.faces, m.n_vertices)
+    assert (e[:, 0] < e[:, 1]).all() and len(np.unique(e, axis=0)) == len(e)

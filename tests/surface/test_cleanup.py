@@ -1,0 +1,172 @@
+"""The shared surface clean-up, simplification and ground fill (twinkit.surface) on small meshes made by code."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from twinkit.mesh import Mesh, boundary_loops, edge_face_incidence
+from twinkit.surface import cleanup as C
+
+from tests.mesh.meshes import grid_mesh
+
+
+def test_distance_trim_removes_bubbles():
+    m = grid_mesh(30)
+    bubble = grid_mesh(5, size=0.2, z=0.5)  # a surface half a metre above the cloud
+    faces = np.vstack([m.faces, bubble.faces + m.n_vertices])
+    mesh = Mesh(np.vstack([m.vertices, bubble.vertices]), faces,
+                attrs={"colors": np.vstack([m.colors, bubble.colors])})
+    points = m.vertices + np.random.default_rng(0).normal(0, 0.001, m.vertices.shape)
+    out, rep = C.clean_mesh(mesh, points, C.CleanOptions(max_dist_m=0.05, min_component_faces=1))
+    assert out.vertices[:, 2].max() < 0.01
+    assert out.n_faces == m.n_faces
+    assert out.attrs["dist_to_cloud_m"].max() < 0.01
+
+
+def test_loose_region_trimmed_loosely_and_its_exact_verdict_reported():
+    m = grid_mesh(30)  # 1 x 1 m; the cloud covers only x < 0.5
+    pts = m.vertices[m.vertices[:, 0] < 0.5]
+    loose = lambda V: V[:, 1] > 0.7  # noqa: E731
+    opt = C.CleanOptions(max_dist_m=0.05, min_component_faces=1, max_hole_edges=0, loose_dist_m=1.0)
+    out, rep = C.clean_mesh(m, pts, opt, loose=loose)
+    X = out.vertices
+    assert X[X[:, 1] <= 0.7, 0].max() < 0.55  # trimmed exactly outside the loose region ...
+    assert X[X[:, 1] > 0.7, 0].max() == pytest.approx(1.0)  # ... and only beyond 1 m in it
+    s = rep["loose_samples"]
+    assert len(s["points"]) == int(loose(m.vertices).sum()) == len(s["keep"]) == len(s["normals"])
+    np.testing.assert_allclose(np.abs(s["normals"][:, 2]), 1.0, atol=1e-5)  # the flat grid's normal
+    # the verdict the exact rule would have given there: keep where the cloud is, drop elsewhere
+    assert np.array_equal(s["keep"], s["points"][:, 0] < 0.5 + 0.05)
+    _, rep2 = C.clean_mesh(m, pts, C.CleanOptions(max_dist_m=0.05, min_component_faces=1))
+    assert "loose_samples" not in rep2
+
+
+def test_small_components_removed():
+    m = grid_mesh(20)
+    small = grid_mesh(3, size=0.05)
+    small.vertices[:, 0] += 2.0
+    mesh = Mesh(np.vstack([m.vertices, small.vertices]), np.vstack([m.faces, small.faces + m.n_vertices]))
+    out, n, kept = C.keep_large_components(mesh, min_faces=50)
+    assert n == 2 and kept == 1 and out.n_faces == m.n_faces
+
+
+def test_non_manifold_edge_repaired():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0.2, 0.5]], float)
+    f = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])  # edge 0-1 shared by three faces; face 2 is smallest
+    out, removed = C.repair_non_manifold_edges(Mesh(v, f))
+    assert removed == 1 and out.n_faces == 2
+    _, _, counts = edge_face_incidence(out.faces)
+    assert counts.max() <= 2
+
+
+def test_small_holes_closed_large_boundary_kept():
+    m = grid_mesh(20)
+    # cut a hole: remove the two faces of one interior quad and the ones around it
+    centre = np.array([0.5, 0.5])
+    cen = m.vertices[m.faces].mean(axis=1)[:, :2]
+    keep = np.linalg.norm(cen - centre, axis=1) > 0.08
+    holed = Mesh(m.vertices, m.faces[keep], attrs=dict(m.attrs))
+    loops_before = boundary_loops(holed.faces)
+    assert len(loops_before) == 2
+    out, closed = C.close_small_holes(holed, max_edges=30)
+    assert closed == 1
+    assert len(boundary_loops(out.faces)) == 1  # the outer border stays open
+    assert out.colors is not None and len(out.colors) == out.n_vertices
+    # consistent orientation: all normals still up
+    from twinkit.mesh import face_normals
+
+    assert (face_normals(out.vertices, out.faces)[:, 2] > 0.99).all()
+
+
+def test_quadric_simplify_keeps_border_and_clustering_fallback():
+    from twinkit.surface.simplify import simplify_mesh
+
+    m = grid_mesh(80)
+    m.vertices[:, 2] = 0.05 * np.sin(6 * m.vertices[:, 0])
+    s, method = simplify_mesh(m, 2000, method="auto")
+    assert method == "quadric" and s.n_faces <= 2000
+    assert np.allclose(s.vertices[:, :2].min(axis=0), 0) and np.allclose(s.vertices[:, :2].max(axis=0), 1)
+    assert s.colors is not None and (s.colors == 100).all()
+    s2, method2 = simplify_mesh(m, 2000, method="auto", cluster_above_faces=5000)
+    assert method2 == "clustering" and s2.n_faces <= 2400
+
+
+def test_gap_rule_keeps_plane_between_sparse_scan_lines():
+    """Far-range ground: scan lines 0.8 m apart, 2 cm apart along each line. Poisson's surface
+    between the lines is on the ground plane (kept with the gap rule, cut by the plain distance
+    trim); a flap 0.3 m above the ground is off the plane and goes either way."""
+    ground = grid_mesh(81, size=4.0)  # 5 cm grid over 4 x 4 m
+    flap = grid_mesh(9, size=0.4, z=0.3)
+    flap.vertices[:, :2] += 1.8
+    m = Mesh(np.vstack([ground.vertices, flap.vertices]),
+             np.vstack([ground.faces, flap.faces + ground.n_vertices]))
+    xs = np.arange(0, 4.0001, 0.02)
+    pts = np.vstack([np.c_[xs, np.full_like(xs, y), np.zeros_like(xs)] for y in np.arange(0, 4.0001, 0.8)])
+    nrm = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    opt = dict(max_dist_m=0.10, min_component_faces=1, max_hole_edges=0, repair_non_manifold=False)
+    plain, _ = C.clean_mesh(m, pts, C.CleanOptions(**opt), normals=nrm)
+    gap, rep = C.clean_mesh(m, pts, C.CleanOptions(gap_dist_m=0.5, gap_plane_m=0.02, **opt), normals=nrm)
+    assert rep["distance_trim"]["kept_on_plane"] > 0
+    assert (np.abs(plain.vertices[:, 2]) < 1e-9).mean() == 1.0  # flap gone
+    assert (np.abs(gap.vertices[:, 2]) < 1e-9).mean() == 1.0  # flap gone with the gap rule too
+    # plain trim keeps only 10 cm strips around the lines; the gap rule keeps the whole ground
+    assert plain.n_faces < 0.4 * ground.n_faces
+    assert gap.n_faces == ground.n_faces
+    # without normals the gap rule is off (same as plain)
+    nonorm, _ = C.clean_mesh(m, pts, C.CleanOptions(gap_dist_m=0.5, **opt))
+    assert nonorm.n_faces == plain.n_faces
+
+
+def test_vertex_plane_distance():
+    pts = np.c_[np.linspace(0, 1, 50), np.zeros(50), np.zeros(50)]
+    nrm = np.tile([0.0, 0.0, 1.0], (50, 1))
+    v = np.array([[0.5, 0.3, 0.0], [0.5, 0.3, 0.2], [0.5, 3.0, 0.0]])
+    d = C.vertex_plane_distance(v, pts, nrm, k=4, max_dist_m=1.0)
+    assert d[0] < 1e-6 and abs(d[1] - 0.2) < 1e-6 and np.isinf(d[2])
+
+
+def _ground_scene():
+    """Ground points (5 cm) on 12 x 12 m at z = 0 with (a) a 2 x 2 m shadow at x, y in [2, 4] with no
+    points and (b) a 3 x 3 m building at x, y in [7, 10]: walls (horizontal normals, 3 m high), no
+    ground inside."""
+    g = np.arange(0, 12.0001, 0.05)
+    X, Y = np.meshgrid(g, g)
+    p = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
+    shadow = (p[:, 0] > 2) & (p[:, 0] < 4) & (p[:, 1] > 2) & (p[:, 1] < 4)
+    inside = (p[:, 0] >= 7) & (p[:, 0] <= 10) & (p[:, 1] >= 7) & (p[:, 1] <= 10)
+    p = p[~shadow & ~inside]
+    n = np.tile([0.0, 0.0, 1.0], (len(p), 1))
+    walls, wn = [], []
+    s = np.arange(7, 10.0001, 0.05)
+    for z in np.arange(0.05, 3.0, 0.1):
+        for xy, nn in (((s, np.full_like(s, 7.0)), (0, -1)), ((s, np.full_like(s, 10.0)), (0, 1)),
+                       ((np.full_like(s, 7.0), s), (-1, 0)), ((np.full_like(s, 10.0), s), (1, 0))):
+            walls.append(np.c_[xy[0], xy[1], np.full_like(s, z)])
+            wn.append(np.tile([nn[0], nn[1], 0.0], (len(s), 1)))
+    return np.vstack([p] + walls), np.vstack([n] + wn)
+
+
+def test_ground_fill_fills_shadow_not_building():
+    from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
+
+    pts, nrm = _ground_scene()
+    mesh = grid_mesh(121, size=12.0)
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    gone = ((c[:, 0] > 2) & (c[:, 0] < 4) & (c[:, 1] > 2) & (c[:, 1] < 4)) | (
+        (c[:, 0] > 7) & (c[:, 0] < 10) & (c[:, 1] > 7) & (c[:, 1] < 10))
+    from twinkit.mesh import compact
+
+    mesh = compact(mesh, ~gone)
+    cols = np.full((len(pts), 3), 77, np.uint8)
+    out, rep = fill_ground_holes(mesh, pts, nrm, cols, GroundFillOptions(cell_m=0.1))
+    new = out.vertices[mesh.n_vertices:]
+    assert 2.5 < rep["area_m2"] < 4.5  # the 2 x 2 m shadow (cells touching its border included)
+    assert (np.abs(new[:, 2]) < 0.01).all()  # on the ground plane
+    assert ((new[:, 0] > 1.8) & (new[:, 0] < 4.2) & (new[:, 1] > 1.8) & (new[:, 1] < 4.2)).all()  # nowhere else
+    assert (out.colors[mesh.n_vertices:] == 77).all()
+    # through clean_mesh (off by default there, on with fill_ground_cell_m)
+    plain, rep0 = C.clean_mesh(mesh, pts, C.CleanOptions(max_dist_m=0, max_hole_edges=0), normals=nrm)
+    filled, rep1 = C.clean_mesh(mesh, pts, C.CleanOptions(max_dist_m=0, max_hole_edges=0, fill_ground_cell_m=0.1),
+                                normals=nrm)
+    assert "ground_fill" not in rep0 and rep1["ground_fill"]["faces_added"] > 0
+    assert filled.n_faces > plain.n_faces
