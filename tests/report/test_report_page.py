@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from twinkit import report as R
-from twinkit.report import _meshbridge as meshbridge
+from twinkit.mesh.glb import write_colored_glb
 from twinkit.report import render, viewer
 from twinkit.report.page import fmt
 
@@ -240,7 +240,7 @@ def test_glb_writer_roundtrip(tmp_path):
     cols = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 255]], np.uint8)
     seg = R.palette()[[0, 0, 2, 2]]
     p = tmp_path / "m.glb"
-    meshbridge.write_glb(p, xyz, faces, cols, seg)
+    write_colored_glb(p, xyz, faces, cols, seg)
     g = read_glb_json(p)
     data = p.read_bytes()
     n = struct.unpack_from("<I", data, 12)[0]
@@ -288,7 +288,7 @@ def test_ply_reader_matches_plyfile(demo_run):
     from plyfile import PlyData
 
     path = demo_run.ws / "06_texture" / "textured_mesh.ply"
-    mesh = meshbridge.read_ply(path)
+    mesh = render.ViewMesh.read(path)
     ref = PlyData.read(str(path))
     v = ref["vertex"]
     np.testing.assert_allclose(mesh.xyz[:, 0], np.asarray(v["x"], float))

@@ -22,12 +22,12 @@ from __future__ import annotations
 from .core import Mesh, compact, edges, face_areas, face_normals, vertex_normals
 from .o3d import to_o3d_cloud, to_o3d_mesh
 from .obj import read_obj, write_obj
-from .ply import read_mesh, read_ply, write_colored_ply, write_ply
+from .ply import ply_vertex_count, read_mesh, read_ply, write_colored_ply, write_ply
 from .topology import boundary_loops, components, edge_face_incidence, fan_fill, remove_vertices
 
 __all__ = [
     "Mesh", "compact", "edges", "face_areas", "face_normals", "vertex_normals",
-    "to_o3d_cloud", "to_o3d_mesh", "read_obj", "write_obj",
+    "to_o3d_cloud", "to_o3d_mesh", "read_obj", "write_obj", "ply_vertex_count",
     "read_mesh", "read_ply", "write_colored_ply", "write_ply",
     "boundary_loops", "components", "edge_face_incidence", "fan_fill", "remove_vertices",
 ]

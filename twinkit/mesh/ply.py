@@ -361,3 +361,21 @@ def write_colored_ply(path: Path | str, vertices: np.ndarray, faces: np.ndarray,
     attrs.update(extra or {})
     write_ply(path, Mesh(vertices=vertices, faces=np.asarray(faces), attrs=attrs,
                          comments=[comment] if comment else []))
+
+
+def ply_vertex_count(path: Path | str) -> int:
+    """The vertex count a PLY's header declares, without reading the body (0 if it cannot be read).
+
+    Cheap enough to match per-vertex arrays (``labels.npy``) to a mesh before deciding to load it."""
+    try:
+        with open(path, "rb") as f:
+            for _ in range(200):
+                line = f.readline()
+                if not line or line.startswith(b"end_header"):
+                    break
+                t = line.split()
+                if len(t) == 3 and t[0] == b"element" and t[1] == b"vertex":
+                    return int(t[2])
+    except (OSError, ValueError):
+        pass
+    return 0

@@ -20,8 +20,8 @@ nothing for them. See docs/report.md.
 
 Modules: ``run`` (the run folder as read), ``page`` (layout and HTML helpers), ``context`` (what a
 section sees), ``sections`` (the core sections), ``render`` (top-down renderer and orthophotos),
-``viewer`` (three.js bundle and the 3D view), ``sweep`` (multirun summary), ``_meshbridge`` (PLY reader,
-GLB writer).
+``viewer`` (three.js bundle and the 3D view), ``sweep`` (multirun summary). Meshes are read and the
+3D view's GLB written with the shared library (``twinkit.mesh``), like everywhere else.
 """
 from __future__ import annotations
 

@@ -13,11 +13,12 @@ import json
 import logging
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from twinkit.report._meshbridge import Mesh, ply_vertex_count, read_ply
+from twinkit.mesh import ply_vertex_count, read_ply
 from twinkit.report.page import palette
 from twinkit.report.run import RunView, link_or_copy, touch, write_text
 
@@ -60,6 +61,25 @@ out vec4 frag;
 void main() { frag = vec4(flat_shade == 1 ? f_col : v_col, 1.0); }
 """
 
+
+
+@dataclass
+class ViewMesh:
+    """What the pictures and the 3D view need of a mesh: ``xyz`` (n, 3) float64 site frame, ``faces`` (m, 3)
+    (empty for a cloud), ``colors`` (n, 3) uint8 or None, ``labels`` (n,) uint8 trainIds from a vertex
+    ``label`` property or None."""
+
+    xyz: np.ndarray
+    faces: np.ndarray
+    colors: np.ndarray | None
+    labels: np.ndarray | None
+
+    @classmethod
+    def read(cls, path: Path) -> "ViewMesh":
+        m = read_ply(path)
+        faces = m.faces if m.faces is not None else np.zeros((0, 3), np.int64)
+        labels = np.asarray(m.attrs["label"]).astype(np.uint8) if "label" in m.attrs else None
+        return cls(m.vertices, faces, m.colors, labels)
 
 def _gl_context():
     if "ctx" not in _GL:
@@ -175,18 +195,18 @@ class TopDown:
         self.run, self.out = run, out
         self.img = out / "img"
         self.frame: dict | None = None
-        self.mesh: Mesh | None = None
+        self.mesh: ViewMesh | None = None
         self.mesh_key = ""
         self.timings: dict[str, float] = {}
 
-    def _mesh(self) -> Mesh | None:
+    def _mesh(self) -> ViewMesh | None:
         if self.mesh is None:
             hit = mesh_for_ortho(self.run)
             if hit is None:
                 return None
             s, f = hit
             t = time.perf_counter()
-            self.mesh = read_ply(f)
+            self.mesh = ViewMesh.read(f)
             self.mesh_src = f
             self.mesh_key = self.run.key_of(s, f)
             self.timings["read_mesh_s"] = round(time.perf_counter() - t, 3)

@@ -12,7 +12,8 @@ import shutil
 import time
 from pathlib import Path
 
-from twinkit.report._meshbridge import decimate, ply_vertex_count, write_glb
+from twinkit.mesh import ply_vertex_count
+from twinkit.mesh.glb import decimate, write_colored_glb
 from twinkit.report.page import ASSETS, esc, palette, size
 from twinkit.report.render import RENDER_VERSION, TopDown, labels_for, mesh_for_ortho
 from twinkit.report.run import RunView, link_or_copy, read_json, rel, touch
@@ -233,7 +234,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
             xyz, faces, near = decimate(mesh.xyz, mesh.faces, VIEWER_MAX_FACES)
             cols = mesh.colors[near] if mesh.colors is not None else None
             seg = palette()[labels[near]] if labels is not None else None
-            write_glb(cached, xyz, faces, cols, seg)
+            write_colored_glb(cached, xyz, faces, cols, seg)
             pics.timings["glb_s"] = round(time.perf_counter() - t, 3)
         else:
             touch(cached)
