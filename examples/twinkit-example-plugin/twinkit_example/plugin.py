@@ -6,7 +6,7 @@ gets a section with the number of points each export wrote.
 from dataclasses import dataclass
 from pathlib import Path
 
-from twinkit import InputError, StepContext, hookimpl
+from twinkit import StepContext, hookimpl
 
 
 @dataclass
@@ -18,13 +18,9 @@ class XyzParams:
 def export_xyz(params: XyzParams, ctx: StepContext, *, in_mesh_ply: Path, out_points_xyz: Path) -> dict:
     """Write the vertices of ``mesh.ply`` as ``points.xyz``."""
     import numpy as np
-    from plyfile import PlyData
+    from twinkit.mesh import read_mesh  # twinkit's PLY reader: an InputError naming the file if unreadable
 
-    try:
-        vertex = PlyData.read(str(in_mesh_ply))["vertex"]
-    except Exception as exc:
-        raise InputError(f"{in_mesh_ply}: not a readable PLY mesh ({exc}); re-export it from the previous step")
-    xyz = np.column_stack([vertex["x"], vertex["y"], vertex["z"]]).astype(np.float64)
+    xyz = read_mesh(in_mesh_ply).vertices  # (n, 3) float64
     xyz[:, 2] += params.offset_m
     np.savetxt(out_points_xyz, xyz, fmt=f"%.{params.decimals}f")
     ctx.log.info("wrote %d points to %s", len(xyz), out_points_xyz.name)

@@ -72,69 +72,37 @@ def write_obj(path: Path, mesh: Mesh, atlas: Atlas) -> None:
 
 
 def write_mesh_ply(path: Path, mesh: Mesh, atlas: Atlas) -> None:
-    """Binary PLY: vertex x y z (float32) u v red green blue label; face vertex_indices label.
+    """Binary PLY (twinkit.mesh.write_ply): vertex x y z (float32) u v red green blue label;
+    face vertex_indices label.
 
     Face order equals the OBJ's (grouped by class); vertex colours are the texture at the vertex UV.
     """
+    from twinkit.mesh import Mesh as PlyMesh, write_ply
+
     col = np.clip(atlas.sample(mesh.uvs) * 255 + 0.5, 0, 255).astype(np.uint8)
-    vdt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("u", "<f4"), ("v", "<f4"),
-                    ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("label", "u1")])
-    va = np.empty(len(mesh.vertices), vdt)
-    for i, k in enumerate("xyz"):
-        va[k] = mesh.vertices[:, i]
-    va["u"], va["v"] = mesh.uvs[:, 0], mesh.uvs[:, 1]
-    va["red"], va["green"], va["blue"] = col[:, 0], col[:, 1], col[:, 2]
-    va["label"] = mesh.vertex_labels
+    uv = np.asarray(mesh.uvs).astype(np.float32)
     order = _face_order(mesh)
-    fdt = np.dtype([("n", "u1"), ("i", "<i4", (3,)), ("label", "u1")])
-    fa = np.empty(len(order), fdt)
-    fa["n"] = 3
-    fa["i"] = mesh.faces[order]
-    fa["label"] = mesh.face_labels[order]
-    header = (
-        "ply\nformat binary_little_endian 1.0\n"
-        "comment twinkit demo site ground truth, site frame (metres, z up); label = CityScapes trainId\n"
-        f"element vertex {len(va)}\n"
-        "property float x\nproperty float y\nproperty float z\nproperty float u\nproperty float v\n"
-        "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar label\n"
-        f"element face {len(fa)}\nproperty list uchar int vertex_indices\nproperty uchar label\nend_header\n"
-    )
-    with open(path, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        fh.write(va.tobytes())
-        fh.write(fa.tobytes())
+    write_ply(path, PlyMesh(
+        vertices=mesh.vertices, faces=mesh.faces[order],
+        attrs={"u": uv[:, 0], "v": uv[:, 1], "colors": col, "label": mesh.vertex_labels.astype(np.uint8, copy=False)},
+        face_attrs={"label": mesh.face_labels[order].astype(np.uint8, copy=False)},
+        comments=["twinkit demo site ground truth, site frame (metres, z up); label = CityScapes trainId"]))
 
 
 # ---------------------------------------------------------------- point cloud
-CLOUD_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
-                        ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("label", "u1"), ("scanner", "<u4")])
-
-
 def write_cloud_ply(path: Path, cloud: dict) -> None:
-    """Binary PLY point cloud in the site frame; written in slices to bound memory."""
-    n = len(cloud["xyz"])
-    header = (
-        "ply\nformat binary_little_endian 1.0\n"
-        "comment twinkit demo site point cloud, site frame (metres, z up)\n"
-        "comment label = CityScapes trainId (11 = ghost points of a passing pedestrian); scanner = index into scanners.json\n"
-        f"element vertex {n}\n"
-        "property float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
-        "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar label\nproperty uint scanner\nend_header\n"
-    )
-    with open(path, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        for a in range(0, n, SLICE):
-            b = min(n, a + SLICE)
-            s = np.empty(b - a, CLOUD_DTYPE)
-            for i, k in enumerate("xyz"):
-                s[k] = cloud["xyz"][a:b, i]
-            for i, k in enumerate(("nx", "ny", "nz")):
-                s[k] = cloud["normals"][a:b, i]
-            for i, k in enumerate(("red", "green", "blue")):
-                s[k] = cloud["rgb"][a:b, i]
-            s["label"] = cloud["label"][a:b]
-            s["scanner"] = cloud["scanner"][a:b]
-            fh.write(s.tobytes())
+    """Binary PLY point cloud in the site frame (twinkit.mesh.write_ply; vertex rows written in slices):
+    x y z nx ny nz (float32) red green blue label (uchar) scanner (uint)."""
+    from twinkit.mesh import Mesh as PlyMesh, write_ply
+
+    write_ply(path, PlyMesh(
+        vertices=cloud["xyz"],
+        attrs={"normals": cloud["normals"], "colors": cloud["rgb"],
+               "label": np.asarray(cloud["label"]).astype(np.uint8, copy=False),
+               "scanner": np.asarray(cloud["scanner"]).astype(np.uint32, copy=False)},
+        comments=["twinkit demo site point cloud, site frame (metres, z up)",
+                  "label = CityScapes trainId (11 = ghost points of a passing pedestrian); "
+                  "scanner = index into scanners.json"]))
 
 
 ASPRS = {0: 11, 1: 2, 9: 2, 2: 6, 8: 5}  # trainId -> ASPRS class (road surface, ground, building, high vegetation)

@@ -121,7 +121,7 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     clean, mesh compared with gt_mesh.ply. Isolates the CPU stereo from the structure from motion."""
     import numpy as np
     import open3d as o3d
-    from plyfile import PlyData
+    from twinkit.mesh import read_ply
     from twinkit.testing import run_plugin
     import twinkit_photo.plugin as photo
 
@@ -134,8 +134,7 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     work = out / "dense_true"
     work.mkdir(parents=True, exist_ok=True)
     (work / "cameras_site.json").write_text(json.dumps({"cameras": cams}))
-    v = PlyData.read(str(site_dir / "cloud.ply"))["vertex"]
-    sparse = np.column_stack([v["x"], v["y"], v["z"]])[::300]  # stands in for SfM points (depth ranges only)
+    sparse = read_ply(site_dir / "cloud.ply").vertices[::300]  # stands in for SfM points (depth ranges only)
     photo._write_cloud(work / "sparse_site.ply", sparse)
     np.savez_compressed(work / "sparse_site.npz", vis_image=np.array([], str), vis_point=np.array([], np.int64))
     rows = []
@@ -158,8 +157,7 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     gt = o3d.io.read_triangle_mesh(str(site_dir / "gt_mesh.ply"))
     sc = o3d.t.geometry.RaycastingScene()
     sc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(gt))
-    pts = PlyData.read(str(d["points.ply"]))["vertex"]
-    P = np.column_stack([pts["x"], pts["y"], pts["z"]]).astype(np.float32)
+    P = read_ply(d["points.ply"]).vertices.astype(np.float32)
     mesh = o3d.io.read_triangle_mesh(str(c["clean_mesh.ply"]))
     V = np.asarray(mesh.vertices, np.float32)
     dp = sc.compute_distance(o3d.core.Tensor(P)).numpy()

@@ -102,10 +102,9 @@ def test_demo_photos_register_and_georeference_within_5cm(tmp_path, monkeypatch)
     meta = json.loads(dres["points_meta.json"].read_text())
     assert meta["dense"]["backend"] == "patchmatch" and meta["dense"]["depth_maps"] == 40
     import open3d as o3d
-    from plyfile import PlyData
+    from twinkit.mesh import read_ply
 
-    v = PlyData.read(str(dres["points.ply"]))["vertex"]
-    P = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float32)
+    P = read_ply(dres["points.ply"]).vertices.astype(np.float32)
     assert len(P) > 5000
     gt = o3d.t.geometry.RaycastingScene()
     gt.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(o3d.io.read_triangle_mesh(str(site / "gt_mesh.ply"))))

@@ -70,14 +70,11 @@ def colmap_dense(sfm_dir: Path, scale: float, R: np.ndarray, t: np.ndarray, phot
     fo.num_threads = int(threads)
     fused_ply = work / "fused.ply"
     pycolmap.stereo_fusion(str(fused_ply), str(mvs), options=fo, output_type="PLY")
-    from plyfile import PlyData
+    from twinkit.mesh import read_ply
 
-    v = PlyData.read(str(fused_ply))["vertex"]
-    xyz = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
-    names = v.data.dtype.names
-    nrm = (np.column_stack([v["nx"], v["ny"], v["nz"]]).astype(np.float64) if "nx" in names
-           else np.zeros_like(xyz))
-    rgb = (np.column_stack([v["red"], v["green"], v["blue"]]).astype(np.uint8) if "red" in names
-           else np.full((len(xyz), 3), 128, np.uint8))
+    fused = read_ply(fused_ply)
+    xyz = fused.vertices
+    nrm = fused.normals.astype(np.float64) if fused.normals is not None else np.zeros_like(xyz)
+    rgb = fused.colors if fused.colors is not None else np.full((len(xyz), 3), 128, np.uint8)
     maps = sorted((mvs / "stereo" / "depth_maps").glob("*.geometric.bin"))
     return xyz, rgb, nrm, {"backend": "patchmatch", "depth_maps": len(maps), "fused": int(len(xyz))}

@@ -1,5 +1,5 @@
 """Point cloud readers: E57 (libe57 through pye57, incl. the ``nor:`` normals extension and
-several posed scans), LAS/LAZ (laspy + lazrs), PLY (plyfile).
+several posed scans), LAS/LAZ (laspy + lazrs), PLY (:func:`twinkit.mesh.read_ply`).
 
 Every reader returns a :class:`RawCloud` in the file's own coordinates (float64); call
 :func:`load_cloud` to also validate it and bring it into the site frame
@@ -307,8 +307,6 @@ def read_ply_cloud(path: Path) -> RawCloud:
     except Exception as exc:
         raise _input_error(f"{path.name}: not a readable PLY file ({type(exc).__name__}: {exc}); "
                            f"the file is corrupt or truncated - export it again") from exc
-    from plyfile import PlyData
-
     a = dict(m.attrs)
     normals = a.pop("normals", None)
     colors = a.pop("colors", None)
@@ -324,7 +322,8 @@ def read_ply_cloud(path: Path) -> RawCloud:
             break
     scanner = np.asarray(a.pop("scanner")).astype(np.int32) if "scanner" in a else None
     fields = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals is not None else []) + \
-             (["red", "green", "blue"] if colors is not None else []) + list(m.attrs.keys() - {"normals", "colors"})
+             (["red", "green", "blue"] if colors is not None else []) + \
+             [k for k in m.attrs if k not in ("normals", "colors")]  # the file's order
     if normals is not None:
         ln = np.linalg.norm(normals, axis=1, keepdims=True)
         ok = ln[:, 0] > 1e-12

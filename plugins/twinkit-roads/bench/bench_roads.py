@@ -82,17 +82,17 @@ def bench_alignment(demo: Path | None, tmp: Path) -> None:
     print("| road surface from | lane centre-line RMSE before (m) | after (m) | fit residual (m) | yaw (deg) | "
           "tx, ty (m) | align s |")
     print("|---|---|---|---|---|---|---|")
-    from plyfile import PlyData
     from scipy.spatial import cKDTree
+    from twinkit.mesh import read_ply
 
-    g = PlyData.read(str(gt))["vertex"]
-    gv = np.column_stack([g["x"], g["y"], g["z"]])
+    g = read_ply(gt)
+    gv, glab = g.vertices, np.asarray(g.attrs["label"]).astype(np.uint8)
     from twinkit_roads.mesh2d import read_mesh
 
     mv = read_mesh(mesh).v
-    labels = np.asarray(g["label"])[cKDTree(gv).query(mv)[1]].astype(np.uint8)
+    labels = glab[cKDTree(gv).query(mv)[1]]
     np.save(tmp / "labels.npy", labels)
-    np.save(tmp / "gt_labels.npy", np.asarray(g["label"]).astype(np.uint8))
+    np.save(tmp / "gt_labels.npy", glab)
     cases = [("reconstructed mesh, labels (ground truth transferred to it)", mesh, tmp / "labels.npy"),
              ("reconstructed mesh, ground (no segmentation)", mesh, None),
              ("ground-truth mesh, its labels (clean curbs: the method's own precision)", gt, tmp / "gt_labels.npy")]

@@ -91,9 +91,9 @@ def test_alignment_recovers_the_known_shift_on_the_demo(demo_site, demo_net, tmp
     mesh = demo_site["gt_mesh.ply"]
     inputs = {"in_roads_xodr": xodr, "in_textured_mesh_ply": mesh}
     if use_labels:
-        from plyfile import PlyData
+        from twinkit.mesh import read_ply
 
-        np.save(tmp_path / "labels.npy", np.asarray(PlyData.read(str(mesh))["vertex"]["label"]).astype(np.uint8))
+        np.save(tmp_path / "labels.npy", np.asarray(read_ply(mesh).attrs["label"]).astype(np.uint8))
         inputs["in_labels_npy"] = tmp_path / "labels.npy"
     al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp_path / "al", inputs, site=DEMO_SITE)
     a = json.loads(al["alignment.json"].read_text())

@@ -20,39 +20,21 @@ class Mesh:
 
 
 def read_mesh(path: Path) -> Mesh:
-    """PLY mesh in the site frame; open3d when it suffices (fast), plyfile when vertices carry labels."""
+    """PLY mesh in the site frame (twinkit.mesh.read_ply): vertices, triangles, colours and the
+    per-vertex ``label`` when the file has one."""
+    from twinkit.mesh import read_ply
+
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: mesh not found")
-    with open(path, "rb") as fh:
-        head = fh.read(4096).split(b"end_header")[0]
-    if b"label" not in head:
-        try:
-            import open3d as o3d
-
-            tm = o3d.io.read_triangle_mesh(str(path))
-            v = np.asarray(tm.vertices, np.float64)
-            f = np.asarray(tm.triangles, np.int64)
-            if len(v) and len(f):
-                rgb = (np.clip(np.asarray(tm.vertex_colors), 0, 1) * 255 + 0.5).astype(np.uint8) if tm.has_vertex_colors() else None
-                return Mesh(v, f, rgb, None)
-        except ImportError:
-            pass
-    from plyfile import PlyData
-
     try:
-        ply = PlyData.read(str(path))
-        vert = ply["vertex"]
-        face = ply["face"]
+        m = read_ply(path)
     except Exception as exc:  # noqa: BLE001
         raise InputError(f"{path}: not a readable PLY mesh ({exc})") from None
-    v = np.column_stack([vert["x"], vert["y"], vert["z"]]).astype(np.float64)
-    names = vert.data.dtype.names
-    rgb = np.column_stack([vert["red"], vert["green"], vert["blue"]]).astype(np.uint8) if "red" in names else None
-    vlabel = np.asarray(vert["label"]).astype(np.int32) if "label" in names else None
-    fi = face.data.dtype.names[0]
-    f = np.vstack([np.asarray(x, dtype=np.int64)[:3] for x in face[fi]]) if len(face[fi]) else np.zeros((0, 3), int)
-    return Mesh(v, f, rgb, vlabel)
+    if m.faces is None:
+        raise InputError(f"{path}: not a readable PLY mesh (no face element)")
+    vlabel = np.asarray(m.attrs["label"]).astype(np.int32) if "label" in m.attrs else None
+    return Mesh(m.vertices, m.faces, m.colors, vlabel)
 
 
 @dataclass

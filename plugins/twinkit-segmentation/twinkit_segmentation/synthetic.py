@@ -80,7 +80,8 @@ def street_scene(step=0.5):
 def write_scene(folder: Path, step=0.5):
     """textured_mesh.ply (+ .png) and gt_mesh.ply of :func:`street_scene` into ``folder``."""
     from PIL import Image
-    from plyfile import PlyData, PlyElement
+
+    from twinkit.mesh import Mesh, write_ply
 
     folder.mkdir(parents=True, exist_ok=True)
     v, f, n, flab = street_scene(step)
@@ -100,22 +101,11 @@ def write_scene(folder: Path, step=0.5):
     vlab = np.zeros(len(v), np.uint8)
     vlab[f.reshape(-1)] = np.repeat(flab, 3)
     vcol = np.array([CLASS_RGB[int(c)] for c in vlab], np.uint8)
-    vert = np.empty(len(v), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("nx", "f4"), ("ny", "f4"), ("nz", "f4"),
-                                   ("red", "u1"), ("green", "u1"), ("blue", "u1")])
-    for i, k in enumerate("xyz"):
-        vert[k] = v[:, i]
-        vert["n" + k] = n[:, i]
-    vert["red"], vert["green"], vert["blue"] = vcol.T
-    face = np.empty(len(f), dtype=[("vertex_indices", "i4", (3,)), ("texcoord", "f4", (6,))])
-    face["vertex_indices"], face["texcoord"] = f, uv.reshape(-1, 6)
-    PlyData([PlyElement.describe(vert, "vertex"), PlyElement.describe(face, "face")], byte_order="<",
-            comments=["TextureFile textured_mesh.png"]).write(str(folder / "textured_mesh.ply"))
-    gv = np.empty(len(v), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("label", "u1")])
-    gv["x"], gv["y"], gv["z"], gv["label"] = v[:, 0], v[:, 1], v[:, 2], vlab
-    gf = np.empty(len(f), dtype=[("vertex_indices", "i4", (3,)), ("label", "u1")])
-    gf["vertex_indices"], gf["label"] = f, flab
-    PlyData([PlyElement.describe(gv, "vertex"), PlyElement.describe(gf, "face")], byte_order="<").write(
-        str(folder / "gt_mesh.ply"))
+    write_ply(folder / "textured_mesh.ply", Mesh(
+        vertices=v, faces=f, attrs={"normals": n, "colors": vcol},
+        face_attrs={"texcoord": uv.reshape(-1, 6)}, comments=["TextureFile textured_mesh.png"]))
+    write_ply(folder / "gt_mesh.ply", Mesh(vertices=v, faces=f, attrs={"label": vlab},
+                                           face_attrs={"label": np.asarray(flab, np.uint8)}))
     return folder / "textured_mesh.ply", folder / "gt_mesh.ply", vlab
 
 
