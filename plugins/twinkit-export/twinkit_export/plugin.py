@@ -209,6 +209,9 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
     (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     ctx.log.info("split %d vertices / %d faces into %d classes (%d border copies)", res.stats["source_vertices"],
                  res.stats["source_faces"], len(classes), res.stats["border_copies"])
+    ctx.log.info("dropped before the split: %d degenerate faces, %d duplicate faces (%d of them back-to-back)",
+                 res.stats["degenerate_faces_dropped"], res.stats["duplicate_faces_dropped"],
+                 res.stats["back_to_back_faces_dropped"])
     return {**res.stats, "read_s": round(t_read, 2), "total_s": round(time.perf_counter() - t0, 2),
             "per_class": {c["name"]: {"vertices": c["vertices"], "own": c["own_vertices"], "faces": c["faces"]}
                           for c in classes}}
