@@ -149,6 +149,75 @@ def test_usd_round_trip(usd_out, class_dir):
     assert asset.resolvedPath and Path(asset.resolvedPath).exists()
 
 
+def test_usd_colliders_on_static_classes_only(usd_out, class_dir):
+    """Isaac Sim / PhysX collide with prims that have PhysicsCollisionAPI; a static triangle mesh needs
+    MeshCollisionAPI with approximation "none" (the mesh itself). Movable classes get none."""
+    from pxr import Usd, UsdPhysics
+
+    cs = load_class_set(class_dir)
+    stage = Usd.Stage.Open(str(usd_out))
+    got = {}
+    for m in cs.meshes:
+        prim = stage.GetPrimAtPath(f"/Site/{m.name}")
+        has = prim.HasAPI(UsdPhysics.CollisionAPI)
+        got[m.name] = has
+        if has:
+            assert prim.HasAPI(UsdPhysics.MeshCollisionAPI)
+            assert UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr().Get() == "none"
+            assert UsdPhysics.CollisionAPI(prim).GetCollisionEnabledAttr().Get() is True
+    # the test street has road, sidewalk, terrain, building, pole (static) and a car (movable)
+    assert {k for k, v in got.items() if v} >= {"Road_Road", "Road_Sidewalk", "Terrain", "Building", "Pole"}
+    assert got["Car"] is False and got.get("Unlabeled", False) is False
+    # a stage without colliders when asked
+    from twinkit_export.usd import write_usd
+
+    bare = usd_out.parent / "bare.usda"
+    write_usd(cs.meshes, None, bare, {}, colliders=False, old_semantics=False, geo_schemas=False)
+    st2 = Usd.Stage.Open(str(bare))
+    assert not any(p.HasAPI(UsdPhysics.CollisionAPI) for p in st2.Traverse())
+    assert not st2.GetPrimAtPath("/CesiumGeoreference")
+
+
+def _authored_api_schemas(prim) -> list[str]:
+    # GetAppliedSchemas() lists only schemas this usd-core knows; Isaac's and Omniverse's are not among them
+    return list(prim.GetMetadata("apiSchemas").GetAddedOrExplicitItems())
+
+
+def test_usd_labels_for_current_and_older_isaac_semantics(usd_out, class_dir):
+    from pxr import Usd, UsdSemantics
+
+    cs = load_class_set(class_dir)
+    stage = Usd.Stage.Open(str(usd_out))
+    for m in cs.meshes:
+        prim = stage.GetPrimAtPath(f"/Site/{m.name}")
+        name = BY_ID[m.class_id].name
+        assert list(UsdSemantics.LabelsAPI(prim, "class").GetLabelsAttr().Get()) == [name]
+        # the older schema: multiple-apply SemanticsAPI, instance "Semantics" (Isaac's add_update_semantics)
+        assert "SemanticsAPI:Semantics" in _authored_api_schemas(prim)
+        assert prim.GetAttribute("semantic:Semantics:params:semanticType").Get() == "class"
+        assert prim.GetAttribute("semantic:Semantics:params:semanticData").Get() == name
+
+
+def test_usd_georeference_for_omniverse_and_cesium(usd_out):
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(usd_out))
+    site = stage.GetDefaultPrim()
+    assert "OmniWGS84ReferencePositionAPI" in _authored_api_schemas(site)
+    lat, lon, h = site.GetAttribute("omni:geospatial:wgs84:reference:referencePosition").Get()  # lat first
+    assert (lat, lon, h) == pytest.approx((60.16945, 24.93365, 12.0))
+    assert site.GetAttribute("omni:geospatial:wgs84:reference:tangentPlane").Get() == "ENU"
+    cg = stage.GetPrimAtPath("/CesiumGeoreference")
+    assert cg.GetTypeName() == "CesiumGeoreferencePrim"
+    assert cg.GetAttribute("cesium:georeferenceOrigin:latitude").Get() == pytest.approx(60.16945)
+    assert cg.GetAttribute("cesium:georeferenceOrigin:longitude").Get() == pytest.approx(24.93365)
+    assert cg.GetAttribute("cesium:georeferenceOrigin:height").Get() == pytest.approx(12.0)
+    geo = stage.GetRootLayer().customLayerData["twinkit:georeference"]
+    # the exact CRS stays, and what an ENU consumer misses is stated: TM35FIN's grid convergence at 24.93 E
+    assert geo["crs"] == "EPSG:3067" and geo["grid_convergence_deg"] == pytest.approx(-1.79, abs=0.01)
+    assert "not converted" in geo["height_reference"]  # a 2D CRS: the height is the site's own
+
+
 # ----------------------------------------------------------------------------- glTF
 
 @pytest.fixture(scope="module")

@@ -46,6 +46,9 @@ class UsdParams:
 
     validate: bool = True  # run usd-core's validators; errors fail the step
     semantics_taxonomy: str = "class"  # instance name of SemanticsLabelsAPI (semantics:labels:<taxonomy>)
+    colliders: bool = True  # UsdPhysics collision (triangle mesh) on the static classes, not on movable ones
+    isaac_legacy_semantics: bool = True  # also the older Semantics schema (SemanticsAPI), read by Isaac Sim < 5.0
+    geo_schemas: bool = True  # georeference for consumers: Omniverse WGS84 reference position + Cesium origin
 
 
 @dataclass
@@ -259,9 +262,11 @@ def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path
         _link_or_copy(cs.texture, tex)
         tex_name = tex.name
     stats = write_usd(cs.meshes, tex_name, out, _georef(ctx, in_site_json),
-                      semantics_taxonomy=params.semantics_taxonomy)
+                      semantics_taxonomy=params.semantics_taxonomy, colliders=params.colliders,
+                      old_semantics=params.isaac_legacy_semantics, geo_schemas=params.geo_schemas)
     t_write = time.perf_counter() - t0
-    metrics = {"prims": list(stats), "usd_bytes": _size(out), "write_s": round(t_write, 2)}
+    metrics = {"prims": list(stats), "colliders": [k for k, v in stats.items() if v["collider"]],
+               "usd_bytes": _size(out), "write_s": round(t_write, 2)}
     if params.validate:
         rep = validation_report(out)
         metrics.update({"validation_errors": rep["errors"], "validation_warnings": rep["warnings"],
