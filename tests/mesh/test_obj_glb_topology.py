@@ -47,8 +47,9 @@ def test_colored_glb_layout(tmp_path):
     write_colored_glb(tmp_path / "v.glb", m.vertices, m.faces, m.colors, seg)
     doc, binary = _glb(tmp_path / "v.glb")
     attrs = doc["meshes"][0]["primitives"][0]["attributes"]
-    assert list(attrs) == ["POSITION", "COLOR_0", "_TEXCOLOR"]
-    acc = doc["accessors"][attrs["_TEXCOLOR"]]
+    # COLOR_0 = the texture colours (what any viewer draws), segmentation in _CLASS_COLOR (darkens nothing)
+    assert list(attrs) == ["POSITION", "COLOR_0", "_CLASS_COLOR"]
+    acc = doc["accessors"][attrs["COLOR_0"]]
     view = doc["bufferViews"][acc["bufferView"]]
     got = np.frombuffer(binary, "<u2", acc["count"] * 4, view["byteOffset"]).reshape(-1, 4)
     want = np.round(srgb_to_linear(m.colors).astype(np.float64) * 65535)
@@ -68,6 +69,8 @@ def test_textured_glb_splits_uv_seams(tmp_path):
     assert list(stats) == ["ground"] and stats["ground"]["vertices"] > m.n_vertices
     assert doc["asset"] == {"version": "2.0", "generator": "test", "extras": {"a": 1}}
     assert doc["nodes"] == [{"name": "ground", "mesh": 0, "extras": {"class_id": 1}}]
+    assert "COLOR_0" in doc["meshes"][0]["primitives"][0]["attributes"]  # given colours are appearance
+    assert "extensions" not in doc and len(doc["materials"]) == 1  # no variants unless asked
     cls = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["_CLASS_ID"]]
     assert doc["bufferViews"][cls["bufferView"]]["byteStride"] == 4
     trimesh = pytest.importorskip("trimesh")

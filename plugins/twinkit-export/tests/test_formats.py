@@ -255,7 +255,9 @@ def test_glb_round_trip(glb_out, class_dir):
         assert node.extras["class_id"] == m.class_id
         prim = g.meshes[node.mesh].primitives[0]
         pos = _accessor(g, blob, prim.attributes.POSITION)
-        col = _accessor(g, blob, prim.attributes.COLOR_0)
+        # no COLOR_0: it would multiply (darken) the photo texture in every viewer
+        assert prim.attributes.COLOR_0 is None
+        col = _accessor(g, blob, getattr(prim.attributes, "_CLASS_COLOR"))
         cls = _accessor(g, blob, getattr(prim.attributes, "_CLASS_ID")).ravel()
         uv = _accessor(g, blob, prim.attributes.TEXCOORD_0)
         idx = _accessor(g, blob, prim.indices).ravel()
@@ -274,6 +276,18 @@ def test_glb_round_trip(glb_out, class_dir):
         assert col.dtype == np.float32 and 0 <= col.min() and col.max() <= 1
     mat = g.materials[0]
     assert mat.pbrMetallicRoughness.baseColorTexture.index == 0
+    assert mat.pbrMetallicRoughness.baseColorFactor in (None, [1, 1, 1, 1])  # the texture as it is
+    # KHR_materials_variants: "photo" = the texture material, "segmentation" = flat palette colour per class
+    assert [v["name"] for v in g.extensions["KHR_materials_variants"]["variants"]] == ["photo", "segmentation"]
+    assert "KHR_materials_variants" in g.extensionsUsed and "KHR_materials_variants" not in (g.extensionsRequired or [])
+    for m in cs.meshes:
+        prim = g.meshes[nodes[m.name].mesh].primitives[0]
+        maps = {tuple(x["variants"]): x["material"] for x in prim.extensions["KHR_materials_variants"]["mappings"]}
+        assert prim.material == maps[(0,)] == 0
+        seg = g.materials[maps[(1,)]]
+        assert seg.pbrMetallicRoughness.baseColorTexture is None
+        np.testing.assert_allclose(seg.pbrMetallicRoughness.baseColorFactor[:3],
+                                   srgb_to_linear(np.array([BY_ID[m.class_id].color]))[0], atol=1e-6)
     img = g.images[0]
     bv = g.bufferViews[img.bufferView]
     im = Image.open(io.BytesIO(blob[bv.byteOffset: bv.byteOffset + bv.byteLength]))
@@ -300,4 +314,4 @@ def test_glb_passes_khronos_validator(glb_out, tmp_path):
     res = subprocess.run(["node", str(js), str(glb_out)], capture_output=True, text=True, timeout=120,
                          env={**os.environ, "NODE_PATH": str(base / "node_modules")})
     rep = json.loads(res.stdout)
-    assert rep["e"] == 0, rep
+    assert rep["e"] == 0 and rep["w"] == 0, rep

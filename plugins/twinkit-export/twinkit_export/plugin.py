@@ -58,6 +58,7 @@ class GltfParams:
     texture_format: str = "jpeg"  # jpeg (smaller, for the web) | png (lossless)
     jpeg_quality: int = 90
     unlit: bool = True  # KHR_materials_unlit: the texture already holds the captured light
+    variants: bool = True  # KHR_materials_variants: "photo" and "segmentation" (flat class colours)
 
 
 @dataclass
@@ -281,7 +282,7 @@ def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path
 
 def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Path, out_twin_glb: Path,
                 in_site_json: Path | None = None) -> dict:
-    """twin.glb: texture + CityScapes vertex colours (COLOR_0) + _CLASS_ID, one node per class."""
+    """twin.glb: the photo texture, segmentation in _CLASS_COLOR / _CLASS_ID and a material variant; node per class."""
     from .gltf import write_glb
 
     params = params or GltfParams()
@@ -290,7 +291,8 @@ def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Pa
     t0 = time.perf_counter()
     cs = _load_set(in_class_meshes_dir)
     stats = write_glb(cs.meshes, cs.texture, Path(out_twin_glb), _georef(ctx, in_site_json),
-                      texture_format=params.texture_format, jpeg_quality=params.jpeg_quality, unlit=params.unlit)
+                      texture_format=params.texture_format, jpeg_quality=params.jpeg_quality, unlit=params.unlit,
+                      variants=params.variants)
     return {"nodes": list(stats), "gltf_vertices": sum(s["vertices"] for s in stats.values()),
             "glb_bytes": _size(out_twin_glb), "seconds": round(time.perf_counter() - t0, 2)}
 
@@ -355,6 +357,6 @@ def twinkit_register_steps(register):
 def twinkit_register_exporters(register):
     register("fbx", export_fbx, params=FbxParams, description="FBX via Blender (bpy): CARLA names, metres, Z up")
     register("usd", export_usd, params=UsdParams, description="USD via usd-core: prims per class, semantics, geo")
-    register("gltf", export_gltf, params=GltfParams, description="GLB for browsers: texture + segmentation colours")
+    register("gltf", export_gltf, params=GltfParams, description="GLB for browsers: photo texture; segmentation as attribute and variant")
     register("carla_package", export_carla_package, params=CarlaPackageParams,
              description="CARLA 0.9.16 import package with OpenDRIVE and spawn points")
