@@ -315,3 +315,50 @@ def test_glb_passes_khronos_validator(glb_out, tmp_path):
                          env={**os.environ, "NODE_PATH": str(base / "node_modules")})
     rep = json.loads(res.stdout)
     assert rep["e"] == 0 and rep["w"] == 0, rep
+
+
+@pytest.fixture(scope="module")
+def artifacts_dir() -> Path:
+    """Pictures kept for a person to look at: $TWINKIT_TEST_ARTIFACTS/export (default build/test-artifacts)."""
+    base = os.environ.get("TWINKIT_TEST_ARTIFACTS") or Path(__file__).resolve().parents[3] / "build" / "test-artifacts"
+    d = Path(base) / "export"
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+@pytest.fixture(scope="module")
+def glb_driver():
+    from glb_render import start_driver
+
+    d = start_driver()
+    if isinstance(d, str):
+        pytest.skip(d)
+    yield d
+    d.quit()
+
+
+def test_glb_renders_as_bright_as_its_texture(glb_out, class_dir, glb_driver, tmp_path, artifacts_dir):
+    """three.js's GLTFLoader (a standard viewer) draws the exported GLB as bright as its texture alone;
+    the layout before (CityScapes palette in COLOR_0, which multiplies the texture) did not."""
+    from PIL import Image
+
+    from glb_render import brightness_ratio
+    from twinkit.mesh.glb import GlbPart, write_textured_glb
+
+    now = brightness_ratio(glb_driver, glb_out, tmp_path / "now")
+    img, ref = now.pop("images")
+    Image.fromarray(img).save(artifacts_dir / "glb_as_loaded.png")
+    Image.fromarray(ref).save(artifacts_dir / "glb_texture_only.png")
+    assert now["meshes"] == len(load_class_set(class_dir).meshes) and now["vertexColors"] == 0
+    assert now["basic"] == now["meshes"]  # KHR_materials_unlit: the texture as captured
+    assert now["covered_px"] > 10_000
+    assert now["ratio"] == pytest.approx(1.0, abs=0.02), now
+    assert now["px_off_by_more_than_8"] < 0.01, now
+    # the same class meshes written the old way: palette as COLOR_0
+    cs = load_class_set(class_dir)
+    old = tmp_path / "old.glb"
+    write_textured_glb(old, [GlbPart(m.name, m.vertices, m.faces, m.normals, m.corner_uv, m.colors)
+                             for m in cs.meshes], cs.texture, generator="old layout")
+    before = brightness_ratio(glb_driver, old, tmp_path / "old")
+    before.pop("images")
+    assert before["vertexColors"] == before["meshes"] and before["ratio"] < 0.8, before  # 0.59 on this street
