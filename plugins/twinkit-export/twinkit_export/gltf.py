@@ -8,7 +8,7 @@
   (the CityScapes palette of each vertex's own label, converted from sRGB to linear, float RGB) and
   _CLASS_ID (unsigned byte, each vertex's own label); vertices are split where UV charts meet (glTF
   has one UV per vertex). No COLOR_0: glTF multiplies the base colour by COLOR_0, so a palette
-  there darkened the photo texture in every standard viewer (to 11 % of its brightness on the demo);
+  there darkened the photo texture in every standard viewer (rendered at 37 % of its brightness on the demo);
 - one material with the texture as baseColorTexture (embedded, PNG or JPEG) and
   KHR_materials_unlit (the texture already holds the captured light);
 - KHR_materials_variants: "photo" (the texture, also the default) and "segmentation" (per class a
