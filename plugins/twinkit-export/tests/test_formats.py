@@ -13,6 +13,7 @@ import pytest
 from twinkit.testing import run_step
 
 from twinkit_export.classes import BY_ID, palette_lut
+from twinkit.mesh import bad_faces
 from twinkit.mesh.glb import srgb_to_linear
 from twinkit_export.split import load_class_set
 
@@ -50,6 +51,7 @@ def test_fbx_round_trip(fbx_out, class_dir, tmp_path):
         assert (n["num_vertices"], n["num_faces"]) == (m.n_vertices, m.n_faces), m.name
         assert n["scale"] == [1.0, 1.0, 1.0]
         np.testing.assert_allclose(np.array(n["positions"]), m.vertices, atol=1e-4)  # site frame, metres
+        assert not bad_faces(m.vertices, m.faces)[0].any()  # same counts as the clean class mesh: no twins
         got_uv = np.array(n["corner_uv"]).reshape(-1, 3, 2)
         np.testing.assert_allclose(got_uv, m.corner_uv, atol=1e-5)
         assert n["uv_sets"] == ["UVMap"]
@@ -129,6 +131,7 @@ def test_usd_round_trip(usd_out, class_dir):
         np.testing.assert_allclose(pts, m.vertices, atol=1e-4)
         idx = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
         np.testing.assert_array_equal(idx, m.faces)
+        assert not bad_faces(pts, idx)[0].any(), m.name  # the test street's twins and degenerates stay out
         pv = UsdGeom.PrimvarsAPI(prim)
         st = pv.GetPrimvar("st")
         assert st.GetInterpolation() == UsdGeom.Tokens.faceVarying
@@ -262,6 +265,9 @@ def test_glb_round_trip(glb_out, class_dir):
         uv = _accessor(g, blob, prim.attributes.TEXCOORD_0)
         idx = _accessor(g, blob, prim.indices).ravel()
         assert len(idx) == 3 * m.n_faces
+        # by position (glTF splits vertices at UV seams): no twin or degenerate face reached the GLB
+        upos, weld = np.unique(pos, axis=0, return_inverse=True)
+        assert not bad_faces(upos.astype(np.float64), weld.ravel()[idx].reshape(-1, 3))[0].any(), m.name
         # back to the site frame: glTF (x, y, z) = site (x, z, -y)
         site = np.column_stack([pos[:, 0], -pos[:, 2], pos[:, 1]])
         np.testing.assert_allclose(site[idx].reshape(-1, 3, 3), m.vertices[m.faces].astype(np.float32), atol=1e-4)
