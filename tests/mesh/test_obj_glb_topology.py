@@ -47,8 +47,9 @@ def test_colored_glb_layout(tmp_path):
     write_colored_glb(tmp_path / "v.glb", m.vertices, m.faces, m.colors, seg)
     doc, binary = _glb(tmp_path / "v.glb")
     attrs = doc["meshes"][0]["primitives"][0]["attributes"]
-    assert list(attrs) == ["POSITION", "COLOR_0", "_TEXCOLOR"]
-    acc = doc["accessors"][attrs["_TEXCOLOR"]]
+    # COLOR_0 = the texture colours (what any viewer draws), segmentation in _CLASS_COLOR (darkens nothing)
+    assert list(attrs) == ["POSITION", "COLOR_0", "_CLASS_COLOR"]
+    acc = doc["accessors"][attrs["COLOR_0"]]
     view = doc["bufferViews"][acc["bufferView"]]
     got = np.frombuffer(binary, "<u2", acc["count"] * 4, view["byteOffset"]).reshape(-1, 4)
     want = np.round(srgb_to_linear(m.colors).astype(np.float64) * 65535)
@@ -68,6 +69,8 @@ def test_textured_glb_splits_uv_seams(tmp_path):
     assert list(stats) == ["ground"] and stats["ground"]["vertices"] > m.n_vertices
     assert doc["asset"] == {"version": "2.0", "generator": "test", "extras": {"a": 1}}
     assert doc["nodes"] == [{"name": "ground", "mesh": 0, "extras": {"class_id": 1}}]
+    assert "COLOR_0" in doc["meshes"][0]["primitives"][0]["attributes"]  # given colours are appearance
+    assert "extensions" not in doc and len(doc["materials"]) == 1  # no variants unless asked
     cls = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["_CLASS_ID"]]
     assert doc["bufferViews"][cls["bufferView"]]["byteStride"] == 4
     trimesh = pytest.importorskip("trimesh")
@@ -88,3 +91,28 @@ def test_topology_components_loops_fan():
     assert boundary_loops(closed.faces) == [] and closed.n_vertices == m.n_vertices + 2
     e = edges(m.faces, m.n_vertices)
     assert (e[:, 0] < e[:, 1]).all() and len(np.unique(e, axis=0)) == len(e)
+
+
+def test_bad_faces_duplicates_any_winding_and_degenerates():
+    from twinkit.mesh import bad_faces, drop_bad_faces
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [2, 0, 0]], float)
+    f = np.array([[0, 1, 2],   # kept
+                  [2, 1, 0],   # back-to-back twin of 0: dropped
+                  [1, 3, 2],   # up-facing: kept over its twin below although it comes later
+                  [1, 2, 3],   # down-facing twin of 2: dropped
+                  [0, 1, 4],   # collinear corners, zero area: degenerate
+                  [0, 0, 2],   # repeated vertex: degenerate
+                  [1, 2, 0]])  # same winding as 0, rotated: a plain duplicate
+    up = np.tile(np.float32([0, 0, 1]), (5, 1))
+    drop, n = bad_faces(v, f, up)
+    assert drop.tolist() == [False, True, False, True, True, True, True]
+    assert n == {"degenerate_faces": 2, "duplicate_faces": 3, "back_to_back_faces": 2}
+    # the vertex normals decide which twin stays: with down normals the down-facing one does
+    drop_dn, _ = bad_faces(v, f[[2, 3]], -up)
+    assert drop_dn.tolist() == [True, False]
+    m, counts = drop_bad_faces(Mesh(v, f, attrs={"normals": up}, face_attrs={"texcoord": np.arange(42.).reshape(7, 6)}))
+    assert m.faces.tolist() == [[0, 1, 2], [1, 3, 2]] and m.n_vertices == 5 and counts == n
+    assert m.face_attrs["texcoord"][:, 0].tolist() == [0, 12]
+    clean, none = drop_bad_faces(m)
+    assert clean is m and none == {"degenerate_faces": 0, "duplicate_faces": 0, "back_to_back_faces": 0}

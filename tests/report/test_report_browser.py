@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from tests.report.conftest import ROOT, open_report
 from twinkit import report as R
@@ -104,9 +105,9 @@ def _png_bytes(img: np.ndarray) -> bytes:
     return b.getvalue()
 
 
-def textured_glb(path: Path) -> None:
-    """A 20 m square with a black-and-white checker texture and red COLOR_0 (segmentation colours),
-    laid out as twinkit's export step writes them."""
+def textured_glb(path: Path, seg_attr: str = "_CLASS_COLOR") -> None:
+    """A 20 m square with a black-and-white checker texture and red segmentation colours in ``seg_attr``:
+    ``_CLASS_COLOR`` as twinkit's export step writes them, ``COLOR_0`` as it did before (still shown)."""
     pos = np.array([[-10, 0, -10], [10, 0, -10], [10, 0, 10], [-10, 0, 10]], "<f4")
     uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], "<f4")
     col = np.tile(np.array([[1.0, 0.0, 0.0, 1.0]], "<f4"), (4, 1))
@@ -126,7 +127,7 @@ def textured_glb(path: Path) -> None:
         off += len(arr) + pad
     gltf = {
         "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1, "COLOR_0": 2}, "indices": 3,
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1, seg_attr: 2}, "indices": 3,
                                     "material": 0}]}],
         "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0},
                        "doubleSided": True}],
@@ -148,10 +149,11 @@ def textured_glb(path: Path) -> None:
         f.write(struct.pack("<I4s", len(js), b"JSON") + js + struct.pack("<I4s", len(binary), b"BIN\0") + binary)
 
 
-def test_exported_glb_with_texture_and_segmentation_colours(browser, tmp_path, artifacts):
+@pytest.mark.parametrize("seg_attr", ["_CLASS_COLOR", "COLOR_0"])
+def test_exported_glb_with_texture_and_segmentation_colours(browser, tmp_path, artifacts, seg_attr):
     ws = tmp_path / "ws"
     (ws / "01_export").mkdir(parents=True)
-    textured_glb(ws / "01_export" / "twin.glb")
+    textured_glb(ws / "01_export" / "twin.glb", seg_attr)
     run = tmp_path / "run"
     run.mkdir()
     manifest = {"status": "ok", "steps": [{"id": "export", "folder": "01_export", "status": "ran", "why": "test",
@@ -161,11 +163,11 @@ def test_exported_glb_with_texture_and_segmentation_colours(browser, tmp_path, a
     assert page is not None and (page.parent / "viewer" / "model.glb").is_file()
     st = open_report(browser, page)
     assert st.get("ready") and st.get("seg") is True, st
-    tex = canvas_pixels(browser, artifacts / "glb_texture.png")
+    tex = canvas_pixels(browser, artifacts / f"glb_texture{seg_attr}.png")
     lum = tex.mean(-1)
     assert (lum < 40).mean() > 0.1 and (lum > 215).mean() > 0.1, "no checker texture"
     click_mode(browser, "segmentation")
-    seg = canvas_pixels(browser, artifacts / "glb_segmentation.png")
+    seg = canvas_pixels(browser, artifacts / f"glb_segmentation{seg_attr}.png")
     red = ((seg[..., 0] > 120) & (seg[..., 1] < 60) & (seg[..., 2] < 60)).mean()
     assert red > 0.2, f"only {red:.1%} red pixels in segmentation mode"
     assert severe_logs(browser) == []

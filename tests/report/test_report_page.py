@@ -144,7 +144,7 @@ def test_no_segmentation_yet_means_no_segmentation_toggle_data(demo_run):
     glb = demo_run.report.parent / "viewer" / "model.glb"
     gltf = read_glb_json(glb)
     attrs = gltf["meshes"][0]["primitives"][0]["attributes"]
-    assert "COLOR_0" in attrs and "_TEXCOLOR" not in attrs  # texture colours only
+    assert "COLOR_0" in attrs and "_CLASS_COLOR" not in attrs  # texture colours only
     assert not (demo_run.report.parent / "img" / "ortho_seg.png").exists()
 
 
@@ -220,7 +220,8 @@ def test_segmentation_orthophoto_uses_the_cityscapes_palette(future_run):
 def test_viewer_model_carries_both_colourings(future_run):
     gltf = read_glb_json(future_run.report.parent / "viewer" / "model.glb")
     attrs = gltf["meshes"][0]["primitives"][0]["attributes"]
-    assert {"POSITION", "COLOR_0", "_TEXCOLOR"} <= set(attrs)
+    # COLOR_0 = texture colours (what every viewer draws), _CLASS_COLOR = segmentation (darkens nothing)
+    assert {"POSITION", "COLOR_0", "_CLASS_COLOR"} <= set(attrs) and "_TEXCOLOR" not in attrs
 
 
 # --------------------------------------------------------------------------- pieces
@@ -254,8 +255,9 @@ def test_glb_writer_roundtrip(tmp_path):
     assert acc["min"] == [-1, 0, -1.5] and acc["max"] == [1, 1, 1.5]
     idx = g["accessors"][prim["indices"]]
     assert idx["count"] == 6 and idx["componentType"] == 5125
-    c0 = g["accessors"][prim["attributes"]["COLOR_0"]]
-    assert c0["normalized"] and c0["type"] == "VEC4"
+    for name in ("COLOR_0", "_CLASS_COLOR"):
+        c = g["accessors"][prim["attributes"][name]]
+        assert c["normalized"] and c["type"] == "VEC4"
     for v in g["bufferViews"]:
         assert v["byteOffset"] % 4 == 0
 

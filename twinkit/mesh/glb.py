@@ -3,11 +3,19 @@
 - :class:`GlbBuilder` packs arrays into the binary chunk (4-byte aligned buffer views, accessors)
   and writes the container (``glTF`` header, JSON chunk, BIN chunk; atomically through a temporary file);
 - :func:`write_textured_glb`: a scene of named, textured parts (the exporter's one node per class):
-  POSITION, NORMAL, TEXCOORD_0, COLOR_0 (linear float RGB) and extra unsigned-byte attributes,
+  POSITION, NORMAL, TEXCOORD_0, optionally COLOR_0 (appearance colours, linear float RGB),
+  application colour attributes (``_CLASS_COLOR``: linear float RGB) and unsigned-byte attributes,
   vertices split where UV charts meet (glTF has one UV per vertex), one material with the texture
-  embedded (JPEG or PNG) and optionally KHR_materials_unlit;
+  embedded (JPEG or PNG) and optionally KHR_materials_unlit, and optionally KHR_materials_variants
+  ("photo" = that material, "segmentation" = one flat, unlit material per part colour);
 - :func:`write_colored_glb`: one light vertex-coloured mesh (the report's 3D view), colours as
   normalised uint16 RGBA, centred on the site (origin in the node's extras).
+
+Colour convention of twinkit's GLBs: ``COLOR_0`` is appearance only (the texture colours, or absent),
+because glTF multiplies the base colour by ``COLOR_0`` and every standard viewer draws it so; the
+segmentation lives where it darkens nothing: the application attribute ``_CLASS_COLOR`` (the
+CityScapes palette of each vertex's own label, linear), ``_CLASS_ID``, and, in the export, the
+"segmentation" material variant.
 
 Axes: glTF is y up; site-frame points (x east, y north, z up, metres) become glTF (x, z, -y)
 (:func:`site_to_gltf`), a rotation, so viewers need no node transform; metres stay metres.
@@ -116,26 +124,40 @@ class GlbPart:
     """One node + mesh of :func:`write_textured_glb`.
 
     vertices (n, 3) float64 site frame; faces (m, 3) int; normals (n, 3); corner_uv (m, 3, 2)
-    (v up, OBJ convention); colors (n, 3) uint8 sRGB; ubyte_attrs: extra per-vertex (n,) uint8
-    attributes by glTF name (application names start with ``_``); extras: the node's ``extras``."""
+    (v up, OBJ convention); colors: (n, 3) uint8 sRGB appearance colours written as ``COLOR_0``
+    (which multiplies the texture in every viewer), or None for none; color_attrs: (n, 3) uint8 sRGB
+    colours by application attribute name (``_CLASS_COLOR``), written linear; ubyte_attrs: extra
+    per-vertex (n,) uint8 attributes by glTF name (application names start with ``_``); extras: the
+    node's ``extras``; variant_color: sRGB colour of this part's flat material in the
+    "segmentation" variant (with ``write_textured_glb(..., variants=True)``)."""
 
     name: str
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray
     corner_uv: np.ndarray
-    colors: np.ndarray
+    colors: np.ndarray | None = None
     ubyte_attrs: dict[str, np.ndarray] = field(default_factory=dict)
     extras: dict = field(default_factory=dict)
+    color_attrs: dict[str, np.ndarray] = field(default_factory=dict)
+    variant_color: tuple[int, int, int] | None = None
+
+
+VARIANTS = ("photo", "segmentation")
 
 
 def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str, asset_extras: dict | None = None,
-                       texture_format: str = "jpeg", jpeg_quality: int = 90, unlit: bool = True) -> dict:
+                       texture_format: str = "jpeg", jpeg_quality: int = 90, unlit: bool = True,
+                       variants: bool = False) -> dict:
     """Write ``out`` (.glb): one node per :class:`GlbPart` with faces (parts without faces are skipped),
     all sharing one material whose base colour is ``texture`` (embedded as JPEG or PNG).
+    With ``variants``, KHR_materials_variants offers "photo" (that material) and "segmentation"
+    (per part, a flat material of its ``variant_color``, unlit when ``unlit``).
     Returns per-part ``{"vertices", "faces"}`` counts after the UV split."""
     b = GlbBuilder()
     nodes, gl_meshes, stats = [], [], {}
+    seg_materials: dict[tuple, int] = {}  # variant colour -> material index (0 is the texture material)
+    materials_extra: list[dict] = []
     for part in parts:
         n_faces = int(len(part.faces))
         if n_faces == 0:
@@ -153,18 +175,34 @@ def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str
         nrm = np.where(ln > 0, nrm / np.where(ln > 0, ln, 1), np.array([0, 1, 0], np.float32)).astype(np.float32)
         uv = corner_uv[first].astype(np.float32).copy()
         uv[:, 1] = 1.0 - uv[:, 1]
-        col = srgb_to_linear(part.colors[src_v])
         attrs = {
             "POSITION": b.accessor(pos, FLOAT, "VEC3", minmax=True),
             "NORMAL": b.accessor(nrm, FLOAT, "VEC3"),
             "TEXCOORD_0": b.accessor(uv, FLOAT, "VEC2"),
-            "COLOR_0": b.accessor(col, FLOAT, "VEC3"),
         }
+        if part.colors is not None:
+            attrs["COLOR_0"] = b.accessor(srgb_to_linear(part.colors[src_v]), FLOAT, "VEC3")
+        for name, a in part.color_attrs.items():
+            attrs[name] = b.accessor(srgb_to_linear(np.asarray(a)[src_v]), FLOAT, "VEC3")
         for name, a in part.ubyte_attrs.items():
             attrs[name] = b.accessor(np.asarray(a)[src_v].astype(np.uint8), UBYTE, "SCALAR")
         ind = b.accessor(inv.astype(np.uint32), UINT, "SCALAR", target=ELEMENT_ARRAY_BUFFER)
-        gl_meshes.append({"name": part.name, "primitives": [{"attributes": attrs, "indices": ind, "material": 0,
-                                                             "mode": 4}]})
+        prim = {"attributes": attrs, "indices": ind, "material": 0, "mode": 4}
+        if variants:
+            key = tuple(int(c) for c in (part.variant_color or (128, 128, 128)))
+            if key not in seg_materials:
+                lin = [float(x) for x in _srgb_to_linear64(np.array([key]))[0]]
+                m = {"name": "M_segmentation_%02x%02x%02x" % key,
+                     "pbrMetallicRoughness": {"baseColorFactor": lin + [1.0], "metallicFactor": 0.0,
+                                              "roughnessFactor": 1.0}}
+                if unlit:
+                    m["extensions"] = {"KHR_materials_unlit": {}}
+                materials_extra.append(m)
+                seg_materials[key] = len(materials_extra)  # index after M_twinkit
+            prim["extensions"] = {"KHR_materials_variants": {"mappings": [
+                {"material": 0, "variants": [VARIANTS.index("photo")]},
+                {"material": seg_materials[key], "variants": [VARIANTS.index("segmentation")]}]}}
+        gl_meshes.append({"name": part.name, "primitives": [prim]})
         nodes.append({"name": part.name, "mesh": len(gl_meshes) - 1, "extras": part.extras})
         stats[part.name] = {"vertices": int(len(pos)), "faces": n_faces}
     material = {"name": "M_twinkit", "doubleSided": False,
@@ -180,8 +218,11 @@ def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str
         "asset": asset,
         "scene": 0,
         "scenes": [{"name": "Site", "nodes": list(range(len(nodes)))}],
-        "nodes": nodes, "meshes": gl_meshes, "materials": [material],
+        "nodes": nodes, "meshes": gl_meshes, "materials": [material] + materials_extra,
     }
+    if variants:
+        ext_used.append("KHR_materials_variants")
+        doc["extensions"] = {"KHR_materials_variants": {"variants": [{"name": v} for v in VARIANTS]}}
     if texture is not None:
         from PIL import Image
 
@@ -210,9 +251,10 @@ def write_colored_glb(path: Path, xyz: np.ndarray, faces: np.ndarray, colors: np
     that the site point (centre of the box in x, y; lowest z) is the origin (kept in the node's
     ``extras.site_origin_m``).
 
-    ``COLOR_0`` holds the segmentation colours ((n, 3) uint8 sRGB) when given (the convention of
-    twinkit's exported GLBs), else the texture colours; with both, the texture colours go to the
-    application attribute ``_TEXCOLOR``. Colours are stored linear (glTF), as normalised uint16 RGBA."""
+    ``COLOR_0`` holds the texture colours ``colors`` ((n, 3) uint8 sRGB), what any viewer shows; the
+    segmentation colours ``seg_colors`` go to the application attribute ``_CLASS_COLOR`` (the convention
+    of twinkit's exported GLBs), which darkens nothing. Colours are stored linear (glTF), as normalised
+    uint16 RGBA."""
     centre = (xyz.min(0) + xyz.max(0)) / 2
     centre[2] = xyz[:, 2].min()
     p = xyz - centre
@@ -225,12 +267,10 @@ def write_colored_glb(path: Path, xyz: np.ndarray, faces: np.ndarray, colors: np
 
     b = GlbBuilder()
     prim_attrs = {"POSITION": b.accessor(pos, FLOAT, "VEC3", minmax=True)}
-    if seg_colors is not None:
-        prim_attrs["COLOR_0"] = b.accessor(col(seg_colors), USHORT, "VEC4", normalized=True)
-        if colors is not None:
-            prim_attrs["_TEXCOLOR"] = b.accessor(col(colors), USHORT, "VEC4", normalized=True)
-    elif colors is not None:
+    if colors is not None:
         prim_attrs["COLOR_0"] = b.accessor(col(colors), USHORT, "VEC4", normalized=True)
+    if seg_colors is not None:
+        prim_attrs["_CLASS_COLOR"] = b.accessor(col(seg_colors), USHORT, "VEC4", normalized=True)
     idx = np.ascontiguousarray(faces, dtype="<u4").ravel()
     ind = b.accessor(idx, UINT, "SCALAR", target=ELEMENT_ARRAY_BUFFER)
     doc = {

@@ -103,3 +103,75 @@ def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute
     if recompute_normals and "normals" in out.attrs:
         out.attrs["normals"] = vertex_normals(out.vertices, out.faces)
     return out
+
+
+def bad_faces(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None,
+              min_area_m2: float = 1e-12) -> tuple[np.ndarray, dict]:
+    """Faces no exporter should get: (m,) bool mask of faces to drop, and the counts.
+
+    - *degenerate*: a vertex index repeated in the face, or an area of at most ``min_area_m2``
+      (collinear or coincident corners);
+    - *duplicate*: the same three vertices as an earlier-kept face, in any order (same winding
+      or reversed: back-to-back twins). Of each group one face is kept: the one whose face normal
+      agrees best with its corners' vertex ``normals`` when given (the side the surface faces),
+      else the first.
+
+    Counts: ``{"degenerate_faces", "duplicate_faces", "back_to_back_faces"}`` (back-to-back: the
+    dropped duplicates whose winding is reversed against the kept face; a subset of duplicates).
+    """
+    from .core import face_areas, face_normals
+
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    m = len(f)
+    drop = np.zeros(m, bool)
+    if m == 0:
+        return drop, {"degenerate_faces": 0, "duplicate_faces": 0, "back_to_back_faces": 0}
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    degenerate = repeated | (face_areas(vertices, f) <= min_area_m2)
+    drop |= degenerate
+    live = np.nonzero(~degenerate)[0]
+    srt = np.sort(f[live], axis=1)
+    _, inv, counts = np.unique(srt, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    n_dup = n_b2b = 0
+    if (counts > 1).any():
+        # preference of each face within its group: agreement of its normal with the vertex normals
+        if normals is not None:
+            fn = face_normals(vertices, f[live])
+            vn = np.asarray(normals, np.float64)[f[live]].sum(axis=1)
+            score = np.einsum("ij,ij->i", fn, vn)
+        else:
+            score = np.zeros(len(live))
+        # order: by group, best score first, then by position (stable: the first face wins ties)
+        order = np.lexsort((np.arange(len(live)), -score, inv))
+        g = inv[order]
+        first = np.ones(len(order), bool)
+        first[1:] = g[1:] != g[:-1]
+        keeper = np.empty(counts.size, np.int64)
+        keeper[g[first]] = order[first]
+        dup = order[~first]
+        drop[live[dup]] = True
+        n_dup = int(len(dup))
+        # reversed winding relative to the kept face: a cyclic rotation of the kept face's order cannot match
+        kept = f[live[keeper[inv[dup]]]]
+        mine = f[live[dup]]
+        same = np.zeros(len(dup), bool)
+        for r in range(3):
+            same |= (np.roll(kept, r, axis=1) == mine).all(axis=1)
+        n_b2b = int((~same).sum())
+    return drop, {"degenerate_faces": int(degenerate.sum()), "duplicate_faces": n_dup, "back_to_back_faces": n_b2b}
+
+
+def drop_bad_faces(mesh: Mesh, min_area_m2: float = 1e-12) -> tuple[Mesh, dict]:
+    """``mesh`` without its degenerate and duplicate faces (see :func:`bad_faces`); vertices are kept
+    (indices stay valid, so per-vertex data such as labels still lines up). Returns (mesh, counts)."""
+    if mesh.faces is None or len(mesh.faces) == 0:
+        return mesh, {"degenerate_faces": 0, "duplicate_faces": 0, "back_to_back_faces": 0}
+    drop, counts = bad_faces(mesh.vertices, mesh.faces, mesh.normals, min_area_m2)
+    if not drop.any():
+        return mesh, counts
+    keep = ~drop
+    out = Mesh(vertices=mesh.vertices, faces=mesh.faces[keep], attrs=dict(mesh.attrs),
+               face_attrs={k: v[keep] for k, v in mesh.face_attrs.items()}, comments=list(mesh.comments),
+               texture=mesh.texture)
+    return out, counts

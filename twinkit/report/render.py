@@ -25,7 +25,7 @@ from twinkit.report.run import RunView, link_or_copy, touch, write_text
 log = logging.getLogger("twinkit.report")
 
 #: bump when a cached picture or model would come out differently for the same inputs.
-RENDER_VERSION = "3"
+RENDER_VERSION = "4"
 ORTHO_PX = 2048            # long side of the orthophotos
 #: the mesh the orthophotos and the light 3D model show (first pattern that matches, latest step first)
 MESH_PATTERNS = ("textured_mesh.ply", "*textured*.ply", "*mesh*.ply")

@@ -1,8 +1,10 @@
 /* twinkit run report: the interactive 3D view.
  * Needs three-bundle.js (window.TWINKIT_THREE: three.js, GLTFLoader, OrbitControls) and model.glb.js
  * (window.TWINKIT_GLB: the GLB, base64), both classic scripts so the page works from file://.
- * Colour modes: "texture" shows the material's texture, else the _TEXCOLOR vertex colours, else COLOR_0;
- * "segmentation" shows COLOR_0 (twinkit's GLBs carry the segmentation colours there) with simple lighting.
+ * Colour modes: "texture" shows the material's texture, else the COLOR_0 vertex colours;
+ * "segmentation" shows the _CLASS_COLOR attribute (twinkit's GLBs carry the segmentation colours there,
+ * where they darken nothing in other viewers) with simple lighting. GLBs written before that convention
+ * (segmentation in COLOR_0, texture colours in _TEXCOLOR) still show both.
  * State for tests and scripts: window.twinkitViewer = {ready, error, mode, frames, hasSegmentation, setMode}.
  */
 (function () {
@@ -125,17 +127,19 @@
       var m0 = Array.isArray(o.material) ? o.material[0] : o.material;
       var map = (m0 && m0.map) || null;
       var col = g.getAttribute('color') || null;
-      var tex = g.getAttribute('_texcolor') || null;
+      var cls = g.getAttribute('_class_color') || null;  // GLTFLoader lower-cases application attributes
+      var tex = g.getAttribute('_texcolor') || null;  // the older convention: texture colours here, segmentation in COLOR_0
       if (!g.getAttribute('normal')) g.computeVertexNormals();
       var p = { mesh: o, map: map, seg: null, texAttr: null };
-      // what the "texture" look draws: the texture, else the texture colours per vertex, else COLOR_0
+      if (cls) {
+        p.seg = cls;
+      } else if (tex || map) {
+        p.seg = col;
+      }
+      if (tex && !cls) col = tex;
+      // what the "texture" look draws: the texture, else the texture colours per vertex
       if (map) {
         p.texMat = new THREE.MeshBasicMaterial({ map: map, side: THREE.DoubleSide });
-        p.seg = col;
-      } else if (tex) {
-        p.texAttr = tex;
-        p.seg = col;
-        p.texMat = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide });
       } else if (col) {
         p.texAttr = col;
         p.texMat = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide });

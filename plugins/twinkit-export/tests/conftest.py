@@ -24,9 +24,10 @@ def plugin(kind: str, name: str):
 
 @pytest.fixture(scope="session")
 def street(tmp_path_factory):
-    """(folder, obj path, labels path, (verts, faces, uv, labels))."""
+    """(folder, obj path, labels path, (verts, faces, uv, labels)); the faces include back-to-back twins,
+    a duplicate and degenerate faces (synthetic.BAD_FACES), which the split must drop."""
     d = tmp_path_factory.mktemp("street")
-    v, f, uv, lab = synthetic.make_street(nx=40, ny=30)
+    v, f, uv, lab = synthetic.make_street(nx=40, ny=30, bad_faces=True)
     obj = synthetic.write_obj(d / "textured_mesh.obj", v, f, uv, texture_px=256)
     np.save(d / "labels.npy", lab)
     return d, obj, d / "labels.npy", (v, f, uv, lab)

@@ -82,6 +82,12 @@ def test_usd_demo_validates(demo_site, demo_split, tmp_path):
     assert names == {BY_ID[int(c)].carla_name for c in np.unique(labels)}
     geo = stage.GetRootLayer().customLayerData["twinkit:georeference"]
     assert geo["projected_x"] == pytest.approx(385346.25059729954)
+    # colliders where Isaac Sim's vehicles and people stand: road, sidewalk, terrain, building
+    from pxr import UsdPhysics
+
+    collide = {p.GetName() for p in stage.GetDefaultPrim().GetChildren() if p.HasAPI(UsdPhysics.CollisionAPI)}
+    assert {"Road_Road", "Road_Sidewalk", "Terrain", "Building"} <= collide
+    assert not collide & {"Car", "Pedestrian", "Truck", "Bus", "Rider", "Motorcycle", "Bicycle"}
 
 
 @pytest.mark.skipif(not HAS_BPY, reason="bpy not installed")

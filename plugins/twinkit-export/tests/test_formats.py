@@ -13,6 +13,7 @@ import pytest
 from twinkit.testing import run_step
 
 from twinkit_export.classes import BY_ID, palette_lut
+from twinkit.mesh import bad_faces
 from twinkit.mesh.glb import srgb_to_linear
 from twinkit_export.split import load_class_set
 
@@ -50,6 +51,7 @@ def test_fbx_round_trip(fbx_out, class_dir, tmp_path):
         assert (n["num_vertices"], n["num_faces"]) == (m.n_vertices, m.n_faces), m.name
         assert n["scale"] == [1.0, 1.0, 1.0]
         np.testing.assert_allclose(np.array(n["positions"]), m.vertices, atol=1e-4)  # site frame, metres
+        assert not bad_faces(m.vertices, m.faces)[0].any()  # same counts as the clean class mesh: no twins
         got_uv = np.array(n["corner_uv"]).reshape(-1, 3, 2)
         np.testing.assert_allclose(got_uv, m.corner_uv, atol=1e-5)
         assert n["uv_sets"] == ["UVMap"]
@@ -129,6 +131,7 @@ def test_usd_round_trip(usd_out, class_dir):
         np.testing.assert_allclose(pts, m.vertices, atol=1e-4)
         idx = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
         np.testing.assert_array_equal(idx, m.faces)
+        assert not bad_faces(pts, idx)[0].any(), m.name  # the test street's twins and degenerates stay out
         pv = UsdGeom.PrimvarsAPI(prim)
         st = pv.GetPrimvar("st")
         assert st.GetInterpolation() == UsdGeom.Tokens.faceVarying
@@ -147,6 +150,75 @@ def test_usd_round_trip(usd_out, class_dir):
     asset = UsdShade.Shader(tex).GetInput("file").Get()
     assert (usd_out.parent / Path(asset.path).name).exists()
     assert asset.resolvedPath and Path(asset.resolvedPath).exists()
+
+
+def test_usd_colliders_on_static_classes_only(usd_out, class_dir):
+    """Isaac Sim / PhysX collide with prims that have PhysicsCollisionAPI; a static triangle mesh needs
+    MeshCollisionAPI with approximation "none" (the mesh itself). Movable classes get none."""
+    from pxr import Usd, UsdPhysics
+
+    cs = load_class_set(class_dir)
+    stage = Usd.Stage.Open(str(usd_out))
+    got = {}
+    for m in cs.meshes:
+        prim = stage.GetPrimAtPath(f"/Site/{m.name}")
+        has = prim.HasAPI(UsdPhysics.CollisionAPI)
+        got[m.name] = has
+        if has:
+            assert prim.HasAPI(UsdPhysics.MeshCollisionAPI)
+            assert UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr().Get() == "none"
+            assert UsdPhysics.CollisionAPI(prim).GetCollisionEnabledAttr().Get() is True
+    # the test street has road, sidewalk, terrain, building, pole (static) and a car (movable)
+    assert {k for k, v in got.items() if v} >= {"Road_Road", "Road_Sidewalk", "Terrain", "Building", "Pole"}
+    assert got["Car"] is False and got.get("Unlabeled", False) is False
+    # a stage without colliders when asked
+    from twinkit_export.usd import write_usd
+
+    bare = usd_out.parent / "bare.usda"
+    write_usd(cs.meshes, None, bare, {}, colliders=False, old_semantics=False, geo_schemas=False)
+    st2 = Usd.Stage.Open(str(bare))
+    assert not any(p.HasAPI(UsdPhysics.CollisionAPI) for p in st2.Traverse())
+    assert not st2.GetPrimAtPath("/CesiumGeoreference")
+
+
+def _authored_api_schemas(prim) -> list[str]:
+    # GetAppliedSchemas() lists only schemas this usd-core knows; Isaac's and Omniverse's are not among them
+    return list(prim.GetMetadata("apiSchemas").GetAddedOrExplicitItems())
+
+
+def test_usd_labels_for_current_and_older_isaac_semantics(usd_out, class_dir):
+    from pxr import Usd, UsdSemantics
+
+    cs = load_class_set(class_dir)
+    stage = Usd.Stage.Open(str(usd_out))
+    for m in cs.meshes:
+        prim = stage.GetPrimAtPath(f"/Site/{m.name}")
+        name = BY_ID[m.class_id].name
+        assert list(UsdSemantics.LabelsAPI(prim, "class").GetLabelsAttr().Get()) == [name]
+        # the older schema: multiple-apply SemanticsAPI, instance "Semantics" (Isaac's add_update_semantics)
+        assert "SemanticsAPI:Semantics" in _authored_api_schemas(prim)
+        assert prim.GetAttribute("semantic:Semantics:params:semanticType").Get() == "class"
+        assert prim.GetAttribute("semantic:Semantics:params:semanticData").Get() == name
+
+
+def test_usd_georeference_for_omniverse_and_cesium(usd_out):
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(usd_out))
+    site = stage.GetDefaultPrim()
+    assert "OmniWGS84ReferencePositionAPI" in _authored_api_schemas(site)
+    lat, lon, h = site.GetAttribute("omni:geospatial:wgs84:reference:referencePosition").Get()  # lat first
+    assert (lat, lon, h) == pytest.approx((60.16945, 24.93365, 12.0))
+    assert site.GetAttribute("omni:geospatial:wgs84:reference:tangentPlane").Get() == "ENU"
+    cg = stage.GetPrimAtPath("/CesiumGeoreference")
+    assert cg.GetTypeName() == "CesiumGeoreferencePrim"
+    assert cg.GetAttribute("cesium:georeferenceOrigin:latitude").Get() == pytest.approx(60.16945)
+    assert cg.GetAttribute("cesium:georeferenceOrigin:longitude").Get() == pytest.approx(24.93365)
+    assert cg.GetAttribute("cesium:georeferenceOrigin:height").Get() == pytest.approx(12.0)
+    geo = stage.GetRootLayer().customLayerData["twinkit:georeference"]
+    # the exact CRS stays, and what an ENU consumer misses is stated: TM35FIN's grid convergence at 24.93 E
+    assert geo["crs"] == "EPSG:3067" and geo["grid_convergence_deg"] == pytest.approx(-1.79, abs=0.01)
+    assert "not converted" in geo["height_reference"]  # a 2D CRS: the height is the site's own
 
 
 # ----------------------------------------------------------------------------- glTF
@@ -186,11 +258,16 @@ def test_glb_round_trip(glb_out, class_dir):
         assert node.extras["class_id"] == m.class_id
         prim = g.meshes[node.mesh].primitives[0]
         pos = _accessor(g, blob, prim.attributes.POSITION)
-        col = _accessor(g, blob, prim.attributes.COLOR_0)
+        # no COLOR_0: it would multiply (darken) the photo texture in every viewer
+        assert prim.attributes.COLOR_0 is None
+        col = _accessor(g, blob, getattr(prim.attributes, "_CLASS_COLOR"))
         cls = _accessor(g, blob, getattr(prim.attributes, "_CLASS_ID")).ravel()
         uv = _accessor(g, blob, prim.attributes.TEXCOORD_0)
         idx = _accessor(g, blob, prim.indices).ravel()
         assert len(idx) == 3 * m.n_faces
+        # by position (glTF splits vertices at UV seams): no twin or degenerate face reached the GLB
+        upos, weld = np.unique(pos, axis=0, return_inverse=True)
+        assert not bad_faces(upos.astype(np.float64), weld.ravel()[idx].reshape(-1, 3))[0].any(), m.name
         # back to the site frame: glTF (x, y, z) = site (x, z, -y)
         site = np.column_stack([pos[:, 0], -pos[:, 2], pos[:, 1]])
         np.testing.assert_allclose(site[idx].reshape(-1, 3, 3), m.vertices[m.faces].astype(np.float32), atol=1e-4)
@@ -205,6 +282,18 @@ def test_glb_round_trip(glb_out, class_dir):
         assert col.dtype == np.float32 and 0 <= col.min() and col.max() <= 1
     mat = g.materials[0]
     assert mat.pbrMetallicRoughness.baseColorTexture.index == 0
+    assert mat.pbrMetallicRoughness.baseColorFactor in (None, [1, 1, 1, 1])  # the texture as it is
+    # KHR_materials_variants: "photo" = the texture material, "segmentation" = flat palette colour per class
+    assert [v["name"] for v in g.extensions["KHR_materials_variants"]["variants"]] == ["photo", "segmentation"]
+    assert "KHR_materials_variants" in g.extensionsUsed and "KHR_materials_variants" not in (g.extensionsRequired or [])
+    for m in cs.meshes:
+        prim = g.meshes[nodes[m.name].mesh].primitives[0]
+        maps = {tuple(x["variants"]): x["material"] for x in prim.extensions["KHR_materials_variants"]["mappings"]}
+        assert prim.material == maps[(0,)] == 0
+        seg = g.materials[maps[(1,)]]
+        assert seg.pbrMetallicRoughness.baseColorTexture is None
+        np.testing.assert_allclose(seg.pbrMetallicRoughness.baseColorFactor[:3],
+                                   srgb_to_linear(np.array([BY_ID[m.class_id].color]))[0], atol=1e-6)
     img = g.images[0]
     bv = g.bufferViews[img.bufferView]
     im = Image.open(io.BytesIO(blob[bv.byteOffset: bv.byteOffset + bv.byteLength]))
@@ -231,4 +320,51 @@ def test_glb_passes_khronos_validator(glb_out, tmp_path):
     res = subprocess.run(["node", str(js), str(glb_out)], capture_output=True, text=True, timeout=120,
                          env={**os.environ, "NODE_PATH": str(base / "node_modules")})
     rep = json.loads(res.stdout)
-    assert rep["e"] == 0, rep
+    assert rep["e"] == 0 and rep["w"] == 0, rep
+
+
+@pytest.fixture(scope="module")
+def artifacts_dir() -> Path:
+    """Pictures kept for a person to look at: $TWINKIT_TEST_ARTIFACTS/export (default build/test-artifacts)."""
+    base = os.environ.get("TWINKIT_TEST_ARTIFACTS") or Path(__file__).resolve().parents[3] / "build" / "test-artifacts"
+    d = Path(base) / "export"
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+@pytest.fixture(scope="module")
+def glb_driver():
+    from glb_render import start_driver
+
+    d = start_driver()
+    if isinstance(d, str):
+        pytest.skip(d)
+    yield d
+    d.quit()
+
+
+def test_glb_renders_as_bright_as_its_texture(glb_out, class_dir, glb_driver, tmp_path, artifacts_dir):
+    """three.js's GLTFLoader (a standard viewer) draws the exported GLB as bright as its texture alone;
+    the layout before (CityScapes palette in COLOR_0, which multiplies the texture) did not."""
+    from PIL import Image
+
+    from glb_render import brightness_ratio
+    from twinkit.mesh.glb import GlbPart, write_textured_glb
+
+    now = brightness_ratio(glb_driver, glb_out, tmp_path / "now")
+    img, ref = now.pop("images")
+    Image.fromarray(img).save(artifacts_dir / "glb_as_loaded.png")
+    Image.fromarray(ref).save(artifacts_dir / "glb_texture_only.png")
+    assert now["meshes"] == len(load_class_set(class_dir).meshes) and now["vertexColors"] == 0
+    assert now["basic"] == now["meshes"]  # KHR_materials_unlit: the texture as captured
+    assert now["covered_px"] > 10_000
+    assert now["ratio"] == pytest.approx(1.0, abs=0.02), now
+    assert now["px_off_by_more_than_8"] < 0.01, now
+    # the same class meshes written the old way: palette as COLOR_0
+    cs = load_class_set(class_dir)
+    old = tmp_path / "old.glb"
+    write_textured_glb(old, [GlbPart(m.name, m.vertices, m.faces, m.normals, m.corner_uv, m.colors)
+                             for m in cs.meshes], cs.texture, generator="old layout")
+    before = brightness_ratio(glb_driver, old, tmp_path / "old")
+    before.pop("images")
+    assert before["vertexColors"] == before["meshes"] and before["ratio"] < 0.8, before  # 0.59 on this street

@@ -10,8 +10,9 @@ from twinkit import InputError
 from twinkit.testing import check_plugin, run_step
 
 from twinkit_export.classes import BY_ID, CLASSES, carla_auto_folder, palette_lut
-from twinkit.mesh import Mesh, read_obj
+from twinkit.mesh import Mesh, bad_faces, read_obj
 from twinkit_export.classmesh import read_class_ply, write_class_ply
+from twinkit_export import synthetic
 from twinkit_export.split import face_classes, load_class_set, split_mesh
 
 from conftest import SITE, plugin
@@ -74,8 +75,15 @@ def test_split_invariants(street):
     _, obj, _, (v, f, uv, lab) = street
     mesh = read_obj(obj)
     res = split_mesh(mesh, lab)
-    # every face in exactly one sub-mesh
-    assert sum(m.n_faces for m in res.meshes) == len(f)
+    # the reconstruction's bad faces are dropped first, and counted
+    n_bad = sum(synthetic.BAD_FACES.values())
+    assert res.stats["input_faces"] == len(f) and res.stats["source_faces"] == len(f) - n_bad
+    assert res.stats["degenerate_faces_dropped"] == synthetic.BAD_FACES["degenerate"]
+    assert res.stats["duplicate_faces_dropped"] == 4 and res.stats["back_to_back_faces_dropped"] == 3
+    # every other face in exactly one sub-mesh
+    assert sum(m.n_faces for m in res.meshes) == len(f) - n_bad
+    for m in res.meshes:
+        assert not bad_faces(m.vertices, m.faces)[0].any(), m.name
     # own-vertex counts equal the label histogram and add up to the source mesh
     for m in res.meshes:
         assert m.own_vertices == int((lab == m.class_id).sum()), m.name
@@ -91,7 +99,7 @@ def test_split_invariants(street):
         np.testing.assert_array_equal(m.colors, lut[lab[m.source_index]])
         # faces map back to source faces with their UVs unchanged
         src_faces = m.source_index[m.faces]
-        key = {tuple(r): i for i, r in enumerate(f.tolist())}
+        key = {tuple(r): i for i, r in reversed(list(enumerate(f.tolist())))}  # the first of twins is kept
         idx = np.array([key[tuple(r)] for r in src_faces.tolist()])
         np.testing.assert_allclose(m.corner_uv, mesh.corner_uv[idx], atol=0)
     # border copies sit exactly on the source vertices (no cracks)

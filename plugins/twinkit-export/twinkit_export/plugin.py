@@ -46,6 +46,9 @@ class UsdParams:
 
     validate: bool = True  # run usd-core's validators; errors fail the step
     semantics_taxonomy: str = "class"  # instance name of SemanticsLabelsAPI (semantics:labels:<taxonomy>)
+    colliders: bool = True  # UsdPhysics collision (triangle mesh) on the static classes, not on movable ones
+    isaac_legacy_semantics: bool = True  # also the older Semantics schema (SemanticsAPI), read by Isaac Sim < 5.0
+    geo_schemas: bool = True  # georeference for consumers: Omniverse WGS84 reference position + Cesium origin
 
 
 @dataclass
@@ -55,6 +58,7 @@ class GltfParams:
     texture_format: str = "jpeg"  # jpeg (smaller, for the web) | png (lossless)
     jpeg_quality: int = 90
     unlit: bool = True  # KHR_materials_unlit: the texture already holds the captured light
+    variants: bool = True  # KHR_materials_variants: "photo" and "segmentation" (flat class colours)
 
 
 @dataclass
@@ -209,6 +213,9 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
     (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     ctx.log.info("split %d vertices / %d faces into %d classes (%d border copies)", res.stats["source_vertices"],
                  res.stats["source_faces"], len(classes), res.stats["border_copies"])
+    ctx.log.info("dropped before the split: %d degenerate faces, %d duplicate faces (%d of them back-to-back)",
+                 res.stats["degenerate_faces_dropped"], res.stats["duplicate_faces_dropped"],
+                 res.stats["back_to_back_faces_dropped"])
     return {**res.stats, "read_s": round(t_read, 2), "total_s": round(time.perf_counter() - t0, 2),
             "per_class": {c["name"]: {"vertices": c["vertices"], "own": c["own_vertices"], "faces": c["faces"]}
                           for c in classes}}
@@ -256,9 +263,11 @@ def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path
         _link_or_copy(cs.texture, tex)
         tex_name = tex.name
     stats = write_usd(cs.meshes, tex_name, out, _georef(ctx, in_site_json),
-                      semantics_taxonomy=params.semantics_taxonomy)
+                      semantics_taxonomy=params.semantics_taxonomy, colliders=params.colliders,
+                      old_semantics=params.isaac_legacy_semantics, geo_schemas=params.geo_schemas)
     t_write = time.perf_counter() - t0
-    metrics = {"prims": list(stats), "usd_bytes": _size(out), "write_s": round(t_write, 2)}
+    metrics = {"prims": list(stats), "colliders": [k for k, v in stats.items() if v["collider"]],
+               "usd_bytes": _size(out), "write_s": round(t_write, 2)}
     if params.validate:
         rep = validation_report(out)
         metrics.update({"validation_errors": rep["errors"], "validation_warnings": rep["warnings"],
@@ -273,7 +282,7 @@ def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path
 
 def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Path, out_twin_glb: Path,
                 in_site_json: Path | None = None) -> dict:
-    """twin.glb: texture + CityScapes vertex colours (COLOR_0) + _CLASS_ID, one node per class."""
+    """twin.glb: the photo texture, segmentation in _CLASS_COLOR / _CLASS_ID and a material variant; node per class."""
     from .gltf import write_glb
 
     params = params or GltfParams()
@@ -282,7 +291,8 @@ def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Pa
     t0 = time.perf_counter()
     cs = _load_set(in_class_meshes_dir)
     stats = write_glb(cs.meshes, cs.texture, Path(out_twin_glb), _georef(ctx, in_site_json),
-                      texture_format=params.texture_format, jpeg_quality=params.jpeg_quality, unlit=params.unlit)
+                      texture_format=params.texture_format, jpeg_quality=params.jpeg_quality, unlit=params.unlit,
+                      variants=params.variants)
     return {"nodes": list(stats), "gltf_vertices": sum(s["vertices"] for s in stats.values()),
             "glb_bytes": _size(out_twin_glb), "seconds": round(time.perf_counter() - t0, 2)}
 
@@ -347,6 +357,6 @@ def twinkit_register_steps(register):
 def twinkit_register_exporters(register):
     register("fbx", export_fbx, params=FbxParams, description="FBX via Blender (bpy): CARLA names, metres, Z up")
     register("usd", export_usd, params=UsdParams, description="USD via usd-core: prims per class, semantics, geo")
-    register("gltf", export_gltf, params=GltfParams, description="GLB for browsers: texture + segmentation colours")
+    register("gltf", export_gltf, params=GltfParams, description="GLB for browsers: photo texture; segmentation as attribute and variant")
     register("carla_package", export_carla_package, params=CarlaPackageParams,
              description="CARLA 0.9.16 import package with OpenDRIVE and spawn points")

@@ -7,6 +7,9 @@ Labels are per vertex; a sub-mesh is a set of faces. Rules:
    first, so the drivable surface stays closed); unlabelled (255) only wins a clear majority;
 2. every vertex lies on at least one face of its own class: where a vertex's label lost every vote
    around it (a lone "pole" vertex in the road), one of its faces is given to its class instead;
+0. before the split, degenerate faces (a repeated vertex, zero area) and duplicate faces (the same
+   three vertices, in either winding; back-to-back twins) are dropped (:func:`twinkit.mesh.bad_faces`),
+   so none reaches FBX, USD, GLB or the CARLA package; the vertices stay (labels still line up);
 3. a sub-mesh holds the vertices of its faces. Vertices on a class border appear in both
    sub-meshes at the same position (no cracks); each copy keeps its *own* label in the
    ``class_id`` attribute, so per class, the count of vertices whose ``class_id`` equals the
@@ -20,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit.mesh import Mesh, vertex_normals
+from twinkit.mesh import Mesh, drop_bad_faces, vertex_normals
 
 from .classes import info, palette_lut
 from .classmesh import ClassMesh, read_class_ply
@@ -89,6 +92,8 @@ def split_mesh(mesh: Mesh, labels: np.ndarray) -> SplitResult:
     if labels.shape != (n,):
         raise ValueError(f"labels have shape {labels.shape}, the mesh has {n} vertices")
     labels = labels.astype(np.uint8)
+    input_faces = mesh.n_faces
+    mesh, bad = drop_bad_faces(mesh)
     normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.vertices, mesh.faces)
     corner_uv = mesh.corner_uv if mesh.corner_uv is not None else np.zeros((len(mesh.faces), 3, 2), np.float32)
     fc, stats = face_classes(mesh.faces, labels)
@@ -126,7 +131,9 @@ def split_mesh(mesh: Mesh, labels: np.ndarray) -> SplitResult:
         ))
     own_total = sum(m.own_vertices for m in meshes)
     stats.update({
-        "source_vertices": int(n), "source_faces": int(len(mesh.faces)),
+        "source_vertices": int(n), "input_faces": int(input_faces), "source_faces": int(len(mesh.faces)),
+        "degenerate_faces_dropped": bad["degenerate_faces"], "duplicate_faces_dropped": bad["duplicate_faces"],
+        "back_to_back_faces_dropped": bad["back_to_back_faces"],
         "classes": len(meshes),
         "exported_vertices": int(sum(m.n_vertices for m in meshes)),
         "own_vertices": int(own_total),

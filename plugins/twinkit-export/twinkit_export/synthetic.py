@@ -3,7 +3,9 @@
 A height-field grid in the site frame (metres, z up) with a road strip along x, sidewalks either
 side, terrain beyond, a raised "building" block, a few "pole", "car" and unlabelled vertices, and
 a few lone vertices whose label differs from all their neighbours. UVs cover the grid; the texture
-is a procedural image of ``texture_px`` pixels.
+is a procedural image of ``texture_px`` pixels. With ``bad_faces``, faces a real reconstruction
+has too are appended: back-to-back twins (reversed winding), a same-winding duplicate and
+degenerate faces (a repeated vertex) -- see :data:`BAD_FACES`.
 """
 from __future__ import annotations
 
@@ -12,7 +14,11 @@ from pathlib import Path
 import numpy as np
 
 
-def make_street(nx: int = 40, ny: int = 30, size_m: float = 40.0, seed: int = 0):
+#: what ``make_street(bad_faces=True)`` appends: {kind: count}
+BAD_FACES = {"back_to_back": 3, "same_winding_duplicate": 1, "degenerate": 2}
+
+
+def make_street(nx: int = 40, ny: int = 30, size_m: float = 40.0, seed: int = 0, bad_faces: bool = False):
     """Returns (vertices (n,3) f64, faces (m,3) i64, uv (n,2) f32, labels (n,) u8)."""
     rng = np.random.default_rng(seed)
     xs = np.linspace(-size_m / 2, size_m / 2, nx)
@@ -41,6 +47,11 @@ def make_street(nx: int = 40, ny: int = 30, size_m: float = 40.0, seed: int = 0)
     i = np.arange(nx * ny).reshape(ny, nx)
     a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
     faces = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    if bad_faces:
+        twins = faces[[5, 17, 200]][:, [0, 2, 1]]  # back-to-back: same corners, reversed winding
+        dup = faces[[40]][:, [1, 2, 0]]  # the same face again, rotated
+        degen = np.array([[a[3], a[3], b[3]], [a[9], b[9], b[9]]])
+        faces = np.concatenate([faces, twins, dup, degen])
     uv = np.column_stack([(gx.ravel() - xs[0]) / (xs[-1] - xs[0]),
                           (gy.ravel() - ys[0]) / (ys[-1] - ys[0])]).astype(np.float32)
     return verts, faces.astype(np.int64), uv, lab

@@ -2,17 +2,39 @@
 
 Layout::
 
-    /Site                      Xform, kind=component, defaultPrim
+    /Site                      Xform, kind=component, defaultPrim; OmniWGS84ReferencePositionAPI
       /Site/Looks/M_twinkit    Material: UsdPreviewSurface <- UsdUVTexture(file=@./<texture>@) <- st reader
       /Site/Road_Road          Mesh per class: points, normals, primvars:st (faceVarying, indexed),
       /Site/Road_Sidewalk ...    primvars:displayColor (vertex, CityScapes palette, linear),
                                  primvars:class_id / primvars:source_index (int, vertex),
                                  SemanticsLabelsAPI:class  semantics:labels:class = ["road"],
-                                 twinkit:classId, twinkit:carlaName, material:binding
+                                 twinkit:classId, twinkit:carlaName, material:binding,
+                                 + SemanticsAPI:Semantics (the older Isaac schema Isaac Sim < 5.0 reads):
+                                   semantic:Semantics:params:semanticType = "class",
+                                   semantic:Semantics:params:semanticData = "road"
+                                 + static classes: PhysicsCollisionAPI, PhysicsMeshCollisionAPI
+                                   (physics:approximation = "none": the triangle mesh itself)
+    /CesiumGeoreference        CesiumGeoreferencePrim (Cesium for Omniverse): cesium:georeferenceOrigin:
+                               latitude / longitude / height of the base point
 
 Stage metadata: upAxis Z, metersPerUnit 1; the site georeference is the root layer's
 ``customLayerData["twinkit:georeference"]`` (crs, lat/lon/alt of the base point, projected
-base point, frame description). Coordinates are the site frame (metres, x east, y north, z up).
+base point, frame description, grid convergence and scale at the base point). Coordinates are
+the site frame (metres, x grid east, y grid north, z up).
+
+Georeference read by consumers: /Site carries NVIDIA Omniverse's geospatial
+``OmniWGS84ReferencePositionAPI`` (``omni:geospatial:wgs84:reference:referencePosition`` = (lat,
+lon, height), ``...:tangentPlane`` = ENU), and /CesiumGeoreference Cesium's origin. Both take
+the stage as an east-north-up frame at the base point, with the height above the WGS84
+ellipsoid. Two differences from the exact site frame are recorded, not hidden: the site frame's
+y axis is *grid* north, which differs from true north by the grid convergence at the base point
+(``grid_convergence_deg``: 1.8 deg on the demo, TM35FIN; a point 150 m away lands 4.7 m off in
+an ENU consumer), and the height is ellipsoidal only when the site CRS is compound with a geoid
+grid at hand; otherwise the base point's own height is written and ``height_reference`` says so.
+The exact CRS stays in the layer data for tools that honour it.
+
+Colliders: every class except the movable ones (person, rider, car, truck, bus, train,
+motorcycle, bicycle: they move or get lifted out of the static map), sky and unlabelled.
 """
 from __future__ import annotations
 
@@ -33,10 +55,53 @@ def _prim_name(name: str) -> str:
     return out if out and not out[0].isdigit() else f"_{out}"
 
 
+#: CityScapes trainIds that get no collider: the movable classes (11 person, 12 rider, 13 car, 14 truck,
+#: 15 bus, 16 train, 17 motorcycle, 18 bicycle), sky (10) and unlabelled (255)
+NO_COLLIDER = frozenset({10, 11, 12, 13, 14, 15, 16, 17, 18, 255})
+#: the older Isaac Sim semantics schema (isaacsim/omni "Semantics" module; Isaac Sim before 5.0 reads it)
+OLD_SEMANTICS_INSTANCE = "Semantics"
+OMNI_GEO = "omni:geospatial:wgs84:reference:"
+CESIUM_GEOREFERENCE_PATH = "/CesiumGeoreference"
+
+
+def geo_anchor(georef: dict) -> dict:
+    """What an ENU consumer needs beyond ``georef``: the base point's height above the WGS84 ellipsoid
+    (when the site CRS is compound and PROJ has the geoid grid) and the grid convergence / point scale
+    of the site CRS at the base point. Keys: ``height_m``, ``height_reference``, ``grid_convergence_deg``
+    (angle from true north to grid north, positive clockwise), ``point_scale_factor``."""
+    out: dict = {"height_m": float(georef.get("alt", 0.0)),
+                 "height_reference": "the site's base point height as given (not converted to WGS84 ellipsoidal)"}
+    if "lat" not in georef or "lon" not in georef or not georef.get("crs"):
+        return out
+    try:
+        from twinkit.geo.frame import SiteFrame
+
+        frame = SiteFrame.from_site({"name": "usd", "crs": georef["crs"],
+                                     "base_point": {"lat": georef["lat"], "lon": georef["lon"],
+                                                    "alt": georef.get("alt", 0.0)}})
+    except Exception:
+        return out
+    try:
+        out["height_m"] = float(frame.ellipsoidal_heights(np.zeros((1, 3)))[0])
+        out["height_reference"] = "WGS84 ellipsoidal height (from the site CRS's vertical datum)"
+    except Exception:
+        pass
+    try:
+        from pyproj import Proj
+
+        fac = Proj(frame.projected).get_factors(georef["lon"], georef["lat"])
+        out["grid_convergence_deg"] = float(fac.meridian_convergence)
+        out["point_scale_factor"] = float(fac.meridional_scale)
+    except Exception:
+        pass
+    return out
+
+
 def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root_name: str = "Site",
-              semantics_taxonomy: str = "class") -> dict:
+              semantics_taxonomy: str = "class", colliders: bool = True, old_semantics: bool = True,
+              geo_schemas: bool = True) -> dict:
     """Write the stage to ``out`` (.usd = binary crate, .usda = text); ``texture_name`` is relative to ``out``."""
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
     try:
         from pxr import UsdSemantics
@@ -51,7 +116,21 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
     stage.SetDefaultPrim(root.GetPrim())
     Usd.ModelAPI(root.GetPrim()).SetKind("component")
     layer = stage.GetRootLayer()
-    layer.customLayerData = {"twinkit:georeference": {k: v for k, v in georef.items()}}
+    anchor = geo_anchor(georef) if geo_schemas else {}
+    layer.customLayerData = {"twinkit:georeference": {**{k: v for k, v in georef.items()},
+                                                      **{k: v for k, v in anchor.items() if k != "height_m"}}}
+    if geo_schemas and "lat" in georef and "lon" in georef:
+        # NVIDIA Omniverse geospatial: the reference position of everything below /Site (ENU tangent plane)
+        rp = root.GetPrim()
+        rp.AddAppliedSchema("OmniWGS84ReferencePositionAPI")
+        rp.CreateAttribute(OMNI_GEO + "referencePosition", Sdf.ValueTypeNames.Double3, custom=False).Set(
+            Gf.Vec3d(float(georef["lat"]), float(georef["lon"]), anchor["height_m"]))
+        rp.CreateAttribute(OMNI_GEO + "tangentPlane", Sdf.ValueTypeNames.Token, custom=False,
+                           variability=Sdf.VariabilityUniform).Set("ENU")
+        # Cesium for Omniverse: the stage's georeference origin (a typed prim at its usual path)
+        cg = stage.DefinePrim(CESIUM_GEOREFERENCE_PATH, "CesiumGeoreferencePrim")
+        for k, v in (("latitude", georef["lat"]), ("longitude", georef["lon"]), ("height", anchor["height_m"])):
+            cg.CreateAttribute(f"cesium:georeferenceOrigin:{k}", Sdf.ValueTypeNames.Double, custom=False).Set(float(v))
     layer.documentation = "twinkit digital twin: one Mesh per CityScapes class (site frame, metres, z up)"
 
     # material
@@ -118,8 +197,19 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
             labels.CreateLabelsAttr().Set(Vt.TokenArray([ci.name]))
         else:
             prim.CreateAttribute("twinkit:semanticLabel", Sdf.ValueTypeNames.Token, custom=True).Set(ci.name)
+        if old_semantics:
+            inst = OLD_SEMANTICS_INSTANCE
+            prim.AddAppliedSchema(f"SemanticsAPI:{inst}")
+            prim.CreateAttribute(f"semantic:{inst}:params:semanticType", Sdf.ValueTypeNames.String,
+                                 custom=False).Set("class")
+            prim.CreateAttribute(f"semantic:{inst}:params:semanticData", Sdf.ValueTypeNames.String,
+                                 custom=False).Set(ci.name)
+        collider = colliders and int(cm.class_id) not in NO_COLLIDER
+        if collider:
+            UsdPhysics.CollisionAPI.Apply(prim).CreateCollisionEnabledAttr(True)
+            UsdPhysics.MeshCollisionAPI.Apply(prim).CreateApproximationAttr(UsdPhysics.Tokens.none)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(mat)
-        stats[cm.name] = {"points": cm.n_vertices, "faces": cm.n_faces}
+        stats[cm.name] = {"points": cm.n_vertices, "faces": cm.n_faces, "collider": bool(collider)}
     layer.Save()
     return stats
 
