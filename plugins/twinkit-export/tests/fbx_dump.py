@@ -14,9 +14,16 @@ def main(path: str, out: str) -> None:
     scene = ufbx.load_file(path)
     axes = scene.settings.axes
     materials = {}
+    texture_files = []
     for mm in scene.materials:
-        materials[mm.name] = [[t2.material_prop, t2.texture.relative_filename] for t2 in mm.textures]
-    res = {"materials": materials, "unit_meters": scene.settings.unit_meters,
+        materials[mm.name] = []
+        for t2 in mm.textures:
+            tx = t2.texture
+            materials[mm.name].append([t2.material_prop, tx.relative_filename])
+            # the file names as stored in the file (FileName, RelativeFilename), not resolved by ufbx
+            texture_files.append([bytes(tx.raw_absolute_filename).decode("utf-8", "replace"),
+                                  bytes(tx.raw_relative_filename).decode("utf-8", "replace")])
+    res = {"materials": materials, "texture_files": texture_files, "unit_meters": scene.settings.unit_meters,
            "axes": [int(axes.right), int(axes.up), int(axes.front)], "nodes": {}}
     for node in scene.nodes:
         me = node.mesh

@@ -11,6 +11,8 @@ from twinkit.testing import run_step
 from conftest import HAS_BPY, SHARED, SITE, plugin
 
 carla = pytest.importorskip("carla")
+# the package's FBX files (map geometry + one prop per class) are written by Blender
+needs_bpy = pytest.mark.skipif(not HAS_BPY, reason="bpy (Blender as a module) is not installed")
 
 
 def _package(tmp_path, fbx_out, class_dir, xodr, params=None, site=SITE):
@@ -34,27 +36,40 @@ def fake_fbx(tmp_path_factory, class_dir):
     return d / "twin.fbx"
 
 
+@needs_bpy
 def test_package_layout_and_json(tmp_path, fake_fbx, class_dir, xodr_file):
     out = _package(tmp_path, fake_fbx, class_dir, xodr_file)
     root = out["carla_import"]
     pkg = root / "Import" / "TeststreetTwin"
     desc = json.loads((pkg / "TeststreetTwin.json").read_text())
-    assert desc == {"maps": [{"name": "Teststreet", "source": "./Teststreet.fbx", "use_carla_materials": False,
-                              "xodr": "./Teststreet.xodr"}], "props": []}
+    assert desc["maps"] == [{"name": "Teststreet", "source": "./Teststreet.fbx", "use_carla_materials": False,
+                             "xodr": "./Teststreet.xodr"}]
+    # every class that MoveAssets cannot route to its own tag is a prop with its Tagger folder as tag
+    props = {p["name"]: p for p in desc["props"]}
+    classes = {c["name"] for c in json.loads((class_dir / "classes.json").read_text())["classes"] if c["faces"]}
+    assert "Road_Road" in classes and "Building" in classes
+    for name in classes - {"Road_Road", "Road_Sidewalk", "Terrain"}:
+        pname = "Teststreet_" + {"TrafficLight": "TrafficLamp", "TrafficSign": "TrafficPlate"}.get(name, name)
+        assert props[pname]["source"] == f"./{pname}.fbx" and (pkg / f"{pname}.fbx").exists()
+        assert props[pname]["size"] in ("Tiny", "Small", "Medium", "Big", "Huge")
+    assert props["Teststreet_Building"]["tag"] == "Building"
     for name in ("Teststreet.fbx", "Teststreet.xodr", "README.md"):
         assert (pkg / name).exists(), name
-    # make import reads every .json under Import/ as a package: only the package's own may be there
-    assert [p.name for p in (root / "Import").rglob("*.json")] == ["TeststreetTwin.json"]
-    assert (root / "spawn_points.json").exists()
+    # make import reads every .json under Import/ as a package, except roadpainter_decals.json
+    assert sorted(p.name for p in (root / "Import").rglob("*.json")) == ["TeststreetTwin.json",
+                                                                         "roadpainter_decals.json"]
+    assert (root / "Import" / "roadpainter_decals.json").exists()
+    assert (root / "spawn_points.json").exists() and (root / "spawn_props.py").exists()
     if HAS_BPY:
         assert (pkg / "twin.png").exists()  # the texture the FBX references by relative path
     # the packaged OpenDRIVE parses offline and has driving lanes
     m = carla.Map("Teststreet", (pkg / "Teststreet.xodr").read_text())
     assert len(m.generate_waypoints(5.0)) > 0
     readme = (pkg / "README.md").read_text()
-    assert "make import" in readme and "Road_Road" in readme
+    assert "make import" in readme and "Road_Road" in readme and "spawn_props.py" in readme
 
 
+@needs_bpy
 def test_spawn_points_on_driving_lanes_and_frames(tmp_path, fake_fbx, class_dir, xodr_file):
     out = _package(tmp_path, fake_fbx, class_dir, xodr_file)
     sp = json.loads(out["spawn_points.json"].read_text())
@@ -94,6 +109,7 @@ def test_not_opendrive(tmp_path, fake_fbx, class_dir):
         _package(tmp_path, fake_fbx, class_dir, bad)
 
 
+@needs_bpy
 @pytest.mark.shared
 def test_real_opendrive_fabriksgatan(tmp_path, fake_fbx, class_dir):
     xodr = SHARED / "data" / "opendrive" / "fabriksgatan.xodr"

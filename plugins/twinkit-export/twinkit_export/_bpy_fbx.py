@@ -76,10 +76,26 @@ def _mesh_object(bpy, cm, mat, georef: dict):
     return ob
 
 
-def main(job_path: str) -> int:
-    job = json.loads(Path(job_path).read_text())
-    import bpy  # heavy: only in this process
+def _relative_texture_paths() -> None:
+    """Make the FBX exporter write the texture's package-relative path into ``FileName`` too.
 
+    Blender's exporter stores ``RelativeFilename`` (relative to the FBX) and ``FileName`` = that path
+    made absolute against the output folder, which for a step is a temporary build folder that no
+    longer exists afterwards. Unreal's importer tries ``FileName``, then ``<fbx folder>/RelativeFilename``,
+    so the relative path in both fields loses nothing and leaks no build path.
+    """
+    import io_scene_fbx.export_fbx_bin as fbx_bin
+
+    orig = fbx_bin._gen_vid_path
+
+    def gen_vid_path(img, scene_data):
+        _abs, rel = orig(img, scene_data)
+        return rel, rel
+
+    fbx_bin._gen_vid_path = gen_vid_path
+
+
+def _export_one(bpy, job: dict, out: dict) -> None:
     from twinkit_export.classes import info
     from twinkit_export.classmesh import read_class_ply
 
@@ -88,11 +104,13 @@ def main(job_path: str) -> int:
     scene.unit_settings.system = "METRIC"
     scene.unit_settings.scale_length = 1.0
     mat = _material(bpy, job.get("material_name", "M_twinkit"), job.get("texture"))
-    for p in job["meshes"]:
+    names = out.get("names") or {}
+    for p in out["meshes"]:
         cm = read_class_ply(Path(p))
         ci = info(cm.class_id)
         cm.cityscapes = ci.name
         cm.carla_tag = ci.carla_tag
+        cm.name = names.get(p, cm.name)
         if cm.n_faces == 0:
             continue
         ob = _mesh_object(bpy, cm, mat, job.get("georef", {}))
@@ -100,7 +118,7 @@ def main(job_path: str) -> int:
         if ob.name != cm.name:
             raise RuntimeError(f"Blender renamed object {cm.name!r} to {ob.name!r}")
     bpy.ops.export_scene.fbx(
-        filepath=job["out"],
+        filepath=out["out"],
         use_selection=False,
         object_types={"MESH"},
         global_scale=1.0,
@@ -119,8 +137,19 @@ def main(job_path: str) -> int:
         path_mode="COPY" if job.get("embed_texture") else "RELATIVE",
         embed_textures=bool(job.get("embed_texture")),
     )
-    if job.get("blend"):
-        bpy.ops.wm.save_as_mainfile(filepath=job["blend"], compress=True)
+    if out.get("blend"):
+        bpy.ops.wm.save_as_mainfile(filepath=out["blend"], compress=True)
+
+
+def main(job_path: str) -> int:
+    """One FBX (``meshes``/``out``/``blend``) or several (``outputs``: [{meshes, out, names}]) per job."""
+    job = json.loads(Path(job_path).read_text())
+    import bpy  # heavy: only in this process
+
+    _relative_texture_paths()
+    outputs = job.get("outputs") or [{"meshes": job["meshes"], "out": job["out"], "blend": job.get("blend")}]
+    for out in outputs:
+        _export_one(bpy, job, out)
     return 0
 
 

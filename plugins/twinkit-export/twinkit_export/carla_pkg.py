@@ -1,14 +1,18 @@
 """CARLA 0.9.16 import package and spawn points from the OpenDRIVE driving lanes.
 
-Package layout (what ``make import`` reads; ``Util/BuildTools/Import.py`` takes the package name
-from the JSON file name, imports ``source`` relative to the JSON, copies ``xodr`` to
-``Content/<Package>/Maps/<name>/OpenDrive/<name>.xodr``)::
+Package layout (what ``make import`` reads; the rules are in ``carla_contract``)::
 
-    Import/<Package>/<Package>.json   {"maps": [{name, source, use_carla_materials, xodr}], "props": []}
-    Import/<Package>/<Map>.fbx        the per-class FBX
-    Import/<Package>/<texture>.png    the texture the FBX references (relative path)
+    Import/<Package>/<Package>.json   {"maps": [{name, source, use_carla_materials, xodr}],
+                                       "props": [{name, source, tag, size}, ...]}
+    Import/<Package>/<Map>.fbx        map geometry: the classes CARLA's MoveAssets routes to their own
+                                      tag by name (Road_Road, Road_Sidewalk, Terrain)
+    Import/<Package>/<Map>_<Class>.fbx  one prop per other class, imported into Static/<Tag>/ and so
+                                      tagged by the folder (Tagger), blueprint static.prop.<map>_<class>
+    Import/<Package>/<texture>.png    the texture every FBX references (relative path)
     Import/<Package>/<Map>.xodr       the aligned OpenDRIVE (site frame)
     Import/<Package>/README.md
+    Import/roadpainter_decals.json    RoadPainter configuration for the map (no decals by default)
+    spawn_props.py                    places the props in the running map (the import never places props)
     spawn_points.json                 beside Import/, not in it: Import.py treats *every* .json file
                                       under Import/ as a package description
 """
@@ -19,21 +23,63 @@ import math
 import re
 from pathlib import Path
 
-from .classes import CARLA_NAME_KEYS
+from .classes import CARLA_NAME_KEYS, ClassInfo
 
 
 class PackageError(ValueError):
     pass
 
 
+#: names of classes in the CARLA package where the class name itself would be dropped by
+#: PrepareAssetsForCooking's ValidateStaticMesh ("light"/"sign" in the asset name); the tag still
+#: comes from the folder (Static/TrafficLight, Static/TrafficSign)
+PACKAGE_NAMES = {6: "TrafficLamp", 7: "TrafficPlate"}
+
+
 def check_names(package: str, map_name: str) -> None:
+    from .carla_contract import name_problems, suggest_name
+
     for what, name in (("package", package), ("map", map_name)):
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name or ""):
             raise PackageError(f"{what} name {name!r}: use letters, digits and '_' (starting with a letter)")
         for key in CARLA_NAME_KEYS:
-            if key in name:
+            if key.lower() in name.lower():
                 raise PackageError(f"{what} name {name!r} contains {key!r}, which CARLA's import uses to tag meshes; "
-                                   f"choose another name")
+                                   f"choose another name, e.g. {what}_name={suggest_name(name)}")
+    # every asset name of the map starts with the map name: a dropped word there drops the whole map
+    probs = name_problems(map_name, what="map name")
+    if probs:
+        raise PackageError(f"{probs[0]}. Set carla_package's map_name to another name, e.g. "
+                           f"map_name={suggest_name(map_name)}")
+
+
+def package_mesh_name(ci: ClassInfo) -> str:
+    """Name of a class's mesh in the CARLA package (free of the words CARLA's cooking filter drops)."""
+    return PACKAGE_NAMES.get(ci.train_id, ci.carla_name)
+
+
+def is_map_geometry(ci: ClassInfo) -> bool:
+    """True when MoveAssets routes the class's mesh by name to the folder that carries its own tag."""
+    from .carla_contract import move_assets_folder, tagger_label
+
+    name = package_mesh_name(ci)
+    return name in ("Road_Road", "Road_Sidewalk", "Road_Marking", "Terrain") and \
+        tagger_label(move_assets_folder(name)) == ci.carla_tag
+
+
+def prop_folder(ci: ClassInfo) -> str:
+    """Static/<folder> (the prop's ``tag``) whose Tagger label is the class's CARLA tag."""
+    from .carla_contract import TAGGER_FOLDERS
+
+    return ci.carla_folder if ci.carla_folder in TAGGER_FOLDERS else "Unlabeled"  # unknown folder -> NONE
+
+
+def prop_size(extent_m: float) -> str:
+    """EPropSize by the largest bounding-box side: Tiny < mailbox < human < bus stop < house."""
+    for limit, size in ((0.5, "Tiny"), (1.2, "Small"), (2.5, "Medium"), (6.0, "Big")):
+        if extent_m < limit:
+            return size
+    return "Huge"
 
 
 def load_map(xodr_text: str, name: str):
@@ -99,73 +145,184 @@ README = """# CARLA import package `{package}`
 
 Made by twinkit (`carla_package` exporter) for CARLA {carla_version} built from source.
 
-Files: `{package}.json` (the package description `make import` reads), `{map}.fbx` (the site
-mesh, one object per semantic class, metres, Z up), `{texture}` (its texture, referenced by the
-FBX by relative path), `{map}.xodr` (the road network, same local frame as the mesh).
-`../../spawn_points.json` (beside `Import/`, since `make import` reads every `.json` under
-`Import/` as a package description) holds {n_spawn} spawn points on driving lanes for scripts;
-CARLA also makes its own spawners from the OpenDRIVE during import.
+Files: `{package}.json` (the package description `make import` reads), `{map}.fbx` (the map
+geometry: {map_classes}), one FBX per other class (`{map}_<Class>.fbx`, imported as props),
+`{texture}` (the texture every FBX references by relative path), `{map}.xodr` (the road network,
+same local frame as the meshes). Beside this folder: `../roadpainter_decals.json` (road decals for
+`{map}`: {decals}). Beside `Import/`: `spawn_props.py` (places the props in the map) and
+`spawn_points.json` ({n_spawn} spawn points on driving lanes for scripts; CARLA also makes its own
+spawners from the OpenDRIVE during import). JSON files other than the package's and the decals
+file must stay outside `Import/`: `make import` reads every `.json` there as a package.
 
 ## Import
 
-1. Copy this folder into `<carla>/Import/` so that it reads `<carla>/Import/{package}/{package}.json`.
-2. From the CARLA root: `make import`. The package name comes from `{package}.json` (a
-   package JSON overrides `--package=` arguments): map `{map}`, source `./{map}.fbx`, OpenDRIVE `./{map}.xodr`,
-   `use_carla_materials: {use_carla_materials}` (false keeps the captured texture instead of
-   replacing road, sidewalk and terrain materials by CARLA's).
-3. `make launch`, open `Content/{package}/Maps/{map}`, or package it with
-   `make package ARGS="--packages={package}"`.
+1. Copy the contents of `carla_import/Import/` into `<carla>/Import/`: this folder and
+   `roadpainter_decals.json` (if `<carla>/Import/roadpainter_decals.json` exists already, add our
+   `{map}` entry to its `decals` list instead).
+2. From the CARLA root: `make import ARGS="--package={package}"`. The package JSON names the map
+   and the props; `--package` only tells `Import.py` where to copy `roadpainter_decals.json`
+   (`Content/{package}/Config/`), where RoadPainter finds it.
+3. `make launch` (or `make package ARGS="--packages={package}"`), open `Content/{package}/Maps/{map}`.
+4. With the simulator running the map: `python spawn_props.py` (beside `Import/`; `--help` for
+   host, port and classes to leave out). It spawns each prop at the map origin, where it belongs.
 
-## Semantic tags
+## Semantic tags: what is automatic
 
-The import moves each mesh by name: `Road_Road` -> Road (Roads), `Road_Sidewalk` -> SideWalk
-(Sidewalks), `Terrain` -> Terrain; every other mesh lands in `Static/Terrain` too and is tagged
-Terrain. To give a class its own tag, move its mesh in the editor to
-`Content/{package}/Static/<Folder>/{map}/`:
+- Map geometry ({map_classes}) is moved by name by CARLA's MoveAssets commandlet to the folder that
+  carries its tag and is placed in the map by the import.
+- Every other class is a prop: `make import` imports it into `Static/<Tag>/<prop>/`, so CARLA's
+  Tagger gives it its class's tag, and registers it as blueprint `static.prop.<prop>`. The import
+  does not place props in a map (nothing in CARLA's import does); `spawn_props.py` does, at run
+  time. To make them part of the map itself, drag the prop assets into the level at the origin
+  (0, 0, 0) in the editor and save it.
+- Traffic lights and signs are named `TrafficLamp` / `TrafficPlate` in this package: CARLA skips
+  every mesh whose name contains "light" or "sign"; their tag still comes from the folder.
 
 {table}
 
+Props are imported with CARLA's import settings: Unreal generates simple collision for them,
+which for a whole-site class mesh is coarser than the mesh; `make package` switches them to
+complex collision (PrepareAssetsForCooking). The pedestrian navmesh is built from `{map}.fbx`
+alone (props are not obstacles in it).
+
 ## Frames
 
-Mesh and OpenDRIVE share the site frame (x east, y north, z up, metres, origin at the base
-point {georef}). Unreal mirrors y on import of both, so they stay aligned.
+All meshes and the OpenDRIVE share the site frame (x east, y north, z up, metres, origin at the
+base point {georef}). Unreal mirrors y on import of both, so they stay aligned.
 """
 
+SPAWN_SCRIPT = '''#!/usr/bin/env python3
+"""Spawn the scanned objects of map {map!r} (package {package!r}) as props in a running CARLA.
 
-def write_package(folder: Path, *, package: str, map_name: str, fbx: Path, texture: Path | None, xodr_text: str,
-                  spawn: list[dict], use_carla_materials: bool, georef: dict, classes_present: list,
-                  carla_version: str = "0.9.16") -> Path:
-    """Write ``folder/Import/<package>/...``; returns the package folder."""
+Made by twinkit. `make import` imports the props of the package (into Static/<Tag>/, which gives
+them their semantic tag) but never places them in a map; this script does, at the map origin,
+where the meshes' coordinates put every object in its scanned place.
+
+    python spawn_props.py [--host localhost] [--port 2000] [--skip car truck ...] [--list]
+"""
+import argparse
+import sys
+
+PROPS = {props}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--host", default="localhost")
+    ap.add_argument("--port", type=int, default=2000)
+    ap.add_argument("--skip", nargs="*", default=[], help="CityScapes classes to leave out (e.g. car person)")
+    ap.add_argument("--list", action="store_true", help="print the props and exit")
+    args = ap.parse_args()
+    todo = [p for p in PROPS if p["class"] not in set(args.skip)]
+    if args.list:
+        for p in todo:
+            print(p["blueprint"], p["class"], p["tag"], p["faces"])
+        return 0
+    import carla
+
+    client = carla.Client(args.host, args.port)
+    client.set_timeout(30.0)
+    world = client.get_world()
+    if not world.get_map().name.endswith({map!r}):
+        sys.exit(f"the running map is {{world.get_map().name}}, load {map!r} first "
+                 f"(client.load_world({map!r}))")
+    lib = world.get_blueprint_library()
+    for p in todo:
+        try:
+            bp = lib.find(p["blueprint"])
+        except IndexError:
+            sys.exit(f"blueprint {{p['blueprint']}} not found: run make import for package {package!r} and restart "
+                     f"the simulator")
+        actor = world.spawn_actor(bp, carla.Transform())
+        actor.set_simulate_physics(False)
+        print(f"spawned {{p['blueprint']}} ({{p['class']}}, tag {{p['tag']}}) as actor {{actor.id}}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+'''
+
+
+def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path, classes: list[dict],
+                  texture: Path | None, xodr_text: str, spawn: list[dict], use_carla_materials: bool, georef: dict,
+                  decals: bool = False, python: str = "", log_path: Path | None = None,
+                  carla_version: str = "0.9.16") -> tuple[Path, dict]:
+    """Write ``folder/Import/<package>/...``, ``Import/roadpainter_decals.json``, ``spawn_props.py``.
+
+    ``classes``: the class-mesh manifest entries (``class_id``, ``file``, ``faces``). Returns the
+    package folder and what went where (map classes, props).
+    """
     import shutil
 
+    from .carla_contract import DECALS_FILE, decals_entry, move_assets_folder, tagger_label
     from .classes import info
+    from .classmesh import read_class_ply
+    from .fbx import write_fbx_set
 
-    pkg = Path(folder) / "Import" / package
+    folder = Path(folder)
+    pkg = folder / "Import" / package
     pkg.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(fbx, pkg / f"{map_name}.fbx")
-    tex_name = None
+    tex = None
     if texture is not None and Path(texture).exists():
-        tex_name = Path(texture).name
-        shutil.copyfile(texture, pkg / tex_name)
+        tex = pkg / Path(texture).name
+        shutil.copyfile(texture, tex)
+    present = [c for c in classes if c["faces"] > 0]
+    map_files, map_names, props = [], {}, []
+    for c in present:
+        ci = info(c["class_id"])
+        ply = Path(class_dir) / c["file"]
+        if is_map_geometry(ci):
+            map_files.append(ply)
+            map_names[ply] = package_mesh_name(ci)
+            continue
+        name = f"{map_name}_{package_mesh_name(ci)}"
+        v = read_class_ply(ply).vertices
+        extent = float((v.max(0) - v.min(0)).max()) if len(v) else 0.0
+        props.append({"name": name, "ply": ply, "class": ci.name, "class_id": ci.train_id,
+                      "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),
+                      "faces": int(c["faces"]), "mesh": package_mesh_name(ci)})
+    if not map_files:
+        raise PackageError("no road, sidewalk or terrain mesh: a CARLA map needs ground geometry")
+    jobs = [(pkg / f"{map_name}.fbx", map_files, map_names)]
+    jobs += [(pkg / f"{p['name']}.fbx", [p["ply"]], {p["ply"]: p["mesh"]}) for p in props]
+    write_fbx_set(jobs, tex, georef=georef, python=python, log_path=log_path)
     (pkg / f"{map_name}.xodr").write_text(xodr_text)
     desc = {"maps": [{"name": map_name, "source": f"./{map_name}.fbx",
                       "use_carla_materials": bool(use_carla_materials), "xodr": f"./{map_name}.xodr"}],
-            "props": []}
+            "props": [{"name": p["name"], "source": f"./{p['name']}.fbx", "tag": p["tag"], "size": p["size"]}
+                      for p in props]}
     (pkg / f"{package}.json").write_text(json.dumps(desc, indent=2) + "\n")
-    (Path(folder) / "spawn_points.json").write_text(json.dumps(
+    (folder / "Import" / DECALS_FILE).write_text(json.dumps({"decals": [decals_entry(map_name, decals)]}, indent=2)
+                                                 + "\n")
+    spawn_list = [{"blueprint": f"static.prop.{p['name'].lower()}", "class": p["class"], "tag": p["label"],
+                   "faces": p["faces"]} for p in props]
+    script = folder / "spawn_props.py"
+    script.write_text(SPAWN_SCRIPT.format(map=map_name, package=package,
+                                          props=json.dumps(spawn_list, indent=4)))
+    script.chmod(0o755)
+    (folder / "spawn_points.json").write_text(json.dumps(
         {"map": map_name, "count": len(spawn),
          "frames": {"carla": "carla.Transform arguments: metres, degrees, Unreal left-handed (y = -north)",
                     "site": "site frame: x east, y north, z up; heading counter-clockwise from east"},
          "spawn_points": spawn}, indent=1) + "\n")
-    rows = ["| mesh | CityScapes class | tag after `make import` | move to `Static/` | intended tag |",
-            "|---|---|---|---|---|"]
-    for cid in classes_present:
-        ci = info(cid)
-        rows.append(f"| `{ci.carla_name}` | {ci.name} | {ci.auto_tag} | `{ci.carla_folder}` | {ci.carla_tag} |")
+    rows = ["| class | in the package | ends in | tag | placed by |", "|---|---|---|---|---|"]
+    for c in present:
+        ci = info(c["class_id"])
+        if ci.train_id in [p["class_id"] for p in props]:
+            p = next(p for p in props if p["class_id"] == ci.train_id)
+            rows.append(f"| {ci.name} | prop `{p['name']}` (`static.prop.{p['name'].lower()}`) | "
+                        f"`Static/{p['tag']}/{p['name']}` | {p['label']} | `spawn_props.py` |")
+        else:
+            node = map_names[Path(class_dir) / c["file"]]
+            rows.append(f"| {ci.name} | `{map_name}.fbx` node `{node}` | "
+                        f"`Static/{move_assets_folder(f'{map_name}_{node}')}/{map_name}` | {ci.carla_tag} | "
+                        f"`make import` |")
     geo = ", ".join(f"{k} {v}" for k, v in georef.items() if k in ("crs", "lat", "lon", "alt"))
     (pkg / "README.md").write_text(README.format(
-        package=package, map=map_name, texture=tex_name or "(no texture)", n_spawn=len(spawn),
-        use_carla_materials=str(bool(use_carla_materials)).lower(), table="\n".join(rows),
-        georef=f"({geo})" if geo else "", carla_version=carla_version))
-    return pkg
-
+        package=package, map=map_name, texture=tex.name if tex else "(no texture)", n_spawn=len(spawn),
+        map_classes=", ".join(f"`{n}`" for n in map_names.values()),
+        decals="none, `decals=true` for CARLA's default random decals" if not decals else "CARLA's default counts",
+        table="\n".join(rows), georef=f"({geo})" if geo else "", carla_version=carla_version))
+    return pkg, {"map_meshes": list(map_names.values()), "props": [p["name"] for p in props],
+                 "prop_tags": {p["name"]: p["label"] for p in props}}

@@ -29,14 +29,36 @@ def write_fbx(mesh_files: list[Path], texture: Path | None, out: Path, *, georef
               blend: Path | None = None, timeout_s: float = 3600) -> None:
     """Write ``out`` (FBX 7.4 binary) from class PLYs; Blender runs in ``python`` (default: this interpreter)."""
     out = Path(out)
-    job = {
-        "meshes": [str(Path(p).resolve()) for p in mesh_files],
-        "texture": str(Path(texture).resolve()) if texture else None,
-        "out": str(out.resolve()),
-        "embed_texture": bool(embed_texture),
-        "georef": {k: v for k, v in (georef or {}).items() if isinstance(v, (str, int, float))},
-        "blend": str(Path(blend).resolve()) if blend else None,
-    }
+    _run_job({"meshes": [str(Path(p).resolve()) for p in mesh_files], "out": str(out.resolve()),
+              "blend": str(Path(blend).resolve()) if blend else None},
+             texture, out, georef=georef, embed_texture=embed_texture, python=python, log_path=log_path,
+             timeout_s=timeout_s, expect=[out])
+
+
+def write_fbx_set(outputs: list[tuple[Path, list[Path], dict[Path, str]]], texture: Path | None, *,
+                  georef: dict | None = None, python: str = "", log_path: Path | None = None,
+                  timeout_s: float = 3600) -> None:
+    """Several FBX files in one Blender run: ``(out, class PLYs, {PLY: object name})`` each.
+
+    Every file gets the same material ``M_twinkit`` with ``texture`` (referenced by its path
+    relative to the FBX); object names default to the class names of the PLYs.
+    """
+    if not outputs:
+        return
+    first = Path(outputs[0][0])
+    job = {"outputs": [{"out": str(Path(o).resolve()), "meshes": [str(Path(p).resolve()) for p in files],
+                        "names": {str(Path(p).resolve()): n for p, n in (names or {}).items()}}
+                       for o, files, names in outputs]}
+    _run_job(job, texture, first, georef=georef, embed_texture=False, python=python, log_path=log_path,
+             timeout_s=timeout_s, expect=[Path(o) for o, _, _ in outputs])
+
+
+def _run_job(job: dict, texture: Path | None, out: Path, *, georef: dict | None, embed_texture: bool, python: str,
+             log_path: Path | None, timeout_s: float, expect: list[Path]) -> None:
+    job = {**job,
+           "texture": str(Path(texture).resolve()) if texture else None,
+           "embed_texture": bool(embed_texture),
+           "georef": {k: v for k, v in (georef or {}).items() if isinstance(v, (str, int, float))}}
     job_path = out.with_suffix(".job.json")
     job_path.write_text(json.dumps(job, indent=1))
     log_path = Path(log_path) if log_path else out.with_suffix(".bpy.log")
@@ -49,7 +71,7 @@ def write_fbx(mesh_files: list[Path], texture: Path | None, out: Path, *, georef
             proc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, timeout=timeout_s)
     finally:
         job_path.unlink(missing_ok=True)
-    if proc.returncode != 0 or not out.exists():
+    if proc.returncode != 0 or not all(Path(p).exists() for p in expect):
         tail = log_path.read_text(errors="replace")[-3000:] if log_path.exists() else ""
         if "No module named 'bpy'" in tail:
             raise FbxExportError(

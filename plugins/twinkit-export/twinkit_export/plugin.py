@@ -71,6 +71,8 @@ class CarlaPackageParams:
     spawn_spacing_m: float = 20.0  # distance between spawn points along a driving lane
     spawn_height_m: float = 0.5  # spawn points are raised by this much above the lane
     skip_junctions: bool = True  # no spawn points inside junctions
+    decals: bool = False  # True: CARLA's default random road decals (dirt, cracks, tyre marks, road lines)
+    python: str = ""  # interpreter that has bpy (the package's FBX files); empty = the one running twinkit
     carla_version: str = "0.9.16"
 
 
@@ -328,17 +330,38 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     cs = _load_set(in_class_meshes_dir)
     fbx = Path(in_twin_fbx)
     tex = next((fbx.with_suffix(e) for e in (".png", ".jpg", ".jpeg") if fbx.with_suffix(e).exists()), None)
+    if tex is None:
+        tex = cs.texture
     georef = _georef(ctx, in_site_json)
     out = Path(out_carla_import_dir)
-    pkg = write_package(out, package=package, map_name=map_name, fbx=fbx, texture=tex, xodr_text=text,
-                        spawn=spawn, use_carla_materials=params.use_carla_materials, georef=georef,
-                        classes_present=[c["class_id"] for c in cs.manifest["classes"] if c["faces"] > 0],
-                        carla_version=params.carla_version)
+    from .carla_contract import check_package
+    from .fbx import FbxExportError
+
+    try:
+        pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=cs.folder,
+                                    classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
+                                    use_carla_materials=params.use_carla_materials, georef=georef,
+                                    decals=params.decals, python=params.python,
+                                    log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version)
+    except PackageError as exc:
+        raise InputError(f"carla_package: {exc}") from None
+    except FbxExportError as exc:
+        raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
     load_map((pkg / f"{map_name}.xodr").read_text(), map_name)
+    # CARLA's import rules, read from its source (carla_contract): a package that breaks one fails here
+    rep = check_package(out, package, expect_decals=params.decals)
+    if not rep.ok:
+        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+                           + "\n  ".join(str(v) for v in rep.violations))
+    summ = rep.summary()
     topo = cmap.get_topology()
     return {"package": package, "map": map_name, "spawn_points": len(spawn), "topology_edges": len(topo),
+            "map_meshes": placed["map_meshes"], "props": placed["props"],
+            "faces_by_tag": summ["faces_by_tag"], "wrong_terrain_share": summ["wrong_terrain_share"],
+            "dropped_assets": summ["dropped_assets"], "walkable_faces": summ["walkable_faces"],
+            "decals": summ["decals"],
             "xodr_georeference": xodr_georeference(text), "package_bytes": _size(out),
             "seconds": round(time.perf_counter() - t0, 2)}
 

@@ -1,0 +1,517 @@
+"""CARLA 0.9.16's import rules, read from its source, as checks on a package folder.
+
+``make import`` cannot run here (no Unreal), so what it would do with a package is computed from
+the rules below; each rule names the file of carla-simulator/carla it comes from (paths in that
+repository; ``Commandlet/`` and ``Game/`` are under ``Unreal/CarlaUE4/Plugins/Carla/Source/Carla/``).
+:func:`check_package` applies them to ``<root>/Import/<Package>/`` and returns a report; the
+``carla_package`` exporter fails when the report has a violation.
+
+What ``make import`` does, in order (``Util/BuildTools/Import.py``):
+
+1. every ``*.json`` under ``Import/`` except ``roadpainter_decals.json`` is a package description;
+   when no ``roadpainter_decals.json`` exists under ``Import/``, one with default random decals
+   is generated for every ``.xodr``/``.fbx`` pair;
+2. ``ImportAssets``: each map FBX goes to ``/Game/<Pkg>/Maps/<Map>`` (one static mesh per FBX
+   node, named ``<FbxStem>_<Node>``); each prop FBX to ``/Game/<Pkg>/Static/<tag>/<name>`` (a
+   single-mesh FBX becomes one asset named after the file, the path Import.py registers in
+   ``<Pkg>.Package.json``: ``/Game/<Pkg>/Static/<tag>/<name>/<stem>.<stem>``);
+3. ``MoveAssets`` moves the map's meshes by name into ``Static/{Road,RoadLine,Terrain,SideWalk}/<Map>``;
+4. the pedestrian navmesh is built from the map FBX by node name (``FBX2OBJ``);
+5. ``PrepareAssetsForCooking`` spawns the meshes of ``Maps/<Map>`` and those four folders into the
+   map, skipping any mesh whose asset or material name contains "light" or "sign";
+6. ``LoadAssetMaterials`` paints RoadPainter decals from ``roadpainter_decals.json``.
+
+The semantic tag of a mesh is the folder at path segment 4 (``/Game/<Pkg>/Static/<Folder>/...``),
+``Tagger.cpp``'s ``GetLabelByFolderName``. Props are never spawned into the map by the import.
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+CARLA = "carla-simulator/carla"
+SRC_IMPORT = "Util/BuildTools/Import.py"
+SRC_MOVE = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/MoveAssetsCommandlet.cpp (SSTags.h)"
+SRC_PREPARE = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/PrepareAssetsForCookingCommandlet.cpp"
+SRC_TAGGER = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Game/Tagger.cpp"
+SRC_REGISTRY = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Actor/CarlaBlueprintRegistry.cpp (PropParameters.h)"
+SRC_NAV = "Util/DockerUtils/fbx/src/FBX2OBJ.cpp"
+SRC_DECALS = ("Util/BuildTools/Import.py (generate_decals_file) + Unreal/CarlaUE4/Plugins/Carla/Source/Carla/"
+              "Util/RoadPainterWrapper.cpp (ReadConfigFile)")
+SRC_MATERIALS = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/LoadAssetMaterialsCommandlet.cpp"
+SRC_TWINKIT = "twinkit (not a CARLA rule)"
+
+DECALS_FILE = "roadpainter_decals.json"
+
+# -- MoveAssetsCommandlet.cpp: substrings tested in this order (FString::Contains, case-insensitive by default)
+MOVE_ROUTES: tuple[tuple[tuple[str, ...], str], ...] = (
+    (("Road_Road", "Roads_Road"), "Road"),
+    (("Road_Marking", "Roads_Marking"), "RoadLine"),
+    (("Terrain",), "Terrain"),
+    (("Road_Sidewalk", "Roads_Sidewalk"), "SideWalk"),
+    (("Road_Curb", "Roads_Curb"), "SideWalk"),
+    (("Road_Gutter", "Roads_Gutter"), "SideWalk"),
+)
+MOVE_DEFAULT = "Terrain"
+MOVE_KEYS = tuple(k for keys, _ in MOVE_ROUTES for k in keys)
+
+# -- PrepareAssetsForCookingCommandlet.cpp: folders whose meshes are spawned into the map
+SPAWNED_FOLDERS = ("Road", "RoadLine", "Terrain", "SideWalk")
+# ValidateStaticMesh: asset and material names containing these (case-insensitive) are never spawned
+DROP_WORDS = ("light", "sign")
+# IsMapInTiles / LoadAssetMaterials: an asset or map name containing this is handled as a tile of a large map
+TILE_MARK = "_Tile_"
+
+# -- Tagger.cpp GetLabelByFolderName: folder name -> carla.CityObjectLabel name (anything else: NONE)
+TAGGER_FOLDERS = {
+    "Building": "Buildings", "Fence": "Fences", "Pedestrian": "Pedestrians", "Pole": "Poles", "Other": "Other",
+    "Road": "Roads", "RoadLine": "RoadLines", "SideWalk": "Sidewalks", "TrafficSign": "TrafficSigns",
+    "Vegetation": "Vegetation", "Car": "Car", "Wall": "Walls", "Sky": "Sky", "Ground": "Ground", "Bridge": "Bridge",
+    "RailTrack": "RailTrack", "GuardRail": "GuardRail", "TrafficLight": "TrafficLight", "Static": "Static",
+    "Dynamic": "Dynamic", "Water": "Water", "Terrain": "Terrain", "Truck": "Truck", "Motorcycle": "Motorcycle",
+    "Bicycle": "Bicycle", "Bus": "Bus", "Rider": "Rider", "Train": "Train",
+}
+
+# -- CarlaBlueprintRegistry.cpp / PropParameters.h: EPropSize names
+PROP_SIZES = ("Tiny", "Small", "Medium", "Big", "Huge")
+
+# -- FBX2OBJ.cpp SetMaterials: exact node names (its StartsWith compares whole names) -> navmesh area
+NAV_AREAS = {"Road_Road": "road", "Road_Marking": "road", "Road_Curb": "road", "Road_Gutter": "road",
+             "Road_Sidewalk": "sidewalk", "Road_Crosswalk": "crosswalk", "Road_Grass": "grass"}
+
+# -- RoadPainterWrapper.cpp ReadConfigFile: fields read for the entry whose map_name is the map
+DECAL_FIELDS = ("map_name", "decal_scale", "fixed_decal_offset", "decal_min_scale", "decal_max_scale",
+                "decal_random_yaw", "random_offset")
+DECAL_VECTOR_FIELDS = ("decal_scale", "fixed_decal_offset")
+# the decal names LoadAssetMaterialsCommandlet.cpp knows (DecalNamesMap), and the counts Import.py's
+# generate_decals_file writes when no roadpainter_decals.json exists
+DECAL_NAMES = tuple(
+    [f"dirt{i}" for i in range(1, 6)] + [f"drip{i}" for i in range(1, 4)] + [f"roadline{i}" for i in range(1, 6)]
+    + [f"tiremark{i}" for i in range(1, 4)] + [f"tarsnake{i}" for i in range(1, 12)]
+    + [f"cracksbig{i}" for i in range(1, 9)] + [f"crack{i}" for i in range(1, 9)]
+    + [f"manhole{i}" for i in range(1, 4)] + [f"mud{i}" for i in range(1, 6)]
+    + [f"oilsplat{i}" for i in range(1, 6)] + ["gum", "grate"])
+DECAL_DEFAULT_COUNTS = {
+    "drip1": 10, "drip3": 10, "dirt1": 10, "dirt3": 10, "dirt4": 10, "dirt5": 10, "roadline1": 20, "roadline5": 20,
+    "tiremark1": 20, "tiremark3": 20, "tarsnake1": 10, "tarsnake3": 20, "tarsnake4": 10, "tarsnake5": 20,
+    "tarsnake11": 20, "cracksbig1": 10, "cracksbig3": 10, "cracksbig5": 10, "cracksbig8": 10, "mud1": 10, "mud5": 10,
+    "oilsplat1": 20, "oilsplat2": 20, "oilsplat3": 20, "oilsplat4": 20, "oilsplat5": 20, "gum": 30, "crack1": 10,
+    "crack3": 10, "crack4": 10, "crack5": 10, "crack8": 10}
+DECAL_DEFAULT_PARAMS = {"decal_scale": {"x_axis": 1.0, "y_axis": 1.0, "z_axis": 1.0},
+                        "fixed_decal_offset": {"x_axis": 15.0, "y_axis": 15.0, "z_axis": 0.0},
+                        "decal_min_scale": 0.3, "decal_max_scale": 0.7, "decal_random_yaw": 360.0,
+                        "random_offset": 50.0}
+
+#: every rule: id -> (what CARLA does, source file)
+RULES: dict[str, tuple[str, str]] = {
+    "layout": ("every *.json under Import/ except roadpainter_decals.json is a package description named after "
+               "the file; source/xodr are joined to the JSON's folder", SRC_IMPORT),
+    "json": ("maps: name, source, xodr, use_carla_materials (read with GetBoolField: a JSON boolean); props: "
+             "name, source, tag, size (Import.py reads prop['size'])", f"{SRC_IMPORT}; {SRC_PREPARE}"),
+    "prop_size": ("a prop's size must be an EPropSize name: " + ", ".join(PROP_SIZES), SRC_REGISTRY),
+    "prop_single_mesh": ("a prop FBX holds one mesh, imported as the asset <stem> that Import.py registers as "
+                         "/Game/<Pkg>/Static/<tag>/<name>/<stem>.<stem>", SRC_IMPORT),
+    "names_dropped": ("meshes whose asset or material name contains 'light' or 'sign' (any case) are never "
+                      "spawned (ValidateStaticMesh)", SRC_PREPARE),
+    "names_tile": (f"an asset name containing '{TILE_MARK}' makes the map a tiled large map", SRC_PREPARE),
+    "routing": ("map meshes are moved by (case-insensitive) substring of their asset name: Road_Road->Road, "
+                "Road_Marking->RoadLine, Terrain->Terrain, Road_Sidewalk/Curb/Gutter->SideWalk, else Terrain",
+                SRC_MOVE),
+    "tag": ("the semantic tag is the folder at path segment 4 (/Game/<Pkg>/Static/<Folder>/...); unknown "
+            "folders give NONE", SRC_TAGGER),
+    "navmesh": ("pedestrian navmesh areas by exact map-FBX node name: Road_Sidewalk walkable, Road_Crosswalk, "
+                "Road_Grass, Road_Road/Marking/Curb/Gutter road, anything else block", SRC_NAV),
+    "decals": ("without Import/roadpainter_decals.json, make import generates default random decals (dirt, "
+               "cracks, tyre marks, road lines) for every map; RoadPainter reads the entry whose map_name is the map",
+               SRC_DECALS),
+    "names_match": ("the .xodr is copied as <name>.xodr; the docs ask for <name>.fbx and <name>.xodr",
+                    SRC_IMPORT),
+    "texture_paths": ("the FBX references its texture by a path inside the package, never an absolute path "
+                      "(Unreal falls back to <fbx folder>/RelativeFilename)", SRC_TWINKIT),
+    "placement": ("props are imported but never placed in the map; the package must carry what places them",
+                  f"{SRC_PREPARE}; {SRC_TWINKIT}"),
+    "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
+                  "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
+}
+
+
+@dataclass
+class Violation:
+    rule: str
+    message: str
+
+    @property
+    def source(self) -> str:
+        return RULES[self.rule][1]
+
+    def __str__(self) -> str:
+        return f"[{self.rule}] {self.message} (CARLA rule from {self.source})"
+
+
+@dataclass
+class MeshFate:
+    """What CARLA's import does with one mesh of the package."""
+
+    kind: str  # "map" | "prop"
+    fbx: str
+    node: str
+    asset: str  # Unreal asset name
+    folder: str  # Static/<folder> it ends in
+    tag: str  # carla.CityObjectLabel name given by the Tagger
+    placed: bool  # spawned into the map by the import (maps only; props need the spawn script)
+    dropped: bool  # ValidateStaticMesh refuses it
+    faces: int
+    class_id: int | None
+    intended_tag: str | None
+    nav_area: str | None = None
+
+
+@dataclass
+class ContractReport:
+    package: str
+    violations: list[Violation] = field(default_factory=list)
+    meshes: list[MeshFate] = field(default_factory=list)
+    decals: bool | None = None  # True when the package's decals configuration paints decals on its map
+
+    @property
+    def ok(self) -> bool:
+        return not self.violations
+
+    def add(self, rule: str, message: str) -> None:
+        self.violations.append(Violation(rule, message))
+
+    def faces_by_tag(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for m in self.meshes:
+            if not m.dropped:
+                out[m.tag] = out.get(m.tag, 0) + m.faces
+        return out
+
+    def wrong_terrain_share(self) -> float:
+        """Share of static faces tagged Terrain whose class is not terrain (0.0 .. 1.0)."""
+        total = sum(m.faces for m in self.meshes)
+        wrong = sum(m.faces for m in self.meshes if m.tag == "Terrain" and m.intended_tag not in (None, "Terrain"))
+        return wrong / total if total else 0.0
+
+    def summary(self) -> dict:
+        total = sum(m.faces for m in self.meshes)
+        return {
+            "package": self.package, "ok": self.ok, "violations": [str(v) for v in self.violations],
+            "faces": total,
+            "faces_by_tag": self.faces_by_tag(),
+            "share_faces_by_tag": {k: round(v / total, 4) for k, v in self.faces_by_tag().items()} if total else {},
+            "wrong_terrain_share": round(self.wrong_terrain_share(), 6),
+            "dropped_assets": [m.asset for m in self.meshes if m.dropped],
+            "walkable_faces": sum(m.faces for m in self.meshes if m.nav_area == "sidewalk"),
+            "decals": self.decals,
+            "meshes": [{"asset": m.asset, "kind": m.kind, "folder": m.folder, "tag": m.tag, "faces": m.faces,
+                        "placed": m.placed, "dropped": m.dropped, "intended_tag": m.intended_tag}
+                       for m in self.meshes],
+        }
+
+
+# ----------------------------------------------------------------------------- single rules
+
+def move_assets_folder(asset_name: str) -> str:
+    """Static/<folder> the MoveAssets commandlet moves a map mesh with this asset name to."""
+    low = asset_name.lower()
+    for keys, folder in MOVE_ROUTES:
+        if any(k.lower() in low for k in keys):
+            return folder
+    return MOVE_DEFAULT
+
+
+def tagger_label(folder: str) -> str:
+    """carla.CityObjectLabel name the Tagger gives a mesh stored in Static/<folder>/ (exact, case-sensitive)."""
+    return TAGGER_FOLDERS.get(folder, "NONE")
+
+
+def dropped_words(name: str) -> list[str]:
+    """The words of ValidateStaticMesh's filter that ``name`` contains (case-insensitive)."""
+    low = name.lower()
+    return [w for w in DROP_WORDS if w in low]
+
+
+def map_asset_name(fbx_stem: str, node: str) -> str:
+    """Asset name Unreal gives a node of a multi-mesh FBX imported without combining meshes."""
+    return f"{fbx_stem}_{node}"
+
+
+def suggest_name(name: str) -> str:
+    """A name close to ``name`` that passes the name rules (light/sign filter, routing keys, tiles)."""
+    out = name
+    for bad, good in (("light", "lite"), ("sign", "syn"), ("terrain", "terra"), ("_tile_", "tile")):
+        out = re.sub(bad, lambda m, g=good: g.capitalize() if m.group(0)[0].isupper() else g, out, flags=re.I)
+    for key in MOVE_KEYS:
+        out = re.sub(re.escape(key), key.replace("_", ""), out, flags=re.I)
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", out) or name_problems(out):
+        return "Site"
+    return out
+
+
+def name_problems(name: str, *, what: str = "name") -> list[str]:
+    """Why CARLA's import would mishandle assets whose names contain ``name`` (empty list: fine)."""
+    probs = []
+    words = dropped_words(name)
+    if words:
+        probs.append(f"{what} {name!r} contains {' and '.join(repr(w) for w in words)}: PrepareAssetsForCooking "
+                     f"skips every mesh whose name contains 'light' or 'sign' (any case), so every mesh of the "
+                     f"map would be dropped")
+    keys = [k for k in MOVE_KEYS if k.lower() in name.lower()]
+    if keys:
+        probs.append(f"{what} {name!r} contains {keys[0]!r}, which MoveAssets uses to route meshes (any case), so "
+                     f"every mesh would be moved to one folder and tagged alike")
+    if TILE_MARK.lower() in name.lower():
+        probs.append(f"{what} {name!r} contains {TILE_MARK!r}: CARLA would treat the map as tiles of a large map")
+    return probs
+
+
+def decals_entry(map_name: str, enabled: bool) -> dict:
+    """One ``decals`` entry of roadpainter_decals.json for ``map_name``: CARLA's default counts or none.
+
+    With ``enabled`` false the entry names no decal at all (RoadPainter then has no decal material
+    to spawn) but keeps every parameter field, which RoadPainterWrapper reads unconditionally.
+    """
+    entry: dict = {"map_name": map_name}
+    if enabled:
+        entry.update(DECAL_DEFAULT_COUNTS)
+    entry.update(json.loads(json.dumps(DECAL_DEFAULT_PARAMS)))
+    return entry
+
+
+# ----------------------------------------------------------------------------- the package check
+
+def _json(path: Path, rep: ContractReport, rule: str):
+    try:
+        return json.loads(path.read_text())
+    except Exception as exc:
+        rep.add(rule, f"{path}: not readable JSON ({exc})")
+        return None
+
+
+def check_package(root: Path, package: str | None = None, *, class_tags: dict[int, str] | None = None,
+                  expect_decals: bool | None = None, spawn_script: Path | None = None) -> ContractReport:
+    """Apply CARLA's import rules to ``root/Import/<package>/`` (``root`` may also be the Import folder).
+
+    class_tags: trainId -> intended carla.CityObjectLabel name (from the FBX objects' ``class_id``);
+    default: twinkit's class table. expect_decals: the decals setting the package must carry (None:
+    only report it). spawn_script: the file that must place every prop (default ``root/spawn_props.py``).
+    """
+    from . import fbxbin
+    from .classes import info
+
+    root = Path(root)
+    imp = root if root.name == "Import" else root / "Import"
+    if not imp.is_dir():
+        rep = ContractReport(package or "?")
+        rep.add("layout", f"{imp}: no Import/ folder (copy the package as <carla>/Import/<Package>/)")
+        return rep
+    descs = sorted(p for p in imp.rglob("*.json") if p.name != DECALS_FILE)
+    if package is None:
+        package = descs[0].stem if descs else "?"
+    rep = ContractReport(package)
+    pkg = imp / package
+    desc_path = pkg / f"{package}.json"
+    # layout -------------------------------------------------------------------------------------
+    if not desc_path.exists():
+        rep.add("layout", f"{desc_path} is missing: Import.py takes the package name from <Package>.json")
+        return rep
+    others = [p for p in descs if p != desc_path]
+    if others:
+        rep.add("layout", f"{', '.join(str(p.relative_to(imp)) for p in others)}: every .json under Import/ is read "
+                          f"as a package description; keep other JSON files outside Import/")
+    desc = _json(desc_path, rep, "json")
+    if not isinstance(desc, dict):
+        return rep
+    maps, props = desc.get("maps", []), desc.get("props", [])
+    if not isinstance(maps, list) or not isinstance(props, list):
+        rep.add("json", f"{desc_path.name}: 'maps' and 'props' must be lists")
+        return rep
+    if not maps:
+        rep.add("json", f"{desc_path.name}: no map ('maps' is empty)")
+
+    def intended(cid):
+        if cid is None:
+            return None
+        if class_tags and int(cid) in class_tags:
+            return class_tags[int(cid)]
+        return info(int(cid)).carla_tag
+
+    # maps -----------------------------------------------------------------------------------------
+    map_names = []
+    for i, m in enumerate(maps):
+        if not isinstance(m, dict):
+            rep.add("json", f"{desc_path.name}: maps[{i}] is not an object")
+            continue
+        missing = [k for k in ("name", "source", "xodr", "use_carla_materials") if k not in m]
+        if missing:
+            rep.add("json", f"{desc_path.name}: maps[{i}] lacks {', '.join(missing)}")
+            continue
+        if not isinstance(m["use_carla_materials"], bool):
+            rep.add("json", f"{desc_path.name}: maps[{i}].use_carla_materials must be a JSON boolean (GetBoolField)")
+        name = str(m["name"])
+        map_names.append(name)
+        for p in name_problems(name, what="map name"):
+            rep.add("names_dropped" if "light" in p or "'sign'" in p else "names_tile" if TILE_MARK in p
+                    else "routing", f"{p}; rename it, e.g. {suggest_name(name)!r}")
+        src, xodr = pkg / str(m["source"]), pkg / str(m["xodr"])
+        if not src.is_file():
+            rep.add("json", f"{desc_path.name}: maps[{i}].source {m['source']!r} does not exist in {pkg}")
+            continue
+        if not xodr.is_file():
+            rep.add("json", f"{desc_path.name}: maps[{i}].xodr {m['xodr']!r} does not exist in {pkg}")
+        if src.stem != name or xodr.stem != name:
+            rep.add("names_match", f"map {name!r}: source {src.name} and xodr {xodr.name} should be {name}.fbx and "
+                                   f"{name}.xodr")
+        try:
+            fs = fbxbin.summarize(src)
+        except Exception as exc:
+            rep.add("json", f"{src}: not a readable binary FBX ({exc})")
+            continue
+        _check_textures(rep, src, fs, pkg)
+        for mesh in fs.meshes:
+            asset = map_asset_name(src.stem, mesh.name)
+            folder = move_assets_folder(asset)
+            cid = mesh.properties.get("class_id")
+            fate = MeshFate("map", src.name, mesh.name, asset, folder, tagger_label(folder), folder in SPAWNED_FOLDERS,
+                            bool(dropped_words(asset) or any(dropped_words(mt) for mt in mesh.materials)),
+                            mesh.faces, cid, intended(cid), NAV_AREAS.get(mesh.name, "block"))
+            rep.meshes.append(fate)
+            _check_mesh(rep, fate, mesh.materials)
+            if cid is not None and info(int(cid)).carla_name == "Road_Sidewalk" and mesh.name != "Road_Sidewalk":
+                rep.add("navmesh", f"{src.name}: sidewalk mesh {mesh.name!r} is not named exactly 'Road_Sidewalk': "
+                                   f"the navmesh tool would not make it walkable")
+    # props ----------------------------------------------------------------------------------------
+    prop_names = []
+    for i, p in enumerate(props):
+        if not isinstance(p, dict):
+            rep.add("json", f"{desc_path.name}: props[{i}] is not an object")
+            continue
+        missing = [k for k in ("name", "source", "tag", "size") if k not in p]
+        if missing:
+            rep.add("json", f"{desc_path.name}: props[{i}] lacks {', '.join(missing)}")
+            continue
+        if p["size"] not in PROP_SIZES:
+            rep.add("prop_size", f"{desc_path.name}: props[{i}].size {p['size']!r} is not one of {PROP_SIZES}")
+        name, tag = str(p["name"]), str(p["tag"])
+        prop_names.append(name)
+        src = pkg / str(p["source"])
+        if not src.is_file():
+            rep.add("json", f"{desc_path.name}: props[{i}].source {p['source']!r} does not exist in {pkg}")
+            continue
+        try:
+            fs = fbxbin.summarize(src)
+        except Exception as exc:
+            rep.add("json", f"{src}: not a readable binary FBX ({exc})")
+            continue
+        _check_textures(rep, src, fs, pkg)
+        if len(fs.meshes) != 1:
+            rep.add("prop_single_mesh", f"{src.name}: {len(fs.meshes)} meshes; a prop FBX must hold exactly one "
+                                        f"(its asset is registered as {src.stem}.{src.stem})")
+        for mesh in fs.meshes:
+            asset = src.stem if len(fs.meshes) == 1 else map_asset_name(src.stem, mesh.name)
+            cid = mesh.properties.get("class_id")
+            fate = MeshFate("prop", src.name, mesh.name, asset, tag, tagger_label(tag), False,
+                            bool(dropped_words(asset) or any(dropped_words(mt) for mt in mesh.materials)),
+                            mesh.faces, cid, intended(cid))
+            rep.meshes.append(fate)
+            _check_mesh(rep, fate, mesh.materials)
+    if len(set(prop_names)) != len(prop_names):
+        rep.add("json", f"{desc_path.name}: prop names repeat; blueprint ids static.prop.<name> must be unique")
+    # placement: nothing in the import places props ------------------------------------------------
+    if prop_names:
+        script = Path(spawn_script) if spawn_script else root / "spawn_props.py"
+        text = script.read_text() if script.is_file() else ""
+        missing = [n for n in prop_names if f"static.prop.{n.lower()}" not in text]
+        if not text:
+            rep.add("placement", f"{script.name} is missing: make import never places props in the map, so the "
+                                 f"package must carry the script that spawns them")
+        elif missing:
+            rep.add("placement", f"{script.name} does not spawn {', '.join(missing)}")
+    # decals --------------------------------------------------------------------------------------
+    _check_decals(rep, imp, map_names, expect_decals)
+    # semantics: every class ends in its tag -----------------------------------------------------------
+    share = rep.wrong_terrain_share()
+    if share > 0:
+        rep.add("semantics", f"{100 * share:.1f} % of the static faces would be tagged Terrain although their class "
+                             f"is not terrain")
+    return rep
+
+
+def _check_mesh(rep: ContractReport, fate: MeshFate, materials: list[str]) -> None:
+    where = f"{fate.fbx}: {'node' if fate.kind == 'map' else 'prop'} {fate.node!r} (asset {fate.asset!r})"
+    words = dropped_words(fate.asset)
+    if words:
+        rep.add("names_dropped", f"{where} contains {' and '.join(repr(w) for w in words)}: never placed in the map; "
+                                 f"rename it, e.g. {suggest_name(fate.asset)!r}")
+    for mt in materials:
+        if dropped_words(mt):
+            rep.add("names_dropped", f"{where}: material {mt!r} contains 'light' or 'sign': the mesh is never placed; "
+                                     f"rename it, e.g. {suggest_name(mt)!r}")
+    if TILE_MARK.lower() in fate.asset.lower():
+        rep.add("names_tile", f"{where} contains {TILE_MARK!r}")
+    if fate.intended_tag is not None and fate.tag != fate.intended_tag and not (
+            fate.intended_tag == "NONE" and fate.tag == "NONE"):
+        if fate.tag != "Terrain":  # Terrain mis-tags are summed up in the 'semantics' rule
+            rep.add("tag", f"{where} ends in Static/{fate.folder} and is tagged {fate.tag}, its class is "
+                           f"{fate.intended_tag}")
+
+
+def _check_textures(rep: ContractReport, fbx: Path, fs, pkg: Path) -> None:
+    for t in fs.textures:
+        for key in ("FileName", "RelativeFilename"):
+            v = t.get(key)
+            if not v:
+                continue
+            if v.startswith("/") or re.match(r"^[A-Za-z]:[\\/]", v) or v.startswith("\\\\"):
+                rep.add("texture_paths", f"{fbx.name}: {t['object']} {t['name']!r} stores the absolute path {v!r} "
+                                         f"in {key}")
+        rel = t.get("RelativeFilename")
+        if rel and not (fbx.parent / rel).is_file() and not (pkg / Path(rel).name).is_file():
+            rep.add("texture_paths", f"{fbx.name}: texture {rel!r} is not in the package")
+
+
+def _check_decals(rep: ContractReport, imp: Path, map_names: list[str], expect: bool | None) -> None:
+    files = sorted(imp.rglob(DECALS_FILE))
+    top = imp / DECALS_FILE
+    if not files:
+        rep.decals = True
+        if expect is not True:
+            rep.add("decals", f"no {DECALS_FILE} under {imp.name}/: make import would generate one that paints random "
+                              f"decals (dirt, cracks, tyre marks, road lines) on {', '.join(map_names) or 'the map'}")
+        return
+    if top not in files:
+        rep.add("decals", f"{DECALS_FILE} must lie directly in Import/ (Import.py copies only Import/{DECALS_FILE} "
+                          f"into the package's Content/<Package>/Config)")
+        return
+    data = _json(top, rep, "decals")
+    entries = data.get("decals") if isinstance(data, dict) else None
+    if not isinstance(entries, list):
+        rep.add("decals", f"{DECALS_FILE}: needs a 'decals' list")
+        return
+    painted = False
+    for name in map_names:
+        ent = [e for e in entries if isinstance(e, dict) and e.get("map_name") == name]
+        if not ent:
+            rep.add("decals", f"{DECALS_FILE}: no entry with map_name {name!r}")
+            continue
+        e = ent[0]
+        missing = [f for f in DECAL_FIELDS if f not in e]
+        missing += [f"{f}.{a}" for f in DECAL_VECTOR_FIELDS if isinstance(e.get(f), dict)
+                    for a in ("x_axis", "y_axis", "z_axis") if a not in e[f]]
+        if missing:
+            rep.add("decals", f"{DECALS_FILE}: entry {name!r} lacks {', '.join(missing)} (RoadPainter reads them all)")
+        for k in DECAL_NAMES:
+            if k in e:
+                try:
+                    n = float(e[k])
+                except (TypeError, ValueError):
+                    rep.add("decals", f"{DECALS_FILE}: entry {name!r}: {k} = {e[k]!r} is not a number")
+                    continue
+                painted = painted or n > 0
+    rep.decals = painted
+    if expect is not None and painted != expect:
+        rep.add("decals", f"{DECALS_FILE}: decals are {'on' if painted else 'off'} for {', '.join(map_names)}, "
+                          f"expected {'on' if expect else 'off'}")
