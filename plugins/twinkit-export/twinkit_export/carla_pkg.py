@@ -127,15 +127,22 @@ Terrain. To give a class its own tag, move its mesh in the editor to
 
 ## Frames
 
-Mesh and OpenDRIVE share the site frame (x east, y north, z up, metres, origin at the base
-point {georef}). Unreal mirrors y on import of both, so they stay aligned.
+{frames}
 """
+
+
+def _site_frames(georef: str) -> str:
+    return (f"Mesh and OpenDRIVE share the site frame (x east, y north, z up, metres, origin at the base\n"
+            f"point {georef}). Unreal mirrors y on import of both, so they stay aligned.")
 
 
 def write_package(folder: Path, *, package: str, map_name: str, fbx: Path, texture: Path | None, xodr_text: str,
                   spawn: list[dict], use_carla_materials: bool, georef: dict, classes_present: list,
-                  carla_version: str = "0.9.16") -> Path:
-    """Write ``folder/Import/<package>/...``; returns the package folder."""
+                  carla_version: str = "0.9.16", frames=None) -> Path:
+    """Write ``folder/Import/<package>/...``; returns the package folder.
+
+    ``frames(georef_text) -> str``: the README's frame section (default: the site frame).
+    """
     import shutil
 
     from .classes import info
@@ -166,6 +173,6 @@ def write_package(folder: Path, *, package: str, map_name: str, fbx: Path, textu
     (pkg / "README.md").write_text(README.format(
         package=package, map=map_name, texture=tex_name or "(no texture)", n_spawn=len(spawn),
         use_carla_materials=str(bool(use_carla_materials)).lower(), table="\n".join(rows),
-        georef=f"({geo})" if geo else "", carla_version=carla_version))
+        frames=(frames or _site_frames)(f"({geo})" if geo else ""), carla_version=carla_version))
     return pkg
 

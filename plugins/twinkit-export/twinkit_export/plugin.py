@@ -68,6 +68,10 @@ class CarlaPackageParams:
     spawn_height_m: float = 0.5  # spawn points are raised by this much above the lane
     skip_junctions: bool = True  # no spawn points inside junctions
     carla_version: str = "0.9.16"
+    frame: str = "carla"  # carla: true-north frame at the base point, CARLA's geolocation works | site: site frame
+    frame_scale: str = "auto"  # auto | site (rotation only) | true (true metres) | minimax (see docs/georeferencing.md)
+    geolocation_radius_m: float = 150.0  # CARLA's geolocation is held within the tolerance up to this distance
+    geolocation_tolerance_m: float = 0.5
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -292,6 +296,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
                          in_aligned_xodr: Path | None = None, in_site_json: Path | None = None) -> dict:
     """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points."""
     from .carla_pkg import PackageError, check_names, load_map, spawn_points, write_package, xodr_georeference
+    from .carla_frame import package_fbx, package_frame, package_xodr, readme_frames, site_spawn, write_frame_json
 
     params = params or CarlaPackageParams()
     t0 = time.perf_counter()
@@ -304,12 +309,17 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     except Exception as exc:
         raise InputError(f"{xodr}: cannot read ({exc})") from None
     site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
+    # the package is written in CARLA's frame (true north at the base point): carla_frame.py
+    frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
+                          params.geolocation_radius_m, params.geolocation_tolerance_m)
+    site_geo, text = xodr_georeference(text), package_xodr(text, frame, xodr.name)
     map_name = params.map_name or _camel(site_name)
     package = params.package or f"{map_name}Twin"
     try:
         check_names(package, map_name)
         cmap = load_map(text, map_name)
-        spawn = spawn_points(cmap, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions)
+        spawn = site_spawn(spawn_points(cmap, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
+                           frame)
     except PackageError as exc:
         raise InputError(f"carla_package: {exc}") from None
     if not spawn:
@@ -320,16 +330,21 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     tex = next((fbx.with_suffix(e) for e in (".png", ".jpg", ".jpeg") if fbx.with_suffix(e).exists()), None)
     georef = _georef(ctx, in_site_json)
     out = Path(out_carla_import_dir)
+    work = Path(ctx.workdir) / "carla_frame_fbx"
+    fbx, tex = package_fbx(frame, cs, fbx, tex, work, georef, Path(ctx.workdir) / "bpy_carla_frame.log")
     pkg = write_package(out, package=package, map_name=map_name, fbx=fbx, texture=tex, xodr_text=text,
                         spawn=spawn, use_carla_materials=params.use_carla_materials, georef=georef,
                         classes_present=[c["class_id"] for c in cs.manifest["classes"] if c["faces"] > 0],
-                        carla_version=params.carla_version)
+                        carla_version=params.carla_version, frames=lambda g: readme_frames(frame, g))
+    shutil.rmtree(work, ignore_errors=True)
+    write_frame_json(out / "carla_frame.json", frame, site_geo)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
     load_map((pkg / f"{map_name}.xodr").read_text(), map_name)
     topo = cmap.get_topology()
     return {"package": package, "map": map_name, "spawn_points": len(spawn), "topology_edges": len(topo),
             "xodr_georeference": xodr_georeference(text), "package_bytes": _size(out),
+            "frame": frame.to_json() if frame is not None else "site",
             "seconds": round(time.perf_counter() - t0, 2)}
 
 
