@@ -29,7 +29,7 @@ import numpy as np
 FRAME_MODES = ("carla", "site")
 
 
-def package_frame(site, mode: str, scale: str, radius_m: float, tolerance_m: float):
+def package_frame(site, mode: str, scale: str, radius_m: float, tolerance_m: float, log=None):
     """The :class:`twinkit.geo.carla.CarlaFrame` of the package, or None for ``mode == "site"``."""
     from twinkit import InputError
     from twinkit.geo import SiteFrame
@@ -43,7 +43,16 @@ def package_frame(site, mode: str, scale: str, radius_m: float, tolerance_m: flo
     except InputError as exc:
         raise InputError(f"carla_package: {exc} (or set the exporter's frame=site to write the package in the "
                          f"site frame, with CARLA's geolocation wrong)") from None
-    return sf.carla_frame(radius_m=radius_m, tolerance_m=tolerance_m, scale=scale)
+    f = sf.carla_frame(radius_m=radius_m, tolerance_m=tolerance_m, scale=scale)
+    if log is not None:
+        log.info("CARLA frame: rotation %+.4f deg, scale %.6f, k %.6f; CARLA's geolocation within %.3f m "
+                 "(mean %.3f m) up to %g m from the base point", math.degrees(f.rotation_rad), f.scale, f.k,
+                 f.carla_error_max_m, f.carla_error_mean_m, radius_m)
+        if f.carla_error_max_m > tolerance_m:
+            log.warning("CARLA's spherical geolocation cannot meet %.2f m within %g m of this base point "
+                        "(best %.3f m, frame_scale=%s); see docs/georeferencing.md", tolerance_m, radius_m,
+                        f.carla_error_max_m, scale)
+    return f
 
 
 def package_xodr(text: str, frame, name: str) -> str:

@@ -311,7 +311,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
     # the package is written in CARLA's frame (true north at the base point): carla_frame.py
     frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
-                          params.geolocation_radius_m, params.geolocation_tolerance_m)
+                          params.geolocation_radius_m, params.geolocation_tolerance_m, ctx.log)
     site_geo, text = xodr_georeference(text), package_xodr(text, frame, xodr.name)
     map_name = params.map_name or _camel(site_name)
     package = params.package or f"{map_name}Twin"
