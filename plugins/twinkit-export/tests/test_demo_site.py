@@ -116,7 +116,10 @@ def test_fbx_and_carla_package_demo(demo_site, demo_split, tmp_path):
                    {"in_twin_fbx": fbx, "in_class_meshes_dir": class_dir, "in_aligned_xodr": xodr,
                     "in_site_json": demo_site / "site.json"}, site=DEMO_SITE)
     pkg = out["carla_import"] / "Import" / "DemoTwin"
-    assert (pkg / "Demo.fbx").stat().st_size == fbx.stat().st_size
+    # the package's FBX is the twin re-exported in the CARLA frame (a pure rotation on the demo: test_carla_frame.py)
+    assert (pkg / "Demo.fbx").read_bytes()[:18] == b"Kaydara FBX Binary"
+    fr = json.loads((out["carla_import"] / "carla_frame.json").read_text())
+    assert fr["scale"] == 1.0 and fr["rotation_deg"] == pytest.approx(1.7928, abs=1e-3)
     m = carla.Map("Demo", (pkg / "Demo.xodr").read_text())
     assert len(m.generate_waypoints(10.0)) > 0
     assert json.loads((pkg / "DemoTwin.json").read_text())["maps"][0]["xodr"] == "./Demo.xodr"

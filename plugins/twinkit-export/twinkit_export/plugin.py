@@ -331,7 +331,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     georef = _georef(ctx, in_site_json)
     out = Path(out_carla_import_dir)
     work = Path(ctx.workdir) / "carla_frame_fbx"
-    fbx, tex = package_fbx(frame, cs, fbx, tex, work, georef, Path(ctx.workdir) / "bpy_carla_frame.log")
+    fbx, tex = package_fbx(frame, cs, fbx, tex, work, georef, work / "bpy.log")  # an error quotes the log's tail
     pkg = write_package(out, package=package, map_name=map_name, fbx=fbx, texture=tex, xodr_text=text,
                         spawn=spawn, use_carla_materials=params.use_carla_materials, georef=georef,
                         classes_present=[c["class_id"] for c in cs.manifest["classes"] if c["faces"] > 0],
