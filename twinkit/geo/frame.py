@@ -237,6 +237,13 @@ class SiteFrame:
         return (f"+proj=tmerc +lat_0={self.lat!r} +lon_0={self.lon!r} +k=1 +x_0=0 +y_0=0 "
                 "+ellps=GRS80 +units=m +no_defs")
 
+    def carla_frame(self, radius_m: float = 150.0, tolerance_m: float = 0.5, scale: str = "auto"):
+        """The frame of the CARLA package (:func:`twinkit.geo.carla.carla_frame`): true north at the base point,
+        an exact PROJ string whose +lat_0/+lon_0 CARLA reads, CARLA's geolocation within ``tolerance_m``."""
+        from twinkit.geo.carla import carla_frame
+
+        return carla_frame(self, radius_m=radius_m, tolerance_m=tolerance_m, scale=scale)
+
     def georef_json(self) -> dict:
         """The georeference keys of a site.json: ``crs``, ``base_point`` and ``base_point_projected``."""
         return {"crs": self.crs, "base_point": {"lat": self.lat, "lon": self.lon, "alt": self.alt},

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from twinkit import InputError
@@ -74,6 +75,10 @@ def test_spawn_points_on_driving_lanes_and_frames(tmp_path, fake_fbx, class_dir,
     out = _package(tmp_path, fake_fbx, class_dir, xodr_file)
     sp = json.loads(out["spawn_points.json"].read_text())
     pts = sp["spawn_points"]
+    # the package is in the CARLA frame: the site frame turned by the meridian convergence (carla_frame.json)
+    fr = json.loads((out["carla_import"] / "carla_frame.json").read_text())
+    m = np.array(fr["matrix_site_to_package"])
+    assert fr["rotation_deg"] == pytest.approx(1.7928, abs=1e-3) and fr["scale"] == 1.0
     # straight road along +x at y = 5 m (site frame), lanes 3.5 m wide, sidewalk not used
     assert {p["lane_id"] for p in pts} == {-1, 1}
     assert len(pts) == 2 * 5  # s = 0, 20, 40, 60, 80 on each lane
@@ -82,7 +87,9 @@ def test_spawn_points_on_driving_lanes_and_frames(tmp_path, fake_fbx, class_dir,
         # right lane (-1) centre at y = 5 - 1.75, left lane (+1) at y = 5 + 1.75, in the site frame
         want_y = 5.0 - 1.75 if p["lane_id"] == -1 else 5.0 + 1.75
         assert site["y"] == pytest.approx(want_y, abs=1e-3)
-        assert c["y"] == pytest.approx(-want_y, abs=1e-3)  # CARLA/Unreal mirror y
+        pkg = m @ [site["x"], site["y"], site["z"]]
+        assert c["x"] == pytest.approx(pkg[0], abs=2e-3)
+        assert c["y"] == pytest.approx(-pkg[1], abs=2e-3)  # CARLA/Unreal mirror y
         assert site["z"] == pytest.approx(0.5)
         # right lane drives along +x (heading 0), left lane against it
         assert site["heading_deg"] == pytest.approx(0.0 if p["lane_id"] == -1 else 180.0, abs=1e-3)
@@ -118,11 +125,13 @@ def test_real_opendrive_fabriksgatan(tmp_path, fake_fbx, class_dir):
     out = _package(tmp_path, fake_fbx, class_dir, xodr)
     sp = json.loads(out["spawn_points.json"].read_text())
     assert sp["count"] > 20
-    m = carla.Map("x", xodr.read_text())
-    # every spawn point lies on a driving lane of the map (CARLA frame), outside junctions
+    pkg = next((out["carla_import"] / "Import").rglob("*.xodr"))
+    m = carla.Map("x", pkg.read_text())
+    # every spawn point lies on a driving lane of the package's map (CARLA frame), outside junctions
     for p in sp["spawn_points"][:40]:
         c = p["carla"]
-        w = m.get_waypoint(carla.Location(c["x"], c["y"], c["z"] - 0.5), project_to_road=True,
-                           lane_type=carla.LaneType.Driving)
-        assert w is not None and not w.is_junction
+        # (by road, lane and s: a point at a road's end also touches the junction's lanes, and which of the
+        # two get_waypoint returns there is a matter of rounding)
+        w = m.get_waypoint_xodr(p["road_id"], p["lane_id"], p["s"])
+        assert w is not None and not w.is_junction and w.lane_type == carla.LaneType.Driving
         assert w.transform.location.distance(carla.Location(c["x"], c["y"], c["z"] - 0.5)) < 0.05

@@ -130,6 +130,10 @@ def test_fbx_and_carla_package_demo(demo_site, demo_split, tmp_path):
     assert rep.ok, [str(v) for v in rep.violations]
     assert {m.class_id: m.faces for m in rep.meshes} == {c["class_id"]: c["faces"] for c in man["classes"]}
     assert rep.wrong_terrain_share() == 0.0 and not any(m.dropped for m in rep.meshes)
+    # the package's FBX files are made in the CARLA frame (a pure rotation on the demo: test_carla_frame.py)
+    assert (pkg / "Demo.fbx").read_bytes()[:18] == b"Kaydara FBX Binary"
+    fr = json.loads((out["carla_import"] / "carla_frame.json").read_text())
+    assert fr["scale"] == 1.0 and fr["rotation_deg"] == pytest.approx(1.7928, abs=1e-3)
     m = carla.Map("Demo", (pkg / "Demo.xodr").read_text())
     assert len(m.generate_waypoints(10.0)) > 0
     assert json.loads((pkg / "DemoTwin.json").read_text())["maps"][0]["xodr"] == "./Demo.xodr"

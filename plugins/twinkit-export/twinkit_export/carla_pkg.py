@@ -187,8 +187,7 @@ alone (props are not obstacles in it).
 
 ## Frames
 
-All meshes and the OpenDRIVE share the site frame (x east, y north, z up, metres, origin at the
-base point {georef}). Unreal mirrors y on import of both, so they stay aligned.
+{frames}
 """
 
 SPAWN_SCRIPT = '''#!/usr/bin/env python3
@@ -244,14 +243,21 @@ if __name__ == "__main__":
 '''
 
 
+def _site_frames(georef: str) -> str:
+    return (f"Mesh and OpenDRIVE share the site frame (x east, y north, z up, metres, origin at the base\n"
+            f"point {georef}). Unreal mirrors y on import of both, so they stay aligned.")
+
+
 def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path, classes: list[dict],
                   texture: Path | None, xodr_text: str, spawn: list[dict], use_carla_materials: bool, georef: dict,
                   decals: bool = False, python: str = "", log_path: Path | None = None,
-                  carla_version: str = "0.9.16") -> tuple[Path, dict]:
+                  carla_version: str = "0.9.16", frames=None) -> tuple[Path, dict]:
     """Write ``folder/Import/<package>/...``, ``Import/roadpainter_decals.json``, ``spawn_props.py``.
 
     ``classes``: the class-mesh manifest entries (``class_id``, ``file``, ``faces``). Returns the
-    package folder and what went where (map classes, props).
+    package folder and what went where (map classes, props). ``class_dir``'s meshes are in the
+    package's frame already. ``frames(georef_text) -> str``: the README's frame section (default: the
+    site frame).
     """
     import shutil
 
@@ -323,6 +329,6 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
         package=package, map=map_name, texture=tex.name if tex else "(no texture)", n_spawn=len(spawn),
         map_classes=", ".join(f"`{n}`" for n in map_names.values()),
         decals="none, `decals=true` for CARLA's default random decals" if not decals else "CARLA's default counts",
-        table="\n".join(rows), georef=f"({geo})" if geo else "", carla_version=carla_version))
+        table="\n".join(rows), frames=(frames or _site_frames)(f"({geo})" if geo else ""), carla_version=carla_version))
     return pkg, {"map_meshes": list(map_names.values()), "props": [p["name"] for p in props],
                  "prop_tags": {p["name"]: p["label"] for p in props}}

@@ -74,6 +74,10 @@ class CarlaPackageParams:
     decals: bool = False  # True: CARLA's default random road decals (dirt, cracks, tyre marks, road lines)
     python: str = ""  # interpreter that has bpy (the package's FBX files); empty = the one running twinkit
     carla_version: str = "0.9.16"
+    frame: str = "carla"  # carla: true-north frame at the base point, CARLA's geolocation works | site: site frame
+    frame_scale: str = "auto"  # auto | site (rotation only) | true (true metres) | minimax (see docs/georeferencing.md)
+    geolocation_radius_m: float = 150.0  # CARLA's geolocation is held within the tolerance up to this distance
+    geolocation_tolerance_m: float = 0.5
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -304,6 +308,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
                          in_aligned_xodr: Path | None = None, in_site_json: Path | None = None) -> dict:
     """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points."""
     from .carla_pkg import PackageError, check_names, load_map, spawn_points, write_package, xodr_georeference
+    from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, site_spawn, write_frame_json
 
     params = params or CarlaPackageParams()
     t0 = time.perf_counter()
@@ -316,12 +321,17 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     except Exception as exc:
         raise InputError(f"{xodr}: cannot read ({exc})") from None
     site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
+    # the package is written in CARLA's frame (true north at the base point): carla_frame.py
+    frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
+                          params.geolocation_radius_m, params.geolocation_tolerance_m, ctx.log)
+    site_geo, text = xodr_georeference(text), package_xodr(text, frame, xodr.name)
     map_name = params.map_name or _camel(site_name)
     package = params.package or f"{map_name}Twin"
     try:
         check_names(package, map_name)
         cmap = load_map(text, map_name)
-        spawn = spawn_points(cmap, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions)
+        spawn = site_spawn(spawn_points(cmap, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
+                           frame)
     except PackageError as exc:
         raise InputError(f"carla_package: {exc}") from None
     if not spawn:
@@ -337,16 +347,21 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     from .carla_contract import check_package
     from .fbx import FbxExportError
 
+    work = Path(ctx.workdir) / "carla_frame_meshes"
+    class_dir = package_class_dir(frame, cs, tex, work)
     try:
-        pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=cs.folder,
+        pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=class_dir,
                                     classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
                                     use_carla_materials=params.use_carla_materials, georef=georef,
                                     decals=params.decals, python=params.python,
-                                    log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version)
+                                    log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version,
+                                    frames=lambda g: readme_frames(frame, g))
     except PackageError as exc:
         raise InputError(f"carla_package: {exc}") from None
     except FbxExportError as exc:
         raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
+    shutil.rmtree(work, ignore_errors=True)
+    write_frame_json(out / "carla_frame.json", frame, site_geo)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
     load_map((pkg / f"{map_name}.xodr").read_text(), map_name)
@@ -363,6 +378,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
             "dropped_assets": summ["dropped_assets"], "walkable_faces": summ["walkable_faces"],
             "decals": summ["decals"],
             "xodr_georeference": xodr_georeference(text), "package_bytes": _size(out),
+            "frame": frame.to_json() if frame is not None else "site",
             "seconds": round(time.perf_counter() - t0, 2)}
 
 
