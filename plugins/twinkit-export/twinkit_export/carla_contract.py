@@ -291,6 +291,20 @@ def _json(path: Path, rep: ContractReport, rule: str):
         return None
 
 
+
+def _entry_ok(rep, desc_path: Path, where: str, entry, keys: tuple[str, ...]) -> bool:
+    """Whether one ``maps[i]`` / ``props[i]`` entry of the package JSON is an object with every key Import.py
+    reads; adds the violation when not."""
+    if not isinstance(entry, dict):
+        rep.add("json", f"{desc_path.name}: {where} is not an object")
+        return False
+    missing = [k for k in keys if k not in entry]
+    if missing:
+        rep.add("json", f"{desc_path.name}: {where} lacks {', '.join(missing)}")
+        return False
+    return True
+
+
 def check_package(root: Path, package: str | None = None, *, class_tags: dict[int, str] | None = None,
                   expect_decals: bool | None = None, spawn_script: Path | None = None) -> ContractReport:
     """Apply CARLA's import rules to ``root/Import/<package>/`` (``root`` may also be the Import folder).
@@ -342,12 +356,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     # maps -----------------------------------------------------------------------------------------
     map_names = []
     for i, m in enumerate(maps):
-        if not isinstance(m, dict):
-            rep.add("json", f"{desc_path.name}: maps[{i}] is not an object")
-            continue
-        missing = [k for k in ("name", "source", "xodr", "use_carla_materials") if k not in m]
-        if missing:
-            rep.add("json", f"{desc_path.name}: maps[{i}] lacks {', '.join(missing)}")
+        if not _entry_ok(rep, desc_path, f"maps[{i}]", m, ("name", "source", "xodr", "use_carla_materials")):
             continue
         if not isinstance(m["use_carla_materials"], bool):
             rep.add("json", f"{desc_path.name}: maps[{i}].use_carla_materials must be a JSON boolean (GetBoolField)")
@@ -386,12 +395,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     # props ----------------------------------------------------------------------------------------
     prop_names = []
     for i, p in enumerate(props):
-        if not isinstance(p, dict):
-            rep.add("json", f"{desc_path.name}: props[{i}] is not an object")
-            continue
-        missing = [k for k in ("name", "source", "tag", "size") if k not in p]
-        if missing:
-            rep.add("json", f"{desc_path.name}: props[{i}] lacks {', '.join(missing)}")
+        if not _entry_ok(rep, desc_path, f"props[{i}]", p, ("name", "source", "tag", "size")):
             continue
         if p["size"] not in PROP_SIZES:
             rep.add("prop_size", f"{desc_path.name}: props[{i}].size {p['size']!r} is not one of {PROP_SIZES}")
