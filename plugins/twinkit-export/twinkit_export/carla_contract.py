@@ -291,7 +291,6 @@ def _json(path: Path, rep: ContractReport, rule: str):
         return None
 
 
-
 def _entry_ok(rep, desc_path: Path, where: str, entry, keys: tuple[str, ...]) -> bool:
     """Whether one ``maps[i]`` / ``props[i]`` entry of the package JSON is an object with every key Import.py
     reads; adds the violation when not."""
