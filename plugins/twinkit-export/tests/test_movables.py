@@ -14,7 +14,7 @@ from twinkit.testing import run_step
 
 from conftest import HAS_BPY, SITE, plugin
 from twinkit_export import synthetic
-from twinkit_export.movables import MOVABLE, border_edges, oriented_box, suggest_blueprint
+from twinkit_export.movables import MOVABLE, border_edges, oriented_box, refine_class, suggest_blueprint
 
 CAR_C, CAR_L, CAR_W, CAR_H, CAR_YAW = np.array([2.0, -1.0]), 4.4, 1.8, 1.5, 30.0
 FLAT_C = np.array([-6.0, -5.0])  # a 3 x 2 m patch of road labelled car, flat: not an object
@@ -143,6 +143,12 @@ def test_oriented_box_and_blueprint():
     assert suggest_blueprint(11, (0.5, 0.4, 1.7))["id"].startswith("walker.pedestrian.")
     assert suggest_blueprint(18, (1.8, 0.6, 1.1))["id"].startswith("vehicle.")
     assert suggest_blueprint(16, (20, 3, 4)) is None  # CARLA has no train
+    votes = np.zeros(256, int)
+    votes[13] = 50
+    assert refine_class(13, votes, 4.4, 1.8) == 13
+    assert refine_class(13, votes, 2.05, 0.3) == 17  # a "car" 0.3 m wide: a motorcycle's scanned side
+    votes[18] = 3
+    assert refine_class(13, votes, 1.7, 0.5) == 18
 
 
 def test_carla_actor_transform_and_spawn_script(lifted, tmp_path):

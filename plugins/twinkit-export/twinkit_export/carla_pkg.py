@@ -179,7 +179,7 @@ file must stay outside `Import/`: `make import` reads every `.json` there as a p
   every mesh whose name contains "light" or "sign"; their tag still comes from the folder.
 
 {table}
-
+{movables}
 Props are imported with CARLA's import settings: Unreal generates simple collision for them,
 which for a whole-site class mesh is coarser than the mesh; `make package` switches them to
 complex collision (PrepareAssetsForCooking). The pedestrian navmesh is built from `{map}.fbx`
@@ -188,6 +188,17 @@ alone (props are not obstacles in it).
 ## Frames
 
 {frames}
+"""
+
+MOVABLES_README = """
+## Movable objects ({n})
+
+The scanned vehicles, riders and pedestrians were lifted out of the map (twinkit's `lift_movables`
+step) and the ground beneath them closed. Beside `Import/`, `actors.json` lists each with a
+suggested CARLA blueprint (by class and size) and its `carla.Transform`; with the map running,
+`python spawn_actors.py` spawns them (`--list`, `--dry-run`, `--skip person`). The scanned meshes
+are imported as props `<Map>_Scanned<Class>_NNN` (tagged by their class) but not spawned by
+default: `spawn_actors.py --scanned` or `spawn_props.py --with-scanned` places them instead.
 """
 
 SPAWN_SCRIPT = '''#!/usr/bin/env python3
@@ -344,6 +355,8 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
         package=package, map=map_name, texture=tex.name if tex else "(no texture)", n_spawn=len(spawn),
         map_classes=", ".join(f"`{n}`" for n in map_names.values()),
         decals="none, `decals=true` for CARLA's default random decals" if not decals else "CARLA's default counts",
+        movables=MOVABLES_README.format(n=len([p for p in props if p.get("scanned")]))
+        if any(p.get("scanned") for p in props) else "",
         table="\n".join(rows), frames=(frames or _site_frames)(f"({geo})" if geo else ""), carla_version=carla_version))
     return pkg, {"map_meshes": list(map_names.values()), "props": [p["name"] for p in props],
                  "prop_tags": {p["name"]: p["label"] for p in props}}

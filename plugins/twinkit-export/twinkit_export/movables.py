@@ -80,6 +80,7 @@ class LiftOptions:
     max_fill_extent_m: float = 3.0  # a hole reaching farther than this beyond the footprint is not filled
     debris_margin_m: float = 0.5  # small pieces left within the footprint + this go with the object
     debris_max_faces: int = 200
+    patch_cell_m: float = 0.2  # grid of the ground patch where a footprint stays uncovered; 0 = no patch
 
 
 @dataclass
@@ -279,7 +280,115 @@ def _fill_loop(vertices: np.ndarray, loop: np.ndarray) -> tuple[np.ndarray, np.n
     return np.stack([np.full(len(ccw), n), ccw, ccw[nb]], axis=1), c
 
 
+def refine_class(cid: int, votes: np.ndarray, length: float, width: float) -> int:
+    """The class by label votes, unless the size rules it out: a car, truck, bus or train narrower than
+    1 m and shorter than 2.8 m is a two-wheeler (labels confuse them; a scan sees a motorcycle's side):
+    motorcycle or bicycle by their votes, else by length (a motorcycle is 1.9 m or longer)."""
+    if cid in (13, 14, 15, 16) and width < 1.0 and length < 2.8:
+        if votes[17] or votes[18]:
+            return 17 if votes[17] >= votes[18] else 18
+        return 17 if length >= 1.9 else 18
+    return cid
+
+
 # ----------------------------------------------------------------------------- the lift
+
+def _covered(pts: np.ndarray, tri_xy: np.ndarray) -> np.ndarray:
+    """(k,) bool: the 2D points lie in at least one of the triangles (m, 3, 2)."""
+    out = np.zeros(len(pts), bool)
+    if len(tri_xy) == 0 or len(pts) == 0:
+        return out
+    a, b, c = tri_xy[:, 0], tri_xy[:, 1], tri_xy[:, 2]
+    for s in range(0, len(tri_xy), 2000):
+        A, B, C = a[s:s + 2000, None], b[s:s + 2000, None], c[s:s + 2000, None]
+        P = pts[None]
+
+        def side(p, q, r):
+            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+
+        d1, d2, d3 = side(A, B, P), side(B, C, P), side(C, A, P)
+        neg = (d1 < -1e-12) | (d2 < -1e-12) | (d3 < -1e-12)
+        pos = (d1 > 1e-12) | (d2 > 1e-12) | (d3 > 1e-12)
+        out |= (~(neg & pos)).any(axis=0)
+    return out
+
+
+def _patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptions):
+    """Ground patches where a footprint is still uncovered: a 2D Delaunay triangulation of the static
+    mesh's border vertices there (so the patch shares them: joined to the ground where the border's
+    edges are Delaunay edges) and grid points at the ground height, keeping the triangles over
+    uncovered ground inside the footprint. Returns (new vertices, faces, their labels, face UVs)."""
+    from scipy.spatial import Delaunay, cKDTree
+
+    c = float(opt.patch_cell_m)
+    nv = len(v)
+    out_v, out_f, out_lab, out_tc = [], [], [], []
+    fxy = v[f][:, :, :2]
+    fz = v[f][:, :, 2].mean(axis=1)
+    bv = np.unique(border_edges(f))
+    for inst in instances:
+        cen, length, width, yaw = inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg
+        m = opt.margin_m
+        a = np.radians(yaw)
+        ax_u, ax_v = np.array([np.cos(a), np.sin(a)]), np.array([-np.sin(a), np.cos(a)])
+        us = np.arange(-(length / 2 + m), length / 2 + m + 1e-9, c)
+        vs = np.arange(-(width / 2 + m), width / 2 + m + 1e-9, c)
+        gu, gv = np.meshgrid(us, vs)
+        pts = cen + gu.ravel()[:, None] * ax_u + gv.ravel()[:, None] * ax_v
+        near = _in_box(fxy.reshape(-1, 2), cen, length, width, yaw, m + 1.0).reshape(-1, 3).any(axis=1)
+        near &= fz - grid.at(fxy.mean(axis=1)) < 0.5  # ground-level surfaces only
+        tri_xy = fxy[near]
+        unc = ~_covered(pts, tri_xy)
+        bnear = bv[_in_box(v[bv, :2], cen, length, width, yaw, m + c)]
+        if len(bnear):
+            d, _ = cKDTree(v[bnear, :2]).query(pts)
+            unc &= d >= 0.5 * c
+        if unc.sum() < 3:
+            continue
+        p_new = pts[unc]
+        p2 = np.vstack([v[bnear, :2], p_new])
+        z = np.concatenate([v[bnear, 2], grid.at(p_new)])
+        try:
+            tri = Delaunay(p2).simplices
+        except Exception:
+            continue
+        tc2 = p2[tri]
+        centre = tc2.mean(axis=1)
+        edge = np.max(np.linalg.norm(tc2 - np.roll(tc2, 1, axis=1), axis=2), axis=1)
+        keep = _in_box(centre, cen, length, width, yaw, m) & (edge <= 3.0 * c) & ~_covered(centre, tri_xy)
+        tri = tri[keep]
+        if len(tri) == 0:
+            continue
+        e1, e2 = tc2[keep, 1] - tc2[keep, 0], tc2[keep, 2] - tc2[keep, 0]
+        cw = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+        tri[cw] = tri[cw][:, [0, 2, 1]]
+        used = np.unique(tri)
+        nb = len(bnear)
+        ids = np.empty(len(p2), np.int64)
+        ids[:nb] = bnear
+        new_pts = used[used >= nb]
+        ids[new_pts] = nv + len(out_v) + np.arange(len(new_pts))
+        for k in new_pts:
+            out_v.append(np.array([p2[k, 0], p2[k, 1], z[k]]))
+        faces_new = ids[tri]
+        lab_ring = lab[bnear] if nb else lab[f[near].ravel()]
+        gl = lab_ring[np.isin(lab_ring, GROUND)]
+        cls = int(np.bincount(gl).argmax()) if len(gl) else 0
+        out_lab.extend([cls] * len(new_pts))
+        out_f.append(faces_new)
+        if tc is not None:
+            gf = np.nonzero(near)[0]
+            gf = gf[np.isin(lab[f[gf]], GROUND).all(axis=1)] if len(gf) else gf
+            if len(gf):
+                _, nn = cKDTree(fxy[gf].mean(axis=1)).query(p2[tri].mean(axis=1))
+                out_tc.append(np.asarray(tc)[gf[nn]])
+            else:
+                out_tc.append(np.zeros((len(tri), 6), np.float32))
+    if not out_f:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.uint8), np.zeros((0, 6), np.float32)
+    return (np.asarray(out_v).reshape(-1, 3), np.vstack(out_f), np.asarray(out_lab, np.uint8),
+            np.vstack(out_tc).astype(np.float32) if out_tc else np.zeros((0, 6), np.float32))
+
 
 def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None, log=None) -> LiftResult:
     """Cut the movable objects out of ``mesh`` (per-vertex ``labels``); see the module doc."""
@@ -355,10 +464,12 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
             body = body if len(body) >= 3 else ov
             topz = float(v[ov, 2].max())
             c2, length, width, yaw = oriented_box(v[body, :2])
+            share = float(cls_counts[cid] / len(vid))
+            cid = refine_class(cid, cls_counts, length, width)
             instances.append(Instance(
                 id=len(instances), class_id=cid, faces=mine,
                 center=np.array([c2[0], c2[1], (gz + topz) / 2]), size=np.array([length, width, topz - gz]),
-                yaw_deg=yaw, ground_z=gz, label_share=float(cls_counts[cid] / len(vid)), vertices=int(len(ov))))
+                yaw_deg=yaw, ground_z=gz, label_share=share, vertices=int(len(ov))))
     rep["clusters_rejected"] = rejected
     # debris: remaining surface inside a footprint that does not reach the ground outside it (the
     # reconstructed underside, slivers at the cut)
@@ -452,6 +563,23 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
             filled += 1
     rep.update(loops_filled=filled, loops_left_open=unfilled, open_border_left_m=round(open_after_m, 3),
                open_border_left_by_reason_m=open_why)
+    # second pass: ground still missing inside a footprint (the hole ran into a scan shadow reaching the
+    # scan's edge, so no loop could be closed safely): a patch on the uncovered part of the footprint
+    if instances and opt.patch_cell_m > 0:
+        cur_v = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
+        cur_f = np.vstack([kept] + add_f) if add_f else kept
+        cur_lab = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
+        cur_tc = None
+        if kept_tc is not None:
+            cur_tc = np.vstack([kept_tc] + add_tc) if add_tc else kept_tc
+        pv, pf, plab, ptc = _patch_footprints(cur_v, cur_f, cur_lab, cur_tc, grid, instances, opt)
+        if len(pf):
+            add_v.extend(list(pv))
+            add_lab.extend(plab.tolist())
+            add_f.append(pf)
+            if kept_tc is not None:
+                add_tc.append(ptc)
+        rep["patch_faces"] = int(len(pf))
     verts = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
     faces = np.vstack([kept] + add_f) if add_f else kept
     labs = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
