@@ -215,3 +215,41 @@ def test_carla_package_with_actors_passes_contract(lifted, class_dir, fbx_out, x
     listed = subprocess.run([sys.executable, str(root / "spawn_props.py"), "--list", "--with-scanned"],
                             capture_output=True, text=True, check=True).stdout
     assert "static.prop.teststreet_scannedcar_000" in listed
+
+
+def test_two_cars_close_together_and_a_person(tmp_path):
+    """Two cars 0.8 m apart stay two objects; a person (0.5 x 0.4 x 1.75 m) is lifted with a walker."""
+    from twinkit_export.lift_step import LiftParams
+
+    step, size = 0.1, 12.0
+    n = int(size / step) + 1
+    xs = np.linspace(-size / 2, size / 2, n)
+    gx, gy = np.meshgrid(xs, xs)
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    z = np.zeros(len(xy))
+    lab = np.zeros(len(xy), np.uint8)
+    for cx in (-2.6, 2.6):
+        z[_in_rect(xy, np.array([cx, -2.0]), 4.4, 1.8, 0.0)] = 1.45
+        lab[_in_rect(xy, np.array([cx, -2.0]), 4.9, 2.3, 0.0)] = 13
+    z[_in_rect(xy, np.array([0.0, 3.0]), 0.5, 0.4, 0.0)] = 1.75
+    lab[_in_rect(xy, np.array([0.0, 3.0]), 0.9, 0.8, 0.0)] = 11
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    faces = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]]).astype(np.int64)
+    obj = synthetic.write_obj(tmp_path / "textured_mesh.obj", np.c_[xy, z], faces, ((xy + 6) / 12).astype(np.float32),
+                              texture_px=64)
+    np.save(tmp_path / "labels.npy", lab)
+    out = run_step(plugin("step", "lift_movables"), tmp_path / "run",
+                   {"in_labels_npy": tmp_path / "labels.npy", "in_textured_mesh_obj": obj}, LiftParams(), site=SITE)
+    acts = json.loads((out["movables"] / "actors.json").read_text())["actors"]
+    cars = sorted((a for a in acts if a["class"] == "car"), key=lambda a: a["box"]["center"][0])
+    people = [a for a in acts if a["class"] == "person"]
+    assert len(cars) == 2 and len(people) == 1, [(a["name"], a["box"]) for a in acts]
+    assert np.allclose([c["box"]["center"][0] for c in cars], [-2.6, 2.6], atol=0.2)
+    assert people[0]["blueprint"]["id"].startswith("walker.pedestrian.")
+    assert abs(people[0]["box"]["size"][2] - 1.75) < 0.1
+    from twinkit.mesh import read_obj
+
+    m = read_obj(out["textured_mesh.obj"])
+    assert m.vertices[:, 2].max() < 0.3  # everything that stood up is gone, the ground is closed
+    assert np.all(np.abs(m.vertices[border_edges(m.faces)].mean(axis=1)[:, :2]).max(axis=1) > 5.9)
