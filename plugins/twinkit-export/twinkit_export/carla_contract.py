@@ -132,6 +132,9 @@ RULES: dict[str, tuple[str, str]] = {
                       "(Unreal falls back to <fbx folder>/RelativeFilename)", SRC_TWINKIT),
     "placement": ("props are imported but never placed in the map; the package must carry what places them",
                   f"{SRC_PREPARE}; {SRC_TWINKIT}"),
+    "actors": ("the lifted movable objects: actors.json beside Import/ (every .json under Import/ is read as a "
+               "package) with a vehicle.*/walker.* blueprint and a carla.Transform each, and spawn_actors.py that "
+               "spawns them (nothing in the import spawns actors)", f"{SRC_IMPORT}; {SRC_TWINKIT}"),
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
 }
@@ -433,6 +436,8 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
                                  f"package must carry the script that spawns them")
         elif missing:
             rep.add("placement", f"{script.name} does not spawn {', '.join(missing)}")
+    # actors (twinkit's lifted movable objects): a transform and a spawn script ---------------------
+    _check_actors(rep, root if root.name != "Import" else root.parent)
     # decals --------------------------------------------------------------------------------------
     _check_decals(rep, imp, map_names, expect_decals)
     # semantics: every class ends in its tag -----------------------------------------------------------
@@ -441,6 +446,32 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         rep.add("semantics", f"{100 * share:.1f} % of the static faces would be tagged Terrain although their class "
                              f"is not terrain")
     return rep
+
+
+def _check_actors(rep: ContractReport, root: Path) -> None:
+    """``actors.json`` beside Import/ (a .json inside it would be read as a package, Import.py): every
+    actor has a blueprint id (or null) and a carla.Transform; ``spawn_actors.py`` places them."""
+    path = root / "actors.json"
+    if not path.exists():
+        return
+    data = _json(path, rep, "actors")
+    if not isinstance(data, dict) or not isinstance(data.get("actors"), list):
+        rep.add("actors", f"{path.name}: needs an 'actors' list")
+        return
+    script = root / "spawn_actors.py"
+    text = script.read_text() if script.is_file() else ""
+    if not text:
+        rep.add("actors", f"{script.name} is missing: nothing spawns the actors of {path.name}")
+    for i, a in enumerate(data["actors"]):
+        t = a.get("transform") if isinstance(a, dict) else None
+        if not isinstance(t, dict) or any(not isinstance(t.get(k), (int, float)) for k in ("x", "y", "z", "yaw")):
+            rep.add("actors", f"{path.name}: actors[{i}] lacks a numeric transform x, y, z, yaw")
+            continue
+        bp = a.get("blueprint")
+        if bp is not None and not (isinstance(bp, str) and bp.startswith(("vehicle.", "walker."))):
+            rep.add("actors", f"{path.name}: actors[{i}].blueprint {bp!r} is not a vehicle.* or walker.* id")
+        if text and bp and repr(bp) not in text:
+            rep.add("actors", f"{script.name} does not spawn {a.get('name')} ({bp})")
 
 
 def _check_mesh(rep: ContractReport, fate: MeshFate, materials: list[str]) -> None:

@@ -179,7 +179,7 @@ file must stay outside `Import/`: `make import` reads every `.json` there as a p
   every mesh whose name contains "light" or "sign"; their tag still comes from the folder.
 
 {table}
-
+{movables}
 Props are imported with CARLA's import settings: Unreal generates simple collision for them,
 which for a whole-site class mesh is coarser than the mesh; `make package` switches them to
 complex collision (PrepareAssetsForCooking). The pedestrian navmesh is built from `{map}.fbx`
@@ -188,6 +188,17 @@ alone (props are not obstacles in it).
 ## Frames
 
 {frames}
+"""
+
+MOVABLES_README = """
+## Movable objects ({n})
+
+The scanned vehicles, riders and pedestrians were lifted out of the map (twinkit's `lift_movables`
+step) and the ground beneath them closed. Beside `Import/`, `actors.json` lists each with a
+suggested CARLA blueprint (by class and size) and its `carla.Transform`; with the map running,
+`python spawn_actors.py` spawns them (`--list`, `--dry-run`, `--skip person`). The scanned meshes
+are imported as props `<Map>_Scanned<Class>_NNN` (tagged by their class) but not spawned by
+default: `spawn_actors.py --scanned` or `spawn_props.py --with-scanned` places them instead.
 """
 
 SPAWN_SCRIPT = '''#!/usr/bin/env python3
@@ -211,8 +222,10 @@ def main():
     ap.add_argument("--port", type=int, default=2000)
     ap.add_argument("--skip", nargs="*", default=[], help="CityScapes classes to leave out (e.g. car person)")
     ap.add_argument("--list", action="store_true", help="print the props and exit")
+    ap.add_argument("--with-scanned", action="store_true",
+                    help="also the scanned movable objects (cars, ...), which spawn_actors.py replaces by actors")
     args = ap.parse_args()
-    todo = [p for p in PROPS if p["class"] not in set(args.skip)]
+    todo = [p for p in PROPS if p["class"] not in set(args.skip) and (args.with_scanned or not p.get("scanned"))]
     if args.list:
         for p in todo:
             print(p["blueprint"], p["class"], p["tag"], p["faces"])
@@ -251,13 +264,14 @@ def _site_frames(georef: str) -> str:
 def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path, classes: list[dict],
                   texture: Path | None, xodr_text: str, spawn: list[dict], use_carla_materials: bool, georef: dict,
                   decals: bool = False, python: str = "", log_path: Path | None = None,
-                  carla_version: str = "0.9.16", frames=None) -> tuple[Path, dict]:
+                  carla_version: str = "0.9.16", frames=None, scanned: list[dict] | None = None) -> tuple[Path, dict]:
     """Write ``folder/Import/<package>/...``, ``Import/roadpainter_decals.json``, ``spawn_props.py``.
 
     ``classes``: the class-mesh manifest entries (``class_id``, ``file``, ``faces``). Returns the
     package folder and what went where (map classes, props). ``class_dir``'s meshes are in the
     package's frame already. ``frames(georef_text) -> str``: the README's frame section (default: the
-    site frame).
+    site frame). ``scanned``: the lifted movable objects as extra props (``carla_actors.scanned_props``:
+    name, ply, class_id, faces, mesh), registered like the others but spawned only on request.
     """
     import shutil
 
@@ -288,6 +302,13 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
         props.append({"name": name, "ply": ply, "class": ci.name, "class_id": ci.train_id,
                       "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),
                       "faces": int(c["faces"]), "mesh": package_mesh_name(ci)})
+    for sp in scanned or []:
+        ci = info(sp["class_id"])
+        v = read_class_ply(sp["ply"]).vertices
+        extent = float((v.max(0) - v.min(0)).max()) if len(v) else 0.0
+        props.append({"name": sp["name"], "ply": sp["ply"], "class": ci.name, "class_id": ci.train_id,
+                      "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),
+                      "faces": int(sp["faces"]), "mesh": sp["mesh"], "scanned": True})
     if not map_files:
         raise PackageError("no road, sidewalk or terrain mesh: a CARLA map needs ground geometry")
     jobs = [(pkg / f"{map_name}.fbx", map_files, map_names)]
@@ -302,7 +323,7 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
     (folder / "Import" / DECALS_FILE).write_text(json.dumps({"decals": [decals_entry(map_name, decals)]}, indent=2)
                                                  + "\n")
     spawn_list = [{"blueprint": f"static.prop.{p['name'].lower()}", "class": p["class"], "tag": p["label"],
-                   "faces": p["faces"]} for p in props]
+                   "faces": p["faces"], **({"scanned": 1} if p.get("scanned") else {})} for p in props]
     script = folder / "spawn_props.py"
     script.write_text(SPAWN_SCRIPT.format(map=map_name, package=package,
                                           props=json.dumps(spawn_list, indent=4)))
@@ -315,8 +336,8 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
     rows = ["| class | in the package | ends in | tag | placed by |", "|---|---|---|---|---|"]
     for c in present:
         ci = info(c["class_id"])
-        if ci.train_id in [p["class_id"] for p in props]:
-            p = next(p for p in props if p["class_id"] == ci.train_id)
+        if ci.train_id in [p["class_id"] for p in props if not p.get("scanned")]:
+            p = next(p for p in props if p["class_id"] == ci.train_id and not p.get("scanned"))
             rows.append(f"| {ci.name} | prop `{p['name']}` (`static.prop.{p['name'].lower()}`) | "
                         f"`Static/{p['tag']}/{p['name']}` | {p['label']} | `spawn_props.py` |")
         else:
@@ -324,11 +345,18 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
             rows.append(f"| {ci.name} | `{map_name}.fbx` node `{node}` | "
                         f"`Static/{move_assets_folder(f'{map_name}_{node}')}/{map_name}` | {ci.carla_tag} | "
                         f"`make import` |")
+    for p in props:
+        if p.get("scanned"):
+            rows.append(f"| {p['class']} (scanned, lifted) | prop `{p['name']}` (`static.prop.{p['name'].lower()}`) | "
+                        f"`Static/{p['tag']}/{p['name']}` | {p['label']} | `spawn_props.py --with-scanned` or "
+                        f"`spawn_actors.py --scanned` (default: `spawn_actors.py` spawns CARLA actors instead) |")
     geo = ", ".join(f"{k} {v}" for k, v in georef.items() if k in ("crs", "lat", "lon", "alt"))
     (pkg / "README.md").write_text(README.format(
         package=package, map=map_name, texture=tex.name if tex else "(no texture)", n_spawn=len(spawn),
         map_classes=", ".join(f"`{n}`" for n in map_names.values()),
         decals="none, `decals=true` for CARLA's default random decals" if not decals else "CARLA's default counts",
+        movables=MOVABLES_README.format(n=len([p for p in props if p.get("scanned")]))
+        if any(p.get("scanned") for p in props) else "",
         table="\n".join(rows), frames=(frames or _site_frames)(f"({geo})" if geo else ""), carla_version=carla_version))
     return pkg, {"map_meshes": list(map_names.values()), "props": [p["name"] for p in props],
                  "prop_tags": {p["name"]: p["label"] for p in props}}

@@ -14,6 +14,8 @@ from pathlib import Path
 
 from twinkit import InputError, StepContext, hookimpl
 
+from .lift_step import LiftParams, lift_movables_step
+
 
 # ----------------------------------------------------------------------------- parameters
 
@@ -255,7 +257,7 @@ def export_fbx(params: FbxParams, ctx: StepContext, *, in_class_meshes_dir: Path
 
 
 def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path, out_twin_usd: Path,
-               in_site_json: Path | None = None) -> dict:
+               in_site_json: Path | None = None, in_movables_dir: Path | None = None) -> dict:
     """twin.usd (binary crate, + twin.png): Mesh prim per class, UsdPreviewSurface, semantic labels, georeference."""
     from .usd import validation_report, write_usd
 
@@ -268,11 +270,15 @@ def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path
         tex = out.with_suffix(cs.texture.suffix)
         _link_or_copy(cs.texture, tex)
         tex_name = tex.name
+    from .lift_step import load_actors
+
+    _, movables = load_actors(in_movables_dir)  # lifted objects: /Site/Movables/<Name>, no collider
     stats = write_usd(cs.meshes, tex_name, out, _georef(ctx, in_site_json),
                       semantics_taxonomy=params.semantics_taxonomy, colliders=params.colliders,
-                      old_semantics=params.isaac_legacy_semantics, geo_schemas=params.geo_schemas)
+                      old_semantics=params.isaac_legacy_semantics, geo_schemas=params.geo_schemas,
+                      movables=movables)
     t_write = time.perf_counter() - t0
-    metrics = {"prims": list(stats), "colliders": [k for k, v in stats.items() if v["collider"]],
+    metrics = {"prims": list(stats), "movables": len(movables), "colliders": [k for k, v in stats.items() if v["collider"]],
                "usd_bytes": _size(out), "write_s": round(t_write, 2)}
     if params.validate:
         rep = validation_report(out)
@@ -305,8 +311,10 @@ def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Pa
 
 def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path,
                          in_class_meshes_dir: Path, out_carla_import_dir: Path, out_spawn_points_json: Path,
-                         in_aligned_xodr: Path | None = None, in_site_json: Path | None = None) -> dict:
-    """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points."""
+                         in_aligned_xodr: Path | None = None, in_site_json: Path | None = None,
+                         in_movables_dir: Path | None = None) -> dict:
+    """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points;
+    the lifted movable objects as actors (actors.json, spawn_actors.py) and scanned props."""
     from .carla_pkg import PackageError, check_names, load_map, spawn_points, write_package, xodr_georeference
     from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, site_spawn, write_frame_json
 
@@ -349,19 +357,27 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
 
     work = Path(ctx.workdir) / "carla_frame_meshes"
     class_dir = package_class_dir(frame, cs, tex, work)
+    from .carla_actors import carla_actors, scanned_props, write_actor_files
+    from .lift_step import load_actors
+
+    mov_data, movables = load_actors(in_movables_dir)
+    scanned = scanned_props(movables, map_name, frame, work / "scanned", tex.name if tex else None)
     try:
         pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=class_dir,
                                     classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
                                     use_carla_materials=params.use_carla_materials, georef=georef,
                                     decals=params.decals, python=params.python,
                                     log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version,
-                                    frames=lambda g: readme_frames(frame, g))
+                                    frames=lambda g: readme_frames(frame, g), scanned=scanned)
     except PackageError as exc:
         raise InputError(f"carla_package: {exc}") from None
     except FbxExportError as exc:
         raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
     shutil.rmtree(work, ignore_errors=True)
     write_frame_json(out / "carla_frame.json", frame, site_geo)
+    actors = carla_actors(mov_data.get("actors", []), frame, map_name)
+    if in_movables_dir is not None:
+        write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
     load_map((pkg / f"{map_name}.xodr").read_text(), map_name)
@@ -376,7 +392,8 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
             "map_meshes": placed["map_meshes"], "props": placed["props"],
             "faces_by_tag": summ["faces_by_tag"], "wrong_terrain_share": summ["wrong_terrain_share"],
             "dropped_assets": summ["dropped_assets"], "walkable_faces": summ["walkable_faces"],
-            "decals": summ["decals"],
+            "decals": summ["decals"], "actors": len(actors),
+            "actor_blueprints": sorted({a["blueprint"] for a in actors if a["blueprint"]}),
             "xodr_georeference": xodr_georeference(text), "package_bytes": _size(out),
             "frame": frame.to_json() if frame is not None else "site",
             "seconds": round(time.perf_counter() - t0, 2)}
@@ -388,6 +405,8 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
 def twinkit_register_steps(register):
     register("gt_labels", gt_labels, params=GtLabelsParams,
              description="ground-truth labels on the reconstructed mesh (until segmentation lands)")
+    register("lift_movables", lift_movables_step, params=LiftParams,
+             description="vehicles, riders, pedestrians out of the static mesh as actors; ground closed beneath")
     register("split_classes", split_classes, params=SplitParams,
              description="one sub-mesh per CityScapes class, CARLA names, palette colours")
 

@@ -99,8 +99,12 @@ def geo_anchor(georef: dict) -> dict:
 
 def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root_name: str = "Site",
               semantics_taxonomy: str = "class", colliders: bool = True, old_semantics: bool = True,
-              geo_schemas: bool = True) -> dict:
-    """Write the stage to ``out`` (.usd = binary crate, .usda = text); ``texture_name`` is relative to ``out``."""
+              geo_schemas: bool = True, movables=()) -> dict:
+    """Write the stage to ``out`` (.usd = binary crate, .usda = text); ``texture_name`` is relative to ``out``.
+
+    ``movables``: class meshes of the objects lifted out of the static map (``lift_movables``), one
+    prim each under ``/<root>/Movables`` (named by the mesh's ``name``, e.g. ``Car_000``), with the
+    same semantics and material and never a collider, so they can be moved or deleted."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
     try:
@@ -161,11 +165,15 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
         surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.5, 0.5, 0.5))
 
     stats = {}
-    for cm in meshes:
+    mov_parent = None
+    if movables:
+        mov_parent = UsdGeom.Xform.Define(stage, root.GetPath().AppendChild("Movables")).GetPath()
+    for cm, parent in [(m, root.GetPath()) for m in meshes] + [(m, mov_parent) for m in movables]:
         if cm.n_faces == 0:
             continue
         ci = info(cm.class_id)
-        mesh = UsdGeom.Mesh.Define(stage, root.GetPath().AppendChild(_prim_name(cm.name)))
+        movable = parent != root.GetPath()
+        mesh = UsdGeom.Mesh.Define(stage, parent.AppendChild(_prim_name(cm.name)))
         prim = mesh.GetPrim()
         pts = cm.vertices.astype(np.float32)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
@@ -204,12 +212,12 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
                                  custom=False).Set("class")
             prim.CreateAttribute(f"semantic:{inst}:params:semanticData", Sdf.ValueTypeNames.String,
                                  custom=False).Set(ci.name)
-        collider = colliders and int(cm.class_id) not in NO_COLLIDER
+        collider = colliders and int(cm.class_id) not in NO_COLLIDER and not movable
         if collider:
             UsdPhysics.CollisionAPI.Apply(prim).CreateCollisionEnabledAttr(True)
             UsdPhysics.MeshCollisionAPI.Apply(prim).CreateApproximationAttr(UsdPhysics.Tokens.none)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(mat)
-        stats[cm.name] = {"points": cm.n_vertices, "faces": cm.n_faces, "collider": bool(collider)}
+        stats[f"Movables/{cm.name}" if movable else cm.name] = {"points": cm.n_vertices, "faces": cm.n_faces, "collider": bool(collider)}
     layer.Save()
     return stats
 

@@ -1,0 +1,255 @@
+"""lift_movables: movable objects cut out of the static mesh, the ground closed, actors described;
+the CARLA package's actors.json / spawn_actors.py / scanned props; USD prims under /Site/Movables."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from twinkit.testing import run_step
+
+from conftest import HAS_BPY, SITE, plugin
+from twinkit_export import synthetic
+from twinkit_export.movables import MOVABLE, border_edges, oriented_box, refine_class, suggest_blueprint
+
+CAR_C, CAR_L, CAR_W, CAR_H, CAR_YAW = np.array([2.0, -1.0]), 4.4, 1.8, 1.5, 30.0
+FLAT_C = np.array([-6.0, -5.0])  # a 3 x 2 m patch of road labelled car, flat: not an object
+
+
+def _in_rect(xy, c, length, width, yaw_deg):
+    a = math.radians(yaw_deg)
+    d = xy - c
+    u = d @ np.array([math.cos(a), math.sin(a)])
+    v = d @ np.array([-math.sin(a), math.cos(a)])
+    return (np.abs(u) <= length / 2) & (np.abs(v) <= width / 2)
+
+
+def scene(step_m: float = 0.2, size_m: float = 20.0):
+    """A height-field street: road (y < 3) and sidewalk, a car-sized box (yaw 30 deg) whose roof and a
+    0.6 m ring of ground around it are labelled car (like a noisy prediction), and a flat car-labelled
+    patch of road."""
+    n = int(size_m / step_m) + 1
+    xs = np.linspace(-size_m / 2, size_m / 2, n)
+    gx, gy = np.meshgrid(xs, xs)
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    z = 0.01 * np.sin(xy[:, 0])
+    lab = np.where(xy[:, 1] < 3.0, 0, 1).astype(np.uint8)
+    car = _in_rect(xy, CAR_C, CAR_L, CAR_W, CAR_YAW)
+    z[car] = CAR_H
+    lab[_in_rect(xy, CAR_C, CAR_L + 1.2, CAR_W + 1.2, CAR_YAW)] = 13
+    lab[_in_rect(xy, FLAT_C, 3.0, 2.0, 0.0)] = 13
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    faces = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]])
+    uv = ((xy - xs[0]) / size_m).astype(np.float32)
+    return np.c_[xy, z], faces.astype(np.int64), uv, lab, car
+
+
+@pytest.fixture(scope="module")
+def scene_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("movscene")
+    v, f, uv, lab, car = scene()
+    obj = synthetic.write_obj(d / "textured_mesh.obj", v, f, uv, texture_px=64)
+    np.save(d / "labels.npy", lab)
+    return obj, d / "labels.npy", (v, f, lab, car)
+
+
+def _lift(tmp, scene_files, **kw):
+    from twinkit_export.lift_step import LiftParams
+
+    obj, labels, _ = scene_files
+    return run_step(plugin("step", "lift_movables"), tmp, {"in_labels_npy": labels, "in_textured_mesh_obj": obj},
+                    LiftParams(**kw), site=SITE)
+
+
+@pytest.fixture(scope="module")
+def lifted(scene_files, tmp_path_factory):
+    return _lift(tmp_path_factory.mktemp("lift"), scene_files)
+
+
+def test_box_car_is_lifted_with_its_box(lifted):
+    acts = json.loads((lifted["movables"] / "actors.json").read_text())
+    assert acts["lifted"] is True and len(acts["actors"]) == 1, acts["actors"]
+    a = acts["actors"][0]
+    assert a["class"] == "car" and a["name"] == "Car_000" and (lifted["movables"] / a["file"]).exists()
+    length, width, height = a["box"]["size"]
+    # the height field's walls lean over one grid step (0.2 m) and the cut keeps 0.1 m: box within 0.45 m
+    assert abs(length - CAR_L) < 0.45 and abs(width - CAR_W) < 0.45 and abs(height - CAR_H) < 0.2
+    assert np.allclose(a["box"]["center"][:2], CAR_C, atol=0.2)
+    assert abs(a["box"]["yaw_deg"] - CAR_YAW) < 4.0
+    assert a["blueprint"]["id"].startswith("vehicle.")
+
+
+def test_hole_filled_no_open_border_ground_label_restored(lifted, scene_files):
+    from twinkit.mesh import read_obj
+
+    v0, f0, lab0, car = scene_files[2]
+    m = read_obj(lifted["textured_mesh.obj"])
+    lab = np.load(lifted["labels.npy"])
+    assert len(lab) == m.n_vertices
+    near = _in_rect(m.vertices[:, :2], CAR_C, CAR_L + 2, CAR_W + 2, CAR_YAW)
+    # the car is gone: nothing above 0.3 m near it, and no movable label anywhere in the static mesh
+    assert m.vertices[near, 2].max() < 0.3
+    assert not np.isin(lab, MOVABLE).any()
+    # the ground beneath is closed: the only open border is the square's outer edge
+    b = border_edges(m.faces)
+    mid = m.vertices[b].mean(axis=1)[:, :2]
+    assert np.all(np.abs(mid).max(axis=1) > 9.9), "open border left inside the street"
+    # the patch and the ring carry the surrounding ground class (road: the car stands at y < 3)
+    assert set(np.unique(lab[near]).tolist()) == {0}
+    # the patch has plausible texture coordinates: inside the ground's range, not the origin
+    uv = m.corner_uv
+    assert uv is not None and np.all(uv >= 0) and np.all(uv <= 1)
+
+
+def test_flat_ground_labelled_car_is_not_lifted(lifted):
+    from twinkit.mesh import read_obj
+
+    acts = json.loads((lifted["movables"] / "actors.json").read_text())
+    assert all(np.linalg.norm(np.asarray(a["box"]["center"][:2]) - FLAT_C) > 2 for a in acts["actors"])
+    m = read_obj(lifted["textured_mesh.obj"])
+    lab = np.load(lifted["labels.npy"])
+    patch = _in_rect(m.vertices[:, :2], FLAT_C, 3.0, 2.0, 0.0)
+    assert patch.sum() > 100  # still there (not cut out) ...
+    assert set(np.unique(lab[patch]).tolist()) == {0}  # ... and road again
+
+
+def test_lift_false_keeps_everything(scene_files, tmp_path):
+    from twinkit.mesh import read_obj
+
+    out = _lift(tmp_path, scene_files, lift=False)
+    v0, f0, lab0, _ = scene_files[2]
+    m = read_obj(out["textured_mesh.obj"])
+    assert m.n_faces == len(f0) and m.n_vertices == len(v0)
+    assert np.array_equal(np.load(out["labels.npy"]), lab0)
+    acts = json.loads((out["movables"] / "actors.json").read_text())
+    assert acts["lifted"] is False and acts["actors"] == []
+
+
+def test_oriented_box_and_blueprint():
+    rng = np.random.default_rng(1)
+    a = math.radians(-60.0)
+    pts = rng.uniform([-2.3, -0.9], [2.3, 0.9], (500, 2)) @ np.array([[math.cos(a), math.sin(a)],
+                                                                         [-math.sin(a), math.cos(a)]])
+    c, length, width, yaw = oriented_box(pts + [5, 5])
+    assert np.allclose(c, [5, 5], atol=0.1) and abs(length - 4.6) < 0.1 and abs(width - 1.8) < 0.1
+    assert abs(yaw - -60.0) < 1.0
+    assert suggest_blueprint(13, (4.7, 1.85, 1.45))["id"] == "vehicle.tesla.model3"
+    assert suggest_blueprint(13, (3.8, 1.7, 1.5))["id"] in ("vehicle.nissan.micra", "vehicle.audi.a2")
+    assert suggest_blueprint(11, (0.5, 0.4, 1.7))["id"].startswith("walker.pedestrian.")
+    assert suggest_blueprint(18, (1.8, 0.6, 1.1))["id"].startswith("vehicle.")
+    assert suggest_blueprint(16, (20, 3, 4)) is None  # CARLA has no train
+    votes = np.zeros(256, int)
+    votes[13] = 50
+    assert refine_class(13, votes, 4.4, 1.8) == 13
+    assert refine_class(13, votes, 2.05, 0.3) == 17  # a "car" 0.3 m wide: a motorcycle's scanned side
+    votes[18] = 3
+    assert refine_class(13, votes, 1.7, 0.5) == 18
+
+
+def test_carla_actor_transform_and_spawn_script(lifted, tmp_path):
+    from twinkit_export.carla_actors import carla_actors, site_to_carla, write_actor_files
+    from twinkit_export.carla_contract import ContractReport, _check_actors
+
+    # CARLA: y = -north, yaw clockwise (site heading 30 deg counter-clockwise from east -> yaw -30)
+    t, _ = site_to_carla([1.0, 2.0, 0.5], 30.0, None)
+    assert (t["x"], t["y"], t["z"], t["yaw"]) == (1.0, -2.0, 0.5, -30.0)
+    acts = json.loads((lifted["movables"] / "actors.json").read_text())
+    entries = carla_actors(acts["actors"], None, "Teststreet")
+    write_actor_files(tmp_path, entries, map_name="Teststreet", package="TeststreetTwin", source=acts)
+    script = tmp_path / "spawn_actors.py"
+    compile(script.read_text(), str(script), "exec")
+    out = subprocess.run([sys.executable, str(script), "--list"], capture_output=True, text=True, check=True).stdout
+    assert "Car_000" in out and entries[0]["blueprint"] in out
+    dry = subprocess.run([sys.executable, str(script), "--dry-run", "--scanned"], capture_output=True, text=True,
+                         check=True).stdout
+    assert "static.prop.teststreet_scannedcar_000" in dry
+    rep = ContractReport("TeststreetTwin")
+    _check_actors(rep, tmp_path)
+    assert rep.ok, rep.violations
+    # the contract check fails an actor without a transform
+    data = json.loads((tmp_path / "actors.json").read_text())
+    del data["actors"][0]["transform"]
+    (tmp_path / "actors.json").write_text(json.dumps(data))
+    rep = ContractReport("TeststreetTwin")
+    _check_actors(rep, tmp_path)
+    assert not rep.ok and "transform" in str(rep.violations[0])
+
+
+def test_usd_movables_prims_without_collider(lifted, class_dir, tmp_path):
+    from pxr import Usd, UsdPhysics
+
+    out = run_step(plugin("exporter", "usd"), tmp_path, {"in_class_meshes_dir": class_dir,
+                                                         "in_movables_dir": lifted["movables"]}, site=SITE)
+    stage = Usd.Stage.Open(str(out["twin.usd"]))
+    prim = stage.GetPrimAtPath("/Site/Movables/Car_000")
+    assert prim.IsValid()
+    assert not prim.HasAPI(UsdPhysics.CollisionAPI)
+    assert prim.GetAttribute("twinkit:cityscapesName").Get() == "car"
+    assert stage.GetPrimAtPath("/Site/Road_Road").HasAPI(UsdPhysics.CollisionAPI)
+
+
+@pytest.mark.skipif(not HAS_BPY, reason="bpy (Blender as a module) is not installed")
+def test_carla_package_with_actors_passes_contract(lifted, class_dir, fbx_out, xodr_file, tmp_path):
+    from twinkit_export.carla_contract import check_package
+
+    out = run_step(plugin("exporter", "carla_package"), tmp_path,
+                   {"in_twin_fbx": fbx_out, "in_class_meshes_dir": class_dir, "in_aligned_xodr": xodr_file,
+                    "in_movables_dir": lifted["movables"]}, site=SITE)
+    root = out["carla_import"]
+    pkg = root / "Import" / "TeststreetTwin"
+    desc = json.loads((pkg / "TeststreetTwin.json").read_text())
+    scanned = [p for p in desc["props"] if p["name"] == "Teststreet_ScannedCar_000"]
+    assert scanned and scanned[0]["tag"] == "Car" and (pkg / "Teststreet_ScannedCar_000.fbx").exists()
+    acts = json.loads((root / "actors.json").read_text())
+    assert acts["count"] == 1 and acts["actors"][0]["blueprint"].startswith("vehicle.")
+    assert check_package(root, "TeststreetTwin").ok
+    # the scanned props are registered but not spawned by default
+    listed = subprocess.run([sys.executable, str(root / "spawn_props.py"), "--list"], capture_output=True, text=True,
+                            check=True).stdout
+    assert "scannedcar" not in listed
+    listed = subprocess.run([sys.executable, str(root / "spawn_props.py"), "--list", "--with-scanned"],
+                            capture_output=True, text=True, check=True).stdout
+    assert "static.prop.teststreet_scannedcar_000" in listed
+
+
+def test_two_cars_close_together_and_a_person(tmp_path):
+    """Two cars 0.8 m apart stay two objects; a person (0.5 x 0.4 x 1.75 m) is lifted with a walker."""
+    from twinkit_export.lift_step import LiftParams
+
+    step, size = 0.1, 12.0
+    n = int(size / step) + 1
+    xs = np.linspace(-size / 2, size / 2, n)
+    gx, gy = np.meshgrid(xs, xs)
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    z = np.zeros(len(xy))
+    lab = np.zeros(len(xy), np.uint8)
+    for cx in (-2.6, 2.6):
+        z[_in_rect(xy, np.array([cx, -2.0]), 4.4, 1.8, 0.0)] = 1.45
+        lab[_in_rect(xy, np.array([cx, -2.0]), 4.9, 2.3, 0.0)] = 13
+    z[_in_rect(xy, np.array([0.0, 3.0]), 0.5, 0.4, 0.0)] = 1.75
+    lab[_in_rect(xy, np.array([0.0, 3.0]), 0.9, 0.8, 0.0)] = 11
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    faces = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]]).astype(np.int64)
+    obj = synthetic.write_obj(tmp_path / "textured_mesh.obj", np.c_[xy, z], faces, ((xy + 6) / 12).astype(np.float32),
+                              texture_px=64)
+    np.save(tmp_path / "labels.npy", lab)
+    out = run_step(plugin("step", "lift_movables"), tmp_path / "run",
+                   {"in_labels_npy": tmp_path / "labels.npy", "in_textured_mesh_obj": obj}, LiftParams(), site=SITE)
+    acts = json.loads((out["movables"] / "actors.json").read_text())["actors"]
+    cars = sorted((a for a in acts if a["class"] == "car"), key=lambda a: a["box"]["center"][0])
+    people = [a for a in acts if a["class"] == "person"]
+    assert len(cars) == 2 and len(people) == 1, [(a["name"], a["box"]) for a in acts]
+    assert np.allclose([c["box"]["center"][0] for c in cars], [-2.6, 2.6], atol=0.2)
+    assert people[0]["blueprint"]["id"].startswith("walker.pedestrian.")
+    assert abs(people[0]["box"]["size"][2] - 1.75) < 0.1
+    from twinkit.mesh import read_obj
+
+    m = read_obj(out["textured_mesh.obj"])
+    assert m.vertices[:, 2].max() < 0.3  # everything that stood up is gone, the ground is closed
+    assert np.all(np.abs(m.vertices[border_edges(m.faces)].mean(axis=1)[:, :2]).max(axis=1) > 5.9)
