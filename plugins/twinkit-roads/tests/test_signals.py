@@ -222,3 +222,19 @@ def test_step_rejects_labels_of_another_mesh(tmp_path):
         run_step(plugin_from_module(roads, "step", "place_signals"), tmp_path / "run",
                  {"in_aligned_xodr": tmp_path / "aligned.xodr", "in_textured_mesh_ply": tmp_path / "textured_mesh.ply",
                   "in_labels_npy": tmp_path / "labels.npy"})
+
+
+def test_reference_line_of_an_arc_and_projection_round_trip():
+    from twinkit_roads.signals import reference_lines
+
+    road = """<OpenDRIVE><road id="2" length="21" junction="-1"><planView>
+ <geometry s="0" x="0" y="9" hdg="1.5707963" length="6"><line/></geometry>
+ <geometry s="6" x="0" y="15" hdg="1.5707963" length="15"><arc curvature="0.03"/></geometry></planView>
+ </road></OpenDRIVE>"""
+    ref = reference_lines(ET.fromstring(road))["2"]
+    # arc of curvature 0.03 over 15 m from (0, 15) heading north
+    assert ref.point(21.0, 0.0) == pytest.approx([-(1 - np.cos(0.45)) / 0.03, 15 + np.sin(0.45) / 0.03], abs=0.01)
+    p = ref.point(12.0, -2.5)
+    s, t, over = ref.project(p)
+    assert (s, t, over) == pytest.approx((12.0, -2.5, 0.0), abs=0.01)
+    assert ref.project([0.0, 5.0])[2] == pytest.approx(4.0, abs=0.01)  # 4 m before the start
