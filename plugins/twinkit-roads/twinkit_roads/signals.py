@@ -330,10 +330,13 @@ def signal_positions(xodr_text: str, shift_m: float = 0.25) -> list[dict]:
     return out
 
 
-def _host(refs: dict[str, RefLine], xy, reach_m: float) -> tuple[RefLine, float, float] | None:
+def _host(refs: dict[str, RefLine], xy, reach_m: float, exclude: str | None = None
+          ) -> tuple[RefLine, float, float] | None:
     """The road whose reference-line frame holds xy (not beyond either end), nearest first."""
     best = None
     for ref in refs.values():
+        if ref.road == exclude:
+            continue
         s, t, over = ref.project(xy)
         if over <= reach_m and (best is None or abs(t) < abs(best[2])):
             best = (ref, min(max(s, 0.0), ref.length), t)
@@ -380,8 +383,8 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
                   sign_max_road_m: float = 12.0, reach_m: float = 0.05) -> tuple[str, list[Placed], list[str]]:
     """Move netconvert's light groups onto the scanned lights; add the scanned signs.
 
-    A *group* is the traffic-light signals of one road within ``group_m`` of each other (netconvert
-    writes one per lane and turn arrow, all at the road's end): one physical head. Groups and scanned
+    A *group* is the traffic-light signals of one road and orientation within ``group_m`` of each
+    other along s (netconvert writes one per lane and turn arrow, all at the road's end): one head. Groups and scanned
     lights are paired by the Hungarian method on horizontal distance, pairs farther than ``gate_m``
     refused. Each signal of a paired group gets the light's position in its own road's reference-line
     frame (s, t, zOffset = head centre above the road); its id, road, lanes (validity), type,
@@ -404,7 +407,9 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     for i, (road, sig, xy) in enumerate(lights):
         for g in groups:
             r0, _, xy0 = lights[g[0]]
-            if r0 is road and abs(float(sig.get("s")) - float(lights[g[0]][1].get("s"))) <= group_m:
+            s0 = lights[g[0]][1]
+            if (r0 is road and abs(float(sig.get("s")) - float(s0.get("s"))) <= group_m
+                    and sig.get("orientation", "+") == s0.get("orientation", "+")):
                 g.append(i)
                 break
         else:
@@ -447,7 +452,7 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
                 # CARLA clamps s to the road (Road::GetDirectedPointInNoLaneOffset), so a light beyond the
                 # approach's end cannot be written on it. Define the signal on the road whose frame holds
                 # the light, and keep a <signalReference> with the lanes it controls on the approach.
-                hb = _host(refs, inst.centre[:2], reach_m)
+                hb = _host(refs, inst.centre[:2], reach_m, exclude=ref.road)
                 if hb is None:
                     rec.note = f"scanned light {over:.2f} m beyond the road's end and on no other road: s clamped"
                     s_w = min(max(s_w, 0.0), ref.length)
@@ -515,6 +520,8 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
                                  [round(float(v), 3) for v in inst.centre], [round(float(v), 3) for v in inst.size],
                                  UNKNOWN_SIGN_TYPE, "-1", None, [float(v) for v in xy],
                                  "type not told from the scan: generic (-1)"))
+    for sg in root.iter("signals"):  # tidy the blocks we edited (4-space indent, as netconvert writes)
+        ET.indent(sg, space="    ", level=2)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     return text, placed, log
 
