@@ -238,3 +238,36 @@ def test_reference_line_of_an_arc_and_projection_round_trip():
     s, t, over = ref.project(p)
     assert (s, t, over) == pytest.approx((12.0, -2.5, 0.0), abs=0.01)
     assert ref.project([0.0, 5.0])[2] == pytest.approx(4.0, abs=0.01)  # 4 m before the start
+
+
+def test_pole_with_an_unlabelled_head_fills_an_unpaired_light():
+    from twinkit_roads.signals import find_pole_heads
+
+    # the segmentation calls the head "building" (2): only the pole is labelled
+    V, L = scene(light=(40.0, -8.0), noise=False)
+    L = np.where(L == 6, 2, L)
+    kept, _ = find_instances(V, L)
+    assert kept == []
+    heads = find_pole_heads(V, L, kept)
+    assert len(heads) == 1 and heads[0].evidence == "pole_head"
+    assert np.hypot(*(heads[0].centre[:2] - [40.1, -8.0])) < 0.15
+    text, placed, _ = place_signals(xodr(), heads)
+    rec = next(p for p in placed if p.id == "3_0")
+    assert rec.source == "scan" and "unlabelled head" in rec.note
+    lms, _ = carla_landmarks(text)
+    loc = lms["3_0"].transform.location
+    assert math.hypot(loc.x - 40.1, -loc.y + 8.0) < 0.15
+
+
+def test_bare_poles_sign_posts_and_trees_are_not_heads():
+    from twinkit_roads.signals import find_pole_heads
+
+    V, L = scene(light=None, sign=(30.0, -8.0), noise=False)
+    L = np.where(L == 7, 2, L)  # the plate unlabelled too: a thin plate is still no head
+    lamp = np.stack([np.full(80, 60.0), np.full(80, -8.0), np.linspace(0.1, 7.0, 80)], 1)  # bare up to 7 m
+    trunk = np.stack([np.full(40, 70.0), np.full(40, -8.0), np.linspace(0.1, 2.6, 40)], 1)
+    g = np.random.default_rng(0).normal(size=(3000, 3))
+    crown = g / np.linalg.norm(g, axis=1, keepdims=True) * [2.0, 2.0, 1.6] + [70.0, -8.0, 4.2]
+    V = np.concatenate([V, lamp, trunk, crown])
+    L = np.concatenate([L, np.full(len(lamp), 5), np.full(len(trunk), 5), np.full(len(crown), 8)])
+    assert find_pole_heads(V, L, []) == []

@@ -191,6 +191,14 @@ class SignalParams:
     pole_radius_m: float = 0.6
     ground_radius_m: float = 3.0  # local ground = 2nd percentile of the mesh height within this radius
     plate_depth_m: float = 0.12  # a "light" cluster thinner than this across is a sign plate (heads are boxes)
+    # poles carrying an unlabelled head (signals.find_pole_heads): candidates for lights the labels miss,
+    # offered only to netconvert light heads left unpaired by the labelled lights
+    pole_heads: bool = True
+    head_min_m: float = 1.8  # head band above the local ground
+    head_max_m: float = 4.5
+    head_min_width_m: float = 0.3  # narrowest extent of the head band: a bare pole or a sign plate is thinner
+    head_max_width_m: float = 1.0  # widest extent
+    head_clear_m: float = 0.8  # no vertex at head height from here to 1.5 m off the pole's axis (trees, walls)
     # placing (signals.place_signals)
     gate_m: float = 15.0  # a netconvert light group and a scanned light farther apart than this never pair
     group_m: float = 2.0  # netconvert light signals of one road within this along s are one head
@@ -208,7 +216,7 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
 
     from .align import lane_lines
     from .mesh2d import read_mesh
-    from .signals import draw_signals, find_instances, place_signals as place
+    from .signals import draw_signals, find_instances, find_pole_heads, place_signals as place
 
     params = params or SignalParams()
     mesh = read_mesh(in_textured_mesh_ply)
@@ -226,6 +234,15 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
         max_height_m=params.max_height_m, max_size_m=params.max_size_m, ground_radius_m=params.ground_radius_m,
         pole_radius_m=params.pole_radius_m, min_pole_vertices=params.min_pole_vertices,
         plate_depth_m=params.plate_depth_m)
+    if params.pole_heads:
+        heads = find_pole_heads(mesh.v, labels, kept, link_m=params.link_m,
+                                head_z_m=(params.head_min_m, params.head_max_m),
+                                head_width_m=(params.head_min_width_m, params.head_max_width_m),
+                                clear_ring_m=(params.head_clear_m, max(params.head_clear_m + 0.2, 1.5)),
+                                ground_radius_m=params.ground_radius_m)
+        for i, h in enumerate(heads):
+            h.id = len(kept) + i
+        kept = kept + heads
     try:
         moved, placed, notes = place(text, kept, gate_m=params.gate_m, group_m=params.group_m,
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,

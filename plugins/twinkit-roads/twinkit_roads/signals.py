@@ -177,12 +177,14 @@ class Instance:
     label: int
     id: int = -1
     rejected: str = ""
+    evidence: str = "label"  # "label": a cluster of its label; "pole_head": a pole carrying a head, unlabelled
 
     def to_json(self) -> dict:
         return {"id": self.id, "kind": self.kind, "label": self.label,
                 "position": [round(float(v), 3) for v in self.centre],
                 "size_m": [round(float(v), 3) for v in self.size], "vertices": self.vertices,
                 "height_above_ground_m": round(self.height_m, 3), "pole_vertices": self.pole_vertices,
+                "evidence": self.evidence,
                 **({"rejected": self.rejected} if self.rejected else {})}
 
 
@@ -264,6 +266,59 @@ def find_instances(V: np.ndarray, labels: np.ndarray, *, link_m: float = 0.35, m
     for i, inst in enumerate(kept):
         inst.id = i
     return kept, rejected
+
+
+def find_pole_heads(V: np.ndarray, labels: np.ndarray, known: list[Instance], *, link_m: float = 0.35,
+                    min_pole_vertices: int = 10, head_z_m: tuple[float, float] = (1.8, 4.5),
+                    axis_radius_m: float = 0.6, head_width_m: tuple[float, float] = (0.3, 1.0),
+                    clear_ring_m: tuple[float, float] = (0.8, 1.5), ground_radius_m: float = 3.0,
+                    known_m: float = 1.0) -> list[Instance]:
+    """Poles that carry a head, whatever the head is labelled: candidates for lights the labels miss.
+
+    A pole is a cluster of pole-labelled vertices (``min_pole_vertices``). Its *head* is every mesh
+    vertex within ``axis_radius_m`` of the pole's axis at ``head_z_m`` above the local ground. It counts
+    when the head is bulky (narrowest horizontal extent ``head_width_m[0]`` or more: a bare pole or a
+    sign plate is thinner; lamps carry theirs higher), small (widest extent at most ``head_width_m[1]``)
+    and free-standing (no vertex at head height ``clear_ring_m`` from the axis: not a tree crown, not a
+    facade). Poles within ``known_m`` of a light found by its label are left out. The head's
+    position is the centroid of its vertices not labelled as sign.
+    """
+    from scipy.spatial import cKDTree
+
+    labels = np.asarray(labels)
+    tree2 = cKDTree(V[:, :2])
+    idx = np.flatnonzero(labels == POLE)
+    out = []
+    for comp in _clusters(V[idx], link_m):
+        if len(comp) < min_pole_vertices:
+            continue
+        c = np.median(V[idx[comp], :2], 0)
+        near = tree2.query_ball_point(c, ground_radius_m)
+        ground = float(np.percentile(V[near, 2], 2))
+        if any(k.kind == "light" and np.hypot(*(k.centre[:2] - c)) <= known_m for k in known):
+            continue
+        ring = np.asarray(tree2.query_ball_point(c, clear_ring_m[1]), int)
+        h = V[ring, 2] - ground
+        r = np.hypot(V[ring, 0] - c[0], V[ring, 1] - c[1])
+        band = (h >= head_z_m[0]) & (h <= head_z_m[1])
+        if np.any(band & (r > clear_ring_m[0])):
+            continue
+        head = ring[band & (r <= axis_radius_m)]
+        if len(head) < 3:
+            continue
+        xy = V[head, :2] - V[head, :2].mean(0)
+        w, vec = np.linalg.eigh(np.cov(xy.T) + 1e-12 * np.eye(2))
+        proj = xy @ vec
+        ext = proj.max(0) - proj.min(0)  # (minor, major)
+        if not (head_width_m[0] <= ext[0] and ext[1] <= head_width_m[1]):
+            continue
+        body = head[labels[head] != SIGN]
+        P = V[body if len(body) >= 3 else head]
+        ctr = P.mean(0)
+        size = np.array([ext[1], ext[0], P[:, 2].max() - P[:, 2].min()])
+        out.append(Instance("light", ctr, size, int(len(P)), float(ctr[2] - ground), int(len(comp)), POLE,
+                            evidence="pole_head"))
+    return out
 
 
 # --------------------------------------------------------------------------- placing
@@ -417,15 +472,19 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     scan_lights = [inst for inst in instances if inst.kind == "light"]
     placed: list[Placed] = []
     pairs: dict[int, Instance] = {}
-    if groups and scan_lights:
-        G = np.array([np.mean([lights[i][2] for i in g], 0) for g in groups])
-        L = np.array([inst.centre[:2] for inst in scan_lights])
-        D = np.hypot(G[:, None, 0] - L[None, :, 0], G[:, None, 1] - L[None, :, 1])
-        big = 1e6
-        rows, cols = linear_sum_assignment(np.where(D <= gate_m, D, big))
+    G = np.array([np.mean([lights[i][2] for i in g], 0) for g in groups]).reshape(-1, 2)
+    # labelled lights first; poles carrying an unlabelled head only for the heads still unpaired
+    for evidence in ("label", "pole_head"):
+        cand = [inst for inst in scan_lights if inst.evidence == evidence]
+        free = [gi for gi in range(len(groups)) if gi not in pairs]
+        if not cand or not free:
+            continue
+        L = np.array([inst.centre[:2] for inst in cand])
+        D = np.hypot(G[free, None, 0] - L[None, :, 0], G[free, None, 1] - L[None, :, 1])
+        rows, cols = linear_sum_assignment(np.where(D <= gate_m, D, 1e6))
         for r, c in zip(rows, cols):
             if D[r, c] <= gate_m:
-                pairs[int(r)] = scan_lights[int(c)]
+                pairs[free[int(r)]] = cand[int(c)]
     used = set()
     for gi, g in enumerate(groups):
         inst = pairs.get(gi)
@@ -476,13 +535,16 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
             new_xy = _signal_xy(ref, sig, carla_light_shift_m)
             rec.s, rec.t, rec.z_offset, rec.source = s_w, t_w, zoff, "scan"
             rec.instance = inst.id
+            if inst.evidence == "pole_head":
+                rec.note = ((rec.note + "; ") if rec.note else "") + \
+                    "a pole carrying an unlabelled head (no traffic-light label there)"
             rec.instance_position = [round(float(v), 3) for v in inst.centre]
             rec.instance_size = [round(float(v), 3) for v in inst.size]
             rec.moved_m = float(np.hypot(*(new_xy - xy)))
             rec.new_xy = [float(v) for v in new_xy]
             placed.append(rec)
     for inst in scan_lights:
-        if inst.id not in used:
+        if inst.id not in used and inst.evidence == "label":
             log.append(f"scanned traffic light {inst.id} at ({inst.centre[0]:.2f}, {inst.centre[1]:.2f}) matches no "
                        "netconvert light group (none left within the gate): not written")
     # ---- signs
@@ -567,7 +629,8 @@ def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], reject
         x, y = px(inst.centre)
         col = (255, 150, 0) if inst.kind == "light" else (60, 140, 255)
         d.rectangle([x - r, y - r, x + r, y + r], outline=col, width=2 * w)
-        d.text((x + r + 2, y - r), f"{inst.kind} {inst.id}", fill=col)
+        tag = " (pole+head)" if inst.evidence == "pole_head" else ""
+        d.text((x + r + 2, y - r), f"{inst.kind} {inst.id}{tag}", fill=col)
     for p in placed:
         if p.old_xy is not None:
             x, y = px(p.old_xy)
