@@ -8,7 +8,8 @@ Needs finished `recipe=pointcloud_site site=demo` runs (any seed). For each run:
   connected components are single box faces, because the generated mesh splits vertices at UV seams);
 - "before": the traffic-light signals of NN_apply_alignment/aligned.xodr (netconvert's guesses);
 - "after": place_signals run here with default settings on the segmentation's labels.npy
-  (NN_backproject) and, as an upper bound, on the ground-truth labels (NN_gt_labels/gt_labels.npy).
+  (NN_backproject), the same without the poles carrying unlabelled heads (pole_heads=false), and,
+  as an upper bound, on the ground-truth labels (NN_gt_labels/gt_labels.npy).
 Distances are horizontal, from each ground-truth light to the nearest traffic-light signal where
 carla.Map (0.9.16, offline) puts it (`get_all_landmarks`).
 """
@@ -75,11 +76,11 @@ def one(folder: Path, pattern: str) -> Path | None:
     return hits[-1] if hits else None
 
 
-def run_place(run: Path, labels: Path, tmp: Path) -> tuple[str, dict]:
+def run_place(run: Path, labels: Path, tmp: Path, params=None) -> tuple[str, dict]:
     xodr = one(run, "*_apply_alignment/aligned.xodr")
     mesh = one(run, "*_texture/textured_mesh.ply")
     out = run_step(plugin_from_module(roads, "step", "place_signals"), tmp,
-                   {"in_aligned_xodr": xodr, "in_textured_mesh_ply": mesh, "in_labels_npy": labels})
+                   {"in_aligned_xodr": xodr, "in_textured_mesh_ply": mesh, "in_labels_npy": labels}, params)
     return out["aligned.xodr"].read_text(), json.loads(out["signals.json"].read_text())
 
 
@@ -93,6 +94,8 @@ def bench_run(run: Path, tmp: Path) -> None:
     pred = one(run, "*_backproject/labels.npy")
     if pred is not None:
         variants["predicted labels (default)"] = run_place(run, pred, tmp / f"{run.parent.name}_pred")
+        variants["predicted labels, pole_heads=false"] = run_place(run, pred, tmp / f"{run.parent.name}_nopole",
+                                                                   roads.SignalParams(pole_heads=False))
     gtl = one(run, "*_gt_labels/gt_labels.npy")
     if gtl is not None:
         variants["ground-truth labels (upper bound)"] = run_place(run, gtl, tmp / f"{run.parent.name}_gt")
