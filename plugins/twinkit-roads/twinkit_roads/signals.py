@@ -413,7 +413,8 @@ def _move_signal(root: ET.Element, road_el: ET.Element, host_id: str, sig: ET.El
     """Define ``sig`` on road ``host_id``; leave a <signalReference> with its lanes where it was.
 
     The defining copy gets validity lane 0 only, so CARLA builds no trigger box on the host road's
-    lanes (TrafficLightManager::GenerateTriggerBoxesForTrafficLights skips lane 0); the approach's
+    lanes (UTrafficLightComponent::InitializeSign, Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Traffic/
+    TrafficLightComponent.cpp, walks every reference to the signal and skips lane 0); the approach's
     reference carries the original validity, which is what the trigger boxes and waypoints read.
     """
     host_el = next(r for r in root.iter("road") if r.get("id") == host_id)
