@@ -115,8 +115,8 @@ def bench_run(run: Path, tmp: Path) -> None:
         print(f"| ({p[0]:.2f}, {p[1]:.2f}) | " + " | ".join(row) + " |")
     print("| **median / max** | " + " | ".join(f"**{np.median(dist[n]):.2f} / {np.max(dist[n]):.2f}**" for n in names)
           + " |")
-    print("| lights within 1 m | " + " | ".join(f"{int(np.sum(np.asarray(dist[n]) <= 1.0))} / {len(gt_l)}" for n in names)
-          + " |")
+    print("| lights within 1 m | "
+          + " | ".join(f"{int(np.sum(np.asarray(dist[n]) <= 1.0))} / {len(gt_l)}" for n in names) + " |")
     print()
     print("| labels | scanned lights kept | signs kept | clusters rejected | light signals from scan / netconvert | "
           "signs written | signs within 1 m of a true sign | max CARLA position error m |")
@@ -126,7 +126,8 @@ def bench_run(run: Path, tmp: Path) -> None:
             continue
         sg = [s for s in doc["signals"] if s["kind"] == "sign"]
         lt = [s for s in doc["signals"] if s["kind"] == "light"]
-        ok_signs = sum(1 for s in sg if gt_s and min(np.hypot(*(np.asarray(s["position"][:2]) - g[:2])) for g in gt_s) <= 1.0)
+        ok_signs = sum(1 for s in sg
+                       if gt_s and min(np.hypot(*(np.asarray(s["position"][:2]) - g[:2])) for g in gt_s) <= 1.0)
         err = max((s["carla_position_error_m"] or 0.0) for s in doc["signals"]) if doc["signals"] else 0.0
         print(f"| {n} | {sum(i['kind'] == 'light' for i in doc['instances'])} | "
               f"{sum(i['kind'] == 'sign' for i in doc['instances'])} | {len(doc['rejected_clusters'])} | "
@@ -146,7 +147,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as td:
         for run in runs:
             if not (run / "01_site" / "gt_mesh.ply").is_file() or one(run, "*_apply_alignment/aligned.xodr") is None:
-                print(f"\n{run}: no finished demo run with ground truth; run `twinkit recipe=pointcloud_site site=demo` first")
+                print(f"\n{run}: no finished demo run with ground truth; "
+                      "run `twinkit recipe=pointcloud_site site=demo` first")
                 continue
             found = True
             bench_run(run, Path(td))

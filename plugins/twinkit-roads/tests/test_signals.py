@@ -195,8 +195,8 @@ def test_step_writes_xodr_json_png_and_checks_carla(tmp_path):
     np.save(tmp_path / "labels.npy", L.astype(np.uint8))
     (tmp_path / "aligned.xodr").write_text(xodr(z=12.0))
     out = run_step(plugin_from_module(roads, "step", "place_signals"), tmp_path / "run",
-                   {"in_aligned_xodr": tmp_path / "aligned.xodr", "in_textured_mesh_ply": tmp_path / "textured_mesh.ply",
-                    "in_labels_npy": tmp_path / "labels.npy"})
+                   {"in_aligned_xodr": tmp_path / "aligned.xodr",
+                    "in_textured_mesh_ply": tmp_path / "textured_mesh.ply", "in_labels_npy": tmp_path / "labels.npy"})
     assert set(out) == {"aligned.xodr", "signals.json", "signals.png"}
     doc = json.loads(out["signals.json"].read_text())
     by = {s["id"]: s for s in doc["signals"]}

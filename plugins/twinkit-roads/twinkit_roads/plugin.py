@@ -254,7 +254,8 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     try:
         m = carla.Map("signals", moved)
     except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{in_aligned_xodr.name} with the scanned signals does not parse in carla.Map ({exc})") from None
+        raise InputError(f"{in_aligned_xodr.name} with the scanned signals does not parse in carla.Map ({exc})"
+                         ) from None
     # what CARLA makes of each signal, against where we meant it to be
     want = {p.id: p.new_xy for p in placed}
     carla_err = {}
@@ -289,7 +290,8 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                  sum(i.kind == "sign" for i in kept), len(rejected), n_scan, len(lights), len(lights) - n_scan,
                  sum(p.kind == "sign" for p in placed))
     moved_m = [p.moved_m for p in lights if p.source == "scan"]
-    return {"scanned_lights": sum(i.kind == "light" for i in kept), "scanned_signs": sum(i.kind == "sign" for i in kept),
+    return {"scanned_lights": sum(i.kind == "light" for i in kept),
+            "scanned_signs": sum(i.kind == "sign" for i in kept),
             "rejected_clusters": len(rejected), "light_signals": len(lights), "light_signals_from_scan": n_scan,
             "light_signals_netconvert": len(lights) - n_scan, "signs_written": sum(p.kind == "sign" for p in placed),
             "median_moved_m": round(float(np.median(moved_m)), 3) if moved_m else 0.0,

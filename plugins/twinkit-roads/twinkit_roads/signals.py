@@ -148,7 +148,8 @@ def reference_lines(root: ET.Element, step: float = 0.05) -> dict[str, RefLine]:
         elev = []
         prof = road.find("elevationProfile")
         if prof is not None:
-            elev = sorted(tuple(float(e.get(k, 0.0)) for k in ("s", "a", "b", "c", "d")) for e in prof.findall("elevation"))
+            elev = sorted(tuple(float(e.get(k, 0.0)) for k in ("s", "a", "b", "c", "d"))
+                          for e in prof.findall("elevation"))
         right, left = [], []
         lanes = road.find("lanes")
         sec = lanes.find("laneSection") if lanes is not None else None
@@ -440,10 +441,12 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     """Move netconvert's light groups onto the scanned lights; add the scanned signs.
 
     A *group* is the traffic-light signals of one road and orientation within ``group_m`` of each
-    other along s (netconvert writes one per lane and turn arrow, all at the road's end): one head. Groups and scanned
-    lights are paired by the Hungarian method on horizontal distance, pairs farther than ``gate_m``
-    refused. Each signal of a paired group gets the light's position in its own road's reference-line
-    frame (s, t, zOffset = head centre above the road); its id, road, lanes (validity), type,
+    other along s (netconvert writes one per lane and turn arrow, all at the road's end): one head.
+    Groups and scanned lights are paired by the Hungarian method on horizontal distance (labelled
+    lights first, then poles carrying an unlabelled head), pairs farther than ``gate_m`` refused.
+    Each signal of a paired group gets the light's position in its own road's reference-line frame
+    (s, t, zOffset = head centre above the road), or, past the road's end, in the frame of the road
+    that holds it, with a signalReference left on its own road; its id, lanes (validity), type,
     controller and orientation stay. Unpaired groups keep netconvert's guess.
     """
     from scipy.optimize import linear_sum_assignment
@@ -462,8 +465,7 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     groups: list[list[int]] = []
     for i, (road, sig, xy) in enumerate(lights):
         for g in groups:
-            r0, _, xy0 = lights[g[0]]
-            s0 = lights[g[0]][1]
+            r0, s0 = lights[g[0]][0], lights[g[0]][1]
             if (r0 is road and abs(float(sig.get("s")) - float(s0.get("s"))) <= group_m
                     and sig.get("orientation", "+") == s0.get("orientation", "+")):
                 g.append(i)
