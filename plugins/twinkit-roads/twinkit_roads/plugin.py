@@ -285,13 +285,15 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     out_signals_json.write_text(json.dumps(doc, indent=1))
     draw_signals(in_textured_mesh_ply, lane_lines(moved, 1.0, junctions=True), kept, rejected, placed,
                  out_signals_png, params.qa_px_per_m)
-    ctx.log.info("%d scanned lights, %d signs (%d clusters rejected); %d of %d light signals from the scan, %d kept "
-                 "from netconvert; %d signs written", sum(i.kind == "light" for i in kept),
+    ctx.log.info("%d scanned lights (%d of them poles carrying an unlabelled head), %d signs (%d clusters "
+                 "rejected); %d of %d light signals from the scan, %d kept from netconvert; %d signs written", sum(i.kind == "light" for i in kept),
+                 sum(i.evidence == "pole_head" for i in kept),
                  sum(i.kind == "sign" for i in kept), len(rejected), n_scan, len(lights), len(lights) - n_scan,
                  sum(p.kind == "sign" for p in placed))
     moved_m = [p.moved_m for p in lights if p.source == "scan"]
     return {"scanned_lights": sum(i.kind == "light" for i in kept),
             "scanned_signs": sum(i.kind == "sign" for i in kept),
+            "pole_head_lights": sum(i.evidence == "pole_head" for i in kept),
             "rejected_clusters": len(rejected), "light_signals": len(lights), "light_signals_from_scan": n_scan,
             "light_signals_netconvert": len(lights) - n_scan, "signs_written": sum(p.kind == "sign" for p in placed),
             "median_moved_m": round(float(np.median(moved_m)), 3) if moved_m else 0.0,
