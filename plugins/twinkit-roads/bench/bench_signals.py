@@ -118,6 +118,25 @@ def bench_run(run: Path, tmp: Path) -> None:
     print("| lights within 1 m | "
           + " | ".join(f"{int(np.sum(np.asarray(dist[n]) <= 1.0))} / {len(gt_l)}" for n in names) + " |")
     print()
+    # pairing: on the demo each light serves the approach whose right kerb it stands on (layout.py)
+    import xml.etree.ElementTree as ET
+
+    from twinkit_roads.signals import reference_lines
+
+    refs = reference_lines(ET.fromstring(before))
+    print("| labels | approaches paired with the light at their lanes' kerb (demo layout) |")
+    print("|---|---|")
+    for n, (t, doc) in variants.items():
+        if doc is None:
+            continue
+        ok, total = 0, 0
+        for road in sorted({x["road"] for x in doc["signals"] if x["kind"] == "light" and x["source"] == "scan"}):
+            inst = next(x["instance_position"] for x in doc["signals"] if x["road"] == road and x["kind"] == "light")
+            g = min(gt_l, key=lambda p: np.hypot(p[0] - inst[0], p[1] - inst[1]))
+            total += 1
+            ok += refs[road].project(g[:2])[1] < 0  # netconvert's light heads control right lanes
+        print(f"| {n} | {ok} / {total} |")
+    print()
     print("| labels | scanned lights kept | signs kept | clusters rejected | light signals from scan / netconvert | "
           "signs written | signs within 1 m of a true sign | max CARLA position error m |")
     print("|---|---|---|---|---|---|---|---|")

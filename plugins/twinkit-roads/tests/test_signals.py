@@ -271,3 +271,16 @@ def test_bare_poles_sign_posts_and_trees_are_not_heads():
     V = np.concatenate([V, lamp, trunk, crown])
     L = np.concatenate([L, np.full(len(lamp), 5), np.full(len(trunk), 5), np.full(len(crown), 8)])
     assert find_pole_heads(V, L, []) == []
+
+
+def test_light_at_its_lanes_kerb_wins_over_a_nearer_one_across_the_road():
+    # the head controls lane -1 (right of the reference line): a light 7.7 m away on the left kerb
+    # loses to one 10.9 m away on the right kerb; without the side cost the nearer one would win
+    V1, L1 = scene(light=(49.0, 6.0), noise=False)
+    V2, L2 = scene(light=(42.0, -9.0), noise=False)
+    kept, _ = find_instances(np.concatenate([V1, V2]), np.concatenate([L1, L2]))
+    assert len([i for i in kept if i.kind == "light"]) == 2
+    _, placed, _ = place_signals(xodr(), kept)
+    assert next(p for p in placed if p.id == "3_0").instance_position[1] == pytest.approx(-9.0, abs=0.1)
+    _, placed, _ = place_signals(xodr(), kept, wrong_side_m=0.0)
+    assert next(p for p in placed if p.id == "3_0").instance_position[1] == pytest.approx(6.0, abs=0.1)

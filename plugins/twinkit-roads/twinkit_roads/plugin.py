@@ -202,6 +202,7 @@ class SignalParams:
     # placing (signals.place_signals)
     gate_m: float = 15.0  # a netconvert light group and a scanned light farther apart than this never pair
     group_m: float = 2.0  # netconvert light signals of one road within this along s are one head
+    wrong_side_m: float = 6.0  # extra pairing cost of a light across the reference line from the head's lanes
     carla_light_shift_m: float = 0.25  # CARLA moves lights this far along their heading (MapBuilder.cpp)
     add_signs: bool = True  # write the scanned traffic signs as signals
     sign_max_road_m: float = 12.0  # a sign farther than this from every road's reference line is not written
@@ -246,7 +247,7 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     try:
         moved, placed, notes = place(text, kept, gate_m=params.gate_m, group_m=params.group_m,
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,
-                                     sign_max_road_m=params.sign_max_road_m)
+                                     sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m)
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
     import carla

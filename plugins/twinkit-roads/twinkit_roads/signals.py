@@ -437,13 +437,16 @@ def _move_signal(root: ET.Element, road_el: ET.Element, host_id: str, sig: ET.El
 
 def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 15.0, group_m: float = 2.0,
                   carla_light_shift_m: float = 0.25, add_signs: bool = True,
-                  sign_max_road_m: float = 12.0, reach_m: float = 0.05) -> tuple[str, list[Placed], list[str]]:
+                  sign_max_road_m: float = 12.0, reach_m: float = 0.05, wrong_side_m: float = 6.0
+                  ) -> tuple[str, list[Placed], list[str]]:
     """Move netconvert's light groups onto the scanned lights; add the scanned signs.
 
     A *group* is the traffic-light signals of one road and orientation within ``group_m`` of each
     other along s (netconvert writes one per lane and turn arrow, all at the road's end): one head.
     Groups and scanned lights are paired by the Hungarian method on horizontal distance (labelled
-    lights first, then poles carrying an unlabelled head), pairs farther than ``gate_m`` refused.
+    lights first, then poles carrying an unlabelled head), pairs farther than ``gate_m`` refused; a
+    light on the other side of the reference line than the head's lanes costs ``wrong_side_m`` more
+    (lights stand at their lanes' kerb; overhead or far-side lights still pair when nothing else fits).
     Each signal of a paired group gets the light's position in its own road's reference-line frame
     (s, t, zOffset = head centre above the road), or, past the road's end, in the frame of the road
     that holds it, with a signalReference left on its own road; its id, lanes (validity), type,
@@ -476,6 +479,12 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     placed: list[Placed] = []
     pairs: dict[int, Instance] = {}
     G = np.array([np.mean([lights[i][2] for i in g], 0) for g in groups]).reshape(-1, 2)
+    # the side of the reference line the head's lanes are on: a light stands at its lanes' kerb
+    # (right-hand traffic: right lanes, negative ids, and the right kerb; left-hand traffic mirrored)
+    side = []
+    for g in groups:
+        ids = [int(v.get(k)) for i in g for v in lights[i][1].findall("validity") for k in ("fromLane", "toLane")]
+        side.append(-1 if ids and max(ids) < 0 else (1 if ids and min(ids) > 0 else 0))
     # labelled lights first; poles carrying an unlabelled head only for the heads still unpaired
     for evidence in ("label", "pole_head"):
         cand = [inst for inst in scan_lights if inst.evidence == evidence]
@@ -484,7 +493,14 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
             continue
         L = np.array([inst.centre[:2] for inst in cand])
         D = np.hypot(G[free, None, 0] - L[None, :, 0], G[free, None, 1] - L[None, :, 1])
-        rows, cols = linear_sum_assignment(np.where(D <= gate_m, D, 1e6))
+        C = D.copy()
+        for r, gi in enumerate(free):
+            ref = refs[lights[groups[gi][0]][0].get("id")]
+            for c, inst in enumerate(cand):
+                t = ref.project(inst.centre[:2])[1]
+                if side[gi] and np.sign(t) != side[gi]:
+                    C[r, c] += wrong_side_m
+        rows, cols = linear_sum_assignment(np.where(D <= gate_m, C, 1e6))
         for r, c in zip(rows, cols):
             if D[r, c] <= gate_m:
                 pairs[free[int(r)]] = cand[int(c)]
