@@ -284,3 +284,13 @@ def test_light_at_its_lanes_kerb_wins_over_a_nearer_one_across_the_road():
     assert next(p for p in placed if p.id == "3_0").instance_position[1] == pytest.approx(-9.0, abs=0.1)
     _, placed, _ = place_signals(xodr(), kept, wrong_side_m=0.0)
     assert next(p for p in placed if p.id == "3_0").instance_position[1] == pytest.approx(6.0, abs=0.1)
+
+
+def test_network_without_lights_gets_only_the_scanned_signs():
+    V, L = scene(light=(40.0, -8.0), sign=(30.0, -8.0), noise=False)
+    kept, _ = find_instances(V, L)
+    text, placed, notes = place_signals(xodr(with_signal=False), kept)
+    assert [p.kind for p in placed] == ["sign"]
+    assert any("matches no netconvert light group" in n for n in notes)  # the light is reported, not written
+    lms, _ = carla_landmarks(text)
+    assert list(lms) == [placed[0].id]
