@@ -5,6 +5,7 @@ Steps (recipes/roads_demo.yaml):
   osm_to_opendrive                                          -> roads.xodr, roads_check.json
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
+  place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
 """
 from __future__ import annotations
 
@@ -178,6 +179,128 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
     return metrics
 
 
+@dataclass
+class SignalParams:
+    # finding scanned instances (signals.find_instances): CityScapes trainIds 5 pole, 6 light, 7 sign
+    link_m: float = 0.35  # vertices of one label closer than this belong to one cluster
+    min_vertices: int = 12  # smaller clusters are label noise
+    min_height_m: float = 1.5  # a head or a plate hangs at least this high above the local ground...
+    max_height_m: float = 8.0  # ...and at most this high
+    max_size_m: float = 2.0  # a cluster wider or taller than this is a mislabelled patch of something else
+    min_pole_vertices: int = 3  # pole-labelled vertices below the cluster (within pole_radius_m): it hangs on a pole
+    pole_radius_m: float = 0.6
+    ground_radius_m: float = 3.0  # local ground = 2nd percentile of the mesh height within this radius
+    plate_depth_m: float = 0.12  # a "light" cluster thinner than this across is a sign plate (heads are boxes)
+    # poles carrying an unlabelled head (signals.find_pole_heads): candidates for lights the labels miss,
+    # offered only to netconvert light heads left unpaired by the labelled lights
+    pole_heads: bool = True
+    head_min_m: float = 1.8  # head band above the local ground
+    head_max_m: float = 4.5
+    head_min_width_m: float = 0.3  # narrowest extent of the head band: a bare pole or a sign plate is thinner
+    head_max_width_m: float = 1.0  # widest extent
+    head_clear_m: float = 0.8  # no vertex at head height from here to 1.5 m off the pole's axis (trees, walls)
+    # placing (signals.place_signals)
+    gate_m: float = 15.0  # a netconvert light group and a scanned light farther apart than this never pair
+    group_m: float = 2.0  # netconvert light signals of one road within this along s are one head
+    wrong_side_m: float = 6.0  # extra pairing cost of a light across the reference line from the head's lanes
+    carla_light_shift_m: float = 0.25  # CARLA moves lights this far along their heading (MapBuilder.cpp)
+    add_signs: bool = True  # write the scanned traffic signs as signals
+    sign_max_road_m: float = 12.0  # a sign farther than this from every road's reference line is not written
+    qa_px_per_m: float = 20.0
+
+
+def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
+                  in_labels_npy: Path, out_aligned_xodr: Path, out_signals_json: Path,
+                  out_signals_png: Path) -> dict:
+    """Move netconvert's traffic lights onto the scanned ones, add the scanned signs (signals.py)."""
+    import numpy as np
+
+    from .align import lane_lines
+    from .mesh2d import read_mesh
+    from .signals import draw_signals, find_instances, find_pole_heads, place_signals as place
+
+    params = params or SignalParams()
+    mesh = read_mesh(in_textured_mesh_ply)
+    try:
+        labels = np.load(in_labels_npy)
+    except Exception as exc:  # noqa: BLE001
+        raise InputError(f"{in_labels_npy}: not a readable .npy label array ({exc})") from None
+    if labels.ndim != 1 or len(labels) != len(mesh.v):
+        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
+                         f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
+                         "labels.npy)")
+    text = in_aligned_xodr.read_text(encoding="utf-8")
+    kept, rejected = find_instances(
+        mesh.v, labels, link_m=params.link_m, min_vertices=params.min_vertices, min_height_m=params.min_height_m,
+        max_height_m=params.max_height_m, max_size_m=params.max_size_m, ground_radius_m=params.ground_radius_m,
+        pole_radius_m=params.pole_radius_m, min_pole_vertices=params.min_pole_vertices,
+        plate_depth_m=params.plate_depth_m)
+    if params.pole_heads:
+        heads = find_pole_heads(mesh.v, labels, kept, link_m=params.link_m,
+                                head_z_m=(params.head_min_m, params.head_max_m),
+                                head_width_m=(params.head_min_width_m, params.head_max_width_m),
+                                clear_ring_m=(params.head_clear_m, max(params.head_clear_m + 0.2, 1.5)),
+                                ground_radius_m=params.ground_radius_m)
+        for i, h in enumerate(heads):
+            h.id = len(kept) + i
+        kept = kept + heads
+    try:
+        moved, placed, notes = place(text, kept, gate_m=params.gate_m, group_m=params.group_m,
+                                     carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,
+                                     sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m)
+    except (ValueError, KeyError, AttributeError) as exc:
+        raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
+    import carla
+
+    try:
+        m = carla.Map("signals", moved)
+    except Exception as exc:  # noqa: BLE001
+        raise InputError(f"{in_aligned_xodr.name} with the scanned signals does not parse in carla.Map ({exc})"
+                         ) from None
+    # what CARLA makes of each signal, against where we meant it to be
+    want = {p.id: p.new_xy for p in placed}
+    carla_err = {}
+    for lm in m.get_all_landmarks():
+        w = want.get(lm.id)
+        if w is not None:
+            loc = lm.transform.location
+            carla_err[lm.id] = round(float(math.hypot(loc.x - w[0], -loc.y - w[1])), 4)
+    out_aligned_xodr.write_text(moved, encoding="utf-8")
+    for p in placed:
+        if p.source == "netconvert":
+            ctx.log.warning("signal %s (road %s): %s", p.id, p.road, p.note)
+    for n in notes:
+        ctx.log.warning("%s", n)
+    lights = [p for p in placed if p.kind == "light"]
+    n_scan = sum(p.source == "scan" for p in lights)
+    doc = {
+        "signals": [dict(p.to_json(), carla_position_error_m=carla_err.get(p.id)) for p in placed],
+        "instances": [i.to_json() for i in kept], "rejected_clusters": [i.to_json() for i in rejected],
+        "notes": notes,
+        "definition": "position: where CARLA 0.9.16 puts the signal (x, y site frame, m); s, t, zOffset in the road's "
+                      "reference-line frame of defined_on_road; road = the road whose lanes it controls (a "
+                      "signalReference there when defined_on_road differs); source scan|netconvert; moved_m = "
+                      "horizontal distance from netconvert's position",
+        "params": {k: getattr(params, k) for k in params.__dataclass_fields__},
+    }
+    out_signals_json.write_text(json.dumps(doc, indent=1))
+    draw_signals(in_textured_mesh_ply, lane_lines(moved, 1.0, junctions=True), kept, rejected, placed,
+                 out_signals_png, params.qa_px_per_m)
+    ctx.log.info("%d scanned lights (%d of them poles carrying an unlabelled head), %d signs (%d clusters "
+                 "rejected); %d of %d light signals from the scan, %d kept from netconvert; %d signs written", sum(i.kind == "light" for i in kept),
+                 sum(i.evidence == "pole_head" for i in kept),
+                 sum(i.kind == "sign" for i in kept), len(rejected), n_scan, len(lights), len(lights) - n_scan,
+                 sum(p.kind == "sign" for p in placed))
+    moved_m = [p.moved_m for p in lights if p.source == "scan"]
+    return {"scanned_lights": sum(i.kind == "light" for i in kept),
+            "scanned_signs": sum(i.kind == "sign" for i in kept),
+            "pole_head_lights": sum(i.evidence == "pole_head" for i in kept),
+            "rejected_clusters": len(rejected), "light_signals": len(lights), "light_signals_from_scan": n_scan,
+            "light_signals_netconvert": len(lights) - n_scan, "signs_written": sum(p.kind == "sign" for p in placed),
+            "median_moved_m": round(float(np.median(moved_m)), 3) if moved_m else 0.0,
+            "max_carla_position_error_m": max(carla_err.values(), default=0.0)}
+
+
 @hookimpl
 def twinkit_register_road_sources(register):
     register("file", file_source, params=FileSourceParams, version=VERSION,
@@ -196,3 +319,5 @@ def twinkit_register_steps(register):
              description="fit the road network to the mesh's road surface (yaw, translation); alignment.json")
     register("apply_alignment", apply_alignment, params=ApplyParams, version=VERSION,
              description="move the OpenDRIVE by alignment.json; top-down QA picture")
+    register("place_signals", place_signals, params=SignalParams, version=VERSION,
+             description="OpenDRIVE signals at the scanned traffic lights and signs; signals.json, signals.png")

@@ -16,6 +16,7 @@ from twinkit import hookimpl
 def twinkit_register_report_sections(register):
     register("roads", sec_roads, title="Road network", order=500)
     register("alignment", sec_alignment, title="Alignment", order=900)
+    register("signals", sec_signals, title="Signals", order=910)
 
 
 # --------------------------------------------------------------------------- OpenDRIVE, sampled for drawing
@@ -191,4 +192,27 @@ def sec_alignment(ctx) -> str:
         flat.sort(key=lambda r: (0 if "resid" in r[0].lower() or "rms" in r[0].lower() else 1))
         flat = [[k, f"{v:.10g}" if isinstance(v, float) else v] for k, v in flat]  # coordinates keep their digits
         parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3>" + ctx.table(["", ""], flat, "kv"))
+    return "".join(parts)
+
+
+def sec_signals(ctx) -> str:
+    """place_signals: each OpenDRIVE signal, where it came from and how far it moved; the top view."""
+    parts = []
+    for s, f in ctx.find("signals.json")[:1]:
+        d = ctx.read_json(f)
+        if not isinstance(d, dict):
+            continue
+        rows = [[x.get("id"), x.get("kind"), x.get("road"), x.get("defined_on_road"), x.get("source"),
+                 f"{x.get('moved_m', 0):.2f}", x.get("instance") if x.get("instance") is not None else "",
+                 x.get("note", "")] for x in d.get("signals", [])]
+        parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3>" + ctx.table(
+            ["signal", "kind", "controls road", "defined on road", "source", "moved m", "scanned instance", "note"],
+            rows))
+        png = f.parent / "signals.png"
+        if png.is_file():
+            name = f"{s.get('folder')}_signals.png"
+            ctx.add_image(png, name)
+            parts.append("<div class=\"figs\">" + ctx.figure(
+                f"img/{name}", "Scanned lights (orange) and signs (blue); netconvert's signals (red) and where "
+                "they are now (green)") + "</div>")
     return "".join(parts)

@@ -1,0 +1,672 @@
+"""OpenDRIVE signals where the scan has them.
+
+netconvert guesses traffic lights from OSM nodes: it puts every signal of an approach at the
+road's end, inside the lanes, 5 m up. This module finds the scanned traffic lights and signs in the
+labelled mesh (CityScapes trainIds 5 pole, 6 traffic light, 7 traffic sign), moves each
+netconvert light group onto the scanned light that matches it and adds the scanned signs.
+
+How CARLA reads a signal (carla 0.9.16, LibCarla/source/carla/road/MapBuilder.cpp,
+``ComputeSignalTransform`` / ``SolveSignalReferencesAndTransforms``):
+
+- position = the road's reference line at ``s`` (no lane offset), moved ``t`` to the left,
+  ``z`` = road elevation + ``zOffset``;
+- heading = road tangent + ``hOffset`` (the ``orientation`` attribute does not enter the transform);
+- a traffic light (``SignalType::IsTrafficLight``: types 1000001 ... 1000020, F, W, A,
+  LibCarla/source/carla/road/SignalType.cpp) is then moved 0.25 m along that heading.
+
+So a signal written at (s, t) lands where we intend only if s, t are measured in that road's
+reference-line frame and, for lights, the 0.25 m shift is taken off first (``carla_light_shift_m``).
+"""
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+
+import numpy as np
+
+POLE, LIGHT, SIGN = 5, 6, 7  # CityScapes trainIds
+# SignalType::IsTrafficLight (LibCarla/source/carla/road/SignalType.cpp, carla 0.9.16)
+CARLA_LIGHT_TYPES = {"1000001", "1000002", "1000009", "1000010", "1000011", "1000007", "1000014", "1000015",
+                     "1000016", "1000017", "1000018", "1000019", "1000013", "1000020", "1000008", "1000012",
+                     "F", "W", "A"}
+UNKNOWN_SIGN_TYPE = "-1"  # OpenDRIVE: "-1" = no type; CARLA keeps it as a landmark and spawns no sign actor
+
+
+# --------------------------------------------------------------------------- reference lines
+
+
+@dataclass
+class RefLine:
+    """A road's reference line sampled densely: s, x, y, heading, and its elevation polynomials."""
+    road: str
+    length: float
+    junction: str
+    s: np.ndarray
+    xy: np.ndarray
+    hdg: np.ndarray
+    elev: list = field(default_factory=list)  # (s, a, b, c, d)
+    lanes_right: list = field(default_factory=list)  # driving lane ids < 0 (first lane section)
+    lanes_left: list = field(default_factory=list)
+
+    def z(self, s: float) -> float:
+        rec = [e for e in self.elev if e[0] <= s + 1e-9] or self.elev[:1]
+        if not rec:
+            return 0.0
+        s0, a, b, c, d = rec[-1]
+        ds = s - s0
+        return a + b * ds + c * ds * ds + d * ds ** 3
+
+    def point(self, s: float, t: float) -> np.ndarray:
+        """Site-frame xy of road coordinates (s, t); s is clamped to the line like CARLA's Road does."""
+        s = min(max(s, 0.0), self.length)
+        i = int(np.clip(np.searchsorted(self.s, s) - 1, 0, len(self.s) - 2))
+        f = (s - self.s[i]) / max(self.s[i + 1] - self.s[i], 1e-12)
+        p = self.xy[i] + f * (self.xy[i + 1] - self.xy[i])
+        h = self.hdg[i]
+        return p + t * np.array([-math.sin(h), math.cos(h)])
+
+    def project(self, p) -> tuple[float, float, float]:
+        """(s, t, distance beyond the ends) of a site-frame xy point; t > 0 left of the line."""
+        p = np.asarray(p, float)[:2]
+        a, b = self.xy[:-1], self.xy[1:]
+        ab = b - a
+        L2 = np.maximum((ab ** 2).sum(1), 1e-12)
+        u = np.clip(((p - a) * ab).sum(1) / L2, 0, 1)
+        q = a + u[:, None] * ab
+        i = int(np.argmin(((p - q) ** 2).sum(1)))
+        s = self.s[i] + u[i] * (self.s[i + 1] - self.s[i])
+        d = ab[i] / math.sqrt(L2[i])
+        r = p - q[i]
+        t = d[0] * r[1] - d[1] * r[0]
+        # beyond an end: extend along the end tangent so the caller sees how far off the line it is
+        over = 0.0
+        if u[i] <= 0 and i == 0:
+            over = -float(np.dot(p - a[0], d))
+        elif u[i] >= 1 and i == len(ab) - 1:
+            over = float(np.dot(p - b[-1], d))
+        return float(s), float(t), max(over, 0.0)
+
+
+def _poly_geometry(g: ET.Element, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points and headings of one <geometry> record in its own s (0..length)."""
+    x0, y0, h0, L = (float(g.get(k)) for k in ("x", "y", "hdg", "length"))
+    kind = next(iter(g), None)
+    n = max(int(math.ceil(L / step)), 1)
+    ss = np.linspace(0.0, L, n + 1)
+    if kind is None or kind.tag == "line":
+        xy = np.stack([x0 + ss * math.cos(h0), y0 + ss * math.sin(h0)], 1)
+        return xy, np.full(len(ss), h0)
+    if kind.tag == "arc":
+        k = float(kind.get("curvature"))
+        if abs(k) < 1e-12:
+            xy = np.stack([x0 + ss * math.cos(h0), y0 + ss * math.sin(h0)], 1)
+            return xy, np.full(len(ss), h0)
+        h = h0 + k * ss
+        xy = np.stack([x0 + (np.sin(h) - math.sin(h0)) / k, y0 - (np.cos(h) - math.cos(h0)) / k], 1)
+        return xy, h
+    if kind.tag == "paramPoly3":
+        c = {k: float(kind.get(k, 0.0)) for k in ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV")}
+        normalized = kind.get("pRange", "normalized") == "normalized"
+        pmax = 1.0 if normalized else L
+        p = np.linspace(0.0, pmax, 20 * (n + 1))
+        u = c["aU"] + c["bU"] * p + c["cU"] * p ** 2 + c["dU"] * p ** 3
+        v = c["aV"] + c["bV"] * p + c["cV"] * p ** 2 + c["dV"] * p ** 3
+        ch, sh = math.cos(h0), math.sin(h0)
+        X, Y = x0 + u * ch - v * sh, y0 + u * sh + v * ch
+        seg = np.hypot(np.diff(X), np.diff(Y))
+        arc = np.concatenate([[0.0], np.cumsum(seg)])
+        arc *= L / max(arc[-1], 1e-12)  # the record's length is the arc length
+        xs, ys = np.interp(ss, arc, X), np.interp(ss, arc, Y)
+        du = c["bU"] + 2 * c["cU"] * p + 3 * c["dU"] * p ** 2
+        dv = c["bV"] + 2 * c["cV"] * p + 3 * c["dV"] * p ** 2
+        hh = np.unwrap(np.arctan2(du * sh + dv * ch, du * ch - dv * sh))
+        return np.stack([xs, ys], 1), np.interp(ss, arc, hh)
+    if kind.tag == "spiral":  # numerical integration of the clothoid
+        c0, c1 = float(kind.get("curvStart")), float(kind.get("curvEnd"))
+        fine = np.linspace(0.0, L, 20 * (n + 1))
+        h = h0 + c0 * fine + (c1 - c0) / (2 * max(L, 1e-12)) * fine ** 2
+        ds = np.diff(fine)
+        X = x0 + np.concatenate([[0.0], np.cumsum(np.cos(h[:-1]) * ds)])
+        Y = y0 + np.concatenate([[0.0], np.cumsum(np.sin(h[:-1]) * ds)])
+        return np.stack([np.interp(ss, fine, X), np.interp(ss, fine, Y)], 1), np.interp(ss, fine, h)
+    raise ValueError(f"unsupported OpenDRIVE geometry <{kind.tag}>")
+
+
+def reference_lines(root: ET.Element, step: float = 0.05) -> dict[str, RefLine]:
+    out = {}
+    for road in root.iter("road"):
+        S, XY, H = [], [], []
+        for g in road.find("planView").findall("geometry"):
+            xy, h = _poly_geometry(g, step)
+            s0, L = float(g.get("s")), float(g.get("length"))
+            S.append(s0 + np.linspace(0.0, L, len(xy)))
+            XY.append(xy)
+            H.append(h)
+        if not S:
+            continue
+        elev = []
+        prof = road.find("elevationProfile")
+        if prof is not None:
+            elev = sorted(tuple(float(e.get(k, 0.0)) for k in ("s", "a", "b", "c", "d"))
+                          for e in prof.findall("elevation"))
+        right, left = [], []
+        lanes = road.find("lanes")
+        sec = lanes.find("laneSection") if lanes is not None else None
+        if sec is not None:
+            for side, dst in (("right", right), ("left", left)):
+                grp = sec.find(side)
+                if grp is not None:
+                    dst.extend(int(ln.get("id")) for ln in grp.findall("lane") if ln.get("type") == "driving")
+        out[road.get("id")] = RefLine(road.get("id"), float(road.get("length")), road.get("junction", "-1"),
+                                      np.concatenate(S), np.concatenate(XY), np.concatenate(H), elev,
+                                      sorted(right), sorted(left))
+    return out
+
+
+# --------------------------------------------------------------------------- scanned instances
+
+
+@dataclass
+class Instance:
+    kind: str  # "light" | "sign"
+    centre: np.ndarray  # (3,) site frame
+    size: np.ndarray  # (3,) extents along the horizontal principal axes and z
+    vertices: int
+    height_m: float  # centre above the local ground
+    pole_vertices: int  # pole-labelled vertices under it
+    label: int
+    id: int = -1
+    rejected: str = ""
+    evidence: str = "label"  # "label": a cluster of its label; "pole_head": a pole carrying a head, unlabelled
+
+    def to_json(self) -> dict:
+        return {"id": self.id, "kind": self.kind, "label": self.label,
+                "position": [round(float(v), 3) for v in self.centre],
+                "size_m": [round(float(v), 3) for v in self.size], "vertices": self.vertices,
+                "height_above_ground_m": round(self.height_m, 3), "pole_vertices": self.pole_vertices,
+                "evidence": self.evidence,
+                **({"rejected": self.rejected} if self.rejected else {})}
+
+
+def _clusters(P: np.ndarray, link_m: float) -> list[np.ndarray]:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    if len(P) == 0:
+        return []
+    pairs = cKDTree(P).query_pairs(link_m, output_type="ndarray")
+    A = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(P), len(P)))
+    n, cc = connected_components(A, directed=False)
+    return [np.flatnonzero(cc == k) for k in range(n)]
+
+
+def find_instances(V: np.ndarray, labels: np.ndarray, *, link_m: float = 0.35, min_vertices: int = 12,
+                   min_height_m: float = 1.5, max_height_m: float = 8.0, max_size_m: float = 2.0,
+                   ground_radius_m: float = 3.0, pole_radius_m: float = 0.6, min_pole_vertices: int = 3,
+                   plate_depth_m: float = 0.12) -> tuple[list[Instance], list[Instance]]:
+    """Scanned traffic lights and signs: clusters of label-6 / label-7 vertices, checked in 3D.
+
+    A cluster is kept when it has ``min_vertices``, floats ``min_height_m``..``max_height_m`` above the
+    local ground (a low percentile of the mesh within ``ground_radius_m``), is no bigger than
+    ``max_size_m`` (a head or a plate, not a facade patch) and stands on a pole (``min_pole_vertices``
+    pole-labelled vertices below it within ``pole_radius_m``). A "light" cluster that is a flat
+    plate (thinner than ``plate_depth_m`` across its horizontal minor axis) is a sign: light heads
+    are boxes. Returns (kept, rejected).
+    """
+    from scipy.spatial import cKDTree
+
+    labels = np.asarray(labels)
+    if len(labels) != len(V):
+        raise ValueError(f"{len(labels)} labels for {len(V)} vertices")
+    tree2 = cKDTree(V[:, :2])
+    pole = V[labels == POLE]
+    ptree = cKDTree(pole[:, :2]) if len(pole) else None
+    kept, rejected = [], []
+    for lab, kind in ((LIGHT, "light"), (SIGN, "sign")):
+        idx = np.flatnonzero(labels == lab)
+        for comp in _clusters(V[idx], link_m):
+            P = V[idx[comp]]
+            c = P.mean(0)
+            xy = P[:, :2] - c[:2]
+            if len(P) >= 2:
+                w, vec = np.linalg.eigh(np.cov(xy.T) + 1e-12 * np.eye(2))
+                proj = xy @ vec
+                ext = proj.max(0) - proj.min(0)  # (minor, major)
+            else:
+                ext = np.zeros(2)
+            size = np.array([ext[1], ext[0], P[:, 2].max() - P[:, 2].min()])
+            near = tree2.query_ball_point(c[:2], ground_radius_m)
+            ground = float(np.percentile(V[near, 2], 2)) if near else float(P[:, 2].min())
+            n_pole = 0
+            if ptree is not None:
+                cand = ptree.query_ball_point(c[:2], pole_radius_m)
+                if cand:
+                    z = pole[cand, 2]
+                    n_pole = int(((z > ground + 0.2) & (z < P[:, 2].min() + 0.2)).sum())
+            k = kind
+            if kind == "light" and len(P) >= min_vertices and ext[0] < plate_depth_m:
+                k = "sign"
+            inst = Instance(k, c, size, int(len(P)), float(c[2] - ground), n_pole, lab)
+            why = []
+            if len(P) < min_vertices:
+                why.append(f"{len(P)} vertices < {min_vertices}")
+            if not (min_height_m <= inst.height_m <= max_height_m):
+                why.append(f"{inst.height_m:.2f} m above ground, outside {min_height_m}..{max_height_m}")
+            if max(size) > max_size_m:
+                why.append(f"{max(size):.2f} m across > {max_size_m}")
+            if n_pole < min_pole_vertices:
+                why.append(f"{n_pole} pole vertices under it < {min_pole_vertices}")
+            if why:
+                inst.rejected = "; ".join(why)
+                rejected.append(inst)
+            else:
+                kept.append(inst)
+    kept.sort(key=lambda i: (i.kind, round(float(i.centre[0]), 1), round(float(i.centre[1]), 1)))
+    for i, inst in enumerate(kept):
+        inst.id = i
+    return kept, rejected
+
+
+def find_pole_heads(V: np.ndarray, labels: np.ndarray, known: list[Instance], *, link_m: float = 0.35,
+                    min_pole_vertices: int = 10, head_z_m: tuple[float, float] = (1.8, 4.5),
+                    axis_radius_m: float = 0.6, head_width_m: tuple[float, float] = (0.3, 1.0),
+                    clear_ring_m: tuple[float, float] = (0.8, 1.5), ground_radius_m: float = 3.0,
+                    known_m: float = 1.0) -> list[Instance]:
+    """Poles that carry a head, whatever the head is labelled: candidates for lights the labels miss.
+
+    A pole is a cluster of pole-labelled vertices (``min_pole_vertices``). Its *head* is every mesh
+    vertex within ``axis_radius_m`` of the pole's axis at ``head_z_m`` above the local ground. It counts
+    when the head is bulky (narrowest horizontal extent ``head_width_m[0]`` or more: a bare pole or a
+    sign plate is thinner; lamps carry theirs higher), small (widest extent at most ``head_width_m[1]``)
+    and free-standing (no vertex at head height ``clear_ring_m`` from the axis: not a tree crown, not a
+    facade). Poles within ``known_m`` of a light found by its label are left out. The head's
+    position is the centroid of its vertices not labelled as sign.
+    """
+    from scipy.spatial import cKDTree
+
+    labels = np.asarray(labels)
+    tree2 = cKDTree(V[:, :2])
+    idx = np.flatnonzero(labels == POLE)
+    out = []
+    for comp in _clusters(V[idx], link_m):
+        if len(comp) < min_pole_vertices:
+            continue
+        c = np.median(V[idx[comp], :2], 0)
+        near = tree2.query_ball_point(c, ground_radius_m)
+        ground = float(np.percentile(V[near, 2], 2))
+        if any(k.kind == "light" and np.hypot(*(k.centre[:2] - c)) <= known_m for k in known):
+            continue
+        ring = np.asarray(tree2.query_ball_point(c, clear_ring_m[1]), int)
+        h = V[ring, 2] - ground
+        r = np.hypot(V[ring, 0] - c[0], V[ring, 1] - c[1])
+        band = (h >= head_z_m[0]) & (h <= head_z_m[1])
+        if np.any(band & (r > clear_ring_m[0])):
+            continue
+        head = ring[band & (r <= axis_radius_m)]
+        if len(head) < 3:
+            continue
+        xy = V[head, :2] - V[head, :2].mean(0)
+        w, vec = np.linalg.eigh(np.cov(xy.T) + 1e-12 * np.eye(2))
+        proj = xy @ vec
+        ext = proj.max(0) - proj.min(0)  # (minor, major)
+        if not (head_width_m[0] <= ext[0] and ext[1] <= head_width_m[1]):
+            continue
+        body = head[labels[head] != SIGN]
+        P = V[body if len(body) >= 3 else head]
+        ctr = P.mean(0)
+        size = np.array([ext[1], ext[0], P[:, 2].max() - P[:, 2].min()])
+        out.append(Instance("light", ctr, size, int(len(P)), float(ctr[2] - ground), int(len(comp)), POLE,
+                            evidence="pole_head"))
+    return out
+
+
+# --------------------------------------------------------------------------- placing
+
+
+@dataclass
+class Placed:
+    id: str
+    kind: str
+    road: str
+    s: float
+    t: float
+    z_offset: float
+    orientation: str
+    source: str  # "scan" | "netconvert"
+    moved_m: float = 0.0
+    instance: int | None = None
+    instance_position: list | None = None
+    instance_size: list | None = None
+    type: str = ""
+    subtype: str = ""
+    old_xy: list | None = None
+    new_xy: list | None = None
+    note: str = ""
+    host_road: str | None = None
+
+    def to_json(self) -> dict:
+        d = {k: getattr(self, k) for k in ("id", "kind", "type", "subtype", "road", "orientation", "source",
+                                            "instance", "instance_position", "instance_size", "note")}
+        d["defined_on_road"] = self.host_road or self.road
+        d.update({"s": round(self.s, 4), "t": round(self.t, 4), "zOffset": round(self.z_offset, 3),
+                  "moved_m": round(self.moved_m, 3),
+                  "position": [round(v, 3) for v in self.new_xy] if self.new_xy else None,
+                  "netconvert_position": [round(v, 3) for v in self.old_xy] if self.old_xy else None})
+        return d
+
+
+def _f(x: float, nd: int = 8) -> str:
+    return f"{x:.{nd}f}"
+
+
+def _signal_xy(ref: RefLine, sig: ET.Element, shift_m: float) -> np.ndarray:
+    """Where CARLA puts a signal (xy, site frame): reference line at s, t to the left, lights shifted."""
+    s, t = float(sig.get("s")), float(sig.get("t", 0.0))
+    p = ref.point(s, t)
+    if sig.get("type") in CARLA_LIGHT_TYPES:
+        s_c = min(max(s, 0.0), ref.length)
+        i = int(np.clip(np.searchsorted(ref.s, s_c) - 1, 0, len(ref.s) - 1))
+        h = ref.hdg[i] + float(sig.get("hOffset", 0.0))
+        p = p + shift_m * np.array([math.cos(h), math.sin(h)])
+    return p
+
+
+def signal_positions(xodr_text: str, shift_m: float = 0.25) -> list[dict]:
+    """Every signal's id, road, type and CARLA position (xy, site frame)."""
+    root = ET.fromstring(xodr_text)
+    refs = reference_lines(root)
+    out = []
+    for road in root.iter("road"):
+        ref = refs.get(road.get("id"))
+        for sig in road.iter("signal"):
+            out.append({"id": sig.get("id"), "road": road.get("id"), "type": sig.get("type"),
+                        "xy": _signal_xy(ref, sig, shift_m)})
+    return out
+
+
+def _host(refs: dict[str, RefLine], xy, reach_m: float, exclude: str | None = None
+          ) -> tuple[RefLine, float, float] | None:
+    """The road whose reference-line frame holds xy (not beyond either end), nearest first."""
+    best = None
+    for ref in refs.values():
+        if ref.road == exclude:
+            continue
+        s, t, over = ref.project(xy)
+        if over <= reach_m and (best is None or abs(t) < abs(best[2])):
+            best = (ref, min(max(s, 0.0), ref.length), t)
+    return best
+
+
+def _signals_el(road_el: ET.Element) -> ET.Element:
+    sg = road_el.find("signals")
+    if sg is None:
+        sg = ET.Element("signals")
+        # <signals> follows <lanes> / <objects> in the OpenDRIVE schema
+        kids = list(road_el)
+        after = max((kids.index(e) for e in kids if e.tag in ("lanes", "objects")), default=len(kids) - 1)
+        road_el.insert(after + 1, sg)
+    return sg
+
+
+def _move_signal(root: ET.Element, road_el: ET.Element, host_id: str, sig: ET.Element, h_offset: float) -> None:
+    """Define ``sig`` on road ``host_id``; leave a <signalReference> with its lanes where it was.
+
+    The defining copy gets validity lane 0 only, so CARLA builds no trigger box on the host road's
+    lanes (UTrafficLightComponent::InitializeSign, Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Traffic/
+    TrafficLightComponent.cpp, walks every reference to the signal and skips lane 0); the approach's
+    reference carries the original validity, which is what the trigger boxes and waypoints read.
+    """
+    host_el = next(r for r in root.iter("road") if r.get("id") == host_id)
+    parent = road_el.find("signals")
+    ref_el = ET.Element("signalReference", {"id": sig.get("id"), "s": sig.get("s"), "t": sig.get("t", "0"),
+                                            "orientation": sig.get("orientation", "+")})
+    for v in sig.findall("validity"):
+        ref_el.append(v)
+        sig.remove(v)
+    parent.remove(sig)
+    parent.append(ref_el)  # <signalReference> entries follow the <signal> entries
+    ET.SubElement(sig, "validity", {"fromLane": "0", "toLane": "0"})
+    if abs(h_offset) > 1e-9:
+        sig.set("hOffset", _f(h_offset))
+    hs = _signals_el(host_el)
+    n_sig = sum(1 for e in hs if e.tag == "signal")
+    hs.insert(n_sig, sig)
+
+
+def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 15.0, group_m: float = 2.0,
+                  carla_light_shift_m: float = 0.25, add_signs: bool = True,
+                  sign_max_road_m: float = 12.0, reach_m: float = 0.05, wrong_side_m: float = 6.0
+                  ) -> tuple[str, list[Placed], list[str]]:
+    """Move netconvert's light groups onto the scanned lights; add the scanned signs.
+
+    A *group* is the traffic-light signals of one road and orientation within ``group_m`` of each
+    other along s (netconvert writes one per lane and turn arrow, all at the road's end): one head.
+    Groups and scanned lights are paired by the Hungarian method on horizontal distance (labelled
+    lights first, then poles carrying an unlabelled head), pairs farther than ``gate_m`` refused; a
+    light on the other side of the reference line than the head's lanes costs ``wrong_side_m`` more
+    (lights stand at their lanes' kerb; overhead or far-side lights still pair when nothing else fits).
+    Each signal of a paired group gets the light's position in its own road's reference-line frame
+    (s, t, zOffset = head centre above the road), or, past the road's end, in the frame of the road
+    that holds it, with a signalReference left on its own road; its id, lanes (validity), type,
+    controller and orientation stay. Unpaired groups keep netconvert's guess.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    root = ET.fromstring(xodr_text, parser=parser)
+    refs = reference_lines(root)
+    log: list[str] = []
+    # ---- netconvert light groups
+    sigs = []  # (road element, signal element, xy)
+    for road in root.iter("road"):
+        ref = refs[road.get("id")]
+        for sig in road.iter("signal"):
+            sigs.append((road, sig, _signal_xy(ref, sig, carla_light_shift_m)))
+    lights = [x for x in sigs if x[1].get("type") in CARLA_LIGHT_TYPES]
+    groups: list[list[int]] = []
+    for i, (road, sig, xy) in enumerate(lights):
+        for g in groups:
+            r0, s0 = lights[g[0]][0], lights[g[0]][1]
+            if (r0 is road and abs(float(sig.get("s")) - float(s0.get("s"))) <= group_m
+                    and sig.get("orientation", "+") == s0.get("orientation", "+")):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    scan_lights = [inst for inst in instances if inst.kind == "light"]
+    placed: list[Placed] = []
+    pairs: dict[int, Instance] = {}
+    G = np.array([np.mean([lights[i][2] for i in g], 0) for g in groups]).reshape(-1, 2)
+    # the side of the reference line the head's lanes are on: a light stands at its lanes' kerb
+    # (right-hand traffic: right lanes, negative ids, and the right kerb; left-hand traffic mirrored)
+    side = []
+    for g in groups:
+        ids = [int(v.get(k)) for i in g for v in lights[i][1].findall("validity") for k in ("fromLane", "toLane")]
+        side.append(-1 if ids and max(ids) < 0 else (1 if ids and min(ids) > 0 else 0))
+    # labelled lights first; poles carrying an unlabelled head only for the heads still unpaired
+    for evidence in ("label", "pole_head"):
+        cand = [inst for inst in scan_lights if inst.evidence == evidence]
+        free = [gi for gi in range(len(groups)) if gi not in pairs]
+        if not cand or not free:
+            continue
+        L = np.array([inst.centre[:2] for inst in cand])
+        D = np.hypot(G[free, None, 0] - L[None, :, 0], G[free, None, 1] - L[None, :, 1])
+        C = D.copy()
+        for r, gi in enumerate(free):
+            ref = refs[lights[groups[gi][0]][0].get("id")]
+            for c, inst in enumerate(cand):
+                t = ref.project(inst.centre[:2])[1]
+                if side[gi] and np.sign(t) != side[gi]:
+                    C[r, c] += wrong_side_m
+        rows, cols = linear_sum_assignment(np.where(D <= gate_m, C, 1e6))
+        for r, c in zip(rows, cols):
+            if D[r, c] <= gate_m:
+                pairs[free[int(r)]] = cand[int(c)]
+    used = set()
+    for gi, g in enumerate(groups):
+        inst = pairs.get(gi)
+        for i in g:
+            road, sig, xy = lights[i]
+            ref = refs[road.get("id")]
+            rec = Placed(sig.get("id"), "light", road.get("id"), float(sig.get("s")), float(sig.get("t", 0.0)),
+                         float(sig.get("zOffset", 0.0)), sig.get("orientation", "+"), "netconvert",
+                         type=sig.get("type", ""), subtype=sig.get("subtype", ""),
+                         old_xy=[float(v) for v in xy], new_xy=[float(v) for v in xy])
+            if inst is None:
+                rec.note = "no scanned traffic light within the gate: netconvert's guess kept"
+                placed.append(rec)
+                continue
+            used.add(inst.id)
+            s, t, over = ref.project(inst.centre[:2])
+            # CARLA moves a light carla_light_shift_m along its heading (road tangent + hOffset): write the
+            # point that far back so that the light lands on the scanned head
+            ho = float(sig.get("hOffset", 0.0))
+            h_app = float(np.interp(s, ref.s, ref.hdg))
+            s_w, t_w = s - carla_light_shift_m * math.cos(ho), t - carla_light_shift_m * math.sin(ho)
+            host = ref
+            if over > reach_m or not (0.0 <= s_w <= ref.length):
+                # CARLA clamps s to the road (Road::GetDirectedPointInNoLaneOffset), so a light beyond the
+                # approach's end cannot be written on it. Define the signal on the road whose frame holds
+                # the light, and keep a <signalReference> with the lanes it controls on the approach.
+                hb = _host(refs, inst.centre[:2], reach_m, exclude=ref.road)
+                if hb is None:
+                    rec.note = f"scanned light {over:.2f} m beyond the road's end and on no other road: s clamped"
+                    s_w = min(max(s_w, 0.0), ref.length)
+                else:
+                    host, hs, ht = hb
+                    hh = float(np.interp(hs, host.s, host.hdg))
+                    ho = float(sig.get("hOffset", 0.0))
+                    # keep the light's heading: the same direction measured from the host road's tangent
+                    ho_new = (h_app + ho - hh + math.pi) % (2 * math.pi) - math.pi
+                    s_w = hs - carla_light_shift_m * math.cos(ho_new)
+                    t_w = ht - carla_light_shift_m * math.sin(ho_new)
+                    _move_signal(root, road, host.road, sig, ho_new)
+                    rec.host_road = host.road
+                    rec.note = (f"scanned light {over:.2f} m beyond road {ref.road}'s end: signal defined on road "
+                                f"{host.road}, referenced from road {ref.road} with its lanes (signalReference)")
+            zoff = float(inst.centre[2]) - host.z(s_w)
+            sig.set("s", _f(s_w))
+            sig.set("t", _f(t_w))
+            sig.set("zOffset", f"{zoff:.3f}")
+            ref = host
+            new_xy = _signal_xy(ref, sig, carla_light_shift_m)
+            rec.s, rec.t, rec.z_offset, rec.source = s_w, t_w, zoff, "scan"
+            rec.instance = inst.id
+            if inst.evidence == "pole_head":
+                rec.note = ((rec.note + "; ") if rec.note else "") + \
+                    "a pole carrying an unlabelled head (no traffic-light label there)"
+            rec.instance_position = [round(float(v), 3) for v in inst.centre]
+            rec.instance_size = [round(float(v), 3) for v in inst.size]
+            rec.moved_m = float(np.hypot(*(new_xy - xy)))
+            rec.new_xy = [float(v) for v in new_xy]
+            placed.append(rec)
+    for inst in scan_lights:
+        if inst.id not in used and inst.evidence == "label":
+            log.append(f"scanned traffic light {inst.id} at ({inst.centre[0]:.2f}, {inst.centre[1]:.2f}) matches no "
+                       "netconvert light group (none left within the gate): not written")
+    # ---- signs
+    if add_signs:
+        outside = {k: r for k, r in refs.items() if r.junction == "-1" and (r.lanes_right or r.lanes_left)}
+        drivable = {k: r for k, r in refs.items() if r.lanes_right or r.lanes_left}
+        n = 0
+        for inst in (i for i in instances if i.kind == "sign"):
+            # the road whose frame holds the sign (CARLA clamps s): outside junctions first
+            best = _host(outside, inst.centre[:2], reach_m)
+            if best is None or abs(best[2]) > sign_max_road_m:
+                best = _host(drivable, inst.centre[:2], reach_m)
+            if best is None or abs(best[2]) > sign_max_road_m:
+                log.append(f"scanned sign {inst.id}: no road within {sign_max_road_m} m; not written")
+                continue
+            ref, s, t = best
+            s = min(max(s, 0.0), ref.length)
+            # right-hand traffic: a sign right of the reference line faces the lanes driving +s
+            orient, lanes = ("+", ref.lanes_right) if t < 0 else ("-", ref.lanes_left)
+            if not lanes:
+                orient, lanes = ("-", ref.lanes_left) if t < 0 else ("+", ref.lanes_right)
+            road_el = next(r for r in root.iter("road") if r.get("id") == ref.road)
+            sg = _signals_el(road_el)
+            sid = f"scan_sign_{n}"
+            n += 1
+            zoff = float(inst.centre[2]) - ref.z(s)
+            el = ET.SubElement(sg, "signal", {
+                "id": sid, "name": "twinkit_scan", "s": _f(s), "t": _f(t), "zOffset": f"{zoff:.3f}",
+                "orientation": orient, "dynamic": "no", "country": "OpenDRIVE", "type": UNKNOWN_SIGN_TYPE,
+                "subtype": "-1", "height": f"{float(inst.size[2]):.3f}", "width": f"{float(inst.size[0]):.3f}"})
+            if lanes:
+                ET.SubElement(el, "validity", {"fromLane": str(min(lanes)), "toLane": str(max(lanes))})
+            xy = ref.point(s, t)
+            placed.append(Placed(sid, "sign", ref.road, s, t, zoff, orient, "scan", 0.0, inst.id,
+                                 [round(float(v), 3) for v in inst.centre], [round(float(v), 3) for v in inst.size],
+                                 UNKNOWN_SIGN_TYPE, "-1", None, [float(v) for v in xy],
+                                 "type not told from the scan: generic (-1)"))
+    for sg in root.iter("signals"):  # tidy the blocks we edited (4-space indent, as netconvert writes)
+        ET.indent(sg, space="    ", level=2)
+    text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return text, placed, log
+
+
+# --------------------------------------------------------------------------- picture
+
+
+def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], rejected: list[Instance],
+                 placed: list[Placed], out, px_per_m: float = 20.0, max_px: int = 4096, crop_m: float = 6.0) -> None:
+    """Top view of the mesh with the lanes, the scanned instances (orange: lights, blue: signs, grey:
+    rejected clusters), netconvert's signals (red crosses) and where they are now (green), arrows
+    from old to new."""
+    from PIL import Image, ImageDraw
+
+    from .mesh2d import Grid, read_mesh, rasterize
+
+    mesh = read_mesh(mesh_path)
+    xy = mesh.v[:, :2]
+    span = float(np.max(xy.max(0) - xy.min(0))) + 4.0
+    res = max(1.0 / px_per_m, span / max_px)
+    grid = Grid.around(xy, res)
+    if mesh.rgb is not None:
+        cols = (mesh.rgb[mesh.f].mean(1) * 0.6).astype(np.uint8)  # darkened: the markers must stand out
+    else:
+        cols = np.full((len(mesh.f), 3), 80, np.uint8)
+    img = Image.fromarray(rasterize(mesh, grid, colours=cols, mode="RGB"))
+    d = ImageDraw.Draw(img)
+    w = max(1, int(round(0.06 / res)))
+    r = max(3, int(round(0.35 / res)))
+    for ln in lines:
+        for key in ("left", "right"):
+            q = [tuple(v) for v in grid.to_px(ln[key])]
+            if len(q) >= 2:
+                d.line(q, fill=(200, 200, 200), width=max(1, w // 2))
+
+    def px(p):
+        return tuple(grid.to_px(np.asarray(p, float)[:2]))
+
+    for inst in rejected:
+        x, y = px(inst.centre)
+        d.rectangle([x - r // 2, y - r // 2, x + r // 2, y + r // 2], outline=(150, 150, 150), width=w)
+    for inst in instances:
+        x, y = px(inst.centre)
+        col = (255, 150, 0) if inst.kind == "light" else (60, 140, 255)
+        d.rectangle([x - r, y - r, x + r, y + r], outline=col, width=2 * w)
+        tag = " (pole+head)" if inst.evidence == "pole_head" else ""
+        d.text((x + r + 2, y - r), f"{inst.kind} {inst.id}{tag}", fill=col)
+    for p in placed:
+        if p.old_xy is not None:
+            x, y = px(p.old_xy)
+            d.line([x - r, y - r, x + r, y + r], fill=(255, 40, 40), width=w)
+            d.line([x - r, y + r, x + r, y - r], fill=(255, 40, 40), width=w)
+        if p.new_xy is not None:
+            x1, y1 = px(p.new_xy)
+            if p.old_xy is not None and p.source == "scan":
+                d.line([px(p.old_xy), (x1, y1)], fill=(120, 255, 120), width=max(1, w // 2))
+            col = (40, 230, 40) if p.source == "scan" else (255, 40, 40)
+            d.ellipse([x1 - r // 2, y1 - r // 2, x1 + r // 2, y1 + r // 2], outline=col, width=w)
+    d.rectangle([8, 8, 420, 92], fill=(0, 0, 0))
+    d.text((16, 14), "orange / blue squares: scanned traffic lights / signs", fill=(255, 150, 0))
+    d.text((16, 30), "grey squares: clusters rejected (noise)", fill=(150, 150, 150))
+    d.text((16, 46), "red crosses: netconvert's signals (red circle: kept)", fill=(255, 40, 40))
+    d.text((16, 62), "green circles: signals placed from the scan", fill=(40, 230, 40))
+    bar = 10.0 / res
+    d.line([(16, 84), (16 + bar, 84)], fill=(255, 255, 255), width=3)
+    d.text((22 + bar, 76), "10 m", fill=(255, 255, 255))
+    img.save(out)
