@@ -30,7 +30,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     os.environ.setdefault("TWINKIT_PLUGINS", "builtins,segmentation")
     from twinkit.mesh import edges as mesh_edges, read_mesh
-    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context
+    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, potts_smooth
     from twinkit_segmentation.metrics import blend_distribution, decide_distribution, propagate, scores
     from twinkit_segmentation.segmesh import unit_normals
     from twinkit_segmentation.steps import BackprojectParams
@@ -40,8 +40,11 @@ def main(argv=None) -> int:
                          max_vehicle_m=bp.max_vehicle_m, min_curb_m=bp.min_curb_m, band_width_m=bp.band_width_m,
                          ground_factor=bp.context_factor, raised_factor=bp.context_factor,
                          high_factor=bp.context_factor, curb_factor=bp.curb_factor)
-    configs = [("plain blended vote", ())] + [(f"{c} only", (c,)) for c in CUES] + \
-              [(f"all but {c}", tuple(x for x in CUES if x != c)) for c in CUES] + [("**all (default)**", CUES)]
+    b = bp.smooth_beta
+    configs = [("plain blended vote", (), 0.0), (f"plain + Potts smoothing (beta {b:g})", (), b)] + \
+              [(f"{c} only", (c,), 0.0) for c in CUES] + \
+              [(f"all but {c}", tuple(x for x in CUES if x != c), 0.0) for c in CUES] + [("all cues", CUES, 0.0)] + \
+              [(f"**all cues + Potts smoothing (default)**", CUES, b)]
     ran = 0
     for d in a.site_dirs.split(","):
         site = Path(d)
@@ -62,14 +65,17 @@ def main(argv=None) -> int:
         head = "| cues | " + " | ".join(SHORT.get(c, c) for c in CLASSES) + " | car prec. | **mIoU** | changed | s |"
         print(head)
         print("|---" * (len(CLASSES) + 5) + "|")
-        for name, cues in configs:
-            c0, t1 = time.process_time(), time.perf_counter()
+        for name, cues, beta in configs:
+            t1 = time.perf_counter()
             if cues:
                 lab, _, met = fuse_with_context(p, mesh.vertices, normals, edges, opt, cues,
-                                                min_retained=bp.min_retained)
+                                                min_retained=bp.min_retained, smooth_beta=beta,
+                                                smooth_iters=bp.smooth_iters)
             else:
                 lab, _ = decide_distribution(p)
-                met = {"changed": 0}
+                base = lab.copy()
+                lab, _ = potts_smooth(lab, p, edges, beta, bp.smooth_iters)
+                met = {"changed": int((lab != base).sum())}
             secs = time.perf_counter() - t1 + t_blend
             if (lab == 255).any():
                 lab = propagate(lab, edges)

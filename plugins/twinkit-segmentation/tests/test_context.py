@@ -126,3 +126,22 @@ def test_strong_evidence_still_wins_and_no_cue_changes_nothing():
     assert (none == ROAD).all() and met["changed"] == 0
     opt = ContextOptions(min_curb_m=0.2)  # a 15 cm step is below this site's curbs: no band
     assert (fuse_with_context(p2, v, n, e, opt)[0] == ROAD).all()
+
+
+def test_potts_smoothing_flips_a_weak_outlier_not_a_confident_one():
+    from twinkit_segmentation.context import potts_smooth
+
+    v, f, n, e = heightfield(lambda x, y: 0.0 * x, size=(4.0, 4.0))
+    p = votes(len(v), road=1.0)
+    centre = int(np.argmin(np.linalg.norm(v[:, :2], axis=1)))
+    corner = int(np.argmin(np.linalg.norm(v[:, :2] - 1.0, axis=1)))
+    p[centre] = votes(1, car=0.55, road=0.45)[0]  # a weak outlier amid road
+    p[corner] = votes(1, car=0.95, road=0.05)[0]  # a confident one
+    lab = p.argmax(axis=1).astype(np.uint8)
+    out, changed = potts_smooth(lab, p, e, beta=1.0)
+    assert out[centre] == ROAD and out[corner] == CAR and changed == 1
+    same, none = potts_smooth(lab, p, e, beta=0.0)
+    assert same[centre] == CAR and none == 0
+    lab255 = lab.copy()
+    lab255[:5] = 255
+    assert (potts_smooth(lab255, p, e, beta=1.0)[0][:5] == 255).all()  # unlabelled stays for the fill

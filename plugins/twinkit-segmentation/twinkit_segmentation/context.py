@@ -165,7 +165,8 @@ def fill_allowed(labels: np.ndarray, missing: np.ndarray, allowed: np.ndarray, e
 
 def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray,
                       opt: ContextOptions | None = None, cues=CUES, segments: np.ndarray | None = None,
-                      segment_weight: float = 0.0, min_retained: float = 0.2) -> tuple[np.ndarray, np.ndarray, dict]:
+                      segment_weight: float = 0.0, min_retained: float = 0.2,
+                      smooth_beta: float = 0.0, smooth_iters: int = 5) -> tuple[np.ndarray, np.ndarray, dict]:
     """The blended vote ``p`` (n, 19) with the geometric prior: (labels (n,) uint8, 255 where nothing
     voted; confidence; metrics with the vertices each cue touched and changed).
 
@@ -174,6 +175,8 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
        survives the prior) take the most common label of their neighbours that their context
        allows (:func:`fill_allowed`); where no allowed neighbour is reached, the allowed class with
        the most votes, else (a curb band) sidewalk, else the plain argmax of ``q``.
+    3. With ``smooth_beta`` > 0, :func:`potts_smooth` with ``q`` as the unaries (uniform over the
+       allowed classes where the votes were explained away).
     """
     from twinkit_segmentation.metrics import decide_distribution
 
@@ -197,10 +200,49 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
         lab[still] = fallback[still]
         conf = conf.copy()
         conf[ea] = 0.0  # decided by the neighbours, not by the votes
+    smoothed = 0
+    if smooth_beta > 0:
+        unary = q.copy()
+        unary[ea] = allowed[ea]
+        lab, smoothed = potts_smooth(lab, unary, edges, smooth_beta, smooth_iters)
     metrics = {"cues": list(cues), "explained_away": int(ea.sum()), "changed": int((lab != base).sum()),
+               "smoothed": smoothed,
                "step_cells": ctx["step_cells"]}
     for c in CUES:
         m = ctx[c]
         metrics[f"{c}_vertices"] = int(m.sum())
         metrics[f"{c}_changed"] = int((m & (lab != base)).sum()) if c in cues else 0
     return lab, conf, metrics
+
+
+def potts_smooth(labels: np.ndarray, unary: np.ndarray, edges: np.ndarray, beta: float = 1.0,
+                 iters: int = 5) -> tuple[np.ndarray, int]:
+    """Label smoothing on the vertex graph (a Potts model solved by iterated conditional modes):
+    each vertex takes ``argmax_c log unary(c) + beta * share of its neighbours labelled c``, a few
+    sweeps (all vertices at once). ``unary`` (n, 19) is a class distribution per vertex (rows of
+    zeros: no evidence, the vertex keeps its label and only votes for its neighbours). Unlabelled
+    vertices (255) neither vote nor change. Returns (labels, vertices changed)."""
+    from scipy import sparse
+
+    lab = np.asarray(labels).copy()
+    n = len(lab)
+    if beta <= 0 or iters <= 0 or n == 0:
+        return lab, 0
+    a = np.concatenate([edges[:, 0], edges[:, 1]])
+    b = np.concatenate([edges[:, 1], edges[:, 0]])
+    adj = sparse.csr_matrix((np.ones(len(a), np.float32), (a, b)), shape=(n, n))
+    deg = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
+    tot = unary.sum(axis=1)
+    act = (tot > 0) & (lab < N_CLASSES)
+    lu = np.log(np.maximum(unary[act] / tot[act, None], 1e-4))
+    start = lab.copy()
+    for _ in range(iters):
+        known = lab < N_CLASSES
+        oh = sparse.csr_matrix((np.ones(int(known.sum()), np.float32), (np.nonzero(known)[0], lab[known].astype(np.int64))),
+                               shape=(n, N_CLASSES))
+        share = (adj[act] @ oh).toarray() / deg[act, None]
+        new = (lu + beta * share).argmax(axis=1).astype(lab.dtype)
+        if (new == lab[act]).all():
+            break
+        lab[act] = new
+    return lab, int((lab != start).sum())

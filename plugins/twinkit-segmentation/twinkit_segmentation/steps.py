@@ -269,7 +269,7 @@ class BackprojectParams:
     fill_unlabelled: bool = True  # unseen vertices take their neighbours' label
     # 3D context (docs/segmentation.md "3D context in the vote"): geometric cues from the mesh scale the
     # blended vote; lengths are physical sizes, not tuned to a site
-    context: bool = True  # False = the plain blended vote
+    context: bool = True  # False = no geometric cues (with smooth_beta 0 too: the plain blended vote)
     context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb"])
     ground_window_m: float = 3.0  # local ground window: wider than the widest vehicle (2.55 m)
     max_curb_m: float = 0.30  # up-facing, at most this above the local ground = ground (the highest curb)
@@ -280,6 +280,8 @@ class BackprojectParams:
     context_factor: float = 0.1  # prior of a class the geometry rules out (ground, raised, high)
     curb_factor: float = 0.2  # prior of road on a raised band beside the carriageway
     min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
+    smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
+    smooth_iters: int = 5
 
 
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
@@ -291,7 +293,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import edges as mesh_edges, read_mesh
     from twinkit_segmentation.segmesh import write_labels_ply
-    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context
+    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, potts_smooth
     from twinkit_segmentation.metrics import _weighted_votes, blend_distribution, decide_distribution, propagate
     from twinkit_segmentation.segmesh import unit_normals
 
@@ -325,12 +327,21 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
                              high_factor=params.context_factor, curb_factor=params.curb_factor)
         keep = labels == IGNORE
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
-                                               params.context_cues, min_retained=params.min_retained)
+                                               params.context_cues, min_retained=params.min_retained,
+                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters)
         labels[keep] = IGNORE  # too few votes stays too few votes
         t_ctx = time.perf_counter() - t1
-        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %.2f s",
+        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, %.2f s",
                      "+".join(cmet["cues"]), cmet["changed"],
-                     ", ".join(f"{c} {cmet[c + '_changed']}" for c in cmet["cues"]), cmet["explained_away"], t_ctx)
+                     ", ".join(f"{c} {cmet[c + '_changed']}" for c in cmet["cues"]), cmet["explained_away"],
+                     cmet["smoothed"], t_ctx)
+    elif params.smooth_beta > 0:
+        t1 = time.perf_counter()
+        edges = mesh_edges(mesh.faces, len(mesh.vertices))
+        labels, n_s = potts_smooth(labels, p, edges, params.smooth_beta, params.smooth_iters)
+        cmet = {"smoothed": n_s}
+        t_ctx = time.perf_counter() - t1
+        ctx.log.info("Potts smoothing: %d vertices changed, %.2f s", n_s, t_ctx)
     unlabelled_before = int((labels == IGNORE).sum())
     if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
         labels = propagate(labels, edges if edges is not None else mesh_edges(mesh.faces, len(mesh.vertices)))
