@@ -15,6 +15,7 @@ import argparse
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -39,11 +40,12 @@ def main(argv=None) -> int:
     opt = ContextOptions(ground_window_m=bp.ground_window_m, max_curb_m=bp.max_curb_m, min_object_m=bp.min_object_m,
                          max_vehicle_m=bp.max_vehicle_m, min_curb_m=bp.min_curb_m, band_width_m=bp.band_width_m,
                          ground_factor=bp.context_factor, raised_factor=bp.context_factor,
-                         high_factor=bp.context_factor, curb_factor=bp.curb_factor)
+                         high_factor=bp.context_factor, curb_factor=bp.curb_factor, curb_face=bp.curb_face)
     b = bp.smooth_beta
     configs = [("plain blended vote", (), 0.0), (f"plain + Potts smoothing (beta {b:g})", (), b)] + \
               [(f"{c} only", (c,), 0.0) for c in CUES] + \
               [(f"all but {c}", tuple(x for x in CUES if x != c), 0.0) for c in CUES] + [("all cues", CUES, 0.0)] + \
+              [("all cues + Potts, curb face off", CUES, -b)] + \
               [(f"**all cues + Potts smoothing (default)**", CUES, b)]
     ran = 0
     for d in a.site_dirs.split(","):
@@ -67,8 +69,11 @@ def main(argv=None) -> int:
         print("|---" * (len(CLASSES) + 5) + "|")
         for name, cues, beta in configs:
             t1 = time.perf_counter()
+            o = opt
+            if beta < 0:  # the curb-face ablation
+                o, beta = replace(opt, curb_face=False), -beta
             if cues:
-                lab, _, met = fuse_with_context(p, mesh.vertices, normals, edges, opt, cues,
+                lab, _, met = fuse_with_context(p, mesh.vertices, normals, edges, o, cues,
                                                 min_retained=bp.min_retained, smooth_beta=beta,
                                                 smooth_iters=bp.smooth_iters)
             else:

@@ -145,3 +145,16 @@ def test_potts_smoothing_flips_a_weak_outlier_not_a_confident_one():
     lab255 = lab.copy()
     lab255[:5] = 255
     assert (potts_smooth(lab255, p, e, beta=1.0)[0][:5] == 255).all()  # unlabelled stays for the fill
+
+
+def test_curb_face_the_curbs_own_edge_is_sidewalk_too():
+    # a finer mesh: the curb's top edge has a tilted normal (not up-facing), so only the face rule reaches it
+    v, f, n, e = heightfield(lambda x, y: np.where((x >= 0) & (x <= 3.0), 0.15, 0.0), size=(10.0, 4.0), step=0.05)
+    edge = (np.abs(v[:, 0]) < 0.08) & (v[:, 2] > 0.1)  # the first row on top of the step
+    assert edge.sum() > 10 and (n[edge, 2] < 0.85).all()
+    p = votes(len(v), road=0.6, sidewalk=0.4)
+    lab, _, _ = fuse_with_context(p, v, n, e)
+    assert (lab[edge] == SIDEWALK).all()
+    assert (lab[v[:, 0] < -0.02] == ROAD).all()  # the gutter below it stays road
+    off, _, _ = fuse_with_context(p, v, n, e, ContextOptions(curb_face=False))
+    assert (off[edge] == ROAD).all()

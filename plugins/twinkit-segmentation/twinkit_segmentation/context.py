@@ -54,6 +54,7 @@ class ContextOptions:
     raised_factor: float = 0.1
     high_factor: float = 0.1
     curb_factor: float = 0.2
+    curb_face: bool = True  # the curb's own face and edge count as the band (and as ground)
 
 
 def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOptions | None = None) -> dict:
@@ -86,6 +87,13 @@ def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOpt
         above_foot = v[:, 2] - foot
         curb = (ground & (d[j, i] * g.cell <= opt.band_width_m) & (np.abs(v[:, 2] - top) <= opt.level_tol_m)
                 & (above_foot >= opt.min_curb_m) & (above_foot <= opt.max_curb_m))
+        if opt.curb_face:
+            # the curb itself (its face and rounded edge, not up-facing): within the step's reach, above
+            # the foot by at least half the lowest curb, not above the top; CityScapes counts it as sidewalk
+            face = (~up & (d[j, i] * g.cell <= opt.step_radius_m) & (h <= opt.max_curb_m)
+                    & (above_foot >= opt.min_curb_m / 2) & (v[:, 2] - top <= opt.level_tol_m))
+            curb |= face
+            out["ground"] = ground | face
     out["curb"] = curb
     out["step_cells"] = int(step.sum())
     return out
