@@ -40,12 +40,13 @@ def main(argv=None) -> int:
     opt = ContextOptions(ground_window_m=bp.ground_window_m, max_curb_m=bp.max_curb_m, min_object_m=bp.min_object_m,
                          max_vehicle_m=bp.max_vehicle_m, min_curb_m=bp.min_curb_m, band_width_m=bp.band_width_m,
                          ground_factor=bp.context_factor, raised_factor=bp.context_factor,
-                         high_factor=bp.context_factor, curb_factor=bp.curb_factor, curb_face=bp.curb_face)
+                         high_factor=bp.context_factor, curb_factor=bp.curb_factor, curb_face=bp.curb_face,
+                         band_default=bp.band_default)
     b = bp.smooth_beta
     configs = [("plain blended vote", (), 0.0), (f"plain + Potts smoothing (beta {b:g})", (), b)] + \
               [(f"{c} only", (c,), 0.0) for c in CUES] + \
               [(f"all but {c}", tuple(x for x in CUES if x != c), 0.0) for c in CUES] + [("all cues", CUES, 0.0)] + \
-              [("all cues + Potts, curb face off", CUES, -b)] + \
+              [("all cues + Potts, curb face off", CUES, -b), ("all cues + Potts, band default off", CUES, -2 * b)] + \
               [(f"**all cues + Potts smoothing (default)**", CUES, b)]
     ran = 0
     for d in a.site_dirs.split(","):
@@ -70,8 +71,9 @@ def main(argv=None) -> int:
         for name, cues, beta in configs:
             t1 = time.perf_counter()
             o = opt
-            if beta < 0:  # the curb-face ablation
-                o, beta = replace(opt, curb_face=False), -beta
+            if beta < 0:  # the curb-face and band-default ablations
+                o = replace(opt, curb_face=False) if beta == -b else replace(opt, band_default=False)
+                beta = b
             if cues:
                 lab, _, met = fuse_with_context(p, mesh.vertices, normals, edges, o, cues,
                                                 min_retained=bp.min_retained, smooth_beta=beta,

@@ -158,3 +158,17 @@ def test_curb_face_the_curbs_own_edge_is_sidewalk_too():
     assert (lab[v[:, 0] < -0.02] == ROAD).all()  # the gutter below it stays road
     off, _, _ = fuse_with_context(p, v, n, e, ContextOptions(curb_face=False))
     assert (off[edge] == ROAD).all()
+
+
+def test_band_default_pavement_hidden_behind_parked_cars_is_sidewalk_not_the_verge_beside_it():
+    v, f, n, e = heightfield(lambda x, y: np.where((x >= 0) & (x <= 3.0), 0.15, 0.0))
+    p = votes(len(v), road=1.0)
+    band = in_box(v, 0.0, 3.0, -8, 8)
+    p[band] = votes(1, car=1.0)  # every view sees the parked cars' sides in front of the pavement
+    verge = v[:, 0] > 3.0
+    p[verge] = votes(1, terrain=1.0)  # the grass behind it
+    lab, _, _ = fuse_with_context(p, v, n, e)
+    inner = in_box(v, 0.3, 2.7, -7.5, 7.5)
+    assert (lab[inner] == SIDEWALK).all()
+    off, _, _ = fuse_with_context(p, v, n, e, ContextOptions(band_default=False))
+    assert (off[inner] == TERRAIN).mean() > 0.9  # the verge grows over the band

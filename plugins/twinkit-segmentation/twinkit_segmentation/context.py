@@ -20,8 +20,11 @@ unanimous evidence can still win over a cue and nothing is decided by the cue al
   ``max_curb_m`` above the step's foot, lies on a raised band beside a lower surface: a
   sidewalk (or a verge), not the carriageway. Road is scaled by ``curb_factor``.
 
-``segment_weight`` averages the (log) prior over each over-segmentation segment the way the
-votes are blended, so a segment's cue is not decided by a few noisy normals.
+The curb's own face and rounded edge (not up-facing) join the band with ``curb_face``. Votes the
+cues explain away are replaced by the neighbours' allowed labels (:func:`fill_allowed`), on a band
+by sidewalk (``band_default``); :func:`potts_smooth` smooths the result on the vertex graph.
+:func:`segment_smooth` (``fuse_with_context(segment_weight=...)``, not used by the step, not
+measured) would average the prior over each over-segmentation segment.
 """
 from __future__ import annotations
 
@@ -55,6 +58,7 @@ class ContextOptions:
     high_factor: float = 0.1
     curb_factor: float = 0.2
     curb_face: bool = True  # the curb's own face and edge count as the band (and as ground)
+    band_default: bool = True  # band vertices whose votes are explained away become sidewalk
 
 
 def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOptions | None = None) -> dict:
@@ -181,8 +185,9 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     1. ``q = p * prior``; argmax.
     2. Vertices whose votes the cues explained away (less than ``min_retained`` of their vote mass
        survives the prior) take the most common label of their neighbours that their context
-       allows (:func:`fill_allowed`); where no allowed neighbour is reached, the allowed class with
-       the most votes, else (a curb band) sidewalk, else the plain argmax of ``q``.
+       allows (:func:`fill_allowed`); on a curb band (``band_default``) they are sidewalk, the band's
+       own meaning (else a grass verge behind the pavement grows into it); where no allowed neighbour
+       is reached, the allowed class with the most votes, else sidewalk on a band, else the argmax of ``q``.
     3. With ``smooth_beta`` > 0, :func:`potts_smooth` with ``q`` as the unaries (uniform over the
        allowed classes where the votes were explained away).
     """
@@ -200,7 +205,15 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     allowed = prior >= 0.5
     ea = explained_away(p, prior, min_retained) if (cues and min_retained > 0) else np.zeros(len(p), bool)
     if ea.any():
-        lab, still = fill_allowed(lab, ea, allowed, edges)
+        if "curb" in cues and opt.band_default:
+            # a raised band beside the carriageway whose views saw something else (the car parked in
+            # front of it, the road beyond): the band's own meaning, sidewalk
+            band = ea & ctx["curb"]
+            lab[band] = SIDEWALK
+            ea_fill = ea & ~band
+        else:
+            ea_fill = ea
+        lab, still = fill_allowed(lab, ea_fill, allowed, edges)
         qa = p * allowed
         if "curb" in cues:
             qa[ctx["curb"], SIDEWALK] += 1e-9  # a raised band beside the carriageway with no usable vote

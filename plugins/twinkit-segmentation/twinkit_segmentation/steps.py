@@ -280,6 +280,7 @@ class BackprojectParams:
     context_factor: float = 0.1  # prior of a class the geometry rules out (ground, raised, high)
     curb_factor: float = 0.2  # prior of road on a raised band beside the carriageway
     curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
+    band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
     min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
     smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
     smooth_iters: int = 5
@@ -326,7 +327,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
                              min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
                              ground_factor=params.context_factor, raised_factor=params.context_factor,
                              high_factor=params.context_factor, curb_factor=params.curb_factor,
-                             curb_face=params.curb_face)
+                             curb_face=params.curb_face, band_default=params.band_default)
         keep = labels == IGNORE
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
                                                params.context_cues, min_retained=params.min_retained,
