@@ -172,3 +172,30 @@ def test_band_default_pavement_hidden_behind_parked_cars_is_sidewalk_not_the_ver
     assert (lab[inner] == SIDEWALK).all()
     off, _, _ = fuse_with_context(p, v, n, e, ContextOptions(band_default=False))
     assert (off[inner] == TERRAIN).mean() > 0.9  # the verge grows over the band
+
+
+def test_backproject_step_context_metrics_and_bad_cue_name(tmp_path, scene_files):
+    from twinkit import InputError
+    from twinkit.testing import plugin_from_module, run_step
+
+    import twinkit_segmentation.plugin as P
+    from twinkit_segmentation.steps import BackprojectParams
+
+    mesh_ply, _, vlab = scene_files
+    rng = np.random.default_rng(1)
+    vv = np.zeros((len(vlab), N_CLASSES), np.float32)
+    vv[np.arange(len(vlab)), vlab] = 1.0
+    vv[rng.random(len(vlab)) < 0.2, CAR] += 2.0  # noisy car votes all over
+    np.save(tmp_path / "votes.npy", vv)
+    np.save(tmp_path / "segments.npy", np.arange(len(vlab), dtype=np.int32))
+    ins = {"in_textured_mesh_ply": mesh_ply, "in_segments_npy": tmp_path / "segments.npy",
+           "in_vertex_votes_npy": tmp_path / "votes.npy"}
+    step = plugin_from_module(P, "step", "backproject")
+    out = run_step(step, tmp_path / "on", ins)
+    on = np.load(out["labels.npy"])
+    off = np.load(run_step(step, tmp_path / "off", ins, BackprojectParams(context=False, smooth_beta=0))["labels.npy"])
+    gt_car = vlab == CAR
+    # the ground voted car is ground again with the context; the plain vote keeps it car
+    assert ((on == CAR) & ~gt_car).sum() < ((off == CAR) & ~gt_car).sum()
+    with pytest.raises(InputError, match="context_cues"):
+        run_step(step, tmp_path / "bad", ins, BackprojectParams(context_cues=["ground", "kerb"]))
