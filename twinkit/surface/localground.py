@@ -13,9 +13,13 @@ up-facing vertex (under a car, inside a facade's footprint) take the nearest cel
 size of what must not count as ground: wider than a vehicle is wide (a bus is 2.55 m) for
 "height above the local ground"; wider than a sidewalk for "height above the carriageway".
 
-``steps(min_step_m, radius_m)`` marks the grid cells that stand at least ``min_step_m`` above the
-lowest surface within ``radius_m``: the top edge of a curb (a step of 5-30 cm within a few
-decimetres), not a road's slope or camber (2-8 % rises 1-4 cm over half a metre).
+``steps(min_step_m, radius_m, max_step_m)`` marks the grid cells that stand ``min_step_m`` to
+``max_step_m`` above the lowest surface within ``radius_m`` (``foot(radius_m)``): the top edge of a
+curb (a step of 5-30 cm within a few decimetres), not a road's slope or camber (2-8 % rises 1-4 cm
+over half a metre). ``near(cells, points, radius_m)`` tells which points lie near marked cells.
+
+Used by the segmentation plugin's 3D context (docs/segmentation.md); the export plugin's
+``lift_movables`` has its own ground grid (a window minimum) and could use this one instead.
 """
 from __future__ import annotations
 
@@ -70,16 +74,19 @@ class LocalGround:
         p = np.asarray(points, np.float64)
         return p[:, 2] - self.at(p[:, :2])
 
-    def steps(self, min_step_m: float = 0.05, radius_m: float = 0.5) -> np.ndarray:
-        """(ny, nx) bool: cells whose lowest up-facing surface stands ``min_step_m`` or more above the
-        lowest surface within ``radius_m`` (the upper edge of a step such as a curb)."""
+    def foot(self, radius_m: float = 0.5) -> np.ndarray:
+        """(ny, nx): the lowest surface within ``radius_m`` of each cell (the foot of a step there)."""
         from scipy.ndimage import grey_erosion
 
         r = max(1, int(round(radius_m / self.cell)))
         yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-        fp = (xx ** 2 + yy ** 2) <= r * r
-        low = grey_erosion(self.surface, footprint=fp, mode="nearest")
-        return self.has_surface & (self.surface - low >= min_step_m)
+        return grey_erosion(self.surface, footprint=(xx ** 2 + yy ** 2) <= r * r, mode="nearest")
+
+    def steps(self, min_step_m: float = 0.05, radius_m: float = 0.5, max_step_m: float = np.inf) -> np.ndarray:
+        """(ny, nx) bool: cells whose lowest up-facing surface stands ``min_step_m`` to ``max_step_m``
+        above the lowest surface within ``radius_m`` (the upper edge of a step such as a curb)."""
+        rise = self.surface - self.foot(radius_m)
+        return self.has_surface & (rise >= min_step_m) & (rise <= max_step_m)
 
     def near(self, cells: np.ndarray, points: np.ndarray, radius_m: float) -> np.ndarray:
         """(n,) bool: a marked cell lies within ``radius_m`` of each point."""

@@ -47,7 +47,7 @@ def main(argv=None) -> int:
               [(f"{c} only", (c,), 0.0) for c in CUES] + \
               [(f"all but {c}", tuple(x for x in CUES if x != c), 0.0) for c in CUES] + [("all cues", CUES, 0.0)] + \
               [("all cues + Potts, curb face off", CUES, -b), ("all cues + Potts, band default off", CUES, -2 * b)] + \
-              [(f"**all cues + Potts smoothing (default)**", CUES, b)]
+              [("**all cues + Potts smoothing (default)**", CUES, b)]
     ran = 0
     for d in a.site_dirs.split(","):
         site = Path(d)

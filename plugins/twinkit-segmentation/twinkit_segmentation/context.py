@@ -75,13 +75,10 @@ def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOpt
     out = {"height": h, "ground": ground, "raised": h > opt.min_object_m, "high": h > opt.max_vehicle_m}
     # curb: step cells (surface min_curb..max_curb above the lowest surface nearby), then vertices on
     # their top level, beside them
-    from scipy.ndimage import distance_transform_edt, grey_erosion
+    from scipy.ndimage import distance_transform_edt
 
-    r = max(1, int(round(opt.step_radius_m / g.cell)))
-    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-    low = grey_erosion(g.surface, footprint=(xx ** 2 + yy ** 2) <= r * r, mode="nearest")
-    rise = g.surface - low
-    step = g.has_surface & (rise >= opt.min_curb_m) & (rise <= opt.max_curb_m)
+    low = g.foot(opt.step_radius_m)
+    step = g.steps(opt.min_curb_m, opt.step_radius_m, opt.max_curb_m)
     curb = np.zeros(len(v), bool)
     if step.any():
         d, (iy, ix) = distance_transform_edt(~step, return_indices=True)
