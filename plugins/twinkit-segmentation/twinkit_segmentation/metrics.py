@@ -112,6 +112,27 @@ def blend_decide(segments: np.ndarray, vertex_votes: np.ndarray, segment_weight:
     segment's label unless its own votes clearly disagree, which repairs segments that
     straddle a class boundary (the over-segmentation's upper bound stops being a cap) while
     noisy, split vertex votes still follow the segment. Returns (labels, confidence)."""
+    p, s_total = blend_distribution(segments, vertex_votes, segment_weight, ignore_classes, class_weights)
+    return decide_distribution(p, s_total < min_votes)
+
+
+def decide_distribution(p: np.ndarray, unlabelled=None):
+    """Argmax of a per-vertex class distribution (n, 19): (labels with 255 where it is empty or
+    ``unlabelled`` is set, confidence = the winner's share)."""
+    total = p.sum(axis=1)
+    lab = p.argmax(axis=1).astype(np.uint8)
+    conf = np.where(total > 0, p.max(axis=1) / np.maximum(total, 1e-12), 0.0).astype(np.float32)
+    bad = total <= 0
+    if unlabelled is not None:
+        bad |= unlabelled
+    lab[bad] = IGNORE
+    return lab, conf
+
+
+def blend_distribution(segments: np.ndarray, vertex_votes: np.ndarray, segment_weight: float = 1.0,
+                       ignore_classes=(10,), class_weights=None):
+    """The class distribution :func:`blend_decide` takes the argmax of: ``(p (n, 19), the segment's
+    total votes per vertex (n,))``."""
     v = _weighted_votes(vertex_votes, ignore_classes, class_weights)
     segments = np.asarray(segments, dtype=np.int64)
     sv = segment_votes(segments, v)
@@ -123,11 +144,7 @@ def blend_decide(segments: np.ndarray, vertex_votes: np.ndarray, segment_weight:
         v_total = v.sum(axis=1)
         seen = v_total > 0
         p[seen] = a * p[seen] + (1.0 - a) * v[seen] / v_total[seen, None]
-    total = p.sum(axis=1)
-    lab = p.argmax(axis=1).astype(np.uint8)
-    conf = np.where(total > 0, p.max(axis=1) / np.maximum(total, 1e-12), 0.0).astype(np.float32)
-    lab[(total <= 0) | (s_total[segments] < min_votes)] = IGNORE
-    return lab, conf
+    return p, s_total[segments]
 
 
 def propagate(labels: np.ndarray, edges: np.ndarray, max_iter: int = 200) -> np.ndarray:

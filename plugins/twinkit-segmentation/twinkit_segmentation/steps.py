@@ -267,6 +267,23 @@ class BackprojectParams:
     class_weights: List[float] = field(default_factory=list)  # 19 weights (trainId order), empty = all 1
     min_votes: float = 0.0  # fewer votes than this = unlabelled
     fill_unlabelled: bool = True  # unseen vertices take their neighbours' label
+    # 3D context (docs/segmentation.md "3D context in the vote"): geometric cues from the mesh scale the
+    # blended vote; lengths are physical sizes, not tuned to a site
+    context: bool = True  # False = no geometric cues (with smooth_beta 0 too: the plain blended vote)
+    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb"])
+    ground_window_m: float = 3.0  # local ground window: wider than the widest vehicle (2.55 m)
+    max_curb_m: float = 0.30  # up-facing, at most this above the local ground = ground (the highest curb)
+    min_object_m: float = 0.50  # more than this above the local ground = not road / sidewalk / terrain
+    max_vehicle_m: float = 4.70  # more than this above the local ground = no vehicle or person
+    min_curb_m: float = 0.05  # the lowest curb step
+    band_width_m: float = 4.0  # a sidewalk lies at most this far from its curb
+    context_factor: float = 0.1  # prior of a class the geometry rules out (ground, raised, high)
+    curb_factor: float = 0.2  # prior of road on a raised band beside the carriageway
+    curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
+    band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
+    min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
+    smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
+    smooth_iters: int = 5
 
 
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
@@ -278,7 +295,9 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import edges as mesh_edges, read_mesh
     from twinkit_segmentation.segmesh import write_labels_ply
-    from twinkit_segmentation.metrics import blend_decide, decide, propagate
+    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, potts_smooth
+    from twinkit_segmentation.metrics import _weighted_votes, blend_distribution, decide_distribution, propagate
+    from twinkit_segmentation.segmesh import unit_normals
 
     t0 = time.perf_counter()
     mesh = read_mesh(in_textured_mesh_ply)
@@ -288,18 +307,53 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
         raise InputError(f"{in_segments_npy.name} ({len(seg)}), {in_vertex_votes_npy.name} ({len(votes)}) and "
                          f"{in_textured_mesh_ply.name} ({len(mesh.vertices)}) disagree on the vertex count; re-run them")
     if params.use_segments:
-        labels, conf = blend_decide(seg, votes, params.segment_weight, params.ignore_classes,
-                                    params.class_weights or None, params.min_votes)
+        p, s_total = blend_distribution(seg, votes, params.segment_weight, params.ignore_classes,
+                                        params.class_weights or None)
     else:
-        labels, conf = decide(votes, params.ignore_classes, params.class_weights or None, params.min_votes)
+        p = _weighted_votes(votes, params.ignore_classes, params.class_weights or None)
+        s_total = p.sum(axis=1)
+    labels, conf = decide_distribution(p, s_total < params.min_votes)
+    edges = None
+    cmet: dict = {}
+    t_ctx = 0.0
+    bad = [c for c in params.context_cues if c not in CUES]
+    if bad:
+        raise InputError(f"backproject: unknown context_cues {bad}; choose from {list(CUES)}")
+    if params.context and params.context_cues:
+        t1 = time.perf_counter()
+        edges = mesh_edges(mesh.faces, len(mesh.vertices))
+        opt = ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
+                             min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
+                             min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
+                             ground_factor=params.context_factor, raised_factor=params.context_factor,
+                             high_factor=params.context_factor, curb_factor=params.curb_factor,
+                             curb_face=params.curb_face, band_default=params.band_default)
+        keep = labels == IGNORE
+        labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
+                                               params.context_cues, min_retained=params.min_retained,
+                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters)
+        labels[keep] = IGNORE  # too few votes stays too few votes
+        t_ctx = time.perf_counter() - t1
+        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, %.2f s",
+                     "+".join(cmet["cues"]), cmet["changed"],
+                     ", ".join(f"{c} {cmet[c + '_changed']}" for c in cmet["cues"]), cmet["explained_away"],
+                     cmet["smoothed"], t_ctx)
+    elif params.smooth_beta > 0:
+        t1 = time.perf_counter()
+        edges = mesh_edges(mesh.faces, len(mesh.vertices))
+        labels, n_s = potts_smooth(labels, p, edges, params.smooth_beta, params.smooth_iters)
+        cmet = {"smoothed": n_s}
+        t_ctx = time.perf_counter() - t1
+        ctx.log.info("Potts smoothing: %d vertices changed, %.2f s", n_s, t_ctx)
     unlabelled_before = int((labels == IGNORE).sum())
     if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
-        labels = propagate(labels, mesh_edges(mesh.faces, len(mesh.vertices)))
+        labels = propagate(labels, edges if edges is not None else mesh_edges(mesh.faces, len(mesh.vertices)))
     np.save(out_labels_npy, labels.astype(np.uint8))
     np.save(out_confidence_npy, conf.astype(np.float32))
     write_labels_ply(out_labels_ply, mesh, labels)
     return {"unlabelled_before_fill": unlabelled_before, "unlabelled": int((labels == IGNORE).sum()),
             "mean_confidence": float(conf[conf > 0].mean()) if (conf > 0).any() else 0.0,
+            "context": cmet, "context_seconds": round(t_ctx, 3),
             "seconds": round(time.perf_counter() - t0, 3)}
 
 
