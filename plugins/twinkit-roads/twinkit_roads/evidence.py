@@ -15,8 +15,11 @@ restricted, rail, tram vote nothing. A lane is only evidence, never an order:
   and is left alone;
 * a lane over a building, a wall, a car or anything else that is not ground (by geometry or by the
   scan's label) is a disagreement too;
-* a lane whose area disagrees with the scan over more than ``max_disagreement`` of its surface
-  (a wrong or outdated OSM, a failed alignment) casts no vote at all; it is reported.
+* a lane, or a road, whose area disagrees with the scan's geometry over more than
+  ``max_disagreement`` of its surface casts no vote at all; and when the driving-like lanes of the
+  whole network disagree over more than ``max_network_disagreement`` (a wrong or outdated OSM, a
+  failed alignment: a right network's carriageway lies on carriageway-level ground) no lane votes.
+  Disagreements are reported either way.
 
 A sidewalk lane that agrees with the scan (raised ground, ground class) marks the raised
 *plateau* it lies on (the connected raised ground around it, bounded by curbs and buildings) as
@@ -167,6 +170,27 @@ def local_ground(v: np.ndarray, up: np.ndarray, cell_m: float, window_m: float, 
     return level[ij[:, 0], ij[:, 1]]
 
 
+def plateaus(v: np.ndarray, raised: np.ndarray, cell_m: float, close_m: float) -> np.ndarray:
+    """Per vertex the id (1..) of the raised plateau it lies on, 0 for vertices not raised."""
+    from scipy import ndimage
+
+    comp = np.zeros(len(v), np.int64)
+    if not raised.any():
+        return comp
+    xy = v[:, :2]
+    lo = xy[raised].min(0) - 2 * close_m
+    ij = np.floor((xy - lo) / cell_m).astype(np.int64)
+    r = ij[raised]
+    shape = tuple(r.max(0) + 1 + int(np.ceil(2 * close_m / cell_m)))
+    mask = np.zeros(shape, bool)
+    mask[r[:, 0], r[:, 1]] = True
+    k = max(1, int(round(close_m / cell_m)))
+    mask = ndimage.binary_closing(mask, structure=np.ones((2 * k + 1, 2 * k + 1), bool))
+    lab, _ = ndimage.label(mask)
+    comp[raised] = lab[r[:, 0], r[:, 1]]
+    return comp
+
+
 @dataclass
 class Evidence:
     labels: np.ndarray  # new labels
@@ -177,6 +201,8 @@ class Evidence:
     height: np.ndarray  # per vertex height above the local ground, m
     ground: np.ndarray  # bool per vertex: ground-level, up-facing
     area: np.ndarray  # per vertex area, m^2
+    network_disagreement: float = 0.0  # of the driving-like lanes' ground: share on the wrong level / not ground
+    network_vetoed: bool = False  # above max_network_disagreement: no lane voted
 
 
 #: per-vertex status codes
@@ -189,10 +215,12 @@ STATUS = {S_OUT: "outside the voting lanes", S_AGREE: "agrees", S_RELABEL: "rela
 def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[Lane], grid, *,
                   normal_min_z: float = 0.9, max_height_m: float = 0.45, curb_min_m: float = 0.06,
                   curb_max_m: float = 0.35, cell_m: float = 0.5, window_m: float = 8.0, ground_pct: float = 5.0,
-                  max_disagreement: float = 0.5, plateau: bool = True, plateau_min_agree_m2: float = 1.0,
+                  max_disagreement: float = 0.5, max_network_disagreement: float = 0.25, plateau: bool = True,
+                  plateau_min_agree_m2: float = 1.0,
+                  plateau_cell_m: float = 0.25, plateau_close_m: float = 0.5,
                   relabel_from=GROUND) -> Evidence:
     """Vote the lanes into ``labels`` (see the module docstring); returns the new labels and why."""
-    from twinkit.mesh.core import edges, vertex_normals
+    from twinkit.mesh.core import vertex_normals
 
     labels = np.asarray(labels)
     n = len(v)
@@ -220,7 +248,6 @@ def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[
     status[ok & (labels != want)] = S_RELABEL
     # per lane: how much of its area disagrees with the scan; a mostly-wrong lane does not vote
     nl = len(lanes)
-    a_tot = np.bincount(li[inl & (li >= 0)], weights=area[inl & (li >= 0)], minlength=nl)
     # geometry only: a lane over a building or on the wrong side of a curb; a label the scan got wrong
     # (a car voted on the pavement) is no sign of a wrong map and is left out of both sums
     counted = inl & (li >= 0) & (status != S_NONGROUND_LABEL)
@@ -229,33 +256,36 @@ def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[
     a_dis = np.bincount(li[dis], weights=area[dis], minlength=nl)
     frac = np.where(a_tot > 0, a_dis / np.maximum(a_tot, 1e-12), 0.0)
     # ...and a road (all its lanes together) that mostly disagrees silences all its lanes
-    rid = np.array([hash(ln.key[0]) for ln in lanes]) if lanes else np.zeros(0, int)
-    _, rinv = np.unique(rid, return_inverse=True) if nl else (None, np.zeros(0, int))
-    r_tot = np.bincount(rinv, weights=a_tot, minlength=rinv.max() + 1 if nl else 0)
-    r_dis = np.bincount(rinv, weights=a_dis, minlength=rinv.max() + 1 if nl else 0)
-    road_frac = np.where(r_tot > 0, r_dis / np.maximum(r_tot, 1e-12), 0.0)[rinv] if nl else frac
+    rid = np.array([int(ln.key[0]) for ln in lanes], np.int64)
+    _, rinv = np.unique(rid, return_inverse=True)
+    r_tot = np.bincount(rinv, weights=a_tot, minlength=len(set(rid.tolist())))
+    r_dis = np.bincount(rinv, weights=a_dis, minlength=len(r_tot))
+    road_frac = np.where(r_tot > 0, r_dis / np.maximum(r_tot, 1e-12), 0.0)[rinv]
     vetoed_lane = (frac > max_disagreement) | (road_frac > max_disagreement)
+    # ...and a network whose carriageway does not lie on the scan's carriageway (a wrong or outdated OSM,
+    # a failed alignment) casts no vote anywhere: driving-like lanes of a right network lie on low ground
+    drv = np.array([ln.vote == L_ROAD for ln in lanes], bool)
+    network_frac = float(a_dis[drv].sum() / a_tot[drv].sum()) if nl and a_tot[drv].sum() > 0 else 0.0
+    network_vetoed = network_frac > max_network_disagreement
+    if network_vetoed:
+        vetoed_lane[:] = True
     vet = inl & (li >= 0) & vetoed_lane[np.maximum(li, 0)] & np.isin(status, (S_AGREE, S_RELABEL))
     status[vet] = S_VETOED
     new = labels.copy()
     rel = status == S_RELABEL
     new[rel] = want[rel]
     if plateau:
-        # raised ground plateaus (connected over mesh edges) that an agreeing sidewalk lane lies on
-        e = edges(f, n)
-        keep = raised[e[:, 0]] & raised[e[:, 1]]
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-
-        g = coo_matrix((np.ones(int(keep.sum()), bool), (e[keep, 0], e[keep, 1])), shape=(n, n))
-        _, comp = connected_components(g, directed=False)
+        # raised ground plateaus: connected cells of a top-down raster of the raised ground vertices, small
+        # gaps (a bollard, a mesh defect, a car's wheel) closed; curbs to the carriageway and buildings separate
+        comp = plateaus(v, raised, plateau_cell_m, plateau_close_m)
         seed = (lv == L_SIDEWALK) & np.isin(status, (S_AGREE, S_RELABEL))
         agree_area = np.bincount(comp[seed], weights=area[seed], minlength=comp.max() + 1)
         road_area = np.bincount(comp[raised & (lv == L_ROAD)], weights=area[raised & (lv == L_ROAD)],
                                 minlength=comp.max() + 1)
         pave = (agree_area >= plateau_min_agree_m2) & (road_area < agree_area)
-        grow = raised & pave[comp] & (new == ROAD) & np.isin(labels, relabel_from) & (status != S_VETOED) & \
-            (lv != L_ROAD)
+        pave[0] = False  # 0: not on a plateau
+        grow = raised & pave[comp] & np.isin(new, [c for c in relabel_from if c not in (SIDEWALK, TERRAIN)]) & \
+            (status != S_VETOED) & (lv != L_ROAD)
         new[grow] = SIDEWALK
         status[grow & (status == S_OUT)] = S_RELABEL
     lane_info = []
@@ -265,7 +295,7 @@ def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[
                           "junction": ln.junction, "area_m2": round(float(a_tot[i]), 2),
                           "disagreement": round(float(frac[i]), 3),
                           "road_disagreement": round(float(road_frac[i]), 3), "vetoed": bool(vetoed_lane[i] and ln.vote)})
-    return Evidence(new, new != labels, lv, status, lane_info, h, ground, area)
+    return Evidence(new, new != labels, lv, status, lane_info, h, ground, area, network_frac, network_vetoed)
 
 
 #: picture colours of the per-vertex status

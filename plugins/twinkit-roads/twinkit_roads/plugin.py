@@ -321,6 +321,7 @@ class RoadEvidenceParams:
     curb_max_m: float = 0.35  # ...and at most this; below curb_min_m is the carriageway level
     window_m: float = 8.0  # local lowest ground: minimum over this window of 0.5 m cells' 5th percentiles
     max_disagreement: float = 0.5  # a lane, or a road, whose surface disagrees more than this casts no vote
+    max_network_disagreement: float = 0.25  # driving-like lanes of the whole network: above this no lane votes
     plateau: bool = True  # a raised plateau an agreeing sidewalk lane lies on becomes sidewalk (its road votes)
     raster_m: float = 0.1  # lane raster resolution
     step_m: float = 0.5  # lane sampling along s
@@ -370,7 +371,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     grid = Grid.around(mesh.v[:, :2], params.raster_m)
     ev = vote(mesh.v, mesh.f, labels, lanes, grid, normal_min_z=params.normal_min_z,
               max_height_m=params.max_height_m, curb_min_m=params.curb_min_m, curb_max_m=params.curb_max_m,
-              window_m=params.window_m, max_disagreement=params.max_disagreement, plateau=params.plateau,
+              window_m=params.window_m, max_disagreement=params.max_disagreement,
+              max_network_disagreement=params.max_network_disagreement, plateau=params.plateau,
               relabel_from=tuple(int(c) for c in params.relabel_classes))
     new = ev.labels if params.relabel else labels.copy()
     np.save(out_labels_npy, new.astype(labels.dtype))
@@ -401,6 +403,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         "disagreement_area_m2": a(inl & (geo | (ev.status == S_NONGROUND_LABEL))),
         "disagreement_geometry_m2": a(inl & geo),
         "disagreement_fraction": round(float(area[inl & geo].sum() / max(area[inl].sum(), 1e-9)), 4),
+        "network_disagreement": round(ev.network_disagreement, 4), "network_vetoed": ev.network_vetoed,
         "vetoed_lanes": [ln for ln in ev.lanes if ln["vetoed"]],
         "lanes": ev.lanes,
         "definition": "areas in m^2 of mesh surface (a third of each adjacent triangle per vertex) under the lanes "
@@ -413,7 +416,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     }
     metrics = {"changed_vertices": int(ch.sum()), "changed_area_m2": a(ch),
                "disagreement_geometry_m2": doc["disagreement_geometry_m2"],
-               "disagreement_fraction": doc["disagreement_fraction"], "vetoed_lanes": len(doc["vetoed_lanes"])}
+               "disagreement_fraction": doc["disagreement_fraction"], "vetoed_lanes": len(doc["vetoed_lanes"]),
+               "network_disagreement": doc["network_disagreement"], "network_vetoed": ev.network_vetoed}
     if in_gt_labels_npy is not None:
         gt = np.load(in_gt_labels_npy)
         if len(gt) == len(labels):
@@ -431,9 +435,11 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     ctx.log.info("road network evidence: %d vertices (%.1f m^2) relabelled %s; lanes disagree with the scan's "
                  "geometry over %.1f m^2 (%.1f %% of the lanes' area), %d lanes vetoed", int(ch.sum()), a(ch), trans,
                  doc["disagreement_geometry_m2"], 100 * doc["disagreement_fraction"], len(doc["vetoed_lanes"]))
-    if doc["disagreement_fraction"] > params.max_disagreement:
-        ctx.log.warning("the road network disagrees with the scan over %.0f %% of its lanes' surface: a wrong or "
-                        "outdated OSM, or a failed alignment? See road_evidence.png", 100 * doc["disagreement_fraction"])
+    if ev.network_vetoed:
+        ctx.log.warning("the network's driving lanes disagree with the scan's ground over %.0f %% of their surface "
+                        "(more than max_network_disagreement %.0f %%): a wrong or outdated OSM, or a failed alignment? "
+                        "No label changed; see road_evidence.png", 100 * ev.network_disagreement,
+                        100 * params.max_network_disagreement)
     return metrics
 
 
