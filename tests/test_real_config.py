@@ -75,6 +75,7 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
               "06_texture/textured_mesh.obj", "06_texture/textured_mesh.png", "07_evaluate/recon_metrics.json",
               "13_backproject/labels.npy", "14_evaluate_segmentation/seg_metrics.json",
               "18_apply_alignment/aligned.xodr", "19_place_signals/aligned.xodr", "19_place_signals/signals.json",
+              "*_road_evidence/labels.npy", "*_road_evidence/road_evidence.json",
               "*_fbx/twin.fbx", "*_usd/twin.usd", "*_gltf/twin.glb"):  # later steps: numbers shift as steps are added
         assert list(ws.glob(f)), f
     assert list(ws.glob("*_carla/**/Import/*/*.json")), "no CARLA import package"

@@ -6,14 +6,16 @@ Steps (recipes/roads_demo.yaml):
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
   place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
+  road_evidence   the lanes vote for road / sidewalk        -> labels.npy (again), road_evidence.json, .png
 """
 from __future__ import annotations
 
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import List
 
 from twinkit import InputError, hookimpl
 
@@ -301,6 +303,173 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
             "max_carla_position_error_m": max(carla_err.values(), default=0.0)}
 
 
+def _road_types():
+    from .evidence import ROAD_TYPES
+    return list(ROAD_TYPES)
+
+
+@dataclass
+class RoadEvidenceParams:
+    enabled: bool = True  # false: labels.npy passes through unchanged (site key road_evidence: false)
+    relabel: bool = True  # false: compare and report only, change no label
+    road_types: List[str] = field(default_factory=_road_types)  # OpenDRIVE lane types that vote road
+    sidewalk_types: List[str] = field(default_factory=lambda: ["sidewalk"])  # ...that vote sidewalk
+    relabel_classes: List[int] = field(default_factory=lambda: [0, 1, 9])  # the ground classes a lane may change
+    normal_min_z: float = 0.9  # ground: vertex normal at most ~25 deg from up...
+    max_height_m: float = 0.45  # ...and at most this high above the local lowest ground
+    curb_min_m: float = 0.06  # raised (pavement) level: at least this above the local lowest ground...
+    curb_max_m: float = 0.35  # ...and at most this; below curb_min_m is the carriageway level
+    window_m: float = 8.0  # local lowest ground: minimum over this window of 0.5 m cells' 5th percentiles
+    max_disagreement: float = 0.5  # a lane, or a road, whose surface disagrees more than this casts no vote
+    max_network_disagreement: float = 0.25  # driving-like lanes of the whole network: above this no lane votes
+    plateau: bool = True  # a raised plateau an agreeing sidewalk lane lies on becomes sidewalk (its road votes)
+    raster_m: float = 0.1  # lane raster resolution
+    step_m: float = 0.5  # lane sampling along s
+    picture_px_per_m: float = 10.0
+
+
+def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
+                  in_labels_npy: Path, out_labels_npy: Path, out_road_evidence_json: Path,
+                  out_road_evidence_png: Path, in_gt_labels_npy: Path | None = None) -> dict:
+    """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
+    import numpy as np
+
+    from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
+                           S_RELABEL, S_VETOED, draw_evidence, lane_polygons, road_evidence as vote)
+    from .mesh2d import Grid, read_mesh
+
+    params = params or RoadEvidenceParams()
+    try:
+        labels = np.load(in_labels_npy)
+    except Exception as exc:  # noqa: BLE001
+        raise InputError(f"{in_labels_npy}: not a readable .npy label array ({exc}); re-run the segmentation") from None
+    if not params.enabled:
+        np.save(out_labels_npy, labels)
+        doc = {"enabled": False, "note": "switched off (steps.road_evidence.enabled=false or site road_evidence: "
+                                          "false): labels.npy passed through unchanged"}
+        out_road_evidence_json.write_text(json.dumps(doc, indent=1))
+        from PIL import Image, ImageDraw
+
+        img = Image.new("RGB", (420, 40), (0, 0, 0))
+        ImageDraw.Draw(img).text((10, 14), "road network evidence switched off: labels unchanged", fill=(255, 255, 255))
+        img.save(out_road_evidence_png)
+        ctx.log.info("road evidence switched off: labels unchanged")
+        return {"enabled": False, "changed_vertices": 0}
+    mesh = read_mesh(in_textured_mesh_ply)
+    if labels.ndim != 1 or len(labels) != len(mesh.v):
+        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
+                         f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
+                         "labels.npy)")
+    try:
+        text = in_aligned_xodr.read_text(encoding="utf-8")
+        lanes = lane_polygons(text, params.step_m, tuple(t.lower() for t in params.road_types),
+                              tuple(t.lower() for t in params.sidewalk_types))
+    except (OSError, UnicodeDecodeError, RuntimeError, ValueError) as exc:
+        raise InputError(f"{in_aligned_xodr}: not a readable OpenDRIVE ({exc}); re-run apply_alignment") from None
+    if not lanes:
+        raise InputError(f"{in_aligned_xodr}: carla.Map finds no lanes in it; check the OpenDRIVE (osm_to_opendrive)")
+    grid = Grid.around(mesh.v[:, :2], params.raster_m)
+    ev = vote(mesh.v, mesh.f, labels, lanes, grid, normal_min_z=params.normal_min_z,
+              max_height_m=params.max_height_m, curb_min_m=params.curb_min_m, curb_max_m=params.curb_max_m,
+              window_m=params.window_m, max_disagreement=params.max_disagreement,
+              max_network_disagreement=params.max_network_disagreement, plateau=params.plateau,
+              relabel_from=tuple(int(c) for c in params.relabel_classes))
+    new = ev.labels if params.relabel else labels.copy()
+    np.save(out_labels_npy, new.astype(labels.dtype))
+    from twinkit.cityscapes import NAMES
+
+    name = lambda c: NAMES[c] if c < len(NAMES) else "unlabelled"  # noqa: E731
+    ch = new != labels
+    trans: dict[str, int] = {}
+    for a, b in zip(labels[ch].tolist(), new[ch].tolist()):
+        k = f"{name(a)} -> {name(b)}"
+        trans[k] = trans.get(k, 0) + 1
+    area = ev.area
+    a = lambda m: round(float(area[m].sum()), 2)  # noqa: E731
+    inl = ev.lane_vote > 0
+    geo = (ev.status == S_NONGROUND_GEOM) | (ev.status == S_LEVEL)
+    areas = {STATUS[s].replace(" ", "_"): a(ev.status == s) for s in STATUS if s}
+    per_vote = {nm: {"lane_area_m2": a(ev.lane_vote == lv), "agree_m2": a((ev.lane_vote == lv) & (ev.status == S_AGREE)),
+                     "relabelled_m2": a((ev.lane_vote == lv) & (ev.status == S_RELABEL)),
+                     "disagree_geometry_m2": a((ev.lane_vote == lv) & geo),
+                     "disagree_label_m2": a((ev.lane_vote == lv) & (ev.status == S_NONGROUND_LABEL))}
+                for nm, lv in (("road", L_ROAD), ("sidewalk", L_SIDEWALK))}
+    doc = {
+        "enabled": True, "relabel": params.relabel,
+        "changed_vertices": int(ch.sum()), "changed_area_m2": a(ch), "transitions": trans,
+        "changed_per_class": {name(c): int(((new == c) & ch).sum()) - int(((labels == c) & ch).sum())
+                              for c in sorted(set(labels[ch].tolist()) | set(new[ch].tolist()))},
+        "lane_area_m2": a(inl), "areas_m2": areas, "per_vote": per_vote,
+        "disagreement_area_m2": a(inl & (geo | (ev.status == S_NONGROUND_LABEL))),
+        "disagreement_geometry_m2": a(inl & geo),
+        "disagreement_fraction": round(float(area[inl & geo].sum() / max(area[inl].sum(), 1e-9)), 4),
+        "network_disagreement": round(ev.network_disagreement, 4), "network_vetoed": ev.network_vetoed,
+        "vetoed_lanes": [ln for ln in ev.lanes if ln["vetoed"]],
+        "lanes": ev.lanes,
+        "definition": "areas in m^2 of mesh surface (a third of each adjacent triangle per vertex) under the lanes "
+                      "that vote (driving-like: road, sidewalk: sidewalk). agrees: ground-level surface of the "
+                      "lane's class; relabelled: ground class changed to the lane's; disagreements: the lane lies "
+                      "over raised/non-ground geometry (a building, a wall, a car body), over ground the scan calls "
+                      "a non-ground class, or on the wrong level (sidewalk lane on the carriageway level, driving "
+                      "lane on a raised pavement); vetoed: a lane or road mostly disagreeing casts no vote",
+        "params": {k: getattr(params, k) for k in params.__dataclass_fields__},
+    }
+    metrics = {"changed_vertices": int(ch.sum()), "changed_area_m2": a(ch),
+               "disagreement_geometry_m2": doc["disagreement_geometry_m2"],
+               "disagreement_fraction": doc["disagreement_fraction"], "vetoed_lanes": len(doc["vetoed_lanes"]),
+               "network_disagreement": doc["network_disagreement"], "network_vetoed": ev.network_vetoed}
+    if in_gt_labels_npy is not None:
+        gt = np.load(in_gt_labels_npy)
+        if len(gt) == len(labels):
+            before, after = _iou(labels, gt), _iou(new, gt)
+            doc["evaluation"] = {"iou_before": before, "iou_after": after}
+            metrics["iou_before"] = {k: before[k] for k in ("road", "sidewalk", "terrain", "miou") if k in before}
+            metrics["iou_after"] = {k: after[k] for k in ("road", "sidewalk", "terrain", "miou") if k in after}
+            ctx.log.info("vs ground truth: road %.1f -> %.1f, sidewalk %.1f -> %.1f, terrain %.1f -> %.1f, "
+                         "mIoU %.1f -> %.1f", before.get("road", 0), after.get("road", 0), before.get("sidewalk", 0),
+                         after.get("sidewalk", 0), before.get("terrain", 0), after.get("terrain", 0),
+                         before["miou"], after["miou"])
+    out_road_evidence_json.write_text(json.dumps(doc, indent=1))
+    draw_evidence(mesh.v, mesh.f, labels, ev if params.relabel else _unchanged(ev, labels), lanes,
+                  out_road_evidence_png, params.picture_px_per_m)
+    ctx.log.info("road network evidence: %d vertices (%.1f m^2) relabelled %s; lanes disagree with the scan's "
+                 "geometry over %.1f m^2 (%.1f %% of the lanes' area), %d lanes vetoed", int(ch.sum()), a(ch), trans,
+                 doc["disagreement_geometry_m2"], 100 * doc["disagreement_fraction"], len(doc["vetoed_lanes"]))
+    if ev.network_vetoed:
+        ctx.log.warning("the network's driving lanes disagree with the scan's ground over %.0f %% of their surface "
+                        "(more than max_network_disagreement %.0f %%): a wrong or outdated OSM, or a failed alignment? "
+                        "No label changed; see road_evidence.png", 100 * ev.network_disagreement,
+                        100 * params.max_network_disagreement)
+    return metrics
+
+
+def _unchanged(ev, labels):
+    import dataclasses
+
+    return dataclasses.replace(ev, labels=labels.copy())
+
+
+def _iou(pred, gt) -> dict:
+    """Per-class IoU (percent) over the classes present in the ground truth, and their mean (the segmentation
+    plugin's definition: unlabelled predictions are misses, unlabelled ground truth is left out)."""
+    import numpy as np
+
+    from twinkit.cityscapes import N_CLASSES, NAMES
+
+    gt = np.asarray(gt).astype(np.int64)
+    pred = np.asarray(pred).astype(np.int64)
+    valid = gt < N_CLASSES
+    g, p = gt[valid], pred[valid]
+    out = {}
+    for c in np.unique(g):
+        tp = int(((p == c) & (g == c)).sum())
+        fp = int(((p == c) & (g != c)).sum())
+        fn = int(((p != c) & (g == c)).sum())
+        out[NAMES[c]] = round(100.0 * tp / max(tp + fp + fn, 1), 2)
+    out["miou"] = round(float(np.mean(list(out.values()))), 2) if out else 0.0
+    return out
+
+
 @hookimpl
 def twinkit_register_road_sources(register):
     register("file", file_source, params=FileSourceParams, version=VERSION,
@@ -321,3 +490,6 @@ def twinkit_register_steps(register):
              description="move the OpenDRIVE by alignment.json; top-down QA picture")
     register("place_signals", place_signals, params=SignalParams, version=VERSION,
              description="OpenDRIVE signals at the scanned traffic lights and signs; signals.json, signals.png")
+    register("road_evidence", road_evidence, params=RoadEvidenceParams, version=VERSION,
+             description="the aligned lanes vote road / sidewalk on ground-level surface; labels.npy, "
+                         "road_evidence.json, road_evidence.png (disagreements reported)")

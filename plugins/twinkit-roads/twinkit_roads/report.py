@@ -17,6 +17,7 @@ def twinkit_register_report_sections(register):
     register("roads", sec_roads, title="Road network", order=500)
     register("alignment", sec_alignment, title="Alignment", order=900)
     register("signals", sec_signals, title="Signals", order=910)
+    register("road_evidence", sec_road_evidence, title="Road network as evidence for the labels", order=920)
 
 
 # --------------------------------------------------------------------------- OpenDRIVE, sampled for drawing
@@ -215,4 +216,38 @@ def sec_signals(ctx) -> str:
             parts.append("<div class=\"figs\">" + ctx.figure(
                 f"img/{name}", "Scanned lights (orange) and signs (blue); netconvert's signals (red) and where "
                 "they are now (green)") + "</div>")
+    return "".join(parts)
+
+
+def sec_road_evidence(ctx) -> str:
+    """road_evidence: what the lanes relabelled, where they disagree with the scan; the three-panel picture."""
+    parts = []
+    for s, f in ctx.find("road_evidence.json")[:1]:
+        d = ctx.read_json(f)
+        if not isinstance(d, dict):
+            continue
+        if not d.get("enabled", True):
+            parts.append(f"<p>{ctx.esc(d.get('note', 'switched off'))}</p>")
+            continue
+        rows = [["relabelled vertices", d.get("changed_vertices")], ["relabelled m²", d.get("changed_area_m2")],
+                ["transitions", ", ".join(f"{k}: {v}" for k, v in (d.get("transitions") or {}).items())],
+                ["lanes' area m²", d.get("lane_area_m2")],
+                ["disagreement (geometry) m²", d.get("disagreement_geometry_m2")],
+                ["disagreement (all) m²", d.get("disagreement_area_m2")],
+                ["driving lanes on the wrong level / not ground", d.get("network_disagreement")],
+                ["network vetoed", d.get("network_vetoed")], ["lanes vetoed", len(d.get("vetoed_lanes") or [])]]
+        ev = d.get("evaluation")
+        if isinstance(ev, dict):
+            b, a = ev.get("iou_before", {}), ev.get("iou_after", {})
+            for k in ("road", "sidewalk", "terrain", "miou"):
+                if k in b:
+                    rows.append([f"IoU {k} before / after", f"{b[k]:.1f} / {a.get(k, 0):.1f}"])
+        parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3>" + ctx.table(["", ""], rows, "kv"))
+        png = f.parent / "road_evidence.png"
+        if png.is_file():
+            name = f"{s.get('folder')}_road_evidence.png"
+            ctx.add_image(png, name)
+            parts.append("<div class=\"figs\">" + ctx.figure(
+                f"img/{name}", "Labels before and after the road network's vote; where lanes and scan agree, "
+                "were relabelled, or disagree") + "</div>")
     return "".join(parts)
