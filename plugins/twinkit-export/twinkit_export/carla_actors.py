@@ -24,17 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .carla_pkg import _wrap180
+
 ACTORS_FILE = "actors.json"
 SPAWN_ACTORS = "spawn_actors.py"
-
-
-def _wrap180(a: float) -> float:
-    a = math.fmod(float(a), 360.0)
-    if a > 180.0:
-        a -= 360.0
-    elif a <= -180.0:
-        a += 360.0
-    return 0.0 if abs(a) < 1e-9 else a
 
 
 def site_to_carla(xyz, yaw_site_deg: float, frame) -> tuple[dict, float]:

@@ -35,8 +35,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twinkit import InputError
-
 ROAD, SIDEWALK, TERRAIN = 0, 1, 9
 GROUND = (ROAD, SIDEWALK, TERRAIN)
 
@@ -311,12 +309,10 @@ def draw_evidence(v: np.ndarray, f: np.ndarray, labels_before: np.ndarray, ev: E
 
     from twinkit.cityscapes import colorize
 
-    from .mesh2d import Grid, Mesh, rasterize
+    from .mesh2d import Mesh, picture_grid, rasterize
 
     xy = v[:, :2]
-    span = float(np.max(xy.max(0) - xy.min(0))) + 4.0
-    res = max(1.0 / px_per_m, span / max_px)
-    grid = Grid.around(xy, res)
+    grid, res = picture_grid(xy, px_per_m, max_px)
 
     # one rasterisation: the top face's index per pixel (24 bits in RGB), then three colourings of it
     bg = 40 | 40 << 8 | 40 << 16  # rasterize()'s background (40, 40, 40), never used as an id

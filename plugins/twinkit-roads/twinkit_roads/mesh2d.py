@@ -63,6 +63,14 @@ class Grid:
         return out
 
 
+def picture_grid(xy: np.ndarray, px_per_m: float, max_px: int) -> tuple[Grid, float]:
+    """The grid of a top-view picture of points ``xy``: ``px_per_m`` pixels per metre, at most
+    ``max_px`` pixels across (coarser for large sites), 2 m margin. Returns the grid and metres per pixel."""
+    span = float(np.max(xy.max(0) - xy.min(0))) + 4.0
+    res = max(1.0 / px_per_m, span / max_px)
+    return Grid.around(xy, res), res
+
+
 def rasterize(mesh: Mesh, grid: Grid, faces: np.ndarray | None = None, colours: np.ndarray | None = None,
               mode: str = "L") -> np.ndarray:
     """Draw faces seen from above (painter's order by height, so the top surface wins)."""

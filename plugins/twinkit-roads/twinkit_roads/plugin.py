@@ -335,7 +335,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     import numpy as np
 
     from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
-                           S_RELABEL, S_VETOED, draw_evidence, lane_polygons, road_evidence as vote)
+                           S_RELABEL, draw_evidence, lane_polygons, road_evidence as vote)
     from .mesh2d import Grid, read_mesh
 
     params = params or RoadEvidenceParams()

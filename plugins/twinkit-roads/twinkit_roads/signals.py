@@ -617,13 +617,11 @@ def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], reject
     from old to new."""
     from PIL import Image, ImageDraw
 
-    from .mesh2d import Grid, read_mesh, rasterize
+    from .mesh2d import picture_grid, read_mesh, rasterize
 
     mesh = read_mesh(mesh_path)
     xy = mesh.v[:, :2]
-    span = float(np.max(xy.max(0) - xy.min(0))) + 4.0
-    res = max(1.0 / px_per_m, span / max_px)
-    grid = Grid.around(xy, res)
+    grid, res = picture_grid(xy, px_per_m, max_px)
     if mesh.rgb is not None:
         cols = (mesh.rgb[mesh.f].mean(1) * 0.6).astype(np.uint8)  # darkened: the markers must stand out
     else:
