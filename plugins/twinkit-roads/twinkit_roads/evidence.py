@@ -213,7 +213,7 @@ STATUS = {S_OUT: "outside the voting lanes", S_AGREE: "agrees", S_RELABEL: "rela
 def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[Lane], grid, *,
                   normal_min_z: float = 0.9, max_height_m: float = 0.45, curb_min_m: float = 0.06,
                   curb_max_m: float = 0.35, cell_m: float = 0.5, window_m: float = 8.0, ground_pct: float = 5.0,
-                  max_disagreement: float = 0.5, max_network_disagreement: float = 0.25, plateau: bool = True,
+                  max_disagreement: float = 0.5, max_network_disagreement: float = 0.10, plateau: bool = True,
                   plateau_min_agree_m2: float = 1.0,
                   plateau_cell_m: float = 0.25, plateau_close_m: float = 0.5,
                   relabel_from=GROUND) -> Evidence:
