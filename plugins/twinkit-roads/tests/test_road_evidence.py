@@ -121,6 +121,19 @@ def test_network_shifted_10_m_over_the_building_is_reported_and_relabels_nothing
     assert doc0["changed_vertices"] > 1000 and doc0["disagreement_fraction"] < 0.5
 
 
+def test_network_whose_driving_lanes_often_disagree_votes_nowhere(tmp_path):
+    """Shifted 1.5 m south, the south driving lane lies partly on the raised pavement: each lane still
+    agrees over more than half its surface, but the driving lanes of the network disagree over about
+    a fifth of theirs, above max_network_disagreement (0.10), so no lane votes. A lax threshold lets
+    the same network relabel."""
+    V, F, L, _ = scene()
+    new, doc, _ = run(tmp_path, write_inputs(tmp_path, dy=-1.5))
+    assert doc["network_vetoed"] and doc["network_disagreement"] > 0.10
+    assert doc["changed_vertices"] == 0 and (new == L).all()
+    new_lax, doc_lax, _ = run(tmp_path / "lax", write_inputs(tmp_path, dy=-1.5), max_network_disagreement=0.5)
+    assert not doc_lax["network_vetoed"] and doc_lax["changed_vertices"] > 0
+
+
 def test_switched_off_labels_pass_through(tmp_path):
     V, F, L, _ = scene()
     new, doc, out = run(tmp_path, write_inputs(tmp_path), enabled=False)
