@@ -315,7 +315,6 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     default: twinkit's class table. expect_decals: the decals setting the package must carry (None:
     only report it). spawn_script: the file that must place every prop (default ``root/spawn_props.py``).
     """
-    from . import fbxbin
     from .classes import info
 
     root = Path(root)
@@ -376,12 +375,9 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         if src.stem != name or xodr.stem != name:
             rep.add("names_match", f"map {name!r}: source {src.name} and xodr {xodr.name} should be {name}.fbx and "
                                    f"{name}.xodr")
-        try:
-            fs = fbxbin.summarize(src)
-        except Exception as exc:
-            rep.add("json", f"{src}: not a readable binary FBX ({exc})")
+        fs = _read_fbx(rep, src, pkg)
+        if fs is None:
             continue
-        _check_textures(rep, src, fs, pkg)
         for mesh in fs.meshes:
             asset = map_asset_name(src.stem, mesh.name)
             folder = move_assets_folder(asset)
@@ -407,12 +403,9 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         if not src.is_file():
             rep.add("json", f"{desc_path.name}: props[{i}].source {p['source']!r} does not exist in {pkg}")
             continue
-        try:
-            fs = fbxbin.summarize(src)
-        except Exception as exc:
-            rep.add("json", f"{src}: not a readable binary FBX ({exc})")
+        fs = _read_fbx(rep, src, pkg)
+        if fs is None:
             continue
-        _check_textures(rep, src, fs, pkg)
         if len(fs.meshes) != 1:
             rep.add("prop_single_mesh", f"{src.name}: {len(fs.meshes)} meshes; a prop FBX must hold exactly one "
                                         f"(its asset is registered as {src.stem}.{src.stem})")
@@ -491,6 +484,19 @@ def _check_mesh(rep: ContractReport, fate: MeshFate, materials: list[str]) -> No
         if fate.tag != "Terrain":  # Terrain mis-tags are summed up in the 'semantics' rule
             rep.add("tag", f"{where} ends in Static/{fate.folder} and is tagged {fate.tag}, its class is "
                            f"{fate.intended_tag}")
+
+
+def _read_fbx(rep, src: Path, pkg: Path):
+    """The FBX's summary with its texture paths checked, or None (reported) when it does not parse."""
+    from . import fbxbin
+
+    try:
+        fs = fbxbin.summarize(src)
+    except Exception as exc:
+        rep.add("json", f"{src}: not a readable binary FBX ({exc})")
+        return None
+    _check_textures(rep, src, fs, pkg)
+    return fs
 
 
 def _check_textures(rep: ContractReport, fbx: Path, fs, pkg: Path) -> None:
