@@ -196,6 +196,15 @@ def sec_alignment(ctx) -> str:
     return "".join(parts)
 
 
+def _step_picture(ctx, step: dict, png, caption: str) -> str:
+    """A step's picture copied into the report as a figure ("" when the step wrote none)."""
+    if not png.is_file():
+        return ""
+    name = f"{step.get('folder')}_{png.name}"
+    ctx.add_image(png, name)
+    return "<div class=\"figs\">" + ctx.figure(f"img/{name}", caption) + "</div>"
+
+
 def sec_signals(ctx) -> str:
     """place_signals: each OpenDRIVE signal, where it came from and how far it moved; the top view."""
     parts = []
@@ -209,13 +218,8 @@ def sec_signals(ctx) -> str:
         parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3>" + ctx.table(
             ["signal", "kind", "controls road", "defined on road", "source", "moved m", "scanned instance", "note"],
             rows))
-        png = f.parent / "signals.png"
-        if png.is_file():
-            name = f"{s.get('folder')}_signals.png"
-            ctx.add_image(png, name)
-            parts.append("<div class=\"figs\">" + ctx.figure(
-                f"img/{name}", "Scanned lights (orange) and signs (blue); netconvert's signals (red) and where "
-                "they are now (green)") + "</div>")
+        parts.append(_step_picture(ctx, s, f.parent / "signals.png", "Scanned lights (orange) and signs (blue); "
+                                   "netconvert's signals (red) and where they are now (green)"))
     return "".join(parts)
 
 
@@ -243,11 +247,6 @@ def sec_road_evidence(ctx) -> str:
                 if k in b:
                     rows.append([f"IoU {k} before / after", f"{b[k]:.1f} / {a.get(k, 0):.1f}"])
         parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3>" + ctx.table(["", ""], rows, "kv"))
-        png = f.parent / "road_evidence.png"
-        if png.is_file():
-            name = f"{s.get('folder')}_road_evidence.png"
-            ctx.add_image(png, name)
-            parts.append("<div class=\"figs\">" + ctx.figure(
-                f"img/{name}", "Labels before and after the road network's vote; where lanes and scan agree, "
-                "were relabelled, or disagree") + "</div>")
+        parts.append(_step_picture(ctx, s, f.parent / "road_evidence.png", "Labels before and after the road "
+                                   "network's vote; where lanes and scan agree, were relabelled, or disagree"))
     return "".join(parts)
