@@ -207,11 +207,12 @@ def test_photo_views_both_sources_share_one_folder_and_predict_in_size_batches(s
                     {"in_renders_dir": res["renders"], "in_gt_labels_npy": gt}, config=cfg,
                     params=S.PredictParams(batch_views=8))
     assert json.loads((pred["predictions"] / "index.json").read_text())["views"] == [v["id"] for v in index["kept"]]
-    # rendered only needs no photos
-    res2 = run_step(_plugin("step", "photo_views"), tmp_path / "pv2",
-                    {"in_textured_mesh_ply": mesh_ply, "in_views_json": views["views.json"]},
-                    params=S.PhotoViewsParams(source="rendered"))
-    assert {v["sampler"] for v in json.loads((res2["renders"] / "index.json").read_text())["kept"]} == {"auto_street"}
+    # rendered only needs no photos, and samples its own views when no views.json is wired: the same views
+    res2 = run_step(_plugin("step", "photo_views"), tmp_path / "pv2", {"in_textured_mesh_ply": mesh_ply},
+                    params=S.PhotoViewsParams(source="rendered"), config=cfg)
+    idx2 = json.loads((res2["renders"] / "index.json").read_text())
+    assert [v["id"] for v in idx2["kept"]] == [v["id"] for v in index["kept"] if v["sampler"] == "auto_street"]
+    assert (res2["renders"] / "views.json").is_file()
     with pytest.raises(InputError, match="cameras_site.json"):
         run_step(_plugin("step", "photo_views"), tmp_path / "pv3", {"in_textured_mesh_ply": mesh_ply})
     # a photo the cameras file names but the folder lacks: the error names the file

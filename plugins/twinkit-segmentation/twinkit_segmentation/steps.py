@@ -91,21 +91,11 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
                  in_roads_osm: Path | None = None, in_street_points_txt: Path | None = None,
                  out_views_json: Path) -> dict:
     """Camera views from the selected view sampler (view_sampler=auto_street|street_points|uniform|random|combined)."""
-    import numpy as np
-
     from twinkit.mesh import read_mesh
-    from twinkit_segmentation.segmesh import unit_normals
-    from twinkit_segmentation.views import Scene
 
     mesh = read_mesh(in_textured_mesh_ply)
-    scene = Scene(mesh.vertices, mesh.faces, unit_normals(mesh), site=ctx.site,
-                  roads_osm=in_roads_osm, street_points=in_street_points_txt)
-    sampler = ctx.component("view_sampler")
     t0 = time.perf_counter()
-    views = sampler.sample(scene, ctx)
-    if params.max_views and len(views) > params.max_views:
-        keep = np.linspace(0, len(views) - 1, params.max_views).round().astype(int)
-        views = [views[i] for i in keep]
+    views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
     if not views:
         raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
     counts: dict[str, int] = {}
@@ -114,6 +104,22 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
     sampler_name = (ctx.config.get("view_sampler") or {}).get("plugin", "?") if ctx.config else "?"
     out_views_json.write_text(json.dumps({"sampler": sampler_name, "counts": counts, "views": views}, indent=1))
     return {"views": len(views), "per_sampler": counts, "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int) -> list:
+    """The selected view sampler's views (evenly thinned to ``max_views`` when > 0)."""
+    import numpy as np
+
+    from twinkit_segmentation.segmesh import unit_normals
+    from twinkit_segmentation.views import Scene
+
+    scene = Scene(mesh.vertices, mesh.faces, unit_normals(mesh), site=ctx.site,
+                  roads_osm=roads_osm, street_points=street_points)
+    views = ctx.component("view_sampler").sample(scene, ctx)
+    if max_views and len(views) > max_views:
+        keep = np.linspace(0, len(views) - 1, max_views).round().astype(int)
+        views = [views[i] for i in keep]
+    return views
 
 
 # ----------------------------------------------------------------------------- rendering
@@ -201,13 +207,16 @@ class PhotoViewsParams:
     min_coverage: float = 0.1  # drop a photo whose pose sees the mesh in fewer of its pixels (missed the mesh)
     max_empty_fraction: float = 0.6  # rendered views: as render_views
     max_photos: int = 0  # at most this many photos (evenly spread in file order), 0 = all
+    max_views: int = 0  # rendered views sampled here (no views.json wired): at most this many, 0 = all
 
 
 def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
                 in_cameras_site_json: Path | None = None, in_photos_dir: Path | None = None,
-                in_views_json: Path | None = None, out_renders_dir: Path) -> dict:
+                in_views_json: Path | None = None, in_roads_osm: Path | None = None,
+                in_street_points_txt: Path | None = None, out_renders_dir: Path) -> dict:
     """The registered photos as views (renders/ as render_views writes it): each photo, undistorted and
-    downscaled, with the vertex map rendered from its pose; optionally plus the sampled views rendered."""
+    downscaled, with the vertex map rendered from its pose; optionally plus rendered views (views.json where
+    a sample_views step wrote one, else the view_sampler's views, sampled here only when they are used)."""
     import numpy as np
     from PIL import Image
 
@@ -221,8 +230,6 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
     if use_photos and (in_cameras_site_json is None or in_photos_dir is None):
         raise InputError("photo_views: source=photos needs cameras_site.json and the photos folder (the photo "
                          "branch's georeference step and site.inputs.photos); use source=rendered without photos")
-    if use_rendered and in_views_json is None:
-        raise InputError("photo_views: source=rendered/both needs views.json: add sample_views before photo_views")
     mesh = read_mesh(in_textured_mesh_ply)
     out_renders_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -293,10 +300,17 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
                     "undistorted": n_undistorted, "photo_sizes": [list(s) for s in sizes],
                     "photo_load_seconds": round(t_load, 3), "photo_render_seconds": round(t_render, 3)})
     if use_rendered:
-        try:
-            views = json.loads(Path(in_views_json).read_text())["views"]
-        except (OSError, ValueError, KeyError) as exc:
-            raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
+        if in_views_json is not None:
+            try:
+                views = json.loads(Path(in_views_json).read_text())["views"]
+            except (OSError, ValueError, KeyError) as exc:
+                raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
+        else:
+            views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
+            (out_renders_dir / "views.json").write_text(json.dumps({"views": views}, indent=1))
+        if not views:
+            raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another "
+                             f"view_sampler or steps.photo_views.source=photos")
         tex = load_texture(mesh.texture) if mesh.texture is not None else None
         if tex is None:
             ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
