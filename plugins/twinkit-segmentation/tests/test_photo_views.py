@@ -119,6 +119,13 @@ def test_distorted_photo_is_resampled_onto_its_pinhole(tmp_path):
     assert img2.shape == (90, 120, 3) and np.allclose(K2[0, 0], 100.0)
     half = np.asarray(Image.fromarray(pin).resize((120, 90), Image.LANCZOS)).astype(float)
     assert np.abs(img2.astype(float) - half)[10:-10, 10:-10].mean() < 8.0
+    # a distortion that moves no pixel by a quarter pixel (what SfM refines for an undistorted camera) is
+    # not resampled: the view is the plain downscaled photo
+    Image.fromarray(pin).save(tmp_path / "p.png")
+    cam0 = PhotoCamera.from_json(_camera_json("p.png", np.eye(3), [0, 0, 0], [[200, 0, 118], [0, 200, 92], [0, 0, 1]],
+                                              w, h, model="SIMPLE_RADIAL", params=[200.0, 118.0, 92.0, -0.0002]))
+    img0, _, valid0, undist0 = photo_view_image(tmp_path / "p.png", cam0, 0)
+    assert not undist0 and valid0 is None and (img0 == pin).all()
     with pytest.raises(ValueError, match="not supported"):
         camera_parameters("OPENCV_FISHEYE", [1, 1, 0, 0, 0, 0, 0, 0])
     with pytest.raises(ValueError, match="takes 4 parameters"):

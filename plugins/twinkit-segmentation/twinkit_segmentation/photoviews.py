@@ -50,6 +50,18 @@ def has_distortion(p: dict) -> bool:
     return any(abs(p[k]) > 0 for k in ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"))
 
 
+def max_distortion_px(p: dict, width: int, height: int, scale: float = 1.0) -> float:
+    """The largest shift (pixels, at ``scale`` of the full size) the distortion makes along the image border,
+    where it is largest for the radial and tangential models."""
+    n = 64
+    t = np.linspace(0.0, 1.0, n)
+    u = np.concatenate([t * width, t * width, np.zeros(n), np.full(n, float(width))])
+    v = np.concatenate([np.zeros(n), np.full(n, float(height)), t * height, t * height])
+    x, y = (u - p["cx"]) / p["fx"], (v - p["cy"]) / p["fy"]
+    xd, yd = distort(p, x, y)
+    return float(np.hypot((xd - x) * p["fx"], (yd - y) * p["fy"]).max() * scale)
+
+
 def distort(p: dict, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """COLMAP's forward distortion of normalised pinhole coordinates (x, y) = (X/Z, Y/Z)."""
     r2 = x * x + y * y
@@ -142,9 +154,10 @@ def projection_from_K(K: np.ndarray, width: int, height: int, near: float = 0.05
     return m
 
 
-def photo_view_image(path, cam: PhotoCamera, long_side_px: int):
+def photo_view_image(path, cam: PhotoCamera, long_side_px: int, min_shift_px: float = 0.25):
     """(image (h, w, 3) uint8 undistorted and downscaled, its pinhole K, valid (h, w) bool or None where every
-    pixel is, whether it was undistorted). A photo stored at another size than its camera (same aspect
+    pixel is, whether it was undistorted: only when the distortion shifts some pixel by ``min_shift_px`` or
+    more at the view's size). A photo stored at another size than its camera (same aspect
     ratio) is scaled like it. Raises ``ValueError`` when the aspect ratio differs."""
     from PIL import Image
 
@@ -157,7 +170,9 @@ def photo_view_image(path, cam: PhotoCamera, long_side_px: int):
         small = im.resize((w, h), Image.LANCZOS) if (w, h) != im.size else im
         img = np.asarray(small)
     K = cam.scaled_K(w, h)
-    if not has_distortion(cam.params):
+    # a shift under a quarter pixel of the view is below what the nearest-vertex map resolves; resampling
+    # would only blur the photo (SfM refines a small k1 even for an undistorted camera)
+    if max_distortion_px(cam.params, cam.width, cam.height, w / cam.width) < min_shift_px:
         return np.ascontiguousarray(img), K, None, False
     und, valid = undistort_image(img, cam.params, K, w, h, scale=(w / cam.width, h / cam.height))
     return und, K, valid, True

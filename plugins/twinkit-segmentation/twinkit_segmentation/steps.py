@@ -221,7 +221,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
     from PIL import Image
 
     from twinkit.mesh import read_mesh
-    from twinkit_segmentation.photoviews import PhotoCamera, photo_view_image, projection_from_K, view_matrix_opencv
+    from twinkit_segmentation.photoviews import (PhotoCamera, max_distortion_px, photo_view_image, projection_from_K,
+                                                 view_matrix_opencv)
     from twinkit_segmentation.render import Renderer, load_texture
 
     if params.source not in ("photos", "rendered", "both"):
@@ -283,6 +284,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
                 kept.append({"id": vid, "sampler": "photo", "image": cam.image, "width": w, "height": h,
                              "K": K.round(4).tolist(), "R_world_from_camera": cam.R_wc.tolist(),
                              "center": cam.center.tolist(), "undistorted": bool(undist),
+                             "max_distortion_px": round(max_distortion_px(cam.params, cam.width, cam.height,
+                                                                          w / cam.width), 3),
                              "empty_fraction": round(1 - coverage, 4)})
         finally:
             for r in renderers.values():
@@ -290,14 +293,17 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
         n_photo = len(kept)
         off = [d for d in dropped if d["reason"] == "off_mesh"]
         sizes = sorted({(v["width"], v["height"]) for v in kept})
-        ctx.log.info("photo views: %d of %d registered photos kept at %s px (%d undistorted), %d dropped (the pose "
-                     "sees the mesh in < %.0f %% of the pixels)", n_photo, len(cams),
-                     ", ".join(f"{a}x{b}" for a, b in sizes) or "-", n_undistorted, len(off), 100 * params.min_coverage)
+        shift = max((v["max_distortion_px"] for v in kept), default=0.0)
+        ctx.log.info("photo views: %d of %d registered photos kept at %s px (%d undistorted; largest distortion "
+                     "%.2f px, resampled from 0.25 px), %d dropped (the pose sees the mesh in < %.0f %% of the "
+                     "pixels)", n_photo, len(cams), ", ".join(f"{a}x{b}" for a, b in sizes) or "-", n_undistorted,
+                     shift, len(off), 100 * params.min_coverage)
         if cams and len(off) > len(cams) / 2:
             ctx.log.warning("photo views: %d of %d photos miss the mesh; check the georeference (cameras_site.json) "
                             "against the mesh", len(off), len(cams))
         out.update({"photos": len(cams), "photo_views": n_photo, "dropped_off_mesh": len(off),
-                    "undistorted": n_undistorted, "photo_sizes": [list(s) for s in sizes],
+                    "undistorted": n_undistorted, "max_distortion_px": round(shift, 3),
+                    "photo_sizes": [list(s) for s in sizes],
                     "photo_load_seconds": round(t_load, 3), "photo_render_seconds": round(t_render, 3)})
     if use_rendered:
         if in_views_json is not None:
