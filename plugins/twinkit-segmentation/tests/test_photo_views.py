@@ -222,6 +222,11 @@ def test_photo_views_both_sources_share_one_folder_and_predict_in_size_batches(s
     assert (res2["renders"] / "views.json").is_file()
     with pytest.raises(InputError, match="cameras_site.json"):
         run_step(_plugin("step", "photo_views"), tmp_path / "pv3", {"in_textured_mesh_ply": mesh_ply})
+    # every photo misses the mesh: a clear error naming the best photo's coverage, not an empty folder
+    with pytest.raises(InputError, match="the best photo, a.png, sees it in"):
+        run_step(_plugin("step", "photo_views"), tmp_path / "pv5",
+                 {"in_textured_mesh_ply": mesh_ply, "in_cameras_site_json": cj, "in_photos_dir": photos},
+                 params=S.PhotoViewsParams(min_coverage=0.99))
     # a photo the cameras file names but the folder lacks: the error names the file
     (photos / "a.png").unlink()
     with pytest.raises(InputError, match="a.png"):

@@ -247,6 +247,7 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
         renderers: dict = {}
         t_load = t_render = 0.0
         n_undistorted = 0
+        shift = 0.0
         used_ids: set = set()
         try:
             for c in ctx.progress(cams, total=len(cams), desc="photo views"):
@@ -264,8 +265,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
                 except ValueError as exc:
                     raise InputError(f"{path}: {exc}; use the photos the SfM registered") from None
                 t_load += time.perf_counter() - t1
-                n_undistorted += int(undist)
                 h, w = img.shape[:2]
+                shift = max(shift, max_distortion_px(cam.params, cam.width, cam.height, w / cam.width))
                 if (w, h) not in renderers:  # the vertex map only: no texture needed
                     renderers[(w, h)] = Renderer(mesh.vertices, mesh.faces, None, None, w, h)
                 t1 = time.perf_counter()
@@ -279,6 +280,7 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
                 if coverage < params.min_coverage:
                     dropped.append({"id": vid, "image": cam.image, "reason": "off_mesh", "coverage": round(coverage, 4)})
                     continue
+                n_undistorted += int(undist)
                 Image.fromarray(img).save(out_renders_dir / f"{vid}.png", compress_level=1)
                 np.savez_compressed(out_renders_dir / f"{vid}_vertex.npz", vertex=vertex)
                 kept.append({"id": vid, "sampler": "photo", "image": cam.image, "width": w, "height": h,
@@ -293,9 +295,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
         n_photo = len(kept)
         off = [d for d in dropped if d["reason"] == "off_mesh"]
         sizes = sorted({(v["width"], v["height"]) for v in kept})
-        shift = max((v["max_distortion_px"] for v in kept), default=0.0)
-        ctx.log.info("photo views: %d of %d registered photos kept at %s px (%d undistorted; largest distortion "
-                     "%.2f px, resampled from 0.25 px), %d dropped (the pose sees the mesh in < %.0f %% of the "
+        ctx.log.info("photo views: %d of %d registered photos kept at %s px (%d of them undistorted; largest "
+                     "distortion %.2f px, resampled from 0.25 px), %d dropped (the pose sees the mesh in < %.0f %% of the "
                      "pixels)", n_photo, len(cams), ", ".join(f"{a}x{b}" for a, b in sizes) or "-", n_undistorted,
                      shift, len(off), 100 * params.min_coverage)
         if cams and len(off) > len(cams) / 2:
@@ -331,9 +332,13 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
              "long_side_px": params.long_side_px}
     (out_renders_dir / "index.json").write_text(json.dumps(index, indent=1))
     if not kept:
-        raise InputError(f"photo_views: no view kept ({len(dropped)} dropped: photos whose pose misses the mesh, "
-                         f"or rendered views mostly empty); see {out_renders_dir / 'index.json'} and check "
-                         f"cameras_site.json against {in_textured_mesh_ply.name}")
+        off = sorted((d for d in dropped if d["reason"] == "off_mesh"), key=lambda d: -d["coverage"])
+        best = f"; the best photo, {off[0]['image']}, sees it in {100 * off[0]['coverage']:.1f} %" if off else ""
+        raise InputError(f"photo_views: no view kept: {len(off)} photos see the mesh in fewer than "
+                         f"{100 * params.min_coverage:.0f} % of their pixels{best}, {len(dropped) - len(off)} rendered "
+                         f"views are mostly empty. Check {in_textured_mesh_ply.name} (a mesh that small or that far "
+                         f"from the cameras: see the dense step's point count) and cameras_site.json, or lower "
+                         f"steps.photo_views.min_coverage")
     out.update({"kept": len(kept), "kept_per_sampler": _per_sampler(kept),
                 "seconds": round(time.perf_counter() - t0, 3)})
     return out
