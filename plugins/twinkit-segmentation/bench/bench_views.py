@@ -37,7 +37,7 @@ def main(argv=None):
     ap.add_argument("--run", type=Path, default=Path("outputs/demo"))
     ap.add_argument("--renders", type=Path, default=None, help="renders/ folder (default: the run's)")
     ap.add_argument("--every", type=int, default=1)
-    ap.add_argument("--variants", default="base,flip,s1536,ms")
+    ap.add_argument("--variants", default="base,flip,ms")
     ap.add_argument("--label", default="", help="name of the renders in the table")
     ap.add_argument("--out", type=Path, default=None, help="append the markdown table to this file")
     a = ap.parse_args(argv)
