@@ -119,6 +119,11 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
 @dataclass
 class RenderParams:
     max_empty_fraction: float = 0.6  # drop views whose image is more than this much background
+    # background below the horizon is a hole in the mesh (or the capture's edge), never sky: paint it with
+    # the nearest surface's colour so the 2D model does not read sky-blue patches in the street (no votes
+    # come from those pixels either way). False = the plain sky-blue background everywhere.
+    fill_holes: bool = True
+    max_hole_px: float = 16.0  # a hole is a background gap at most 2x this wide; wider = past the capture's edge
 
 
 def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
@@ -128,7 +133,7 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     from PIL import Image
 
     from twinkit.mesh import read_mesh
-    from twinkit_segmentation.render import Renderer, load_texture
+    from twinkit_segmentation.render import Renderer, below_horizon, fill_from_nearest, ground_holes, load_texture
     from twinkit_segmentation.views import view_matrices
 
     try:
@@ -144,6 +149,7 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     renderers: dict = {}
     kept, dropped = [], []
     t_render = 0.0
+    hole_px = 0
     try:
         for v in ctx.progress(views, total=len(views), desc="render"):
             size = (int(v["width"]), int(v["height"]))
@@ -158,17 +164,24 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
             if empty > params.max_empty_fraction:
                 dropped.append({"id": v["id"], "empty_fraction": round(empty, 4)})
                 continue
+            hole_mask = ground_holes(vertex >= 0, below_horizon(vm, pm, *size), params.max_hole_px)
+            holes = int(hole_mask.sum())
+            hole_px += holes
+            if params.fill_holes:
+                fill_from_nearest(rgb, hole_mask, vertex >= 0)
             Image.fromarray(rgb).save(out_renders_dir / f"{v['id']}.png", compress_level=1)
             np.savez_compressed(out_renders_dir / f"{v['id']}_vertex.npz", vertex=vertex)
-            kept.append(dict(v, empty_fraction=round(empty, 4)))
+            kept.append(dict(v, empty_fraction=round(empty, 4), hole_fraction=round(holes / vertex.size, 4)))
     finally:
         for r in renderers.values():
             r.release()
     index = {"n_vertices": int(len(mesh.vertices)), "kept": kept, "dropped": dropped,
-             "max_empty_fraction": params.max_empty_fraction}
+             "max_empty_fraction": params.max_empty_fraction, "fill_holes": params.fill_holes}
     (out_renders_dir / "index.json").write_text(json.dumps(index, indent=1))
-    ctx.log.info("rendered %d views, kept %d, dropped %d (> %.0f %% empty)", len(views), len(kept), len(dropped),
-                 100 * params.max_empty_fraction)
+    hole_share = hole_px / max(sum(int(v["width"]) * int(v["height"]) for v in kept), 1)
+    ctx.log.info("rendered %d views, kept %d, dropped %d (> %.0f %% empty); %.1f %% of the kept pixels were holes "
+                 "below the horizon%s", len(views), len(kept), len(dropped), 100 * params.max_empty_fraction,
+                 100 * hole_share, " (filled from the nearest surface)" if params.fill_holes else "")
     if not kept:
         raise InputError(f"{in_views_json}: every view is more than {100 * params.max_empty_fraction:.0f} % empty; "
                          f"check the sampler's positions (views.json) against the mesh")
@@ -176,6 +189,7 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     for v in kept:
         per[v["sampler"]] = per.get(v["sampler"], 0) + 1
     return {"views": len(views), "kept": len(kept), "dropped_empty": len(dropped), "kept_per_sampler": per,
+            "hole_fraction": round(hole_share, 4),
             "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
             "seconds_per_view": round(t_render / max(len(views), 1), 4)}
 
