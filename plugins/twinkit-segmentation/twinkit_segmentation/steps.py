@@ -282,8 +282,22 @@ class BackprojectParams:
     curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
     band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
     min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
+    keep_share: float = 0.9  # a class with this share of a vertex's (or its segment's) votes: no cue acts (0 = off)
     smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
     smooth_iters: int = 5
+
+
+def context_options(params: BackprojectParams):
+    """The :class:`ContextOptions` of ``backproject``'s params (the bench fuses with the same)."""
+    from twinkit_segmentation.context import ContextOptions
+
+    return ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
+                          min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
+                          min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
+                          ground_factor=params.context_factor, raised_factor=params.context_factor,
+                          high_factor=params.context_factor, curb_factor=params.curb_factor,
+                          curb_face=params.curb_face, band_default=params.band_default,
+                          shape_factor=params.context_factor)
 
 
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
@@ -295,7 +309,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import edges as mesh_edges, read_mesh
     from twinkit_segmentation.segmesh import write_labels_ply
-    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, potts_smooth
+    from twinkit_segmentation.context import CUES, fuse_with_context, near_unanimous, potts_smooth
     from twinkit_segmentation.metrics import _weighted_votes, blend_distribution, decide_distribution, propagate
     from twinkit_segmentation.segmesh import unit_normals
 
@@ -322,16 +336,14 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     if params.context and params.context_cues:
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
-        opt = ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
-                             min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
-                             min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
-                             ground_factor=params.context_factor, raised_factor=params.context_factor,
-                             high_factor=params.context_factor, curb_factor=params.curb_factor,
-                             curb_face=params.curb_face, band_default=params.band_default)
+        opt = context_options(params)
         keep = labels == IGNORE
+        sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None),
+                              seg if params.use_segments else None, params.keep_share)
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
                                                params.context_cues, min_retained=params.min_retained,
-                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters)
+                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
+                                               keep=sure)
         labels[keep] = IGNORE  # too few votes stays too few votes
         t_ctx = time.perf_counter() - t1
         ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, %.2f s",
