@@ -53,8 +53,9 @@ def main(argv=None) -> int:
     ap.add_argument("--site-dirs", default="outputs/demo,outputs/demo_s3/demo,outputs/demo_s7/demo")
     ap.add_argument("--oracle", action="store_true", help="fuse the oracle's votes (ground truth through the "
                     "stored renders) instead of the 2D model's")
-    ap.add_argument("--rows", default="all", choices=["all", "shape", "short"],
-                    help="all: every ablation; shape: the shape cues and the floor; short: plain and default")
+    ap.add_argument("--rows", default="all", choices=["all", "shape", "floor", "short"],
+                    help="all: every ablation; shape: the shape cues; floor: floor variants with every cue; "
+                    "short: plain and default")
     a = ap.parse_args(argv)
     os.environ.setdefault("TWINKIT_PLUGINS", "builtins,segmentation")
     from twinkit.mesh import edges as mesh_edges, read_mesh
@@ -69,21 +70,25 @@ def main(argv=None) -> int:
     b = bp.smooth_beta
     default = tuple(bp.context_cues)
     old = tuple(c for c in CUES if c not in SHAPE_CUES)
-    # (name, cues, beta, variant, keep_share)
-    k = bp.keep_share
-    old_rows = [("plain blended vote", (), 0.0, None, 0.0), (f"plain + Potts smoothing (beta {b:g})", (), b, None, 0.0)] + \
-        [(f"{c} only", (c,), 0.0, None, 0.0) for c in old] + \
-        [(f"all but {c}", tuple(x for x in old if x != c), 0.0, None, 0.0) for c in old] + \
-        [("ground, raised, high, curb", old, 0.0, None, 0.0),
-         ("ground, raised, high, curb + Potts, curb face off", old, b, "curb_face", 0.0),
-         ("ground, raised, high, curb + Potts, band default off", old, b, "band_default", 0.0)]
-    shape_rows = [("ground, raised, high, curb + Potts (no floor)", old, b, None, 0.0),
-                  (f"ground, raised, high, curb + Potts, floor {k:g}", old, b, None, k)] + \
+    # (name, cues, beta, variant, floor (share, votes) or None)
+    k = (bp.keep_share, bp.keep_votes)
+    fk = f"floor {k[0]:g} of >= {k[1]:g} votes"
+    old_rows = [("plain blended vote", (), 0.0, None, None), (f"plain + Potts smoothing (beta {b:g})", (), b, None, None)] + \
+        [(f"{c} only", (c,), 0.0, None, None) for c in old] + \
+        [(f"all but {c}", tuple(x for x in old if x != c), 0.0, None, None) for c in old] + \
+        [("ground, raised, high, curb", old, 0.0, None, None),
+         ("ground, raised, high, curb + Potts, curb face off", old, b, "curb_face", None),
+         ("ground, raised, high, curb + Potts, band default off", old, b, "band_default", None)]
+    shape_rows = [("ground, raised, high, curb + Potts (no floor)", old, b, None, None),
+                  (f"ground, raised, high, curb + Potts, {fk}", old, b, None, k)] + \
         [(f"+ {c}", old + (c,), b, None, k) for c in SHAPE_CUES] + \
         [(f"+ all shape cues but {c}", tuple(x for x in CUES if x != c), b, None, k) for c in SHAPE_CUES] + \
-        [("+ all shape cues", CUES, b, None, k), ("+ all shape cues, no floor", CUES, b, None, 0.0)]
-    last = [(f"**default ({', '.join(default)} + Potts, floor {k:g})**", default, b, None, k)]
-    configs = {"all": old_rows + shape_rows + last, "shape": shape_rows + last,
+        [("+ all shape cues", CUES, b, None, k)]
+    floor_rows = [("all cues + Potts, no floor", CUES, b, None, None)] + \
+        [(f"all cues + Potts, floor {s_:g} of >= {n_:g} votes", CUES, b, None, (s_, n_))
+         for s_, n_ in ((0.9, 0), (0.99, 0), (0.99, 8), (0.99, 16), (1.0, 32))]
+    last = [(f"**default ({', '.join(default)} + Potts, {fk})**", default, b, None, k)]
+    configs = {"all": old_rows + shape_rows + last, "shape": shape_rows + last, "floor": floor_rows,
                "short": [old_rows[0]] + last}[a.rows]
     ran = 0
     for d in a.site_dirs.split(","):
@@ -108,11 +113,11 @@ def main(argv=None) -> int:
         head = "| cues | " + " | ".join(SHORT.get(c, c) for c in CLASSES) + " | car prec. | **mIoU** | changed | s |"
         print(head)
         print("|---" * (len(CLASSES) + 5) + "|")
-        for name, cues, beta, variant, share in configs:
+        for name, cues, beta, variant, floor in configs:
             t1 = time.perf_counter()
             o = replace(opt, **{variant: False}) if variant else opt
             if cues:
-                sure = near_unanimous(wv, seg, share) if share > 0 else None
+                sure = near_unanimous(wv, None, *floor) if floor else None
                 lab, _, met = fuse_with_context(p, mesh.vertices, normals, edges, o, cues,
                                                 min_retained=bp.min_retained, smooth_beta=beta,
                                                 smooth_iters=bp.smooth_iters, keep=sure)

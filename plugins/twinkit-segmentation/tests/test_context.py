@@ -203,7 +203,7 @@ def test_backproject_step_context_metrics_and_bad_cue_name(tmp_path, scene_files
 
 # ------------------------------------------------------------------ objects above the ground and their shape
 WALL, FENCE, POLE, LIGHT, SIGN, MOTORCYCLE, BICYCLE = 3, 4, 5, 6, 7, 17, 18
-SHAPE_OFF = {c: [x for x in CUES if x != c] for c in ("column", "mounted", "low", "narrow")}
+SHAPE_OFF = {c: [x for x in CUES if x != c] for c in ("column", "mounted", "low", "narrow", "slender")}
 
 
 def solid_box(lo, hi, step=0.1, top=True):
@@ -354,3 +354,27 @@ def test_floor_unanimous_votes_survive_the_cues():
     assert (off[bike] == ROAD).all()
     seg = np.zeros(len(v), np.int64)  # one segment, road by far: its share reaches the floor for all
     assert near_unanimous(raw, seg, 0.9).all() and not near_unanimous(raw, None, 0).any()
+
+
+def test_slender_cue_a_fence_panel_is_no_vegetation_a_hedge_is():
+    fence = solid_box([-4, 0, 0], [4, 0.08, 1.4], step=0.07)
+    hedge = solid_box([-4, 4, 0], [4, 4.8, 1.4])
+    v, n, e, (mf, mh) = scene(fence, hedge)
+    p = votes(len(v), road=1.0)
+    p[mf | mh] = votes(1, vegetation=0.6, fence=0.4)  # the park behind the fence shows through it
+    lab, _, met = fuse_with_context(p, v, n, e)
+    panel = mf & (v[:, 2] > 0.35)
+    assert (lab[panel] == FENCE).all() and met["slender_changed"] > 0
+    assert (lab[mh] == VEGETATION).all()
+    off, _, _ = fuse_with_context(p, v, n, e, cues=[c for c in CUES if c != "slender"])
+    assert (off[panel] == VEGETATION).all()
+
+
+def test_low_cue_no_signal_head_on_a_low_object():
+    box = solid_box([0, 0, 0], [0.4, 0.4, 1.2], step=0.05)  # a control cabinet at the kerb
+    v, n, e, (mb,) = scene(box)
+    p = votes(len(v), road=1.0)
+    p[mb] = votes(1, light=0.6, pole=0.4)
+    body = mb & (v[:, 2] > 0.35)
+    assert (fuse_with_context(p, v, n, e)[0][body] == POLE).all()
+    assert (fuse_with_context(p, v, n, e, cues=SHAPE_OFF["low"])[0][body] == LIGHT).all()

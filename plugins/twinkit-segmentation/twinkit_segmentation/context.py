@@ -37,9 +37,12 @@ footprint (its horizontal extent along its principal axes) and a horizontal *sli
   larger object (else it is a fragment of a facade or a crown the mesh split off): everything but pole, light and sign
   x ``shape_factor``; a thin plate (thinner than ``plate_m`` with its post) is a sign (light x
   ``mount_factor``), a bulkier box a signal head (sign x ``mount_factor``).
-- ``low``: an object whose top stands less than ``low_top_m`` above the ground is no building
-  (building x ``shape_factor``).
+- ``low``: an object whose top stands less than ``low_top_m`` above the ground is no building and
+  carries no signal head (those hang with their lower edge 2 m up or more): building and traffic
+  light x ``shape_factor``.
 - ``narrow``: an object whose footprint is narrower than ``narrow_m`` is no car, truck, bus or train.
+- ``slender``: a low object (top under ``low_top_m``) thinner than ``hedge_min_m`` is no vegetation
+  (a fence, a wall, a bicycle, a bollard; even a trimmed hedge is thicker).
 
 ``keep_share`` is the floor for near-unanimous evidence: a vertex whose own votes, or whose
 segment's, give one class at least that share is left as the votes say by every cue
@@ -68,7 +71,8 @@ POLE, LIGHT, SIGN = 5, 6, 7
 BUILDING = 2
 #: vehicles with four wheels or more (car, truck, bus, train)
 WIDE_VEHICLES = (13, 14, 15, 16)
-SHAPE_CUES = ("column", "mounted", "low", "narrow")
+VEGETATION = 8
+SHAPE_CUES = ("column", "mounted", "low", "narrow", "slender")
 CUES = ("ground", "raised", "high", "curb") + SHAPE_CUES
 
 
@@ -103,8 +107,10 @@ class ContextOptions:
     mount_max_m: float = 8.0  # (overhead signals reach ~6-7 m, lamps 8-10 m)
     plate_m: float = 0.30  # a sign plate with its post is thinner (a plate is cm, a post <= 0.2 m); a signal
     # head (>= 0.25 m deep) beside its post is thicker
-    low_top_m: float = 2.5  # every building is taller (a storey is >= 2.5 m); walls, fences, hedges, cars are lower
+    low_top_m: float = 2.5  # every building is taller (a storey is >= 2.5 m), every signal post too (heads hang
+    # >= 2 m up); walls, fences, hedges, cars are lower
     narrow_m: float = 1.2  # narrower than any car (the narrowest, quadricycles, are 1.24 m wide)
+    hedge_min_m: float = 0.4  # even a trimmed hedge is thicker; a fence, a wall, a bike, a post is thinner
     shape_factor: float = 0.1
     mount_factor: float = 0.2  # a light on a plate, a sign on a box: unlikely, not ruled out
 
@@ -216,7 +222,9 @@ def _touches_larger(v: np.ndarray, o: np.ndarray, items: np.ndarray, ob: dict, o
     for dx in range(-r, r + 1):
         for dy in range(-r, r + 1):
             for dz in range(-r, r + 1):
-                hit = np.isin(key(iv + [dx, dy, dz]), big_keys)
+                q = key(iv + [dx, dy, dz])
+                at = np.minimum(np.searchsorted(big_keys, q), len(big_keys) - 1)
+                hit = big_keys[at] == q
                 out[io[hit]] = True
     return out
 
@@ -277,23 +285,26 @@ def shape_cues(vertices: np.ndarray, height: np.ndarray, above: np.ndarray, edge
         out["box"][np.nonzero(m)[0][~plate]] = True
     out["low"][inside] = ob["top"][oi] < opt.low_top_m
     out["narrow"][inside] = ob["footprint_minor"][oi] < opt.narrow_m
+    out["slender"][inside] = (ob["top"][oi] < opt.low_top_m) & (ob["footprint_minor"][oi] < opt.hedge_min_m)
     return out
 
 
-def near_unanimous(vertex_votes: np.ndarray, segments: np.ndarray | None, share: float) -> np.ndarray:
+def near_unanimous(vertex_votes: np.ndarray, segments: np.ndarray | None, share: float,
+                   min_votes: float = 0.0) -> np.ndarray:
     """(n,) bool: vertices whose own votes, or whose segment's, give one class at least ``share`` of
-    the mass (the floor below which no cue goes: near-unanimous evidence is left as it is)."""
+    the mass, from at least ``min_votes`` votes (one per view with ``vote_per_view``): the floor
+    below which no cue goes, near-unanimous evidence is left as it is."""
     v = np.asarray(vertex_votes, np.float64)
     if share <= 0 or share > 1:
         return np.zeros(len(v), bool)
     tot = v.sum(axis=1)
-    sure = (tot > 0) & (v.max(axis=1) >= share * tot)
+    sure = (tot > 0) & (tot >= min_votes) & (v.max(axis=1) >= share * tot)
     if segments is not None:
         seg = np.asarray(segments, np.int64)
         sv = np.zeros((int(seg.max()) + 1, v.shape[1]))
         np.add.at(sv, seg, v)
         st = sv.sum(axis=1)
-        s_sure = (st > 0) & (sv.max(axis=1) >= share * st)
+        s_sure = (st > 0) & (st >= min_votes) & (sv.max(axis=1) >= share * st)
         sure |= s_sure[seg]
     return sure
 
@@ -368,9 +379,11 @@ def context_prior(ctx: dict, opt: ContextOptions | None = None, cues=CUES) -> np
         prior[ctx["plate"], LIGHT] *= opt.mount_factor
         prior[ctx["box"], SIGN] *= opt.mount_factor
     if "low" in cues:
-        prior[ctx["low"], BUILDING] *= opt.shape_factor
+        prior[np.ix_(ctx["low"], [BUILDING, LIGHT])] *= opt.shape_factor
     if "narrow" in cues:
         prior[np.ix_(ctx["narrow"], list(WIDE_VEHICLES))] *= opt.shape_factor
+    if "slender" in cues:
+        prior[ctx["slender"], VEGETATION] *= opt.shape_factor
     return prior
 
 
@@ -436,7 +449,8 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     """The blended vote ``p`` (n, 19) with the geometric prior: (labels (n,) uint8, 255 where nothing
     voted; confidence; metrics with the vertices each cue touched and changed).
 
-    0. Vertices in ``keep`` (near-unanimous evidence, :func:`near_unanimous`) get no prior at all.
+    0. Vertices in ``keep`` (near-unanimous evidence, :func:`near_unanimous`) get no prior at all and
+       keep the plain vote's label through the fill and the smoothing.
     1. ``q = p * prior``; argmax.
     2. Vertices whose votes the cues explained away (less than ``min_retained`` of their vote mass
        survives the prior) take the most common label of their neighbours that their context
@@ -483,7 +497,7 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     if smooth_beta > 0:
         unary = q.copy()
         unary[ea] = allowed[ea]
-        lab, smoothed = potts_smooth(lab, unary, edges, smooth_beta, smooth_iters)
+        lab, smoothed = potts_smooth(lab, unary, edges, smooth_beta, smooth_iters, fixed=kept)
     metrics = {"cues": list(cues), "explained_away": int(ea.sum()), "changed": int((lab != base).sum()),
                "smoothed": smoothed,
                "step_cells": ctx["step_cells"], "objects": ctx["objects"],
@@ -496,12 +510,13 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
 
 
 def potts_smooth(labels: np.ndarray, unary: np.ndarray, edges: np.ndarray, beta: float = 1.0,
-                 iters: int = 5) -> tuple[np.ndarray, int]:
+                 iters: int = 5, fixed: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Label smoothing on the vertex graph (a Potts model solved by iterated conditional modes):
     each vertex takes ``argmax_c log unary(c) + beta * share of its neighbours labelled c``, a few
     sweeps (all vertices at once). ``unary`` (n, 19) is a class distribution per vertex (rows of
     zeros: no evidence, the vertex keeps its label and only votes for its neighbours). Unlabelled
-    vertices (255) neither vote nor change. Returns (labels, vertices changed)."""
+    vertices (255) neither vote nor change, nor do ``fixed`` ones (they still vote). Returns (labels,
+    vertices changed)."""
     from scipy import sparse
 
     lab = np.asarray(labels).copy()
@@ -514,6 +529,8 @@ def potts_smooth(labels: np.ndarray, unary: np.ndarray, edges: np.ndarray, beta:
     deg = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
     tot = unary.sum(axis=1)
     act = (tot > 0) & (lab < N_CLASSES)
+    if fixed is not None:
+        act &= ~np.asarray(fixed, bool)
     lu = np.log(np.maximum(unary[act] / tot[act, None], 1e-4))
     start = lab.copy()
     for _ in range(iters):

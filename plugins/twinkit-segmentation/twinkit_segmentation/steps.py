@@ -282,7 +282,8 @@ class BackprojectParams:
     curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
     band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
     min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
-    keep_share: float = 0.9  # a class with this share of a vertex's (or its segment's) votes: no cue acts (0 = off)
+    keep_share: float = 0.99  # the floor: a vertex whose own votes give one class this share (0 = off) ...
+    keep_votes: float = 16.0  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
     smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
     smooth_iters: int = 5
 
@@ -338,8 +339,8 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
         opt = context_options(params)
         keep = labels == IGNORE
-        sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None),
-                              seg if params.use_segments else None, params.keep_share)
+        sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None), None,
+                              params.keep_share, params.keep_votes)
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
                                                params.context_cues, min_retained=params.min_retained,
                                                smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
