@@ -8,7 +8,8 @@ points (normals flipped to face up where they point down; a point cloud has no f
 objects are the connected parts of a neighbour graph: points closer than ``--link-m``, a few
 times the scan's point spacing). Prints the objects and the share of points each cue flags;
 writes a picture: a top view of all cues and a side view of the objects (columns red, mounted
-items yellow (plates) / orange (boxes), low objects green, narrow ones blue, other objects grey).
+items yellow (plates) / orange (boxes), low objects green, narrow ones blue, low and slender ones
+purple, other objects grey; later colours drawn over earlier ones).
 Nothing is scored (no labels) and nothing is tuned here.
 """
 from __future__ import annotations
@@ -67,6 +68,7 @@ def picture(v: np.ndarray, ctx: dict, out: Path) -> None:
     obj = (h > 0.30) & ~ctx["ground"]
     col = np.full((len(v), 3), 235, np.uint8)
     layers = [(obj, (150, 150, 150)), (ctx["low"], (60, 170, 60)), (ctx["narrow"], (60, 110, 230)),
+              (ctx["slender"], (170, 60, 200)),
               (ctx["column"], (220, 30, 30)), (ctx["plate"], (240, 210, 0)), (ctx["box"], (255, 130, 0))]
     for mask, c in layers:
         col[mask] = c

@@ -7,7 +7,7 @@ from twinkit.cityscapes import N_CLASSES
 from twinkit.mesh import edges as mesh_edges
 from twinkit.mesh.core import vertex_normals
 from twinkit.surface.localground import LocalGround
-from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, geometric_context
+from twinkit_segmentation.context import CUES, DEFAULT_CUES, ContextOptions, fuse_with_context, geometric_context
 
 ROAD, SIDEWALK, BUILDING, VEGETATION, TERRAIN, CAR = 0, 1, 2, 8, 9, 13
 
@@ -197,6 +197,7 @@ def test_backproject_step_context_metrics_and_bad_cue_name(tmp_path, scene_files
     gt_car = vlab == CAR
     # the ground voted car is ground again with the context; the plain vote keeps it car
     assert ((on == CAR) & ~gt_car).sum() < ((off == CAR) & ~gt_car).sum()
+    assert BackprojectParams().context_cues == list(DEFAULT_CUES)  # the step and the library agree
     with pytest.raises(InputError, match="context_cues"):
         run_step(step, tmp_path / "bad", ins, BackprojectParams(context_cues=["ground", "kerb"]))
 
@@ -362,12 +363,13 @@ def test_slender_cue_a_fence_panel_is_no_vegetation_a_hedge_is():
     v, n, e, (mf, mh) = scene(fence, hedge)
     p = votes(len(v), road=1.0)
     p[mf | mh] = votes(1, vegetation=0.6, fence=0.4)  # the park behind the fence shows through it
-    lab, _, met = fuse_with_context(p, v, n, e)
+    lab, _, met = fuse_with_context(p, v, n, e, cues=CUES)  # slender is not on by default
     panel = mf & (v[:, 2] > 0.35)
     assert (lab[panel] == FENCE).all() and met["slender_changed"] > 0
     assert (lab[mh] == VEGETATION).all()
     off, _, _ = fuse_with_context(p, v, n, e, cues=[c for c in CUES if c != "slender"])
     assert (off[panel] == VEGETATION).all()
+    assert (fuse_with_context(p, v, n, e)[0][panel] == VEGETATION).all() and "slender" not in DEFAULT_CUES
 
 
 def test_low_cue_no_signal_head_on_a_low_object():

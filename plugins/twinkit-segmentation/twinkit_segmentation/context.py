@@ -74,6 +74,9 @@ WIDE_VEHICLES = (13, 14, 15, 16)
 VEGETATION = 8
 SHAPE_CUES = ("column", "mounted", "low", "narrow", "slender")
 CUES = ("ground", "raised", "high", "curb") + SHAPE_CUES
+#: on by default: every cue that helped on each measured seed (slender helps only where the 2D model
+#: votes fence at all; docs/segmentation.md "Shape cues")
+DEFAULT_CUES = tuple(c for c in CUES if c != "slender")
 
 
 @dataclass
@@ -442,7 +445,7 @@ def fill_allowed(labels: np.ndarray, missing: np.ndarray, allowed: np.ndarray, e
 
 
 def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray,
-                      opt: ContextOptions | None = None, cues=CUES, segments: np.ndarray | None = None,
+                      opt: ContextOptions | None = None, cues=DEFAULT_CUES, segments: np.ndarray | None = None,
                       segment_weight: float = 0.0, min_retained: float = 0.2,
                       smooth_beta: float = 0.0, smooth_iters: int = 5,
                       keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:

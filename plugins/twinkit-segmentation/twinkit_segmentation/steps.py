@@ -270,7 +270,10 @@ class BackprojectParams:
     # 3D context (docs/segmentation.md "3D context in the vote"): geometric cues from the mesh scale the
     # blended vote; lengths are physical sizes, not tuned to a site
     context: bool = True  # False = no geometric cues (with smooth_beta 0 too: the plain blended vote)
-    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb"])
+    # all of context.CUES but slender, which helps only where the model votes fence at all
+    # (docs/segmentation.md "Shape cues")
+    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb", "column", "mounted",
+                                                             "low", "narrow"])
     ground_window_m: float = 3.0  # local ground window: wider than the widest vehicle (2.55 m)
     max_curb_m: float = 0.30  # up-facing, at most this above the local ground = ground (the highest curb)
     min_object_m: float = 0.50  # more than this above the local ground = not road / sidewalk / terrain
