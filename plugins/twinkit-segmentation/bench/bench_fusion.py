@@ -73,7 +73,8 @@ def main(argv=None) -> int:
     # (name, cues, beta, variant, floor (share, votes) or None)
     k = (bp.keep_share, bp.keep_votes)
     fk = f"floor {k[0]:g} of >= {k[1]:g} votes"
-    old_rows = [("plain blended vote", (), 0.0, None, None), (f"plain + Potts smoothing (beta {b:g})", (), b, None, None)] + \
+    old_rows = [("plain blended vote", (), 0.0, None, None),
+                (f"plain + Potts smoothing (beta {b:g})", (), b, None, None)] + \
         [(f"{c} only", (c,), 0.0, None, None) for c in old] + \
         [(f"all but {c}", tuple(x for x in old if x != c), 0.0, None, None) for c in old] + \
         [("ground, raised, high, curb", old, 0.0, None, None),
@@ -84,8 +85,8 @@ def main(argv=None) -> int:
         [(f"+ {c}", old + (c,), b, None, k) for c in SHAPE_CUES] + \
         [(f"+ all shape cues but {c}", tuple(x for x in CUES if x != c), b, None, k) for c in SHAPE_CUES] + \
         [("+ all shape cues", CUES, b, None, k)]
-    floor_rows = [("all cues + Potts, no floor", CUES, b, None, None)] + \
-        [(f"all cues + Potts, floor {s_:g} of >= {n_:g} votes", CUES, b, None, (s_, n_))
+    floor_rows = [("default cues + Potts, no floor", default, b, None, None)] + \
+        [(f"default cues + Potts, floor {s_:g} of >= {n_:g} votes", default, b, None, (s_, n_))
          for s_, n_ in ((0.9, 0), (0.99, 0), (0.99, 8), (0.99, 16), (1.0, 32))]
     last = [(f"**default ({', '.join(default)} + Potts, {fk})**", default, b, None, k)]
     configs = {"all": old_rows + shape_rows + last, "shape": shape_rows + last, "floor": floor_rows,

@@ -350,10 +350,11 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
                                                keep=sure)
         labels[keep] = IGNORE  # too few votes stays too few votes
         t_ctx = time.perf_counter() - t1
-        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, %.2f s",
+        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, "
+                     "%d objects above the ground, %d near-unanimous vertices kept against a cue, %.2f s",
                      "+".join(cmet["cues"]), cmet["changed"],
                      ", ".join(f"{c} {cmet[c + '_changed']}" for c in cmet["cues"]), cmet["explained_away"],
-                     cmet["smoothed"], t_ctx)
+                     cmet["smoothed"], cmet["objects"], cmet["kept_unanimous"], t_ctx)
     elif params.smooth_beta > 0:
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
