@@ -285,8 +285,8 @@ class BackprojectParams:
     curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
     band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
     min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
-    keep_share: float = 0.99  # the floor: a vertex whose own votes give one class this share (0 = off) ...
-    keep_votes: float = 16.0  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
+    keep_share: float = 1.0  # the floor: a vertex whose own votes give one class this share (0 = off) ...
+    keep_votes: float = 32.0  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
     smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
     smooth_iters: int = 5
 
