@@ -44,9 +44,10 @@ footprint (its horizontal extent along its principal axes) and a horizontal *sli
 - ``slender``: a low object (top under ``low_top_m``) thinner than ``hedge_min_m`` is no vegetation
   (a fence, a wall, a bicycle, a bollard; even a trimmed hedge is thicker).
 
-``keep_share`` is the floor for near-unanimous evidence: a vertex whose own votes, or whose
-segment's, give one class at least that share is left as the votes say by every cue
-(:func:`near_unanimous`).
+The floor for near-unanimous evidence (``fuse_with_context(keep=...)``, from
+:func:`near_unanimous`): a vertex whose own votes (or, if asked, its segment's) give one class a
+share of at least ``keep_share`` from at least ``keep_votes`` views (``backproject``'s params) gets
+no prior and keeps the plain vote's label through the fill and the smoothing.
 
 The curb's own face and rounded edge (not up-facing) join the band with ``curb_face``. Votes the
 cues explain away are replaced by the neighbours' allowed labels (:func:`fill_allowed`), on a band
