@@ -380,3 +380,14 @@ def test_low_cue_no_signal_head_on_a_low_object():
     body = mb & (v[:, 2] > 0.35)
     assert (fuse_with_context(p, v, n, e)[0][body] == POLE).all()
     assert (fuse_with_context(p, v, n, e, cues=SHAPE_OFF["low"])[0][body] == LIGHT).all()
+
+
+def test_objects_join_parts_that_share_positions_a_car_built_of_separate_sides_stays_one_car():
+    from twinkit_segmentation.synthetic import box
+
+    bv, bf, _ = box((4, -1, 0.3), (8.4, 0.8, 1.5), 0.2)  # each side its own vertex set (a texture seam)
+    v, n, e, (mc,) = scene((bv, bf))
+    p = votes(len(v), road=1.0)
+    p[mc] = votes(1, car=0.6, motorcycle=0.4)
+    lab, _, met = fuse_with_context(p, v, n, e)
+    assert met["objects"] == 1 and (lab[mc] == CAR).all()  # one 1.8 m wide object, not five narrow panels

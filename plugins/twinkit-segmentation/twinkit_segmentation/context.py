@@ -177,6 +177,12 @@ def objects_above_ground(vertices: np.ndarray, height: np.ndarray, above: np.nda
     if len(idx) == 0:
         return res
     e = np.asarray(edges, np.int64).reshape(-1, 2)
+    # vertices at one position (duplicated along a texture seam, or where separately built parts
+    # meet) are one: link each to the first of its millimetre cell
+    q = np.floor(v[idx] / 1e-3).astype(np.int64)
+    _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
+    dup = idx[first[inv.ravel()]] != idx
+    e = np.vstack([e, np.column_stack([idx[dup], idx[first[inv.ravel()]][dup]])])
     e = e[above[e[:, 0]] & above[e[:, 1]]]
     graph = sparse.csr_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
     _, comp = connected_components(graph, directed=False)
