@@ -24,7 +24,8 @@ Objects above the ground (:func:`objects_above_ground`): the vertices above the 
 (``max_curb_m``) that are not ground, split into the connected parts of the mesh they form (a
 pole, a sign plate, a car, a hedge, a building's facade). Each object has a top, a bottom, a
 footprint (its horizontal extent along its principal axes) and a horizontal *slice* per
-``slice_m`` of height, with the slice's own extent. Four shape cues read them (``SHAPE_CUES``):
+``slice_m`` of height, with the slice's own extent. Five shape cues read them (``SHAPE_CUES``;
+all but ``slender`` on by default, ``DEFAULT_CUES``):
 
 - ``column``: a vertex in a slice at most ``column_width_m`` across, of an object whose thin
   slices span at least ``column_span_m``, whose top stands at least ``column_top_m`` up and that
@@ -34,8 +35,8 @@ footprint (its horizontal extent along its principal axes) and a horizontal *sli
 - ``mounted``: a compact item ``mount_min_m``..``mount_max_m`` up, either the wider slices of a
   column or an object that floats (its bottom ``float_m`` above the ground, at most ``compact_m``
   in any direction: carried by a post too thin for the scan) free, at least ``clear_m`` from any
-  larger object (else it is a fragment of a facade or a crown the mesh split off): everything but pole, light and sign
-  x ``shape_factor``; a thin plate (thinner than ``plate_m`` with its post) is a sign (light x
+  larger object (else it is a fragment of a facade or a crown the mesh split off): everything but
+  pole, light and sign x ``shape_factor``; a thin plate (thinner than ``plate_m`` with its post) is a sign (light x
   ``mount_factor``), a bulkier box a signal head (sign x ``mount_factor``).
 - ``low``: an object whose top stands less than ``low_top_m`` above the ground is no building and
   carries no signal head (those hang with their lower edge 2 m up or more): building and traffic
