@@ -284,7 +284,10 @@ class BackprojectParams:
     # 3D context (docs/segmentation.md "3D context in the vote"): geometric cues from the mesh scale the
     # blended vote; lengths are physical sizes, not tuned to a site
     context: bool = True  # False = no geometric cues (with smooth_beta 0 too: the plain blended vote)
-    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb"])
+    # all of context.CUES but slender, which helps only where the model votes fence at all
+    # (docs/segmentation.md "Shape cues")
+    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb", "column", "mounted",
+                                                             "low", "narrow"])
     ground_window_m: float = 3.0  # local ground window: wider than the widest vehicle (2.55 m)
     max_curb_m: float = 0.30  # up-facing, at most this above the local ground = ground (the highest curb)
     min_object_m: float = 0.50  # more than this above the local ground = not road / sidewalk / terrain
@@ -296,8 +299,23 @@ class BackprojectParams:
     curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
     band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
     min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
+    keep_share: float = 1.0  # the floor: a vertex whose own votes give one class this share (0 = off) ...
+    keep_votes: float = 32.0  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
     smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
     smooth_iters: int = 5
+
+
+def context_options(params: BackprojectParams):
+    """The :class:`ContextOptions` of ``backproject``'s params (the bench fuses with the same)."""
+    from twinkit_segmentation.context import ContextOptions
+
+    return ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
+                          min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
+                          min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
+                          ground_factor=params.context_factor, raised_factor=params.context_factor,
+                          high_factor=params.context_factor, curb_factor=params.curb_factor,
+                          curb_face=params.curb_face, band_default=params.band_default,
+                          shape_factor=params.context_factor)
 
 
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
@@ -309,7 +327,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import edges as mesh_edges, read_mesh
     from twinkit_segmentation.segmesh import write_labels_ply
-    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, potts_smooth
+    from twinkit_segmentation.context import CUES, fuse_with_context, near_unanimous, potts_smooth
     from twinkit_segmentation.metrics import _weighted_votes, blend_distribution, decide_distribution, propagate
     from twinkit_segmentation.segmesh import unit_normals
 
@@ -336,22 +354,21 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     if params.context and params.context_cues:
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
-        opt = ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
-                             min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
-                             min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
-                             ground_factor=params.context_factor, raised_factor=params.context_factor,
-                             high_factor=params.context_factor, curb_factor=params.curb_factor,
-                             curb_face=params.curb_face, band_default=params.band_default)
+        opt = context_options(params)
         keep = labels == IGNORE
+        sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None), None,
+                              params.keep_share, params.keep_votes)
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
                                                params.context_cues, min_retained=params.min_retained,
-                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters)
+                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
+                                               keep=sure)
         labels[keep] = IGNORE  # too few votes stays too few votes
         t_ctx = time.perf_counter() - t1
-        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, %.2f s",
+        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, "
+                     "%d objects above the ground, %d near-unanimous vertices kept against a cue, %.2f s",
                      "+".join(cmet["cues"]), cmet["changed"],
                      ", ".join(f"{c} {cmet[c + '_changed']}" for c in cmet["cues"]), cmet["explained_away"],
-                     cmet["smoothed"], t_ctx)
+                     cmet["smoothed"], cmet["objects"], cmet["kept_unanimous"], t_ctx)
     elif params.smooth_beta > 0:
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
