@@ -7,7 +7,7 @@ from twinkit.cityscapes import N_CLASSES
 from twinkit.mesh import edges as mesh_edges
 from twinkit.mesh.core import vertex_normals
 from twinkit.surface.localground import LocalGround
-from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, geometric_context
+from twinkit_segmentation.context import CUES, DEFAULT_CUES, ContextOptions, fuse_with_context, geometric_context
 
 ROAD, SIDEWALK, BUILDING, VEGETATION, TERRAIN, CAR = 0, 1, 2, 8, 9, 13
 
@@ -197,5 +197,197 @@ def test_backproject_step_context_metrics_and_bad_cue_name(tmp_path, scene_files
     gt_car = vlab == CAR
     # the ground voted car is ground again with the context; the plain vote keeps it car
     assert ((on == CAR) & ~gt_car).sum() < ((off == CAR) & ~gt_car).sum()
+    assert BackprojectParams().context_cues == list(DEFAULT_CUES)  # the step and the library agree
     with pytest.raises(InputError, match="context_cues"):
         run_step(step, tmp_path / "bad", ins, BackprojectParams(context_cues=["ground", "kerb"]))
+
+
+# ------------------------------------------------------------------ objects above the ground and their shape
+WALL, FENCE, POLE, LIGHT, SIGN, MOTORCYCLE, BICYCLE = 3, 4, 5, 6, 7, 17, 18
+SHAPE_OFF = {c: [x for x in CUES if x != c] for c in ("column", "mounted", "low", "narrow", "slender")}
+
+
+def solid_box(lo, hi, step=0.1, top=True):
+    """A box's closed surface (welded, outward faces) subdivided to about ``step``: (vertices, faces);
+    ``top=False`` leaves the roof out (what a street scanner sees of a building)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    verts, faces = [], []
+    sides = [(0, 1, 2, lo[2], -1), (0, 1, 2, hi[2], 1), (0, 2, 1, lo[1], 1), (0, 2, 1, hi[1], -1),
+             (1, 2, 0, lo[0], -1), (1, 2, 0, hi[0], 1)]
+    for a, b, c, val, sign in sides:
+        if c == 2 and val == hi[2] and not top:
+            continue
+        ua = np.linspace(lo[a], hi[a], max(2, int(np.ceil((hi[a] - lo[a]) / step)) + 1))
+        ub = np.linspace(lo[b], hi[b], max(2, int(np.ceil((hi[b] - lo[b]) / step)) + 1))
+        A, B = np.meshgrid(ua, ub)
+        p = np.zeros((A.size, 3))
+        p[:, a], p[:, b], p[:, c] = A.ravel(), B.ravel(), val
+        na = len(ua)
+        i, j = np.meshgrid(np.arange(na - 1), np.arange(len(ub) - 1))
+        q = (j * na + i).ravel()
+        t = np.vstack([np.column_stack([q, q + 1, q + na + 1]), np.column_stack([q, q + na + 1, q + na])])
+        # outward: the cross product of the grid axes a x b points along +c for (a, b, c) cyclic
+        cyclic = (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1))
+        if (sign > 0) != cyclic:
+            t = t[:, ::-1]
+        faces.append(t + sum(len(x) for x in verts))
+        verts.append(p)
+    v = np.vstack(verts)
+    _, first, inv = np.unique(np.round(v, 6), axis=0, return_index=True, return_inverse=True)
+    return v[first], inv.ravel()[np.vstack(faces)]
+
+
+def scene(*parts, ground=(20.0, 20.0)):
+    """A flat ground grid plus solids: (vertices, normals, edges, [vertex mask of each solid])."""
+    gv, gf, _, _ = heightfield(lambda x, y: 0.0 * x, size=ground)
+    vs, fs, masks, off = [gv], [gf], [], len(gv)
+    for v, f in parts:
+        vs.append(v)
+        fs.append(f + off)
+        off += len(v)
+    v, f = np.vstack(vs), np.vstack(fs)
+    start = len(gv)
+    for pv, _ in parts:
+        m = np.zeros(len(v), bool)
+        m[start:start + len(pv)] = True
+        masks.append(m)
+        start += len(pv)
+    return v, vertex_normals(v, f), mesh_edges(f, len(v)), masks
+
+
+def test_objects_above_the_ground_split_and_measure_a_post_and_a_wall():
+    from twinkit_segmentation.context import objects_above_ground
+
+    post = solid_box([0, 0, 0], [0.2, 0.2, 4.0], top=False)
+    wall = solid_box([3, -4, 0], [3.25, 4, 1.9])
+    v, n, e, (mp, mw) = scene(post, wall)
+    h = LocalGround(v, n).height(v)
+    ob = objects_above_ground(v, h, h > 0.3, e)
+    assert ob["n_objects"] == 2
+    op, ow = ob["object"][mp & (h > 0.3)][0], ob["object"][mw & (h > 0.3)][0]
+    assert abs(ob["top"][op] - 4.0) < 0.05 and abs(ob["top"][ow] - 1.9) < 0.05
+    assert ob["footprint_minor"][ow] < 0.3 and ob["footprint_major"][ow] > 7.9  # thin and long
+    assert ob["thin_span"][op] > 3.5 and ob["thin_span"][ow] == 0
+    assert (ob["slice_major"][mp & (h > 0.3)] < 0.3).all()
+
+
+def test_column_cue_a_thin_post_is_pole_a_tree_trunk_under_its_crown_is_not():
+    post = solid_box([0, 0, 0], [0.2, 0.2, 4.0], top=False)
+    trunk = solid_box([6, 0, 0], [6.25, 0.25, 2.8], top=False)
+    crown = solid_box([4.6, -1.4, 2.8], [7.6, 1.6, 5.5])
+    v, n, e, (mp, mt, mc) = scene(post, trunk, crown)
+    p = votes(len(v), road=1.0)
+    p[mp] = votes(1, building=0.6, pole=0.4)  # the facade behind the post takes most of its pixels
+    p[mt] = votes(1, vegetation=0.6, pole=0.4)
+    p[mc] = votes(1, vegetation=1.0)
+    shaft = mp & (v[:, 2] > 0.5)
+    lab, _, met = fuse_with_context(p, v, n, e)
+    assert (lab[shaft] == POLE).all() and met["column_changed"] > 0
+    assert (lab[mt & (v[:, 2] > 0.5)] == VEGETATION).all()  # a trunk (CityScapes: vegetation) stays
+    off, _, _ = fuse_with_context(p, v, n, e, cues=SHAPE_OFF["column"])
+    assert (off[shaft] == BUILDING).all()
+
+
+def test_mounted_cue_a_free_plate_is_a_sign_a_box_on_a_post_is_a_light():
+    plate = solid_box([0, 0, 2.1], [0.65, 0.03, 2.75], step=0.05)  # on a post too thin for the scan
+    post = solid_box([5, 0, 0], [5.15, 0.15, 3.6], top=False)
+    head = solid_box([5.15, -0.05, 2.45], [5.45, 0.25, 3.4], step=0.05)
+    facade = solid_box([-6, 6, 0], [6, 14, 10], top=False)
+    chip = solid_box([0, 5.7, 3.0], [0.5, 5.9, 3.5], step=0.05)  # a bit of facade the mesh split off
+    v, n, e, (mpl, mpo, mh, mf, mch) = scene(plate, post, head, facade, chip)
+    p = votes(len(v), road=1.0)
+    p[mpl] = votes(1, building=0.5, vegetation=0.14, light=0.2, sign=0.16)  # light ahead: a plate is a sign
+    p[mpo | mh] = votes(1, building=0.5, sign=0.2, light=0.16, pole=0.14)  # sign ahead: a box is a light
+    p[mf | mch] = votes(1, building=0.6, sign=0.4)
+    lab, _, met = fuse_with_context(p, v, n, e)
+    assert (lab[mpl] == SIGN).mean() > 0.95 and met["mounted_changed"] > 0
+    assert (lab[mh] == LIGHT).mean() > 0.9
+    assert (lab[mch] == BUILDING).all() and (lab[mf] == BUILDING).all()  # a facade fragment is no sign
+    off, _, _ = fuse_with_context(p, v, n, e, cues=SHAPE_OFF["mounted"])
+    assert (off[mpl] == BUILDING).all() and (off[mh] == BUILDING).all()
+
+
+def test_low_cue_a_two_metre_wall_is_no_building_a_facade_is():
+    wall = solid_box([-5, 0, 0], [5, 0.25, 1.9])
+    facade = solid_box([-5, 5, 0], [5, 12, 9], top=False)
+    v, n, e, (mw, mf) = scene(wall, facade, ground=(24.0, 30.0))
+    p = votes(len(v), road=1.0)
+    p[mw | mf] = votes(1, building=0.6, wall=0.4)
+    lab, _, met = fuse_with_context(p, v, n, e)
+    face = mw & (v[:, 2] > 0.5)
+    assert (lab[face] == WALL).all() and met["low_changed"] > 0
+    assert (lab[mf & (v[:, 2] > 0.5)] == BUILDING).all()
+    off, _, _ = fuse_with_context(p, v, n, e, cues=SHAPE_OFF["low"])
+    assert (off[face] == BUILDING).all()
+
+
+def test_narrow_cue_a_motorcycle_is_no_car_a_car_is():
+    moto = solid_box([0, 0, 0.3], [2.0, 0.6, 1.1], step=0.05)
+    car = solid_box([4, -1, 0.3], [8.4, 0.8, 1.5])
+    v, n, e, (mm, mc) = scene(moto, car)
+    p = votes(len(v), road=1.0)
+    p[mm | mc] = votes(1, car=0.6, motorcycle=0.4)
+    lab, _, met = fuse_with_context(p, v, n, e)
+    body = mm & (v[:, 2] > 0.35)  # above the highest curb: part of an object
+    assert (lab[body] == MOTORCYCLE).all() and met["narrow_changed"] > 0
+    assert (lab[mc] == CAR).all()
+    off, _, _ = fuse_with_context(p, v, n, e, cues=SHAPE_OFF["narrow"])
+    assert (off[body] == CAR).all()
+
+
+def test_floor_unanimous_votes_survive_the_cues():
+    from twinkit_segmentation.context import near_unanimous
+
+    v, f, n, e = heightfield(lambda x, y: 0.0 * x, size=(8.0, 8.0))
+    raw = np.zeros((len(v), N_CLASSES))
+    raw[:, ROAD] = 10.0
+    bike = in_box(v, -0.3, 0.3, -0.3, 0.3)  # a wheel's contact patch, flat on the ground
+    raw[bike] = 0.0
+    raw[bike, BICYCLE] = 12.0  # every view: bicycle
+    weak = in_box(v, 2.0, 2.4, 2.0, 2.4)
+    raw[weak, ROAD], raw[weak, BICYCLE] = 2.0, 8.0  # 80 %: the ground cue wins there
+    p = raw / raw.sum(axis=1, keepdims=True)
+    sure = near_unanimous(raw, None, 0.9)
+    assert sure[bike].all() and not sure[weak].any()
+    lab, _, met = fuse_with_context(p, v, n, e, keep=sure)
+    assert (lab[bike] == BICYCLE).all() and (lab[weak] == ROAD).all() and met["kept_unanimous"] == bike.sum()
+    off, _, _ = fuse_with_context(p, v, n, e)
+    assert (off[bike] == ROAD).all()
+    seg = np.zeros(len(v), np.int64)  # one segment, road by far: its share reaches the floor for all
+    assert near_unanimous(raw, seg, 0.9).all() and not near_unanimous(raw, None, 0).any()
+
+
+def test_slender_cue_a_fence_panel_is_no_vegetation_a_hedge_is():
+    fence = solid_box([-4, 0, 0], [4, 0.08, 1.4], step=0.07)
+    hedge = solid_box([-4, 4, 0], [4, 4.8, 1.4])
+    v, n, e, (mf, mh) = scene(fence, hedge)
+    p = votes(len(v), road=1.0)
+    p[mf | mh] = votes(1, vegetation=0.6, fence=0.4)  # the park behind the fence shows through it
+    lab, _, met = fuse_with_context(p, v, n, e, cues=CUES)  # slender is not on by default
+    panel = mf & (v[:, 2] > 0.35)
+    assert (lab[panel] == FENCE).all() and met["slender_changed"] > 0
+    assert (lab[mh] == VEGETATION).all()
+    off, _, _ = fuse_with_context(p, v, n, e, cues=[c for c in CUES if c != "slender"])
+    assert (off[panel] == VEGETATION).all()
+    assert (fuse_with_context(p, v, n, e)[0][panel] == VEGETATION).all() and "slender" not in DEFAULT_CUES
+
+
+def test_low_cue_no_signal_head_on_a_low_object():
+    box = solid_box([0, 0, 0], [0.4, 0.4, 1.2], step=0.05)  # a control cabinet at the kerb
+    v, n, e, (mb,) = scene(box)
+    p = votes(len(v), road=1.0)
+    p[mb] = votes(1, light=0.6, pole=0.4)
+    body = mb & (v[:, 2] > 0.35)
+    assert (fuse_with_context(p, v, n, e)[0][body] == POLE).all()
+    assert (fuse_with_context(p, v, n, e, cues=SHAPE_OFF["low"])[0][body] == LIGHT).all()
+
+
+def test_objects_join_parts_that_share_positions_a_car_built_of_separate_sides_stays_one_car():
+    from twinkit_segmentation.synthetic import box
+
+    bv, bf, _ = box((4, -1, 0.3), (8.4, 0.8, 1.5), 0.2)  # each side its own vertex set (a texture seam)
+    v, n, e, (mc,) = scene((bv, bf))
+    p = votes(len(v), road=1.0)
+    p[mc] = votes(1, car=0.6, motorcycle=0.4)
+    lab, _, met = fuse_with_context(p, v, n, e)
+    assert met["objects"] == 1 and (lab[mc] == CAR).all()  # one 1.8 m wide object, not five narrow panels

@@ -201,3 +201,84 @@ def test_manual_correction_round_trip(scene_files, tmp_path):
     with pytest.raises(InputError, match="order"):
         run_step(_plugin("step", "import_labels"), tmp_path / "imp3",
                  {"in_labels_ply": bad, "in_labels_npy": labels_npy, "in_textured_mesh_ply": mesh_ply})
+
+
+def test_below_horizon_follows_the_camera_pitch():
+    from twinkit_segmentation.render import below_horizon
+    from twinkit_segmentation.views import view_matrices
+
+    level = {"position": [0, 0, 1.5], "heading_deg": 30.0, "pitch_deg": 0.0, "hfov_deg": 75.0, "width": 64, "height": 32}
+    b = below_horizon(*view_matrices(level), 64, 32)
+    assert not b[:16].any() and b[16:].all()  # a level camera: the horizon is the middle row
+    down = dict(level, pitch_deg=-10.0)
+    b = below_horizon(*view_matrices(down), 64, 32)
+    assert 0 < np.argmax(b[:, 32]) < 16  # pitched down: the horizon moves up
+    assert b[:, 0].sum() == b[:, 63].sum()  # no roll
+
+
+def _ground_with_hole(hole: float, extent: float = 30.0, step: float = 0.5):
+    """A flat, 1 m-grid street floor from -extent/2..extent/2 with a square hole of side ``hole`` at (6, 0)."""
+    xs = np.arange(-extent / 2, extent / 2 + step / 2, step)
+    gx, gy = np.meshgrid(xs, xs, indexing="ij")
+    v = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    n = len(xs)
+    faces = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            cx, cy = xs[i] + step / 2, xs[j] + step / 2
+            if abs(cx - 6.0) < hole / 2 and abs(cy) < hole / 2:
+                continue
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            faces += [[a, b, c], [a, c, d]]
+    return v, np.asarray(faces)
+
+
+@needs_egl
+def test_holes_in_the_ground_are_filled_but_cast_no_vote():
+    from twinkit_segmentation.render import Renderer, below_horizon, fill_from_nearest, ground_holes
+    from twinkit_segmentation.views import view_matrices
+
+    v, f = _ground_with_hole(1.0)
+    r = Renderer(v, f, None, None, 160, 80)
+    view = {"position": [0, 0, 1.5], "heading_deg": 0.0, "pitch_deg": -12.0, "hfov_deg": 75.0, "width": 160, "height": 80}
+    vm, pm = view_matrices(view)
+    rgb, vid = r.render(vm, pm)
+    r.release()
+    sky = np.all(rgb == [135, 206, 235], axis=2)
+    below = below_horizon(vm, pm, 160, 80)
+    holes = ground_holes(vid >= 0, below, 8)
+    floor_rows = np.arange(80)[:, None] >= np.argmax((vid >= 0).any(axis=1))  # the floor's far edge and nearer
+    assert (sky & below & floor_rows).sum() > 10  # the hole shows the sky colour below the horizon
+    assert holes[sky & below & floor_rows].all()
+    n = fill_from_nearest(rgb, holes, vid >= 0)
+    assert n == holes.sum()
+    assert not np.all(rgb == [135, 206, 235], axis=2)[holes].any()  # painted with the floor's grey
+    assert (vid[holes] < 0).all()  # and still no vertex: no vote comes from a filled pixel
+    # the world past the floor's far edge is a wide gap: left as background, not smeared
+    far = sky & below & ~floor_rows
+    assert far.sum() > 100 and not holes[far].any()
+
+
+@needs_egl
+def test_render_views_step_fills_holes_by_default(tmp_path):
+    from PIL import Image
+
+    from twinkit.mesh import Mesh, write_ply
+    from twinkit_segmentation.steps import RenderParams
+
+    v, f = _ground_with_hole(1.0)
+    mesh_path = tmp_path / "m.ply"
+    write_ply(mesh_path, Mesh(v, f))
+    view = {"id": "v0", "sampler": "test", "position": [0, 0, 1.5], "heading_deg": 0.0, "pitch_deg": -12.0,
+            "hfov_deg": 75.0, "width": 160, "height": 80}
+    (tmp_path / "views.json").write_text(json.dumps({"views": [view]}))
+    sky_low = {}
+    for fill in (True, False):
+        out = run_step(_plugin("step", "render_views"), tmp_path / f"r{fill}",
+                       {"in_textured_mesh_ply": mesh_path, "in_views_json": tmp_path / "views.json"},
+                       params=RenderParams(fill_holes=fill, max_empty_fraction=0.9))
+        index = json.loads((out["renders"] / "index.json").read_text())
+        assert index["kept"][0]["hole_fraction"] > 0  # counted either way
+        rgb = np.asarray(Image.open(out["renders"] / "v0.png").convert("RGB"))
+        sky_low[fill] = int(np.all(rgb[32:] == [135, 206, 235], axis=2).sum())  # the hole (the floor: rows 32-79)
+    assert sky_low[False] > 10 and sky_low[True] == 0

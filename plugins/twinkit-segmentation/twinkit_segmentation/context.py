@@ -20,6 +20,36 @@ unanimous evidence can still win over a cue and nothing is decided by the cue al
   ``max_curb_m`` above the step's foot, lies on a raised band beside a lower surface: a
   sidewalk (or a verge), not the carriageway. Road is scaled by ``curb_factor``.
 
+Objects above the ground (:func:`objects_above_ground`): the vertices above the highest curb
+(``max_curb_m``) that are not ground, split into the connected parts of the mesh they form (a
+pole, a sign plate, a car, a hedge, a building's facade). Each object has a top, a bottom, a
+footprint (its horizontal extent along its principal axes) and a horizontal *slice* per
+``slice_m`` of height, with the slice's own extent. Five shape cues read them (``SHAPE_CUES``;
+all but ``slender`` on by default, ``DEFAULT_CUES``):
+
+- ``column``: a vertex in a slice at most ``column_width_m`` across, of an object whose thin
+  slices span at least ``column_span_m``, whose top stands at least ``column_top_m`` up and that
+  carries no crown (no slice ``crown_m`` wide both ways, and no such object above it): a post, not
+  building, vegetation, a vehicle. Everything but pole, traffic light and sign is scaled by
+  ``shape_factor``.
+- ``mounted``: a compact item ``mount_min_m``..``mount_max_m`` up, either the wider slices of a
+  column or an object that floats (its bottom ``float_m`` above the ground, at most ``compact_m``
+  in any direction: carried by a post too thin for the scan) free, at least ``clear_m`` from any
+  larger object (else it is a fragment of a facade or a crown the mesh split off): everything but
+  pole, light and sign x ``shape_factor``; a thin plate (thinner than ``plate_m`` with its post) is a sign (light x
+  ``mount_factor``), a bulkier box a signal head (sign x ``mount_factor``).
+- ``low``: an object whose top stands less than ``low_top_m`` above the ground is no building and
+  carries no signal head (those hang with their lower edge 2 m up or more): building and traffic
+  light x ``shape_factor``.
+- ``narrow``: an object whose footprint is narrower than ``narrow_m`` is no car, truck, bus or train.
+- ``slender``: a low object (top under ``low_top_m``) thinner than ``hedge_min_m`` is no vegetation
+  (a fence, a wall, a bicycle, a bollard; even a trimmed hedge is thicker).
+
+The floor for near-unanimous evidence (``fuse_with_context(keep=...)``, from
+:func:`near_unanimous`): a vertex whose own votes (or, if asked, its segment's) give one class a
+share of at least ``keep_share`` from at least ``keep_votes`` views (``backproject``'s params) gets
+no prior and keeps the plain vote's label through the fill and the smoothing.
+
 The curb's own face and rounded edge (not up-facing) join the band with ``curb_face``. Votes the
 cues explain away are replaced by the neighbours' allowed labels (:func:`fill_allowed`), on a band
 by sidewalk (``band_default``); :func:`potts_smooth` smooths the result on the vertex graph.
@@ -38,7 +68,17 @@ ROAD, SIDEWALK, TERRAIN = 0, 1, 9
 GROUND_CLASSES = (ROAD, SIDEWALK, TERRAIN)
 #: people and vehicles (person, rider, car, truck, bus, train, motorcycle, bicycle)
 MOVABLE_CLASSES = (11, 12, 13, 14, 15, 16, 17, 18)
-CUES = ("ground", "raised", "high", "curb")
+#: the classes of street furniture: pole, traffic light, traffic sign
+POLE, LIGHT, SIGN = 5, 6, 7
+BUILDING = 2
+#: vehicles with four wheels or more (car, truck, bus, train)
+WIDE_VEHICLES = (13, 14, 15, 16)
+VEGETATION = 8
+SHAPE_CUES = ("column", "mounted", "low", "narrow", "slender")
+CUES = ("ground", "raised", "high", "curb") + SHAPE_CUES
+#: on by default: every cue that helped on each measured seed (slender helps only where the 2D model
+#: votes fence at all; docs/segmentation.md "Shape cues")
+DEFAULT_CUES = tuple(c for c in CUES if c != "slender")
 
 
 @dataclass
@@ -59,10 +99,231 @@ class ContextOptions:
     curb_factor: float = 0.2
     curb_face: bool = True  # the curb's own face and edge count as the band (and as ground)
     band_default: bool = True  # band vertices whose votes are explained away become sidewalk
+    # objects above the ground and their shape (lengths: physical sizes, see docs/segmentation.md)
+    slice_m: float = 0.25  # height of a slice: finer than any signal head (>= 0.3 m) or sign plate (>= 0.4 m)
+    column_width_m: float = 0.40  # a post is at most ~0.3 m across (lamp posts 0.1-0.3 m); + reconstruction blur
+    column_span_m: float = 1.5  # a post's bare shaft runs from the curb to its load above head height
+    column_top_m: float = 2.2  # signs and signal heads hang above head clearance (>= 2.2 m over a footway)
+    crown_m: float = 1.5  # a tree crown is wider than this both ways; a plate, a head, a lamp arm is not
+    float_m: float = 1.0  # an object whose lowest point is this far up stands on nothing the scan saw
+    compact_m: float = 1.5  # a sign plate or a signal head is at most this large in any direction
+    clear_m: float = 0.5  # a free-standing sign or head stands clear of facades and crowns (sidewalk clearance)
+    mount_min_m: float = 1.5  # mounted items hang between these heights above the ground
+    mount_max_m: float = 8.0  # (overhead signals reach ~6-7 m, lamps 8-10 m)
+    plate_m: float = 0.30  # a sign plate with its post is thinner (a plate is cm, a post <= 0.2 m); a signal
+    # head (>= 0.25 m deep) beside its post is thicker
+    low_top_m: float = 2.5  # every building is taller (a storey is >= 2.5 m), every signal post too (heads hang
+    # >= 2 m up); walls, fences, hedges, cars are lower
+    narrow_m: float = 1.2  # narrower than any car (the narrowest, quadricycles, are 1.24 m wide)
+    hedge_min_m: float = 0.4  # even a trimmed hedge is thicker; a fence, a wall, a bike, a post is thinner
+    shape_factor: float = 0.1
+    mount_factor: float = 0.2  # a light on a plate, a sign on a box: unlikely, not ruled out
 
 
-def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOptions | None = None) -> dict:
-    """Per-vertex cue masks and the heights they come from: ``{"height": h, "ground": bool(n), ...}``."""
+def _extent_2d(xy: np.ndarray, key: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(major, minor) horizontal extent of each group ``key`` of points ``xy``, measured along the
+    group's principal axes (a diagonal wall is as thin as one along x)."""
+    cnt = np.maximum(np.bincount(key, minlength=n), 1).astype(np.float64)
+    d = xy - np.column_stack([np.bincount(key, xy[:, 0], n) / cnt, np.bincount(key, xy[:, 1], n) / cnt])[key]
+    sxx, syy, sxy = (np.bincount(key, d[:, 0] * d[:, 0], n), np.bincount(key, d[:, 1] * d[:, 1], n),
+                     np.bincount(key, d[:, 0] * d[:, 1], n))
+    ang = 0.5 * np.arctan2(2 * sxy, sxx - syy)[key]
+    u = d[:, 0] * np.cos(ang) + d[:, 1] * np.sin(ang)
+    w = -d[:, 0] * np.sin(ang) + d[:, 1] * np.cos(ang)
+
+    def span(a):
+        hi, lo = np.full(n, -np.inf), np.full(n, np.inf)
+        np.maximum.at(hi, key, a)
+        np.minimum.at(lo, key, a)
+        return np.where(np.isfinite(hi), hi - lo, 0.0)
+
+    a, b = span(u), span(w)
+    return np.maximum(a, b), np.minimum(a, b)
+
+
+def _thickness(p: np.ndarray, key: np.ndarray, n: int) -> np.ndarray:
+    """Extent of each group of 3D points along its direction of least spread (a plate: its thickness)."""
+    out = np.zeros(n)
+    order = np.argsort(key, kind="stable")
+    bounds = np.searchsorted(key[order], np.arange(n + 1))
+    for g in range(n):
+        q = p[order[bounds[g]:bounds[g + 1]]]
+        if len(q) < 4:
+            continue
+        q = q - q.mean(axis=0)
+        _, vec = np.linalg.eigh(q.T @ q)
+        t = q @ vec[:, 0]
+        out[g] = t.max() - t.min()
+    return out
+
+
+def objects_above_ground(vertices: np.ndarray, height: np.ndarray, above: np.ndarray, edges: np.ndarray,
+                         opt: ContextOptions | None = None) -> dict:
+    """The connected parts of the mesh among the ``above`` vertices (above the ground) and their shape.
+
+    Returns per vertex ``object`` (id, -1 outside any object) and ``slice_major`` / ``slice_minor``
+    (horizontal extent of the object's ``slice_m`` slice at the vertex's height), and per object
+    ``top``, ``bottom`` (heights above the ground), ``footprint_major`` / ``footprint_minor``,
+    ``thin_span`` (metres of height where its slice is at most ``column_width_m`` across) and
+    ``crown`` (a slice ``crown_m`` wide both ways)."""
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+
+    opt = opt or ContextOptions()
+    v = np.asarray(vertices, np.float64)
+    n = len(v)
+    obj = np.full(n, -1, np.int64)
+    idx = np.nonzero(above)[0]
+    res = {"object": obj, "slice_major": np.zeros(n), "slice_minor": np.zeros(n), "n_objects": 0}
+    if len(idx) == 0:
+        return res
+    e = np.asarray(edges, np.int64).reshape(-1, 2)
+    # vertices at one position (duplicated along a texture seam, or where separately built parts
+    # meet) are one: link each to the first of its millimetre cell
+    q = np.floor(v[idx] / 1e-3).astype(np.int64)
+    _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
+    dup = idx[first[inv.ravel()]] != idx
+    e = np.vstack([e, np.column_stack([idx[dup], idx[first[inv.ravel()]][dup]])])
+    e = e[above[e[:, 0]] & above[e[:, 1]]]
+    graph = sparse.csr_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    _, oid = np.unique(comp[idx], return_inverse=True)
+    no = int(oid.max()) + 1
+    obj[idx] = oid
+    h = height[idx]
+    top, bottom = np.full(no, -np.inf), np.full(no, np.inf)
+    np.maximum.at(top, oid, h)
+    np.minimum.at(bottom, oid, h)
+    fmaj, fmin = _extent_2d(v[idx, :2], oid, no)
+    band = np.floor(h / opt.slice_m).astype(np.int64)
+    _, skey = np.unique(oid * (int(band.max()) + 1) + band, return_inverse=True)
+    ns = int(skey.max()) + 1
+    smaj, smin = _extent_2d(v[idx, :2], skey, ns)
+    s_obj = np.zeros(ns, np.int64)
+    s_obj[skey] = oid
+    thin_s = smaj <= opt.column_width_m
+    res.update(n_objects=no, top=top, bottom=bottom, footprint_major=fmaj, footprint_minor=fmin,
+               thin_span=np.bincount(s_obj, thin_s.astype(np.float64), no) * opt.slice_m,
+               crown=np.bincount(s_obj, (smin >= opt.crown_m).astype(np.float64), no) > 0)
+    res["slice_major"][idx] = smaj[skey]
+    res["slice_minor"][idx] = smin[skey]
+    return res
+
+
+def _touches_larger(v: np.ndarray, o: np.ndarray, items: np.ndarray, ob: dict, opt: ContextOptions) -> np.ndarray:
+    """(n_objects,) bool: the ``items`` with a vertex of a larger object (footprint over ``compact_m``:
+    a facade, a crown) within ``clear_m`` in 3D: a fragment of that object the mesh split off (a
+    window frame, a balcony, a bough), not a free-standing sign or signal head."""
+    big = np.zeros(len(o), bool)
+    inside = o >= 0
+    big[inside] = ob["footprint_major"][o[inside]] > opt.compact_m
+    out = np.zeros(len(items), bool)
+    if not big.any():
+        return out
+    c = opt.cell_m
+    lo = v.min(axis=0)
+    vox = np.floor((v - lo) / c).astype(np.int64) + 2
+    dims = vox.max(axis=0) + 3
+    key = lambda q: (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]  # noqa: E731
+    big_keys = np.unique(key(vox[big]))
+    sel = np.zeros(len(o), bool)
+    sel[inside] = items[o[inside]]
+    iv, io = vox[sel], o[sel]
+    r = int(np.ceil(opt.clear_m / c))
+    for dx in range(-r, r + 1):
+        for dy in range(-r, r + 1):
+            for dz in range(-r, r + 1):
+                q = key(iv + [dx, dy, dz])
+                at = np.minimum(np.searchsorted(big_keys, q), len(big_keys) - 1)
+                hit = big_keys[at] == q
+                out[io[hit]] = True
+    return out
+
+
+def shape_cues(vertices: np.ndarray, height: np.ndarray, above: np.ndarray, edges: np.ndarray,
+               opt: ContextOptions | None = None) -> dict:
+    """Per-vertex masks of the shape cues (``column``, ``mounted`` with ``plate`` / ``box``, ``low``,
+    ``narrow``) from :func:`objects_above_ground`."""
+    from scipy.ndimage import binary_dilation
+
+    opt = opt or ContextOptions()
+    v = np.asarray(vertices, np.float64)
+    n = len(v)
+    ob = objects_above_ground(v, height, above, edges, opt)
+    out = {c: np.zeros(n, bool) for c in SHAPE_CUES + ("plate", "box")}
+    out["objects"] = ob["n_objects"]
+    if not ob["n_objects"]:
+        return out
+    o = ob["object"]
+    inside = o >= 0
+    oi = o[inside]
+    h = height
+    # column: a thin slice of a tall object with a long bare shaft and no crown, not under a canopy
+    post = (ob["top"] >= opt.column_top_m) & (ob["thin_span"] >= opt.column_span_m) & ~ob["crown"]
+    bulky = ob["crown"] | (ob["footprint_minor"] >= opt.crown_m)
+    if post.any() and bulky.any():
+        # a tree trunk whose crown the mesh keeps apart (or a post under a canopy): a crown's cells
+        # above head height cover it
+        lo = v[:, :2].min(axis=0)
+        ij = np.floor((v[:, :2] - lo) / opt.cell_m).astype(np.int64)
+        grid = np.zeros(tuple(ij.max(axis=0) + 1), bool)
+        cano = inside.copy()
+        cano[inside] = bulky[oi] & (h[inside] >= opt.column_top_m)
+        grid[ij[cano, 0], ij[cano, 1]] = True
+        grid = binary_dilation(grid)
+        hit = np.zeros(ob["n_objects"], bool)
+        sel = inside.copy()
+        sel[inside] = post[oi]
+        hit[o[sel][grid[ij[sel, 0], ij[sel, 1]]]] = True
+        post &= ~hit
+    thin = ob["slice_major"] <= opt.column_width_m
+    out["column"][inside] = post[oi] & thin[inside]
+    # mounted: the wider slices of a post, or a compact object that floats free, at mounting height
+    floats = ((ob["bottom"] >= opt.float_m) & (ob["footprint_major"] <= opt.compact_m)
+              & (ob["top"] - ob["bottom"] <= opt.compact_m))
+    if floats.any():
+        floats &= ~_touches_larger(v, o, floats, ob, opt)
+    at = (h >= opt.mount_min_m) & (h <= opt.mount_max_m)
+    m = np.zeros(n, bool)
+    m[inside] = at[inside] & ((post[oi] & ~thin[inside]) | floats[oi])
+    out["mounted"] = m
+    if m.any():
+        mo = o[m]
+        ids, key = np.unique(mo, return_inverse=True)
+        t = _thickness(v[m], key, len(ids))
+        plate = t[key] < opt.plate_m
+        out["plate"][np.nonzero(m)[0][plate]] = True
+        out["box"][np.nonzero(m)[0][~plate]] = True
+    out["low"][inside] = ob["top"][oi] < opt.low_top_m
+    out["narrow"][inside] = ob["footprint_minor"][oi] < opt.narrow_m
+    out["slender"][inside] = (ob["top"][oi] < opt.low_top_m) & (ob["footprint_minor"][oi] < opt.hedge_min_m)
+    return out
+
+
+def near_unanimous(vertex_votes: np.ndarray, segments: np.ndarray | None, share: float,
+                   min_votes: float = 0.0) -> np.ndarray:
+    """(n,) bool: vertices whose own votes, or whose segment's, give one class at least ``share`` of
+    the mass, from at least ``min_votes`` votes (one per view with ``vote_per_view``): the floor
+    below which no cue goes, near-unanimous evidence is left as it is."""
+    v = np.asarray(vertex_votes, np.float64)
+    if share <= 0 or share > 1:
+        return np.zeros(len(v), bool)
+    tot = v.sum(axis=1)
+    sure = (tot > 0) & (tot >= min_votes) & (v.max(axis=1) >= share * tot)
+    if segments is not None:
+        seg = np.asarray(segments, np.int64)
+        sv = np.zeros((int(seg.max()) + 1, v.shape[1]))
+        np.add.at(sv, seg, v)
+        st = sv.sum(axis=1)
+        s_sure = (st > 0) & (st >= min_votes) & (sv.max(axis=1) >= share * st)
+        sure |= s_sure[seg]
+    return sure
+
+
+def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOptions | None = None,
+                      edges: np.ndarray | None = None) -> dict:
+    """Per-vertex cue masks and the heights they come from: ``{"height": h, "ground": bool(n), ...}``.
+    The shape cues need the mesh's ``edges`` (vertex pairs); without them their masks are empty."""
     from twinkit.surface.localground import LocalGround
 
     opt = opt or ContextOptions()
@@ -97,6 +358,12 @@ def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOpt
             out["ground"] = ground | face
     out["curb"] = curb
     out["step_cells"] = int(step.sum())
+    # objects: above the highest curb and not ground
+    above = (h > opt.max_curb_m) & ~out["ground"]
+    if edges is not None and len(edges):
+        out.update(shape_cues(v, h, above, edges, opt))
+    else:
+        out.update({c: np.zeros(len(v), bool) for c in SHAPE_CUES + ("plate", "box")}, objects=0)
     return out
 
 
@@ -115,6 +382,19 @@ def context_prior(ctx: dict, opt: ContextOptions | None = None, cues=CUES) -> np
         prior[np.ix_(ctx["high"], list(MOVABLE_CLASSES))] *= opt.high_factor
     if "curb" in cues:
         prior[ctx["curb"], ROAD] *= opt.curb_factor
+    furniture_out = [c for c in range(N_CLASSES) if c not in (POLE, LIGHT, SIGN)]
+    if "column" in cues:
+        prior[np.ix_(ctx["column"], furniture_out)] *= opt.shape_factor
+    if "mounted" in cues:
+        prior[np.ix_(ctx["mounted"], furniture_out)] *= opt.shape_factor
+        prior[ctx["plate"], LIGHT] *= opt.mount_factor
+        prior[ctx["box"], SIGN] *= opt.mount_factor
+    if "low" in cues:
+        prior[np.ix_(ctx["low"], [BUILDING, LIGHT])] *= opt.shape_factor
+    if "narrow" in cues:
+        prior[np.ix_(ctx["narrow"], list(WIDE_VEHICLES))] *= opt.shape_factor
+    if "slender" in cues:
+        prior[ctx["slender"], VEGETATION] *= opt.shape_factor
     return prior
 
 
@@ -173,12 +453,15 @@ def fill_allowed(labels: np.ndarray, missing: np.ndarray, allowed: np.ndarray, e
 
 
 def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray,
-                      opt: ContextOptions | None = None, cues=CUES, segments: np.ndarray | None = None,
+                      opt: ContextOptions | None = None, cues=DEFAULT_CUES, segments: np.ndarray | None = None,
                       segment_weight: float = 0.0, min_retained: float = 0.2,
-                      smooth_beta: float = 0.0, smooth_iters: int = 5) -> tuple[np.ndarray, np.ndarray, dict]:
+                      smooth_beta: float = 0.0, smooth_iters: int = 5,
+                      keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """The blended vote ``p`` (n, 19) with the geometric prior: (labels (n,) uint8, 255 where nothing
     voted; confidence; metrics with the vertices each cue touched and changed).
 
+    0. Vertices in ``keep`` (near-unanimous evidence, :func:`near_unanimous`) get no prior at all and
+       keep the plain vote's label through the fill and the smoothing.
     1. ``q = p * prior``; argmax.
     2. Vertices whose votes the cues explained away (less than ``min_retained`` of their vote mass
        survives the prior) take the most common label of their neighbours that their context
@@ -192,11 +475,14 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
 
     opt = opt or ContextOptions()
     cues = tuple(c for c in cues if c in CUES)
-    ctx = geometric_context(vertices, normals, opt)
+    ctx = geometric_context(vertices, normals, opt, edges)
     base, _ = decide_distribution(p)
     prior = context_prior(ctx, opt, cues)
     if segments is not None and segment_weight > 0:
         prior = segment_smooth(prior, segments, segment_weight)
+    kept = np.zeros(len(p), bool) if keep is None else np.asarray(keep, bool)
+    shielded = kept & (prior[np.arange(len(p)), p.argmax(axis=1)] < 1.0)  # a cue was against their class
+    prior[kept] = 1.0  # the floor: no cue overrules near-unanimous evidence
     q = p * prior
     lab, conf = decide_distribution(q)
     allowed = prior >= 0.5
@@ -222,10 +508,11 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     if smooth_beta > 0:
         unary = q.copy()
         unary[ea] = allowed[ea]
-        lab, smoothed = potts_smooth(lab, unary, edges, smooth_beta, smooth_iters)
+        lab, smoothed = potts_smooth(lab, unary, edges, smooth_beta, smooth_iters, fixed=kept)
     metrics = {"cues": list(cues), "explained_away": int(ea.sum()), "changed": int((lab != base).sum()),
                "smoothed": smoothed,
-               "step_cells": ctx["step_cells"]}
+               "step_cells": ctx["step_cells"], "objects": ctx["objects"],
+               "kept_unanimous": int(shielded.sum())}
     for c in CUES:
         m = ctx[c]
         metrics[f"{c}_vertices"] = int(m.sum())
@@ -234,12 +521,13 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
 
 
 def potts_smooth(labels: np.ndarray, unary: np.ndarray, edges: np.ndarray, beta: float = 1.0,
-                 iters: int = 5) -> tuple[np.ndarray, int]:
+                 iters: int = 5, fixed: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Label smoothing on the vertex graph (a Potts model solved by iterated conditional modes):
     each vertex takes ``argmax_c log unary(c) + beta * share of its neighbours labelled c``, a few
     sweeps (all vertices at once). ``unary`` (n, 19) is a class distribution per vertex (rows of
     zeros: no evidence, the vertex keeps its label and only votes for its neighbours). Unlabelled
-    vertices (255) neither vote nor change. Returns (labels, vertices changed)."""
+    vertices (255) neither vote nor change, nor do ``fixed`` ones (they still vote). Returns (labels,
+    vertices changed)."""
     from scipy import sparse
 
     lab = np.asarray(labels).copy()
@@ -252,6 +540,8 @@ def potts_smooth(labels: np.ndarray, unary: np.ndarray, edges: np.ndarray, beta:
     deg = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
     tot = unary.sum(axis=1)
     act = (tot > 0) & (lab < N_CLASSES)
+    if fixed is not None:
+        act &= ~np.asarray(fixed, bool)
     lu = np.log(np.maximum(unary[act] / tot[act, None], 1e-4))
     start = lab.copy()
     for _ in range(iters):

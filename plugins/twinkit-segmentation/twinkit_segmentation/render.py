@@ -75,6 +75,44 @@ def projection_matrix(hfov_deg: float, width: int, height: int, near: float = 0.
     return m
 
 
+def below_horizon(view_matrix: np.ndarray, proj_matrix: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height, width) bool: the pixel's viewing ray points downwards in the world (z up). Row 0 is the
+    top of the image."""
+    col = (np.arange(width) + 0.5) / width * 2.0 - 1.0
+    row = 1.0 - (np.arange(height) + 0.5) / height * 2.0
+    r = np.asarray(view_matrix, dtype=np.float64)[:3, :3]  # world -> camera rotation
+    # camera-space ray (x / fx, y / fy, -1); its world z is the third column of r applied to it
+    zx = r[0, 2] * col / proj_matrix[0, 0]
+    zy = r[1, 2] * row / proj_matrix[1, 1]
+    return (zy[:, None] + zx[None, :] - r[2, 2]) < 0.0
+
+
+def ground_holes(hit: np.ndarray, below: np.ndarray, max_gap_px: float) -> np.ndarray:
+    """Background pixels that are holes in the mesh: below the horizon (a street has ground under every
+    downward ray, so it is never sky there) and inside a gap of the surface at most ``2 * max_gap_px``
+    wide in some direction (a morphological closing of the hit mask). Wider background below the
+    horizon is the world past the capture's edge and is left alone."""
+    from scipy.ndimage import distance_transform_edt
+
+    if hit.all() or not hit.any():
+        return np.zeros_like(hit)
+    grown = distance_transform_edt(~hit) <= max_gap_px
+    closed = distance_transform_edt(grown) > max_gap_px  # erode the grown mask back
+    return closed & ~hit & below
+
+
+def fill_from_nearest(rgb: np.ndarray, holes: np.ndarray, hit: np.ndarray) -> int:
+    """Paint ``holes`` pixels (in place) with the colour of the nearest ``hit`` pixel; returns how many."""
+    n = int(holes.sum())
+    if n == 0 or not hit.any():
+        return 0
+    from scipy.ndimage import distance_transform_edt
+
+    _, (iy, ix) = distance_transform_edt(~hit, return_indices=True)
+    rgb[holes] = rgb[iy[holes], ix[holes]]
+    return n
+
+
 class Renderer:
     """Keeps the mesh on the (software) GPU; :meth:`render` returns ``(rgb (h,w,3) uint8, vertex (h,w) int32)``
     with ``vertex = -1`` where no geometry was hit."""

@@ -126,6 +126,11 @@ def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int) -> list:
 @dataclass
 class RenderParams:
     max_empty_fraction: float = 0.6  # drop views whose image is more than this much background
+    # background below the horizon is a hole in the mesh (or the capture's edge), never sky: paint it with
+    # the nearest surface's colour so the 2D model does not read sky-blue patches in the street (no votes
+    # come from those pixels either way). False = the plain sky-blue background everywhere.
+    fill_holes: bool = True
+    max_hole_px: float = 16.0  # a hole is a background gap at most 2x this wide; wider = past the capture's edge
 
 
 def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
@@ -144,17 +149,20 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
         ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
     out_renders_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    kept, dropped, t_render = _render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction, ctx)
+    kept, dropped, t_render, hole_px = _render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction,
+                                                        ctx, params.fill_holes, params.max_hole_px)
     index = {"n_vertices": int(len(mesh.vertices)), "kept": kept, "dropped": dropped,
-             "max_empty_fraction": params.max_empty_fraction}
+             "max_empty_fraction": params.max_empty_fraction, "fill_holes": params.fill_holes}
     (out_renders_dir / "index.json").write_text(json.dumps(index, indent=1))
-    ctx.log.info("rendered %d views, kept %d, dropped %d (> %.0f %% empty)", len(views), len(kept), len(dropped),
-                 100 * params.max_empty_fraction)
+    hole_share = hole_px / max(sum(int(v["width"]) * int(v["height"]) for v in kept), 1)
+    ctx.log.info("rendered %d views, kept %d, dropped %d (> %.0f %% empty); %.1f %% of the kept pixels were holes "
+                 "below the horizon%s", len(views), len(kept), len(dropped), 100 * params.max_empty_fraction,
+                 100 * hole_share, " (filled from the nearest surface)" if params.fill_holes else "")
     if not kept:
         raise InputError(f"{in_views_json}: every view is more than {100 * params.max_empty_fraction:.0f} % empty; "
                          f"check the sampler's positions (views.json) against the mesh")
     return {"views": len(views), "kept": len(kept), "dropped_empty": len(dropped), "kept_per_sampler": _per_sampler(kept),
-            "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
+            "hole_fraction": round(hole_share, 4), "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
             "seconds_per_view": round(t_render / max(len(views), 1), 4)}
 
 
@@ -165,17 +173,20 @@ def _per_sampler(kept: list) -> dict:
     return per
 
 
-def _render_view_set(mesh, tex, views: list, out_dir: Path, max_empty_fraction: float, ctx):
-    """Render sampled views (views.json records) into ``out_dir``; (kept, dropped, render seconds)."""
+def _render_view_set(mesh, tex, views: list, out_dir: Path, max_empty_fraction: float, ctx,
+                     fill_holes: bool = True, max_hole_px: float = 16.0):
+    """Render sampled views (views.json records) into ``out_dir``, holes in the ground filled (see
+    :class:`RenderParams`); (kept, dropped, render seconds, hole pixels of the kept views)."""
     import numpy as np
     from PIL import Image
 
-    from twinkit_segmentation.render import Renderer
+    from twinkit_segmentation.render import Renderer, below_horizon, fill_from_nearest, ground_holes
     from twinkit_segmentation.views import view_matrices
 
     renderers: dict = {}
     kept, dropped = [], []
     t_render = 0.0
+    hole_px = 0
     try:
         for v in ctx.progress(views, total=len(views), desc="render"):
             size = (int(v["width"]), int(v["height"]))
@@ -190,13 +201,18 @@ def _render_view_set(mesh, tex, views: list, out_dir: Path, max_empty_fraction: 
             if empty > max_empty_fraction:
                 dropped.append({"id": v["id"], "empty_fraction": round(empty, 4)})
                 continue
+            hole_mask = ground_holes(vertex >= 0, below_horizon(vm, pm, *size), max_hole_px)
+            holes = int(hole_mask.sum())
+            hole_px += holes
+            if fill_holes:
+                fill_from_nearest(rgb, hole_mask, vertex >= 0)
             Image.fromarray(rgb).save(out_dir / f"{v['id']}.png", compress_level=1)
             np.savez_compressed(out_dir / f"{v['id']}_vertex.npz", vertex=vertex)
-            kept.append(dict(v, empty_fraction=round(empty, 4)))
+            kept.append(dict(v, empty_fraction=round(empty, 4), hole_fraction=round(holes / vertex.size, 4)))
     finally:
         for r in renderers.values():
             r.release()
-    return kept, dropped, t_render
+    return kept, dropped, t_render, hole_px
 
 
 # ----------------------------------------------------------------------------- the capture's photos as views
@@ -321,7 +337,7 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
         tex = load_texture(mesh.texture) if mesh.texture is not None else None
         if tex is None:
             ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
-        k2, d2, t_r = _render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction, ctx)
+        k2, d2, t_r, _ = _render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction, ctx)
         kept += k2
         dropped += [dict(d, reason="empty") for d in d2]
         ctx.log.info("rendered views: %d of %d kept", len(k2), len(views))
@@ -466,7 +482,10 @@ class BackprojectParams:
     # 3D context (docs/segmentation.md "3D context in the vote"): geometric cues from the mesh scale the
     # blended vote; lengths are physical sizes, not tuned to a site
     context: bool = True  # False = no geometric cues (with smooth_beta 0 too: the plain blended vote)
-    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb"])
+    # all of context.CUES but slender, which helps only where the model votes fence at all
+    # (docs/segmentation.md "Shape cues")
+    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb", "column", "mounted",
+                                                             "low", "narrow"])
     ground_window_m: float = 3.0  # local ground window: wider than the widest vehicle (2.55 m)
     max_curb_m: float = 0.30  # up-facing, at most this above the local ground = ground (the highest curb)
     min_object_m: float = 0.50  # more than this above the local ground = not road / sidewalk / terrain
@@ -478,8 +497,23 @@ class BackprojectParams:
     curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
     band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
     min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
+    keep_share: float = 1.0  # the floor: a vertex whose own votes give one class this share (0 = off) ...
+    keep_votes: float = 32.0  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
     smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
     smooth_iters: int = 5
+
+
+def context_options(params: BackprojectParams):
+    """The :class:`ContextOptions` of ``backproject``'s params (the bench fuses with the same)."""
+    from twinkit_segmentation.context import ContextOptions
+
+    return ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
+                          min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
+                          min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
+                          ground_factor=params.context_factor, raised_factor=params.context_factor,
+                          high_factor=params.context_factor, curb_factor=params.curb_factor,
+                          curb_face=params.curb_face, band_default=params.band_default,
+                          shape_factor=params.context_factor)
 
 
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
@@ -491,7 +525,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import edges as mesh_edges, read_mesh
     from twinkit_segmentation.segmesh import write_labels_ply
-    from twinkit_segmentation.context import CUES, ContextOptions, fuse_with_context, potts_smooth
+    from twinkit_segmentation.context import CUES, fuse_with_context, near_unanimous, potts_smooth
     from twinkit_segmentation.metrics import _weighted_votes, blend_distribution, decide_distribution, propagate
     from twinkit_segmentation.segmesh import unit_normals
 
@@ -518,22 +552,21 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     if params.context and params.context_cues:
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
-        opt = ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
-                             min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
-                             min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
-                             ground_factor=params.context_factor, raised_factor=params.context_factor,
-                             high_factor=params.context_factor, curb_factor=params.curb_factor,
-                             curb_face=params.curb_face, band_default=params.band_default)
+        opt = context_options(params)
         keep = labels == IGNORE
+        sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None), None,
+                              params.keep_share, params.keep_votes)
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
                                                params.context_cues, min_retained=params.min_retained,
-                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters)
+                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
+                                               keep=sure)
         labels[keep] = IGNORE  # too few votes stays too few votes
         t_ctx = time.perf_counter() - t1
-        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, %.2f s",
+        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, "
+                     "%d objects above the ground, %d near-unanimous vertices kept against a cue, %.2f s",
                      "+".join(cmet["cues"]), cmet["changed"],
                      ", ".join(f"{c} {cmet[c + '_changed']}" for c in cmet["cues"]), cmet["explained_away"],
-                     cmet["smoothed"], t_ctx)
+                     cmet["smoothed"], cmet["objects"], cmet["kept_unanimous"], t_ctx)
     elif params.smooth_beta > 0:
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
