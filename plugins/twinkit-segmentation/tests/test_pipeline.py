@@ -26,7 +26,7 @@ def test_contracts():
     for kind, name in [("segmenter", "felzenszwalb"), ("segmenter", "vertices"), ("view_sampler", "auto_street"),
                        ("view_sampler", "uniform"), ("view_sampler", "random"), ("view_sampler", "street_points"),
                        ("view_sampler", "combined"), ("image_model", "oracle"), ("step", "sample_views"),
-                       ("step", "render_views"), ("step", "predict_views"), ("step", "backproject"),
+                       ("step", "render_views"), ("step", "photo_views"), ("step", "predict_views"), ("step", "backproject"),
                        ("step", "transfer_gt_labels"), ("step", "evaluate_segmentation"), ("step", "import_labels")]:
         check_plugin(_plugin(kind, name))
 

@@ -39,6 +39,7 @@ def twinkit_register_image_models(register):
 def twinkit_register_steps(register):
     register("sample_views", S.sample_views, params=S.SampleViewsParams, uses=("view_sampler",))
     register("render_views", S.render_views, params=S.RenderParams)
+    register("photo_views", S.photo_views, params=S.PhotoViewsParams, uses=("view_sampler",))
     register("predict_views", S.predict_views, params=S.PredictParams, uses=("image_model",))
     register("backproject", S.backproject, params=S.BackprojectParams)
     register("transfer_gt_labels", S.transfer_gt_labels, params=S.TransferGtParams)

@@ -3,6 +3,7 @@
     oversegment           segments.npy (int32 per vertex), segments.ply (random colour per segment)
     sample_views          views.json
     render_views          renders/ (<view>.png, <view>_vertex.npz, index.json)
+    photo_views           renders/ as render_views, the capture's photos as the images (+ rendered views)
     predict_views         predictions/ (<view>.png, palette PNG whose pixel values are trainIds),
                           vertex_votes.npy (float32, vertices x 19)
     backproject           labels.npy (uint8 per vertex, 255 = none), confidence.npy, labels.ply
@@ -90,21 +91,11 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
                  in_roads_osm: Path | None = None, in_street_points_txt: Path | None = None,
                  out_views_json: Path) -> dict:
     """Camera views from the selected view sampler (view_sampler=auto_street|street_points|uniform|random|combined)."""
-    import numpy as np
-
     from twinkit.mesh import read_mesh
-    from twinkit_segmentation.segmesh import unit_normals
-    from twinkit_segmentation.views import Scene
 
     mesh = read_mesh(in_textured_mesh_ply)
-    scene = Scene(mesh.vertices, mesh.faces, unit_normals(mesh), site=ctx.site,
-                  roads_osm=in_roads_osm, street_points=in_street_points_txt)
-    sampler = ctx.component("view_sampler")
     t0 = time.perf_counter()
-    views = sampler.sample(scene, ctx)
-    if params.max_views and len(views) > params.max_views:
-        keep = np.linspace(0, len(views) - 1, params.max_views).round().astype(int)
-        views = [views[i] for i in keep]
+    views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
     if not views:
         raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
     counts: dict[str, int] = {}
@@ -113,6 +104,22 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
     sampler_name = (ctx.config.get("view_sampler") or {}).get("plugin", "?") if ctx.config else "?"
     out_views_json.write_text(json.dumps({"sampler": sampler_name, "counts": counts, "views": views}, indent=1))
     return {"views": len(views), "per_sampler": counts, "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int) -> list:
+    """The selected view sampler's views (evenly thinned to ``max_views`` when > 0)."""
+    import numpy as np
+
+    from twinkit_segmentation.segmesh import unit_normals
+    from twinkit_segmentation.views import Scene
+
+    scene = Scene(mesh.vertices, mesh.faces, unit_normals(mesh), site=ctx.site,
+                  roads_osm=roads_osm, street_points=street_points)
+    views = ctx.component("view_sampler").sample(scene, ctx)
+    if max_views and len(views) > max_views:
+        keep = np.linspace(0, len(views) - 1, max_views).round().astype(int)
+        views = [views[i] for i in keep]
+    return views
 
 
 # ----------------------------------------------------------------------------- rendering
@@ -129,12 +136,8 @@ class RenderParams:
 def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
                  out_renders_dir: Path) -> dict:
     """Render every view unlit with a sky background; per pixel the nearest vertex (<view>_vertex.npz)."""
-    import numpy as np
-    from PIL import Image
-
     from twinkit.mesh import read_mesh
-    from twinkit_segmentation.render import Renderer, below_horizon, fill_from_nearest, ground_holes, load_texture
-    from twinkit_segmentation.views import view_matrices
+    from twinkit_segmentation.render import load_texture
 
     try:
         views = json.loads(Path(in_views_json).read_text())["views"]
@@ -146,6 +149,40 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
         ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
     out_renders_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    kept, dropped, t_render, hole_px = _render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction,
+                                                        ctx, params.fill_holes, params.max_hole_px)
+    index = {"n_vertices": int(len(mesh.vertices)), "kept": kept, "dropped": dropped,
+             "max_empty_fraction": params.max_empty_fraction, "fill_holes": params.fill_holes}
+    (out_renders_dir / "index.json").write_text(json.dumps(index, indent=1))
+    hole_share = hole_px / max(sum(int(v["width"]) * int(v["height"]) for v in kept), 1)
+    ctx.log.info("rendered %d views, kept %d, dropped %d (> %.0f %% empty); %.1f %% of the kept pixels were holes "
+                 "below the horizon%s", len(views), len(kept), len(dropped), 100 * params.max_empty_fraction,
+                 100 * hole_share, " (filled from the nearest surface)" if params.fill_holes else "")
+    if not kept:
+        raise InputError(f"{in_views_json}: every view is more than {100 * params.max_empty_fraction:.0f} % empty; "
+                         f"check the sampler's positions (views.json) against the mesh")
+    return {"views": len(views), "kept": len(kept), "dropped_empty": len(dropped), "kept_per_sampler": _per_sampler(kept),
+            "hole_fraction": round(hole_share, 4), "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
+            "seconds_per_view": round(t_render / max(len(views), 1), 4)}
+
+
+def _per_sampler(kept: list) -> dict:
+    per: dict = {}
+    for v in kept:
+        per[v["sampler"]] = per.get(v["sampler"], 0) + 1
+    return per
+
+
+def _render_view_set(mesh, tex, views: list, out_dir: Path, max_empty_fraction: float, ctx,
+                     fill_holes: bool = True, max_hole_px: float = 16.0):
+    """Render sampled views (views.json records) into ``out_dir``, holes in the ground filled (see
+    :class:`RenderParams`); (kept, dropped, render seconds, hole pixels of the kept views)."""
+    import numpy as np
+    from PIL import Image
+
+    from twinkit_segmentation.render import Renderer, below_horizon, fill_from_nearest, ground_holes
+    from twinkit_segmentation.views import view_matrices
+
     renderers: dict = {}
     kept, dropped = [], []
     t_render = 0.0
@@ -161,37 +198,178 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
             rgb, vertex = r.render(vm, pm)
             t_render += time.perf_counter() - t1
             empty = float((vertex < 0).mean())
-            if empty > params.max_empty_fraction:
+            if empty > max_empty_fraction:
                 dropped.append({"id": v["id"], "empty_fraction": round(empty, 4)})
                 continue
-            hole_mask = ground_holes(vertex >= 0, below_horizon(vm, pm, *size), params.max_hole_px)
+            hole_mask = ground_holes(vertex >= 0, below_horizon(vm, pm, *size), max_hole_px)
             holes = int(hole_mask.sum())
             hole_px += holes
-            if params.fill_holes:
+            if fill_holes:
                 fill_from_nearest(rgb, hole_mask, vertex >= 0)
-            Image.fromarray(rgb).save(out_renders_dir / f"{v['id']}.png", compress_level=1)
-            np.savez_compressed(out_renders_dir / f"{v['id']}_vertex.npz", vertex=vertex)
+            Image.fromarray(rgb).save(out_dir / f"{v['id']}.png", compress_level=1)
+            np.savez_compressed(out_dir / f"{v['id']}_vertex.npz", vertex=vertex)
             kept.append(dict(v, empty_fraction=round(empty, 4), hole_fraction=round(holes / vertex.size, 4)))
     finally:
         for r in renderers.values():
             r.release()
-    index = {"n_vertices": int(len(mesh.vertices)), "kept": kept, "dropped": dropped,
-             "max_empty_fraction": params.max_empty_fraction, "fill_holes": params.fill_holes}
+    return kept, dropped, t_render, hole_px
+
+
+# ----------------------------------------------------------------------------- the capture's photos as views
+@dataclass
+class PhotoViewsParams:
+    source: str = "photos"  # photos (the registered photos) | rendered (views.json, as render_views) | both
+    long_side_px: int = 1024  # photos downscaled to this long side (the 2D models' CityScapes scale; 0 = full)
+    min_coverage: float = 0.1  # drop a photo whose pose sees the mesh in fewer of its pixels (missed the mesh)
+    max_empty_fraction: float = 0.6  # rendered views: as render_views
+    max_photos: int = 0  # at most this many photos (evenly spread in file order), 0 = all
+    max_views: int = 0  # rendered views sampled here (no views.json wired): at most this many, 0 = all
+
+
+def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
+                in_cameras_site_json: Path | None = None, in_photos_dir: Path | None = None,
+                in_views_json: Path | None = None, in_roads_osm: Path | None = None,
+                in_street_points_txt: Path | None = None, out_renders_dir: Path) -> dict:
+    """The registered photos as views (renders/ as render_views writes it): each photo, undistorted and
+    downscaled, with the vertex map rendered from its pose; optionally plus rendered views (views.json where
+    a sample_views step wrote one, else the view_sampler's views, sampled here only when they are used)."""
+    import numpy as np
+    from PIL import Image
+
+    from twinkit.mesh import read_mesh
+    from twinkit_segmentation.photoviews import (PhotoCamera, max_distortion_px, photo_view_image, projection_from_K,
+                                                 view_matrix_opencv)
+    from twinkit_segmentation.render import Renderer, load_texture
+
+    if params.source not in ("photos", "rendered", "both"):
+        raise InputError(f"photo_views: source='{params.source}' must be photos, rendered or both")
+    use_photos, use_rendered = params.source in ("photos", "both"), params.source in ("rendered", "both")
+    if use_photos and (in_cameras_site_json is None or in_photos_dir is None):
+        raise InputError("photo_views: source=photos needs cameras_site.json and the photos folder (the photo "
+                         "branch's georeference step and site.inputs.photos); use source=rendered without photos")
+    mesh = read_mesh(in_textured_mesh_ply)
+    out_renders_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    kept: list = []
+    dropped: list = []
+    out: dict = {"source": params.source}
+    if use_photos:
+        try:
+            cams = json.loads(Path(in_cameras_site_json).read_text())["cameras"]
+        except (OSError, ValueError, KeyError) as exc:
+            raise InputError(f"{in_cameras_site_json}: not a cameras file ({exc}); re-run georeference") from None
+        if params.max_photos and len(cams) > params.max_photos:
+            cams = [cams[i] for i in np.linspace(0, len(cams) - 1, params.max_photos).round().astype(int)]
+        renderers: dict = {}
+        t_load = t_render = 0.0
+        n_undistorted = 0
+        shift = 0.0
+        used_ids: set = set()
+        try:
+            for c in ctx.progress(cams, total=len(cams), desc="photo views"):
+                try:
+                    cam = PhotoCamera.from_json(c)
+                except (KeyError, ValueError) as exc:
+                    raise InputError(f"{in_cameras_site_json}: camera of {c.get('image', '?')}: {exc}") from None
+                path = Path(in_photos_dir) / cam.image
+                t1 = time.perf_counter()
+                try:
+                    img, K, valid, undist = photo_view_image(path, cam, params.long_side_px)
+                except OSError as exc:
+                    raise InputError(f"{path}: cannot read the photo ({exc}); put the photos georeference used "
+                                     f"in {in_photos_dir}, or re-run sfm") from None
+                except ValueError as exc:
+                    raise InputError(f"{path}: {exc}; use the photos the SfM registered") from None
+                t_load += time.perf_counter() - t1
+                h, w = img.shape[:2]
+                shift = max(shift, max_distortion_px(cam.params, cam.width, cam.height, w / cam.width))
+                if (w, h) not in renderers:  # the vertex map only: no texture needed
+                    renderers[(w, h)] = Renderer(mesh.vertices, mesh.faces, None, None, w, h)
+                t1 = time.perf_counter()
+                _, vertex = renderers[(w, h)].render(view_matrix_opencv(cam.R_wc, cam.center),
+                                                     projection_from_K(K, w, h))
+                t_render += time.perf_counter() - t1
+                if valid is not None:
+                    vertex[~valid] = -1  # no photo pixel there after undistortion
+                coverage = float((vertex >= 0).mean())
+                vid = _photo_view_id(cam.image, used_ids)
+                if coverage < params.min_coverage:
+                    dropped.append({"id": vid, "image": cam.image, "reason": "off_mesh", "coverage": round(coverage, 4)})
+                    continue
+                n_undistorted += int(undist)
+                Image.fromarray(img).save(out_renders_dir / f"{vid}.png", compress_level=1)
+                np.savez_compressed(out_renders_dir / f"{vid}_vertex.npz", vertex=vertex)
+                kept.append({"id": vid, "sampler": "photo", "image": cam.image, "width": w, "height": h,
+                             "K": K.round(4).tolist(), "R_world_from_camera": cam.R_wc.tolist(),
+                             "center": cam.center.tolist(), "undistorted": bool(undist),
+                             "max_distortion_px": round(max_distortion_px(cam.params, cam.width, cam.height,
+                                                                          w / cam.width), 3),
+                             "empty_fraction": round(1 - coverage, 4)})
+        finally:
+            for r in renderers.values():
+                r.release()
+        n_photo = len(kept)
+        off = [d for d in dropped if d["reason"] == "off_mesh"]
+        sizes = sorted({(v["width"], v["height"]) for v in kept})
+        ctx.log.info("photo views: %d of %d registered photos kept at %s px (%d of them undistorted; largest "
+                     "distortion %.2f px, resampled from 0.25 px), %d dropped (the pose sees the mesh in < %.0f %% of the "
+                     "pixels)", n_photo, len(cams), ", ".join(f"{a}x{b}" for a, b in sizes) or "-", n_undistorted,
+                     shift, len(off), 100 * params.min_coverage)
+        if cams and len(off) > len(cams) / 2:
+            ctx.log.warning("photo views: %d of %d photos miss the mesh; check the georeference (cameras_site.json) "
+                            "against the mesh", len(off), len(cams))
+        out.update({"photos": len(cams), "photo_views": n_photo, "dropped_off_mesh": len(off),
+                    "undistorted": n_undistorted, "max_distortion_px": round(shift, 3),
+                    "photo_sizes": [list(s) for s in sizes],
+                    "photo_load_seconds": round(t_load, 3), "photo_render_seconds": round(t_render, 3)})
+    if use_rendered:
+        if in_views_json is not None:
+            try:
+                views = json.loads(Path(in_views_json).read_text())["views"]
+            except (OSError, ValueError, KeyError) as exc:
+                raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
+        else:
+            views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
+            (out_renders_dir / "views.json").write_text(json.dumps({"views": views}, indent=1))
+        if not views:
+            raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another "
+                             f"view_sampler or steps.photo_views.source=photos")
+        tex = load_texture(mesh.texture) if mesh.texture is not None else None
+        if tex is None:
+            ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
+        k2, d2, t_r, _ = _render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction, ctx)
+        kept += k2
+        dropped += [dict(d, reason="empty") for d in d2]
+        ctx.log.info("rendered views: %d of %d kept", len(k2), len(views))
+        out.update({"rendered_views": len(views), "rendered_kept": len(k2), "dropped_empty": len(d2),
+                    "render_seconds": round(t_r, 3)})
+    index = {"n_vertices": int(len(mesh.vertices)), "kept": kept, "dropped": dropped, "source": params.source,
+             "max_empty_fraction": params.max_empty_fraction, "min_coverage": params.min_coverage,
+             "long_side_px": params.long_side_px}
     (out_renders_dir / "index.json").write_text(json.dumps(index, indent=1))
-    hole_share = hole_px / max(sum(int(v["width"]) * int(v["height"]) for v in kept), 1)
-    ctx.log.info("rendered %d views, kept %d, dropped %d (> %.0f %% empty); %.1f %% of the kept pixels were holes "
-                 "below the horizon%s", len(views), len(kept), len(dropped), 100 * params.max_empty_fraction,
-                 100 * hole_share, " (filled from the nearest surface)" if params.fill_holes else "")
     if not kept:
-        raise InputError(f"{in_views_json}: every view is more than {100 * params.max_empty_fraction:.0f} % empty; "
-                         f"check the sampler's positions (views.json) against the mesh")
-    per = {}
-    for v in kept:
-        per[v["sampler"]] = per.get(v["sampler"], 0) + 1
-    return {"views": len(views), "kept": len(kept), "dropped_empty": len(dropped), "kept_per_sampler": per,
-            "hole_fraction": round(hole_share, 4),
-            "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
-            "seconds_per_view": round(t_render / max(len(views), 1), 4)}
+        off = sorted((d for d in dropped if d["reason"] == "off_mesh"), key=lambda d: -d["coverage"])
+        best = f"; the best photo, {off[0]['image']}, sees it in {100 * off[0]['coverage']:.1f} %" if off else ""
+        raise InputError(f"photo_views: no view kept: {len(off)} photos see the mesh in fewer than "
+                         f"{100 * params.min_coverage:.0f} % of their pixels{best}, {len(dropped) - len(off)} rendered "
+                         f"views are mostly empty. Check {in_textured_mesh_ply.name} (a mesh that small or that far "
+                         f"from the cameras: see the dense step's point count) and cameras_site.json, or lower "
+                         f"steps.photo_views.min_coverage")
+    out.update({"kept": len(kept), "kept_per_sampler": _per_sampler(kept),
+                "seconds": round(time.perf_counter() - t0, 3)})
+    return out
+
+
+def _photo_view_id(image: str, used: set) -> str:
+    """A file-name-safe, unique view id for a photo ("photo_<stem>")."""
+    import re
+
+    base = "photo_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(image).with_suffix("").as_posix())
+    vid, k = base, 1
+    while vid in used:
+        vid, k = f"{base}_{k}", k + 1
+    used.add(vid)
+    return vid
 
 
 # ----------------------------------------------------------------------------- 2D prediction
@@ -230,8 +408,7 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     kept = index["kept"]
     t_model = 0.0
     t0 = time.perf_counter()
-    step = max(1, int(params.batch_views))
-    batches = [kept[i:i + step] for i in range(0, len(kept), step)]
+    batches = _size_batches(kept, max(1, int(params.batch_views)), Path(in_renders_dir))
     for batch in ctx.progress(batches, total=len(batches), desc="predict"):
         images = np.stack([np.asarray(Image.open(Path(in_renders_dir) / f"{v['id']}.png").convert("RGB")) for v in batch])
         vmaps = np.stack([np.load(Path(in_renders_dir) / f"{v['id']}_vertex.npz")["vertex"] for v in batch])
@@ -270,6 +447,27 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     seen = float((votes.sum(axis=1) > 0).mean())
     return {"views": len(kept), "model_seconds": round(t_model, 3), "seconds": round(time.perf_counter() - t0, 3),
             "seconds_per_view": round(t_model / max(len(kept), 1), 4), "vertices_seen": round(seen, 4)}
+
+
+def _size_batches(kept: list, step: int, folder: Path) -> list:
+    """Consecutive views in batches of at most ``step`` that share one image size (photos and renders of
+    several sizes can share a renders/ folder; a batch is one array)."""
+    from PIL import Image
+
+    batches: list = []
+    last = None
+    for v in kept:
+        if "width" in v and "height" in v:
+            size = (int(v["width"]), int(v["height"]))
+        else:
+            with Image.open(folder / f"{v['id']}.png") as im:
+                size = im.size
+        if batches and size == last and len(batches[-1]) < step:
+            batches[-1].append(v)
+        else:
+            batches.append([v])
+        last = size
+    return batches
 
 
 # ----------------------------------------------------------------------------- back-projection
