@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -42,14 +43,11 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=None, help="append the markdown table to this file")
     a = ap.parse_args(argv)
 
-    import torch
-    import torch.nn.functional as F
     from PIL import Image
 
     from twinkit.cityscapes import IGNORE, N_CLASSES
     from twinkit.mesh import edges as mesh_edges, read_mesh
-    from twinkit_efficientvit.common import network_size
-    from twinkit_efficientvit.efficientvit import EfficientViTModel, EfficientViTParams
+    from twinkit.plugins import build_component
     from twinkit_segmentation.context import ContextOptions, fuse_with_context
     from twinkit_segmentation.metrics import blend_distribution, decide_distribution, propagate, scores
     from twinkit_segmentation.segmesh import unit_normals
@@ -70,7 +68,8 @@ def main(argv=None):
                          ground_factor=bp.context_factor, raised_factor=bp.context_factor,
                          high_factor=bp.context_factor, curb_factor=bp.curb_factor, curb_face=bp.curb_face,
                          band_default=bp.band_default)
-    model = EfficientViTModel(EfficientViTParams())
+    os.environ.setdefault("TWINKIT_PLUGINS", "builtins,efficientvit,segmentation")
+    models: dict = {}  # (long side, flip) -> the image_model component, built by name through the registry
     rows = []
     for name in a.variants.split(","):
         sides, flip = VARIANTS[name]
@@ -79,20 +78,15 @@ def main(argv=None):
         for v in kept:
             img = np.asarray(Image.open(renders / f"{v['id']}.png").convert("RGB"))
             vm = np.load(renders / f"{v['id']}_vertex.npz")["vertex"].reshape(-1)
-            h, w, _ = img.shape
+            for side in sides:  # built once, outside the timing
+                if (side, flip) not in models:
+                    models[(side, flip)] = build_component("image_model", None, {"image_model": {
+                        "plugin": "efficientvit_b0", "input_long_side_px": side, "flip_tta": flip}})
             t1 = time.perf_counter()
-            with torch.inference_mode():
-                x0 = torch.from_numpy(img.copy()).permute(2, 0, 1)[None].float()
-                acc = 0
-                for side in sides:
-                    nh, nw = network_size(h, w, side, 32)
-                    x = F.interpolate(x0, size=(nh, nw), mode="bilinear", align_corners=False, antialias=nh < h)
-                    x = ((x - model._mean) / model._std).contiguous(memory_format=model._memory_format)
-                    lg = model.net(x)
-                    if flip:
-                        lg = 0.5 * (lg + model.net(x.flip(-1)).flip(-1))
-                    acc = acc + F.interpolate(lg, size=(h, w), mode="bilinear", align_corners=False).softmax(1)
-                lab = acc.argmax(1)[0].numpy().reshape(-1)
+            acc = 0.0
+            for side in sides:
+                acc = acc + models[(side, flip)].predict_proba(img[None])[0].astype(np.float32)
+            lab = acc.argmax(0).reshape(-1)
             t_model += time.perf_counter() - t1
             hit = vm >= 0
             vv = np.bincount(vm[hit].astype(np.int64) * N_CLASSES + lab[hit], minlength=n * N_CLASSES)
