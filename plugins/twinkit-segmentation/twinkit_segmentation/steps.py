@@ -98,9 +98,7 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
     views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
     if not views:
         raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
-    counts: dict[str, int] = {}
-    for v in views:
-        counts[v["sampler"]] = counts.get(v["sampler"], 0) + 1
+    counts = _per_sampler(views)
     sampler_name = (ctx.config.get("view_sampler") or {}).get("plugin", "?") if ctx.config else "?"
     out_views_json.write_text(json.dumps({"sampler": sampler_name, "counts": counts, "views": views}, indent=1))
     return {"views": len(views), "per_sampler": counts, "seconds": round(time.perf_counter() - t0, 3)}
@@ -282,7 +280,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
                     raise InputError(f"{path}: {exc}; use the photos the SfM registered") from None
                 t_load += time.perf_counter() - t1
                 h, w = img.shape[:2]
-                shift = max(shift, max_distortion_px(cam.params, cam.width, cam.height, w / cam.width))
+                dist_px = max_distortion_px(cam.params, cam.width, cam.height, w / cam.width)
+                shift = max(shift, dist_px)
                 if (w, h) not in renderers:  # the vertex map only: no texture needed
                     renderers[(w, h)] = Renderer(mesh.vertices, mesh.faces, None, None, w, h)
                 t1 = time.perf_counter()
@@ -302,8 +301,7 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
                 kept.append({"id": vid, "sampler": "photo", "image": cam.image, "width": w, "height": h,
                              "K": K.round(4).tolist(), "R_world_from_camera": cam.R_wc.tolist(),
                              "center": cam.center.tolist(), "undistorted": bool(undist),
-                             "max_distortion_px": round(max_distortion_px(cam.params, cam.width, cam.height,
-                                                                          w / cam.width), 3),
+                             "max_distortion_px": round(dist_px, 3),
                              "empty_fraction": round(1 - coverage, 4)})
         finally:
             for r in renderers.values():
