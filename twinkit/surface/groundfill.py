@@ -39,6 +39,23 @@ class GroundFillOptions:
     keep_if_mesh_within_m: float = 0.05
     passes: int = 3  # later passes treat the cells filled before as ground (shadows seen along one axis)
     threads: int = -1
+    # joining the fill to the reconstructed surface (``stitch``): the fill is one constrained Delaunay
+    # triangulation (2D, seen from above) of the cells' centres and the mesh's open border near them,
+    # with that border as fixed edges, so the new triangles share the mesh's own border vertices
+    stitch: bool = True
+    cover_band_m: float = 0.30  # a cell / triangle is already covered when the mesh passes this close above or below
+    border_rise_m: float = 0.50  # open-border vertices up to this far above the local ground are joined (curb tops,
+    #                              the skirt of a car); higher border (façades, canopies) is left alone
+    stitch_reach_cells: int = 2  # the joining reaches this many cells past the filled ones
+    under_objects: bool = True  # (with stitch) also the ground beneath objects that stand on it (a bush in its
+    #                             tree pit, a parked car, a bollard): blocked cells with ground on both sides
+    #                             within max_gap_m; where the object's own surface comes within cover_band_m
+    #                             of the ground it is kept, elsewhere the ground runs on beneath it
+    under_rise_m: float = 0.9  # ... sides more than this above the lowest ground within max_gap_m are no ground
+    under_max_top_m: float = 2.8  # ... objects no taller than this (vehicles up to a van, bushes, people, bollards)
+    under_clearance_m: float = 1.5  # ... or hanging at least this high (canopies, awnings)
+    kerb_step_m: float = 0.3  # ... the two sides may differ by a kerb step
+    max_slope: float = 0.15  # ... plus this slope over the gap (steeper than any street)
 
 
 def _first_nonempty(cls: np.ndarray, axis: int, reverse: bool):
@@ -58,8 +75,10 @@ def _first_nonempty(cls: np.ndarray, axis: int, reverse: bool):
     return np.moveaxis(prev, -1, axis)
 
 
-def ground_grid(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions):
-    """(classes (ny, nx) int8: 0 empty, 1 ground, 2 blocked; ground height (ny, nx); origin (2,))."""
+def ground_grid(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions, with_local: bool = False):
+    """(classes (ny, nx) int8: 0 empty, 1 ground, 2 blocked; ground height (ny, nx); origin (2,)); with
+    ``with_local`` also the local lowest up-facing height (ny, nx) (inf where none within the window) and,
+    per cell, the lowest and the highest blocking point above it (inf / -inf where none)."""
     from scipy.ndimage import minimum_filter
 
     c = float(opt.cell_m)
@@ -83,18 +102,28 @@ def ground_grid(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions)
                                                 + opt.ground_tol_m)
     blocked = np.zeros(nx * ny, bool)
     blocked[flat[wall]] = True
+    if with_local:  # per blocked cell, the lowest and highest blocking point above the local ground
+        hb = points[wall, 2] - zloc[flat[wall]]
+        bmin = np.full(nx * ny, np.inf)
+        bmax = np.full(nx * ny, -np.inf)
+        np.minimum.at(bmin, flat[wall], hb)
+        np.maximum.at(bmax, flat[wall], hb)
     occupied = np.zeros(nx * ny, bool)
     occupied[flat] = True
     cls = np.zeros(nx * ny, np.int8)
     cls[occupied] = 2
     cls[ground] = 1
     cls[blocked] = 2
+    if with_local:
+        return (cls.reshape(ny, nx), gz.reshape(ny, nx), lo, zloc.reshape(ny, nx), bmin.reshape(ny, nx),
+                bmax.reshape(ny, nx))
     return cls.reshape(ny, nx), gz.reshape(ny, nx), lo
 
 
-def _holes(cls: np.ndarray, gz: np.ndarray, max_cells: int):
+def _holes(cls: np.ndarray, gz: np.ndarray, max_cells: int, max_rise: tuple[float, float] | None = None):
     """Empty cells with ground on both sides along x or along y (at most ``max_cells`` apart) and
-    their height interpolated linearly between those ground cells: (mask, height)."""
+    their height interpolated linearly between those ground cells: (mask, height). ``max_rise``
+    (step, slope per cell): the two sides may differ in height by at most step + slope * cells."""
     ny, nx = cls.shape
     est_sum = np.zeros((ny, nx))
     est_n = np.zeros((ny, nx))
@@ -111,12 +140,164 @@ def _holes(cls: np.ndarray, gz: np.ndarray, max_cells: int):
             ca, cb = cls[np.arange(ny)[:, None], ia], cls[np.arange(ny)[:, None], ib]
             za, zb = gz[np.arange(ny)[:, None], ia], gz[np.arange(ny)[:, None], ib]
         ok &= (ca == 1) & (cb == 1)
+        if max_rise is not None:
+            with np.errstate(invalid="ignore"):
+                rise = np.abs(np.where(ok, zb - za, 0.0))
+            ok &= rise <= max_rise[0] + max_rise[1] * np.abs(ib - ia)
         t = np.where(ok, (pos - ia) / np.maximum(ib - ia, 1), 0.0)
         za, zb = np.where(ok, za, 0.0), np.where(ok, zb, 0.0)
         est_sum += np.where(ok, za * (1 - t) + zb * t, 0.0)
         est_n += ok
     hole = est_n > 0
     return hole, np.where(hole, est_sum / np.maximum(est_n, 1), np.nan)
+
+
+def _cover(scene, xy: np.ndarray, z: np.ndarray, band: float) -> np.ndarray:
+    """True where the mesh in ``scene`` crosses the vertical segment from ``z - band`` to ``z + band`` at ``xy``."""
+    import open3d as o3d
+
+    if len(xy) == 0:
+        return np.zeros(0, bool)
+    rays = np.zeros((len(xy), 6), np.float32)
+    rays[:, :2] = xy
+    rays[:, 2] = z + band
+    rays[:, 5] = -1.0
+    t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    return t <= 2 * band
+
+
+def _bad_new_faces(faces: np.ndarray, n_old: int) -> np.ndarray:
+    """Among ``faces[n_old:]``, those that break the surface: a directed edge already used by another face
+    (overlapping or flipped) or an edge shared by more than two faces."""
+    n = len(faces)
+    m = int(faces.max()) + 1
+    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2).astype(np.int64)
+    fid = np.repeat(np.arange(n), 3)
+    dkey = he[:, 0] * m + he[:, 1]
+    ukey = np.minimum(he[:, 0], he[:, 1]) * m + np.maximum(he[:, 0], he[:, 1])
+    _, dinv, dcnt = np.unique(dkey, return_inverse=True, return_counts=True)
+    _, uinv, ucnt = np.unique(ukey, return_inverse=True, return_counts=True)
+    bad_he = (dcnt[dinv] > 1) | (ucnt[uinv] > 2)
+    bad = np.zeros(n, bool)
+    bad[fid[bad_he]] = True
+    bad[:n_old] = False
+    return bad[n_old:]
+
+
+def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.ndarray, lo: np.ndarray,
+                   opt: GroundFillOptions, rep: dict):
+    """The fill joined to the mesh: (new vertices (k, 3), new faces (f, 3) indexing ``mesh.vertices`` then the
+    new vertices). ``cand``: cells to cover (ny, nx) bool, ``height`` their ground height."""
+    import pythoncdt as cdt
+    from scipy.ndimage import binary_dilation
+    from scipy.spatial import cKDTree
+
+    from .closest import Surface
+
+    c = float(opt.cell_m)
+    ny, nx = cand.shape
+    v = mesh.vertices
+    scene = Surface(v, mesh.faces, opt.threads).scene
+    jj, ii = np.nonzero(cand)
+    gxy = np.c_[lo[0] + (ii + 0.5) * c, lo[1] + (jj + 0.5) * c]
+    gz = height[jj, ii]
+    free = ~_cover(scene, gxy, gz, opt.cover_band_m)
+    jj, ii, gxy, gz = jj[free], ii[free], gxy[free], gz[free]
+    cells = np.zeros((ny, nx), bool)
+    cells[jj, ii] = True
+    rep["uncovered_cells"] = int(cells.sum())
+    if not cells.any():
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    reach = max(1, int(opt.stitch_reach_cells))
+    zone = binary_dilation(cells, structure=np.ones((3, 3), bool), iterations=reach)
+
+    def cell_of(xy):
+        ij = np.floor((xy - lo) / c).astype(np.int64)
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)
+        ij[~ok] = 0
+        return ij, ok
+
+    # the mesh's open border near the filled cells, at ground level
+    f = mesh.faces
+    he = np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=1).reshape(-1, 2).astype(np.int64)
+    m = int(v.shape[0])
+    ukey = np.minimum(he[:, 0], he[:, 1]) * m + np.maximum(he[:, 0], he[:, 1])
+    _, uinv, ucnt = np.unique(ukey, return_inverse=True, return_counts=True)
+    border = he[ucnt[uinv] == 1]
+    bv = np.unique(border)
+    ij, ok = cell_of(v[bv, :2])
+    ref = np.where(ok, zloc[ij[:, 1], ij[:, 0]], np.inf)
+    dz = v[bv, 2] - ref
+    level = np.zeros(m, bool)
+    level[bv] = np.isfinite(ref) & (dz <= opt.border_rise_m) & (dz >= -opt.border_rise_m)
+    inzone = np.zeros(m, bool)
+    inzone[bv] = ok & zone[ij[:, 1], ij[:, 0]]
+    border = border[level[border].all(axis=1) & inzone[border].any(axis=1)]
+    bids = np.unique(border)
+    # one 2D vertex per position (a vertical border edge has both ends at one xy)
+    key = np.round(v[bids, :2] / 1e-3).astype(np.int64)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    rep_id = bids[first]  # representative mesh vertex per 2D position
+    bxy = v[rep_id, :2]
+    local = np.full(m, -1, np.int64)
+    local[bids] = inv.ravel()
+    e = local[border]
+    e = e[e[:, 0] != e[:, 1]]
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    # the cells' centres, less those too close to the border (slivers)
+    if len(bxy):
+        mids = np.vstack([bxy, 0.5 * (bxy[e[:, 0]] + bxy[e[:, 1]])]) if len(e) else bxy
+        dmin, _ = cKDTree(mids).query(gxy, workers=opt.threads)
+        keep = dmin >= 0.4 * c
+        gxy, gz = gxy[keep], gz[keep]
+    pts = np.vstack([bxy, gxy]).astype(np.float64)
+    zs = np.r_[v[rep_id, 2], gz]
+    nb = len(bxy)
+    if len(pts) < 3:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
+    tri.insert_vertices(np.ascontiguousarray(pts))
+    if len(e):
+        tri.insert_edges(np.ascontiguousarray(e.astype(np.uintc)))
+    tri.erase_super_triangle()
+    va = tri.vertices_array()
+    allxy = np.c_[va["x"], va["y"]] if va.dtype.names else np.asarray(va, np.float64).reshape(-1, 2)
+    if len(allxy) > len(pts):  # crossings of border edges seen from above: height of the nearest input vertex
+        _, near = cKDTree(pts).query(allxy[len(pts):])
+        zs = np.r_[zs, zs[near]]
+    t = np.asarray(tri.triangles_array()["vertices"], np.int64).reshape(-1, 3)
+    p3 = np.c_[allxy, zs]
+    a, b, d = p3[t[:, 0]], p3[t[:, 1]], p3[t[:, 2]]
+    cen = (a + b + d) / 3.0
+    edge2d = np.max(np.stack([np.linalg.norm((b - a)[:, :2], axis=1), np.linalg.norm((d - b)[:, :2], axis=1),
+                              np.linalg.norm((a - d)[:, :2], axis=1)]), axis=0)
+    cij, cok = cell_of(cen[:, :2])
+    sel = cok & zone[cij[:, 1], cij[:, 0]] & (edge2d <= 5 * c)
+    sel[sel] = ~_cover(scene, cen[sel, :2], cen[sel, 2], opt.cover_band_m)
+    t = t[sel]
+    # counter-clockwise seen from above
+    a, b, d = allxy[t[:, 0]], allxy[t[:, 1]], allxy[t[:, 2]]
+    area = (b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0])
+    t = np.where((area < 0)[:, None], t[:, [0, 2, 1]], t)
+    t = t[np.abs(area) > 1e-12]
+    # to mesh ids: border vertices are the mesh's own, the others new
+    n_new = len(allxy) - nb
+    gid = np.r_[rep_id, m + np.arange(n_new)]
+    nf = gid[t]
+    for _ in range(4):
+        if not len(nf):
+            break
+        bad = _bad_new_faces(np.vstack([f, nf]), len(f))
+        if not bad.any():
+            break
+        nf = nf[~bad]
+    used = np.unique(nf[nf >= m]) - m
+    remap = np.full(n_new, -1, np.int64)
+    remap[used] = np.arange(len(used))
+    nf = np.where(nf >= m, m + remap[np.maximum(nf - m, 0)], nf)
+    newv = p3[nb:][used]
+    rep["border_vertices_joined"] = int(len(np.unique(nf[nf < m])))
+    return newv, nf
 
 
 def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None = None,
@@ -126,7 +307,8 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
 
     opt = opt or GroundFillOptions()
     c = float(opt.cell_m)
-    cls, gz, lo = ground_grid(points, normals, opt)
+    cls, gz, lo, zloc, bmin, bmax = ground_grid(points, normals, opt, with_local=True)
+    cls0, gz0 = cls, gz
     ny, nx = cls.shape
     max_cells = int(opt.max_gap_m / c)
     hole = np.zeros((ny, nx), bool)
@@ -142,6 +324,35 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
         cls[new] = 1  # the next pass sees the cells filled so far as ground
         gz[new] = z[new]
     rep = {"cell_m": c, "ground_cells": n_ground, "hole_cells": int(hole.sum())}
+    if opt.stitch and mesh.n_faces:
+        # cells to cover: the shadows, and ground cells the trimmed mesh no longer covers
+        cand = hole | (cls0 == 1)
+        height = np.where(hole, hz, gz0)
+        if opt.under_objects:
+            # beneath objects: blocked cells count as empty, the cells filled so far as ground. Only ground
+            # that is truly the ground bounds them: up-facing surface within ``under_rise_m`` of the lowest
+            # in a ``max_gap_m`` window (a canopy with no ground seen under it is no side), and the two
+            # sides differ no more than a kerb step plus a street's steepest slope over the gap
+            from scipy.ndimage import minimum_filter
+
+            w = max(3, int(round(opt.max_gap_m / c)) | 1)
+            zwide = minimum_filter(np.where(cls == 1, gz, np.inf), size=w, mode="nearest")
+            # an object lets the ground run beneath it when it is low (a car, a bush, a bollard: its top at most
+            # under_max_top_m) or hangs overhead (a canopy: its lowest point at least under_clearance_m up);
+            # a building's walls stand on the ground and rise higher, so its inside is never filled
+            low = (bmax <= opt.under_max_top_m) | (bmin >= opt.under_clearance_m)
+            see = np.where((cls == 2) & low, 0, cls).astype(np.int8)
+            see[(cls == 1) & ~(gz <= zwide + opt.under_rise_m)] = 0
+            under, uz = _holes(see, gz, max_cells, max_rise=(opt.kerb_step_m, opt.max_slope * c))
+            under &= ~cand
+            rep["under_object_cells"] = int(under.sum())
+            cand = cand | under
+            height = np.where(under, uz, height)
+        pv, pf = _stitched_fill(mesh, cand, height, zloc, lo, opt, rep)
+        if len(pf) == 0:
+            rep.update(filled_cells=0, faces_added=0)
+            return mesh, rep
+        return _append(mesh, pv, pf, points, colors, tree, opt, rep)
     if not hole.any():
         rep.update(filled_cells=0, faces_added=0)
         return mesh, rep
@@ -174,9 +385,19 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
     remap[used] = np.arange(len(used))
     pv = centres[fill][used]
     pf = remap[pf] + mesh.n_vertices
+    return _append(mesh, pv, pf, points, colors, tree, opt, rep)
+
+
+def _append(mesh: Mesh, pv: np.ndarray, pf: np.ndarray, points, colors, tree, opt: GroundFillOptions,
+            rep: dict) -> tuple[Mesh, dict]:
+    """The mesh with new vertices ``pv`` (colour of the nearest point, normal up) and faces ``pf``."""
+    from scipy.spatial import cKDTree
+
+    from twinkit.mesh import face_areas
+
     attrs = {}
     for k, arr in mesh.attrs.items():
-        if k == "colors" and colors is not None:
+        if k == "colors" and colors is not None and len(pv):
             t = tree if tree is not None else cKDTree(points)
             _, near = t.query(pv, workers=opt.threads)
             add = colors[near].astype(arr.dtype)
@@ -189,5 +410,67 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
                   for k, a in mesh.face_attrs.items()}
     out = Mesh(vertices=np.vstack([mesh.vertices, pv]), faces=np.vstack([mesh.faces, pf]), attrs=attrs,
                face_attrs=face_attrs, comments=list(mesh.comments))
-    rep.update(filled_cells=int(len(pv)), faces_added=int(len(pf)), area_m2=round(float(len(pv) * c * c), 2))
+    area = float(face_areas(out.vertices, np.asarray(pf, np.int64)).sum()) if len(pf) else 0.0
+    rep.update(filled_cells=int(len(pv)), faces_added=int(len(pf)), area_m2=round(area, 2))
     return out, rep
+
+
+def fill_loop_on_ground(vertices: np.ndarray, loop: np.ndarray, ground_z, cell_m: float = 0.10):
+    """Close one hole of a mesh (``loop``: its border's vertex ids in order) with a surface that lies on
+    the ground: a constrained Delaunay triangulation, seen from above, of the loop's vertices and of
+    points on a ``cell_m`` grid inside it at ``ground_z(xy)`` (a function (k, 2) -> (k,)), with the loop's
+    edges fixed. The border keeps its own heights; inside, the surface follows the ground instead of
+    spanning the border (a car's cut-off feet stand above the road). Returns (faces (f, 3), new vertices
+    (k, 3)) where ids >= len(vertices) are the new vertices in order, counter-clockwise seen from above;
+    None when the loop seen from above is not a simple polygon (it crosses itself)."""
+    import pythoncdt as cdt
+    from scipy.spatial import cKDTree
+
+    loop = np.asarray(loop, np.int64)
+    if len(loop) < 3:
+        return None
+    xy = vertices[loop, :2].astype(np.float64)
+    if len(np.unique(np.round(xy / 1e-4).astype(np.int64), axis=0)) < len(xy):
+        return None  # two border vertices on one vertical line: not a simple polygon seen from above
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    gx = np.arange(lo[0] + cell_m / 2, hi[0], cell_m)
+    gy = np.arange(lo[1] + cell_m / 2, hi[1], cell_m)
+    g = np.c_[np.repeat(gx, len(gy)), np.tile(gy, len(gx))] if len(gx) and len(gy) else np.zeros((0, 2))
+    if len(g):
+        g = g[_inside_polygon(g, xy)]
+    if len(g):
+        d, _ = cKDTree(xy).query(g)
+        g = g[d >= 0.4 * cell_m]
+    pts = np.vstack([xy, g])
+    n = len(loop)
+    edges = np.c_[np.arange(n), (np.arange(n) + 1) % n].astype(np.uintc)
+    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.NOT_ALLOWED, 0.0)
+    try:
+        tri.insert_vertices(np.ascontiguousarray(pts))
+        tri.insert_edges(np.ascontiguousarray(edges))
+        tri.erase_outer_triangles_and_holes()
+    except Exception:  # noqa: BLE001 - crossing border edges: not a simple polygon
+        return None
+    if tri.vertices_count() != len(pts):
+        return None
+    t = np.asarray(tri.triangles_array()["vertices"], np.int64).reshape(-1, 3)
+    if len(t) == 0:
+        return None
+    a, b, c = pts[t[:, 0]], pts[t[:, 1]], pts[t[:, 2]]
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    t = np.where((area < 0)[:, None], t[:, [0, 2, 1]], t)
+    used = np.unique(t[t >= n]) if (t >= n).any() else np.zeros(0, np.int64)
+    ids = np.empty(len(pts), np.int64)
+    ids[:n] = loop
+    ids[used] = len(vertices) + np.arange(len(used))
+    new = np.c_[pts[used], np.asarray(ground_z(pts[used]), np.float64)] if len(used) else np.zeros((0, 3))
+    return ids[t], new
+
+
+def _inside_polygon(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd point-in-polygon test for (k, 2) points against one ring (m, 2)."""
+    x, y = p[:, 0][:, None], p[:, 1][:, None]
+    x1, y1 = poly[:, 0][None, :], poly[:, 1][None, :]
+    x2, y2 = np.roll(poly[:, 0], -1)[None, :], np.roll(poly[:, 1], -1)[None, :]
+    cross = ((y1 > y) != (y2 > y)) & (x < (x2 - x1) * (y - y1) / np.where(y2 == y1, 1e-300, y2 - y1) + x1)
+    return (cross.sum(axis=1) % 2) == 1

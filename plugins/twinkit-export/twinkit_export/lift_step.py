@@ -38,6 +38,7 @@ class LiftParams:
     ground_window_m: float = 4.0  # local ground search window, wider than any vehicle
     min_vertical_share: float = 0.15  # an object has walls: this share of its vertices with a near-horizontal normal
     margin_m: float = 0.3  # footprint widening when collecting an object's faces
+    fill_cell_m: float = 0.1  # holes left under an object are filled on this grid at the ground's height (0: fan)
     max_fill_extent_m: float = 3.0  # holes reaching farther than this beyond an object's footprint stay open
 
 

@@ -46,6 +46,7 @@ import numpy as np
 
 from twinkit.mesh import Mesh
 from twinkit.mesh.core import compact, vertex_normals
+from twinkit.surface.groundfill import fill_loop_on_ground
 
 #: CityScapes trainIds of movable objects
 MOVABLE = (11, 12, 13, 14, 15, 16, 17, 18)
@@ -81,6 +82,8 @@ class LiftOptions:
     debris_margin_m: float = 0.5  # small pieces left within the footprint + this go with the object
     debris_max_faces: int = 200
     patch_cell_m: float = 0.2  # grid of the ground patch where a footprint stays uncovered; 0 = no patch
+    fill_cell_m: float = 0.1  # a closed hole under an object is filled on this grid at the ground's height
+    #                           (0: a fan / ear clipping of the border, which spans it at the border's heights)
 
 
 @dataclass
@@ -532,7 +535,14 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                 continue  # an open border elsewhere: not ours
             ok_box = any(_in_box(pts, c_, l_, w_, y_, opt.margin_m + opt.max_fill_extent_m).all()
                          for c_, l_, w_, y_ in (hits or boxes))
-            res = _fill_loop(v, lp) if ok_box else None
+            res = None
+            if ok_box and _signed_area(v[lp[::-1], :2]) > 0:
+                # on the ground: the border keeps its heights (the cut-off feet), the inside follows the road
+                res = fill_loop_on_ground(v, lp, grid.at, opt.fill_cell_m) if opt.fill_cell_m > 0 else None
+                if res is None:
+                    res = _fill_loop(v, lp)
+                    if res is not None:
+                        res = (res[0], np.zeros((0, 3)) if res[1] is None else np.asarray(res[1])[None])
             if res is None:
                 unfilled += 1
                 ln = float(np.linalg.norm(v[lp] - v[np.roll(lp, -1)], axis=1).sum())
@@ -541,16 +551,16 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                     else "not_simple"
                 open_why[why] = round(open_why.get(why, 0.0) + ln, 3)
                 continue
-            faces_new, centroid = res
+            faces_new, new_pts = res
             ring = np.unique(korder[np.concatenate([np.arange(kstarts[i], kstarts[i + 1]) for i in lp])] // 3)
             lab_ring = new_labels[lp]
             gl = lab_ring[np.isin(lab_ring, GROUND)]
             ground_class = int(np.bincount(gl).argmax()) if len(gl) else int(np.bincount(lab_ring).argmax())
-            if centroid is not None:
-                cidx = nv + len(add_v)
-                faces_new = np.where(faces_new == nv, cidx, faces_new)
-                add_v.append(centroid)
-                add_lab.append(ground_class)
+            if len(new_pts):
+                base = nv + len(add_v)
+                faces_new = np.where(faces_new >= nv, faces_new - nv + base, faces_new)
+                add_v.extend(list(new_pts))
+                add_lab.extend([ground_class] * len(new_pts))
             add_f.append(faces_new)
             if kept_tc is not None and len(ring):
                 rg = ring[np.isin(new_labels[kept[ring]], GROUND).all(axis=1)]

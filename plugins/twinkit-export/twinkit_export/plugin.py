@@ -409,6 +409,10 @@ def twinkit_register_steps(register):
              description="vehicles, riders, pedestrians out of the static mesh as actors; ground closed beneath")
     register("split_classes", split_classes, params=SplitParams,
              description="one sub-mesh per CityScapes class, CARLA names, palette colours")
+    from .ground_check import DropTestParams, drop_test_step
+
+    register("drop_test", drop_test_step, params=DropTestParams,
+             description="vertical rays over every driving and sidewalk lane: does the static mesh hold them up")
 
 
 @hookimpl

@@ -57,6 +57,8 @@ class CleanParams:
     max_hole_edges: int = 60  # close holes whose boundary has at most this many edges; < 3 = off
     fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on a grid of this cell size; 0 = off
     fill_ground_max_gap_m: float = 8.0  # ... when ground lies on both sides at most this far apart
+    fill_ground_stitch: bool = True  # join the fill to the mesh's own open border (one surface, no seam);
+    #                                  false: separate grid patches (the fill before 25 Nov 2026)
     colormap_max_m: float = 0.0  # distance colour map saturates here; 0 = max_dist_m (or p99)
 
 
@@ -282,7 +284,7 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                            min_component_ratio=params.min_component_ratio,
                            repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
                            fill_ground_cell_m=params.fill_ground_cell_m, fill_ground_max_gap_m=params.fill_ground_max_gap_m,
-                           threads=_threads(ctx))
+                           fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
         mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
         write_ply(out_clean_mesh_ply, mesh)
@@ -291,10 +293,26 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
         topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
                     title="clean mesh: vertex -> nearest point distance")
         rep["colormap_png"] = Path(out_clean_report_json).with_suffix(".png").name
+        border = _ground_border_report(mesh, cloud, params.fill_ground_max_gap_m,
+                                       Path(out_clean_report_json).with_name("open_border.png"), ctx.log)
+        if border is not None:
+            rep["open_border"] = border
         rep["time"] = {"seconds": round(meas_now(meas), 3)}
         write_json(out_clean_report_json, rep)
-    return {"vertices": mesh.n_vertices, "faces": mesh.n_faces,
-            "dist_mean_m": rep["output"]["dist_to_cloud_m"]["mean"], **meas.as_dict()}
+    out = {"vertices": mesh.n_vertices, "faces": mesh.n_faces,
+           "dist_mean_m": rep["output"]["dist_to_cloud_m"]["mean"], **meas.as_dict()}
+    if border is not None:
+        out["open_border_inside_m"] = border["inside_m"]
+        out["open_border_inside_m_per_m2"] = border["inside_m_per_m2"]
+    return out
+
+
+def _ground_border_report(mesh, cloud, fill_limit_m: float, png: Path, log) -> dict | None:
+    from twinkit.surface.watertight import ground_border_report
+
+    if cloud.normals is None:
+        return None
+    return ground_border_report(mesh.vertices, mesh.faces, cloud.vertices, cloud.normals, fill_limit_m, png, log)
 
 
 def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_ply: Path) -> dict:

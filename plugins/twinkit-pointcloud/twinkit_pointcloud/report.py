@@ -20,7 +20,10 @@ def sec_pictures(ctx) -> str:
     figs = []
     for pattern, caption in (("recon_metrics.png", "Distance from the cloud to the mesh (heat map)"),
                              ("*distance*.png", "Distance heat map"), ("*heat*.png", "Heat map"),
-                             ("clean_report.png", "Mesh cleaning: what was removed")):
+                             ("clean_report.png", "Mesh cleaning: what was removed"),
+                             ("open_border.png", "Open border of the ground (red: a crack or hole inside the site; "
+                                                 "blue: the site's edge)"),
+                             ("drop_test.png", "Drop test over the lanes (orange: a ray that found no ground)")):
         for s, f in ctx.find(pattern)[:1]:
             name = f"{s.get('folder')}_{f.name}"
             if any(name in x for x in figs):

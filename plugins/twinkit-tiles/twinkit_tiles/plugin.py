@@ -366,7 +366,15 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                                                                      threads=threads))
                 ctx.log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled",
                              ground.get("filled_cells", 0), ground.get("area_m2", 0.0))
-            del cloud
+        if cloud is None:
+            cloud = _read_points(in_points_ply)
+        from twinkit.surface.watertight import ground_border_report
+
+        # the merged mesh's open border at ground level, inside the site and on its edge (picture beside)
+        ground_border = ground_border_report(merged.vertices, merged.faces, cloud.vertices, cloud.normals,
+                                             params.fill_ground_max_gap_m,
+                                             Path(out_tile_seams_json).with_name("open_border.png"), ctx.log)
+        del cloud
         after_total = edge_counts(merged.faces)
         # open border near the seams vs. near lines half-way between them, per metre of surface cut: the
         # seams add cracks where their figure is higher (compare with an untiled mesh at the same lines)
@@ -389,7 +397,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
             "boundary_edges_before": before_total["boundary_edges"], "boundary_edges_after": after_total["boundary_edges"],
             "stitched_faces": int((tile_attr < 0).sum()), "vertices": merged.n_vertices, "faces": merged.n_faces,
-            "ground_fill": ground, "seam_band_trim": band_rep, "open_near_lines": near_lines, "seams": seams,
+            "ground_fill": ground, "open_border": ground_border, "seam_band_trim": band_rep, "open_near_lines": near_lines, "seams": seams,
         }
         gaps = [s["gap_mean_mm"] for s in seams if s["gap_mean_mm"] is not None]
         report["gap_mean_mm"] = round(float(np.mean(gaps)), 3) if gaps else None
@@ -408,6 +416,8 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                                    "non_manifold_edges", "non_manifold_edges_in_tiles", "boundary_edges_before", "boundary_edges_after", "stitched_faces", "gap_mean_mm",
                                    "gap_max_mm")} | {
         "open_near_seams_per_m": near_lines["seams"]["open_per_section"],
+        "open_border_inside_m": (ground_border or {}).get("inside_m"),
+        "open_border_inside_m_per_m2": (ground_border or {}).get("inside_m_per_m2"),
         "open_near_controls_per_m": near_lines["controls"]["open_per_section"]} | meas.as_dict()
 
 

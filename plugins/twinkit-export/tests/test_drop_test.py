@@ -1,0 +1,80 @@
+"""The drop test step: vertical rays over the lanes of a real carla.Map find the static mesh."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from twinkit.mesh import Mesh, write_ply
+from twinkit.testing import run_step
+
+from conftest import SITE, plugin, straight_xodr
+from twinkit_export import synthetic
+
+pytest.importorskip("carla")
+
+
+def _street(hole_at=None, sidewalk_z=0.12):
+    """A 40 x 12 m ground grid (10 cm) under the straight test road (driving lanes y 1.5..8.5, sidewalk
+    y -0.5..1.5); the sidewalk stands ``sidewalk_z`` above the road (a kerb at y = 1.5); optionally a
+    30 x 30 cm hole centred at ``hole_at``."""
+    xs, ys = np.arange(0, 40.0001, 0.1), np.arange(-2.0, 10.0001, 0.1)
+    X, Y = np.meshgrid(xs, ys)
+    z = np.where(Y < 1.45, sidewalk_z, 0.0)
+    v = np.c_[X.ravel(), Y.ravel(), z.ravel()]
+    n, m = len(xs), len(ys)
+    idx = np.arange(n * m).reshape(m, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    f = np.vstack([np.c_[a, b, d], np.c_[a, d, c]])
+    if hole_at is not None:
+        cen = v[f].mean(axis=1)
+        f = f[~((np.abs(cen[:, 0] - hole_at[0]) < 0.15) & (np.abs(cen[:, 1] - hole_at[1]) < 0.15))]
+    return v, f
+
+
+def _run(tmp_path, v, f, name):
+    d = tmp_path / name
+    d.mkdir()
+    uv = np.c_[v[:, 0] / 40.0, (v[:, 1] + 2) / 12.0].astype(np.float32)
+    obj = synthetic.write_obj(d / "textured_mesh.obj", v, f, uv, texture_px=64)
+    (d / "aligned.xodr").write_text(straight_xodr(length_m=40.0))
+    pts = Mesh(v.copy(), None, attrs={"normals": np.tile(np.array([0, 0, 1], np.float32), (len(v), 1))})
+    write_ply(d / "points.ply", pts)
+    out = run_step(plugin("step", "drop_test"), d / "out",
+                   {"in_textured_mesh_obj": obj, "in_aligned_xodr": d / "aligned.xodr", "in_points_ply": d / "points.ply"},
+                   site=SITE)
+    return json.loads(out["drop_test.json"].read_text()), out
+
+
+def test_whole_street_holds_every_ray(tmp_path):
+    v, f = _street()
+    rep, out = _run(tmp_path, v, f, "whole")
+    drv, sw = rep["lanes"]["driving"], rep["lanes"]["sidewalk"]
+    # two 3.5 m lanes and a 2 m sidewalk over the 38 m inside the site (1 m margin at each end)
+    assert 24000 < drv["rays"] < 29000 and 6500 < sw["rays"] < 8500
+    assert drv["hit_pct"] == 100.0 and sw["hit_pct"] == 100.0  # the kerb-high sidewalk counts as on its lane
+    assert rep["ok"] is True and rep["open_border_over_driving_lanes_m"] == 0.0
+    assert drv["widest_hole_m"] == 0.0
+    assert out["drop_test.png"].stat().st_size > 1000
+
+
+def test_a_30cm_hole_in_a_lane_fails_and_is_located(tmp_path):
+    v, f = _street(hole_at=(20.0, 3.0))
+    rep, _ = _run(tmp_path, v, f, "hole")
+    drv = rep["lanes"]["driving"]
+    missed = drv["rays"] - drv["hits"]
+    assert 4 <= missed <= 16 and drv["fall_through"] == missed  # nothing under them: they fall through
+    assert drv["hit_pct"] > 99.9  # one hole is a tiny share of the rays ...
+    assert drv["widest_hole_m"] >= 0.29 and drv["ok"] is False and rep["ok"] is False  # ... but a wheel drops in
+    top = drv["miss_clusters"][0]
+    assert abs(top["x"] - 20.0) < 0.2 and abs(top["y"] - 3.0) < 0.2
+    assert rep["open_border_over_driving_lanes_m"] > 1.0 and rep["open_chains_over_driving_lanes"] == 1
+    assert rep["lanes"]["sidewalk"]["hit_pct"] == 100.0
+
+
+def test_a_lane_off_the_surface_misses_without_falling_through(tmp_path):
+    v, f = _street(sidewalk_z=0.45)  # a sidewalk higher than any kerb: the rays meet it at another height
+    rep, _ = _run(tmp_path, v, f, "high")
+    sw = rep["lanes"]["sidewalk"]
+    assert sw["hit_pct"] < 10.0 and sw["fall_through"] == 0 and sw["ok"] is False  # (the kerb slope row hits)

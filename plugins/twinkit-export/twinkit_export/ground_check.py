@@ -1,0 +1,217 @@
+"""The ``drop_test`` step: does the static mesh hold up a car and a walker everywhere the map sends them?
+
+The way a simulator sees the ground: vertical rays on a grid (``spacing_m``, 10 cm) over every driving
+and sidewalk lane of the OpenDRIVE map (carla.Map, offline), inside the scanned site (the cloud's
+footprint, :class:`twinkit.surface.watertight.Footprint`). A ray passes when the static mesh (after
+``lift_movables``: what CARLA gets as its map) crosses it within ``tol_m`` of the lane's height. A lane's
+height is the map's road elevation plus the lane's own ``<height>`` records, if any; a sidewalk lane
+without one (netconvert writes none) is expected at the height of the pavement beside the road, up to
+``curb_max_m`` above the road (a kerb), and passes when the mesh is within ``tol_m`` of any height in
+that band.
+
+Writes ``drop_test.json`` (per lane type: rays, hits, the share, the misses grouped in clusters with
+their positions) and ``drop_test.png`` (misses in orange over the mesh seen from above, with the open
+border at ground level). A share below ``min_driving_pct`` / ``min_sidewalk_pct`` is logged as a
+warning and marked ``"ok": false`` in the metrics and the report.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from twinkit import InputError, StepContext
+
+
+@dataclass
+class DropTestParams:
+    """Vertical rays over the lanes: does the static mesh hold up cars and walkers?"""
+
+    spacing_m: float = 0.10  # ray grid along and across each lane
+    tol_m: float = 0.05  # a ray passes when the surface is this close to the lane's height
+    curb_max_m: float = 0.30  # a sidewalk without <height> records may lie up to this above the road (a kerb)
+    min_driving_pct: float = 99.9  # below this share of hits on driving lanes: a warning, ok = false
+    min_sidewalk_pct: float = 99.5  # ... on sidewalks
+    footprint_margin_m: float = 1.0  # rays this close to the scan's edge are not counted (the site ends there)
+    fill_limit_m: float = 8.0  # unscanned gaps narrower than this count as inside the site (the ground fill's limit)
+    fall_m: float = 0.5  # a missed ray with no surface this close to the lane falls through (a hole), else off height
+    max_hole_m: float = 0.25  # any hole wider than this (falling rays' extent + one spacing) fails the lane, whatever
+    #                           the share: it swallows a tyre's contact patch (about 0.2 m) or a shoe
+
+
+DRIVING = ("driving", "bidirectional", "parking", "stop", "entry", "exit", "onramp", "offramp")
+SIDEWALK = ("sidewalk",)
+
+
+def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
+    """Ray positions over the lanes, site frame: {"driving": (k, 3), "sidewalk": (k, 3)} (x, y, lane z).
+
+    carla.Map (offline) gives waypoints every ``spacing_m`` on the driving lanes; the other lanes are
+    reached sideways from them (get_left_lane / get_right_lane). Across a lane, rays every
+    ``spacing_m`` from border to border (half a step in from each)."""
+    import carla
+
+    m = carla.Map("drop_test", xodr_text)
+    seen: set[tuple] = set()
+    out: dict[str, list] = {"driving": [], "sidewalk": []}
+
+    def add(w):
+        t = str(w.lane_type).lower()
+        kind = "driving" if t in DRIVING else "sidewalk" if t in SIDEWALK else None
+        if kind is None:
+            return
+        key = (w.road_id, w.section_id, w.lane_id, round(float(w.s), 3))
+        if key in seen:
+            return
+        seen.add(key)
+        loc = w.transform.location
+        rv = w.transform.get_right_vector()
+        n = np.array([rv.x, -rv.y])  # CARLA's y points south: site frame is x east, y north
+        n /= np.linalg.norm(n) or 1.0
+        h = float(w.lane_width) / 2
+        k = max(1, int(np.floor(2 * h / spacing_m)))
+        off = (np.arange(k) + 0.5) * (2 * h / k) - h
+        out[kind].append(np.c_[loc.x + off * n[0], -loc.y + off * n[1], np.full(k, loc.z)])
+
+    for w in m.generate_waypoints(spacing_m):
+        add(w)
+        for side in ("get_right_lane", "get_left_lane"):
+            o = getattr(w, side)()
+            hops = 0
+            while o is not None and hops < 8 and o.lane_type != carla.LaneType.Driving:
+                add(o)
+                o = getattr(o, side)()
+                hops += 1
+    return {k: (np.vstack(v) if v else np.zeros((0, 3))) for k, v in out.items()}
+
+
+def _clusters(xy: np.ndarray, gap_m: float) -> list[dict]:
+    """Misses grouped by proximity: centre, count, extent."""
+    if len(xy) == 0:
+        return []
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(xy).query_pairs(gap_m, output_type="ndarray")
+    from scipy.sparse import coo_matrix
+
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(xy), len(xy))) if len(pairs) else \
+        coo_matrix((len(xy), len(xy)))
+    n, lab = connected_components(g, directed=False)
+    out = []
+    for c in range(n):
+        p = xy[lab == c]
+        out.append({"x": round(float(p[:, 0].mean()), 2), "y": round(float(p[:, 1].mean()), 2), "rays": int(len(p)),
+                    "extent_m": round(float(np.ptp(p, axis=0).max()) if len(p) > 1 else 0.0, 2)})
+    return sorted(out, key=lambda d: -d["rays"])
+
+
+def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh_obj: Path, in_aligned_xodr: Path,
+                   in_points_ply: Path, out_drop_test_json: Path, out_drop_test_png: Path) -> dict:
+    """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
+    from twinkit.jsonio import write_json
+    from twinkit.mesh import read_obj, read_ply
+    from twinkit.surface.watertight import Footprint, draw_border, drop_test, ground_border, height_above_ground
+
+    params = params or DropTestParams()
+    t0 = time.perf_counter()
+    try:
+        mesh = read_obj(Path(in_textured_mesh_obj))
+    except Exception as exc:
+        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the step that wrote it") from None
+    try:
+        cloud = read_ply(Path(in_points_ply))
+    except Exception as exc:
+        raise InputError(f"{in_points_ply}: not a readable PLY ({exc}); re-run read_cloud") from None
+    text = Path(in_aligned_xodr).read_text(encoding="utf-8", errors="replace")
+    try:
+        rays = lane_rays(text, params.spacing_m)
+    except Exception as exc:
+        raise InputError(f"{in_aligned_xodr}: carla.Map could not read it ({exc}); re-run the road steps") from None
+    fp = Footprint.from_points(cloud.vertices, fill_limit_m=params.fill_limit_m, margin_m=params.footprint_margin_m)
+    res: dict = {"spacing_m": params.spacing_m, "tol_m": params.tol_m, "lanes": {}}
+    misses = []
+    ok_all = True
+    for kind, need in (("driving", params.min_driving_pct), ("sidewalk", params.min_sidewalk_pct)):
+        r = rays[kind]
+        r = r[fp.inside(r)] if len(r) else r
+        if kind == "sidewalk":
+            # no <height> in the map: the pavement may sit up to curb_max_m above the road
+            band = np.arange(0.0, params.curb_max_m + 1e-9, params.tol_m)
+            hit = np.zeros(len(r), bool)
+            for dz in band:
+                todo = ~hit
+                hit[todo] = drop_test(mesh.vertices, mesh.faces, r[todo] + [0, 0, dz], params.tol_m)
+        else:
+            hit = drop_test(mesh.vertices, mesh.faces, r, params.tol_m)
+        n = int(len(r))
+        pct = round(100.0 * float(hit.mean()), 3) if n else None
+        # a miss either falls through (no surface within fall_m of the lane: a hole) or finds the surface at
+        # another height (a kerb face under the lane's edge, a bump): told apart for the reader
+        falls = np.zeros(len(r), bool)
+        if (~hit).any():
+            falls[~hit] = ~drop_test(mesh.vertices, mesh.faces, r[~hit], params.fall_m)
+        holes = _clusters(r[falls, :2], 3 * params.spacing_m)
+        widest = max((h["extent_m"] + params.spacing_m for h in holes), default=0.0)
+        ok = (pct is None or pct >= need) and widest <= params.max_hole_m
+        ok_all &= ok
+        res["lanes"][kind] = {"rays": n, "hits": int(hit.sum()), "hit_pct": pct, "target_pct": need, "ok": ok,
+                              "fall_through": int(falls.sum()),
+                              "fall_through_pct": round(100.0 * float(falls.mean()), 3) if n else None,
+                              "miss_clusters": _clusters(r[~hit, :2], 3 * params.spacing_m)[:50],
+                              "fall_through_clusters": holes[:50], "widest_hole_m": round(widest, 3)}
+        misses.append(r[~hit])
+        if n and widest > params.max_hole_m:
+            wh = max(holes, key=lambda h: h["extent_m"])
+            ctx.log.warning("drop test: a hole %.2f m wide at (%.1f, %.1f) under a %s lane (more than %.2f m: a wheel or "
+                            "a foot drops in)", widest, wh["x"], wh["y"], kind, params.max_hole_m)
+        if n and not ok and pct < need:
+            ctx.log.warning("drop test: %.2f %% of %d rays over %s lanes find the ground (target %.1f %%; %.3f %% "
+                            "fall through, the others meet the surface at another height); largest gap at "
+                            "(%.1f, %.1f), see %s", pct, n, kind, need, res["lanes"][kind]["fall_through_pct"],
+                            res["lanes"][kind]["miss_clusters"][0]["x"], res["lanes"][kind]["miss_clusters"][0]["y"],
+                            Path(out_drop_test_png).name)
+        elif n:
+            ctx.log.info("drop test: %.2f %% of %d rays over %s lanes find the ground", pct, n, kind)
+        else:
+            ctx.log.warning("drop test: no %s lane of the map lies inside the scanned site", kind)
+    res["ok"] = bool(ok_all)
+    up = cloud.normals[:, 2] >= 0.85 if cloud.normals is not None else np.zeros(cloud.n_vertices, bool)
+    gv = np.abs(height_above_ground(mesh.vertices, cloud.vertices[up])) <= 0.5
+    border = ground_border(mesh.vertices, mesh.faces, fp, gv)
+    edges = border.pop("_edges")
+    res["open_border_at_ground_level"] = border
+    # open border over the driving lanes: edges (any height within 0.5 m of the ground) whose middle has a
+    # driving-lane ray within a ray spacing; chains of them are loops a wheel can catch on
+    drv = rays["driving"]
+    drv = drv[fp.inside(drv)] if len(drv) else drv
+    ein = edges["inside"]
+    over_m, over_chains = 0.0, 0
+    if len(drv) and len(ein):
+        from scipy.spatial import cKDTree
+
+        mid = mesh.vertices[ein].mean(axis=1)
+        dd, _ = cKDTree(drv[:, :2]).query(mid[:, :2], workers=-1)
+        over = dd <= params.spacing_m
+        if over.any():
+            from twinkit.surface.watertight import chains_of
+
+            over_m = float(np.linalg.norm(mesh.vertices[ein[over, 0]] - mesh.vertices[ein[over, 1]], axis=1).sum())
+            over_chains = int(len(np.unique(chains_of(ein[over]))))
+    res["open_border_over_driving_lanes_m"] = round(over_m, 2)
+    res["open_chains_over_driving_lanes"] = over_chains
+    d, s = res["lanes"]["driving"], res["lanes"]["sidewalk"]
+    draw_border(out_drop_test_png, mesh.vertices, mesh.faces, edges, ground_face=gv[mesh.faces].all(axis=1),
+                misses=np.vstack(misses) if misses else None,
+                title=f"drop test: driving {d['hit_pct']} %, sidewalk {s['hit_pct']} % of rays hit; misses orange, "
+                      f"open border red")
+    res["seconds"] = round(time.perf_counter() - t0, 2)
+    write_json(out_drop_test_json, res)
+    return {"ok": res["ok"], "driving_hit_pct": d["hit_pct"], "sidewalk_hit_pct": s["hit_pct"],
+            "driving_fall_through_pct": d["fall_through_pct"], "sidewalk_fall_through_pct": s["fall_through_pct"],
+            "driving_rays": d["rays"], "sidewalk_rays": s["rays"],
+            "open_border_inside_m": border["inside_m"],
+            "open_border_over_driving_lanes_m": res["open_border_over_driving_lanes_m"],
+            "open_chains_over_driving_lanes": over_chains, "seconds": res["seconds"]}
