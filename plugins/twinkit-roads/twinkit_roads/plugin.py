@@ -2,6 +2,7 @@
 
 Steps (recipes/roads_demo.yaml):
   fetch_roads     road_source (file | osm_api | overpass)   -> osm.osm
+                  road_source=opendrive                     -> opendrive.xodr (site frame), reprojection.json
   osm_to_opendrive                                          -> roads.xodr, roads_check.json
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
@@ -22,7 +23,8 @@ from twinkit import InputError, hookimpl
 from . import __version__
 from .convert import ConvertParams
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
-from .sources import DownloadParams, FileSourceParams, file_source, osm_api_source, overpass_source, site_radius
+from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
+                      site_radius)
 
 
 def _source_version() -> str:
@@ -44,38 +46,59 @@ def _bounds(site, radius_m: float) -> tuple[float, float, float, float]:
     return (-r, -r, r, r)
 
 
-def osm_to_opendrive(params: ConvertParams, ctx, *, in_osm_osm: Path, out_roads_xodr: Path,
-                     out_roads_check_json: Path) -> dict:
-    """Convert with netconvert into the site frame, then check with carla.Map offline."""
-    from .convert import check_xodr, netconvert_version, run_netconvert, xodr_counts
+def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_roads_check_json: Path,
+                     in_osm_osm: Path | None = None, in_opendrive_xodr: Path | None = None) -> dict:
+    """Convert with netconvert into the site frame, then check with carla.Map offline.
+
+    With ``opendrive.xodr`` from road_source=opendrive (already moved into the site frame) there is
+    nothing to convert: the map is only checked, and written as roads.xodr like a converted one."""
+    from .convert import check_xodr, netconvert_version, run_netconvert, way_type_message, xodr_counts
     from twinkit.geo import SiteFrame
 
     frame = SiteFrame.from_site(ctx.site)
     proj = frame.proj_string()
     t0 = time.perf_counter()
-    info = run_netconvert(in_osm_osm, out_roads_xodr, proj, params, ctx.log)
-    text = out_roads_xodr.read_text(encoding="utf-8")
+    if in_opendrive_xodr is not None:
+        if in_osm_osm is not None:
+            ctx.log.info("road_source gave an OpenDRIVE map: %s is not converted", in_osm_osm.name)
+        text = Path(in_opendrive_xodr).read_text(encoding="utf-8")
+        out_roads_xodr.write_text(text, encoding="utf-8")
+        info = {"source": "opendrive", "netconvert_s": 0.0}
+        conv = "none: road_source=opendrive (the map moved into the site frame, see reprojection.json)"
+    elif in_osm_osm is not None:
+        info = run_netconvert(in_osm_osm, out_roads_xodr, proj, params, ctx.log)
+        text = out_roads_xodr.read_text(encoding="utf-8")
+        conv = netconvert_version()
+    else:
+        raise InputError("osm_to_opendrive needs osm.osm (road_source=file, osm_api or overpass) or opendrive.xodr "
+                         "(road_source=opendrive) from the fetch_roads step before it")
     counts = xodr_counts(text)
     if counts["roads"] == 0:
-        raise InputError(f"netconvert produced no roads from {in_osm_osm.name}: none of its ways has a kept type "
-                         f"({', '.join(params.way_types)}); widen way_types")
+        raise InputError(f"netconvert produced no roads from {in_osm_osm.name}: "
+                         + way_type_message(in_osm_osm, params.way_types))
     bounds = _bounds(ctx.site, params.check_radius_m)
+    t1 = time.perf_counter()
     chk = check_xodr(out_roads_xodr, bounds, params.step_m)
+    check_s = time.perf_counter() - t1
     total = time.perf_counter() - t0
     ok = chk["topology_segments"] > 0 and chk["waypoints_inside"] >= params.min_waypoints_inside
-    report = {"ok": ok, "netconvert": netconvert_version(), "netconvert_args": "see roads.xodr header comment",
+    report = {"ok": ok, "netconvert": conv, "netconvert_args": "see roads.xodr header comment",
               "proj": proj, "site_frame": frame.to_json(), "bounds_local": bounds, **info, **counts,
-              "carla": chk, "conversion_s": round(total, 3)}
+              "carla": chk, "check_s": round(check_s, 3), "conversion_s": round(total, 3)}
     out_roads_check_json.write_text(json.dumps(report, indent=1))
     if not ok:
+        what = (f"the OpenDRIVE map ({in_opendrive_xodr.name}) does not cover the site: check site.base_point and the "
+                "map's geoReference" if in_opendrive_xodr is not None else "the OSM data do not cover the site")
         raise InputError(f"{out_roads_xodr.name}: carla.Map found {chk['topology_segments']} topology segments and "
                          f"{chk['waypoints_inside']} waypoints inside the site box {bounds} (need "
-                         f"{params.min_waypoints_inside}); the OSM data do not cover the site")
-    ctx.log.info("%d roads, %d junctions, %d traffic lights; carla.Map: %d waypoints (%d inside the site)",
-                 counts["roads"], counts["junctions"], counts["traffic_lights"], chk["waypoints"], chk["waypoints_inside"])
+                         f"{params.min_waypoints_inside}); {what}")
+    ctx.log.info("%d roads, %d junctions, %d traffic lights; carla.Map: %d waypoints (%d inside the site); "
+                 "netconvert %.2f s, check %.2f s, total %.2f s", counts["roads"], counts["junctions"],
+                 counts["traffic_lights"], chk["waypoints"], chk["waypoints_inside"], info["netconvert_s"], check_s,
+                 total)
     return {"roads": counts["roads"], "junctions": counts["junctions"], "traffic_lights": counts["traffic_lights"],
             "waypoints": chk["waypoints"], "waypoints_inside": chk["waypoints_inside"],
-            "conversion_s": round(total, 3), "netconvert_s": info["netconvert_s"]}
+            "conversion_s": round(total, 3), "netconvert_s": info["netconvert_s"], "check_s": round(check_s, 3)}
 
 
 @dataclass
@@ -478,6 +501,9 @@ def twinkit_register_road_sources(register):
              description="OpenStreetMap API /map by box around the base point (cached)")
     register("overpass", overpass_source, params=DownloadParams, version=VERSION,
              description="Overpass API query for highways by box around the base point (cached)")
+    register("opendrive", opendrive_source, params=OpenDriveSourceParams, version=VERSION,
+             description="an existing OpenDRIVE map (site.inputs.xodr or road_source.path) moved from its "
+                         "geoReference into the site frame")
 
 
 @hookimpl

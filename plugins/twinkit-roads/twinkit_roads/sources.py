@@ -21,6 +21,15 @@ class FileSourceParams:
 
 
 @dataclass
+class OpenDriveSourceParams:
+    path: str = ""  # the .xodr; empty: the site input xodr (site.inputs.xodr=/path/map.xodr)
+    georeference: str = ""  # the map's frame when it has no (or a wrong) <geoReference>: PROJ string or EPSG code; "site": already the site frame
+    heights: str = "datum"  # "datum": the map's z are heights in the site's vertical datum (z - base point alt); "keep": unchanged
+    max_residual_m: float = 0.01  # largest distance between the similarity and pyproj at a lane centre
+    sample_step_m: float = 2.0  # lane-centre spacing of the residual check
+
+
+@dataclass
 class DownloadParams:
     url: str = ""  # empty: the public default of the source
     radius_m: float = -1.0  # half-side of the box around the base point; <0: site.osm_radius_m (default 150)
@@ -139,3 +148,22 @@ def overpass_source(params: DownloadParams, ctx, *, out_osm_osm: Path) -> dict:
     res = _client(params).request("POST", url, data={"data": overpass_query(bbox, params.timeout_s)},
                                   validate=_validate)
     return _store(res.body, ctx, out_osm_osm, url, bbox, res)
+
+
+def opendrive_source(params, ctx, *, out_opendrive_xodr: Path, out_reprojection_json: Path,
+                     in_xodr: Path | None = None) -> dict:
+    """An existing OpenDRIVE map (``road_source.path``, else the site input ``xodr``) moved from its
+    ``<geoReference>`` into the site frame (reproject.py); ``osm_to_opendrive`` then checks it."""
+    from .reproject import to_site_frame, write_report
+
+    src = Path(params.path).expanduser() if params.path else in_xodr
+    if src is None:
+        raise InputError("road_source=opendrive needs an OpenDRIVE file: set site.inputs.xodr=/path/to/map.xodr or "
+                         "road_source.path=/path/to/map.xodr")
+    frame = SiteFrame.from_site(ctx.site)
+    text, rep = to_site_frame(Path(src), frame, params, ctx.log)
+    out_opendrive_xodr.write_text(text, encoding="utf-8")
+    write_report(rep, out_reprojection_json)
+    return {"source": str(src), "residual_max_m": round(rep["residual_max_m"], 6),
+            "scale": rep["similarity"]["scale"], "rotation_deg": rep["similarity"]["rotation_deg"],
+            "lane_centres": rep["lane_centres"], "identity": rep["similarity"]["identity"]}
