@@ -3,14 +3,16 @@
 A projection change is not a rigid motion, but over a street-sized map it is very nearly a
 similarity: ``site_xy = k * Rz(theta) @ map_xy + t`` (k: the ratio of the two projections' scale
 factors, theta: the difference of their grid convergences, t: the base point). A similarity maps
-every OpenDRIVE geometry onto the same kind of geometry, exactly:
+every OpenDRIVE geometry onto the same kind of geometry, exactly (:mod:`twinkit.geo.xodr`, shared with
+the CARLA package):
 
 - plan view: x, y by the similarity, hdg + theta, lengths * k; arc and spiral curvatures / k;
   poly3 and paramPoly3 (pRange arcLength) coefficients a * k, b, c / k, d / k^2 (normalized: all * k);
 - road coordinates scale with the map: every s and t (lane sections, widths, offsets, road marks,
   signals, objects) * k; lateral polynomials (width, border, laneOffset) a * k, b, c / k, d / k^2;
-- heights do not scale: elevation, superelevation, crossfall and shape keep their values, their
-  polynomials in s (or t) become a, b / k, c / k^2, d / k^3; elevation gets the vertical offset.
+- heights do not scale (a projection's scale factor is horizontal): elevation and shape keep their
+  values, superelevation and crossfall their angles; their polynomials in s (or t) become
+  a, b / k, c / k^2, d / k^3; elevation gets the vertical offset.
 
 Lanes, junctions, signals and objects are in road coordinates and follow. The similarity is fitted
 to the lane centres of the map (carla.Map waypoints) sent through pyproj's full transform; its
@@ -33,15 +35,6 @@ import numpy as np
 from twinkit import InputError
 
 from .sources import OpenDriveSourceParams  # noqa: F401 (the source's parameters live with the sources)
-
-#: attributes holding a horizontal length or an s / t coordinate inside a road (scaled by k)
-HORIZONTAL = frozenset("""s sOffset sStart sEnd ds length t tOffset tStart tEnd width widthStart widthEnd lengthStart
-lengthEnd radius radiusStart radiusEnd distance space validLength u v elementS""".split())
-#: polynomials of a horizontal quantity (a lateral distance) in s
-LATERAL_POLY = frozenset({"width", "border", "laneOffset", "poly3"})
-#: polynomials of a height or an angle in s (or in t for shape)
-VERTICAL_POLY = frozenset({"elevation", "superelevation", "crossfall", "shape"})
-
 
 @dataclass
 class Similarity2D:
@@ -147,106 +140,6 @@ def lane_centres(path: Path, step_m: float) -> np.ndarray:
         return np.load(npy)
 
 
-# --------------------------------------------------------------------------- rewriting
-
-def _f(v: float) -> str:
-    return repr(float(v))
-
-
-def _scale_poly(el: ET.Element, mult: tuple[float, float, float, float], names=("a", "b", "c", "d")) -> None:
-    for n, m in zip(names, mult):
-        if el.get(n) is not None and m != 1.0:
-            el.set(n, _f(float(el.get(n)) * m))
-
-
-def _move_road(road: ET.Element, sim: Similarity2D) -> None:
-    k, th = sim.k, sim.theta
-    lateral = (k, 1.0, 1 / k, 1 / k ** 2)
-    vertical = (1.0, 1 / k, 1 / k ** 2, 1 / k ** 3)
-    stack = [road]
-    while stack:
-        el = stack.pop()
-        if el.tag == "userData":  # tool-specific payload: left as it is
-            continue
-        stack.extend(list(el))
-        if el.tag == "geometry":
-            xy = sim.apply([[float(el.get("x", 0)), float(el.get("y", 0))]])[0]
-            el.set("x", _f(xy[0]))
-            el.set("y", _f(xy[1]))
-            el.set("hdg", _f(float(el.get("hdg", 0)) + th))
-        elif el.tag == "positionInertial":
-            xy = sim.apply([[float(el.get("x", 0)), float(el.get("y", 0))]])[0]
-            el.set("x", _f(xy[0]))
-            el.set("y", _f(xy[1]))
-            el.set("hdg", _f(float(el.get("hdg", 0)) + th))
-            continue  # its other attributes are not road coordinates
-        if k == 1.0:
-            continue
-        for a in HORIZONTAL & set(el.attrib):
-            el.set(a, _f(float(el.get(a)) * k))
-        if el.tag == "arc":
-            el.set("curvature", _f(float(el.get("curvature", 0)) / k))
-        elif el.tag == "spiral":
-            for a in ("curvStart", "curvEnd"):
-                el.set(a, _f(float(el.get(a, 0)) / k))
-        elif el.tag == "paramPoly3":
-            norm = el.get("pRange", "normalized") != "arcLength"
-            for ax in ("U", "V"):
-                _scale_poly(el, (k, k, k, k) if norm else lateral, tuple(c + ax for c in "abcd"))
-        elif el.tag in LATERAL_POLY:
-            _scale_poly(el, lateral)
-        elif el.tag in VERTICAL_POLY:
-            _scale_poly(el, vertical)
-
-
-def _shift_heights(road: ET.Element, dz: float) -> None:
-    prof = road.find("elevationProfile")
-    if prof is None:
-        prof = ET.Element("elevationProfile")
-        kids = list(road)
-        pv = road.find("planView")
-        road.insert(kids.index(pv) + 1 if pv is not None else 0, prof)
-    els = prof.findall("elevation")
-    if not els:
-        els = [ET.SubElement(prof, "elevation", {"s": "0", "a": "0", "b": "0", "c": "0", "d": "0"})]
-    for e in els:
-        e.set("a", _f(float(e.get("a", 0)) + dz))
-
-
-def set_georeference(root: ET.Element, proj: str) -> None:
-    head = root.find("header")
-    if head is None:
-        head = ET.Element("header", {"revMajor": "1", "revMinor": "4"})
-        root.insert(0, head)
-    geo = head.find("geoReference")
-    if geo is None:
-        geo = ET.Element("geoReference")
-        head.insert(0, geo)
-    geo.text = proj
-    geo.tail = geo.tail if geo.tail and geo.tail.strip() == "" else "\n    "
-
-
-def transform_map(root: ET.Element, sim: Similarity2D | None, dz: float, proj: str) -> None:
-    """Apply the similarity (None: the identity, every value kept as written) and the vertical offset to every
-    road; write the site's geoReference."""
-    xs, ys = [], []
-    for road in root.findall("road"):
-        if sim is not None:
-            _move_road(road, sim)
-        if dz:
-            _shift_heights(road, dz)
-        for g in road.findall("planView/geometry"):
-            xs.append(float(g.get("x")))
-            ys.append(float(g.get("y")))
-    set_georeference(root, proj)
-    head = root.find("header")
-    if xs and sim is not None:
-        head.set("north", f"{max(ys):.3f}")
-        head.set("south", f"{min(ys):.3f}")
-        head.set("east", f"{max(xs):.3f}")
-        head.set("west", f"{min(xs):.3f}")
-
-
 # --------------------------------------------------------------------------- the source
 
 def to_site_frame(src: Path, frame, params: OpenDriveSourceParams, log=None) -> tuple[str, dict]:
@@ -290,8 +183,13 @@ def to_site_frame(src: Path, frame, params: OpenDriveSourceParams, log=None) -> 
     proj = frame.proj_string()
     if identity:
         sim = Similarity2D(1.0, 0.0, np.zeros(2))
-    transform_map(root, None if identity else sim, dz, proj)
-    out = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    from twinkit.geo.xodr import XodrFrameError, transform_xodr
+
+    try:
+        out = transform_xodr(text, sim.theta, sim.k, proj, name=str(src), translation=(sim.t[0], sim.t[1]),
+                             scale_heights=False, dz=dz, keep_georeference_as="twinkit_source_geoReference")
+    except XodrFrameError as exc:
+        raise InputError(f"{exc}; or give a site CRS equal to the map's (scale 1)") from None
     rep = {
         "source": str(src), "map_georeference": declared, "site_georeference": proj, "transform": full,
         "similarity": {"scale": sim.k, "rotation_deg": math.degrees(sim.theta), "tx_m": float(sim.t[0]),
