@@ -4,6 +4,7 @@ Steps (recipes/roads_demo.yaml):
   fetch_roads     road_source (file | osm_api | overpass)   -> osm.osm
                   road_source=opendrive                     -> opendrive.xodr (site frame), reprojection.json
   osm_to_opendrive                                          -> roads.xodr, roads_check.json
+  roads_overview  top view of the network (recipe roads)   -> roads_overview.png
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
   place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
@@ -99,6 +100,35 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
     return {"roads": counts["roads"], "junctions": counts["junctions"], "traffic_lights": counts["traffic_lights"],
             "waypoints": chk["waypoints"], "waypoints_inside": chk["waypoints_inside"],
             "conversion_s": round(total, 3), "netconvert_s": info["netconvert_s"], "check_s": round(check_s, 3)}
+
+
+@dataclass
+class OverviewParams:
+    px_per_m: float = 4.0  # resolution of the picture
+    max_px: int = 3000  # at most this many pixels across (coarser for large networks)
+
+
+def roads_overview(params: OverviewParams, ctx, *, in_roads_xodr: Path, out_roads_overview_png: Path,
+                   in_roads_check_json: Path | None = None) -> dict:
+    """The road network seen from above, without any mesh: lanes by type, centre lines, the site box."""
+    from .qa import draw_network
+
+    params = params or OverviewParams()
+    text = in_roads_xodr.read_text(encoding="utf-8")
+    bounds = None
+    title = in_roads_xodr.name
+    if in_roads_check_json is not None:
+        chk = json.loads(in_roads_check_json.read_text())
+        bounds = tuple(chk.get("bounds_local") or ()) or None
+        title = (f"{chk.get('roads', '?')} roads, {chk.get('junctions', '?')} junctions, "
+                 f"{chk.get('traffic_lights', '?')} traffic lights")
+    try:
+        info = draw_network(text, out_roads_overview_png, bounds, params.px_per_m, params.max_px, title)
+    except ValueError as exc:
+        raise InputError(f"{in_roads_xodr}: {exc}; carla.Map finds no lanes (check osm_to_opendrive)") from None
+    ctx.log.info("roads_overview.png: %d lane segments (%s), %d x %d px", info["lane_segments"],
+                 ", ".join(f"{k} {v}" for k, v in info["lane_types"].items()), *info["px"])
+    return {"lane_segments": info["lane_segments"], "m_per_px": info["m_per_px"]}
 
 
 @dataclass
@@ -510,6 +540,8 @@ def twinkit_register_road_sources(register):
 def twinkit_register_steps(register):
     register("osm_to_opendrive", osm_to_opendrive, params=ConvertParams, version=VERSION,
              description="OSM -> OpenDRIVE with netconvert in the site frame; checked with carla.Map")
+    register("roads_overview", roads_overview, params=OverviewParams, version=VERSION,
+             description="top view of the road network without a mesh (lanes by type); roads_overview.png")
     register("align_roads", align_roads, params=AlignParams, version=VERSION,
              description="fit the road network to the mesh's road surface (yaw, translation); alignment.json")
     register("apply_alignment", apply_alignment, params=ApplyParams, version=VERSION,
