@@ -130,3 +130,22 @@ def test_an_edited_alignment_file_is_applied(demo_site, demo_net, tmp_path):
         run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap2",
                  {"in_roads_xodr": xodr, "in_alignment_json": f, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]},
                  site=DEMO_SITE)
+
+
+def test_footway_only_extract_names_its_way_types(tmp_path):
+    """Not netconvert's "No edges loaded.": the way types found, and the setting that widens the kept ones."""
+    from twinkit.geo import SiteFrame
+
+    frame = SiteFrame.from_site(DEMO_SITE)
+    ll = frame.local_to_lonlat([[-40, 0], [0, 0], [40, 0], [0, 40], [0, -40]])
+    nodes = "".join(f'<node id="{i + 1}" version="1" lat="{la:.7f}" lon="{lo:.7f}"/>' for i, (lo, la) in enumerate(ll))
+    osm = tmp_path / "paths.osm"
+    osm.write_text(f'<?xml version="1.0"?><osm version="0.6">{nodes}'
+                   '<way id="1" version="1"><nd ref="1"/><nd ref="2"/><nd ref="3"/><tag k="highway" v="footway"/></way>'
+                   '<way id="2" version="1"><nd ref="4"/><nd ref="2"/><tag k="highway" v="footway"/></way>'
+                   '<way id="3" version="1"><nd ref="2"/><nd ref="5"/><tag k="highway" v="cycleway"/></way></osm>')
+    with pytest.raises(InputError) as err:
+        _convert(tmp_path / "run", osm, DEMO_SITE)
+    msg = str(err.value)
+    assert "paths.osm" in msg and "footway (2), cycleway (1)" in msg and "No edges" not in msg
+    assert "steps.osm_to_opendrive.way_types=[motorway," in msg and "footway,cycleway]" in msg

@@ -44,7 +44,7 @@ def test_roads_recipe_from_an_osm_file(tmp_path):
     assert out["roads_overview.png"].stat().st_size > 10000
     report = next((tmp_path / "out" / "roadsite" / "runs").glob("*/report/report.html")).read_text()
     assert "roads_overview.png" in report and "roads_check.json" in report
-    assert "cropped to 200 m around the base point" in p.stderr + p.stdout
+    assert "cropped to 300 m around the base point" in p.stderr + p.stdout
 
 
 def test_roads_recipe_from_an_opendrive_map(tmp_path):

@@ -126,6 +126,10 @@ def way_type_message(osm: Path | None, way_types: list[str]) -> str:
         except InputError:
             pass
     have = ", ".join(f"{k} ({v})" for k, v in sorted(found.items(), key=lambda kv: -kv[1])) or "none"
+    kept = [k for k in found if k in way_types]
+    if kept:
+        return (f"it has highway ways of the types {have}; netconvert built no road from the kept ones "
+                f"({', '.join(kept)}): too short, or outside the projection's area? Check the extract in an editor")
     missing = [k for k in sorted(found, key=lambda k: -found[k]) if k not in way_types]
     widen = ",".join(list(way_types) + missing[:3])
     return (f"it has highway ways of the types {have}, and none of them is a kept type "

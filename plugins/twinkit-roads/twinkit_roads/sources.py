@@ -19,7 +19,7 @@ from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
 class FileSourceParams:
     path: str = ""  # a local .osm / .osm.bz2 / .osm.pbf; empty: the step's input (site.inputs.osm or a generated roads.osm)
     crop_radius_m: float = -1.0  # <0: the site box (site.osm_radius_m, default 150 m) plus crop_margin_m; 0: the whole file; >0: this half side
-    crop_margin_m: float = 50.0  # added to the site box when crop_radius_m < 0 (junctions just outside keep their shape)
+    crop_margin_m: float = 150.0  # added to the site box when crop_radius_m < 0 (bench_crop.py: 150 m gives the lanes of the whole extract inside the box)
 
 
 @dataclass
