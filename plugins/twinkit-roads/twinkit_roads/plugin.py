@@ -75,6 +75,8 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
                          "(road_source=opendrive) from the fetch_roads step before it")
     counts = xodr_counts(text)
     if counts["roads"] == 0:
+        if in_opendrive_xodr is not None:
+            raise InputError(f"{in_opendrive_xodr}: no roads in the OpenDRIVE map; check the road source's file")
         raise InputError(f"netconvert produced no roads from {in_osm_osm.name}: "
                          + way_type_message(in_osm_osm, params.way_types))
     bounds = _bounds(ctx.site, params.check_radius_m)
