@@ -7,8 +7,6 @@
   (:func:`to_site_frame`, :func:`apply_frame`, :class:`FrameInfo`).
 - :mod:`twinkit.geo.georef` -- :func:`site_georef`, the georeference block written into every export.
 - :mod:`twinkit.geo.similarity` -- :func:`fit_similarity`, the robust camera-centres -> GPS fit.
-- :mod:`twinkit.geo.xodr` -- :func:`~twinkit.geo.xodr.transform_xodr`, an OpenDRIVE map under a similarity
-  (the CARLA package's frame; ``road_source=opendrive``).
 
 pyproj (the ``twinkit[geo]`` extra) is imported inside the functions that need it, so importing this
 package costs only numpy. See docs/georeferencing.md.
