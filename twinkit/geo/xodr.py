@@ -130,7 +130,7 @@ def _move_point(el: ET.Element, c: float, s: float, scale: float, rot: float, t=
     x, y = _num(el.get("x", "0")), _num(el.get("y", "0"))
     el.set("x", _fmt(scale * (c * x - s * y) + t[0]))
     el.set("y", _fmt(scale * (s * x + c * y) + t[1]))
-    if el.tag in ANGLE_TAGS and "hdg" in el.attrib:
+    if el.tag in ANGLE_TAGS and "hdg" in el.attrib and rot:
         el.set("hdg", _fmt(_num(el.get("hdg")) + rot))
 
 
@@ -177,7 +177,8 @@ def transform_xodr(text: str, rotation_rad: float, scale: float, geo_reference: 
         if tag == "geometry" and parent.tag == "planView":
             if moves:
                 _move_point(el, c, s, scale, 0.0, t)
-                el.set("hdg", _fmt(_num(el.get("hdg", "0")) + rotation_rad))
+                if rotation_rad:
+                    el.set("hdg", _fmt(_num(el.get("hdg", "0")) + rotation_rad))
             _scale_attrs(el, ("s", "length"), scale)
             for g in el:
                 if not isinstance(g.tag, str):

@@ -155,6 +155,39 @@ def test_town10_passes_through(tmp_path):
     assert doc["ok"] and doc["roads"] == 108 and doc["junctions"] == 9 and doc["carla"]["traffic_light_landmarks"] > 0
 
 
+def test_same_projection_other_base_point_is_a_pure_translation(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    from twinkit.geo import SiteFrame
+
+    src = need_xodr("Town10HD.xodr")
+    site = dict(TOWN_SITE, base_point={"lat": 0.001, "lon": 0.002, "alt": 0.0})
+    out = source(tmp_path, src, site)
+    rep = json.loads(out["reprojection.json"].read_text())["similarity"]
+    assert rep["scale"] == 1.0 and rep["rotation_deg"] == 0.0 and not rep["identity"]
+    f = SiteFrame.from_site(site)
+    a, b = ET.parse(src).getroot(), ET.parse(out["opendrive.xodr"]).getroot()
+    for ga, gb in zip(a.iter("geometry"), b.iter("geometry")):
+        assert gb.get("length") == ga.get("length") and gb.get("hdg") == ga.get("hdg")  # not a digit changed
+        assert float(gb.get("x")) == pytest.approx(float(ga.get("x")) - f.easting, abs=1e-6)
+        assert float(gb.get("y")) == pytest.approx(float(ga.get("y")) - f.northing, abs=1e-6)
+
+
+def test_georeference_site_takes_the_coordinates_as_they_are(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    from twinkit.geo import SiteFrame
+
+    src = need_xodr("fabriksgatan.xodr")
+    site = {"name": "hki", "crs": "EPSG:3067", "base_point": {"lat": 60.17, "lon": 24.94, "alt": 0.0}}
+    out = source(tmp_path, src, site, georeference="site")
+    rep = json.loads(out["reprojection.json"].read_text())
+    assert rep["similarity"]["identity"] and rep["map_georeference"] == "site"
+    a, b = ET.parse(src).getroot(), ET.parse(out["opendrive.xodr"]).getroot()
+    assert [g.attrib for g in a.iter("geometry")] == [g.attrib for g in b.iter("geometry")]
+    assert b.find("header/geoReference").text == SiteFrame.from_site(site).proj_string()
+
+
 def test_heights_get_the_vertical_offset(tmp_path):
     import xml.etree.ElementTree as ET
 

@@ -104,7 +104,8 @@ def draw_network(xodr_text: str, out: Path, bounds: tuple[float, float, float, f
     rows += ["white: driving-lane centre lines", "yellow: site box"]
     d.rectangle([8, 8, 300, 20 + 16 * len(rows)], fill=(0, 0, 0))
     for i, r in enumerate(rows):
-        d.text((16, 14 + 16 * i), r, fill=LANE_COLOURS.get(r.split(":")[0], (255, 255, 255)))
+        c = LANE_COLOURS.get(r.split(":")[0])
+        d.text((16, 14 + 16 * i), r, fill=tuple(min(255, v + 90) for v in c) if c else (255, 255, 255))
     bar = 50.0 / res
     d.line([(16, grid.h - 20), (16 + bar, grid.h - 20)], fill=(255, 255, 255), width=3)
     d.text((22 + bar, grid.h - 28), "50 m", fill=(255, 255, 255))

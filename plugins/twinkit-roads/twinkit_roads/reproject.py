@@ -165,6 +165,11 @@ def to_site_frame(src: Path, frame, params: OpenDriveSourceParams, log=None) -> 
             raise InputError(f"{src}: pyproj cannot move the map from '{declared[:120]}' into the site CRS "
                              f"{frame.crs} (points outside the CRS's area); check the geoReference and site.crs")
         sim = fit_similarity_2d(p, q)
+        # float noise of a pure translation (same projection, another base point): no scale, no turn
+        if abs(sim.k - 1) * max(extent, 1.0) < 1e-9:
+            sim.k = 1.0
+        if abs(sim.theta) * max(extent, 1.0) < 1e-9:
+            sim.theta = 0.0
         full = f"pyproj: {declared[:200]} -> {frame.projected[:200]}"
     res = np.hypot(*(sim.apply(p) - q).T)
     worst = float(res.max())
