@@ -97,9 +97,11 @@ def test_spawn_points_on_driving_lanes_and_frames(tmp_path, fake_fbx, class_dir,
 
 
 def test_missing_xodr_is_a_clear_error(tmp_path, fake_fbx, class_dir):
-    with pytest.raises(InputError, match="aligned.xodr"):
+    with pytest.raises(InputError, match="aligned.xodr") as err:
         run_step(plugin("exporter", "carla_package"), tmp_path / "run",
                  {"in_twin_fbx": fake_fbx, "in_class_meshes_dir": class_dir}, site=SITE)
+    # the key it names is the one the engine wires to in_aligned_xodr (site input "aligned", a .xodr)
+    assert "site.inputs.aligned=/" in str(err.value) and "aligned_xodr" not in str(err.value)
 
 
 def test_names_that_would_mislead_carla_are_refused(tmp_path, fake_fbx, class_dir, xodr_file):
@@ -135,3 +137,38 @@ def test_real_opendrive_fabriksgatan(tmp_path, fake_fbx, class_dir):
         w = m.get_waypoint_xodr(p["road_id"], p["lane_id"], p["s"])
         assert w is not None and not w.is_junction and w.lane_type == carla.LaneType.Driving
         assert w.transform.location.distance(carla.Location(c["x"], c["y"], c["z"] - 0.5)) < 0.05
+
+
+@needs_bpy
+@pytest.mark.shared
+def test_an_opendrive_map_from_road_source_opendrive_is_packaged(tmp_path, fake_fbx, class_dir):
+    """A UTM map (soderleden.xodr) moved into a SWEREF 99 TM site by road_source=opendrive (twinkit-roads,
+    reached through the registry), packaged: CARLA parses it, spawn points lie on its lanes, and CARLA's
+    geolocation of its lane centres is where pyproj puts the source map's (within the package's 0.5 m)."""
+    from pyproj import Transformer
+    from scipy.spatial import cKDTree
+    from twinkit.testing import need_plugin, run_plugin
+
+    src = SHARED / "data" / "opendrive" / "soderleden.xodr"
+    if not src.exists():
+        pytest.skip(f"{src} not available")
+    need_plugin("road_source", "opendrive")
+    site = {"name": "teststreet", "crs": "EPSG:3006", "base_point": {"lat": -0.0000685, "lon": 4.5164, "alt": 0.0}}
+    moved = run_plugin("road_source", "opendrive", tmp_path / "src", {"in_xodr": src}, site=site)["opendrive.xodr"]
+    out = _package(tmp_path, fake_fbx, class_dir, moved, site=site)
+    assert json.loads(out["spawn_points.json"].read_text())["count"] > 10
+    pkg = carla.Map("p", next((out["carla_import"] / "Import").rglob("*.xodr")).read_text())
+    a = carla.Map("a", src.read_text())
+    ref = np.array([(w.transform.location.x, -w.transform.location.y) for w in a.generate_waypoints(0.1)])
+    to_utm = Transformer.from_crs("EPSG:4326", "EPSG:32632", always_xy=True)
+    n = 0
+    for w in pkg.generate_waypoints(2.0):
+        if w.transform.location.length() > 150:
+            continue
+        loc = w.transform.location
+        g = pkg.transform_to_geolocation(carla.Location(loc.x, -loc.y, 0.0))  # north-positive y (twinkit.geo.carla)
+        e, nn = to_utm.transform(g.longitude, g.latitude)
+        d, _ = cKDTree(ref).query([e, nn])
+        assert d < 0.5, (w.road_id, w.lane_id, w.s, d)
+        n += 1
+    assert n > 50

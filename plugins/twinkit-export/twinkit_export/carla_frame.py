@@ -5,7 +5,7 @@ in metres at that point (``GeoReferenceParser.cpp``, ``GeoLocation.cpp``; see
 :mod:`twinkit.geo.carla`). The package is therefore written in :func:`twinkit.geo.carla.carla_frame`'s
 frame: ``package = scale * Rz(rotation) * site`` for x, y and z.
 
-- OpenDRIVE: :func:`twinkit_export.xodr_frame.transform_xodr`; its geoReference becomes the frame's
+- OpenDRIVE: :func:`twinkit.geo.xodr.transform_xodr`; its geoReference becomes the frame's
   exact PROJ string (the site-frame string is kept in a header ``userData``).
 - FBX: re-exported through the fbx exporter with the vertices moved (normals turned). The transform
   is baked into the vertices, not put on a root node: CARLA's pedestrian navmesh tool reads raw

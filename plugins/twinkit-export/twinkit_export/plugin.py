@@ -322,7 +322,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     t0 = time.perf_counter()
     if in_aligned_xodr is None:
         raise InputError("carla_package needs the aligned road network aligned.xodr (OpenDRIVE in the site frame): "
-                         "add the road alignment step before it, or set site.inputs.aligned_xodr=/path/to/roads.xodr")
+                         "add the road alignment step before it, or set site.inputs.aligned=/path/to/roads.xodr")
     xodr = Path(in_aligned_xodr)
     try:
         text = xodr.read_text()

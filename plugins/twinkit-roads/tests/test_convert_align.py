@@ -130,3 +130,51 @@ def test_an_edited_alignment_file_is_applied(demo_site, demo_net, tmp_path):
         run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap2",
                  {"in_roads_xodr": xodr, "in_alignment_json": f, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]},
                  site=DEMO_SITE)
+
+
+def test_footway_only_extract_names_its_way_types(tmp_path):
+    """Not netconvert's "No edges loaded.": the way types found, and the setting that widens the kept ones."""
+    from twinkit.geo import SiteFrame
+
+    frame = SiteFrame.from_site(DEMO_SITE)
+    ll = frame.local_to_lonlat([[-40, 0], [0, 0], [40, 0], [0, 40], [0, -40]])
+    nodes = "".join(f'<node id="{i + 1}" version="1" lat="{la:.7f}" lon="{lo:.7f}"/>' for i, (lo, la) in enumerate(ll))
+    osm = tmp_path / "paths.osm"
+    osm.write_text(f'<?xml version="1.0"?><osm version="0.6">{nodes}'
+                   '<way id="1" version="1"><nd ref="1"/><nd ref="2"/><nd ref="3"/><tag k="highway" v="footway"/></way>'
+                   '<way id="2" version="1"><nd ref="4"/><nd ref="2"/><tag k="highway" v="footway"/></way>'
+                   '<way id="3" version="1"><nd ref="2"/><nd ref="5"/><tag k="highway" v="cycleway"/></way></osm>')
+    with pytest.raises(InputError) as err:
+        _convert(tmp_path / "run", osm, DEMO_SITE)
+    msg = str(err.value)
+    assert "paths.osm" in msg and "footway (2), cycleway (1)" in msg and "No edges" not in msg
+    assert "steps.osm_to_opendrive.way_types=[motorway," in msg and "footway,cycleway]" in msg
+
+
+def test_an_opendrive_map_in_another_crs_is_aligned_like_a_converted_one(demo_site, demo_net, tmp_path):
+    """The demo's network written in UTM 34 (another CRS, its own geoReference), read back with
+    road_source=opendrive into the demo site (TM35FIN), then aligned and applied: the same result as the
+    network converted from OSM."""
+    xodr, truth = demo_net
+    utm34 = dict(DEMO_SITE, name="utm34", crs="EPSG:32634")
+    src = plugin_from_module(roads, "road_source", "opendrive")
+    other = run_step(src, tmp_path / "to34", {"in_xodr": xodr}, roads.OpenDriveSourceParams(heights="keep"),
+                     site=utm34)["opendrive.xodr"]
+    assert SiteFrame.from_site(utm34).proj_string() in other.read_text()
+    back = run_step(src, tmp_path / "back", {"in_xodr": other}, roads.OpenDriveSourceParams(heights="keep"),
+                    site=DEMO_SITE)
+    rep = json.loads(back["reprojection.json"].read_text())
+    assert rep["residual_max_m"] < 0.01 and abs(rep["similarity"]["rotation_deg"]) > 1  # the grids differ (convergence)
+    chk = run_step(plugin_from_module(roads, "step", "osm_to_opendrive"), tmp_path / "chk",
+                   {"in_opendrive_xodr": back["opendrive.xodr"]}, site=DEMO_SITE)
+    moved = chk["roads.xodr"]
+    b = (-28.0, -28.0, 28.0, 28.0)
+    assert abs(centreline_rmse(moved.read_text(), truth, b)[0] - centreline_rmse(xodr.read_text(), truth, b)[0]) < 0.01
+    mesh = demo_site["gt_mesh.ply"]
+    al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp_path / "al",
+                  {"in_roads_xodr": moved, "in_textured_mesh_ply": mesh}, site=DEMO_SITE)
+    ap = run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap",
+                  {"in_roads_xodr": moved, "in_alignment_json": al["alignment.json"], "in_textured_mesh_ply": mesh},
+                  roads.ApplyParams(qa_px_per_m=8), site=DEMO_SITE)
+    after, n = centreline_rmse(ap["aligned.xodr"].read_text(), truth, b)
+    assert after < 0.3 and n > 100

@@ -100,6 +100,8 @@ def run_netconvert(osm: Path, xodr: Path, proj: str, p: ConvertParams, log=None)
     lines = [ln for ln in (r.stderr + r.stdout).splitlines() if ln.strip() and "proj.db" not in ln
              and "SUMO_HOME" not in ln]
     errors = [ln for ln in lines if ln.startswith("Error")]
+    if any("No edges loaded" in ln for ln in errors):
+        raise InputError(f"netconvert found no roads in {osm.name}: " + way_type_message(osm, p.way_types))
     if r.returncode != 0 or errors or not xodr.is_file() or xodr.stat().st_size == 0:
         why = "; ".join(errors[-3:] or lines[-3:]) or f"exit code {r.returncode}"
         raise InputError(f"netconvert failed on {osm.name} (exit {r.returncode}): {why}")
@@ -109,6 +111,30 @@ def run_netconvert(osm: Path, xodr: Path, proj: str, p: ConvertParams, log=None)
         for ln in warnings[:5]:
             log.info("netconvert: %s", ln)
     return {"netconvert_s": round(dt, 3), "netconvert_warnings": len(warnings)}
+
+
+def way_type_message(osm: Path | None, way_types: list[str]) -> str:
+    """Which highway=* way types the OSM file holds, against the kept ones, and the setting that widens them."""
+    found: dict[str, int] = {}
+    if osm is not None:
+        try:
+            from .osmio import read_osm
+
+            for _, tags in read_osm(osm).ways.values():
+                if "highway" in tags:
+                    found[tags["highway"]] = found.get(tags["highway"], 0) + 1
+        except InputError:
+            pass
+    have = ", ".join(f"{k} ({v})" for k, v in sorted(found.items(), key=lambda kv: -kv[1])) or "none"
+    kept = [k for k in found if k in way_types]
+    if kept:
+        return (f"it has highway ways of the types {have}; netconvert built no road from the kept ones "
+                f"({', '.join(kept)}): too short, or outside the projection's area? Check the extract in an editor")
+    missing = [k for k in sorted(found, key=lambda k: -found[k]) if k not in way_types]
+    widen = ",".join(list(way_types) + missing[:3])
+    return (f"it has highway ways of the types {have}, and none of them is a kept type "
+            f"(way_types: {', '.join(way_types)}). Widen the kept types, e.g. "
+            f"steps.osm_to_opendrive.way_types=[{widen}], or give an extract with streets")
 
 
 def _make_deterministic(xodr: Path, args: list[str]) -> None:
@@ -146,12 +172,15 @@ def xodr_counts(text: str) -> dict:
 
 
 def check_xodr(xodr: Path, bounds_local: tuple[float, float, float, float], step_m: float = 2.0,
-               timeout_s: float = 300.0) -> dict:
+               timeout_s: float = 300.0, samples: Path | None = None) -> dict:
     """Parse with carla.Map offline in a child process (a malformed file cannot crash the step).
 
-    ``bounds_local`` = (xmin, ymin, xmax, ymax) in the site frame. Returns counts and timings.
+    ``bounds_local`` = (xmin, ymin, xmax, ymax) in the site frame. Returns counts and timings. With
+    ``samples``, the waypoints' lane centres are saved there (x, y, z, road, lane, s; see xodrcheck).
     """
     cmd = [sys.executable, "-m", "twinkit_roads.xodrcheck", str(xodr), json.dumps(list(bounds_local)), str(step_m)]
+    if samples is not None:
+        cmd.append(str(samples))
     try:
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:

@@ -2,7 +2,9 @@
 
 Steps (recipes/roads_demo.yaml):
   fetch_roads     road_source (file | osm_api | overpass)   -> osm.osm
+                  road_source=opendrive                     -> opendrive.xodr (site frame), reprojection.json
   osm_to_opendrive                                          -> roads.xodr, roads_check.json
+  roads_overview  top view of the network (recipe roads)   -> roads_overview.png
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
   place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
@@ -22,7 +24,8 @@ from twinkit import InputError, hookimpl
 from . import __version__
 from .convert import ConvertParams
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
-from .sources import DownloadParams, FileSourceParams, file_source, osm_api_source, overpass_source, site_radius
+from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
+                      site_radius)
 
 
 def _source_version() -> str:
@@ -44,38 +47,90 @@ def _bounds(site, radius_m: float) -> tuple[float, float, float, float]:
     return (-r, -r, r, r)
 
 
-def osm_to_opendrive(params: ConvertParams, ctx, *, in_osm_osm: Path, out_roads_xodr: Path,
-                     out_roads_check_json: Path) -> dict:
-    """Convert with netconvert into the site frame, then check with carla.Map offline."""
-    from .convert import check_xodr, netconvert_version, run_netconvert, xodr_counts
+def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_roads_check_json: Path,
+                     in_osm_osm: Path | None = None, in_opendrive_xodr: Path | None = None) -> dict:
+    """Convert with netconvert into the site frame, then check with carla.Map offline.
+
+    With ``opendrive.xodr`` from road_source=opendrive (already moved into the site frame) there is
+    nothing to convert: the map is only checked, and written as roads.xodr like a converted one."""
+    from .convert import check_xodr, netconvert_version, run_netconvert, way_type_message, xodr_counts
     from twinkit.geo import SiteFrame
 
     frame = SiteFrame.from_site(ctx.site)
     proj = frame.proj_string()
     t0 = time.perf_counter()
-    info = run_netconvert(in_osm_osm, out_roads_xodr, proj, params, ctx.log)
-    text = out_roads_xodr.read_text(encoding="utf-8")
+    if in_opendrive_xodr is not None:
+        if in_osm_osm is not None:
+            ctx.log.info("road_source gave an OpenDRIVE map: %s is not converted", in_osm_osm.name)
+        text = Path(in_opendrive_xodr).read_text(encoding="utf-8")
+        out_roads_xodr.write_text(text, encoding="utf-8")
+        info = {"source": "opendrive", "netconvert_s": 0.0}
+        conv = "none: road_source=opendrive (the map moved into the site frame, see reprojection.json)"
+    elif in_osm_osm is not None:
+        info = run_netconvert(in_osm_osm, out_roads_xodr, proj, params, ctx.log)
+        text = out_roads_xodr.read_text(encoding="utf-8")
+        conv = netconvert_version()
+    else:
+        raise InputError("osm_to_opendrive needs osm.osm (road_source=file, osm_api or overpass) or opendrive.xodr "
+                         "(road_source=opendrive) from the fetch_roads step before it")
     counts = xodr_counts(text)
     if counts["roads"] == 0:
-        raise InputError(f"netconvert produced no roads from {in_osm_osm.name}: none of its ways has a kept type "
-                         f"({', '.join(params.way_types)}); widen way_types")
+        if in_opendrive_xodr is not None:
+            raise InputError(f"{in_opendrive_xodr}: no roads in the OpenDRIVE map; check the road source's file")
+        raise InputError(f"netconvert produced no roads from {in_osm_osm.name}: "
+                         + way_type_message(in_osm_osm, params.way_types))
     bounds = _bounds(ctx.site, params.check_radius_m)
+    t1 = time.perf_counter()
     chk = check_xodr(out_roads_xodr, bounds, params.step_m)
+    check_s = time.perf_counter() - t1
     total = time.perf_counter() - t0
     ok = chk["topology_segments"] > 0 and chk["waypoints_inside"] >= params.min_waypoints_inside
-    report = {"ok": ok, "netconvert": netconvert_version(), "netconvert_args": "see roads.xodr header comment",
+    report = {"ok": ok, "netconvert": conv, "netconvert_args": "see roads.xodr header comment",
               "proj": proj, "site_frame": frame.to_json(), "bounds_local": bounds, **info, **counts,
-              "carla": chk, "conversion_s": round(total, 3)}
+              "carla": chk, "check_s": round(check_s, 3), "conversion_s": round(total, 3)}
     out_roads_check_json.write_text(json.dumps(report, indent=1))
     if not ok:
+        what = (f"the OpenDRIVE map ({in_opendrive_xodr.name}) does not cover the site: check site.base_point and the "
+                "map's geoReference" if in_opendrive_xodr is not None else "the OSM data do not cover the site")
         raise InputError(f"{out_roads_xodr.name}: carla.Map found {chk['topology_segments']} topology segments and "
                          f"{chk['waypoints_inside']} waypoints inside the site box {bounds} (need "
-                         f"{params.min_waypoints_inside}); the OSM data do not cover the site")
-    ctx.log.info("%d roads, %d junctions, %d traffic lights; carla.Map: %d waypoints (%d inside the site)",
-                 counts["roads"], counts["junctions"], counts["traffic_lights"], chk["waypoints"], chk["waypoints_inside"])
+                         f"{params.min_waypoints_inside}); {what}")
+    ctx.log.info("%d roads, %d junctions, %d traffic lights; carla.Map: %d waypoints (%d inside the site); "
+                 "netconvert %.2f s, check %.2f s, total %.2f s", counts["roads"], counts["junctions"],
+                 counts["traffic_lights"], chk["waypoints"], chk["waypoints_inside"], info["netconvert_s"], check_s,
+                 total)
     return {"roads": counts["roads"], "junctions": counts["junctions"], "traffic_lights": counts["traffic_lights"],
             "waypoints": chk["waypoints"], "waypoints_inside": chk["waypoints_inside"],
-            "conversion_s": round(total, 3), "netconvert_s": info["netconvert_s"]}
+            "conversion_s": round(total, 3), "netconvert_s": info["netconvert_s"], "check_s": round(check_s, 3)}
+
+
+@dataclass
+class OverviewParams:
+    px_per_m: float = 4.0  # resolution of the picture
+    max_px: int = 3000  # at most this many pixels across (coarser for large networks)
+
+
+def roads_overview(params: OverviewParams, ctx, *, in_roads_xodr: Path, out_roads_overview_png: Path,
+                   in_roads_check_json: Path | None = None) -> dict:
+    """The road network seen from above, without any mesh: lanes by type, centre lines, the site box."""
+    from .qa import draw_network
+
+    params = params or OverviewParams()
+    text = in_roads_xodr.read_text(encoding="utf-8")
+    bounds = None
+    title = in_roads_xodr.name
+    if in_roads_check_json is not None:
+        chk = json.loads(in_roads_check_json.read_text())
+        bounds = tuple(chk.get("bounds_local") or ()) or None
+        title = (f"{chk.get('roads', '?')} roads, {chk.get('junctions', '?')} junctions, "
+                 f"{chk.get('traffic_lights', '?')} traffic lights")
+    try:
+        info = draw_network(text, out_roads_overview_png, bounds, params.px_per_m, params.max_px, title)
+    except ValueError as exc:
+        raise InputError(f"{in_roads_xodr}: {exc}; carla.Map finds no lanes (check osm_to_opendrive)") from None
+    ctx.log.info("roads_overview.png: %d lane segments (%s), %d x %d px", info["lane_segments"],
+                 ", ".join(f"{k} {v}" for k, v in info["lane_types"].items()), *info["px"])
+    return {"lane_segments": info["lane_segments"], "m_per_px": info["m_per_px"]}
 
 
 @dataclass
@@ -478,12 +533,17 @@ def twinkit_register_road_sources(register):
              description="OpenStreetMap API /map by box around the base point (cached)")
     register("overpass", overpass_source, params=DownloadParams, version=VERSION,
              description="Overpass API query for highways by box around the base point (cached)")
+    register("opendrive", opendrive_source, params=OpenDriveSourceParams, version=VERSION,
+             description="an existing OpenDRIVE map (site.inputs.xodr or road_source.path) moved from its "
+                         "geoReference into the site frame")
 
 
 @hookimpl
 def twinkit_register_steps(register):
     register("osm_to_opendrive", osm_to_opendrive, params=ConvertParams, version=VERSION,
              description="OSM -> OpenDRIVE with netconvert in the site frame; checked with carla.Map")
+    register("roads_overview", roads_overview, params=OverviewParams, version=VERSION,
+             description="top view of the road network without a mesh (lanes by type); roads_overview.png")
     register("align_roads", align_roads, params=AlignParams, version=VERSION,
              description="fit the road network to the mesh's road surface (yaw, translation); alignment.json")
     register("apply_alignment", apply_alignment, params=ApplyParams, version=VERSION,

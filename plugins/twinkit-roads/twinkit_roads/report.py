@@ -184,7 +184,8 @@ def _projected_shift(ctx, roads: list[dict]) -> tuple[float, float]:
 def sec_alignment(ctx) -> str:
     """Every number of the alignment and road-check files, residuals first."""
     parts = []
-    for s, f in ctx.find("*align*.json") + ctx.find("*residual*.json") + ctx.find("*roads_check*.json"):
+    for s, f in (ctx.find("*align*.json") + ctx.find("*residual*.json") + ctx.find("*reprojection*.json")
+                 + ctx.find("*roads_check*.json")):
         d = ctx.read_json(f)
         if not isinstance(d, dict):
             continue

@@ -5,6 +5,7 @@ fails with an InputError naming the cause when the data hold no roads.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,7 +18,17 @@ from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
 @dataclass
 class FileSourceParams:
     path: str = ""  # a local .osm / .osm.bz2 / .osm.pbf; empty: the step's input (site.inputs.osm or a generated roads.osm)
-    crop_radius_m: float = 0.0  # >0: keep only ways with a node within this half-side box around the base point
+    crop_radius_m: float = -1.0  # <0: the site box (site.osm_radius_m, default 150 m) plus crop_margin_m; 0: the whole file; >0: this half side
+    crop_margin_m: float = 150.0  # added to the site box when crop_radius_m < 0 (bench_crop.py: 150 m gives the lanes of the whole extract inside the box)
+
+
+@dataclass
+class OpenDriveSourceParams:
+    path: str = ""  # the .xodr; empty: the site input xodr (site.inputs.xodr=/path/map.xodr)
+    georeference: str = ""  # the map's frame when it has no (or a wrong) <geoReference>: PROJ string or EPSG code; "site": already the site frame
+    heights: str = "datum"  # "datum": the map's z are heights in the site's vertical datum (z - base point alt); "keep": unchanged
+    max_residual_m: float = 0.01  # largest distance between the similarity and pyproj at a lane centre
+    sample_step_m: float = 2.0  # lane-centre spacing of the residual check
 
 
 @dataclass
@@ -50,14 +61,14 @@ def _bbox(params: DownloadParams, site) -> tuple[float, float, float, float]:
     return frame.bbox_lonlat(site_radius(site, params.radius_m))
 
 
-def finish(data: OsmData, out: Path, where: str, bbox=None) -> dict:
-    """Write ``data`` to ``out`` after checking it has roads."""
+def finish(data: OsmData, out: Path, where: str, bbox=None, write_bbox: bool = True) -> dict:
+    """Write ``data`` to ``out`` after checking it has roads (``<bounds>``: ``bbox``, or the data's own)."""
     counts = data.count()
     if counts["highway_ways"] == 0:
         box = f" in the box {tuple(round(v, 6) for v in bbox)}" if bbox else ""
         raise InputError(f"{where}: no roads (no highway=* ways){box}; {counts['ways']} ways, {counts['nodes']} nodes. "
                          "Check the base point and osm_radius_m, or give a file that covers the site")
-    write_osm_xml(data, out, bbox)
+    write_osm_xml(data, out, bbox if write_bbox else None)
     return counts
 
 
@@ -72,15 +83,26 @@ def file_source(params: FileSourceParams, ctx, *, out_osm_osm: Path, in_osm: Pat
     if src is None:
         raise InputError("road_source=file needs an OSM file: set site.inputs.osm=/path/to/area.osm.pbf or "
                          "road_source.path=..., or choose road_source=overpass / osm_api to download by box")
+    t0 = time.perf_counter()
     data = read_osm(Path(src))
-    bbox = None
-    if params.crop_radius_m > 0:
-        bbox = SiteFrame.from_site(ctx.site).bbox_lonlat(params.crop_radius_m)
+    t_read = time.perf_counter() - t0
+    bbox, radius = None, 0.0
+    ways_in = len(data.ways)
+    if params.crop_radius_m != 0:
+        radius = (params.crop_radius_m if params.crop_radius_m > 0
+                  else site_radius(ctx.site, -1.0) + max(params.crop_margin_m, 0.0))
+        bbox = SiteFrame.from_site(ctx.site).bbox_lonlat(radius)
         data = crop(data, bbox)
-    counts = finish(data, out_osm_osm, str(src), bbox)
-    ctx.log.info("read %s: %d highway ways, %d traffic signals", Path(src).name, counts["highway_ways"],
-                 counts["traffic_signals"])
-    return {"source": str(src), **counts}
+    t_crop = time.perf_counter() - t0 - t_read
+    # an explicit crop_radius_m writes its box as the file's <bounds> (as before); the automatic one the data's
+    counts = finish(data, out_osm_osm, str(src), bbox, write_bbox=params.crop_radius_m > 0)
+    t_write = time.perf_counter() - t0 - t_read - t_crop
+    crop_note = f", cropped to {radius:g} m around the base point ({ways_in} -> {counts['ways']} ways)" if bbox else ""
+    ctx.log.info("read %s: %d highway ways, %d traffic signals%s; read %.2f s, crop %.2f s, write %.2f s",
+                 Path(src).name, counts["highway_ways"], counts["traffic_signals"], crop_note, t_read, t_crop,
+                 t_write)
+    return {"source": str(src), **counts, "crop_half_side_m": radius, "ways_before_crop": ways_in,
+            "read_s": round(t_read, 3), "crop_s": round(t_crop, 3), "write_s": round(t_write, 3)}
 
 
 def _validate(body: bytes) -> str | None:
@@ -139,3 +161,22 @@ def overpass_source(params: DownloadParams, ctx, *, out_osm_osm: Path) -> dict:
     res = _client(params).request("POST", url, data={"data": overpass_query(bbox, params.timeout_s)},
                                   validate=_validate)
     return _store(res.body, ctx, out_osm_osm, url, bbox, res)
+
+
+def opendrive_source(params, ctx, *, out_opendrive_xodr: Path, out_reprojection_json: Path,
+                     in_xodr: Path | None = None) -> dict:
+    """An existing OpenDRIVE map (``road_source.path``, else the site input ``xodr``) moved from its
+    ``<geoReference>`` into the site frame (reproject.py); ``osm_to_opendrive`` then checks it."""
+    from .reproject import to_site_frame, write_report
+
+    src = Path(params.path).expanduser() if params.path else in_xodr
+    if src is None:
+        raise InputError("road_source=opendrive needs an OpenDRIVE file: set site.inputs.xodr=/path/to/map.xodr or "
+                         "road_source.path=/path/to/map.xodr")
+    frame = SiteFrame.from_site(ctx.site)
+    text, rep = to_site_frame(Path(src), frame, params, ctx.log)
+    out_opendrive_xodr.write_text(text, encoding="utf-8")
+    write_report(rep, out_reprojection_json)
+    return {"source": str(src), "residual_max_m": round(rep["residual_max_m"], 6),
+            "scale": rep["similarity"]["scale"], "rotation_deg": rep["similarity"]["rotation_deg"],
+            "lane_centres": rep["lane_centres"], "identity": rep["similarity"]["identity"]}

@@ -1,6 +1,9 @@
 """Child process: parse an OpenDRIVE file with carla.Map offline and report on it as one JSON line.
 
-    python -m twinkit_roads.xodrcheck file.xodr '[xmin, ymin, xmax, ymax]' 2.0
+    python -m twinkit_roads.xodrcheck file.xodr '[xmin, ymin, xmax, ymax]' 2.0 [samples.npy]
+
+With a fourth argument, the lane centres of the waypoints are saved there as an (n, 6) array:
+x, y (site convention), z, road id, lane id, s.
 
 CARLA's frame is left-handed: a waypoint at carla (x, y) is at site (x, -y).
 """
@@ -39,6 +42,11 @@ def main(argv: list[str]) -> int:
         if w.is_junction:
             junctions.add(w.junction_id)
         lane_types[str(w.lane_type)] = lane_types.get(str(w.lane_type), 0) + 1
+    if len(argv) > 3:
+        import numpy as np
+
+        np.save(argv[3], np.array([(w.transform.location.x, -w.transform.location.y, w.transform.location.z,
+                                    w.road_id, w.lane_id, w.s) for w in wps], float).reshape(-1, 6))
     lights = [lm for lm in m.get_all_landmarks() if lm.type in ("1000001", "1000002", "1000011")]
     print(json.dumps({"topology_segments": len(topo), "waypoints": len(wps), "waypoints_inside": inside,
                       "junctions_with_waypoints": len(junctions), "landmarks": len(m.get_all_landmarks()),
