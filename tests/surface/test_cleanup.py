@@ -170,3 +170,21 @@ def test_ground_fill_fills_shadow_not_building():
                                 normals=nrm)
     assert "ground_fill" not in rep0 and rep1["ground_fill"]["faces_added"] > 0
     assert filled.n_faces > plain.n_faces
+
+
+def test_pin_holes_after_simplification_are_closed():
+    from twinkit.surface.simplify import close_collapse_holes
+
+    m = grid_mesh(30)
+    c = m.vertices[m.faces].mean(axis=1)
+    # two pin-holes (one face, two faces) like those edge collapses leave, and a 12 x 12 cell hole
+    drop = np.zeros(m.n_faces, bool)
+    drop[np.argmin(np.linalg.norm(c[:, :2] - [0.2, 0.2], axis=1))] = True
+    drop[np.argsort(np.linalg.norm(c[:, :2] - [0.7, 0.3], axis=1))[:2]] = True
+    drop |= (np.abs(c[:, 0] - 0.5) < 0.2) & (np.abs(c[:, 1] - 0.75) < 0.2)
+    holed = Mesh(m.vertices, m.faces[~drop])
+    loops = [len(lp) for lp in boundary_loops(holed.faces)]
+    out, closed = close_collapse_holes(holed, max_edges=12)
+    assert closed == 2
+    left = sorted(len(lp) for lp in boundary_loops(out.faces))
+    assert left == sorted(n for n in loops if n > 12)  # the outer border and the big hole stay open

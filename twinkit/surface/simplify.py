@@ -73,7 +73,8 @@ def resample_attributes(simple: Mesh, dense: Mesh, threads: int = 0, names=("col
 
 
 def simplify_mesh(mesh: Mesh, target_faces: int = 500_000, *, method: str = "auto", cluster_above_faces: int = 20_000_000,
-                  preserve_border: bool = True, aggressiveness: float = 7.0, threads: int = 0) -> tuple[Mesh, str]:
+                  preserve_border: bool = True, aggressiveness: float = 7.0, threads: int = 0,
+                  close_holes_edges: int = 12) -> tuple[Mesh, str]:
     """Return (simplified mesh with re-sampled colours and normals, method used)."""
     if method == "auto":
         method = "clustering" if mesh.n_faces > cluster_above_faces else "quadric"
@@ -85,5 +86,19 @@ def simplify_mesh(mesh: Mesh, target_faces: int = 500_000, *, method: str = "aut
             out = simplify_quadric(out, target_faces, preserve_border=preserve_border, aggressiveness=aggressiveness)
     else:
         raise ValueError(f"unknown simplification method '{method}' (auto, quadric, clustering)")
+    out, closed = close_collapse_holes(out, max_edges=close_holes_edges)
     out = resample_attributes(out, mesh, threads)
+    out.comments = [f"holes closed after simplification: {closed}"]
     return out, method
+
+
+def close_collapse_holes(mesh: Mesh, max_edges: int = 12) -> tuple[Mesh, int]:
+    """Close the pin-holes edge collapses leave (a face dropped as degenerate, a collapse the border rule
+    refused next to another): boundary loops of at most ``max_edges`` edges, by a fan. The clean-up before
+    closed every hole up to 60 edges, so a loop this small here is the simplifier's, not the scan's."""
+    from twinkit.mesh.topology import boundary_loops, fan_fill
+
+    if max_edges < 3 or mesh.n_faces == 0:
+        return mesh, 0
+    loops = [lp for lp in boundary_loops(mesh.faces) if len(lp) <= max_edges]
+    return (fan_fill(mesh, loops) if loops else mesh), len(loops)

@@ -329,10 +329,13 @@ def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_p
                                      preserve_border=params.preserve_border,
                                      aggressiveness=params.aggressiveness, threads=_threads(ctx))
         err = mesh.attrs.pop("dist_to_dense_m", None)
-        mesh.comments = [f"twinkit-pointcloud simplify {method} target {params.target_faces}"]
+        closed = [c for c in mesh.comments if c.startswith("holes closed after simplification")]
+        mesh.comments = [f"twinkit-pointcloud simplify {method} target {params.target_faces}"] + closed
         write_ply(out_mesh_ply, mesh)
     out = {"method": method, "vertices": mesh.n_vertices, "faces": mesh.n_faces,
            "input_faces": dense.n_faces, **meas.as_dict()}
+    if closed:
+        out["holes_closed"] = int(closed[0].rsplit(":", 1)[1])
     if err is not None and len(err):
         out["vertex_to_dense_mean_m"] = float(err.mean())
         out["vertex_to_dense_max_m"] = float(err.max())
