@@ -253,3 +253,34 @@ def test_two_cars_close_together_and_a_person(tmp_path):
     m = read_obj(out["textured_mesh.obj"])
     assert m.vertices[:, 2].max() < 0.3  # everything that stood up is gone, the ground is closed
     assert np.all(np.abs(m.vertices[border_edges(m.faces)].mean(axis=1)[:, :2]).max(axis=1) > 5.9)
+
+
+def test_ground_under_a_lifted_car_is_at_road_height(tmp_path):
+    """Rays over the car's footprint find the road within 5 cm: the hole is closed on the ground, and the
+    car's cut-off feet (here a skirt 0.3 m up all round, whose faces reach the road and so stay in the
+    static mesh: a ridge a wheel would hit) are lowered onto it."""
+    from twinkit.mesh import read_obj
+    from twinkit.surface.watertight import drop_test
+
+    v, f, uv, lab, car = scene()
+    skirt = _in_rect(v[:, :2], CAR_C, CAR_L + 0.4, CAR_W + 0.4, CAR_YAW) & ~car
+    v[skirt, 2] = 0.3
+    d = tmp_path / "skirt"
+    d.mkdir()
+    obj = synthetic.write_obj(d / "textured_mesh.obj", v, f, uv, texture_px=64)
+    np.save(d / "labels.npy", lab)
+    files = (obj, d / "labels.npy", None)
+    g = np.arange(-10, 10, 0.1)
+    gx, gy = np.meshgrid(g, g)
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = xy[_in_rect(xy, CAR_C, CAR_L + 0.2, CAR_W + 0.2, CAR_YAW)]
+    rays = np.c_[xy, 0.01 * np.sin(xy[:, 0])]
+    out = _lift(tmp_path / "a", files)
+    m = read_obj(out["textured_mesh.obj"])
+    acts = json.loads((out["movables"] / "actors.json").read_text())
+    assert len(acts["actors"]) == 1 and acts["report"]["feet_vertices_flattened"] > 0
+    assert drop_test(m.vertices, m.faces, rays).mean() > 0.99
+    # without the flattening the skirt stays: the rays over it meet it 0.3 m up, not the road
+    kept = _lift(tmp_path / "b", files, flatten_feet_m=0.0)
+    m0 = read_obj(kept["textured_mesh.obj"])
+    assert drop_test(m0.vertices, m0.faces, rays).mean() < 0.97  # the skirt's ring (one 0.2 m grid row) misses

@@ -39,6 +39,7 @@ class LiftParams:
     min_vertical_share: float = 0.15  # an object has walls: this share of its vertices with a near-horizontal normal
     margin_m: float = 0.3  # footprint widening when collecting an object's faces
     fill_cell_m: float = 0.1  # holes left under an object are filled on this grid at the ground's height (0: fan)
+    flatten_feet_m: float = 0.5  # the object's cut-off feet up to this high are lowered onto the ground (0: kept)
     max_fill_extent_m: float = 3.0  # holes reaching farther than this beyond an object's footprint stay open
 
 

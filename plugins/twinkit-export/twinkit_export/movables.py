@@ -83,6 +83,7 @@ class LiftOptions:
     debris_max_faces: int = 200
     patch_cell_m: float = 0.2  # grid of the ground patch where a footprint stays uncovered; 0 = no patch
     fill_cell_m: float = 0.1  # a closed hole under an object is filled on this grid at the ground's height
+    flatten_feet_m: float = 0.5  # ... and its border inside the footprint, up to this high, lowered onto the ground
     #                           (0: a fan / ear clipping of the border, which spans it at the border's heights)
 
 
@@ -403,7 +404,7 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
 
     opt = opt or LiftOptions()
     labels = np.asarray(labels).astype(np.uint8)
-    v = np.asarray(mesh.vertices, float)
+    v = np.array(mesh.vertices, float)  # a copy: the objects' feet are lowered onto the ground below
     f = np.asarray(mesh.faces, np.int64)
     normals = mesh.normals if mesh.normals is not None else vertex_normals(v, f)
     normals = np.asarray(normals, float)
@@ -518,7 +519,7 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
     rep["relabelled_vertices"] = int(stay_mov.sum())
     loops = boundary_loops(kept) if len(kept) else []
     add_v, add_f, add_tc, add_lab = [], [], [], []
-    filled = unfilled = 0
+    filled = unfilled = flattened = 0
     open_why: dict[str, float] = {}
     open_after_m = 0.0
     nv = len(v)
@@ -537,7 +538,19 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                          for c_, l_, w_, y_ in (hits or boxes))
             res = None
             if ok_box and _signed_area(v[lp[::-1], :2]) > 0:
-                # on the ground: the border keeps its heights (the cut-off feet), the inside follows the road
+                if opt.flatten_feet_m > 0 and hits:
+                    # the object's cut-off feet (its faces with a corner below the cut stay in the static mesh,
+                    # a ridge up to ~0.4 m a wheel would hit): border vertices inside its footprint go down to
+                    # the ground, which flattens those faces onto the road
+                    gl = grid.at(v[lp, :2])
+                    hl = v[lp, 2] - gl
+                    foot = np.zeros(len(lp), bool)
+                    for c_, l_, w_, y_ in hits:
+                        foot |= _in_box(pts, c_, l_, w_, y_, opt.margin_m)
+                    foot &= (hl > 0.02) & (hl <= opt.flatten_feet_m)
+                    v[lp[foot], 2] = gl[foot]
+                    flattened += int(foot.sum())
+                # on the ground: the inside follows the road, joined to the border
                 res = fill_loop_on_ground(v, lp, grid.at, opt.fill_cell_m) if opt.fill_cell_m > 0 else None
                 if res is None:
                     res = _fill_loop(v, lp)
@@ -572,6 +585,7 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                 add_tc.append(np.zeros((len(faces_new), 6), np.float32))
             filled += 1
     rep.update(loops_filled=filled, loops_left_open=unfilled, open_border_left_m=round(open_after_m, 3),
+               feet_vertices_flattened=flattened,
                open_border_left_by_reason_m=open_why)
     # second pass: ground still missing inside a footprint (the hole ran into a scan shadow reaching the
     # scan's edge, so no loop could be closed safely): a patch on the uncovered part of the footprint
