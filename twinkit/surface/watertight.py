@@ -63,12 +63,12 @@ class Footprint:
 
 def open_edges(faces: np.ndarray) -> np.ndarray:
     """Edges used by exactly one face, (e, 2) vertex ids."""
+    from twinkit.mesh.topology import edge_face_incidence
+
     if len(faces) == 0:
         return np.zeros((0, 2), np.int64)
-    e = np.sort(np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
-    e = e.astype(np.int64)
-    u, cnt = np.unique(e, axis=0, return_counts=True)
-    return u[cnt == 1]
+    edges, _, counts = edge_face_incidence(np.asarray(faces, np.int64))
+    return edges[counts == 1]
 
 
 def chains_of(edges: np.ndarray) -> np.ndarray:

@@ -91,12 +91,11 @@ def _clusters(xy: np.ndarray, gap_m: float) -> list[dict]:
     """Misses grouped by proximity: centre, count, extent."""
     if len(xy) == 0:
         return []
+    from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     pairs = cKDTree(xy).query_pairs(gap_m, output_type="ndarray")
-    from scipy.sparse import coo_matrix
-
     g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(xy), len(xy))) if len(pairs) else \
         coo_matrix((len(xy), len(xy)))
     n, lab = connected_components(g, directed=False)
