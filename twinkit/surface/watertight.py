@@ -143,15 +143,17 @@ def height_above_ground(vertices: np.ndarray, ground_xyz: np.ndarray, cell_m: fl
 
 
 def drop_test(vertices: np.ndarray, faces: np.ndarray, samples: np.ndarray, tol_m: float = 0.05,
-              threads: int = 0) -> np.ndarray:
-    """(k,) bool: the mesh crosses the vertical line at each sample (x, y, z) within ``tol_m`` of z."""
+              threads: int = 0, scene=None) -> np.ndarray:
+    """(k,) bool: the mesh crosses the vertical line at each sample (x, y, z) within ``tol_m`` of z. ``scene``:
+    the mesh's open3d RaycastingScene when the caller casts several sets of rays on one mesh."""
     import open3d as o3d
 
     if len(samples) == 0 or len(faces) == 0:
         return np.zeros(len(samples), bool)
-    scene = o3d.t.geometry.RaycastingScene(nthreads=max(0, int(threads)))
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, np.float32)),
-                        o3d.core.Tensor(np.ascontiguousarray(faces, np.uint32)))
+    if scene is None:
+        from .closest import Surface
+
+        scene = Surface(vertices, faces, threads).scene
     out = np.zeros(len(samples), bool)
     for s in range(0, len(samples), 2_000_000):
         p = samples[s:s + 2_000_000]

@@ -130,6 +130,9 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     except Exception as exc:
         raise InputError(f"{in_aligned_xodr}: carla.Map could not read it ({exc}); re-run the road steps") from None
     fp = Footprint.from_points(cloud.vertices, fill_limit_m=params.fill_limit_m, margin_m=params.footprint_margin_m)
+    from twinkit.surface.closest import Surface
+
+    scene = Surface(mesh.vertices, mesh.faces).scene  # one BVH for every set of rays below
     res: dict = {"spacing_m": params.spacing_m, "tol_m": params.tol_m, "lanes": {}}
     misses = []
     ok_all = True
@@ -142,16 +145,16 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
             hit = np.zeros(len(r), bool)
             for dz in band:
                 todo = ~hit
-                hit[todo] = drop_test(mesh.vertices, mesh.faces, r[todo] + [0, 0, dz], params.tol_m)
+                hit[todo] = drop_test(mesh.vertices, mesh.faces, r[todo] + [0, 0, dz], params.tol_m, scene=scene)
         else:
-            hit = drop_test(mesh.vertices, mesh.faces, r, params.tol_m)
+            hit = drop_test(mesh.vertices, mesh.faces, r, params.tol_m, scene=scene)
         n = int(len(r))
         pct = round(100.0 * float(hit.mean()), 3) if n else None
         # a miss either falls through (no surface within fall_m of the lane: a hole) or finds the surface at
         # another height (a kerb face under the lane's edge, a bump): told apart for the reader
         falls = np.zeros(len(r), bool)
         if (~hit).any():
-            falls[~hit] = ~drop_test(mesh.vertices, mesh.faces, r[~hit], params.fall_m)
+            falls[~hit] = ~drop_test(mesh.vertices, mesh.faces, r[~hit], params.fall_m, scene=scene)
         holes = _clusters(r[falls, :2], 3 * params.spacing_m)
         widest = max((h["extent_m"] + params.spacing_m for h in holes), default=0.0)
         ok = (pct is None or pct >= need) and widest <= params.max_hole_m
