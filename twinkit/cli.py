@@ -375,20 +375,14 @@ def cmd_gc(args: list[str]) -> int:
     overrides = [a for a in args if a != "--dry-run"]
     conf_dir, cfg = _compose(overrides)
     site_root = Path(cfg["engine"]["outputs_dir"]) / cfg["site"]["name"]
-    from filelock import FileLock, Timeout
+    from twinkit.engine.locks import gc_locks
 
-    lock = FileLock(str(site_root / ".twinkit.lock")) if site_root.is_dir() else None
-    try:
-        if lock is not None:
-            lock.acquire(timeout=0)
-    except Timeout:
-        return _err(f"a twinkit run is using {site_root}; run gc when it has finished")
-    try:
-        doomed, size = collect_garbage(site_root, dry_run=dry)
-        forgotten = 0 if dry else prune_hash_cache(site_root)
-    finally:
-        if lock is not None and lock.is_locked:
-            lock.release()
+    if not site_root.is_dir():
+        doomed, size, forgotten = [], 0, 0
+    else:
+        with gc_locks(site_root):
+            doomed, size = collect_garbage(site_root, dry_run=dry)
+            forgotten = 0 if dry else prune_hash_cache(site_root)
     verb = "would remove" if dry else "removed"
     print(f"{verb} {len(doomed)} stored result(s), {size / 2**20:.1f} MiB, from {site_root / '.cache' / 'steps'}")
     if not dry:

@@ -1,9 +1,11 @@
 """Content hashes of files and artefacts, with a stat cache.
 
 A file's sha256 is computed once and remembered in a small SQLite database
-keyed by (device, inode, size, mtime in ns): a file that was not modified is
-never read again; a file touched without change is re-read once and found
-equal. Hard links share one entry.
+keyed by (device, inode, size, mtime in ns, ctime in ns): a file that was not
+modified is never read again; a file touched without change is re-read once and
+found equal. The ctime (inode change time) cannot be set back by a program, so an
+edit that keeps the size and restores the mtime (``touch -r``) is still seen.
+Hard links share one entry.
 """
 from __future__ import annotations
 
@@ -24,39 +26,79 @@ def sha256_file(path: Path) -> str:
 class HashCache:
     """sha256 of files, remembered by stat signature. Safe across processes."""
 
-    def __init__(self, db_path: Path | None):
+    def __init__(self, db_path: Path | None, read_only: bool = False):
+        """``read_only``: remembered hashes are used but nothing is written (``twinkit status``); a missing
+        database is not created."""
         self.db_path = db_path
+        self.read_only = read_only
         self._conn: sqlite3.Connection | None = None
         self._lock = threading.Lock()
-        self._mem: dict[tuple[int, int, int, int], str] = {}
+        self._mem: dict[tuple[int, int, int, int, int], str] = {}
         self.bytes_hashed = 0
         self.files_hashed = 0
 
     def _db(self) -> sqlite3.Connection | None:
         if self.db_path is None:
             return None
+        if self._conn is None and self.read_only:
+            if not self.db_path.is_file():
+                self.db_path = None
+                return None
+            try:
+                # immutable: no -wal/-shm files either; a write by a concurrent run is at worst not seen
+                # (the file is then hashed), never trusted wrongly, as every row is keyed by the full stat
+                self._conn = sqlite3.connect(f"file:{self.db_path}?mode=ro&immutable=1", uri=True, timeout=60,
+                                             isolation_level=None)
+                self._conn.execute("SELECT ctime FROM hashes LIMIT 1")
+            except sqlite3.Error:  # an older layout, or unreadable: hash without it
+                self._conn, self.db_path = None, None
+            return self._conn
         if self._conn is None:
             self.db_path.parent.mkdir(parents=True, exist_ok=True)
             self._conn = sqlite3.connect(str(self.db_path), timeout=60, isolation_level=None)
             self._conn.execute("PRAGMA journal_mode=WAL")
             self._conn.execute("PRAGMA synchronous=NORMAL")
+            cols = [r[1] for r in self._conn.execute("PRAGMA table_info(hashes)").fetchall()]
+            if cols and "ctime" not in cols:  # remembered before ctime was part of the signature
+                self._conn.execute("DROP TABLE hashes")
             self._conn.execute(
                 "CREATE TABLE IF NOT EXISTS hashes (dev INTEGER, ino INTEGER, size INTEGER, mtime INTEGER, "
-                "sha256 TEXT, PRIMARY KEY (dev, ino, size, mtime))"
+                "ctime INTEGER, sha256 TEXT, PRIMARY KEY (dev, ino, size, mtime, ctime))"
             )
         return self._conn
 
+    @staticmethod
+    def signature(st: os.stat_result) -> tuple[int, int, int, int, int]:
+        """What identifies one state of a file without reading it."""
+        return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+    def remember(self, path: Path, digest: str) -> None:
+        """Record the sha256 of a file just written (its bytes were hashed while they were written)."""
+        sig = self.signature(os.stat(path))
+        self._mem[sig] = digest
+        if self.read_only:
+            return
+        with self._lock:
+            db = self._db()
+            if db is not None:
+                db.execute("INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?,?)", (*sig, digest))
+
     def hash(self, path: Path) -> str:
         st = os.stat(path)
-        sig = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+        sig = self.signature(st)
         if sig in self._mem:
             return self._mem[sig]
         with self._lock:
             db = self._db()
             if db is not None:
-                row = db.execute(
-                    "SELECT sha256 FROM hashes WHERE dev=? AND ino=? AND size=? AND mtime=?", sig
-                ).fetchone()
+                try:
+                    row = db.execute(
+                        "SELECT sha256 FROM hashes WHERE dev=? AND ino=? AND size=? AND mtime=? AND ctime=?", sig
+                    ).fetchone()
+                except sqlite3.DatabaseError:
+                    if not self.read_only:
+                        raise
+                    row = None
                 if row:
                     self._mem[sig] = row[0]
                     return row[0]
@@ -64,25 +106,25 @@ class HashCache:
         self.bytes_hashed += st.st_size
         self.files_hashed += 1
         # a file modified while we read it gets a new mtime: store under the stat we saw first only if unchanged
-        st2 = os.stat(path)
-        if (st2.st_size, st2.st_mtime_ns) == (st.st_size, st.st_mtime_ns):
+        if self.signature(os.stat(path)) == sig:
             self._mem[sig] = digest
-            with self._lock:
-                db = self._db()
-                if db is not None:
-                    db.execute("INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?)", (*sig, digest))
+            if not self.read_only:
+                with self._lock:
+                    db = self._db()
+                    if db is not None:
+                        db.execute("INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?,?)", (*sig, digest))
         return digest
 
-    def prune(self, keep: set[tuple[int, int, int, int]]) -> int:
+    def prune(self, keep: set[tuple[int, int, int, int, int]]) -> int:
         """Forget every remembered hash whose stat signature is not in ``keep``; returns how many."""
         with self._lock:
             db = self._db()
             if db is None:
                 return 0
-            rows = db.execute("SELECT dev, ino, size, mtime FROM hashes").fetchall()
+            rows = db.execute("SELECT dev, ino, size, mtime, ctime FROM hashes").fetchall()
             doomed = [r for r in rows if tuple(r) not in keep]
             db.execute("BEGIN")
-            db.executemany("DELETE FROM hashes WHERE dev=? AND ino=? AND size=? AND mtime=?", doomed)
+            db.executemany("DELETE FROM hashes WHERE dev=? AND ino=? AND size=? AND mtime=? AND ctime=?", doomed)
             db.execute("COMMIT")
             self._mem = {k: v for k, v in self._mem.items() if k in keep}
             return len(doomed)

@@ -108,6 +108,21 @@ def gather(params, ctx, *, in_tile_txt: list, out_merged_txt: Path) -> None:
     out_merged_txt.write_text(f"{total}\n")
 
 
+def place(params, ctx, *, in_data_txt: Path, out_placed_txt: Path) -> None:
+    """Shift the number by the site's base point (reads site.base_point, like read_cloud's frame shift)."""
+    _count("place")
+    bp = ctx.site.get("base_point") or {}
+    v = int(Path(in_data_txt).read_text().splitlines()[0])
+    out_placed_txt.write_text(f"{v + int(bp.get('x', 0))}\n")
+
+
+def place_tile(params, ctx, *, in_data_txt: Path, item: dict, out_ptile_txt: Path) -> None:
+    """A fanned-out item that reads the site's base point (in a worker process)."""
+    _count(f"place_tile{item['i']}")
+    bp = ctx.site.get("base_point") or {}
+    out_ptile_txt.write_text(f"{item['i'] + int(bp.get('x', 0))}\n")
+
+
 @hookimpl
 def twinkit_register_steps(register):
     register("make", make, params=MakeParams)
@@ -118,3 +133,5 @@ def twinkit_register_steps(register):
     register("tiles", tiles, params=TilesParams)
     register("per_tile", per_tile)
     register("gather", gather)
+    register("place", place)
+    register("place_tile", place_tile)

@@ -5,14 +5,16 @@ from __future__ import annotations
 
 import json
 import logging
+import shutil
 import time
 from pathlib import Path
 from typing import Any
 
 from twinkit.engine.memory import release_memory
 from twinkit.engine.records import RECORD, StepOutcome, read_record
-from twinkit.engine.store import compute_into_store
-from twinkit.errors import InputError
+from twinkit.engine.store import compute_into_store, with_site
+from twinkit.engine.workspace import DamagedStore
+from twinkit.errors import InputError, StepError
 from twinkit.hashing import artefact_hash
 
 log = logging.getLogger("twinkit")
@@ -46,7 +48,8 @@ class FanoutMixin:
 
         return LocalExecutor(workers=min(2, self.threads))
 
-    def _run_fanout(self, ps, folder, key, desc, rec, in_paths, forced) -> StepOutcome:
+    def _run_fanout(self, ps, folder, key, desc, rec, in_paths, forced, desc0=None, index=None,
+                    fields=()) -> StepOutcome:
         items_path = in_paths.pop("__foreach__")
         try:
             items = json.loads(Path(items_path).read_text())
@@ -58,8 +61,11 @@ class FanoutMixin:
             raise InputError(f"{items_path}: 'foreach' of step '{ps.id}' needs a JSON list (or {{\"items\": [...]}})")
         # each item is keyed by its own content and the step's other inputs, not by the whole list,
         # so adding a tile computes only the new tile
-        base = dict(desc, inputs={k: v for k, v in desc["inputs"].items() if k != "__foreach__"})
-        keys = [self._key({"step": base, "item": it}) for it in items]
+        desc0 = desc if desc0 is None else desc0
+        site = self.cfg.get("site")
+        base = dict(desc0, inputs={k: v for k, v in desc0["inputs"].items() if k != "__foreach__"})
+        item_descs = [{"step": base, "item": it} for it in items]
+        keys = [with_site(d, site, fields)[0] for d in item_descs]
         if rec is not None and rec.get("key") == key and not forced:
             state, files = self._check_workspace(folder, rec)
             if state in ("unchanged", "edited"):
@@ -79,7 +85,8 @@ class FanoutMixin:
         todo.sort(key=lambda i: -_item_cost(items[i]))
         tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
                       store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
-                      item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path) for i in todo]
+                      item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path,
+                      key_descriptor=item_descs[i], fields=list(fields), index=index) for i in todo]
         for t in tasks:
             t["ctx_kwargs"].pop("log")
         t0 = time.perf_counter()
@@ -87,9 +94,13 @@ class FanoutMixin:
             log.debug("  %s: running %s on %d of %d items ...", ps.folder, ps.label, len(tasks), len(items))
             ex = self._executor()
             results = ex.map(_run_item_task, tasks)
-            for _ in _track(results, len(tasks), ps.id):
-                pass
+            for i, res in zip(todo, _track(results, len(tasks), ps.id)):
+                if isinstance(res, dict) and res.get("key"):
+                    keys[i] = res["key"]  # an item that read a new site field is stored under the key with it
         duration = time.perf_counter() - t0
+        read = sorted(set(fields).union(*[(read_record(self.store / k) or {}).get("site_fields") or [] for k in keys]))
+        if read != sorted(fields):
+            key, desc = with_site(desc0, site, read)
         stored = [read_record(self.store / k) for k in keys]
         files: dict[str, Any] = {}
         for i, r in enumerate(stored):
@@ -104,7 +115,21 @@ class FanoutMixin:
         record = self._workspace_record(ps, key, desc, {"files": files, "artefacts": artefacts, "metrics": metrics,
                                                         "duration_s": round(duration, 3)}, status, why, in_paths)
         record["item_keys"] = keys
-        self._materialize(folder, [(f"{i:03d}", self.store / k) for i, k in enumerate(keys)], record)
+        self._keep_edits(folder, rec, "forced re-run" if forced else f"its step re-runs ({why})")
+        try:
+            self._materialize(folder, [(f"{i:03d}", self.store / k) for i, k in enumerate(keys)], record)
+        except DamagedStore as exc:
+            if getattr(self, "_fanout_retry", False):
+                raise StepError(f"step '{ps.id}': the stored file {exc} differs from its record right after it "
+                                f"was written; is something else writing to {self.store}?") from None
+            log.warning("  stored result %s differs from its record; computing it again", exc)
+            shutil.rmtree(exc.entry, ignore_errors=True)
+            self._fanout_retry = True
+            try:
+                return self._run_fanout(ps, folder, key, desc, rec, {**in_paths, "__foreach__": items_path}, forced,
+                                        desc0=desc0, index=index, fields=fields)
+            finally:
+                self._fanout_retry = False
         outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
         return StepOutcome(ps.id, ps.folder, ps.label, status, why + f" ({len(tasks)}/{len(items)} items computed)",
                            key, duration, outputs, artefacts, metrics)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -11,19 +12,30 @@ from twinkit.engine.records import RECORD, read_record
 from twinkit.hashing import HashCache
 
 
+_NUMBERED = re.compile(r"^\d{2,}_\w+$")
+
+
+def recorded_folders(site_root: Path) -> list[Path]:
+    """Every numbered step folder of the site, of its sweep jobs and of its parked recipes (any number of
+    digits: ``07_texture``, ``112_export``)."""
+    roots = [site_root, *site_root.glob("sweeps/*/*"), *site_root.glob("recipes/*")]
+    return sorted(d for r in roots if r.is_dir() for d in r.iterdir()
+                  if d.is_dir() and _NUMBERED.match(d.name) and (d / RECORD).is_file())
+
+
 def collect_garbage(site_root: Path, dry_run: bool = False) -> tuple[list[Path], int]:
     """Stored results that no numbered folder (of the site or of any sweep job) refers to.
 
-    Returns (removed or removable entries, bytes). Entries in use by a running job are safe:
-    they are referenced by that job's folders only after it finishes, so run gc when nothing runs.
+    Returns (removed or removable entries, bytes). Call it under :func:`twinkit.engine.locks.gc_locks`: a
+    running job has results it has not yet recorded in its folders, so gc refuses while any job holds the
+    store.
     """
     store = Path(site_root) / ".cache" / "steps"
     if not store.is_dir():
         return [], 0
     keep: set[str] = set()
-    for rec_path in [*Path(site_root).glob(f"[0-9][0-9]_*/{RECORD}"),
-                     *Path(site_root).glob(f"sweeps/*/*/[0-9][0-9]_*/{RECORD}")]:
-        rec = read_record(rec_path.parent) or {}
+    for folder in recorded_folders(Path(site_root)):
+        rec = read_record(folder) or {}
         if rec.get("key"):
             keep.add(rec["key"])
         keep.update(rec.get("item_keys") or [])
@@ -52,7 +64,7 @@ def prune_hash_cache(site_root: Path) -> int:
             st = os.stat(p)
         except OSError:
             return None
-        return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+        return HashCache.signature(st)
 
     keep: set = set()
     for root, dirs, files in os.walk(site_root):
@@ -74,3 +86,4 @@ def prune_hash_cache(site_root: Path) -> int:
         return cache.prune(keep)
     finally:
         cache.close()
+

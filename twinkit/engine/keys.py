@@ -8,6 +8,7 @@ import json
 from typing import Any
 
 from twinkit.engine.plan import PlannedStep
+from twinkit.engine.store import site_fields, with_site
 from twinkit.errors import InputError
 from twinkit.hashing import artefact_hash
 
@@ -55,6 +56,13 @@ class KeysMixin:
             "outputs": [o.filename for o in ps.outputs],
         }
 
+    def _keyed(self, descriptor: dict) -> tuple[str, dict, str, list[str]]:
+        """(key, descriptor with the site fields the step reads, the descriptor's own key, those fields)."""
+        index = self._key(descriptor)
+        fields = site_fields(self.store, index)
+        key, desc = with_site(descriptor, self.cfg.get("site"), fields)
+        return key, desc, index, fields
+
     @staticmethod
     def _key(descriptor: dict) -> str:
         return hashlib.sha256(json.dumps(descriptor, sort_keys=True, default=str).encode()).hexdigest()[:32]
@@ -81,4 +89,15 @@ class KeysMixin:
             reasons.append("input changed: " + ", ".join(changed))
         if o.get("components") != new["components"]:
             reasons.append("component config changed")
+        old_site, new_site = o.get("site") or {}, new.get("site") or {}
+        for k in sorted(set(old_site) & set(new_site)):
+            if old_site[k] != new_site[k]:
+                reasons.append(f"site.{k} {_short(old_site[k])} -> {_short(new_site[k])}")
+        if set(new_site) - set(old_site) and not reasons:
+            reasons.append("reads site field(s) " + ", ".join(f"site.{k}" for k in sorted(set(new_site) - set(old_site))))
         return "; ".join(reasons) or "key changed"
+
+
+def _short(v: Any, n: int = 60) -> str:
+    t = json.dumps(v, sort_keys=True, default=str)
+    return t if len(t) <= n else t[: n - 3] + "..."

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import time
 import traceback
 from pathlib import Path
@@ -21,8 +22,8 @@ from twinkit.engine.manual import ManualMixin
 from twinkit.engine.plan import PlannedStep, build_plan
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.engine.status import StatusMixin
-from twinkit.engine.store import StoreMixin, compute_into_store
-from twinkit.engine.workspace import WorkspaceMixin
+from twinkit.engine.store import StoreMixin, compute_into_store, with_site
+from twinkit.engine.workspace import DamagedStore, WorkspaceMixin
 from twinkit.errors import ConfigError, StepError, TwinkitError
 from twinkit.hashing import HashCache
 from twinkit.plugins import Registry
@@ -108,14 +109,15 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
     def _run_step(self, ps: PlannedStep) -> StepOutcome:
         folder = self.workspace / ps.folder
         in_paths, in_hashes = self._input_values(ps)
-        desc = self._descriptor(ps, in_hashes)
-        key = self._key(desc)
+        desc0 = self._descriptor(ps, in_hashes)
+        key, desc, index, fields = self._keyed(desc0)
         rec = read_record(folder)
         forced = ps.id in self.rerun or ps.folder in self.rerun
         if ps.plugin is None:
             return self._run_manual(ps, folder, key, desc, rec)
         if ps.foreach is not None:
-            return self._run_fanout(ps, folder, key, desc, rec, in_paths, forced)
+            return self._run_fanout(ps, folder, key, desc, rec, in_paths, forced, desc0=desc0, index=index,
+                                    fields=fields)
 
         if rec is not None and rec.get("key") == key and not forced:
             state, files = self._check_workspace(folder, rec)
@@ -133,24 +135,35 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             why = "forced by rerun"
         else:
             why = self._why(rec, desc)
-        if rec is not None and folder.is_dir():
-            state, files = self._check_workspace(folder, rec)
-            if state == "edited":
-                self._set_aside(folder, files, "forced re-run" if forced else f"its step re-runs ({why})")
+        self._keep_edits(folder, rec, "forced re-run" if forced else f"its step re-runs ({why})")
 
-        stored = None if forced else self._store_valid(key)
-        status = "cached" if stored else "ran"
-        if stored is None:
-            log.debug("  %s: running %s ...", ps.folder, ps.label)
-            from twinkit.progress import step_status
+        index_key = key
+        for attempt in (1, 2):
+            stored = None if forced else self._store_valid(key)
+            status = "cached" if stored else "ran"
+            if stored is None:
+                log.debug("  %s: running %s ...", ps.folder, ps.label)
+                from twinkit.progress import step_status
 
-            with step_status(f"{ps.folder} ({ps.label})"):
-                stored = compute_into_store(ps.plugin.run, ps.params, in_paths, ps.outputs, key, self.store,
-                                            self._ctx_kwargs(ps), force=forced, hash_db=self.hashes.db_path)
-            if not stored.pop("_computed_here", True):
-                status, why = "cached", why + " (computed by a concurrent job)"
-        record = self._workspace_record(ps, key, desc, stored, status, why, in_paths)
-        self._materialize(folder, [("", self.store / key)], record)
+                with step_status(f"{ps.folder} ({ps.label})"):
+                    stored = compute_into_store(ps.plugin.run, ps.params, in_paths, ps.outputs, index_key,
+                                                self.store, self._ctx_kwargs(ps), force=forced or attempt > 1,
+                                                hash_db=self.hashes.db_path, key_descriptor=desc0, fields=fields,
+                                                index=index)
+                if not stored.pop("_computed_here", True):
+                    status, why = "cached", why + " (computed by a concurrent job)"
+                if stored.get("key", key) != key:  # it read a site field it had not read before
+                    key, desc = stored["key"], with_site(desc0, self.cfg.get("site"), stored["site_fields"])[1]
+            record = self._workspace_record(ps, key, desc, stored, status, why, in_paths)
+            try:
+                self._materialize(folder, [("", self.store / key)], record)
+                break
+            except DamagedStore as exc:
+                if attempt > 1:
+                    raise StepError(f"step '{ps.id}': the stored file {exc} differs from its record right after "
+                                    f"it was written; is something else writing to {self.store}?") from None
+                log.warning("  stored result %s/%s differs from its record; computing it again", key, exc.rel)
+                shutil.rmtree(self.store / key, ignore_errors=True)
         outputs, hashes = self._outputs_of(folder, ps, stored, current=False)
         return StepOutcome(ps.id, ps.folder, ps.label, status, why, key,
                            stored.get("duration_s", 0.0) if status == "ran" else 0.0, outputs, hashes,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.errors import TwinkitError
-from twinkit.hashing import artefact_hash
+from twinkit.hashing import HashCache, artefact_hash
 
 
 class StatusMixin:
@@ -14,6 +14,8 @@ class StatusMixin:
         """What a run would do, without running or writing anything: (folder, decision, why)."""
         rows = []
         dirty = False
+        self.hashes.close()
+        self.hashes = HashCache(self.hashes.db_path, read_only=True)  # a dry run writes nothing, not even hashes
         for ps in self.plan:
             folder = self.workspace / ps.folder
             rec = read_record(folder)
@@ -27,7 +29,7 @@ class StatusMixin:
                 rows.append((ps.folder, "blocked", str(exc)))
                 dirty = True
                 continue
-            key = self._key(self._descriptor(ps, in_hashes))
+            key, desc, _, _ = self._keyed(self._descriptor(ps, in_hashes))
             forced = ps.id in self.rerun
             if ps.plugin is None:
                 done = all((folder / p.filename).exists() for p in ps.outputs)
@@ -58,7 +60,7 @@ class StatusMixin:
                     rows.append((ps.folder, "cached", "result stored for this key"))
                     hashes = stored["artefacts"]
                 else:
-                    rows.append((ps.folder, "would run", "forced by rerun" if forced else self._why(rec, self._descriptor(ps, in_hashes))))
+                    rows.append((ps.folder, "would run", "forced by rerun" if forced else self._why(rec, desc)))
                     dirty = True
                     continue
             outputs = {p.filename: folder / p.filename for p in ps.outputs}

@@ -2,17 +2,26 @@
 
 A step (or one fan-out item) writes into a temporary folder, which is moved into the store only when the
 step returned and every declared output exists; an entry whose files no longer match their record is
-dropped and computed again."""
+dropped and computed again. Stored files are made read-only, and nothing outside the store shares their
+inode (the numbered folders get copies), so an edit elsewhere cannot reach them.
+
+The site fields a step reads are part of its key. A step sees ``ctx.site`` (and ``ctx.config["site"]``)
+through :class:`SiteReads`, which notes every field read; the fields are remembered per step descriptor in
+``.cache/steps/<descriptor key>.site.json``, and the next key covers their values. A step that reads a field
+it has not read before is stored under the key that includes it."""
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
 import shutil
+import stat
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 from twinkit.context import StepContext
 from twinkit.engine.memory import _PeakRSS
@@ -25,10 +34,87 @@ from twinkit.signature import Port
 log = logging.getLogger("twinkit")
 
 
+class SiteReads(Mapping):
+    """The site's configuration, read-only, noting every top-level field a step reads."""
+
+    def __init__(self, site: Mapping | None):
+        self._data = dict(site or {})
+        self.seen: set[str] = set()
+
+    def __getitem__(self, k: str) -> Any:
+        self.seen.add(k)
+        return self._data[k]
+
+    def __contains__(self, k: object) -> bool:
+        if isinstance(k, str):
+            self.seen.add(k)
+        return k in self._data
+
+    def get(self, k: str, default: Any = None) -> Any:
+        self.seen.add(k)
+        return self._data.get(k, default)
+
+    def __iter__(self) -> Iterator[str]:  # dict(site), {**site}: every field is read
+        self.seen.update(self._data)
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __repr__(self) -> str:
+        return f"SiteReads({self._data!r})"
+
+    def __reduce__(self):  # a plain dict when pickled to another process
+        return (dict, (self._data,))
+
+
+def descriptor_key(descriptor: dict) -> str:
+    return hashlib.sha256(json.dumps(descriptor, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+def with_site(descriptor: dict, site: Mapping | None, fields) -> tuple[str, dict]:
+    """(key, descriptor) of a step that reads ``fields`` of the site: their values join the descriptor.
+    With no fields it is the descriptor's own key."""
+    d = dict(descriptor)
+    site = dict(site or {})
+    if fields:
+        d["site"] = {f: site.get(f) for f in sorted(fields)}
+    return descriptor_key(d), d
+
+
+def site_fields(store: Path, index: str) -> list[str]:
+    """The site fields the step of descriptor key ``index`` has read so far (none when it never ran)."""
+    try:
+        return sorted(json.loads((store / f"{index}.site.json").read_text()))
+    except (OSError, ValueError, TypeError):
+        return []
+
+
+def _note_site_fields(store: Path, index: str, fields: set[str]) -> None:
+    known = set(site_fields(store, index))
+    if fields <= known:
+        return
+    write_json_atomic(store / f"{index}.site.json", sorted(known | fields))
+
+
+def _read_only(folder: Path) -> None:
+    """Stored files cannot be written (directories stay writable so that gc can remove entries)."""
+    for root, _dirs, files in os.walk(folder):
+        for f in files:
+            p = os.path.join(root, f)
+            mode = os.stat(p).st_mode
+            os.chmod(p, mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
+
+
 def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outputs: tuple[Port, ...], key: str,
                        store: Path, ctx_kwargs: dict, item: Any = None, wants_item: bool = False,
-                       force: bool = False, hash_db: Path | None = None) -> dict:
+                       force: bool = False, hash_db: Path | None = None, key_descriptor: dict | None = None,
+                       fields: list[str] | None = None, index: str | None = None) -> dict:
     """Run one step (or one fan-out item) into ``store/<key>`` atomically; returns the stored record.
+
+    ``key`` covers ``key_descriptor`` and the values of the site ``fields`` the step read before
+    (:func:`with_site`). When the step reads a site field beyond those, the result is stored under the key that
+    includes it, the field is remembered under ``index``, and the record's ``key`` says where it went.
 
     Module-level so executors can ship it to other processes or machines.
     """
@@ -36,11 +122,16 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
 
     store.mkdir(parents=True, exist_ok=True)
     final = store / key
+    lock_key = key
     with FileLock(str(store / f"{key}.lock")):
         if final.is_dir() and (final / RECORD).is_file() and not force:
             rec = json.loads((final / RECORD).read_text())
             rec["_computed_here"] = False
             return rec
+        site = SiteReads(ctx_kwargs.get("site"))
+        ctx_kwargs = dict(ctx_kwargs, site=site)
+        if isinstance(ctx_kwargs.get("config"), Mapping):
+            ctx_kwargs["config"] = {**ctx_kwargs["config"], "site": site}
         tmp = store / ".tmp" / f"{key}-{os.getpid()}-{threading.get_ident()}"
         if tmp.exists():
             shutil.rmtree(tmp)
@@ -65,12 +156,20 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
             shutil.rmtree(tmp, ignore_errors=True)
             what = f"did not write {missing}" if missing else f"wrote files where folders were declared (or the reverse): {wrong}"
             raise StepError(f"step '{ctx.step_id}' {what}; nothing from this attempt was kept")
+        used = sorted(set(fields or ()) | site.seen)
+        if key_descriptor is not None and set(used) != set(fields or ()):
+            key, _ = with_site(key_descriptor, site._data, used)
+            final = store / key
+        if index is not None and used:
+            _note_site_fields(store, index, set(used))
+        _read_only(tmp)
         cache = HashCache(hash_db)
         files = {rel.as_posix(): {"sha256": cache.hash(tmp / rel), "size": (tmp / rel).stat().st_size}
                  for rel in list_files(tmp)}
         record = {
             "schema": RECORD_SCHEMA,
             "key": key,
+            "site_fields": used,
             "duration_s": round(duration, 3),
             "peak_rss_mb": round(mem.peak / 2**20, 1) if mem.peak else None,
             # what the process held before the step began (a pooled worker keeps memory from earlier items)
@@ -83,11 +182,19 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
         }
         cache.close()
         write_json_atomic(tmp / RECORD, record)
-        if final.exists():
-            shutil.rmtree(final)
-        os.replace(tmp, final)
+        if final.name != lock_key:  # stored under the key that covers the site fields it read
+            with FileLock(str(store / f"{final.name}.lock")):
+                _swap_in(tmp, final)
+        else:
+            _swap_in(tmp, final)
         record["_computed_here"] = True
         return record
+
+
+def _swap_in(tmp: Path, final: Path) -> None:
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(tmp, final)
 
 
 class StoreMixin:

@@ -34,7 +34,7 @@ from typing import Any
 
 from twinkit.report import page as _page
 from twinkit.report.render import TopDown, render_topdown
-from twinkit.report.run import RunView, file_key, flatten, link_or_copy, read_json, rel, touch
+from twinkit.report.run import RunView, copy_into, file_key, flatten, read_json, rel, touch
 
 log = logging.getLogger("twinkit.report")
 
@@ -149,7 +149,7 @@ class SectionContext:
     def add_image(self, src: Path, name: str | None = None) -> str:
         """Link (or copy) a picture into the report's ``img/`` and return its address in the page."""
         name = name or Path(src).name
-        link_or_copy(Path(src), self.out / "img" / name)
+        copy_into(Path(src), self.out / "img" / name)
         return f"img/{name}"
 
     def ortho(self) -> dict | None:

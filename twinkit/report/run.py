@@ -36,6 +36,7 @@ def flatten(d: Any, prefix: str = "") -> dict[str, Any]:
 
 
 def link_or_copy(src: Path, dst: Path) -> None:
+    """A hard link to a file of the report's own cache (rendered pictures, script bundles)."""
     dst.parent.mkdir(parents=True, exist_ok=True)
     if dst.exists() or dst.is_symlink():
         dst.unlink()
@@ -43,6 +44,15 @@ def link_or_copy(src: Path, dst: Path) -> None:
         os.link(src, dst)
     except OSError:
         shutil.copy2(src, dst)
+
+
+def copy_into(src: Path, dst: Path) -> None:
+    """A copy, never a hard link: a report's pictures must not share an inode with a step folder a person
+    may edit (the engine's rule, docs/engine.md "Edits stay where they were made")."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    if dst.exists() or dst.is_symlink():
+        dst.unlink()
+    shutil.copyfile(src, dst)
 
 
 def write_text(path: Path, text: str) -> None:

@@ -16,7 +16,7 @@ from twinkit.mesh import ply_vertex_count
 from twinkit.mesh.glb import decimate, write_colored_glb
 from twinkit.report.page import ASSETS, esc, palette, size
 from twinkit.report.render import RENDER_VERSION, TopDown, labels_for, mesh_for_ortho
-from twinkit.report.run import RunView, link_or_copy, read_json, rel, touch
+from twinkit.report.run import RunView, copy_into, link_or_copy, read_json, rel, touch
 
 log = logging.getLogger("twinkit.report")
 
@@ -213,7 +213,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
         glbs = []
     if glbs:
         s, f = glbs[0]
-        link_or_copy(f, vdir / "model.glb")
+        copy_into(f, vdir / "model.glb")
         source = f"{s.get('folder')}/{f.name}"
     else:
         hit = mesh_for_ortho(run)
