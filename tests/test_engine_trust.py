@@ -212,3 +212,30 @@ def test_status_writes_nothing(project):
     assert st.rc == 0 and "edited" in st.out, st.text
     after = {p.name: (p.stat().st_size, p.stat().st_mtime_ns) for p in cache.iterdir() if p.is_file()}
     assert after == before
+
+
+def test_two_recipes_on_one_site_keep_their_folders_apart(project):
+    project.recipe("other", ["{id: make, uses: step/make, params: {value: 5}}", "{id: place, uses: step/place}"])
+    assert project.run("site=t", "recipe=chain").rc == 0
+    (project.ws / "03_scale" / "scaled.txt").write_text("60\n")  # a hand edit in the first recipe's folder
+    r = project.run("site=t", "recipe=other")
+    assert r.rc == 0, r.text
+    top = sorted(d.name for d in project.ws.iterdir() if d.is_dir() and d.name[:2].isdigit())
+    assert top == ["01_make", "02_place"], top
+    parked = project.ws / "recipes" / "chain"
+    assert sorted(d.name for d in parked.iterdir()) == ["01_make", "02_double", "03_scale"]
+    assert (parked / "03_scale" / "scaled.txt").read_text() == "60\n"
+    assert json.loads((project.ws / "01_make" / "step.json").read_text())["recipe"] == "other"
+    st = project.run("status", "site=t", "recipe=chain")  # status looks at the parked folders
+    assert "03_scale" in st.out and "edited" in next(ln for ln in st.out.splitlines() if "03_scale" in ln), st.out
+    first = sorted((project.ws / "runs").iterdir())[0]
+    v = project.run("verify", str(first))  # the first run's files are found where they were parked
+    assert v.rc == 1 and [ln for ln in v.out.splitlines() if "changed" in ln and "manifest" not in ln] == \
+        [ln for ln in v.out.splitlines() if "recipes/chain/03_scale/scaled.txt" in ln], v.out
+    project.reset_counts()
+    r = project.run("site=t", "recipe=chain")
+    assert r.rc == 0, r.text
+    assert project.status_of(r, "01_make") == "reused" and project.status_of(r, "03_scale") == "edited"
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "60\n"
+    assert sorted(d.name for d in (project.ws / "recipes" / "other").iterdir()) == ["01_make", "02_place"]
+    assert project.counts() == {}

@@ -119,9 +119,12 @@ def verify_manifest(path: Path) -> list[str]:
     if m.get("schema_version") != SCHEMA_VERSION:
         return [f"{path}: schema version {m.get('schema_version')} (this twinkit reads {SCHEMA_VERSION})"]
     problems = []
+    recipe = ((m.get("config") or {}).get("recipe") or {}).get("name")
     for section in ("inputs", "outputs"):
         for e in m.get(section, []):
             p = Path(e["path"])
+            if recipe:
+                p = _parked(p, recipe)
             if not p.is_file():
                 problems.append(f"{section[:-1]} missing: {p}")
                 continue
@@ -131,3 +134,24 @@ def verify_manifest(path: Path) -> list[str]:
             elif sha256_file(p) != e["sha256"]:
                 problems.append(f"{section[:-1]} changed: {p} (same size, different content)")
     return problems
+
+
+def _parked(path: Path, recipe: str) -> Path:
+    """Where a numbered folder's file of ``recipe`` is now: in place, or parked in
+    ``<site>/recipes/<recipe>/NN_step/...`` while another recipe's folders are at the top of the site
+    (twinkit/engine/recipes.py)."""
+    import re
+
+    parts = path.parts
+    for i in range(len(parts) - 1, 0, -1):
+        if re.match(r"^\d{2,}_\w+$", parts[i]):
+            try:
+                owner = json.loads(Path(*parts[: i + 1], "step.json").read_text()).get("recipe")
+            except (OSError, ValueError, AttributeError):
+                owner = None
+            if owner in (None, recipe) and path.is_file():
+                return path
+            safe = re.sub(r"[^\w.-]", "_", recipe) or "_"
+            parked = Path(*parts[:i], "recipes", safe, *parts[i:])
+            return parked if parked.is_file() or owner not in (None, recipe) else path
+    return path

@@ -4,23 +4,19 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import shutil
 from pathlib import Path
 
+from twinkit.engine.recipes import numbered_folders
 from twinkit.engine.records import RECORD, read_record
 from twinkit.hashing import HashCache
-
-
-_NUMBERED = re.compile(r"^\d{2,}_\w+$")
 
 
 def recorded_folders(site_root: Path) -> list[Path]:
     """Every numbered step folder of the site, of its sweep jobs and of its parked recipes (any number of
     digits: ``07_texture``, ``112_export``)."""
     roots = [site_root, *site_root.glob("sweeps/*/*"), *site_root.glob("recipes/*")]
-    return sorted(d for r in roots if r.is_dir() for d in r.iterdir()
-                  if d.is_dir() and _NUMBERED.match(d.name) and (d / RECORD).is_file())
+    return [d for r in roots for d in numbered_folders(r) if (d / RECORD).is_file()]
 
 
 def collect_garbage(site_root: Path, dry_run: bool = False) -> tuple[list[Path], int]:

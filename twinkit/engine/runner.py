@@ -21,6 +21,7 @@ from twinkit.engine.locks import LockMixin
 from twinkit.engine.manual import ManualMixin
 from twinkit.engine.plan import PlannedStep, build_plan
 from twinkit.engine.records import StepOutcome, read_record
+from twinkit.engine.recipes import RecipesMixin
 from twinkit.engine.status import StatusMixin
 from twinkit.engine.store import StoreMixin, compute_into_store, with_site
 from twinkit.engine.workspace import DamagedStore, WorkspaceMixin
@@ -31,7 +32,8 @@ from twinkit.plugins import Registry
 log = logging.getLogger("twinkit")
 
 
-class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, FanoutMixin, ManualMixin, StatusMixin):
+class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, FanoutMixin, ManualMixin, StatusMixin,
+             RecipesMixin):
     """Runs a plan in a workspace with a shared store.
 
     Args:
@@ -80,6 +82,11 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
 
     def run(self, on_step: Callable[[StepOutcome, int, int], None] | None = None) -> list[StepOutcome]:
         self._prepare()
+        try:
+            self._switch_recipe()
+        except BaseException:
+            self._release()
+            raise
         for sid, reason in self.skipped:
             log.info("[-] %-28s skipped  optional step: %s", sid, reason)
         try:

@@ -2,6 +2,7 @@
 writing nothing."""
 from __future__ import annotations
 
+from twinkit.engine.recipes import parked_folder
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.errors import TwinkitError
 from twinkit.hashing import HashCache, artefact_hash
@@ -16,6 +17,8 @@ class StatusMixin:
         dirty = False
         self.hashes.close()
         self.hashes = HashCache(self.hashes.db_path, read_only=True)  # a dry run writes nothing, not even hashes
+        if self.workspace.resolve() == self.site_root.resolve():  # another recipe's folders may be at the top
+            self.workspace = parked_folder(self.workspace, str((self.cfg.get("recipe") or {}).get("name") or ""))
         for ps in self.plan:
             folder = self.workspace / ps.folder
             rec = read_record(folder)

@@ -100,6 +100,7 @@ class WorkspaceMixin:
         return {
             "schema": RECORD_SCHEMA,
             "step": ps.id,
+            "recipe": (self.cfg.get("recipe") or {}).get("name"),
             "key": key,
             "descriptor": desc,
             "plugin": ps.label,
