@@ -66,7 +66,7 @@ class FanoutMixin:
         base = dict(desc0, inputs={k: v for k, v in desc0["inputs"].items() if k != "__foreach__"})
         item_descs = [{"step": base, "item": it} for it in items]
         keys = [with_site(d, site, fields)[0] for d in item_descs]
-        if rec is not None and rec.get("key") == key and not forced:
+        if rec is not None and rec.get("key") == key and "site_fields" in rec and not forced:
             state, files = self._check_workspace(folder, rec)
             if state in ("unchanged", "edited"):
                 outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
@@ -113,7 +113,8 @@ class FanoutMixin:
                                                         "duration_s": r.get("duration_s")} for r in stored]}
         status = "ran" if tasks else "cached"
         record = self._workspace_record(ps, key, desc, {"files": files, "artefacts": artefacts, "metrics": metrics,
-                                                        "duration_s": round(duration, 3)}, status, why, in_paths)
+                                                        "duration_s": round(duration, 3), "site_fields": read},
+                                        status, why, in_paths)
         record["item_keys"] = keys
         self._keep_edits(folder, rec, "forced re-run" if forced else f"its step re-runs ({why})")
         try:

@@ -95,6 +95,8 @@ class KeysMixin:
                 reasons.append(f"site.{k} {_short(old_site[k])} -> {_short(new_site[k])}")
         if set(new_site) - set(old_site) and not reasons:
             reasons.append("reads site field(s) " + ", ".join(f"site.{k}" for k in sorted(set(new_site) - set(old_site))))
+        if not reasons and "site_fields" not in old:
+            return "recorded by a twinkit that did not yet track the site fields a step reads (runs once)"
         return "; ".join(reasons) or "key changed"
 
 

@@ -126,7 +126,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             return self._run_fanout(ps, folder, key, desc, rec, in_paths, forced, desc0=desc0, index=index,
                                     fields=fields)
 
-        if rec is not None and rec.get("key") == key and not forced:
+        if rec is not None and rec.get("key") == key and "site_fields" in rec and not forced:
             state, files = self._check_workspace(folder, rec)
             if state == "unchanged":
                 outputs, hashes = self._outputs_of(folder, ps, rec, current=False)

@@ -42,7 +42,7 @@ class StatusMixin:
                     dirty = True
                     continue
                 hashes = {p.filename: artefact_hash(folder / p.filename, self.hashes) for p in ps.outputs}
-            elif rec is not None and rec.get("key") == key and not forced:
+            elif rec is not None and rec.get("key") == key and "site_fields" in rec and not forced:
                 state, files = self._check_workspace(folder, rec)
                 if state == "missing":
                     rows.append((ps.folder, "would run", f"output missing: {', '.join(files)}"))
@@ -59,6 +59,8 @@ class StatusMixin:
                     _, hashes = self._outputs_of(folder, ps, rec, current=state == "edited")
             else:
                 stored = None if forced else read_record(self.store / key)
+                if stored is not None and "site_fields" not in stored:
+                    stored = None
                 if stored is not None:
                     rows.append((ps.folder, "cached", "result stored for this key"))
                     hashes = stored["artefacts"]

@@ -126,8 +126,9 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
     with FileLock(str(store / f"{key}.lock")):
         if final.is_dir() and (final / RECORD).is_file() and not force:
             rec = json.loads((final / RECORD).read_text())
-            rec["_computed_here"] = False
-            return rec
+            if "site_fields" in rec:  # an entry of an older twinkit, which did not track them, is computed again
+                rec["_computed_here"] = False
+                return rec
         site = SiteReads(ctx_kwargs.get("site"))
         ctx_kwargs = dict(ctx_kwargs, site=site)
         if isinstance(ctx_kwargs.get("config"), Mapping):
@@ -204,7 +205,7 @@ class StoreMixin:
     def _store_valid(self, key: str) -> dict | None:
         entry = self.store / key
         rec = read_record(entry)
-        if rec is None:
+        if rec is None or "site_fields" not in rec:  # none, or stored before site fields were tracked
             return None
         for rel, info in rec.get("files", {}).items():
             p = entry / rel

@@ -114,5 +114,6 @@ class WorkspaceMixin:
             "peak_rss_mb": stored.get("peak_rss_mb"),
             "status": status,
             "why": why,
+            "site_fields": stored.get("site_fields", []),
             "recorded_at": _now(),
         }
