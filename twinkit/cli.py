@@ -128,7 +128,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
             del cfg["hydra"]
     container = OmegaConf.to_container(cfg, resolve=True)
     from twinkit.engine import GIVEN_KEY, given_params
+    from twinkit.manifest import env_secrets, redact
 
+    secrets = env_secrets(OmegaConf.to_container(cfg, resolve=False))
     container[GIVEN_KEY] = given_params(container, overrides)
     site = container.get("site") or {}
     if not site.get("name"):
@@ -137,6 +139,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
     site_root = Path(engine_cfg["outputs_dir"]) / site["name"]
     workspace = run_dir if multirun else site_root
     registry = get_registry()
+    from twinkit.config import check_config
+
+    check_config(container, registry)
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
     engine = Engine(
@@ -170,6 +175,7 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
                 finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                 duration_s=time.perf_counter() - t0,
             )
+            manifest = redact(manifest, secrets)  # ${oc.env:...} values stay out of the manifest and the report
             engine.hashes.close()
             write_manifest(run_dir / "manifest.json", manifest)
             if status == "ok":
@@ -224,13 +230,14 @@ def open_site_inputs(args: list[str]) -> list[str]:
 def _run_hydra(argv: list[str]) -> int:
     import hydra
 
-    from twinkit.config import check_choices, find_config_dir, register_configs, use_libyaml
+    from twinkit.config import check_choices, check_configs_are_data, find_config_dir, register_configs, use_libyaml
     from twinkit.plugins import get_registry
 
     use_libyaml()
     conf_dir = find_config_dir()
     argv = open_site_inputs(options_first(argv))
     overrides = [a for a in argv if not a.startswith("-") and "=" in a]
+    check_configs_are_data(conf_dir, argv)
     check_choices(overrides, conf_dir)
     if "--cfg" not in argv and "-c" not in argv and "--help" not in argv and "--info" not in argv:
         _check_writable(overrides)
@@ -298,12 +305,13 @@ def _compose(overrides: list[str]):
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from twinkit.config import check_choices, find_config_dir, register_configs, use_libyaml
+    from twinkit.config import check_choices, check_configs_are_data, find_config_dir, register_configs, use_libyaml
     from twinkit.plugins import get_registry
 
     use_libyaml()
     conf_dir = find_config_dir()
     overrides = open_site_inputs(overrides)
+    check_configs_are_data(conf_dir)
     check_choices(overrides, conf_dir)
     register_configs(get_registry())
     with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
@@ -312,6 +320,9 @@ def _compose(overrides: list[str]):
 
     container = OmegaConf.to_container(cfg, resolve=True)
     container[GIVEN_KEY] = given_params(container, overrides)
+    from twinkit.config import check_config
+
+    check_config(container, get_registry())
     return conf_dir, container
 
 

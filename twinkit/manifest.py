@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import importlib.metadata as md
 import json
+import os
 import platform
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -131,3 +133,49 @@ def verify_manifest(path: Path) -> list[str]:
             elif sha256_file(p) != e["sha256"]:
                 problems.append(f"{section[:-1]} changed: {p} (same size, different content)")
     return problems
+
+
+_ENV_REF = re.compile(r"\$\{oc\.env:\s*([A-Za-z_][A-Za-z0-9_]*)")
+
+
+def env_secrets(raw: Any) -> dict[str, str]:
+    """``{value: VAR}`` for every environment variable the config reads through ``${oc.env:VAR}``.
+
+    ``raw`` is the config unresolved (``OmegaConf.to_container(cfg, resolve=False)``). Such values
+    (tokens, passwords) are kept out of the manifest and the report: :func:`redact`.
+    """
+    found: dict[str, str] = {}
+
+    def walk(node: Any) -> None:
+        if isinstance(node, dict):
+            for v in node.values():
+                walk(v)
+        elif isinstance(node, list):
+            for v in node:
+                walk(v)
+        elif isinstance(node, str):
+            for var in _ENV_REF.findall(node):
+                value = os.environ.get(var)
+                if value:
+                    found[value] = var
+
+    walk(raw)
+    return found
+
+
+def redact(obj: Any, secrets: dict[str, str]) -> Any:
+    """A copy of ``obj`` with each secret value replaced by ``<from env VAR>`` (inside strings too)."""
+    if not secrets:
+        return obj
+    if isinstance(obj, dict):
+        return {k: redact(v, secrets) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [redact(v, secrets) for v in obj]
+    if isinstance(obj, str):
+        if obj in secrets:
+            return f"<from env {secrets[obj]}>"
+        for value, var in sorted(secrets.items(), key=lambda kv: -len(kv[0])):
+            if len(value) >= 4 and value in obj:
+                obj = obj.replace(value, f"<from env {var}>")
+        return obj
+    return obj
