@@ -128,6 +128,41 @@ def check_yaml(path: Path) -> None:
         raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
 
 
+def local_outputs_dirs(overrides: list[str], conf_dir: Path) -> list[str]:
+    """``engine.outputs_dir`` set by ``conf/local/<site>.yaml`` of the chosen site(s), where one sets it."""
+    out = []
+    for site in _chosen(overrides, conf_dir)["site"]:
+        local = conf_dir / "local" / f"{site}.yaml"
+        try:
+            data = yaml.load(local.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        except (OSError, yaml.YAMLError):
+            continue
+        value = ((data or {}).get("engine") or {}).get("outputs_dir") if isinstance(data, dict) else None
+        if isinstance(value, str) and value and "${" not in value:
+            out.append(value)
+    return out
+
+
+def _chosen(overrides: list[str], conf_dir: Path) -> dict[str, list[str]]:
+    chosen: dict[str, list[str]] = {"site": [], "recipe": []}
+    try:
+        defaults = yaml.safe_load((conf_dir / "config.yaml").read_text()).get("defaults", [])
+    except (OSError, yaml.YAMLError, AttributeError):
+        defaults = []
+    for d in defaults:
+        if isinstance(d, dict):
+            for k in ("site", "recipe"):
+                if k in d:
+                    chosen[k] = [d[k]]
+    for ov in overrides:
+        m = _CHOICE.match(ov)
+        if not m:
+            continue
+        value = re.sub(r"^(choice|glob)\((.*)\)$", r"\2", m.group(3))
+        chosen[m.group(2)] = [v.strip() for v in value.split(",")]
+    return chosen
+
+
 def check_choices(overrides: list[str], conf_dir: Path) -> None:
     """Fail in one line on an unknown or empty site/recipe, and on unparsable YAML of the chosen ones."""
     check_yaml(conf_dir / "config.yaml")
@@ -173,7 +208,7 @@ def _check_site(site: dict) -> None:
         ok = isinstance(v, (int, float)) and not isinstance(v, bool) and v == v and abs(v) != float("inf")
         if not ok:
             raise ConfigError(f"site.base_point.{k}={v!r} is not a number: give it in "
-                              f"{'degrees' if k in limits else 'metres (CRS units)'} in conf/site/{site.get('name')}.yaml")
+                              f"{'degrees' if k in limits else 'metres (CRS units)'} in the site's file")
         if k in limits and not (limits[k][0] <= v <= limits[k][1]):
             lo, hi = limits[k]
             raise ConfigError(f"site.base_point.{k}={v} is out of range: site.base_point.{k} must be {lo:g}..{hi:g} "
