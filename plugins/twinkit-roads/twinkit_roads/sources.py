@@ -37,8 +37,9 @@ class DownloadParams:
     url: str = ""  # empty: the public default of the source
     radius_m: float = param(-1.0, gt=0, also=(-1,))  # half-side of the box around the base point; <0: site.osm_radius_m (default 150)
     bbox: str = ""  # explicit "south,west,north,east" (degrees) instead of a box around the base point
-    timeout_s: float = param(60.0, gt=0)
-    retries: int = param(3, ge=1, le=100)
+    timeout_s: float = param(60.0, gt=0)  # per read (connect: at most 15 s)
+    deadline_s: float = param(120.0, gt=0)  # the whole download, retries included (a trickling server cannot stall it)
+    retries: int = param(3, ge=0, le=100)
     backoff_s: float = param(2.0, ge=0)
     user_agent: str = ""  # empty: twinkit-roads/<version> (+project URL); public servers require a real one
     cache_dir: str = ""  # empty: $XDG_CACHE_HOME/twinkit/osm
@@ -118,7 +119,8 @@ def _client(params: DownloadParams):
     from .http import CachedHttp
 
     return CachedHttp(cache_dir=params.cache_dir or None, timeout_s=params.timeout_s, retries=params.retries,
-                      backoff_s=params.backoff_s, user_agent=params.user_agent, max_age_days=params.cache_max_age_days)
+                      backoff_s=params.backoff_s, user_agent=params.user_agent, max_age_days=params.cache_max_age_days,
+                      deadline_s=params.deadline_s)
 
 
 def _store(body: bytes, ctx, out: Path, where: str, bbox, res) -> dict:
