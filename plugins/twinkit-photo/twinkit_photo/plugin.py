@@ -59,7 +59,7 @@ class RoiParams:
     below_ground_m: float = param(1.0, ge=0)
     above_ground_m: float = param(25.0, gt=0)
     ground_threshold_m: float = param(0.10, gt=0)  # RANSAC inlier distance for the ground plane
-    max_depth_m: float = param(40.0, gt=0)  # dense matching ignores anything farther from a photo
+    max_depth_m: float = param(40.0, ge=0)  # dense matching ignores anything farther from a photo
 
 
 @dataclass
