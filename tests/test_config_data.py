@@ -95,3 +95,19 @@ def test_disk_full_names_the_cause_and_the_path(project):
     assert str(project.ws) in line[0] and "engine.outputs_dir" in line[0]
     m = json.loads(next(project.ws.glob("runs/*/manifest.json")).read_text())
     assert m["status"] == "failed" and "disk full" in m["error"]
+
+
+def test_a_sweep_value_out_of_range_is_refused_before_any_job_runs(project):
+    """-m reconstructor.depth=11,30: every job's values are checked in the parent, as a single run's are;
+    sweep files' hydra.sweeper.params too."""
+    project.recipe("mesh", ["{id: make, uses: step/make}", "{id: reconstruct, uses: reconstructor}"],
+                   extra="defaults:\n  - /reconstructor: poisson\n  - _self_\n")
+    (project.conf / "sweep").mkdir()
+    (project.conf / "sweep" / "d.yaml").write_text(
+        "# @package _global_\nhydra:\n  sweeper:\n    params:\n      reconstructor.depth: 9,31\n")
+    env = project.env(TWINKIT_PLUGINS="builtins,pointcloud")
+    for args, bad in ((["reconstructor.depth=11,30"], "30"), (["+sweep=d"], "31")):
+        r = project.run("-m", "site=t", "recipe=mesh", *args, env=env)
+        assert r.rc == 2, r.text
+        assert f"reconstructor.depth={bad} is out of range (plugin reconstructor/poisson)" in r.err
+        assert not project.counts() and not list(project.out.glob("t/sweeps/*/job*/0*"))

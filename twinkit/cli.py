@@ -344,6 +344,8 @@ def _run_hydra(argv: list[str]) -> int:
     _STATE.update(conf_dir=str(conf_dir), argv=["twinkit", *argv])
     if not any(a.startswith("-") for a in argv):
         return _run_single(conf_dir, overrides)
+    if "-m" in argv or "--multirun" in argv:
+        _precheck_sweep(conf_dir, overrides)
     app = hydra.main(config_path=str(conf_dir), config_name="config", version_base="1.3")(_job)
     saved = sys.argv
     sys.argv = ["twinkit", *argv]
@@ -360,6 +362,51 @@ def _run_hydra(argv: list[str]) -> int:
     if _STATE.get("error") is not None:
         raise _STATE.pop("error")
     return 0
+
+
+def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
+    """Every job of a sweep composed and its values checked (twinkit.config.check_config) before any job starts.
+
+    So ``-m reconstructor.depth=11,30`` fails with exit 2 before the first job runs a step, as a single
+    run does. The jobs are the ones Hydra's basic sweeper makes: the sweep file's
+    ``hydra.sweeper.params`` and the command line's sweeps. Whatever this cannot enumerate is left to
+    Hydra (and each job checks its own values again).
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    from twinkit.config import check_config
+    from twinkit.plugins import get_registry
+
+    parser = OverridesParser.create()
+    try:
+        parsed = parser.parse_overrides(overrides)
+        fixed = [o.input_line for o in parsed if not o.is_sweep_override() and not o.key_or_group.startswith("hydra")]
+        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
+            base = compose(config_name="config", overrides=fixed, return_hydra_config=True)
+        node = base.hydra.sweeper.get("params")
+        params = OmegaConf.to_container(node, resolve=False) if node is not None else {}
+        combined = parser.parse_overrides([f"{k}={v}" for k, v in params.items()] + list(overrides))
+        batches = BasicSweeper.split_arguments(combined, None)
+    except (HydraException, OmegaConfBaseException, ValueError, TypeError, AttributeError):
+        return  # Hydra reports it in its own words
+    registry = get_registry()
+    for job in (batches[0] if batches else []):
+        job = [o for o in job if not o.lstrip("+~").startswith("hydra")]
+        try:
+            with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
+                cfg = compose(config_name="config", overrides=job)
+            container = OmegaConf.to_container(cfg, resolve=True)
+        except (HydraException, OmegaConfBaseException) as exc:
+            raise _composition_error(exc) from None
+        try:
+            check_config(container, registry)
+        except ConfigError as exc:
+            raise ConfigError(f"{exc} (sweep job {' '.join(job)})") from None
 
 
 def _composition_error(exc: Exception) -> ConfigError:
