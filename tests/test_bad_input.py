@@ -9,13 +9,16 @@ configuration case must fail before any step runs, an input case must still writ
 from __future__ import annotations
 
 import json
+import os
 import random
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import ROOT, Project
+from tests.conftest import ROOT, CliResult, Project
 
 DOC = ROOT / "docs" / "engine.md"
 
@@ -128,6 +131,23 @@ def _write(name: str, data: bytes):
     return make
 
 
+def _unreadable(p: Project) -> list[str]:
+    """A cloud without read permission (tests that run as root drop the capability to read it anyway)."""
+    cloud = _ply(p.tmp / "locked.ply", [(i, i % 3, 0) for i in range(30)])
+    cloud.chmod(0)
+    return _cloud_case(p, lambda t: cloud)
+
+
+def _as_user(argv: list[str]) -> list[str]:
+    """Run without root's power to read any file, so that a mode-000 file is really unreadable."""
+    if os.geteuid() != 0:
+        return argv
+    if not shutil.which("setpriv"):
+        pytest.skip("running as root without setpriv: cannot make a file unreadable")
+    caps = "-dac_override,-dac_read_search"
+    return ["setpriv", f"--inh-caps={caps}", f"--bounding-set={caps}", *argv]
+
+
 def _bad_osm(p: Project) -> list[str]:
     p.site("o", f"name: t\n{GEO}")
     p.recipe("osm", ["{id: fetch_roads, uses: road_source}"], extra="defaults:\n  - /road_source: file\n  - _self_\n")
@@ -153,6 +173,7 @@ SETUPS = {
     "cloud-missing": lambda p: _cloud_case(p, lambda t: t / "nope.ply"),
     "cloud-broken-link": lambda p: _cloud_case(p, _broken_link),
     "cloud-folder": lambda p: _cloud_case(p, _folder),
+    "cloud-unreadable": _unreadable,
     "cloud-empty-file": lambda p: _cloud_case(p, _write("zero.ply", b"")),
     "cloud-corrupt-ply": lambda p: _cloud_case(p, _write("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 9\n")),
     "cloud-corrupt-e57": lambda p: _cloud_case(p, _write("bad.e57", b"not an e57 file at all" * 100)),
@@ -183,7 +204,13 @@ def test_the_table_and_the_cases_match():
                          ids=[r[0] for r in ROWS if r[0] in SETUPS])
 def test_bad_input(project, case, exit_code, message):
     env = project.env(TWINKIT_PLUGINS="builtins,pointcloud,roads")
-    r = project.run(*SETUPS[case](project), env=env)
+    argv = SETUPS[case](project)
+    if case == "cloud-unreadable":
+        cmd = _as_user(project.cmd(*argv, f"engine.outputs_dir={project.out}"))
+        p = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=project.tmp, timeout=120)
+        r = CliResult(p.returncode, p.stdout, p.stderr)
+    else:
+        r = project.run(*argv, env=env)
     err = r.err.strip()
     assert r.rc == exit_code, f"{case}: exit {r.rc}\n{r.text[-3000:]}"
     errors = [ln for ln in err.splitlines() if "error" in ln.lower() or "Traceback" in ln]

@@ -268,11 +268,12 @@ def _explaining_os_errors(run, where: Path):
         return run()
     except TwinkitError as exc:
         os_exc = _os_error_in(exc.__cause__)
-        if os_exc is None or os_exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+        if os_exc is None or os_exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EPERM):
             raise
         head = str(exc).split(" failed: ")[0]
-        new = type(exc)(f"{head} failed: {_os_text(os_exc, where)}")
-        raise new from exc.__cause__
+        # an unreadable file is the input's problem (exit 2); a full disk is the run's (the step failed, exit 1)
+        kind = InputError if os_exc.errno in (errno.EACCES, errno.EPERM) else type(exc)
+        raise kind(f"{head} failed: {_os_text(os_exc, where)}") from exc.__cause__
     except OSError as exc:  # outside a step: hashing an input, the store, the hash cache
         if exc.errno in (errno.ENOSPC, errno.EDQUOT):
             raise StepError(_os_text(exc, where)) from exc

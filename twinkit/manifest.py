@@ -47,7 +47,10 @@ def git_state(root: Path) -> dict[str, Any]:
 
 
 def _file_entry(path: Path, cache) -> dict:
-    return {"path": str(path), "sha256": cache.hash(path), "size": path.stat().st_size}
+    try:
+        return {"path": str(path), "sha256": cache.hash(path), "size": path.stat().st_size}
+    except OSError as exc:  # an unreadable input: the manifest is still written, and says so
+        return {"path": str(path), "sha256": None, "size": None, "error": f"cannot read: {exc.strerror or exc}"}
 
 
 def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site: dict, outcomes: list,
