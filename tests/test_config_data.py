@@ -111,3 +111,20 @@ def test_a_sweep_value_out_of_range_is_refused_before_any_job_runs(project):
         assert r.rc == 2, r.text
         assert f"reconstructor.depth={bad} is out of range (plugin reconstructor/poisson)" in r.err
         assert not project.counts() and not list(project.out.glob("t/sweeps/*/job*/0*"))
+
+
+def test_an_input_path_read_from_the_environment_still_verifies(project):
+    """oc.env is used for paths too: the config shows <from env VAR>, the file lists keep the real path."""
+    data = project.tmp / "data"
+    data.mkdir()
+    (data / "seed.txt").write_text("3\n")
+    project.site("s", "name: t\ninputs:\n  seed: ${oc.env:TWINKIT_TEST_DATA}/seed.txt\n")
+    project.recipe("fromseed", ["{id: read, uses: step/read_seed}"])
+    r = project.run("site=s", "recipe=fromseed", env=project.env(TWINKIT_TEST_DATA=str(data)))
+    assert r.rc == 0, r.text
+    run = next(project.ws.glob("runs/*"))
+    m = json.loads((run / "manifest.json").read_text())
+    assert m["config"]["site"]["inputs"]["seed"] == "<from env TWINKIT_TEST_DATA>/seed.txt"
+    assert [e["path"] for e in m["inputs"]] == [str(data / "seed.txt")]
+    v = project.run("verify", str(run))
+    assert v.rc == 0, v.text

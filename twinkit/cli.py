@@ -215,7 +215,10 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
                 finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                 duration_s=time.perf_counter() - t0,
             )
-            manifest = redact(manifest, secrets)  # ${oc.env:...} values stay out of the manifest and the report
+            # ${oc.env:...} values stay out of the manifest and the report; the file lists keep their real
+            # paths (twinkit verify reads them)
+            manifest = {k: (v if k in ("inputs", "outputs", "workspace") else redact(v, secrets))
+                        for k, v in manifest.items()}
             engine.hashes.close()
             try:
                 write_manifest(run_dir / "manifest.json", manifest)
