@@ -399,18 +399,49 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
     except (HydraException, OmegaConfBaseException, ValueError, TypeError, AttributeError):
         return  # Hydra reports it in its own words
     registry = get_registry()
+    composed: dict[tuple, dict] = {}  # one composition per set of group choices; plain values are laid over it
     for job in (batches[0] if batches else []):
         job = [o for o in job if not o.lstrip("+~").startswith("hydra")]
         try:
-            with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
-                cfg = compose(config_name="config", overrides=job)
-            container = OmegaConf.to_container(cfg, resolve=True)
+            parsed_job = parser.parse_overrides(job)
+            values = {o.key_or_group: o.value() for o in parsed_job
+                      if "." in o.key_or_group and not o.is_delete() and not o.is_add() and not o.is_force_add()
+                      and "/" not in o.key_or_group and isinstance(o.value(), (int, float, str, bool))}
+        except Exception:  # noqa: BLE001 -- then compose this job as it is
+            values = {}
+        rest = tuple(o for o in job if o.split("=", 1)[0].lstrip("+~") not in values)
+        try:
+            if rest not in composed:
+                with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
+                    cfg = compose(config_name="config", overrides=list(rest) + [f"{k}={v!r}" if isinstance(v, str)
+                                                                                 else f"{k}={v}"
+                                                                                 for k, v in values.items()])
+                composed[rest] = OmegaConf.to_container(cfg, resolve=True)
+                container = composed[rest]
+            else:
+                container = _with_values(composed[rest], values)
         except (HydraException, OmegaConfBaseException) as exc:
             raise _composition_error(exc) from None
         try:
             check_config(container, registry)
         except ConfigError as exc:
             raise ConfigError(f"{exc} (sweep job {' '.join(job)})") from None
+
+
+def _with_values(container: dict, values: dict) -> dict:
+    """A copy of a composed config with dotted keys set (the values one sweep job changes)."""
+    import copy
+
+    out = copy.deepcopy(container)
+    for key, value in values.items():
+        node = out
+        *parents, last = key.split(".")
+        for p in parents:
+            if not isinstance(node.get(p), dict):
+                node[p] = {}
+            node = node[p]
+        node[last] = value
+    return out
 
 
 def _composition_error(exc: Exception) -> ConfigError:
