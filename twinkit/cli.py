@@ -281,9 +281,9 @@ def _explaining_os_errors(run, where: Path):
         if exc.errno in (errno.ENOSPC, errno.EDQUOT):
             raise StepError(_os_text(exc, where)) from exc
         raise InputError(_os_text(exc, where)) from exc
-    except Exception as exc:
+    except Exception as exc:  # e.g. sqlite3's "database or disk is full" from the hash cache
         os_exc = _os_error_in(exc)
-        if os_exc is None:
+        if os_exc is None or os_exc.errno not in (errno.ENOSPC, errno.EDQUOT):
             raise
         raise StepError(_os_text(os_exc, where)) from exc
 

@@ -137,7 +137,8 @@ def local_outputs_dirs(overrides: list[str], conf_dir: Path) -> list[str]:
             data = yaml.load(local.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
         except (OSError, yaml.YAMLError):
             continue
-        value = ((data or {}).get("engine") or {}).get("outputs_dir") if isinstance(data, dict) else None
+        engine = data.get("engine") if isinstance(data, dict) else None
+        value = engine.get("outputs_dir") if isinstance(engine, dict) else None
         if isinstance(value, str) and value and "${" not in value:
             out.append(value)
     return out
@@ -166,20 +167,7 @@ def _chosen(overrides: list[str], conf_dir: Path) -> dict[str, list[str]]:
 def check_choices(overrides: list[str], conf_dir: Path) -> None:
     """Fail in one line on an unknown or empty site/recipe, and on unparsable YAML of the chosen ones."""
     check_yaml(conf_dir / "config.yaml")
-    chosen: dict[str, list[str]] = {"site": [], "recipe": []}
-    defaults = yaml.safe_load((conf_dir / "config.yaml").read_text()).get("defaults", [])
-    for d in defaults:
-        if isinstance(d, dict):
-            for k in ("site", "recipe"):
-                if k in d:
-                    chosen[k] = [d[k]]
-    for ov in overrides:
-        m = _CHOICE.match(ov)
-        if not m:
-            continue
-        group, value = m.group(2), m.group(3)
-        value = re.sub(r"^(choice|glob)\((.*)\)$", r"\2", value)
-        chosen[group] = [v.strip() for v in value.split(",")]
+    chosen = _chosen(overrides, conf_dir)
     for group, folder in (("site", conf_dir / "site"), ("recipe", conf_dir / "recipe")):
         have = _available(folder)
         for v in chosen[group]:
