@@ -40,6 +40,7 @@ class _P:
     heights_m: list[float] = param(default_factory=lambda: [1.5], gt=0)
     mode: str = param("a", choices=("a", "b"))
     free: float = param(0.0)
+    name: str = param("", pattern=r"\w*", words="one word")
 
 
 @pytest.mark.parametrize("key,value,says", [
@@ -48,7 +49,8 @@ class _P:
     ("radius_m", -2.0, "must be -1 or > 0"),
     ("radius_m", 0.0, "-1 or > 0"),
     ("heights_m", [1.0, -3.0], "x.heights_m=-3.0 is out of range: x.heights_m (each element) must be > 0"),
-    ("mode", "c", "x.mode='c' is out of range: x.mode must be one of 'a', 'b'"),
+    ("mode", "c", "x.mode='c' is not allowed: x.mode must be one of 'a', 'b'"),
+    ("name", "a b\n#x", "x.name='a b\\n#x' is not allowed: x.name must be one word"),
     ("depth", float("nan"), "2..14"),
 ])
 def test_a_value_outside_names_the_key_and_the_range(key, value, says):

@@ -87,17 +87,37 @@ class Choices:
         return "one of " + ", ".join(repr(v) if isinstance(v, str) else str(v) for v in self.values)
 
 
+@dataclass(frozen=True)
+class Pattern:
+    """A string matching a regular expression as a whole (``describe`` says it in words)."""
+
+    regex: str
+    words: str = ""
+
+    def ok(self, v: Any) -> bool:
+        import re
+
+        return isinstance(v, str) and re.fullmatch(self.regex, v) is not None
+
+    def describe(self) -> str:
+        return self.words or f"a string matching {self.regex}"
+
+
 def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: float | None = None,
           le: float | None = None, lt: float | None = None, also: tuple = (), choices: tuple | None = None,
-          default_factory: Any = dataclasses.MISSING) -> Any:
+          pattern: str | None = None, words: str = "", default_factory: Any = dataclasses.MISSING) -> Any:
     """A dataclass field with its valid values: ``ge``/``gt``/``le``/``lt`` for numbers, ``choices`` for the rest.
 
-    ``also`` lists special values outside the range (``-1`` = automatic). With no bound at all the
+    ``pattern`` (a regular expression the whole string must match, ``words`` saying it for the error)
+    is for strings that reach a command line or a script. ``also`` lists special values outside the
+    range (``-1`` = automatic). With no bound at all the
     field still counts as declared ("any number"): say so on purpose, for signed offsets and angles.
     For a list the check applies to each element.
     """
-    if choices is not None:
-        check: Range | Choices = Choices(tuple(choices))
+    if pattern is not None:
+        check: Range | Choices | Pattern = Pattern(pattern, words)
+    elif choices is not None:
+        check = Choices(tuple(choices))
     else:
         if ge is not None and gt is not None or le is not None and lt is not None:
             raise TypeError("give one lower bound (ge or gt) and one upper bound (le or lt)")
@@ -108,7 +128,7 @@ def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: fl
     return dataclasses.field(default=default, metadata={META: check})
 
 
-def check_of(f: dataclasses.Field) -> Range | Choices | None:
+def check_of(f: dataclasses.Field) -> Range | Choices | Pattern | None:
     return f.metadata.get(META) if f.metadata else None
 
 
@@ -139,7 +159,7 @@ def undeclared(cls: type, prefix: str = "") -> Iterator[str]:
             yield prefix + f.name
 
 
-def problem(check: Range | Choices, value: Any) -> str | None:
+def problem(check: Range | Choices | Pattern, value: Any) -> str | None:
     """None when ``value`` (or each element of a list) passes; else the offending value as text."""
     if value is None:
         return None  # Optional: None means "not set", the type check decides whether it may be
@@ -176,4 +196,5 @@ def check_values(cls: type | None, values: Any, prefix: str, plugin: str = "") -
         if bad is not None:
             whose = f" (plugin {plugin})" if plugin else ""
             each = " (each element)" if isinstance(values[f.name], (list, tuple)) else ""
-            raise ConfigError(f"{key}={bad} is out of range{whose}: {key}{each} must be {check.describe()}")
+            what = "is out of range" if isinstance(check, Range) else "is not allowed"
+            raise ConfigError(f"{key}={bad} {what}{whose}: {key}{each} must be {check.describe()}")

@@ -85,6 +85,9 @@ class EvaluateSeamLabelsParams:
     #                                                  tiles.json's seams (the same lines on an untiled run)
 
 
+_SLURM_WORD = dict(pattern=r"[\w.:@+-]*", words="letters, digits and . : @ + - only (it is written into the SLURM job script)")
+
+
 @dataclass
 class DaskExecutorParams:
     """Run fanned-out items on a Dask distributed cluster."""
@@ -92,13 +95,13 @@ class DaskExecutorParams:
     address: Optional[str] = None  # tcp://host:8786 of an existing scheduler; null = start a local cluster
     n_workers: int = param(2, ge=1)  # worker processes of the local cluster (or SLURM jobs)
     threads_per_worker: int = param(1, ge=1)
-    memory_limit: str = "auto"  # per worker, e.g. 6GiB; auto = RAM / n_workers; 0 = no limit
+    memory_limit: str = param("auto", **_SLURM_WORD)  # per worker, e.g. 6GiB; auto = RAM / n_workers; 0 = no limit
     cluster: str = param("local", choices=("local", "slurm"))  # local | slurm (dask-jobqueue; used when address is null)
-    slurm_queue: str = ""
+    slurm_queue: str = param("", **_SLURM_WORD)
     slurm_cores: int = param(4, ge=1)
-    slurm_memory: str = "16GB"
-    slurm_walltime: str = "02:00:00"
-    slurm_account: str = ""
+    slurm_memory: str = param("16GB", **_SLURM_WORD)
+    slurm_walltime: str = param("02:00:00", **_SLURM_WORD)
+    slurm_account: str = param("", **_SLURM_WORD)
 
 
 # ----------------------------------------------------------------------------- steps
