@@ -11,13 +11,15 @@
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import logging
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
 
-from twinkit.errors import ConfigError, TwinkitError
+from twinkit.errors import ConfigError, InputError, StepError, TwinkitError
 
 log = logging.getLogger("twinkit")
 
@@ -47,6 +49,7 @@ def _setup_logging(run_log: Path | None) -> None:
         fh.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
         root.addHandler(fh)
     root.propagate = False
+    logging.raiseExceptions = False  # a full disk under run.log must not print logging's own tracebacks
 
 
 def _format_outcome(oc, i: int, n: int) -> str:
@@ -63,18 +66,22 @@ def _interactive(setting: str) -> bool:
     return sys.stdin.isatty() and sys.stderr.isatty()
 
 
-def _check_writable(overrides: list[str]) -> None:
-    outputs = "outputs"
-    for ov in overrides:
-        if ov.startswith("engine.outputs_dir="):
-            outputs = ov.split("=", 1)[1]
+def _check_writable(overrides: list[str], conf_dir: Path | None = None) -> None:
+    from twinkit.config import local_outputs_dirs
     from twinkit.engine import unwritable
 
-    p = Path(outputs)
-    problem = unwritable(p)
-    if problem:
-        raise ConfigError(f"cannot write to the outputs folder {p.resolve()} ({problem}); "
-                          f"choose another with engine.outputs_dir=<dir>")
+    outputs = None
+    for ov in overrides:
+        if ov.lstrip("+").startswith("engine.outputs_dir="):
+            outputs = ov.split("=", 1)[1]
+    # conf/local/<site>.yaml may move the outputs (engine.outputs_dir there), and is honoured here too
+    candidates = [outputs] if outputs is not None else (local_outputs_dirs(overrides, conf_dir) if conf_dir else [])
+    for outputs in candidates or ["outputs"]:
+        p = Path(outputs)
+        problem = unwritable(p)
+        if problem:
+            raise ConfigError(f"cannot write to the outputs folder {p.resolve()} ({problem}); "
+                              f"choose another with engine.outputs_dir=<dir>")
 
 
 # --------------------------------------------------------------------------- the Hydra job
@@ -91,11 +98,43 @@ def _job(cfg) -> int:
         return _job_body(cfg)
     except TwinkitError as exc:
         if HydraConfig.get().mode == RunMode.MULTIRUN:
-            from hydra.errors import CompactHydraException
-
-            raise CompactHydraException(f"twinkit: error: {exc}") from None
+            raise _job_error(f"twinkit: error: {exc}", exc.exit_code) from None
         _STATE["error"] = exc
         return exc.exit_code
+
+
+def _job_error(message: str, exit_code: int):
+    """A multirun job's TwinkitError, carried to the parent process with its exit code (see _report)."""
+    from hydra.errors import CompactHydraException
+
+    class TwinkitJobError(CompactHydraException):
+        def __reduce__(self):
+            return _job_error, (self.args[0], self.exit_code)
+
+    err = TwinkitJobError(message)
+    err.exit_code = exit_code
+    return err
+
+
+def _report(func):
+    """Hydra's ``run_and_report`` for multirun: one line, and twinkit's exit code (2 for a config error, not 1)."""
+    from hydra.errors import ConfigCompositionException, MissingConfigException, OverrideParseException
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        return func()
+    except Exception as exc:  # noqa: BLE001 -- sorted below; anything else gets Hydra's own report
+        code = getattr(exc, "exit_code", None)
+        if isinstance(code, int):
+            print(str(exc), file=sys.stderr)
+            sys.exit(code)
+        if isinstance(exc, (ConfigCompositionException, MissingConfigException, OverrideParseException,
+                            OmegaConfBaseException)):
+            sys.exit(_err(str(_composition_error(exc)), 2))
+        return _ORIGINAL_REPORT[0](lambda: (_ for _ in ()).throw(exc))
+
+
+_ORIGINAL_REPORT: list = []
 
 
 def _job_body(cfg) -> int:
@@ -128,7 +167,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
             del cfg["hydra"]
     container = OmegaConf.to_container(cfg, resolve=True)
     from twinkit.engine import GIVEN_KEY, given_params
+    from twinkit.manifest import env_secrets, redact
 
+    secrets = env_secrets(OmegaConf.to_container(cfg, resolve=False))
     container[GIVEN_KEY] = given_params(container, overrides)
     site = container.get("site") or {}
     if not site.get("name"):
@@ -137,6 +178,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
     site_root = Path(engine_cfg["outputs_dir"]) / site["name"]
     workspace = run_dir if multirun else site_root
     registry = get_registry()
+    from twinkit.config import check_config
+
+    check_config(container, registry)
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
     engine = Engine(
@@ -150,7 +194,8 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
              run_dir / "run.log")
     status, error = "ok", None
     try:
-        engine.run(on_step=lambda oc, i, n: log.info(_format_outcome(oc, i, n)))
+        _explaining_os_errors(lambda: engine.run(on_step=lambda oc, i, n: log.info(_format_outcome(oc, i, n))),
+                              site_root)
     except TwinkitError as exc:
         status, error = ("pending" if exc.exit_code == 3 else "failed"), str(exc)
         if exc.__cause__ is not None:
@@ -170,13 +215,77 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
                 finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                 duration_s=time.perf_counter() - t0,
             )
+            # ${oc.env:...} values stay out of the manifest and the report; the file lists keep their real
+            # paths (twinkit verify reads them)
+            manifest = {k: (v if k in ("inputs", "outputs", "workspace") else redact(v, secrets))
+                        for k, v in manifest.items()}
             engine.hashes.close()
-            write_manifest(run_dir / "manifest.json", manifest)
+            try:
+                write_manifest(run_dir / "manifest.json", manifest)
+            except OSError as exc:  # a full disk must not hide the run's own error behind a second traceback
+                log.error("twinkit: could not write %s: %s", run_dir / "manifest.json", _os_text(exc, run_dir))
+                if status == "ok":
+                    raise StepError(f"the run finished, but its manifest could not be written: "
+                                    f"{_os_text(exc, run_dir)}") from None
             if status == "ok":
                 log.info("twinkit: done in %.1f s; manifest %s", time.perf_counter() - t0, run_dir / "manifest.json")
                 if engine_cfg.get("report", True):
                     _write_report(run_dir, manifest, engine)
     return 0
+
+
+def _os_error_in(exc: BaseException | None) -> OSError | None:
+    """The OSError behind an exception (its cause or context chain), if any."""
+    seen = 0
+    while exc is not None and seen < 10:
+        if isinstance(exc, OSError):
+            return exc
+        if "database or disk is full" in str(exc):  # sqlite3.OperationalError
+            return OSError(errno.ENOSPC, "No space left on device")
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return None
+
+
+def _os_text(exc: OSError, where: Path) -> str:
+    """One line for an operating-system error: the cause and the path, and what to do."""
+    path = Path(exc.filename) if exc.filename else where
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        probe = path
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        try:
+            free = f"{shutil.disk_usage(probe).free / 2**20:.0f} MiB free"
+        except OSError:
+            free = "free space unknown"
+        return (f"disk full (no space left on the device) writing {path} ({free}); free some space (twinkit gc "
+                f"removes stored results nothing refers to) or set engine.outputs_dir=<a folder on another disk>")
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return f"{path}: permission denied; make it readable (and writable for outputs) by this user"
+    return f"{path}: {exc.strerror or exc}"
+
+
+def _explaining_os_errors(run, where: Path):
+    """Run ``run()``; an OSError (disk full, unreadable file) becomes one line naming the cause and the path."""
+    try:
+        return run()
+    except TwinkitError as exc:
+        os_exc = _os_error_in(exc.__cause__)
+        if os_exc is None or os_exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EPERM):
+            raise
+        head = str(exc).split(" failed: ")[0]
+        # an unreadable file is the input's problem (exit 2); a full disk is the run's (the step failed, exit 1)
+        kind = InputError if os_exc.errno in (errno.EACCES, errno.EPERM) else type(exc)
+        raise kind(f"{head} failed: {_os_text(os_exc, where)}") from exc.__cause__
+    except OSError as exc:  # outside a step: hashing an input, the store, the hash cache
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise StepError(_os_text(exc, where)) from exc
+        raise InputError(_os_text(exc, where)) from exc
+    except Exception as exc:  # e.g. sqlite3's "database or disk is full" from the hash cache
+        os_exc = _os_error_in(exc)
+        if os_exc is None or os_exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+            raise
+        raise StepError(_os_text(os_exc, where)) from exc
 
 
 def _write_report(run_dir: Path, manifest: dict, engine) -> None:
@@ -224,31 +333,115 @@ def open_site_inputs(args: list[str]) -> list[str]:
 def _run_hydra(argv: list[str]) -> int:
     import hydra
 
-    from twinkit.config import check_choices, find_config_dir, register_configs, use_libyaml
+    from twinkit.config import check_choices, check_configs_are_data, find_config_dir, register_configs, use_libyaml
     from twinkit.plugins import get_registry
 
     use_libyaml()
     conf_dir = find_config_dir()
     argv = open_site_inputs(options_first(argv))
     overrides = [a for a in argv if not a.startswith("-") and "=" in a]
+    check_configs_are_data(conf_dir, argv)
     check_choices(overrides, conf_dir)
     if "--cfg" not in argv and "-c" not in argv and "--help" not in argv and "--info" not in argv:
-        _check_writable(overrides)
+        _check_writable(overrides, conf_dir)
     register_configs(get_registry())
     _STATE.update(conf_dir=str(conf_dir), argv=["twinkit", *argv])
     if not any(a.startswith("-") for a in argv):
         return _run_single(conf_dir, overrides)
+    if "-m" in argv or "--multirun" in argv:
+        _precheck_sweep(conf_dir, overrides)
     app = hydra.main(config_path=str(conf_dir), config_name="config", version_base="1.3")(_job)
     saved = sys.argv
     sys.argv = ["twinkit", *argv]
     _STATE.pop("error", None)
+    from hydra._internal import utils as hydra_utils
+
+    _ORIGINAL_REPORT[:] = [hydra_utils.run_and_report]
+    hydra_utils.run_and_report = _report
     try:
         app()
     finally:
         sys.argv = saved
+        hydra_utils.run_and_report = _ORIGINAL_REPORT[0]
     if _STATE.get("error") is not None:
         raise _STATE.pop("error")
     return 0
+
+
+def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
+    """Every job of a sweep composed and its values checked (twinkit.config.check_config) before any job starts.
+
+    So ``-m reconstructor.depth=11,30`` fails with exit 2 before the first job runs a step, as a single
+    run does. The jobs are the ones Hydra's basic sweeper makes: the sweep file's
+    ``hydra.sweeper.params`` and the command line's sweeps. Whatever this cannot enumerate is left to
+    Hydra (and each job checks its own values again).
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    from twinkit.config import check_config
+    from twinkit.plugins import get_registry
+
+    parser = OverridesParser.create()
+    try:
+        parsed = parser.parse_overrides(overrides)
+        fixed = [o.input_line for o in parsed if not o.is_sweep_override() and not o.key_or_group.startswith("hydra")]
+        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
+            base = compose(config_name="config", overrides=fixed, return_hydra_config=True)
+        node = base.hydra.sweeper.get("params")
+        params = OmegaConf.to_container(node, resolve=False) if node is not None else {}
+        combined = parser.parse_overrides([f"{k}={v}" for k, v in params.items()] + list(overrides))
+        batches = BasicSweeper.split_arguments(combined, None)
+    except (HydraException, OmegaConfBaseException, ValueError, TypeError, AttributeError):
+        return  # Hydra reports it in its own words
+    registry = get_registry()
+    composed: dict[tuple, dict] = {}  # one composition per set of group choices; plain values are laid over it
+    for job in (batches[0] if batches else []):
+        job = [o for o in job if not o.lstrip("+~").startswith("hydra")]
+        try:
+            parsed_job = parser.parse_overrides(job)
+            values = {o.key_or_group: o.value() for o in parsed_job
+                      if "." in o.key_or_group and not o.is_delete() and not o.is_add() and not o.is_force_add()
+                      and "/" not in o.key_or_group and isinstance(o.value(), (int, float, str, bool))}
+        except Exception:  # noqa: BLE001 -- then compose this job as it is
+            values = {}
+        rest = tuple(o for o in job if o.split("=", 1)[0].lstrip("+~") not in values)
+        try:
+            if rest not in composed:
+                with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
+                    cfg = compose(config_name="config", overrides=list(rest) + [f"{k}={v!r}" if isinstance(v, str)
+                                                                                 else f"{k}={v}"
+                                                                                 for k, v in values.items()])
+                composed[rest] = OmegaConf.to_container(cfg, resolve=True)
+                container = composed[rest]
+            else:
+                container = _with_values(composed[rest], values)
+        except (HydraException, OmegaConfBaseException) as exc:
+            raise _composition_error(exc) from None
+        try:
+            check_config(container, registry)
+        except ConfigError as exc:
+            raise ConfigError(f"{exc} (sweep job {' '.join(job)})") from None
+
+
+def _with_values(container: dict, values: dict) -> dict:
+    """A copy of a composed config with dotted keys set (the values one sweep job changes)."""
+    import copy
+
+    out = copy.deepcopy(container)
+    for key, value in values.items():
+        node = out
+        *parents, last = key.split(".")
+        for p in parents:
+            if not isinstance(node.get(p), dict):
+                node[p] = {}
+            node = node[p]
+        node[last] = value
+    return out
 
 
 def _composition_error(exc: Exception) -> ConfigError:
@@ -287,6 +480,7 @@ def _run_single(conf_dir: Path, overrides: list[str]) -> int:
         run_dir = Path(cfg.hydra.run.dir)
     except (HydraException, OmegaConfBaseException) as exc:
         raise _composition_error(exc) from None
+    _check_writable([f"engine.outputs_dir={cfg.engine.outputs_dir}"])  # wherever the composed config puts it
     run_dir.mkdir(parents=True, exist_ok=True)
     return _execute(cfg, run_dir=run_dir, multirun=False, overrides=overrides)
 
@@ -298,12 +492,13 @@ def _compose(overrides: list[str]):
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from twinkit.config import check_choices, find_config_dir, register_configs, use_libyaml
+    from twinkit.config import check_choices, check_configs_are_data, find_config_dir, register_configs, use_libyaml
     from twinkit.plugins import get_registry
 
     use_libyaml()
     conf_dir = find_config_dir()
     overrides = open_site_inputs(overrides)
+    check_configs_are_data(conf_dir)
     check_choices(overrides, conf_dir)
     register_configs(get_registry())
     with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
@@ -312,6 +507,9 @@ def _compose(overrides: list[str]):
 
     container = OmegaConf.to_container(cfg, resolve=True)
     container[GIVEN_KEY] = given_params(container, overrides)
+    from twinkit.config import check_config
+
+    check_config(container, get_registry())
     return conf_dir, container
 
 

@@ -12,6 +12,7 @@ import yaml
 
 from twinkit.errors import ConfigError
 from twinkit.plugins import COMPONENT_KINDS, STEP_KINDS, Registry
+from twinkit.ranges import param
 
 
 @dataclass
@@ -19,9 +20,9 @@ class EngineConfig:
     """Engine settings (``engine.<key>=...`` on the command line)."""
 
     outputs_dir: str = "outputs"
-    threads: int = 0  # 0 = every core
+    threads: int = param(0, ge=0)  # 0 = every core
     interactive: str = "auto"  # auto (a terminal) | true | false
-    manual_timeout_s: Optional[float] = None
+    manual_timeout_s: Optional[float] = param(None, gt=0)
     report: bool = True
 
 
@@ -127,11 +128,28 @@ def check_yaml(path: Path) -> None:
         raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
 
 
-def check_choices(overrides: list[str], conf_dir: Path) -> None:
-    """Fail in one line on an unknown or empty site/recipe, and on unparsable YAML of the chosen ones."""
-    check_yaml(conf_dir / "config.yaml")
+def local_outputs_dirs(overrides: list[str], conf_dir: Path) -> list[str]:
+    """``engine.outputs_dir`` set by ``conf/local/<site>.yaml`` of the chosen site(s), where one sets it."""
+    out = []
+    for site in _chosen(overrides, conf_dir)["site"]:
+        local = conf_dir / "local" / f"{site}.yaml"
+        try:
+            data = yaml.load(local.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        except (OSError, yaml.YAMLError):
+            continue
+        engine = data.get("engine") if isinstance(data, dict) else None
+        value = engine.get("outputs_dir") if isinstance(engine, dict) else None
+        if isinstance(value, str) and value and "${" not in value:
+            out.append(value)
+    return out
+
+
+def _chosen(overrides: list[str], conf_dir: Path) -> dict[str, list[str]]:
     chosen: dict[str, list[str]] = {"site": [], "recipe": []}
-    defaults = yaml.safe_load((conf_dir / "config.yaml").read_text()).get("defaults", [])
+    try:
+        defaults = yaml.safe_load((conf_dir / "config.yaml").read_text()).get("defaults", [])
+    except (OSError, yaml.YAMLError, AttributeError):
+        defaults = []
     for d in defaults:
         if isinstance(d, dict):
             for k in ("site", "recipe"):
@@ -141,9 +159,15 @@ def check_choices(overrides: list[str], conf_dir: Path) -> None:
         m = _CHOICE.match(ov)
         if not m:
             continue
-        group, value = m.group(2), m.group(3)
-        value = re.sub(r"^(choice|glob)\((.*)\)$", r"\2", value)
-        chosen[group] = [v.strip() for v in value.split(",")]
+        value = re.sub(r"^(choice|glob)\((.*)\)$", r"\2", m.group(3))
+        chosen[m.group(2)] = [v.strip() for v in value.split(",")]
+    return chosen
+
+
+def check_choices(overrides: list[str], conf_dir: Path) -> None:
+    """Fail in one line on an unknown or empty site/recipe, and on unparsable YAML of the chosen ones."""
+    check_yaml(conf_dir / "config.yaml")
+    chosen = _chosen(overrides, conf_dir)
     for group, folder in (("site", conf_dir / "site"), ("recipe", conf_dir / "recipe")):
         have = _available(folder)
         for v in chosen[group]:
@@ -156,3 +180,172 @@ def check_choices(overrides: list[str], conf_dir: Path) -> None:
         local = conf_dir / "local" / f"{v}.yaml"
         if local.is_file():
             check_yaml(local)
+
+
+def _check_site(site: dict) -> None:
+    """The site's georeference fields are numbers in range (a typo fails now, not in a late step)."""
+    bp = site.get("base_point")
+    if bp is None:
+        return
+    if not isinstance(bp, dict):
+        raise ConfigError(f"site.base_point={bp!r} is not a mapping: give {{lat, lon, alt}} or projected {{x, y, z}}")
+    limits = {"lat": (-90.0, 90.0), "lon": (-180.0, 180.0)}
+    for k, v in bp.items():
+        if k not in ("lat", "lon", "alt", "x", "y", "z"):
+            continue
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and v == v and abs(v) != float("inf")
+        if not ok:
+            raise ConfigError(f"site.base_point.{k}={v!r} is not a number: give it in "
+                              f"{'degrees' if k in limits else 'metres (CRS units)'} in the site's file")
+        if k in limits and not (limits[k][0] <= v <= limits[k][1]):
+            lo, hi = limits[k]
+            raise ConfigError(f"site.base_point.{k}={v} is out of range: site.base_point.{k} must be {lo:g}..{hi:g} "
+                              "degrees")
+
+
+def check_config(cfg: dict, registry: Registry) -> None:
+    """Every parameter in the composed config inside its declared range (twinkit.ranges); the site's base point.
+
+    Runs before any step: ``reconstructor.depth=30`` fails here with exit 2 naming the key and the range.
+    """
+    from twinkit.ranges import check_values
+
+    check_values(EngineConfig, cfg.get("engine") or {}, "engine")
+    for kind in (*STEP_KINDS, *COMPONENT_KINDS):
+        if kind in ("step", "site_generator"):
+            continue
+        node = cfg.get(kind)
+        if isinstance(node, dict) and node.get("plugin") in registry.plugins.get(kind, {}):
+            plugin = registry.plugins[kind][node["plugin"]]
+            check_values(plugin.params, node, kind, plugin.qualname)
+    for name, node in (cfg.get("steps") or {}).items():
+        plugin = registry.plugins.get("step", {}).get(name)
+        if plugin is not None:
+            check_values(plugin.params, node, f"steps.{name}", plugin.qualname)
+    site = cfg.get("site") or {}
+    if isinstance(site, dict):
+        gen = registry.plugins.get("site_generator", {}).get(site.get("generator"))
+        if gen is not None:
+            check_values(gen.params, site, "site", gen.qualname)
+        _check_site(site)
+
+
+# --------------------------------------------------------------------------- configs are data
+
+_HEADER = re.compile(r"^#\s*@package\s+(\S+)", re.M)
+# what a recipe, site, sweep or local file may set under hydra: the values a sweep runs over
+_HYDRA_ALLOWED = ("hydra.sweeper.params",)
+
+
+def _config_files(conf_dir: Path, extra_dirs: list[Path]) -> list[tuple[Path, str]]:
+    """Every YAML file Hydra could load besides the root config, with its group (``site``, ``recipe``, ...)."""
+    out = []
+    for base in [conf_dir, *extra_dirs]:
+        if not base.is_dir():
+            continue
+        for folder, _dirs, files in os.walk(base, followlinks=True):
+            rel = Path(folder).relative_to(base)
+            for f in sorted(files):
+                if f.endswith((".yaml", ".yml")) and not (base == conf_dir and rel == Path(".") and f == "config.yaml"):
+                    out.append((Path(folder) / f, rel.as_posix() if str(rel) != "." else ""))
+    return out
+
+
+def _targets(node: Any, path: str) -> str | None:
+    if isinstance(node, dict):
+        for k, v in node.items():
+            here = f"{path}.{k}" if path else str(k)
+            if k == "_target_":
+                return here
+            found = _targets(v, here)
+            if found:
+                return found
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            found = _targets(v, f"{path}[{i}]")
+            if found:
+                return found
+    return None
+
+
+def _hydra_keys(node: Any, path: str) -> str | None:
+    """The first key under ``hydra`` that is not a sweep's parameter list."""
+    if any(path == a or path.startswith(a + ".") for a in _HYDRA_ALLOWED):
+        return None
+    if not isinstance(node, dict) or not node:
+        return path
+    for k, v in node.items():
+        found = _hydra_keys(v, f"{path}.{k}")
+        if found:
+            return found
+    return None
+
+
+def config_file_problem(path: Path, group: str) -> str | None:
+    """Why a recipe, site, sweep or local config file may not be used (it could run code), or None."""
+    text = path.read_text(errors="replace")
+    if group == "hydra" or group.startswith("hydra/"):
+        return "it is a Hydra config group (hydra/...): recipes and sites cannot add launchers or callbacks"
+    try:
+        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    except yaml.YAMLError:
+        return None  # check_yaml reports it where the file is used
+    if not isinstance(data, dict):
+        return None
+    target = _targets(data, "")
+    if target:
+        return f"it sets '{target}': a config file is data and cannot name Python objects to call"
+    for entry in data.get("defaults") or []:
+        names = [entry] if isinstance(entry, str) else list(entry) if isinstance(entry, dict) else []
+        for n in names:
+            g = str(n).replace("override", "").strip().lstrip("/")
+            if g == "hydra" or g.startswith("hydra/"):
+                return f"its defaults choose '{str(n).strip()}': recipes and sites cannot change Hydra's launcher, " \
+                       "callbacks or logging"
+    m = _HEADER.search(text)
+    package = m.group(1) if m else "_group_"
+    package = package.replace("_group_", group.replace("/", ".")) if group else package.replace("_group_", "")
+    if package.startswith("_global_"):
+        package = package[len("_global_"):].lstrip(".")
+    root = {}
+    node: dict = root
+    parts = [p for p in package.split(".") if p]
+    for p in parts[:-1]:
+        node = node.setdefault(p, {})
+    if parts:
+        node[parts[-1]] = {k: v for k, v in data.items() if k != "defaults"}
+    else:
+        root = {k: v for k, v in data.items() if k != "defaults"}
+    if "hydra" in root:
+        bad = _hydra_keys(root["hydra"], "hydra")
+        if bad:
+            return f"it sets '{bad}': recipes, sites and sweeps may set only {', '.join(_HYDRA_ALLOWED)} under hydra"
+    return None
+
+
+def check_configs_are_data(conf_dir: Path, argv: list[str] | None = None) -> None:
+    """Refuse (exit 2, naming the file) a recipe, site, sweep or local file that could make Hydra run code.
+
+    Only the root ``config.yaml`` may set Hydra callbacks and the launcher; any other file that sets
+    ``_target_``, ``hydra.callbacks``, ``hydra.launcher`` (anything under ``hydra`` but a sweep's
+    ``hydra.sweeper.params``) or picks a ``hydra/...`` group is refused before Hydra reads it. The
+    folders of ``--config-dir``/``-cd`` are checked too.
+    """
+    argv = list(argv or [])
+    extra = []
+    for i, a in enumerate(argv):
+        if a in ("--config-dir", "-cd") and i + 1 < len(argv):
+            extra.append(Path(argv[i + 1]))
+        elif a.startswith("--config-dir="):
+            extra.append(Path(a.split("=", 1)[1]))
+    for path, group in _config_files(conf_dir, extra):
+        why = _safe_problem(path, group)
+        if why:
+            raise ConfigError(f"{path}: refused, {why}; remove it (only {conf_dir / 'config.yaml'} configures Hydra)")
+
+
+def _safe_problem(path: Path, group: str) -> str | None:
+    try:
+        return config_file_problem(path, group)
+    except OSError as exc:
+        return f"cannot read it ({exc.strerror})"

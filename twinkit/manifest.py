@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import importlib.metadata as md
 import json
+import os
 import platform
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -45,7 +47,10 @@ def git_state(root: Path) -> dict[str, Any]:
 
 
 def _file_entry(path: Path, cache) -> dict:
-    return {"path": str(path), "sha256": cache.hash(path), "size": path.stat().st_size}
+    try:
+        return {"path": str(path), "sha256": cache.hash(path), "size": path.stat().st_size}
+    except OSError as exc:  # an unreadable input: the manifest is still written, and says so
+        return {"path": str(path), "sha256": None, "size": None, "error": f"cannot read: {exc.strerror or exc}"}
 
 
 def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site: dict, outcomes: list,
@@ -155,3 +160,49 @@ def _parked(path: Path, recipe: str) -> Path:
             parked = Path(*parts[:i], "recipes", safe, *parts[i:])
             return parked if parked.is_file() or owner not in (None, recipe) else path
     return path
+
+
+_ENV_REF = re.compile(r"\$\{oc\.env:\s*([A-Za-z_][A-Za-z0-9_]*)")
+
+
+def env_secrets(raw: Any) -> dict[str, str]:
+    """``{value: VAR}`` for every environment variable the config reads through ``${oc.env:VAR}``.
+
+    ``raw`` is the config unresolved (``OmegaConf.to_container(cfg, resolve=False)``). Such values
+    (tokens, passwords) are kept out of the manifest and the report: :func:`redact`.
+    """
+    found: dict[str, str] = {}
+
+    def walk(node: Any) -> None:
+        if isinstance(node, dict):
+            for v in node.values():
+                walk(v)
+        elif isinstance(node, list):
+            for v in node:
+                walk(v)
+        elif isinstance(node, str):
+            for var in _ENV_REF.findall(node):
+                value = os.environ.get(var)
+                if value:
+                    found[value] = var
+
+    walk(raw)
+    return found
+
+
+def redact(obj: Any, secrets: dict[str, str]) -> Any:
+    """A copy of ``obj`` with each secret value replaced by ``<from env VAR>`` (inside strings too)."""
+    if not secrets:
+        return obj
+    if isinstance(obj, dict):
+        return {k: redact(v, secrets) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [redact(v, secrets) for v in obj]
+    if isinstance(obj, str):
+        if obj in secrets:
+            return f"<from env {secrets[obj]}>"
+        for value, var in sorted(secrets.items(), key=lambda kv: -len(kv[0])):
+            if len(value) >= 4 and value in obj:
+                obj = obj.replace(value, f"<from env {var}>")
+        return obj
+    return obj

@@ -38,6 +38,9 @@ def make(params: MakeParams, ctx, *, out_data_txt: Path) -> dict:
         time.sleep(sleep)
     if params.fail:
         raise RuntimeError("boom on purpose")
+    if os.environ.get("TWINKIT_TEST_FULL"):  # /dev/full: every write fails with a real ENOSPC
+        with open(os.environ["TWINKIT_TEST_FULL"], "wb") as f:
+            f.write(b"x" * 65536)
     with open(out_data_txt, "w") as f:
         f.write(f"{params.value}\n")
         if params.size_mb:

@@ -103,6 +103,7 @@ def resolve_params(plugin: Plugin, *layers: dict, where: str) -> tuple[Any, dict
             merged[k] = v
     fast = _fast_params(plugin.params, merged)
     if fast is not None:
+        _check_ranges(plugin, fast, where)
         return fast, _params_to_dict(fast)
     base = OmegaConf.structured(plugin.params)
     for layer in layers:
@@ -119,4 +120,15 @@ def resolve_params(plugin: Plugin, *layers: dict, where: str) -> tuple[Any, dict
         except OmegaConfBaseException as exc:
             raise ConfigError(f"{where}: plugin {plugin.qualname}: {exc.msg if hasattr(exc, 'msg') else exc}") from None
     obj = OmegaConf.to_object(base)
+    _check_ranges(plugin, obj, where)
     return obj, _params_to_dict(obj)
+
+
+def _check_ranges(plugin: Plugin, obj: Any, where: str) -> None:
+    """Every value inside its declared range (twinkit.ranges), else one line naming the step and key."""
+    from twinkit.ranges import check_values
+
+    try:
+        check_values(plugin.params, obj, "", plugin.qualname)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None

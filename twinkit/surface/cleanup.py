@@ -179,6 +179,21 @@ def trim_mask(vertices: np.ndarray, d: np.ndarray, points: np.ndarray, normals, 
     return drop, int(len(on_plane))
 
 
+def _nothing_left(points: np.ndarray, max_dist_m: float) -> str:
+    """Why the distance trim left no face: a cloud too small or too sparse for a surface, else a frame mismatch."""
+    n = len(points)
+    spacing = float("nan")
+    if n >= 2:
+        from scipy.spatial import cKDTree
+
+        spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+    if n < 1000 or spacing > max_dist_m:
+        return (f"no face is within {max_dist_m} m of the cloud after trimming: the cloud has only {n} points "
+                f"(median spacing {spacing:.3g} m), too few or too sparse for a surface; use a denser or larger capture")
+    return (f"no face is within {max_dist_m} m of the cloud ({n} points, median spacing {spacing:.3g} m) after "
+            f"trimming; check that the mesh and the cloud share a frame")
+
+
 def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
                normals: np.ndarray | None = None, colors: np.ndarray | None = None,
                loose=None) -> tuple[Mesh, dict]:
@@ -219,8 +234,7 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
     if mesh.n_faces == 0:
         from twinkit import InputError
 
-        raise InputError(f"no face is within {opt.max_dist_m} m of the cloud after trimming; "
-                         f"raise max_dist_m or check that the mesh and the cloud share a frame")
+        raise InputError(_nothing_left(points, opt.max_dist_m))
     mesh, n_before, n_kept = keep_large_components(mesh, opt.min_component_faces, opt.min_component_ratio)
     rep["components"] = {"before": n_before, "kept": n_kept, "vertices": mesh.n_vertices, "faces": mesh.n_faces}
     if opt.repair_non_manifold:

@@ -7,12 +7,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import StepContext, hookimpl
+from twinkit.ranges import param
 
 
 @dataclass
 class XyzParams:
-    decimals: int = 3  # digits after the point, in metres (3 = millimetres)
-    offset_m: float = 0.0  # added to z, e.g. to undo a height shift
+    decimals: int = param(3, ge=0, le=12)  # digits after the point, in metres (3 = millimetres)
+    offset_m: float = param(0.0)  # added to z, e.g. to undo a height shift (any value)
 
 
 def export_xyz(params: XyzParams, ctx: StepContext, *, in_mesh_ply: Path, out_points_xyz: Path) -> dict:

@@ -4,13 +4,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from twinkit import hookimpl
+from twinkit.ranges import param
 
 
 @dataclass
 class LocalExecutorParams:
-    workers: int = 2  # worker processes for fanned-out items (1 = run in the main process)
-    threads_per_worker: int = 0  # cap on each worker's native thread pools (OpenMP, BLAS); 0 = cores / workers
-    max_items_per_worker: int = 0  # > 0: a fresh worker process after this many items (bounds memory carried over)
+    workers: int = param(2, ge=1, le=1024)  # worker processes for fanned-out items (1 = run in the main process)
+    threads_per_worker: int = param(0, ge=0)  # cap on each worker's native thread pools (OpenMP, BLAS); 0 = cores / workers
+    max_items_per_worker: int = param(0, ge=0)  # > 0: a fresh worker process after this many items (bounds memory carried over)
 
 
 def local_executor(params: LocalExecutorParams):

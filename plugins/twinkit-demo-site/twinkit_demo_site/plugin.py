@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import StepContext, hookimpl
+from twinkit.ranges import param
 
 #: where the demo site is when the site config gives no georeference: a four-way junction in central
 #: Helsinki (Finland); ETRS89 / TM35FIN is the national metric CRS
@@ -26,25 +27,25 @@ PRESETS = {
 
 @dataclass
 class DemoSiteParams:
-    size: str = "small"  # small | default | large
-    seed: int = 0
-    photo_count: int = 0  # 0 = the preset's count
-    photo_width_px: int = 1024
-    photo_height_px: int = 768
-    focal_px: float = 820.0
-    photo_supersample: int = 1  # colour rays per pixel side (2 = 4 + 1 rays per pixel)
-    noise_mm: float = 3.0  # scanner range noise (1 sigma, clipped at 3 sigma)
-    scanner_height_m: float = 2.0
-    max_range_m: float = 80.0
-    density_scale: float = 1.0  # multiplies the preset's point density
-    gps_noise_m: float = 2.5  # EXIF GPS noise (1 sigma horizontal; vertical 1.6x)
-    osm_shift_m: float = 3.5  # length of the known OSM translation
-    osm_rotation_deg: float = 0.8  # magnitude of the known OSM rotation about the base point
+    size: str = param("small", choices=("small", "default", "large"))  # small | default | large
+    seed: int = param(0, ge=0)
+    photo_count: int = param(0, ge=0, le=10000)  # 0 = the preset's count
+    photo_width_px: int = param(1024, ge=16, le=16384)
+    photo_height_px: int = param(768, ge=16, le=16384)
+    focal_px: float = param(820.0, gt=0)
+    photo_supersample: int = param(1, ge=1, le=8)  # colour rays per pixel side (2 = 4 + 1 rays per pixel)
+    noise_mm: float = param(3.0, ge=0)  # scanner range noise (1 sigma, clipped at 3 sigma)
+    scanner_height_m: float = param(2.0, gt=0)
+    max_range_m: float = param(80.0, gt=0)
+    density_scale: float = param(1.0, gt=0, le=100)  # multiplies the preset's point density
+    gps_noise_m: float = param(2.5, ge=0)  # EXIF GPS noise (1 sigma horizontal; vertical 1.6x)
+    osm_shift_m: float = param(3.5, ge=0)  # length of the known OSM translation
+    osm_rotation_deg: float = param(0.8, ge=0, le=180)  # magnitude of the known OSM rotation about the base point
     shadows: bool = True
-    weathering: float = 0.6  # world-space stains in the photos so no two places look alike; 0 = off
+    weathering: float = param(0.6, ge=0, le=1)  # world-space stains in the photos so no two places look alike; 0 = off
     weathering_scan: bool = False  # the scanner's colours weathered too (changes the segmentation demo's input)
-    gcp_survey_noise_m: float = 0.005  # noise of the surveyed ground-control points (gcp.json)
-    gcp_pixel_noise_px: float = 0.5  # noise of their pixel observations (a user clicking them)
+    gcp_survey_noise_m: float = param(0.005, ge=0)  # noise of the surveyed ground-control points (gcp.json)
+    gcp_pixel_noise_px: float = param(0.5, ge=0)  # noise of their pixel observations (a user clicking them)
 
 
 def _osm_transform(params: DemoSiteParams, seed: int) -> dict:

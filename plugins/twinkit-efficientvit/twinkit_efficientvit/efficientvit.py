@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twinkit.errors import InputError
+from twinkit.ranges import param
 
 from twinkit_efficientvit.common import (
     CITYSCAPES_CLASSES,
@@ -49,11 +50,11 @@ class EfficientViTParams:
     weights_path: str = ""
     weights_sha256: str = ""
     download_if_missing: bool = False
-    threads: int = 0
-    batch_size: int = 0
+    threads: int = param(0, ge=0)
+    batch_size: int = param(0, ge=0, le=1024)
     device: str = "auto"
-    input_long_side_px: int = 1024
-    size_multiple_px: int = 32
+    input_long_side_px: int = param(1024, ge=32, le=8192)
+    size_multiple_px: int = param(32, ge=1, le=1024)
     optimize: bool = True
     flip_tta: bool = False
 

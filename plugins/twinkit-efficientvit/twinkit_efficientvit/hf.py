@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from twinkit.errors import InputError
+from twinkit.ranges import param
 
 from twinkit_efficientvit.common import (
     CITYSCAPES_CLASSES,
@@ -50,11 +51,11 @@ class HFParams:
     model: str = "nvidia/segformer-b0-finetuned-cityscapes-1024-1024"
     revision: str = "main"
     local_files_only: bool = False
-    threads: int = 0
-    batch_size: int = 0
+    threads: int = param(0, ge=0)
+    batch_size: int = param(0, ge=0, le=1024)
     device: str = "auto"
-    input_long_side_px: int = 0
-    size_multiple_px: int = 32
+    input_long_side_px: int = param(0, ge=0, le=8192)
+    size_multiple_px: int = param(32, ge=1, le=1024)
     label_map: dict[str, int] = field(default_factory=dict)
 
 

@@ -18,6 +18,7 @@ import numpy as np
 from twinkit.errors import InputError
 
 from twinkit_efficientvit.common import CITYSCAPES_CLASSES, IGNORE_ID, N_CLASSES, as_batch
+from twinkit.ranges import param
 
 WEIGHTS_FILE = "deeplab_mobilenet_edgetpu_slim_cityscapes_quant.tflite"
 WEIGHTS_SHA256 = "322fe29945cb1693f426952f2a330ab67ea5678545ddee6f2548e0cfd0ca03e5"
@@ -37,8 +38,8 @@ class DeepLabTFLiteParams:
 
     weights_path: str = ""
     weights_sha256: str = ""
-    threads: int = 0
-    resize_mode: str = "stretch"
+    threads: int = param(0, ge=0)
+    resize_mode: str = param("stretch", choices=("stretch", "pad"))
 
 
 def litert_available() -> bool:

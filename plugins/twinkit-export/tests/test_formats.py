@@ -368,3 +368,24 @@ def test_glb_renders_as_bright_as_its_texture(glb_out, class_dir, glb_driver, tm
     before = brightness_ratio(glb_driver, old, tmp_path / "old")
     before.pop("images")
     assert before["vertexColors"] == before["meshes"] and before["ratio"] < 0.8, before  # 0.59 on this street
+
+
+def test_the_bpy_interpreter_comes_from_the_environment_not_from_a_config(monkeypatch, tmp_path):
+    """An executable is never a parameter (a site or recipe file is data): $TWINKIT_BPY_PYTHON picks it."""
+    import dataclasses
+    import sys
+
+    import pytest
+
+    from twinkit_export import plugin as export_plugin
+    from twinkit_export.fbx import FbxExportError, bpy_python
+
+    for cls in (export_plugin.FbxParams, export_plugin.CarlaPackageParams):
+        assert "python" not in {f.name for f in dataclasses.fields(cls)}
+    monkeypatch.delenv("TWINKIT_BPY_PYTHON", raising=False)
+    assert bpy_python() == ""
+    monkeypatch.setenv("TWINKIT_BPY_PYTHON", str(tmp_path / "no-such-python"))
+    with pytest.raises(FbxExportError, match="TWINKIT_BPY_PYTHON=.*is not an executable file"):
+        bpy_python()
+    monkeypatch.setenv("TWINKIT_BPY_PYTHON", sys.executable)
+    assert bpy_python() == sys.executable

@@ -24,6 +24,20 @@ class FbxExportError(RuntimeError):
     pass
 
 
+ENV_PYTHON = "TWINKIT_BPY_PYTHON"
+
+
+def bpy_python() -> str:
+    """The interpreter that runs Blender's bpy: ``$TWINKIT_BPY_PYTHON``, else the one running twinkit.
+
+    An executable comes from the environment, never from a config file (a site or recipe is data).
+    """
+    exe = os.environ.get(ENV_PYTHON, "")
+    if exe and not (Path(exe).is_file() and os.access(exe, os.X_OK)):
+        raise FbxExportError(f"{ENV_PYTHON}={exe} is not an executable file; unset it or point it at a Python with bpy")
+    return exe
+
+
 def write_fbx(mesh_files: list[Path], texture: Path | None, out: Path, *, georef: dict | None = None,
               embed_texture: bool = False, python: str = "", log_path: Path | None = None,
               blend: Path | None = None, timeout_s: float = 3600) -> None:
@@ -76,5 +90,5 @@ def _run_job(job: dict, texture: Path | None, out: Path, *, georef: dict | None,
         if "No module named 'bpy'" in tail:
             raise FbxExportError(
                 "the FBX exporter needs Blender as a Python module: pip install bpy==5.0.1 "
-                "(see docs/export.md), or set the fbx exporter's python= to an interpreter that has it")
+                f"(see docs/export.md), or set {ENV_PYTHON}=<an interpreter that has it>")
         raise FbxExportError(f"Blender FBX export failed (exit {proc.returncode}); log {log_path}:\n{tail}")

@@ -23,21 +23,22 @@ from pathlib import Path
 import numpy as np
 
 from twinkit import InputError, StepContext
+from twinkit.ranges import param
 
 
 @dataclass
 class DropTestParams:
     """Vertical rays over the lanes: does the static mesh hold up cars and walkers?"""
 
-    spacing_m: float = 0.10  # ray grid along and across each lane
-    tol_m: float = 0.05  # a ray passes when the surface is this close to the lane's height
-    curb_max_m: float = 0.30  # a sidewalk without <height> records may lie up to this above the road (a kerb)
-    min_driving_pct: float = 99.9  # below this share of hits on driving lanes: a warning, ok = false
-    min_sidewalk_pct: float = 99.5  # ... on sidewalks
-    footprint_margin_m: float = 1.0  # rays this close to the scan's edge are not counted (the site ends there)
-    fill_limit_m: float = 8.0  # unscanned gaps narrower than this count as inside the site (the ground fill's limit)
-    fall_m: float = 0.5  # a missed ray with no surface this close to the lane falls through (a hole), else off height
-    max_hole_m: float = 0.25  # any hole wider than this (falling rays' extent + one spacing) fails the lane, whatever
+    spacing_m: float = param(0.10, gt=0)  # ray grid along and across each lane
+    tol_m: float = param(0.05, gt=0)  # a ray passes when the surface is this close to the lane's height
+    curb_max_m: float = param(0.30, ge=0)  # a sidewalk without <height> records may lie up to this above the road (a kerb)
+    min_driving_pct: float = param(99.9, ge=0, le=100)  # below this share of hits on driving lanes: a warning, ok = false
+    min_sidewalk_pct: float = param(99.5, ge=0, le=100)  # ... on sidewalks
+    footprint_margin_m: float = param(1.0, ge=0)  # rays this close to the scan's edge are not counted (the site ends there)
+    fill_limit_m: float = param(8.0, ge=0)  # unscanned gaps narrower than this count as inside the site (the ground fill's limit)
+    fall_m: float = param(0.5, gt=0)  # a missed ray with no surface this close to the lane falls through (a hole), else off height
+    max_hole_m: float = param(0.25, ge=0)  # any hole wider than this (falling rays' extent + one spacing) fails the lane, whatever
     #                           the share: it swallows a tyre's contact patch (about 0.2 m) or a shoe
 
 

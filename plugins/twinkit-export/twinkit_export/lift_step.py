@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError, StepContext
+from twinkit.ranges import param
 
 ACTORS = "actors.json"
 
@@ -32,15 +33,15 @@ class LiftParams:
     """Lift vehicles, riders and pedestrians out of the static mesh (see twinkit_export.movables)."""
 
     lift: bool = True  # false: keep every movable object in the static map (files pass through unchanged)
-    min_height_m: float = 0.25  # movable-labelled surface at most this above the local ground is ground
-    cut_height_m: float = 0.10  # an object's faces start this far above the ground
-    cluster_gap_m: float = 0.5  # movable-labelled vertices closer than this are one object
-    ground_window_m: float = 4.0  # local ground search window, wider than any vehicle
-    min_vertical_share: float = 0.15  # an object has walls: this share of its vertices with a near-horizontal normal
-    margin_m: float = 0.3  # footprint widening when collecting an object's faces
-    fill_cell_m: float = 0.1  # holes left under an object are filled on this grid at the ground's height (0: fan)
-    flatten_feet_m: float = 0.5  # the object's cut-off feet up to this high are lowered onto the ground (0: kept)
-    max_fill_extent_m: float = 3.0  # holes reaching farther than this beyond an object's footprint stay open
+    min_height_m: float = param(0.25, ge=0)  # movable-labelled surface at most this above the local ground is ground
+    cut_height_m: float = param(0.10, ge=0)  # an object's faces start this far above the ground
+    cluster_gap_m: float = param(0.5, gt=0)  # movable-labelled vertices closer than this are one object
+    ground_window_m: float = param(4.0, gt=0)  # local ground search window, wider than any vehicle
+    min_vertical_share: float = param(0.15, ge=0, le=1)  # an object has walls: this share of its vertices with a near-horizontal normal
+    margin_m: float = param(0.3, ge=0)  # footprint widening when collecting an object's faces
+    fill_cell_m: float = param(0.1, ge=0)  # holes left under an object are filled on this grid at the ground's height (0: fan)
+    flatten_feet_m: float = param(0.5, ge=0)  # the object's cut-off feet up to this high are lowered onto the ground (0: kept)
+    max_fill_extent_m: float = param(3.0, ge=0)  # holes reaching farther than this beyond an object's footprint stay open
 
 
 def _actor_json(inst, file: str) -> dict:

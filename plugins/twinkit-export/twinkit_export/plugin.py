@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError, StepContext, hookimpl
+from twinkit.ranges import param
 
 from .lift_step import LiftParams, lift_movables_step
 
@@ -23,14 +24,14 @@ from .lift_step import LiftParams, lift_movables_step
 class GtLabelsParams:
     """Transfer ground-truth labels to the reconstructed mesh."""
 
-    max_dist_m: float = 0.5  # vertices farther than this from the ground-truth surface stay unlabelled (255)
+    max_dist_m: float = param(0.5, gt=0)  # vertices farther than this from the ground-truth surface stay unlabelled (255)
 
 
 @dataclass
 class SplitParams:
     """Split the labelled, textured mesh into one sub-mesh per class."""
 
-    max_texture_px: int = 8192  # a larger atlas is downscaled to this size (Unreal's default limit); 0 = keep
+    max_texture_px: int = param(8192, ge=0, le=65536)  # a larger atlas is downscaled to this size (Unreal's default limit); 0 = keep
 
 
 @dataclass
@@ -38,7 +39,6 @@ class FbxParams:
     """FBX through Blender (bpy) in a subprocess."""
 
     embed_texture: bool = False  # True: the texture is embedded in the FBX too (bigger file)
-    python: str = ""  # interpreter that has bpy; empty = the one running twinkit
     save_blend: bool = False  # also write twin.blend (for inspection in Blender)
 
 
@@ -57,8 +57,8 @@ class UsdParams:
 class GltfParams:
     """GLB for viewing in a browser."""
 
-    texture_format: str = "jpeg"  # jpeg (smaller, for the web) | png (lossless)
-    jpeg_quality: int = 90
+    texture_format: str = param("jpeg", choices=("jpeg", "png"))  # jpeg (smaller, for the web) | png (lossless)
+    jpeg_quality: int = param(90, ge=1, le=100)
     unlit: bool = True  # KHR_materials_unlit: the texture already holds the captured light
     variants: bool = True  # KHR_materials_variants: "photo" and "segmentation" (flat class colours)
 
@@ -70,16 +70,15 @@ class CarlaPackageParams:
     package: str = ""  # package name; empty = "<Site>Twin" from the site name
     map_name: str = ""  # map name (FBX and XODR names); empty = "<Site>"
     use_carla_materials: bool = False  # True: CARLA replaces road/sidewalk/terrain materials by its own
-    spawn_spacing_m: float = 20.0  # distance between spawn points along a driving lane
-    spawn_height_m: float = 0.5  # spawn points are raised by this much above the lane
+    spawn_spacing_m: float = param(20.0, gt=0)  # distance between spawn points along a driving lane
+    spawn_height_m: float = param(0.5, ge=0)  # spawn points are raised by this much above the lane
     skip_junctions: bool = True  # no spawn points inside junctions
     decals: bool = False  # True: CARLA's default random road decals (dirt, cracks, tyre marks, road lines)
-    python: str = ""  # interpreter that has bpy (the package's FBX files); empty = the one running twinkit
     carla_version: str = "0.9.16"
-    frame: str = "carla"  # carla: true-north frame at the base point, CARLA's geolocation works | site: site frame
-    frame_scale: str = "auto"  # auto | site (rotation only) | true (true metres) | minimax (see docs/georeferencing.md)
-    geolocation_radius_m: float = 150.0  # CARLA's geolocation is held within the tolerance up to this distance
-    geolocation_tolerance_m: float = 0.5
+    frame: str = param("carla", choices=("carla", "site"))  # carla: true-north frame at the base point, CARLA's geolocation works | site: site frame
+    frame_scale: str = param("auto", choices=("auto", "site", "true", "minimax"))  # auto | site (rotation only) | true (true metres) | minimax (see docs/georeferencing.md)
+    geolocation_radius_m: float = param(150.0, gt=0)  # CARLA's geolocation is held within the tolerance up to this distance
+    geolocation_tolerance_m: float = param(0.5, gt=0)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -234,7 +233,7 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
 def export_fbx(params: FbxParams, ctx: StepContext, *, in_class_meshes_dir: Path, out_twin_fbx: Path,
                in_site_json: Path | None = None) -> dict:
     """twin.fbx (+ twin.png beside it): one object per class, CARLA names, metres, Z up / -Y front."""
-    from .fbx import FbxExportError, write_fbx
+    from .fbx import FbxExportError, bpy_python, write_fbx
 
     params = params or FbxParams()
     t0 = time.perf_counter()
@@ -248,7 +247,7 @@ def export_fbx(params: FbxParams, ctx: StepContext, *, in_class_meshes_dir: Path
     blend = out.with_suffix(".blend") if params.save_blend else None
     try:
         write_fbx(files, tex, out, georef=_georef(ctx, in_site_json), embed_texture=params.embed_texture,
-                  python=params.python, log_path=Path(ctx.workdir) / "bpy.log", blend=blend)
+                  python=bpy_python(), log_path=Path(ctx.workdir) / "bpy.log", blend=blend)
     except FbxExportError as exc:
         raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
     return {"objects": [c["name"] for c in cs.manifest["classes"] if c["faces"] > 0],
@@ -353,7 +352,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     georef = _georef(ctx, in_site_json)
     out = Path(out_carla_import_dir)
     from .carla_contract import check_package
-    from .fbx import FbxExportError
+    from .fbx import FbxExportError, bpy_python
 
     work = Path(ctx.workdir) / "carla_frame_meshes"
     class_dir = package_class_dir(frame, cs, tex, work)
@@ -366,7 +365,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
         pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=class_dir,
                                     classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
                                     use_carla_materials=params.use_carla_materials, georef=georef,
-                                    decals=params.decals, python=params.python,
+                                    decals=params.decals, python=bpy_python(),
                                     log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version,
                                     frames=lambda g: readme_frames(frame, g), scanned=scanned)
     except PackageError as exc:

@@ -13,6 +13,7 @@ from typing import Any
 
 from twinkit import InputError, hookimpl
 from twinkit.jsonio import write_json
+from twinkit.ranges import param
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -21,18 +22,18 @@ from twinkit.jsonio import write_json
 class SfmParams:
     """Structure from motion (pycolmap, CPU)."""
 
-    matching: str = "auto"  # auto | exhaustive | sequential | spatial | sequential+spatial
-    exhaustive_max: int = 40  # auto: exhaustive matching up to this many photos
-    overlap: int = 10  # sequential: each photo with its next N photos (file-name order)
-    spatial_neighbors: int = 12  # spatial: nearest photos by EXIF GPS
-    mapper: str = "incremental"  # incremental | global (GLOMAP)
-    max_image_px: int = 1600  # features are found on photos downscaled to this long side (0 = full size)
-    max_features: int = 4096
+    matching: str = param("auto", choices=("auto", "exhaustive", "sequential", "spatial", "sequential+spatial"))  # auto | exhaustive | sequential | spatial | sequential+spatial
+    exhaustive_max: int = param(40, ge=0)  # auto: exhaustive matching up to this many photos
+    overlap: int = param(10, ge=1)  # sequential: each photo with its next N photos (file-name order)
+    spatial_neighbors: int = param(12, ge=1)  # spatial: nearest photos by EXIF GPS
+    mapper: str = param("incremental", choices=("incremental", "global"))  # incremental | global (GLOMAP)
+    max_image_px: int = param(1600, ge=0)  # features are found on photos downscaled to this long side (0 = full size)
+    max_features: int = param(4096, ge=1)
     camera_model: str = "SIMPLE_RADIAL"
     single_camera: bool = True  # all photos from one camera with one set of intrinsics
     intrinsics: str = "auto"  # auto (K.txt beside the photos, else the site's cameras.json, else EXIF) | exif
-    min_registered_ratio: float = 0.5  # fewer registered photos -> error
-    seed: int = 0
+    min_registered_ratio: float = param(0.5, ge=0, le=1)  # fewer registered photos -> error
+    seed: int = param(0, ge=0)
     deterministic: bool = True  # one thread for matching and mapping, so a re-run gives the same model (false: faster)
 
 
@@ -40,53 +41,53 @@ class SfmParams:
 class GeorefParams:
     """Model frame -> site frame."""
 
-    method: str = "auto"  # auto (gcp, else gps, else none) | gcp | gps | none
-    gps_threshold_m: float = 8.0  # RANSAC inlier distance for GPS fixes (about 3 sigma of phone GPS)
+    method: str = param("auto", choices=("auto", "gcp", "gps", "none"))  # auto (gcp, else gps, else none) | gcp | gps | none
+    gps_threshold_m: float = param(8.0, gt=0)  # RANSAC inlier distance for GPS fixes (about 3 sigma of phone GPS)
     gps_use_z: bool = False  # scale from x, y only (GPS heights are the noisiest)
-    height_from: str = "gps"  # gps | ground: ground puts the sparse ground plane at ground_z_m
-    ground_z_m: float = 0.0
-    scale: float = 1.0  # method none: metres per model unit
-    min_gcp_views: int = 2
-    gcp_outlier_m: float = 0.05  # a GCP whose residual exceeds this (and 3x the median) is left out of the fit
+    height_from: str = param("gps", choices=("gps", "ground"))  # gps | ground: ground puts the sparse ground plane at ground_z_m
+    ground_z_m: float = param(0.0)
+    scale: float = param(1.0, gt=0)  # method none: metres per model unit
+    min_gcp_views: int = param(2, ge=1)
+    gcp_outlier_m: float = param(0.05, gt=0)  # a GCP whose residual exceeds this (and 3x the median) is left out of the fit
 
 
 @dataclass
 class RoiParams:
     """Automatic region of interest and ground plane (edit roi.json to override)."""
 
-    margin_m: float = 12.0  # around the camera positions, horizontally
-    below_ground_m: float = 1.0
-    above_ground_m: float = 25.0
-    ground_threshold_m: float = 0.10  # RANSAC inlier distance for the ground plane
-    max_depth_m: float = 40.0  # dense matching ignores anything farther from a photo
+    margin_m: float = param(12.0, ge=0)  # around the camera positions, horizontally
+    below_ground_m: float = param(1.0, ge=0)
+    above_ground_m: float = param(25.0, gt=0)
+    ground_threshold_m: float = param(0.10, gt=0)  # RANSAC inlier distance for the ground plane
+    max_depth_m: float = param(40.0, ge=0)  # dense matching ignores anything farther from a photo
 
 
 @dataclass
 class DenseParams:
     """Dense reconstruction: CPU plane-sweep stereo + consistency fusion (pycolmap patch-match with CUDA)."""
 
-    backend: str = "auto"  # auto (patchmatch when pycolmap has CUDA, else cpu) | cpu | patchmatch
-    max_image_px: int = 640  # working resolution (long side)
-    planes: int = 192  # most planes per plane family of the coarse sweep
-    neighbors: int = 4
-    window_px: int = 7
-    min_ncc: float = 0.55
-    min_consistent: int = 2  # other depth maps that must agree
-    rel_tol: float = 0.003  # agreement: |depth difference| < rel_tol * depth
+    backend: str = param("auto", choices=("auto", "cpu", "patchmatch"))  # auto (patchmatch when pycolmap has CUDA, else cpu) | cpu | patchmatch
+    max_image_px: int = param(640, ge=16, le=16384)  # working resolution (long side)
+    planes: int = param(192, ge=2, le=4096)  # most planes per plane family of the coarse sweep
+    neighbors: int = param(4, ge=1)
+    window_px: int = param(7, ge=1, le=63)
+    min_ncc: float = param(0.55, ge=-1, le=1)
+    min_consistent: int = param(2, ge=0)  # other depth maps that must agree
+    rel_tol: float = param(0.003, gt=0)  # agreement: |depth difference| < rel_tol * depth
     average_depths: bool = True  # a kept point's depth is the mean of the depth maps that agree with it
-    voxel_m: float = 0.02  # merge duplicate points per voxel (0 = off)
-    coarse_scale: float = 0.25
-    refine_passes: int = 2
+    voxel_m: float = param(0.02, ge=0)  # merge duplicate points per voxel (0 = off)
+    coarse_scale: float = param(0.25, gt=0, le=1)
+    refine_passes: int = param(2, ge=0)
 
 
 @dataclass
 class PhotoTextureParams:
     """Texture from the photos (project and blend the best views per texel)."""
 
-    max_views: int = 3  # photos blended per face (the best ones)
-    sharpness: float = 4.0  # blend weight = score ** sharpness (score = cos(view angle) / distance)
-    min_cos: float = 0.15  # ignore views more grazing than about 81 degrees
-    max_dist_m: float = 40.0  # ignore views farther than this
+    max_views: int = param(3, ge=1)  # photos blended per face (the best ones)
+    sharpness: float = param(4.0, ge=0)  # blend weight = score ** sharpness (score = cos(view angle) / distance)
+    min_cos: float = param(0.15, ge=0, le=1)  # ignore views more grazing than about 81 degrees
+    max_dist_m: float = param(40.0, gt=0)  # ignore views farther than this
 
 
 # ----------------------------------------------------------------------------- helpers

@@ -8,6 +8,7 @@ from typing import Any
 
 from twinkit import hookimpl
 from twinkit.jsonio import write_json
+from twinkit.ranges import param
 
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 
@@ -19,80 +20,80 @@ class ReadCloudParams:
     """Reading a cloud into the site frame."""
 
     estimate_normals: bool = True  # estimate normals when the file has none
-    normals_k: int = 24  # neighbours for PCA normals
-    normals_orientation: str = "auto"  # auto | scanner | mst | up (see normals.py)
+    normals_k: int = param(24, ge=3, le=1000)  # neighbours for PCA normals
+    normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"))  # auto | scanner | mst | up (see normals.py)
     reorient_existing_normals: bool = False  # False: normals from the file are kept as they are
-    min_points: int = 10  # fewer points -> "too few points" error
+    min_points: int = param(10, ge=1)  # fewer points -> "too few points" error
     drop_invalid_points: bool = True  # drop NaN/inf points with a warning (False: error)
-    max_offset_km: float = 20.0  # without site bounds: cloud centre farther from the base point = wrong CRS
-    bounds_margin_m: float = 50.0  # with site bounds: margin around them for the wrong-CRS check
+    max_offset_km: float = param(20.0, gt=0)  # without site bounds: cloud centre farther from the base point = wrong CRS
+    bounds_margin_m: float = param(50.0, ge=0)  # with site bounds: margin around them for the wrong-CRS check
 
 
 @dataclass
 class PoissonParams:
     """Screened Poisson reconstruction."""
 
-    depth: int = 11  # octree depth; voxel = scene size * scale / 2**depth
-    voxel_m: float = 0.0  # > 0: derive the depth from this target voxel size (metres) instead
-    scale: float = 1.1  # reconstruction cube / bounding cube of the samples
-    point_weight: float = 4.0  # screening weight (interpolation vs smoothness)
-    samples_per_node: float = 1.5
+    depth: int = param(11, ge=2, le=14)  # octree depth (Open3D needs >= 2; 30 crashed it); voxel = scene size * scale / 2**depth
+    voxel_m: float = param(0.0, ge=0)  # > 0: derive the depth from this target voxel size (metres) instead
+    scale: float = param(1.1, ge=1, le=10)  # reconstruction cube / bounding cube of the samples
+    point_weight: float = param(4.0, ge=0)  # screening weight (interpolation vs smoothness)
+    samples_per_node: float = param(1.5, ge=1, le=100)
     linear_fit: bool = False
-    backend: str = "open3d"  # open3d | pymeshlab (optional dependency, the thesis's route)
-    normals_k: int = 24  # only used when the points have no normals
-    normals_orientation: str = "auto"
+    backend: str = param("open3d", choices=("open3d", "pymeshlab"))  # open3d | pymeshlab (optional dependency, the thesis's route)
+    normals_k: int = param(24, ge=3, le=1000)  # only used when the points have no normals
+    normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"))
 
 
 @dataclass
 class CleanParams:
     """Trimming and repair of the dense mesh."""
 
-    max_dist_m: float = 0.10  # remove vertices farther than this from every input point ("bubbles"); 0 = off
-    gap_dist_m: float = 0.5  # ... but keep those up to this far that lie on the points' tangent planes; 0 = off
-    gap_plane_m: float = 0.02  # "on the plane": median distance to the tangent planes of the k nearest points
-    density_quantile: float = 0.0  # remove vertices below this quantile of Poisson density; 0 = off
-    min_component_faces: int = 200  # drop connected components smaller than this
-    min_component_ratio: float = 0.0  # ... or smaller than this fraction of the largest
+    max_dist_m: float = param(0.10, ge=0)  # remove vertices farther than this from every input point ("bubbles"); 0 = off
+    gap_dist_m: float = param(0.5, ge=0)  # ... but keep those up to this far that lie on the points' tangent planes; 0 = off
+    gap_plane_m: float = param(0.02, ge=0)  # "on the plane": median distance to the tangent planes of the k nearest points
+    density_quantile: float = param(0.0, ge=0, lt=1)  # remove vertices below this quantile of Poisson density; 0 = off
+    min_component_faces: int = param(200, ge=0)  # drop connected components smaller than this
+    min_component_ratio: float = param(0.0, ge=0, le=1)  # ... or smaller than this fraction of the largest
     repair_non_manifold: bool = True
-    max_hole_edges: int = 60  # close holes whose boundary has at most this many edges; < 3 = off
-    fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on a grid of this cell size; 0 = off
-    fill_ground_max_gap_m: float = 8.0  # ... when ground lies on both sides at most this far apart
+    max_hole_edges: int = param(60, ge=0)  # close holes whose boundary has at most this many edges; < 3 = off
+    fill_ground_cell_m: float = param(0.10, ge=0)  # fill the ground's occlusion shadows on a grid of this cell size; 0 = off
+    fill_ground_max_gap_m: float = param(8.0, ge=0)  # ... when ground lies on both sides at most this far apart
     fill_ground_stitch: bool = True  # join the fill to the mesh's own open border (one surface, no seam);
     #                                  false: separate grid patches (the fill before 25 Nov 2026)
-    colormap_max_m: float = 0.0  # distance colour map saturates here; 0 = max_dist_m (or p99)
+    colormap_max_m: float = param(0.0, ge=0)  # distance colour map saturates here; 0 = max_dist_m (or p99)
 
 
 @dataclass
 class SimplifyParams:
     """Decimation to a target face count."""
 
-    target_faces: int = 500_000
-    method: str = "auto"  # auto | quadric | clustering
-    cluster_above_faces: int = 20_000_000  # auto: clustering first above this size
+    target_faces: int = param(500_000, ge=1)
+    method: str = param("auto", choices=("auto", "quadric", "clustering"))  # auto | quadric | clustering
+    cluster_above_faces: int = param(20_000_000, ge=1)  # auto: clustering first above this size
     preserve_border: bool = True  # open boundaries never collapse
-    aggressiveness: float = 7.0  # fast-simplification's agg (lower = slower, more faithful)
+    aggressiveness: float = param(7.0, gt=0)  # fast-simplification's agg (lower = slower, more faithful)
 
 
 @dataclass
 class BakeParams:
     """UV atlas and colour baking."""
 
-    texture_px: int = 8192  # 4096, 8192 or 16384 (any power of two from 256 accepted)
-    uv_method: str = "charts"  # charts (built in) | xatlas (optional dependency, slower)
-    pad_px: int = 2  # gutter around each chart, texels
+    texture_px: int = param(8192, ge=256, le=16384)  # 4096, 8192 or 16384 (any power of two from 256 accepted)
+    uv_method: str = param("charts", choices=("charts", "xatlas"))  # charts (built in) | xatlas (optional dependency, slower)
+    pad_px: int = param(2, ge=0, le=64)  # gutter around each chart, texels
 
 
 @dataclass
 class EvalParams:
     """Distances between the cloud, the mesh and an optional ground-truth mesh."""
 
-    colormap_max_m: float = 0.0  # colour map saturates here; 0 = p95 of the cloud -> mesh distances
-    gt_samples: int = 1_000_000  # points sampled on the ground-truth surface
-    gt_min_samples_per_class: int = 20_000  # per-class coverage: at least this many samples per GT label
-    coverage_within_m: float = 0.05  # a GT sample is covered when the mesh is within this distance
-    observed_m: float = 0.10  # a GT sample was seen by the scan when an input point is within this distance
-    exact_within_m: float = 0.5  # GT -> mesh distances are exact up to here, nearest-vertex distances beyond
-    image_px: int = 1024
+    colormap_max_m: float = param(0.0, ge=0)  # colour map saturates here; 0 = p95 of the cloud -> mesh distances
+    gt_samples: int = param(1_000_000, ge=1000)  # points sampled on the ground-truth surface
+    gt_min_samples_per_class: int = param(20_000, ge=0)  # per-class coverage: at least this many samples per GT label
+    coverage_within_m: float = param(0.05, gt=0)  # a GT sample is covered when the mesh is within this distance
+    observed_m: float = param(0.10, gt=0)  # a GT sample was seen by the scan when an input point is within this distance
+    exact_within_m: float = param(0.5, gt=0)  # GT -> mesh distances are exact up to here, nearest-vertex distances beyond
+    image_px: int = param(1024, ge=64, le=16384)
 
 
 # ----------------------------------------------------------------------------- helpers

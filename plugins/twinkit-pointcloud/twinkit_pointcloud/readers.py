@@ -7,6 +7,7 @@ Every reader returns a :class:`RawCloud` in the file's own coordinates (float64)
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -102,7 +103,7 @@ def read_e57(path: Path) -> RawCloud:
     try:
         imf = libe57.ImageFile(str(path), "r")
     except Exception as exc:  # libe57 raises E57Exception subclasses; message says what
-        raise _input_error(f"{path.name}: not a readable E57 file ({exc}); the file is corrupt or truncated - "
+        raise _input_error(f"{path.name}: not a readable E57 file ({_first_line(exc)}); the file is corrupt or truncated - "
                            f"re-export it from the scanner software") from exc
     try:
         root = imf.root()
@@ -224,6 +225,13 @@ def read_e57(path: Path) -> RawCloud:
                 part[k] = part[k][valid]
             part["scanner"] = np.full(int(valid.sum()), i, np.int32)
             parts.append(part)
+    except Exception as exc:
+        from twinkit import InputError
+
+        if isinstance(exc, InputError):
+            raise
+        raise _input_error(f"{path.name}: the E57 file cannot be read ({_first_line(exc)}); the file is corrupt or "
+                           f"truncated - re-export it from the scanner software") from None
     finally:
         try:
             imf.close()
@@ -335,10 +343,26 @@ def read_ply_cloud(path: Path) -> RawCloud:
 READERS = {".e57": read_e57, ".las": read_las, ".laz": read_las, ".ply": read_ply_cloud}
 
 
+def _first_line(exc: BaseException) -> str:
+    """libE57's messages carry a debug dump (context, source file and line) after the first line."""
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0].strip()
+
+
 def read_any(path: Path) -> RawCloud:
     path = Path(path)
+    if path.is_symlink() and not path.exists():
+        raise _input_error(f"{path}: a broken link (to {os.readlink(path)}, which does not exist); "
+                           f"fix the link or the site's input path")
     if not path.exists():
         raise _input_error(f"{path}: file not found; check the site's input paths")
+    if path.is_dir():
+        raise _input_error(f"{path}: is a folder, not a point cloud file; give the E57, LAS, LAZ or PLY file "
+                           f"inside it as the site's cloud input")
+    try:
+        with open(path, "rb") as f:
+            f.read(1)
+    except OSError as exc:
+        raise _input_error(f"{path}: cannot read the file ({exc.strerror}); check its permissions") from None
     reader = READERS.get(path.suffix.lower())
     if reader is None:
         raise _input_error(f"{path.name}: unsupported point cloud format '{path.suffix}'; "
@@ -371,7 +395,10 @@ def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: in
     finite = np.isfinite(raw.xyz).all(axis=1)
     n_bad = int((~finite).sum())
     if n_bad:
-        if not drop_invalid or n_bad == raw.n:
+        if n_bad == raw.n:
+            raise _input_error(f"{name}: all {raw.n} points have NaN or infinite coordinates, so none is left; "
+                               f"the export is broken - export the cloud again")
+        if not drop_invalid:
             raise _input_error(f"{name}: {n_bad} of {raw.n} points have NaN or infinite coordinates; "
                                f"remove them (or set drop_invalid_points=true to skip them)")
         if log is not None:

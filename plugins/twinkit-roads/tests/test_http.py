@@ -130,3 +130,63 @@ def test_download_needs_a_georeferenced_site(server, tmp_path):
     with pytest.raises(InputError, match="antimeridian"):
         run_step(plugin, tmp_path / "b", {}, _params(server, tmp_path, bbox="-17,179.9,-16,-179.9"), site=DEMO_SITE)
     assert server.hits == []
+
+
+class TricklingServer:
+    """Answers 200 at once, then sends one byte every 0.2 s for ever: no single read ever times out."""
+
+    def __init__(self):
+        self.stop = threading.Event()
+        srv = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *a):
+                pass
+
+            def do_GET(self):
+                self.send_response(200)
+                self.send_header("Content-Type", "text/xml")
+                self.send_header("Content-Length", str(10**9))
+                self.end_headers()
+                try:
+                    while not srv.stop.is_set():
+                        self.wfile.write(b" ")
+                        self.wfile.flush()
+                        time.sleep(0.2)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass
+
+            do_POST = do_GET
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}"
+        threading.Thread(target=self.httpd.serve_forever, daemon=True).start()
+
+    def close(self):
+        self.stop.set()
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+def test_a_trickling_server_hits_the_total_deadline(tmp_path):
+    """Per-read timeouts (1 s) never fire against a byte every 0.2 s; the total deadline (2 s) does, with one
+    clear line, through the step's own parameters."""
+    srv = TricklingServer()
+    try:
+        params = roads.DownloadParams(url=srv.url + "/api/0.6/map", timeout_s=1.0, retries=2, backoff_s=0.05,
+                                      cache_dir=str(tmp_path / "cache"), user_agent="twinkit-tests/1.0",
+                                      radius_m=100.0, deadline_s=2.0)
+        t0 = time.monotonic()
+        with pytest.raises(InputError) as e:
+            run_step(plugin_from_module(roads, "road_source", "osm_api"), tmp_path / "out", {}, params,
+                     site=DEMO_SITE)
+        took = time.monotonic() - t0
+        msg = str(e.value)
+        assert "total deadline of 2 s" in msg and "road_source.deadline_s" in msg and "\n" not in msg
+        assert took < 60, took  # generous: without the deadline this would stream for ~6 years
+        client = CachedHttp(cache_dir=tmp_path / "c2", timeout_s=1.0, retries=0, deadline_s=1.0)
+        with pytest.raises(InputError, match="total deadline of 1 s"):
+            client.request("GET", srv.url + "/x")
+    finally:
+        srv.close()

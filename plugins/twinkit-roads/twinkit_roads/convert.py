@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from twinkit import InputError
+from twinkit.ranges import param
 
 #: CARLA's Osm2OdrSettings default way types (carla/PythonAPI: settings.set_osm_way_types)
 CARLA_WAY_TYPES = ["motorway", "motorway_link", "trunk", "trunk_link", "primary", "primary_link", "secondary",
@@ -19,19 +20,19 @@ CARLA_WAY_TYPES = ["motorway", "motorway_link", "trunk", "trunk_link", "primary"
 
 @dataclass
 class ConvertParams:
-    lane_width_m: float = 3.25  # --default.lanewidth for ways without width tags (CARLA's importer: 4.0)
+    lane_width_m: float = param(3.25, gt=0, le=20)  # --default.lanewidth for ways without width tags (CARLA's importer: 4.0)
     way_types: list[str] = field(default_factory=lambda: list(CARLA_WAY_TYPES))  # highway=* kept
     traffic_lights: bool = True  # --tls.guess-signals from highway=traffic_signals nodes (CARLA: generate_traffic_lights)
     all_junctions_traffic_lights: bool = False  # --tls.guess: signalise every junction (CARLA: all_junctions_with_traffic_lights)
     sidewalks: bool = True  # --sidewalks.guess: sidewalk lanes beside urban streets (CARLA: default_sidewalk_width)
-    sidewalk_width_m: float = 2.0  # --default.sidewalk-width (CARLA's default)
+    sidewalk_width_m: float = param(2.0, gt=0, le=20)  # --default.sidewalk-width (CARLA's default)
     osm_sidewalk_tags: bool = False  # --osm.sidewalks: use sidewalk=* tags (shifts one-way streets, see docs/roads.md)
-    layer_elevation_m: float = 0.0  # --osm.layer-elevation (CARLA: elevation_layer_height); 0 = flat
-    junction_corner_detail: int = 5  # points on junction corners
-    step_m: float = 2.0  # waypoint spacing of the check
-    check_radius_m: float = -1.0  # half-side of the site box for the check; <0: site.osm_radius_m (default 150)
-    min_waypoints_inside: int = 10  # fewer waypoints inside the site box fail the step
-    timeout_s: float = 600.0  # netconvert wall-clock limit
+    layer_elevation_m: float = param(0.0, ge=0)  # --osm.layer-elevation (CARLA: elevation_layer_height); 0 = flat
+    junction_corner_detail: int = param(5, ge=0)  # points on junction corners
+    step_m: float = param(2.0, gt=0)  # waypoint spacing of the check
+    check_radius_m: float = param(-1.0)  # half-side of the site box for the check; <0: site.osm_radius_m (default 150)
+    min_waypoints_inside: int = param(10, ge=0)  # fewer waypoints inside the site box fail the step
+    timeout_s: float = param(600.0, gt=0)  # netconvert wall-clock limit
     extra_args: list[str] = field(default_factory=list)  # more netconvert options, appended verbatim
 
 

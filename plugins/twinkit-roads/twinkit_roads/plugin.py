@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import List
 
 from twinkit import InputError, hookimpl
+from twinkit.ranges import param
 
 from . import __version__
 from .convert import ConvertParams
@@ -106,8 +107,8 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
 
 @dataclass
 class OverviewParams:
-    px_per_m: float = 4.0  # resolution of the picture
-    max_px: int = 3000  # at most this many pixels across (coarser for large networks)
+    px_per_m: float = param(4.0, gt=0)  # resolution of the picture
+    max_px: int = param(3000, ge=16)  # at most this many pixels across (coarser for large networks)
 
 
 def roads_overview(params: OverviewParams, ctx, *, in_roads_xodr: Path, out_roads_overview_png: Path,
@@ -136,14 +137,14 @@ def roads_overview(params: OverviewParams, ctx, *, in_roads_xodr: Path, out_road
 @dataclass
 class AlignParams:
     fit_scale: bool = False  # also estimate a uniform scale (reported; not applied to the OpenDRIVE)
-    search_m: float = 8.0  # coarse search radius for the translation (0: refine only)
-    yaw_range_deg: float = 3.0  # coarse search over yaw in +- this range
-    raster_m: float = 0.1  # resolution of the road masks
-    margin_m: float = 6.0  # how far beyond the network's carriageway edge to look for the mesh's road edge
-    huber_m: float = 0.3  # robust loss threshold
-    curb_tol_m: float = 0.07  # ground fallback: height above the lowest local level still counted as road
+    search_m: float = param(8.0, ge=0)  # coarse search radius for the translation (0: refine only)
+    yaw_range_deg: float = param(3.0, ge=0, le=180)  # coarse search over yaw in +- this range
+    raster_m: float = param(0.1, gt=0)  # resolution of the road masks
+    margin_m: float = param(6.0, ge=0)  # how far beyond the network's carriageway edge to look for the mesh's road edge
+    huber_m: float = param(0.3, gt=0)  # robust loss threshold
+    curb_tol_m: float = param(0.07, ge=0)  # ground fallback: height above the lowest local level still counted as road
     fit_height: bool = True  # shift the OpenDRIVE elevation to the median road-surface height
-    model: str = "middles"  # residuals: "middles" of the carriageway, or each "edges" with a free extra width per road
+    model: str = param("middles", choices=("middles", "edges"))  # residuals: "middles" of the carriageway, or each "edges" with a free extra width per road
     use_labels: bool = True  # fit to the road-labelled surface when labels.npy exists; false: always the ground (curbs)
 
 
@@ -194,8 +195,8 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
 
 @dataclass
 class ApplyParams:
-    qa_px_per_m: float = 20.0  # resolution of the QA picture
-    qa_max_px: int = 4096
+    qa_px_per_m: float = param(20.0, gt=0)  # resolution of the QA picture
+    qa_max_px: int = param(4096, ge=16)
 
 
 def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignment_json: Path,
@@ -239,31 +240,31 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
 @dataclass
 class SignalParams:
     # finding scanned instances (signals.find_instances): CityScapes trainIds 5 pole, 6 light, 7 sign
-    link_m: float = 0.35  # vertices of one label closer than this belong to one cluster
-    min_vertices: int = 12  # smaller clusters are label noise
-    min_height_m: float = 1.5  # a head or a plate hangs at least this high above the local ground...
-    max_height_m: float = 8.0  # ...and at most this high
-    max_size_m: float = 2.0  # a cluster wider or taller than this is a mislabelled patch of something else
-    min_pole_vertices: int = 3  # pole-labelled vertices below the cluster (within pole_radius_m): it hangs on a pole
-    pole_radius_m: float = 0.6
-    ground_radius_m: float = 3.0  # local ground = 2nd percentile of the mesh height within this radius
-    plate_depth_m: float = 0.12  # a "light" cluster thinner than this across is a sign plate (heads are boxes)
+    link_m: float = param(0.35, gt=0)  # vertices of one label closer than this belong to one cluster
+    min_vertices: int = param(12, ge=0)  # smaller clusters are label noise
+    min_height_m: float = param(1.5, ge=0)  # a head or a plate hangs at least this high above the local ground...
+    max_height_m: float = param(8.0, gt=0)  # ...and at most this high
+    max_size_m: float = param(2.0, gt=0)  # a cluster wider or taller than this is a mislabelled patch of something else
+    min_pole_vertices: int = param(3, ge=0)  # pole-labelled vertices below the cluster (within pole_radius_m): it hangs on a pole
+    pole_radius_m: float = param(0.6, gt=0)
+    ground_radius_m: float = param(3.0, gt=0)  # local ground = 2nd percentile of the mesh height within this radius
+    plate_depth_m: float = param(0.12, ge=0)  # a "light" cluster thinner than this across is a sign plate (heads are boxes)
     # poles carrying an unlabelled head (signals.find_pole_heads): candidates for lights the labels miss,
     # offered only to netconvert light heads left unpaired by the labelled lights
     pole_heads: bool = True
-    head_min_m: float = 1.8  # head band above the local ground
-    head_max_m: float = 4.5
-    head_min_width_m: float = 0.3  # narrowest extent of the head band: a bare pole or a sign plate is thinner
-    head_max_width_m: float = 1.0  # widest extent
-    head_clear_m: float = 0.8  # no vertex at head height from here to 1.5 m off the pole's axis (trees, walls)
+    head_min_m: float = param(1.8, ge=0)  # head band above the local ground
+    head_max_m: float = param(4.5, gt=0)
+    head_min_width_m: float = param(0.3, ge=0)  # narrowest extent of the head band: a bare pole or a sign plate is thinner
+    head_max_width_m: float = param(1.0, gt=0)  # widest extent
+    head_clear_m: float = param(0.8, ge=0)  # no vertex at head height from here to 1.5 m off the pole's axis (trees, walls)
     # placing (signals.place_signals)
-    gate_m: float = 15.0  # a netconvert light group and a scanned light farther apart than this never pair
-    group_m: float = 2.0  # netconvert light signals of one road within this along s are one head
-    wrong_side_m: float = 6.0  # extra pairing cost of a light across the reference line from the head's lanes
-    carla_light_shift_m: float = 0.25  # CARLA moves lights this far along their heading (MapBuilder.cpp)
+    gate_m: float = param(15.0, gt=0)  # a netconvert light group and a scanned light farther apart than this never pair
+    group_m: float = param(2.0, ge=0)  # netconvert light signals of one road within this along s are one head
+    wrong_side_m: float = param(6.0, ge=0)  # extra pairing cost of a light across the reference line from the head's lanes
+    carla_light_shift_m: float = param(0.25)  # CARLA moves lights this far along their heading (MapBuilder.cpp)
     add_signs: bool = True  # write the scanned traffic signs as signals
-    sign_max_road_m: float = 12.0  # a sign farther than this from every road's reference line is not written
-    qa_px_per_m: float = 20.0
+    sign_max_road_m: float = param(12.0, gt=0)  # a sign farther than this from every road's reference line is not written
+    qa_px_per_m: float = param(20.0, gt=0)
 
 
 def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
@@ -369,18 +370,18 @@ class RoadEvidenceParams:
     relabel: bool = True  # false: compare and report only, change no label
     road_types: List[str] = field(default_factory=_road_types)  # OpenDRIVE lane types that vote road
     sidewalk_types: List[str] = field(default_factory=lambda: ["sidewalk"])  # ...that vote sidewalk
-    relabel_classes: List[int] = field(default_factory=lambda: [0, 1, 9])  # the ground classes a lane may change
-    normal_min_z: float = 0.9  # ground: vertex normal at most ~25 deg from up...
-    max_height_m: float = 0.45  # ...and at most this high above the local lowest ground
-    curb_min_m: float = 0.06  # raised (pavement) level: at least this above the local lowest ground...
-    curb_max_m: float = 0.35  # ...and at most this; below curb_min_m is the carriageway level
-    window_m: float = 8.0  # local lowest ground: minimum over this window of 0.5 m cells' 5th percentiles
-    max_disagreement: float = 0.5  # a lane, or a road, whose surface disagrees more than this casts no vote
-    max_network_disagreement: float = 0.10  # driving-like lanes of the whole network: above this no lane votes (aligned 1-3 %, 10 m shifts 17-56 %)
+    relabel_classes: List[int] = param(default_factory=lambda: [0, 1, 9], ge=0, le=255)  # the ground classes a lane may change
+    normal_min_z: float = param(0.9, ge=0, le=1)  # ground: vertex normal at most ~25 deg from up...
+    max_height_m: float = param(0.45, ge=0)  # ...and at most this high above the local lowest ground
+    curb_min_m: float = param(0.06, ge=0)  # raised (pavement) level: at least this above the local lowest ground...
+    curb_max_m: float = param(0.35, ge=0)  # ...and at most this; below curb_min_m is the carriageway level
+    window_m: float = param(8.0, gt=0)  # local lowest ground: minimum over this window of 0.5 m cells' 5th percentiles
+    max_disagreement: float = param(0.5, ge=0, le=1)  # a lane, or a road, whose surface disagrees more than this casts no vote
+    max_network_disagreement: float = param(0.10, ge=0, le=1)  # driving-like lanes of the whole network: above this no lane votes (aligned 1-3 %, 10 m shifts 17-56 %)
     plateau: bool = True  # a raised plateau an agreeing sidewalk lane lies on becomes sidewalk (its road votes)
-    raster_m: float = 0.1  # lane raster resolution
-    step_m: float = 0.5  # lane sampling along s
-    picture_px_per_m: float = 10.0
+    raster_m: float = param(0.1, gt=0)  # lane raster resolution
+    step_m: float = param(0.5, gt=0)  # lane sampling along s
+    picture_px_per_m: float = param(10.0, gt=0)
 
 
 def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from twinkit import InputError
 from twinkit.geo import SiteFrame, check_bbox
+from twinkit.ranges import param
 
 from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
 
@@ -18,30 +19,31 @@ from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
 @dataclass
 class FileSourceParams:
     path: str = ""  # a local .osm / .osm.bz2 / .osm.pbf; empty: the step's input (site.inputs.osm or a generated roads.osm)
-    crop_radius_m: float = -1.0  # <0: the site box (site.osm_radius_m, default 150 m) plus crop_margin_m; 0: the whole file; >0: this half side
-    crop_margin_m: float = 150.0  # added to the site box when crop_radius_m < 0 (bench_crop.py: 150 m gives the lanes of the whole extract inside the box)
+    crop_radius_m: float = param(-1.0)  # <0: the site box (site.osm_radius_m, default 150 m) plus crop_margin_m; 0: the whole file; >0: this half side
+    crop_margin_m: float = param(150.0, ge=0)  # added to the site box when crop_radius_m < 0 (bench_crop.py: 150 m gives the lanes of the whole extract inside the box)
 
 
 @dataclass
 class OpenDriveSourceParams:
     path: str = ""  # the .xodr; empty: the site input xodr (site.inputs.xodr=/path/map.xodr)
     georeference: str = ""  # the map's frame when it has no (or a wrong) <geoReference>: PROJ string or EPSG code; "site": already the site frame
-    heights: str = "datum"  # "datum": the map's z are heights in the site's vertical datum (z - base point alt); "keep": unchanged
-    max_residual_m: float = 0.01  # largest distance between the similarity and pyproj at a lane centre
-    sample_step_m: float = 2.0  # lane-centre spacing of the residual check
+    heights: str = param("datum", choices=("datum", "keep"))  # "datum": the map's z are heights in the site's vertical datum (z - base point alt); "keep": unchanged
+    max_residual_m: float = param(0.01, gt=0)  # largest distance between the similarity and pyproj at a lane centre
+    sample_step_m: float = param(2.0, gt=0)  # lane-centre spacing of the residual check
 
 
 @dataclass
 class DownloadParams:
     url: str = ""  # empty: the public default of the source
-    radius_m: float = -1.0  # half-side of the box around the base point; <0: site.osm_radius_m (default 150)
+    radius_m: float = param(-1.0, gt=0, also=(-1,))  # half-side of the box around the base point; <0: site.osm_radius_m (default 150)
     bbox: str = ""  # explicit "south,west,north,east" (degrees) instead of a box around the base point
-    timeout_s: float = 60.0
-    retries: int = 3
-    backoff_s: float = 2.0
+    timeout_s: float = param(60.0, gt=0)  # per read (connect: at most 15 s)
+    deadline_s: float = param(120.0, gt=0)  # the whole download, retries included (a trickling server cannot stall it)
+    retries: int = param(3, ge=0, le=100)
+    backoff_s: float = param(2.0, ge=0)
     user_agent: str = ""  # empty: twinkit-roads/<version> (+project URL); public servers require a real one
     cache_dir: str = ""  # empty: $XDG_CACHE_HOME/twinkit/osm
-    cache_max_age_days: float = 30.0
+    cache_max_age_days: float = param(30.0, ge=0)
 
 
 def site_radius(site, radius_m: float) -> float:
@@ -117,7 +119,8 @@ def _client(params: DownloadParams):
     from .http import CachedHttp
 
     return CachedHttp(cache_dir=params.cache_dir or None, timeout_s=params.timeout_s, retries=params.retries,
-                      backoff_s=params.backoff_s, user_agent=params.user_agent, max_age_days=params.cache_max_age_days)
+                      backoff_s=params.backoff_s, user_agent=params.user_agent, max_age_days=params.cache_max_age_days,
+                      deadline_s=params.deadline_s)
 
 
 def _store(body: bytes, ctx, out: Path, where: str, bbox, res) -> dict:

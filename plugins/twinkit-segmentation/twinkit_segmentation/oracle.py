@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twinkit.errors import InputError
+from twinkit.ranges import param
 
 N_CLASSES = 19
 SKY = 10
@@ -18,8 +19,8 @@ SKY = 10
 
 @dataclass
 class OracleParams:
-    noise_fraction: float = 0.0  # share of pixels given a random class
-    seed: int = 0
+    noise_fraction: float = param(0.0, ge=0, le=1)  # share of pixels given a random class
+    seed: int = param(0, ge=0)
 
 
 class OracleModel:

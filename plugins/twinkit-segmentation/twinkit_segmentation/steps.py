@@ -24,16 +24,17 @@ from pathlib import Path
 from typing import List
 
 from twinkit import InputError, StepContext
+from twinkit.ranges import param
 
 
 # ----------------------------------------------------------------------------- over-segmentation
 @dataclass
 class FelzenszwalbParams:
-    k_threshold: float = 0.3  # larger = larger segments
-    min_vertices: int = 10  # merge smaller segments into a neighbour along the lightest edge (0 = off)
-    max_vertices: int = 5000  # never grow a segment beyond this (0 = unlimited)
-    normal_weight: float = 1.0  # weight of 1 - n1.n2 (squared on convex edges)
-    colour_weight: float = 1.0  # weight of the RGB distance (0..1)
+    k_threshold: float = param(0.3, ge=0)  # larger = larger segments
+    min_vertices: int = param(10, ge=0)  # merge smaller segments into a neighbour along the lightest edge (0 = off)
+    max_vertices: int = param(5000, ge=0)  # never grow a segment beyond this (0 = unlimited)
+    normal_weight: float = param(1.0, ge=0)  # weight of 1 - n1.n2 (squared on convex edges)
+    colour_weight: float = param(1.0, ge=0)  # weight of the RGB distance (0..1)
 
 
 def oversegment(params: FelzenszwalbParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
@@ -84,7 +85,7 @@ def no_oversegment(params: NoSegmentsParams, ctx: StepContext, *, in_textured_me
 # ----------------------------------------------------------------------------- view sampling
 @dataclass
 class SampleViewsParams:
-    max_views: int = 0  # keep at most this many (evenly spread), 0 = all
+    max_views: int = param(0, ge=0)  # keep at most this many (evenly spread), 0 = all
 
 
 def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
@@ -123,12 +124,12 @@ def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int) -> list:
 # ----------------------------------------------------------------------------- rendering
 @dataclass
 class RenderParams:
-    max_empty_fraction: float = 0.6  # drop views whose image is more than this much background
+    max_empty_fraction: float = param(0.6, ge=0, le=1)  # drop views whose image is more than this much background
     # background below the horizon is a hole in the mesh (or the capture's edge), never sky: paint it with
     # the nearest surface's colour so the 2D model does not read sky-blue patches in the street (no votes
     # come from those pixels either way). False = the plain sky-blue background everywhere.
     fill_holes: bool = True
-    max_hole_px: float = 16.0  # a hole is a background gap at most 2x this wide; wider = past the capture's edge
+    max_hole_px: float = param(16.0, ge=0)  # a hole is a background gap at most 2x this wide; wider = past the capture's edge
 
 
 def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
@@ -216,12 +217,12 @@ def _render_view_set(mesh, tex, views: list, out_dir: Path, max_empty_fraction: 
 # ----------------------------------------------------------------------------- the capture's photos as views
 @dataclass
 class PhotoViewsParams:
-    source: str = "photos"  # photos (the registered photos) | rendered (views.json, as render_views) | both
-    long_side_px: int = 1024  # photos downscaled to this long side (the 2D models' CityScapes scale; 0 = full)
-    min_coverage: float = 0.1  # drop a photo whose pose sees the mesh in fewer of its pixels (missed the mesh)
-    max_empty_fraction: float = 0.6  # rendered views: as render_views
-    max_photos: int = 0  # at most this many photos (evenly spread in file order), 0 = all
-    max_views: int = 0  # rendered views sampled here (no views.json wired): at most this many, 0 = all
+    source: str = param("photos", choices=("photos", "rendered", "both"))  # photos (the registered photos) | rendered (views.json, as render_views) | both
+    long_side_px: int = param(1024, ge=0)  # photos downscaled to this long side (the 2D models' CityScapes scale; 0 = full)
+    min_coverage: float = param(0.1, ge=0, le=1)  # drop a photo whose pose sees the mesh in fewer of its pixels (missed the mesh)
+    max_empty_fraction: float = param(0.6, ge=0, le=1)  # rendered views: as render_views
+    max_photos: int = param(0, ge=0)  # at most this many photos (evenly spread in file order), 0 = all
+    max_views: int = param(0, ge=0)  # rendered views sampled here (no views.json wired): at most this many, 0 = all
 
 
 def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
@@ -375,7 +376,7 @@ def _photo_view_id(image: str, used: set) -> str:
 class PredictParams:
     soft_votes: bool = False  # vote with the softmax probabilities instead of one vote per pixel
     vote_per_view: bool = True  # each view gives each vertex it sees one vote, shared by its pixels' classes
-    batch_views: int = 4
+    batch_views: int = param(4, ge=1, le=1024)
     save_pngs: bool = True  # predictions/<view>.png (palette PNG, pixel value = trainId)
 
 
@@ -472,10 +473,10 @@ def _size_batches(kept: list, step: int, folder: Path) -> list:
 @dataclass
 class BackprojectParams:
     use_segments: bool = True  # vote per segment (False: per vertex)
-    segment_weight: float = 0.5  # share of the segment's vote against the vertex's own (1 = segment only)
-    ignore_classes: List[int] = field(default_factory=lambda: [10])  # outside the target set (sky)
-    class_weights: List[float] = field(default_factory=list)  # 19 weights (trainId order), empty = all 1
-    min_votes: float = 0.0  # fewer votes than this = unlabelled
+    segment_weight: float = param(0.5, ge=0, le=1)  # share of the segment's vote against the vertex's own (1 = segment only)
+    ignore_classes: List[int] = param(default_factory=lambda: [10], ge=0, le=255)  # outside the target set (sky)
+    class_weights: List[float] = param(default_factory=list, ge=0)  # 19 weights (trainId order), empty = all 1
+    min_votes: float = param(0.0, ge=0)  # fewer votes than this = unlabelled
     fill_unlabelled: bool = True  # unseen vertices take their neighbours' label
     # 3D context (docs/segmentation.md "3D context in the vote"): geometric cues from the mesh scale the
     # blended vote; lengths are physical sizes, not tuned to a site
@@ -484,21 +485,21 @@ class BackprojectParams:
     # (docs/segmentation.md "Shape cues")
     context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb", "column", "mounted",
                                                              "low", "narrow"])
-    ground_window_m: float = 3.0  # local ground window: wider than the widest vehicle (2.55 m)
-    max_curb_m: float = 0.30  # up-facing, at most this above the local ground = ground (the highest curb)
-    min_object_m: float = 0.50  # more than this above the local ground = not road / sidewalk / terrain
-    max_vehicle_m: float = 4.70  # more than this above the local ground = no vehicle or person
-    min_curb_m: float = 0.05  # the lowest curb step
-    band_width_m: float = 4.0  # a sidewalk lies at most this far from its curb
-    context_factor: float = 0.1  # prior of a class the geometry rules out (ground, raised, high)
-    curb_factor: float = 0.2  # prior of road on a raised band beside the carriageway
+    ground_window_m: float = param(3.0, gt=0)  # local ground window: wider than the widest vehicle (2.55 m)
+    max_curb_m: float = param(0.30, ge=0)  # up-facing, at most this above the local ground = ground (the highest curb)
+    min_object_m: float = param(0.50, ge=0)  # more than this above the local ground = not road / sidewalk / terrain
+    max_vehicle_m: float = param(4.70, ge=0)  # more than this above the local ground = no vehicle or person
+    min_curb_m: float = param(0.05, ge=0)  # the lowest curb step
+    band_width_m: float = param(4.0, ge=0)  # a sidewalk lies at most this far from its curb
+    context_factor: float = param(0.1, ge=0, le=1)  # prior of a class the geometry rules out (ground, raised, high)
+    curb_factor: float = param(0.2, ge=0, le=1)  # prior of road on a raised band beside the carriageway
     curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
     band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
-    min_retained: float = 0.2  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
-    keep_share: float = 1.0  # the floor: a vertex whose own votes give one class this share (0 = off) ...
-    keep_votes: float = 32.0  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
-    smooth_beta: float = 1.0  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
-    smooth_iters: int = 5
+    min_retained: float = param(0.2, ge=0, le=1)  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
+    keep_share: float = param(1.0, ge=0, le=1)  # the floor: a vertex whose own votes give one class this share (0 = off) ...
+    keep_votes: float = param(32.0, ge=0)  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
+    smooth_beta: float = param(1.0, ge=0)  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
+    smooth_iters: int = param(5, ge=0)
 
 
 def context_options(params: BackprojectParams):
@@ -587,7 +588,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
 # ----------------------------------------------------------------------------- ground truth and evaluation
 @dataclass
 class TransferGtParams:
-    max_distance_m: float = 0.5  # farther from any ground-truth face = unlabelled (255)
+    max_distance_m: float = param(0.5, gt=0)  # farther from any ground-truth face = unlabelled (255)
 
 
 def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
@@ -640,7 +641,7 @@ def transfer_labels(gt, points):
 
 @dataclass
 class EvaluateParams:
-    classes: List[int] = field(default_factory=list)  # trainIds to average over; empty = those in the ground truth
+    classes: List[int] = param(default_factory=list, ge=0, le=255)  # trainIds to average over; empty = those in the ground truth
 
 
 def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels_npy: Path, in_gt_labels_npy: Path,

@@ -20,14 +20,15 @@ from typing import List
 import numpy as np
 
 from twinkit.errors import InputError
+from twinkit.ranges import param
 
 
 @dataclass
 class CameraParams:
-    width_px: int = 1024
-    height_px: int = 512
-    hfov_deg: float = 75.0
-    pitch_deg: float = -8.0
+    width_px: int = param(1024, ge=16, le=16384)
+    height_px: int = param(512, ge=16, le=16384)
+    hfov_deg: float = param(75.0, gt=0, lt=180)
+    pitch_deg: float = param(-8.0, ge=-90, le=90)
 
 
 class Scene:
@@ -122,10 +123,10 @@ def _thin(points: np.ndarray, min_dist: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- uniform
 @dataclass
 class UniformParams(CameraParams):
-    spacing_m: float = 4.0
-    heights_m: List[float] = field(default_factory=lambda: [2.0])  # above the lowest ground level
-    headings: int = 8
-    margin_m: float = 2.0
+    spacing_m: float = param(4.0, gt=0)
+    heights_m: List[float] = param(default_factory=lambda: [2.0], gt=0)  # above the lowest ground level
+    headings: int = param(8, ge=1, le=360)
+    margin_m: float = param(2.0, ge=0)
 
 
 class UniformSampler:
@@ -148,10 +149,10 @@ class UniformSampler:
 # ----------------------------------------------------------------------------- random
 @dataclass
 class RandomParams(CameraParams):
-    n_views: int = 300
-    offset_min_m: float = 2.0
-    offset_max_m: float = 6.0
-    seed: int = 0
+    n_views: int = param(300, ge=1)
+    offset_min_m: float = param(2.0, ge=0)
+    offset_max_m: float = param(6.0, gt=0)
+    seed: int = param(0, ge=0)
 
 
 class RandomSampler:
@@ -188,8 +189,8 @@ class RandomSampler:
 @dataclass
 class StreetPointsParams(CameraParams):
     points_file: str = ""  # CloudCompare point list ("x y z" per line); empty = the step's street_points.txt
-    heights_m: List[float] = field(default_factory=lambda: [1.5, 3.0, 4.5])
-    headings: int = 8
+    heights_m: List[float] = param(default_factory=lambda: [1.5, 3.0, 4.5], gt=0)
+    headings: int = param(8, ge=1, le=360)
 
 
 def read_point_list(path: Path) -> np.ndarray:
@@ -235,13 +236,13 @@ class StreetPointsSampler:
 # ----------------------------------------------------------------------------- automatic street points
 @dataclass
 class AutoStreetParams(CameraParams):
-    spacing_m: float = 6.0  # between camera positions along roads / on the ground grid
-    heights_m: List[float] = field(default_factory=lambda: [1.5, 3.0, 4.5])
-    headings: int = 8
+    spacing_m: float = param(6.0, gt=0)  # between camera positions along roads / on the ground grid
+    heights_m: List[float] = param(default_factory=lambda: [1.5, 3.0, 4.5], gt=0)
+    headings: int = param(8, ge=1, le=360)
     use_roads: bool = True  # use the road network (roads.osm) when available
-    min_clearance_m: float = 1.0  # free space around a camera position (horizontal rays at 1.5 m)
-    min_headroom_m: float = 5.0  # nothing overhead (trees, roofs) within this height
-    max_ground_step_m: float = 0.35  # ground points higher than the lowest ground level + this are not street
+    min_clearance_m: float = param(1.0, ge=0)  # free space around a camera position (horizontal rays at 1.5 m)
+    min_headroom_m: float = param(5.0, ge=0)  # nothing overhead (trees, roofs) within this height
+    max_ground_step_m: float = param(0.35, ge=0)  # ground points higher than the lowest ground level + this are not street
 
 
 def osm_roads_local(path: Path, site: dict) -> list[np.ndarray]:

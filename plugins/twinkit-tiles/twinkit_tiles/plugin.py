@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import List, Optional
 
 from twinkit import hookimpl
+from twinkit.ranges import param
 
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 
@@ -24,14 +25,14 @@ from .report import twinkit_register_report_sections  # noqa: F401 (this plugin'
 class PlanTilesParams:
     """How the site is cut into tiles."""
 
-    tile_m: float = 0.0  # core size of a tile (metres); 0 = automatic from memory_budget_gb and the point density
-    overlap_m: float = 2.0  # each tile also reconstructs this much of its neighbours (guides the cut only)
-    memory_budget_gb: float = 4.0  # automatic tile size: predicted peak memory of one tile stays below this
-    voxel_m: float = 0.03  # finest Poisson voxel of every tile (passed to reconstruct_tile in tiles.json)
-    max_tiles: int = 256  # refuse a plan with more tiles than this
-    seam_search_m: float = 1.0  # move each seam by up to this to where the fewest upright surfaces (poles,
+    tile_m: float = param(0.0, ge=0)  # core size of a tile (metres); 0 = automatic from memory_budget_gb and the point density
+    overlap_m: float = param(2.0, ge=0)  # each tile also reconstructs this much of its neighbours (guides the cut only)
+    memory_budget_gb: float = param(4.0, gt=0)  # automatic tile size: predicted peak memory of one tile stays below this
+    voxel_m: float = param(0.03, gt=0)  # finest Poisson voxel of every tile (passed to reconstruct_tile in tiles.json)
+    max_tiles: int = param(256, ge=1)  # refuse a plan with more tiles than this
+    seam_search_m: float = param(1.0, ge=0)  # move each seam by up to this to where the fewest upright surfaces (poles,
     #                              trunks, crowns, cars) cross it; 0 = evenly spaced seams
-    target_faces: int = 0  # > 0: each tile is simplified after its cut to its share of this many faces
+    target_faces: int = param(0, ge=0)  # > 0: each tile is simplified after its cut to its share of this many faces
     #                        (shared by the points in its core; seam borders are kept), which bounds
     #                        the memory of the merge and of the steps after it; 0 = full resolution
 
@@ -40,48 +41,51 @@ class PlanTilesParams:
 class ReconstructTileParams:
     """Poisson + clean-up of one padded tile, then the exact cut to its core."""
 
-    point_weight: float = 4.0
-    samples_per_node: float = 1.5
-    max_dist_m: float = 0.10  # trim vertices farther than this from every point of the tile ("bubbles")
-    gap_dist_m: float = 0.5  # ... but keep those up to this far on the points' tangent planes (clean_mesh's gap rule)
-    gap_plane_m: float = 0.02
-    density_quantile: float = 0.0  # trim vertices below this quantile of Poisson density; 0 = off
-    min_component_faces: int = 200  # drop smaller connected components (judged on the padded tile)
-    max_hole_edges: int = 60  # close holes up to this many edges (before the cut, so no cap on a seam)
-    threads: int = 1  # threads per tile (1 = parallelism comes from the workers); 0 = all the step may use
-    seam_band_m: float = 1.0  # within this of an interior seam the tile trims only loosely (seam_loose_dist_m);
-    seam_loose_dist_m: float = 1.0  # merge_tiles then applies the trim above once, to both sides; 0 = off
+    point_weight: float = param(4.0, ge=0)
+    samples_per_node: float = param(1.5, ge=1, le=100)
+    max_dist_m: float = param(0.10, ge=0)  # trim vertices farther than this from every point of the tile ("bubbles")
+    gap_dist_m: float = param(0.5, ge=0)  # ... but keep those up to this far on the points' tangent planes (clean_mesh's gap rule)
+    gap_plane_m: float = param(0.02, ge=0)
+    density_quantile: float = param(0.0, ge=0, lt=1)  # trim vertices below this quantile of Poisson density; 0 = off
+    min_component_faces: int = param(200, ge=0)  # drop smaller connected components (judged on the padded tile)
+    max_hole_edges: int = param(60, ge=0)  # close holes up to this many edges (before the cut, so no cap on a seam)
+    threads: int = param(1, ge=0)  # threads per tile (1 = parallelism comes from the workers); 0 = all the step may use
+    seam_band_m: float = param(1.0, ge=0)  # within this of an interior seam the tile trims only loosely (seam_loose_dist_m);
+    seam_loose_dist_m: float = param(1.0, ge=0)  # merge_tiles then applies the trim above once, to both sides; 0 = off
 
 
 @dataclass
 class MergeTilesParams:
     """Stitching of the tiles into one mesh."""
 
-    max_gap_m: float = 0.10  # borders farther apart than this are not stitched (counted as open)
-    seam_tol_m: float = 0.001  # an edge within this of a seam plane counts as a seam edge in the statistics
-    max_hole_edges: int = 120  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
-    vote_reach_m: float = 0.15  # the seam-band trim asks each tile's full-resolution surface: the tile's nearest
+    max_gap_m: float = param(0.10, ge=0)  # borders farther apart than this are not stitched (counted as open)
+    seam_tol_m: float = param(0.001, ge=0)  # an edge within this of a seam plane counts as a seam edge in the statistics
+    max_hole_edges: int = param(120, ge=0)  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
+    vote_reach_m: float = param(0.15, ge=0)  # the seam-band trim asks each tile's full-resolution surface: the tile's nearest
     #                             vote within this (and within vote_plane_m of its tangent plane) is that tile's
     #                             verdict; a vertex is kept when some tile's verdict is "keep", dropped when every
     #                             tile's is "drop", and judged on its own only where no tile voted; 0 = off
-    vote_plane_m: float = 0.05  # a vote counts for vertices this close to its tangent plane (not a bubble above)
+    vote_plane_m: float = param(0.05, ge=0)  # a vote counts for vertices this close to its tangent plane (not a bubble above)
     drop_hanging_faces: bool = True  # after the trim near the seams, remove a face left on a seam edge whose
     #                                  other side the trim removed, so that the trim's boundary crosses the seam
     #                                  instead of running along it (docs/tiles.md)
-    vote_radius_m: float = 0.0  # also keep a vertex with any "keep" vote this close (the seventh session's rule:
+    vote_radius_m: float = param(0.0, ge=0)  # also keep a vertex with any "keep" vote this close (the seventh session's rule:
     #                             0.05 there; wider radii keep surface the trim would drop, docs/tiles.md)
-    line_band_m: float = 0.05  # open border within this of the seams vs. of control lines (tile_seams.json)
-    fill_ground_cell_m: float = 0.10  # fill the ground's occlusion shadows on the merged mesh (clean_mesh's
-    fill_ground_max_gap_m: float = 8.0  # ground fill, over the whole site at once so it has no tile edges); 0 = off
+    line_band_m: float = param(0.05, ge=0)  # open border within this of the seams vs. of control lines (tile_seams.json)
+    fill_ground_cell_m: float = param(0.10, ge=0)  # fill the ground's occlusion shadows on the merged mesh (clean_mesh's
+    fill_ground_max_gap_m: float = param(8.0, ge=0)  # ground fill, over the whole site at once so it has no tile edges); 0 = off
 
 
 @dataclass
 class EvaluateSeamLabelsParams:
     """Label agreement across the seams of a tiled, segmented mesh."""
 
-    band_m: float = 1.0  # accuracy within this of a seam vs. farther away (with ground truth)
+    band_m: float = param(1.0, gt=0)  # accuracy within this of a seam vs. farther away (with ground truth)
     planes: List[str] = field(default_factory=list)  # e.g. ["x=-10", "y=10"]: check these planes instead of
     #                                                  tiles.json's seams (the same lines on an untiled run)
+
+
+_SLURM_WORD = dict(pattern=r"[\w.:@+-]*", words="letters, digits and . : @ + - only (it is written into the SLURM job script)")
 
 
 @dataclass
@@ -89,15 +93,15 @@ class DaskExecutorParams:
     """Run fanned-out items on a Dask distributed cluster."""
 
     address: Optional[str] = None  # tcp://host:8786 of an existing scheduler; null = start a local cluster
-    n_workers: int = 2  # worker processes of the local cluster (or SLURM jobs)
-    threads_per_worker: int = 1
-    memory_limit: str = "auto"  # per worker, e.g. 6GiB; auto = RAM / n_workers; 0 = no limit
-    cluster: str = "local"  # local | slurm (dask-jobqueue; used when address is null)
-    slurm_queue: str = ""
-    slurm_cores: int = 4
-    slurm_memory: str = "16GB"
-    slurm_walltime: str = "02:00:00"
-    slurm_account: str = ""
+    n_workers: int = param(2, ge=1)  # worker processes of the local cluster (or SLURM jobs)
+    threads_per_worker: int = param(1, ge=1)
+    memory_limit: str = param("auto", **_SLURM_WORD)  # per worker, e.g. 6GiB; auto = RAM / n_workers; 0 = no limit
+    cluster: str = param("local", choices=("local", "slurm"))  # local | slurm (dask-jobqueue; used when address is null)
+    slurm_queue: str = param("", **_SLURM_WORD)
+    slurm_cores: int = param(4, ge=1)
+    slurm_memory: str = param("16GB", **_SLURM_WORD)
+    slurm_walltime: str = param("02:00:00", **_SLURM_WORD)
+    slurm_account: str = param("", **_SLURM_WORD)
 
 
 # ----------------------------------------------------------------------------- steps

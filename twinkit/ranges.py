@@ -1,0 +1,200 @@
+"""What values a parameter accepts: a range for numbers, a list for strings.
+
+A plugin declares it on the dataclass field that holds the parameter::
+
+    from twinkit.ranges import param
+
+    @dataclass
+    class PoissonParams:
+        depth: int = param(11, ge=1, le=14)                    # octree depth
+        voxel_m: float = param(0.0, ge=0)                      # 0 = off
+        check_radius_m: float = param(-1.0, gt=0, also=(-1,))  # -1 = the site's radius
+        backend: str = param("open3d", choices=("open3d", "pypoisson"))
+        heights_m: list[float] = param(default_factory=lambda: [1.5, 3.0], gt=0)   # each element
+
+``param`` is ``dataclasses.field`` with the check in the field's metadata, so Hydra and OmegaConf see
+an ordinary field. The values are checked when the config is composed, before any step runs
+(:func:`check_values`), and again on a step's merged parameters; a value outside its range is a
+:class:`~twinkit.errors.ConfigError` (exit 2) naming the key and the range. NaN is never in a range.
+``tests/test_ranges.py`` walks every registered plugin and fails for a number without a declaration.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass
+from typing import Any, Iterator
+
+from twinkit.errors import ConfigError
+
+META = "twinkit_check"
+
+
+def _num(x: float) -> str:
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
+@dataclass(frozen=True)
+class Range:
+    """Numbers between ``lo`` and ``hi`` (either may be open or absent), or one of ``also``."""
+
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    also: tuple = ()
+
+    def ok(self, v: Any) -> bool:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            return False
+        if v in self.also:
+            return True
+        if isinstance(v, float) and math.isnan(v):
+            return False
+        if self.lo is not None and (v <= self.lo if self.lo_open else v < self.lo):
+            return False
+        if self.hi is not None and (v >= self.hi if self.hi_open else v > self.hi):
+            return False
+        return True
+
+    def describe(self) -> str:
+        lo, hi = self.lo, self.hi
+        if lo is not None and hi is not None and not self.lo_open and not self.hi_open:
+            text = f"{_num(lo)}..{_num(hi)}"
+        else:
+            parts = []
+            if lo is not None:
+                parts.append(f"{'>' if self.lo_open else '>='} {_num(lo)}")
+            if hi is not None:
+                parts.append(f"{'<' if self.hi_open else '<='} {_num(hi)}")
+            text = " and ".join(parts) or "any number"
+        if self.also:
+            text = " or ".join([_num(a) for a in self.also] + [text])
+        return text
+
+
+@dataclass(frozen=True)
+class Choices:
+    """One of the listed values (strings, usually)."""
+
+    values: tuple
+
+    def ok(self, v: Any) -> bool:
+        return v in self.values
+
+    def describe(self) -> str:
+        return "one of " + ", ".join(repr(v) if isinstance(v, str) else str(v) for v in self.values)
+
+
+@dataclass(frozen=True)
+class Pattern:
+    """A string matching a regular expression as a whole (``describe`` says it in words)."""
+
+    regex: str
+    words: str = ""
+
+    def ok(self, v: Any) -> bool:
+        import re
+
+        return isinstance(v, str) and re.fullmatch(self.regex, v) is not None
+
+    def describe(self) -> str:
+        return self.words or f"a string matching {self.regex}"
+
+
+def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: float | None = None,
+          le: float | None = None, lt: float | None = None, also: tuple = (), choices: tuple | None = None,
+          pattern: str | None = None, words: str = "", default_factory: Any = dataclasses.MISSING) -> Any:
+    """A dataclass field with its valid values: ``ge``/``gt``/``le``/``lt`` for numbers, ``choices`` for the rest.
+
+    ``pattern`` (a regular expression the whole string must match, ``words`` saying it for the error)
+    is for strings that reach a command line or a script. ``also`` lists special values outside the
+    range (``-1`` = automatic). With no bound at all the
+    field still counts as declared ("any number"): say so on purpose, for signed offsets and angles.
+    For a list the check applies to each element.
+    """
+    if pattern is not None:
+        check: Range | Choices | Pattern = Pattern(pattern, words)
+    elif choices is not None:
+        check = Choices(tuple(choices))
+    else:
+        if ge is not None and gt is not None or le is not None and lt is not None:
+            raise TypeError("give one lower bound (ge or gt) and one upper bound (le or lt)")
+        check = Range(lo=gt if gt is not None else ge, hi=lt if lt is not None else le,
+                      lo_open=gt is not None, hi_open=lt is not None, also=tuple(also))
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata={META: check})
+    return dataclasses.field(default=default, metadata={META: check})
+
+
+def check_of(f: dataclasses.Field) -> Range | Choices | Pattern | None:
+    return f.metadata.get(META) if f.metadata else None
+
+
+def _numeric(tp: Any) -> bool:
+    """int or float, possibly Optional or a list of them."""
+    if tp in (int, float):
+        return True
+    args = [a for a in typing.get_args(tp) if a is not type(None)]
+    return bool(args) and all(_numeric(a) for a in args)
+
+
+def _nested(tp: Any) -> type | None:
+    if dataclasses.is_dataclass(tp):
+        return tp
+    args = [a for a in typing.get_args(tp) if a is not type(None)]
+    return args[0] if len(args) == 1 and dataclasses.is_dataclass(args[0]) else None
+
+
+def undeclared(cls: type, prefix: str = "") -> Iterator[str]:
+    """Names of numeric fields of ``cls`` (and of its nested dataclasses) without a range."""
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp = hints.get(f.name, Any)
+        sub = _nested(tp)
+        if sub is not None:
+            yield from undeclared(sub, f"{prefix}{f.name}.")
+        elif _numeric(tp) and check_of(f) is None:
+            yield prefix + f.name
+
+
+def problem(check: Range | Choices | Pattern, value: Any) -> str | None:
+    """None when ``value`` (or each element of a list) passes; else the offending value as text."""
+    if value is None:
+        return None  # Optional: None means "not set", the type check decides whether it may be
+    for v in (value if isinstance(value, (list, tuple)) else [value]):
+        if not check.ok(v):
+            return repr(v) if isinstance(v, str) else str(v)
+    return None
+
+
+def check_values(cls: type | None, values: Any, prefix: str, plugin: str = "") -> None:
+    """Raise ConfigError naming ``<prefix>.<field>`` for the first value outside its declared range.
+
+    ``values`` is a mapping (a config node) or an instance of ``cls``; nested dataclasses are walked.
+    """
+    if cls is None or values is None:
+        return
+    if dataclasses.is_dataclass(values) and not isinstance(values, type):
+        values = {f.name: getattr(values, f.name) for f in dataclasses.fields(values)}
+    if not isinstance(values, dict):
+        return
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        if f.name not in values:
+            continue
+        key = f"{prefix}.{f.name}" if prefix else f.name
+        sub = _nested(hints.get(f.name, Any))
+        if sub is not None:
+            check_values(sub, values[f.name], key, plugin)
+            continue
+        check = check_of(f)
+        if check is None:
+            continue
+        bad = problem(check, values[f.name])
+        if bad is not None:
+            whose = f" (plugin {plugin})" if plugin else ""
+            each = " (each element)" if isinstance(values[f.name], (list, tuple)) else ""
+            what = "is out of range" if isinstance(check, Range) else "is not allowed"
+            raise ConfigError(f"{key}={bad} {what}{whose}: {key}{each} must be {check.describe()}")
