@@ -24,7 +24,7 @@ def test_base_point_change_reruns_the_steps_that_read_it_and_status_says_why(pro
     assert r.rc == 0, r.text
     assert (project.ws / "02_place" / "placed.txt").read_text() == "101\n"
     rec = json.loads((project.ws / "02_place" / "step.json").read_text())
-    assert rec["descriptor"]["site"] == {"base_point": {"x": 100, "y": 0}}
+    assert rec["descriptor"]["site"] == {"base_point": {"x": 100, "y": 0}, "tag": None}
     assert "site" not in json.loads((project.ws / "01_make" / "step.json").read_text())["descriptor"]
     project.reset_counts()
     assert [project.status_of(project.run("site=t", "recipe=placed"), f) for f in ("01_make", "02_place")] == \
@@ -239,3 +239,19 @@ def test_two_recipes_on_one_site_keep_their_folders_apart(project):
     assert (project.ws / "03_scale" / "scaled.txt").read_text() == "60\n"
     assert sorted(d.name for d in (project.ws / "recipes" / "other").iterdir()) == ["01_make", "02_place"]
     assert project.counts() == {}
+
+
+def test_secret_read_by_a_step_stays_out_of_its_step_record(project):
+    secret = "98765"
+    project.recipe("placed", ["{id: make, uses: step/make}", "{id: place, uses: step/place}"])
+    project.site("t", "name: t\nbase_point: {x: 7, y: 0}\ntag: ${oc.env:TWINKIT_TEST_SECRET_X}\n")
+    env = project.env(TWINKIT_TEST_SECRET_X=secret)
+    r = project.run("site=t", "recipe=placed", env=env)
+    assert r.rc == 0, r.text
+    assert (project.ws / "02_place" / "tag.txt").is_file()  # the step read it
+    for rec in project.ws.glob("[0-9][0-9]_*/step.json"):
+        assert secret not in rec.read_text(), rec
+    r = project.run("site=t", "recipe=placed", env=env)
+    assert project.status_of(r, "02_place") == "reused", r.text
+    r = project.run("site=t", "recipe=placed", env=project.env(TWINKIT_TEST_SECRET_X="12345"))
+    assert project.status_of(r, "02_place") == "ran" and secret not in r.text, r.text

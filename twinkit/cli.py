@@ -189,6 +189,7 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
         threads=engine_cfg.get("threads") or None, config_root=root,
         manual_timeout_s=engine_cfg.get("manual_timeout_s"),
     )
+    engine.secrets = secrets  # kept out of the step records too
     recipe = container.get("recipe", {}).get("name", "?")
     log.info("twinkit: recipe '%s' on site '%s' -> %s (run log %s)", recipe, site["name"], workspace,
              run_dir / "run.log")

@@ -115,6 +115,8 @@ def place(params, ctx, *, in_data_txt: Path, out_placed_txt: Path) -> None:
     """Shift the number by the site's base point (reads site.base_point, like read_cloud's frame shift)."""
     _count("place")
     bp = ctx.site.get("base_point") or {}
+    if ctx.site.get("tag"):  # read, so in the key (a test's secret)
+        (Path(out_placed_txt).parent / "tag.txt").write_text("tagged\n")
     v = int(Path(in_data_txt).read_text().splitlines()[0])
     out_placed_txt.write_text(f"{v + int(bp.get('x', 0))}\n")
 

@@ -67,11 +67,11 @@ class KeysMixin:
     def _key(descriptor: dict) -> str:
         return hashlib.sha256(json.dumps(descriptor, sort_keys=True, default=str).encode()).hexdigest()[:32]
 
-    @staticmethod
-    def _why(old: dict | None, new: dict) -> str:
+    def _why(self, old: dict | None, new: dict) -> str:
         if old is None or "descriptor" not in old:
             return "no earlier result"
         o = old["descriptor"]
+        new = self._redacted(new) if hasattr(self, "_redacted") else new  # records keep secrets out
         reasons = []
         if o.get("plugin", {}).get("name") != new["plugin"].get("name"):
             reasons.append(f"plugin {o['plugin'].get('name')} -> {new['plugin'].get('name')}")

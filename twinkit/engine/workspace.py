@@ -96,7 +96,17 @@ class WorkspaceMixin:
             hashes = dict(rec["artefacts"])
         return outputs, hashes
 
+    def _redacted(self, obj):
+        """``obj`` with the values read through ``${oc.env:...}`` replaced (twinkit.manifest.redact)."""
+        secrets = getattr(self, "secrets", None)
+        if not secrets:
+            return obj
+        from twinkit.manifest import redact
+
+        return redact(obj, secrets)
+
     def _workspace_record(self, ps, key, desc, stored, status, why, in_paths) -> dict:
+        desc = self._redacted(desc)
         return {
             "schema": RECORD_SCHEMA,
             "step": ps.id,
@@ -105,7 +115,7 @@ class WorkspaceMixin:
             "descriptor": desc,
             "plugin": ps.label,
             "distribution": ps.plugin.distribution if ps.plugin else None,
-            "params": ps.params_dict,
+            "params": self._redacted(ps.params_dict),
             "inputs": {k: (str(v) if not isinstance(v, list) else [str(x) for x in v]) for k, v in in_paths.items()},
             "files": stored.get("files", {}),
             "artefacts": stored.get("artefacts", {}),
