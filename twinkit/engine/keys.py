@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from typing import Any
 
 from twinkit.engine.plan import PlannedStep
@@ -29,6 +30,11 @@ class KeysMixin:
                 paths[param], hashes[param] = None, None
                 continue
             if src.path is not None:
+                if not src.path.exists() and src.path.is_symlink():
+                    raise InputError(
+                        f"site input {src.path} is a broken link (to {os.readlink(src.path)}, which does not exist; "
+                        f"needed by step '{ps.id}'); fix the link or give the file's own path"
+                    )
                 if not src.path.exists():
                     raise InputError(
                         f"site input {src.path} does not exist (needed by step '{ps.id}'); "
