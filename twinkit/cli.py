@@ -104,11 +104,23 @@ def _job_body(cfg) -> int:
     from hydra.types import RunMode
 
     hc = HydraConfig.get()
-    return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=hc.mode == RunMode.MULTIRUN,
-                    overrides=list(hc.overrides.task))
+    multirun = hc.mode == RunMode.MULTIRUN
+    jobs = 1
+    if multirun:
+        from twinkit.executors import use_standard_start_method
+
+        use_standard_start_method()  # a job runs in a loky worker: its fan-out pools must not inherit 'loky'
+        from omegaconf import OmegaConf
+
+        from twinkit.threads import cores
+
+        jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)
+        jobs = cores() if jobs <= 0 else jobs  # joblib's -1: as many jobs as cores
+    return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=multirun,
+                    overrides=list(hc.overrides.task), concurrent_jobs=jobs)
 
 
-def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
+def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurrent_jobs: int = 1) -> int:
     """Plan -> run -> manifest (-> report) for one composed config."""
     from omegaconf import OmegaConf
 
@@ -118,6 +130,7 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
     from twinkit.plugins import get_registry
 
     _setup_logging(run_dir / "run.log")
+    _crash_log(run_dir / "run.log")
     conf_dir = Path(_STATE.get("conf_dir") or find_config_dir())
     root = conf_dir.parent
     from omegaconf import open_dict
@@ -144,12 +157,25 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
         interactive=_interactive(engine_cfg.get("interactive", "auto")),
         threads=engine_cfg.get("threads") or None, config_root=root,
         manual_timeout_s=engine_cfg.get("manual_timeout_s"),
+        max_threads=_job_threads(concurrent_jobs),
     )
     recipe = container.get("recipe", {}).get("name", "?")
     log.info("twinkit: recipe '%s' on site '%s' -> %s (run log %s)", recipe, site["name"], workspace,
              run_dir / "run.log")
     status, error = "ok", None
+
+    def manifest_now(status: str, error: str | None) -> dict:
+        return build_manifest(
+            argv=_STATE.get("argv", sys.argv), overrides=overrides, config=container, site=site,
+            outcomes=engine.outcomes, engine=engine, registry=registry, project_root=root, status=status,
+            error=error, started=started,
+            finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            duration_s=time.perf_counter() - t0,
+        )
+
     try:
+        # written now as "running": a run killed outright (kill -9, power) is recognisable afterwards
+        write_manifest(run_dir / "manifest.json", manifest_now("running", None))
         engine.run(on_step=lambda oc, i, n: log.info(_format_outcome(oc, i, n)))
     except TwinkitError as exc:
         status, error = ("pending" if exc.exit_code == 3 else "failed"), str(exc)
@@ -158,18 +184,14 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
 
             logging.getLogger("twinkit").debug("".join(traceback.format_exception(exc.__cause__)))
         raise
-    except BaseException as exc:  # Ctrl-C, or a bug in twinkit itself: the manifest must not say "ok"
+    except BaseException as exc:  # Ctrl-C, SIGTERM, or a bug in twinkit itself: the manifest must not say "ok"
         status, error = "interrupted", f"{type(exc).__name__}: {exc}"
+        if engine.current_step and isinstance(exc, KeyboardInterrupt):
+            error += f" (during step '{engine.current_step}')"
         raise
     finally:
         if engine._lock is None and engine.outcomes is not None:
-            manifest = build_manifest(
-                argv=_STATE.get("argv", sys.argv), overrides=overrides, config=container, site=site,
-                outcomes=engine.outcomes, engine=engine, registry=registry, project_root=root, status=status,
-                error=error, started=started,
-                finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                duration_s=time.perf_counter() - t0,
-            )
+            manifest = manifest_now(status, error)
             engine.hashes.close()
             write_manifest(run_dir / "manifest.json", manifest)
             if status == "ok":
@@ -177,6 +199,32 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
                 if engine_cfg.get("report", True):
                     _write_report(run_dir, manifest, engine)
     return 0
+
+
+def _job_threads(concurrent_jobs: int) -> int | None:
+    """A multirun job's cap on threads: the cores divided among the launcher's concurrent jobs."""
+    if concurrent_jobs <= 1:
+        return None
+    from twinkit.threads import cores
+
+    return max(1, cores() // concurrent_jobs)
+
+
+_FAULT_LOG: list = []
+
+
+def _crash_log(run_log: Path) -> None:
+    """A crash in native code writes the Python stack of every thread into the run log."""
+    import faulthandler
+
+    try:
+        f = open(run_log, "a")  # kept open for the life of the process
+    except OSError:
+        return
+    faulthandler.enable(file=f, all_threads=True)
+    for old in _FAULT_LOG:
+        old.close()
+    _FAULT_LOG[:] = [f]
 
 
 def _write_report(run_dir: Path, manifest: dict, engine) -> None:
@@ -398,6 +446,13 @@ def cmd_gc(args: list[str]) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    from twinkit.signals import sigterm_as_interrupt
+
+    with sigterm_as_interrupt():  # SIGTERM (schedulers, docker stop, timeout) stops a run like Ctrl-C
+        return _main(argv)
+
+
+def _main(argv: list[str]) -> int:
     try:
         if argv and argv[0] in ("-h", "--help", "help"):
             print(__doc__.strip())
@@ -411,7 +466,11 @@ def main(argv: list[str] | None = None) -> int:
         return _run_hydra(argv)
     except TwinkitError as exc:
         return _err(str(exc), exc.exit_code)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        from twinkit.signals import Terminated
+
+        if isinstance(exc, Terminated):
+            return _err("terminated (SIGTERM); finished steps are kept, the interrupted one will run again", 143)
         return _err("interrupted; finished steps are kept, the interrupted one will run again", 130)
 
 

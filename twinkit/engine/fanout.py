@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import logging
+import os
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -24,7 +26,18 @@ def _item_cost(item: Any) -> float:
 
 
 def _run_item_task(task: dict) -> dict:
-    """Executor entry point for one fan-out item (picklable, top level)."""
+    """Executor entry point for one fan-out item (picklable, top level). In the run's own process (an
+    executor with one worker) the item runs in a child process, like a step (twinkit.engine.isolate)."""
+    task = dict(task)
+    run_pid, threads = task.pop("run_pid", None), task.pop("threads", None)
+    if run_pid == os.getpid():
+        from twinkit.engine.isolate import run_in_child
+
+        def cleanup(pid: int) -> None:
+            for d in (Path(task["store"]) / ".tmp").glob(f"*-{pid}-*"):
+                shutil.rmtree(d, ignore_errors=True)
+
+        return run_in_child(compute_into_store, task, threads=threads, cleanup=cleanup)
     try:
         return compute_into_store(**task)
     finally:
@@ -79,7 +92,8 @@ class FanoutMixin:
         todo.sort(key=lambda i: -_item_cost(items[i]))
         tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
                       store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
-                      item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path) for i in todo]
+                      item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path,
+                      run_pid=os.getpid(), threads=self.threads) for i in todo]
         for t in tasks:
             t["ctx_kwargs"].pop("log")
         t0 = time.perf_counter()

@@ -23,13 +23,9 @@ def unwritable(folder: Path) -> str | None:
 
 
 def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+    from twinkit.signals import pid_alive  # a zombie counts as dead (a killed step process, not yet reaped)
+
+    return pid <= 0 or pid_alive(pid)  # no pid in the name: kept, as before
 
 
 class LockMixin:
