@@ -117,7 +117,7 @@ class CrashParams:
     how: str = "segv"  # segv: read address 0 | abort | block: sleep with SIGINT/SIGTERM blocked (a long C call)
 
 
-def crash(params: CrashParams, ctx, *, in_data_txt: Path, out_crashed_txt: Path) -> None:
+def crash(params: CrashParams, ctx, *, in_data_txt: Path, out_crashed_txt: Path, item: dict | None = None) -> None:
     """A stand-in for a native library that crashes, or does not return to Python for a long time."""
     import ctypes
     import signal
