@@ -90,6 +90,8 @@ class FanoutMixin:
         # items that say what they cost ("cost": any number) start costliest first, so that a big
         # item does not start last and leave the other workers idle (results are keyed, not ordered)
         todo.sort(key=lambda i: -_item_cost(items[i]))
+        if todo:
+            self._share_threads()
         tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
                       store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
                       item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path,

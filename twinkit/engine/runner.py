@@ -109,7 +109,6 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             n = len(self.plan)
             for ps in self.plan:
                 self.current_step = ps.id
-                self._share_threads()
                 t0 = time.perf_counter()
                 try:
                     outcome = self._run_step(ps)
@@ -172,6 +171,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
 
             from twinkit.engine.isolate import run_in_child
 
+            self._share_threads()
             with step_status(f"{ps.folder} ({ps.label})"):
                 # in a child process: a native crash is this step's failure, Ctrl-C stops it within seconds
                 stored = run_in_child(compute_into_store, dict(
