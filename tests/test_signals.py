@@ -134,10 +134,17 @@ def test_ctrl_c_stops_a_step_stuck_in_a_native_call_within_seconds(project):
     assert _manifests(project)[-1]["status"] == "interrupted"
 
 
-def test_killing_the_run_kills_its_fan_out_workers(project):
+@pytest.mark.parametrize("executor", ["local", "dask"])
+def test_killing_the_run_kills_its_fan_out_workers(project, executor):
     project.recipe("fan", FAN)
-    p = project.popen("site=t", "recipe=fan", "steps.tiles.n=2", "executor.workers=2",
-                      env=project.env(TWINKIT_TEST_TILE_SLEEP="120"))
+    if executor == "dask":
+        pytest.importorskip("distributed")
+        pytest.importorskip("twinkit_tiles")
+        args, plugins = ["executor=dask", "executor.n_workers=2"], "builtins,tiles"
+    else:
+        args, plugins = ["executor.workers=2"], "builtins"
+    p = project.popen("site=t", "recipe=fan", "steps.tiles.n=2", *args,
+                      env=project.env(TWINKIT_TEST_TILE_SLEEP="120", TWINKIT_PLUGINS=plugins))
     try:
         store_tmp = project.ws / ".cache" / "steps" / ".tmp"
         started = _wait_for(lambda: len(list(store_tmp.glob("*/started"))) == 2 and list(store_tmp.glob("*/started")),
