@@ -242,3 +242,21 @@ def test_two_sweeps_started_together_do_not_share_a_folder(project):
     assert len(sweeps) == 2, sweeps
     values = sorted(int((j / "03_scale" / "scaled.txt").read_text()) for s in sweeps for j in s.glob("job*"))
     assert values == [4, 6, 8, 10]
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signalled_sweep_stops_its_jobs_like_single_runs(project, sig, code):
+    p = project.popen("-m", "site=t", "recipe=chain", "steps.scale.factor=2,3", env=project.env(TWINKIT_TEST_SLEEP="60"))
+    try:
+        store_tmp = project.ws / ".cache" / "steps" / ".tmp"
+        _wait_for(lambda: list(store_tmp.glob("*/started")), what="a job's step to start")
+        _wait_for(lambda: len(list((project.ws / "sweeps").glob("*/job*/manifest.json"))) == 2, what="both jobs")
+        os.kill(p.pid, sig)  # the sweep's own process only (docker stop, timeout)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == code, err
+    statuses = [json.loads(m.read_text())["status"] for m in (project.ws / "sweeps").glob("*/job*/manifest.json")]
+    assert statuses == ["interrupted", "interrupted"], statuses
+    assert not list(store_tmp.iterdir())

@@ -96,6 +96,20 @@ def _job(cfg) -> int:
             raise CompactHydraException(f"twinkit: error: {exc}") from None
         _STATE["error"] = exc
         return exc.exit_code
+    except KeyboardInterrupt as exc:
+        if HydraConfig.get().mode != RunMode.MULTIRUN:
+            raise
+        return _job_interrupted(exc)
+
+
+def _job_interrupted(exc: KeyboardInterrupt) -> int:
+    """A multirun job stopped by Ctrl-C or SIGTERM (its manifest says so) returns instead of raising: a
+    raised error would make joblib kill the other jobs before they have written their manifests. The
+    sweep's own process ends with 130 / 143 (``forward_to_children``); later jobs of this worker are skipped."""
+    from twinkit.signals import Terminated
+
+    _STATE["interrupted"] = 143 if isinstance(exc, Terminated) else 130
+    return _STATE["interrupted"]
 
 
 def _job_body(cfg) -> int:
@@ -106,6 +120,9 @@ def _job_body(cfg) -> int:
     hc = HydraConfig.get()
     multirun = hc.mode == RunMode.MULTIRUN
     jobs = 1
+    if multirun and _STATE.get("interrupted"):
+        log.info("twinkit: job %s not started: the sweep was interrupted", hc.job.num)
+        return _STATE["interrupted"]
     if multirun:
         from twinkit.executors import use_standard_start_method
 
@@ -116,8 +133,11 @@ def _job_body(cfg) -> int:
 
         jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)
         jobs = cores() if jobs <= 0 else jobs  # joblib's -1: as many jobs as cores
-    return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=multirun,
-                    overrides=list(hc.overrides.task), concurrent_jobs=jobs)
+    from twinkit.signals import sigterm_as_interrupt
+
+    with sigterm_as_interrupt():  # a job's process (a joblib worker) stops like a single run
+        return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=multirun,
+                        overrides=list(hc.overrides.task), concurrent_jobs=jobs)
 
 
 def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurrent_jobs: int = 1) -> int:
@@ -163,6 +183,7 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
     log.info("twinkit: recipe '%s' on site '%s' -> %s (run log %s)", recipe, site["name"], workspace,
              run_dir / "run.log")
     status, error = "ok", None
+    saved_handlers: dict = {}
 
     def manifest_now(status: str, error: str | None) -> dict:
         return build_manifest(
@@ -188,6 +209,11 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
         status, error = "interrupted", f"{type(exc).__name__}: {exc}"
         if engine.current_step and isinstance(exc, KeyboardInterrupt):
             error += f" (during step '{engine.current_step}')"
+        if isinstance(exc, KeyboardInterrupt):
+            # a second Ctrl-C (or a sweep's forwarded SIGTERM) must not cut the manifest short
+            from twinkit.signals import ignore_interrupts
+
+            saved_handlers = ignore_interrupts()
         raise
     finally:
         if engine._lock is None and engine.outcomes is not None:
@@ -198,6 +224,10 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
                 log.info("twinkit: done in %.1f s; manifest %s", time.perf_counter() - t0, run_dir / "manifest.json")
                 if engine_cfg.get("report", True):
                     _write_report(run_dir, manifest, engine)
+        if saved_handlers:
+            from twinkit.signals import restore_handlers
+
+            restore_handlers(saved_handlers)
     return 0
 
 
@@ -290,10 +320,19 @@ def _run_hydra(argv: list[str]) -> int:
     saved = sys.argv
     sys.argv = ["twinkit", *argv]
     _STATE.pop("error", None)
-    try:
-        app()
-    finally:
-        sys.argv = saved
+    from twinkit.signals import forward_to_children
+
+    with forward_to_children() as signalled:  # jobs stop like single runs, with their manifests
+        try:
+            app()
+        except BaseException:
+            if "exc" in signalled:
+                raise signalled["exc"] from None
+            raise
+        finally:
+            sys.argv = saved
+    if "exc" in signalled:
+        raise signalled["exc"]
     if _STATE.get("error") is not None:
         raise _STATE.pop("error")
     return 0

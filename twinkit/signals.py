@@ -62,3 +62,73 @@ def pid_alive(pid: int) -> bool:
             return f.read().rsplit(")", 1)[1].split()[0] != "Z"
     except (OSError, IndexError):
         return True
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    try:
+        names = os.listdir("/proc")
+    except OSError:
+        return out
+    for name in names:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            if ppid != pid:
+                continue
+            with open(f"/proc/{name}/cmdline", "rb") as f:
+                cmd = f.read()
+        except (OSError, IndexError, ValueError):
+            continue
+        if b"resource_tracker" not in cmd:  # joblib's and multiprocessing's bookkeepers, not jobs
+            out.append(int(name))
+    return out
+
+
+@contextlib.contextmanager
+def forward_to_children():
+    """In a multirun's main process: the first Ctrl-C or SIGTERM is passed on to the job processes as
+    SIGTERM, so that each job stops its step and writes its manifest as a single run does; the jobs'
+    errors then end the sweep. A second signal stops this process at once. Yields the state, whose
+    ``"exc"`` is the exception the sweep must end with (Ctrl-C: 130, SIGTERM: 143)."""
+    import threading
+
+    state: dict = {}
+    if threading.current_thread() is not threading.main_thread():
+        yield state
+        return
+
+    def handler(signum, frame):
+        exc = Terminated("SIGTERM") if signum == signal.SIGTERM else KeyboardInterrupt()
+        if "exc" in state:
+            raise exc
+        state["exc"] = exc
+        for pid in _children(os.getpid()):
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGTERM)
+
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield state
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def ignore_interrupts() -> dict:
+    """Ignore SIGINT and SIGTERM (main thread only); returns the handlers for :func:`restore_handlers`."""
+    saved = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            saved[sig] = signal.signal(sig, signal.SIG_IGN)
+        except ValueError:  # not the main thread
+            break
+    return saved
+
+
+def restore_handlers(saved: dict) -> None:
+    for sig, handler in saved.items():
+        with contextlib.suppress(ValueError, TypeError):
+            signal.signal(sig, handler)
