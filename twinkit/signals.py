@@ -102,10 +102,11 @@ def forward_to_children():
 
     def handler(signum, frame):
         exc = Terminated("SIGTERM") if signum == signal.SIGTERM else KeyboardInterrupt()
-        if "exc" in state:
+        children = _children(os.getpid())
+        if "exc" in state or not children:  # a second signal, or jobs that run in this process
             raise exc
         state["exc"] = exc
-        for pid in _children(os.getpid()):
+        for pid in children:
             with contextlib.suppress(OSError):
                 os.kill(pid, signal.SIGTERM)
 

@@ -167,9 +167,8 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
         status = "cached" if stored else "ran"
         if stored is None:
             log.debug("  %s: running %s ...", ps.folder, ps.label)
-            from twinkit.progress import step_status
-
             from twinkit.engine.isolate import run_in_child
+            from twinkit.progress import step_status
 
             self._share_threads()
             with step_status(f"{ps.folder} ({ps.label})"):
