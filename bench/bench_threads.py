@@ -1,9 +1,10 @@
 """The thread budget: two runs at once on one machine, sharing the cores or each taking all of them.
 
-A one-step recipe multiplies matrices with numpy's BLAS (its pool set to the step's ``ctx.threads``).
-Prints a Markdown table of seconds per product: one run alone; two runs at once with the budget
-(each takes cores / 2); two runs at once each taking every core (``engine.threads=<cores>``, as
-before the budget).
+A two-step recipe multiplies matrices with numpy's BLAS (its pool set to the step's ``ctx.threads``).
+Prints a Markdown table of seconds per product in the second step (by then both runs have
+registered; a step already running keeps the threads it started with): one run alone; two runs at
+once with the budget (each takes cores / 2); two runs at once each taking every core
+(``engine.threads=<cores>``, as before the budget).
 Run: .venv/bin/python bench/bench_threads.py [--n 600] [--repeats 40]
 """
 from __future__ import annotations
@@ -32,7 +33,8 @@ def main() -> int:
     for s in ("a", "b"):
         (conf / "site" / f"{s}.yaml").write_text(f"name: {s}\n")
     (conf / "recipe" / "mm.yaml").write_text("# @package _global_\nrecipe:\n  name: mm\n  steps:\n"
-                                             "    - {id: matmul, uses: step/matmul}\n")
+                                             "    - {id: m1, uses: step/matmul}\n"
+                                             "    - {id: m2, uses: step/matmul, params: {index: 1}}\n")
     env = dict(os.environ, TWINKIT_CONFIG_DIR=str(conf), TWINKIT_PLUGINS="builtins",
                TWINKIT_PLUGIN_MODULES="engine_bench_plugins", TWINKIT_RUNTIME_DIR=str(tmp / "runtime"),
                PYTHONPATH=f"{ROOT / 'bench'}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
@@ -45,14 +47,14 @@ def main() -> int:
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "twinkit", f"site={site}", "recipe=mm", f"engine.outputs_dir={out}",
                  "engine.report=false", f"steps.matmul.n={a.n}", f"steps.matmul.repeats={a.repeats}",
-                 f"steps.matmul.index={i}", *extra],
+                 *extra],
                 env=env, cwd=tmp, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
         res = []
         for site, p in zip("ab", procs):
             _, err = p.communicate()
             if p.returncode != 0:
                 raise SystemExit(err[-2000:])
-            per, threads = (tmp / f"out-{tag}" / site / "01_matmul" / "timing.txt").read_text().split()
+            per, threads = (tmp / f"out-{tag}" / site / "02_m2" / "timing.txt").read_text().split()
             res.append((float(per), int(threads)))
         return res
 
