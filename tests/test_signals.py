@@ -260,3 +260,31 @@ def test_a_signalled_sweep_stops_its_jobs_like_single_runs(project, sig, code):
     statuses = [json.loads(m.read_text())["status"] for m in (project.ws / "sweeps").glob("*/job*/manifest.json")]
     assert statuses == ["interrupted", "interrupted"], statuses
     assert not list(store_tmp.iterdir())
+
+
+def test_a_native_crash_in_a_fan_out_worker_is_the_steps_failure(project):
+    project.recipe("fancrash", ["{id: make, uses: step/make}", "{id: tiles, uses: step/tiles}",
+                                "{id: crash, uses: step/crash, foreach: tiles.json}"])
+    r = project.run("site=t", "recipe=fancrash", "executor.workers=2")
+    assert r.rc == 1, r.text
+    assert "step 'crash'" in r.err and "worker process died" in r.err, r.err
+    assert _manifests(project)[-1]["status"] == "failed"
+
+
+def test_ctrl_c_stops_fan_out_workers_stuck_in_native_calls(project):
+    project.recipe("fanstuck", ["{id: make, uses: step/make}", "{id: tiles, uses: step/tiles}",
+                                "{id: crash, uses: step/crash, foreach: tiles.json, params: {how: block}}"])
+    p = project.popen("site=t", "recipe=fanstuck", "steps.tiles.n=2", "executor.workers=2")
+    try:
+        store_tmp = project.ws / ".cache" / "steps" / ".tmp"
+        started = _wait_for(lambda: len(list(store_tmp.glob("*/started"))) == 2 and list(store_tmp.glob("*/started")),
+                            what="both workers to start")
+        workers = {int(s.read_text()) for s in started}
+        os.kill(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=30)  # the items would block for 120 s
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130, err
+    _wait_for(lambda: not any(_alive(w) for w in workers), timeout=10, what="the workers to be killed")
+    assert _manifests(project)[-1]["status"] == "interrupted"

@@ -8,6 +8,7 @@ import logging
 import os
 import shutil
 import time
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
@@ -103,8 +104,15 @@ class FanoutMixin:
             log.debug("  %s: running %s on %d of %d items ...", ps.folder, ps.label, len(tasks), len(items))
             ex = self._executor()
             results = ex.map(_run_item_task, tasks)
-            for _ in _track(results, len(tasks), ps.id):
-                pass
+            try:
+                for _ in _track(results, len(tasks), ps.id):
+                    pass
+            except BrokenProcessPool as exc:
+                from twinkit.engine.isolate import NativeCrash
+
+                raise NativeCrash("a worker process died while running its items (a crash in native code, or "
+                                  "killed: out of memory?); the Python stack of a crash, where known, is in the "
+                                  "run log") from exc
         duration = time.perf_counter() - t0
         stored = [read_record(self.store / k) for k in keys]
         files: dict[str, Any] = {}
