@@ -24,7 +24,7 @@ import time
 import traceback
 from typing import Any, Callable
 
-from twinkit.signals import Terminated, _raise_terminated, die_with_parent  # noqa: F401 (re-exported)
+from twinkit.signals import _raise_terminated, die_with_parent
 
 log = logging.getLogger("twinkit")
 
