@@ -73,6 +73,7 @@ class Project:
             TWINKIT_PLUGINS="builtins",
             TWINKIT_PLUGIN_MODULES="tests.support.engine_plugins",
             TWINKIT_TEST_COUNTER=str(self.counter),
+            TWINKIT_RUNTIME_DIR=str(self.tmp / "runtime"),  # the thread budget counts only this test's runs
             PYTHONPATH=str(ROOT) + os.pathsep + env.get("PYTHONPATH", ""),
         )
         env.update(extra)

@@ -101,6 +101,20 @@ def _job(cfg) -> int:
             raise _job_error(f"twinkit: error: {exc}", exc.exit_code) from None
         _STATE["error"] = exc
         return exc.exit_code
+    except KeyboardInterrupt as exc:
+        if HydraConfig.get().mode != RunMode.MULTIRUN:
+            raise
+        return _job_interrupted(exc)
+
+
+def _job_interrupted(exc: KeyboardInterrupt) -> int:
+    """A multirun job stopped by Ctrl-C or SIGTERM (its manifest says so) returns instead of raising: a
+    raised error would make joblib kill the other jobs before they have written their manifests. The
+    sweep's own process ends with 130 / 143 (``forward_to_children``); later jobs of this worker are skipped."""
+    from twinkit.signals import Terminated
+
+    _STATE["interrupted"] = 143 if isinstance(exc, Terminated) else 130
+    return _STATE["interrupted"]
 
 
 def _job_error(message: str, exit_code: int):
@@ -143,11 +157,29 @@ def _job_body(cfg) -> int:
     from hydra.types import RunMode
 
     hc = HydraConfig.get()
-    return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=hc.mode == RunMode.MULTIRUN,
-                    overrides=list(hc.overrides.task))
+    multirun = hc.mode == RunMode.MULTIRUN
+    jobs = 1
+    if multirun and _STATE.get("interrupted"):
+        log.info("twinkit: job %s not started: the sweep was interrupted", hc.job.num)
+        return _STATE["interrupted"]
+    if multirun:
+        from twinkit.executors import use_standard_start_method
+
+        use_standard_start_method()  # a job runs in a loky worker: its fan-out pools must not inherit 'loky'
+        from omegaconf import OmegaConf
+
+        from twinkit.threads import cores
+
+        jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)
+        jobs = cores() if jobs <= 0 else jobs  # joblib's -1: as many jobs as cores
+    from twinkit.signals import sigterm_as_interrupt
+
+    with sigterm_as_interrupt():  # a job's process (a joblib worker) stops like a single run
+        return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=multirun,
+                        overrides=list(hc.overrides.task), concurrent_jobs=jobs)
 
 
-def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
+def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurrent_jobs: int = 1) -> int:
     """Plan -> run -> manifest (-> report) for one composed config."""
     from omegaconf import OmegaConf
 
@@ -157,6 +189,7 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
     from twinkit.plugins import get_registry
 
     _setup_logging(run_dir / "run.log")
+    _crash_log(run_dir / "run.log")
     conf_dir = Path(_STATE.get("conf_dir") or find_config_dir())
     root = conf_dir.parent
     from omegaconf import open_dict
@@ -188,13 +221,31 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
         interactive=_interactive(engine_cfg.get("interactive", "auto")),
         threads=engine_cfg.get("threads") or None, config_root=root,
         manual_timeout_s=engine_cfg.get("manual_timeout_s"),
+        max_threads=_job_threads(concurrent_jobs),
     )
     engine.secrets = secrets  # kept out of the step records too
     recipe = container.get("recipe", {}).get("name", "?")
     log.info("twinkit: recipe '%s' on site '%s' -> %s (run log %s)", recipe, site["name"], workspace,
              run_dir / "run.log")
     status, error = "ok", None
+    saved_handlers: dict = {}
+
+    def manifest_now(status: str, error: str | None) -> dict:
+        manifest = build_manifest(
+            argv=_STATE.get("argv", sys.argv), overrides=overrides, config=container, site=site,
+            outcomes=engine.outcomes, engine=engine, registry=registry, project_root=root, status=status,
+            error=error, started=started,
+            finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            duration_s=time.perf_counter() - t0,
+        )
+        # ${oc.env:...} values stay out of the manifest and the report; the file lists keep their real
+        # paths (twinkit verify reads them)
+        return {k: (v if k in ("inputs", "outputs", "workspace") else redact(v, secrets))
+                for k, v in manifest.items()}
+
     try:
+        # written now as "running": a run killed outright (kill -9, power) is recognisable afterwards
+        write_manifest(run_dir / "manifest.json", manifest_now("running", None))
         _explaining_os_errors(lambda: engine.run(on_step=lambda oc, i, n: log.info(_format_outcome(oc, i, n))),
                               site_root)
     except TwinkitError as exc:
@@ -204,22 +255,19 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
 
             logging.getLogger("twinkit").debug("".join(traceback.format_exception(exc.__cause__)))
         raise
-    except BaseException as exc:  # Ctrl-C, or a bug in twinkit itself: the manifest must not say "ok"
+    except BaseException as exc:  # Ctrl-C, SIGTERM, or a bug in twinkit itself: the manifest must not say "ok"
         status, error = "interrupted", f"{type(exc).__name__}: {exc}"
+        if engine.current_step and isinstance(exc, KeyboardInterrupt):
+            error += f" (during step '{engine.current_step}')"
+        if isinstance(exc, KeyboardInterrupt):
+            # a second Ctrl-C (or a sweep's forwarded SIGTERM) must not cut the manifest short
+            from twinkit.signals import ignore_interrupts
+
+            saved_handlers = ignore_interrupts()
         raise
     finally:
         if engine._lock is None and engine.outcomes is not None:
-            manifest = build_manifest(
-                argv=_STATE.get("argv", sys.argv), overrides=overrides, config=container, site=site,
-                outcomes=engine.outcomes, engine=engine, registry=registry, project_root=root, status=status,
-                error=error, started=started,
-                finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                duration_s=time.perf_counter() - t0,
-            )
-            # ${oc.env:...} values stay out of the manifest and the report; the file lists keep their real
-            # paths (twinkit verify reads them)
-            manifest = {k: (v if k in ("inputs", "outputs", "workspace") else redact(v, secrets))
-                        for k, v in manifest.items()}
+            manifest = manifest_now(status, error)
             engine.hashes.close()
             try:
                 write_manifest(run_dir / "manifest.json", manifest)
@@ -232,6 +280,10 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str]) -> int:
                 log.info("twinkit: done in %.1f s; manifest %s", time.perf_counter() - t0, run_dir / "manifest.json")
                 if engine_cfg.get("report", True):
                     _write_report(run_dir, manifest, engine)
+        if saved_handlers:
+            from twinkit.signals import restore_handlers
+
+            restore_handlers(saved_handlers)
     return 0
 
 
@@ -287,6 +339,32 @@ def _explaining_os_errors(run, where: Path):
         if os_exc is None or os_exc.errno not in (errno.ENOSPC, errno.EDQUOT):
             raise
         raise StepError(_os_text(os_exc, where)) from exc
+
+
+def _job_threads(concurrent_jobs: int) -> int | None:
+    """A multirun job's cap on threads: the cores divided among the launcher's concurrent jobs."""
+    if concurrent_jobs <= 1:
+        return None
+    from twinkit.threads import cores
+
+    return max(1, cores() // concurrent_jobs)
+
+
+_FAULT_LOG: list = []
+
+
+def _crash_log(run_log: Path) -> None:
+    """A crash in native code writes the Python stack of every thread into the run log."""
+    import faulthandler
+
+    try:
+        f = open(run_log, "a")  # kept open for the life of the process
+    except OSError:
+        return
+    faulthandler.enable(file=f, all_threads=True)
+    for old in _FAULT_LOG:
+        old.close()
+    _FAULT_LOG[:] = [f]
 
 
 def _write_report(run_dir: Path, manifest: dict, engine) -> None:
@@ -357,13 +435,22 @@ def _run_hydra(argv: list[str]) -> int:
     _STATE.pop("error", None)
     from hydra._internal import utils as hydra_utils
 
+    from twinkit.signals import forward_to_children
+
     _ORIGINAL_REPORT[:] = [hydra_utils.run_and_report]
     hydra_utils.run_and_report = _report
-    try:
-        app()
-    finally:
-        sys.argv = saved
-        hydra_utils.run_and_report = _ORIGINAL_REPORT[0]
+    with forward_to_children() as signalled:  # jobs stop like single runs, with their manifests
+        try:
+            app()
+        except BaseException:
+            if "exc" in signalled:
+                raise signalled["exc"] from None
+            raise
+        finally:
+            sys.argv = saved
+            hydra_utils.run_and_report = _ORIGINAL_REPORT[0]
+    if "exc" in signalled:
+        raise signalled["exc"]
     if _STATE.get("error") is not None:
         raise _STATE.pop("error")
     return 0
@@ -591,6 +678,13 @@ def cmd_gc(args: list[str]) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    from twinkit.signals import sigterm_as_interrupt
+
+    with sigterm_as_interrupt():  # SIGTERM (schedulers, docker stop, timeout) stops a run like Ctrl-C
+        return _main(argv)
+
+
+def _main(argv: list[str]) -> int:
     try:
         if argv and argv[0] in ("-h", "--help", "help"):
             print(__doc__.strip())
@@ -604,7 +698,11 @@ def main(argv: list[str] | None = None) -> int:
         return _run_hydra(argv)
     except TwinkitError as exc:
         return _err(str(exc), exc.exit_code)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        from twinkit.signals import Terminated
+
+        if isinstance(exc, Terminated):
+            return _err("terminated (SIGTERM); finished steps are kept, the interrupted one will run again", 143)
         return _err("interrupted; finished steps are kept, the interrupted one will run again", 130)
 
 

@@ -11,14 +11,28 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Callable, Iterator
 
-#: thread-pool sizes read by OpenMP (open3d, scipy), OpenBLAS/MKL (numpy), numba and torch at start-up
-THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+from twinkit.threads import BUDGET_ENV, THREAD_ENV, cores, limit_threads  # noqa: F401 (THREAD_ENV re-exported)
+
+#: start methods of the standard library; a multirun job runs in a joblib (loky) worker whose default is
+#: loky's own, which a spawned child cannot find ("cannot find context for 'loky'")
+_STD_METHODS = ("spawn", "fork", "forkserver")
 
 
-def _limit_threads(n: int) -> None:
-    """Worker initializer: cap the native thread pools before any library starts them."""
-    for var in THREAD_ENV:
-        os.environ[var] = str(n)
+def use_standard_start_method() -> None:
+    """Make 'spawn' this process's default start method when it is not one of the standard library's.
+
+    A spawned child re-applies its parent's *default* start method (even when the pool asked for spawn
+    explicitly), so a pool started inside a loky worker dies at once with BrokenProcessPool."""
+    if mp.get_start_method(allow_none=True) not in (None, *_STD_METHODS):
+        mp.set_start_method("spawn", force=True)
+
+
+def _init_worker(n: int, parent_pid: int) -> None:
+    """Worker initializer: die with the run, and cap the native thread pools before any library starts them."""
+    from twinkit.signals import die_with_parent
+
+    die_with_parent(parent_pid)
+    limit_threads(n)
 
 
 class LocalExecutor:
@@ -39,7 +53,12 @@ class LocalExecutor:
     def _threads(self, n_workers: int) -> int:
         if self.threads_per_worker > 0:
             return self.threads_per_worker
-        return max(1, (os.cpu_count() or 1) // n_workers)
+        # the run's share of the cores (the engine sets it per step), divided among the workers
+        try:
+            budget = int(os.environ.get(BUDGET_ENV) or 0) or cores()
+        except ValueError:
+            budget = cores()
+        return max(1, budget // n_workers)
 
     def map(self, fn: Callable[[Any], Any], items: list[Any]) -> Iterator[Any]:
         # one worker runs in this process, unless every item must have a fresh process of its own
@@ -52,6 +71,27 @@ class LocalExecutor:
             return
         n = min(self.workers, len(items))
         extra = {"max_tasks_per_child": self.max_items_per_worker} if self.max_items_per_worker else {}
-        with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"),
-                                 initializer=_limit_threads, initargs=(self._threads(n),), **extra) as pool:
+        use_standard_start_method()
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+                                   initargs=(self._threads(n), os.getpid()), **extra)
+        try:
             yield from pool.map(fn, items)
+        except (KeyboardInterrupt, GeneratorExit):
+            # Ctrl-C, SIGTERM, or the caller stopped early: a worker busy in a long C call would keep
+            # shutdown() waiting, so the workers are killed (their temporary folders go at the next run)
+            _kill_workers(pool)
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        except BaseException:  # a failed item: the items already running finish and are stored
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
+
+
+def _kill_workers(pool: ProcessPoolExecutor) -> None:
+    for p in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            p.kill()
+            p.join(timeout=5)
+        except (OSError, ValueError, AttributeError):
+            pass

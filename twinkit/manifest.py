@@ -1,6 +1,7 @@
 """Provenance: one manifest per run, and a check of a manifest against the files on disk."""
 from __future__ import annotations
 
+import functools
 import importlib.metadata as md
 import json
 import os
@@ -23,6 +24,11 @@ LIBRARIES = [
 ]
 
 
+@functools.lru_cache(maxsize=None)
+def _library_versions() -> tuple:
+    return tuple(library_versions().items())
+
+
 def library_versions() -> dict[str, str]:
     out = {}
     for name in LIBRARIES:
@@ -31,6 +37,11 @@ def library_versions() -> dict[str, str]:
         except md.PackageNotFoundError:
             pass
     return out
+
+
+@functools.lru_cache(maxsize=8)
+def _git_state(root: Path) -> tuple:
+    return tuple(git_state(root).items())
 
 
 def git_state(root: Path) -> dict[str, Any]:
@@ -93,10 +104,10 @@ def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site:
         "overrides": overrides,
         "config": config,
         "site": {k: site.get(k) for k in ("name", "crs", "base_point", "bounds_m") if k in site},
-        "git": git_state(project_root),
+        "git": dict(_git_state(Path(project_root))),  # once per process: the manifest is written at start and end
         "python": {"version": sys.version.split()[0], "implementation": platform.python_implementation(),
                    "platform": platform.platform()},
-        "libraries": library_versions(),
+        "libraries": dict(_library_versions()),
         "plugins": plugins,
         "steps": steps,
         "inputs": inputs,

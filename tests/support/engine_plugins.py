@@ -99,6 +99,10 @@ def tiles(params: TilesParams, ctx, *, in_data_txt: Path, out_tiles_json: Path) 
 def per_tile(params, ctx, *, in_data_txt: Path, item: dict, out_tile_txt: Path) -> dict:
     """One fanned-out item: value + tile index; records the worker pid."""
     _count(f"per_tile{item['i']}")
+    sleep = float(os.environ.get("TWINKIT_TEST_TILE_SLEEP", "0"))
+    if sleep:
+        Path(ctx.workdir, "started").write_text(f"{os.getpid()}\n")
+        time.sleep(sleep)
     v = int(Path(in_data_txt).read_text().splitlines()[0])
     out_tile_txt.write_text(f"{v + item['i']}\n{os.getpid()}\n")
     return {"pid": os.getpid(), "omp_threads": os.environ.get("OMP_NUM_THREADS"), "started": time.time()}
@@ -128,8 +132,39 @@ def place_tile(params, ctx, *, in_data_txt: Path, item: dict, out_ptile_txt: Pat
     out_ptile_txt.write_text(f"{item['i'] + int(bp.get('x', 0))}\n")
 
 
+@dataclass
+class CrashParams:
+    how: str = "segv"  # segv: read address 0 | abort | block: sleep with SIGINT/SIGTERM blocked (a long C call)
+
+
+def crash(params: CrashParams, ctx, *, in_data_txt: Path, out_crashed_txt: Path, item: dict | None = None) -> None:
+    """A stand-in for a native library that crashes, or does not return to Python for a long time."""
+    import ctypes
+    import signal
+
+    _count("crash")
+    Path(ctx.workdir, "started").write_text(f"{os.getpid()}\n")
+    if params.how == "segv":
+        ctypes.string_at(0)
+    elif params.how == "abort":
+        os.abort()
+    elif params.how == "block":
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        time.sleep(120)
+    out_crashed_txt.write_text("survived\n")
+
+
+def threads(params, ctx, *, in_data_txt: Path, out_threads_txt: Path) -> dict:
+    """Write the step's thread budget and the OpenMP setting it runs under."""
+    _count("threads")
+    out_threads_txt.write_text(f"{ctx.threads} {os.environ.get('OMP_NUM_THREADS')}\n")
+    return {"threads": ctx.threads}
+
+
 @hookimpl
 def twinkit_register_steps(register):
+    register("crash", crash, params=CrashParams)
+    register("threads", threads)
     register("make", make, params=MakeParams)
     register("read_seed", read_seed)
     register("make_ply", make_ply)

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import shutil
 import time
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +28,18 @@ def _item_cost(item: Any) -> float:
 
 
 def _run_item_task(task: dict) -> dict:
-    """Executor entry point for one fan-out item (picklable, top level)."""
+    """Executor entry point for one fan-out item (picklable, top level). In the run's own process (an
+    executor with one worker) the item runs in a child process, like a step (twinkit.engine.isolate)."""
+    task = dict(task)
+    run_pid, threads = task.pop("run_pid", None), task.pop("threads", None)
+    if run_pid == os.getpid():
+        from twinkit.engine.isolate import run_in_child
+
+        def cleanup(pid: int) -> None:
+            for d in (Path(task["store"]) / ".tmp").glob(f"*-{pid}-*"):
+                shutil.rmtree(d, ignore_errors=True)
+
+        return run_in_child(compute_into_store, task, threads=threads, cleanup=cleanup)
     try:
         return compute_into_store(**task)
     finally:
@@ -83,10 +96,13 @@ class FanoutMixin:
         # items that say what they cost ("cost": any number) start costliest first, so that a big
         # item does not start last and leave the other workers idle (results are keyed, not ordered)
         todo.sort(key=lambda i: -_item_cost(items[i]))
+        if todo:
+            self._share_threads()
         tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
                       store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
                       item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path,
-                      key_descriptor=item_descs[i], fields=list(fields), index=index) for i in todo]
+                      key_descriptor=item_descs[i], fields=list(fields), index=index,
+                      run_pid=os.getpid(), threads=self.threads) for i in todo]
         for t in tasks:
             t["ctx_kwargs"].pop("log")
         t0 = time.perf_counter()
@@ -94,9 +110,16 @@ class FanoutMixin:
             log.debug("  %s: running %s on %d of %d items ...", ps.folder, ps.label, len(tasks), len(items))
             ex = self._executor()
             results = ex.map(_run_item_task, tasks)
-            for i, res in zip(todo, _track(results, len(tasks), ps.id)):
-                if isinstance(res, dict) and res.get("key"):
-                    keys[i] = res["key"]  # an item that read a new site field is stored under the key with it
+            try:
+                for i, res in zip(todo, _track(results, len(tasks), ps.id)):
+                    if isinstance(res, dict) and res.get("key"):
+                        keys[i] = res["key"]  # an item that read a new site field is stored under the key with it
+            except BrokenProcessPool as exc:
+                from twinkit.engine.isolate import NativeCrash
+
+                raise NativeCrash("a worker process died while running its items (a crash in native code, or "
+                                  "killed: out of memory?); the Python stack of a crash, where known, is in the "
+                                  "run log") from exc
         duration = time.perf_counter() - t0
         read = sorted(set(fields).union(*[(read_record(self.store / k) or {}).get("site_fields") or [] for k in keys]))
         if read != sorted(fields):

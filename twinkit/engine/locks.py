@@ -110,13 +110,9 @@ def gc_locks(site_root: Path) -> Iterator[None]:
 
 
 def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+    from twinkit.signals import pid_alive  # a zombie counts as dead (a killed step process, not yet reaped)
+
+    return pid <= 0 or pid_alive(pid)  # no pid in the name: kept, as before
 
 
 class LockMixin:

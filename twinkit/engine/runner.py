@@ -48,7 +48,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
     def __init__(self, cfg: dict, registry: Registry, workspace: Path, site_root: Path,
                  rerun: list[str] | None = None, interactive: bool = False, threads: int | None = None,
                  config_root: Path | None = None, executor_factory: Callable[[], Any] | None = None,
-                 manual_timeout_s: float | None = None):
+                 manual_timeout_s: float | None = None, max_threads: int | None = None):
         self.cfg = cfg
         self.registry = registry
         self.workspace = Path(workspace)
@@ -56,6 +56,10 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
         self.rerun = set(rerun or [])
         self.interactive = interactive
         self.threads = threads or os.cpu_count() or 1
+        # engine.threads given: that many; else the run's share of the machine, read again before each
+        # step (twinkit.threads), at most max_threads (a multirun job: cores / n_jobs)
+        self._fixed_threads = threads
+        self.max_threads = max_threads
         self.config_root = config_root
         self.store = self.site_root / ".cache" / "steps"
         self.edits_dir = self.site_root / ".cache" / "edits"
@@ -69,6 +73,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
         if bad:
             raise ConfigError(f"rerun names unknown step(s) {sorted(bad)}; steps are: {', '.join(s.id for s in self.plan)}")
         self.outcomes: list[StepOutcome] = []
+        self.current_step: str | None = None
         self._lock = None
 
     def _ctx_kwargs(self, ps: PlannedStep) -> dict:
@@ -80,7 +85,26 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             "log": logging.getLogger(f"twinkit.step.{ps.id}"),
         }
 
+    def _share_threads(self) -> None:
+        from twinkit.threads import BUDGET_ENV, budget
+
+        self.threads = self._fixed_threads or budget(self.max_threads)
+        os.environ[BUDGET_ENV] = str(self.threads)
+
+    def _remove_tmp_of(self, pid: int) -> None:
+        """What a killed or crashed step process left in the store's temporary folder."""
+        import shutil
+
+        for d in (self.store / ".tmp").glob(f"*-{pid}-*"):
+            shutil.rmtree(d, ignore_errors=True)
+
     def run(self, on_step: Callable[[StepOutcome, int, int], None] | None = None) -> list[StepOutcome]:
+        from twinkit.threads import registered
+
+        with registered():
+            return self._run(on_step)
+
+    def _run(self, on_step: Callable[[StepOutcome, int, int], None] | None = None) -> list[StepOutcome]:
         self._prepare()
         try:
             self._switch_recipe()
@@ -92,6 +116,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
         try:
             n = len(self.plan)
             for ps in self.plan:
+                self.current_step = ps.id
                 t0 = time.perf_counter()
                 try:
                     outcome = self._run_step(ps)
@@ -150,13 +175,17 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             status = "cached" if stored else "ran"
             if stored is None:
                 log.debug("  %s: running %s ...", ps.folder, ps.label)
+                from twinkit.engine.isolate import run_in_child
                 from twinkit.progress import step_status
 
+                self._share_threads()
                 with step_status(f"{ps.folder} ({ps.label})"):
-                    stored = compute_into_store(ps.plugin.run, ps.params, in_paths, ps.outputs, index_key,
-                                                self.store, self._ctx_kwargs(ps), force=forced or attempt > 1,
-                                                hash_db=self.hashes.db_path, key_descriptor=desc0, fields=fields,
-                                                index=index)
+                    # in a child process: a native crash is this step's failure, Ctrl-C stops it within seconds
+                    stored = run_in_child(compute_into_store, dict(
+                        run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=index_key,
+                        store=self.store, ctx_kwargs=self._ctx_kwargs(ps), force=forced or attempt > 1,
+                        hash_db=self.hashes.db_path, key_descriptor=desc0, fields=fields, index=index),
+                        threads=self.threads, cleanup=self._remove_tmp_of)
                 if not stored.pop("_computed_here", True):
                     status, why = "cached", why + " (computed by a concurrent job)"
                 if stored.get("key", key) != key:  # it read a site field it had not read before

@@ -80,6 +80,21 @@ def test_dask_local_cluster_gives_the_same_result(local_run, tmp_path, synth_clo
     assert " reused " in line, line
 
 
+def test_multirun_of_the_tiled_recipe(project):
+    # a multirun job runs in a joblib (loky) worker: its fan-out pool used to die at once with
+    # "cannot find context for 'loky'" (BrokenProcessPool); the parameter varied is the fan-out step's
+    coarse = [a for a in COARSE if not a.startswith("steps.reconstruct_tile.max_dist_m=")]
+    r = project.run("-m", "recipe=tiled_site", "site=synth", "executor=local", "executor.workers=2", *coarse,
+                    "steps.reconstruct_tile.max_dist_m=0.15,0.2")
+    assert r.returncode == 0, r.stderr[-3000:]
+    jobs = sorted((project.out / "synth" / "sweeps").glob("*/job*"))
+    assert len(jobs) == 2
+    for j in jobs:
+        assert json.loads((j / "manifest.json").read_text())["status"] == "ok"
+        rec = json.loads((j / "03_reconstruct_tiles" / "step.json").read_text())
+        assert rec["metrics"]["computed"] == rec["metrics"]["items"] > 1
+
+
 def test_dask_executor_preserves_order_and_reports_errors():
     from twinkit_tiles.dask_executor import DaskExecutor
 
