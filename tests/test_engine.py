@@ -332,3 +332,34 @@ def test_optional_step_is_skipped_when_its_input_is_missing(project):
     r = project.run("site=s", "recipe=opt")
     assert r.rc == 0, r.text
     assert (project.ws / "03_double" / "double.txt").read_text() == "8\n"
+
+
+def test_kind_none_leaves_out_its_step_and_the_optional_steps_that_depend_on_it(project):
+    """road_source=none: the road steps are left out with a logged reason, the later steps take what exists;
+    a site input left for the user ('???') that only the left-out steps read does not stop the run (issue 28)."""
+    project.site("r", "name: t\ninputs:\n  osm: ???\n")
+    project.recipe("twin", ["{id: make, uses: step/make}",
+                            "{id: fetch, uses: road_source}",
+                            "{id: convert, uses: step/convert_roads, optional: true}",
+                            "{id: align, uses: step/align_net, optional: true}",
+                            "{id: double, uses: step/double}",
+                            "{id: export, uses: step/export_all}"], extra="defaults:\n  - /road_source: toy\n  - _self_\n")
+    # the default: roads from the toy source; every step runs (the site's osm is not read: fetch writes it)
+    r = project.run("site=t", "recipe=twin")
+    assert r.rc == 0, r.text
+    assert (project.ws / "06_export" / "export.txt").read_text() == "roads\n"
+    assert project.counts() == {"make": 1, "toy_roads": 1, "convert_roads": 1, "align_net": 1, "double": 1,
+                                "export_all": 1}
+    project.reset_counts()
+    r = project.run("site=r", "recipe=twin", "road_source=none")
+    assert r.rc == 0, r.text
+    assert "road_source=none was chosen" in r.text
+    assert re.search(r"convert\s+skipped\s+.*road_source=none", r.text), r.text
+    assert re.search(r"align\s+skipped\s+optional step: its input in_net_txt comes from convert, which was left out", r.text), r.text
+    assert (project.ws / "03_export" / "export.txt").read_text() == "no roads\n"
+    assert set(project.counts()) == {"export_all"}  # make and double reused; no road step ran
+    # without a '<kind>=none' choice, an optional step whose site input is left empty ('???') still fails
+    # the plan, naming the key (behaviour kept)
+    project.recipe("conv", ["{id: make, uses: step/make}", "{id: convert, uses: step/convert_roads, optional: true}"])
+    r = project.run("site=r", "recipe=conv")
+    assert r.rc != 0 and "site.inputs.osm" in r.text, r.text

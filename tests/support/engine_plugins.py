@@ -128,8 +128,46 @@ def place_tile(params, ctx, *, in_data_txt: Path, item: dict, out_ptile_txt: Pat
     out_ptile_txt.write_text(f"{item['i'] + int(bp.get('x', 0))}\n")
 
 
+def toy_roads(params, ctx, *, in_data_txt: Path, out_osm_txt: Path) -> None:
+    """A road source: writes the 'roads' of the site."""
+    _count("toy_roads")
+    out_osm_txt.write_text(Path(in_data_txt).read_text())
+
+
+def no_roads(params, ctx) -> None:
+    """road_source=none: never runs (the plan leaves the step out)."""
+    raise AssertionError("road_source=none ran")
+
+
+def convert_roads(params, ctx, *, out_net_txt: Path, in_osm_txt: Path | None = None,
+                  in_xodr_txt: Path | None = None) -> None:
+    """Reads only optional inputs (like osm_to_opendrive)."""
+    _count("convert_roads")
+    out_net_txt.write_text(Path(in_osm_txt or in_xodr_txt).read_text())
+
+
+def align_net(params, ctx, *, in_net_txt: Path, out_aligned_txt: Path) -> None:
+    _count("align_net")
+    out_aligned_txt.write_text(Path(in_net_txt).read_text())
+
+
+def export_all(params, ctx, *, in_double_txt: Path, out_export_txt: Path, in_aligned_txt: Path | None = None) -> None:
+    """Takes the roads when there are any (like carla_package)."""
+    _count("export_all")
+    out_export_txt.write_text("roads\n" if in_aligned_txt else "no roads\n")
+
+
+@hookimpl
+def twinkit_register_road_sources(register):
+    register("toy", toy_roads)
+    register("none", no_roads)
+
+
 @hookimpl
 def twinkit_register_steps(register):
+    register("convert_roads", convert_roads)
+    register("align_net", align_net)
+    register("export_all", export_all)
     register("make", make, params=MakeParams)
     register("read_seed", read_seed)
     register("make_ply", make_ply)

@@ -196,7 +196,7 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                 # optional steps after it that read nothing a running step writes
                 chosen_none.append(f"{kind}={NONE}")
                 if skipped is not None:
-                    skipped.append((spec.id, f"{kind}={NONE} was chosen"))
+                    skipped.append((spec.id, f"{kind}={NONE} was chosen (no {kind})"))
                 idx -= 1
                 continue
             try:
@@ -240,17 +240,17 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
             by = next((sid for f, d, sid in reversed(left_out) if port.accepts(f, d)), None)
             if skipped is not None:
                 if by is not None:
-                    skipped.append((spec.id, f"its input {port.param} comes from {by}, which was left out"))
+                    skipped.append((spec.id, f"optional step: its input {port.param} comes from {by}, which was left out"))
                 else:
                     why = f" ({', '.join(chosen_none)})" if chosen_none and "needs input" in str(exc) else ""
-                    skipped.append((spec.id, f"no {port.name} ({port.param}) on this site{why}"))
+                    skipped.append((spec.id, f"optional step: no {port.name} ({port.param}) on this site{why}"))
             left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
             idx -= 1
             continue
         if spec.optional and chosen_none and signature.inputs and not any(
                 src is not None and src.step_index is not None for src in inputs.values()):
             if skipped is not None:
-                skipped.append((spec.id, f"none of its inputs ({', '.join(p.param for p in signature.inputs)}) is "
+                skipped.append((spec.id, f"optional step: none of its inputs ({', '.join(p.param for p in signature.inputs)}) is "
                                          f"written by a step that runs ({', '.join(chosen_none)})"))
             left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
             idx -= 1

@@ -88,7 +88,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             self._release()
             raise
         for sid, reason in self.skipped:
-            log.info("[-] %-28s skipped  optional step: %s", sid, reason)
+            log.info("[-] %-28s skipped  %s", sid, reason)
         try:
             n = len(self.plan)
             for ps in self.plan:
