@@ -363,3 +363,24 @@ def test_kind_none_leaves_out_its_step_and_the_optional_steps_that_depend_on_it(
     project.recipe("conv", ["{id: make, uses: step/make}", "{id: convert, uses: step/convert_roads, optional: true}"])
     r = project.run("site=r", "recipe=conv")
     assert r.rc != 0 and "site.inputs.osm" in r.text, r.text
+
+
+def test_preflight_refuses_before_the_first_step_runs(project):
+    """Cheap checks of every planned step run before any step: a missing site input of the last step and a
+    plugin's own check are both reported, one line each, with exit 2, and nothing runs (issue 28)."""
+    project.site("p", f"name: t\nroads_offline: true\ninputs:\n  seed: {project.tmp / 'missing_seed.txt'}\n")
+    project.recipe("late", ["{id: make, uses: step/make}", "{id: fetch, uses: road_source}",
+                            "{id: double, uses: step/double}", "{id: read, uses: step/read_seed}"],
+                   extra="defaults:\n  - /road_source: toy\n  - _self_\n")
+    r = project.run("site=p", "recipe=late")
+    assert r.rc == 2, r.text
+    assert "preflight found 2 problems before the first step ran" in r.err, r.err
+    assert "missing_seed.txt does not exist (read by step 'read'" in r.err
+    assert "step 'fetch' (road_source/toy): the toy road server is offline" in r.err
+    assert project.counts() == {} and not (project.ws / "01_make").exists()
+    # the same with the problems gone runs every step
+    seed = project.tmp / "missing_seed.txt"
+    seed.write_text("5\n")
+    r = project.run("site=p", "recipe=late", "site.roads_offline=false")
+    assert r.rc == 0, r.text
+    assert project.counts() == {"make": 1, "toy_roads": 1, "double": 1, "read_seed": 1}

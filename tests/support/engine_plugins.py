@@ -157,9 +157,14 @@ def export_all(params, ctx, *, in_double_txt: Path, out_export_txt: Path, in_ali
     out_export_txt.write_text("roads\n" if in_aligned_txt else "no roads\n")
 
 
+def toy_roads_preflight(site, params, inputs) -> list[str]:
+    """A plugin's cheap check (twinkit/engine/preflight.py): refuses a site marked ``roads_offline``."""
+    return ["the toy road server is offline (site.roads_offline)"] if site.get("roads_offline") else []
+
+
 @hookimpl
 def twinkit_register_road_sources(register):
-    register("toy", toy_roads)
+    register("toy", toy_roads, preflight=toy_roads_preflight)
     register("none", no_roads)
 
 

@@ -1,0 +1,66 @@
+"""Preflight: the checks that fail cheaply, run for every planned step before the first step runs.
+
+The engine checks that every site input file a step reads exists and is readable; each plugin may add
+its own checks (``register(..., preflight=fn)``, see twinkit/hookspecs.py): ``fn(site, params, inputs)``
+returns its problems, one line each. Every problem of every step is collected and reported together,
+one line each, as an :class:`twinkit.InputError` (exit 2), before a long step has run. A preflight
+that crashes is a bug of its plugin: it is logged and the run goes on (the step's own checks remain).
+"""
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+
+from twinkit.errors import InputError, TwinkitError
+
+log = logging.getLogger("twinkit.preflight")
+
+
+def site_input_problems(plan) -> list[str]:
+    """Site input files of the planned steps that are missing or unreadable, one line each."""
+    out: list[str] = []
+    seen: set[Path] = set()
+    for ps in plan:
+        for param, src in ps.inputs.items():
+            if src is None or src.path is None or src.path in seen:
+                continue
+            seen.add(src.path)
+            key = src.path.name
+            if not src.path.exists():
+                out.append(f"site input {src.path} does not exist (read by step '{ps.id}' as {param}); fix the path "
+                           f"in the site config or on the command line")
+            elif not os.access(src.path, os.R_OK) or (src.path.is_dir() and not os.access(src.path, os.X_OK)):
+                out.append(f"site input {src.path} is not readable (read by step '{ps.id}' as {param}; "
+                           f"{key}: check its permissions)")
+    return out
+
+
+def run_preflight(plan, cfg: dict) -> list[str]:
+    """Run the preflight of every planned step; raise InputError listing every problem (exit 2)."""
+    t0 = time.perf_counter()
+    site = cfg.get("site") or {}
+    problems = site_input_problems(plan)
+    bad_inputs = {p for p in problems}
+    for ps in plan:
+        fn = getattr(ps.plugin, "preflight", None) if ps.plugin is not None else None
+        if fn is None:
+            continue
+        # every wired input: the site file's path, or None when an earlier step writes it (not there yet)
+        inputs = {param: src.path for param, src in ps.inputs.items() if src is not None}
+        try:
+            found = fn(site, ps.params, inputs) or []
+        except TwinkitError as exc:
+            found = [str(exc)]
+        except Exception as exc:  # noqa: BLE001 -- a plugin's bug must not stop a run its step may handle
+            log.warning("preflight of step '%s' (%s) failed: %s: %s; going on", ps.id, ps.label,
+                        type(exc).__name__, exc)
+            continue
+        problems += [f"step '{ps.id}' ({ps.label}): {p}" for p in found if p not in bad_inputs]
+    log.debug("preflight: %d steps checked in %.2f s", len(plan), time.perf_counter() - t0)
+    if problems:
+        n = len(problems)
+        raise InputError(f"preflight found {n} problem{'s' if n > 1 else ''} before the first step ran:\n  "
+                         + "\n  ".join(problems))
+    return problems
