@@ -375,7 +375,7 @@ def test_preflight_refuses_before_the_first_step_runs(project):
     r = project.run("site=p", "recipe=late")
     assert r.rc == 2, r.text
     assert "preflight found 2 problems before the first step ran" in r.err, r.err
-    assert "missing_seed.txt does not exist (read by step 'read'" in r.err
+    assert "missing_seed.txt does not exist (needed by step 'read')" in r.err
     assert "step 'fetch' (road_source/toy): the toy road server is offline" in r.err
     assert project.counts() == {} and not (project.ws / "01_make").exists()
     # the same with the problems gone runs every step

@@ -134,11 +134,6 @@ def toy_roads(params, ctx, *, in_data_txt: Path, out_osm_txt: Path) -> None:
     out_osm_txt.write_text(Path(in_data_txt).read_text())
 
 
-def no_roads(params, ctx) -> None:
-    """road_source=none: never runs (the plan leaves the step out)."""
-    raise AssertionError("road_source=none ran")
-
-
 def convert_roads(params, ctx, *, out_net_txt: Path, in_osm_txt: Path | None = None,
                   in_xodr_txt: Path | None = None) -> None:
     """Reads only optional inputs (like osm_to_opendrive)."""
@@ -165,7 +160,6 @@ def toy_roads_preflight(site, params, inputs) -> list[str]:
 @hookimpl
 def twinkit_register_road_sources(register):
     register("toy", toy_roads, preflight=toy_roads_preflight)
-    register("none", no_roads)
 
 
 @hookimpl

@@ -91,8 +91,9 @@ def _site_inputs(site: dict) -> dict[str, Any]:
     return dict(site.get("inputs") or {})
 
 
-#: the plugin name that selects no plugin of a kind (``road_source=none``): steps using the kind are left out
-#: of the plan (logged), and with them the optional steps that then read nothing a running step writes
+#: the name that selects no plugin of a kind (``road_source=none``; twinkit/config.py offers it for every
+#: step-like kind): steps using the kind are left out of the plan (logged), and with them the optional steps
+#: that then read nothing a running step writes
 NONE = "none"
 
 #: key of the composed config holding the step parameters given on the command line (see ``given_params``)

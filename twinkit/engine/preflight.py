@@ -19,21 +19,21 @@ log = logging.getLogger("twinkit.preflight")
 
 
 def site_input_problems(plan) -> list[str]:
-    """Site input files of the planned steps that are missing or unreadable, one line each."""
+    """Site input files of the planned steps that are missing or unreadable, one line each (the same
+    words as when the step itself meets them: twinkit/engine/keys.py, twinkit/cli.py)."""
     out: list[str] = []
     seen: set[Path] = set()
     for ps in plan:
-        for param, src in ps.inputs.items():
+        for src in ps.inputs.values():
             if src is None or src.path is None or src.path in seen:
                 continue
             seen.add(src.path)
-            key = src.path.name
             if not src.path.exists():
-                out.append(f"site input {src.path} does not exist (read by step '{ps.id}' as {param}); fix the path "
-                           f"in the site config or on the command line")
+                out.append(f"site input {src.path} does not exist (needed by step '{ps.id}'); fix the path in the "
+                           f"site config or on the command line")
             elif not os.access(src.path, os.R_OK) or (src.path.is_dir() and not os.access(src.path, os.X_OK)):
-                out.append(f"site input {src.path} is not readable (read by step '{ps.id}' as {param}; "
-                           f"{key}: check its permissions)")
+                out.append(f"{src.path}: permission denied; make it readable by this user (site input of step "
+                           f"'{ps.id}')")
     return out
 
 

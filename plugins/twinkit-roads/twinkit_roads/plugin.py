@@ -25,7 +25,7 @@ from twinkit.ranges import param
 from . import __version__
 from .convert import ConvertParams
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
-from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, no_road_source, opendrive_source, osm_api_source, overpass_source,
+from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
                       site_radius)
 
 
@@ -536,8 +536,6 @@ def twinkit_register_road_sources(register):
              description="OpenStreetMap API /map by box around the base point (cached)")
     register("overpass", overpass_source, params=DownloadParams, version=VERSION, preflight=overpass_preflight,
              description="Overpass API query for highways by box around the base point (cached)")
-    register("none", no_road_source, version=VERSION,
-             description="no road network: the road steps are left out; meshes, labels and exports only")
     register("opendrive", opendrive_source, params=OpenDriveSourceParams, version=VERSION,
              description="an existing OpenDRIVE map (site.inputs.xodr or road_source.path) moved from its "
                          "geoReference into the site frame")

@@ -184,9 +184,3 @@ def opendrive_source(params, ctx, *, out_opendrive_xodr: Path, out_reprojection_
             "scale": rep["similarity"]["scale"], "rotation_deg": rep["similarity"]["rotation_deg"],
             "lane_centres": rep["lane_centres"], "identity": rep["similarity"]["identity"]}
 
-
-def no_road_source(params, ctx) -> dict:
-    """``road_source=none``: a twin without a road network. The engine leaves the step out of the plan
-    (``twinkit.engine.plan.NONE``), so this runs only when called outside a recipe."""
-    raise InputError("road_source=none means no road network: the engine leaves the road steps out of the plan; "
-                     "choose road_source=file / overpass / osm_api / opendrive for roads")
