@@ -3,7 +3,8 @@
 The engine checks that every site input file a step reads exists and is readable; each plugin may add
 its own checks (``register(..., preflight=fn)``, see twinkit/hookspecs.py): ``fn(site, params, inputs)``
 returns its problems, one line each. Every problem of every step is collected and reported together,
-one line each, as an :class:`twinkit.InputError` (exit 2), before a long step has run. A preflight
+one line each (a single problem: that line alone), as an :class:`twinkit.InputError` (exit 2), before a
+long step has run. A preflight
 that crashes is a bug of its plugin: it is logged and the run goes on (the step's own checks remain).
 """
 from __future__ import annotations
@@ -59,8 +60,9 @@ def run_preflight(plan, cfg: dict) -> list[str]:
             continue
         problems += [f"step '{ps.id}' ({ps.label}): {p}" for p in found if p not in bad_inputs]
     log.debug("preflight: %d steps checked in %.2f s", len(plan), time.perf_counter() - t0)
+    if len(problems) == 1:
+        raise InputError(problems[0])  # one line, as when the step itself meets it
     if problems:
-        n = len(problems)
-        raise InputError(f"preflight found {n} problem{'s' if n > 1 else ''} before the first step ran:\n  "
+        raise InputError(f"preflight found {len(problems)} problems before the first step ran:\n  "
                          + "\n  ".join(problems))
     return problems

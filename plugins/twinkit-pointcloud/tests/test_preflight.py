@@ -92,5 +92,7 @@ def test_a_run_is_refused_before_the_first_step(tmp_path):
                         f"engine.outputs_dir={tmp_path / 'out'}"],
                        capture_output=True, text=True, cwd=REPO, env=env, timeout=300)
     assert p.returncode == 2, p.stderr[-3000:]
-    assert "preflight found 1 problem" in p.stderr and "430 m outside the cloud's box" in p.stderr, p.stderr[-3000:]
+    errors = [ln for ln in p.stderr.splitlines() if "error" in ln.lower()]
+    assert len(errors) == 1 and "430 m outside the cloud's box" in errors[0], p.stderr[-3000:]
+    assert "step 'read_cloud' (step/read_cloud): street.laz: the site's base point" in errors[0]
     assert not list((tmp_path / "out" / "mex").glob("0*"))

@@ -159,8 +159,8 @@ def read_cloud_preflight(site, params, inputs) -> list[str]:
     try:
         b = cloud_bounds(path)
     except Exception as exc:  # noqa: BLE001 -- an empty, cut or corrupt file: read_cloud's reader names the fault
-        log.info("%s: no bounds from the header (%s: %s); read_cloud checks the file", path.name,
-                 type(exc).__name__, str(exc).splitlines()[0][:200] if str(exc) else "")
+        log.debug("%s: no bounds from the header (%s: %s); read_cloud checks the file", path.name,
+                  type(exc).__name__, str(exc).splitlines()[0][:200] if str(exc) else "")
         return []
     if b is None:
         log.info("%s: no bounds in the header; the base point is checked when read_cloud runs", path.name)

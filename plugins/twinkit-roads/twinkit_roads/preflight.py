@@ -66,7 +66,7 @@ def file_preflight(site, params, inputs) -> list[str]:
     try:
         box = osm_file_bbox(src)
     except Exception as exc:  # noqa: BLE001 -- a corrupt file: fetch_roads's reader names the fault
-        log.info("%s: no bounds (%s: %s); fetch_roads reads and checks it", src.name, type(exc).__name__, exc)
+        log.debug("%s: no bounds (%s: %s); fetch_roads reads and checks it", src.name, type(exc).__name__, exc)
         return []
     if box is None:
         log.info("%s: no bounding box in the header and too large to scan here; its cover is checked when "
