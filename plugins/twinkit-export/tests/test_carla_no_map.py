@@ -35,7 +35,7 @@ def test_package_without_opendrive_is_props_only_and_says_so(tmp_path, class_dir
     readme = (pkg / "README.md").read_text()
     assert "no map and no OpenDRIVE" in readme and "road_source=none" in readme
     spawn = json.loads((root / "spawn_points.json").read_text())
-    assert spawn["count"] == 0 and "no road network" in spawn["note"]
+    assert spawn["count"] == 0 and spawn["map"] is None and "no road network" in spawn["note"]
     assert json.loads((root / "Import" / "roadpainter_decals.json").read_text()) == {"decals": []}
     script = (root / "spawn_props.py").read_text()
     assert "MAP = ''" in script and all(f"static.prop.{n.lower()}" in script for n in props)

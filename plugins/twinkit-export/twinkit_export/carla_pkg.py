@@ -376,7 +376,7 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
                                           props=json.dumps(spawn_list, indent=4)))
     script.chmod(0o755)
     (folder / "spawn_points.json").write_text(json.dumps(
-        {"map": map_name, "count": len(spawn),
+        {"map": map_name if has_map else None, "count": len(spawn),
          "frames": {"carla": "carla.Transform arguments: metres, degrees, Unreal left-handed (y = -north)",
                     "site": "site frame: x east, y north, z up; heading counter-clockwise from east"},
          "spawn_points": spawn, **({} if has_map else {"note": NO_MAP_NOTE})}, indent=1) + "\n")
