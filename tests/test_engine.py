@@ -332,3 +332,55 @@ def test_optional_step_is_skipped_when_its_input_is_missing(project):
     r = project.run("site=s", "recipe=opt")
     assert r.rc == 0, r.text
     assert (project.ws / "03_double" / "double.txt").read_text() == "8\n"
+
+
+def test_kind_none_leaves_out_its_step_and_the_optional_steps_that_depend_on_it(project):
+    """road_source=none: the road steps are left out with a logged reason, the later steps take what exists;
+    a site input left for the user ('???') that only the left-out steps read does not stop the run (issue 28)."""
+    project.site("r", "name: t\ninputs:\n  osm: ???\n")
+    project.recipe("twin", ["{id: make, uses: step/make}",
+                            "{id: fetch, uses: road_source}",
+                            "{id: convert, uses: step/convert_roads, optional: true}",
+                            "{id: align, uses: step/align_net, optional: true}",
+                            "{id: double, uses: step/double}",
+                            "{id: export, uses: step/export_all}"], extra="defaults:\n  - /road_source: toy\n  - _self_\n")
+    # the default: roads from the toy source; every step runs (the site's osm is not read: fetch writes it)
+    r = project.run("site=t", "recipe=twin")
+    assert r.rc == 0, r.text
+    assert (project.ws / "06_export" / "export.txt").read_text() == "roads\n"
+    assert project.counts() == {"make": 1, "toy_roads": 1, "convert_roads": 1, "align_net": 1, "double": 1,
+                                "export_all": 1}
+    project.reset_counts()
+    r = project.run("site=r", "recipe=twin", "road_source=none")
+    assert r.rc == 0, r.text
+    assert "road_source=none was chosen" in r.text
+    assert re.search(r"convert\s+skipped\s+.*road_source=none", r.text), r.text
+    assert re.search(r"align\s+skipped\s+optional step: its input in_net_txt comes from convert, which was left out", r.text), r.text
+    assert (project.ws / "03_export" / "export.txt").read_text() == "no roads\n"
+    assert set(project.counts()) == {"export_all"}  # make and double reused; no road step ran
+    # without a '<kind>=none' choice, an optional step whose site input is left empty ('???') still fails
+    # the plan, naming the key (behaviour kept)
+    project.recipe("conv", ["{id: make, uses: step/make}", "{id: convert, uses: step/convert_roads, optional: true}"])
+    r = project.run("site=r", "recipe=conv")
+    assert r.rc != 0 and "site.inputs.osm" in r.text, r.text
+
+
+def test_preflight_refuses_before_the_first_step_runs(project):
+    """Cheap checks of every planned step run before any step: a missing site input of the last step and a
+    plugin's own check are both reported, one line each, with exit 2, and nothing runs (issue 28)."""
+    project.site("p", f"name: t\nroads_offline: true\ninputs:\n  seed: {project.tmp / 'missing_seed.txt'}\n")
+    project.recipe("late", ["{id: make, uses: step/make}", "{id: fetch, uses: road_source}",
+                            "{id: double, uses: step/double}", "{id: read, uses: step/read_seed}"],
+                   extra="defaults:\n  - /road_source: toy\n  - _self_\n")
+    r = project.run("site=p", "recipe=late")
+    assert r.rc == 2, r.text
+    assert "preflight found 2 problems before the first step ran" in r.err, r.err
+    assert "missing_seed.txt does not exist (needed by step 'read')" in r.err
+    assert "step 'fetch' (road_source/toy): the toy road server is offline" in r.err
+    assert project.counts() == {} and not (project.ws / "01_make").exists()
+    # the same with the problems gone runs every step
+    seed = project.tmp / "missing_seed.txt"
+    seed.write_text("5\n")
+    r = project.run("site=p", "recipe=late", "site.roads_offline=false")
+    assert r.rc == 0, r.text
+    assert project.counts() == {"make": 1, "toy_roads": 1, "double": 1, "read_seed": 1}

@@ -92,6 +92,9 @@ def register_configs(registry: Registry) -> None:
             continue
         for name, plugin in registry.plugins[kind].items():
             cs.store(group=kind, name=name, node=_with_plugin_field(name, plugin.params))
+        if kind in STEP_KINDS:
+            # '<kind>=none' chooses no plugin: the steps using the kind are left out (twinkit/engine/plan.py NONE)
+            cs.store(group=kind, name="none", node=_with_plugin_field("none", None))
     steps_fields = []
     for name, plugin in sorted(registry.plugins["step"].items()):
         if plugin.params is not None:

@@ -2,7 +2,7 @@
 
 Every registration hook receives a ``register`` callback::
 
-    register(name, run, params=None, version=None, description="", uses=())
+    register(name, run, params=None, version=None, description="", uses=(), preflight=None)
 
 ``name`` is what users type (``reconstructor=poisson``); ``run`` is the
 callable described per kind below; ``params`` is a dataclass whose fields are
@@ -12,6 +12,13 @@ distribution that provides the plugin; ``uses`` names component kinds
 (``image_model``, ``view_sampler``, ``executor``) whose configuration becomes
 part of the step's cache key. Registering a name twice for one kind raises
 :class:`twinkit.errors.PluginError`; nothing is ever renamed.
+
+``preflight(site, params, inputs)`` (optional) holds a step-like plugin's cheap checks: the engine
+calls it for every planned step before the first step runs, with the site, the step's resolved
+parameters and ``inputs`` (``{in_<name>: Path | None}``: every input wired to the step, the path of a
+site input file, None for a file an earlier step writes, which does not exist yet). It returns a list of problems, one line each (an empty list:
+fine), and may log; a problem stops the run with exit 2 before any long step (docs/engine.md,
+"Preflight").
 
 Step-like kinds (site generators, reconstructors, segmenters, road sources,
 exporters and generic steps) have ``run(params, ctx, **files)``: keyword

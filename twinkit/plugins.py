@@ -60,10 +60,11 @@ _TWINKIT_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+twinkit((?:\.\w+)*)[ \t]+impo
 
 
 def _report_only(f: Path, root: Path) -> bool:
-    """Whether ``f`` is a plugin's report code (``<pkg>/report.py`` or ``<pkg>/report/...``), which shows
-    results and never changes them, so it is left out of the code hash."""
+    """Whether ``f`` is a plugin's report code (``<pkg>/report.py`` or ``<pkg>/report/...``) or its preflight
+    checks (``<pkg>/preflight.py``), which show or check and never change results, so it is left out of the
+    code hash."""
     rel = f.relative_to(root).parts
-    return rel[0] in ("report.py", "report")
+    return rel[0] in ("report.py", "report", "preflight.py")
 
 
 def _shared_root(name: str) -> list[Path]:
@@ -121,6 +122,10 @@ class Plugin:
     uses: tuple[str, ...] = ()
     distribution: str = "?"
     module: str = ""
+    #: ``preflight(site, params, inputs) -> list[str]``: the plugin's cheap checks (``inputs``: every wired
+    #: input, a site file's path or None for an earlier step's file), run for every planned step
+    #: before the first step runs (twinkit/engine/preflight.py); each string is one problem, one line
+    preflight: Callable[..., Any] | None = None
 
     @property
     def qualname(self) -> str:
@@ -198,7 +203,10 @@ def _make_register(registry: Registry, kind: str, dist: str, dist_version: str, 
         version: str | None = None,
         description: str = "",
         uses: tuple[str, ...] | list[str] = (),
+        preflight: Callable[..., Any] | None = None,
     ) -> None:
+        if preflight is not None and not callable(preflight):
+            raise PluginError(f"{dist}: {kind} plugin '{name}' registered a non-callable preflight")
         if not isinstance(name, str) or not name.replace("_", "").replace("-", "").isalnum():
             raise PluginError(f"{dist}: plugin name {name!r} must be letters, digits, '_' or '-'")
         if not callable(run):
@@ -224,6 +232,7 @@ def _make_register(registry: Registry, kind: str, dist: str, dist_version: str, 
             uses=tuple(uses),
             distribution=dist,
             module=getattr(run, "__module__", module),
+            preflight=preflight,
         )
 
     return register

@@ -161,10 +161,47 @@ def threads(params, ctx, *, in_data_txt: Path, out_threads_txt: Path) -> dict:
     return {"threads": ctx.threads}
 
 
+def toy_roads(params, ctx, *, in_data_txt: Path, out_osm_txt: Path) -> None:
+    """A road source: writes the 'roads' of the site."""
+    _count("toy_roads")
+    out_osm_txt.write_text(Path(in_data_txt).read_text())
+
+
+def convert_roads(params, ctx, *, out_net_txt: Path, in_osm_txt: Path | None = None,
+                  in_xodr_txt: Path | None = None) -> None:
+    """Reads only optional inputs (like osm_to_opendrive)."""
+    _count("convert_roads")
+    out_net_txt.write_text(Path(in_osm_txt or in_xodr_txt).read_text())
+
+
+def align_net(params, ctx, *, in_net_txt: Path, out_aligned_txt: Path) -> None:
+    _count("align_net")
+    out_aligned_txt.write_text(Path(in_net_txt).read_text())
+
+
+def export_all(params, ctx, *, in_double_txt: Path, out_export_txt: Path, in_aligned_txt: Path | None = None) -> None:
+    """Takes the roads when there are any (like carla_package)."""
+    _count("export_all")
+    out_export_txt.write_text("roads\n" if in_aligned_txt else "no roads\n")
+
+
+def toy_roads_preflight(site, params, inputs) -> list[str]:
+    """A plugin's cheap check (twinkit/engine/preflight.py): refuses a site marked ``roads_offline``."""
+    return ["the toy road server is offline (site.roads_offline)"] if site.get("roads_offline") else []
+
+
+@hookimpl
+def twinkit_register_road_sources(register):
+    register("toy", toy_roads, preflight=toy_roads_preflight)
+
+
 @hookimpl
 def twinkit_register_steps(register):
     register("crash", crash, params=CrashParams)
     register("threads", threads)
+    register("convert_roads", convert_roads)
+    register("align_net", align_net)
+    register("export_all", export_all)
     register("make", make, params=MakeParams)
     register("read_seed", read_seed)
     register("make_ply", make_ply)

@@ -91,6 +91,11 @@ def _site_inputs(site: dict) -> dict[str, Any]:
     return dict(site.get("inputs") or {})
 
 
+#: the name that selects no plugin of a kind (``road_source=none``; twinkit/config.py offers it for every
+#: step-like kind): steps using the kind are left out of the plan (logged), and with them the optional steps
+#: that then read nothing a running step writes
+NONE = "none"
+
 #: key of the composed config holding the step parameters given on the command line (see ``given_params``)
 GIVEN_KEY = "command_line_params"
 
@@ -123,7 +128,9 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
     """Turn the composed config into an ordered list of steps with wired inputs.
 
     Steps marked ``optional: true`` whose required inputs are unavailable are left out and
-    appended to ``skipped`` as (step id, reason). Raises ConfigError naming the recipe, step,
+    appended to ``skipped`` as (step id, reason). A step whose kind is chosen as ``none``
+    (``road_source=none``) is left out too, and after it every optional step none of whose inputs
+    comes from a step that runs. Raises ConfigError naming the recipe, step,
     plugin, key or file at fault.
     """
     site = cfg.get("site") or {}
@@ -150,6 +157,8 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
     base_dir = config_root or Path.cwd()
 
     idx = 0
+    chosen_none: list[str] = []  # '<kind>=none' choices that left a step out (see NONE)
+    left_out: list[tuple[str, bool, str]] = []  # (filename, is_dir, step id) of optional steps left out
     for spec in specs:
         idx += 1
         where = f"recipe '{rname}', step '{spec.id}'"
@@ -183,6 +192,14 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                 name = node.get("plugin")
                 if not name:
                     raise ConfigError(f"{where}: no {kind} selected; add '{kind}=<name>' or 'uses: {kind}/<name>'")
+            if name == NONE and kind not in ("step", "site_generator"):
+                # an explicit choice of nothing (road_source=none): the step is left out, and so are the
+                # optional steps after it that read nothing a running step writes
+                chosen_none.append(f"{kind}={NONE}")
+                if skipped is not None:
+                    skipped.append((spec.id, f"{kind}={NONE} was chosen (no {kind})"))
+                idx -= 1
+                continue
             try:
                 plugin = registry.get(kind, name)
             except TwinkitError as exc:
@@ -217,10 +234,26 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                     port, want, produced, site_inputs, site_name, where, base_dir, optional=port.optional
                 )
         except ConfigError as exc:
-            if not spec.optional or "needs input" in str(exc):
+            # a site input left empty ('???') fails even an optional step, unless a '<kind>=none' choice left
+            # out the step that would have used it (site mex's osm with road_source=none)
+            if not spec.optional or ("needs input" in str(exc) and not chosen_none):
                 raise
+            by = next((sid for f, d, sid in reversed(left_out) if port.accepts(f, d)), None)
             if skipped is not None:
-                skipped.append((spec.id, f"no {port.name} ({port.param}) on this site"))
+                if by is not None:
+                    skipped.append((spec.id, f"optional step: its input {port.param} comes from {by}, which was left out"))
+                else:
+                    why = f" ({', '.join(chosen_none)})" if chosen_none and "needs input" in str(exc) else ""
+                    skipped.append((spec.id, f"optional step: no {port.name} ({port.param}) on this site{why}"))
+            left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
+            idx -= 1
+            continue
+        if spec.optional and chosen_none and signature.inputs and not any(
+                src is not None and src.step_index is not None for src in inputs.values()):
+            if skipped is not None:
+                skipped.append((spec.id, f"optional step: none of its inputs ({', '.join(p.param for p in signature.inputs)}) is "
+                                         f"written by a step that runs ({', '.join(chosen_none)})"))
+            left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
             idx -= 1
             continue
         unknown_wiring = set(spec.inputs) - {p.param for p in signature.inputs}

@@ -20,6 +20,7 @@ from twinkit.engine.keys import KeysMixin
 from twinkit.engine.locks import LockMixin
 from twinkit.engine.manual import ManualMixin
 from twinkit.engine.plan import PlannedStep, build_plan
+from twinkit.engine.preflight import run_preflight
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.engine.recipes import RecipesMixin
 from twinkit.engine.status import StatusMixin
@@ -112,8 +113,9 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             self._release()
             raise
         for sid, reason in self.skipped:
-            log.info("[-] %-28s skipped  optional step: %s", sid, reason)
+            log.info("[-] %-28s skipped  %s", sid, reason)
         try:
+            run_preflight(self.plan, self.cfg)  # cheap checks of every step before the first runs (exit 2)
             n = len(self.plan)
             for ps in self.plan:
                 self.current_step = ps.id

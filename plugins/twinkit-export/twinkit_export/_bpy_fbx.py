@@ -15,10 +15,11 @@ import numpy as np
 
 def _material(bpy, name: str, texture: str | None):
     mat = bpy.data.materials.new(name)
-    if hasattr(mat, "use_nodes"):
+    # Blender 5 always uses nodes; touching Material.use_nodes there only prints a DeprecationWarning
+    if bpy.app.version < (5, 0, 0) and hasattr(mat, "use_nodes"):
         try:
             mat.use_nodes = True
-        except Exception:  # Blender 5 always uses nodes; the property may be read-only
+        except Exception:
             pass
     nt = mat.node_tree
     bsdf = next((n for n in nt.nodes if n.type == "BSDF_PRINCIPLED"), None)

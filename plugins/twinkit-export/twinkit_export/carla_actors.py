@@ -101,6 +101,7 @@ import argparse
 import sys
 
 ACTORS = {actors}
+MAP = {map_check!r}  # the map the transforms belong to; "": any map (a package without a map of its own)
 
 
 def main():
@@ -128,8 +129,8 @@ def main():
     client = carla.Client(args.host, args.port)
     client.set_timeout(30.0)
     world = client.get_world()
-    if not world.get_map().name.endswith({map!r}):
-        sys.exit(f"the running map is {{world.get_map().name}}, load {map!r} first (client.load_world({map!r}))")
+    if MAP and not world.get_map().name.endswith(MAP):
+        sys.exit(f"the running map is {{world.get_map().name}}, load {{MAP!r}} first (client.load_world({{MAP!r}}))")
     lib = world.get_blueprint_library()
     for a in todo:
         bp_id = a["scanned_prop"] if args.scanned else a["blueprint"]
@@ -160,8 +161,10 @@ if __name__ == "__main__":
 '''
 
 
-def write_actor_files(folder: Path, entries: list[dict], *, map_name: str, package: str, source: dict) -> None:
-    """``folder/actors.json`` and ``folder/spawn_actors.py`` (folder = the package root beside ``Import/``)."""
+def write_actor_files(folder: Path, entries: list[dict], *, map_name: str, package: str, source: dict,
+                      has_map: bool = True) -> None:
+    """``folder/actors.json`` and ``folder/spawn_actors.py`` (folder = the package root beside ``Import/``).
+    ``has_map=False``: the package has no map (no OpenDRIVE), the script spawns into whichever map runs."""
     folder = Path(folder)
     (folder / ACTORS_FILE).write_text(json.dumps({
         "map": map_name, "count": len(entries), "lifted": bool(source.get("lifted", True)),
@@ -172,5 +175,6 @@ def write_actor_files(folder: Path, entries: list[dict], *, map_name: str, packa
         "actors": entries}, indent=1) + "\n")
     script = folder / SPAWN_ACTORS
     script.write_text(SCRIPT.format(map=map_name, map_lower=map_name.lower(), package=package,
+                                    map_check=map_name if has_map else "",
                                     actors=pprint.pformat(entries, indent=1, width=110, sort_dicts=False)))
     script.chmod(0o755)

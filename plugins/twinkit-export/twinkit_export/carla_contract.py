@@ -344,8 +344,11 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     if not isinstance(maps, list) or not isinstance(props, list):
         rep.add("json", f"{desc_path.name}: 'maps' and 'props' must be lists")
         return rep
-    if not maps:
-        rep.add("json", f"{desc_path.name}: no map ('maps' is empty)")
+    if not maps and not props:
+        rep.add("json", f"{desc_path.name}: no map and no prop ('maps' and 'props' are empty)")
+    elif not maps and not (pkg / "README.md").is_file():
+        # a props-only package is what CARLA imports without an OpenDRIVE; it must say that it has no map
+        rep.add("json", f"{desc_path.name}: no map ('maps' is empty) and no README.md saying why")
 
     def intended(cid):
         if cid is None:

@@ -190,6 +190,44 @@ alone (props are not obstacles in it).
 {frames}
 """
 
+NO_MAP_NOTE = ("no road network (road_source=none): the package has no map and no OpenDRIVE, so no spawn points; "
+               "the twin's meshes are props (README.md)")
+
+README_NO_MAP = """# CARLA import package `{package}`: props only, no map
+
+Made by twinkit (`carla_package` exporter) for CARLA {carla_version} built from source, from a twin
+made **without a road network** (`road_source=none`, no OpenStreetMap or OpenDRIVE input).
+
+**There is no map and no OpenDRIVE (`.xodr`) in this package.** CARLA's `make import` needs an
+OpenDRIVE file beside each map's FBX (`Import.py` builds the pedestrian navmesh and the traffic
+manager's binary from it; a map entry without one fails), and a road network cannot be invented
+from nothing. So `{package}.json` lists no map (`"maps": []`) and every class of the twin is a
+prop: `{map}_<Class>.fbx`, imported into `Static/<Tag>/` so CARLA's Tagger gives it its class's
+tag. Without OpenDRIVE there are no driving lanes, no spawn points (`spawn_points.json` is empty),
+no traffic lights or signs from CARLA, and vehicles cannot drive on the twin. For a drivable map,
+give the site an OSM extract (`site.inputs.osm`) or an OpenDRIVE (`road_source=opendrive`) and run
+the recipe again.
+
+Files: `{package}.json`, one FBX per class, `{texture}` (the texture every FBX references by
+relative path). Beside this folder: `../roadpainter_decals.json` (empty: no map to paint). Beside
+`Import/`: `spawn_props.py` (places the props in the running map, whichever it is).
+
+## Import
+
+1. Copy the contents of `carla_import/Import/` into `<carla>/Import/`.
+2. From the CARLA root: `make import ARGS="--package={package}"`: the props become blueprints
+   `static.prop.<prop>`.
+3. `make launch`, open any map, and with the simulator running: `python spawn_props.py` (beside
+   `Import/`). It spawns each prop at the map origin, where the twin's coordinates put it; or drag
+   the prop assets into a level at (0, 0, 0) in the editor.
+
+{table}
+{movables}
+## Frames
+
+{frames}
+"""
+
 MOVABLES_README = """
 ## Movable objects ({n})
 
@@ -214,6 +252,7 @@ import argparse
 import sys
 
 PROPS = {props}
+MAP = {map_check!r}  # the map the props belong to; "": any map (a package without a map of its own)
 
 
 def main():
@@ -235,9 +274,9 @@ def main():
     client = carla.Client(args.host, args.port)
     client.set_timeout(30.0)
     world = client.get_world()
-    if not world.get_map().name.endswith({map!r}):
-        sys.exit(f"the running map is {{world.get_map().name}}, load {map!r} first "
-                 f"(client.load_world({map!r}))")
+    if MAP and not world.get_map().name.endswith(MAP):
+        sys.exit(f"the running map is {{world.get_map().name}}, load {{MAP!r}} first "
+                 f"(client.load_world({{MAP!r}}))")
     lib = world.get_blueprint_library()
     for p in todo:
         try:
@@ -262,7 +301,7 @@ def _site_frames(georef: str) -> str:
 
 
 def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path, classes: list[dict],
-                  texture: Path | None, xodr_text: str, spawn: list[dict], use_carla_materials: bool, georef: dict,
+                  texture: Path | None, xodr_text: str | None, spawn: list[dict], use_carla_materials: bool, georef: dict,
                   decals: bool = False, python: str = "", log_path: Path | None = None,
                   carla_version: str = "0.9.16", frames=None, scanned: list[dict] | None = None) -> tuple[Path, dict]:
     """Write ``folder/Import/<package>/...``, ``Import/roadpainter_decals.json``, ``spawn_props.py``.
@@ -272,6 +311,8 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
     package's frame already. ``frames(georef_text) -> str``: the README's frame section (default: the
     site frame). ``scanned``: the lifted movable objects as extra props (``carla_actors.scanned_props``:
     name, ply, class_id, faces, mesh), registered like the others but spawned only on request.
+    ``xodr_text=None`` (no road network, ``road_source=none``): no map at all, every class is a prop
+    (``README_NO_MAP`` says why: CARLA's import needs an OpenDRIVE beside a map's FBX).
     """
     import shutil
 
@@ -287,12 +328,13 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
     if texture is not None and Path(texture).exists():
         tex = pkg / Path(texture).name
         shutil.copyfile(texture, tex)
+    has_map = xodr_text is not None
     present = [c for c in classes if c["faces"] > 0]
     map_files, map_names, props = [], {}, []
     for c in present:
         ci = info(c["class_id"])
         ply = Path(class_dir) / c["file"]
-        if is_map_geometry(ci):
+        if has_map and is_map_geometry(ci):
             map_files.append(ply)
             map_names[ply] = package_mesh_name(ci)
             continue
@@ -309,30 +351,35 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
         props.append({"name": sp["name"], "ply": sp["ply"], "class": ci.name, "class_id": ci.train_id,
                       "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),
                       "faces": int(sp["faces"]), "mesh": sp["mesh"], "scanned": True})
-    if not map_files:
+    if has_map and not map_files:
         raise PackageError("no road, sidewalk or terrain mesh: a CARLA map needs ground geometry")
-    jobs = [(pkg / f"{map_name}.fbx", map_files, map_names)]
+    if not has_map and not props:
+        raise PackageError("no class mesh with faces: nothing to put in the package")
+    jobs = [(pkg / f"{map_name}.fbx", map_files, map_names)] if has_map else []
     jobs += [(pkg / f"{p['name']}.fbx", [p["ply"]], {p["ply"]: p["mesh"]}) for p in props]
     write_fbx_set(jobs, tex, georef=georef, python=python, log_path=log_path)
-    (pkg / f"{map_name}.xodr").write_text(xodr_text)
+    if has_map:
+        (pkg / f"{map_name}.xodr").write_text(xodr_text)
     desc = {"maps": [{"name": map_name, "source": f"./{map_name}.fbx",
-                      "use_carla_materials": bool(use_carla_materials), "xodr": f"./{map_name}.xodr"}],
+                      "use_carla_materials": bool(use_carla_materials), "xodr": f"./{map_name}.xodr"}]
+            if has_map else [],
             "props": [{"name": p["name"], "source": f"./{p['name']}.fbx", "tag": p["tag"], "size": p["size"]}
                       for p in props]}
     (pkg / f"{package}.json").write_text(json.dumps(desc, indent=2) + "\n")
-    (folder / "Import" / DECALS_FILE).write_text(json.dumps({"decals": [decals_entry(map_name, decals)]}, indent=2)
-                                                 + "\n")
+    # no map: an empty decals list (without the file, Import.py would write one with random decals)
+    (folder / "Import" / DECALS_FILE).write_text(json.dumps(
+        {"decals": [decals_entry(map_name, decals)] if has_map else []}, indent=2) + "\n")
     spawn_list = [{"blueprint": f"static.prop.{p['name'].lower()}", "class": p["class"], "tag": p["label"],
                    "faces": p["faces"], **({"scanned": 1} if p.get("scanned") else {})} for p in props]
     script = folder / "spawn_props.py"
-    script.write_text(SPAWN_SCRIPT.format(map=map_name, package=package,
+    script.write_text(SPAWN_SCRIPT.format(map=map_name, package=package, map_check=map_name if has_map else "",
                                           props=json.dumps(spawn_list, indent=4)))
     script.chmod(0o755)
     (folder / "spawn_points.json").write_text(json.dumps(
-        {"map": map_name, "count": len(spawn),
+        {"map": map_name if has_map else None, "count": len(spawn),
          "frames": {"carla": "carla.Transform arguments: metres, degrees, Unreal left-handed (y = -north)",
                     "site": "site frame: x east, y north, z up; heading counter-clockwise from east"},
-         "spawn_points": spawn}, indent=1) + "\n")
+         "spawn_points": spawn, **({} if has_map else {"note": NO_MAP_NOTE})}, indent=1) + "\n")
     rows = ["| class | in the package | ends in | tag | placed by |", "|---|---|---|---|---|"]
     for c in present:
         ci = info(c["class_id"])
@@ -351,7 +398,7 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
                         f"`Static/{p['tag']}/{p['name']}` | {p['label']} | `spawn_props.py --with-scanned` or "
                         f"`spawn_actors.py --scanned` (default: `spawn_actors.py` spawns CARLA actors instead) |")
     geo = ", ".join(f"{k} {v}" for k, v in georef.items() if k in ("crs", "lat", "lon", "alt"))
-    (pkg / "README.md").write_text(README.format(
+    (pkg / "README.md").write_text((README if has_map else README_NO_MAP).format(
         package=package, map=map_name, texture=tex.name if tex else "(no texture)", n_spawn=len(spawn),
         map_classes=", ".join(f"`{n}`" for n in map_names.values()),
         decals="none, `decals=true` for CARLA's default random decals" if not decals else "CARLA's default counts",

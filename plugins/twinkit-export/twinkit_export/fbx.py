@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -67,6 +68,31 @@ def write_fbx_set(outputs: list[tuple[Path, list[Path], dict[Path, str]]], textu
              timeout_s=timeout_s, expect=[Path(o) for o, _, _ in outputs])
 
 
+#: What ``import bpy`` prints on every start with NumPy 2: the bpy wheel's built-in audio module
+#: (audaspace's ``aud``) was compiled against NumPy 1.x, so NumPy 2's ABI guard prints its warning with
+#: a traceback, the import of ``aud`` fails and Blender prints "Unable to initialise audio". Nothing
+#: else in bpy uses NumPy's C API (the FBX add-on uses NumPy from Python, which works), and the
+#: export needs no audio, so the cause cannot be fixed from here short of NumPy 1.x for the bpy
+#: interpreter (``TWINKIT_BPY_PYTHON``). The block is replaced by one line in bpy.log; any other
+#: output, another traceback included, is kept as it is.
+_BPY_NUMPY_NOISE = re.compile(
+    r"\n?A module that was compiled using NumPy 1\.x cannot be run in\n.*?"
+    r"Unable to initialise audio\nImportError: numpy\.core\.multiarray failed to import\n", re.S)
+BPY_NUMPY_NOTE = ("bpy: audio off (its audio module was built for NumPy 1.x; NumPy's ABI warning removed "
+                  "by twinkit, see twinkit_export/fbx.py); the export does not use audio\n")
+
+
+def clean_log(log_path: Path) -> None:
+    """Replace the known, harmless NumPy-ABI block of ``import bpy`` in ``log_path`` by one line."""
+    try:
+        text = log_path.read_text(errors="replace")
+    except OSError:
+        return
+    m = _BPY_NUMPY_NOISE.search(text)
+    if m and "Traceback" in m.group(0) and m.group(0).count("Unable to initialise audio") == 1:
+        log_path.write_text(text[:m.start()] + BPY_NUMPY_NOTE + text[m.end():])
+
+
 def _run_job(job: dict, texture: Path | None, out: Path, *, georef: dict | None, embed_texture: bool, python: str,
              log_path: Path | None, timeout_s: float, expect: list[Path]) -> None:
     job = {**job,
@@ -85,6 +111,7 @@ def _run_job(job: dict, texture: Path | None, out: Path, *, georef: dict | None,
             proc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, timeout=timeout_s)
     finally:
         job_path.unlink(missing_ok=True)
+    clean_log(log_path)
     if proc.returncode != 0 or not all(Path(p).exists() for p in expect):
         tail = log_path.read_text(errors="replace")[-3000:] if log_path.exists() else ""
         if "No module named 'bpy'" in tail:

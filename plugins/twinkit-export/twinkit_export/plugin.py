@@ -320,8 +320,9 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     params = params or CarlaPackageParams()
     t0 = time.perf_counter()
     if in_aligned_xodr is None:
-        raise InputError("carla_package needs the aligned road network aligned.xodr (OpenDRIVE in the site frame): "
-                         "add the road alignment step before it, or set site.inputs.aligned=/path/to/roads.xodr")
+        return _carla_props_only(params, ctx, in_twin_fbx=in_twin_fbx, in_class_meshes_dir=in_class_meshes_dir,
+                                 out_carla_import_dir=out_carla_import_dir, out_spawn_points_json=out_spawn_points_json,
+                                 in_site_json=in_site_json, in_movables_dir=in_movables_dir, t0=t0)
     xodr = Path(in_aligned_xodr)
     try:
         text = xodr.read_text()
@@ -396,6 +397,72 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
             "xodr_georeference": xodr_georeference(text), "package_bytes": _size(out),
             "frame": frame.to_json() if frame is not None else "site",
             "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path, in_class_meshes_dir: Path,
+                      out_carla_import_dir: Path, out_spawn_points_json: Path, in_site_json: Path | None,
+                      in_movables_dir: Path | None, t0: float) -> dict:
+    """The package of a twin without a road network (``road_source=none``): no map, every class a prop.
+
+    CARLA's import needs an OpenDRIVE beside a map's FBX (Import.py copies it, builds the navmesh and
+    the traffic manager's binary from it; a map entry without one fails), so a map is not written;
+    the README and ``spawn_points.json`` say so, and so does the log."""
+    from .carla_actors import carla_actors, scanned_props, write_actor_files
+    from .carla_contract import check_package
+    from .carla_pkg import NO_MAP_NOTE, PackageError, check_names, write_package
+    from .fbx import FbxExportError, bpy_python
+    from .lift_step import load_actors
+
+    site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
+    map_name = params.map_name or _camel(site_name)
+    package = params.package or f"{map_name}Twin"
+    try:
+        check_names(package, map_name)
+    except PackageError as exc:
+        raise InputError(f"carla_package: {exc}") from None
+    cs = _load_set(in_class_meshes_dir)
+    fbx = Path(in_twin_fbx)
+    tex = next((fbx.with_suffix(e) for e in (".png", ".jpg", ".jpeg") if fbx.with_suffix(e).exists()), None) \
+        or cs.texture
+    georef = _georef(ctx, in_site_json)
+    out = Path(out_carla_import_dir)
+    work = Path(ctx.workdir) / "carla_frame_meshes"
+    mov_data, movables = load_actors(in_movables_dir)
+    scanned = scanned_props(movables, map_name, None, work / "scanned", tex.name if tex else None)
+    geo_text = ", ".join(f"{k} {v}" for k, v in georef.items() if k in ("crs", "lat", "lon", "alt"))
+    frames = (f"The props are in the site frame (x east, y north, z up, metres, origin at the base point "
+              f"({geo_text})); spawned at a map's origin they lie where the twin's coordinates put them. Unreal "
+              f"mirrors y on import.")
+    try:
+        pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=Path(cs.folder),
+                                    classes=cs.manifest["classes"], texture=tex, xodr_text=None, spawn=[],
+                                    use_carla_materials=params.use_carla_materials, georef=georef,
+                                    decals=params.decals, python=bpy_python(),
+                                    log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version,
+                                    frames=lambda g: frames, scanned=scanned)
+    except PackageError as exc:
+        raise InputError(f"carla_package: {exc}") from None
+    except FbxExportError as exc:
+        raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
+    shutil.rmtree(work, ignore_errors=True)
+    actors = carla_actors(mov_data.get("actors", []), None, map_name)
+    if in_movables_dir is not None:
+        write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data, has_map=False)
+    shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
+    rep = check_package(out, package, expect_decals=None)
+    if not rep.ok:
+        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+                           + "\n  ".join(str(v) for v in rep.violations))
+    summ = rep.summary()
+    ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "
+                    "class meshes are props (no spawn points, no drivable lanes; %s/README.md)", package,
+                    len(placed["props"]), package)
+    return {"package": package, "map": None, "opendrive": False, "note": NO_MAP_NOTE, "spawn_points": 0,
+            "topology_edges": 0, "map_meshes": [], "props": placed["props"], "faces_by_tag": summ["faces_by_tag"],
+            "wrong_terrain_share": summ["wrong_terrain_share"], "dropped_assets": summ["dropped_assets"],
+            "walkable_faces": summ["walkable_faces"], "decals": summ["decals"], "actors": len(actors),
+            "actor_blueprints": sorted({a["blueprint"] for a in actors if a["blueprint"]}),
+            "package_bytes": _size(out), "frame": "site", "seconds": round(time.perf_counter() - t0, 2)}
 
 
 # ----------------------------------------------------------------------------- registration

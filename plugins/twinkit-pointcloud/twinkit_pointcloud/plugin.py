@@ -27,6 +27,7 @@ class ReadCloudParams:
     drop_invalid_points: bool = True  # drop NaN/inf points with a warning (False: error)
     max_offset_km: float = param(20.0, gt=0)  # without site bounds: cloud centre farther from the base point = wrong CRS
     bounds_margin_m: float = param(50.0, ge=0)  # with site bounds: margin around them for the wrong-CRS check
+    max_base_point_offset_m: float = param(250.0, ge=0)  # preflight: base point farther outside the cloud's box is refused (0: off); docs/pointcloud.md
 
 
 @dataclass
@@ -470,7 +471,9 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
 
 @hookimpl
 def twinkit_register_steps(register):
-    register("read_cloud", read_cloud, params=ReadCloudParams)
+    from .preflight import read_cloud_preflight
+
+    register("read_cloud", read_cloud, params=ReadCloudParams, preflight=read_cloud_preflight)
     register("clean_mesh", clean_mesh, params=CleanParams)
     register("simplify", simplify, params=SimplifyParams)
     register("bake_texture", bake_texture, params=BakeParams)

@@ -65,6 +65,14 @@ class CachedHttp:
         blob = json.dumps([method, url, sorted((params or {}).items()), sorted((data or {}).items())])
         return hashlib.sha256(blob.encode()).hexdigest()
 
+    def cached(self, method: str, url: str, *, params: dict | None = None, data: dict | None = None) -> Path | None:
+        """The fresh cached answer of this request (what :meth:`request` would serve without the network), or None."""
+        key = self._key(method, url, params, data)
+        body_path, meta_path = self.cache_dir / f"{key}.body", self.cache_dir / f"{key}.json"
+        if body_path.is_file() and meta_path.is_file() and time.time() - body_path.stat().st_mtime <= self.max_age_s:
+            return body_path
+        return None
+
     def request(self, method: str, url: str, *, params: dict | None = None, data: dict | None = None,
                 validate=None) -> HttpResult:
         """Fetch ``url``; served from the cache when a fresh copy exists. ``validate(bytes)`` may reject a body."""

@@ -528,11 +528,13 @@ def _iou(pred, gt) -> dict:
 
 @hookimpl
 def twinkit_register_road_sources(register):
-    register("file", file_source, params=FileSourceParams, version=VERSION,
+    from .preflight import file_preflight, osm_api_preflight, overpass_preflight
+
+    register("file", file_source, params=FileSourceParams, version=VERSION, preflight=file_preflight,
              description="local .osm / .osm.bz2 / .osm.pbf (site.inputs.osm or road_source.path)")
-    register("osm_api", osm_api_source, params=DownloadParams, version=VERSION,
+    register("osm_api", osm_api_source, params=DownloadParams, version=VERSION, preflight=osm_api_preflight,
              description="OpenStreetMap API /map by box around the base point (cached)")
-    register("overpass", overpass_source, params=DownloadParams, version=VERSION,
+    register("overpass", overpass_source, params=DownloadParams, version=VERSION, preflight=overpass_preflight,
              description="Overpass API query for highways by box around the base point (cached)")
     register("opendrive", opendrive_source, params=OpenDriveSourceParams, version=VERSION,
              description="an existing OpenDRIVE map (site.inputs.xodr or road_source.path) moved from its "

@@ -183,3 +183,4 @@ def opendrive_source(params, ctx, *, out_opendrive_xodr: Path, out_reprojection_
     return {"source": str(src), "residual_max_m": round(rep["residual_max_m"], 6),
             "scale": rep["similarity"]["scale"], "rotation_deg": rep["similarity"]["rotation_deg"],
             "lane_centres": rep["lane_centres"], "identity": rep["similarity"]["identity"]}
+
