@@ -6,12 +6,22 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from pathlib import Path
 from typing import Any
 
 from twinkit.engine.plan import PlannedStep
 from twinkit.engine.store import site_fields, with_site
 from twinkit.errors import InputError
 from twinkit.hashing import artefact_hash
+
+
+def missing_input(path: Path, step_id: str) -> str:
+    """One line for a site input that is not there (a broken link named as one)."""
+    if path.is_symlink():
+        return (f"site input {path} is a broken link (to {os.readlink(path)}, which does not exist; needed by "
+                f"step '{step_id}'); fix the link or give the file's own path")
+    return (f"site input {path} does not exist (needed by step '{step_id}'); fix the path in the site config or "
+            f"on the command line")
 
 
 class KeysMixin:
@@ -30,16 +40,8 @@ class KeysMixin:
                 paths[param], hashes[param] = None, None
                 continue
             if src.path is not None:
-                if not src.path.exists() and src.path.is_symlink():
-                    raise InputError(
-                        f"site input {src.path} is a broken link (to {os.readlink(src.path)}, which does not exist; "
-                        f"needed by step '{ps.id}'); fix the link or give the file's own path"
-                    )
                 if not src.path.exists():
-                    raise InputError(
-                        f"site input {src.path} does not exist (needed by step '{ps.id}'); "
-                        f"fix the path in the site config or on the command line"
-                    )
+                    raise InputError(missing_input(src.path, ps.id))
                 paths[param] = src.path
                 hashes[param] = artefact_hash(src.path, self.hashes) if src.path.is_dir() else self.hashes.hash(src.path)
             else:

@@ -14,6 +14,7 @@ import os
 import time
 from pathlib import Path
 
+from twinkit.engine.keys import missing_input
 from twinkit.errors import InputError, TwinkitError
 
 log = logging.getLogger("twinkit.preflight")
@@ -30,8 +31,7 @@ def site_input_problems(plan) -> list[str]:
                 continue
             seen.add(src.path)
             if not src.path.exists():
-                out.append(f"site input {src.path} does not exist (needed by step '{ps.id}'); fix the path in the "
-                           f"site config or on the command line")
+                out.append(missing_input(src.path, ps.id))
             elif not os.access(src.path, os.R_OK) or (src.path.is_dir() and not os.access(src.path, os.X_OK)):
                 out.append(f"{src.path}: permission denied; make it readable by this user (site input of step "
                            f"'{ps.id}')")
