@@ -79,22 +79,12 @@ def _ply_bounds(path: Path):
 def _e57_bounds(path: Path):
     from pye57 import libe57
 
-    from .readers import _child, _node_value, _quat_to_matrix
+    from .readers import _child, _e57_crs, _node_value, _quat_to_matrix
 
     imf = libe57.ImageFile(str(path), "r")
     try:
         root = imf.root()
-        crs = None
-        cm = _child(root, "coordinateMetadata")
-        if cm is not None:
-            s = _node_value(cm)
-            if isinstance(s, str) and s.strip():
-                try:
-                    from pyproj import CRS
-
-                    crs = CRS.from_user_input(s.strip()).to_wkt()
-                except Exception:  # noqa: BLE001
-                    crs = None
+        crs = _e57_crs(root)
         if not root.isDefined("data3D"):
             return None
         data3d = libe57.VectorNode(root.get("data3D"))

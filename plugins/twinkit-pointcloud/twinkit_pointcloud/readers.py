@@ -76,6 +76,22 @@ def _node_value(node) -> float | str | None:
     return None
 
 
+def _e57_crs(root) -> str | None:
+    """The CRS an E57 file names in its ``coordinateMetadata`` (as WKT), or None."""
+    cm = _child(root, "coordinateMetadata")
+    if cm is None:
+        return None
+    s = _node_value(cm)
+    if not (isinstance(s, str) and s.strip()):
+        return None
+    try:
+        from pyproj import CRS
+
+        return CRS.from_user_input(s.strip()).to_wkt()
+    except Exception:  # noqa: BLE001 -- any unparsable text: no CRS, the site's is used
+        return None
+
+
 def _child(struct, name):
     from pye57 import libe57
 
@@ -107,17 +123,7 @@ def read_e57(path: Path) -> RawCloud:
                            f"re-export it from the scanner software") from exc
     try:
         root = imf.root()
-        crs = None
-        cm = _child(root, "coordinateMetadata")
-        if cm is not None:
-            s = _node_value(cm)
-            if isinstance(s, str) and s.strip():
-                try:
-                    from pyproj import CRS
-
-                    crs = CRS.from_user_input(s.strip()).to_wkt()
-                except Exception:
-                    crs = None
+        crs = _e57_crs(root)
         if not root.isDefined("data3D"):
             raise _input_error(f"{path.name}: the E57 file has no data3D section (no point scans); "
                                f"export the point cloud, not only images")
