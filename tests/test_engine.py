@@ -169,7 +169,10 @@ def test_fan_out_runs_items_in_parallel_and_caches_each(project):
     project.recipe("fan", ["{id: make, uses: step/make}", "{id: tiles, uses: step/tiles}",
                            "{id: per_tile, uses: step/per_tile, foreach: tiles.json}",
                            "{id: gather, uses: step/gather}"])
-    r = project.run("site=t", "recipe=fan", "steps.tiles.n=4", "executor.workers=2")
+    # each item takes 1 s, so that one worker cannot finish them all before the second has started (spawned
+    # workers start in 0.5-2 s on a busy 2-core machine)
+    r = project.run("site=t", "recipe=fan", "steps.tiles.n=4", "executor.workers=2",
+                    env=project.env(TWINKIT_TEST_TILE_SLEEP="1"))
     assert r.rc == 0, r.text
     assert (project.ws / "04_gather" / "merged.txt").read_text() == f"{4 * 1 + 0 + 1 + 2 + 3}\n"
     pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(4)}
