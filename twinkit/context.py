@@ -32,6 +32,26 @@ class StepContext:
     log: logging.Logger = field(default_factory=lambda: logging.getLogger("twinkit.step"))
     _component_factory: Callable[[str, str | None], Any] | None = None
     _executor_factory: Callable[[], Any] | None = None
+    _degraded: list = field(default_factory=list)
+
+    def degraded(self, reason: str, hint: str | None = None) -> None:
+        """Say that this step's result is degenerate (far less than it should be): the run ends "degraded".
+
+        ``reason`` says what was achieved against what was expected ("the mesh covers 5 m² of a 900 m² walk");
+        ``hint`` names the setting to try. The step still returns its outputs; later steps still run. The
+        run's manifest, report and ``twinkit status`` show the reasons in red, and the command exits with 4
+        (``engine.degraded_exit_code``). The reasons are stored with the result, so a cached step stays degraded.
+        """
+        entry = {"step": self.step_id, "reason": str(reason)}
+        if hint:
+            entry["hint"] = str(hint)
+        self._degraded.append(entry)
+        self.log.warning("DEGRADED: %s%s", reason, f" (try {hint})" if hint else "")
+
+    @property
+    def degraded_reasons(self) -> list[dict]:
+        """What ``degraded`` was told so far (tests read it)."""
+        return list(self._degraded)
 
     def progress(self, iterable: Iterable[T], total: int | None = None, desc: str | None = None) -> Iterator[T]:
         """Iterate with a progress bar on a terminal; plain and quiet otherwise."""

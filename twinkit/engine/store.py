@@ -29,6 +29,7 @@ from twinkit.engine.records import RECORD, RECORD_SCHEMA, _now, read_record
 from twinkit.errors import StepError
 from twinkit.hashing import HashCache, artefact_hash, list_files
 from twinkit.jsonio import write_json as write_json_atomic
+from twinkit.quality import with_degraded
 from twinkit.signature import Port
 
 log = logging.getLogger("twinkit")
@@ -151,6 +152,7 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
             shutil.rmtree(tmp, ignore_errors=True)
             raise
         duration = time.perf_counter() - t0
+        metrics = with_degraded(metrics if isinstance(metrics, dict) else {}, ctx._degraded)
         missing = [p.filename for p in outputs if not (tmp / p.filename).exists()]
         wrong = [p.filename for p in outputs if (tmp / p.filename).exists() and p.is_dir != (tmp / p.filename).is_dir()]
         if missing or wrong:
