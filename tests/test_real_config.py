@@ -69,7 +69,9 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
     out = tmp_path / "outputs"
     fast = [*FAST, f"image_model={model}"] + (["image_model.input_long_side_px=512"] if model != "oracle" else [])
     p = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *fast, cwd=tmp_path)
-    assert p.returncode == 0, p.stderr[-3000:]
+    # the coarse settings give a depth-8 mesh whose road is not at the lanes' height: the drop test may call
+    # the result degraded (exit 4); nothing else may
+    assert p.returncode in (0, 4), p.stderr[-3000:]
     ws = out / "demo"
     for f in ("01_site/cloud.e57", "02_read_cloud/points.ply", "03_reconstruct/dense_mesh.ply",
               "06_texture/textured_mesh.obj", "06_texture/textured_mesh.png", "07_evaluate/recon_metrics.json",
@@ -84,6 +86,8 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
     run = sorted((ws / "runs").iterdir())[-1]
     manifest = json.loads((run / "manifest.json").read_text())
     assert [s["status"] for s in manifest["steps"]] == ["ran"] * STEPS
+    assert {e["step"] for e in manifest["degraded"]} <= {"drop_test"}, manifest["degraded"]
+    assert manifest["status"] == ("degraded" if p.returncode == 4 else "ok")
     assert (run / "report" / "report.html").is_file()
     seg = json.loads((ws / "14_evaluate_segmentation" / "seg_metrics.json").read_text())["scores"]
     if model == "oracle":  # exact labels through the views: proves rendering and back-projection end to end
@@ -91,5 +95,5 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
     assert any(i["path"].endswith("cloud.e57") for i in manifest["outputs"])
     assert twinkit("verify", str(run), cwd=tmp_path).returncode == 0
     again = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *fast, cwd=tmp_path)
-    assert again.returncode == 0, again.stderr[-3000:]
+    assert again.returncode == p.returncode, again.stderr[-3000:]  # a reused degraded result stays degraded
     assert again.stderr.count(" reused ") == STEPS, again.stderr

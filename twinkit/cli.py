@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from twinkit.errors import ConfigError, InputError, StepError, TwinkitError
+from twinkit.quality import DEGRADED_EXIT
 
 log = logging.getLogger("twinkit")
 
@@ -55,7 +56,11 @@ def _setup_logging(run_log: Path | None) -> None:
 def _format_outcome(oc, i: int, n: int) -> str:
     dur = f"{oc.duration_s:7.1f} s" if oc.status in ("ran",) or oc.duration_s >= 0.05 else " " * 9
     mem = f"  peak {oc.peak_rss_mb:.0f} MB" if oc.status == "ran" and oc.peak_rss_mb else ""
-    return f"[{i}/{n}] {oc.folder:<24} {oc.status:<7} {dur}  {oc.why}{mem}"
+    from twinkit.quality import degraded_of
+
+    bad = degraded_of(oc.metrics)
+    flag = f"  DEGRADED ({len(bad)}: {bad[0]['reason']}{' ...' if len(bad) > 1 else ''})" if bad else ""
+    return f"[{i}/{n}] {oc.folder:<24} {oc.status:<7} {dur}  {oc.why}{mem}{flag}"
 
 
 def _interactive(setting: str) -> bool:
@@ -277,14 +282,29 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
                     raise StepError(f"the run finished, but its manifest could not be written: "
                                     f"{_os_text(exc, run_dir)}") from None
             if status == "ok":
+                status = manifest["status"]  # "degraded" when a step said its result is far below what it should be
                 log.info("twinkit: done in %.1f s; manifest %s", time.perf_counter() - t0, run_dir / "manifest.json")
+                _say_degraded(manifest.get("degraded") or [], engine_cfg)
                 if engine_cfg.get("report", True):
                     _write_report(run_dir, manifest, engine)
         if saved_handlers:
             from twinkit.signals import restore_handlers
 
             restore_handlers(saved_handlers)
-    return 0
+    return int(engine_cfg.get("degraded_exit_code", DEGRADED_EXIT)) if status == "degraded" else 0
+
+
+def _say_degraded(entries: list[dict], engine_cfg: dict) -> None:
+    """The log's last word on a degraded run: every reason, and the exit status it gets."""
+    from twinkit.quality import describe
+
+    if not entries:
+        return
+    code = int(engine_cfg.get("degraded_exit_code", DEGRADED_EXIT))
+    log.error("twinkit: DEGRADED result: %d step result(s) are far below what they should be%s:", len(entries),
+              f" (exit status {code})" if code else "")
+    for e in entries:
+        log.error("  - %s", describe(e))
 
 
 def _os_error_in(exc: BaseException | None) -> OSError | None:
@@ -453,7 +473,33 @@ def _run_hydra(argv: list[str]) -> int:
         raise signalled["exc"]
     if _STATE.get("error") is not None:
         raise _STATE.pop("error")
+    if "-m" in argv or "--multirun" in argv:
+        return _sweep_exit_code()
     return 0
+
+
+def _sweep_exit_code() -> int:
+    """A sweep whose jobs all finished exits like its worst job: degraded jobs give the degraded exit status."""
+    import json
+
+    try:
+        from twinkit.report.sweep import SweepSummaryCallback
+    except ImportError:
+        return 0
+    sweep, SweepSummaryCallback.last_sweep = SweepSummaryCallback.last_sweep, None
+    if sweep is None:  # the sweep callback was configured away: nothing to read
+        return 0
+    worst = 0
+    for mf in sorted(sweep.glob("*/manifest.json")):
+        try:
+            m = json.loads(mf.read_text())
+        except (OSError, ValueError):
+            continue
+        if m.get("status") == "degraded":
+            code = int(((m.get("config") or {}).get("engine") or {}).get("degraded_exit_code", DEGRADED_EXIT))
+            log.error("twinkit: sweep job %s is DEGRADED (see its report)", mf.parent.name)
+            worst = max(worst, code)
+    return worst
 
 
 def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
@@ -614,8 +660,15 @@ def cmd_status(args: list[str]) -> int:
     print(f"recipe '{cfg['recipe'].get('name')}' on site '{site['name']}' in {site_root}")
     for sid, reason in engine.skipped:
         print(f"  {'-- ' + sid:<24} {'skipped':<12} {reason}")
+    red = sys.stdout.isatty() and not os.environ.get("NO_COLOR")
+    degraded = 0
     for folder, decision, why in rows:
+        if decision == "DEGRADED":
+            degraded += 1
+            decision = f"\033[1;31m{decision:<12}\033[0m" if red else f"{decision:<12}"
         print(f"  {folder:<24} {decision:<12} {why}")
+    if degraded:
+        print(f"{degraded} step result(s) are DEGRADED: far below what they should be (reasons above)")
     return 0
 
 

@@ -24,6 +24,8 @@ class EngineConfig:
     interactive: str = "auto"  # auto (a terminal) | true | false
     manual_timeout_s: Optional[float] = param(None, gt=0)
     report: bool = True
+    # exit status of a run that finished with a degraded result (docs/engine.md "Degraded results"); 0 = exit 0
+    degraded_exit_code: int = param(4, ge=0, le=125)
 
 
 def find_config_dir() -> Path:

@@ -38,7 +38,7 @@ class StepContext:
         """Say that this step's result is degenerate (far less than it should be): the run ends "degraded".
 
         ``reason`` says what was achieved against what was expected ("the mesh covers 5 m² of a 900 m² walk");
-        ``hint`` names the setting to try. The step still returns its outputs; later steps still run. The
+        ``hint`` says what to look at or which setting to try ("try reconstructor.max_dist_m=0.6"). The step still returns its outputs; later steps still run. The
         run's manifest, report and ``twinkit status`` show the reasons in red, and the command exits with 4
         (``engine.degraded_exit_code``). The reasons are stored with the result, so a cached step stays degraded.
         """
@@ -46,7 +46,7 @@ class StepContext:
         if hint:
             entry["hint"] = str(hint)
         self._degraded.append(entry)
-        self.log.warning("DEGRADED: %s%s", reason, f" (try {hint})" if hint else "")
+        self.log.warning("DEGRADED: %s%s", reason, f" ({hint})" if hint else "")
 
     @property
     def degraded_reasons(self) -> list[dict]:

@@ -96,9 +96,15 @@ def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site:
         {"kind": p.kind, "name": p.name, "version": p.version, "distribution": p.distribution, "module": p.module}
         for p in registry.all()
     ]
+    from twinkit.quality import run_degraded
+
+    degraded = run_degraded(steps)
+    if status == "ok" and degraded:
+        status = "degraded"
     return {
         "schema_version": SCHEMA_VERSION,
         "status": status,
+        "degraded": degraded,
         "error": error,
         "argv": argv,
         "overrides": overrides,

@@ -65,6 +65,6 @@ def run_degraded(steps: Iterable[dict]) -> list[dict]:
 
 
 def describe(entry: dict) -> str:
-    """One line: ``step (item 3): reason (try hint)``."""
+    """One line: ``step (item 3): reason (hint)``."""
     where = entry.get("step", "?") + (f" (item {entry['item']})" if entry.get("item") is not None else "")
-    return f"{where}: {entry['reason']}" + (f" (try {entry['hint']})" if entry.get("hint") else "")
+    return f"{where}: {entry['reason']}" + (f" ({entry['hint']})" if entry.get("hint") else "")

@@ -59,6 +59,7 @@ def double(params, ctx, *, in_data_txt: Path, out_double_txt: Path) -> dict:
 @dataclass
 class ScaleParams:
     factor: int = 3
+    degrade_below: int = 0  # a result below this says it is degraded (ctx.degraded)
 
 
 def scale(params: ScaleParams, ctx, *, in_double_txt: Path, out_scaled_txt: Path) -> dict:
@@ -66,6 +67,8 @@ def scale(params: ScaleParams, ctx, *, in_double_txt: Path, out_scaled_txt: Path
     _count("scale")
     v = int(Path(in_double_txt).read_text().splitlines()[0])
     out_scaled_txt.write_text(f"{params.factor * v}\n")
+    if params.factor * v < params.degrade_below:
+        ctx.degraded(f"scaled value {params.factor * v} is below {params.degrade_below}", "try steps.scale.factor=10")
     return {"value": params.factor * v}
 
 
@@ -105,6 +108,8 @@ def per_tile(params, ctx, *, in_data_txt: Path, item: dict, out_tile_txt: Path) 
         time.sleep(sleep)
     v = int(Path(in_data_txt).read_text().splitlines()[0])
     out_tile_txt.write_text(f"{v + item['i']}\n{os.getpid()}\n")
+    if str(item["i"]) == os.environ.get("TWINKIT_TEST_DEGRADE_TILE"):
+        return {"pid": os.getpid(), "degraded": [{"reason": f"tile {item['i']} came out empty"}]}
     return {"pid": os.getpid(), "omp_threads": os.environ.get("OMP_NUM_THREADS"), "started": time.time()}
 
 

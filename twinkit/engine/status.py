@@ -6,6 +6,7 @@ from twinkit.engine.recipes import parked_folder
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.errors import TwinkitError
 from twinkit.hashing import HashCache, artefact_hash
+from twinkit.quality import degraded_of, describe
 
 
 class StatusMixin:
@@ -48,8 +49,13 @@ class StatusMixin:
                     rows.append((ps.folder, "would run", f"output missing: {', '.join(files)}"))
                     dirty = True
                     continue
-                rows.append((ps.folder, "up to date" if state == "unchanged" else "edited",
-                             "" if state == "unchanged" else ", ".join(files)))
+                bad = degraded_of(rec.get("metrics"))
+                if bad:  # up to date, but its result is degenerate: say so, with the reason and the setting to try
+                    rows.append((ps.folder, "DEGRADED", "; ".join(describe(dict(e, step=ps.id)) for e in bad)
+                                 + ("" if state == "unchanged" else f" (edited: {', '.join(files)})")))
+                else:
+                    rows.append((ps.folder, "up to date" if state == "unchanged" else "edited",
+                                 "" if state == "unchanged" else ", ".join(files)))
                 if ps.foreach is not None:
                     hashes = rec["artefacts"] if state == "unchanged" else None
                     if hashes is None:

@@ -33,7 +33,8 @@ import time
 from pathlib import Path
 
 from twinkit.report.context import SectionContext
-from twinkit.report.page import ASSETS, CITYSCAPES, CSS_FILE, IGNORE_COLOR, Page, esc, palette, render_page, status_badge
+from twinkit.report.page import (ASSETS, CITYSCAPES, CSS_FILE, IGNORE_COLOR, Page, degraded_banner, esc, palette,
+                                 render_page, status_badge)
 from twinkit.report.render import ORTHO_PX, TopDown
 from twinkit.report.run import REPORT_DIR, RunView, prune_cache
 from twinkit.report.sections import GALLERIES, core_sections
@@ -107,6 +108,8 @@ def build_report(run_dir: Path, manifest: dict, engine=None) -> Path:
             f"{(cfg.get('recipe') or {}).get('name', '?')}"
     sub = (f"{status_badge(str(manifest.get('status', '?')))} run {esc(Path(run_dir).name)} · "
            f"{esc(manifest.get('finished', ''))}")
+    if manifest.get("degraded"):
+        page.banner = degraded_banner(manifest["degraded"])
     shutil.copyfile(ASSETS / CSS_FILE, tmp / CSS_FILE)
     (tmp / "report.html").write_text(render_page(title, page, sub), encoding="utf-8")
     timings.update(pics.timings)

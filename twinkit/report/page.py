@@ -77,6 +77,7 @@ class Page:
         self.out = out
         self.sections: list[tuple[str, str, str]] = []  # id, title, html
         self.notes: list[str] = []
+        self.banner: str = ""  # HTML shown above everything (a degraded run's reasons)
 
     def add(self, sid: str, title: str, body: str | None) -> None:
         if body:
@@ -113,6 +114,17 @@ def legend(present: Iterable[int] | None = None) -> str:
         f"<span><i style=\"background:rgb{c}\"></i>{esc(n)}</span>" for _, n, c in items) + "</div>"
 
 
+def degraded_banner(entries: list[dict]) -> str:
+    """The red box of a degraded run: each reason with its step and the setting to try."""
+    items = []
+    for e in entries:
+        where = esc(e.get("step", "?")) + (f" (item {esc(e['item'])})" if e.get("item") is not None else "")
+        hint = f" <i>({esc(e['hint'])})</i>" if e.get("hint") else ""
+        items.append(f"<li><b>{where}</b>: {esc(e.get('reason', ''))}{hint}</li>")
+    return (f"<div class=\"degraded\" id=\"degraded\"><b>Degraded result:</b> the run finished, but "
+            f"{len(entries)} step result(s) are far below what they should be.<ul>{''.join(items)}</ul></div>")
+
+
 def render_page(title: str, page: Page, subtitle: str = "") -> str:
     nav = "".join(f"<a href=\"#{sid}\">{esc(t)}</a>" for sid, t, _ in page.sections)
     body = "".join(f"<section id=\"{sid}\"><h2>{esc(t)}</h2>{h}</section>" for sid, t, h in page.sections)
@@ -122,6 +134,6 @@ def render_page(title: str, page: Page, subtitle: str = "") -> str:
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
         f"<title>{esc(title)}</title><link rel=\"stylesheet\" href=\"{CSS_FILE}\"></head><body>"
-        f"<header><h1>{esc(title)}</h1><p>{subtitle}</p><nav>{nav}</nav></header>{notes}<main>{body}</main>"
+        f"<header><h1>{esc(title)}</h1><p>{subtitle}</p><nav>{nav}</nav></header>{page.banner}{notes}<main>{body}</main>"
         f"<footer>written by twinkit.report at {gen}</footer></body></html>\n"
     )

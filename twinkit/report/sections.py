@@ -21,6 +21,7 @@ import json
 from pathlib import Path
 
 from twinkit.plugins import ReportSection
+from twinkit.quality import degraded_of
 from twinkit.report.context import SectionContext
 from twinkit.report.page import esc, figure, fmt, legend, size, status_badge, table
 from twinkit.report.run import RunView, flatten, rel
@@ -67,7 +68,8 @@ def _timeline(run: RunView) -> str:
             f"<td class=\"num\">{i}</td>",
             f"<td><a href=\"#step-{esc(s.get('folder'))}\">{esc(s.get('folder'))}</a></td>",
             f"<td>{esc(s.get('plugin', ''))}</td>",
-            f"<td>{status_badge(str(s.get('status', '?')))}</td>",
+            f"<td>{status_badge(str(s.get('status', '?')))}"
+            f"{(' ' + status_badge('degraded')) if degraded_of(s.get('metrics')) else ''}</td>",
             f"<td>{esc(s.get('why', ''))}</td>",
             f"<td class=\"num\">{d:.1f} s</td>",
             f"<td class=\"num\">{esc(fmt(s.get('peak_rss_mb')) if s.get('peak_rss_mb') else '')}</td>",
@@ -75,7 +77,8 @@ def _timeline(run: RunView) -> str:
         ]) + "</tr>")
     head = "".join(f"<th>{h}</th>" for h in ("#", "folder", "plugin", "status", "why", "time", "peak MB", ""))
     key = ("<p class=\"legend\">ran: computed now · cached: linked from an earlier result · reused: "
-              "unchanged in place · edited: a hand edit was kept · manual: a file you provided</p>")
+              "unchanged in place · edited: a hand edit was kept · manual: a file you provided · degraded: the step "
+              "said its result is far below what it should be (reasons at the top)</p>")
     return f"<table class=\"timeline\"><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>{key}"
 
 

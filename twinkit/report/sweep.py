@@ -187,9 +187,11 @@ class SweepSummaryCallback(_HydraCallback):  # type: ignore[misc, valid-type]
     """Writes the sweep summary when a multirun ends (never fails the sweep)."""
 
     _done: set = set()
+    last_sweep: Path | None = None
 
     def on_multirun_end(self, config, **kwargs) -> None:
         sweep = Path(str(config.hydra.sweep.dir)).resolve()
+        SweepSummaryCallback.last_sweep = sweep  # the CLI reads its jobs' statuses for the exit status
         if sweep in SweepSummaryCallback._done:  # Hydra may call a callback twice; write and say it once
             return
         SweepSummaryCallback._done.add(sweep)

@@ -47,6 +47,10 @@ def _run(tmp_path, v, f, name):
     return json.loads(out["drop_test.json"].read_text()), out
 
 
+def _metrics(out: dict) -> dict:
+    return json.loads((out["drop_test.json"].parent / "step.json").read_text())["metrics"]
+
+
 def test_whole_street_holds_every_ray(tmp_path):
     v, f = _street()
     rep, out = _run(tmp_path, v, f, "whole")
@@ -57,11 +61,12 @@ def test_whole_street_holds_every_ray(tmp_path):
     assert rep["ok"] is True and rep["open_border_over_driving_lanes_m"] == 0.0
     assert drv["widest_hole_m"] == 0.0
     assert out["drop_test.png"].stat().st_size > 1000
+    assert "degraded" not in _metrics(out)  # a whole ground is not a degraded result
 
 
 def test_a_30cm_hole_in_a_lane_fails_and_is_located(tmp_path):
     v, f = _street(hole_at=(20.0, 3.0))
-    rep, _ = _run(tmp_path, v, f, "hole")
+    rep, out_ = _run(tmp_path, v, f, "hole")
     drv = rep["lanes"]["driving"]
     missed = drv["rays"] - drv["hits"]
     assert 4 <= missed <= 16 and drv["fall_through"] == missed  # nothing under them: they fall through
@@ -71,6 +76,9 @@ def test_a_30cm_hole_in_a_lane_fails_and_is_located(tmp_path):
     assert abs(top["x"] - 20.0) < 0.2 and abs(top["y"] - 3.0) < 0.2
     assert rep["open_border_over_driving_lanes_m"] > 1.0 and rep["open_chains_over_driving_lanes"] == 1
     assert rep["lanes"]["sidewalk"]["hit_pct"] == 100.0
+    # the run ends "degraded" (exit 4), naming the lane kind and the hole
+    reasons = [e["reason"] for e in _metrics(out_)["degraded"]]
+    assert len(reasons) == 1 and "driving lanes" in reasons[0] and "hole 0." in reasons[0]
 
 
 def test_a_lane_off_the_surface_misses_without_falling_through(tmp_path):

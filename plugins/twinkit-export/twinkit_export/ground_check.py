@@ -181,6 +181,15 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
         else:
             ctx.log.warning("drop test: no %s lane of the map lies inside the scanned site", kind)
     res["ok"] = bool(ok_all)
+    for kind, lane in res["lanes"].items():  # a wheel or a foot drops in: the twin is not fit to drive on
+        if lane["rays"] and not lane["ok"]:
+            hole = lane["widest_hole_m"] > params.max_hole_m
+            ctx.degraded(f"drop test over {kind} lanes: {lane['hit_pct']:.2f} % of {lane['rays']} rays find the "
+                         f"ground (target {lane['target_pct']} %)"
+                         + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
+                            if hole else ""),
+                         f"misses in orange in {Path(out_drop_test_png).name}"
+                         + ("; the clean step fills scan gaps up to steps.clean.fill_ground_max_gap_m" if hole else ""))
     up = cloud.normals[:, 2] >= 0.85 if cloud.normals is not None else np.zeros(cloud.n_vertices, bool)
     gv = np.abs(height_above_ground(mesh.vertices, cloud.vertices[up])) <= 0.5
     border = ground_border(mesh.vertices, mesh.faces, fp, gv)
