@@ -275,7 +275,7 @@ def test_manifest_records_and_verifies(project):
 def test_step_records_beside_outputs(project):
     assert project.run("site=t", "recipe=chain", "steps.scale.factor=4").rc == 0
     rec = json.loads((project.ws / "03_scale" / "step.json").read_text())
-    assert rec["plugin"] == "step/scale" and rec["params"] == {"factor": 4}
+    assert rec["plugin"] == "step/scale" and rec["params"] == {"factor": 4, "degrade_below": 0}
     assert rec["status"] == "ran" and rec["files"]["scaled.txt"]["size"] == 2
     assert rec["duration_s"] is not None
 

@@ -43,6 +43,10 @@ class PoissonParams:
     backend: str = param("open3d", choices=("open3d", "pymeshlab"))  # open3d | pymeshlab (optional dependency, the thesis's route)
     normals_k: int = param(24, ge=3, le=1000)  # only used when the points have no normals
     normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"))
+    # threads of the solver. 1: the same mesh on every machine and run (measured on the demo: open3d's parallel
+    # solver gives a different mesh on each run with 2 threads, a 0.3 m sidewalk hole in one; 1 thread costs
+    # about 10 % more time). 0: the step's share of the cores (faster, not repeatable)
+    threads: int = param(1, ge=0)
 
 
 @dataclass
@@ -253,9 +257,9 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
                   samples_per_node=params.samples_per_node)
         if params.backend == "open3d":
             mesh = poisson_open3d(pts, normals, cloud.colors, linear_fit=params.linear_fit,
-                                  threads=_threads(ctx), **kw)
+                                  threads=params.threads or _threads(ctx), **kw)
         elif params.backend == "pymeshlab":
-            mesh = poisson_pymeshlab(pts, normals, cloud.colors, threads=_threads(ctx), **kw)
+            mesh = poisson_pymeshlab(pts, normals, cloud.colors, threads=params.threads or _threads(ctx), **kw)
         else:
             raise InputError(f"poisson: unknown backend '{params.backend}' (open3d or pymeshlab)")
         if mesh.n_faces == 0:
