@@ -69,3 +69,28 @@ def test_too_few_registered_is_a_clear_error(tmp_path):
     with pytest.raises(InputError, match="few"):
         run_step(_sfm(), tmp_path / "run", {"in_photos_dir": few}, photo.SfmParams(max_features=1024))
     assert not (tmp_path / "run" / "result").exists()
+
+
+def test_portrait_and_landscape_photos_register_together(tmp_path):
+    """A phone set that mixes orientations: each image size gets its own camera (intrinsics), nothing is dropped.
+    Before camera groups, COLMAP's single-camera mode skipped every photo whose size differed from the first."""
+    from PIL import Image
+
+    folder = shared_photos("lund_street")
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    for k in range(1, 11):
+        name = f"{k:02d}.jpg"
+        with Image.open(folder / name) as im:
+            exif = im.info.get("exif", b"")
+            if k in (3, 6, 9):  # turned to portrait: the pixels themselves, as a phone held upright writes them
+                im = im.transpose(Image.Transpose.ROTATE_90)
+            im.save(mixed / name, quality=95, exif=exif)
+    out = run_step(_sfm(), tmp_path / "run", {"in_photos_dir": mixed},
+                   photo.SfmParams(max_features=2048, matching="exhaustive"))
+    rep = json.loads(out["sfm_report.json"].read_text())
+    groups = {tuple(g["size"]): g for g in rep["camera_groups"]}
+    assert set(groups) == {(1024, 768), (768, 1024)} and groups[(768, 1024)]["photos"] == 3
+    assert len(rep["cameras"]) == 2
+    assert rep["registered"] >= 9, rep
+    assert groups[(768, 1024)]["registered"] >= 2, rep["camera_groups"]

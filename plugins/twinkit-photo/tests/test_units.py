@@ -209,3 +209,18 @@ def test_bad_gcp_file_names_the_file(tmp_path):
     (tmp_path / "gcp.json").write_text("[1, 2]")
     with pytest.raises(InputError, match="gcp.json"):
         read_gcp_file(tmp_path / "gcp.json", None)
+
+
+def test_a_thin_dense_cloud_makes_the_run_degraded(tmp_path):
+    """Lund's CPU sweep: 4,280 points from 29 photos (a 5 m² mesh) is degraded; the demo's 397,798 from 40 is not."""
+    from twinkit.testing import make_context
+
+    import twinkit_photo.plugin as photo
+
+    thin = make_context(tmp_path / "thin", step_id="dense")
+    photo._dense_gate(thin, 4280, 29, photo.DenseParams(), "cpu")
+    (entry,) = thin.degraded_reasons
+    assert "4,280 points from 29 photos (148 per photo" in entry["reason"] and "patchmatch" in entry["hint"]
+    fine = make_context(tmp_path / "fine", step_id="dense")
+    photo._dense_gate(fine, 397_798, 40, photo.DenseParams(), "cpu")
+    assert fine.degraded_reasons == []

@@ -18,7 +18,16 @@ class PhotoInfo:
     lon: float | None = None
     alt: float | None = None
     focal_35mm: float | None = None
+    make: str | None = None
+    model: str | None = None
+    focal_mm: float | None = None
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def camera_key(self) -> tuple:
+        """Photos with the same key can share one set of intrinsics: image size, EXIF make, model, focal."""
+        focal = self.focal_mm if self.focal_mm else self.focal_35mm
+        return (self.width, self.height, self.make or "", self.model or "", round(focal, 1) if focal else None)
 
     @property
     def has_gps(self) -> bool:
@@ -91,7 +100,32 @@ def read_info(path: Path) -> PhotoInfo:
     f35 = (ex.get("Exif") or {}).get(41989)  # FocalLengthIn35mmFilm
     if f35:
         info.focal_35mm = float(f35)
+    zeroth = ex.get("0th") or {}
+    for tag, attr in ((271, "make"), (272, "model")):  # Make, Model
+        v = zeroth.get(tag)
+        if isinstance(v, bytes):
+            v = v.decode("utf-8", "replace")
+        if v and str(v).strip("\x00 "):
+            setattr(info, attr, str(v).strip("\x00 "))
+    try:
+        f = (ex.get("Exif") or {}).get(37386)  # FocalLength (mm)
+        if f:
+            info.focal_mm = _rational(f) or None
+    except (TypeError, ValueError, ZeroDivisionError):
+        pass
     return info
+
+
+def camera_groups(infos: list[PhotoInfo]) -> list[dict]:
+    """Photos grouped by what makes their intrinsics differ: image size (portrait and landscape shots of one
+    phone are two groups), EXIF make and model, and focal length (a zoom). In file-name order of each group's
+    first photo; each ``{"size": [w, h], "make", "model", "focal_mm", "photos": [names]}``."""
+    groups: dict[tuple, dict] = {}
+    for i in infos:
+        g = groups.setdefault(i.camera_key, {"size": [i.width, i.height], "make": i.make, "model": i.model,
+                                             "focal_mm": i.focal_mm or i.focal_35mm, "photos": []})
+        g["photos"].append(i.name)
+    return list(groups.values())
 
 
 def focal_px_from_35mm(info: PhotoInfo) -> float | None:

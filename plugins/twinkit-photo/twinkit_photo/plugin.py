@@ -30,9 +30,10 @@ class SfmParams:
     max_image_px: int = param(1600, ge=0)  # features are found on photos downscaled to this long side (0 = full size)
     max_features: int = param(4096, ge=1)
     camera_model: str = "SIMPLE_RADIAL"
-    single_camera: bool = True  # all photos from one camera with one set of intrinsics
+    single_camera: bool = True  # one set of intrinsics per camera group (same size, EXIF make/model, focal); false: per photo
     intrinsics: str = "auto"  # auto (K.txt beside the photos, else the site's cameras.json, else EXIF) | exif
     min_registered_ratio: float = param(0.5, ge=0, le=1)  # fewer registered photos -> error
+    degraded_below_ratio: float = param(0.8, ge=0, le=1)  # fewer registered photos -> the run ends "degraded"
     seed: int = param(0, ge=0)
     deterministic: bool = True  # one thread for matching and mapping, so a re-run gives the same model (false: faster)
 
@@ -78,6 +79,9 @@ class DenseParams:
     voxel_m: float = param(0.02, ge=0)  # merge duplicate points per voxel (0 = off)
     coarse_scale: float = param(0.25, gt=0, le=1)
     refine_passes: int = param(2, ge=0)
+    # fewer kept points per depth map than this: the run ends "degraded" (the demo keeps ~10,000 per photo; the
+    # CPU sweep kept 148 per photo on Lund, a 5 m² mesh)
+    degraded_below_points_per_photo: int = param(1000, ge=0)
 
 
 @dataclass
@@ -145,7 +149,7 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
     """Features, matching and mapping with pycolmap; a COLMAP model folder and a report."""
     import numpy as np
 
-    from .images import read_k_txt
+    from .images import camera_groups, read_k_txt
     from .sfm import SfmOptions, camera_table, run_sfm, sparse_points
 
     params = params or SfmParams()
@@ -173,6 +177,11 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
     if K is not None and len(sizes) != 1:
         K, k_source = None, "exif"
     ctx.log.info("sfm: %d photos in %s (%d with GPS), intrinsics from %s", len(infos), folder.name, n_gps, k_source)
+    groups = camera_groups(infos)
+    if len(groups) > 1:
+        ctx.log.info("sfm: %d camera groups (size, make/model, focal), each with its own intrinsics: %s", len(groups),
+                     "; ".join(f"{g['size'][0]}x{g['size'][1]} {g['make'] or ''} {g['model'] or ''}".strip()
+                               + f" ({len(g['photos'])})" for g in groups))
     import shutil
     import tempfile
 
@@ -181,6 +190,7 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
                      spatial_neighbors=params.spatial_neighbors, mapper=params.mapper,
                      max_image_px=params.max_image_px, max_features=params.max_features,
                      camera_model=params.camera_model, single_camera=params.single_camera, intrinsics=K,
+                     groups=[g["photos"] for g in groups],
                      threads=_threads(ctx), seed=params.seed, deterministic=params.deterministic)
     try:
         res = run_sfm(folder, [i.name for i in infos], work, opt, has_gps=n_gps >= max(3, len(infos) // 2),
@@ -196,6 +206,10 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
                          f"({100 * ratio:.0f} % < sfm.min_registered_ratio {100 * params.min_registered_ratio:.0f} %); "
                          f"unregistered: {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}. Take more "
                          f"overlapping photos, try sfm.matching=exhaustive or sequential, or lower the ratio")
+    if ratio < params.degraded_below_ratio:
+        ctx.degraded(f"structure from motion registered only {n_reg} of {len(infos)} photos; unregistered: "
+                     f"{', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}",
+                     "take more overlapping photos, or try steps.sfm.matching=exhaustive")
     out = Path(out_sfm_dir)
     out.mkdir(parents=True, exist_ok=True)
     rec.write(str(out))
@@ -224,6 +238,8 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
         "sparse_points": int(len(xyz)), "mean_track_length": round(track, 3),
         "matching": res.matching, "mapper": params.mapper, "attempts": res.attempts,
         "intrinsics_from": k_source, "photos_with_gps": n_gps,
+        "camera_groups": [dict(g, photos=len(g["photos"]),
+                               registered=sum(1 for n in g["photos"] if n in set(res.registered))) for g in groups],
         "cameras": [{"id": int(cid), "model": c.model.name, "params": [float(v) for v in c.params]}
                     for cid, c in rec.cameras.items()],
         "timings_s": {**res.timings_s, "total": round(time.perf_counter() - t_all, 3)},
@@ -520,8 +536,19 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                                            "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)})
     ctx.log.info("dense: %d depth maps, %d fused points, %d after the region of interest and %.3f m voxels",
                  n_maps, n_fused, written, params.voxel_m)
-    return {"points": written, "depth_maps": n_maps, "fused": n_fused,
+    _dense_gate(ctx, written, n_maps, params, "cpu")
+    return {"points": written, "points_per_photo": round(written / max(n_maps, 1), 1), "depth_maps": n_maps, "fused": n_fused,
             "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)}
+
+
+def _dense_gate(ctx, written: int, n_maps: int, params: DenseParams, backend: str) -> None:
+    """A dense cloud far too thin for a street: say so (the run ends degraded), with what to try."""
+    per = written / max(n_maps, 1)
+    if per < params.degraded_below_points_per_photo:
+        ctx.degraded(f"dense stereo ({backend}) kept {written:,} points from {n_maps} photos ({per:,.0f} per photo, "
+                     f"under {params.degraded_below_points_per_photo:,}): the mesh will cover a small part of what "
+                     f"was photographed",
+                     "photos with more overlap and texture; on a CUDA machine steps.dense.backend=patchmatch")
 
 
 def _write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_points_ply, out_points_meta_json,
@@ -579,6 +606,7 @@ def _dense_patchmatch(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_ge
                                     times={"seconds": round(time.perf_counter() - t0, 3)})
     ctx.log.info("dense (patch-match): %d depth maps, %d fused points, %d after the region of interest and "
                  "%.3f m voxels", info["depth_maps"], n_fused, written, params.voxel_m)
+    _dense_gate(ctx, written, info["depth_maps"], params, "patchmatch")
     return {"backend": "patchmatch", "points": written, "depth_maps": info["depth_maps"], "fused": n_fused}
 
 

@@ -34,7 +34,8 @@ class SfmOptions:
     max_image_px: int = 1600
     max_features: int = 8192
     camera_model: str = "SIMPLE_RADIAL"
-    single_camera: bool = True
+    single_camera: bool = True  # one camera per group of photos (camera_groups); false: one per photo
+    groups: list | None = None  # lists of photo names that share a camera (None: all in one)
     intrinsics: list | None = None  # 3x3 K to start from (pixels of the full-size image)
     retry_below_ratio: float = 0.9
     threads: int = 2
@@ -104,9 +105,15 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
             raise InputError(f"sfm: known intrinsics need camera_model SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL or "
                              f"RADIAL, not {opt.camera_model}")
         reader.camera_params = ",".join(f"{v:.6f}" for v in params)
-    mode = pycolmap.CameraMode.SINGLE if opt.single_camera else pycolmap.CameraMode.AUTO
-    pycolmap.extract_features(db, image_dir, image_names=list(names), camera_mode=mode, reader_options=reader,
-                              extraction_options=ext, device=pycolmap.Device.cpu)
+    if opt.single_camera:
+        # one COLMAP camera per group: in SINGLE mode COLMAP skips every photo whose size differs from the first
+        # one's, so a set mixing portrait and landscape shots lost all of one kind. Each call adds one camera.
+        for group in (opt.groups or [list(names)]):
+            pycolmap.extract_features(db, image_dir, image_names=list(group), camera_mode=pycolmap.CameraMode.SINGLE,
+                                      reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu)
+    else:
+        pycolmap.extract_features(db, image_dir, image_names=list(names), camera_mode=pycolmap.CameraMode.AUTO,
+                                  reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu)
     timings["features"] = round(time.perf_counter() - t0, 3)
 
     t0 = time.perf_counter()
