@@ -87,6 +87,14 @@ def test_gcp_georeference_recovers_the_site_frame(tmp_path):
     assert rep["camera_centre_error_m"]["max"] < 1e-4
     cams = json.loads(out["cameras_site.json"].read_text())["cameras"]
     np.testing.assert_allclose(np.asarray(cams[0]["R_world_from_camera"]), R_wc, atol=1e-6)
+    assert "gcp_unused" not in rep
+    # a file with one usable point (as ../shared/data/photos/berlin_gcp): auto says why and what it used instead
+    (tmp_path / "gcp1.json").write_text(json.dumps({"points": points[:1]}))
+    one = run_step(_step("georeference"), tmp_path / "run1", {"in_sfm_dir": sfm_dir, "in_gcp_json": tmp_path / "gcp1.json"},
+                   photo.GeorefParams(), site=SITE)
+    rep1 = json.loads(one["georef.json"].read_text())
+    assert rep1["method"] == "none" and rep1["gcp_unused"]["usable"] == 1
+    assert "3 needed" in rep1["gcp_unused"]["why"] and "levelled" in rep1["gcp_unused"]["used_instead"]
 
 
 def test_gps_georeference_levels_and_scales(tmp_path):
@@ -158,3 +166,34 @@ def test_sfm_unrelated_photos_fail_clearly(tmp_path):
         Image.fromarray(rng.integers(0, 255, (240, 320, 3), dtype=np.uint8)).save(folder / f"{k}.jpg")
     with pytest.raises(InputError, match="photos"):
         run_step(_step("sfm"), tmp_path / "run", {"in_photos_dir": folder}, photo.SfmParams(max_features=512))
+
+
+def test_an_outlier_camera_is_flagged_and_left_out(tmp_path):
+    """One photo misregistered 70 m off the walk, with its GPS fix on the walk: flagged with both reasons in
+    georef.json and absent from cameras_site.json (so from the ROI, dense and photo steps)."""
+    from twinkit.geo import SiteFrame
+
+    T = _arbitrary()
+    _, C = _truth()
+    C = C * [5.0, 1.0, 1.0]  # a 70 m walk, photos 10 m apart (phone GPS errors of metres stay small beside it)
+    frame = SiteFrame.from_site(SITE)
+    ll = frame.local_to_lonlat(C[:, :2])
+    gps = {f"{k:02d}.jpg": [float(ll[k, 1]), float(ll[k, 0]), 12.0 + 1.6] for k in range(len(C))}
+    sfm_dir, _, _ = _model_dir(tmp_path, T, gps)
+    doc = json.loads((sfm_dir / "cameras_model.json").read_text())
+    for k, cam in enumerate(doc["cameras"]):
+        cam["center"] = T.apply(C[k])[0].tolist()
+    doc["cameras"][5]["center"] = T.apply(C[5] + [0.0, 70.0, 0.0])[0].tolist()  # photo 05 registered 70 m off
+    (sfm_dir / "cameras_model.json").write_text(json.dumps(doc))
+    out = run_step(_step("georeference"), tmp_path / "run", {"in_sfm_dir": sfm_dir}, photo.GeorefParams(), site=SITE)
+    rep = json.loads(out["georef.json"].read_text())
+    assert list(rep["outlier_cameras"]) == ["05.jpg"], rep["outlier_cameras"]
+    assert "from its own GPS fix" in rep["outlier_cameras"]["05.jpg"]
+    assert rep["gps"]["residual_m"]["05.jpg"] > 60 and max(v for k, v in rep["gps"]["residual_m"].items()
+                                                          if k != "05.jpg") < 1.0
+    names = [c["image"] for c in json.loads(out["cameras_site.json"].read_text())["cameras"]]
+    assert "05.jpg" not in names and len(names) == 7
+    # the same camera kept when the check is off
+    out2 = run_step(_step("georeference"), tmp_path / "run2", {"in_sfm_dir": sfm_dir},
+                    photo.GeorefParams(outlier_factor=0), site=SITE)
+    assert len(json.loads(out2["cameras_site.json"].read_text())["cameras"]) == 8

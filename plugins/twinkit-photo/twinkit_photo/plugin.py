@@ -50,6 +50,11 @@ class GeorefParams:
     scale: float = param(1.0, gt=0)  # method none: metres per model unit
     min_gcp_views: int = param(2, ge=1)
     gcp_outlier_m: float = param(0.05, gt=0)  # a GCP whose residual exceeds this (and 3x the median) is left out of the fit
+    # a camera is an outlier (flagged in georef.json, left out of cameras_site.json and so of the region of
+    # interest, the dense step and the photo views) when its GPS fix is this many times gps_threshold_m away
+    # from where the fit puts it, or it stands off the walk: farther from its nearest neighbour than 10 times
+    # the median neighbour spacing (and, in metres, more than 5 m). 0 = keep every camera
+    outlier_factor: float = param(3.0, ge=0)
 
 
 @dataclass
@@ -254,6 +259,33 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
 
 # ----------------------------------------------------------------------------- georeference
 
+def _outlier_cameras(names: list[str], centres, gps_residual: dict, params: GeorefParams,
+                     metric: bool = True) -> dict[str, str]:
+    """Cameras not to trust: a GPS fix far beyond the RANSAC threshold from where the fit puts the camera, or
+    a camera standing off the walk (a misregistered photo). {name: why}."""
+    import numpy as np
+
+    out: dict[str, str] = {}
+    if params.outlier_factor <= 0:
+        return out
+    for n, e in gps_residual.items():
+        if e > params.outlier_factor * params.gps_threshold_m:
+            out[n] = f"{e:.1f} m from its own GPS fix (RANSAC threshold {params.gps_threshold_m:g} m)"
+    P = np.asarray(centres, float)
+    if len(P) >= 5:
+        from scipy.spatial import cKDTree
+
+        d, _ = cKDTree(P).query(P, k=2)
+        nn = d[:, 1]
+        spacing = float(np.median(nn))
+        limit = max(5.0 if metric else 0.0, 10.0 * spacing)
+        for n, e in zip(names, nn):
+            if e > limit and n not in out:
+                unit = "m" if metric else "model units"
+                out[n] = f"{e:.1f} {unit} from the nearest other camera (median spacing {spacing:.1f}): off the walk"
+    return out
+
+
 def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_site_json: Path,
                  out_georef_json: Path, out_sparse_site_ply: Path, in_gcp_json: Path | None = None,
                  in_cameras_json: Path | None = None) -> dict:
@@ -287,6 +319,16 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
             gcp_rows.append((g["id"], X, g["site_xyz"], nv))
     if method == "auto":
         gps_ok = [n for n in names if n in model.get("exif_gps", {})]
+        if in_gcp_json is not None and len(gcp_rows) < 3:
+            # the user gave a GCP file: say why it was not used and what was used instead
+            why = (f"only {len(gcp_rows)} of its {len(gcps)} points are seen in >= {params.min_gcp_views} "
+                   f"registered photos (3 needed)")
+            instead = ("EXIF GPS" if len(gps_ok) >= 3 and frame is not None else
+                       "nothing: the model is only levelled and centred")
+            ctx.log.warning("georeference: the GCP file %s cannot be used: %s; using %s instead",
+                            Path(in_gcp_json).name, why, instead)
+            info["gcp_unused"] = {"file": Path(in_gcp_json).name, "why": why, "used_instead": instead,
+                                  "points": len(gcps), "usable": len(gcp_rows)}
         if len(gcp_rows) >= 3:
             method = "gcp"
         elif len(gps_ok) >= 3 and frame is not None:
@@ -337,7 +379,9 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
         c, s = np.cos(sim.yaw_rad), np.sin(sim.yaw_rad)
         Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
         T = Transform(sim.scale, Rz @ R_lvl, np.asarray(sim.t, float))
-        info["gps"] = {**sim.to_json(), "photos_with_gps": len(gps_names)}
+        res_gps = np.linalg.norm(sim.apply(src)[:, :2] - dst[:, :2], axis=1)
+        info["gps"] = {**sim.to_json(), "photos_with_gps": len(gps_names),
+                       "residual_m": {n: round(float(e), 3) for n, e in zip(gps_names, res_gps)}}
     elif method == "none":
         R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log)
         info["level"] = linfo
@@ -354,8 +398,19 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
             T = Transform(T.scale, T.R, T.t + np.array([0, 0, params.ground_z_m - gz]))
             xyz = T.apply(sp["xyz"])
             info["height_shift_m"] = params.ground_z_m - gz
+    outliers = _outlier_cameras(names, T.apply(C), info.get("gps", {}).get("residual_m", {}), params,
+                                metric=method != "none")
+    if outliers:
+        ctx.log.warning("georeference: %d outlier camera(s) left out of the later steps: %s", len(outliers),
+                        "; ".join(f"{n} ({why})" for n, why in outliers.items()))
+        if len(outliers) > 0.2 * len(names):
+            ctx.degraded(f"{len(outliers)} of {len(names)} registered photos are outlier cameras "
+                         f"({', '.join(list(outliers)[:6])})", "check the photos and their GPS; see georef.json")
+    info["outlier_cameras"] = outliers
     cams_out = []
     for n in names:
+        if n in outliers:
+            continue
         r = rows[n]
         cams_out.append({**{k: r[k] for k in ("image", "model", "width", "height", "params", "K")},
                          "R_world_from_camera": (T.R @ np.asarray(r["R_world_from_camera"])).tolist(),
@@ -391,7 +446,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
                         vis_point=sp["vis_point"])
     report["time_s"] = round(time.perf_counter() - t0, 3)
     write_json(out_georef_json, report)
-    out = {"method": method, "scale": float(T.scale)}
+    out = {"method": method, "scale": float(T.scale), "outlier_cameras": len(outliers)}
     if "camera_centre_error_m" in report:
         out["camera_centre_error_mean_m"] = report["camera_centre_error_m"]["mean"]
         out["camera_centre_error_shape_m"] = report["camera_centre_error_after_best_similarity_m"]["mean"]
