@@ -474,3 +474,64 @@ def _inside_polygon(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
     x2, y2 = np.roll(poly[:, 0], -1)[None, :], np.roll(poly[:, 1], -1)[None, :]
     cross = ((y1 > y) != (y2 > y)) & (x < (x2 - x1) * (y - y1) / np.where(y2 == y1, 1e-300, y2 - y1) + x1)
     return (cross.sum(axis=1) % 2) == 1
+
+
+def close_ground_holes(vertices: np.ndarray, faces: np.ndarray, ground_z, *, max_extent_m: float = 8.0,
+                       max_rise_m: float = 0.3, level_m: float = 0.1, cell_m: float = 0.10,
+                       skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], dict]:
+    """Close every hole of the ground that the scan did not leave: a closed loop of open border (a hole
+    enclosed by surface, so never the site's edge) at most ``max_extent_m`` across seen from above (the
+    ground fill's limit: a wider gap is an unscanned area and stays open), lying on the ground (its
+    border's median height above ``ground_z(xy)`` at most ``level_m``, none of it above ``max_rise_m``:
+    a kerb may run through it, a wall or a car body may not), and open towards the sky (oriented as a
+    hole in an up-facing surface). Each is closed by :func:`fill_loop_on_ground` on a ``cell_m`` grid at
+    the ground's height. Loops listed in ``skip`` (a bool mask over vertices: any border vertex marked)
+    are left to the caller.
+
+    Returns (new vertices (k, 3), new faces (f, 3) indexing the old and new vertices, the closed loops,
+    a report: ``closed``, ``closed_m`` (their border's length), ``left_open_m`` by reason)."""
+    from twinkit.mesh.topology import boundary_loops
+
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(faces, np.int64)
+    loops = boundary_loops(f) if len(f) else []
+    add_v: list[np.ndarray] = []
+    add_f: list[np.ndarray] = []
+    done: list[np.ndarray] = []
+    rep = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
+    nv = len(v)
+
+    def left(why: str, ln: float) -> None:
+        rep["left_open_m"][why] = round(rep["left_open_m"].get(why, 0.0) + ln, 3)
+
+    for lp in loops:
+        ln = float(np.linalg.norm(v[lp] - v[np.roll(lp, -1)], axis=1).sum())
+        if skip is not None and skip[lp].any():
+            continue
+        xy = v[lp, :2]
+        if float(np.ptp(xy, axis=0).max()) > max_extent_m:
+            left("wider_than_the_fill_limit", ln)
+            continue
+        h = v[lp, 2] - np.asarray(ground_z(xy), np.float64)
+        if float(np.median(np.abs(h))) > level_m or float(np.abs(h).max()) > max_rise_m:
+            left("not_on_the_ground", ln)
+            continue
+        x, y = xy[::-1, 0], xy[::-1, 1]
+        if 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)) <= 0:
+            left("not_a_hole_seen_from_above", ln)
+            continue
+        res = fill_loop_on_ground(np.vstack([v] + add_v) if add_v else v, lp, ground_z, cell_m)
+        if res is None:
+            left("not_simple_seen_from_above", ln)
+            continue
+        fn, new = res
+        add_f.append(fn)
+        if len(new):
+            add_v.append(new)
+        done.append(lp)
+        rep["closed"] += 1
+        rep["closed_m"] = round(rep["closed_m"] + ln, 3)
+    new_v = np.vstack(add_v) if add_v else np.zeros((0, 3))
+    new_f = np.vstack(add_f).astype(np.int64) if add_f else np.zeros((0, 3), np.int64)
+    assert new_f.size == 0 or new_f.max() < nv + len(new_v)
+    return new_v, new_f, done, rep

@@ -284,3 +284,92 @@ def test_ground_under_a_lifted_car_is_at_road_height(tmp_path):
     kept = _lift(tmp_path / "b", files, flatten_feet_m=0.0)
     m0 = read_obj(kept["textured_mesh.obj"])
     assert drop_test(m0.vertices, m0.faces, rays).mean() < 0.97  # the skirt's ring (one 0.2 m grid row) misses
+
+
+def test_holes_in_the_ground_away_from_objects_are_closed_on_the_ground(tmp_path):
+    """A 30 cm crack in the road, a 1.5 m hole across a kerb and a 12 m unscanned area, none under a lifted
+    object: the first two are closed at the ground's height (their rays find the ground, the open border
+    is gone), the one wider than the ground fill's limit stays open, and so do holes off the ground."""
+    from twinkit.mesh import read_obj
+    from twinkit.surface.watertight import drop_test, open_edges
+
+    size = 40.0
+    v, f, uv, lab, car = scene(step_m=0.2, size_m=size)
+    v[:, 2] = np.where(v[:, 1] >= 3.0, 0.12, 0.0)  # a 12 cm kerb at y = 3: road below, sidewalk above
+    lab[:] = np.where(v[:, 1] < 3.0, 0, 1)
+    cen = v[f].mean(axis=1)
+    crack = (np.abs(cen[:, 0] + 8) < 0.15) & (np.abs(cen[:, 1] + 5) < 0.3)  # 0.3 x 0.6 m in a lane
+    kerb = (np.abs(cen[:, 0] - 8) < 0.75) & (np.abs(cen[:, 1] - 3) < 0.5)  # 1.5 m across the kerb line
+    wide = (np.abs(cen[:, 0] - 6) < 6) & (np.abs(cen[:, 1] - 12) < 3)  # 12 x 6 m: wider than 8 m
+    wall = np.zeros(len(v), bool)  # a hole 2 m up a wall: a raised block with a hole in its top
+    blk = (np.abs(v[:, 0] + 10) < 1.5) & (np.abs(v[:, 1] - 12) < 1.5)
+    v[blk, 2] = 2.0
+    wall_hole = (np.abs(cen[:, 0] + 10) < 0.3) & (np.abs(cen[:, 1] - 12) < 0.3)
+    f = f[~(crack | kerb | wide | wall_hole)]
+    d = tmp_path / "holes"
+    d.mkdir()
+    obj = synthetic.write_obj(d / "textured_mesh.obj", v, f, uv, texture_px=64)
+    np.save(d / "labels.npy", lab)
+    files = (obj, d / "labels.npy", None)
+
+    def rays(c, half):
+        g = np.arange(-half, half + 1e-9, 0.1)
+        gx, gy = np.meshgrid(g + c[0], g + c[1])
+        xy = np.c_[gx.ravel(), gy.ravel()]
+        return np.c_[xy, np.where(xy[:, 1] >= 3.0, 0.12, 0.0)]
+
+    out = _lift(tmp_path / "a", files)
+    m = read_obj(out["textured_mesh.obj"])
+    rep = json.loads((out["movables"] / "actors.json").read_text())["report"]["ground_holes"]
+    assert rep["closed"] == 2, rep
+    assert drop_test(m.vertices, m.faces, rays((-8, -5), 0.1)).all()  # the crack
+    r = rays((8, 3), 0.6)
+    r = r[np.abs(r[:, 1] - 3.0) > 0.06]  # off the kerb line itself
+    assert drop_test(m.vertices, m.faces, r).all()  # road and pavement on both sides of the kerb
+    e = open_edges(m.faces)
+    mid = m.vertices[e].mean(axis=1)
+    near = lambda c, rx, ry: (np.abs(mid[:, 0] - c[0]) < rx) & (np.abs(mid[:, 1] - c[1]) < ry)  # noqa: E731
+    assert not near((-8, -5), 0.5, 0.5).any() and not near((8, 3), 1.0, 1.0).any()
+    assert near((6, 12), 6.3, 3.3).sum() > 50  # the 12 m gap stays open (an unscanned area)
+    assert near((-10, 12), 0.5, 0.5).sum() >= 4  # the hole 2 m up stays open
+    assert rep["left_open_m"]["wider_than_the_fill_limit"] > 30
+    # off: the crack stays
+    m0 = read_obj(_lift(tmp_path / "b", files, ground_hole_max_m=0.0)["textured_mesh.obj"])
+    assert not drop_test(m0.vertices, m0.faces, rays((-8, -5), 0.1)).all()
+
+
+def test_a_hole_whose_border_is_no_simple_loop_is_patched(tmp_path):
+    """A 0.4 m hole in a lane whose border climbs: one border vertex stands 0.25 m up, right above its
+    neighbour (an object's cut-off foot), so seen from above the loop is not a simple polygon and no
+    loop fill takes it. Rays at the ground fell through there; the gap patch closes it."""
+    from twinkit.mesh import read_obj
+    from twinkit.surface.watertight import drop_test
+
+    v, f, uv, lab, car = scene(step_m=0.2, size_m=20.0)
+    v[:, 2] = 0.0
+    lab[:] = 0
+    cen = v[f].mean(axis=1)
+    hole = (np.abs(cen[:, 0] - 4.0) < 0.2) & (np.abs(cen[:, 1] + 4.0) < 0.2)
+    f = f[~hole]
+    a = np.flatnonzero((np.abs(v[:, 0] - 3.8) < 1e-6) & (np.abs(v[:, 1] + 4.2) < 1e-6))[0]
+    b = np.flatnonzero((np.abs(v[:, 0] - 4.0) < 1e-6) & (np.abs(v[:, 1] + 4.2) < 1e-6))[0]
+    v[a] = [v[b, 0], v[b, 1], 0.25]
+    d = tmp_path / "foot"
+    d.mkdir()
+    obj = synthetic.write_obj(d / "textured_mesh.obj", v, f, uv, texture_px=64)
+    np.save(d / "labels.npy", lab)
+    files = (obj, d / "labels.npy", None)
+    g = np.arange(3.85, 4.2, 0.05)
+    gx, gy = np.meshgrid(g, g - 8.0)
+    rays = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
+    off = read_obj(_lift(tmp_path / "off", files, gap_max_m=0.0)["textured_mesh.obj"])
+    falls = ~drop_test(off.vertices, off.faces, rays, 0.5)
+    assert falls.sum() >= 4  # falls through without the patch
+    out = _lift(tmp_path / "on", files)
+    m = read_obj(out["textured_mesh.obj"])
+    rep = json.loads((out["movables"] / "actors.json").read_text())["report"]
+    assert rep["ground_holes"]["left_open_m"].get("not_simple_seen_from_above", 0) > 0
+    assert rep["ground_gaps"] >= 1 and rep["ground_gap_faces"] > 0
+    assert drop_test(m.vertices, m.faces, rays, 0.5).all()  # nothing falls through
+    # the patch lies on the ground, joined to the border (so it rises to the raised vertex where it meets it)
+    assert drop_test(m.vertices, m.faces, rays[falls], 0.05).mean() >= 0.6

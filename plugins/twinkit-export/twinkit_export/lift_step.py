@@ -42,6 +42,10 @@ class LiftParams:
     fill_cell_m: float = param(0.1, ge=0)  # holes left under an object are filled on this grid at the ground's height (0: fan)
     flatten_feet_m: float = param(0.5, ge=0)  # the object's cut-off feet up to this high are lowered onto the ground (0: kept)
     max_fill_extent_m: float = param(3.0, ge=0)  # holes reaching farther than this beyond an object's footprint stay open
+    gap_max_m: float = param(1.0, ge=0)  # what no loop fill closes: spots up to this wide that a ray at the ground falls
+    #                 through, with surface all round, get a ground patch (found on a 5 cm grid); 0 = off
+    ground_hole_max_m: float = param(8.0, ge=0)  # every other hole of the ground up to this wide is closed on the ground
+    #                         (the clean step's fill_ground_max_gap_m: a wider gap is unscanned and stays open); 0 = off
 
 
 def _actor_json(inst, file: str) -> dict:

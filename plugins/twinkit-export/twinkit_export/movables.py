@@ -40,6 +40,8 @@ the class alone does not make an object; 3D cues decide (all in the site frame, 
 """
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,6 +87,10 @@ class LiftOptions:
     fill_cell_m: float = 0.1  # a closed hole under an object is filled on this grid at the ground's height
     flatten_feet_m: float = 0.5  # ... and its border inside the footprint, up to this high, lowered onto the ground
     #                           (0: a fan / ear clipping of the border, which spans it at the border's heights)
+    gap_max_m: float = 1.0  # smaller spots a ray at the ground falls through, surface all round, get a patch; 0 = off
+    gap_cell_m: float = 0.05  # ... found and patched on this grid
+    ground_hole_max_m: float = 8.0  # any other hole of the ground up to this wide is closed at the ground's height
+    #                           (the ground fill's limit: wider is an unscanned area); 0 = off
 
 
 @dataclass
@@ -317,7 +323,53 @@ def _covered(pts: np.ndarray, tri_xy: np.ndarray) -> np.ndarray:
     return out
 
 
-def _patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptions):
+def _ground_gaps(v: np.ndarray, f: np.ndarray, grid: GroundGrid, cell_m: float, max_extent_m: float) -> list:
+    """Small places where a vertical ray at the ground finds no surface within 0.5 m of the ground (a wheel
+    or a foot would drop in) with surface all round them: the remains of a hole whose border is no
+    simple loop (it runs up an object's foot, or crosses itself seen from above). Each as a box
+    (``center``, ``size``, ``yaw_deg`` 0) for :func:`_patch_footprints`."""
+    from types import SimpleNamespace
+
+    from scipy import ndimage as ndi
+
+    from twinkit.surface.closest import Surface
+    from twinkit.surface.watertight import drop_test
+
+    if len(f) == 0:
+        return []
+    lo = v[:, :2].min(axis=0)
+    hi = v[:, :2].max(axis=0)
+    xs = np.arange(lo[0] + cell_m / 2, hi[0], cell_m)
+    ys = np.arange(lo[1] + cell_m / 2, hi[1], cell_m)
+    gx, gy = np.meshgrid(xs, ys)
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    covered = drop_test(v, f, np.c_[xy, grid.at(xy)], 0.5, scene=Surface(v, f).scene).reshape(gx.shape)
+    lab, n = ndi.label(~covered)
+    out = []
+    if n == 0:
+        return out
+    for k, sl in enumerate(ndi.find_objects(lab), start=1):
+        if sl is None:
+            continue
+        ext = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) * cell_m
+        if ext > max_extent_m:
+            continue
+        if sl[0].start == 0 or sl[1].start == 0 or sl[0].stop == lab.shape[0] or sl[1].stop == lab.shape[1]:
+            continue  # touches the mesh's box: the site's edge, not enclosed
+        win = (slice(sl[0].start - 1, sl[0].stop + 1), slice(sl[1].start - 1, sl[1].stop + 1))
+        comp = lab[win] == k
+        ring = ndi.binary_dilation(comp) & ~comp
+        if not covered[win][ring].all():
+            continue
+        j, i = np.nonzero(comp)
+        cx = xs[win[1].start + i]
+        cy = ys[win[0].start + j]
+        out.append(SimpleNamespace(center=np.array([(cx.min() + cx.max()) / 2, (cy.min() + cy.max()) / 2]),
+                                   size=np.array([np.ptp(cx) + cell_m, np.ptp(cy) + cell_m, 0.0]), yaw_deg=0.0))
+    return out
+
+
+def _patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptions, max_edge_m: float | None = None):
     """Ground patches where a footprint is still uncovered: a 2D Delaunay triangulation of the static
     mesh's border vertices there (so the patch shares them: joined to the ground where the border's
     edges are Delaunay edges) and grid points at the ground height, keeping the triangles over
@@ -347,7 +399,7 @@ def _patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptio
         if len(bnear):
             d, _ = cKDTree(v[bnear, :2]).query(pts)
             unc &= d >= 0.5 * c
-        if unc.sum() < 3:
+        if unc.sum() < 3 and (max_edge_m is None or unc.sum() + len(bnear) < 3):
             continue
         p_new = pts[unc]
         p2 = np.vstack([v[bnear, :2], p_new])
@@ -359,7 +411,8 @@ def _patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptio
         tc2 = p2[tri]
         centre = tc2.mean(axis=1)
         edge = np.max(np.linalg.norm(tc2 - np.roll(tc2, 1, axis=1), axis=2), axis=1)
-        keep = _in_box(centre, cen, length, width, yaw, m) & (edge <= 3.0 * c) & ~_covered(centre, tri_xy)
+        keep = (_in_box(centre, cen, length, width, yaw, m) & (edge <= (max_edge_m or 3.0 * c))
+                & ~_covered(centre, tri_xy))
         tri = tri[keep]
         if len(tri) == 0:
             continue
@@ -604,6 +657,50 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
             if kept_tc is not None:
                 add_tc.append(ptc)
         rep["patch_faces"] = int(len(pf))
+    # third pass: every other hole of the ground up to the ground fill's limit (a crack at a kerb's foot, a
+    # notch the simplification or the trim left): closed on the ground, so a wheel or a foot never drops in
+    if opt.ground_hole_max_m > 0:
+        from twinkit.surface.groundfill import close_ground_holes
+
+        cur_v = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
+        cur_f = np.vstack([kept] + add_f) if add_f else kept
+        cur_lab = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
+        gv, gf, gloops, grep = close_ground_holes(cur_v, cur_f, grid.at, max_extent_m=opt.ground_hole_max_m,
+                                                  cell_m=opt.fill_cell_m or 0.1)
+        if len(gf):
+            # each new vertex takes the class of the nearest ground vertex of the mesh (road, sidewalk, terrain)
+            gvid = np.nonzero(np.isin(cur_lab, GROUND))[0]
+            gvid = gvid if len(gvid) else np.arange(len(cur_v))
+            fill_lab = cur_lab[gvid[cKDTree(cur_v[gvid]).query(gv)[1]]] if len(gv) else np.zeros(0, np.uint8)
+            if kept_tc is not None:
+                cur_tc = np.vstack([kept_tc] + add_tc) if add_tc else kept_tc
+                ground_f = np.nonzero(np.isin(cur_lab[cur_f], GROUND).all(axis=1))[0]
+                ground_f = ground_f if len(ground_f) else np.arange(len(cur_f))
+                all_v = np.vstack([cur_v, gv]) if len(gv) else cur_v
+                _, nn = cKDTree(cur_v[cur_f[ground_f]].mean(axis=1)).query(all_v[gf].mean(axis=1))
+                add_tc.append(cur_tc[ground_f[nn]])
+            add_v.extend(list(gv))
+            add_lab.extend(fill_lab.tolist())
+            add_f.append(gf)
+        rep["ground_holes"] = grep
+        # what no loop could close (a hole whose border climbs an object's foot or crosses itself seen from
+        # above): small spots a ray at the ground falls through, with surface all round, get a patch
+        cur_v = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
+        cur_f = np.vstack([kept] + add_f) if add_f else kept
+        cur_lab = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
+        gaps = _ground_gaps(cur_v, cur_f, grid, opt.gap_cell_m, opt.gap_max_m) if opt.gap_max_m > 0 else []
+        rep["ground_gaps"] = len(gaps)
+        if gaps:
+            cur_tc = (np.vstack([kept_tc] + add_tc) if add_tc else kept_tc) if kept_tc is not None else None
+            popt = dataclasses.replace(opt, patch_cell_m=opt.gap_cell_m, margin_m=opt.gap_cell_m)
+            pv, pf, plab, ptc = _patch_footprints(cur_v, cur_f, cur_lab, cur_tc, grid, gaps, popt, max_edge_m=0.3)
+            if len(pf):
+                add_v.extend(list(pv))
+                add_lab.extend(plab.tolist())
+                add_f.append(pf)
+                if kept_tc is not None:
+                    add_tc.append(ptc)
+            rep["ground_gap_faces"] = int(len(pf))
     verts = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
     faces = np.vstack([kept] + add_f) if add_f else kept
     labs = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
