@@ -244,16 +244,20 @@ class SiteFrame:
 
         return carla_frame(self, radius_m=radius_m, tolerance_m=tolerance_m, scale=scale)
 
+    def _z_projected(self) -> float:
+        """The base point's height in the CRS's own vertical unit (what ``base_point.z`` means; metres: ``alt``)."""
+        return self.alt / z_unit(parse_crs(self.crs))
+
     def georef_json(self) -> dict:
         """The georeference keys of a site.json: ``crs``, ``base_point`` and ``base_point_projected``."""
         return {"crs": self.crs, "base_point": {"lat": self.lat, "lon": self.lon, "alt": self.alt},
-                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self.alt}}
+                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self._z_projected()}}
 
     def to_json(self) -> dict:
         """Everything about the frame (for reports): :meth:`georef_json`, the projected CRS, the vertical datum."""
         return {"crs": self.crs, "projected_crs": self.projected,
                 "base_point": {"lat": self.lat, "lon": self.lon, "alt": self.alt},
-                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self.alt},
+                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self._z_projected()},
                 "vertical_datum": self.vertical_datum,
                 "frame": "local = (projected - base_point_projected) * unit_m, z = height - alt; x east, y north, z up"}
 

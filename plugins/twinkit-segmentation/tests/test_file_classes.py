@@ -21,32 +21,18 @@ def _backproject(tmp_path, name, inputs, **params):
                     params=BackprojectParams(**params))
 
 
-def _scene(scene_files, tmp, slope_deg):
-    """The street of the scene files, tilted about the y axis by ``slope_deg`` (a street up a hill)."""
-    mesh_ply, _, vlab = scene_files
-    mesh = read_mesh(mesh_ply)
-    if slope_deg:
-        a = np.radians(slope_deg)
-        rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-        mesh.vertices = mesh.vertices @ rot.T
-        mesh.attrs["normals"] = (mesh.attrs["normals"] @ rot.T).astype(np.float32)
-        mesh_ply = tmp / "tilted_mesh.ply"
-        write_ply(mesh_ply, mesh)
-    return mesh_ply, mesh, vlab
-
-
 @pytest.fixture(scope="module")
 def biased(scene_files, tmp_path_factory):
     """Votes = the truth, 5 views per vertex, except a band of ground across the street (|x| < 4 m) whose
     views all said car (the bias of issue 28 on IGN); points.ply with ASPRS codes from the truth: ground 2,
     building 6, everything else 1 (unclassified, silent)."""
     tmp = tmp_path_factory.mktemp("fileclasses")
-    mesh_ply, mesh, vlab = _scene(scene_files, tmp, 0.0)
-    v = mesh.vertices
+    mesh_ply, _, vlab = scene_files
+    v = read_mesh(mesh_ply).vertices
     votes = np.zeros((len(v), 19), np.float32)
     votes[np.arange(len(v)), np.minimum(vlab, 18)] = 5.0
     ground = np.isin(vlab, [ROAD, SIDEWALK])
-    band = ground & (np.abs(read_mesh(scene_files[0]).vertices[:, 0]) < 4.0)
+    band = ground & (np.abs(v[:, 0]) < 4.0)
     votes[band] = 0.0
     votes[band, CAR] = 5.0
     np.save(tmp / "votes.npy", votes)
@@ -115,3 +101,29 @@ def test_points_far_from_the_mesh_say_nothing():
     vc, spacing, reach = classes_on_vertices(pts, codes, verts, spacings=3.0)
     assert abs(spacing - 0.1) < 1e-6 and abs(reach - 0.3) < 1e-6
     assert vc.tolist() == [2, 0]
+
+
+def test_the_file_wins_where_the_geometry_rules_out_all_it_allows():
+    """A surface 1.5 m above the local ground (the cue 'raised': no road, sidewalk or terrain) that the file
+    calls ground (a ramp, a terrace, an embankment): the file's ground classes stay possible."""
+    from twinkit.mesh import edges as mesh_edges
+    from twinkit_segmentation.context import fuse_with_context
+    from twinkit_segmentation.fileclasses import file_class_prior
+    from twinkit_segmentation.synthetic import street_scene
+
+    v, f, n, flab = street_scene(step=0.5)
+    vlab = np.zeros(len(v), np.uint8)
+    vlab[f.reshape(-1)] = np.repeat(flab, 3)
+    roof = (vlab == CAR) & (n[:, 2] > 0.9) & (v[:, 2] > 1.4)
+    assert roof.sum() > 20
+    p = np.zeros((len(v), 19))
+    p[np.arange(len(v)), np.minimum(vlab, 18)] = 1.0
+    p[roof] = 0.0
+    p[roof, CAR], p[roof, ROAD] = 0.7, 0.3  # the views lean to car, some say road
+    codes = np.where(roof, 2, 0).astype(np.uint8)
+    prior, _ = file_class_prior(codes, 0.1)
+    edges = mesh_edges(f, len(v))
+    lab, _, _ = fuse_with_context(p, v, n, edges, cues=["raised"], extra_prior=prior)
+    assert (lab[roof] == ROAD).mean() > 0.9  # raised x file would leave car (0.07 vs 0.03); the file decides
+    lab0, _, _ = fuse_with_context(p, v, n, edges, cues=["raised"])
+    assert (lab0[roof] == CAR).mean() > 0.9
