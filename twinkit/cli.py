@@ -300,9 +300,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
 
 
 def _failed_step(engine, status: str, error: str | None) -> dict | None:
-    """The step a failed or interrupted run stopped in (id, folder, plugin, error), or None when it stopped
-    before any step ran (a plan or preflight refusal) or did not fail."""
-    if status not in ("failed", "interrupted") or not getattr(engine, "current_step", None):
+    """The step a failed run stopped in (id, folder, plugin, error), or None when it stopped before any step
+    ran (a plan or preflight refusal) or did not fail (an interrupted run exits at once, without a report)."""
+    if status != "failed" or not getattr(engine, "current_step", None):
         return None
     done = {getattr(o, "step", None) for o in (engine.outcomes or [])}
     if engine.current_step in done:

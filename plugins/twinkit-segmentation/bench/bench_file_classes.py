@@ -58,7 +58,7 @@ def point_table(points: np.ndarray, codes: np.ndarray, vertices: np.ndarray, run
     _, nearest = cKDTree(vertices).query(points, workers=-1)
     allowed = asprs_allowed()
     lines = ["| file class | points | " + " | ".join(f"ruled out, {k}" for k in runs) + " | "
-             + " | ".join(f"car, {k}" for k in runs) + " | most common label, " + " / ".join(runs) + " |",
+             + " | ".join(f"car, {k}" for k in runs) + " | most common labels (%), " + " / ".join(runs) + " |",
              "|---|---:|" + "---:|" * (2 * len(runs)) + "---|"]
     agree = {k: [0, 0] for k in runs}
     for code in sorted(set(np.unique(codes).tolist())):
@@ -75,7 +75,8 @@ def point_table(points: np.ndarray, codes: np.ndarray, vertices: np.ndarray, run
             cells_out.append(f"{100 * (1 - ok[known].mean()):.1f} %" if voting and known.any() else "(silent)")
             cells_car.append(f"{100 * (lab == 13).mean():.1f} %")
             vals, cnt = np.unique(lab[known], return_counts=True)
-            common.append(f"{NAMES[vals[cnt.argmax()]]} {100 * cnt.max() / max(known.sum(), 1):.0f} %" if len(vals) else "-")
+            top = np.argsort(-cnt)[:3]
+            common.append(", ".join(f"{NAMES[vals[i]]} {100 * cnt[i] / max(known.sum(), 1):.0f}" for i in top) or "-")
         lines.append(f"| {code} {ASPRS_NAMES.get(code, 'user/reserved')} | {int(m.sum())} | " + " | ".join(cells_out)
                      + " | " + " | ".join(cells_car) + " | " + " / ".join(common) + " |")
     lines.append("")
