@@ -161,3 +161,15 @@ def test_classification_fields_of_ply_are_kept(tmp_path):
     m, meta, _ = _read(tmp_path, src, {"name": "t"})
     assert m.attrs["classification"].dtype == np.uint8
     assert np.array_equal(m.attrs["classification"], codes.astype(np.uint8)) and meta["fields"]["classification"]
+
+
+def test_a_wrong_reference_does_not_turn_the_ground_upside_down():
+    """The demo's E57 case: scanner positions that are not where the points were seen from (here below the
+    ground) disagree with correct file normals; flipping would point the ground down, so the file is kept."""
+    from twinkit_pointcloud.normals import check_file_normals
+
+    pts, true_n = _plane_wall()
+    out, chk = check_file_normals(pts, true_n, "scanner", scanner_index=np.zeros(len(pts), np.int32),
+                                  scanner_positions=np.array([[5.0, 2.0, -3.0]]))
+    assert chk["disagreeing_share"] > 0.5 and chk["flipped"] == 0 and "turn" in chk["kept_because"]
+    assert np.array_equal(out, true_n)

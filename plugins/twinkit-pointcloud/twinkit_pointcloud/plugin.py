@@ -189,7 +189,9 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
             log("%s: normals from the file: %.1f %% point into the surface against a consistent orientation (%s)%s; "
                 "near-horizontal normals pointing down %.1f %% -> %.1f %%", in_cloud.name,
                 100 * normals_check["disagreeing_share"], normals_check["method"],
-                f", {normals_check['flipped']} flipped" if normals_check["flipped"] else ", kept as they are",
+                f", {normals_check['flipped']} flipped" if normals_check["flipped"] else
+                f", kept as they are ({normals_check['kept_because']})" if normals_check["kept_because"] else
+                ", kept as they are",
                 100 * normals_check["near_horizontal_down_before"], 100 * normals_check["near_horizontal_down_after"])
         if normals is None and params.estimate_normals:
             ctx.log.info("%s: no normals in the file: estimating them (k=%d)", in_cloud.name, params.normals_k)

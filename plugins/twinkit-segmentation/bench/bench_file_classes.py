@@ -6,7 +6,8 @@ on real classified clouds: the labels without and with them, against the file's 
 Each site folder is a ``recipe=pointcloud_site`` run up to ``predict_views`` on a classified LAS/LAZ (its
 points.ply keeps ``classification``); nothing is rendered or predicted again: ``backproject`` (its defaults)
 runs twice on the stored votes, with ``file_classes`` false and true. ``--run`` first makes outputs/ign from
-../shared/data/pointclouds/ign_lidarhd_village_street.laz (IGN LiDAR HD, aerial; about 15 minutes here).
+../shared/data/pointclouds/ign_lidarhd_village_street.laz (IGN LiDAR HD, aerial; 300 views, a 2048 px texture:
+25 minutes to predict_views on the shared 2-core machine, plus the exports).
 
 Printed per site: the share of the file's points of each ASPRS class (ground, building, ...) whose label
 (the label of the nearest mesh vertex) the file's class rules out, car on the file's ground, and the
@@ -27,7 +28,10 @@ ROOT = Path(__file__).resolve().parents[3]
 IGN = ROOT.parent / "shared" / "data" / "pointclouds" / "ign_lidarhd_village_street.laz"
 RUN_IGN = ["recipe=pointcloud_site", "site=mex", "site.name=ign", "site.crs=EPSG:2154",
            "site.base_point.lat=46.632496", "site.base_point.lon=5.225686", "site.base_point.alt=185",
-           f"site.inputs.cloud={IGN}", "road_source=none"]
+           f"site.inputs.cloud={IGN}", "road_source=none",
+           # fewer views and a smaller texture than the defaults, only to keep the run short (both runs of the
+           # comparison fuse the same stored votes)
+           "steps.sample_views.max_views=300", "steps.bake_texture.texture_px=2048"]
 
 
 def _one(site: Path, pattern: str) -> Path | None:
