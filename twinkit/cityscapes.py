@@ -49,3 +49,38 @@ def nearest_class(rgb: np.ndarray) -> np.ndarray:
     d = ((rgb[..., None, :] - cand) ** 2).sum(-1)
     idx = d.argmin(-1)
     return np.where(idx == N_CLASSES, IGNORE, idx).astype(np.uint8)
+
+
+# ----------------------------------------------------------------------------- ASPRS classes (LAS/LAZ)
+#: ASPRS classification code (LAS 1.4 R15, table 17) -> the CityScapes trainIds a point of that class may be.
+#: The file's class is evidence about *what kind of thing* a point is, never about which of the finer
+#: CityScapes classes: ASPRS "ground" is road, sidewalk or terrain, and only the views (and the 3D context)
+#: tell which; "low vegetation" is grass (terrain) or a low plant (vegetation). Codes absent here (0 never
+#: classified, 1 unclassified, 7/18 noise, 9 water and 10 rail, which CityScapes' 19 classes have no class
+#: for, 12 overlap, 13/14 wires, 16 wire connector, 19+ overhead structures and user classes) are silent:
+#: they add nothing, so nothing is invented where the file says nothing (docs/segmentation.md "File classes").
+ROAD, SIDEWALK, BUILDING, WALL, POLE, VEGETATION, TERRAIN = 0, 1, 2, 3, 5, 8, 9
+ASPRS_TO_TRAINIDS: dict[int, tuple[int, ...]] = {
+    2: (ROAD, SIDEWALK, TERRAIN),        # ground
+    3: (VEGETATION, TERRAIN),            # low vegetation: grass (terrain) or low plants
+    4: (VEGETATION,),                    # medium vegetation: bushes, hedges
+    5: (VEGETATION,),                    # high vegetation: trees
+    6: (BUILDING, WALL),                 # building
+    11: (ROAD,),                         # road surface (LAS 1.4)
+    15: (POLE,),                         # transmission tower
+    17: (ROAD, SIDEWALK),                # bridge deck: the surface that carries traffic
+    20: (ROAD, SIDEWALK, TERRAIN),       # ignored ground (near a breakline): still ground
+}
+ASPRS_NAMES: dict[int, str] = {0: "never classified", 1: "unclassified", 2: "ground", 3: "low vegetation",
+                               4: "medium vegetation", 5: "high vegetation", 6: "building", 7: "low noise",
+                               9: "water", 10: "rail", 11: "road surface", 12: "overlap", 13: "wire guard",
+                               14: "wire conductor", 15: "transmission tower", 16: "wire connector",
+                               17: "bridge deck", 18: "high noise", 20: "ignored ground"}
+
+
+def asprs_allowed() -> np.ndarray:
+    """(256, 19) bool: row ``code`` marks the trainIds an ASPRS class allows; all False for a silent code."""
+    table = np.zeros((256, N_CLASSES), bool)
+    for code, ids in ASPRS_TO_TRAINIDS.items():
+        table[code, list(ids)] = True
+    return table

@@ -273,6 +273,9 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
     finally:
         if engine._lock is None and engine.outcomes is not None:
             manifest = manifest_now(status, error)
+            failed = _failed_step(engine, status, error)
+            if failed is not None:
+                manifest["failed_step"] = failed
             engine.hashes.close()
             try:
                 write_manifest(run_dir / "manifest.json", manifest)
@@ -287,11 +290,26 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
                 _say_degraded(manifest.get("degraded") or [], engine_cfg)
                 if engine_cfg.get("report", True):
                     _write_report(run_dir, manifest, engine)
+            elif failed is not None and engine_cfg.get("report", True):
+                _write_report(run_dir, manifest, engine)  # a failed run's report: what ran, and the step that failed
         if saved_handlers:
             from twinkit.signals import restore_handlers
 
             restore_handlers(saved_handlers)
     return int(engine_cfg.get("degraded_exit_code", DEGRADED_EXIT)) if status == "degraded" else 0
+
+
+def _failed_step(engine, status: str, error: str | None) -> dict | None:
+    """The step a failed run stopped in (id, folder, plugin, error), or None when it stopped before any step
+    ran (a plan or preflight refusal) or did not fail (an interrupted run exits at once, without a report)."""
+    if status != "failed" or not getattr(engine, "current_step", None):
+        return None
+    done = {getattr(o, "step", None) for o in (engine.outcomes or [])}
+    if engine.current_step in done:
+        return None  # the step finished; the run failed after it
+    ps = next((p for p in (getattr(engine, "plan", None) or []) if p.id == engine.current_step), None)
+    return {"id": engine.current_step, "folder": ps.folder if ps is not None else engine.current_step,
+            "plugin": ps.label if ps is not None else "", "status": status, "error": error or ""}
 
 
 def _say_degraded(entries: list[dict], engine_cfg: dict) -> None:

@@ -47,8 +47,8 @@ def test_a_feet_cloud_lands_where_the_site_frame_puts_it():
     got, info = to_site_frame(file_xyz, "EPSG:2992", site, "cloud.las")
     assert info.shift_source == "base_point" and info.unit_factor_xy == pytest.approx(FT)
     assert np.abs(got[:, :2] - local[:, :2]).max() < 1e-6
-    # the same base point given in projected feet gives the same frame
-    site_xy = dict(site, base_point={"x": f.easting, "y": f.northing, "z": 3.0})
+    # the same base point given in projected feet gives the same frame: x, y and z in the CRS's feet
+    site_xy = dict(site, base_point={"x": f.easting, "y": f.northing, "z": 3.0 / FT})
     again, _ = to_site_frame(file_xyz, "EPSG:2992", site_xy, "cloud.las")
     assert np.abs(again - got).max() < 1e-6
 

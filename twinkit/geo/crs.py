@@ -115,9 +115,22 @@ def unit_factors(crs) -> tuple[float, float]:
     return fxy, (fz if fz is not None else fxy)
 
 
-def base_height(bp: Mapping[str, Any]) -> float:
-    """The base point's height: ``alt``, else ``z``, else 0 (used as given, never converted)."""
-    return float(bp.get("alt", bp.get("z", 0.0)) or 0.0)
+def z_unit(crs) -> float:
+    """Metres per unit of a base point's ``z`` in ``crs``: the vertical axis of a compound CRS, else the
+    horizontal unit of a projected one (feet in a feet CRS); 1 for a geographic 2D CRS or None."""
+    if crs is None:
+        return 1.0
+    if not crs.is_compound and horizontal(crs).is_geographic:
+        return 1.0
+    return unit_factors(crs)[1]
+
+
+def base_height(bp: Mapping[str, Any], z_unit_m: float = 1.0) -> float:
+    """The base point's height in metres: ``alt`` (metres, as given), else ``z`` (the site CRS's own vertical
+    unit, like ``x, y``: times ``z_unit_m``, 0.3048 in a feet CRS), else 0. Never a datum conversion."""
+    if bp.get("alt") is not None:
+        return float(bp["alt"] or 0.0)
+    return float(bp.get("z", 0.0) or 0.0) * float(z_unit_m)
 
 
 def base_point_in(crs, site: Mapping[str, Any]) -> np.ndarray | None:
@@ -131,16 +144,15 @@ def base_point_in(crs, site: Mapping[str, Any]) -> np.ndarray | None:
     bp = site.get("base_point") or {}
     if not bp:
         return None
+    fxy, fz = (unit_factors(crs)[0] if crs is not None else 1.0), z_unit(crs)
     if "x" in bp and "y" in bp:
-        fxy = unit_factors(crs)[0] if crs is not None else 1.0
-        return np.array([float(bp["x"]) * fxy, float(bp["y"]) * fxy, base_height(bp)])
+        return np.array([float(bp["x"]) * fxy, float(bp["y"]) * fxy, base_height(bp, fz)])
     if "lat" in bp and "lon" in bp and crs is not None and not crs.is_geographic:
         from pyproj import Transformer
 
         t = Transformer.from_crs("EPSG:4326", crs, always_xy=True)
         x, y = t.transform(float(bp["lon"]), float(bp["lat"]))
-        fxy, _ = unit_factors(crs)
-        return np.array([x * fxy, y * fxy, base_height(bp)])
+        return np.array([x * fxy, y * fxy, base_height(bp, fz)])
     return None
 
 

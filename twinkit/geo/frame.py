@@ -24,7 +24,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from twinkit.errors import InputError
-from twinkit.geo.crs import base_height, horizontal, parse_crs, site_dict, unit_factors
+from twinkit.geo.crs import base_height, horizontal, parse_crs, site_dict, unit_factors, z_unit
 
 #: largest acceptable error of the netconvert projection string against the site frame (metres)
 PROJ_TOLERANCE_M = 1e-3
@@ -80,7 +80,7 @@ class SiteFrame:
                 lon, lat = (float(v) for v in t.transform(float(bp["x"]), float(bp["y"])))
         else:
             raise InputError(f"site '{name}': base_point needs lat/lon or x/y, got keys {sorted(bp)}")
-        alt = base_height(bp)
+        alt = base_height(bp, z_unit(crs))  # z in the CRS's vertical unit, alt in metres: metres here
         if abs(lat) > 89.0:
             raise InputError(f"site '{name}': base point latitude {lat} is at a pole; no projected site frame is "
                              "defined there (choose a polar stereographic CRS and give the base point in it)")
@@ -244,16 +244,20 @@ class SiteFrame:
 
         return carla_frame(self, radius_m=radius_m, tolerance_m=tolerance_m, scale=scale)
 
+    def _z_projected(self) -> float:
+        """The base point's height in the CRS's own vertical unit (what ``base_point.z`` means; metres: ``alt``)."""
+        return self.alt / z_unit(parse_crs(self.crs))
+
     def georef_json(self) -> dict:
         """The georeference keys of a site.json: ``crs``, ``base_point`` and ``base_point_projected``."""
         return {"crs": self.crs, "base_point": {"lat": self.lat, "lon": self.lon, "alt": self.alt},
-                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self.alt}}
+                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self._z_projected()}}
 
     def to_json(self) -> dict:
         """Everything about the frame (for reports): :meth:`georef_json`, the projected CRS, the vertical datum."""
         return {"crs": self.crs, "projected_crs": self.projected,
                 "base_point": {"lat": self.lat, "lon": self.lon, "alt": self.alt},
-                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self.alt},
+                "base_point_projected": {"x": self.easting, "y": self.northing, "z": self._z_projected()},
                 "vertical_datum": self.vertical_datum,
                 "frame": "local = (projected - base_point_projected) * unit_m, z = height - alt; x east, y north, z up"}
 

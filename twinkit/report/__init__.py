@@ -110,6 +110,10 @@ def build_report(run_dir: Path, manifest: dict, engine=None) -> Path:
            f"{esc(manifest.get('finished', ''))}")
     if manifest.get("degraded"):
         page.banner = degraded_banner(manifest["degraded"])
+    if isinstance(manifest.get("failed_step"), dict):
+        from twinkit.report.page import failed_banner
+
+        page.banner = failed_banner(manifest["failed_step"]) + page.banner
     shutil.copyfile(ASSETS / CSS_FILE, tmp / CSS_FILE)
     (tmp / "report.html").write_text(render_page(title, page, sub), encoding="utf-8")
     timings.update(pics.timings)

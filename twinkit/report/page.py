@@ -125,6 +125,14 @@ def degraded_banner(entries: list[dict]) -> str:
             f"{len(entries)} step result(s) are far below what they should be.<ul>{''.join(items)}</ul></div>")
 
 
+def failed_banner(failed: dict) -> str:
+    """The red box of a failed run: the step it stopped in and the error."""
+    return (f"<div class=\"degraded failed\" id=\"failed\"><b>Failed run:</b> it stopped in step "
+            f"<a href=\"#step-{esc(failed.get('folder', ''))}\"><b>{esc(failed.get('id', '?'))}</b></a> "
+            f"({esc(failed.get('status', 'failed'))}): {esc(failed.get('error', ''))}. The steps before it are "
+            f"shown as they ran.</div>")
+
+
 def render_page(title: str, page: Page, subtitle: str = "") -> str:
     nav = "".join(f"<a href=\"#{sid}\">{esc(t)}</a>" for sid, t, _ in page.sections)
     body = "".join(f"<section id=\"{sid}\"><h2>{esc(t)}</h2>{h}</section>" for sid, t, h in page.sections)

@@ -127,6 +127,13 @@ class RunView:
                                key=lambda p: str(p.relative_to(folder)))
             hashes = {k: v.get("sha256") for k, v in (rec.get("files") or {}).items() if isinstance(v, dict)}
             self.steps.append({**s, "dir": folder, "record": rec, "files": files, "hashes": hashes})
+        failed = self.manifest.get("failed_step")
+        if isinstance(failed, dict) and failed.get("id"):  # the step a failed run stopped in (docs/report.md)
+            folder = self.workspace / str(failed.get("folder") or failed["id"])
+            self.steps.append({"id": failed["id"], "folder": failed.get("folder") or failed["id"],
+                               "plugin": failed.get("plugin", ""), "status": "failed",
+                               "why": failed.get("error", ""), "dir": folder, "record": {}, "files": [],
+                               "hashes": {}})
 
     # ------------------------------------------------------------------ finding files
     def all_files(self) -> Iterable[tuple[dict, Path]]:

@@ -32,7 +32,9 @@ def _assert_no_outputs(ctx):
 # ----------------------------------------------------------------------------- shared real files
 
 def test_lille_ply_keeps_file_normals(ctx):
-    res, m, meta = _read(ctx, shared_file("lille_street_small_normals.ply"))
+    # file_normals_flip_share=1: the check is off (it flips 58 % of this file's normals; docs/pointcloud.md
+    # "Normals from the file"; test_frames_normals.py tests it on a small cloud)
+    res, m, meta = _read(ctx, shared_file("lille_street_small_normals.ply"), P.ReadCloudParams(file_normals_flip_share=1.0))
     assert m.n_vertices == 170610
     assert meta["fields"]["normals"] == "file" and not meta["fields"]["colors"]
     assert meta["frame"]["shift_m"] == [0.0, 0.0, 0.0]

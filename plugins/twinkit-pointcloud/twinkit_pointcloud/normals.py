@@ -105,3 +105,38 @@ def _orient_mst(points: np.ndarray, normals: np.ndarray, k: int = 12) -> np.ndar
     flip_c = np.where(has_h, up_score < 0, view_score < 0)
     out[flip_c[comp]] *= -1
     return out.astype(np.float32)
+
+
+def check_file_normals(points: np.ndarray, normals: np.ndarray, method: str = "auto", *,
+                       scanner_index: np.ndarray | None = None, scanner_positions: np.ndarray | None = None,
+                       min_share: float = 0.01) -> tuple[np.ndarray, dict]:
+    """Normals from the file checked against a consistent orientation of the same lines (:func:`orient_normals`:
+    towards the scanner where it is known, else propagated over the neighbour graph with each connected part's
+    near-horizontal surfaces facing up). A normal that disagrees points into the surface. When more than
+    ``min_share`` of them disagree, they are flipped (fewer: the file is kept as it is, the disagreement being
+    the orientation's own noise on thin parts) -- unless flipping would leave more near-horizontal normals
+    pointing down than the file has (then the reference is wrong: scanner positions that are not where the
+    points were seen from). Returns (normals, metrics)."""
+    n = np.asarray(normals, np.float32)
+    oriented, used = orient_normals(points, n, method, scanner_index=scanner_index,
+                                    scanner_positions=scanner_positions)
+    disagree = np.einsum("ij,ij->i", n, oriented) < 0
+    horiz = np.abs(n[:, 2]) > 0.7
+
+    def down_share(a):
+        return float((a[horiz, 2] < 0).mean()) if horiz.any() else 0.0
+
+    share = float(disagree.mean()) if len(n) else 0.0
+    flip = share > min_share
+    out = np.where(disagree[:, None], -n, n).astype(np.float32) if flip else n
+    kept_why = None
+    if flip and down_share(out) > down_share(n) + 0.01:
+        # the orientation would turn floors and roads upside down: its reference (scanner positions that are
+        # not where the points were seen from, a part joined the wrong way) is the wrong one, not the file
+        kept_why = (f"flipping would turn {100 * down_share(out):.1f} % of the near-horizontal normals down "
+                    f"(now {100 * down_share(n):.1f} %)")
+        out, flip = n, False
+    return out, {"method": used, "disagreeing_share": round(share, 4), "flipped": int(disagree.sum()) if flip else 0,
+                 "near_horizontal_down_before": round(down_share(n), 4),
+                 "near_horizontal_down_after": round(down_share(out), 4), "min_share": min_share,
+                 "kept_because": kept_why}

@@ -22,7 +22,11 @@ class ReadCloudParams:
     estimate_normals: bool = True  # estimate normals when the file has none
     normals_k: int = param(24, ge=3, le=1000)  # neighbours for PCA normals
     normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"))  # auto | scanner | mst | up (see normals.py)
-    reorient_existing_normals: bool = False  # False: normals from the file are kept as they are
+    reorient_existing_normals: bool = False  # True: normals from the file are re-oriented wholesale (normals_orientation)
+    # normals from the file are compared with a consistent orientation of the same lines (normals_orientation);
+    # those pointing into the surface are flipped when more than this share disagrees (0 = always; 1 = never
+    # flip, only measure). docs/pointcloud.md "Normals from the file"
+    file_normals_flip_share: float = param(0.01, ge=0, le=1)
     min_points: int = param(10, ge=1)  # fewer points -> "too few points" error
     drop_invalid_points: bool = True  # drop NaN/inf points with a warning (False: error)
     max_offset_km: float = param(20.0, gt=0)  # without site bounds: cloud centre farther from the base point = wrong CRS
@@ -153,7 +157,8 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
 
     from twinkit.mesh import Mesh, write_ply
     from twinkit.surface.measure import Measure
-    from .normals import estimate_normals, orient_normals
+    from .localframe import apply_cloud_frame
+    from .normals import check_file_normals, estimate_normals, orient_normals
     from .readers import read_any, validate_and_frame
 
     params = params or ReadCloudParams()
@@ -161,6 +166,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     with Measure() as meas, _Outputs(out_points_ply, out_points_meta_json):
         raw = read_any(in_cloud)
         n_read = raw.n
+        cloud_frame = apply_cloud_frame(raw, ctx.site, ctx.log)  # site.cloud_frame: a local cloud into the CRS
         cloud = validate_and_frame(raw, ctx.site, min_points=params.min_points,
                                    drop_invalid=params.drop_invalid_points, log=ctx.log,
                                    max_offset_m=params.max_offset_km * 1000.0,
@@ -170,9 +176,23 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
         normals = raw.normals
         normals_source = "file" if normals is not None else None
         orientation = None
+        normals_check = None
         if normals is not None and params.reorient_existing_normals:
             normals, orientation = orient_normals(pts, normals, params.normals_orientation,
                                                   scanner_index=raw.scanner, scanner_positions=raw.scanner_positions)
+        elif normals is not None and params.file_normals_flip_share < 1:
+            normals, normals_check = check_file_normals(pts, normals, params.normals_orientation,
+                                                        scanner_index=raw.scanner,
+                                                        scanner_positions=raw.scanner_positions,
+                                                        min_share=params.file_normals_flip_share)
+            log = ctx.log.warning if normals_check["flipped"] else ctx.log.info
+            log("%s: normals from the file: %.1f %% point into the surface against a consistent orientation (%s)%s; "
+                "near-horizontal normals pointing down %.1f %% -> %.1f %%", in_cloud.name,
+                100 * normals_check["disagreeing_share"], normals_check["method"],
+                f", {normals_check['flipped']} flipped" if normals_check["flipped"] else
+                f", kept as they are ({normals_check['kept_because']})" if normals_check["kept_because"] else
+                ", kept as they are",
+                100 * normals_check["near_horizontal_down_before"], 100 * normals_check["near_horizontal_down_after"])
         if normals is None and params.estimate_normals:
             ctx.log.info("%s: no normals in the file: estimating them (k=%d)", in_cloud.name, params.normals_k)
             normals = estimate_normals(pts, k=params.normals_k)
@@ -201,11 +221,11 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
         meta = {
             "source": {"file": in_cloud.name, "format": raw.format, "fields": raw.source_fields},
             "counts": {"read": n_read, "dropped_invalid": cloud.dropped_invalid, "written": int(len(pts))},
-            "fields": {"normals": normals_source, "normals_orientation": orientation,
+            "fields": {"normals": normals_source, "normals_orientation": orientation, "normals_check": normals_check,
                        "colors": raw.colors is not None, "intensity": raw.intensity is not None,
                        "classification": raw.classification is not None, "scanner": raw.scanner is not None,
                        "extra": sorted(raw.extra)},
-            "frame": cloud.frame.as_dict(),
+            "frame": dict(cloud.frame.as_dict(), cloud_frame=cloud_frame),
             "scanner_positions_m": (None if raw.scanner_positions is None else
                                     [[None if not np.isfinite(c) else float(c) for c in row]
                                      for row in raw.scanner_positions]),
@@ -219,6 +239,11 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
         write_json(out_points_meta_json, meta)
     out = {"points": int(len(pts)), "normals": normals_source, "colors": raw.colors is not None,
            "shift_m": cloud.frame.shift, **meas.as_dict()}
+    if normals_check is not None:
+        out["normals_flipped"] = normals_check["flipped"]
+        out["normals_disagreeing_share"] = normals_check["disagreeing_share"]
+    if cloud_frame is not None:
+        out["cloud_frame"] = {k: v for k, v in cloud_frame.items() if k != "transform"} or {"transform": True}
     return out
 
 

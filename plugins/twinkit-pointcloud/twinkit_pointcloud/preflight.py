@@ -157,6 +157,15 @@ def read_cloud_preflight(site, params, inputs) -> list[str]:
         return []
     lo, hi, crs = b
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    from .localframe import apply_points, cloud_frame_matrix
+
+    try:
+        m, _ = cloud_frame_matrix(site)  # site.cloud_frame: the box moves as read_cloud moves the points
+    except InputError as exc:
+        return [str(exc)]
+    if m is not None:
+        corners = apply_points(m, corners)
+        crs = (site or {}).get("crs") or None
     try:
         local, info = to_site_frame(corners, crs, site, path.name,
                                     max_offset_m=float(getattr(params, "max_offset_km", 20.0)) * 1000.0,

@@ -203,6 +203,9 @@ def read_e57(path: Path) -> RawCloud:
                     lo = float(_node_value(a)) if a is not None else lo
                     hi = float(_node_value(b)) if b is not None else hi
                 part["intensity"] = ((v - lo) / max(hi - lo, 1e-12)).astype(np.float32)
+            cls_field = _class_field(names)
+            if cls_field is not None:  # an extension field of per-point classes (ASPRS codes)
+                part["classification"] = np.clip(np.rint(out[cls_field]), 0, 255).astype(np.uint8)
             # pose
             pose = _child(scan, "pose")
             scanner_pos = [np.nan] * 3
@@ -259,7 +262,7 @@ def read_e57(path: Path) -> RawCloud:
         ln = np.linalg.norm(normals, axis=1, keepdims=True)
         normals = (normals / np.maximum(ln, 1e-12)).astype(np.float32)
     return RawCloud(path=path, format="e57", xyz=cat("xyz"), normals=normals, colors=cat("colors"),
-                    intensity=cat("intensity"), scanner=cat("scanner"),
+                    intensity=cat("intensity"), classification=cat("classification", np.uint8), scanner=cat("scanner"),
                     scanner_positions=np.asarray(positions, np.float64).reshape(-1, 3),
                     crs=crs, source_fields=sorted(fields_seen), notes=notes)
 
@@ -330,10 +333,9 @@ def read_ply_cloud(path: Path) -> RawCloud:
             intensity = np.asarray(a.pop(k), np.float32)
             break
     classification = None
-    for k in ("classification", "scalar_Classification", "class"):
-        if k in a:
-            classification = np.asarray(a.pop(k)).astype(np.uint8)
-            break
+    k = _class_field(list(a))
+    if k is not None:
+        classification = np.clip(np.rint(np.asarray(a.pop(k), np.float64)), 0, 255).astype(np.uint8)
     scanner = np.asarray(a.pop("scanner")).astype(np.int32) if "scanner" in a else None
     fields = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals is not None else []) + \
              (["red", "green", "blue"] if colors is not None else []) + \
@@ -344,6 +346,21 @@ def read_ply_cloud(path: Path) -> RawCloud:
         normals = np.where(ok[:, None], normals / np.maximum(ln, 1e-12), 0).astype(np.float32)
     return RawCloud(path=path, format="ply", xyz=m.vertices, normals=normals, colors=colors, intensity=intensity,
                     classification=classification, scanner=scanner, extra=a, source_fields=fields)
+
+
+#: per-point class fields read as ASPRS codes (any case; CloudCompare's ``scalar_`` prefix, an E57
+#: extension's ``prefix:``). A ``label`` field declares no scheme, so it stays an extra field, unused.
+CLASS_FIELDS = ("classification", "class")
+
+
+def _class_field(names) -> str | None:
+    for nm in names:
+        base = str(nm).split(":")[-1].lower()
+        if base.startswith("scalar_"):
+            base = base[len("scalar_"):]
+        if base in CLASS_FIELDS:
+            return nm
+    return None
 
 
 READERS = {".e57": read_e57, ".las": read_las, ".laz": read_las, ".ply": read_ply_cloud}

@@ -456,7 +456,8 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
                       opt: ContextOptions | None = None, cues=DEFAULT_CUES, segments: np.ndarray | None = None,
                       segment_weight: float = 0.0, min_retained: float = 0.2,
                       smooth_beta: float = 0.0, smooth_iters: int = 5,
-                      keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+                      keep: np.ndarray | None = None,
+                      extra_prior: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """The blended vote ``p`` (n, 19) with the geometric prior: (labels (n,) uint8, 255 where nothing
     voted; confidence; metrics with the vertices each cue touched and changed).
 
@@ -470,6 +471,9 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
        is reached, the allowed class with the most votes, else sidewalk on a band, else the argmax of ``q``.
     3. With ``smooth_beta`` > 0, :func:`potts_smooth` with ``q`` as the unaries (uniform over the
        allowed classes where the votes were explained away).
+
+    ``extra_prior`` (n, 19), e.g. the scan file's own classes (:mod:`twinkit_segmentation.fileclasses`),
+    multiplies the geometric prior after step 0: near-unanimous views do not shield a vertex from it.
     """
     from twinkit_segmentation.metrics import decide_distribution
 
@@ -483,10 +487,19 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     kept = np.zeros(len(p), bool) if keep is None else np.asarray(keep, bool)
     shielded = kept & (prior[np.arange(len(p)), p.argmax(axis=1)] < 1.0)  # a cue was against their class
     prior[kept] = 1.0  # the floor: no cue overrules near-unanimous evidence
+    if extra_prior is not None:  # the file's classes: evidence from the capture itself, not a cue
+        combined = prior * extra_prior
+        file_ok = extra_prior >= 1.0
+        speaks = ~file_ok.all(axis=1)
+        # where the geometry rules out every class the file allows (ASPRS ground on a steep street reads
+        # as "raised"), the file wins: it was classified on the full scan, the cues read the mesh
+        clash = speaks & ~((combined >= 0.5) & file_ok).any(axis=1)
+        combined[clash] = extra_prior[clash]
+        prior = combined
     q = p * prior
     lab, conf = decide_distribution(q)
     allowed = prior >= 0.5
-    ea = explained_away(p, prior, min_retained) if (cues and min_retained > 0) else np.zeros(len(p), bool)
+    ea = explained_away(p, prior, min_retained) if ((cues or extra_prior is not None) and min_retained > 0) else np.zeros(len(p), bool)
     if ea.any():
         if "curb" in cues and opt.band_default:
             # a raised band beside the carriageway whose views saw something else (the car parked in

@@ -500,6 +500,12 @@ class BackprojectParams:
     keep_votes: float = param(32.0, ge=0)  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
     smooth_beta: float = param(1.0, ge=0)  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
     smooth_iters: int = param(5, ge=0)
+    # the scan file's own classes (ASPRS codes in points.ply's classification; docs/segmentation.md "File
+    # classes"): a prior beside the views. A class the file rules out (car on ASPRS ground) keeps this factor
+    # of its votes -- the same strength as a class the geometry rules out (context_factor)
+    file_classes: bool = True
+    file_class_factor: float = param(0.1, ge=0, le=1)
+    file_class_spacings: float = param(3.0, gt=0)  # a vertex takes the class of its nearest point within this many point spacings
 
 
 def context_options(params: BackprojectParams):
@@ -517,8 +523,9 @@ def context_options(params: BackprojectParams):
 
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
                 in_vertex_votes_npy: Path, out_labels_npy: Path, out_confidence_npy: Path,
-                out_labels_ply: Path) -> dict:
-    """Votes per segment and class, argmax -> labels.npy (per vertex), confidence.npy, labels.ply (palette)."""
+                out_labels_ply: Path, in_points_ply: Path | None = None) -> dict:
+    """Votes per segment and class, argmax -> labels.npy (per vertex), confidence.npy, labels.ply (palette).
+    The cloud's own classes (points.ply ``classification``), where it has them, are a prior beside the votes."""
     import numpy as np
 
     from twinkit.cityscapes import IGNORE
@@ -541,14 +548,18 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     else:
         p = _weighted_votes(votes, params.ignore_classes, params.class_weights or None)
         s_total = p.sum(axis=1)
+    fprior, fvoting, fcodes, finfo = _file_classes(params, ctx, in_points_ply, mesh.vertices)
     labels, conf = decide_distribution(p, s_total < params.min_votes)
+    base_labels = labels.copy()  # the views alone
     edges = None
     cmet: dict = {}
     t_ctx = 0.0
     bad = [c for c in params.context_cues if c not in CUES]
     if bad:
         raise InputError(f"backproject: unknown context_cues {bad}; choose from {list(CUES)}")
-    if params.context and params.context_cues:
+    if (params.context and params.context_cues) or fprior is not None:
+        # the file's classes go through the same fusion as the cues (with no cue when context is off)
+        cues = list(params.context_cues) if params.context else []
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
         opt = context_options(params)
@@ -556,9 +567,9 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
         sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None), None,
                               params.keep_share, params.keep_votes)
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, opt,
-                                               params.context_cues, min_retained=params.min_retained,
+                                               cues, min_retained=params.min_retained,
                                                smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
-                                               keep=sure)
+                                               keep=sure, extra_prior=fprior)
         labels[keep] = IGNORE  # too few votes stays too few votes
         t_ctx = time.perf_counter() - t1
         ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, "
@@ -576,13 +587,47 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     unlabelled_before = int((labels == IGNORE).sum())
     if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
         labels = propagate(labels, edges if edges is not None else mesh_edges(mesh.faces, len(mesh.vertices)))
+    if fprior is not None:
+        from twinkit_segmentation.fileclasses import summary
+
+        finfo.update(summary(fcodes, fvoting, fprior, base_labels, labels))
+        ctx.log.info("file classes: %d of %d vertices carry a class the fusion uses; the views' plain vote gave "
+                     "%.1f %% of them a class the file rules out, the fused labels %.1f %% (prior factor %g)",
+                     finfo["vertices_with_class"], finfo["vertices"], 100 * finfo["against_file_before"],
+                     100 * finfo["against_file_after"], params.file_class_factor)
     np.save(out_labels_npy, labels.astype(np.uint8))
     np.save(out_confidence_npy, conf.astype(np.float32))
     write_labels_ply(out_labels_ply, mesh, labels)
     return {"unlabelled_before_fill": unlabelled_before, "unlabelled": int((labels == IGNORE).sum()),
             "mean_confidence": float(conf[conf > 0].mean()) if (conf > 0).any() else 0.0,
-            "context": cmet, "context_seconds": round(t_ctx, 3),
+            "context": cmet, "context_seconds": round(t_ctx, 3), "file_classes": finfo,
             "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _file_classes(params: BackprojectParams, ctx: StepContext, points_ply: Path | None, vertices):
+    """(prior (n, 19) or None, voting (n,), per-vertex codes, info) from the cloud's own classes."""
+    import numpy as np
+
+    from twinkit_segmentation.fileclasses import classes_on_vertices, file_class_prior, read_point_classes
+
+    if not params.file_classes:
+        return None, None, None, {"used": False, "why": "file_classes: false"}
+    if points_ply is None:
+        return None, None, None, {"used": False, "why": "no points.ply"}
+    got = read_point_classes(Path(points_ply))
+    if got is None:
+        return None, None, None, {"used": False, "why": "the cloud has no classification field"}
+    pts, codes = got
+    vcodes, spacing, reach = classes_on_vertices(pts, codes, vertices, params.file_class_spacings,
+                                                 max(1, int(getattr(ctx, "threads", 1) or 1)))
+    prior, voting = file_class_prior(vcodes, params.file_class_factor)
+    info = {"used": bool(voting.any()), "point_spacing_m": round(spacing, 4), "reach_m": round(reach, 4),
+            "factor": params.file_class_factor}
+    if not voting.any():
+        ctx.log.info("file classes: none of the cloud's classes (%s) says anything the labels use; not used",
+                     ", ".join(str(int(c)) for c in np.unique(codes)[:12]))
+        return None, None, None, dict(info, why="only silent codes (0 never classified, 1 unclassified, ...)")
+    return prior, voting, vcodes, info
 
 
 # ----------------------------------------------------------------------------- ground truth and evaluation
