@@ -204,14 +204,15 @@ def tilt_components(up, ref, centres=None) -> dict:
 
 def level(centres: np.ndarray, R_wc: np.ndarray, sparse: np.ndarray, log=None, *, up_model=None,
           min_ground_support: float = 0.2, ground_agree_deg: float = 2.0, vertical: tuple | None = None,
-          ) -> tuple[np.ndarray, dict]:
+          max_lines_vs_horizon_deg: float = 30.0) -> tuple[np.ndarray, dict]:
     """Rotation that makes the model's up +z, from the photos' own horizon first.
 
     Sources, in order:
       * ``up_model``: the user's up vector (model frame) -- used as given;
-      * the photos' horizon (:func:`camera_horizon`), refined by vertical structure (``vertical``: an
-        estimate from vertical lines in the photos, (unit vector, info), used where it agrees with the
-        cameras within 10 degrees);
+      * the photos' horizon (:func:`camera_horizon`), corrected by vertical structure (``vertical``: an
+        estimate from vertical lines in the photos, (unit vector, info), used where it lies within
+        ``max_lines_vs_horizon_deg`` of the photos' horizon: photos of a tall facade are all pitched up,
+        by 11 degrees at Sceaux, which no average of their up axes removes);
       * a RANSAC ground plane of the sparse points, only with enough support (``min_ground_support`` of the
         points) and only where it agrees with the photos within ``max(ground_agree_deg, 3 x their standard
         error)`` -- a street's camber, a slope or a roof is a plane too -- or where the photos' up axes
@@ -232,7 +233,7 @@ def level(centres: np.ndarray, R_wc: np.ndarray, sparse: np.ndarray, log=None, *
         vi = dict(vertical[1] or {})
         vi["vs_camera_horizon_deg"] = round(_angle_deg(v, up_cam), 3)
         info["vertical_lines"] = vi
-        if photos_agree and vi["vs_camera_horizon_deg"] <= 10.0:
+        if photos_agree and vi["vs_camera_horizon_deg"] <= max_lines_vs_horizon_deg:
             up, up_from = v, "vertical_lines"
             sigma = min(sigma, float(vi.get("std_error_deg", sigma)))
     if len(sparse) >= 50:
@@ -371,6 +372,29 @@ def line_segments(gray: np.ndarray, min_len_px: float) -> np.ndarray:
     return segs[ln >= min_len_px]
 
 
+def undistort_normalized(p: np.ndarray, model: str | None, params) -> np.ndarray:
+    """Homogeneous normalised image points (n, 3) with COLMAP's radial distortion (SIMPLE_RADIAL, RADIAL,
+    OPENCV's k1, k2) taken out by fixed-point iteration; other models are returned as they are."""
+    if not params:
+        return p
+    params = list(params)
+    k1 = k2 = 0.0
+    if model == "SIMPLE_RADIAL" and len(params) >= 4:
+        k1 = params[3]
+    elif model == "RADIAL" and len(params) >= 5:
+        k1, k2 = params[3], params[4]
+    elif model in ("OPENCV", "FULL_OPENCV") and len(params) >= 6:
+        k1, k2 = params[4], params[5]
+    if k1 == 0 and k2 == 0:
+        return p
+    xd = p[:, :2] / p[:, 2:3]
+    xu = xd.copy()
+    for _ in range(10):
+        r2 = (xu ** 2).sum(1, keepdims=True)
+        xu = xd / (1 + k1 * r2 + k2 * r2 ** 2)
+    return np.c_[xu, np.ones(len(xu))]
+
+
 def vertical_from_lines(photos_dir: Path, cams: list[dict], up_hint: np.ndarray, max_px: int = 1024,
                         max_image_deg: float = 25.0, inlier_deg: float = 1.5, min_lines: int = 40,
                         min_photos: int = 3) -> tuple[np.ndarray | None, dict]:
@@ -404,8 +428,8 @@ def vertical_from_lines(photos_dir: Path, cams: list[dict], up_hint: np.ndarray,
         if not len(segs):
             continue
         Ki = np.linalg.inv(K)
-        p1 = np.c_[segs[:, :2], np.ones(len(segs))] @ Ki.T
-        p2 = np.c_[segs[:, 2:], np.ones(len(segs))] @ Ki.T
+        p1 = undistort_normalized(np.c_[segs[:, :2], np.ones(len(segs))] @ Ki.T, c.get("model"), c.get("params"))
+        p2 = undistort_normalized(np.c_[segs[:, 2:], np.ones(len(segs))] @ Ki.T, c.get("model"), c.get("params"))
         n = np.cross(p1, p2)
         n /= np.linalg.norm(n, axis=1, keepdims=True)
         n = n @ np.asarray(c["R_world_from_camera"], float).T
