@@ -269,3 +269,18 @@ def test_vertical_lines_correct_photos_that_all_look_up():
     assert v is not None, info
     assert math.degrees(math.acos(min(1.0, v[2]))) < 0.5, info
     assert info["photos_with_lines"] == 6
+
+
+def test_level_takes_the_vertical_lines_over_the_photos_horizon_within_30_degrees():
+    C = np.c_[np.linspace(-5, 5, 8), np.zeros(8), np.full(8, 1.6)]
+    a = math.radians(11.0)  # every photo pitched up 11 degrees (Sceaux)
+    R_up = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+    R_wc = np.array([np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], float) @ R_up] * 8)
+    info_lines = {"lines": 300, "photos_with_lines": 8, "std_error_deg": 0.1}
+    R_lvl, info = level(C, R_wc, np.zeros((0, 3)), vertical=(np.array([0, 0, 1.0]), info_lines))
+    assert info["up_from"] == "vertical_lines" and (R_lvl @ [0, 0, 1.0])[2] > math.cos(math.radians(0.01))
+    assert info["final_vs_camera_horizon"]["total_deg"] == pytest.approx(11.0, abs=0.01)
+    # lines 40 degrees from the photos' horizon are not trusted
+    far = np.array([0, math.sin(math.radians(51)), math.cos(math.radians(51))])
+    _, info = level(C, R_wc, np.zeros((0, 3)), vertical=(far, info_lines))
+    assert info["up_from"] == "camera_horizon"

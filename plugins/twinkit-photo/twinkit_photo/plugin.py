@@ -356,12 +356,17 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     method = params.method
     lv = {"up_model": list(params.up_model) or None, "min_ground_support": params.min_ground_support,
           "ground_agree_deg": params.ground_agree_deg}
-    if params.vertical_lines and in_photos_dir is not None and Path(in_photos_dir).is_dir():
-        from .georef import camera_horizon, vertical_from_lines
 
-        t_v = time.perf_counter()
-        lv["vertical"] = vertical_from_lines(Path(in_photos_dir), [rows[n] for n in names], camera_horizon(Rwc)[0])
-        lv["vertical"][1]["seconds"] = round(time.perf_counter() - t_v, 3)
+    def with_lines() -> dict:
+        """The levelling options, with the vertical lines of the photos (only the routes that level need them)."""
+        if params.vertical_lines and in_photos_dir is not None and Path(in_photos_dir).is_dir() and not params.up_model:
+            from .georef import camera_horizon, vertical_from_lines
+
+            t_v = time.perf_counter()
+            v = vertical_from_lines(Path(in_photos_dir), [rows[n] for n in names], camera_horizon(Rwc)[0])
+            v[1]["seconds"] = round(time.perf_counter() - t_v, 3)
+            return {**lv, "vertical": v}
+        return lv
     if params.up_model and len(params.up_model) != 3:
         raise InputError(f"georeference.up_model has {len(params.up_model)} numbers; give 3 (x, y, z in the SfM "
                          f"model frame, e.g. read off sfm/sparse_model.ply) or none")
@@ -443,7 +448,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
             gps_ok = [n for n in names if n in model.get("exif_gps", {})]
             raise InputError("georeference.method=gps needs the site's crs and base_point (conf/site/<site>.yaml)"
                              + (f"; {_suggest_site(model, gps_ok)}" if gps_ok else ""))
-        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log, **lv)
+        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log, **with_lines())
         info["level"] = linfo
         gps_names = [n for n in names if n in model.get("exif_gps", {})]
         if len(gps_names) < 3:
@@ -467,7 +472,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
         info["gps"] = {**sim.to_json(), "photos_with_gps": len(gps_names),
                        "residual_m": {n: round(float(e), 3) for n, e in zip(gps_names, res_gps)}}
     elif method == "none":
-        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log, **lv)
+        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log, **with_lines())
         info["level"] = linfo
         scale = float(params.scale)
         if known is not None:
