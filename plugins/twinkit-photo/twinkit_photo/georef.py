@@ -410,10 +410,13 @@ def vertical_from_lines(photos_dir: Path, cams: list[dict], up_hint: np.ndarray,
     tan_max = math.tan(math.radians(max_image_deg))
     for c in cams:
         path = Path(photos_dir) / c["image"]
-        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        # the pixels as SfM saw them: no EXIF rotation (COLMAP ignores the orientation flag)
+        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION)
         if img is None:
             continue
         h0, w0 = img.shape
+        if abs(w0 / h0 - float(c["width"]) / float(c["height"])) > 0.02:
+            continue  # not the image the camera describes (turned, or another file)
         s = min(1.0, max_px / float(max(h0, w0)))
         if s < 1.0:
             img = cv2.resize(img, (int(round(w0 * s)), int(round(h0 * s))), interpolation=cv2.INTER_AREA)
