@@ -37,11 +37,23 @@ def _slope(P, z):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--photos", required=True)
+    ap.add_argument("--photos", help="the photo folder (default: ../shared's Lund and Sceaux sets, as make bench does)")
     ap.add_argument("--site", default="{}", help="the site as JSON (crs, base_point) for the GPS route")
     ap.add_argument("--sfm", help="a finished sfm/ folder to reuse")
     ap.add_argument("--out", default="/tmp/twinkit_levelling")
     a = ap.parse_args(argv)
+    if not a.photos:  # make bench: the shared real sets
+        shared = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "photos"
+        sets = [("lund_street", {"name": "lund", "crs": "EPSG:3006",
+                                 "base_point": {"lat": 55.698167, "lon": 13.195389, "alt": 37.0}}),
+                ("sceaux_castle", {})]
+        for name, site in sets:
+            if (shared / name).is_dir():
+                print(f"\n## {name}\n", flush=True)
+                main(["--photos", str(shared / name), "--site", json.dumps(site), "--out", f"{a.out}/{name}"])
+            else:
+                print(f"{shared / name}: absent, skipped")
+        return 0
     from twinkit.testing import plugin_from_module, run_step
 
     import twinkit_photo.plugin as photo

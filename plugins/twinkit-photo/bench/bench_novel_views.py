@@ -145,7 +145,7 @@ def build_from_rest(run: Path, photos: Path, keep: list[dict], cams_doc: dict, o
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--run", required=True, help="outputs/<site> of a finished image_site run")
+    ap.add_argument("--run", help="outputs/<site> of a finished image_site run")
     ap.add_argument("--photos", help="the photos folder (default: from the run's manifest)")
     ap.add_argument("--every", type=int, default=5, help="hold out every N-th photo (default 5)")
     ap.add_argument("--out", default="/tmp/twinkit_novel_views")
@@ -153,6 +153,10 @@ def main(argv=None) -> int:
     ap.add_argument("--dense-px", type=int, default=0, help="dense.max_image_px (0: the step's default)")
     ap.add_argument("--mesh", help="skip the rebuild: evaluate this textured mesh PLY (e.g. one built before)")
     a = ap.parse_args(argv)
+    if not a.run:  # make bench runs every script bare: this one needs a finished run to measure
+        print("bench_novel_views: no run folder given (--run outputs/<site> of a finished image_site run); "
+              "nothing measured")
+        return 0
     from PIL import Image
     from twinkit.mesh import read_ply
 
