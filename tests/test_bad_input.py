@@ -166,6 +166,7 @@ SETUPS = {
     "recipe-param-out-of-range": _recipe_params,
     "lat-not-a-number": _site("base_point: {lat: abc, lon: 24.9, alt: 0}"),
     "lat-out-of-range": _site("base_point: {lat: 95.0, lon: 24.9, alt: 0}"),
+    "base-point-outside-crs-area": _site("base_point: {lat: 19.4326, lon: -99.1332, alt: 2240}"),
     "recipe-callbacks": _callbacks(False),
     "recipe-callbacks-multirun": _callbacks(True),
     "site-target": _site_target,
@@ -185,6 +186,7 @@ SETUPS = {
 
 CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative", "target-faces-0", "max-dist-negative",
                 "backend-unknown", "recipe-param-out-of-range", "lat-not-a-number", "lat-out-of-range",
+                "base-point-outside-crs-area",
                 "recipe-callbacks", "recipe-callbacks-multirun", "site-target", "local-launcher"}
 
 

@@ -216,9 +216,15 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
     site_root = Path(engine_cfg["outputs_dir"]) / site["name"]
     workspace = run_dir if multirun else site_root
     registry = get_registry()
-    from twinkit.config import check_config
+    from twinkit.config import _chosen, check_config
 
-    check_config(container, registry)
+    try:
+        sites = _chosen(overrides, conf_dir).get("site") or []
+        chosen_site = sites[0] if len(sites) == 1 else None
+    except Exception:  # noqa: BLE001 - only for the message
+        chosen_site = None
+    check_config(container, registry,
+                 site_file=str(conf_dir / "site" / f"{chosen_site}.yaml") if chosen_site else None)
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
     engine = Engine(

@@ -187,7 +187,7 @@ def check_choices(overrides: list[str], conf_dir: Path) -> None:
             check_yaml(local)
 
 
-def _check_site(site: dict) -> None:
+def _check_site(site: dict, site_file: str | None = None) -> None:
     """The site's georeference fields are numbers in range (a typo fails now, not in a late step)."""
     bp = site.get("base_point")
     if bp is None:
@@ -206,9 +206,19 @@ def _check_site(site: dict) -> None:
             lo, hi = limits[k]
             raise ConfigError(f"site.base_point.{k}={v} is out of range: site.base_point.{k} must be {lo:g}..{hi:g} "
                               "degrees")
+    if site.get("crs"):
+        from twinkit.errors import InputError
+        from twinkit.geo.crs import check_base_point_area
+
+        name = site.get("name", "?")
+        where = site_file or f"the site file of site '{name}' (conf/site/<site>.yaml)"
+        try:
+            check_base_point_area(site, where)
+        except InputError as exc:
+            raise ConfigError(str(exc)) from None
 
 
-def check_config(cfg: dict, registry: Registry) -> None:
+def check_config(cfg: dict, registry: Registry, site_file: str | None = None) -> None:
     """Every parameter in the composed config inside its declared range (twinkit.ranges); the site's base point.
 
     Runs before any step: ``reconstructor.depth=30`` fails here with exit 2 naming the key and the range.
@@ -232,7 +242,7 @@ def check_config(cfg: dict, registry: Registry) -> None:
         gen = registry.plugins.get("site_generator", {}).get(site.get("generator"))
         if gen is not None:
             check_values(gen.params, site, "site", gen.qualname)
-        _check_site(site)
+        _check_site(site, site_file)
 
 
 # --------------------------------------------------------------------------- configs are data

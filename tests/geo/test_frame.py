@@ -71,3 +71,24 @@ def test_no_heights_without_a_vertical_datum():
         f.ellipsoidal_heights([[0, 0, 0]])
     g = SiteFrame.from_site({"crs": "EPSG:3067+3900", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}})
     assert "N2000" in g.vertical_datum
+
+
+def test_a_base_point_outside_the_crs_area_of_use_is_refused():
+    """EPSG:3067 (Finland) with a Mexico City base point was accepted and gave a frame thousands of km from
+    the place; now refused with the CRS's area, the site file and a CRS that fits (the UTM zone)."""
+    from twinkit.geo import check_base_point_area, outside_area_of_use, utm_epsg
+    from twinkit.geo.crs import parse_crs
+
+    bad = {"name": "mexfi", "crs": "EPSG:3067", "base_point": {"lat": 19.4326, "lon": -99.1332, "alt": 2240.0}}
+    with pytest.raises(InputError, match=r"conf/site/mexfi\.yaml.*EPSG:3067.*area of use.*EPSG:32614"):
+        SiteFrame.from_site(bad)
+    # a projected base point in another CRS's metres (Mexico City's UTM 14N x/y read as TM35FIN)
+    with pytest.raises(InputError, match="t.yaml: site.crs EPSG:3067 does not fit"):
+        check_base_point_area({"crs": "EPSG:3067", "base_point": {"x": 486_000.0, "y": 2_148_000.0}}, "t.yaml")
+    # inside (and just across a zone border, within the 2 degree margin) is fine
+    assert outside_area_of_use(parse_crs("EPSG:3067"), 60.17, 24.93) is None
+    assert outside_area_of_use(parse_crs("EPSG:32633"), 48.19, 11.5) is None  # zone 33 starts at 12 E
+    assert outside_area_of_use(parse_crs("EPSG:32633"), 48.19, 5.0) is not None
+    SiteFrame.from_site({"crs": "EPSG:32614", "base_point": {"lat": 19.4326, "lon": -99.1332, "alt": 2240.0}})
+    assert utm_epsg(19.4326, -99.1332) == (32614, "zone 14N")
+    assert utm_epsg(-33.9, 18.4) == (32734, "zone 34S")

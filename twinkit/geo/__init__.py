@@ -13,8 +13,9 @@ package costs only numpy. See docs/georeferencing.md.
 """
 from __future__ import annotations
 
-from twinkit.geo.crs import (LARGE_COORD_M, FrameInfo, apply_frame, base_height, base_point_in, horizontal,
-                             parse_crs, short_crs, site_dict, to_site_frame, unit_factors)
+from twinkit.geo.crs import (LARGE_COORD_M, FrameInfo, apply_frame, base_height, base_point_in,
+                             check_base_point_area, horizontal, outside_area_of_use, parse_crs, short_crs,
+                             site_dict, to_site_frame, unit_factors, utm_epsg)
 from twinkit.geo.frame import PROJ_TOLERANCE_M, SiteFrame, check_bbox
 from twinkit.geo.georef import FRAME, site_georef
 from twinkit.geo.similarity import Similarity, fit_similarity
@@ -22,5 +23,6 @@ from twinkit.geo.similarity import Similarity, fit_similarity
 __all__ = [
     "FRAME", "LARGE_COORD_M", "PROJ_TOLERANCE_M", "FrameInfo", "SiteFrame", "Similarity", "apply_frame",
     "base_height", "base_point_in", "check_bbox", "fit_similarity", "horizontal", "parse_crs", "short_crs",
-    "site_dict", "site_georef", "to_site_frame", "unit_factors",
+    "site_dict", "site_georef", "to_site_frame", "unit_factors", "check_base_point_area", "outside_area_of_use",
+    "utm_epsg",
 ]

@@ -133,6 +133,81 @@ def base_height(bp: Mapping[str, Any], z_unit_m: float = 1.0) -> float:
     return float(bp.get("z", 0.0) or 0.0) * float(z_unit_m)
 
 
+def utm_epsg(lat: float, lon: float) -> tuple[int, str]:
+    """The WGS 84 / UTM zone of a place: (EPSG code, "zone 35N")."""
+    zone = int((float(lon) + 180.0) // 6.0) % 60 + 1
+    north = float(lat) >= 0
+    return (32600 if north else 32700) + zone, f"zone {zone}{'N' if north else 'S'}"
+
+
+def outside_area_of_use(crs, lat: float, lon: float, margin_deg: float = 2.0) -> str | None:
+    """Why ``(lat, lon)`` lies outside ``crs``'s area of use (pyproj ``CRS.area_of_use``, widened by
+    ``margin_deg`` on every side: a site just across a zone or national border is still fine), or None
+    when it lies inside, or the CRS states no area."""
+    try:
+        area = crs.area_of_use
+    except Exception:  # noqa: BLE001 - a CRS without the information
+        area = None
+    if area is None:
+        return None
+    w, s, e, n = float(area.west), float(area.south), float(area.east), float(area.north)
+    lat, lon = float(lat), float(lon)
+    in_lat = s - margin_deg <= lat <= n + margin_deg
+    if w <= e:
+        in_lon = w - margin_deg <= lon <= e + margin_deg
+    else:  # the area crosses the antimeridian
+        in_lon = lon >= w - margin_deg or lon <= e + margin_deg
+    if in_lat and in_lon:
+        return None
+    return (f"lat {lat:.4f}, lon {lon:.4f} lies outside the area of use of {short_crs(crs.to_wkt())} "
+            f"({crs.name}: {area.name}; lon {w:g}..{e:g}, lat {s:g}..{n:g})")
+
+
+def check_base_point_area(site: Mapping[str, Any], where: str) -> None:
+    """Refuse a site whose base point lies outside its CRS's area of use (a CRS of another country or UTM
+    zone gives metres that are kilometres wrong, or nonsense). ``where`` names the site file in the message.
+    Unknown CRSs and incomplete base points are left to :class:`twinkit.geo.SiteFrame`."""
+    from twinkit.errors import InputError
+
+    crs_in, bp = site.get("crs"), site.get("base_point")
+    if not crs_in or not isinstance(bp, Mapping):
+        return
+    try:
+        crs = parse_crs(str(crs_in))
+    except Exception:  # noqa: BLE001 - an unknown CRS is SiteFrame's message
+        return
+    horiz = horizontal(crs)
+    try:
+        if "lat" in bp and "lon" in bp:
+            lat, lon = float(bp["lat"]), float(bp["lon"])
+        elif "x" in bp and "y" in bp:
+            if horiz.is_geographic:
+                lon, lat = float(bp["x"]), float(bp["y"])
+            else:
+                from pyproj import Transformer
+
+                t = Transformer.from_crs(horiz, "EPSG:4326", always_xy=True)
+                lon, lat = (float(v) for v in t.transform(float(bp["x"]), float(bp["y"])))
+        else:
+            return
+    except (TypeError, ValueError):
+        return
+    import math
+
+    if not (math.isfinite(lat) and math.isfinite(lon)):
+        why = f"the base point {dict(bp)} has no position in {crs_in}"
+    else:
+        why = outside_area_of_use(crs, lat, lon)
+    if why is None:
+        return
+    hint = ""
+    if math.isfinite(lat) and math.isfinite(lon) and abs(lat) < 84:
+        code, zone = utm_epsg(lat, lon)
+        hint = f" (for this place e.g. EPSG:{code}, WGS 84 / UTM {zone}, or the national grid)"
+    raise InputError(f"{where}: site.crs {crs_in} does not fit site.base_point: {why}. Set site.crs to a CRS "
+                     f"made for the place{hint}, or fix site.base_point to the place the data shows")
+
+
 def base_point_in(crs, site: Mapping[str, Any]) -> np.ndarray | None:
     """The site base point in ``crs`` as metres (x, y times the CRS's unit factor; z: :func:`base_height`),
     or None when the site has none (or gives lat/lon and ``crs`` is None or geographic).

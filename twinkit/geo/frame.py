@@ -24,7 +24,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from twinkit.errors import InputError
-from twinkit.geo.crs import base_height, horizontal, parse_crs, site_dict, unit_factors, z_unit
+from twinkit.geo.crs import (base_height, check_base_point_area, horizontal, parse_crs, site_dict, unit_factors,
+                             z_unit)
 
 #: largest acceptable error of the netconvert projection string against the site frame (metres)
 PROJ_TOLERANCE_M = 1e-3
@@ -81,6 +82,7 @@ class SiteFrame:
         else:
             raise InputError(f"site '{name}': base_point needs lat/lon or x/y, got keys {sorted(bp)}")
         alt = base_height(bp, z_unit(crs))  # z in the CRS's vertical unit, alt in metres: metres here
+        check_base_point_area(s, f"site '{name}' (conf/site/{name}.yaml)")
         if abs(lat) > 89.0:
             raise InputError(f"site '{name}': base point latitude {lat} is at a pole; no projected site frame is "
                              "defined there (choose a polar stereographic CRS and give the base point in it)")

@@ -137,7 +137,7 @@ def test_real_opendrive_fabriksgatan(tmp_path, fake_fbx, class_dir):
 @needs_bpy
 @pytest.mark.shared
 def test_an_opendrive_map_from_road_source_opendrive_is_packaged(tmp_path, fake_fbx, class_dir):
-    """A UTM map (soderleden.xodr) moved into a SWEREF 99 TM site by road_source=opendrive (twinkit-roads,
+    """A UTM map (soderleden.xodr, zone 32) moved into a site in the neighbouring UTM zone 31 by road_source=opendrive (twinkit-roads,
     reached through the registry), packaged: CARLA parses it, spawn points lie on its lanes, and CARLA's
     geolocation of its lane centres is where pyproj puts the source map's (within the package's 0.5 m)."""
     from pyproj import Transformer
@@ -148,7 +148,9 @@ def test_an_opendrive_map_from_road_source_opendrive_is_packaged(tmp_path, fake_
     if not src.exists():
         pytest.skip(f"{src} not available")
     need_plugin("road_source", "opendrive")
-    site = {"name": "teststreet", "crs": "EPSG:3006", "base_point": {"lat": -0.0000685, "lon": 4.5164, "alt": 0.0}}
+    # the map's own geoReference puts it at lat 0, lon 4.5: a site CRS must be one whose area of use holds that
+    # place (SWEREF 99 TM, Sweden's, is refused there)
+    site = {"name": "teststreet", "crs": "EPSG:32631", "base_point": {"lat": -0.0000685, "lon": 4.5164, "alt": 0.0}}
     moved = run_plugin("road_source", "opendrive", tmp_path / "src", {"in_xodr": src}, site=site)["opendrive.xodr"]
     out = _package(tmp_path, fake_fbx, class_dir, moved, site=site)
     assert json.loads(out["spawn_points.json"].read_text())["count"] > 10

@@ -197,3 +197,127 @@ def test_an_outlier_camera_is_flagged_and_left_out(tmp_path):
     out2 = run_step(_step("georeference"), tmp_path / "run2", {"in_sfm_dir": sfm_dir},
                     photo.GeorefParams(outlier_factor=0), site=SITE)
     assert len(json.loads(out2["cameras_site.json"].read_text())["cameras"]) == 8
+
+
+def _rot(axis, deg):
+    a = np.radians(deg)
+    c, s = np.cos(a), np.sin(a)
+    if axis == "x":
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    if axis == "y":
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _no_gps_walk(tmp_path, slope_deg=25.0):
+    """A hand-held walk along +x (site frame, z up): 20 photos, each turned by a few degrees of roll and pitch
+    (as people hold phones), looking at a facade; the sparse cloud is the facade and clutter, plus a sloped bank
+    (``slope_deg`` about the walk direction) holding 21 % of the points: the biggest plane within 30 degrees of the
+    cameras' up, which the old rule (any plane over 5 % within 30 degrees) took for the ground. Written in an
+    arbitrary model frame."""
+    rng = np.random.default_rng(11)
+    n = 20
+    base = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], float)  # looking +y, level
+    R_wc = np.array([base @ _rot("z", rng.normal(0, 3)) @ _rot("x", rng.normal(0, 3)) @ _rot("y", rng.normal(0, 5))
+                     for _ in range(n)])
+    C = np.c_[np.linspace(-10, 10, n), rng.normal(0, 0.2, n), 1.6 + rng.normal(0, 0.05, n)]
+    facade = np.c_[rng.uniform(-15, 15, 500), 8 + rng.normal(0, 0.3, 500), rng.uniform(0, 10, 500)]
+    clutter = np.c_[rng.uniform(-15, 15, 420), rng.uniform(1, 8, 420), rng.uniform(-1, 6, 420)]
+    u, v = rng.uniform(-15, 15, 250), rng.uniform(0, 6, 250)
+    t = np.radians(slope_deg)
+    bank = np.c_[u, 1 + v * np.cos(t), -0.5 + v * np.sin(t)]  # rises towards the facade
+    pts = np.vstack([facade, clutter, bank])
+    Tm = _arbitrary()
+    d = tmp_path / "sfm"
+    d.mkdir()
+    cams = [{"image": f"{k:02d}.jpg", "model": "PINHOLE", "width": 640, "height": 480, "params": [800, 800, 320, 240],
+             "K": K, "R_world_from_camera": (Tm.R @ R_wc[k]).tolist(), "center": Tm.apply(C[k])[0].tolist()}
+            for k in range(n)]
+    (d / "cameras_model.json").write_text(json.dumps({"cameras": cams, "exif_gps": {}}))
+    np.savez_compressed(d / "sparse.npz", xyz=Tm.apply(pts), rgb=np.zeros((len(pts), 3), np.uint8),
+                        error=np.zeros(len(pts)), vis_image=np.array([], str), vis_point=np.array([], np.int64))
+    return d, Tm
+
+
+def test_a_no_gps_set_is_levelled_by_the_horizon_within_2_degrees(tmp_path):
+    """No GPS: the photos' own horizon (robust mean of the cameras' up axes) levels the model; a sloped bank, the
+    biggest plane in the cloud, is not taken for the ground (the old rule did and tilted the model by the bank's
+    25 degrees). The frame is marked unscaled, and the roi step says so."""
+    sfm_dir, Tm = _no_gps_walk(tmp_path)
+    out = run_step(_step("georeference"), tmp_path / "run", {"in_sfm_dir": sfm_dir}, photo.GeorefParams(), site={})
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["method"] == "none"
+    R = np.asarray(rep["transform"]["R"])
+    up = R @ (Tm.R @ np.array([0, 0, 1.0]))  # the true vertical, in the levelled frame
+    tilt = np.degrees(np.arccos(np.clip(up[2], -1, 1)))
+    assert tilt < 2.0, (tilt, rep["level"])
+    assert rep["level"]["up_from"] == "camera_horizon"
+    assert rep["level"]["ground_plane"]["used"] is False
+    assert rep["level_vs_camera_horizon_deg"] < 0.01
+    # unscaled: stated in georef.json, cameras_site.json and the metrics; the roi step ends degraded
+    assert rep["scaled"] is False and "unscaled" in rep["units"]
+    cams = json.loads(out["cameras_site.json"].read_text())
+    assert cams["scaled"] is False and "unscaled" in cams["frame"]
+    from twinkit.testing import make_context
+
+    ctx = make_context(tmp_path / "r", step_id="roi")
+    metrics = photo.roi(photo.RoiParams(), ctx, in_cameras_site_json=out["cameras_site.json"],
+                        in_sparse_site_ply=out["sparse_site.ply"], out_roi_json=tmp_path / "roi.json")
+    assert metrics["scaled"] is False and json.loads((tmp_path / "roi.json").read_text())["scaled"] is False
+    (entry,) = ctx.degraded_reasons
+    assert "unscaled" in entry["reason"] and "distance_m" in entry["hint"]
+
+
+def test_the_user_can_give_up_a_known_distance_or_a_transform(tmp_path):
+    sfm_dir, Tm = _no_gps_walk(tmp_path)
+    up_true = Tm.R @ np.array([0, 0, 1.0])
+    # a wrong up from the user wins (they said so), and is reported as theirs
+    tilted = _rot("x", 10) @ up_true
+    out = run_step(_step("georeference"), tmp_path / "a", {"in_sfm_dir": sfm_dir},
+                   photo.GeorefParams(up_model=tilted.tolist()), site={})
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["level"]["up_from"] == "user"
+    assert rep["level_vs_camera_horizon_deg"] > 5
+    # a known distance sets the scale: two camera centres 20 m apart (the truth: model units are 0.37 m... x1/0.37)
+    doc = json.loads((sfm_dir / "cameras_model.json").read_text())
+    a, b = doc["cameras"][0]["center"], doc["cameras"][-1]["center"]
+    d_true = float(np.linalg.norm(np.subtract(a, b)) / 0.37)
+    out = run_step(_step("georeference"), tmp_path / "b", {"in_sfm_dir": sfm_dir},
+                   photo.GeorefParams(distance_points_model=[*a, *b], distance_m=d_true), site={})
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["scaled"] is True and rep["transform"]["scale"] == pytest.approx(1 / 0.37, rel=1e-6)
+    assert abs(rep["known_distance"]["error_m"]) < 1e-6
+    # a 4x4 transform replaces levelling and fit
+    inv = np.eye(4)
+    inv[:3, :3] = Tm.R.T / Tm.scale
+    inv[:3, 3] = -Tm.R.T @ Tm.t / Tm.scale
+    out = run_step(_step("georeference"), tmp_path / "c", {"in_sfm_dir": sfm_dir},
+                   photo.GeorefParams(transform_model_to_site=inv.ravel().tolist()), site={})
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["method"] == "transform" and rep["scaled"] is True
+    cams = json.loads(out["cameras_site.json"].read_text())["cameras"]
+    assert cams[0]["center"][2] == pytest.approx(1.6, abs=0.2)
+    with pytest.raises(InputError, match="16"):
+        run_step(_step("georeference"), tmp_path / "d", {"in_sfm_dir": sfm_dir},
+                 photo.GeorefParams(transform_model_to_site=[1.0, 0, 0]), site={})
+    with pytest.raises(InputError, match="distance_m"):
+        run_step(_step("georeference"), tmp_path / "e", {"in_sfm_dir": sfm_dir},
+                 photo.GeorefParams(distance_points_model=[0, 0, 0, 1, 1, 1]), site={})
+
+
+def test_exif_gps_without_a_site_crs_suggests_the_utm_zone(tmp_path):
+    from twinkit.geo import SiteFrame
+
+    _, C = _truth()
+    ll = SiteFrame.from_site(SITE).local_to_lonlat(C[:, :2])
+    gps = {f"{k:02d}.jpg": [float(ll[k, 1]), float(ll[k, 0]), 13.6] for k in range(len(C))}
+    sfm_dir, _, _ = _model_dir(tmp_path, _arbitrary(), gps)
+    out = run_step(_step("georeference"), tmp_path / "run", {"in_sfm_dir": sfm_dir}, photo.GeorefParams(),
+                   site={"name": "nocrs"})
+    rep = json.loads(out["georef.json"].read_text())
+    assert rep["method"] == "none"
+    assert "EPSG:32635" in rep["gps_unused"]["suggestion"]  # Helsinki, 24.9 E: UTM zone 35N
+    assert "lat: 60.169" in rep["gps_unused"]["suggestion"]
+    with pytest.raises(InputError, match="EPSG:32635"):
+        run_step(_step("georeference"), tmp_path / "b", {"in_sfm_dir": sfm_dir}, photo.GeorefParams(method="gps"),
+                 site={"name": "nocrs"})

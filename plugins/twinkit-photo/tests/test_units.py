@@ -224,3 +224,63 @@ def test_a_thin_dense_cloud_makes_the_run_degraded(tmp_path):
     fine = make_context(tmp_path / "fine", step_id="dense")
     photo._dense_gate(fine, 397_798, 40, photo.DenseParams(), "cpu")
     assert fine.degraded_reasons == []
+
+
+def test_vertical_lines_correct_photos_that_all_look_up():
+    """A facade photographed from the street, every photo pitched up 10 degrees (and rolled a little): the mean
+    of the cameras' up axes is 10 degrees off, the vertical edges in the photos give the vertical within
+    0.5 degree; horizontal edges (window sills) and a few slanted ones do not pull it."""
+    import cv2
+
+    from twinkit_photo.georef import camera_horizon, vertical_from_lines
+
+    def rot(axis, deg):
+        a = math.radians(deg)
+        c, s = math.cos(a), math.sin(a)
+        return {"x": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]),
+                "z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])}[axis]
+
+    import tempfile
+    from pathlib import Path
+
+    rng = np.random.default_rng(4)
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    base = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], float)
+    edges = [((x, 10.0, 0.0), (x, 10.0, 9.0)) for x in np.arange(-12, 12.1, 1.5)]            # vertical
+    edges += [((-12, 10.0, z), (12, 10.0, z)) for z in (2.0, 4.5, 7.0)]                       # sills
+    edges += [((-8, 10.0, 0.0), (-5, 10.0, 6.0)), ((6, 10.0, 1.0), (7.5, 10.0, 8.0))]         # slanted
+    cams = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, cx in enumerate(np.linspace(-6, 6, 6)):
+            R = base @ rot("x", 10.0) @ rot("z", rng.normal(0, 1.5))
+            C = np.array([cx, 0.0, 1.6])
+            img = np.zeros((480, 640), np.uint8)
+            for a, b in edges:
+                pa, pb = (K @ (R.T @ (np.asarray(p, float) - C)) for p in (a, b))
+                cv2.line(img, tuple(int(round(v)) for v in pa[:2] / pa[2]), tuple(int(round(v)) for v in pb[:2] / pb[2]),
+                         255, 2, cv2.LINE_AA)
+            name = f"{k}.png"
+            cv2.imwrite(str(Path(tmp) / name), img)
+            cams.append({"image": name, "width": 640, "height": 480, "K": K.tolist(), "model": "PINHOLE",
+                         "params": [800, 800, 320, 240], "R_world_from_camera": R.tolist(), "center": C.tolist()})
+        up_cam, _ = camera_horizon(np.array([c["R_world_from_camera"] for c in cams]))
+        v, info = vertical_from_lines(Path(tmp), cams, up_cam, min_lines=10)
+    assert math.degrees(math.acos(up_cam[2])) > 9.0  # the photos' horizon: off by the pitch
+    assert v is not None, info
+    assert math.degrees(math.acos(min(1.0, v[2]))) < 0.5, info
+    assert info["photos_with_lines"] == 6
+
+
+def test_level_takes_the_vertical_lines_over_the_photos_horizon_within_30_degrees():
+    C = np.c_[np.linspace(-5, 5, 8), np.zeros(8), np.full(8, 1.6)]
+    a = math.radians(11.0)  # every photo pitched up 11 degrees (Sceaux)
+    R_up = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+    R_wc = np.array([np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], float) @ R_up] * 8)
+    info_lines = {"lines": 300, "photos_with_lines": 8, "std_error_deg": 0.1}
+    R_lvl, info = level(C, R_wc, np.zeros((0, 3)), vertical=(np.array([0, 0, 1.0]), info_lines))
+    assert info["up_from"] == "vertical_lines" and (R_lvl @ [0, 0, 1.0])[2] > math.cos(math.radians(0.01))
+    assert info["final_vs_camera_horizon"]["total_deg"] == pytest.approx(11.0, abs=0.01)
+    # lines 40 degrees from the photos' horizon are not trusted
+    far = np.array([0, math.sin(math.radians(51)), math.cos(math.radians(51))])
+    _, info = level(C, R_wc, np.zeros((0, 3)), vertical=(far, info_lines))
+    assert info["up_from"] == "camera_horizon"

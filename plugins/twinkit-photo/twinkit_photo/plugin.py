@@ -55,6 +55,19 @@ class GeorefParams:
     # from where the fit puts it, or it stands off the walk: farther from its nearest neighbour than 10 times
     # the median neighbour spacing (and, in metres, more than 5 m). 0 = keep every camera
     outlier_factor: float = param(3.0, ge=0)
+    # levelling (docs/photo.md "Levelling"): the photos' own horizon (the robust mean of the cameras' up axes),
+    # a ground plane only with this share of the sparse points and within ground_agree_deg of the photos' up
+    # (or 3x its standard error)
+    min_ground_support: float = param(0.2, ge=0, le=1)
+    ground_agree_deg: float = param(2.0, ge=0, le=90)
+    vertical_lines: bool = True  # refine the photos' horizon with vertical lines (building edges) in the photos
+    # the user's own frame, in the SfM model frame (sfm/sparse_model.ply): an up vector [x, y, z]; a known
+    # distance: two points [x1, y1, z1, x2, y2, z2] and their distance in metres (method none: sets the scale);
+    # a 4x4 similarity model -> site (16 numbers, row by row) replaces levelling and fit (method none)
+    up_model: list[float] = param(default_factory=list)
+    distance_points_model: list[float] = param(default_factory=list)
+    distance_m: float = param(0.0, ge=0)  # 0 = no known distance
+    transform_model_to_site: list[float] = param(default_factory=list)
 
 
 @dataclass
@@ -286,9 +299,44 @@ def _outlier_cameras(names: list[str], centres, gps_residual: dict, params: Geor
     return out
 
 
+def _suggest_site(model: dict, names: list[str]) -> str:
+    """With EXIF GPS and no site CRS: the UTM zone of the photos and a base point (their mean position)."""
+    import numpy as np
+
+    ll = np.array([model["exif_gps"][n] for n in names], dtype=float)
+    lat, lon = float(np.nanmean(ll[:, 0])), float(np.nanmean(ll[:, 1]))
+    alt = float(np.nanmean(ll[:, 2])) if np.isfinite(ll[:, 2]).any() else 0.0
+    zone = int((lon + 180.0) // 6.0) % 60 + 1
+    epsg = (32600 if lat >= 0 else 32700) + zone
+    return (f"set site.crs=EPSG:{epsg} (WGS 84 / UTM zone {zone}{'N' if lat >= 0 else 'S'}, the photos' zone; "
+            f"or your country's grid) and site.base_point={{lat: {lat:.6f}, lon: {lon:.6f}, alt: {alt:.1f}}} "
+            f"(the photos' mean GPS position) in conf/site/<site>.yaml")
+
+
+def _user_transform(m16) -> "Transform":
+    """georeference.transform_model_to_site (16 numbers, a 4x4 similarity row by row) as a Transform."""
+    import numpy as np
+
+    from .georef import Transform
+
+    M = np.asarray(m16, float).reshape(4, 4)
+    A = M[:3, :3]
+    det = float(np.linalg.det(A))
+    if not np.allclose(M[3], [0, 0, 0, 1], atol=1e-9) or det <= 0:
+        raise InputError("georeference.transform_model_to_site: not a similarity (last row must be 0 0 0 1 and the "
+                         "3x3 part a rotation times a positive scale)")
+    s = det ** (1.0 / 3.0)
+    R = A / s
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-3):
+        raise InputError("georeference.transform_model_to_site: the 3x3 part is not a rotation times one scale "
+                         "(shear or unequal scales); give a similarity")
+    U, _, Vt = np.linalg.svd(R)
+    return Transform(s, U @ Vt, M[:3, 3].copy())
+
+
 def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_site_json: Path,
                  out_georef_json: Path, out_sparse_site_ply: Path, in_gcp_json: Path | None = None,
-                 in_cameras_json: Path | None = None) -> dict:
+                 in_cameras_json: Path | None = None, in_photos_dir: Path | None = None) -> dict:
     """Level the model, then map it into the site frame from GCPs, EXIF GPS or (without either) as is."""
     import numpy as np
 
@@ -306,7 +354,34 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     frame = _frame(ctx)
     info: dict[str, Any] = {}
     method = params.method
+    lv = {"up_model": list(params.up_model) or None, "min_ground_support": params.min_ground_support,
+          "ground_agree_deg": params.ground_agree_deg}
+
+    def with_lines() -> dict:
+        """The levelling options, with the vertical lines of the photos (only the routes that level need them)."""
+        if params.vertical_lines and in_photos_dir is not None and Path(in_photos_dir).is_dir() and not params.up_model:
+            from .georef import camera_horizon, vertical_from_lines
+
+            t_v = time.perf_counter()
+            v = vertical_from_lines(Path(in_photos_dir), [rows[n] for n in names], camera_horizon(Rwc)[0])
+            v[1]["seconds"] = round(time.perf_counter() - t_v, 3)
+            return {**lv, "vertical": v}
+        return lv
+    if params.up_model and len(params.up_model) != 3:
+        raise InputError(f"georeference.up_model has {len(params.up_model)} numbers; give 3 (x, y, z in the SfM "
+                         f"model frame, e.g. read off sfm/sparse_model.ply) or none")
+    known = None  # the known distance's length in model units
+    if params.distance_points_model or params.distance_m:
+        if len(params.distance_points_model) != 6 or params.distance_m <= 0:
+            raise InputError("georeference: a known distance needs distance_points_model (6 numbers: two points "
+                             "x1, y1, z1, x2, y2, z2 in the SfM model frame) and distance_m > 0 (their distance in "
+                             "metres)")
+        pa, pb = np.asarray(params.distance_points_model, float).reshape(2, 3)
+        known = float(np.linalg.norm(pa - pb))
+        if known <= 0:
+            raise InputError("georeference.distance_points_model: the two points are the same point")
     gcps = []
+    gps_site: dict[str, list] = {}
     if in_gcp_json is not None and method in ("auto", "gcp"):
         gcps = read_gcp_file(in_gcp_json, frame)
     if method == "gcp" and in_gcp_json is None:
@@ -335,9 +410,20 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
             method = "gps"
         else:
             method = "none"
-            ctx.log.warning("georeference: no usable GCPs and fewer than 3 registered photos with EXIF GPS "
-                            "(or no site CRS): the model is only levelled and centred (scale %.3f); give "
-                            "site.inputs.gcp for a metric, georeferenced result", params.scale)
+            if len(gps_ok) >= 3 and frame is None:
+                ctx.log.warning("georeference: %d photos carry EXIF GPS but the site has no crs/base_point, so "
+                                "the GPS is not used: %s", len(gps_ok), _suggest_site(model, gps_ok))
+                info["gps_unused"] = {"photos_with_gps": len(gps_ok), "why": "the site has no crs or base_point",
+                                      "suggestion": _suggest_site(model, gps_ok)}
+            else:
+                ctx.log.warning("georeference: no usable GCPs and fewer than 3 registered photos with EXIF GPS: "
+                                "the model is only levelled and centred (scale %.3f); give site.inputs.gcp for a "
+                                "metric, georeferenced result", params.scale)
+    if len(params.transform_model_to_site) not in (0, 16):
+        raise InputError(f"georeference.transform_model_to_site has {len(params.transform_model_to_site)} numbers; "
+                         f"give 16 (a 4x4 similarity, row by row) or none")
+    if params.transform_model_to_site:
+        method = "transform"
     if method == "gcp":
         if len(gcp_rows) < 3:
             raise InputError(f"{in_gcp_json}: only {len(gcp_rows)} ground-control points are seen in "
@@ -359,8 +445,10 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
         from twinkit.geo import fit_similarity
 
         if frame is None:
-            raise InputError("georeference.method=gps needs the site's crs and base_point (conf/site/<site>.yaml)")
-        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log)
+            gps_ok = [n for n in names if n in model.get("exif_gps", {})]
+            raise InputError("georeference.method=gps needs the site's crs and base_point (conf/site/<site>.yaml)"
+                             + (f"; {_suggest_site(model, gps_ok)}" if gps_ok else ""))
+        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log, **with_lines())
         info["level"] = linfo
         gps_names = [n for n in names if n in model.get("exif_gps", {})]
         if len(gps_names) < 3:
@@ -380,14 +468,37 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
         Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
         T = Transform(sim.scale, Rz @ R_lvl, np.asarray(sim.t, float))
         res_gps = np.linalg.norm(sim.apply(src)[:, :2] - dst[:, :2], axis=1)
+        gps_site = {n: dst[k].tolist() for k, n in enumerate(gps_names)}
         info["gps"] = {**sim.to_json(), "photos_with_gps": len(gps_names),
                        "residual_m": {n: round(float(e), 3) for n, e in zip(gps_names, res_gps)}}
     elif method == "none":
-        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log)
+        R_lvl, linfo = level(C, Rwc, sp["xyz"], ctx.log, **with_lines())
         info["level"] = linfo
-        T = Transform(float(params.scale), R_lvl, -float(params.scale) * R_lvl @ C.mean(0))
+        scale = float(params.scale)
+        if known is not None:
+            scale = params.distance_m / known
+            info["scale_from"] = "known distance"
+        elif params.scale != 1.0:
+            info["scale_from"] = "georeference.scale"
+        T = Transform(scale, R_lvl, -scale * R_lvl @ C.mean(0))
+    elif method == "transform":
+        T = _user_transform(params.transform_model_to_site)
+        info["level"] = {"up_from": "user transform"}
     else:
         raise InputError(f"georeference: unknown method '{params.method}' (auto, gcp, gps or none)")
+    scaled = method in ("gcp", "gps", "transform") or "scale_from" in info
+    info["scaled"] = scaled
+    info["units"] = "metres" if scaled else "model units (unscaled: no GPS, GCPs, known distance or scale)"
+    if known is not None:
+        got = float(T.scale * known)
+        info["known_distance"] = {"given_m": params.distance_m, "in_site_frame_m": round(got, 4),
+                                  "error_m": round(got - params.distance_m, 4)}
+    if "level" in info and "final_vs_camera_horizon" in info["level"]:
+        info["level_vs_camera_horizon_deg"] = info["level"]["final_vs_camera_horizon"]["total_deg"]
+    if not scaled:
+        ctx.log.warning("georeference: the site frame is in model units, not metres (no GPS with a site CRS, no "
+                        "GCPs, no known distance): later steps' thresholds in metres do not mean metres; give "
+                        "georeference.distance_points_model + distance_m, or georeference.scale")
     xyz = T.apply(sp["xyz"]) if len(sp["xyz"]) else np.zeros((0, 3))
     if params.height_from == "ground" and len(xyz) >= 50:
         from .georef import ransac_plane
@@ -407,6 +518,13 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
             ctx.degraded(f"{len(outliers)} of {len(names)} registered photos are outlier cameras "
                          f"({', '.join(list(outliers)[:6])})", "check the photos and their GPS; see georef.json")
     info["outlier_cameras"] = outliers
+    # per photo, for the report's map and residual table: where the model puts the camera and its GPS fix
+    C_site = T.apply(C)
+    res_map = info.get("gps", {}).get("residual_m", {})
+    info["photos"] = {n: {"camera_m": [round(float(v), 3) for v in C_site[k]],
+                          "gps_m": ([round(float(v), 3) for v in gps_site[n]] if n in gps_site else None),
+                          "gps_residual_m": res_map.get(n), "outlier": outliers.get(n)}
+                      for k, n in enumerate(names)}
     cams_out = []
     for n in names:
         if n in outliers:
@@ -438,7 +556,9 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
             ctx.log.info("georeference (%s): camera centres %.3f m from the truth on average (max %.3f); "
                          "SfM shape alone %.3f m", method, e.mean(), e.max(), eb.mean())
     write_json(out_cameras_site_json, {
-        "frame": "site local (metres, x east, y north, z up)" if method != "none" else "levelled model frame",
+        "frame": ("site local (metres, x east, y north, z up)" if method in ("gcp", "gps", "transform") else
+                  "levelled model frame (z up, " + ("metres)" if scaled else "model units: unscaled)")),
+        "scaled": scaled, "units": "metres" if scaled else "model units",
         "convention": "OpenCV pinhole: X_world = R_world_from_camera @ X_cam + center; K at full photo size",
         "cameras": cams_out})
     _write_cloud(out_sparse_site_ply, xyz, sp["rgb"], comments=[f"twinkit-photo georeference ({method})"])
@@ -446,7 +566,10 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
                         vis_point=sp["vis_point"])
     report["time_s"] = round(time.perf_counter() - t0, 3)
     write_json(out_georef_json, report)
-    out = {"method": method, "scale": float(T.scale), "outlier_cameras": len(outliers)}
+    out = {"method": method, "scale": float(T.scale), "outlier_cameras": len(outliers), "scaled": scaled}
+    if "level_vs_camera_horizon_deg" in info:
+        out["level_vs_camera_horizon_deg"] = info["level_vs_camera_horizon_deg"]
+        out["up_from"] = info["level"]["up_from"]
     if "camera_centre_error_m" in report:
         out["camera_centre_error_mean_m"] = report["camera_centre_error_m"]["mean"]
         out["camera_centre_error_shape_m"] = report["camera_centre_error_after_best_similarity_m"]["mean"]
@@ -463,7 +586,15 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
     from .georef import ransac_plane
 
     params = params or RoiParams()
-    cams = _read_json(in_cameras_site_json, "site-frame cameras")["cameras"]
+    cdoc = _read_json(in_cameras_site_json, "site-frame cameras")
+    cams = cdoc["cameras"]
+    scaled = bool(cdoc.get("scaled", True))
+    if not scaled:
+        # the margins, the ground threshold and max_depth_m below are metres; this frame is not
+        ctx.degraded("the site frame is unscaled (no GPS with a site CRS, no GCPs, no known distance): the region "
+                     "of interest, the dense step and the mesh apply thresholds in metres to model units",
+                     "give steps.georeference.distance_points_model=[..6 numbers..] and distance_m, or "
+                     "steps.georeference.scale, or a site CRS for the photos' GPS")
     C = np.array([c["center"] for c in cams], float)
     pts = read_ply(in_sparse_site_ply).vertices
     ground = {"z_m": float(np.median(C[:, 2]) - 1.6), "normal": [0.0, 0.0, 1.0], "source": "cameras - 1.6 m"}
@@ -499,12 +630,13 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
     doc = {"_comment": "Edit this file to change what the dense step keeps (the thesis's manual step 3.8.2): "
                        "box min/max in site metres, ground z, max_depth_m. The next run keeps your edit and "
                        "re-runs only the steps after it.",
-           "box": box, "ground": ground, "max_depth_m": params.max_depth_m,
+           "box": box, "ground": ground, "max_depth_m": params.max_depth_m, "scaled": scaled,
+           "units": "metres" if scaled else "model units (unscaled)",
            "cameras_xy_extent_m": np.ptp(C[:, :2], 0).tolist(), "sparse_inside_ratio": float(inside)}
     write_json(out_roi_json, doc)
     ctx.log.info("roi: box %s .. %s, ground z %.2f m (%s)", np.round(box["min"], 1), np.round(box["max"], 1),
                  ground["z_m"], ground["source"])
-    return {"ground_z_m": ground["z_m"], "sparse_inside_ratio": float(inside)}
+    return {"ground_z_m": ground["z_m"], "sparse_inside_ratio": float(inside), "scaled": scaled}
 
 
 # ----------------------------------------------------------------------------- dense
@@ -725,6 +857,8 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
 
 
 # ----------------------------------------------------------------------------- registration
+
+from .report import twinkit_register_report_sections  # noqa: E402,F401 (this plugin's section of the run report)
 
 @hookimpl
 def twinkit_register_steps(register):

@@ -20,7 +20,11 @@ from twinkit_roads.convert import xodr_counts
 from conftest import SHARED
 
 OD = SHARED / "opendrive"
-SWEREF_SITE = {"name": "sweref", "crs": "EPSG:3006", "base_point": {"lat": -0.0000685, "lon": 4.5164, "alt": 0.0}}
+# SWEREF 99 TM's projection (UTM zone 33 on GRS80) as a PROJ string, at the map's own place (lat 0, lon 4.5),
+# 10.5 degrees from its central meridian: a hard case for the reprojection. EPSG:3006 itself is refused there
+# (outside its area of use, Sweden); a PROJ string states no area, so it is the user's word
+SWEREF_SITE = {"name": "sweref", "crs": "+proj=utm +zone=33 +ellps=GRS80 +units=m +no_defs",
+               "base_point": {"lat": -0.0000685, "lon": 4.5164, "alt": 0.0}}
 UTM31_SITE = {"name": "utm31", "crs": "EPSG:32631", "base_point": {"lat": 0.0, "lon": 4.5, "alt": 0.0}}
 TOWN_SITE = {"name": "town", "crs": "+proj=tmerc +lat_0=0 +lon_0=0 +k=1 +x_0=0 +y_0=0 +datum=WGS84 +units=m +no_defs",
              "base_point": {"lat": 0.0, "lon": 0.0, "alt": 0.0}}

@@ -51,8 +51,10 @@ def test_roads_recipe_from_an_opendrive_map(tmp_path):
     xodr = SHARED / "opendrive" / "soderleden.xodr"
     if not xodr.is_file():
         pytest.skip(f"shared sample data absent: {xodr}")
-    # UTM zone 32 map, SWEREF 99 TM site with its base point on the map
-    site = ("name: roadsite\ncrs: EPSG:3006\nbase_point: {lat: -0.0000685, lon: 4.5164, alt: 0.0}\n"
+    # UTM zone 32 map, a site in SWEREF 99 TM's projection with its base point on the map (a PROJ string:
+    # EPSG:3006 itself is refused at lat 0, lon 4.5, outside its area of use)
+    site = ("name: roadsite\ncrs: '+proj=utm +zone=33 +ellps=GRS80 +units=m +no_defs'\n"
+            "base_point: {lat: -0.0000685, lon: 4.5164, alt: 0.0}\n"
             f"osm_radius_m: 900\ninputs:\n  xodr: {xodr}\n")
     p = run(tmp_path, site, "road_source=opendrive")
     assert p.returncode == 0, p.stderr[-2000:]
