@@ -163,6 +163,22 @@ def outside_area_of_use(crs, lat: float, lon: float, margin_deg: float = 2.0) ->
             f"({crs.name}: {area.name}; lon {w:g}..{e:g}, lat {s:g}..{n:g})")
 
 
+def base_point_lonlat(bp: Mapping[str, Any], horiz) -> tuple[float, float] | None:
+    """(lon, lat) of a base point given as ``lat``/``lon`` or as ``x``/``y`` in the horizontal CRS ``horiz``;
+    None when it has neither pair."""
+    if "lat" in bp and "lon" in bp:
+        return float(bp["lon"]), float(bp["lat"])
+    if "x" in bp and "y" in bp:
+        if horiz.is_geographic:
+            return float(bp["x"]), float(bp["y"])
+        from pyproj import Transformer
+
+        t = Transformer.from_crs(horiz, "EPSG:4326", always_xy=True)
+        lon, lat = t.transform(float(bp["x"]), float(bp["y"]))
+        return float(lon), float(lat)
+    return None
+
+
 def check_base_point_area(site: Mapping[str, Any], where: str) -> None:
     """Refuse a site whose base point lies outside its CRS's area of use (a CRS of another country or UTM
     zone gives metres that are kilometres wrong, or nonsense). ``where`` names the site file in the message.
@@ -176,22 +192,13 @@ def check_base_point_area(site: Mapping[str, Any], where: str) -> None:
         crs = parse_crs(str(crs_in))
     except Exception:  # noqa: BLE001 - an unknown CRS is SiteFrame's message
         return
-    horiz = horizontal(crs)
     try:
-        if "lat" in bp and "lon" in bp:
-            lat, lon = float(bp["lat"]), float(bp["lon"])
-        elif "x" in bp and "y" in bp:
-            if horiz.is_geographic:
-                lon, lat = float(bp["x"]), float(bp["y"])
-            else:
-                from pyproj import Transformer
-
-                t = Transformer.from_crs(horiz, "EPSG:4326", always_xy=True)
-                lon, lat = (float(v) for v in t.transform(float(bp["x"]), float(bp["y"])))
-        else:
-            return
+        ll = base_point_lonlat(bp, horizontal(crs))
     except (TypeError, ValueError):
         return
+    if ll is None:
+        return
+    lon, lat = ll
     import math
 
     if not (math.isfinite(lat) and math.isfinite(lon)):

@@ -24,7 +24,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from twinkit.errors import InputError
-from twinkit.geo.crs import (base_height, check_base_point_area, horizontal, parse_crs, site_dict, unit_factors,
+from twinkit.geo.crs import (base_height, base_point_lonlat, check_base_point_area, horizontal, parse_crs, site_dict, unit_factors,
                              z_unit)
 
 #: largest acceptable error of the netconvert projection string against the site frame (metres)
@@ -69,18 +69,12 @@ class SiteFrame:
                              "give an EPSG code such as EPSG:3067 or a PROJ string") from None
         bp = dict(bp)
         horiz = horizontal(crs)
-        if "lat" in bp and "lon" in bp:
-            lat, lon = float(bp["lat"]), float(bp["lon"])
-            if not (-90 < lat < 90 and -180 <= lon <= 180):
-                raise InputError(f"site '{name}': base point lat={lat} lon={lon} is outside the globe")
-        elif "x" in bp and "y" in bp:
-            if horiz.is_geographic:
-                lon, lat = float(bp["x"]), float(bp["y"])
-            else:
-                t = Transformer.from_crs(horiz, "EPSG:4326", always_xy=True)
-                lon, lat = (float(v) for v in t.transform(float(bp["x"]), float(bp["y"])))
-        else:
+        ll = base_point_lonlat(bp, horiz)
+        if ll is None:
             raise InputError(f"site '{name}': base_point needs lat/lon or x/y, got keys {sorted(bp)}")
+        lon, lat = ll
+        if "lat" in bp and "lon" in bp and not (-90 < lat < 90 and -180 <= lon <= 180):
+            raise InputError(f"site '{name}': base point lat={lat} lon={lon} is outside the globe")
         alt = base_height(bp, z_unit(crs))  # z in the CRS's vertical unit, alt in metres: metres here
         check_base_point_area(s, f"site '{name}' (conf/site/{name}.yaml)")
         if abs(lat) > 89.0:

@@ -642,29 +642,32 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                open_border_left_by_reason_m=open_why)
     # second pass: ground still missing inside a footprint (the hole ran into a scan shadow reaching the
     # scan's edge, so no loop could be closed safely): a patch on the uncovered part of the footprint
-    if instances and opt.patch_cell_m > 0:
-        cur_v = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
-        cur_f = np.vstack([kept] + add_f) if add_f else kept
-        cur_lab = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
-        cur_tc = None
-        if kept_tc is not None:
-            cur_tc = np.vstack([kept_tc] + add_tc) if add_tc else kept_tc
-        pv, pf, plab, ptc = _patch_footprints(cur_v, cur_f, cur_lab, cur_tc, grid, instances, opt)
+    def current():
+        """The static mesh so far: vertices, faces, vertex labels, face UVs (None without a texture)."""
+        cur_tc = (np.vstack([kept_tc] + add_tc) if add_tc else kept_tc) if kept_tc is not None else None
+        return (np.vstack([v] + ([np.asarray(add_v)] if add_v else [])),
+                np.vstack([kept] + add_f) if add_f else kept,
+                np.concatenate([new_labels, np.asarray(add_lab, np.uint8)]), cur_tc)
+
+    def append(pv, pf, plab, ptc):
         if len(pf):
             add_v.extend(list(pv))
-            add_lab.extend(plab.tolist())
+            add_lab.extend(np.asarray(plab).tolist())
             add_f.append(pf)
             if kept_tc is not None:
                 add_tc.append(ptc)
+
+    if instances and opt.patch_cell_m > 0:
+        cur_v, cur_f, cur_lab, cur_tc = current()
+        pv, pf, plab, ptc = _patch_footprints(cur_v, cur_f, cur_lab, cur_tc, grid, instances, opt)
+        append(pv, pf, plab, ptc)
         rep["patch_faces"] = int(len(pf))
     # third pass: every other hole of the ground up to the ground fill's limit (a crack at a kerb's foot, a
     # notch the simplification or the trim left): closed on the ground, so a wheel or a foot never drops in
     if opt.ground_hole_max_m > 0:
         from twinkit.surface.groundfill import close_ground_holes
 
-        cur_v = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
-        cur_f = np.vstack([kept] + add_f) if add_f else kept
-        cur_lab = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
+        cur_v, cur_f, cur_lab, cur_tc = current()
         gv, gf, gloops, grep = close_ground_holes(cur_v, cur_f, grid.at, max_extent_m=opt.ground_hole_max_m,
                                                   cell_m=opt.fill_cell_m or 0.1)
         if len(gf):
@@ -672,34 +675,24 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
             gvid = np.nonzero(np.isin(cur_lab, GROUND))[0]
             gvid = gvid if len(gvid) else np.arange(len(cur_v))
             fill_lab = cur_lab[gvid[cKDTree(cur_v[gvid]).query(gv)[1]]] if len(gv) else np.zeros(0, np.uint8)
-            if kept_tc is not None:
-                cur_tc = np.vstack([kept_tc] + add_tc) if add_tc else kept_tc
+            gtc = None
+            if cur_tc is not None:  # the UVs of the nearest ground face
                 ground_f = np.nonzero(np.isin(cur_lab[cur_f], GROUND).all(axis=1))[0]
                 ground_f = ground_f if len(ground_f) else np.arange(len(cur_f))
                 all_v = np.vstack([cur_v, gv]) if len(gv) else cur_v
                 _, nn = cKDTree(cur_v[cur_f[ground_f]].mean(axis=1)).query(all_v[gf].mean(axis=1))
-                add_tc.append(cur_tc[ground_f[nn]])
-            add_v.extend(list(gv))
-            add_lab.extend(fill_lab.tolist())
-            add_f.append(gf)
+                gtc = cur_tc[ground_f[nn]]
+            append(gv, gf, fill_lab, gtc)
         rep["ground_holes"] = grep
         # what no loop could close (a hole whose border climbs an object's foot or crosses itself seen from
         # above): small spots a ray at the ground falls through, with surface all round, get a patch
-        cur_v = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
-        cur_f = np.vstack([kept] + add_f) if add_f else kept
-        cur_lab = np.concatenate([new_labels, np.asarray(add_lab, np.uint8)])
+        cur_v, cur_f, cur_lab, cur_tc = current()
         gaps = _ground_gaps(cur_v, cur_f, grid, opt.gap_cell_m, opt.gap_max_m) if opt.gap_max_m > 0 else []
         rep["ground_gaps"] = len(gaps)
         if gaps:
-            cur_tc = (np.vstack([kept_tc] + add_tc) if add_tc else kept_tc) if kept_tc is not None else None
             popt = dataclasses.replace(opt, patch_cell_m=opt.gap_cell_m, margin_m=opt.gap_cell_m)
             pv, pf, plab, ptc = _patch_footprints(cur_v, cur_f, cur_lab, cur_tc, grid, gaps, popt, max_edge_m=0.3)
-            if len(pf):
-                add_v.extend(list(pv))
-                add_lab.extend(plab.tolist())
-                add_f.append(pf)
-                if kept_tc is not None:
-                    add_tc.append(ptc)
+            append(pv, pf, plab, ptc)
             rep["ground_gap_faces"] = int(len(pf))
     verts = np.vstack([v] + ([np.asarray(add_v)] if add_v else []))
     faces = np.vstack([kept] + add_f) if add_f else kept
