@@ -125,3 +125,34 @@ def test_no_carriageway_is_a_clear_error():
     v[:, 2] = np.where(np.hypot(v[:, 0], v[:, 1]) < 3, 0.0, 0.12)
     with pytest.raises(InputError, match="no carriageway|no road axis|no road at least"):
         scan.derive_network(v, f, lab, scan.ScanSourceParams())
+
+
+def test_scan_source_through_the_engine_then_the_carla_check(tmp_path):
+    """The registered road source (the engine's code path) on a mesh file and its labels, then
+    osm_to_opendrive's carla.Map check of its opendrive.xodr: source scan, lanes inside the site."""
+    import json
+
+    from twinkit.mesh import Mesh, write_ply
+    from twinkit.testing import run_plugin
+
+    v, f, lab, truth = cross_mesh(step_m=1.0)
+    # colours as a scanner's; labels as the segmentation writes them
+    rgb = np.where(lab[:, None] == ROAD, 80, 170).astype(np.uint8).repeat(3, 1)
+    mesh_p = tmp_path / "textured_mesh.ply"
+    write_ply(mesh_p, Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
+    np.save(tmp_path / "labels.npy", lab)
+    tj = {"lanes": [{"points": [[*p, 0.0] for p in t.tolist()]} for t in truth]}
+    (tmp_path / "roads_truth.json").write_text(json.dumps(tj))
+    site = {"name": "cross", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
+    out = run_plugin("road_source", "scan", tmp_path / "scan",
+                     {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy",
+                      "in_roads_truth_json": tmp_path / "roads_truth.json"}, site=site)
+    doc = json.loads(out["scan_roads.json"].read_text())
+    assert doc["labels"] == "predicted" and len(doc["roads"]) == 4
+    assert doc["centreline_rmse_m"] < 0.2 and doc["lanes_on_road"]["on_road_share"] > 0.95
+    assert out["scan_roads.png"].stat().st_size > 5000
+    chk = run_plugin("step", "osm_to_opendrive", tmp_path / "conv", {"in_opendrive_xodr": out["opendrive.xodr"]},
+                     site=site)
+    rep = json.loads(chk["roads_check.json"].read_text())
+    assert rep["ok"] and rep["source"] == "scan" and rep["junctions"] == 1
+    assert rep["carla"]["waypoints_inside"] > 100

@@ -300,6 +300,34 @@ def _smooth(xy: np.ndarray, window: int) -> np.ndarray:
     return np.stack([np.convolve(pad[:, i], ker, mode="valid") for i in range(2)], 1)
 
 
+def _fit_axis(xy: np.ndarray, window: int, huber_m: float = 0.3) -> np.ndarray:
+    """A road's axis through noisy centre points: a robust (Huber, IRLS) quadratic in the road's own frame
+    (its principal direction), when the road turns less than 30 degrees; a moving average otherwise.
+    The per-point centres wobble where a car or an occlusion eats one edge; a street is straight or
+    gently curved over the length of one arm between junctions."""
+    if len(xy) < 6:
+        return _smooth(xy, window)
+    c = xy.mean(0)
+    u, s_, vt = np.linalg.svd(xy - c, full_matrices=False)
+    d = vt[0]
+    n = np.array([-d[1], d[0]])
+    t = (xy - c) @ d
+    y = (xy - c) @ n
+    tang = np.diff(_smooth(xy, window), axis=0)
+    ang = np.unwrap(np.arctan2(tang[:, 1], tang[:, 0]))
+    if len(ang) and float(np.ptp(ang)) > math.radians(30) or np.any(np.diff(t) <= 0) and np.any(np.diff(t) >= 0):
+        return _smooth(xy, window)
+    scale = max(float(np.abs(t).max()), 1.0)
+    A = np.stack([np.ones_like(t), t / scale, (t / scale) ** 2], 1)
+    w = np.ones(len(t))
+    for _ in range(8):
+        coef, *_ = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)
+        r = np.abs(y - A @ coef)
+        w = np.sqrt(np.where(r <= huber_m, 1.0, huber_m / np.maximum(r, 1e-9)))
+    yf = A @ coef
+    return c + t[:, None] * d + yf[:, None] * n
+
+
 def _normals(xy: np.ndarray) -> np.ndarray:
     t = np.gradient(xy, axis=0)
     t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-9)
@@ -477,6 +505,17 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
         core = xy[first:last + 1]
         win = max(3, int(round(p.edge_window_m / 2 / step)))
         core = _smooth(core, win)
+        # a skeleton stops about a half width before a free end (where the scan ends): measure the edges
+        # on the straight continuation up to the end of the carriageway too
+        for g, at_start in ((ga, True), (gb, False)):
+            if deg2.get(g, 0) >= 3 or len(core) < 3:
+                continue
+            e = core[0] if at_start else core[-1]
+            dv = _unit(core[0] - core[min(5, len(core) - 1)]) if at_start else _unit(core[-1] - core[max(-6, -len(core))])
+            ln = float(_ray_lengths(mask, grid, e[None], dv[None], 60.0, grid.res / 2)[0]) - 1.0
+            if ln > step:
+                ext = e + dv * np.arange(step, ln, step)[:, None]
+                core = np.concatenate([ext[::-1], core]) if at_start else np.concatenate([core, ext])
         nrm = _normals(core)
         left = _ray_lengths(mask, grid, core, nrm, 40.0, grid.res / 4)
         right = _ray_lengths(mask, grid, core, -nrm, 40.0, grid.res / 4)
@@ -487,7 +526,7 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
         lw = np.array([np.percentile(lpad[i:i + w], p.edge_percentile) for i in range(len(core))])
         rw = np.array([np.percentile(rpad[i:i + w], p.edge_percentile) for i in range(len(core))])
         centre = core + nrm * ((lw - rw) / 2)[:, None]
-        centre = _smooth(centre, win)
+        centre = _fit_axis(centre, win)
         # the mask is on average half a pixel wider on each side (_rasterize_faces); the rays overshoot by
         # half their step: measured on the synthetic cross, half a pixel too wide in all
         width = float(np.median(lw + rw)) - grid.res / 2
