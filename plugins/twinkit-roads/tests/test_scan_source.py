@@ -156,3 +156,33 @@ def test_scan_source_through_the_engine_then_the_carla_check(tmp_path):
     rep = json.loads(chk["roads_check.json"].read_text())
     assert rep["ok"] and rep["source"] == "scan" and rep["junctions"] == 1
     assert rep["carla"]["waypoints_inside"] > 100
+
+
+def test_without_osm_the_default_recipe_takes_the_roads_from_the_scan(tmp_path):
+    """pointcloud_site on a site whose OSM input is left empty (mex: osm: ???): the default road source
+    (file) gives way to scan, said in the log; road_source=file typed on the command line keeps the error;
+    road_source=none still leaves the roads out."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[3]
+    cloud = tmp_path / "scan.ply"
+    cloud.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+                      b"property float z\nend_header\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("TWINKIT_")}
+
+    def status(*extra):
+        return subprocess.run([sys.executable, "-m", "twinkit", "status", "recipe=pointcloud_site", "site=mex",
+                               f"site.inputs.cloud={cloud}", f"engine.outputs_dir={tmp_path / 'out'}", *extra],
+                              capture_output=True, text=True, cwd=root, env=env, timeout=300)
+
+    p = status()
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "road_source=file cannot serve this site" in p.stderr and "using road_source=scan instead" in p.stderr
+    assert "osm_to_opendrive" in p.stdout and "apply_alignment" in p.stdout and "carla" in p.stdout
+    p = status("road_source=file")
+    assert p.returncode != 0 and "site.inputs.osm" in p.stderr and "road_source=scan" not in p.stderr
+    p = status("road_source=none")
+    assert p.returncode == 0 and "road_source=none was chosen" in p.stdout and "scan" not in p.stderr
