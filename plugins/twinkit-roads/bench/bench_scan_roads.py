@@ -56,7 +56,9 @@ def bench_run(run: Path, tmp: Path, sources: list[str]) -> list[dict]:
         if pred is not None:
             inputs["in_labels_npy"] = pred
         t0 = time.perf_counter()
-        out = run_plugin("road_source", "scan", tmp / src, inputs, site=site, labels=src)
+        labels, _, variant = src.partition(":")
+        extra = {"use_curbs": False} if variant == "nocurbs" else {}
+        out = run_plugin("road_source", "scan", tmp / src.replace(":", "_"), inputs, site=site, labels=labels, **extra)
         dt = time.perf_counter() - t0
         doc = json.loads(out["scan_roads.json"].read_text())
         text = out["opendrive.xodr"].read_text(encoding="utf-8")
@@ -95,7 +97,8 @@ def pipeline_numbers(run: Path) -> dict | None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--run", action="append", type=Path, help="a finished demo run folder (default outputs/demo)")
-    ap.add_argument("--labels", default="gt,predicted,none", help="label sources to compare (comma separated)")
+    ap.add_argument("--labels", default="gt,predicted,none,gt:nocurbs,predicted:nocurbs",
+                    help="label sources to compare (comma separated; ':nocurbs': the labels alone, use_curbs=false)")
     ap.add_argument("--keep", type=Path, help="keep the outputs (pictures) in this folder")
     a = ap.parse_args()
     runs = a.run or [ROOT / "outputs" / "demo"]

@@ -107,8 +107,9 @@ def test_curbs_alone_without_labels(tmp_path):
 @pytest.mark.parametrize("width, lanes, lane_m, strip_m, two_way", [
     (17.4, 2, 3.25, 2.2, True),   # the demo's main road: 2 + 2 lanes, parking strips
     (6.5, 1, 3.25, 0.0, True),    # a two-lane street
-    (7.4, 1, 3.7, 0.0, True),     # wider lanes rather than a strip narrower than min_strip_m
-    (4.0, 1, 4.0, 0.0, False),    # a narrow one-lane street
+    (6.7, 1, 3.25, 0.1, True),    # a little wider: the lanes stay clear of the curb
+    (7.4, 1, 3.55, 0.15, True),   # wider lanes rather than a strip narrower than min_strip_m, curb_clearance_m free
+    (4.0, 1, 3.7, 0.15, False),   # a narrow one-lane street
 ])
 def test_lane_layout(width, lanes, lane_m, strip_m, two_way):
     lay = scan.lane_layout(width, scan.ScanSourceParams())

@@ -58,6 +58,7 @@ class ScanSourceParams:
     min_lane_width_m: float = param(2.5, gt=0, le=10)  # a road with less than this per direction has one lane, one way
     max_lane_width_m: float = param(4.5, gt=0, le=10)  # lanes are widened up to this before a strip is made
     min_strip_m: float = param(1.8, ge=0, le=10)  # remainder per side at least this wide: a parking strip at the curb
+    curb_clearance_m: float = param(0.15, ge=0, le=2)  # widened lanes stop this short of the found curb (a no-traffic lane fills it)
     strip_type: str = param("parking", choices=("parking", "driving", "none"))  # parking -> lane type none (no traffic), driving -> another lane
     sidewalks: bool = True  # sidewalk lanes where the scan shows sidewalk beyond the curb
     min_sidewalk_m: float = param(1.0, ge=0, le=20)  # narrower sidewalk surface: no sidewalk lane
@@ -362,17 +363,18 @@ def _junction_point(lines: list[tuple[np.ndarray, np.ndarray]], fallback: np.nda
 def lane_layout(width_m: float, p: ScanSourceParams) -> dict:
     """Lanes per direction, their width and a strip at the curb, for a carriageway ``width_m`` wide."""
     half = width_m / 2
-    if half < p.min_lane_width_m:  # one lane, one way
-        return {"two_way": False, "lanes": 1, "lane_m": round(min(width_m, p.max_lane_width_m), 3), "strip_m": 0.0}
+    if half < p.min_lane_width_m:  # one lane, one way (spread about the axis: strip_m at each curb)
+        lane = min(p.max_lane_width_m, max(width_m - 2 * p.curb_clearance_m, 0.5 * width_m))
+        return {"two_way": False, "lanes": 1, "lane_m": round(lane, 3), "strip_m": round(max((width_m - lane) / 2, 0.0), 3)}
     n = max(1, int(math.floor(half / p.lane_width_m + 1e-6)))
     rem = half - n * p.lane_width_m
     if rem >= p.min_strip_m and p.strip_type != "driving":
         return {"two_way": True, "lanes": n, "lane_m": p.lane_width_m, "strip_m": round(rem, 3)}
     if p.strip_type == "driving" and rem >= p.min_strip_m:
         return {"two_way": True, "lanes": n + 1, "lane_m": round(half / (n + 1), 3), "strip_m": 0.0}
-    lane = half / n
-    if lane > p.max_lane_width_m:
-        lane = p.max_lane_width_m
+    # widen the lanes, but keep curb_clearance_m free at the curb: the found edge lies a little outside the
+    # curb's foot (a reconstructed curb is a ramp), and a lane reaching onto the curb drops the drop test
+    lane = min(p.max_lane_width_m, max(p.lane_width_m, (half - p.curb_clearance_m) / n))
     return {"two_way": True, "lanes": n, "lane_m": round(lane, 3), "strip_m": round(max(half - n * lane, 0.0), 3)}
 
 
@@ -701,6 +703,13 @@ def write_plain(net: Network, p: ScanSourceParams, proj: str, folder: Path) -> t
                 lanes.append((None, "all", lay["strip_m"]))
             for _ in range(lay["lanes"]):
                 lanes.append((None, "pedestrian", lay["lane_m"]))
+            if not lay["two_way"]:  # one edge centred on the axis: the same strip and sidewalk on its left
+                if lay["strip_m"] > 0.05:
+                    lanes.append((None, "all", lay["strip_m"]))
+                both = min(arm.sidewalk_left_m, arm.sidewalk_right_m) if p.sidewalks else 0.0
+                lanes = [ln for ln in lanes if ln[0] != "pedestrian"]
+                if both > 0:
+                    lanes = [("pedestrian", None, both)] + lanes + [("pedestrian", None, both)]
             shape = " ".join(f"{x:.3f},{y:.3f},{h:.3f}" for (x, y), h in zip(xy, zz))
             spread = "right" if lay["two_way"] else "center"
             el.append(f'  <edge id="scan{i}{tag}" from="n{a}" to="n{b}" priority="{lay["lanes"]}" '
