@@ -368,6 +368,39 @@ def test_kind_none_leaves_out_its_step_and_the_optional_steps_that_depend_on_it(
     assert r.rc != 0 and "site.inputs.osm" in r.text, r.text
 
 
+def test_default_road_source_falls_back_when_it_cannot_serve_the_site(project):
+    """A recipe's default plugin that cannot serve the site (no OSM file, or one that does not cover it) is
+    replaced by its registered fallback (road_source=file -> scan), logged; a plugin typed on the command
+    line is never replaced (issue 28: roads from the scan when no OSM is given or it does not cover the site)."""
+    osm = project.tmp / "area.txt"
+    osm.write_text("osm roads\n")
+    project.site("given", f"name: t\ninputs:\n  osm: {osm}\n")
+    project.site("far", f"name: t\nosm_far: true\ninputs:\n  osm: {osm}\n")
+    project.site("empty", "name: t\ninputs:\n  osm: ???\n")
+    project.recipe("twin", ["{id: make, uses: step/make}",
+                            "{id: fetch, uses: road_source}",
+                            "{id: convert, uses: step/convert_roads, optional: true}",
+                            "{id: export, uses: step/export_all, inputs: {in_double_txt: net.txt}}"],
+                   extra="defaults:\n  - /road_source: toy_file\n  - _self_\n")
+    r = project.run("site=given", "recipe=twin")
+    assert r.rc == 0, r.text
+    assert project.counts().get("toy_file_roads") == 1 and "toy_scan_roads" not in project.counts()
+    assert (project.ws / "03_convert" / "net.txt").read_text() == "osm roads\n"
+    assert "fallback" not in r.text
+    for site, why in (("empty", "needs input 'osm'"), ("far", "does not cover the site")):
+        project.reset_counts()
+        r = project.run(f"site={site}", "recipe=twin")
+        assert r.rc == 0, r.text
+        assert "toy_file_roads" not in project.counts(), r.text  # (the scan roads: computed once, then reused)
+        assert re.search(r"fetch\s+fallback road_source=toy_scan instead of road_source=toy_file", r.text), r.text
+        assert why in r.text, r.text
+        assert (project.ws / "03_convert" / "net.txt").read_text().startswith("scan "), site
+    # chosen on the command line: the file source is kept, and its problem stops the run
+    r = project.run("site=far", "recipe=twin", "road_source=toy_file")
+    assert r.rc == 2 and "does not cover the site" in r.text, r.text
+    assert "fallback" not in r.text
+
+
 def test_preflight_refuses_before_the_first_step_runs(project):
     """Cheap checks of every planned step run before any step: a missing site input of the last step and a
     plugin's own check are both reported, one line each, with exit 2, and nothing runs (issue 28)."""

@@ -2,7 +2,7 @@
 
 Every registration hook receives a ``register`` callback::
 
-    register(name, run, params=None, version=None, description="", uses=(), preflight=None)
+    register(name, run, params=None, version=None, description="", uses=(), preflight=None, fallback=None)
 
 ``name`` is what users type (``reconstructor=poisson``); ``run`` is the
 callable described per kind below; ``params`` is a dataclass whose fields are
@@ -19,6 +19,11 @@ parameters and ``inputs`` (``{in_<name>: Path | None}``: every input wired to th
 site input file, None for a file an earlier step writes, which does not exist yet). It returns a list of problems, one line each (an empty list:
 fine), and may log; a problem stops the run with exit 2 before any long step (docs/engine.md,
 "Preflight").
+
+``fallback`` (optional, step-like kinds) names another plugin of the same kind that the planner uses
+instead when this one is the recipe's default choice (not typed on the command line) and cannot serve
+the site: an input it needs cannot be wired, or its preflight finds a problem. The switch is logged
+(``road_source=file`` without an OSM file covering the site falls back to ``road_source=scan``).
 
 Step-like kinds (site generators, reconstructors, segmenters, road sources,
 exporters and generic steps) have ``run(params, ctx, **files)``: keyword

@@ -126,6 +126,10 @@ class Plugin:
     #: input, a site file's path or None for an earlier step's file), run for every planned step
     #: before the first step runs (twinkit/engine/preflight.py); each string is one problem, one line
     preflight: Callable[..., Any] | None = None
+    #: another plugin of the same kind to use instead when this one, chosen by the recipe's default (not
+    #: on the command line), cannot serve the site: its inputs cannot be wired or its preflight finds a
+    #: problem (``road_source=file`` without an OSM file that covers the site -> ``road_source=scan``)
+    fallback: str | None = None
 
     @property
     def qualname(self) -> str:
@@ -204,7 +208,10 @@ def _make_register(registry: Registry, kind: str, dist: str, dist_version: str, 
         description: str = "",
         uses: tuple[str, ...] | list[str] = (),
         preflight: Callable[..., Any] | None = None,
+        fallback: str | None = None,
     ) -> None:
+        if fallback is not None and (not isinstance(fallback, str) or fallback == name):
+            raise PluginError(f"{dist}: {kind} plugin '{name}': fallback must name another {kind} plugin")
         if preflight is not None and not callable(preflight):
             raise PluginError(f"{dist}: {kind} plugin '{name}' registered a non-callable preflight")
         if not isinstance(name, str) or not name.replace("_", "").replace("-", "").isalnum():
@@ -233,6 +240,7 @@ def _make_register(registry: Registry, kind: str, dist: str, dist_version: str, 
             distribution=dist,
             module=getattr(run, "__module__", module),
             preflight=preflight,
+            fallback=fallback,
         )
 
     return register

@@ -195,9 +195,28 @@ def toy_roads_preflight(site, params, inputs) -> list[str]:
     return ["the toy road server is offline (site.roads_offline)"] if site.get("roads_offline") else []
 
 
+def toy_file_roads(params, ctx, *, in_osm_txt: Path, out_osm_txt: Path) -> None:
+    """A road source reading a site file (like road_source=file), with a fallback (toy_scan)."""
+    _count("toy_file_roads")
+    out_osm_txt.write_text(Path(in_osm_txt).read_text())
+
+
+def toy_file_preflight(site, params, inputs) -> list[str]:
+    """Refuses a file that 'does not cover the site' (site.osm_far), like road_source=file's box check."""
+    return ["the OSM file does not cover the site (site.osm_far)"] if site.get("osm_far") else []
+
+
+def toy_scan_roads(params, ctx, *, in_data_txt: Path, out_xodr_txt: Path) -> None:
+    """A road source from an earlier step's output (like road_source=scan)."""
+    _count("toy_scan_roads")
+    out_xodr_txt.write_text("scan " + Path(in_data_txt).read_text())
+
+
 @hookimpl
 def twinkit_register_road_sources(register):
     register("toy", toy_roads, preflight=toy_roads_preflight)
+    register("toy_file", toy_file_roads, preflight=toy_file_preflight, fallback="toy_scan")
+    register("toy_scan", toy_scan_roads)
 
 
 @hookimpl

@@ -9,10 +9,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import logging
+
 from twinkit.engine.params import resolve_params
 from twinkit.errors import ConfigError, TwinkitError
 from twinkit.plugins import STEP_KINDS, Plugin, Registry
 from twinkit.signature import Port, Signature, parse_signature
+
+log = logging.getLogger("twinkit")
 
 _STEP_SPEC_KEYS = {"id", "uses", "params", "inputs", "foreach", "manual", "description", "optional"}
 
@@ -98,6 +102,8 @@ NONE = "none"
 
 #: key of the composed config holding the step parameters given on the command line (see ``given_params``)
 GIVEN_KEY = "command_line_params"
+#: key inside it: the plugins chosen on the command line, ``{kind: name}``
+CHOSEN = "_chosen"
 
 
 def given_params(cfg: dict, overrides: list[str]) -> dict:
@@ -116,6 +122,9 @@ def given_params(cfg: dict, overrides: list[str]) -> dict:
             node = (cfg.get("steps") or {}).get(parts[1]) or {}
             if parts[2] in node:
                 out.setdefault("steps", {}).setdefault(parts[1], {})[parts[2]] = node[parts[2]]
+        elif parts[0] in STEP_KINDS and parts[0] not in ("step", "site_generator") and len(parts) == 1:
+            # '<kind>=<name>': a plugin chosen on the command line (no fallback replaces it, Plugin.fallback)
+            out.setdefault(CHOSEN, {})[parts[0]] = ov.split("=", 1)[1].strip()
         elif parts[0] in STEP_KINDS and parts[0] not in ("step", "site_generator") and len(parts) == 2:
             node = cfg.get(parts[0]) or {}
             if parts[1] != "plugin" and parts[1] in node:
@@ -124,13 +133,16 @@ def given_params(cfg: dict, overrides: list[str]) -> dict:
 
 
 def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
-               skipped: list[tuple[str, str]] | None = None) -> list[PlannedStep]:
+               skipped: list[tuple[str, str]] | None = None,
+               fallbacks: list[tuple[str, str]] | None = None) -> list[PlannedStep]:
     """Turn the composed config into an ordered list of steps with wired inputs.
 
     Steps marked ``optional: true`` whose required inputs are unavailable are left out and
     appended to ``skipped`` as (step id, reason). A step whose kind is chosen as ``none``
     (``road_source=none``) is left out too, and after it every optional step none of whose inputs
-    comes from a step that runs. Raises ConfigError naming the recipe, step,
+    comes from a step that runs. A plugin chosen by the recipe's default that cannot serve the site is
+    replaced by its registered fallback (``Plugin.fallback``), appended to ``fallbacks`` as (step id,
+    reason). Raises ConfigError naming the recipe, step,
     plugin, key or file at fault.
     """
     site = cfg.get("site") or {}
@@ -159,6 +171,7 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
     idx = 0
     chosen_none: list[str] = []  # '<kind>=none' choices that left a step out (see NONE)
     left_out: list[tuple[str, bool, str]] = []  # (filename, is_dir, step id) of optional steps left out
+    freed: set[str] = set()  # site input keys read only by a plugin its fallback replaced (Plugin.fallback)
     for spec in specs:
         idx += 1
         where = f"recipe '{rname}', step '{spec.id}'"
@@ -204,6 +217,28 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                 plugin = registry.get(kind, name)
             except TwinkitError as exc:
                 raise ConfigError(f"{where}: {exc}") from None
+            if plugin.fallback and (given.get(CHOSEN) or {}).get(kind) != name:
+                why = _cannot_serve(plugin, spec, node, produced, site, site_inputs, site_name, where, base_dir)
+                alt = None
+                if why:
+                    try:
+                        alt = registry.get(kind, plugin.fallback)
+                    except TwinkitError as exc:
+                        raise ConfigError(f"{where}: {why}, and its fallback: {exc}") from None
+                    # a fallback that cannot serve the site either: the chosen plugin stays, with its own error
+                    if _cannot_serve(alt, spec, {}, produced, site, site_inputs, site_name, where, base_dir):
+                        alt = None
+                if alt is not None:
+                    # the site inputs the replaced plugin read: left empty ('???') they stop nothing, and
+                    # the later steps' optional inputs do not read them (below)
+                    freed |= {port.name for port in parse_signature(plugin.run).inputs}
+                    plugin = alt
+                    log.warning("step '%s': %s=%s cannot serve this site (%s): using %s=%s instead (choose "
+                                "%s=%s on the command line to insist, or %s=none for no %s)", spec.id, kind, name,
+                                why, kind, plugin.name, kind, name, kind, kind)
+                    if fallbacks is not None:
+                        fallbacks.append((spec.id, f"{kind}={plugin.name} instead of {kind}={name}: {why}"))
+                    name = plugin.name
             layers: list[dict] = []
             if kind == "site_generator":
                 fields = [f.name for f in dataclasses.fields(plugin.params)] if plugin.params else []
@@ -230,6 +265,12 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
         try:
             for port in signature.inputs:
                 want = spec.inputs.get(port.param)
+                key = (want or port.name).partition(".")[0]
+                # a site input of a plugin its fallback replaced (an OSM file that does not cover the site) is
+                # not read by the later steps' optional inputs either: they take the fallback's files
+                if port.optional and key in freed and not any(port.accepts(f, d) for f, d, _ in produced):
+                    inputs[port.param] = None
+                    continue
                 inputs[port.param] = _resolve_input(
                     port, want, produced, site_inputs, site_name, where, base_dir, optional=port.optional
                 )
@@ -274,6 +315,34 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
         for o in ps.outputs:
             produced.append((o.filename, o.is_dir, idx))
     return plan
+
+
+def _cannot_serve(plugin: Plugin, spec: StepSpec, node: dict, produced, site: dict, site_inputs: dict,
+                  site_name: str, where: str, base_dir: Path) -> str:
+    """Why ``plugin`` cannot serve this site ('' when it can): an input it needs cannot be wired, or its
+    preflight finds a problem (the cheap checks, run here with its resolved parameters)."""
+    try:
+        signature = parse_signature(plugin.run)
+        inputs: dict[str, Path | None] = {}
+        for port in signature.inputs:
+            src = _resolve_input(port, spec.inputs.get(port.param), produced, site_inputs, site_name, where,
+                                 base_dir, optional=port.optional)
+            if src is not None:
+                inputs[port.param] = src.path
+    except ConfigError as exc:
+        return str(exc).replace(f"{where}: ", "")
+    if plugin.preflight is None:
+        return ""
+    try:
+        params_obj, _ = resolve_params(plugin, node if node.get("plugin") == plugin.name else {}, spec.params,
+                                       where=where)
+        found = plugin.preflight(site, params_obj, inputs) or []
+    except TwinkitError as exc:
+        found = [str(exc)]
+    except Exception as exc:  # noqa: BLE001 -- a preflight's bug: no fallback, the run's preflight logs it
+        log.debug("%s: preflight of %s failed at plan time: %s", where, plugin.qualname, exc)
+        return ""
+    return "; ".join(str(p) for p in found)
 
 
 def _resolve_input(port: Port, want: str | None, produced, site_inputs: dict, site_name: str, where: str,

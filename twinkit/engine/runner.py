@@ -68,7 +68,8 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
         self.executor_factory = executor_factory
         self.manual_timeout_s = manual_timeout_s
         self.skipped: list[tuple[str, str]] = []
-        self.plan = build_plan(cfg, registry, config_root, skipped=self.skipped)
+        self.fallbacks: list[tuple[str, str]] = []  # (step id, why its plugin was replaced by its fallback)
+        self.plan = build_plan(cfg, registry, config_root, skipped=self.skipped, fallbacks=self.fallbacks)
         known = {s.id for s in self.plan} | {s.folder for s in self.plan}
         bad = self.rerun - known
         if bad:
@@ -114,6 +115,8 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             raise
         for sid, reason in self.skipped:
             log.info("[-] %-28s skipped  %s", sid, reason)
+        for sid, reason in self.fallbacks:
+            log.info("[~] %-28s fallback %s", sid, reason)
         try:
             run_preflight(self.plan, self.cfg)  # cheap checks of every step before the first runs (exit 2)
             n = len(self.plan)

@@ -3,6 +3,7 @@
 Steps (recipes/roads_demo.yaml):
   fetch_roads     road_source (file | osm_api | overpass)   -> osm.osm
                   road_source=opendrive                     -> opendrive.xodr (site frame), reprojection.json
+                  road_source=scan (the labelled mesh)      -> opendrive.xodr, scan_roads.json, scan_roads.png
   osm_to_opendrive                                          -> roads.xodr, roads_check.json
   roads_overview  top view of the network (recipe roads)   -> roads_overview.png
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
@@ -65,8 +66,12 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
             ctx.log.info("road_source gave an OpenDRIVE map: %s is not converted", in_osm_osm.name)
         text = Path(in_opendrive_xodr).read_text(encoding="utf-8")
         out_roads_xodr.write_text(text, encoding="utf-8")
-        info = {"source": "opendrive", "netconvert_s": 0.0}
-        conv = "none: road_source=opendrive (the map moved into the site frame, see reprojection.json)"
+        if 'code="twinkit_road_source" value="scan"' in text[:4000]:
+            info = {"source": "scan", "netconvert_s": 0.0}
+            conv = "none: road_source=scan (derived from the scan and converted there, see scan_roads.json)"
+        else:
+            info = {"source": "opendrive", "netconvert_s": 0.0}
+            conv = "none: road_source=opendrive (the map moved into the site frame, see reprojection.json)"
     elif in_osm_osm is not None:
         info = run_netconvert(in_osm_osm, out_roads_xodr, proj, params, ctx.log)
         text = out_roads_xodr.read_text(encoding="utf-8")
@@ -530,12 +535,20 @@ def _iou(pred, gt) -> dict:
 def twinkit_register_road_sources(register):
     from .preflight import file_preflight, osm_api_preflight, overpass_preflight
 
+    # the default road source; without an OSM file that covers the site it gives way to the scan (issue 28)
     register("file", file_source, params=FileSourceParams, version=VERSION, preflight=file_preflight,
-             description="local .osm / .osm.bz2 / .osm.pbf (site.inputs.osm or road_source.path)")
+             fallback="scan",
+             description="local .osm / .osm.bz2 / .osm.pbf (site.inputs.osm or road_source.path); without one "
+                         "that covers the site: roads from the scan (road_source=scan)")
     register("osm_api", osm_api_source, params=DownloadParams, version=VERSION, preflight=osm_api_preflight,
              description="OpenStreetMap API /map by box around the base point (cached)")
     register("overpass", overpass_source, params=DownloadParams, version=VERSION, preflight=overpass_preflight,
              description="Overpass API query for highways by box around the base point (cached)")
+    from .scan import ScanSourceParams, scan_source
+
+    register("scan", scan_source, params=ScanSourceParams, version=VERSION,
+             description="roads derived from the scan itself (no OSM): the labelled road surface, curbs and "
+                         "sidewalks of the textured mesh -> lanes -> OpenDRIVE (scan_roads.json, scan_roads.png)")
     register("opendrive", opendrive_source, params=OpenDriveSourceParams, version=VERSION,
              description="an existing OpenDRIVE map (site.inputs.xodr or road_source.path) moved from its "
                          "geoReference into the site frame")

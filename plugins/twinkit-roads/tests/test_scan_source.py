@@ -1,0 +1,189 @@
+"""road_source=scan: roads derived from a labelled mesh (a synthetic cross of carriageways with raised
+sidewalks), written as OpenDRIVE through netconvert and read back with carla.Map offline (issue 28)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scan_fixtures import ROAD, SIDEWALK, cross_mesh
+from twinkit_roads import scan
+from twinkit_roads.align import centreline_rmse, lane_lines
+
+PROJ = "+proj=tmerc +lat_0=60.16945 +lon_0=24.93365 +k=1 +x_0=0 +y_0=0 +ellps=GRS80 +units=m +no_defs"
+
+
+def derive_xodr(tmp_path, v, f, labels, **kw):
+    p = scan.ScanSourceParams(**kw)
+    net = scan.derive_network(v, f, labels, p)
+    scan.add_sidewalks(net, v, f, labels, p)
+    scan.add_heights_and_signals(net, v, f, labels, p)
+    nod, edg = scan.write_plain(net, p, PROJ, tmp_path / "plain")
+    out = tmp_path / "scan.xodr"
+    scan.netconvert_plain(nod, edg, out, p)
+    return net, scan.mark_source(out.read_text(encoding="utf-8"))
+
+
+def on_road(pts, main_half, side_half, arms="ns"):
+    x, y = pts[:, 0], pts[:, 1]
+    side = np.abs(x) <= side_half
+    if arms == "n":
+        side &= y >= 0
+    return (np.abs(y) <= main_half) | side
+
+
+@pytest.fixture(scope="module")
+def four_way(tmp_path_factory):
+    v, f, lab, truth = cross_mesh(step_m=1.0)
+    net, text = derive_xodr(tmp_path_factory.mktemp("cross"), v, f, lab)
+    return v, f, lab, truth, net, text
+
+
+def test_four_way_cross_gives_lanes_on_the_road_that_carla_reads(four_way):
+    import carla
+
+    v, f, lab, truth, net, text = four_way
+    m = carla.Map("scan", text)  # parses offline
+    assert len(m.get_topology()) > 0
+    assert 'code="twinkit_road_source" value="scan"' in text
+    # one junction where the four arms meet, four roads
+    assert sum(nd["kind"] == "junction" for nd in net.nodes.values()) == 1
+    assert len(net.arms) == 4
+    j = next(nd for nd in net.nodes.values() if nd["kind"] == "junction")
+    assert np.hypot(*j["xy"]) < 0.3
+    # main road: 17.4 m curb to curb = 2 lanes of 3.25 m each way + a 2.2 m parking strip; side: 1 + 1
+    widths = sorted(round(a.width_m, 1) for a in net.arms)
+    assert widths[0] == pytest.approx(6.5, abs=0.25) and widths[-1] == pytest.approx(17.4, abs=0.25)
+    main = [a for a in net.arms if a.width_m > 10]
+    assert all(a.lanes["lanes"] == 2 and a.lanes["two_way"] and a.lanes["strip_m"] == pytest.approx(2.2, abs=0.2)
+               for a in main)
+    # lane centres match the true ones, and every driving lane lies on the carriageway
+    rmse, n = centreline_rmse(text, truth, (-38, -38, 38, 38))
+    assert n > 200 and rmse < 0.2
+    cen = np.concatenate([ln["centre"] for ln in lane_lines(text, 1.0, junctions=True)])
+    assert on_road(cen, 8.7, 3.25).all()
+    share = scan.lanes_on_road(text, v, f, lab)
+    assert share["on_road_share"] > 0.95
+    # sidewalk lanes (OpenDRIVE type sidewalk) about 3.5 m wide on both sides of every arm
+    assert text.count('type="sidewalk"') >= 8
+    assert all(2.8 < a.sidewalk_left_m < 4.2 and 2.8 < a.sidewalk_right_m < 4.2 for a in net.arms)
+
+
+def test_three_way_junction(tmp_path):
+    v, f, lab, truth = cross_mesh(step_m=1.0, side_arms="n")
+    net, text = derive_xodr(tmp_path, v, f, lab)
+    assert sum(nd["kind"] == "junction" for nd in net.nodes.values()) == 1
+    assert len(net.arms) == 3
+    rmse, n = centreline_rmse(text, truth, (-38, -38, 38, 38))
+    assert n > 150 and rmse < 0.25
+    cen = np.concatenate([ln["centre"] for ln in lane_lines(text, 1.0)])
+    assert on_road(cen, 8.7, 3.25, arms="n").all()
+
+
+def test_curbs_keep_the_edge_where_the_labels_spill_onto_the_sidewalk(tmp_path):
+    """Road labels spilling 1.2 m onto the north sidewalk of the main road: the curb (height step) keeps
+    the carriageway's edge; the labels alone move the road's axis by half the spill."""
+    v, f, lab, truth = cross_mesh(step_m=1.0)
+    spill = (lab == SIDEWALK) & (v[:, 1] > 8.7) & (v[:, 1] < 9.95) & (np.abs(v[:, 0]) > 10)
+    lab = lab.copy()
+    lab[spill] = ROAD
+    net, text = derive_xodr(tmp_path, v, f, lab)
+    main = [a for a in net.arms if a.width_m > 10]
+    assert all(a.width_m == pytest.approx(17.4, abs=0.25) for a in main)
+    assert centreline_rmse(text, truth, (-38, -38, 38, 38))[0] < 0.2
+    p = scan.ScanSourceParams(use_curbs=False)
+    labels_only = scan.derive_network(v, f, lab, p)
+    assert max(a.width_m for a in labels_only.arms) > 18.0  # the labels alone take the spill as road
+
+
+def test_curbs_alone_without_labels(tmp_path):
+    v, f, lab, truth = cross_mesh(step_m=1.0)
+    net, text = derive_xodr(tmp_path, v, f, None)
+    assert len(net.arms) == 4
+    assert centreline_rmse(text, truth, (-38, -38, 38, 38))[0] < 0.2
+    assert net.stats["sidewalks_from"] == "raised level beside the curb"
+    assert text.count('type="sidewalk"') >= 8
+
+
+@pytest.mark.parametrize("width, lanes, lane_m, strip_m, two_way", [
+    (17.4, 2, 3.25, 2.2, True),   # the demo's main road: 2 + 2 lanes, parking strips
+    (6.5, 1, 3.25, 0.0, True),    # a two-lane street
+    (6.7, 1, 3.25, 0.1, True),    # a little wider: the lanes stay clear of the curb
+    (7.4, 1, 3.55, 0.15, True),   # wider lanes rather than a strip narrower than min_strip_m, curb_clearance_m free
+    (4.0, 1, 3.7, 0.15, False),   # a narrow one-lane street
+])
+def test_lane_layout(width, lanes, lane_m, strip_m, two_way):
+    lay = scan.lane_layout(width, scan.ScanSourceParams())
+    assert lay["lanes"] == lanes and lay["two_way"] == two_way
+    assert lay["lane_m"] == pytest.approx(lane_m, abs=0.01) and lay["strip_m"] == pytest.approx(strip_m, abs=0.01)
+
+
+def test_no_carriageway_is_a_clear_error():
+    from twinkit import InputError
+
+    v, f, lab, _ = cross_mesh(half_m=20.0, step_m=1.0)
+    lab = np.full_like(lab, 9)  # all terrain, and all raised
+    v = v.copy()
+    v[:, 2] = np.where(np.hypot(v[:, 0], v[:, 1]) < 3, 0.0, 0.12)
+    with pytest.raises(InputError, match="no carriageway|no road axis|no road at least"):
+        scan.derive_network(v, f, lab, scan.ScanSourceParams())
+
+
+def test_scan_source_through_the_engine_then_the_carla_check(tmp_path):
+    """The registered road source (the engine's code path) on a mesh file and its labels, then
+    osm_to_opendrive's carla.Map check of its opendrive.xodr: source scan, lanes inside the site."""
+    import json
+
+    from twinkit.mesh import Mesh, write_ply
+    from twinkit.testing import run_plugin
+
+    v, f, lab, truth = cross_mesh(step_m=1.0)
+    # colours as a scanner's; labels as the segmentation writes them
+    rgb = np.where(lab[:, None] == ROAD, 80, 170).astype(np.uint8).repeat(3, 1)
+    mesh_p = tmp_path / "textured_mesh.ply"
+    write_ply(mesh_p, Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
+    np.save(tmp_path / "labels.npy", lab)
+    tj = {"lanes": [{"points": [[*p, 0.0] for p in t.tolist()]} for t in truth]}
+    (tmp_path / "roads_truth.json").write_text(json.dumps(tj))
+    site = {"name": "cross", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
+    out = run_plugin("road_source", "scan", tmp_path / "scan",
+                     {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy",
+                      "in_roads_truth_json": tmp_path / "roads_truth.json"}, site=site)
+    doc = json.loads(out["scan_roads.json"].read_text())
+    assert doc["labels"] == "predicted" and len(doc["roads"]) == 4
+    assert doc["centreline_rmse_m"] < 0.2 and doc["lanes_on_road"]["on_road_share"] > 0.95
+    assert out["scan_roads.png"].stat().st_size > 5000
+    chk = run_plugin("step", "osm_to_opendrive", tmp_path / "conv", {"in_opendrive_xodr": out["opendrive.xodr"]},
+                     site=site)
+    rep = json.loads(chk["roads_check.json"].read_text())
+    assert rep["ok"] and rep["source"] == "scan" and rep["junctions"] == 1
+    assert rep["carla"]["waypoints_inside"] > 100
+
+
+def test_without_osm_the_default_recipe_takes_the_roads_from_the_scan(tmp_path):
+    """pointcloud_site on a site whose OSM input is left empty (mex: osm: ???): the default road source
+    (file) gives way to scan, said in the log; road_source=file typed on the command line keeps the error;
+    road_source=none still leaves the roads out."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[3]
+    cloud = tmp_path / "scan.ply"
+    cloud.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+                      b"property float z\nend_header\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("TWINKIT_")}
+
+    def status(*extra):
+        return subprocess.run([sys.executable, "-m", "twinkit", "status", "recipe=pointcloud_site", "site=mex",
+                               f"site.inputs.cloud={cloud}", f"engine.outputs_dir={tmp_path / 'out'}", *extra],
+                              capture_output=True, text=True, cwd=root, env=env, timeout=300)
+
+    p = status()
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "road_source=file cannot serve this site" in p.stderr and "using road_source=scan instead" in p.stderr
+    assert "osm_to_opendrive" in p.stdout and "apply_alignment" in p.stdout and "carla" in p.stdout
+    p = status("road_source=file")
+    assert p.returncode != 0 and "site.inputs.osm" in p.stderr and "road_source=scan" not in p.stderr
+    p = status("road_source=none")
+    assert p.returncode == 0 and "road_source=none was chosen" in p.stdout and "scan" not in p.stderr

@@ -1,0 +1,976 @@
+"""Roads from the scan itself: lane centre lines, carriageway and sidewalk edges from the labelled mesh.
+
+What a person does by hand in RoadRunner from lidar, as a road source (``road_source=scan``):
+
+1. **Carriageway mask** (top view, ``raster_m``): faces labelled road (CityScapes 0) that lie on the
+   carriageway level, i.e. below the curbs: up-facing faces within ``curb_tol_m`` of the local lowest
+   ground (mesh2d.road_faces' ground fit, the same curb test align_roads uses). The labels say where
+   the road roughly is; the curb step draws its edge. Curb-level faces a little beyond the labels
+   (``label_margin_m``) are kept, so a label edge that wanders onto the carriageway does not move the
+   road. Holes (cars, mislabelled markings) are filled.
+2. **Axes and topology**: the mask is thinned to a one-pixel skeleton (Zhang-Suen); its pixels form a
+   graph whose nodes are junctions (3+ arms) and ends. Short spurs (from mask corners) are pruned,
+   nodes closer than a junction's size are merged.
+3. **Each arm**: the skeleton path is smoothed; along it the distance to the carriageway edge is
+   measured on both sides (rays along the normal). Parked cars and occlusions only ever *remove*
+   road from the mask, so each side's edge is a high percentile over a window along the road. The
+   axis is moved to the middle of the two edges; near a junction the axis is the straight
+   continuation of the arm up to the junction point (the least-squares meeting point of the arms).
+4. **Lanes**: per side ``floor(half width / lane_width_m)`` lanes of ``lane_width_m``; a remainder of
+   at least ``min_strip_m`` is a parking strip at the curb (OpenDRIVE type none from netconvert,
+   ``strip_type``), a smaller one widens the lanes. Roads narrower than two lanes are one lane, one way.
+5. **Sidewalks**: beyond each curb, the run of sidewalk-labelled surface (else the raised level);
+   its robust width becomes a sidewalk lane (``min_sidewalk_m``..``max_sidewalk_m``).
+6. **OpenDRIVE**: a SUMO plain network (nodes at the junctions and ends, one edge per direction with
+   its lanes: sidewalk, strip, driving lanes) goes through netconvert, which builds the junctions'
+   connecting roads, as for OSM. A junction with traffic-light-labelled surface near it gets a
+   signal plan (netconvert's signals, moved to the scanned heads later by place_signals).
+"""
+from __future__ import annotations
+
+import math
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from twinkit import InputError
+from twinkit.ranges import param
+
+ROAD, SIDEWALK, TRAFFIC_LIGHT = 0, 1, 6
+
+
+@dataclass
+class ScanSourceParams:
+    labels: str = param("auto", choices=("auto", "predicted", "gt", "none"))  # auto: the segmentation's labels.npy when an earlier step wrote it, else the curbs alone; predicted: labels.npy (required); gt: gt_labels.npy (benchmarks); none: the curbs alone
+    raster_m: float = param(0.25, gt=0, le=2)  # top-view resolution of the carriageway mask
+    curb_tol_m: float = param(0.07, ge=0, le=1)  # height above the local lowest ground still on the carriageway (below the curb)
+    use_curbs: bool = True  # false: the road labels alone draw the edges
+    label_margin_m: float = param(1.5, ge=0, le=10)  # carriageway-level surface this far beyond the road labels is still road
+    min_road_width_m: float = param(3.0, gt=0)  # narrower carriageway (driveways, gaps) is not a road
+    min_road_length_m: float = param(8.0, gt=0)  # shorter arms (spurs of the mask's corners) are pruned
+    edge_percentile: float = param(75.0, ge=50, le=100)  # per side: this percentile of the edge distance along a window (cars only remove road)
+    edge_window_m: float = param(20.0, gt=0)  # ...over this length of road
+    lane_width_m: float = param(3.25, gt=0, le=10)  # nominal lane width (the OSM route's default too)
+    min_lane_width_m: float = param(2.5, gt=0, le=10)  # a road with less than this per direction has one lane, one way
+    max_lane_width_m: float = param(4.5, gt=0, le=10)  # lanes are widened up to this before a strip is made
+    min_strip_m: float = param(1.8, ge=0, le=10)  # remainder per side at least this wide: a parking strip at the curb
+    curb_clearance_m: float = param(0.15, ge=0, le=2)  # widened lanes stop this short of the found curb (a no-traffic lane fills it)
+    strip_type: str = param("parking", choices=("parking", "driving", "none"))  # parking -> lane type none (no traffic), driving -> another lane
+    sidewalks: bool = True  # sidewalk lanes where the scan shows sidewalk beyond the curb
+    min_sidewalk_m: float = param(1.0, ge=0, le=20)  # narrower sidewalk surface: no sidewalk lane
+    max_sidewalk_m: float = param(6.0, gt=0, le=30)  # sidewalk lanes are at most this wide
+    traffic_light_radius_m: float = param(12.0, ge=0)  # traffic-light labels within this of a junction's edge: a signalised junction
+    min_traffic_light_vertices: int = param(20, ge=0)  # ...at least this many such vertices
+    sample_m: float = param(2.0, gt=0, le=20)  # spacing of the road shape points
+    timeout_s: float = param(300.0, gt=0)  # netconvert wall-clock limit
+
+
+@dataclass
+class Arm:
+    """One road between two nodes of the network (a junction or an end)."""
+
+    a: int
+    b: int
+    xy: np.ndarray  # (k, 2) axis, a -> b
+    width_m: float  # carriageway, curb to curb
+    sidewalk_left_m: float = 0.0  # left of a -> b
+    sidewalk_right_m: float = 0.0
+    z: np.ndarray | None = None
+    lanes: dict = field(default_factory=dict)
+
+
+@dataclass
+class Network:
+    nodes: dict  # id -> {"xy": (x, y), "z": z, "kind": "junction" | "end", "signals": bool}
+    arms: list
+    mask: np.ndarray
+    grid: object
+    sidewalk_mask: np.ndarray | None
+    stats: dict
+    level_faces: np.ndarray | None = None  # faces on the carriageway level (below the curbs)
+
+
+# --------------------------------------------------------------------------- masks
+
+def _rasterize_faces(v, f, fidx, grid) -> np.ndarray:
+    """Faces seen from above. PIL fills the pixels floor(a) .. floor(b) for a polygon from a to b: the mask
+    is centred on the surface and on average half a pixel wider on each side (the widths take it off)."""
+    from .mesh2d import Mesh, rasterize
+
+    return rasterize(Mesh(v, f, None, None), grid, fidx) > 0
+
+
+def _level_faces(v, f, curb_tol_m, cell_m: float = 1.0, window_m: float = 9.0) -> np.ndarray:
+    """Up-facing faces on the carriageway level, below the curbs: within ``curb_tol_m`` of the local lowest
+    walkable level (the test of mesh2d.road_faces' ground fallback: per-cell minima, their minimum over
+    ``window_m``, raised to the 10th percentile of the window less the tolerance so a deep hole does not
+    pull it down), with the rank filter of scipy (fast) instead of a Python percentile per cell."""
+    from scipy import ndimage
+
+    from .mesh2d import Mesh, face_normals_z
+
+    nz = face_normals_z(Mesh(v, f, None, None))
+    up = np.flatnonzero(nz > 0.95)
+    if len(up) == 0:
+        raise InputError("the mesh has no upward-facing faces; cannot find the ground (road_source=scan)")
+    tri = v[f[up]]
+    cz = tri[:, :, 2].mean(1)
+    cxy = tri[:, :, :2].mean(1)
+    lo = cxy.min(0)
+    ij = np.floor((cxy - lo) / cell_m).astype(int)
+    shape = tuple(ij.max(0) + 1)
+    zmin = np.full(shape, np.inf)
+    np.minimum.at(zmin, (ij[:, 0], ij[:, 1]), cz)
+    k = max(1, int(round(window_m / cell_m)))
+    level = ndimage.minimum_filter(zmin, size=k, mode="nearest")
+    finite = np.where(np.isfinite(zmin), zmin, np.nan)
+    filled = np.nan_to_num(finite, nan=float(np.nanmax(finite)))
+    pct = ndimage.percentile_filter(filled, 10, size=k, mode="nearest")
+    level = np.maximum(level, pct - curb_tol_m)
+    return up[cz - level[ij[:, 0], ij[:, 1]] < curb_tol_m]
+
+
+def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None) -> tuple[np.ndarray, str]:
+    from scipy import ndimage
+
+    parts = []
+    lab_mask = None
+    if labels is not None:
+        lv = labels[f]
+        road_f = np.flatnonzero((lv == ROAD).sum(1) >= 2)
+        if len(road_f):
+            lab_mask = _rasterize_faces(v, f, road_f, grid)
+            parts.append("road labels")
+    if p.use_curbs or lab_mask is None:
+        low = _rasterize_faces(v, f, _level_faces(v, f, p.curb_tol_m) if level is None else level, grid)
+        parts.append("curbs (carriageway level)")
+        if lab_mask is not None:
+            r = max(1, int(round(p.label_margin_m / grid.res)))
+            near = ndimage.binary_dilation(ndimage.binary_closing(lab_mask, np.ones((5, 5), bool)),
+                                           np.ones((2 * r + 1, 2 * r + 1), bool))
+            m = low & near
+        else:
+            m = low
+    else:
+        m = lab_mask
+    r = max(1, int(round(0.75 / grid.res)))
+    m = ndimage.binary_closing(m, np.ones((2 * r + 1, 2 * r + 1), bool), border_value=0)
+    m = ndimage.binary_fill_holes(m)
+    # away with slivers narrower than a lane half: what remains is carriageway
+    k = max(1, int(round(0.5 * p.min_road_width_m / grid.res / 2)))
+    m = ndimage.binary_opening(m, np.ones((2 * k + 1, 2 * k + 1), bool))
+    lab, n = ndimage.label(m)
+    if n > 1:  # keep components of at least a road's worth of surface...
+        sizes = ndimage.sum(m, lab, range(1, n + 1)) * grid.res ** 2
+        keep = np.flatnonzero(sizes >= p.min_road_width_m * p.min_road_length_m * 2) + 1
+        if len(keep) > 1 and (p.use_curbs or lab_mask is None):
+            # ...on the lowest level: far from any road (a yard, a park) the raised ground is the local
+            # lowest too, but it lies a curb above the carriageway's
+            tri = v[f[level]] if level is not None else v[f]
+            comp = grid.sample(lab, tri[:, :, :2].mean(1))
+            cz = tri[:, :, 2].mean(1)
+            med = {c: float(np.median(cz[comp == c])) for c in keep if (comp == c).any()}
+            if med:
+                low = min(med.values())
+                keep = np.array([c for c in keep if med.get(c, low) <= low + 0.06])
+        m = np.isin(lab, keep)
+    return m, " + ".join(parts)
+
+
+# --------------------------------------------------------------------------- skeleton
+
+def thin(mask: np.ndarray) -> np.ndarray:
+    """Zhang-Suen thinning (vectorised): a one-pixel, 8-connected skeleton of a boolean image."""
+    img = np.pad(mask.astype(np.uint8), 1)
+    while True:
+        changed = False
+        for step in (0, 1):
+            p = img
+            P2, P3, P4 = p[:-2, 1:-1], p[:-2, 2:], p[1:-1, 2:]
+            P5, P6, P7 = p[2:, 2:], p[2:, 1:-1], p[2:, :-2]
+            P8, P9 = p[1:-1, :-2], p[:-2, :-2]
+            nb = [P2, P3, P4, P5, P6, P7, P8, P9]
+            B = sum(x.astype(np.int32) for x in nb)
+            seq = nb + [P2]
+            A = sum(((seq[i] == 0) & (seq[i + 1] == 1)).astype(np.int32) for i in range(8))
+            if step == 0:
+                c = (P2 * P4 * P6 == 0) & (P4 * P6 * P8 == 0)
+            else:
+                c = (P2 * P4 * P8 == 0) & (P2 * P6 * P8 == 0)
+            rm = (p[1:-1, 1:-1] == 1) & (B >= 2) & (B <= 6) & (A == 1) & c
+            if rm.any():
+                img = img.copy()
+                img[1:-1, 1:-1][rm] = 0
+                changed = True
+        if not changed:
+            break
+    return img[1:-1, 1:-1].astype(bool)
+
+
+_NB = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
+
+
+def skeleton_graph(skel: np.ndarray):
+    """Nodes (clusters of pixels with != 2 neighbours) and the pixel paths between them.
+
+    Returns (node_pixels: list of (k, 2) arrays of (row, col), edges: list of (na, nb, path (k, 2)))."""
+    from scipy import ndimage
+
+    s = skel.astype(np.uint8)
+    cnt = ndimage.convolve(s, np.ones((3, 3), np.uint8), mode="constant") - s
+    node = skel & (cnt != 2)
+    lab, n = ndimage.label(node, np.ones((3, 3), bool))
+    nodes = [np.argwhere(lab == i + 1) for i in range(n)]
+    h, w = skel.shape
+    visited = np.zeros_like(skel, bool)
+    edges = []
+
+    def nbrs(r, c):
+        for dr, dc in _NB:
+            rr, cc = r + dr, c + dc
+            if 0 <= rr < h and 0 <= cc < w and skel[rr, cc]:
+                yield rr, cc
+
+    for ni, pix in enumerate(nodes):
+        for r0, c0 in pix:
+            for r, c in nbrs(r0, c0):
+                if lab[r, c] or visited[r, c]:
+                    continue
+                path = [(r0, c0), (r, c)]
+                visited[r, c] = True
+                prev = (r0, c0)
+                end = None
+                while True:
+                    cr, cc = path[-1]
+                    nxt = None
+                    for q in nbrs(cr, cc):
+                        if q == prev or (q[0], q[1]) == (r0, c0) and len(path) <= 2:
+                            continue
+                        if lab[q]:
+                            if lab[q] - 1 != ni or len(path) > 3:
+                                end = lab[q] - 1
+                                path.append(q)
+                                break
+                            continue
+                        if not visited[q]:
+                            nxt = q
+                            break
+                    if end is not None or nxt is None:
+                        break
+                    visited[nxt] = True
+                    prev = (cr, cc)
+                    path.append(nxt)
+                if end is None:
+                    continue  # a loop without nodes, or a dangling piece: ignored
+                edges.append((ni, int(end), np.array(path)))
+    # pure loops (no node) are not roads we can model: ignored
+    # de-duplicate edges found from both ends
+    seen, out = set(), []
+    for a, b, p in edges:
+        key = (min(a, b), max(a, b), tuple(p[len(p) // 2]))
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append((a, b, p))
+    return nodes, out
+
+
+# --------------------------------------------------------------------------- geometry helpers
+
+def _resample(xy: np.ndarray, step: float) -> np.ndarray:
+    d = np.r_[0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+    if d[-1] < 1e-9:
+        return xy[:1]
+    n = max(2, int(math.ceil(d[-1] / step)) + 1)
+    t = np.linspace(0, d[-1], n)
+    return np.stack([np.interp(t, d, xy[:, 0]), np.interp(t, d, xy[:, 1])], 1)
+
+
+def _smooth(xy: np.ndarray, window: int) -> np.ndarray:
+    """Moving average keeping the end points (reflected ends)."""
+    if len(xy) < 3 or window < 2:
+        return xy
+    k = min(window, len(xy) - 1) | 1
+    h = k // 2
+    pad = np.concatenate([2 * xy[:1] - xy[h:0:-1], xy, 2 * xy[-1:] - xy[-2:-h - 2:-1]])
+    ker = np.ones(k) / k
+    return np.stack([np.convolve(pad[:, i], ker, mode="valid") for i in range(2)], 1)
+
+
+def _fit_axis(xy: np.ndarray, window: int, huber_m: float = 0.3) -> np.ndarray:
+    """A road's axis through noisy centre points: a robust (Huber, IRLS) quadratic in the road's own frame
+    (its principal direction), when the road turns less than 30 degrees; a moving average otherwise.
+    The per-point centres wobble where a car or an occlusion eats one edge; a street is straight or
+    gently curved over the length of one arm between junctions."""
+    if len(xy) < 6:
+        return _smooth(xy, window)
+    c = xy.mean(0)
+    u, s_, vt = np.linalg.svd(xy - c, full_matrices=False)
+    d = vt[0]
+    n = np.array([-d[1], d[0]])
+    t = (xy - c) @ d
+    y = (xy - c) @ n
+    tang = np.diff(_smooth(xy, window), axis=0)
+    ang = np.unwrap(np.arctan2(tang[:, 1], tang[:, 0]))
+    if len(ang) and float(np.ptp(ang)) > math.radians(30) or np.any(np.diff(t) <= 0) and np.any(np.diff(t) >= 0):
+        return _smooth(xy, window)
+    scale = max(float(np.abs(t).max()), 1.0)
+    A = np.stack([np.ones_like(t), t / scale, (t / scale) ** 2], 1)
+    w = np.ones(len(t))
+    for _ in range(8):
+        coef, *_ = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)
+        r = np.abs(y - A @ coef)
+        w = np.sqrt(np.where(r <= huber_m, 1.0, huber_m / np.maximum(r, 1e-9)))
+    yf = A @ coef
+    return c + t[:, None] * d + yf[:, None] * n
+
+
+def _normals(xy: np.ndarray) -> np.ndarray:
+    t = np.gradient(xy, axis=0)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-9)
+    return np.stack([-t[:, 1], t[:, 0]], 1)  # left normal
+
+
+def _ray_lengths(mask, grid, xy, dirs, max_m, step) -> np.ndarray:
+    """Distance from each point along its direction until the mask ends (first pixel off)."""
+    ts = np.arange(0.0, max_m + step, step)
+    pts = xy[:, None, :] + ts[None, :, None] * dirs[:, None, :]
+    inside = grid.sample(mask.astype(np.uint8), pts) > 0
+    off = ~inside
+    off[:, -1] = True
+    first = off.argmax(1)
+    return ts[first]
+
+
+def _junction_point(lines: list[tuple[np.ndarray, np.ndarray]], fallback: np.ndarray) -> np.ndarray:
+    """Least-squares meeting point of lines (point, unit direction); the fallback when they are parallel."""
+    A = np.zeros((2, 2))
+    b = np.zeros(2)
+    for p, d in lines:
+        P = np.eye(2) - np.outer(d, d)
+        A += P
+        b += P @ p
+    if len(lines) < 2 or abs(np.linalg.det(A)) < 1e-3 * len(lines):
+        return fallback
+    q = np.linalg.solve(A, b)
+    return q if np.hypot(*(q - fallback)) < 30 else fallback
+
+
+def lane_layout(width_m: float, p: ScanSourceParams) -> dict:
+    """Lanes per direction, their width and a strip at the curb, for a carriageway ``width_m`` wide."""
+    half = width_m / 2
+    if half < p.min_lane_width_m:  # one lane, one way (spread about the axis: strip_m at each curb)
+        lane = min(p.max_lane_width_m, max(width_m - 2 * p.curb_clearance_m, 0.5 * width_m))
+        return {"two_way": False, "lanes": 1, "lane_m": round(lane, 3), "strip_m": round(max((width_m - lane) / 2, 0.0), 3)}
+    n = max(1, int(math.floor(half / p.lane_width_m + 1e-6)))
+    rem = half - n * p.lane_width_m
+    if rem >= p.min_strip_m and p.strip_type != "driving":
+        return {"two_way": True, "lanes": n, "lane_m": p.lane_width_m, "strip_m": round(rem, 3)}
+    if p.strip_type == "driving" and rem >= p.min_strip_m:
+        return {"two_way": True, "lanes": n + 1, "lane_m": round(half / (n + 1), 3), "strip_m": 0.0}
+    # widen the lanes, but keep curb_clearance_m free at the curb: the found edge lies a little outside the
+    # curb's foot (a reconstructed curb is a ramp), and a lane reaching onto the curb drops the drop test
+    lane = min(p.max_lane_width_m, max(p.lane_width_m, (half - p.curb_clearance_m) / n))
+    return {"two_way": True, "lanes": n, "lane_m": round(lane, 3), "strip_m": round(max(half - n * lane, 0.0), 3)}
+
+
+# --------------------------------------------------------------------------- the network
+
+def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: ScanSourceParams,
+                   log=None) -> Network:
+    """The road network of a labelled mesh (site frame): junctions, ends and the arms between them."""
+    from scipy import ndimage
+
+    from .mesh2d import Grid
+
+    t0 = time.perf_counter()
+    grid = Grid.around(v[:, :2], p.raster_m)
+    level = _level_faces(v, f, p.curb_tol_m)
+    mask, how = carriageway_mask(v, f, labels, grid, p, level)
+    if mask.sum() * grid.res ** 2 < p.min_road_width_m * p.min_road_length_m:
+        raise InputError(f"no carriageway in the scan ({how}): {mask.sum() * grid.res ** 2:.0f} m^2 of road "
+                         "surface; a street scan with road labels (or curbs) is needed, or road_source=none")
+    dt = ndimage.distance_transform_edt(mask) * grid.res
+    skel = thin(mask)
+    node_pix, edges = skeleton_graph(skel)
+
+    def px_to_xy(rc):
+        rc = np.asarray(rc, float)
+        return np.stack([grid.x0 + (rc[:, 1] + 0.5) * grid.res, grid.y0 - (rc[:, 0] + 0.5) * grid.res], 1)
+
+    node_xy = [px_to_xy(pix).mean(0) for pix in node_pix]
+    # --- prune spurs: an edge with a free end (degree-1 node) shorter than the half width where it leaves
+    # the network, plus min_road_length_m; repeat until stable
+    edges = [(a, b, px_to_xy(pth), dt[pth[:, 0], pth[:, 1]]) for a, b, pth in edges]
+    for _ in range(10):
+        deg = np.zeros(len(node_xy), int)
+        for a, b, _, _ in edges:
+            deg[a] += 1
+            deg[b] += 1
+        keep = []
+        changed = False
+        for e in edges:
+            a, b, xy, hw = e
+            length = float(np.hypot(*np.diff(xy, axis=0).T).sum())
+            free = (deg[a] == 1) != (deg[b] == 1)
+            if free and length < float(hw.max()) + p.min_road_length_m and (deg[a] > 2 or deg[b] > 2):
+                changed = True
+                continue
+            if a == b and length < 4 * float(hw.max()):  # tiny loops around a hole
+                changed = True
+                continue
+            keep.append(e)
+        edges = keep
+        # merge through degree-2 nodes
+        deg = np.zeros(len(node_xy), int)
+        for a, b, _, _ in edges:
+            deg[a] += 1
+            deg[b] += 1
+        for n in np.flatnonzero(deg == 2):
+            ix = [i for i, e in enumerate(edges) if e[0] == n or e[1] == n]
+            if len(ix) != 2 or ix[0] == ix[1]:
+                continue
+            e1, e2 = edges[ix[0]], edges[ix[1]]
+            if e1[0] == e1[1] or e2[0] == e2[1]:
+                continue
+            x1 = e1 if e1[1] == n else (e1[1], e1[0], e1[2][::-1], e1[3][::-1])
+            x2 = e2 if e2[0] == n else (e2[1], e2[0], e2[2][::-1], e2[3][::-1])
+            merged = (x1[0], x2[1], np.concatenate([x1[2], x2[2][1:]]), np.concatenate([x1[3], x2[3][1:]]))
+            edges = [e for i, e in enumerate(edges) if i not in ix] + [merged]
+            changed = True
+        if not changed:
+            break
+    if not edges:
+        raise InputError(f"the carriageway ({how}, {mask.sum() * grid.res ** 2:.0f} m^2) has no road axis; "
+                         "a street scan is needed, or road_source=none")
+    # --- typical half width of each edge (middle part), junction sizes, merge close junctions
+    half = []
+    for a, b, xy, hw in edges:
+        k = len(hw)
+        mid = hw[k // 4: max(k // 4 + 1, 3 * k // 4)]
+        half.append(float(np.median(mid)))
+    deg = np.zeros(len(node_xy), int)
+    for a, b, _, _ in edges:
+        deg[a] += 1
+        deg[b] += 1
+    radius = np.zeros(len(node_xy))
+    for (a, b, _, _), h in zip(edges, half):
+        radius[a] = max(radius[a], h)
+        radius[b] = max(radius[b], h)
+    # union of junction nodes linked by an edge shorter than their size
+    parent = list(range(len(node_xy)))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    short = []
+    for i, (a, b, xy, hw) in enumerate(edges):
+        length = float(np.hypot(*np.diff(xy, axis=0).T).sum())
+        if a != b and deg[a] >= 3 and deg[b] >= 3 and length < 1.5 * (radius[a] + radius[b]):
+            parent[find(a)] = find(b)
+            short.append(i)
+    edges = [e for i, e in enumerate(edges) if i not in short]
+    half = [h for i, h in enumerate(half) if i not in short]
+    groups: dict[int, list[int]] = {}
+    for i in range(len(node_xy)):
+        groups.setdefault(find(i), []).append(i)
+    gid = {i: find(i) for i in range(len(node_xy))}
+    node_r = {g: max(radius[i] for i in members) for g, members in groups.items()}
+    node_c = {g: np.mean([node_xy[i] for i in members], 0) for g, members in groups.items()}
+    deg2: dict[int, int] = {}
+    for a, b, _, _ in edges:
+        deg2[gid[a]] = deg2.get(gid[a], 0) + 1
+        deg2[gid[b]] = deg2.get(gid[b], 0) + 1
+    # --- each arm: smooth the axis away from junctions, centre it between the edges, measure widths
+    step = 1.0
+    raw_arms = []
+    for (a, b, xy, hw), h in zip(edges, half):
+        ga, gb = gid[a], gid[b]
+        xy = _resample(xy, step)
+        if len(xy) < 3:
+            continue
+        trim = np.ones(len(xy), bool)
+        for g, at_start in ((ga, True), (gb, False)):
+            if deg2.get(g, 0) >= 3:
+                r = 1.15 * node_r[g] + 2.0
+                trim &= np.hypot(*(xy - node_c[g]).T) > r
+        if trim.sum() < max(3, int(p.min_road_length_m / 2 / step)):
+            continue
+        first, last = np.flatnonzero(trim)[[0, -1]]
+        core = xy[first:last + 1]
+        win = max(3, int(round(p.edge_window_m / 2 / step)))
+        core = _smooth(core, win)
+        # a skeleton stops about a half width before a free end (where the scan ends): measure the edges
+        # on the straight continuation up to the end of the carriageway too
+        for g, at_start in ((ga, True), (gb, False)):
+            if deg2.get(g, 0) >= 3 or len(core) < 3:
+                continue
+            e = core[0] if at_start else core[-1]
+            dv = _unit(core[0] - core[min(5, len(core) - 1)]) if at_start else _unit(core[-1] - core[max(-6, -len(core))])
+            ln = float(_ray_lengths(mask, grid, e[None], dv[None], 60.0, grid.res / 2)[0]) - 1.0
+            if ln > step:
+                ext = e + dv * np.arange(step, ln, step)[:, None]
+                core = np.concatenate([ext[::-1], core]) if at_start else np.concatenate([core, ext])
+        nrm = _normals(core)
+        left = _ray_lengths(mask, grid, core, nrm, 40.0, grid.res / 4)
+        right = _ray_lengths(mask, grid, core, -nrm, 40.0, grid.res / 4)
+        w = max(3, int(round(p.edge_window_m / step)))
+        pad = w // 2
+        lpad = np.pad(left, pad, mode="edge")
+        rpad = np.pad(right, pad, mode="edge")
+        lw = np.array([np.percentile(lpad[i:i + w], p.edge_percentile) for i in range(len(core))])
+        rw = np.array([np.percentile(rpad[i:i + w], p.edge_percentile) for i in range(len(core))])
+        centre = core + nrm * ((lw - rw) / 2)[:, None]
+        centre = _fit_axis(centre, win)
+        # the mask is on average half a pixel wider on each side (_rasterize_faces); the rays overshoot by
+        # half their step: measured on the synthetic cross, half a pixel too wide in all
+        width = float(np.median(lw + rw)) - grid.res / 2
+        if width < p.min_road_width_m:
+            continue
+        raw_arms.append({"ga": ga, "gb": gb, "core": centre, "width": width, "nrm": _normals(centre)})
+    if not raw_arms:
+        raise InputError(f"the carriageway ({how}) holds no road at least {p.min_road_width_m} m wide and "
+                         f"{p.min_road_length_m} m long; road_source=none for a twin without roads")
+    # --- junction points: where the arms' axes meet
+    ends: dict[int, list] = {}
+    for arm in raw_arms:
+        c = arm["core"]
+        ends.setdefault(arm["ga"], []).append((c[0], _unit(c[0] - c[min(5, len(c) - 1)])))
+        ends.setdefault(arm["gb"], []).append((c[-1], _unit(c[-1] - c[max(-6, -len(c))])))
+    jpos = {}
+    for g, lines in ends.items():
+        if len(lines) >= 3 or (len(lines) == 2 and deg2.get(g, 0) >= 3):
+            jpos[g] = _junction_point(lines, node_c[g])
+    # --- nodes and arms
+    nodes: dict[int, dict] = {}
+    arms: list[Arm] = []
+    for arm in raw_arms:
+        c = arm["core"]
+        pts = [c]
+        for g, at_start in ((arm["ga"], True), (arm["gb"], False)):
+            if g in jpos:
+                q = jpos[g]
+                nodes.setdefault(g, {"xy": q, "kind": "junction"})
+                seg = np.array([q, c[0]]) if at_start else np.array([c[-1], q])
+                seg = _resample(seg, step)
+                pts.insert(0, seg[:-1]) if at_start else pts.append(seg[1:])
+            else:  # an end: continue straight to the mask's end
+                e = c[0] if at_start else c[-1]
+                d = _unit(c[0] - c[min(5, len(c) - 1)]) if at_start else _unit(c[-1] - c[max(-6, -len(c))])
+                ln = float(_ray_lengths(mask, grid, e[None], d[None], 60.0, grid.res / 2)[0])
+                q = e + d * ln
+                seg = _resample(np.array([q, e]) if at_start else np.array([e, q]), step)
+                pts.insert(0, seg[:-1]) if at_start else pts.append(seg[1:])
+                key = ("end", len(nodes), at_start, id(arm))
+                g_end = hash(key) & 0x7FFFFFFF
+                nodes[g_end] = {"xy": q, "kind": "end"}
+                if at_start:
+                    arm["ga"] = g_end
+                else:
+                    arm["gb"] = g_end
+        xy = np.concatenate([x for x in pts if len(x)])
+        xy = _resample(xy, p.sample_m)
+        arms.append(Arm(arm["ga"], arm["gb"], xy, arm["width"]))
+    # renumber nodes 0..n-1
+    ren = {g: i for i, g in enumerate(nodes)}
+    nodes = {ren[g]: nd for g, nd in nodes.items()}
+    for arm in arms:
+        arm.a, arm.b = ren[arm.a], ren[arm.b]
+    stats = {"carriageway_from": how, "carriageway_m2": round(float(mask.sum() * grid.res ** 2), 1),
+             "skeleton_nodes": len(node_pix), "derive_s": round(time.perf_counter() - t0, 3)}
+    net = Network(nodes, arms, mask, grid, None, stats)
+    net.level_faces = level
+    return net
+
+
+def _unit(d) -> np.ndarray:
+    d = np.asarray(d, float)
+    n = float(np.hypot(*d))
+    return d / n if n > 1e-9 else np.array([1.0, 0.0])
+
+
+def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
+    """Sidewalk width beyond each curb: the run of sidewalk-labelled surface (else the raised level)."""
+    from scipy import ndimage
+
+    grid = net.grid
+    if labels is not None and (labels == SIDEWALK).any():
+        lv = labels[f]
+        sw = _rasterize_faces(v, f, np.flatnonzero((lv == SIDEWALK).sum(1) >= 2), grid)
+        sw = ndimage.binary_closing(sw, np.ones((5, 5), bool))
+        src = "sidewalk labels"
+    else:  # the raised level: up-facing faces 6-35 cm above the carriageway level, just beyond the curb
+        from .mesh2d import Mesh, face_normals_z
+
+        nz = face_normals_z(Mesh(v, f, None, None))
+        up = np.flatnonzero(nz > 0.9)
+        zr = _level_raster(v, f, net.level_faces, grid)
+        cz = v[f[up], 2].mean(1)
+        lvl = grid.sample(zr, v[f[up], :2].mean(1))
+        raised = up[(cz - lvl > 0.06) & (cz - lvl < 0.35) & np.isfinite(lvl)]
+        sw = _rasterize_faces(v, f, raised, grid) & ~net.mask
+        src = "raised level beside the curb"
+    net.sidewalk_mask = sw
+    net.stats["sidewalks_from"] = src
+    for arm in net.arms:
+        nrm = _normals(arm.xy)
+        for side, sgn in (("left", 1.0), ("right", -1.0)):
+            edge = arm.xy + sgn * nrm * (arm.width_m / 2 + 0.3)  # past the curb stone (its own label varies)
+            run = _ray_lengths(sw, grid, edge, sgn * nrm, 15.0, grid.res / 2) - grid.res / 2
+            # only away from the junctions (the cross street's carriageway crosses the sidewalk there)
+            ok = np.ones(len(run), bool)
+            for nid in (arm.a, arm.b):
+                nd = net.nodes[nid]
+                if nd["kind"] == "junction":
+                    ok &= np.hypot(*(arm.xy - nd["xy"]).T) > arm.width_m + 6.0
+            vals = run[ok] if ok.sum() >= 3 else run
+            wv = float(np.percentile(vals, 60)) + 0.3 if len(vals) else 0.0  # + the curb stone the ray started past
+            wv = min(wv, p.max_sidewalk_m)
+            if wv >= p.min_sidewalk_m and float(np.mean(vals > 0.5)) >= 0.3:
+                setattr(arm, f"sidewalk_{side}_m", round(wv, 2))
+
+
+def _level_raster(v, f, fidx, grid) -> np.ndarray:
+    """Height of the carriageway level per pixel (nan where none); nearest filled."""
+    from scipy import ndimage
+
+    c = v[f[fidx]].mean(1)
+    px = np.floor(grid.to_px(c[:, :2])).astype(int)
+    ok = (px[:, 0] >= 0) & (px[:, 0] < grid.w) & (px[:, 1] >= 0) & (px[:, 1] < grid.h)
+    z = np.full((grid.h, grid.w), np.nan)
+    z[px[ok, 1], px[ok, 0]] = c[ok, 2]
+    if np.isnan(z).all():
+        return np.zeros_like(z)
+    idx = ndimage.distance_transform_edt(np.isnan(z), return_distances=False, return_indices=True)
+    return z[idx[0], idx[1]]
+
+
+def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> None:
+    zr = _level_raster(v, f, net.level_faces, net.grid)
+    for arm in net.arms:
+        arm.z = net.grid.sample(zr, arm.xy).astype(float)
+        arm.z = np.convolve(np.pad(arm.z, 2, mode="edge"), np.ones(5) / 5, mode="valid")
+    for nd in net.nodes.values():
+        nd["z"] = float(net.grid.sample(zr, np.asarray(nd["xy"])[None])[0])
+        nd["signals"] = False
+    if labels is None or p.min_traffic_light_vertices <= 0:
+        return
+    tl = v[labels == TRAFFIC_LIGHT, :2]
+    for nid, nd in net.nodes.items():
+        if nd["kind"] != "junction" or not len(tl):
+            continue
+        r = max(a.width_m / 2 for a in net.arms if nid in (a.a, a.b)) + p.traffic_light_radius_m
+        near = int((np.hypot(*(tl - nd["xy"]).T) < r).sum())
+        nd["signals"] = near >= p.min_traffic_light_vertices
+        nd["traffic_light_vertices"] = near
+
+
+# --------------------------------------------------------------------------- OpenDRIVE through netconvert
+
+def write_plain(net: Network, p: ScanSourceParams, proj: str, folder: Path) -> tuple[Path, Path]:
+    """SUMO plain network files (nodes, edges with their lanes) of the derived network."""
+    folder.mkdir(parents=True, exist_ok=True)
+    allxy = np.concatenate([a.xy for a in net.arms])
+    lo, hi = allxy.min(0) - 50, allxy.max(0) + 50
+    bnd = f"{lo[0]:.2f},{lo[1]:.2f},{hi[0]:.2f},{hi[1]:.2f}"
+    nl = ['<?xml version="1.0" encoding="UTF-8"?>', "<nodes>",
+          f'  <location netOffset="0.00,0.00" convBoundary="{bnd}" origBoundary="{bnd}" projParameter={quoteattr(proj)}/>']
+    for nid, nd in net.nodes.items():
+        kind = "traffic_light" if nd.get("signals") else ("priority" if nd["kind"] == "junction" else "dead_end")
+        x, y = nd["xy"]
+        nl.append(f'  <node id="n{nid}" x="{x:.3f}" y="{y:.3f}" z="{nd.get("z", 0.0):.3f}" type="{kind}"/>')
+    nl.append("</nodes>")
+    el = ['<?xml version="1.0" encoding="UTF-8"?>', "<edges>"]
+    for i, arm in enumerate(net.arms):
+        lay = lane_layout(arm.width_m, p)
+        arm.lanes = lay
+        z = arm.z if arm.z is not None else np.zeros(len(arm.xy))
+        dirs = [("f", arm.a, arm.b, arm.xy, z, arm.sidewalk_right_m)]
+        if lay["two_way"]:
+            dirs.append(("b", arm.b, arm.a, arm.xy[::-1], z[::-1], arm.sidewalk_left_m))
+        for tag, a, b, xy, zz, sw in dirs:
+            lanes = []
+            if p.sidewalks and sw > 0:
+                lanes.append(("pedestrian", None, sw))
+            if lay["strip_m"] > 0.05:
+                lanes.append((None, "all", lay["strip_m"]))
+            for _ in range(lay["lanes"]):
+                lanes.append((None, "pedestrian", lay["lane_m"]))
+            if not lay["two_way"]:  # one edge centred on the axis: the same strip and sidewalk on its left
+                if lay["strip_m"] > 0.05:
+                    lanes.append((None, "all", lay["strip_m"]))
+                both = min(arm.sidewalk_left_m, arm.sidewalk_right_m) if p.sidewalks else 0.0
+                lanes = [ln for ln in lanes if ln[0] != "pedestrian"]
+                if both > 0:
+                    lanes = [("pedestrian", None, both)] + lanes + [("pedestrian", None, both)]
+            shape = " ".join(f"{x:.3f},{y:.3f},{h:.3f}" for (x, y), h in zip(xy, zz))
+            spread = "right" if lay["two_way"] else "center"
+            el.append(f'  <edge id="scan{i}{tag}" from="n{a}" to="n{b}" priority="{lay["lanes"]}" '
+                      f'numLanes="{len(lanes)}" speed="13.89" spreadType="{spread}" shape="{shape}">')
+            for k, (allow, disallow, wd) in enumerate(lanes):
+                attr = f' allow="{allow}"' if allow else ""
+                attr += f' disallow="{disallow}"' if disallow else ""
+                el.append(f'    <lane index="{k}"{attr} width="{wd:.3f}"/>')
+            el.append("  </edge>")
+    el.append("</edges>")
+    nod, edg = folder / "scan.nod.xml", folder / "scan.edg.xml"
+    nod.write_text("\n".join(nl) + "\n", encoding="utf-8")
+    edg.write_text("\n".join(el) + "\n", encoding="utf-8")
+    return nod, edg
+
+
+def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=None) -> dict:
+    """netconvert on the plain network -> OpenDRIVE (the junctions' connecting roads are netconvert's)."""
+    from .convert import _env, _make_deterministic, netconvert_path
+
+    args = [str(netconvert_path()), "--node-files", str(nod), "--edge-files", str(edg),
+            "--opendrive-output", str(xodr), "--offset.disable-normalization", "--no-turnarounds",
+            "--junctions.corner-detail", "5", "--tls.discard-simple", "--no-warnings", "false", "--verbose", "false"]
+    t0 = time.perf_counter()
+    try:
+        r = subprocess.run(args, capture_output=True, text=True, timeout=p.timeout_s, env=_env())
+    except subprocess.TimeoutExpired:
+        raise InputError(f"netconvert did not finish in {p.timeout_s:g} s on the scan's road network "
+                         f"({edg}); raise road_source.timeout_s") from None
+    lines = [ln for ln in (r.stderr + r.stdout).splitlines() if ln.strip() and "proj.db" not in ln
+             and "SUMO_HOME" not in ln]
+    errors = [ln for ln in lines if ln.startswith("Error")]
+    if r.returncode != 0 or errors or not xodr.is_file() or xodr.stat().st_size == 0:
+        why = "; ".join(errors[-3:] or lines[-3:]) or f"exit code {r.returncode}"
+        raise InputError(f"netconvert failed on the scan's road network {edg} (exit {r.returncode}): {why}")
+    _make_deterministic(xodr, args)
+    warnings = [ln for ln in lines if ln.startswith("Warning")]
+    if log is not None:
+        for ln in warnings[:5]:
+            log.info("netconvert: %s", ln)
+    return {"netconvert_s": round(time.perf_counter() - t0, 3), "netconvert_warnings": len(warnings)}
+
+
+def mark_source(xodr_text: str) -> str:
+    """Tag the header so later steps (and people) know the map came from the scan."""
+    tag = '<userData code="twinkit_road_source" value="scan"/>'
+    if tag in xodr_text:
+        return xodr_text
+    i = xodr_text.find("<header")
+    j = xodr_text.find(">", i)
+    if i < 0 or j < 0:
+        return xodr_text
+    if xodr_text[j - 1] == "/":  # <header .../>
+        return xodr_text[:j - 1] + ">" + tag + "</header>" + xodr_text[j + 1:]
+    return xodr_text[:j + 1] + "\n        " + tag + xodr_text[j + 1:]
+
+
+def describe(net: Network) -> dict:
+    return {
+        "nodes": [{"id": nid, "kind": nd["kind"], "xy": [round(float(c), 3) for c in nd["xy"]],
+                   "z": round(float(nd.get("z", 0.0)), 3), "signals": bool(nd.get("signals")),
+                   **({"traffic_light_vertices": nd["traffic_light_vertices"]} if "traffic_light_vertices" in nd else {})}
+                  for nid, nd in net.nodes.items()],
+        "roads": [{"from": a.a, "to": a.b, "length_m": round(float(np.hypot(*np.diff(a.xy, axis=0).T).sum()), 2),
+                   "carriageway_m": round(a.width_m, 3), "sidewalk_left_m": a.sidewalk_left_m,
+                   "sidewalk_right_m": a.sidewalk_right_m, **a.lanes,
+                   "axis": [[round(float(x), 3), round(float(y), 3)] for x, y in a.xy]} for a in net.arms],
+        **net.stats,
+    }
+
+
+# --------------------------------------------------------------------------- the picture
+
+def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_per_m: float = 8.0,
+                    max_px: int = 3000, truth: list | None = None) -> dict:
+    """Top view of the labelled mesh (CityScapes colours, dimmed) with the derived network: the
+    carriageway edges found (yellow), the lanes carla.Map reads from the OpenDRIVE (driving borders
+    white, centre lines red, sidewalk lanes orange), the true centre lines if known (cyan)."""
+    from PIL import Image, ImageDraw
+
+    from twinkit.cityscapes import colorize
+
+    from .evidence import lane_polygons
+    from .mesh2d import Mesh, picture_grid, rasterize
+
+    grid, res = picture_grid(v[:, :2], px_per_m, max_px)
+    if labels is not None:
+        cols = (colorize(labels[f[:, 0]]).astype(float) * 0.6).astype(np.uint8)
+    else:
+        z = v[f, 2].mean(1)
+        g = np.clip((z - np.percentile(z, 2)) / max(float(np.ptp(z)), 1e-6) * 150 + 40, 0, 255).astype(np.uint8)
+        cols = np.stack([g, g, g], 1)
+    img = Image.fromarray(rasterize(Mesh(v, f, None, None), grid, colours=cols, mode="RGB"))
+    d = ImageDraw.Draw(img)
+    w = max(1, int(round(0.1 / res)))
+
+    def line(p, fill, width):
+        q = [tuple(map(float, x)) for x in grid.to_px(np.asarray(p)[:, :2])]
+        if len(q) >= 2:
+            d.line(q, fill=fill, width=width)
+
+    lanes = lane_polygons(xodr_text, 0.5)
+    for ln in lanes:
+        if ln.type == "sidewalk" and len(ln.left) >= 2:
+            ring = np.concatenate([ln.left, ln.right[::-1]])
+            d.polygon([tuple(map(float, x)) for x in grid.to_px(ring)], outline=(255, 150, 40))
+    from .align import lane_lines
+
+    lines = lane_lines(xodr_text, 1.0, junctions=True)
+    for ln in lines:
+        line(ln["left"], (255, 255, 255), max(1, w // 2))
+        line(ln["right"], (255, 255, 255), max(1, w // 2))
+    for t in truth or []:
+        line(np.asarray(t), (0, 220, 255), w)
+    for ln in lines:
+        line(ln["centre"], (230, 20, 20), w)
+    for arm in net.arms:
+        nrm = _normals(arm.xy)
+        for sgn in (1, -1):
+            line(arm.xy + sgn * nrm * arm.width_m / 2, (255, 230, 0), max(1, w // 2))
+    for nd in net.nodes.values():
+        x, y = grid.to_px(np.asarray(nd["xy"]))
+        r = 4
+        d.ellipse([x - r, y - r, x + r, y + r], outline=(255, 0, 255), width=2)
+    d.rectangle([8, 8, 360, 108], fill=(0, 0, 0))
+    d.text((16, 14), "roads from the scan (road_source=scan)", fill=(255, 255, 255))
+    d.text((16, 30), "yellow: carriageway edges (labels + curbs)", fill=(255, 230, 0))
+    d.text((16, 46), "white / red: lane borders / centre lines", fill=(230, 20, 20))
+    d.text((16, 62), "orange: sidewalk lanes; magenta: nodes", fill=(255, 150, 40))
+    if truth:
+        d.text((16, 78), "cyan: true lane centre lines", fill=(0, 220, 255))
+    bar = 10.0 / res
+    d.line([(16, 100), (16 + bar, 100)], fill=(255, 255, 255), width=3)
+    d.text((22 + bar, 92), "10 m", fill=(255, 255, 255))
+    img.save(out)
+    return {"px": list(img.size), "m_per_px": res, "lane_segments": len(lines)}
+
+
+# --------------------------------------------------------------------------- measures
+
+def lanes_on_road(xodr_text: str, v, f, labels, step_m: float = 0.5, raster_m: float = 0.1,
+                  junctions: bool = False) -> dict:
+    """Share of the driving lanes' area (carla.Map, outside junctions unless ``junctions``) that lies on
+    road-labelled surface of the mesh (seen from above); and of their centre points."""
+    from scipy import ndimage
+
+    from .align import lane_lines
+    from .evidence import lane_polygons, lane_raster
+    from .mesh2d import Grid
+
+    grid = Grid.around(v[:, :2], raster_m)
+    lv = labels[f]
+    road = _rasterize_faces(v, f, np.flatnonzero((lv == ROAD).sum(1) >= 2), grid)
+    road = ndimage.binary_closing(road, np.ones((3, 3), bool))
+    lanes = [ln for ln in lane_polygons(xodr_text, step_m) if ln.type == "driving" and (junctions or not ln.junction)]
+    if not lanes:
+        return {"lane_area_m2": 0.0, "on_road_share": 0.0, "centre_on_road_share": 0.0}
+    for ln in lanes:
+        ln.vote = 1
+    vote, _ = lane_raster(lanes, grid)
+    inl = vote > 0
+    share = float((inl & road).sum() / max(inl.sum(), 1))
+    cen = np.concatenate([ln["centre"] for ln in lane_lines(xodr_text, 1.0, junctions=junctions)])
+    cshare = float(np.mean(grid.sample(road.astype(np.uint8), cen) > 0)) if len(cen) else 0.0
+    return {"lane_area_m2": round(float(inl.sum() * raster_m ** 2), 1), "on_road_share": round(share, 4),
+            "centre_on_road_share": round(cshare, 4)}
+
+
+# --------------------------------------------------------------------------- the road source
+
+def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: Path,
+                out_scan_roads_json: Path, out_scan_roads_png: Path, in_labels_npy: Path | None = None,
+                in_gt_labels_npy: Path | None = None, in_roads_truth_json: Path | None = None) -> dict:
+    """Roads from the scan itself (no OSM): the labelled mesh's carriageway, curbs and sidewalks ->
+    lanes -> OpenDRIVE in the site frame (``opendrive.xodr``, checked by osm_to_opendrive like a map)."""
+    import json
+
+    from twinkit.geo import SiteFrame
+
+    from .mesh2d import read_mesh
+
+    params = params or ScanSourceParams()
+    t0 = time.perf_counter()
+    mesh = read_mesh(in_textured_mesh_ply)
+    which = params.labels
+    if which == "auto":
+        which = "predicted" if in_labels_npy is not None else "none"
+        if in_labels_npy is None:
+            ctx.log.info("road_source=scan: no labels.npy before this step; the curbs alone draw the roads")
+    src = {"predicted": in_labels_npy, "gt": in_gt_labels_npy, "none": None}[which]
+    labels = None
+    if which != "none":
+        if src is None:
+            what = ("the segmentation's labels.npy (the steps before fetch_roads)" if which == "predicted"
+                    else "gt_labels.npy (a site with ground truth: the demo)")
+            raise InputError(f"road_source=scan with labels={which} needs {what}; none was written before this "
+                             "step. Use road_source.labels=none for the curbs alone")
+        try:
+            labels = np.load(src).astype(np.int64).reshape(-1)
+        except Exception as exc:  # noqa: BLE001
+            raise InputError(f"{src}: not a readable .npy label array ({exc}); re-run the segmentation") from None
+        if len(labels) != len(mesh.v):
+            raise InputError(f"{src}: {len(labels)} labels for the {len(mesh.v)} vertices of "
+                             f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh")
+        if not (labels == ROAD).any():
+            ctx.log.warning("road_source=scan: no vertex is labelled road in %s; the curbs alone draw the roads",
+                            src.name)
+            labels_for_mask = None
+        else:
+            labels_for_mask = labels
+    else:
+        labels_for_mask = None
+    net = derive_network(mesh.v, mesh.f, labels_for_mask, params, ctx.log)
+    if params.sidewalks:
+        add_sidewalks(net, mesh.v, mesh.f, labels, params)
+    add_heights_and_signals(net, mesh.v, mesh.f, labels, params)
+    frame = SiteFrame.from_site(ctx.site)
+    work = out_opendrive_xodr.parent / "scan_plain"
+    nod, edg = write_plain(net, params, frame.proj_string(), work)
+    info = netconvert_plain(nod, edg, out_opendrive_xodr, params, ctx.log)
+    text = mark_source(out_opendrive_xodr.read_text(encoding="utf-8"))
+    out_opendrive_xodr.write_text(text, encoding="utf-8")
+    doc = describe(net)
+    doc.update({"labels": which, "labels_file": str(src) if src else None, **info,
+                "definition": "roads derived from the scan: carriageway = road-labelled surface on the level below "
+                              "the curbs; axes = its skeleton, centred between the edges; lanes of lane_width_m per "
+                              "direction, a remainder >= min_strip_m a parking strip at the curb; sidewalk lanes "
+                              "where sidewalk surface lies beyond the curb; junctions by netconvert",
+                "params": {k: getattr(params, k) for k in params.__dataclass_fields__}})
+    truth = None
+    if in_roads_truth_json is not None:
+        tj = json.loads(Path(in_roads_truth_json).read_text())
+        truth = [np.asarray(ln["points"], float)[:, :2] for ln in tj.get("lanes", [])] or None
+    if labels is not None:
+        doc["lanes_on_road"] = lanes_on_road(text, mesh.v, mesh.f, labels)
+    if truth:
+        from .align import centreline_rmse
+
+        allp = np.concatenate(truth)
+        lo, hi = allp.min(0) + 2.0, allp.max(0) - 2.0
+        rmse, n = centreline_rmse(text, truth, (lo[0], lo[1], hi[0], hi[1]))
+        doc["centreline_rmse_m"] = round(rmse, 4)
+        doc["centreline_points"] = n
+    draw_scan_roads(mesh.v, mesh.f, labels, net, text, out_scan_roads_png, truth=truth)
+    doc["total_s"] = round(time.perf_counter() - t0, 3)
+    out_scan_roads_json.write_text(json.dumps(doc, indent=1))
+    n_roads, n_j = len(net.arms), sum(nd["kind"] == "junction" for nd in net.nodes.values())
+    n_lanes = sum(a.lanes["lanes"] * (2 if a.lanes["two_way"] else 1) for a in net.arms)
+    ctx.log.info("roads from the scan (%s; labels: %s): %d roads, %d junctions, %d driving lanes, %d sidewalk lanes; "
+                 "%.1f s", net.stats["carriageway_from"], which, n_roads, n_j, n_lanes,
+                 sum((a.sidewalk_left_m > 0) + (a.sidewalk_right_m > 0) for a in net.arms), doc["total_s"])
+    metrics = {"roads": n_roads, "junctions": n_j, "driving_lanes": n_lanes, "labels": which,
+               "carriageway_m2": net.stats["carriageway_m2"], "total_s": doc["total_s"]}
+    if "lanes_on_road" in doc:
+        metrics["lanes_on_road_share"] = doc["lanes_on_road"]["on_road_share"]
+        if doc["lanes_on_road"]["on_road_share"] < 0.9:
+            ctx.log.warning("only %.0f %% of the derived driving lanes lie on road-labelled surface: check "
+                            "scan_roads.png", 100 * doc["lanes_on_road"]["on_road_share"])
+    if "centreline_rmse_m" in doc:
+        metrics["centreline_rmse_m"] = doc["centreline_rmse_m"]
+        ctx.log.info("derived lane centre lines vs truth: RMSE %.3f m (%d points), lanes on road %.1f %%",
+                     doc["centreline_rmse_m"], doc["centreline_points"],
+                     100 * doc.get("lanes_on_road", {}).get("on_road_share", float("nan")))
+    return metrics
