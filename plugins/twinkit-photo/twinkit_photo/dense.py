@@ -121,6 +121,33 @@ def depth_ranges(views: list[View], sparse: np.ndarray, vis: dict[str, np.ndarra
             v.dmin = min(v.dmin, 0.5 * v.dmax)
 
 
+def near_limit_from_ground(views: list[View], normal, ground_z: float) -> None:
+    """Lower each view's near depth limit to the nearest ground it sees: the SfM points of a street photo
+    are mostly far (the near road has few features), so their depth range cuts off the road in front of
+    the photo. The ground plane (``normal`` . X = ``normal`` . (0, 0, ground_z)) met by the rays of the
+    photo's bottom edge gives that depth."""
+    nrm = np.asarray(normal, float)
+    nrm = nrm / np.linalg.norm(nrm)
+    off = nrm @ np.array([0.0, 0.0, float(ground_z)])
+    for v in views:
+        if v.dmax <= 0:
+            continue
+        h, w = v.gray.shape
+        height = float(nrm @ v.C - off)
+        if height <= 0:
+            continue
+        us = np.linspace(0, w - 1, 9)
+        pix = np.stack([np.concatenate([us, us, np.zeros(3), np.full(3, w - 1.0)]),
+                        np.concatenate([np.full(9, h - 1.0), np.full(9, h * 0.75),
+                                        np.linspace(h / 2, h - 1, 3), np.linspace(h / 2, h - 1, 3)]),
+                        np.ones(24)], 1)
+        rays = pix @ np.linalg.inv(v.K).T @ v.R_wc.T  # world directions with camera z = 1
+        down = -(rays @ nrm)
+        z = height / down[down > 1e-6]  # camera depth where the ray meets the ground
+        if len(z):
+            v.dmin = float(min(v.dmin, 0.8 * z.min()))
+
+
 def choose_neighbors(views: list[View], vis: dict[str, np.ndarray], opt: DenseOptions) -> dict[int, list[int]]:
     out = {}
     sets = {v.name: set(vis.get(v.name, np.zeros(0, int)).tolist()) for v in views}
@@ -322,6 +349,21 @@ def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarra
     return depth, score.astype(np.float32)
 
 
+def patchmatch_view(r: View, nbrs: list[View], opt: DenseOptions, pm=None) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (0 = unknown) and NCC of the reference view by PatchMatch (twinkit_photo.patchmatch); sets
+    ``r.normal`` (world, facing the photo) where a depth was kept."""
+    from .patchmatch import PMOptions, patchmatch
+
+    pm = pm or PMOptions(threads=opt.threads)
+    rel = [(n.gray, n.K, n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C)) for n in nbrs]
+    depth, n_cam, score = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm)
+    nrm = n_cam.reshape(-1, 3) @ r.R_wc.T
+    nrm = nrm.reshape(n_cam.shape)
+    nrm[depth <= 0] = np.nan
+    r.normal = nrm
+    return depth, score
+
+
 def backproject(v: View, depth: np.ndarray) -> np.ndarray:
     h, w = depth.shape
     u, vv = np.meshgrid(np.arange(w), np.arange(h))
@@ -362,7 +404,7 @@ def fuse(views: list[View], opt: DenseOptions, progress=None):
         if not valid.any():
             continue
         pts = backproject(v, d)
-        nrm = depth_normals(v, pts, d)
+        nrm = v.normal if v.normal is not None else depth_normals(v, pts, d)
         P = pts[valid]
         cnt = np.zeros(len(P), np.int32)
         ratio_sum = np.ones(len(P), np.float64)  # this view's own depth counts once (ratio 1)

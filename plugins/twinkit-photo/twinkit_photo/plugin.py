@@ -83,9 +83,12 @@ class RoiParams:
 
 @dataclass
 class DenseParams:
-    """Dense reconstruction: CPU plane-sweep stereo + consistency fusion (pycolmap patch-match with CUDA)."""
+    """Dense reconstruction: CPU PatchMatch (or plane-sweep) stereo + consistency fusion (pycolmap patch-match with CUDA)."""
 
     backend: str = param("auto", choices=("auto", "cpu", "patchmatch"))  # auto (patchmatch when pycolmap has CUDA, else cpu) | cpu | patchmatch
+    # the CPU backend's matcher: patchmatch (per-pixel slanted planes, propagation, best-of-neighbours NCC;
+    # twinkit_photo/patchmatch.py) or sweep (the plane sweep over four plane families)
+    cpu_method: str = param("patchmatch", choices=("patchmatch", "sweep"))
     max_image_px: int = param(640, ge=16, le=16384)  # working resolution (long side)
     planes: int = param(192, ge=2, le=4096)  # most planes per plane family of the coarse sweep
     neighbors: int = param(4, ge=1)
@@ -97,6 +100,12 @@ class DenseParams:
     voxel_m: float = param(0.02, ge=0)  # merge duplicate points per voxel (0 = off)
     coarse_scale: float = param(0.25, gt=0, le=1)
     refine_passes: int = param(2, ge=0)
+    pm_window: int = param(5, ge=3, le=15)  # patchmatch: window samples per side
+    pm_dilation: int = param(2, ge=1, le=8)  # patchmatch: pixels between window samples
+    pm_iters_coarse: int = param(4, ge=0, le=32)  # patchmatch iterations at half the working resolution
+    pm_iters_fine: int = param(3, ge=0, le=32)  # then at the working resolution
+    pm_top_k: int = param(2, ge=1, le=16)  # a pixel's cost: mean NCC cost of its best top_k neighbours
+    pm_min_ncc: float = param(0.5, ge=-1, le=1)  # patchmatch: keep a depth whose aggregated NCC reaches this
     # fewer kept points per depth map than this: the run ends "degraded" (the demo keeps ~10,000 per photo; the
     # CPU sweep kept 148 per photo on Lund, a 5 m² mesh)
     degraded_below_points_per_photo: int = param(1000, ge=0)
@@ -693,9 +702,17 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                          window_px=params.window_px, min_ncc=params.min_ncc, min_consistent=params.min_consistent,
                          rel_tol=params.rel_tol, average_depths=params.average_depths, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
                          refine_passes=params.refine_passes, threads=_threads(ctx))
+    from .patchmatch import PMOptions
+
+    pm = PMOptions(window=params.pm_window, dilation=params.pm_dilation, iters_coarse=params.pm_iters_coarse,
+                   iters_fine=params.pm_iters_fine, top_k=params.pm_top_k, min_ncc=params.pm_min_ncc,
+                   threads=opt.threads)
     views = D.load_views(Path(in_photos_dir), cams, opt.max_image_px)
     D.depth_ranges(views, sp, vis_arr, max_depth)
     nb = D.choose_neighbors(views, vis_arr, opt)
+    ground = roi_doc.get("ground") or {}
+    if params.cpu_method == "patchmatch" and "normal" in ground and "z_m" in ground:
+        D.near_limit_from_ground(views, ground["normal"], float(ground["z_m"]))  # after the neighbour choice
     t_sweep = time.perf_counter()
     n_maps = 0
     for i in ctx.progress(range(len(views)), total=len(views), desc="depth maps"):
@@ -703,7 +720,10 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
         if not nb[i] or v.dmax <= v.dmin or v.dmin <= 0:
             ctx.log.info("dense: %s has no usable neighbour; no depth map", v.name)
             continue
-        v.depth, _ = D.plane_sweep(v, [views[j] for j in nb[i]], opt)
+        if params.cpu_method == "patchmatch":
+            v.depth, _ = D.patchmatch_view(v, [views[j] for j in nb[i]], opt, pm)
+        else:
+            v.depth, _ = D.plane_sweep(v, [views[j] for j in nb[i]], opt)
         n_maps += 1
     t_sweep = time.perf_counter() - t_sweep
     if n_maps == 0:
@@ -712,13 +732,18 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
     t_fuse = time.perf_counter()
     xyz, rgb, nrm, _src = D.fuse(views, opt)
     t_fuse = time.perf_counter() - t_fuse
+    in_roi = np.all((xyz >= bmin) & (xyz <= bmax), axis=1)
+    per_photo = np.bincount(_src[in_roi], minlength=len(views)) if len(_src) else np.zeros(len(views), int)
     written, n_fused = _write_dense(xyz, rgb, nrm, bmin, bmax, params.voxel_m, in_photos_dir, out_points_ply,
-                                    out_points_meta_json, "plane sweep + fusion", "depth maps", dense_info={
-                                        "backend": "cpu", "depth_maps": n_maps, "photos": len(views),
+                                    out_points_meta_json, f"{params.cpu_method} + fusion",
+                                    "depth maps" if params.cpu_method == "sweep" else "patchmatch planes", dense_info={
+                                        "backend": "cpu", "method": params.cpu_method, "depth_maps": n_maps, "photos": len(views),
                                         "working_px": params.max_image_px,
                                         "neighbours": {views[i].name: [views[j].name for j in nb[i]] for i in nb},
                                         "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean()))
-                                                        for v in views}},
+                                                        for v in views},
+                                        "per_photo": {v.name: int(per_photo[i]) for i, v in enumerate(views)
+                                                      if v.depth is not None}},
                                     times={"seconds": round(time.perf_counter() - t0, 3),
                                            "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)})
     ctx.log.info("dense: %d depth maps, %d fused points, %d after the region of interest and %.3f m voxels",
