@@ -49,3 +49,64 @@ def test_near_limit_reaches_the_road_in_front_of_the_photo():
         nearest_road = gt[-1][gt[-1] > 0].min()
         assert v.dmin < nearest_road  # the road at the photo's bottom edge is inside the search range
         assert v.dmin > 0.5 * nearest_road
+
+
+def _street_inputs(tmp_path, photos, cams, depths):
+    """The dense step's inputs for the synthetic street: photos, cameras_site.json, sparse points, roi.json."""
+    import json
+
+    import cv2
+
+    import twinkit_photo.plugin as photo
+
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    out = []
+    pts = []
+    vis_i, vis_p = [], []
+    for i, (p, c, d) in enumerate(zip(photos, cams, depths)):
+        name = f"{i:02d}.png"
+        cv2.imwrite(str(folder / name), np.dstack([np.round(p * 255).astype(np.uint8)] * 3))
+        out.append({"image": name, "model": "PINHOLE", "K": c["K"].tolist(),
+                    "R_world_from_camera": c["R_world_from_camera"].tolist(), "center": c["center"].tolist()})
+        # "SfM points": a sparse grid of the true surface, mostly far (as on a real street)
+        h, w = d.shape
+        v, u = np.mgrid[4:h // 2:6, 4:w - 4:6]
+        z = d[v, u]
+        ok = z > 0
+        X = (np.stack([u[ok], v[ok], np.ones(ok.sum())], 1) @ np.linalg.inv(c["K"]).T) * z[ok, None]
+        X = X @ c["R_world_from_camera"].T + c["center"]
+        vis_i += [name] * len(X)
+        vis_p += list(range(len(pts), len(pts) + len(X)))
+        pts.extend(X.tolist())
+    (tmp_path / "cameras_site.json").write_text(json.dumps({"cameras": out}))
+    photo._write_cloud(tmp_path / "sparse_site.ply", np.asarray(pts))
+    np.savez_compressed(tmp_path / "sparse_site.npz", vis_image=np.array(vis_i), vis_point=np.array(vis_p, np.int64))
+    (tmp_path / "roi.json").write_text(json.dumps({
+        "box": {"min": [-10.0, -5.0, -1.0], "max": [10.0, 80.0, 15.0]}, "max_depth_m": 40.0,
+        "ground": {"normal": [0.0, 0.0, 1.0], "z_m": 0.0}}))
+    return {"in_photos_dir": folder, "in_cameras_site_json": tmp_path / "cameras_site.json",
+            "in_sparse_site_ply": tmp_path / "sparse_site.ply", "in_roi_json": tmp_path / "roi.json"}
+
+
+def test_dense_step_on_a_walked_street_keeps_road_and_facades(tmp_path):
+    import json
+
+    from twinkit.mesh import read_ply
+    from twinkit.testing import plugin_from_module, run_step
+
+    import twinkit_photo.plugin as photo
+
+    photos, cams, depths = render_street(n_photos=5, size=(160, 120), f_px=140.0)
+    inputs = _street_inputs(tmp_path, photos, cams, depths)
+    out = run_step(plugin_from_module(photo, "step", "dense"), tmp_path / "dense", inputs,
+                   photo.DenseParams(backend="cpu", voxel_m=0.0, rel_tol=0.01, degraded_below_points_per_photo=0))
+    meta = json.loads(out["points_meta.json"].read_text())
+    assert meta["dense"]["method"] == "patchmatch" and meta["dense"]["depth_maps"] == 5
+    assert set(meta["dense"]["per_photo"]) == {f"{i:02d}.png" for i in range(5)}
+    P = read_ply(out["points.ply"]).vertices
+    # distance to the nearest true surface: road z = 0, façades x = -4 and x = 5
+    dist = np.min(np.abs(np.stack([P[:, 2], P[:, 0] + 4.0, P[:, 0] - 5.0], 1)), 1)
+    assert np.median(dist) < 0.05
+    assert (P[:, 2] < 0.1).sum() > 1000  # the road
+    assert ((np.abs(P[:, 0] + 4) < 0.1) | (np.abs(P[:, 0] - 5) < 0.1)).sum() > 300  # the façades
