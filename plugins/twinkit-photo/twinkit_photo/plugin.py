@@ -653,8 +653,9 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
 def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json: Path, in_sparse_site_ply: Path,
           in_roi_json: Path, out_points_ply: Path, out_points_meta_json: Path, in_sfm_dir: Path | None = None,
           in_georef_json: Path | None = None) -> dict:
-    """Depth map per photo, fused to a coloured cloud with normals (what read_cloud writes): our CPU plane
-    sweep, or COLMAP's patch-match stereo where pycolmap has CUDA (needs the sfm model and georef.json)."""
+    """Depth map per photo, fused to a coloured cloud with normals (what read_cloud writes): our CPU
+    PatchMatch (or plane sweep), or COLMAP's patch-match stereo where pycolmap has CUDA (needs the sfm
+    model and georef.json)."""
     import cv2
     import numpy as np
     from twinkit.mesh import read_ply
