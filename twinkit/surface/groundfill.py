@@ -476,17 +476,38 @@ def _inside_polygon(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return (cross.sum(axis=1) % 2) == 1
 
 
+def _border_heights(border: np.ndarray, k: int = 4):
+    """z(xy) inside a hole: the inverse-distance weighted height of the ``k`` nearest border vertices."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(border[:, :2])
+    k = min(k, len(border))
+
+    def z(xy: np.ndarray) -> np.ndarray:
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        if len(xy) == 0:
+            return np.zeros(0)
+        d, i = tree.query(xy, k=k)
+        d, i = np.atleast_2d(d).reshape(len(xy), -1), np.atleast_2d(i).reshape(len(xy), -1)
+        w = 1.0 / np.maximum(d, 1e-6) ** 2
+        return (w * border[i, 2]).sum(axis=1) / w.sum(axis=1)
+
+    return z
+
+
 def close_ground_holes(vertices: np.ndarray, faces: np.ndarray, ground_z, *, max_extent_m: float = 8.0,
-                       max_rise_m: float = 0.3, level_m: float = 0.1, cell_m: float = 0.10,
+                       max_rise_m: float = 0.5, level_m: float = 0.3, cell_m: float = 0.10,
                        skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], dict]:
     """Close every hole of the ground that the scan did not leave: a closed loop of open border (a hole
     enclosed by surface, so never the site's edge) at most ``max_extent_m`` across seen from above (the
     ground fill's limit: a wider gap is an unscanned area and stays open), lying on the ground (its
-    border's median height above ``ground_z(xy)`` at most ``level_m``, none of it above ``max_rise_m``:
-    a kerb may run through it, a wall or a car body may not), and open towards the sky (oriented as a
-    hole in an up-facing surface). Each is closed by :func:`fill_loop_on_ground` on a ``cell_m`` grid at
-    the ground's height. Loops listed in ``skip`` (a bool mask over vertices: any border vertex marked)
-    are left to the caller.
+    border's median height above ``ground_z(xy)``, the carriageway level, at most ``level_m``: a pavement
+    on its kerb; none of it above ``max_rise_m``: a wall or a car body is no ground), and open towards
+    the sky (oriented as a hole in an up-facing surface; the open bottom of an object runs the other
+    way). Each is closed by :func:`fill_loop_on_ground` on a ``cell_m`` grid whose points take the
+    heights of the nearest border vertices (inverse-distance weighted: a hole on a pavement is closed at
+    the pavement's height, one across a kerb keeps both levels). Loops listed in ``skip`` (a bool mask
+    over vertices: any border vertex marked) are left to the caller.
 
     Returns (new vertices (k, 3), new faces (f, 3) indexing the old and new vertices, the closed loops,
     a report: ``closed``, ``closed_m`` (their border's length), ``left_open_m`` by reason)."""
@@ -520,7 +541,7 @@ def close_ground_holes(vertices: np.ndarray, faces: np.ndarray, ground_z, *, max
         if 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)) <= 0:
             left("not_a_hole_seen_from_above", ln)
             continue
-        res = fill_loop_on_ground(np.vstack([v] + add_v) if add_v else v, lp, ground_z, cell_m)
+        res = fill_loop_on_ground(np.vstack([v] + add_v) if add_v else v, lp, _border_heights(v[lp]), cell_m)
         if res is None:
             left("not_simple_seen_from_above", ln)
             continue

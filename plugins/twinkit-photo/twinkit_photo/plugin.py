@@ -88,7 +88,9 @@ class DenseParams:
     backend: str = param("auto", choices=("auto", "cpu", "patchmatch"))  # auto (patchmatch when pycolmap has CUDA, else cpu) | cpu | patchmatch
     # the CPU backend's matcher: patchmatch (per-pixel slanted planes, propagation, best-of-neighbours NCC;
     # twinkit_photo/patchmatch.py) or sweep (the plane sweep over four plane families)
-    cpu_method: str = param("patchmatch", choices=("patchmatch", "sweep"))
+    # sweep stays the default until PatchMatch meets the demo's 3 cm mesh target (27 Nov 2026: 3.17 cm, one run;
+    # the sweep 2.76-2.93); PatchMatch is what a walked street needs (Lund: 153 -> 1,109 points per photo)
+    cpu_method: str = param("sweep", choices=("patchmatch", "sweep"))
     max_image_px: int = param(640, ge=16, le=16384)  # working resolution (long side)
     planes: int = param(192, ge=2, le=4096)  # most planes per plane family of the coarse sweep
     neighbors: int = param(4, ge=1)
@@ -761,7 +763,9 @@ def _dense_gate(ctx, written: int, n_maps: int, params: DenseParams, backend: st
         ctx.degraded(f"dense stereo ({backend}) kept {written:,} points from {n_maps} photos ({per:,.0f} per photo, "
                      f"under {params.degraded_below_points_per_photo:,}): the mesh will cover a small part of what "
                      f"was photographed",
-                     "photos with more overlap and texture; on a CUDA machine steps.dense.backend=patchmatch")
+                     ("steps.dense.cpu_method=patchmatch (the CPU PatchMatch: a walked street keeps 7x the points); "
+                      if params.cpu_method == "sweep" and backend == "cpu" else "")
+                     + "photos with more overlap and texture; on a CUDA machine steps.dense.backend=patchmatch")
 
 
 def _write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_points_ply, out_points_meta_json,
