@@ -161,7 +161,7 @@ SETUPS = {
     "depth-negative": _param("reconstructor.depth=-3"),
     "target-faces-negative": _param("steps.simplify.target_faces=-5"),
     "target-faces-0": _param("steps.simplify.target_faces=0"),
-    "max-dist-negative": _param("steps.clean_mesh.max_dist_m=-1"),
+    "max-dist-negative": _param("steps.clean_mesh.max_dist_m=-2"),  # -1 = auto
     "backend-unknown": _param("reconstructor.backend=meshroom"),
     "recipe-param-out-of-range": _recipe_params,
     "lat-not-a-number": _site("base_point: {lat: abc, lon: 24.9, alt: 0}"),

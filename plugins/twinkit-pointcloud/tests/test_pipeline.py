@@ -142,7 +142,8 @@ def test_textured_obj_round_trip(pipeline):
     assert (np.abs(ply.colors[vs].astype(int) - checker_colour(vv[vs]).astype(int)).max(axis=1) < 40).mean() > 0.9
 
 
-def test_no_colours_gives_neutral_texture(tmp_path, caplog):
+def test_no_colours_gives_shaded_or_neutral_texture(tmp_path, caplog):
+    """A cloud without colours: by default a shaded grey (issue 28); colourless=grey: the flat grey of before."""
     from PIL import Image
 
     pts, _, nrm = box_scene(8000, 1500)
@@ -155,6 +156,14 @@ def test_no_colours_gives_neutral_texture(tmp_path, caplog):
     P.simplify(P.SimplifyParams(target_faces=1000), ctx, in_clean_mesh_ply=w / "clean_mesh.ply", out_mesh_ply=w / "mesh.ply")
     with caplog.at_level(logging.WARNING):
         r = P.bake_texture(P.BakeParams(texture_px=256), ctx, in_mesh_ply=w / "mesh.ply",
+                           in_clean_mesh_ply=w / "clean_mesh.ply", out_textured_mesh_obj=w / "s.obj",
+                           out_textured_mesh_ply=w / "s.ply")
+    assert not r["neutral_texture"] and r["colourless"] == "shaded" and "shaded" in caplog.text
+    img = np.asarray(Image.open(w / "s.png"))
+    assert img[..., 0].std() > 10 and (img[..., 0] == img[..., 1]).all()  # grey levels, not one grey
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        r = P.bake_texture(P.BakeParams(texture_px=256, colourless="grey"), ctx, in_mesh_ply=w / "mesh.ply",
                            in_clean_mesh_ply=w / "clean_mesh.ply", out_textured_mesh_obj=w / "t.obj",
                            out_textured_mesh_ply=w / "t.ply")
     assert r["neutral_texture"] and "neutral grey" in caplog.text

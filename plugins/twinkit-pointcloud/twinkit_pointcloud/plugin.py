@@ -32,13 +32,16 @@ class ReadCloudParams:
     max_offset_km: float = param(20.0, gt=0)  # without site bounds: cloud centre farther from the base point = wrong CRS
     bounds_margin_m: float = param(50.0, ge=0)  # with site bounds: margin around them for the wrong-CRS check
     max_base_point_offset_m: float = param(250.0, ge=0)  # preflight: base point farther outside the cloud's box is refused (0: off); docs/pointcloud.md
+    use_colors: bool = True  # false: drop the file's colours (the colourless path on a coloured cloud, to measure it)
 
 
 @dataclass
 class PoissonParams:
     """Screened Poisson reconstruction."""
 
-    depth: int = param(11, ge=2, le=14)  # octree depth (Open3D needs >= 2; 30 crashed it); voxel = scene size * scale / 2**depth
+    # octree depth (Open3D needs >= 2; 30 crashed it); voxel = scene size * scale / 2**depth. -1 = auto: the depth
+    # whose voxel is about the cloud's median point spacing, 6..11 (street scans: 11 as before)
+    depth: int = param(-1, ge=2, le=14, also=(-1,))
     voxel_m: float = param(0.0, ge=0)  # > 0: derive the depth from this target voxel size (metres) instead
     scale: float = param(1.1, ge=1, le=10)  # reconstruction cube / bounding cube of the samples
     point_weight: float = param(4.0, ge=0)  # screening weight (interpolation vs smoothness)
@@ -57,7 +60,9 @@ class PoissonParams:
 class CleanParams:
     """Trimming and repair of the dense mesh."""
 
-    max_dist_m: float = param(0.10, ge=0)  # remove vertices farther than this from every input point ("bubbles"); 0 = off
+    # remove vertices farther than this from every input point ("bubbles"); 0 = off; -1 = auto: 2 x the cloud's
+    # p90 point spacing, never below 0.10 m (street scans: 0.10 as before; aerial lidar ~0.3 m spacing: ~0.8 m)
+    max_dist_m: float = param(-1.0, ge=0, also=(-1,))
     gap_dist_m: float = param(0.5, ge=0)  # ... but keep those up to this far that lie on the points' tangent planes; 0 = off
     gap_plane_m: float = param(0.02, ge=0)  # "on the plane": median distance to the tangent planes of the k nearest points
     density_quantile: float = param(0.0, ge=0, lt=1)  # remove vertices below this quantile of Poisson density; 0 = off
@@ -65,11 +70,15 @@ class CleanParams:
     min_component_ratio: float = param(0.0, ge=0, le=1)  # ... or smaller than this fraction of the largest
     repair_non_manifold: bool = True
     max_hole_edges: int = param(60, ge=0)  # close holes whose boundary has at most this many edges; < 3 = off
-    fill_ground_cell_m: float = param(0.10, ge=0)  # fill the ground's occlusion shadows on a grid of this cell size; 0 = off
+    # fill the ground's occlusion shadows on a grid of this cell size; 0 = off; -1 = auto: the median point
+    # spacing, never below 0.10 m (a finer grid than the samples only costs time)
+    fill_ground_cell_m: float = param(-1.0, ge=0, also=(-1,))
     fill_ground_max_gap_m: float = param(8.0, ge=0)  # ... when ground lies on both sides at most this far apart
     fill_ground_stitch: bool = True  # join the fill to the mesh's own open border (one surface, no seam);
     #                                  false: separate grid patches (the fill before 25 Nov 2026)
     colormap_max_m: float = param(0.0, ge=0)  # distance colour map saturates here; 0 = max_dist_m (or p99)
+    # the run is marked degraded (ctx.degraded) when the distance trim removes more than this share of the faces
+    max_trim_share: float = param(0.9, gt=0, le=1)
 
 
 @dataclass
@@ -81,15 +90,21 @@ class SimplifyParams:
     cluster_above_faces: int = param(20_000_000, ge=1)  # auto: clustering first above this size
     preserve_border: bool = True  # open boundaries never collapse
     aggressiveness: float = param(7.0, gt=0)  # fast-simplification's agg (lower = slower, more faithful)
+    max_overshoot: float = param(0.2, ge=0)  # more faces than target x (1 + this): degraded (ctx.degraded)
 
 
 @dataclass
 class BakeParams:
     """UV atlas and colour baking."""
 
-    texture_px: int = param(8192, ge=256, le=16384)  # 4096, 8192 or 16384 (any power of two from 256 accepted)
+    # 4096, 8192 or 16384 (any power of two from 256 accepted); -1 = auto: texels of a quarter of the dense mesh's
+    # median edge (>= 1 cm) over the simplified mesh's area, 1024..8192 (twinkit.surface.density.texture_size)
+    texture_px: int = param(-1, ge=256, le=16384, also=(-1,))
     uv_method: str = param("charts", choices=("charts", "xatlas"))  # charts (built in) | xatlas (optional dependency, slower)
     pad_px: int = param(2, ge=0, le=64)  # gutter around each chart, texels
+    # a cloud without colours: what the texture shows (shading.py): auto = intensity when the cloud has it, else
+    # shaded | intensity | shaded | height | grey (the flat grey before issue 28)
+    colourless: str = param("auto", choices=("auto", "intensity", "shaded", "height", "grey"))
 
 
 @dataclass
@@ -172,6 +187,9 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
                                    max_offset_m=params.max_offset_km * 1000.0,
                                    bounds_margin_m=params.bounds_margin_m)
         raw = cloud.raw
+        if not params.use_colors and raw.colors is not None:
+            ctx.log.info("%s: colours dropped (use_colors=false)", in_cloud.name)
+            raw.colors = None
         pts = cloud.points
         normals = raw.normals
         normals_source = "file" if normals is not None else None
@@ -200,7 +218,12 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
                                                   scanner_index=raw.scanner, scanner_positions=raw.scanner_positions)
             normals_source = "estimated"
         if raw.colors is None:
-            ctx.log.warning("%s: the cloud has no colours; the texture will be neutral grey", in_cloud.name)
+            ctx.log.warning("%s: the cloud has no colours; the texture will show %s (bake_texture colourless)",
+                            in_cloud.name, "its intensity" if raw.intensity is not None else "a shaded grey")
+        from twinkit.surface import density
+
+        dens = density.measure(pts, scanner_positions=raw.scanner_positions)
+        ctx.log.info("%s: %s", in_cloud.name, density.describe(dens))
         attrs: dict[str, np.ndarray] = {}
         if normals is not None:
             attrs["normals"] = normals.astype(np.float32)
@@ -230,6 +253,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
                                     [[None if not np.isfinite(c) else float(c) for c in row]
                                      for row in raw.scanner_positions]),
             "bounds_m": [lo.tolist(), hi.tolist()],
+            "density": dens,
             "notes": raw.notes,
         }
         for note in cloud.frame.notes:
@@ -238,7 +262,8 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
         meta["time"] = {"seconds": round(meas_now(meas), 3)}
         write_json(out_points_meta_json, meta)
     out = {"points": int(len(pts)), "normals": normals_source, "colors": raw.colors is not None,
-           "shift_m": cloud.frame.shift, **meas.as_dict()}
+           "shift_m": cloud.frame.shift, "spacing_m": dens["spacing_m"], "capture": dens["capture"],
+           **meas.as_dict()}
     if normals_check is not None:
         out["normals_flipped"] = normals_check["flipped"]
         out["normals_disagreeing_share"] = normals_check["disagreeing_share"]
@@ -274,7 +299,16 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
             ctx.log.info("points have no usable normals: estimating them")
             normals = estimate_normals(pts, k=params.normals_k)
             normals, _ = orient_normals(pts, normals, params.normals_orientation)
-        depth = depth_for_voxel(pts, params.voxel_m, params.scale) if params.voxel_m > 0 else int(params.depth)
+        if params.voxel_m > 0:
+            depth = depth_for_voxel(pts, params.voxel_m, params.scale)
+        elif params.depth < 0:
+            from twinkit.surface import density
+
+            dm = density.measure(pts)
+            depth = density.poisson_depth(dm, params.scale)
+            ctx.log.info("poisson: %s; depth %d (auto)", density.describe(dm), depth)
+        else:
+            depth = int(params.depth)
         voxel = voxel_for_depth(pts, depth, params.scale)
         ctx.log.info("screened Poisson (%s) depth %d (voxel %.4f m) on %d points",
                      params.backend, depth, voxel, len(pts))
@@ -309,18 +343,19 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     with Measure() as meas, _Outputs(out_clean_mesh_ply, out_clean_report_json):
         dense = _read_mesh_input(in_dense_mesh_ply, "dense mesh")
         cloud = _read_mesh_input(in_points_ply, "points")
-        opt = CleanOptions(max_dist_m=params.max_dist_m, gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
+        auto = _clean_auto(params, cloud, ctx.log)
+        opt = CleanOptions(max_dist_m=auto["max_dist_m"], gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
                            density_quantile=params.density_quantile,
                            min_component_faces=params.min_component_faces,
                            min_component_ratio=params.min_component_ratio,
                            repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
-                           fill_ground_cell_m=params.fill_ground_cell_m, fill_ground_max_gap_m=params.fill_ground_max_gap_m,
+                           fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
                            fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
         mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
         write_ply(out_clean_mesh_ply, mesh)
         d = mesh.attrs["dist_to_cloud_m"]
-        vmax = params.colormap_max_m or params.max_dist_m or float(np.quantile(d, 0.99))
+        vmax = params.colormap_max_m or opt.max_dist_m or float(np.quantile(d, 0.99))
         topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
                     title="clean mesh: vertex -> nearest point distance")
         rep["colormap_png"] = Path(out_clean_report_json).with_suffix(".png").name
@@ -328,14 +363,53 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                                        Path(out_clean_report_json).with_name("open_border.png"), ctx.log)
         if border is not None:
             rep["open_border"] = border
+        rep["auto"] = auto
+        removed = _removed_most(rep, params.max_trim_share, ctx)
         rep["time"] = {"seconds": round(meas_now(meas), 3)}
         write_json(out_clean_report_json, rep)
-    out = {"vertices": mesh.n_vertices, "faces": mesh.n_faces,
+    out = {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "max_dist_m": opt.max_dist_m,
+           "fill_ground_cell_m": opt.fill_ground_cell_m, "capture": auto.get("capture"),
+           "trim_removed_share": removed,
            "dist_mean_m": rep["output"]["dist_to_cloud_m"]["mean"], **meas.as_dict()}
     if border is not None:
         out["open_border_inside_m"] = border["inside_m"]
         out["open_border_inside_m_per_m2"] = border["inside_m_per_m2"]
     return out
+
+
+def _clean_auto(params: CleanParams, cloud, log) -> dict:
+    """The clean step's automatic settings (-1) from the cloud's measured spacing (twinkit.surface.density)."""
+    from twinkit.surface import density
+
+    out: dict = {"max_dist_m": params.max_dist_m, "fill_ground_cell_m": params.fill_ground_cell_m}
+    if params.max_dist_m >= 0 and params.fill_ground_cell_m >= 0:
+        return out
+    m = density.measure(cloud.vertices)
+    out.update(spacing_m=m["spacing_m"], spacing_p90_m=m["spacing_p90_m"], capture=m["capture"])
+    if params.max_dist_m < 0:
+        out["max_dist_m"] = density.trim_distance(m)
+    if params.fill_ground_cell_m < 0:
+        s = m["spacing_m"]
+        out["fill_ground_cell_m"] = round(max(0.10, s if s == s else 0.10), 3)
+    log.info("clean: %s; trim distance %.3g m, ground-fill cell %.3g m (auto)", density.describe(m),
+             out["max_dist_m"], out["fill_ground_cell_m"])
+    return out
+
+
+def _removed_most(rep: dict, max_share: float, ctx) -> float | None:
+    """The share of the faces the distance trim removed; more than ``max_share``: degraded, with the numbers."""
+    trim = rep.get("distance_trim")
+    n_in = rep["input"]["faces"]
+    if not trim or not n_in:
+        return None
+    share = 1.0 - trim["faces"] / n_in
+    if share > max_share:
+        fill = (rep.get("ground_fill") or {}).get("faces_added")
+        ctx.degraded(f"the distance trim ({trim['max_dist_m']:.3g} m) removed {100 * share:.1f} % of the "
+                     f"{n_in:,} faces ({trim['faces']:,} left)" + (f"; the ground fill added {fill:,}" if fill else ""),
+                     "the trim distance is probably below the cloud's point spacing: leave "
+                     "steps.clean_mesh.max_dist_m at -1 (auto) or set it to 2-3 x the spacing (clean_report.json)")
+    return round(share, 4)
 
 
 def _ground_border_report(mesh, cloud, fill_limit_m: float, png: Path, log) -> dict | None:
@@ -367,6 +441,12 @@ def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_p
            "input_faces": dense.n_faces, **meas.as_dict()}
     if closed:
         out["holes_closed"] = int(closed[0].rsplit(":", 1)[1])
+    if dense.n_faces > params.target_faces and mesh.n_faces > params.target_faces * (1 + params.max_overshoot):
+        over = mesh.n_faces / params.target_faces - 1
+        out["overshoot"] = round(over, 4)
+        ctx.degraded(f"simplify left {mesh.n_faces:,} faces for a target of {params.target_faces:,} "
+                     f"({100 * over:.0f} % over)", "open borders and thin parts cannot collapse with "
+                     "preserve_border=true; try steps.simplify.preserve_border=false or a lower target")
     if err is not None and len(err):
         out["vertex_to_dense_mean_m"] = float(err.mean())
         out["vertex_to_dense_max_m"] = float(err.max())
@@ -374,7 +454,8 @@ def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_p
 
 
 def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_ply: Path,
-                 out_textured_mesh_obj: Path, out_textured_mesh_ply: Path) -> dict:
+                 out_textured_mesh_obj: Path, out_textured_mesh_ply: Path,
+                 in_points_ply: Path | None = None) -> dict:
     """UV-unwrap the simplified mesh and bake the dense mesh's colours into a texture (OBJ+MTL+PNG, PLY)."""
     import numpy as np
     from twinkit import InputError
@@ -389,7 +470,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
 
     params = params or BakeParams()
     size = int(params.texture_px)
-    if size < 256 or size > 16384 or size & (size - 1):
+    if size != -1 and (size < 256 or size > 16384 or size & (size - 1)):
         raise InputError(f"bake_texture: texture_px={size} must be a power of two from 256 to 16384 "
                          f"(4096, 8192 or 16384 for a site)")
     timer = StepTimer()
@@ -398,6 +479,15 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     with Measure() as meas, _Outputs(out_textured_mesh_obj, out_textured_mesh_ply):
         mesh = _read_mesh_input(in_mesh_ply, "mesh")
         dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        auto_size = None
+        if size == -1:
+            from twinkit.surface import density
+
+            area, _ = density.mesh_texel(mesh.vertices, mesh.faces)
+            _, texel = density.mesh_texel(dense.vertices, dense.faces)
+            size = auto_size = density.texture_size(area, texel)
+            ctx.log.info("bake: %.0f m^2 of surface, texel %.1f mm (a quarter of the dense mesh's median edge, >= 1 cm): "
+                         "texture %d px (auto)", area, 1000 * texel, size)
         with timer("uv"):
             if params.uv_method == "charts":
                 uv, uinfo = chart_uv(mesh.vertices, mesh.faces, size, pad_px=params.pad_px)
@@ -406,9 +496,9 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
             else:
                 raise InputError(f"bake_texture: unknown uv_method '{params.uv_method}' (charts or xatlas)")
         colors = dense.colors
+        colourless = None
         if colors is None:
-            ctx.log.warning("%s: the dense mesh has no colours (the cloud had none): neutral grey texture",
-                            Path(in_clean_mesh_ply).name)
+            colors, colourless = _colourless(params.colourless, dense, in_points_ply, ctx)
         with timer("bake"):
             img, binfo = bake_colors(mesh.vertices, mesh.faces, uv, size, dense.vertices, dense.faces, colors,
                                      threads=_threads(ctx),
@@ -416,6 +506,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
         with timer("write"):
             write_png(png, img)
             if colors is not None:
+                dense.attrs["colors"] = colors
                 mesh = resample_attributes(mesh, dense, _threads(ctx))
                 mesh.attrs.pop("dist_to_dense_m", None)
             else:
@@ -425,9 +516,44 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
             mesh.face_attrs["texcoord"] = uv.reshape(-1, 6).astype(np.float32)
             mesh.comments = [f"TextureFile {png.name}"]
             write_ply(out_textured_mesh_ply, mesh)
-    return {"texture_px": size, "uv_method": params.uv_method, "neutral_texture": colors is None,
+    return {"texture_px": size, "texture_px_auto": auto_size is not None, "uv_method": params.uv_method,
+            "neutral_texture": colors is None or colourless == "grey", "colourless": colourless,
             "vertices": mesh.n_vertices, "faces": mesh.n_faces, **{f"uv_{k}": v for k, v in uinfo.items()},
             **binfo, "substeps": timer.table, **meas.as_dict()}
+
+
+def _colourless(mode: str, dense, in_points_ply, ctx):
+    """Vertex colours for a dense mesh whose cloud had none (shading.py): (colours, the mode used)."""
+    import numpy as np
+
+    from twinkit.mesh import vertex_normals
+    from .shading import AUTO_WITHOUT_INTENSITY, vertex_colours
+
+    intensity = None
+    if mode in ("auto", "intensity") and in_points_ply is not None:
+        cloud = _read_mesh_input(in_points_ply, "points")
+        inten = cloud.attrs.get("intensity")
+        if inten is not None and np.isfinite(inten).any() and float(np.nanstd(inten)) > 0:
+            from scipy.spatial import cKDTree
+
+            _, idx = cKDTree(cloud.vertices).query(dense.vertices, workers=_threads(ctx))
+            intensity = np.asarray(inten, np.float64)[idx]
+    if mode == "auto":
+        mode = "intensity" if intensity is not None else AUTO_WITHOUT_INTENSITY
+    elif mode == "intensity" and intensity is None:
+        ctx.log.warning("bake: colourless=intensity but the cloud has no usable intensity: shaded instead")
+        mode = "shaded"
+    normals = dense.attrs.get("normals")
+    if normals is None or len(normals) != dense.n_vertices:
+        normals = vertex_normals(dense.vertices, dense.faces)
+    if mode == "grey":
+        ctx.log.warning("the cloud has no colours: neutral grey texture (colourless=grey); the 2D model will see "
+                        "flat grey views")
+    else:
+        ctx.log.warning("the cloud has no colours: the texture shows %s grey (colourless=%s, "
+                        "docs/pointcloud.md 'Clouds without colour')",
+                        "its intensity, lit," if mode == "intensity" else f"a {mode} rendering in", mode)
+    return vertex_colours(mode, dense.vertices, normals, intensity, faces=dense.faces), mode
 
 
 def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_ply: Path,

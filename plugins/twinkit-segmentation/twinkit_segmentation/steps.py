@@ -85,40 +85,67 @@ def no_oversegment(params: NoSegmentsParams, ctx: StepContext, *, in_textured_me
 # ----------------------------------------------------------------------------- view sampling
 @dataclass
 class SampleViewsParams:
-    max_views: int = param(0, ge=0)  # keep at most this many (evenly spread), 0 = all
+    # keep at most this many views: whole camera positions (all their heights and headings), the positions
+    # spread over the site by farthest-point order; 0 = all; -1 = auto (auto_max_views)
+    max_views: int = param(-1, ge=0, also=(-1,))
+    # the budget of max_views=-1: rendering + the 2D model take ~0.25 s a view on 2 cores, so 480 views are
+    # about 2 minutes (the demo's 336 views all stay; IGN had 1,896 and Autzen 2,784 before the cap)
+    auto_max_views: int = param(480, ge=1)
 
 
 def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
                  in_roads_osm: Path | None = None, in_street_points_txt: Path | None = None,
-                 out_views_json: Path) -> dict:
+                 in_points_ply: Path | None = None, out_views_json: Path) -> dict:
     """Camera views from the selected view sampler (view_sampler=auto_street|street_points|uniform|random|combined)."""
     from twinkit.mesh import read_mesh
 
     mesh = read_mesh(in_textured_mesh_ply)
     t0 = time.perf_counter()
-    views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
+    budget = params.auto_max_views if params.max_views < 0 else params.max_views
+    capture = _capture(in_points_ply, ctx)
+    views, sampled = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, budget, with_total=True,
+                                   capture=capture)
     if not views:
         raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
+    if len(views) < sampled:
+        ctx.log.warning("sample_views: %d views sampled, %d kept (max_views %d%s): whole camera positions, "
+                        "spread over the site", sampled, len(views), budget, " auto" if params.max_views < 0 else "")
     counts = _per_sampler(views)
     sampler_name = (ctx.config.get("view_sampler") or {}).get("plugin", "?") if ctx.config else "?"
-    out_views_json.write_text(json.dumps({"sampler": sampler_name, "counts": counts, "views": views}, indent=1))
-    return {"views": len(views), "per_sampler": counts, "seconds": round(time.perf_counter() - t0, 3)}
+    out_views_json.write_text(json.dumps({"sampler": sampler_name, "counts": counts, "views": views,
+                                          "sampled": sampled, "max_views": budget}, indent=1))
+    return {"views": len(views), "sampled_views": sampled, "max_views": budget, "capture": capture,
+            "per_sampler": counts,
+            "seconds": round(time.perf_counter() - t0, 3)}
 
 
-def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int) -> list:
-    """The selected view sampler's views (evenly thinned to ``max_views`` when > 0)."""
-    import numpy as np
+def _capture(points_ply: Path | None, ctx) -> str | None:
+    """The capture type of the cloud (twinkit.surface.density), when the run has one."""
+    if points_ply is None or not Path(points_ply).is_file():
+        return None
+    from twinkit.mesh import read_ply
+    from twinkit.surface import density
 
+    m = density.measure(read_ply(points_ply).vertices)
+    ctx.log.info("sample_views: %s", density.describe(m))
+    return m["capture"]
+
+
+def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int, with_total: bool = False,
+                  capture: str | None = None):
+    """The selected view sampler's views, cut to ``max_views`` (> 0) by :func:`cap_views`
+    (with ``with_total``: (views, how many were sampled))."""
     from twinkit_segmentation.segmesh import unit_normals
-    from twinkit_segmentation.views import Scene
+    from twinkit_segmentation.views import Scene, cap_views
 
     scene = Scene(mesh.vertices, mesh.faces, unit_normals(mesh), site=ctx.site,
                   roads_osm=roads_osm, street_points=street_points)
+    scene.capture = capture
     views = ctx.component("view_sampler").sample(scene, ctx)
+    total = len(views)
     if max_views and len(views) > max_views:
-        keep = np.linspace(0, len(views) - 1, max_views).round().astype(int)
-        views = [views[i] for i in keep]
-    return views
+        views = cap_views(views, max_views)
+    return (views, total) if with_total else views
 
 
 # ----------------------------------------------------------------------------- rendering
@@ -130,6 +157,10 @@ class RenderParams:
     # come from those pixels either way). False = the plain sky-blue background everywhere.
     fill_holes: bool = True
     max_hole_px: float = param(16.0, ge=0)  # a hole is a background gap at most 2x this wide; wider = past the capture's edge
+    # a view whose mesh pixels vary less than this (standard deviation of the grey level, 0..255) is blank: the
+    # 2D model reads nothing from a flat grey silhouette (a colourless cloud with colourless=grey: 0; the demo: median 35)
+    min_signal_std: float = param(4.0, ge=0)
+    max_blank_share: float = param(0.5, ge=0, le=1)  # more blank views than this share: degraded (ctx.degraded)
 
 
 def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
@@ -160,9 +191,31 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     if not kept:
         raise InputError(f"{in_views_json}: every view is more than {100 * params.max_empty_fraction:.0f} % empty; "
                          f"check the sampler's positions (views.json) against the mesh")
-    return {"views": len(views), "kept": len(kept), "dropped_empty": len(dropped), "kept_per_sampler": _per_sampler(kept),
+    signal = view_signal(kept, params.min_signal_std, params.max_blank_share, ctx)
+    return {"views": len(views), "kept": len(kept), **signal, "dropped_empty": len(dropped), "kept_per_sampler": _per_sampler(kept),
             "hole_fraction": round(hole_share, 4), "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
             "seconds_per_view": round(t_render / max(len(views), 1), 4)}
+
+
+def view_signal(kept: list, min_std: float, max_blank_share: float, ctx) -> dict:
+    """How much the kept views show (their ``signal_std``); too many blank views: degraded, with a hint."""
+    import numpy as np
+
+    stds = np.array([float(v.get("signal_std", 0.0)) for v in kept])
+    if not len(stds):
+        return {}
+    blank = float((stds < min_std).mean())
+    out = {"signal_std_median": round(float(np.median(stds)), 2), "blank_views": int((stds < min_std).sum()),
+           "blank_share": round(blank, 4)}
+    if blank > max_blank_share:
+        ctx.degraded(f"{100 * blank:.0f} % of the {len(stds)} views are blank (grey level varies by less than "
+                     f"{min_std:g} over the mesh; median {out['signal_std_median']:g}): the 2D labels cannot be trusted",
+                     "a cloud without colours: keep bake_texture colourless at auto (intensity or shaded), "
+                     "not grey; else check the texture (docs/pointcloud.md 'Clouds without colour')")
+    elif blank > 0.2:
+        ctx.log.warning("%.0f %% of the %d views are nearly blank (grey level std < %g)", 100 * blank, len(stds),
+                        min_std)
+    return out
 
 
 def _per_sampler(kept: list) -> dict:
@@ -207,7 +260,10 @@ def _render_view_set(mesh, tex, views: list, out_dir: Path, max_empty_fraction: 
                 fill_from_nearest(rgb, hole_mask, vertex >= 0)
             Image.fromarray(rgb).save(out_dir / f"{v['id']}.png", compress_level=1)
             np.savez_compressed(out_dir / f"{v['id']}_vertex.npz", vertex=vertex)
-            kept.append(dict(v, empty_fraction=round(empty, 4), hole_fraction=round(holes / vertex.size, 4)))
+            on = vertex >= 0
+            signal = float(rgb[on].astype(np.float32).mean(axis=1).std()) if on.any() else 0.0
+            kept.append(dict(v, empty_fraction=round(empty, 4), hole_fraction=round(holes / vertex.size, 4),
+                             signal_std=round(signal, 2)))
     finally:
         for r in renderers.values():
             r.release()

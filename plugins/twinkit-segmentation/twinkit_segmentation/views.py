@@ -42,6 +42,7 @@ class Scene:
         self.site = dict(site or {})
         self.roads_osm = roads_osm
         self.street_points = street_points
+        self.capture: str | None = None  # aerial | mobile | terrestrial (twinkit.surface.density), when known
         self.lo = self.vertices.min(axis=0)
         self.hi = self.vertices.max(axis=0)
         self._rc = None
@@ -233,6 +234,39 @@ class StreetPointsSampler:
         return _views_at(pts, self.p.heights_m, self.p.headings, self.p, "street")
 
 
+def cap_views(views: list[dict], max_views: int) -> list[dict]:
+    """At most ``max_views`` views, the most informative first: whole camera positions (a position's
+    heights and headings see different things; evenly thinning the list dropped whole headings), the
+    positions taken in farthest-point order (each next one the farthest from those already kept, so the
+    kept ones spread over the whole site), then in their original order. A budget below one position's
+    views keeps that position's views evenly thinned."""
+    if max_views <= 0 or len(views) <= max_views:
+        return list(views)
+    keys: dict = {}
+    for i, v in enumerate(views):
+        keys.setdefault((v.get("sampler"), round(v["position"][0], 2), round(v["position"][1], 2)), []).append(i)
+    groups = list(keys.values())
+    xy = np.array([views[g[0]]["position"][:2] for g in groups], dtype=np.float64)
+    order = [int(np.argmin(np.linalg.norm(xy - xy.mean(axis=0), axis=1)))]  # start at the centre
+    d = np.linalg.norm(xy - xy[order[0]], axis=1)
+    chosen, n = [], 0
+    while True:
+        g = groups[order[-1]]
+        if n + len(g) > max_views:
+            if not chosen:  # one position is over the budget: thin it evenly
+                keep = np.linspace(0, len(g) - 1, max_views).round().astype(int)
+                chosen = [g[k] for k in keep]
+            break
+        chosen += g
+        n += len(g)
+        if len(order) == len(groups):
+            break
+        nxt = int(np.argmax(d))
+        order.append(nxt)
+        d = np.minimum(d, np.linalg.norm(xy - xy[nxt], axis=1))
+    return [views[i] for i in sorted(chosen)]
+
+
 # ----------------------------------------------------------------------------- automatic street points
 @dataclass
 class AutoStreetParams(CameraParams):
@@ -243,6 +277,10 @@ class AutoStreetParams(CameraParams):
     min_clearance_m: float = param(1.0, ge=0)  # free space around a camera position (horizontal rays at 1.5 m)
     min_headroom_m: float = param(5.0, ge=0)  # nothing overhead (trees, roofs) within this height
     max_ground_step_m: float = param(0.35, ge=0)  # ground points higher than the lowest ground level + this are not street
+    # an aerial capture (twinkit.surface.density: few points on walls) has walls Poisson drew between roof and
+    # ground: the street-level heights look along the ground; these higher, steeper views see roofs and ground
+    aerial_heights_m: List[float] = param(default_factory=lambda: [3.0, 6.0, 10.0], gt=0)
+    aerial_pitch_deg: float = param(-20.0, ge=-90, le=90)
 
 
 def osm_roads_local(path: Path, site: dict) -> list[np.ndarray]:
@@ -328,9 +366,17 @@ class AutoStreetSampler:
         if len(pts) == 0 and source == "roads":
             self.p.use_roads = False
             pts, source = self.candidates(scene, log)
+        heights, cam = self.p.heights_m, self.p
+        if getattr(scene, "capture", None) == "aerial":
+            import dataclasses
+
+            heights, cam = self.p.aerial_heights_m, dataclasses.replace(self.p, pitch_deg=self.p.aerial_pitch_deg)
+            if log:
+                log.info("auto_street: an aerial capture: cameras at %s m, pitch %g deg",
+                         ", ".join(f"{h:g}" for h in heights), cam.pitch_deg)
         if log:
             log.info("auto_street: %d street points from the %s", len(pts), source)
-        views = _views_at(pts, self.p.heights_m, self.p.headings, self.p, "auto_street")
+        views = _views_at(pts, heights, self.p.headings, cam, "auto_street")
         for v in views:
             v["source"] = source
         return views
