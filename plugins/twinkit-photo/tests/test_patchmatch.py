@@ -100,7 +100,8 @@ def test_dense_step_on_a_walked_street_keeps_road_and_facades(tmp_path):
     photos, cams, depths = render_street(n_photos=5, size=(160, 120), f_px=140.0)
     inputs = _street_inputs(tmp_path, photos, cams, depths)
     out = run_step(plugin_from_module(photo, "step", "dense"), tmp_path / "dense", inputs,
-                   photo.DenseParams(backend="cpu", voxel_m=0.0, rel_tol=0.01, degraded_below_points_per_photo=0))
+                   photo.DenseParams(backend="cpu", cpu_method="patchmatch", voxel_m=0.0, rel_tol=0.01,
+                                     degraded_below_points_per_photo=0))
     meta = json.loads(out["points_meta.json"].read_text())
     assert meta["dense"]["method"] == "patchmatch" and meta["dense"]["depth_maps"] == 5
     assert set(meta["dense"]["per_photo"]) == {f"{i:02d}.png" for i in range(5)}
