@@ -43,7 +43,7 @@ def main(argv=None):
     import bench_views
     from twinkit.mesh import read_ply, write_ply
     from twinkit.testing import make_context
-    from twinkit_pointcloud import plugin as P
+    from twinkit.plugins import get_registry
 
     from twinkit_segmentation import steps as S
 
@@ -67,7 +67,8 @@ def main(argv=None):
             if mode == "intensity" and "intensity" not in read_ply(points).attrs:
                 print("intensity: the run's cloud has none; skipped", flush=True)
                 continue
-            P.bake_texture(P.BakeParams(texture_px=a.texture_px, colourless=mode), ctx,
+            bake = get_registry().get("step", "bake_texture")  # the point-cloud plugin's step, by name
+            bake.run(bake.params(texture_px=a.texture_px, colourless=mode), ctx,
                            in_mesh_ply=_step(run, "simplify") / "mesh.ply",
                            in_clean_mesh_ply=a.work / "clean_mesh_nocolour.ply",
                            out_textured_mesh_obj=w / "textured_mesh.obj", out_textured_mesh_ply=w / "textured_mesh.ply",
