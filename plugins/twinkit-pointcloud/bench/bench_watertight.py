@@ -88,11 +88,13 @@ def main(argv: list[str]) -> int:
         dt = _step(run, "drop_test")
         if dt and (dt / "drop_test.json").exists():
             d = json.loads((dt / "drop_test.json").read_text())
-            print("\n| drop test | rays | hit % (target) | fall through % | misses at another height |")
-            print("|---|---:|---:|---:|---:|")
+            print("\n| drop test | rays | hit % (target) | fall through % | misses at another height | of them on a kerb "
+                  "line | hit % off the kerb line | degrades the run |")
+            print("|---|---:|---:|---:|---:|---:|---:|---|")
             for k, r in d["lanes"].items():
                 print(f"| {k} | {r['rays']} | {r['hit_pct']} ({r['target_pct']}) | {r.get('fall_through_pct')} | "
-                      f"{r['rays'] - r['hits'] - r.get('fall_through', 0)} |")
+                      f"{r['rays'] - r['hits'] - r.get('fall_through', 0)} | {r.get('kerb_line', '-')} | "
+                      f"{r.get('hit_pct_off_kerb_line', '-')} | {'no' if r.get('ground_ok', r['ok']) else 'yes'} |")
         ev, es = _step(run, "evaluate"), _step(run, "evaluate_segmentation")
         extra = []
         if ev and (ev / "recon_metrics.json").exists():
