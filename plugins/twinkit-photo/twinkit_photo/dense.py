@@ -23,6 +23,19 @@ from pathlib import Path
 import numpy as np
 
 
+def scaled_view(gray: np.ndarray, K: np.ndarray, f: float) -> tuple[np.ndarray, np.ndarray]:
+    """A photo resized by ``f`` (area averaging) and its intrinsics for that size (pixel centres kept)."""
+    import cv2
+
+    hh, ww = gray.shape
+    g = cv2.resize(gray, (int(round(ww * f)), int(round(hh * f))), interpolation=cv2.INTER_AREA)
+    K2 = np.array(K, np.float64, copy=True)
+    K2[:2, :2] *= f
+    K2[0, 2] = (K[0, 2] + 0.5) * f - 0.5
+    K2[1, 2] = (K[1, 2] + 0.5) * f - 0.5
+    return g, K2
+
+
 @dataclass
 class DenseOptions:
     max_image_px: int = 640
@@ -235,15 +248,7 @@ def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarra
     f = float(opt.coarse_scale)
 
     def _scaled(gray, K):
-        if f >= 1.0:
-            return gray, K
-        hh, ww = gray.shape
-        g = cv2.resize(gray, (int(round(ww * f)), int(round(hh * f))), interpolation=cv2.INTER_AREA)
-        K2 = K.copy()
-        K2[:2, :2] *= f
-        K2[0, 2] = (K[0, 2] + 0.5) * f - 0.5
-        K2[1, 2] = (K[1, 2] + 0.5) * f - 0.5
-        return g, K2
+        return (gray, K) if f >= 1.0 else scaled_view(gray, K, f)
 
     g_r, Kr = _scaled(r.gray, r.K)
     hs, ws = g_r.shape

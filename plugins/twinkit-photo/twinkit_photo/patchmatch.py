@@ -227,14 +227,10 @@ def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions):
     f = 0.5
     hs, ws = int(round(h * f)), int(round(w * f))
 
+    from .dense import scaled_view
+
     def _half(gray, K):
-        hh, ww = gray.shape
-        g = cv2.resize(gray, (int(round(ww * f)), int(round(hh * f))), interpolation=cv2.INTER_AREA)
-        K2 = K.copy()
-        K2[:2, :2] *= f
-        K2[0, 2] = (K[0, 2] + 0.5) * f - 0.5
-        K2[1, 2] = (K[1, 2] + 0.5) * f - 0.5
-        return g, K2
+        return scaled_view(gray, K, f)
 
     # coarse: half resolution, random planes to start
     g_r, Kc = _half(ref_gray, K_r)
