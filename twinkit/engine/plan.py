@@ -234,8 +234,8 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                     freed |= {port.name for port in parse_signature(plugin.run).inputs}
                     plugin = alt
                     log.warning("step '%s': %s=%s cannot serve this site (%s): using %s=%s instead (choose "
-                                "%s=%s on the command line to insist, or %s=none for no %s)", spec.id, kind, name,
-                                why, kind, plugin.name, kind, name, kind, kind)
+                                "%s=%s on the command line to insist, or %s=none to leave out the steps that use it)",
+                                spec.id, kind, name, why, kind, plugin.name, kind, name, kind)
                     if fallbacks is not None:
                         fallbacks.append((spec.id, f"{kind}={plugin.name} instead of {kind}={name}: {why}"))
                     name = plugin.name
