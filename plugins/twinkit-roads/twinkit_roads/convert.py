@@ -97,21 +97,33 @@ def run_netconvert(osm: Path, xodr: Path, proj: str, p: ConvertParams, log=None)
         raise InputError(f"netconvert did not finish in {p.timeout_s:g} s on {osm.name}; raise timeout_s or crop "
                          "the OSM data (road_source.crop_radius_m)") from None
     dt = time.perf_counter() - t0
+    lines, errors = netconvert_output(r)
+    if any("No edges loaded" in ln for ln in errors):
+        raise InputError(f"netconvert found no roads in {osm.name}: " + way_type_message(osm, p.way_types))
+    return finish_netconvert(r, lines, errors, xodr, args, osm.name, dt, log)
+
+
+def netconvert_output(r) -> tuple[list[str], list[str]]:
+    """netconvert's output lines worth reading, and its errors."""
     # PROJ inside the wheel looks for proj.db at a build-time path; our +proj strings do not need it.
     lines = [ln for ln in (r.stderr + r.stdout).splitlines() if ln.strip() and "proj.db" not in ln
              and "SUMO_HOME" not in ln]
-    errors = [ln for ln in lines if ln.startswith("Error")]
-    if any("No edges loaded" in ln for ln in errors):
-        raise InputError(f"netconvert found no roads in {osm.name}: " + way_type_message(osm, p.way_types))
+    return lines, [ln for ln in lines if ln.startswith("Error")]
+
+
+def finish_netconvert(r, lines: list[str], errors: list[str], xodr: Path, args: list[str], what: str,
+                      seconds: float, log=None) -> dict:
+    """A failed netconvert run (``what``: the input, in words) is an InputError; else the written OpenDRIVE
+    is made deterministic and its warnings logged (the first five)."""
     if r.returncode != 0 or errors or not xodr.is_file() or xodr.stat().st_size == 0:
         why = "; ".join(errors[-3:] or lines[-3:]) or f"exit code {r.returncode}"
-        raise InputError(f"netconvert failed on {osm.name} (exit {r.returncode}): {why}")
+        raise InputError(f"netconvert failed on {what} (exit {r.returncode}): {why}")
     _make_deterministic(xodr, args)
     warnings = [ln for ln in lines if ln.startswith("Warning")]
     if log is not None:
         for ln in warnings[:5]:
             log.info("netconvert: %s", ln)
-    return {"netconvert_s": round(dt, 3), "netconvert_warnings": len(warnings)}
+    return {"netconvert_s": round(seconds, 3), "netconvert_warnings": len(warnings)}
 
 
 def way_type_message(osm: Path | None, way_types: list[str]) -> str:

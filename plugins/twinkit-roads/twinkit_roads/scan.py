@@ -728,7 +728,7 @@ def write_plain(net: Network, p: ScanSourceParams, proj: str, folder: Path) -> t
 
 def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=None) -> dict:
     """netconvert on the plain network -> OpenDRIVE (the junctions' connecting roads are netconvert's)."""
-    from .convert import _env, _make_deterministic, netconvert_path
+    from .convert import _env, finish_netconvert, netconvert_output, netconvert_path
 
     args = [str(netconvert_path()), "--node-files", str(nod), "--edge-files", str(edg),
             "--opendrive-output", str(xodr), "--offset.disable-normalization", "--no-turnarounds",
@@ -739,18 +739,9 @@ def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=
     except subprocess.TimeoutExpired:
         raise InputError(f"netconvert did not finish in {p.timeout_s:g} s on the scan's road network "
                          f"({edg}); raise road_source.timeout_s") from None
-    lines = [ln for ln in (r.stderr + r.stdout).splitlines() if ln.strip() and "proj.db" not in ln
-             and "SUMO_HOME" not in ln]
-    errors = [ln for ln in lines if ln.startswith("Error")]
-    if r.returncode != 0 or errors or not xodr.is_file() or xodr.stat().st_size == 0:
-        why = "; ".join(errors[-3:] or lines[-3:]) or f"exit code {r.returncode}"
-        raise InputError(f"netconvert failed on the scan's road network {edg} (exit {r.returncode}): {why}")
-    _make_deterministic(xodr, args)
-    warnings = [ln for ln in lines if ln.startswith("Warning")]
-    if log is not None:
-        for ln in warnings[:5]:
-            log.info("netconvert: %s", ln)
-    return {"netconvert_s": round(time.perf_counter() - t0, 3), "netconvert_warnings": len(warnings)}
+    lines, errors = netconvert_output(r)
+    return finish_netconvert(r, lines, errors, xodr, args, f"the scan's road network {edg}",
+                             time.perf_counter() - t0, log)
 
 
 def mark_source(xodr_text: str) -> str:
