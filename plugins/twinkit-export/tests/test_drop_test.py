@@ -33,12 +33,17 @@ def _street(hole_at=None, sidewalk_z=0.12):
     return v, f
 
 
-def _run(tmp_path, v, f, name):
+def _run(tmp_path, v, f, name, from_scan=False):
     d = tmp_path / name
     d.mkdir()
     uv = np.c_[v[:, 0] / 40.0, (v[:, 1] + 2) / 12.0].astype(np.float32)
     obj = synthetic.write_obj(d / "textured_mesh.obj", v, f, uv, texture_px=64)
-    (d / "aligned.xodr").write_text(straight_xodr(length_m=40.0))
+    text = straight_xodr(length_m=40.0)
+    if from_scan:  # the tag road_source=scan writes into the header (docs/roads.md)
+        i = text.index(">", text.index("<header"))
+        text = text[:i + 1] + '<userData code="twinkit_road_source" value="scan"/>' + text[i + 1:]
+        assert text[i - 1] != "/"  # the test map's header has children
+    (d / "aligned.xodr").write_text(text)
     pts = Mesh(v.copy(), None, attrs={"normals": np.tile(np.array([0, 0, 1], np.float32), (len(v), 1))})
     write_ply(d / "points.ply", pts)
     out = run_step(plugin("step", "drop_test"), d / "out",
@@ -83,9 +88,13 @@ def test_a_30cm_hole_in_a_lane_fails_and_is_located(tmp_path):
 
 def test_a_lane_off_the_surface_misses_without_falling_through(tmp_path):
     v, f = _street(sidewalk_z=0.45)  # a sidewalk higher than any kerb: the rays meet it at another height
-    rep, _ = _run(tmp_path, v, f, "high")
+    rep, out = _run(tmp_path, v, f, "high", from_scan=True)
     sw = rep["lanes"]["sidewalk"]
     assert sw["hit_pct"] < 10.0 and sw["fall_through"] == 0 and sw["ok"] is False  # (the kerb slope row hits)
+    # the degraded hint says what the misses are and, for a map derived from the scan, where to look
+    (entry,) = _metrics(out)["degraded"]
+    assert "sidewalk lanes" in entry["reason"]
+    assert "find the ground at another height" in entry["hint"] and "road_source=scan" in entry["hint"]
 
 
 def test_lane_edge_over_the_kerb_is_told_apart_and_does_not_fail_the_ground(tmp_path):

@@ -40,6 +40,10 @@ class DropTestParams:
     fall_m: float = param(0.5, gt=0)  # a missed ray with no surface this close to the lane falls through (a hole), else off height
     max_hole_m: float = param(0.25, ge=0)  # any hole wider than this (falling rays' extent + one spacing) fails the lane, whatever
     #                           the share: it swallows a tyre's contact patch (about 0.2 m) or a shoe
+    # the surface's continuity: a ray holds when the surface under it lies within tol_m of the surface's
+    # mean height over this window around it (a crack, a step, a bump fail; a camber the lane's one
+    # height cannot follow does not). 0: off (the lane height alone decides the degraded flag)
+    local_window_m: float = param(0.5, ge=0)
 
 
 DRIVING = ("driving", "bidirectional", "parking", "stop", "entry", "exit", "onramp", "offramp")
@@ -108,6 +112,47 @@ def _clusters(xy: np.ndarray, gap_m: float) -> list[dict]:
     return sorted(out, key=lambda d: -d["rays"])
 
 
+def surface_under(scene, rays: np.ndarray, fall_m: float) -> np.ndarray:
+    """(k,) the height of the top surface within ``fall_m`` above or below each ray's (x, y, z); nan where
+    there is none (the ray falls through)."""
+    import open3d as o3d
+
+    out = np.full(len(rays), np.nan)
+    if not len(rays):
+        return out
+    q = np.zeros((len(rays), 6), np.float32)
+    q[:, :2] = rays[:, :2]
+    q[:, 2] = rays[:, 2] + fall_m
+    q[:, 5] = -1.0
+    t = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
+    ok = t <= 2 * fall_m
+    out[ok] = rays[ok, 2] + fall_m - t[ok]
+    return out
+
+
+def continuous(rays: np.ndarray, surf: np.ndarray, spacing_m: float, window_m: float, tol_m: float) -> np.ndarray:
+    """(k,) bool: the surface under each ray lies within ``tol_m`` of the surface's mean height over a
+    ``window_m`` square around it (rays binned on a ``spacing_m`` grid; rays that fall through count as
+    empty). A wheel rolls over a camber or a gentle slope; it catches on a crack, a step or a bump."""
+    from scipy import ndimage
+
+    ok = np.isfinite(surf)
+    if not ok.any():
+        return ok
+    lo = rays[:, :2].min(axis=0)
+    ij = np.floor((rays[:, :2] - lo) / spacing_m).astype(int)
+    shape = tuple(ij.max(axis=0) + 1)
+    tot = np.zeros(shape)
+    cnt = np.zeros(shape)
+    np.add.at(tot, (ij[ok, 0], ij[ok, 1]), surf[ok])
+    np.add.at(cnt, (ij[ok, 0], ij[ok, 1]), 1.0)
+    k = max(1, int(round(window_m / spacing_m)) | 1)
+    tot = ndimage.uniform_filter(tot, size=k, mode="constant")
+    cnt = ndimage.uniform_filter(cnt, size=k, mode="constant")
+    mean = np.where(cnt > 0, tot / np.maximum(cnt, 1e-12), np.nan)[ij[:, 0], ij[:, 1]]
+    return ok & (np.abs(surf - mean) <= tol_m)
+
+
 def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh_obj: Path, in_aligned_xodr: Path,
                    in_points_ply: Path, out_drop_test_json: Path, out_drop_test_png: Path) -> dict:
     """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
@@ -126,6 +171,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     except Exception as exc:
         raise InputError(f"{in_points_ply}: not a readable PLY ({exc}); re-run read_cloud") from None
     text = Path(in_aligned_xodr).read_text(encoding="utf-8", errors="replace")
+    from_scan = 'code="twinkit_road_source" value="scan"' in text[:4000]
     try:
         rays = lane_rays(text, params.spacing_m)
     except Exception as exc:
@@ -178,11 +224,19 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
         ok_all &= ok
         nk = n - int(kerb.sum())
         pct_ground = round(100.0 * float(hit.sum()) / nk, 3) if nk else None
+        # the surface's continuity (the ground a wheel rolls on, whatever the lane's one height says)
+        pct_cont = None
+        if n and params.local_window_m > 0:
+            cont = continuous(r, surface_under(scene, r, params.fall_m), params.spacing_m, params.local_window_m,
+                              params.tol_m)
+            pct_cont = round(100.0 * float((cont | hit).mean()), 3)
+        best = max([x for x in (pct_ground, pct_cont) if x is not None], default=None)
         res["lanes"][kind] = {"rays": n, "hits": int(hit.sum()), "hit_pct": pct, "target_pct": need, "ok": ok,
                               "kerb_line": int(kerb.sum()),
                               "kerb_line_pct": round(100.0 * float(kerb.mean()), 3) if n else None,
                               "hit_pct_off_kerb_line": pct_ground,
-                              "ground_ok": (pct_ground is None or pct_ground >= need) and widest <= params.max_hole_m,
+                              "continuous_pct": pct_cont,
+                              "ground_ok": (best is None or best >= need) and widest <= params.max_hole_m,
                               "fall_through": int(falls.sum()),
                               "fall_through_pct": round(100.0 * float(falls.mean()), 3) if n else None,
                               "miss_clusters": _clusters(r[~hit, :2], 3 * params.spacing_m)[:50],
@@ -209,12 +263,21 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
         # (misses on a kerb line are the map's lane edge over the scanned kerb: a warning, not a failed ground)
         if lane["rays"] and not lane["ground_ok"]:
             hole = lane["widest_hole_m"] > params.max_hole_m
+            misses_n = lane["rays"] - lane["hits"]
+            at_height = misses_n - lane["fall_through"]  # the ground is there, at another height than the lane
+            hint = f"misses in orange in {Path(out_drop_test_png).name}"
+            if hole:
+                hint += "; the clean step fills scan gaps up to steps.clean.fill_ground_max_gap_m"
+            if misses_n and at_height > 0.5 * misses_n:
+                hint += (f"; {100 * at_height / misses_n:.0f} % of the misses find the ground at another height than "
+                         "the lane (a cambered or rough road, a lane over a kerb or an object)")
+            if from_scan:
+                hint += ("; the lanes were derived from the scan (road_source=scan): see scan_roads.png, or give an "
+                         "OSM extract (site.inputs.osm) for the map")
             ctx.degraded(f"drop test over {kind} lanes: {lane['hit_pct']:.2f} % of {lane['rays']} rays find the "
                          f"ground (target {lane['target_pct']} %)"
                          + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
-                            if hole else ""),
-                         f"misses in orange in {Path(out_drop_test_png).name}"
-                         + ("; the clean step fills scan gaps up to steps.clean.fill_ground_max_gap_m" if hole else ""))
+                            if hole else ""), hint)
     up = cloud.normals[:, 2] >= 0.85 if cloud.normals is not None else np.zeros(cloud.n_vertices, bool)
     gv = np.abs(height_above_ground(mesh.vertices, cloud.vertices[up])) <= 0.5
     border = ground_border(mesh.vertices, mesh.faces, fp, gv)
@@ -249,6 +312,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     return {"ok": res["ok"], "driving_hit_pct": d["hit_pct"], "sidewalk_hit_pct": s["hit_pct"],
             "driving_fall_through_pct": d["fall_through_pct"], "sidewalk_fall_through_pct": s["fall_through_pct"],
             "driving_kerb_line_pct": d["kerb_line_pct"], "driving_hit_pct_off_kerb_line": d["hit_pct_off_kerb_line"],
+            "driving_continuous_pct": d["continuous_pct"], "sidewalk_continuous_pct": s["continuous_pct"],
             "driving_rays": d["rays"], "sidewalk_rays": s["rays"],
             "open_border_inside_m": border["inside_m"],
             "open_border_over_driving_lanes_m": res["open_border_over_driving_lanes_m"],

@@ -3,10 +3,11 @@
     .venv/bin/python plugins/twinkit-pointcloud/bench/bench_real_scans.py [--only lille autzen ign] [--report-only]
         [--mesh-only]
 
-Each cloud runs the whole main job (``recipe=pointcloud_site road_source=none``: mesh, labels, FBX/USD/GLB,
-CARLA package) with nothing but the cloud, its CRS and a base point (the cloud's centre, computed here from
-the file's header, as a user would read it off a map), one run at a time, into outputs/bench_real_scans/.
-Then it prints one table:
+Each cloud runs the whole main job with the defaults (``recipe=pointcloud_site``: mesh, labels, roads from the
+scan since no OSM is given, FBX/USD/GLB, CARLA package) with nothing but the cloud, its CRS and a base point
+(the cloud's centre, computed here from the file's header, as a user would read it off a map), one run at a
+time, into outputs/bench_real_scans/. The indoor pump scan is expected to be refused at once (exit 2, "not a
+street"). Then it prints one table:
 
 - the measured point spacing and capture type and the settings chosen from them (trim, depth, texture, views);
 - the run's time and exit code;
@@ -36,6 +37,8 @@ CLOUDS = {
     "lille": {"file": "lille_street_small_normals.ply", "args": ["site=lille"]},
     "ign": {"file": "ign_lidarhd_village_street.laz", "crs": "EPSG:2154"},
     "autzen": {"file": "autzen_trim.laz", "crs": "EPSG:32610"},  # the file is in US feet (Oregon LCC)
+    # an indoor scan of a pump (4.6 x 4.5 m): not a street, to be refused before any step runs (exit 2)
+    "pump": {"file": "pump_colored_scan.e57", "args": ["site=mex", "site.name=pump"]},
 }
 BUILDING_WALL = (2, 3)
 FACADE_OK = (2, 3, 5, 8)  # building, wall, pole, vegetation
@@ -63,11 +66,13 @@ def run_one(name: str, cfg: dict, mesh_only: bool = False) -> dict:
     if not src.is_file():
         return {"name": name, "skipped": f"{src} not present"}
     args = list(cfg.get("args", []))
+    if cfg["file"].endswith(".e57"):
+        args.append(f"site.inputs.cloud={src}")
     if not args:
         lat, lon, alt = centre_latlon(src)
         args = ["site=mex", f"site.name={name}", f"site.crs={cfg['crs']}", f"site.base_point.lat={lat:.6f}",
                 f"site.base_point.lon={lon:.6f}", f"site.base_point.alt={alt}", f"site.inputs.cloud={src}"]
-    cmd = [str(REPO / ".venv" / "bin" / "twinkit"), "recipe=pointcloud_site", "road_source=none",
+    cmd = [str(REPO / ".venv" / "bin" / "twinkit"), "recipe=pointcloud_site",
            f"engine.outputs_dir={OUT}", *args, *(mesh_only_args() if mesh_only else [])]
     t0 = time.perf_counter()
     log = OUT / f"{name}.log"
@@ -114,6 +119,16 @@ def measure(name: str, cfg: dict) -> dict:
     from twinkit.surface.closest import Surface
 
     res = json.loads((OUT / f"{name}.json").read_text()) if (OUT / f"{name}.json").is_file() else {"name": name}
+    log = OUT / f"{name}.log"
+    if log.is_file():  # why the run did not end with exit 0: its last error or degraded line
+        why = [ln for ln in log.read_text(errors="replace").splitlines()
+               if ln.startswith("twinkit: error:") or ln.startswith("DEGRADED:")]
+        res["why"] = why[-1][:160] if why else ""
+    fr = _metrics(name, "fetch_roads")
+    if fr:
+        res["roads"] = f"{fr.get('roads')} roads, {fr.get('driving_lanes')} lanes"
+    dt = _metrics(name, "drop_test")
+    res.update(drop_driving=dt.get("driving_hit_pct"), drop_fall=dt.get("driving_fall_through_pct"))
     pts_dir = _step(name, "read_cloud")
     if pts_dir is None:
         return res
@@ -172,7 +187,8 @@ def _f(x, fmt="{:.3f}"):
 def table(rows: list[dict]) -> str:
     head = ("| cloud | capture | spacing m | trim m | trim removed | depth | texture px | views (sampled) | blank views "
             "| c2m median m | <= 0.5 x spacing | buildings kept | facades ok (>= 80 %) | facades building (>= 50 %) "
-            "| low ground ok (>= 90 %) | time s | exit |")
+            "| low ground ok (>= 90 %) | roads from the scan | drop test driving % (fall through %) | time s | exit "
+            "| why not 0 |")
     out = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
     for r in rows:
         if r.get("skipped"):
@@ -184,7 +200,9 @@ def table(rows: list[dict]) -> str:
         out.append(f"| {r['name']} | {r.get('capture', '-')} | {_f(sp)} | {_f(r.get('trim_m'))} | {pct('trim_removed')} "
                    f"| {r.get('depth', '-')} | {r.get('texture_px', '-')} | {r.get('views') or '-'} ({r.get('views_sampled') or '-'}) "
                    f"| {pct('blank_share')} | {_f(c2m)} | {ok} | {pct('building_kept')} | {pct('facade_ok')} "
-                   f"| {pct('facade_building')} | {pct('ground_ok')} | {r.get('seconds', '-')} | {r.get('rc', '-')} |")
+                   f"| {pct('facade_building')} | {pct('ground_ok')} | {r.get('roads', '-')} "
+                   f"| {_f(r.get('drop_driving'), '{:.1f}')} ({_f(r.get('drop_fall'), '{:.1f}')}) "
+                   f"| {r.get('seconds', '-')} | {r.get('rc', '-')} | {r.get('why') or '-'} |")
     return "\n".join(out)
 
 

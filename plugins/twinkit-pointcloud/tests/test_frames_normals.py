@@ -122,8 +122,8 @@ def test_a_feet_crs_base_point_lands_in_the_same_place_in_read_cloud_and_roads(t
 def _plane_wall(n=4000, seed=0):
     """A ground (normals up) and a wall facing -y (normals -y), as a scan from the street sees them."""
     rng = np.random.default_rng(seed)
-    g = np.c_[rng.uniform(0, 10, n), rng.uniform(0, 5, n), rng.normal(0, 0.003, n)]
-    w = np.c_[rng.uniform(0, 10, n // 2), 5.0 + rng.normal(0, 0.003, n // 2), rng.uniform(0.2, 4, n // 2)]
+    g = np.c_[rng.uniform(0, 12, n), rng.uniform(0, 5, n), rng.normal(0, 0.003, n)]
+    w = np.c_[rng.uniform(0, 12, n // 2), 5.0 + rng.normal(0, 0.003, n // 2), rng.uniform(0.2, 4, n // 2)]
     pts = np.vstack([g, w])
     nrm = np.vstack([np.tile([0, 0, 1.0], (n, 1)), np.tile([0, -1.0, 0], (n // 2, 1))]).astype(np.float32)
     return pts, nrm

@@ -43,7 +43,8 @@ def test_lille_ply_keeps_file_normals(ctx):
 
 
 def test_pump_e57_colours_intensity_scanner(ctx):
-    res, m, meta = _read(ctx, shared_file("pump_colored_scan.e57"))
+    # the reader itself, on a scan that read_cloud refuses as no street (the next test): the check is off here
+    res, m, meta = _read(ctx, shared_file("pump_colored_scan.e57"), P.ReadCloudParams(min_street_extent_m=0))
     assert m.n_vertices > 150_000
     assert m.colors is not None and m.colors.max() > 100
     assert "intensity" in m.attrs and 0 <= m.attrs["intensity"].min() and m.attrs["intensity"].max() <= 1
@@ -51,6 +52,21 @@ def test_pump_e57_colours_intensity_scanner(ctx):
     assert meta["fields"]["normals_orientation"] == "scanner"  # gridded scan: scanner at the origin
     to_scanner = -m.vertices  # scanner at (0, 0, 0)
     assert (np.einsum("ij,ij->i", to_scanner, m.normals) >= 0).mean() > 0.99
+
+
+def test_indoor_scan_is_refused_as_no_street_before_anything_is_written(ctx):
+    from twinkit_pointcloud.preflight import read_cloud_preflight
+
+    src = shared_file("pump_colored_scan.e57")  # an indoor scan of a pump, 4.6 x 4.5 m
+    problems = read_cloud_preflight({"name": "pump"}, P.ReadCloudParams(), {"in_cloud": src})
+    assert len(problems) == 1 and "not a street" in problems[0] and "pump_colored_scan.e57" in problems[0]
+    assert "min_street_extent_m=0" in problems[0]  # the way on, named
+    with pytest.raises(InputError, match=r"pump_colored_scan.e57: the capture spans only 4\.6 x 4\.5 m"):
+        _read(ctx, src)
+    _assert_no_outputs(ctx)
+    # a street-sized cloud passes both (Lille: 25 x 37 m)
+    assert read_cloud_preflight({"name": "lille"}, P.ReadCloudParams(),
+                                {"in_cloud": shared_file("lille_street_small_normals.ply")}) == []
 
 
 def test_two_point_e57_too_few_points_but_normals_read(ctx):
@@ -176,7 +192,7 @@ def test_wrong_crs_declared_in_file_is_reprojected(tmp_path):
     lon, lat = Transformer.from_crs("EPSG:2154", "EPSG:4326", always_xy=True).transform(704005.0, 7059005.0)
     ctx = make_context(tmp_path / "w", site={"name": "s", "crs": "EPSG:32631",
                                              "base_point": {"lat": lat, "lon": lon, "alt": 20.0}})
-    res, m, meta = _read(ctx, src)
+    res, m, meta = _read(ctx, src, P.ReadCloudParams(min_street_extent_m=0))  # a 10 m grid: reprojected it is 9.99 m
     assert meta["frame"]["reprojected"]
     c = 0.5 * (m.vertices.min(axis=0) + m.vertices.max(axis=0))
     assert np.hypot(c[0], c[1]) < 1.0
@@ -276,7 +292,7 @@ def test_e57_several_scans_merged_with_poses(tmp_path, ctx):
         scans.append((local, np.full((len(local), 3), 90 if yaw == 0 else 180, np.uint8), q, np.asarray(tr)))
     src = tmp_path / "two_scans.e57"
     _write_e57(src, scans)
-    res, m, meta = _read(ctx, src)
+    res, m, meta = _read(ctx, src, P.ReadCloudParams(min_street_extent_m=0))  # an 8 m plane
     assert m.n_vertices == 6000
     assert np.abs(m.vertices[:, 2]).max() < 1e-3  # both scans land on the plane z = 0
     assert np.allclose(meta["scanner_positions_m"], [[0, 0, 1.5], [3, 1, 1.5]], atol=1e-6)

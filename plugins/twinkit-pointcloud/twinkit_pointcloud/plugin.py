@@ -33,6 +33,9 @@ class ReadCloudParams:
     bounds_margin_m: float = param(50.0, ge=0)  # with site bounds: margin around them for the wrong-CRS check
     max_base_point_offset_m: float = param(250.0, ge=0)  # preflight: base point farther outside the cloud's box is refused (0: off); docs/pointcloud.md
     use_colors: bool = True  # false: drop the file's colours (the colourless path on a coloured cloud, to measure it)
+    # a cloud shorter than this on its longer horizontal side is refused as no street (an object or indoor scan),
+    # in the preflight from the header's box and here from the points (street.py); 0 = off
+    min_street_extent_m: float = param(10.0, ge=0)
 
 
 @dataclass
@@ -191,6 +194,13 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
             ctx.log.info("%s: colours dropped (use_colors=false)", in_cloud.name)
             raw.colors = None
         pts = cloud.points
+        from twinkit import InputError
+
+        from .street import not_a_street
+
+        refusal = not_a_street(in_cloud.name, pts.max(axis=0) - pts.min(axis=0), params.min_street_extent_m)
+        if refusal:
+            raise InputError(refusal)
         normals = raw.normals
         normals_source = "file" if normals is not None else None
         orientation = None

@@ -187,6 +187,11 @@ def read_cloud_preflight(site, params, inputs) -> list[str]:
         pass
     size = lhi - llo
     log.info("%s: box %.0f x %.0f x %.0f m, %s", path.name, size[0], size[1], size[2], where)
+    from .street import MIN_STREET_EXTENT_M, not_a_street
+
+    refusal = not_a_street(path.name, size, float(getattr(params, "min_street_extent_m", MIN_STREET_EXTENT_M)))
+    if refusal:
+        return [refusal]
     limit = float(getattr(params, "max_base_point_offset_m", 0.0) or 0.0)
     if not (info.projected and info.shift_source == "base_point") or limit <= 0:
         return []  # a local cloud (used as it is) or no base point: nothing to compare

@@ -34,3 +34,53 @@ def cross_mesh(half_m: float = 40.0, main_half_m: float = 8.7, side_half_m: floa
     y0 = -half_m if side_arms != "n" else main_half_m
     truth += [np.array([[xl, y0], [xl, half_m]]) for xl in (-1.625, 1.625)]
     return v, f.astype(np.int64), lab, truth
+
+
+def aerial_lane(half_m: float = 40.0, road_half_m: float = 3.0, bank_m: float = 0.4, slope: float = 0.05,
+                spill_m: float = 10.0, step_m: float = 0.5):
+    """What an aerial scan of a rural street gives (issue 28, the IGN village): a grey lane ``2 x road_half_m``
+    wide along x on a low embankment (``bank_m`` above the fields, so the carriageway is not the local lowest
+    level), no curbs, the whole ground sloping ``slope`` along x, green fields either side. The labels take
+    the lane as road and spill ``spill_m`` onto the field north of it (a street-level model reading a field
+    from above). Returns vertices, triangles, labels, RGB colours and the true axis (y = 0)."""
+    xs = np.arange(-half_m, half_m + 1e-9, step_m)
+    X, Y = np.meshgrid(xs, xs)
+    x, y = X.ravel(), Y.ravel()
+    road = np.abs(y) < road_half_m
+    # the embankment's shoulders slope down over 1.5 m
+    shoulder = np.clip((np.abs(y) - road_half_m) / 1.5, 0.0, 1.0)
+    z = slope * x + bank_m * (1.0 - shoulder)
+    lab = np.where(road | ((y > 0) & (y < road_half_m + spill_m)), ROAD, TERRAIN).astype(np.uint8)
+    rgb = np.where(road[:, None], np.array([118, 116, 112]), np.array([92, 140, 58])).astype(np.uint8)
+    v = np.stack([x, y, z], 1)
+    n = len(xs)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    f = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    return v, f.astype(np.int64), lab, rgb, np.array([[-half_m, 0.0], [half_m, 0.0]])
+
+
+def cambered_street(half_m: float = 40.0, road_half_m: float = 7.0, camber: float = 0.02, grade: float = 0.03,
+                    tilt: float = 0.02, sidewalk_m: float = 3.0, curb_m: float = 0.14, step_m: float = 0.5):
+    """A straight street along x as real streets are: cambered (the crown on the axis, falling ``camber``
+    to each curb), on a ``grade`` along its length and across a hillside (``tilt``: the north side higher),
+    sidewalks ``curb_m`` above the gutters. Returns
+    vertices, triangles, labels and the carriageway's height function z(x, y)."""
+    xs = np.arange(-half_m, half_m + 1e-9, step_m)
+    ys = np.unique(np.r_[np.arange(-road_half_m - sidewalk_m, road_half_m + sidewalk_m + 1e-9, step_m),
+                         [-road_half_m - 0.002, -road_half_m + 0.002, road_half_m - 0.002, road_half_m + 0.002]])
+    X, Y = np.meshgrid(xs, ys)
+    x, y = X.ravel(), Y.ravel()
+    road = np.abs(y) < road_half_m
+
+    def surface(x, y):
+        return grade * x - camber * np.abs(y) + tilt * y
+
+    z = np.where(road, surface(x, y), surface(x, road_half_m) + curb_m)
+    lab = np.where(road, ROAD, SIDEWALK).astype(np.uint8)
+    v = np.stack([x, y, z], 1)
+    nx, ny = len(xs), len(ys)
+    i, j = np.meshgrid(np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
+    a = (i * nx + j).ravel()
+    f = np.concatenate([np.stack([a, a + 1, a + nx + 1], 1), np.stack([a, a + nx + 1, a + nx], 1)])
+    return v, f.astype(np.int64), lab, surface

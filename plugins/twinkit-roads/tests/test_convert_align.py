@@ -178,3 +178,25 @@ def test_an_opendrive_map_in_another_crs_is_aligned_like_a_converted_one(demo_si
                   roads.ApplyParams(qa_px_per_m=8), site=DEMO_SITE)
     after, n = centreline_rmse(ap["aligned.xodr"].read_text(), truth, b)
     assert after < 0.3 and n > 100
+
+
+def test_an_opendrive_with_its_own_heights_is_not_lifted_again(demo_site, demo_net, tmp_path):
+    """A network whose elevations already follow the ground (road_source=scan writes the scanned heights)
+    on a site far above its datum: the height fit compares the two heights, it does not add the ground's
+    height again (IGN at 179 m came out at 359 m and the drop test found no ground under any lane)."""
+    from twinkit.mesh import read_ply, write_ply
+
+    xodr, _ = demo_net
+    lifted = tmp_path / "lifted.xodr"
+    lifted.write_text(transform_xodr(xodr.read_text(), 0.0, 0.0, 0.0, dz=179.5))
+    m = read_ply(demo_site["gt_mesh.ply"])
+    m.vertices = m.vertices + np.array([0.0, 0.0, 179.5])
+    mesh = tmp_path / "high.ply"
+    write_ply(mesh, m)
+    al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp_path / "al",
+                  {"in_roads_xodr": lifted, "in_textured_mesh_ply": mesh}, site=DEMO_SITE)
+    dz_high = json.loads(al["alignment.json"].read_text())["dz_m"]
+    al0 = run_step(plugin_from_module(roads, "step", "align_roads"), tmp_path / "al0",
+                   {"in_roads_xodr": xodr, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]}, site=DEMO_SITE)
+    dz_low = json.loads(al0["alignment.json"].read_text())["dz_m"]
+    assert abs(dz_high - dz_low) < 0.05 and abs(dz_high) < 0.5

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scan_fixtures import ROAD, SIDEWALK, cross_mesh
+from scan_fixtures import ROAD, SIDEWALK, aerial_lane, cambered_street, cross_mesh
 from twinkit_roads import scan
 from twinkit_roads.align import centreline_rmse, lane_lines
 
@@ -187,3 +187,66 @@ def test_without_osm_the_default_recipe_takes_the_roads_from_the_scan(tmp_path):
     assert p.returncode != 0 and "site.inputs.osm" in p.stderr and "road_source=scan" not in p.stderr
     p = status("road_source=none")
     assert p.returncode == 0 and "road_source=none was chosen" in p.stdout and "scan" not in p.stderr
+
+
+def test_an_aerial_scan_without_curbs_finds_the_grey_lane_on_its_embankment(tmp_path):
+    """A scan too sparse to show curbs (points_meta.json: 0.3 m spacing, as aerial lidar): the carriageway is
+    the road-labelled grey ground, not the local lowest level. The lane lies on a 0.4 m embankment on a
+    5 % slope and the labels spill 10 m onto the field: the curb test put the road in the field (y = 9 m,
+    10.6 m wide); without it the axis is on the lane and carla.Map reads lanes on it only."""
+    import json
+
+    import carla
+    from twinkit.mesh import Mesh, write_ply
+    from twinkit.testing import run_plugin
+
+    v, f, lab, rgb, axis = aerial_lane()
+    mesh_p = tmp_path / "textured_mesh.ply"
+    write_ply(mesh_p, Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
+    np.save(tmp_path / "labels.npy", lab)
+    meta = tmp_path / "points_meta.json"
+    meta.write_text(json.dumps({"density": {"spacing_m": 0.3, "capture": "aerial"}}))
+    site = {"name": "lane", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
+    out = run_plugin("road_source", "scan", tmp_path / "scan",
+                     {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy",
+                      "in_points_meta_json": meta}, site=site)
+    doc = json.loads(out["scan_roads.json"].read_text())
+    assert doc["curbs"] is False and doc["point_spacing_m"] == 0.3
+    assert len(doc["roads"]) == 1 and abs(doc["roads"][0]["carriageway_m"] - 6.0) < 1.0
+    assert 'type="sidewalk"' not in out["opendrive.xodr"].read_text()  # no curbs: no sidewalk told from the verge
+    m = carla.Map("lane", out["opendrive.xodr"].read_text())
+    w = [x for x in m.generate_waypoints(1.0) if x.lane_type == carla.LaneType.Driving]
+    y = np.array([-x.transform.location.y for x in w])  # CARLA's y is flipped
+    assert len(w) > 50 and np.abs(y).max() < 3.0
+    # the lanes follow the slope and the embankment (2 cm typical, 6 cm at the ends of the scan)
+    z = np.array([x.transform.location.z for x in w])
+    xs = np.array([x.transform.location.x for x in w])
+    dz = np.abs(z - (0.05 * xs + 0.4))
+    assert np.median(dz) < 0.02 and dz.max() < 0.06
+    # spacing unknown (no points_meta.json): the curb test, as for a street scan
+    out2 = run_plugin("road_source", "scan", tmp_path / "scan2",
+                      {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy"}, site=site)
+    assert json.loads(out2["scan_roads.json"].read_text())["curbs"] is True
+
+
+def test_each_direction_sits_on_its_half_of_a_cambered_street(tmp_path):
+    """A street across a hillside (2 % from south to north), cambered 2 % from its crown, on a 3 % grade:
+    the flat-street level test keeps only the gutters there, the step test takes the whole carriageway;
+    each direction's edge takes its own half's height (one height for the carriageway put the north lanes
+    14 cm under it). What is left is a lane's own cross slope (4 % on the south half: +-6.5 cm between its
+    two lanes), out of reach: netconvert writes no cross slope, and carla.Map ignores superelevation."""
+    import carla
+
+    v, f, lab, surface = cambered_street()
+    net, text = derive_xodr(tmp_path, v, f, lab)
+    assert len(net.arms) == 1 and net.arms[0].lanes["two_way"]
+    arm = net.arms[0]
+    assert float(np.median(arm.z_left - arm.z_right)) > 0.1  # the two halves, a hillside apart
+    m = carla.Map("camber", text)
+    w = [x for x in m.generate_waypoints(1.0) if x.lane_type == carla.LaneType.Driving]
+    p = np.array([[x.transform.location.x, -x.transform.location.y, x.transform.location.z] for x in w])
+    inner = np.abs(p[:, 0]) < 34  # away from the scan's ends
+    dz = np.abs(p[inner, 2] - surface(p[inner, 0], p[inner, 1]))
+    assert inner.sum() > 200 and np.percentile(dz, 95) < 0.085
+    north = p[inner, 1] > 0  # the north half is nearly level across (crown and hillside cancel): 2 cm
+    assert np.percentile(dz[north], 95) < 0.025

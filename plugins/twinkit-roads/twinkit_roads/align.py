@@ -71,14 +71,15 @@ def sample_sections(xodr_text: str, step_m: float = 1.0, res_m: float = 0.1, lim
         d = np.gradient(c, axis=0)
         d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
         P.append(c)
+        Z.append(ln["z"])  # the OpenDRIVE's own heights (0 from OSM; the scanned heights from road_source=scan)
         Nrm.append(np.stack([d[:, 1], -d[:, 0]], 1))
         R.append(np.full(len(c), hash(ln["id"]) % 100000))
-    P, Nrm, R = np.concatenate(P), np.concatenate(Nrm), np.concatenate(R)
+    P, Nrm, Z, R = np.concatenate(P), np.concatenate(Nrm), np.concatenate(Z), np.concatenate(R)
     off, ok, wid = _runs(P, Nrm, np.full(len(P), limit_m / 2), net, grid, limit_m / 2, (0.0, 1e9))
     if ok.sum() == 0:
         raise InputError("no carriageway cross-section could be measured in the OpenDRIVE")
     C = P[ok] + off[ok, None] * Nrm[ok]
-    return Sections(C, Nrm[ok], wid[ok] / 2, np.zeros(int(ok.sum())), R[ok])
+    return Sections(C, Nrm[ok], wid[ok] / 2, Z[ok], R[ok])
 
 
 def _rot(theta: float) -> np.ndarray:
@@ -220,6 +221,14 @@ class FitResult:
     n_used: int
     iterations: int
     degenerate: bool
+    #: the fit did no better than leaving the network where it was (the robust loss on the cross-sections
+    #: both find the road at): the identity is returned
+    kept_identity: bool = False
+
+
+def _huber_cost(r: np.ndarray, h: float) -> float:
+    a = np.abs(r)
+    return float(np.mean(np.where(a <= h, 0.5 * a * a, h * (a - 0.5 * h))))
 
 
 def _weights(r: np.ndarray, it: int, huber_m: float) -> np.ndarray:
@@ -234,7 +243,7 @@ def _weights(r: np.ndarray, it: int, huber_m: float) -> np.ndarray:
 
 def fit(sec: Sections, mask: np.ndarray, grid: Grid, *, fit_scale: bool = False, search_m: float = 8.0,
         yaw_range_deg: float = 3.0, iterations: int = 30, huber_m: float = 0.3, margin_m: float = 6.0,
-        width_tol_m: float = 0.0, model: str = "middles") -> FitResult:
+        width_tol_m: float = 0.0, model: str = "middles", keep_identity: bool = False) -> FitResult:
     """Robust Gauss-Newton fit of yaw and translation (and scale).
 
     ``model="middles"``: residual = offset of the mesh road's middle from the carriageway middle.
@@ -298,11 +307,22 @@ def fit(sec: Sections, mask: np.ndarray, grid: Grid, *, fit_scale: bool = False,
             break
     off, ok, wid = centre_offsets(sec, tf, mask, grid, margin_m)
     ok = _typical_width(sec, ok, wid, width_tol_m)
+    # the fit has to beat leaving the network where it is: both judged by the carriageway middles' robust
+    # loss on the cross-sections that find the road either way (a network drawn from this very mesh, as
+    # road_source=scan's, is already in place; a fit pulled by a few wrong sections must not turn it)
+    ident = Transform2D(about=about)
+    off_i, ok_i, wid_i = centre_offsets(sec, ident, mask, grid, margin_m)
+    ok_i = _typical_width(sec, ok_i, wid_i, width_tol_m)
+    both = ok & ok_i
+    kept_identity = keep_identity or bool(both.sum() >= 6 and
+                                          _huber_cost(off_i[both], huber_m) <= _huber_cost(off[both], huber_m))
+    if kept_identity:
+        tf, off, ok, r_last = ident, off_i, ok_i, off_i[ok_i]
     if model == "middles":
         rmse1 = float(np.sqrt(np.mean(off[ok] ** 2))) if ok.any() else float("nan")
     else:  # RMS of the edge residuals kept by the robust loss
         rmse1 = float(np.sqrt(np.mean(r_last ** 2))) if len(r_last) else float("nan")
-    return FitResult(tf, rmse0, rmse1, len(sec.c), int(ok.sum()), it, degenerate)
+    return FitResult(tf, rmse0, rmse1, len(sec.c), int(ok.sum()), it, degenerate, kept_identity)
 
 
 # --------------------------------------------------------------------------- OpenDRIVE rewriting
@@ -364,15 +384,16 @@ def lane_lines(xodr_text: str, step_m: float = 1.0, junctions: bool = False) -> 
         rv = w.transform.get_right_vector()
         n = np.array([rv.x, -rv.y])
         n /= np.linalg.norm(n) or 1.0
-        d = out.setdefault(key, {"s": [], "c": [], "l": [], "r": [], "junction": bool(w.is_junction)})
+        d = out.setdefault(key, {"s": [], "c": [], "z": [], "l": [], "r": [], "junction": bool(w.is_junction)})
         d["s"].append(w.s)
         d["c"].append((x, y))
+        d["z"].append(z)
         d["l"].append((x - n[0] * w.lane_width / 2, y - n[1] * w.lane_width / 2))
         d["r"].append((x + n[0] * w.lane_width / 2, y + n[1] * w.lane_width / 2))
     lines = []
     for key, d in out.items():
         o = np.argsort(d["s"])
-        lines.append({"id": key, "junction": d["junction"], "centre": np.array(d["c"])[o],
+        lines.append({"id": key, "junction": d["junction"], "centre": np.array(d["c"])[o], "z": np.array(d["z"])[o],
                       "left": np.array(d["l"])[o], "right": np.array(d["r"])[o]})
     return lines
 

@@ -49,6 +49,20 @@ def _bounds(site, radius_m: float) -> tuple[float, float, float, float]:
     return (-r, -r, r, r)
 
 
+def _xodr_box(text: str, margin_m: float = 10.0) -> tuple[float, float, float, float]:
+    """The box of an OpenDRIVE map's plan-view geometry starts (site frame), ``margin_m`` wider."""
+    import re
+
+    import numpy as np
+
+    xy = np.array([(float(a), float(b)) for a, b in
+                   re.findall(r'<geometry [^>]*?x="([-0-9.eE+]+)" y="([-0-9.eE+]+)"', text)])
+    if not len(xy):
+        return (-margin_m, -margin_m, margin_m, margin_m)
+    lo, hi = xy.min(0) - margin_m, xy.max(0) + margin_m
+    return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+
 def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_roads_check_json: Path,
                      in_osm_osm: Path | None = None, in_opendrive_xodr: Path | None = None) -> dict:
     """Convert with netconvert into the site frame, then check with carla.Map offline.
@@ -85,12 +99,17 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
             raise InputError(f"{in_opendrive_xodr}: no roads in the OpenDRIVE map; check the road source's file")
         raise InputError(f"netconvert produced no roads from {in_osm_osm.name}: "
                          + way_type_message(in_osm_osm, params.way_types))
-    bounds = _bounds(ctx.site, params.check_radius_m)
+    from_scan = info.get("source") == "scan"
+    # a network derived from the scan lies on the scan by construction, wherever the cloud sits in the site
+    # frame (a local-frame cloud may lie a kilometre from the base point): its own extent is the box
+    bounds = _xodr_box(text) if from_scan else _bounds(ctx.site, params.check_radius_m)
     t1 = time.perf_counter()
     chk = check_xodr(out_roads_xodr, bounds, params.step_m)
     check_s = time.perf_counter() - t1
     total = time.perf_counter() - t0
-    ok = chk["topology_segments"] > 0 and chk["waypoints_inside"] >= params.min_waypoints_inside
+    # one street scanned end to end is one road with no junction: carla.Map gives it no topology segment
+    # (nothing links to it), and its lanes are still there to drive
+    ok = ((chk["topology_segments"] > 0 or from_scan) and chk["waypoints_inside"] >= params.min_waypoints_inside)
     report = {"ok": ok, "netconvert": conv, "netconvert_args": "see roads.xodr header comment",
               "proj": proj, "site_frame": frame.to_json(), "bounds_local": bounds, **info, **counts,
               "carla": chk, "check_s": round(check_s, 3), "conversion_s": round(total, 3)}
@@ -170,15 +189,29 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         raise InputError(f"{in_textured_mesh_ply.name}: no road surface found ({how}); nothing to align to")
     grid = Grid.around(mesh.v[:, :2], params.raster_m)
     mask = road_mask(mesh, fidx, grid)
-    sec = sample_sections(in_roads_xodr.read_text(encoding="utf-8"), 1.0)
-    res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=params.search_m,
+    xodr_text = in_roads_xodr.read_text(encoding="utf-8")
+    sec = sample_sections(xodr_text, 1.0)
+    # a network drawn from this very mesh (road_source=scan) is already where the mesh's roads are: the fit,
+    # against a cruder road surface (the ground level, which takes ramped sidewalks too), can only move it
+    # off (Lille: turned 2.6 deg, lanes onto the curb); it is measured, not applied
+    from_scan = 'code="twinkit_road_source" value="scan"' in xodr_text[:4000]
+    res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=0.0 if from_scan else params.search_m,
               yaw_range_deg=params.yaw_range_deg, huber_m=params.huber_m, margin_m=params.margin_m,
-              model=params.model)
+              model=params.model, keep_identity=from_scan)
     yaw, tx, ty, scale = res.tf.about_origin()
     dz = 0.0
     if params.fit_height:
+        # the road surface's height under each carriageway middle against the OpenDRIVE's own height there
+        # (0 from OSM; the scanned heights from road_source=scan): one offset, the median of the differences
+        from scipy.spatial import cKDTree
+
         rv = np.unique(mesh.f[fidx].ravel())
-        dz = float(np.median(mesh.v[rv, 2]) - np.median(sec.z))
+        d, i = cKDTree(mesh.v[rv, :2]).query(res.tf.apply(sec.c), distance_upper_bound=1.0)
+        hit = np.isfinite(d)
+        if hit.sum() >= 6:
+            dz = float(np.median(mesh.v[rv[i[hit]], 2] - sec.z[hit]))
+        else:  # the middles find no road vertex near them: the medians of the whole surface and network
+            dz = float(np.median(mesh.v[rv, 2]) - np.median(sec.z))
     doc = {
         "yaw_deg": round(math.degrees(yaw), 6), "tx_m": round(tx, 4), "ty_m": round(ty, 4), "dz_m": round(dz, 4),
         "scale_estimate": round(scale, 6),
@@ -186,16 +219,21 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
                       "Edit the numbers and re-run: later steps use your values.",
         "residual_rmse_m": round(res.rmse_after, 4), "residual_rmse_before_m": round(res.rmse_before, 4),
         "sections": res.n_sections, "sections_used": res.n_used, "iterations": res.iterations,
-        "degenerate": res.degenerate, "road_surface_from": how, "model": params.model,
+        "degenerate": res.degenerate, "kept_identity": res.kept_identity, "road_surface_from": how,
+        "model": params.model,
         "note": "residual = RMS offset between carriageway middles of the network and of the mesh's road surface",
     }
+    if from_scan:
+        ctx.log.info("alignment: the network was derived from this scan (road_source=scan): kept in place")
+    elif res.kept_identity:
+        ctx.log.info("alignment: no rigid move fits the road surface better than the network as it is: kept in place")
     if res.degenerate:
         ctx.log.warning("alignment poorly constrained (parallel roads only?): check alignment.json")
     out_alignment_json.write_text(json.dumps(doc, indent=1))
     ctx.log.info("alignment: yaw %.3f deg, t (%.3f, %.3f) m, dz %.3f m; residual %.3f m (was %.3f) from %s",
                  doc["yaw_deg"], tx, ty, dz, res.rmse_after, res.rmse_before, how)
     return {k: doc[k] for k in ("yaw_deg", "tx_m", "ty_m", "dz_m", "residual_rmse_m", "residual_rmse_before_m",
-                                "sections_used", "road_surface_from")}
+                                "sections_used", "road_surface_from", "kept_identity")}
 
 
 @dataclass

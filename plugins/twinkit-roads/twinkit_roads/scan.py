@@ -49,6 +49,13 @@ class ScanSourceParams:
     raster_m: float = param(0.25, gt=0, le=2)  # top-view resolution of the carriageway mask
     curb_tol_m: float = param(0.07, ge=0, le=1)  # height above the local lowest ground still on the carriageway (below the curb)
     use_curbs: bool = True  # false: the road labels alone draw the edges
+    # the curb test needs a scan that resolves a 10-15 cm kerb: a cloud whose median point spacing
+    # (points_meta.json) is coarser than this (aerial lidar) is read without curbs: the carriageway is the
+    # road-labelled, up-facing, grey surface, and no sidewalk lanes are made (0: always the curbs)
+    curb_max_spacing_m: float = param(0.10, ge=0, le=5)
+    # without curbs: paved surface is grey; a face whose colour saturation ((max - min) / max of its
+    # vertices' RGB) is above this is not carriageway (grass, gardens, roofs' tiles). 1: colour not used
+    grey_max_saturation: float = param(0.10, gt=0, le=1)
     label_margin_m: float = param(1.5, ge=0, le=10)  # carriageway-level surface this far beyond the road labels is still road
     min_road_width_m: float = param(3.0, gt=0)  # narrower carriageway (driveways, gaps) is not a road
     min_road_length_m: float = param(8.0, gt=0)  # shorter arms (spurs of the mask's corners) are pruned
@@ -80,6 +87,10 @@ class Arm:
     sidewalk_left_m: float = 0.0  # left of a -> b
     sidewalk_right_m: float = 0.0
     z: np.ndarray | None = None
+    # the heights of the right and left halves (a -> b): each direction's edge carries its own lanes' height,
+    # so a cambered street's lanes sit on it (OpenDRIVE from netconvert has no cross slope)
+    z_right: np.ndarray | None = None
+    z_left: np.ndarray | None = None
     lanes: dict = field(default_factory=dict)
 
 
@@ -104,41 +115,41 @@ def _rasterize_faces(v, f, fidx, grid) -> np.ndarray:
     return rasterize(Mesh(v, f, None, None), grid, fidx) > 0
 
 
-def _level_faces(v, f, curb_tol_m, cell_m: float = 1.0, window_m: float = 9.0) -> np.ndarray:
-    """Up-facing faces on the carriageway level, below the curbs: within ``curb_tol_m`` of the local lowest
-    walkable level (the test of mesh2d.road_faces' ground fallback: per-cell minima, their minimum over
-    ``window_m``, raised to the 10th percentile of the window less the tolerance so a deep hole does not
-    pull it down), with the rank filter of scipy (fast) instead of a Python percentile per cell."""
-    from scipy import ndimage
+def _level_faces(v, f, curb_tol_m) -> np.ndarray:
+    """Up-facing faces on the carriageway level, below the curbs (mesh2d.level_faces, the test align_roads'
+    ground fallback uses too)."""
+    from .mesh2d import level_faces
 
+    return level_faces(v, f, curb_tol_m)
+
+
+def _grey_ground(v, f, labels, rgb, p: ScanSourceParams) -> tuple[np.ndarray, str]:
+    """Faces of the carriageway where the scan shows no curbs: road-labelled, facing up, grey."""
     from .mesh2d import Mesh, face_normals_z
 
-    nz = face_normals_z(Mesh(v, f, None, None))
-    up = np.flatnonzero(nz > 0.95)
-    if len(up) == 0:
-        raise InputError("the mesh has no upward-facing faces; cannot find the ground (road_source=scan)")
-    tri = v[f[up]]
-    cz = tri[:, :, 2].mean(1)
-    cxy = tri[:, :, :2].mean(1)
-    lo = cxy.min(0)
-    ij = np.floor((cxy - lo) / cell_m).astype(int)
-    shape = tuple(ij.max(0) + 1)
-    zmin = np.full(shape, np.inf)
-    np.minimum.at(zmin, (ij[:, 0], ij[:, 1]), cz)
-    k = max(1, int(round(window_m / cell_m)))
-    level = ndimage.minimum_filter(zmin, size=k, mode="nearest")
-    finite = np.where(np.isfinite(zmin), zmin, np.nan)
-    filled = np.nan_to_num(finite, nan=float(np.nanmax(finite)))
-    pct = ndimage.percentile_filter(filled, 10, size=k, mode="nearest")
-    level = np.maximum(level, pct - curb_tol_m)
-    return up[cz - level[ij[:, 0], ij[:, 1]] < curb_tol_m]
+    sel = np.flatnonzero((labels[f] == ROAD).sum(1) >= 2)
+    sel = sel[face_normals_z(Mesh(v, f, None, None), sel) > 0.9]
+    how = "road labels, facing up"
+    if rgb is not None and p.grey_max_saturation < 1:
+        c = rgb[f[sel]].astype(np.float64).mean(1)
+        sat = (c.max(1) - c.min(1)) / np.maximum(c.max(1), 1.0)
+        sel = sel[sat <= p.grey_max_saturation]
+        how += f", grey (saturation <= {p.grey_max_saturation:g})"
+    return sel, how
 
 
-def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None) -> tuple[np.ndarray, str]:
+def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None, *, curbs: bool = True,
+                     rgb=None) -> tuple[np.ndarray, str]:
+    """Top-view mask of the carriageway. ``curbs`` false (a scan too sparse to show them; labels needed):
+    the road-labelled, up-facing, grey surface (``_grey_ground``) instead of the level below the curbs."""
     from scipy import ndimage
 
     parts = []
     lab_mask = None
+    if not curbs and labels is not None:
+        sel, how = _grey_ground(v, f, labels, rgb, p)
+        m = _rasterize_faces(v, f, sel, grid)
+        return _clean_mask(m, grid, p, None, v, f, False), how + " (no curbs at this point spacing)"
     if labels is not None:
         lv = labels[f]
         road_f = np.flatnonzero((lv == ROAD).sum(1) >= 2)
@@ -157,6 +168,14 @@ def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None) -> tup
             m = low
     else:
         m = lab_mask
+    return _clean_mask(m, grid, p, level, v, f, p.use_curbs or lab_mask is None), " + ".join(parts)
+
+
+def _clean_mask(m, grid, p: ScanSourceParams, level, v, f, by_level: bool) -> np.ndarray:
+    """Gaps closed, holes filled, slivers opened away; components of a road's worth of surface kept, and
+    with ``by_level`` only those on the lowest level (a yard or park is a curb above the carriageway)."""
+    from scipy import ndimage
+
     r = max(1, int(round(0.75 / grid.res)))
     m = ndimage.binary_closing(m, np.ones((2 * r + 1, 2 * r + 1), bool), border_value=0)
     m = ndimage.binary_fill_holes(m)
@@ -167,7 +186,7 @@ def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None) -> tup
     if n > 1:  # keep components of at least a road's worth of surface...
         sizes = ndimage.sum(m, lab, range(1, n + 1)) * grid.res ** 2
         keep = np.flatnonzero(sizes >= p.min_road_width_m * p.min_road_length_m * 2) + 1
-        if len(keep) > 1 and (p.use_curbs or lab_mask is None):
+        if len(keep) > 1 and by_level:
             # ...on the lowest level: far from any road (a yard, a park) the raised ground is the local
             # lowest too, but it lies a curb above the carriageway's
             tri = v[f[level]] if level is not None else v[f]
@@ -178,7 +197,7 @@ def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None) -> tup
                 low = min(med.values())
                 keep = np.array([c for c in keep if med.get(c, low) <= low + 0.06])
         m = np.isin(lab, keep)
-    return m, " + ".join(parts)
+    return m
 
 
 # --------------------------------------------------------------------------- skeleton
@@ -381,7 +400,7 @@ def lane_layout(width_m: float, p: ScanSourceParams) -> dict:
 # --------------------------------------------------------------------------- the network
 
 def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: ScanSourceParams,
-                   log=None) -> Network:
+                   log=None, *, curbs: bool = True, rgb: np.ndarray | None = None) -> Network:
     """The road network of a labelled mesh (site frame): junctions, ends and the arms between them."""
     from scipy import ndimage
 
@@ -389,8 +408,11 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
 
     t0 = time.perf_counter()
     grid = Grid.around(v[:, :2], p.raster_m)
-    level = _level_faces(v, f, p.curb_tol_m)
-    mask, how = carriageway_mask(v, f, labels, grid, p, level)
+    if curbs or labels is None:
+        level = _level_faces(v, f, p.curb_tol_m)
+    else:  # no curbs: the carriageway's own faces give its heights (a lane on an embankment is no low level)
+        level = _grey_ground(v, f, labels, rgb, p)[0]
+    mask, how = carriageway_mask(v, f, labels, grid, p, level, curbs=curbs, rgb=rgb)
     if mask.sum() * grid.res ** 2 < p.min_road_width_m * p.min_road_length_m:
         raise InputError(f"no carriageway in the scan ({how}): {mask.sum() * grid.res ** 2:.0f} m^2 of road "
                          "surface; a street scan with road labels (or curbs) is needed, or road_source=none")
@@ -561,10 +583,13 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
                 seg = np.array([q, c[0]]) if at_start else np.array([c[-1], q])
                 seg = _resample(seg, step)
                 pts.insert(0, seg[:-1]) if at_start else pts.append(seg[1:])
-            else:  # an end: continue straight to the mask's end
+            else:  # an end: continue straight to the mask's end, for the outer lanes too (at a road
+                # that bends where the scan ends, the axis reaches farther than the lanes beside it)
                 e = c[0] if at_start else c[-1]
                 d = _unit(c[0] - c[min(5, len(c) - 1)]) if at_start else _unit(c[-1] - c[max(-6, -len(c))])
-                ln = float(_ray_lengths(mask, grid, e[None], d[None], 60.0, grid.res / 2)[0])
+                side = np.array([-d[1], d[0]]) * max(arm["width"] / 2 - 0.5, 0.0)
+                starts = np.stack([e, e + side, e - side])
+                ln = float(_ray_lengths(mask, grid, starts, np.tile(d, (3, 1)), 60.0, grid.res / 2).min())
                 q = e + d * ln
                 seg = _resample(np.array([q, e]) if at_start else np.array([e, q]), step)
                 pts.insert(0, seg[:-1]) if at_start else pts.append(seg[1:])
@@ -596,6 +621,10 @@ def _unit(d) -> np.ndarray:
     return d / n if n > 1e-9 else np.array([1.0, 0.0])
 
 
+#: sidewalk surface more than this above the carriageway level beside it is not a sidewalk (a roof, a wall)
+WALK_MAX_M = 0.5
+
+
 def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
     """Sidewalk width beyond each curb: the run of sidewalk-labelled surface (else the raised level)."""
     from scipy import ndimage
@@ -603,7 +632,14 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
     grid = net.grid
     if labels is not None and (labels == SIDEWALK).any():
         lv = labels[f]
-        sw = _rasterize_faces(v, f, np.flatnonzero((lv == SIDEWALK).sum(1) >= 2), grid)
+        sw_f = np.flatnonzero((lv == SIDEWALK).sum(1) >= 2)
+        # a sidewalk one can step onto from the road: within WALK_MAX_M of the carriageway level beside it
+        # (an aerial scan's flat roofs and walls can take the sidewalk label too)
+        zr = _level_raster(v, f, net.level_faces, grid)
+        cz = v[f[sw_f], 2].mean(1)
+        dz = cz - grid.sample(zr, v[f[sw_f], :2].mean(1))
+        sw_f = sw_f[(dz > -0.1) & (dz < WALK_MAX_M)]
+        sw = _rasterize_faces(v, f, sw_f, grid)
         sw = ndimage.binary_closing(sw, np.ones((5, 5), bool))
         src = "sidewalk labels"
     else:  # the raised level: up-facing faces 6-35 cm above the carriageway level, just beyond the curb
@@ -655,8 +691,25 @@ def _level_raster(v, f, fidx, grid) -> np.ndarray:
 def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> None:
     zr = _level_raster(v, f, net.level_faces, net.grid)
     for arm in net.arms:
-        arm.z = net.grid.sample(zr, arm.xy).astype(float)
-        arm.z = np.convolve(np.pad(arm.z, 2, mode="edge"), np.ones(5) / 5, mode="valid")
+        # the carriageway's height at each shape point: the median of its level across the road (a lane
+        # off the axis of a cambered or sloping street is as far above as the other is below), lightly
+        # smoothed along the road (3 points)
+        nrm = _normals(arm.xy)
+        across = np.linspace(-0.4, 0.4, 9) * arm.width_m
+        zz = net.grid.sample(zr, arm.xy[:, None, :] + across[None, :, None] * nrm[:, None, :]).astype(float)
+
+        def smooth(a):
+            return np.convolve(np.pad(a, 1, mode="edge"), np.ones(3) / 3, mode="valid")
+
+        arm.z = smooth(np.median(zz, axis=1))
+        # each direction's driving lanes lie from the axis outwards (netconvert spreads them to the right of
+        # the edge's shape), over lanes x lane_m: its height is the surface's across that band
+        lay = lane_layout(arm.width_m, p)
+        band = lay["lanes"] * lay["lane_m"]
+        off = np.linspace(0.1, 0.9, 5) * band
+        for side, sgn in (("z_right", -1.0), ("z_left", 1.0)):  # the normal points left
+            q = arm.xy[:, None, :] + (sgn * off)[None, :, None] * nrm[:, None, :]
+            setattr(arm, side, smooth(np.median(net.grid.sample(zr, q).astype(float), axis=1)))
     for nd in net.nodes.values():
         nd["z"] = float(net.grid.sample(zr, np.asarray(nd["xy"])[None])[0])
         nd["signals"] = False
@@ -670,6 +723,81 @@ def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> 
         near = int((np.hypot(*(tl - nd["xy"]).T) < r).sum())
         nd["signals"] = near >= p.min_traffic_light_vertices
         nd["traffic_light_vertices"] = near
+
+
+def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3, min_support: float = 0.8) -> dict:
+    """A derived lane must lie on scanned ground. Along each road, the share of its carriageway's cross
+    section (7 samples, 0.3 m in from each edge) with up-facing surface within ``tol_m`` of the road's
+    height there; from a road's free end (not a junction) the road is cut back while that share is under
+    ``min_support`` (a road that bends where the scan ends and runs on into a wall, Lille), and a road
+    left shorter than ``min_road_length_m`` is dropped with the nodes it leaves alone. Returns what was cut."""
+    from scipy import ndimage
+
+    from .mesh2d import Mesh, face_normals_z
+
+    grid = net.grid
+    up = np.flatnonzero(face_normals_z(Mesh(v, f, None, None)) > 0.7)
+    c = v[f[up]].mean(1)
+    px = np.floor(grid.to_px(c[:, :2])).astype(int)
+    ok = (px[:, 0] >= 0) & (px[:, 0] < grid.w) & (px[:, 1] >= 0) & (px[:, 1] < grid.h)
+    zlo = np.full((grid.h, grid.w), np.inf)
+    zhi = np.full((grid.h, grid.w), -np.inf)
+    np.minimum.at(zlo, (px[ok, 1], px[ok, 0]), c[ok, 2])
+    np.maximum.at(zhi, (px[ok, 1], px[ok, 0]), c[ok, 2])
+    zlo = ndimage.minimum_filter(zlo, 3, mode="constant", cval=np.inf)
+    zhi = ndimage.maximum_filter(zhi, 3, mode="constant", cval=-np.inf)
+    cut_m, dropped = 0.0, 0
+    keep = []
+    for arm in net.arms:
+        if arm.z is None or len(arm.xy) < 3:
+            keep.append(arm)
+            continue
+        nrm = _normals(arm.xy)
+        half = max(arm.width_m / 2 - 0.3, 0.0)
+        across = np.linspace(-half, half, 7)
+        q = arm.xy[:, None, :] + across[None, :, None] * nrm[:, None, :]
+        h = arm.z[:, None]
+        lo, hi = grid.sample(zlo, q), grid.sample(zhi, q)
+        inside = grid.sample(np.ones((grid.h, grid.w), bool), q)
+        sup = inside & (lo <= h + tol_m) & (hi >= h - tol_m)
+        frac = sup.mean(axis=1)
+        a, b = 0, len(arm.xy)
+        if net.nodes[arm.a]["kind"] == "end":
+            while a < b - 1 and frac[a] < min_support:
+                a += 1
+        if net.nodes[arm.b]["kind"] == "end":
+            while b - 1 > a and frac[b - 1] < min_support:
+                b -= 1
+        if a == 0 and b == len(arm.xy):
+            keep.append(arm)
+            continue
+        seg = arm.xy[a:b]
+        length = float(np.hypot(*np.diff(seg, axis=0).T).sum()) if len(seg) > 1 else 0.0
+        cut_m += float(np.hypot(*np.diff(arm.xy, axis=0).T).sum()) - length
+        if length < p.min_road_length_m or len(seg) < 3:
+            dropped += 1
+            continue
+        for name in ("z", "z_left", "z_right"):
+            val = getattr(arm, name)
+            if val is not None:
+                setattr(arm, name, val[a:b])
+        arm.xy = seg
+        if a:
+            net.nodes[arm.a]["xy"] = seg[0]
+            net.nodes[arm.a]["z"] = float(arm.z[0])
+        if b < len(frac):
+            net.nodes[arm.b]["xy"] = seg[-1]
+            net.nodes[arm.b]["z"] = float(arm.z[-1])
+        keep.append(arm)
+    net.arms = keep
+    used = {n for arm in keep for n in (arm.a, arm.b)}
+    net.nodes = {k: nd for k, nd in net.nodes.items() if k in used}
+    out = {"cut_m": round(cut_m, 1), "dropped_roads": dropped}
+    net.stats["unsupported"] = out
+    if not keep:
+        raise InputError("none of the roads derived from the scan lies on scanned ground (their lanes run over walls, "
+                         "roofs or gaps): see scan_roads.png; give an OSM extract (site.inputs.osm), or road_source=none")
+    return out
 
 
 # --------------------------------------------------------------------------- OpenDRIVE through netconvert
@@ -692,9 +820,11 @@ def write_plain(net: Network, p: ScanSourceParams, proj: str, folder: Path) -> t
         lay = lane_layout(arm.width_m, p)
         arm.lanes = lay
         z = arm.z if arm.z is not None else np.zeros(len(arm.xy))
-        dirs = [("f", arm.a, arm.b, arm.xy, z, arm.sidewalk_right_m)]
+        zr = arm.z_right if lay["two_way"] and arm.z_right is not None else z
+        zl = arm.z_left if lay["two_way"] and arm.z_left is not None else z
+        dirs = [("f", arm.a, arm.b, arm.xy, zr, arm.sidewalk_right_m)]
         if lay["two_way"]:
-            dirs.append(("b", arm.b, arm.a, arm.xy[::-1], z[::-1], arm.sidewalk_left_m))
+            dirs.append(("b", arm.b, arm.a, arm.xy[::-1], zl[::-1], arm.sidewalk_left_m))
         for tag, a, b, xy, zz, sw in dirs:
             lanes = []
             if p.sidewalks and sw > 0:
@@ -873,7 +1003,8 @@ def lanes_on_road(xodr_text: str, v, f, labels, step_m: float = 0.5, raster_m: f
 
 def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: Path,
                 out_scan_roads_json: Path, out_scan_roads_png: Path, in_labels_npy: Path | None = None,
-                in_gt_labels_npy: Path | None = None, in_roads_truth_json: Path | None = None) -> dict:
+                in_gt_labels_npy: Path | None = None, in_roads_truth_json: Path | None = None,
+                in_points_meta_json: Path | None = None) -> dict:
     """Roads from the scan itself (no OSM): the labelled mesh's carriageway, curbs and sidewalks ->
     lanes -> OpenDRIVE in the site frame (``opendrive.xodr``, checked by osm_to_opendrive like a map)."""
     import json
@@ -913,10 +1044,28 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
             labels_for_mask = labels
     else:
         labels_for_mask = None
-    net = derive_network(mesh.v, mesh.f, labels_for_mask, params, ctx.log)
-    if params.sidewalks:
+    spacing = None
+    if in_points_meta_json is not None:
+        try:
+            spacing = (json.loads(Path(in_points_meta_json).read_text()).get("density") or {}).get("spacing_m")
+        except (OSError, ValueError):
+            spacing = None
+    curbs = not (labels_for_mask is not None and spacing is not None and params.curb_max_spacing_m > 0
+                 and float(spacing) > params.curb_max_spacing_m)
+    if not curbs:
+        ctx.log.info("road_source=scan: point spacing %.3f m is coarser than curb_max_spacing_m=%g: no curbs to "
+                     "see; the carriageway is the road-labelled grey ground, and no sidewalk lanes are made",
+                     float(spacing), params.curb_max_spacing_m)
+    net = derive_network(mesh.v, mesh.f, labels_for_mask, params, ctx.log, curbs=curbs, rgb=mesh.rgb)
+    net.stats["curbs"] = curbs
+    net.stats["point_spacing_m"] = spacing
+    if params.sidewalks and curbs:
         add_sidewalks(net, mesh.v, mesh.f, labels, params)
     add_heights_and_signals(net, mesh.v, mesh.f, labels, params)
+    cut = trim_unsupported(net, mesh.v, mesh.f, params)
+    if cut["cut_m"] or cut["dropped_roads"]:
+        ctx.log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
+                     "scanned ground", cut["cut_m"], cut["dropped_roads"])
     frame = SiteFrame.from_site(ctx.site)
     work = out_opendrive_xodr.parent / "scan_plain"
     nod, edg = write_plain(net, params, frame.proj_string(), work)
