@@ -120,8 +120,14 @@ def _broken_link(tmp: Path) -> Path:
 
 def _sparse(tmp: Path) -> Path:
     rnd = random.Random(1)
-    return _ply(tmp / "ten.ply", [(rnd.uniform(0, 10), rnd.uniform(0, 10), rnd.uniform(0, 3)) for _ in range(10)],
+    return _ply(tmp / "ten.ply", [(rnd.uniform(0, 20), rnd.uniform(0, 20), rnd.uniform(0, 3)) for _ in range(10)],
                 [(0, 0, 1)] * 10)
+
+
+def _small(tmp: Path) -> Path:
+    rnd = random.Random(2)
+    return _ply(tmp / "pump.ply", [(rnd.uniform(0, 4), rnd.uniform(0, 4), rnd.uniform(0, 3)) for _ in range(500)],
+                [(0, 0, 1)] * 500)
 
 
 def _write(name: str, data: bytes):
@@ -181,6 +187,7 @@ SETUPS = {
     "cloud-all-nan": lambda p: _cloud_case(p, _all_nan),
     "cloud-too-few-points": lambda p: _cloud_case(p, lambda t: _ply(t / "five.ply", [(i, 0, 0) for i in range(5)])),
     "cloud-too-sparse": lambda p: _cloud_case(p, _sparse),
+    "cloud-not-a-street": lambda p: _cloud_case(p, _small),
     "osm-corrupt": _bad_osm,
 }
 
