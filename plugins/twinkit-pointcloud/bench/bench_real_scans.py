@@ -121,8 +121,11 @@ def measure(name: str, cfg: dict) -> dict:
     res = json.loads((OUT / f"{name}.json").read_text()) if (OUT / f"{name}.json").is_file() else {"name": name}
     log = OUT / f"{name}.log"
     if log.is_file():  # why the run did not end with exit 0: its last error or degraded line
-        why = [ln for ln in log.read_text(errors="replace").splitlines()
-               if ln.startswith("twinkit: error:") or ln.startswith("DEGRADED:")]
+        lines = log.read_text(errors="replace").splitlines()
+        # an error, or the degraded summary's items (a run whose steps were all reused prints only those)
+        why = [ln for ln in lines if ln.startswith("twinkit: error:")]
+        why += [ln.strip() for i, ln in enumerate(lines) if ln.startswith("  - ")
+                and any(p.startswith("twinkit: DEGRADED result") for p in lines[max(0, i - 5):i])]
         res["why"] = why[-1][:160] if why else ""
     fr = _metrics(name, "fetch_roads")
     if fr:

@@ -710,8 +710,16 @@ def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> 
         for side, sgn in (("z_right", -1.0), ("z_left", 1.0)):  # the normal points left
             q = arm.xy[:, None, :] + (sgn * off)[None, :, None] * nrm[:, None, :]
             setattr(arm, side, smooth(np.median(net.grid.sample(zr, q).astype(float), axis=1)))
-    for nd in net.nodes.values():
-        nd["z"] = float(net.grid.sample(zr, np.asarray(nd["xy"])[None])[0])
+    # a node's height is where its roads meet it (their ends' heights), not the level raster at its point:
+    # a junction point can lie off the carriageway, where the nearest carriageway face is another one
+    # (IGN: a three-way junction 0.7 m under the ground)
+    ends: dict[int, list[float]] = {}
+    for arm in net.arms:
+        ends.setdefault(arm.a, []).append(float(arm.z[0]))
+        ends.setdefault(arm.b, []).append(float(arm.z[-1]))
+    for nid, nd in net.nodes.items():
+        nd["z"] = (float(np.median(ends[nid])) if nid in ends
+                   else float(net.grid.sample(zr, np.asarray(nd["xy"])[None])[0]))
         nd["signals"] = False
     if labels is None or p.min_traffic_light_vertices <= 0:
         return
