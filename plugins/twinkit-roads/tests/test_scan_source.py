@@ -250,3 +250,29 @@ def test_each_direction_sits_on_its_half_of_a_cambered_street(tmp_path):
     assert inner.sum() > 200 and np.percentile(dz, 95) < 0.085
     north = p[inner, 1] > 0  # the north half is nearly level across (crown and hillside cancel): 2 cm
     assert np.percentile(dz[north], 95) < 0.025
+
+
+def test_lanes_stay_on_scanned_ground_cut_at_a_free_end_and_split_under_a_roof():
+    """trim_unsupported on a 60 m road over a 50 m ground (x -25..25; the road's east 10 m run past the
+    scan's end) with a roof 4 m up over x -3..3 and no ground under it: the end is cut back to the scan,
+    and the road is split in two around the roof, each piece with its own end nodes."""
+    xs = np.arange(-25.0, 25.0 + 1e-9, 0.5)
+    ys = np.arange(-6.0, 6.0 + 1e-9, 0.5)
+    X, Y = np.meshgrid(xs, ys)
+    v = np.stack([X.ravel(), Y.ravel(), np.where(np.abs(X.ravel()) < 3.2, 4.0, 0.0)], 1)
+    nx = len(xs)
+    i, j = np.meshgrid(np.arange(len(ys) - 1), np.arange(nx - 1), indexing="ij")
+    a = (i * nx + j).ravel()
+    f = np.concatenate([np.stack([a, a + 1, a + nx + 1], 1), np.stack([a, a + nx + 1, a + nx], 1)])
+    xy = np.stack([np.arange(-24.0, 36.0 + 1e-9, 2.0), np.zeros(31)], 1)
+    arm = scan.Arm(0, 1, xy, 6.5, z=np.zeros(31), z_left=np.zeros(31), z_right=np.zeros(31))
+    net = scan.Network({0: {"xy": xy[0], "z": 0.0, "kind": "end"}, 1: {"xy": xy[-1], "z": 0.0, "kind": "end"}},
+                       [arm], None, None, None, {})
+    out = scan.trim_unsupported(net, v, f, scan.ScanSourceParams())
+    assert len(net.arms) == 2 and out["dropped_roads"] == 0
+    west, east = sorted(net.arms, key=lambda r: r.xy[0, 0])
+    assert west.xy[0, 0] == -24.0 and west.xy[-1, 0] < -3.0  # the west end is on the scan: kept
+    assert east.xy[0, 0] > 3.0 and east.xy[-1, 0] <= 25.0  # the east end ran off the scan: cut back to it
+    assert 10.0 < out["cut_m"] < 22.0
+    assert {west.a, west.b, east.a, east.b} == set(net.nodes) and len(net.nodes) == 4
+    assert all(len(r.z) == len(r.xy) == len(r.z_left) for r in net.arms)

@@ -28,6 +28,7 @@ What a person does by hand in RoadRunner from lidar, as a road source (``road_so
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import time
@@ -735,25 +736,17 @@ def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> 
 
 def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3, min_support: float = 0.8) -> dict:
     """A derived lane must lie on scanned ground. Along each road, the share of its carriageway's cross
-    section (7 samples, 0.3 m in from each edge) with up-facing surface within ``tol_m`` of the road's
-    height there; from a road's free end (not a junction) the road is cut back while that share is under
-    ``min_support`` (a road that bends where the scan ends and runs on into a wall, Lille), and a road
-    left shorter than ``min_road_length_m`` is dropped with the nodes it leaves alone. Returns what was cut."""
-    from scipy import ndimage
+    section (7 samples, 0.3 m in from each edge) where a vertical ray meets the surface within ``tol_m`` of
+    the road's height there; from a road's free end (not a junction) the road is cut back while that share is under
+    ``min_support`` (a road that bends where the scan ends and runs on into a wall, Lille); inside a road, 2 or
+    more unsupported shape points in a row (a few metres under a roof or over a gap, IGN) split it into two
+    roads with new ends; a piece shorter than ``min_road_length_m`` is dropped, and so are the nodes it leaves
+    alone. Returns what was cut."""
+    import open3d as o3d
 
-    from .mesh2d import Mesh, face_normals_z
+    from twinkit.surface.closest import Surface
 
-    grid = net.grid
-    up = np.flatnonzero(face_normals_z(Mesh(v, f, None, None)) > 0.7)
-    c = v[f[up]].mean(1)
-    px = np.floor(grid.to_px(c[:, :2])).astype(int)
-    ok = (px[:, 0] >= 0) & (px[:, 0] < grid.w) & (px[:, 1] >= 0) & (px[:, 1] < grid.h)
-    zlo = np.full((grid.h, grid.w), np.inf)
-    zhi = np.full((grid.h, grid.w), -np.inf)
-    np.minimum.at(zlo, (px[ok, 1], px[ok, 0]), c[ok, 2])
-    np.maximum.at(zhi, (px[ok, 1], px[ok, 0]), c[ok, 2])
-    zlo = ndimage.minimum_filter(zlo, 3, mode="constant", cval=np.inf)
-    zhi = ndimage.maximum_filter(zhi, 3, mode="constant", cval=-np.inf)
+    scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
     cut_m, dropped = 0.0, 0
     keep = []
     for arm in net.arms:
@@ -764,39 +757,65 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
         half = max(arm.width_m / 2 - 0.3, 0.0)
         across = np.linspace(-half, half, 7)
         q = arm.xy[:, None, :] + across[None, :, None] * nrm[:, None, :]
-        h = arm.z[:, None]
-        lo, hi = grid.sample(zlo, q), grid.sample(zhi, q)
-        inside = grid.sample(np.ones((grid.h, grid.w), bool), q)
-        sup = inside & (lo <= h + tol_m) & (hi >= h - tol_m)
-        frac = sup.mean(axis=1)
-        a, b = 0, len(arm.xy)
-        if net.nodes[arm.a]["kind"] == "end":
-            while a < b - 1 and frac[a] < min_support:
-                a += 1
-        if net.nodes[arm.b]["kind"] == "end":
-            while b - 1 > a and frac[b - 1] < min_support:
-                b -= 1
-        if a == 0 and b == len(arm.xy):
+        rays = np.zeros((q.shape[0] * q.shape[1], 6), np.float32)
+        rays[:, :2] = q.reshape(-1, 2)
+        rays[:, 2] = np.repeat(arm.z, q.shape[1]) + tol_m
+        rays[:, 5] = -1.0
+        t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()  # the surface within tol_m of the road's height
+        frac = (t <= 2 * tol_m).reshape(q.shape[:2]).mean(axis=1)
+        n = len(frac)
+        keep_pt = np.ones(n, bool)
+        bad = frac < min_support
+        i = 0
+        while i < n:  # runs of unsupported shape points
+            if not bad[i]:
+                i += 1
+                continue
+            j = i
+            while j < n and bad[j]:
+                j += 1
+            at_a, at_b = i == 0, j == n
+            if at_a and at_b:
+                keep_pt[:] = False
+            elif at_a:
+                keep_pt[i:j] = net.nodes[arm.a]["kind"] != "end"  # a junction end stays: the junction needs it
+            elif at_b:
+                keep_pt[i:j] = net.nodes[arm.b]["kind"] != "end"
+            elif j - i >= 2:  # inside the road: 2+ points (a few metres) under a roof or over a gap split it
+                keep_pt[i:j] = False
+            i = j
+        if keep_pt.all():
             keep.append(arm)
             continue
-        seg = arm.xy[a:b]
-        length = float(np.hypot(*np.diff(seg, axis=0).T).sum()) if len(seg) > 1 else 0.0
-        cut_m += float(np.hypot(*np.diff(arm.xy, axis=0).T).sum()) - length
-        if length < p.min_road_length_m or len(seg) < 3:
+        full = float(np.hypot(*np.diff(arm.xy, axis=0).T).sum())
+        kept_len = 0.0
+        i = 0
+        while i < n:
+            if not keep_pt[i]:
+                i += 1
+                continue
+            j = i
+            while j < n and keep_pt[j]:
+                j += 1
+            seg = arm.xy[i:j]
+            length = float(np.hypot(*np.diff(seg, axis=0).T).sum()) if len(seg) > 1 else 0.0
+            if length >= p.min_road_length_m and len(seg) >= 3:
+                piece = dataclasses.replace(arm, xy=seg, **{k: getattr(arm, k)[i:j] for k in ("z", "z_left", "z_right")
+                                                            if getattr(arm, k) is not None})
+                for end_idx, attr in ((i, "a"), (j - 1, "b")):
+                    if (attr == "a" and i == 0) or (attr == "b" and j == n):
+                        continue  # the road's own node
+                    nid = max(net.nodes) + 1
+                    net.nodes[nid] = {"xy": arm.xy[end_idx], "z": float(arm.z[end_idx]), "kind": "end"}
+                    setattr(piece, attr, nid)
+                keep.append(piece)
+                kept_len += length
+            else:
+                dropped += 1 if (i == 0 and j == n) else 0
+            i = j
+        if kept_len == 0.0:
             dropped += 1
-            continue
-        for name in ("z", "z_left", "z_right"):
-            val = getattr(arm, name)
-            if val is not None:
-                setattr(arm, name, val[a:b])
-        arm.xy = seg
-        if a:
-            net.nodes[arm.a]["xy"] = seg[0]
-            net.nodes[arm.a]["z"] = float(arm.z[0])
-        if b < len(frac):
-            net.nodes[arm.b]["xy"] = seg[-1]
-            net.nodes[arm.b]["z"] = float(arm.z[-1])
-        keep.append(arm)
+        cut_m += full - kept_len
     net.arms = keep
     used = {n for arm in keep for n in (arm.a, arm.b)}
     net.nodes = {k: nd for k, nd in net.nodes.items() if k in used}
