@@ -734,6 +734,12 @@ def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> 
         nd["traffic_light_vertices"] = near
 
 
+def _true_runs(b: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of each run of True in a 1-D bool array."""
+    d = np.diff(np.r_[0, b.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
 def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3, min_support: float = 0.8) -> dict:
     """A derived lane must lie on scanned ground. Along each road, the share of its carriageway's cross
     section (7 samples, 0.3 m in from each edge) where a vertical ray meets the surface within ``tol_m`` of
@@ -765,15 +771,7 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
         frac = (t <= 2 * tol_m).reshape(q.shape[:2]).mean(axis=1)
         n = len(frac)
         keep_pt = np.ones(n, bool)
-        bad = frac < min_support
-        i = 0
-        while i < n:  # runs of unsupported shape points
-            if not bad[i]:
-                i += 1
-                continue
-            j = i
-            while j < n and bad[j]:
-                j += 1
+        for i, j in _true_runs(frac < min_support):  # runs of unsupported shape points
             at_a, at_b = i == 0, j == n
             if at_a and at_b:
                 keep_pt[:] = False
@@ -783,20 +781,12 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
                 keep_pt[i:j] = net.nodes[arm.b]["kind"] != "end"
             elif j - i >= 2:  # inside the road: 2+ points (a few metres) under a roof or over a gap split it
                 keep_pt[i:j] = False
-            i = j
         if keep_pt.all():
             keep.append(arm)
             continue
         full = float(np.hypot(*np.diff(arm.xy, axis=0).T).sum())
         kept_len = 0.0
-        i = 0
-        while i < n:
-            if not keep_pt[i]:
-                i += 1
-                continue
-            j = i
-            while j < n and keep_pt[j]:
-                j += 1
+        for i, j in _true_runs(keep_pt):
             seg = arm.xy[i:j]
             length = float(np.hypot(*np.diff(seg, axis=0).T).sum()) if len(seg) > 1 else 0.0
             if length >= p.min_road_length_m and len(seg) >= 3:
@@ -812,7 +802,6 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
                 kept_len += length
             else:
                 dropped += 1 if (i == 0 and j == n) else 0
-            i = j
         if kept_len == 0.0:
             dropped += 1
         cut_m += full - kept_len
