@@ -34,7 +34,8 @@ def pipeline(tmp_path_factory):
     ctx = make_context(tmp / "work", site={"name": "synthetic", "bounds_m": [[-5, -5, 0], [5, 5, 2]]})
     w = ctx.workdir
     res = {}
-    res["read"] = P.read_cloud(P.ReadCloudParams(), ctx, in_cloud=src, out_points_ply=w / "points.ply",
+    # a 10 x 10 m box scene for the meshing steps, not a street: the street-size check is off here
+    res["read"] = P.read_cloud(P.ReadCloudParams(min_street_extent_m=0), ctx, in_cloud=src, out_points_ply=w / "points.ply",
                                out_points_meta_json=w / "points_meta.json")
     res["poisson"] = P.poisson(P.PoissonParams(depth=8), ctx, in_points_ply=w / "points.ply",
                                out_dense_mesh_ply=w / "dense_mesh.ply")
