@@ -41,17 +41,22 @@ def draw_qa(mesh_path: Path, lines: list[dict], before: list[dict] | None, out: 
         poly(ln["right"], (255, 255, 255), w)
     for ln in lines:
         poly(ln["centre"], (230, 20, 20), w)
-    # legend and scale bar
-    d.rectangle([8, 8, 330, 92], fill=(0, 0, 0))
-    d.text((16, 14), "white: lane borders (aligned)", fill=(255, 255, 255))
-    d.text((16, 30), "red: lane centre lines (aligned)", fill=(230, 20, 20))
-    d.text((16, 46), "yellow: centre lines before alignment", fill=(255, 220, 0))
-    if truth:
-        d.text((16, 62), "cyan: true centre lines", fill=(0, 220, 255))
-    bar = 10.0 / res
-    d.line([(16, 84), (16 + bar, 84)], fill=(255, 255, 255), width=3)
-    d.text((22 + bar, 76), "10 m", fill=(255, 255, 255))
+    legend(d, [("white: lane borders (aligned)", (255, 255, 255)), ("red: lane centre lines (aligned)", (230, 20, 20)),
+               ("yellow: centre lines before alignment", (255, 220, 0))]
+           + ([("cyan: true centre lines", (0, 220, 255))] if truth else []), res, width=330, slots=4)
     img.save(out)
+
+
+def legend(d, rows: list[tuple[str, tuple]], m_per_px: float, width: int, slots: int) -> None:
+    """A top-view picture's legend in the top-left corner: ``rows`` (text, colour) on black, room for
+    ``slots`` rows, and a 10 m scale bar under them."""
+    bar_y = 20 + 16 * slots
+    d.rectangle([8, 8, width, bar_y + 8], fill=(0, 0, 0))
+    for i, (text, colour) in enumerate(rows):
+        d.text((16, 14 + 16 * i), text, fill=colour)
+    bar = 10.0 / m_per_px
+    d.line([(16, bar_y), (16 + bar, bar_y)], fill=(255, 255, 255), width=3)
+    d.text((22 + bar, bar_y - 8), "10 m", fill=(255, 255, 255))
 
 
 #: fill colours of the network picture by OpenDRIVE lane type (lower case); others: OTHER_COLOUR

@@ -971,16 +971,13 @@ def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_pe
         x, y = grid.to_px(np.asarray(nd["xy"]))
         r = 4
         d.ellipse([x - r, y - r, x + r, y + r], outline=(255, 0, 255), width=2)
-    d.rectangle([8, 8, 360, 108], fill=(0, 0, 0))
-    d.text((16, 14), "roads from the scan (road_source=scan)", fill=(255, 255, 255))
-    d.text((16, 30), "yellow: carriageway edges (labels + curbs)", fill=(255, 230, 0))
-    d.text((16, 46), "white / red: lane borders / centre lines", fill=(230, 20, 20))
-    d.text((16, 62), "orange: sidewalk lanes; magenta: nodes", fill=(255, 150, 40))
-    if truth:
-        d.text((16, 78), "cyan: true lane centre lines", fill=(0, 220, 255))
-    bar = 10.0 / res
-    d.line([(16, 100), (16 + bar, 100)], fill=(255, 255, 255), width=3)
-    d.text((22 + bar, 92), "10 m", fill=(255, 255, 255))
+    from .qa import legend
+
+    legend(d, [("roads from the scan (road_source=scan)", (255, 255, 255)),
+               ("yellow: carriageway edges (labels + curbs)", (255, 230, 0)),
+               ("white / red: lane borders / centre lines", (230, 20, 20)),
+               ("orange: sidewalk lanes; magenta: nodes", (255, 150, 40))]
+           + ([("cyan: true lane centre lines", (0, 220, 255))] if truth else []), res, width=360, slots=5)
     img.save(out)
     return {"px": list(img.size), "m_per_px": res, "lane_segments": len(lines)}
 
