@@ -289,6 +289,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     drv = drv[fp.inside(drv)] if len(drv) else drv
     ein = edges["inside"]
     over_m, over_chains = 0.0, 0
+    over_at: list[dict] = []
     if len(drv) and len(ein):
         from scipy.spatial import cKDTree
 
@@ -298,10 +299,19 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
         if over.any():
             from twinkit.surface.watertight import chains_of
 
-            over_m = float(np.linalg.norm(mesh.vertices[ein[over, 0]] - mesh.vertices[ein[over, 1]], axis=1).sum())
-            over_chains = int(len(np.unique(chains_of(ein[over]))))
+            seg = np.linalg.norm(mesh.vertices[ein[over, 0]] - mesh.vertices[ein[over, 1]], axis=1)
+            over_m = float(seg.sum())
+            ch = chains_of(ein[over])
+            over_chains = int(len(np.unique(ch)))
+            for c in np.unique(ch):  # where they are (the longest first), for the log and the picture's reader
+                k = ch == c
+                p = mid[over][k]
+                over_at.append({"x": round(float(p[:, 0].mean()), 2), "y": round(float(p[:, 1].mean()), 2),
+                                "length_m": round(float(seg[k].sum()), 2),
+                                "z_min": round(float(p[:, 2].min()), 3), "z_max": round(float(p[:, 2].max()), 3)})
     res["open_border_over_driving_lanes_m"] = round(over_m, 2)
     res["open_chains_over_driving_lanes"] = over_chains
+    res["open_chains_over_driving_lanes_at"] = sorted(over_at, key=lambda c: -c["length_m"])[:20]
     d, s = res["lanes"]["driving"], res["lanes"]["sidewalk"]
     draw_border(out_drop_test_png, mesh.vertices, mesh.faces, edges, ground_face=gv[mesh.faces].all(axis=1),
                 misses=np.vstack(misses) if misses else None,

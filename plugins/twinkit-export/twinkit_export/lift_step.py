@@ -58,7 +58,7 @@ def _actor_json(inst, file: str) -> dict:
                     "size": [round(float(x), 3) for x in inst.size],
                     "yaw_deg": round(float(inst.yaw_deg), 2)},
             "ground_z": round(float(inst.ground_z), 3), "faces": int(len(inst.faces)), "vertices": inst.vertices,
-            "label_share": round(float(inst.label_share), 3),
+            "label_share": round(float(inst.label_share), 3), "class_by": inst.class_by,
             "blueprint": suggest_blueprint(inst.class_id, inst.size)}
 
 
@@ -94,7 +94,7 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
     from twinkit.mesh import read_obj, write_obj
 
     from .classmesh import write_class_ply
-    from .movables import LiftOptions, lift_movables, open_border_near
+    from .movables import NAMES, LiftOptions, lift_movables, open_border_near
 
     params = params or LiftParams()
     t0 = time.perf_counter()
@@ -143,6 +143,11 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
         fname = f"{inst.name}.ply"
         write_class_ply(mov_dir / fname, instance_mesh(res, inst), mtex)
         actors.append(_actor_json(inst, fname))
+        if inst.class_by == "size":
+            ctx.log.info("lift_movables: %s at (%.1f, %.1f), %.1f x %.1f x %.1f m, is a %s by its size: the labels "
+                         "named a class its shape rules out (%.0f %% of its vertices agree)", inst.name,
+                         inst.center[0], inst.center[1], *inst.size, NAMES[inst.class_id].lower(),
+                         100 * inst.label_share)
     before = open_border_near(mesh.faces, mesh.vertices, res.instances)
     after = open_border_near(out.faces, out.vertices, res.instances)
     rep = {**res.report, "open_border_near_objects_before_m": round(before, 3),

@@ -21,7 +21,10 @@ the class alone does not make an object; 3D cues decide (all in the site frame, 
    stands up (its top at least the class's minimum height, at most its maximum), has a footprint
    no longer than the class allows, and has walls (at least ``min_vertical_share`` of its
    vertices with a near-horizontal normal). Flat patches (a painted bay, a ramp labelled car) fail
-   the first or the last test; a building wall labelled car fails the size test.
+   the first or the last test; a building wall labelled car fails the size test. The class is the
+   votes' first that the shape fits; a cluster with a vehicle's width and walls that fits no voted
+   class is a car or truck by size (``choose_class``), and one longer than a car is first cut where its
+   height dips (cars parked bumper to bumper, ``split_along``).
 4. **Faces of an instance**: grown over the mesh from the cluster's faces through faces whose
    corners all lie above ``cut_height_m``, inside the cluster's oriented footprint widened by
    ``margin_m`` and below its top + ``margin_m``, whatever their label (wheels and windows are
@@ -42,6 +45,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,6 +108,8 @@ class Instance:
     ground_z: float
     label_share: float  # share of the cluster's vertices with the instance's class
     vertices: int = 0
+    class_by: str = "labels"  # "labels": the votes' class fits its shape; "size": the votes named a class the
+    #                            shape rules out, and the shape is a vehicle's (see choose_class)
 
     @property
     def name(self) -> str:
@@ -301,6 +307,92 @@ def refine_class(cid: int, votes: np.ndarray, length: float, width: float) -> in
     return cid
 
 
+def why_not(cid: int, n: int, top: float, length: float, vert_share: float, opt: LiftOptions) -> str | None:
+    """Why a cluster of ``n`` vertices, ``top`` m high, ``length`` m long, is no object of class ``cid``
+    (None: it is one)."""
+    lo_top, hi_top, max_len, min_n = CLASS_LIMITS[cid]
+    if n < min_n:
+        return "too_few_vertices"
+    if top < lo_top:
+        return "too_low"
+    if top > hi_top:
+        return "too_high"
+    if length > max_len:
+        return "too_long"
+    if vert_share < opt.min_vertical_share:
+        return "no_walls"
+    return None
+
+
+#: a vehicle the scanner saw is at least this wide (a side and the roof)
+VEHICLE_MIN_WIDTH_M = 1.2
+#: a truck by size alone is at least this high (lower and longer than a car: a row of cars, a wall)
+TRUCK_MIN_TOP_M = 2.2
+#: a second class by votes is tried when it has at least this share of the cluster's vertices
+SECOND_VOTE_SHARE = 0.1
+
+
+def choose_class(votes: np.ndarray, n: int, top: float, length: float, width: float, vert_share: float,
+                 opt: LiftOptions, split_tried: bool = False) -> tuple[int, str | None, str]:
+    """The class of a cluster: (class id, why it is no object or None, "labels" | "size").
+
+    The class with the most votes, if the shape fits it (``CLASS_LIMITS``); else the next class by votes
+    that has at least ``SECOND_VOTE_SHARE`` of them and fits; else, for a cluster with a vehicle's width,
+    car or truck by size. The 2D model names a parked car "person" or "motorcycle" on uncoloured or
+    oblique views (a real mobile scan without colour; the demo's seed 7), and a 4.5 x 1.9 x 1.5 m
+    object with walls is a car whatever the votes say. A vehicle-wide cluster longer than a car is
+    "too_long" until ``split_tried`` (it may be cars parked bumper to bumper, ``split_along``); then a
+    truck by size if it is at least ``TRUCK_MIN_TOP_M`` high. Nothing is made of a cluster no class fits."""
+    mv = np.asarray(votes)[list(MOVABLE)]
+    order = [MOVABLE[i] for i in np.argsort(-mv, kind="stable") if mv[i] > 0] or [MOVABLE[0]]
+    first = order[0]
+    why = why_not(first, n, top, length, vert_share, opt)
+    if why is None:
+        return first, None, "labels"
+    for c in order[1:]:
+        if votes[c] >= SECOND_VOTE_SHARE * n and why_not(c, n, top, length, vert_share, opt) is None:
+            return c, None, "labels"
+    if width >= VEHICLE_MIN_WIDTH_M:
+        if why_not(13, n, top, length, vert_share, opt) is None:
+            return 13, None, "size"
+        if not split_tried and why_not(13, n, top, 0.0, vert_share, opt) is None:
+            return first, "too_long", "labels"  # a car's height and width, longer: maybe several (split_along)
+        if top >= TRUCK_MIN_TOP_M and why_not(14, n, top, length, vert_share, opt) is None:
+            return 14, None, "size"
+    return first, why, "labels"
+
+
+def split_along(xy: np.ndarray, h: np.ndarray, yaw_deg: float, min_piece_m: float = 2.0, bin_m: float = 0.1,
+                dip: float = 0.7) -> list[np.ndarray] | None:
+    """Cut a cluster in two where its height profile along the long axis dips deepest: the gap between
+    two cars parked bumper to bumper. (mask, mask) over the points, or None when no bin at least
+    ``min_piece_m`` from either end is lower than ``dip`` times the lower of the peaks on its two sides."""
+    from scipy.ndimage import maximum_filter1d
+
+    a = np.radians(yaw_deg)
+    t = np.asarray(xy, float) @ np.array([np.cos(a), np.sin(a)])
+    b = ((t - t.min()) / bin_m).astype(np.int64)
+    prof = np.zeros(int(b.max()) + 1)
+    np.maximum.at(prof, b, np.asarray(h, float))
+    prof = maximum_filter1d(prof, 3)  # a bin the points' spacing skips is no gap
+    lo = int(round(min_piece_m / bin_m))
+    hi = len(prof) - lo
+    if hi <= lo:
+        return None
+    k = lo + int(np.argmin(prof[lo:hi]))
+    if prof[k] > dip * min(prof[:k].max(), prof[k + 1:].max()):
+        return None
+    # the middle of the run of lowest bins around k (two bumpers side by side are one low run)
+    low = prof <= prof[k] + 0.05
+    a, e = k, k
+    while a - 1 >= lo and low[a - 1]:
+        a -= 1
+    while e + 1 < hi and low[e + 1]:
+        e += 1
+    k = (a + e) // 2
+    return [b <= k, b > k]
+
+
 # ----------------------------------------------------------------------------- the lift
 
 def _covered(pts: np.ndarray, tri_xy: np.ndarray) -> np.ndarray:
@@ -469,6 +561,7 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                  "ground_cells": int(grid.has_ground.sum())}
     instances: list[Instance] = []
     rejected: dict[str, int] = {}
+    rejected_at: list[dict] = []  # the largest rejected clusters, where and why (the report's table)
     face_owner = np.full(len(f), -1, np.int64)
     if len(cand):
         pairs = cKDTree(v[cand]).query_pairs(opt.cluster_gap_m, output_type="ndarray")
@@ -478,27 +571,30 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
         order = np.argsort(f.ravel(), kind="stable")
         starts = np.searchsorted(f.ravel()[order], np.arange(len(v) + 1))
         sizes = np.bincount(cl, minlength=ncl)
-        for k in np.argsort(-sizes):
-            vid = cand[cl == k]
+        queue = deque(cand[cl == k] for k in np.argsort(-sizes))
+        while queue:
+            vid = queue.popleft()
             cls_counts = np.bincount(labels[vid], minlength=256)
-            cid = int(np.argmax(cls_counts[list(MOVABLE)]) + MOVABLE[0])
-            lo_top, hi_top, max_len, min_n = CLASS_LIMITS[cid]
             top = float(h[vid].max())
             centre, length, width, yaw = oriented_box(v[vid, :2])
             vert_share = float(np.mean(np.abs(normals[vid, 2]) < 0.5))
-            why = None
-            if len(vid) < min_n:
-                why = "too_few_vertices"
-            elif top < lo_top:
-                why = "too_low"
-            elif top > hi_top:
-                why = "too_high"
-            elif length > max_len:
-                why = "too_long"
-            elif vert_share < opt.min_vertical_share:
-                why = "no_walls"
+            cid, why, class_by = choose_class(cls_counts, len(vid), top, length, width, vert_share, opt)
+            if why == "too_long":
+                # objects standing close (cars parked bumper to bumper) make one cluster: cut it where its
+                # height along the long axis dips between two of them, and judge each piece on its own
+                pieces = split_along(v[vid, :2], h[vid], yaw)
+                if pieces is not None:
+                    queue.extendleft(vid[p] for p in pieces[::-1])
+                    continue
+                cid, why, class_by = choose_class(cls_counts, len(vid), top, length, width, vert_share, opt,
+                                                  split_tried=True)
             if why:
                 rejected[why] = rejected.get(why, 0) + 1
+                if len(rejected_at) < 40 and len(vid) >= CLASS_LIMITS[cid][3]:
+                    rejected_at.append({"class": NAMES[cid], "why": why, "vertices": int(len(vid)),
+                                        "x": round(float(centre[0]), 2), "y": round(float(centre[1]), 2),
+                                        "length_m": round(float(length), 2), "width_m": round(float(width), 2),
+                                        "top_m": round(top, 2), "wall_share": round(vert_share, 2)})
                 continue
             # grow over faces above the cut, inside the widened footprint, below the top
             inside = _in_box(v[:, :2], centre, length, width, yaw, opt.margin_m)
@@ -526,8 +622,9 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
             instances.append(Instance(
                 id=len(instances), class_id=cid, faces=mine,
                 center=np.array([c2[0], c2[1], (gz + topz) / 2]), size=np.array([length, width, topz - gz]),
-                yaw_deg=yaw, ground_z=gz, label_share=share, vertices=int(len(ov))))
+                yaw_deg=yaw, ground_z=gz, label_share=share, vertices=int(len(ov)), class_by=class_by))
     rep["clusters_rejected"] = rejected
+    rep["clusters_rejected_at"] = rejected_at
     # debris: remaining surface inside a footprint that does not reach the ground outside it (the
     # reconstructed underside, slivers at the cut)
     removed = face_owner >= 0

@@ -200,3 +200,42 @@ def test_an_opendrive_with_its_own_heights_is_not_lifted_again(demo_site, demo_n
                    {"in_roads_xodr": xodr, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]}, site=DEMO_SITE)
     dz_low = json.loads(al0["alignment.json"].read_text())["dz_m"]
     assert abs(dz_high - dz_low) < 0.05 and abs(dz_high) < 0.5
+
+
+def test_lane_edges_are_moved_onto_the_kerbs_feet(demo_site, demo_net):
+    """A network a rigid fit left 0.2 deg and 6 cm off (lanes a few cm over the kerb at the ends of the side
+    streets) is brought onto the kerbs' feet of the ground-truth mesh; what no kerb constrains (along the
+    side streets: the main road's kerbs lie behind its parking strips) stays; a mesh without kerbs moves
+    nothing."""
+    from twinkit.mesh import read_ply
+    from twinkit_roads.align import Transform2D, lane_lines, refine_to_kerbs
+
+    xodr, truth = demo_net
+    site = json.loads(demo_site["site.json"].read_text())["osm_transform"]
+    th = -math.radians(site["rotation_deg"])
+    R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    t = -R @ np.array([site["dx_m"], site["dy_m"]])
+    exact = Transform2D(th, float(t[0]), float(t[1]))
+    off = Transform2D(th + math.radians(0.2), float(t[0]) + 0.06, float(t[1]))
+    text = xodr.read_text()
+    lines = lane_lines(text, 1.0)
+    m = read_ply(demo_site["gt_mesh.ply"])
+
+    def rmse(tf):  # lane centres against the truth, inside the site
+        c = np.concatenate([tf.apply(ln["centre"]) for ln in lines if not ln["junction"]])
+        c = c[(np.abs(c) < 28).all(axis=1)]
+        from twinkit_roads.align import polyline_distance
+
+        return float(np.sqrt(np.mean(polyline_distance(c, [t_[:, :2] for t_ in truth]) ** 2)))
+
+    k = refine_to_kerbs(lines, off, m.vertices, m.faces)
+    assert k.applied and k.edges >= 20, k
+    assert k.before_m > 0.03 and k.after_m < 0.015
+    assert rmse(off) > 0.05 and rmse(k.tf) < 0.01, (rmse(off), rmse(k.tf), rmse(exact))
+    assert abs(k.shift_m[1]) < 0.005
+    # the same network over flat ground: no kerb, nothing moves
+    flat = m.vertices.copy()
+    flat[:, 2] = 0.0
+    k0 = refine_to_kerbs(lines, off, flat, m.faces)
+    assert not k0.applied and k0.edges == 0 and "kerb" in k0.why
+    assert (k0.tf.yaw_rad, k0.tf.tx, k0.tf.ty) == (off.yaw_rad, off.tx, off.ty)

@@ -420,3 +420,135 @@ def centreline_rmse(xodr_text: str, truth_lines: list[np.ndarray], bounds: tuple
         pts = pts[(pts[:, 0] >= xmin) & (pts[:, 0] <= xmax) & (pts[:, 1] >= ymin) & (pts[:, 1] <= ymax)]
     d = polyline_distance(pts, [np.asarray(t, float)[:, :2] for t in truth_lines])
     return float(np.sqrt(np.mean(d ** 2))), int(len(pts))
+
+
+# --------------------------------------------------------------------------- kerbs: the last centimetres
+
+@dataclass
+class KerbFit:
+    tf: Transform2D  # the refined transform (the input one when not ``applied``)
+    edges: int  # carriageway edges that found a kerb in the mesh
+    before_m: float  # median |edge - kerb foot| before
+    after_m: float  # ... and after the refinement
+    shift_m: tuple[float, float]  # translation added (site frame)
+    yaw_deg: float  # rotation added
+    applied: bool
+    why: str = ""
+
+
+def kerb_feet(edge: np.ndarray, out: np.ndarray, vertices: np.ndarray, faces: np.ndarray, *, reach_m: float = 0.8,
+              search_m: float = 0.5, step_m: float = 0.01, kerb_min_m: float = 0.06, kerb_max_m: float = 0.30,
+              rise_m: float = 0.025, flat_m: float = 0.03) -> np.ndarray:
+    """Signed distance (m, along ``out``) from each carriageway edge point to the foot of the kerb beside it
+    in the mesh, or nan where no kerb is seen.
+
+    A profile of vertical rays crosses each edge (``step_m`` apart, ``reach_m`` each way). It shows a kerb
+    when both ends are flat (10-90 % height spread under ``flat_m``: no car, no bollard) and the outer end
+    stands ``kerb_min_m`` to ``kerb_max_m`` above the inner one. The foot is where, within ``search_m`` of
+    the edge, the surface last lies within ``rise_m`` of the road and everything outward of it above."""
+    import warnings
+
+    import open3d as o3d
+
+    edge = np.asarray(edge, float)
+    out = np.asarray(out, float)
+    res = np.full(len(edge), np.nan)
+    if len(edge) == 0:
+        return res
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, np.float32)),
+                        o3d.core.Tensor(np.ascontiguousarray(faces, np.uint32)))
+    u = np.arange(-reach_m, reach_m + step_m / 2, step_m)
+    pts = edge[:, None, :] + u[None, :, None] * out[:, None, :]
+    top = float(vertices[:, 2].max()) + 1.0
+    rays = np.zeros((pts.shape[0] * pts.shape[1], 6), np.float32)
+    rays[:, :2] = pts.reshape(-1, 2)
+    rays[:, 2] = top
+    rays[:, 5] = -1.0
+    t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().reshape(pts.shape[:2])
+    z = np.where(np.isfinite(t), top - t, np.nan)
+    inner, outer = u < -search_m, u > search_m
+    mid = ~inner & ~outer
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-nan rows: profiles off the mesh
+        zi = np.nanmedian(z[:, inner], axis=1)
+        zo = np.nanmedian(z[:, outer], axis=1)
+        spread_i = np.nanpercentile(z[:, inner], 90, axis=1) - np.nanpercentile(z[:, inner], 10, axis=1)
+        spread_o = np.nanpercentile(z[:, outer], 90, axis=1) - np.nanpercentile(z[:, outer], 10, axis=1)
+    rise = zo - zi
+    ok = (np.isfinite(z[:, mid]).all(axis=1) & (spread_i < flat_m) & (spread_o < flat_m)
+          & (rise >= kerb_min_m) & (rise <= kerb_max_m))
+    um = u[mid]
+    for i in np.flatnonzero(ok):
+        low = z[i, mid] <= zi[i] + rise_m
+        if not low.any() or low.all():
+            continue
+        j = int(np.flatnonzero(low).max())  # the last low sample: outward of it the kerb
+        if j + 1 >= len(um) or not (z[i, mid][j + 1:] > zi[i] + rise_m).all():
+            continue  # no clean step (a ramp, a gully, a dip beyond)
+        res[i] = um[j] + step_m / 2
+    return res
+
+
+def lane_edges(lines: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """Both borders of every driving lane outside junctions (``lane_lines``): points (k, 2) and unit
+    normals pointing out of the lane (k, 2). Borders between two lanes are in too: they see no kerb."""
+    P, O = [], []
+    for ln in lines:
+        if ln["junction"] or len(ln["centre"]) < 2:
+            continue
+        for side, sign in (("right", 1.0), ("left", -1.0)):
+            o = sign * (ln[side] - ln["centre"])
+            o /= np.maximum(np.linalg.norm(o, axis=1, keepdims=True), 1e-9)
+            P.append(ln[side])
+            O.append(o)
+    if not P:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    return np.concatenate(P), np.concatenate(O)
+
+
+def refine_to_kerbs(lines: list[dict], tf: Transform2D, vertices: np.ndarray, faces: np.ndarray, *,
+                    max_shift_m: float = 0.3, max_yaw_deg: float = 0.5, min_edges: int = 12,
+                    **kerb_kw) -> KerbFit:
+    """The carriageway edges onto the kerbs' feet: a small rigid correction (yaw about the sections' middle,
+    translation) of ``tf`` by robust least squares on the measured kerb offsets (``kerb_feet``).
+
+    The rigid fit on the road mask is as good as its raster (0.1 m) and its residual rotation shows at
+    the ends of long roads: lanes a few cm over the kerb, where a wheel meets its rounded foot. Only
+    the directions the kerbs constrain move (kerbs along one axis fix nothing along it). Kept only when
+    at least ``min_edges`` edges see a kerb, the correction stays within ``max_shift_m`` /
+    ``max_yaw_deg``, and the median offset shrinks."""
+    p0, o0 = lane_edges(lines)
+    edge, out = tf.apply(p0), tf.apply_dir(o0)
+    d = kerb_feet(edge, out, vertices, faces, **kerb_kw)
+    ok = np.isfinite(d)
+    none = KerbFit(tf, int(ok.sum()), float(np.median(np.abs(d[ok]))) if ok.any() else float("nan"),
+                   float("nan"), (0.0, 0.0), 0.0, False)
+    if ok.sum() < min_edges:
+        none.why = f"{int(ok.sum())} edges see a kerb (at least {min_edges} needed)"
+        return none
+    e, o, r = edge[ok], out[ok], d[ok]
+    a = np.asarray(tf.about) + np.array([tf.tx, tf.ty])  # where the sections' middle went
+    p = e - a
+    A = np.stack([o[:, 0] * -p[:, 1] + o[:, 1] * p[:, 0], o[:, 0], o[:, 1]], 1)
+    x = np.zeros(3)
+    w = np.ones(len(r))
+    for it in range(1, 15):
+        res_ = r - A @ x
+        w = _weights(res_, it + 8, 0.05)  # Tukey around the robust scale: a parked car's edge drops out
+        U, S, Vt = np.linalg.svd(A * np.sqrt(w)[:, None], full_matrices=False)
+        keep = S > 1e-3 * S[0] * np.sqrt(len(r))  # directions no kerb constrains stay where they are
+        x = Vt[keep].T @ ((U[:, keep].T @ (np.sqrt(w) * r)) / S[keep])
+    dyaw, dx, dy = float(x[0]), float(x[1]), float(x[2])
+    after = float(np.median(np.abs(r - A @ x)))
+    fitres = KerbFit(tf, int(ok.sum()), none.before_m, after, (dx, dy), math.degrees(dyaw), False)
+    if math.hypot(dx, dy) > max_shift_m or abs(math.degrees(dyaw)) > max_yaw_deg:
+        fitres.why = "the correction is larger than a refinement may be"
+        return fitres
+    if after >= none.before_m:
+        fitres.why = "no better than before"
+        return fitres
+    # new(x) = R(dyaw) (tf(x) - a) + a + (dx, dy), and tf(x) - a = scale R(yaw) (x - about)
+    fitres.tf = Transform2D(tf.yaw_rad + dyaw, tf.tx + dx, tf.ty + dy, tf.scale, tf.about)
+    fitres.applied = True
+    return fitres

@@ -170,6 +170,8 @@ class AlignParams:
     fit_height: bool = True  # shift the OpenDRIVE elevation to the median road-surface height
     model: str = param("middles", choices=("middles", "edges"))  # residuals: "middles" of the carriageway, or each "edges" with a free extra width per road
     use_labels: bool = True  # fit to the road-labelled surface when labels.npy exists; false: always the ground (curbs)
+    kerbs: bool = True  # then move the lane edges onto the kerbs' feet seen in the mesh (a cm-scale correction)
+    kerb_max_shift_m: float = param(0.3, ge=0)  # ... refused when it would move the network farther than this
 
 
 def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_mesh_ply: Path,
@@ -198,6 +200,17 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=0.0 if from_scan else params.search_m,
               yaw_range_deg=params.yaw_range_deg, huber_m=params.huber_m, margin_m=params.margin_m,
               model=params.model, keep_identity=from_scan)
+    kerb = None
+    if params.kerbs and not from_scan:
+        from .align import lane_lines, refine_to_kerbs
+
+        kerb = refine_to_kerbs(lane_lines(xodr_text, 1.0), res.tf, mesh.v, mesh.f, max_shift_m=params.kerb_max_shift_m)
+        if kerb.applied:
+            res.tf = kerb.tf
+            ctx.log.info("alignment: lane edges onto %d kerb feet: median offset %.3f -> %.3f m (moved %.3f m, %.3f deg)",
+                         kerb.edges, kerb.before_m, kerb.after_m, math.hypot(*kerb.shift_m), kerb.yaw_deg)
+        else:
+            ctx.log.info("alignment: kerb refinement not applied: %s", kerb.why)
     yaw, tx, ty, scale = res.tf.about_origin()
     dz = 0.0
     if params.fit_height:
@@ -223,6 +236,13 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         "model": params.model,
         "note": "residual = RMS offset between carriageway middles of the network and of the mesh's road surface",
     }
+    if kerb is not None:
+        doc["kerbs"] = {"edges": kerb.edges, "applied": kerb.applied, "why_not": kerb.why or None,
+                        "median_offset_before_m": round(kerb.before_m, 4) if math.isfinite(kerb.before_m) else None,
+                        "median_offset_after_m": round(kerb.after_m, 4) if math.isfinite(kerb.after_m) else None,
+                        "shift_m": [round(x, 4) for x in kerb.shift_m], "yaw_deg": round(kerb.yaw_deg, 4),
+                        "note": "lane edges against the foot of the kerb beside them (profiles of vertical rays "
+                                "across each driving lane border); included in yaw_deg / tx_m / ty_m when applied"}
     if from_scan:
         ctx.log.info("alignment: the network was derived from this scan (road_source=scan): kept in place")
     elif res.kept_identity:
@@ -232,8 +252,10 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     out_alignment_json.write_text(json.dumps(doc, indent=1))
     ctx.log.info("alignment: yaw %.3f deg, t (%.3f, %.3f) m, dz %.3f m; residual %.3f m (was %.3f) from %s",
                  doc["yaw_deg"], tx, ty, dz, res.rmse_after, res.rmse_before, how)
-    return {k: doc[k] for k in ("yaw_deg", "tx_m", "ty_m", "dz_m", "residual_rmse_m", "residual_rmse_before_m",
-                                "sections_used", "road_surface_from", "kept_identity")}
+    return {**{k: doc[k] for k in ("yaw_deg", "tx_m", "ty_m", "dz_m", "residual_rmse_m", "residual_rmse_before_m",
+                                   "sections_used", "road_surface_from", "kept_identity")},
+            "kerb_edges": kerb.edges if kerb else 0, "kerb_applied": bool(kerb and kerb.applied),
+            "kerb_offset_after_m": doc.get("kerbs", {}).get("median_offset_after_m")}
 
 
 @dataclass
