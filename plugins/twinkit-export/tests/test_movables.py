@@ -278,10 +278,16 @@ def test_ground_under_a_lifted_car_is_at_road_height(tmp_path):
     out = _lift(tmp_path / "a", files)
     m = read_obj(out["textured_mesh.obj"])
     acts = json.loads((out["movables"] / "actors.json").read_text())
-    assert len(acts["actors"]) == 1 and acts["report"]["feet_vertices_flattened"] > 0
+    # the skirt is open along its top: it goes with the car as a fin (or, kept, its feet are lowered)
+    rep = acts["report"]
+    assert len(acts["actors"]) == 1 and rep.get("fin_faces_peeled", 0) + rep["feet_vertices_flattened"] > 0
     assert drop_test(m.vertices, m.faces, rays).mean() > 0.99
-    # without the flattening the skirt stays: the rays over it meet it 0.3 m up, not the road
-    kept = _lift(tmp_path / "b", files, flatten_feet_m=0.0)
+    fins_off = _lift(tmp_path / "c", files, fin_min_m=0.0)
+    assert json.loads((fins_off["movables"] / "actors.json").read_text())["report"]["feet_vertices_flattened"] > 0
+    m1 = read_obj(fins_off["textured_mesh.obj"])
+    assert drop_test(m1.vertices, m1.faces, rays).mean() > 0.99
+    # with neither, the skirt stays: the rays over it meet it 0.3 m up, not the road
+    kept = _lift(tmp_path / "b", files, flatten_feet_m=0.0, fin_min_m=0.0)
     m0 = read_obj(kept["textured_mesh.obj"])
     assert drop_test(m0.vertices, m0.faces, rays).mean() < 0.97  # the skirt's ring (one 0.2 m grid row) misses
 
@@ -444,3 +450,53 @@ def test_split_along_cuts_at_the_dip_between_two_cars():
     assert split_along(xy[one], _car_profile(u[one]), 0.0) is None
     # a flat wall is not cut
     assert split_along(xy, np.full(len(u), 1.5), 0.0) is None
+
+
+def test_a_fin_at_a_cars_foot_goes_with_it_a_wall_beside_it_stays():
+    """A flap 0.3 m high left standing on the road at a car's corner, its top edge open (what the cut leaves
+    of a bumper's corner), is lifted with the car; a wall 1 m high beside the car, built of a lower and an
+    upper band, keeps both bands (the lower band alone would look like a fin but continues upward)."""
+    from twinkit.mesh import Mesh
+    from twinkit.surface.watertight import open_edges
+    from twinkit_export.movables import lift_movables
+
+    v, f, uv, lab, car = scene(step_m=0.1)
+    v = v.copy()
+    v[:, 2] = np.where(car, CAR_H, 0.0)  # a flat road round the car
+
+    def stand(x0, y0, n, heights):
+        """A vertical strip on the ground along +x from the grid vertex nearest (x0, y0), over n grid edges
+        (shared with the road's faces), in bands up to each height: its new faces."""
+        nonlocal v, lab
+        i0 = int(np.argmin(np.linalg.norm(v[:, :2] - [x0, y0], axis=1)))
+        rows = [list(range(i0, i0 + n + 1))]  # the scene's grid runs along +x within a row
+        for z in heights:
+            rows.append(list(range(len(v), len(v) + n + 1)))
+            v = np.vstack([v, np.c_[v[rows[0], :2], np.full(n + 1, z)]])
+            lab = np.concatenate([lab, lab[rows[0]]])
+        faces = []
+        for lo, hi in zip(rows[:-1], rows[1:]):
+            for j in range(n):
+                faces += [[lo[j], lo[j + 1], hi[j + 1]], [lo[j], hi[j + 1], hi[j]]]
+        return np.array(faces)
+
+    a = math.radians(CAR_YAW)
+    ax, ay = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    corner = CAR_C + ax * (CAR_L / 2 + 0.2) + ay * (CAR_W / 2 + 0.2)
+    fin = stand(*corner, 3, [0.3])
+    side = CAR_C - ay * (CAR_W / 2 + 0.5)
+    wall = stand(*(side - [0.5, 0.0]), 10, [0.4, 1.0])
+    f2 = np.vstack([f, fin, wall])
+    res = lift_movables(Mesh(v, f2), lab)
+    assert len(res.instances) == 1 and res.report.get("fin_faces_peeled", 0) >= 2
+    out = res.mesh
+    near_fin = np.linalg.norm(out.vertices[:, :2] - (corner + [0.15, 0.0]), axis=1) < 0.3
+    assert out.vertices[near_fin, 2].max() < 0.05  # the fin is gone, the road closed where it stood
+    near_wall = np.linalg.norm(out.vertices[:, :2] - side, axis=1) < 0.6
+    assert np.isclose(out.vertices[near_wall, 2].max(), 1.0)
+    assert (np.abs(out.vertices[near_wall, 2] - 0.4) < 1e-6).sum() == 11  # both bands stay
+    mid = out.vertices[open_edges(out.faces)].mean(axis=1)
+    inner = np.abs(mid[:, :2]).max(axis=1) < 9.9
+    # what stays open inside the square is the wall's own outline (a strip: its top and its ends)
+    on_wall = np.linalg.norm(mid[:, :2] - side, axis=1) < 0.7
+    assert np.all(on_wall[inner]), mid[inner & ~on_wall]

@@ -44,6 +44,7 @@ class LiftParams:
     max_fill_extent_m: float = param(3.0, ge=0)  # holes reaching farther than this beyond an object's footprint stay open
     gap_max_m: float = param(1.0, ge=0)  # what no loop fill closes: spots up to this wide that a ray at the ground falls
     #                 through, with surface all round, get a ground patch (found on a 5 cm grid); 0 = off
+    fin_min_m: float = param(0.2, ge=0)  # flaps left at an object's foot, on the open border, above this go with it (0: off)
     ground_hole_max_m: float = param(8.0, ge=0)  # every other hole of the ground up to this wide is closed on the ground
     #                         (the clean step's fill_ground_max_gap_m: a wider gap is unscanned and stays open); 0 = off
 

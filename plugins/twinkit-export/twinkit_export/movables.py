@@ -93,6 +93,8 @@ class LiftOptions:
     #                           (0: a fan / ear clipping of the border, which spans it at the border's heights)
     gap_max_m: float = 1.0  # smaller spots a ray at the ground falls through, surface all round, get a patch; 0 = off
     gap_cell_m: float = 0.05  # ... found and patched on this grid
+    fin_min_m: float = 0.2  # faces left standing at an object's foot, on the open border, above this are peeled
+    #                         off with it (_peel_fins; above a kerb's height); 0 = off
     ground_hole_max_m: float = 8.0  # any other hole of the ground up to this wide is closed at the ground's height
     #                           (the ground fill's limit: wider is an unscanned area); 0 = off
 
@@ -539,6 +541,51 @@ def _patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptio
             np.vstack(out_tc).astype(np.float32) if out_tc else np.zeros((0, 6), np.float32))
 
 
+def _peel_fins(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.ndarray, instances: list[Instance],
+               opt: LiftOptions) -> int:
+    """Fins: what stays of an object's skin at its foot. Faces with a corner below the cut stay in the
+    static mesh, and at a car's lower corner they can stand as a flap up to ``flatten_feet_m`` high, joined
+    to the road, with an open edge along its top (seed 3 of the demo: 0.32 m at a lifted car's corner, open
+    border over a driving lane). A fin is a connected piece of the faces that stay inside an object's
+    footprint + ``margin_m`` + ``debris_margin_m`` and reach more than ``fin_min_m`` (above a kerb) but at
+    most ``flatten_feet_m`` above the ground, that has an open edge and touches nothing higher (a wall or a
+    pole beside the car continues upward and stays; a closed low thing has no open edge and stays). Fins go
+    with the object; the hole closing that follows closes what they leave on the ground. Faces assigned
+    in place (``face_owner``); returns how many."""
+    from twinkit.mesh.topology import edge_face_incidence
+
+    if opt.fin_min_m <= 0 or not instances:
+        return 0
+    boxes = np.full(len(v), -1, np.int64)
+    for inst in instances[::-1]:  # the first instance whose widened footprint holds the vertex
+        inside = _in_box(v[:, :2], inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg,
+                         opt.margin_m + opt.debris_margin_m)
+        boxes[inside] = inst.id
+    rest = np.nonzero(face_owner < 0)[0]
+    hmax = h[f[rest]].max(axis=1)
+    cand = (boxes[f[rest]] >= 0).all(axis=1) & (hmax > opt.fin_min_m) & (hmax <= opt.flatten_feet_m)
+    if not cand.any():
+        return 0
+    high_v = np.zeros(len(v), bool)
+    high_v[f[rest[hmax > opt.flatten_feet_m]].ravel()] = True
+    _, fe, counts = edge_face_incidence(f[rest])
+    on_border = (counts[fe] == 1).any(axis=1)
+    ci = np.nonzero(cand)[0]
+    comp = edge_components(f[rest[ci]])
+    n = int(comp.max()) + 1
+    has_border = np.bincount(comp, weights=on_border[ci], minlength=n) > 0
+    touches_high = np.bincount(comp, weights=high_v[f[rest[ci]]].any(axis=1), minlength=n) > 0
+    take = rest[ci[(has_border & ~touches_high)[comp]]]
+    if len(take) == 0:
+        return 0
+    owner = boxes[f[take, 0]]
+    face_owner[take] = owner
+    by_id = {inst.id: inst for inst in instances}
+    for k in np.unique(owner):
+        by_id[int(k)].faces = np.concatenate([by_id[int(k)].faces, take[owner == k]])
+    return int(len(take))
+
+
 def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None, log=None) -> LiftResult:
     """Cut the movable objects out of ``mesh`` (per-vertex ``labels``); see the module doc."""
     from scipy.sparse import coo_matrix
@@ -643,6 +690,9 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
             if len(cand_f):
                 face_owner[cand_f] = inst.id
                 inst.faces = np.concatenate([inst.faces, cand_f])
+        peeled = _peel_fins(v, f, h, face_owner, instances, opt)
+        if peeled:
+            rep["fin_faces_peeled"] = peeled
         removed = face_owner >= 0
     rep["faces_lifted"] = int(removed.sum())
     # static mesh: the rest, holes closed
