@@ -239,3 +239,44 @@ def test_lane_edges_are_moved_onto_the_kerbs_feet(demo_site, demo_net):
     k0 = refine_to_kerbs(lines, off, flat, m.faces)
     assert not k0.applied and k0.edges == 0 and "kerb" in k0.why
     assert (k0.tf.yaw_rad, k0.tf.tx, k0.tf.ty) == (off.yaw_rad, off.tx, off.ty)
+
+
+def test_a_road_drawn_off_its_neighbours_is_moved_onto_its_own_kerbs(demo_site, demo_net, tmp_path):
+    """One road of the exactly aligned demo network pushed 8 cm sideways (an OSM way drawn off its
+    neighbours: no rigid move fits it) gets a lane offset that brings it back within 2 cm; the others
+    get none; apply_alignment writes it as the road's <laneOffset> and carla.Map reads it."""
+    from twinkit.mesh import read_ply
+    from twinkit_roads.align import Transform2D, lane_lines, road_lane_offsets, set_lane_offsets
+
+    xodr, truth = demo_net
+    site = json.loads(demo_site["site.json"].read_text())["osm_transform"]
+    th = -math.radians(site["rotation_deg"])
+    R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    t = -R @ np.array([site["dx_m"], site["dy_m"]])
+    exact = transform_xodr(xodr.read_text(), th, float(t[0]), float(t[1]))
+    m = read_ply(demo_site["gt_mesh.ply"])
+    lines = lane_lines(exact, 1.0)
+    assert road_lane_offsets(lines, Transform2D(), m.vertices, m.faces) == {}  # in place: under 1 cm, nothing to do
+    # a side street (north-south: its lanes end at the kerbs; the main road's kerbs lie behind parking strips),
+    # pushed 8 cm to its left
+    rid = max({ln["id"][0] for ln in lines if not ln["junction"]},
+              key=lambda r: np.mean([np.abs(ln["centre"][:, 1]).mean() for ln in lines if ln["id"][0] == r]))
+    pushed = set_lane_offsets(exact, {rid: 0.08})
+    off = road_lane_offsets(lane_lines(pushed, 1.0), Transform2D(), m.vertices, m.faces)
+    assert list(off) == [rid] and abs(off[rid] + 0.08) < 0.02, off
+    # through the steps: alignment.json carries it, apply_alignment writes it
+    f = tmp_path / "alignment.json"
+    f.write_text(json.dumps({"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "lane_offsets_m": {str(rid): off[rid]}}))
+    src = tmp_path / "pushed.xodr"
+    src.write_text(pushed)
+    ap = run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap",
+                  {"in_roads_xodr": src, "in_alignment_json": f, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]},
+                  roads.ApplyParams(qa_px_per_m=4), site=DEMO_SITE)
+    b = (-28, -28, 28, 28)
+    assert centreline_rmse(pushed, truth, b)[0] > centreline_rmse(exact, truth, b)[0] + 0.01
+    assert centreline_rmse(ap["aligned.xodr"].read_text(), truth, b)[0] < centreline_rmse(exact, truth, b)[0] + 0.01
+    f.write_text(json.dumps({"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "lane_offsets_m": ["not", "a", "map"]}))
+    with pytest.raises(InputError, match="lane_offsets_m"):
+        run_step(plugin_from_module(roads, "step", "apply_alignment"), tmp_path / "ap2",
+                 {"in_roads_xodr": src, "in_alignment_json": f, "in_textured_mesh_ply": demo_site["gt_mesh.ply"]},
+                 site=DEMO_SITE)

@@ -172,6 +172,7 @@ class AlignParams:
     use_labels: bool = True  # fit to the road-labelled surface when labels.npy exists; false: always the ground (curbs)
     kerbs: bool = True  # then move the lane edges onto the kerbs' feet seen in the mesh (a cm-scale correction)
     kerb_max_shift_m: float = param(0.3, ge=0)  # ... refused when it would move the network farther than this
+    kerb_road_offset_m: float = param(0.15, ge=0)  # then each road sideways onto its own kerbs, up to this (0: off)
 
 
 def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_mesh_ply: Path,
@@ -204,13 +205,23 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     if params.kerbs and not from_scan:
         from .align import lane_lines, refine_to_kerbs
 
-        kerb = refine_to_kerbs(lane_lines(xodr_text, 1.0), res.tf, mesh.v, mesh.f, max_shift_m=params.kerb_max_shift_m)
+        lines = lane_lines(xodr_text, 1.0)
+        kerb = refine_to_kerbs(lines, res.tf, mesh.v, mesh.f, max_shift_m=params.kerb_max_shift_m)
         if kerb.applied:
             res.tf = kerb.tf
             ctx.log.info("alignment: lane edges onto %d kerb feet: median offset %.3f -> %.3f m (moved %.3f m, %.3f deg)",
                          kerb.edges, kerb.before_m, kerb.after_m, math.hypot(*kerb.shift_m), kerb.yaw_deg)
         else:
             ctx.log.info("alignment: kerb refinement not applied: %s", kerb.why)
+    offsets: dict = {}
+    if kerb is not None and params.kerb_road_offset_m > 0:
+        from .align import road_lane_offsets
+
+        offsets = road_lane_offsets(lines, res.tf, mesh.v, mesh.f,
+                                    max_offset_m=params.kerb_road_offset_m)
+        if offsets:
+            ctx.log.info("alignment: %d road(s) moved sideways onto their kerbs: %s", len(offsets),
+                         ", ".join(f"road {k} {v:+.3f} m" for k, v in sorted(offsets.items())))
     yaw, tx, ty, scale = res.tf.about_origin()
     dz = 0.0
     if params.fit_height:
@@ -243,6 +254,10 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
                         "shift_m": [round(x, 4) for x in kerb.shift_m], "yaw_deg": round(kerb.yaw_deg, 4),
                         "note": "lane edges against the foot of the kerb beside them (profiles of vertical rays "
                                 "across each driving lane border); included in yaw_deg / tx_m / ty_m when applied"}
+        doc["lane_offsets_m"] = {str(k): v for k, v in sorted(offsets.items())}
+        doc["lane_offsets_note"] = ("per OpenDRIVE road id: metres to the left of its reference line, added to its "
+                                    "<laneOffset> by apply_alignment after the rigid move (each road onto its own "
+                                    "kerbs); edit or empty it by hand like the numbers above")
     if from_scan:
         ctx.log.info("alignment: the network was derived from this scan (road_source=scan): kept in place")
     elif res.kept_identity:
@@ -270,20 +285,21 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
     """Move the OpenDRIVE by alignment.json (never the mesh) and draw the top-down QA picture."""
     import numpy as np
 
-    from .align import centreline_rmse, lane_lines, transform_xodr
+    from .align import centreline_rmse, lane_lines, set_lane_offsets, transform_xodr
     from .qa import draw_qa
 
     try:
         a = json.loads(in_alignment_json.read_text())
         yaw, tx, ty = math.radians(float(a["yaw_deg"])), float(a["tx_m"]), float(a["ty_m"])
         dz = float(a.get("dz_m", 0.0))
-    except (ValueError, KeyError, TypeError) as exc:
+        offsets = {int(k): float(v) for k, v in (a.get("lane_offsets_m") or {}).items()}
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise InputError(f"{in_alignment_json}: unreadable alignment ({exc}); it needs numbers yaw_deg, tx_m, ty_m "
-                         "(and dz_m)") from None
+                         "(and dz_m; lane_offsets_m: road id -> metres)") from None
     text = in_roads_xodr.read_text(encoding="utf-8")
-    moved = transform_xodr(text, yaw, tx, ty, dz)
+    moved = set_lane_offsets(transform_xodr(text, yaw, tx, ty, dz), offsets)
     out_aligned_xodr.write_text(moved, encoding="utf-8")
-    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz}
+    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets)}
     truth = None
     if in_roads_truth_json is not None:
         tj = json.loads(in_roads_truth_json.read_text())
