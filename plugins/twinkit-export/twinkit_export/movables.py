@@ -93,6 +93,8 @@ class LiftOptions:
     #                           (0: a fan / ear clipping of the border, which spans it at the border's heights)
     gap_max_m: float = 1.0  # smaller spots a ray at the ground falls through, surface all round, get a patch; 0 = off
     gap_cell_m: float = 0.05  # ... found and patched on this grid
+    small_loop_m: float = 1.0  # a loop of open border this short at an object's foot is closed even when it is no
+    #                             hole seen from above (a fold of the cut-off feet); 0 = off
     fin_min_m: float = 0.2  # faces left standing at an object's foot, on the open border, above this are peeled
     #                         off with it (_peel_fins; above a kerb's height); 0 = off
     ground_hole_max_m: float = 8.0  # any other hole of the ground up to this wide is closed at the ground's height
@@ -719,7 +721,7 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
     rep["relabelled_vertices"] = int(stay_mov.sum())
     loops = boundary_loops(kept) if len(kept) else []
     add_v, add_f, add_tc, add_lab = [], [], [], []
-    filled = unfilled = flattened = 0
+    filled = unfilled = flattened = small_closed = 0
     open_why: dict[str, float] = {}
     open_after_m = 0.0
     nv = len(v)
@@ -756,9 +758,16 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                     res = _fill_loop(v, lp)
                     if res is not None:
                         res = (res[0], np.zeros((0, 3)) if res[1] is None else np.asarray(res[1])[None])
+            ln = float(np.linalg.norm(v[lp] - v[np.roll(lp, -1)], axis=1).sum())
+            if res is None and ok_box and hits and ln <= opt.small_loop_m:
+                # a small loop at an object's foot that is no hole seen from above (a fold of the cut-off feet,
+                # 0.5 m round on the default demo, over a driving lane): a fan closes it whatever its orientation
+                ccw = lp[::-1]  # against the surface's own half-edges, as _fill_loop's fan
+                nb = np.roll(np.arange(len(ccw)), -1)
+                res = (np.stack([np.full(len(ccw), nv), ccw, ccw[nb]], axis=1), v[lp].mean(axis=0)[None])
+                small_closed += 1
             if res is None:
                 unfilled += 1
-                ln = float(np.linalg.norm(v[lp] - v[np.roll(lp, -1)], axis=1).sum())
                 open_after_m += ln
                 why = "beyond_footprint" if not ok_box else "not_a_hole" if _signed_area(v[lp[::-1], :2]) <= 0 \
                     else "not_simple"
@@ -785,6 +794,7 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                 add_tc.append(np.zeros((len(faces_new), 6), np.float32))
             filled += 1
     rep.update(loops_filled=filled, loops_left_open=unfilled, open_border_left_m=round(open_after_m, 3),
+               small_loops_closed=small_closed,
                feet_vertices_flattened=flattened,
                open_border_left_by_reason_m=open_why)
     # second pass: ground still missing inside a footprint (the hole ran into a scan shadow reaching the
