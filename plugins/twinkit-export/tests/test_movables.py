@@ -217,15 +217,34 @@ def test_carla_package_with_actors_passes_contract(lifted, class_dir, fbx_out, x
     assert "static.prop.teststreet_scannedcar_000" in listed
 
 
-def test_two_cars_close_together_and_a_person(tmp_path):
-    """Two cars 0.8 m apart stay two objects; a person (0.5 x 0.4 x 1.75 m) is lifted with a walker."""
-    from twinkit_export.lift_step import LiftParams
-
-    step, size = 0.1, 12.0
+def _grid(size: float, step: float) -> np.ndarray:
+    """(n*n, 2) points of a square grid centred on the origin, rows along +x."""
     n = int(size / step) + 1
     xs = np.linspace(-size / 2, size / 2, n)
     gx, gy = np.meshgrid(xs, xs)
-    xy = np.c_[gx.ravel(), gy.ravel()]
+    return np.c_[gx.ravel(), gy.ravel()]
+
+
+def _lift_height_field(tmp_path, xy, z, lab, size):
+    """Triangulate the grid ``xy`` (from :func:`_grid`) at heights ``z``, label it, run lift_movables:
+    (the step's outputs, the actors)."""
+    from twinkit_export.lift_step import LiftParams
+
+    n = int(round(np.sqrt(len(xy))))
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    faces = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]]).astype(np.int64)
+    obj = synthetic.write_obj(tmp_path / "textured_mesh.obj", np.c_[xy, z], faces,
+                              ((xy + size / 2) / size).astype(np.float32), texture_px=64)
+    np.save(tmp_path / "labels.npy", lab)
+    out = run_step(plugin("step", "lift_movables"), tmp_path / "run",
+                   {"in_labels_npy": tmp_path / "labels.npy", "in_textured_mesh_obj": obj}, LiftParams(), site=SITE)
+    return out, json.loads((out["movables"] / "actors.json").read_text())["actors"]
+
+
+def test_two_cars_close_together_and_a_person(tmp_path):
+    """Two cars 0.8 m apart stay two objects; a person (0.5 x 0.4 x 1.75 m) is lifted with a walker."""
+    xy = _grid(12.0, 0.1)
     z = np.zeros(len(xy))
     lab = np.zeros(len(xy), np.uint8)
     for cx in (-2.6, 2.6):
@@ -233,15 +252,7 @@ def test_two_cars_close_together_and_a_person(tmp_path):
         lab[_in_rect(xy, np.array([cx, -2.0]), 4.9, 2.3, 0.0)] = 13
     z[_in_rect(xy, np.array([0.0, 3.0]), 0.5, 0.4, 0.0)] = 1.75
     lab[_in_rect(xy, np.array([0.0, 3.0]), 0.9, 0.8, 0.0)] = 11
-    i = np.arange(n * n).reshape(n, n)
-    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
-    faces = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]]).astype(np.int64)
-    obj = synthetic.write_obj(tmp_path / "textured_mesh.obj", np.c_[xy, z], faces, ((xy + 6) / 12).astype(np.float32),
-                              texture_px=64)
-    np.save(tmp_path / "labels.npy", lab)
-    out = run_step(plugin("step", "lift_movables"), tmp_path / "run",
-                   {"in_labels_npy": tmp_path / "labels.npy", "in_textured_mesh_obj": obj}, LiftParams(), site=SITE)
-    acts = json.loads((out["movables"] / "actors.json").read_text())["actors"]
+    out, acts = _lift_height_field(tmp_path, xy, z, lab, 12.0)
     cars = sorted((a for a in acts if a["class"] == "car"), key=lambda a: a["box"]["center"][0])
     people = [a for a in acts if a["class"] == "person"]
     assert len(cars) == 2 and len(people) == 1, [(a["name"], a["box"]) for a in acts]
@@ -393,13 +404,7 @@ def test_cars_bumper_to_bumper_labelled_person_are_two_cars_by_size(tmp_path):
     seed of the demo calls a car "motorcycle". The shape decides: the 9 m cluster is cut where its
     height dips and each half is a car; the 4.4 m "motorcycle" is a car. A 9 m wall 1.5 m high and 0.3 m
     thick labelled person stays in the static mesh (no vehicle is 0.3 m wide)."""
-    from twinkit_export.lift_step import LiftParams
-
-    step, size = 0.1, 20.0
-    n = int(size / step) + 1
-    xs = np.linspace(-size / 2, size / 2, n)
-    gx, gy = np.meshgrid(xs, xs)
-    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = _grid(20.0, 0.1)
     z = np.zeros(len(xy))
     lab = np.zeros(len(xy), np.uint8)
     for cx in (-2.2, 2.2):  # touching: one cluster 8.8 m long
@@ -412,15 +417,7 @@ def test_cars_bumper_to_bumper_labelled_person_are_two_cars_by_size(tmp_path):
     wall = _in_rect(xy, np.array([0.0, 8.0]), 9.0, 0.3, 0.0)
     z[wall] = 1.5
     lab[_in_rect(xy, np.array([0.0, 8.0]), 9.2, 0.5, 0.0)] = 11
-    i = np.arange(n * n).reshape(n, n)
-    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
-    faces = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]]).astype(np.int64)
-    obj = synthetic.write_obj(tmp_path / "textured_mesh.obj", np.c_[xy, z], faces, ((xy + 10) / 20).astype(np.float32),
-                              texture_px=64)
-    np.save(tmp_path / "labels.npy", lab)
-    out = run_step(plugin("step", "lift_movables"), tmp_path / "run",
-                   {"in_labels_npy": tmp_path / "labels.npy", "in_textured_mesh_obj": obj}, LiftParams(), site=SITE)
-    acts = json.loads((out["movables"] / "actors.json").read_text())["actors"]
+    out, acts = _lift_height_field(tmp_path, xy, z, lab, 20.0)
     assert len(acts) == 3 and all(a["class"] == "car" and a["class_by"] == "size" for a in acts), \
         [(a["name"], a["class_by"], a["box"]) for a in acts]
     row = sorted((a for a in acts if a["box"]["center"][1] < 0), key=lambda a: a["box"]["center"][0])
