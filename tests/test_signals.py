@@ -287,3 +287,29 @@ def test_ctrl_c_stops_fan_out_workers_stuck_in_native_calls(project):
     assert p.returncode == 130, err
     _wait_for(lambda: not any(_alive(w) for w in workers), timeout=10, what="the workers to be killed")
     assert _manifests(project)[-1]["status"] == "interrupted"
+
+
+def test_a_signal_inside_a_logging_lock_is_raised_once_the_lock_is_free():
+    """SIGTERM that lands while the thread holds logging's lock must not raise there (the lock would stay held
+    and any other thread that logs would block for good: a sweep hung so once under load); it is raised
+    a moment later, outside the lock."""
+    script = (
+        "import logging, os, signal, time\n"
+        "from twinkit.signals import _raise_terminated, _logging_lock_held, Terminated\n"
+        "signal.signal(signal.SIGTERM, _raise_terminated)\n"
+        "logging._acquireLock()\n"
+        "try:\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    time.sleep(0.01)\n"
+        "    print('inside: not raised', flush=True)\n"
+        "finally:\n"
+        "    logging._releaseLock()\n"
+        "try:\n"
+        "    time.sleep(2.0)\n"
+        "    print('after: not raised')\n"
+        "except Terminated:\n"
+        "    print('after: raised')\n"
+    )
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split("\n")[:2] == ["inside: not raised", "after: raised"], p.stdout

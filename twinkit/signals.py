@@ -28,8 +28,54 @@ def die_with_parent(parent_pid: int, sig: int = signal.SIGKILL) -> None:
         os._exit(1)
 
 
+def _logging_lock_held() -> bool:
+    """Whether this thread holds the logging module's lock or a handler's lock (an RLock each)."""
+    import logging
+
+    locks = [getattr(logging, "_lock", None)]
+    for ref in list(getattr(logging, "_handlerList", [])):
+        h = ref() if callable(ref) else None
+        locks.append(getattr(h, "lock", None))
+    for lock in locks:
+        owned = getattr(lock, "_is_owned", None)
+        try:
+            if owned is not None and owned():
+                return True
+        except Exception:  # noqa: BLE001
+            continue
+    return False
+
+
+def _later_if_logging(signum) -> bool:
+    """A signal that lands while this thread holds a logging lock must not raise there: the exception would
+    leave the lock held, and another thread that logs (a progress or log-forwarding thread) blocks on it
+    for good, so the process never ends (a sweep stopped with SIGTERM hung so, once, on a loaded machine:
+    the job's traceback ended in logging's _releaseLock). The signal is sent again 50 ms later instead,
+    when the lock is free. True when deferred."""
+    if not _logging_lock_held():
+        return False
+    import threading
+
+    try:
+        t = threading.Timer(0.05, os.kill, (os.getpid(), signum))
+        t.daemon = True
+        t.start()
+    except RuntimeError:  # no new threads at interpreter shutdown: raise now after all
+        return False
+    return True
+
+
 def _raise_terminated(signum, frame):
+    if _later_if_logging(signum):
+        return
     raise Terminated("SIGTERM")
+
+
+def raise_interrupt(signum, frame):
+    """SIGINT as KeyboardInterrupt (:func:`signal.default_int_handler`), never inside a logging lock."""
+    if _later_if_logging(signum):
+        return
+    raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -104,6 +150,8 @@ def forward_to_children():
         exc = Terminated("SIGTERM") if signum == signal.SIGTERM else KeyboardInterrupt()
         children = _children(os.getpid())
         if "exc" in state or not children:  # a second signal, or jobs that run in this process
+            if _later_if_logging(signum):
+                return
             raise exc
         state["exc"] = exc
         for pid in children:

@@ -24,7 +24,7 @@ import time
 import traceback
 from typing import Any, Callable
 
-from twinkit.signals import _raise_terminated, die_with_parent
+from twinkit.signals import _raise_terminated, die_with_parent, raise_interrupt
 
 log = logging.getLogger("twinkit")
 
@@ -55,7 +55,7 @@ def _child(fn: Callable[..., Any], kwargs: dict, w: int, parent: int, threads: i
     code = 0
     try:
         die_with_parent(parent)
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, raise_interrupt)
         signal.signal(signal.SIGTERM, _raise_terminated)
         from twinkit import progress
 
