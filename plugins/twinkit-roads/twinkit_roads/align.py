@@ -450,14 +450,14 @@ def kerb_feet(edge: np.ndarray, out: np.ndarray, vertices: np.ndarray, faces: np
 
     import open3d as o3d
 
+    from twinkit.surface.closest import Surface
+
     edge = np.asarray(edge, float)
     out = np.asarray(out, float)
     res = np.full(len(edge), np.nan)
     if len(edge) == 0:
         return res
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, np.float32)),
-                        o3d.core.Tensor(np.ascontiguousarray(faces, np.uint32)))
+    scene = Surface(np.asarray(vertices, np.float64), np.asarray(faces)).scene
     u = np.arange(-reach_m, reach_m + step_m / 2, step_m)
     pts = edge[:, None, :] + u[None, :, None] * out[:, None, :]
     top = float(vertices[:, 2].max()) + 1.0
@@ -490,21 +490,25 @@ def kerb_feet(edge: np.ndarray, out: np.ndarray, vertices: np.ndarray, faces: np
     return res
 
 
-def lane_edges(lines: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-    """Both borders of every driving lane outside junctions (``lane_lines``): points (k, 2) and unit
-    normals pointing out of the lane (k, 2). Borders between two lanes are in too: they see no kerb."""
-    P, O = [], []
+def lane_edges(lines: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Both borders of every driving lane outside junctions (``lane_lines``): points (k, 2), unit normals
+    pointing out of the lane (k, 2), the OpenDRIVE road id (k,) and the unit normal to the left of the
+    road's reference line (k, 2; lanes with a positive id run against it). Borders between two lanes
+    are in too: they see no kerb."""
+    P, O, R, L = [], [], [], []
     for ln in lines:
         if ln["junction"] or len(ln["centre"]) < 2:
             continue
+        n = ln["right"] - ln["centre"]
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)  # right of travel
         for side, sign in (("right", 1.0), ("left", -1.0)):
-            o = sign * (ln[side] - ln["centre"])
-            o /= np.maximum(np.linalg.norm(o, axis=1, keepdims=True), 1e-9)
             P.append(ln[side])
-            O.append(o)
+            O.append(sign * n)
+            R.append(np.full(len(n), ln["id"][0]))
+            L.append(-n if ln["id"][2] < 0 else n)
     if not P:
-        return np.zeros((0, 2)), np.zeros((0, 2))
-    return np.concatenate(P), np.concatenate(O)
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros((0, 2))
+    return np.concatenate(P), np.concatenate(O), np.concatenate(R), np.concatenate(L)
 
 
 def refine_to_kerbs(lines: list[dict], tf: Transform2D, vertices: np.ndarray, faces: np.ndarray, *,
@@ -518,7 +522,7 @@ def refine_to_kerbs(lines: list[dict], tf: Transform2D, vertices: np.ndarray, fa
     the directions the kerbs constrain move (kerbs along one axis fix nothing along it). Kept only when
     at least ``min_edges`` edges see a kerb, the correction stays within ``max_shift_m`` /
     ``max_yaw_deg``, and the median offset shrinks."""
-    p0, o0 = lane_edges(lines)
+    p0, o0, _, _ = lane_edges(lines)
     edge, out = tf.apply(p0), tf.apply_dir(o0)
     d = kerb_feet(edge, out, vertices, faces, **kerb_kw)
     ok = np.isfinite(d)
@@ -532,7 +536,6 @@ def refine_to_kerbs(lines: list[dict], tf: Transform2D, vertices: np.ndarray, fa
     p = e - a
     A = np.stack([o[:, 0] * -p[:, 1] + o[:, 1] * p[:, 0], o[:, 0], o[:, 1]], 1)
     x = np.zeros(3)
-    w = np.ones(len(r))
     for it in range(1, 15):
         res_ = r - A @ x
         w = _weights(res_, it + 8, 0.05)  # Tukey around the robust scale: a parked car's edge drops out
@@ -564,21 +567,9 @@ def road_lane_offsets(lines: list[dict], tf: Transform2D, vertices: np.ndarray, 
     a few cm off its neighbours keeps its lanes over the kerb (the demo's north side street: 3 cm at
     its east kerb after the rigid fit, the drop test's outermost rays on the kerb's foot). A road whose two
     kerbs ask for opposite shifts (it is narrower or wider than the map says) gets their median."""
-    P, O, L, R = [], [], [], []
-    for ln in lines:
-        if ln["junction"] or len(ln["centre"]) < 2:
-            continue
-        n = ln["right"] - ln["centre"]
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)  # right of travel
-        left_of_ref = -n if ln["id"][2] < 0 else n  # lanes with a positive id run against the reference line
-        for side, sign in (("right", 1.0), ("left", -1.0)):
-            P.append(ln[side])
-            O.append(sign * n)
-            L.append(left_of_ref)
-            R.append(np.full(len(n), ln["id"][0]))
-    if not P:
+    P, O, R, L = lane_edges(lines)
+    if not len(P):
         return {}
-    P, O, L, R = (np.concatenate(a) for a in (P, O, L, R))
     d = kerb_feet(tf.apply(P), tf.apply_dir(O), vertices, faces, **kerb_kw)
     ok = np.isfinite(d)
     dt = d * np.einsum("ij,ij->i", tf.apply_dir(O), tf.apply_dir(L))  # the wanted move, along the road's left
