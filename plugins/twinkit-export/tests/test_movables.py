@@ -461,7 +461,7 @@ def test_a_fin_at_a_cars_foot_goes_with_it_a_wall_beside_it_stays():
     v = v.copy()
     v[:, 2] = np.where(car, CAR_H, 0.0)  # a flat road round the car
 
-    def stand(x0, y0, n, heights):
+    def stand(x0, y0, n, heights, label=None):
         """A vertical strip on the ground along +x from the grid vertex nearest (x0, y0), over n grid edges
         (shared with the road's faces), in bands up to each height: its new faces."""
         nonlocal v, lab
@@ -470,7 +470,7 @@ def test_a_fin_at_a_cars_foot_goes_with_it_a_wall_beside_it_stays():
         for z in heights:
             rows.append(list(range(len(v), len(v) + n + 1)))
             v = np.vstack([v, np.c_[v[rows[0], :2], np.full(n + 1, z)]])
-            lab = np.concatenate([lab, lab[rows[0]]])
+            lab = np.concatenate([lab, lab[rows[0]] if label is None else np.full(n + 1, label, lab.dtype)])
         faces = []
         for lo, hi in zip(rows[:-1], rows[1:]):
             for j in range(n):
@@ -482,7 +482,7 @@ def test_a_fin_at_a_cars_foot_goes_with_it_a_wall_beside_it_stays():
     corner = CAR_C + ax * (CAR_L / 2 + 0.2) + ay * (CAR_W / 2 + 0.2)
     fin = stand(*corner, 3, [0.3])
     side = CAR_C - ay * (CAR_W / 2 + 0.5)
-    wall = stand(*(side - [0.5, 0.0]), 10, [0.4, 1.0])
+    wall = stand(*(side - [4.0, 0.0]), 80, [0.4, 1.0], label=2)  # 8 m of building: beyond the car's footprint
     f2 = np.vstack([f, fin, wall])
     res = lift_movables(Mesh(v, f2), lab)
     assert len(res.instances) == 1 and res.report.get("fin_faces_peeled", 0) >= 2
@@ -491,9 +491,9 @@ def test_a_fin_at_a_cars_foot_goes_with_it_a_wall_beside_it_stays():
     assert out.vertices[near_fin, 2].max() < 0.05  # the fin is gone, the road closed where it stood
     near_wall = np.linalg.norm(out.vertices[:, :2] - side, axis=1) < 0.6
     assert np.isclose(out.vertices[near_wall, 2].max(), 1.0)
-    assert (np.abs(out.vertices[near_wall, 2] - 0.4) < 1e-6).sum() == 11  # both bands stay
+    assert (np.abs(out.vertices[near_wall, 2] - 0.4) < 1e-6).sum() >= 11  # both bands stay
     mid = out.vertices[open_edges(out.faces)].mean(axis=1)
     inner = np.abs(mid[:, :2]).max(axis=1) < 9.9
     # what stays open inside the square is the wall's own outline (a strip: its top and its ends)
-    on_wall = np.linalg.norm(mid[:, :2] - side, axis=1) < 0.7
+    on_wall = (np.abs(mid[:, 0] - side[0]) < 4.1) & (np.abs(mid[:, 1] - side[1]) < 0.1)
     assert np.all(on_wall[inner]), mid[inner & ~on_wall]

@@ -95,8 +95,8 @@ class LiftOptions:
     gap_cell_m: float = 0.05  # ... found and patched on this grid
     small_loop_m: float = 1.0  # a loop of open border this short at an object's foot is closed even when it is no
     #                             hole seen from above (a fold of the cut-off feet); 0 = off
-    fin_min_m: float = 0.2  # faces left standing at an object's foot, on the open border, above this are peeled
-    #                         off with it (_peel_fins; above a kerb's height); 0 = off
+    fin_min_m: float = 0.2  # open pieces left standing at an object's foot higher than this (a kerb) go with it
+    #                         (_peel_fins); 0 = off
     ground_hole_max_m: float = 8.0  # any other hole of the ground up to this wide is closed at the ground's height
     #                           (the ground fill's limit: wider is an unscanned area); 0 = off
 
@@ -548,10 +548,12 @@ def _peel_fins(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.ndarr
     """Fins: what stays of an object's skin at its foot. Faces with a corner below the cut stay in the
     static mesh, and at a car's lower corner they can stand as a flap up to ``flatten_feet_m`` high, joined
     to the road, with an open edge along its top (seed 3 of the demo: 0.32 m at a lifted car's corner, open
-    border over a driving lane). A fin is a connected piece of the faces that stay inside an object's
-    footprint + ``margin_m`` + ``debris_margin_m`` and reach more than ``fin_min_m`` (above a kerb) but at
-    most ``flatten_feet_m`` above the ground, that has an open edge and touches nothing higher (a wall or a
-    pole beside the car continues upward and stays; a closed low thing has no open edge and stays). Fins go
+    border over a driving lane; on seed 0 a motorcycle's front wheel, 0.94 m, beside a 0.3 m hole under a
+    sidewalk lane). A fin is a connected piece of the faces that stay inside an object's footprint +
+    ``margin_m`` + ``debris_margin_m`` and reach more than ``fin_min_m`` (above a kerb) but no higher than
+    the object + ``margin_m``, that has an open edge and touches nothing else that stands up (a wall or a
+    pole beside the car runs on beyond the footprint or above the object and stays; a closed thing has no
+    open edge and stays). Fins go
     with the object; the hole closing that follows closes what they leave on the ground. Faces assigned
     in place (``face_owner``); returns how many."""
     from twinkit.mesh.topology import edge_face_incidence
@@ -563,13 +565,23 @@ def _peel_fins(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.ndarr
         inside = _in_box(v[:, :2], inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg,
                          opt.margin_m + opt.debris_margin_m)
         boxes[inside] = inst.id
+    near = np.full(len(v), -1, np.int64)  # the footprint + margin_m alone: where a tall piece may be a fin
+    for inst in instances[::-1]:
+        near[_in_box(v[:, :2], inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg, opt.margin_m)] = inst.id
+    tops = np.array([inst.size[2] for inst in instances]) + opt.margin_m
     rest = np.nonzero(face_owner < 0)[0]
     hmax = h[f[rest]].max(axis=1)
-    cand = (boxes[f[rest]] >= 0).all(axis=1) & (hmax > opt.fin_min_m) & (hmax <= opt.flatten_feet_m)
+    fb = boxes[f[rest]]
+    cand = (fb >= 0).all(axis=1) & (hmax > opt.fin_min_m)
+    tall = cand & (hmax > opt.flatten_feet_m)
+    # a piece higher than the feet: only within the footprint + margin_m, no higher than the object itself
+    tall_ok = (near[f[rest]] >= 0).all(axis=1)
+    tall_ok[tall_ok] &= hmax[tall_ok] <= tops[near[f[rest[tall_ok], 0]]]
+    cand &= ~tall | tall_ok
     if not cand.any():
         return 0
-    high_v = np.zeros(len(v), bool)
-    high_v[f[rest[hmax > opt.flatten_feet_m]].ravel()] = True
+    high_v = np.zeros(len(v), bool)  # what stands up and is no candidate: a wall, a pole, a sign beside the object
+    high_v[f[rest[~cand & (hmax > opt.fin_min_m)]].ravel()] = True
     _, fe, counts = edge_face_incidence(f[rest])
     on_border = (counts[fe] == 1).any(axis=1)
     ci = np.nonzero(cand)[0]
