@@ -543,6 +543,14 @@ def _patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptio
             np.vstack(out_tc).astype(np.float32) if out_tc else np.zeros((0, 6), np.float32))
 
 
+def _box_owner(v: np.ndarray, instances: list[Instance], margin_m: float) -> np.ndarray:
+    """Per vertex, the id of the first instance whose footprint widened by ``margin_m`` holds it, else -1."""
+    owner = np.full(len(v), -1, np.int64)
+    for inst in instances[::-1]:
+        owner[_in_box(v[:, :2], inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg, margin_m)] = inst.id
+    return owner
+
+
 def _peel_fins(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.ndarray, instances: list[Instance],
                opt: LiftOptions) -> int:
     """Fins: what stays of an object's skin at its foot. Faces with a corner below the cut stay in the
@@ -560,14 +568,8 @@ def _peel_fins(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.ndarr
 
     if opt.fin_min_m <= 0 or not instances:
         return 0
-    boxes = np.full(len(v), -1, np.int64)
-    for inst in instances[::-1]:  # the first instance whose widened footprint holds the vertex
-        inside = _in_box(v[:, :2], inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg,
-                         opt.margin_m + opt.debris_margin_m)
-        boxes[inside] = inst.id
-    near = np.full(len(v), -1, np.int64)  # the footprint + margin_m alone: where a tall piece may be a fin
-    for inst in instances[::-1]:
-        near[_in_box(v[:, :2], inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg, opt.margin_m)] = inst.id
+    boxes = _box_owner(v, instances, opt.margin_m + opt.debris_margin_m)
+    near = _box_owner(v, instances, opt.margin_m)  # the footprint + margin_m alone: where a tall piece may be a fin
     tops = np.array([inst.size[2] for inst in instances]) + opt.margin_m
     rest = np.nonzero(face_owner < 0)[0]
     hmax = h[f[rest]].max(axis=1)
