@@ -7,9 +7,10 @@ The real-data check of view synthesis where no ground truth exists. From a finis
 (``outputs/<site>``, with its sfm/georeference/roi step folders) it
 
 1. holds out every ``--every``-th registered photo (1-based: the 5th, 10th, ...) of ``cameras_site.json``;
-2. builds the mesh and texture again from the rest only: the dense step with the kept cameras, then Poisson
-   (depth 10), clean_mesh (0.08 m), simplify (200,000 faces), bake_texture and photo_texture -- the
-   image_site recipe's chain with its parameters, through the installed plugins (twinkit.testing.run_plugin);
+2. builds the mesh and texture again from the rest only: the dense step with the kept cameras, then Poisson,
+   clean_mesh, simplify, bake_texture and photo_texture -- the image_site recipe's chain with the
+   parameters the run used (read from each step folder's ``step.json``), through the installed plugins
+   (twinkit.testing.run_plugin);
    the poses come from the full run's sfm, so a held-out photo has a pose but gave no pixel to the model;
 3. renders that mesh at each held-out photo's pose (Open3D ray casting, texture looked up per pixel) and
    compares with the photo at ``--max-px`` (long side):
@@ -110,9 +111,23 @@ def compare(photo: np.ndarray, rgb: np.ndarray, hit: np.ndarray, dirs: np.ndarra
             "psnr_db": round(float(psnr), 2)}
 
 
+def _run_params(run: Path, plugin: str) -> dict:
+    """The parameters the run's ``plugin`` step used (its step folder's step.json), so the rebuild measures
+    the run's own settings (e.g. ``steps.dense.cpu_method=patchmatch``), not the plugins' defaults."""
+    for step in sorted(run.glob("[0-9][0-9]_*/step.json"), reverse=True):
+        try:
+            doc = json.loads(step.read_text())
+        except (OSError, ValueError):
+            continue
+        if doc.get("plugin") == plugin:
+            return dict(doc.get("params") or {})
+    print(f"warning: {run} has no {plugin} step; its defaults are used", flush=True)
+    return {}
+
+
 def build_from_rest(run: Path, photos: Path, keep: list[dict], cams_doc: dict, out: Path, dense_px: int) -> Path:
-    """dense -> poisson -> clean -> simplify -> bake -> photo_texture from the kept cameras; returns the
-    textured mesh (PLY with per-face texcoords beside its PNG)."""
+    """dense -> poisson -> clean -> simplify -> bake -> photo_texture from the kept cameras, each with the
+    run's parameters; returns the textured mesh (PLY with per-face texcoords beside its PNG)."""
     from twinkit.testing import run_plugin
 
     cams_rest = out / "cameras_rest.json"
@@ -121,24 +136,32 @@ def build_from_rest(run: Path, photos: Path, keep: list[dict], cams_doc: dict, o
     roi = _latest(run, "roi.json")
     georef = _latest(run, "georef.json")
     sfm = _latest(run, "sfm_report.json").parent / "sfm"
-    over = {"max_image_px": dense_px} if dense_px else {}
+    over = _run_params(run, "step/dense")
+    if dense_px:
+        over["max_image_px"] = dense_px
+    print("dense: " + ", ".join(f"{k}={v}" for k, v in sorted(over.items())), flush=True)
     inputs = {"in_photos_dir": photos, "in_cameras_site_json": cams_rest, "in_sparse_site_ply": sparse,
               "in_roi_json": roi}
     if sfm.is_dir():
         inputs.update({"in_sfm_dir": sfm, "in_georef_json": georef})
+    inputs["in_sfm_report_json"] = _latest(run, "sfm_report.json")
     t = time.perf_counter()
     d = run_plugin("step", "dense", out / "dense", inputs, **over)
     print(f"dense from {len(keep)} photos: {time.perf_counter() - t:.0f} s", flush=True)
-    m = run_plugin("reconstructor", "poisson", out / "poisson", {"in_points_ply": d["points.ply"]}, depth=10)
+    m = run_plugin("reconstructor", "poisson", out / "poisson", {"in_points_ply": d["points.ply"]},
+                   **_run_params(run, "reconstructor/poisson"))
     c = run_plugin("step", "clean_mesh", out / "clean", {"in_dense_mesh_ply": m["dense_mesh.ply"],
-                                                         "in_points_ply": d["points.ply"]}, max_dist_m=0.08)
+                                                         "in_points_ply": d["points.ply"]},
+                   **_run_params(run, "step/clean_mesh"))
     s = run_plugin("step", "simplify", out / "simplify", {"in_clean_mesh_ply": c["clean_mesh.ply"]},
-                   target_faces=200000)
+                   **_run_params(run, "step/simplify"))
     b = run_plugin("step", "bake_texture", out / "bake", {"in_mesh_ply": s["mesh.ply"],
-                                                          "in_clean_mesh_ply": c["clean_mesh.ply"]})
+                                                          "in_clean_mesh_ply": c["clean_mesh.ply"]},
+                   **_run_params(run, "step/bake_texture"))
     p = run_plugin("step", "photo_texture", out / "phototex", {"in_textured_mesh_ply": b["textured_mesh.ply"],
                                                                "in_photos_dir": photos,
-                                                               "in_cameras_site_json": cams_rest})
+                                                               "in_cameras_site_json": cams_rest},
+                   **_run_params(run, "step/photo_texture"))
     print(f"mesh chain done: {time.perf_counter() - t:.0f} s", flush=True)
     return p["textured_mesh.ply"]
 

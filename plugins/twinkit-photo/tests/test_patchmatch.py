@@ -76,9 +76,23 @@ def _street_inputs(tmp_path, photos, cams, depths):
         ok = z > 0
         X = (np.stack([u[ok], v[ok], np.ones(ok.sum())], 1) @ np.linalg.inv(c["K"]).T) * z[ok, None]
         X = X @ c["R_world_from_camera"].T + c["center"]
-        vis_i += [name] * len(X)
-        vis_p += list(range(len(pts), len(pts) + len(X)))
         pts.extend(X.tolist())
+    # as in a real SfM model, a point is seen by every photo where it lands unoccluded in the frame
+    P = np.asarray(pts)
+    for i, (c, d) in enumerate(zip(cams, depths)):
+        Xc = (P - c["center"]) @ c["R_world_from_camera"]
+        uv = Xc @ c["K"].T
+        z = Xc[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.round(uv[:, 0] / z)
+            v = np.round(uv[:, 1] / z)
+        h, w = d.shape
+        ins = (z > 0.1) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        k = np.flatnonzero(ins)
+        dz = d[v[k].astype(int), u[k].astype(int)]
+        k = k[np.abs(dz - z[k]) < 0.02 * z[k]]
+        vis_i += [f"{i:02d}.png"] * len(k)
+        vis_p += k.tolist()
     (tmp_path / "cameras_site.json").write_text(json.dumps({"cameras": out}))
     photo._write_cloud(tmp_path / "sparse_site.ply", np.asarray(pts))
     np.savez_compressed(tmp_path / "sparse_site.npz", vis_image=np.array(vis_i), vis_point=np.array(vis_p, np.int64))
@@ -111,3 +125,49 @@ def test_dense_step_on_a_walked_street_keeps_road_and_facades(tmp_path):
     assert np.median(dist) < 0.05
     assert (P[:, 2] < 0.1).sum() > 1000  # the road
     assert ((np.abs(P[:, 0] + 4) < 0.1) | (np.abs(P[:, 0] - 5) < 0.1)).sum() > 300  # the façades
+
+
+def _corridor(step_m: float, n: int, back_facing: int | None = None):
+    """Photos walked forward (+y) between two textured walls 4 m either side; SfM points on the walls and
+    the road, seen by the photos whose frustum holds them."""
+    rng = np.random.default_rng(0)
+    K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+    ys = rng.uniform(-10, step_m * n + 40, 3000)
+    side = rng.choice([-4.0, 4.0, 0.0], 3000)
+    pts = np.stack([np.where(side == 0, rng.uniform(-4, 4, 3000), side), ys,
+                    np.where(side == 0, -1.6, rng.uniform(-1.6, 4, 3000))], 1)
+    fwd = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # camera x right, y down, z along +y (world)
+    views, vis = [], {}
+    for i in range(n):
+        R = fwd.copy()
+        if i == back_facing:
+            R = R @ np.diag([-1.0, 1.0, -1.0])  # turned round: looks along -y
+        v = D.View(f"{i:02d}.jpg", K, R, np.array([0.0, i * step_m, 0.0]), np.zeros((480, 640), np.float32),
+                   np.zeros((480, 640, 3), np.uint8))
+        Xc = (pts - v.C) @ R
+        uv = Xc @ K.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            seen = (Xc[:, 2] > 0.5) & (Xc[:, 2] < 40) & (np.abs(uv[:, 0] / uv[:, 2] - 320) < 320) \
+                & (np.abs(uv[:, 1] / uv[:, 2] - 240) < 240)
+        vis[v.name] = np.flatnonzero(seen)
+        v.dmin, v.dmax = float(Xc[seen, 2].min()), float(Xc[seen, 2].max())
+        views.append(v)
+    return views, vis, pts
+
+
+def test_neighbours_of_a_forward_walk_come_from_the_shared_points_angles():
+    views, vis, pts = _corridor(step_m=4.0, n=8, back_facing=7)
+    opt = D.DenseOptions()
+    nb = D.choose_neighbors(views, vis, opt, pts)
+    names = {i: sorted(views[j].name for j in nb[i]) for i in nb}
+    for i in range(1, 6):
+        # photos 4-12 m ahead and behind see the same walls from well-spread angles: four neighbours each
+        assert len(nb[i]) == opt.neighbors, names[i]
+        assert all(abs(j - i) <= 3 for j in nb[i]), names[i]
+        assert 7 not in nb[i]  # the photo turned round sees the walls from behind the walk: no pair
+    # the single angle at the photo's middle depth (no SfM points) calls photos 8-12 m away too wide, though
+    # the walls beside the walk are seen from 10-30 degrees apart: fewer neighbours
+    old = D.choose_neighbors(views, vis, opt)
+    assert sum(len(old[i]) for i in range(1, 6)) < sum(len(nb[i]) for i in range(1, 6))
+    ang = D.pair_angles(pts, np.intersect1d(vis["02.jpg"], vis["04.jpg"]), views[2].C, views[4].C)
+    assert np.percentile(ang, 90) > opt.min_angle_deg and np.median(ang) < opt.max_angle_deg

@@ -284,3 +284,20 @@ def test_level_takes_the_vertical_lines_over_the_photos_horizon_within_30_degree
     far = np.array([0, math.sin(math.radians(51)), math.cos(math.radians(51))])
     _, info = level(C, R_wc, np.zeros((0, 3)), vertical=(far, info_lines))
     assert info["up_from"] == "camera_horizon"
+
+
+def test_fusion_tolerance_follows_the_sfm_reprojection_error(tmp_path):
+    from twinkit_photo.plugin import fusion_tolerance
+
+    rep = tmp_path / "sfm_report.json"
+    assert fusion_tolerance(0.02, rep) == (0.02, "given")  # a given tolerance is used as it is
+    assert fusion_tolerance(-1, None)[0] == pytest.approx(0.003)  # nothing known: the demo's tolerance
+    rep.write_text('{"mean_reprojection_error_px": 0.30}')
+    assert fusion_tolerance(-1, rep)[0] == pytest.approx(0.003)  # never tighter than 0.3 %
+    rep.write_text('{"mean_reprojection_error_px": 0.70}')
+    tol, why = fusion_tolerance(-1, rep)
+    assert tol == pytest.approx(0.006) and "0.70 px" in why  # twice the pose error: twice the tolerance
+    rep.write_text('{"mean_reprojection_error_px": 3.5}')
+    assert fusion_tolerance(-1, rep)[0] == pytest.approx(0.01)  # capped
+    rep.write_text("{not json")
+    assert fusion_tolerance(-1, rep)[0] == pytest.approx(0.003)

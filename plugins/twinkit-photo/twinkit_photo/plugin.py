@@ -87,17 +87,21 @@ class DenseParams:
 
     backend: str = param("auto", choices=("auto", "cpu", "patchmatch"))  # auto (patchmatch when pycolmap has CUDA, else cpu) | cpu | patchmatch
     # the CPU backend's matcher: patchmatch (per-pixel slanted planes, propagation, best-of-neighbours NCC;
-    # twinkit_photo/patchmatch.py) or sweep (the plane sweep over four plane families)
-    # sweep stays the default until PatchMatch meets the demo's 3 cm mesh target (27 Nov 2026: 3.17 cm, one run;
-    # the sweep 2.76-2.93); PatchMatch is what a walked street needs (Lund: 153 -> 1,109 points per photo)
-    cpu_method: str = param("sweep", choices=("patchmatch", "sweep"))
+    # twinkit_photo/patchmatch.py) or sweep (the plane sweep over four plane families). PatchMatch is the default
+    # since 28 Nov 2026: with the neighbours chosen by the shared points' angles it meets the demo's 3 cm mesh
+    # target (2.82 cm) and keeps 6-20x the sweep's points on a walked street (docs/photo.md)
+    cpu_method: str = param("patchmatch", choices=("patchmatch", "sweep"))
     max_image_px: int = param(640, ge=16, le=16384)  # working resolution (long side)
     planes: int = param(192, ge=2, le=4096)  # most planes per plane family of the coarse sweep
     neighbors: int = param(4, ge=1)
     window_px: int = param(7, ge=1, le=63)
     min_ncc: float = param(0.55, ge=-1, le=1)
     min_consistent: int = param(2, ge=0)  # other depth maps that must agree
-    rel_tol: float = param(0.003, gt=0)  # agreement: |depth difference| < rel_tol * depth
+    # agreement: |depth difference| < rel_tol * depth. -1 = auto: 0.3 % for photos whose SfM model reprojects
+    # within 0.35 px (the demo's GCP-georeferenced model: the tightest tolerance that keeps its 3 cm), growing in
+    # proportion to the model's mean reprojection error (sfm_report.json) up to 1 %: depth maps cannot agree
+    # better than the poses they were computed from (Lund, 0.68 px: 0.58 %)
+    rel_tol: float = param(-1.0, gt=0, also=(-1,))
     average_depths: bool = True  # a kept point's depth is the mean of the depth maps that agree with it
     voxel_m: float = param(0.02, ge=0)  # merge duplicate points per voxel (0 = off)
     coarse_scale: float = param(0.25, gt=0, le=1)
@@ -654,7 +658,7 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
 
 def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json: Path, in_sparse_site_ply: Path,
           in_roi_json: Path, out_points_ply: Path, out_points_meta_json: Path, in_sfm_dir: Path | None = None,
-          in_georef_json: Path | None = None) -> dict:
+          in_georef_json: Path | None = None, in_sfm_report_json: Path | None = None) -> dict:
     """Depth map per photo, fused to a coloured cloud with normals (what read_cloud writes): our CPU
     PatchMatch (or plane sweep), or COLMAP's patch-match stereo where pycolmap has CUDA (needs the sfm
     model and georef.json)."""
@@ -701,9 +705,11 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
     for name, p in zip(visz["vis_image"].tolist(), visz["vis_point"].tolist()):
         vis.setdefault(name, []).append(p)
     vis_arr = {k: np.asarray(v, np.int64) for k, v in vis.items()}
+    rel_tol, rel_why = fusion_tolerance(params.rel_tol, in_sfm_report_json)
+    ctx.log.info("dense: fusion tolerance %.2f %% of the depth (%s)", 100 * rel_tol, rel_why)
     opt = D.DenseOptions(max_image_px=params.max_image_px, planes=params.planes, neighbors=params.neighbors,
                          window_px=params.window_px, min_ncc=params.min_ncc, min_consistent=params.min_consistent,
-                         rel_tol=params.rel_tol, average_depths=params.average_depths, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
+                         rel_tol=rel_tol, average_depths=params.average_depths, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
                          refine_passes=params.refine_passes, threads=_threads(ctx))
     from .patchmatch import PMOptions
 
@@ -712,7 +718,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                    threads=opt.threads)
     views = D.load_views(Path(in_photos_dir), cams, opt.max_image_px)
     D.depth_ranges(views, sp, vis_arr, max_depth)
-    nb = D.choose_neighbors(views, vis_arr, opt)
+    nb = D.choose_neighbors(views, vis_arr, opt, sp)
     ground = roi_doc.get("ground") or {}
     if params.cpu_method == "patchmatch" and "normal" in ground and "z_m" in ground:
         D.near_limit_from_ground(views, ground["normal"], float(ground["z_m"]))  # after the neighbour choice
@@ -741,7 +747,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                                     out_points_meta_json, f"{params.cpu_method} + fusion",
                                     "depth maps" if params.cpu_method == "sweep" else "patchmatch planes", dense_info={
                                         "backend": "cpu", "method": params.cpu_method, "depth_maps": n_maps, "photos": len(views),
-                                        "working_px": params.max_image_px,
+                                        "working_px": params.max_image_px, "rel_tol": rel_tol, "rel_tol_from": rel_why,
                                         "neighbours": {views[i].name: [views[j].name for j in nb[i]] for i in nb},
                                         "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean()))
                                                         for v in views},
@@ -756,6 +762,29 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
             "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)}
 
 
+FUSION_TOL_BASE = 0.003  # relative depth agreement for a model that reprojects within FUSION_TOL_AT_PX
+FUSION_TOL_AT_PX = 0.35
+FUSION_TOL_MAX = 0.01
+
+
+def fusion_tolerance(rel_tol: float, sfm_report_json: Path | None) -> tuple[float, str]:
+    """The fusion's relative depth tolerance and where it came from: the given one, or (-1) scaled with the
+    SfM model's mean reprojection error -- the poses' own disagreement with the photos, which no pair of
+    depth maps computed from them can beat."""
+    if rel_tol > 0:
+        return float(rel_tol), "given"
+    err = None
+    if sfm_report_json is not None and Path(sfm_report_json).is_file():
+        try:
+            err = float(json.loads(Path(sfm_report_json).read_text())["mean_reprojection_error_px"])
+        except (OSError, ValueError, KeyError, TypeError):
+            err = None
+    if err is None or not err > 0:
+        return FUSION_TOL_BASE, "auto: no SfM reprojection error known"
+    tol = min(FUSION_TOL_MAX, FUSION_TOL_BASE * max(1.0, err / FUSION_TOL_AT_PX))
+    return tol, f"auto: SfM mean reprojection error {err:.2f} px"
+
+
 def _dense_gate(ctx, written: int, n_maps: int, params: DenseParams, backend: str) -> None:
     """A dense cloud far too thin for a street: say so (the run ends degraded), with what to try."""
     per = written / max(n_maps, 1)
@@ -764,7 +793,8 @@ def _dense_gate(ctx, written: int, n_maps: int, params: DenseParams, backend: st
                      f"under {params.degraded_below_points_per_photo:,}): the mesh will cover a small part of what "
                      f"was photographed",
                      ("steps.dense.cpu_method=patchmatch (the CPU PatchMatch: a walked street keeps 7x the points); "
-                      if params.cpu_method == "sweep" and backend == "cpu" else "")
+                      if params.cpu_method == "sweep" and backend == "cpu" else
+                      "steps.dense.rel_tol=0.01 (a looser agreement between depth maps); " if backend == "cpu" else "")
                      + "photos with more overlap and texture; on a CUDA machine steps.dense.backend=patchmatch")
 
 
