@@ -171,3 +171,25 @@ def test_neighbours_of_a_forward_walk_come_from_the_shared_points_angles():
     assert sum(len(old[i]) for i in range(1, 6)) < sum(len(nb[i]) for i in range(1, 6))
     ang = D.pair_angles(pts, np.intersect1d(vis["02.jpg"], vis["04.jpg"]), views[2].C, views[4].C)
     assert np.percentile(ang, 90) > opt.min_angle_deg and np.median(ang) < opt.max_angle_deg
+
+
+def test_fusion_drops_points_that_only_near_parallel_rays_agree_on():
+    """A point confirmed only by a photo 5 cm away (0.3 degrees apart at 10 m) is not kept; one that a photo
+    2 m away (11 degrees) also confirms is."""
+    K = np.array([[100.0, 0, 40], [0, 100.0, 30], [0, 0, 1]])
+
+    def view(name, x):
+        v = D.View(name, K, np.eye(3), np.array([x, 0.0, 0.0]), np.zeros((60, 80), np.float32),
+                   np.zeros((60, 80, 3), np.uint8))
+        v.depth = np.full((60, 80), 10.0, np.float32)  # a wall 10 m ahead, facing the photos
+        v.normal = np.broadcast_to(np.array([0.0, 0.0, -1.0]), (60, 80, 3)).copy()
+        return v
+
+    a, b, c = view("a", 0.0), view("b", 0.05), view("c", 2.0)
+    c.depth[:, :40] = 0  # the wide-baseline photo has no depth on the left half of its view: world x < 2 m
+    for angle, both in ((0.0, True), (3.0, False)):
+        xyz, _, _, src = D.fuse([a, b, c], D.DenseOptions(min_consistent=1, rel_tol=0.003,
+                                                          min_triangulation_deg=angle))
+        from_a = xyz[src == 0]
+        assert (from_a[:, 0] > 2.5).sum() > 500  # the part c sees: kept either way
+        assert ((from_a[:, 0] < 1.5).sum() > 500) == both, angle

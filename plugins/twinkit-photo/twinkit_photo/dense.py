@@ -55,6 +55,7 @@ class DenseOptions:
     coarse_scale: float = 0.25  # resolution of the coarse sweep (0.5 = half: 4x faster, less reliable)
     threads: int = 2
     average_depths: bool = True  # fuse: average each point's depth with the depth maps that agree
+    min_triangulation_deg: float = 0.0  # fuse: keep a point only if an agreeing map sees it this far apart
 
 
 @dataclass
@@ -459,6 +460,11 @@ def fuse(views: list[View], opt: DenseOptions, progress=None):
         P = pts[valid]
         cnt = np.zeros(len(P), np.int32)
         ratio_sum = np.ones(len(P), np.float64)  # this view's own depth counts once (ratio 1)
+        min_ang = opt.min_triangulation_deg
+        best_cos = np.ones(len(P), np.float64) if min_ang > 0 else None
+        if best_cos is not None:
+            ray_i = P - v.C
+            ray_i /= np.maximum(np.linalg.norm(ray_i, axis=1, keepdims=True), 1e-12)
         for j, o in enumerate(views):
             if j == i or o.depth is None:
                 continue
@@ -477,8 +483,15 @@ def fuse(views: list[View], opt: DenseOptions, progress=None):
             dz[inside] = o.depth[vv[inside], u[inside]]
             ok = inside & (dz > 0) & (np.abs(dz - z) < opt.rel_tol * z)
             cnt += ok
+            if best_cos is not None and ok.any():
+                k = np.flatnonzero(ok)
+                ray_j = P[k] - o.C
+                c = np.sum(ray_i[k] * ray_j, 1) / np.maximum(np.linalg.norm(ray_j, axis=1), 1e-12)
+                best_cos[k] = np.minimum(best_cos[k], c)
             ratio_sum[ok] += dz[ok] / z[ok]
         keep = cnt >= opt.min_consistent
+        if best_cos is not None:
+            keep &= best_cos <= np.cos(np.radians(min_ang))
         if opt.average_depths:
             # average the agreeing depth maps: the other view's depth over the predicted one is, for the
             # small baselines of neighbouring photos, the same ratio along this view's ray; noise falls ~1/sqrt(n)
