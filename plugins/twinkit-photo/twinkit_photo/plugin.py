@@ -89,7 +89,7 @@ class DenseParams:
     # the CPU backend's matcher: patchmatch (per-pixel slanted planes, propagation, best-of-neighbours NCC;
     # twinkit_photo/patchmatch.py) or sweep (the plane sweep over four plane families). PatchMatch is the default
     # since 28 Nov 2026: with the neighbours chosen by the shared points' angles it meets the demo's 3 cm mesh
-    # target (2.82 cm) and keeps 6-20x the sweep's points on a walked street (docs/photo.md)
+    # target (2.75 cm with min_triangulation_deg) and keeps 6-20x the sweep's points on a walked street (docs/photo.md)
     cpu_method: str = param("patchmatch", choices=("patchmatch", "sweep"))
     max_image_px: int = param(640, ge=16, le=16384)  # working resolution (long side)
     planes: int = param(192, ge=2, le=4096)  # most planes per plane family of the coarse sweep
@@ -100,7 +100,7 @@ class DenseParams:
     # agreement: |depth difference| < rel_tol * depth. -1 = auto: 0.3 % for photos whose SfM model reprojects
     # within 0.35 px (the demo's GCP-georeferenced model: the tightest tolerance that keeps its 3 cm), growing in
     # proportion to the model's mean reprojection error (sfm_report.json) up to 1 %: depth maps cannot agree
-    # better than the poses they were computed from (Lund, 0.68 px: 0.58 %)
+    # better than the poses they were computed from (Lund, 0.68 px: 0.59 %)
     rel_tol: float = param(-1.0, gt=0, also=(-1,))
     average_depths: bool = True  # a kept point's depth is the mean of the depth maps that agree with it
     # a kept point needs an agreeing depth map whose photo sees it at least this angle apart (COLMAP's
