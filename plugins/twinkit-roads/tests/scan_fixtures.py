@@ -37,12 +37,23 @@ def cross_mesh(half_m: float = 40.0, main_half_m: float = 8.7, side_half_m: floa
 
 
 def aerial_lane(half_m: float = 40.0, road_half_m: float = 3.0, bank_m: float = 0.4, slope: float = 0.05,
-                spill_m: float = 10.0, step_m: float = 0.5):
+                spill_m: float = 10.0, step_m: float = 0.5, specks: float = 0.0, river_m: float = 0.0,
+                sidewalk_share: float = 0.0, seed: int = 0):
     """What an aerial scan of a rural street gives (issue 28, the IGN village): a grey lane ``2 x road_half_m``
     wide along x on a low embankment (``bank_m`` above the fields, so the carriageway is not the local lowest
     level), no curbs, the whole ground sloping ``slope`` along x, green fields either side. The labels take
     the lane as road and spill ``spill_m`` onto the field north of it (a street-level model reading a field
-    from above). Returns vertices, triangles, labels, RGB colours and the true axis (y = 0)."""
+    from above). Options for what real aerial scans add:
+
+    - ``specks``: this share of the field's vertices grey and labelled road (shadows, gravel, path stones);
+    - ``sidewalk_share``: this share of the lane's vertices labelled sidewalk (a model looking down at a
+      street without kerbs calls much of it sidewalk);
+    - ``river_m``: a band of water this wide south of the lane (from y = -20 m), flat, 0.3 m below the
+      fields, grey and labelled sidewalk: lidar gets few returns from water (``water`` in the returned
+      mask marks its vertices, for a cloud thinned there).
+
+    Returns vertices, triangles, labels, RGB colours, the true axis (y = 0) and the water mask."""
+    rng = np.random.default_rng(seed)
     xs = np.arange(-half_m, half_m + 1e-9, step_m)
     X, Y = np.meshgrid(xs, xs)
     x, y = X.ravel(), Y.ravel()
@@ -52,12 +63,23 @@ def aerial_lane(half_m: float = 40.0, road_half_m: float = 3.0, bank_m: float = 
     z = slope * x + bank_m * (1.0 - shoulder)
     lab = np.where(road | ((y > 0) & (y < road_half_m + spill_m)), ROAD, TERRAIN).astype(np.uint8)
     rgb = np.where(road[:, None], np.array([118, 116, 112]), np.array([92, 140, 58])).astype(np.uint8)
+    water = (y <= -20.0) & (y > -20.0 - river_m)
+    if river_m > 0:
+        z = np.where(water, slope * x - 0.3, z)
+        lab[water] = SIDEWALK
+        rgb[water] = (96, 98, 101)
+    if specks > 0:
+        sp = ~road & ~water & (rng.random(len(x)) < specks)
+        lab[sp] = ROAD
+        rgb[sp] = (120, 118, 116)
+    if sidewalk_share > 0:
+        lab[road & (rng.random(len(x)) < sidewalk_share)] = SIDEWALK
     v = np.stack([x, y, z], 1)
     n = len(xs)
     i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
     a = (i * n + j).ravel()
     f = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
-    return v, f.astype(np.int64), lab, rgb, np.array([[-half_m, 0.0], [half_m, 0.0]])
+    return v, f.astype(np.int64), lab, rgb, np.array([[-half_m, 0.0], [half_m, 0.0]]), water
 
 
 def cambered_street(half_m: float = 40.0, road_half_m: float = 7.0, camber: float = 0.02, grade: float = 0.03,

@@ -198,9 +198,22 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     # against a cruder road surface (the ground level, which takes ramped sidewalks too), can only move it
     # off (Lille: turned 2.6 deg, lanes onto the curb); it is measured, not applied
     from_scan = 'code="twinkit_road_source" value="scan"' in xodr_text[:4000]
-    res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=0.0 if from_scan else params.search_m,
-              yaw_range_deg=params.yaw_range_deg, huber_m=params.huber_m, margin_m=params.margin_m,
-              model=params.model, keep_identity=from_scan)
+    try:
+        res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=0.0 if from_scan else params.search_m,
+                  yaw_range_deg=params.yaw_range_deg, huber_m=params.huber_m, margin_m=params.margin_m,
+                  model=params.model, keep_identity=from_scan)
+    except InputError as exc:
+        if not from_scan:
+            raise
+        # the scan's own network stays where it was drawn whatever the fit says; that the cruder surface
+        # here (road labels or the ground level) does not find it is no reason to stop the run (Autzen:
+        # paths drawn on paved-looking grey ground the ground test does not take)
+        from .align import FitResult, Transform2D
+
+        ctx.log.warning("alignment: the scan's own network is kept in place; its residual is not measured (%s)", exc)
+        nan = float("nan")
+        res = FitResult(Transform2D(about=tuple(sec.c.mean(0)) if len(sec.c) else (0.0, 0.0)), nan, nan,
+                        len(sec.c), 0, 0, False, kept_identity=True)
     kerb = None
     if params.kerbs and not from_scan:
         from .align import lane_lines, refine_to_kerbs
@@ -234,6 +247,8 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         hit = np.isfinite(d)
         if hit.sum() >= 6:
             dz = float(np.median(mesh.v[rv[i[hit]], 2] - sec.z[hit]))
+        elif from_scan:  # the scan's network carries the scanned heights already
+            dz = 0.0
         else:  # the middles find no road vertex near them: the medians of the whole surface and network
             dz = float(np.median(mesh.v[rv, 2]) - np.median(sec.z))
     doc = {
@@ -241,7 +256,8 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         "scale_estimate": round(scale, 6),
         "definition": "aligned_xy = Rz(yaw_deg) @ xy + [tx_m, ty_m] about the site origin; z += dz_m. "
                       "Edit the numbers and re-run: later steps use your values.",
-        "residual_rmse_m": round(res.rmse_after, 4), "residual_rmse_before_m": round(res.rmse_before, 4),
+        "residual_rmse_m": round(res.rmse_after, 4) if math.isfinite(res.rmse_after) else None,
+        "residual_rmse_before_m": round(res.rmse_before, 4) if math.isfinite(res.rmse_before) else None,
         "sections": res.n_sections, "sections_used": res.n_used, "iterations": res.iterations,
         "degenerate": res.degenerate, "kept_identity": res.kept_identity, "road_surface_from": how,
         "model": params.model,

@@ -57,6 +57,14 @@ class ScanSourceParams:
     # without curbs: paved surface is grey; a face whose colour saturation ((max - min) / max of its
     # vertices' RGB) is above this is not carriageway (grass, gardens, roofs' tiles). 1: colour not used
     grey_max_saturation: float = param(0.10, gt=0, le=1)
+    # without curbs, and with the cloud (points.ply): a carriageway is surface the scanner measured at its
+    # usual density. Water and unscanned gaps return few lidar points and the mesh bridges them with
+    # invented grey surface; a pixel whose 2 m neighbourhood holds less than this share of the cloud's
+    # median density is not carriageway. 0: not used
+    min_point_density: float = param(0.25, ge=0, le=1)
+    # without curbs: a carriageway pixel has most of the pixels in a square this wide (half the narrowest
+    # road) paved-looking; single grey specks (shadows, gravel, path stones) are not. 0: not used
+    majority_m: float = param(1.5, ge=0, le=10)
     label_margin_m: float = param(1.5, ge=0, le=10)  # carriageway-level surface this far beyond the road labels is still road
     min_road_width_m: float = param(3.0, gt=0)  # narrower carriageway (driveways, gaps) is not a road
     min_road_length_m: float = param(8.0, gt=0)  # shorter arms (spurs of the mask's corners) are pruned
@@ -74,6 +82,13 @@ class ScanSourceParams:
     traffic_light_radius_m: float = param(12.0, ge=0)  # traffic-light labels within this of a junction's edge: a signalised junction
     min_traffic_light_vertices: int = param(20, ge=0)  # ...at least this many such vertices
     sample_m: float = param(2.0, gt=0, le=20)  # spacing of the road shape points
+    # the map netconvert builds is checked against the scan (check_lanes): a driving-lane sample is on the
+    # scan when the surface lies within lane_tol_m of the lane's height; a road's stretch, or a junction,
+    # with less than min_lane_support of its samples on it (the lanes float over a bank or sink into a
+    # slope) is cut out, or the junction taken apart, and netconvert runs again (up to lane_check_rounds)
+    lane_tol_m: float = param(0.3, gt=0, le=2)
+    min_lane_support: float = param(0.8, ge=0, le=1)
+    lane_check_rounds: int = param(3, ge=0, le=10)
     timeout_s: float = param(300.0, gt=0)  # netconvert wall-clock limit
 
 
@@ -125,12 +140,14 @@ def _level_faces(v, f, curb_tol_m) -> np.ndarray:
 
 
 def _grey_ground(v, f, labels, rgb, p: ScanSourceParams) -> tuple[np.ndarray, str]:
-    """Faces of the carriageway where the scan shows no curbs: road-labelled, facing up, grey."""
+    """Faces of the carriageway where the scan shows no curbs: paved-labelled (road or sidewalk: without a
+    kerb the two are one surface, and a 2D model looking down at a street calls much of it sidewalk), facing
+    up, grey."""
     from .mesh2d import Mesh, face_normals_z
 
-    sel = np.flatnonzero((labels[f] == ROAD).sum(1) >= 2)
+    sel = np.flatnonzero(np.isin(labels[f], (ROAD, SIDEWALK)).sum(1) >= 2)
     sel = sel[face_normals_z(Mesh(v, f, None, None), sel) > 0.9]
-    how = "road labels, facing up"
+    how = "road or sidewalk labels, facing up"
     if rgb is not None and p.grey_max_saturation < 1:
         c = rgb[f[sel]].astype(np.float64).mean(1)
         sat = (c.max(1) - c.min(1)) / np.maximum(c.max(1), 1.0)
@@ -139,10 +156,26 @@ def _grey_ground(v, f, labels, rgb, p: ScanSourceParams) -> tuple[np.ndarray, st
     return sel, how
 
 
+def measured(points_xy: np.ndarray, grid, share: float) -> tuple[np.ndarray, float]:
+    """Pixels whose 2 m neighbourhood holds at least ``share`` of the cloud's median point density (points
+    per m^2 over the pixels with any point near), and that median."""
+    from scipy import ndimage
+
+    px = np.floor(grid.to_px(points_xy)).astype(int)
+    ok = (px[:, 0] >= 0) & (px[:, 0] < grid.w) & (px[:, 1] >= 0) & (px[:, 1] < grid.h)
+    cnt = np.zeros((grid.h, grid.w), np.float32)
+    np.add.at(cnt, (px[ok, 1], px[ok, 0]), 1.0)
+    k = max(3, int(round(2.0 / grid.res)) | 1)
+    dens = ndimage.uniform_filter(cnt, size=k, mode="constant") / grid.res ** 2
+    typical = float(np.median(dens[dens > 0])) if (dens > 0).any() else 0.0
+    return dens >= share * typical, typical
+
+
 def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None, *, curbs: bool = True,
-                     rgb=None) -> tuple[np.ndarray, str]:
+                     rgb=None, points_xy: np.ndarray | None = None) -> tuple[np.ndarray, str]:
     """Top-view mask of the carriageway. ``curbs`` false (a scan too sparse to show them; labels needed):
-    the road-labelled, up-facing, grey surface (``_grey_ground``) instead of the level below the curbs."""
+    the paved-labelled, up-facing, grey surface (``_grey_ground``) instead of the level below the curbs, where
+    the cloud (``points_xy``, when given) was measured at its usual density."""
     from scipy import ndimage
 
     parts = []
@@ -150,6 +183,17 @@ def carriageway_mask(v, f, labels, grid, p: ScanSourceParams, level=None, *, cur
     if not curbs and labels is not None:
         sel, how = _grey_ground(v, f, labels, rgb, p)
         m = _rasterize_faces(v, f, sel, grid)
+        if points_xy is not None and len(points_xy) and p.min_point_density > 0:
+            ok, typical = measured(points_xy, grid, p.min_point_density)
+            m &= ok
+            how += (f", measured (>= {p.min_point_density:g} x the cloud's median {typical:.1f} points/m^2 "
+                    "within 2 m)")
+        if p.majority_m > 0:
+            # seen from above, grey paved-looking specks lie everywhere (shadows, gravel, a garden's path
+            # stones): a carriageway pixel has most of its neighbourhood paved-looking
+            k = max(3, int(round(p.majority_m / grid.res)) | 1)
+            m = ndimage.uniform_filter(m.astype(np.float32), size=k, mode="constant") > 0.5
+            how += f", the majority of {k * grid.res:.2f} m around"
         return _clean_mask(m, grid, p, None, v, f, False), how + " (no curbs at this point spacing)"
     if labels is not None:
         lv = labels[f]
@@ -401,7 +445,8 @@ def lane_layout(width_m: float, p: ScanSourceParams) -> dict:
 # --------------------------------------------------------------------------- the network
 
 def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: ScanSourceParams,
-                   log=None, *, curbs: bool = True, rgb: np.ndarray | None = None) -> Network:
+                   log=None, *, curbs: bool = True, rgb: np.ndarray | None = None,
+                   points_xy: np.ndarray | None = None) -> Network:
     """The road network of a labelled mesh (site frame): junctions, ends and the arms between them."""
     from scipy import ndimage
 
@@ -413,7 +458,12 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
         level = _level_faces(v, f, p.curb_tol_m)
     else:  # no curbs: the carriageway's own faces give its heights (a lane on an embankment is no low level)
         level = _grey_ground(v, f, labels, rgb, p)[0]
-    mask, how = carriageway_mask(v, f, labels, grid, p, level, curbs=curbs, rgb=rgb)
+    mask, how = carriageway_mask(v, f, labels, grid, p, level, curbs=curbs, rgb=rgb, points_xy=points_xy)
+    if not (curbs or labels is None) and len(level):
+        # the heights come from the carriageway's own faces: not from grey specks beside it
+        inside = grid.sample(mask.astype(np.uint8), v[f[level]].mean(1)[:, :2]) > 0
+        if inside.any():
+            level = level[inside]
     if mask.sum() * grid.res ** 2 < p.min_road_width_m * p.min_road_length_m:
         raise InputError(f"no carriageway in the scan ({how}): {mask.sum() * grid.res ** 2:.0f} m^2 of road "
                          "surface; a street scan with road labels (or curbs) is needed, or road_source=none")
@@ -753,11 +803,9 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
     from twinkit.surface.closest import Surface
 
     scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
-    cut_m, dropped = 0.0, 0
-    keep = []
-    for arm in net.arms:
+    bad: dict[int, np.ndarray] = {}
+    for k, arm in enumerate(net.arms):
         if arm.z is None or len(arm.xy) < 3:
-            keep.append(arm)
             continue
         nrm = _normals(arm.xy)
         half = max(arm.width_m / 2 - 0.3, 0.0)
@@ -769,16 +817,38 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
         rays[:, 5] = -1.0
         t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()  # the surface within tol_m of the road's height
         frac = (t <= 2 * tol_m).reshape(q.shape[:2]).mean(axis=1)
-        n = len(frac)
+        bad[k] = frac < min_support
+    out = cut_arms(net, bad, p)
+    net.stats["unsupported"] = out
+    if not net.arms:
+        raise InputError("none of the roads derived from the scan lies on scanned ground (their lanes run over walls, "
+                         "roofs or gaps): see scan_roads.png; give an OSM extract (site.inputs.osm), or road_source=none")
+    return out
+
+
+def cut_arms(net: Network, bad: dict[int, np.ndarray], p: ScanSourceParams, keep_junction_ends: bool = True) -> dict:
+    """Cut the arms (index -> per-shape-point bool, True where the road is not on the scan): from a free end
+    the road is cut back over its bad points (from a junction too unless ``keep_junction_ends``: the road
+    then leaves the junction and ends where it is on the scan again); inside, 2 or more bad points in a row
+    split it into two roads with new ends; a piece shorter than ``min_road_length_m`` is dropped, and so are
+    the nodes left alone."""
+    cut_m, dropped = 0.0, 0
+    keep = []
+    for k, arm in enumerate(net.arms):
+        b = bad.get(k)
+        if b is None or not b.any():
+            keep.append(arm)
+            continue
+        n = len(b)
         keep_pt = np.ones(n, bool)
-        for i, j in _true_runs(frac < min_support):  # runs of unsupported shape points
+        for i, j in _true_runs(b):  # runs of unsupported shape points
             at_a, at_b = i == 0, j == n
             if at_a and at_b:
                 keep_pt[:] = False
-            elif at_a:
-                keep_pt[i:j] = net.nodes[arm.a]["kind"] != "end"  # a junction end stays: the junction needs it
+            elif at_a:  # a junction end stays (the junction needs it) when keep_junction_ends
+                keep_pt[i:j] = keep_junction_ends and net.nodes[arm.a]["kind"] != "end"
             elif at_b:
-                keep_pt[i:j] = net.nodes[arm.b]["kind"] != "end"
+                keep_pt[i:j] = keep_junction_ends and net.nodes[arm.b]["kind"] != "end"
             elif j - i >= 2:  # inside the road: 2+ points (a few metres) under a roof or over a gap split it
                 keep_pt[i:j] = False
         if keep_pt.all():
@@ -796,7 +866,8 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
                     if (attr == "a" and i == 0) or (attr == "b" and j == n):
                         continue  # the road's own node
                     nid = max(net.nodes) + 1
-                    net.nodes[nid] = {"xy": arm.xy[end_idx], "z": float(arm.z[end_idx]), "kind": "end"}
+                    net.nodes[nid] = {"xy": arm.xy[end_idx], "z": float(arm.z[end_idx]) if arm.z is not None else 0.0,
+                                      "kind": "end"}
                     setattr(piece, attr, nid)
                 keep.append(piece)
                 kept_len += length
@@ -808,12 +879,143 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
     net.arms = keep
     used = {n for arm in keep for n in (arm.a, arm.b)}
     net.nodes = {k: nd for k, nd in net.nodes.items() if k in used}
-    out = {"cut_m": round(cut_m, 1), "dropped_roads": dropped}
-    net.stats["unsupported"] = out
-    if not keep:
-        raise InputError("none of the roads derived from the scan lies on scanned ground (their lanes run over walls, "
-                         "roofs or gaps): see scan_roads.png; give an OSM extract (site.inputs.osm), or road_source=none")
-    return out
+    return {"cut_m": round(cut_m, 1), "dropped_roads": dropped}
+
+
+def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.0, above_m: float = 1.0,
+                 below_m: float = 3.0, covered_m: float = 15.0, scene=None) -> dict:
+    """Do the driving lanes carla.Map reads from the OpenDRIVE lie on the scanned surface at their heights?
+    Samples every ``spacing_m`` along each driving lane, 7 across it. A sample is **on** when the surface
+    lies within ``tol_m`` of the lane's height; **off** when it lies elsewhere: up to ``below_m`` under the
+    lane (the lane floats over a bank or a yard), up to ``above_m`` over it (the lane is buried in a
+    slope), or not at all under a roof up to ``covered_m`` over the lane (it runs into a house); an open
+    hole in the mesh is left to the drop test. Returns the samples' x, y, whether on and
+    off, and the junction (its OpenDRIVE name, netconvert's node id) of those inside one ('' elsewhere)."""
+    import re
+
+    import carla
+    import open3d as o3d
+
+    from twinkit.surface.closest import Surface
+
+    m = carla.Map("scan_lane_heights", xodr_text)
+    names = {int(i): nm for nm, i in re.findall(r'<junction\s+name="([^"]*)"\s+id="(-?\d+)"', xodr_text)}
+    names.update({int(i): nm for i, nm in re.findall(r'<junction\s+id="(-?\d+)"\s+name="([^"]*)"', xodr_text)})
+    pts, junc = [], []
+    across = np.linspace(-0.45, 0.45, 7)  # to 5 % of the width from either border
+    for w in m.generate_waypoints(spacing_m):
+        if w.lane_type != carla.LaneType.Driving:
+            continue
+        loc = w.transform.location
+        rv = w.transform.get_right_vector()
+        nx, ny = rv.x, -rv.y  # CARLA's y points south
+        off = across * float(w.lane_width)
+        pts.append(np.c_[loc.x + off * nx, -loc.y + off * ny, np.full(len(off), loc.z)])
+        junc += [names.get(w.get_junction().id, str(w.get_junction().id)) if w.is_junction else ""] * len(off)
+    if not pts:
+        return {"xy": np.zeros((0, 2)), "on": np.zeros(0, bool), "off": np.zeros(0, bool), "junction": np.zeros(0, str)}
+    r = np.vstack(pts)
+    if scene is None:
+        scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
+
+    def down(z0, reach):  # the first surface under z0 within reach
+        q = np.zeros((len(r), 6), np.float32)
+        q[:, :2] = r[:, :2]
+        q[:, 2] = z0
+        q[:, 5] = -1.0
+        t = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
+        return t <= reach
+
+    on = down(r[:, 2] + tol_m, 2 * tol_m)
+    below = down(r[:, 2] + tol_m, tol_m + below_m)
+    above = down(r[:, 2] + above_m, above_m - tol_m)
+    q = np.zeros((len(r), 6), np.float32)  # a roof over a lane with no ground under it: the lane runs into a house
+    q[:, :2] = r[:, :2]
+    q[:, 2] = r[:, 2] + tol_m
+    q[:, 5] = 1.0
+    covered = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy() <= covered_m
+    return {"xy": r[:, :2], "on": on, "off": ~on & (below | above | covered), "junction": np.array(junc)}
+
+
+def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=None) -> dict:
+    """The map netconvert built from the derived network, against the scan (``lane_heights``): per road,
+    the shape points whose driving lanes are off the surface on more than ``1 - min_lane_support`` of their
+    samples; per junction, the same share over its connecting lanes. Returns ``{"bad_points": {arm index:
+    bool array}, "bad_junctions": {node id: share on}, "on_share": share of all samples on}``."""
+    from scipy.spatial import cKDTree
+
+    lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene)
+    on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
+    res = {"bad_points": {}, "bad_junctions": {}, "samples": int(len(on)),
+           "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
+    judged = on | off
+    for nid in net.nodes:
+        s = (jn == f"n{nid}") & judged
+        if s.sum() >= 10:
+            share = float(on[s].mean())
+            if share < p.min_lane_support:
+                res["bad_junctions"][nid] = round(share, 3)
+    road = (jn == "") & judged
+    if not road.any() or not net.arms:
+        return res
+    axis = np.concatenate([a.xy for a in net.arms])
+    owner = np.concatenate([np.full(len(a.xy), k) for k, a in enumerate(net.arms)])
+    index = np.concatenate([np.arange(len(a.xy)) for a in net.arms])
+    half = np.concatenate([np.full(len(a.xy), a.width_m / 2 + 1.0) for a in net.arms])
+    d, i = cKDTree(axis).query(xy[road])
+    near = d <= half[i]
+    src = np.flatnonzero(road)[near]
+    i = i[near]
+    n_on = np.bincount(i, weights=on[src].astype(float), minlength=len(axis))
+    n_all = np.bincount(i, minlength=len(axis)).astype(float)
+    bad_pt = (n_all >= 5) & (n_on < p.min_lane_support * n_all)
+    for k in range(len(net.arms)):
+        b = bad_pt[owner == k][np.argsort(index[owner == k])]
+        if b.any():
+            res["bad_points"][k] = b
+    return res
+
+
+def detach_junctions(net: Network, nodes: list[int], p: ScanSourceParams) -> int:
+    """Take junctions out of the network: each road that met one is cut back to outside it (the junction's
+    reach: its widest road's width plus 2 m from its point) and ends there. Returns the roads dropped."""
+    dropped = 0
+    for nid in nodes:
+        nd = net.nodes.get(nid)
+        if nd is None:
+            continue
+        mine = [a for a in net.arms if nid in (a.a, a.b)]
+        reach = max((a.width_m for a in mine), default=0.0) + 2.0
+        for arm in mine:
+            if arm.a == nid and arm.b == nid:
+                net.arms.remove(arm)
+                dropped += 1
+                continue
+            far = np.hypot(*(arm.xy - np.asarray(nd["xy"])).T) > reach
+            idx = np.flatnonzero(far)
+            if not len(idx):
+                net.arms.remove(arm)
+                dropped += 1
+                continue
+            i, j = (idx[0], len(arm.xy)) if arm.a == nid else (0, idx[-1] + 1)
+            seg = arm.xy[i:j]
+            if len(seg) < 3 or float(np.hypot(*np.diff(seg, axis=0).T).sum()) < p.min_road_length_m:
+                net.arms.remove(arm)
+                dropped += 1
+                continue
+            k = net.arms.index(arm)
+            piece = dataclasses.replace(arm, xy=seg, **{a: getattr(arm, a)[i:j] for a in ("z", "z_left", "z_right")
+                                                        if getattr(arm, a) is not None})
+            new = max(net.nodes) + 1
+            end_i = 0 if arm.a == nid else len(seg) - 1
+            net.nodes[new] = {"xy": seg[end_i], "z": float(piece.z[end_i]) if piece.z is not None else 0.0,
+                              "kind": "end", "signals": False}
+            setattr(piece, "a" if arm.a == nid else "b", new)
+            net.arms[k] = piece
+        net.nodes.pop(nid, None)
+    used = {n for arm in net.arms for n in (arm.a, arm.b)}
+    net.nodes = {k: nd for k, nd in net.nodes.items() if k in used}
+    return dropped
 
 
 # --------------------------------------------------------------------------- OpenDRIVE through netconvert
@@ -1017,7 +1219,7 @@ def lanes_on_road(xodr_text: str, v, f, labels, step_m: float = 0.5, raster_m: f
 def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: Path,
                 out_scan_roads_json: Path, out_scan_roads_png: Path, in_labels_npy: Path | None = None,
                 in_gt_labels_npy: Path | None = None, in_roads_truth_json: Path | None = None,
-                in_points_meta_json: Path | None = None) -> dict:
+                in_points_meta_json: Path | None = None, in_points_ply: Path | None = None) -> dict:
     """Roads from the scan itself (no OSM): the labelled mesh's carriageway, curbs and sidewalks ->
     lanes -> OpenDRIVE in the site frame (``opendrive.xodr``, checked by osm_to_opendrive like a map)."""
     import json
@@ -1069,7 +1271,16 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
         ctx.log.info("road_source=scan: point spacing %.3f m is coarser than curb_max_spacing_m=%g: no curbs to "
                      "see; the carriageway is the road-labelled grey ground, and no sidewalk lanes are made",
                      float(spacing), params.curb_max_spacing_m)
-    net = derive_network(mesh.v, mesh.f, labels_for_mask, params, ctx.log, curbs=curbs, rgb=mesh.rgb)
+    points_xy = None
+    if not curbs and in_points_ply is not None and params.min_point_density > 0:
+        from twinkit.mesh import read_ply
+
+        try:
+            points_xy = np.asarray(read_ply(Path(in_points_ply)).vertices, np.float64)[:, :2]
+        except Exception as exc:  # noqa: BLE001
+            raise InputError(f"{in_points_ply}: not a readable PLY ({exc}); re-run read_cloud") from None
+    net = derive_network(mesh.v, mesh.f, labels_for_mask, params, ctx.log, curbs=curbs, rgb=mesh.rgb,
+                         points_xy=points_xy)
     net.stats["curbs"] = curbs
     net.stats["point_spacing_m"] = spacing
     if params.sidewalks and curbs:
@@ -1081,8 +1292,42 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
                      "scanned ground", cut["cut_m"], cut["dropped_roads"])
     frame = SiteFrame.from_site(ctx.site)
     work = out_opendrive_xodr.parent / "scan_plain"
-    nod, edg = write_plain(net, params, frame.proj_string(), work)
-    info = netconvert_plain(nod, edg, out_opendrive_xodr, params, ctx.log)
+    rounds = []
+    scene = None
+    for rnd in range(params.lane_check_rounds + 1):
+        nod, edg = write_plain(net, params, frame.proj_string(), work)
+        info = netconvert_plain(nod, edg, out_opendrive_xodr, params, ctx.log)
+        if rnd == params.lane_check_rounds:
+            break
+        # the lanes netconvert built (junctions included) must lie on the scan at their heights
+        if scene is None:
+            from twinkit.surface.closest import Surface
+
+            scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene
+        chk = check_lanes(net, out_opendrive_xodr.read_text(encoding="utf-8"), mesh.v, mesh.f, params, scene)
+        row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
+               "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
+               "roads_off": len(chk["bad_points"])}
+        rounds.append(row)
+        if not chk["bad_points"] and not chk["bad_junctions"]:
+            break
+        before = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
+        cut2 = cut_arms(net, chk["bad_points"], params, keep_junction_ends=False)
+        gone = detach_junctions(net, [k for k in chk["bad_junctions"] if k in net.nodes], params)
+        row.update({"cut_m": cut2["cut_m"], "dropped_roads": cut2["dropped_roads"] + gone})
+        if (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes)) == before:
+            break  # what is off cannot be cut (single shape points): the drop test reports it
+        ctx.log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface; %d "
+                     "road(s) off it in places (%.1f m cut), %d junction(s) taken apart (%s), %d road(s) dropped; "
+                     "netconvert again", rnd + 1, 100 * chk["on_share"], len(chk["bad_points"]), cut2["cut_m"],
+                     len(chk["bad_junctions"]), ", ".join(f"n{k}: {100 * v:.0f} % on" for k, v in
+                                                         chk["bad_junctions"].items()) or "-",
+                     row["dropped_roads"])
+        if not net.arms:
+            raise InputError("none of the roads derived from the scan keeps its lanes on the scanned surface (they "
+                             "float over banks or sink into slopes): see scan_roads.png; give an OSM extract "
+                             "(site.inputs.osm), or road_source=none")
+    net.stats["lane_check"] = rounds
     text = mark_source(out_opendrive_xodr.read_text(encoding="utf-8"))
     out_opendrive_xodr.write_text(text, encoding="utf-8")
     doc = describe(net)
