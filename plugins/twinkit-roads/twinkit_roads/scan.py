@@ -1269,7 +1269,8 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
                  and float(spacing) > params.curb_max_spacing_m)
     if not curbs:
         ctx.log.info("road_source=scan: point spacing %.3f m is coarser than curb_max_spacing_m=%g: no curbs to "
-                     "see; the carriageway is the road-labelled grey ground, and no sidewalk lanes are made",
+                     "see; the carriageway is the paved-labelled grey ground the scanner measured, and no sidewalk "
+                     "lanes are made",
                      float(spacing), params.curb_max_spacing_m)
     points_xy = None
     if not curbs and in_points_ply is not None and params.min_point_density > 0:
