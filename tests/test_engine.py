@@ -399,6 +399,11 @@ def test_default_road_source_falls_back_when_it_cannot_serve_the_site(project):
     r = project.run("site=far", "recipe=twin", "road_source=toy_file")
     assert r.rc == 2 and "does not cover the site" in r.text, r.text
     assert "fallback" not in r.text
+    # the scan source typed on the command line on a site whose OSM is left empty: the later step's optional
+    # OSM input is not given (it has the scan's file), instead of "needs input 'osm'" stopping the run
+    r = project.run("site=empty", "recipe=twin", "road_source=toy_scan")
+    assert r.rc == 0, r.text
+    assert (project.ws / "03_convert" / "net.txt").read_text().startswith("scan "), r.text
 
 
 def test_preflight_refuses_before_the_first_step_runs(project):

@@ -43,3 +43,21 @@ def test_package_without_opendrive_is_props_only_and_says_so(tmp_path, class_dir
     # a props-only package without the README that says why it has no map breaks the contract
     (pkg / "README.md").unlink()
     assert not check_package(root, "TeststreetTwin").ok
+
+
+def test_a_map_the_scan_found_no_roads_for_is_packaged_as_no_map(tmp_path, class_dir, fbx_out):
+    """road_source=scan on a scan without roads writes an OpenDRIVE with none (userData twinkit_roads=none):
+    the package treats it as no map (props only, the contract holds) instead of refusing it."""
+    from twinkit_export.carla_contract import check_package
+
+    xodr = tmp_path / "aligned.xodr"
+    xodr.write_text('<?xml version="1.0" encoding="UTF-8"?>\n<OpenDRIVE>\n    <header revMajor="1" revMinor="4">\n'
+                    '        <userData code="twinkit_road_source" value="scan" />\n'
+                    '        <userData code="twinkit_roads" value="none" />\n    </header>\n</OpenDRIVE>\n')
+    out = run_step(plugin("exporter", "carla_package"), tmp_path / "run",
+                   {"in_twin_fbx": fbx_out, "in_class_meshes_dir": class_dir, "in_aligned_xodr": xodr}, site=SITE)
+    root = out["carla_import"]
+    desc = json.loads((root / "Import" / "TeststreetTwin" / "TeststreetTwin.json").read_text())
+    assert desc["maps"] == [] and desc["props"]
+    assert json.loads((root / "spawn_points.json").read_text())["count"] == 0
+    assert check_package(root, "TeststreetTwin").ok

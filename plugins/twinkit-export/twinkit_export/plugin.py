@@ -308,6 +308,17 @@ def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Pa
             "glb_bytes": _size(out_twin_glb), "seconds": round(time.perf_counter() - t0, 2)}
 
 
+def _no_roads_map(xodr: Path) -> bool:
+    """The map road_source=scan writes when the scan holds no road (userData twinkit_roads=none)."""
+    import re
+
+    try:
+        head = xodr.read_text(encoding="utf-8", errors="replace")[:4000]
+    except OSError:
+        return False
+    return re.search(r'code="twinkit_roads"\s+value="none"', head) is not None
+
+
 def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path,
                          in_class_meshes_dir: Path, out_carla_import_dir: Path, out_spawn_points_json: Path,
                          in_aligned_xodr: Path | None = None, in_site_json: Path | None = None,
@@ -319,6 +330,10 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
 
     params = params or CarlaPackageParams()
     t0 = time.perf_counter()
+    if in_aligned_xodr is not None and _no_roads_map(Path(in_aligned_xodr)):
+        ctx.log.warning("carla_package: %s holds no roads (road_source=scan found none in the scan): the package "
+                        "has no map, as with road_source=none", Path(in_aligned_xodr).name)
+        in_aligned_xodr = None
     if in_aligned_xodr is None:
         return _carla_props_only(params, ctx, in_twin_fbx=in_twin_fbx, in_class_meshes_dir=in_class_meshes_dir,
                                  out_carla_import_dir=out_carla_import_dir, out_spawn_points_json=out_spawn_points_json,

@@ -391,3 +391,49 @@ def test_the_scans_own_network_is_kept_when_the_alignment_finds_no_road_surface(
     with pytest.raises(InputError, match="cross-sections"):
         run_step(step, tmp_path / "al2", {"in_roads_xodr": tmp_path / "other.xodr",
                                           "in_textured_mesh_ply": tmp_path / "far.ply"}, site=site)
+
+
+def test_a_scan_without_roads_gives_a_map_without_roads_and_the_road_steps_pass_it_on(tmp_path):
+    """No carriageway in the scan (a park, a yard: nothing paved-looking) is a twin without a road network:
+    road_source=scan writes an OpenDRIVE with no roads (carla.Map reads it: no waypoints), says why, and the
+    run goes on; osm_to_opendrive, align_roads and road_evidence pass it on. Roads derived and then all
+    dropped by the checks (the scan shows carriageway, none of it held up) make the step degraded."""
+    import json
+
+    import carla
+    from twinkit.testing import plugin_from_module, run_step
+
+    import twinkit_roads.plugin as roads
+    from scan_fixtures import TERRAIN
+
+    v, f, lab, rgb, axis, _ = aerial_lane()
+    park = np.full_like(lab, TERRAIN)
+    doc, text = _aerial_scan(tmp_path, "park", v, f, park, rgb, v.copy())
+    assert scan.is_empty_map(text) and doc["roads"] == [] and "no carriageway" in doc["no_roads"]
+    assert not doc["derived_then_dropped"]
+    assert len(carla.Map("park", text).generate_waypoints(1.0)) == 0
+    step_json = json.loads((tmp_path / "park" / "scan" / "result" / "step.json").read_text())
+    assert step_json["metrics"]["no_roads"] is True and "degraded" not in step_json["metrics"]
+    # the road steps after it
+    site = {"name": "lane", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
+    d = tmp_path / "park"
+    (d / "opendrive.xodr").write_text(text)
+    conv = run_step(plugin_from_module(roads, "step", "osm_to_opendrive"), d / "conv",
+                    {"in_opendrive_xodr": d / "opendrive.xodr"}, site=site)
+    assert json.loads(conv["roads_check.json"].read_text())["no_roads"] is True
+    al = run_step(plugin_from_module(roads, "step", "align_roads"), d / "al",
+                  {"in_roads_xodr": conv["roads.xodr"], "in_textured_mesh_ply": d / "textured_mesh.ply"}, site=site)
+    assert json.loads(al["alignment.json"].read_text())["no_roads"] is True
+    ap = run_step(plugin_from_module(roads, "step", "apply_alignment"), d / "ap",
+                  {"in_roads_xodr": conv["roads.xodr"], "in_alignment_json": al["alignment.json"],
+                   "in_textured_mesh_ply": d / "textured_mesh.ply"}, site=site)
+    assert scan.is_empty_map(ap["aligned.xodr"].read_text())
+    ev = run_step(plugin_from_module(roads, "step", "road_evidence"), d / "ev",
+                  {"in_aligned_xodr": ap["aligned.xodr"], "in_textured_mesh_ply": d / "textured_mesh.ply",
+                   "in_labels_npy": d / "labels.npy"}, site=site)
+    assert np.array_equal(np.load(ev["labels.npy"]), park)
+    # roads derived, then none keeps its lanes on the scan (a 1 mm tolerance: every sample is off): degraded
+    doc2, text2 = _aerial_scan(tmp_path, "dropped", v, f, lab, rgb, v.copy(), lane_tol_m=0.001)
+    assert scan.is_empty_map(text2) and doc2["derived_then_dropped"]
+    step2 = json.loads((tmp_path / "dropped" / "scan" / "result" / "step.json").read_text())
+    assert any("none kept" in e["reason"] for e in step2["metrics"]["degraded"])

@@ -94,6 +94,17 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
         raise InputError("osm_to_opendrive needs osm.osm (road_source=file, osm_api or overpass) or opendrive.xodr "
                          "(road_source=opendrive) from the fetch_roads step before it")
     counts = xodr_counts(text)
+    from .scan import is_empty_map
+
+    if counts["roads"] == 0 and in_opendrive_xodr is not None and is_empty_map(text):
+        # road_source=scan found no road: a twin without a road network (scan_roads.json says why)
+        report = {"ok": True, "no_roads": True, "source": "scan", "proj": proj, "site_frame": frame.to_json(),
+                  **counts, "note": "the scan holds no road (scan_roads.json): no map to check"}
+        out_roads_check_json.write_text(json.dumps(report, indent=1))
+        ctx.log.warning("no roads: the scan holds none (see scan_roads.json); the twin has no road network")
+        return {"roads": 0, "junctions": 0, "traffic_lights": 0, "waypoints": 0, "waypoints_inside": 0,
+                "conversion_s": round(time.perf_counter() - t0, 3), "netconvert_s": 0.0, "check_s": 0.0,
+                "no_roads": True}
     if counts["roads"] == 0:
         if in_opendrive_xodr is not None:
             raise InputError(f"{in_opendrive_xodr}: no roads in the OpenDRIVE map; check the road source's file")
@@ -182,7 +193,15 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
 
     from .align import fit, sample_sections
     from .mesh2d import Grid, read_mesh, road_faces, road_mask
+    from .scan import is_empty_map
 
+    if is_empty_map(in_roads_xodr.read_text(encoding="utf-8")):  # road_source=scan found no road
+        doc = {"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "dz_m": 0.0, "scale_estimate": 1.0, "kept_identity": True,
+               "no_roads": True, "definition": "aligned_xy = Rz(yaw_deg) @ xy + [tx_m, ty_m] about the site origin; "
+                                               "z += dz_m", "note": "no roads in the map: nothing to align"}
+        out_alignment_json.write_text(json.dumps(doc, indent=1))
+        ctx.log.info("alignment: no roads in the map (the scan holds none): nothing to align")
+        return {"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "dz_m": 0.0, "kept_identity": True, "no_roads": True}
     mesh = read_mesh(in_textured_mesh_ply)
     labels = None
     if in_labels_npy is not None and params.use_labels:
@@ -496,18 +515,23 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         labels = np.load(in_labels_npy)
     except Exception as exc:  # noqa: BLE001
         raise InputError(f"{in_labels_npy}: not a readable .npy label array ({exc}); re-run the segmentation") from None
-    if not params.enabled:
+    from .scan import is_empty_map
+
+    no_roads = is_empty_map(in_aligned_xodr.read_text(encoding="utf-8"))
+    if not params.enabled or no_roads:
         np.save(out_labels_npy, labels)
-        doc = {"enabled": False, "note": "switched off (steps.road_evidence.enabled=false or site road_evidence: "
-                                          "false): labels.npy passed through unchanged"}
+        why = ("no roads in the map (the scan holds none)" if no_roads else
+               "switched off (steps.road_evidence.enabled=false or site road_evidence: false)")
+        doc = {"enabled": bool(params.enabled), "no_roads": no_roads,
+               "note": f"{why}: labels.npy passed through unchanged"}
         out_road_evidence_json.write_text(json.dumps(doc, indent=1))
         from PIL import Image, ImageDraw
 
         img = Image.new("RGB", (420, 40), (0, 0, 0))
-        ImageDraw.Draw(img).text((10, 14), "road network evidence switched off: labels unchanged", fill=(255, 255, 255))
+        ImageDraw.Draw(img).text((10, 14), f"road network evidence: {why[:44]}; labels unchanged", fill=(255, 255, 255))
         img.save(out_road_evidence_png)
-        ctx.log.info("road evidence switched off: labels unchanged")
-        return {"enabled": False, "changed_vertices": 0}
+        ctx.log.info("road evidence: %s; labels unchanged", why)
+        return {"enabled": bool(params.enabled), "changed_vertices": 0, **({"no_roads": True} if no_roads else {})}
     mesh = read_mesh(in_textured_mesh_ply)
     if labels.ndim != 1 or len(labels) != len(mesh.v):
         raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "

@@ -44,6 +44,15 @@ from twinkit.ranges import param
 ROAD, SIDEWALK, TRAFFIC_LIGHT = 0, 1, 6
 
 
+class NoRoads(InputError):
+    """The scan holds no road: no carriageway, or no derived road kept its lanes on the scan (``derived``:
+    roads were derived and the checks dropped them all). ``scan_source`` writes a map without roads."""
+
+    def __init__(self, message: str, derived: bool = False):
+        super().__init__(message)
+        self.derived = derived
+
+
 @dataclass
 class ScanSourceParams:
     labels: str = param("auto", choices=("auto", "predicted", "gt", "none"))  # auto: the segmentation's labels.npy when an earlier step wrote it, else the curbs alone; predicted: labels.npy (required); gt: gt_labels.npy (benchmarks); none: the curbs alone
@@ -465,8 +474,7 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
         if inside.any():
             level = level[inside]
     if mask.sum() * grid.res ** 2 < p.min_road_width_m * p.min_road_length_m:
-        raise InputError(f"no carriageway in the scan ({how}): {mask.sum() * grid.res ** 2:.0f} m^2 of road "
-                         "surface; a street scan with road labels (or curbs) is needed, or road_source=none")
+        raise NoRoads(f"no carriageway in the scan ({how}): {mask.sum() * grid.res ** 2:.0f} m^2 of road surface")
     dt = ndimage.distance_transform_edt(mask) * grid.res
     skel = thin(mask)
     node_pix, edges = skeleton_graph(skel)
@@ -518,8 +526,7 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
         if not changed:
             break
     if not edges:
-        raise InputError(f"the carriageway ({how}, {mask.sum() * grid.res ** 2:.0f} m^2) has no road axis; "
-                         "a street scan is needed, or road_source=none")
+        raise NoRoads(f"the carriageway ({how}, {mask.sum() * grid.res ** 2:.0f} m^2) has no road axis")
     # --- typical half width of each edge (middle part), junction sizes, merge close junctions
     half = []
     for a, b, xy, hw in edges:
@@ -609,8 +616,8 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
             continue
         raw_arms.append({"ga": ga, "gb": gb, "core": centre, "width": width, "nrm": _normals(centre)})
     if not raw_arms:
-        raise InputError(f"the carriageway ({how}) holds no road at least {p.min_road_width_m} m wide and "
-                         f"{p.min_road_length_m} m long; road_source=none for a twin without roads")
+        raise NoRoads(f"the carriageway ({how}) holds no road at least {p.min_road_width_m} m wide and "
+                      f"{p.min_road_length_m} m long")
     # --- junction points: where the arms' axes meet
     ends: dict[int, list] = {}
     for arm in raw_arms:
@@ -821,8 +828,8 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
     out = cut_arms(net, bad, p)
     net.stats["unsupported"] = out
     if not net.arms:
-        raise InputError("none of the roads derived from the scan lies on scanned ground (their lanes run over walls, "
-                         "roofs or gaps): see scan_roads.png; give an OSM extract (site.inputs.osm), or road_source=none")
+        raise NoRoads("none of the roads derived from the scan lies on scanned ground (their lanes run over walls, "
+                      "roofs or gaps)", derived=True)
     return out
 
 
@@ -1123,7 +1130,7 @@ def describe(net: Network) -> dict:
 # --------------------------------------------------------------------------- the picture
 
 def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_per_m: float = 8.0,
-                    max_px: int = 3000, truth: list | None = None) -> dict:
+                    max_px: int = 3000, truth: list | None = None, note: str | None = None) -> dict:
     """Top view of the labelled mesh (CityScapes colours, dimmed) with the derived network: the
     carriageway edges found (yellow), the lanes carla.Map reads from the OpenDRIVE (driving borders
     white, centre lines red, sidewalk lanes orange), the true centre lines if known (cyan)."""
@@ -1180,6 +1187,9 @@ def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_pe
                ("white / red: lane borders / centre lines", (230, 20, 20)),
                ("orange: sidewalk lanes; magenta: nodes", (255, 150, 40))]
            + ([("cyan: true lane centre lines", (0, 220, 255))] if truth else []), res, width=360, slots=5)
+    if note:  # why there is nothing to draw
+        d.rectangle([8, img.size[1] - 30, min(img.size[0] - 8, 16 + 6 * len(note)), img.size[1] - 8], fill=(0, 0, 0))
+        d.text((16, img.size[1] - 24), note, fill=(255, 80, 80))
     img.save(out)
     return {"px": list(img.size), "m_per_px": res, "lane_segments": len(lines)}
 
@@ -1216,6 +1226,50 @@ def lanes_on_road(xodr_text: str, v, f, labels, step_m: float = 0.5, raster_m: f
 
 # --------------------------------------------------------------------------- the road source
 
+def empty_map(proj: str) -> str:
+    """An OpenDRIVE map with no roads (carla.Map reads it: no waypoints), tagged as the scan's and as empty."""
+    from xml.sax.saxutils import escape
+
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n<OpenDRIVE>\n    <header revMajor="1" revMinor="4" name="" '
+            'version="1.00" north="0" south="0" east="0" west="0">\n'
+            f"        <geoReference><![CDATA[{escape(proj)}]]></geoReference>\n"
+            '        <userData code="twinkit_road_source" value="scan"/>\n'
+            '        <userData code="twinkit_roads" value="none"/>\n    </header>\n</OpenDRIVE>\n')
+
+
+def is_empty_map(xodr_text: str) -> bool:
+    """The map ``scan_source`` writes when the scan holds no road."""
+    import re
+
+    return re.search(r'code="twinkit_roads"\s+value="none"', xodr_text[:4000]) is not None
+
+
+def _no_roads(exc: "NoRoads", ctx, mesh, labels, which, frame, out_xodr: Path, out_json: Path, out_png: Path,
+              t0: float) -> dict:
+    """No road in the scan: a map without roads, so the twin goes on without a road network (the exports and
+    the CARLA package without a map, as with road_source=none). Roads derived and then all dropped by the
+    checks (the scan shows carriageway, none of it held up) make the run degraded; a scan with no carriageway
+    at all (a park, a yard) is a twin without roads, said in a warning."""
+    import json
+
+    out_xodr.write_text(empty_map(frame.proj_string()), encoding="utf-8")
+    why = str(exc)
+    net = Network({}, [], np.zeros((1, 1), bool), None, None, {})
+    draw_scan_roads(mesh.v, mesh.f, labels, net, out_xodr.read_text(encoding="utf-8"), out_png,
+                    note=f"no roads: {why}")
+    doc = {"roads": [], "nodes": [], "no_roads": why, "derived_then_dropped": bool(exc.derived), "labels": which,
+           "definition": "no road in the scan: opendrive.xodr holds no road (userData twinkit_roads=none); the twin "
+                         "has no road network", "total_s": round(time.perf_counter() - t0, 3)}
+    out_json.write_text(json.dumps(doc, indent=1))
+    ctx.log.warning("road_source=scan: no roads: %s. The twin has no road network (the CARLA package has no map); "
+                    "give an OSM extract (site.inputs.osm) for one", why)
+    if exc.derived:
+        ctx.degraded(f"roads from the scan: none kept ({why})",
+                     "see scan_roads.png; give an OSM extract (site.inputs.osm) for the map")
+    return {"roads": 0, "junctions": 0, "driving_lanes": 0, "labels": which, "no_roads": True,
+            "total_s": doc["total_s"]}
+
+
 def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: Path,
                 out_scan_roads_json: Path, out_scan_roads_png: Path, in_labels_npy: Path | None = None,
                 in_gt_labels_npy: Path | None = None, in_roads_truth_json: Path | None = None,
@@ -1251,22 +1305,25 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
         if len(labels) != len(mesh.v):
             raise InputError(f"{src}: {len(labels)} labels for the {len(mesh.v)} vertices of "
                              f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh")
-        if not (labels == ROAD).any():
-            ctx.log.warning("road_source=scan: no vertex is labelled road in %s; the curbs alone draw the roads",
-                            src.name)
-            labels_for_mask = None
-        else:
-            labels_for_mask = labels
-    else:
-        labels_for_mask = None
     spacing = None
     if in_points_meta_json is not None:
         try:
             spacing = (json.loads(Path(in_points_meta_json).read_text()).get("density") or {}).get("spacing_m")
         except (OSError, ValueError):
             spacing = None
-    curbs = not (labels_for_mask is not None and spacing is not None and params.curb_max_spacing_m > 0
-                 and float(spacing) > params.curb_max_spacing_m)
+    # a cloud coarser than curb_max_spacing_m shows no curbs: with labels, the paved-labelled grey ground
+    # is the carriageway (no road or sidewalk label at all: no carriageway, no roads)
+    coarse = spacing is not None and params.curb_max_spacing_m > 0 and float(spacing) > params.curb_max_spacing_m
+    labels_for_mask = None
+    if labels is not None:
+        if coarse:
+            labels_for_mask = labels
+        elif not (labels == ROAD).any():
+            ctx.log.warning("road_source=scan: no vertex is labelled road in %s; the curbs alone draw the roads",
+                            src.name)
+        else:
+            labels_for_mask = labels
+    curbs = not (labels_for_mask is not None and coarse)
     if not curbs:
         ctx.log.info("road_source=scan: point spacing %.3f m is coarser than curb_max_spacing_m=%g: no curbs to "
                      "see; the carriageway is the paved-labelled grey ground the scanner measured, and no sidewalk "
@@ -1280,55 +1337,58 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
             points_xy = np.asarray(read_ply(Path(in_points_ply)).vertices, np.float64)[:, :2]
         except Exception as exc:  # noqa: BLE001
             raise InputError(f"{in_points_ply}: not a readable PLY ({exc}); re-run read_cloud") from None
-    net = derive_network(mesh.v, mesh.f, labels_for_mask, params, ctx.log, curbs=curbs, rgb=mesh.rgb,
-                         points_xy=points_xy)
-    net.stats["curbs"] = curbs
-    net.stats["point_spacing_m"] = spacing
-    if params.sidewalks and curbs:
-        add_sidewalks(net, mesh.v, mesh.f, labels, params)
-    add_heights_and_signals(net, mesh.v, mesh.f, labels, params)
-    cut = trim_unsupported(net, mesh.v, mesh.f, params)
-    if cut["cut_m"] or cut["dropped_roads"]:
-        ctx.log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
-                     "scanned ground", cut["cut_m"], cut["dropped_roads"])
     frame = SiteFrame.from_site(ctx.site)
-    work = out_opendrive_xodr.parent / "scan_plain"
-    rounds = []
-    scene = None
-    for rnd in range(params.lane_check_rounds + 1):
-        nod, edg = write_plain(net, params, frame.proj_string(), work)
-        info = netconvert_plain(nod, edg, out_opendrive_xodr, params, ctx.log)
-        if rnd == params.lane_check_rounds:
-            break
-        # the lanes netconvert built (junctions included) must lie on the scan at their heights
-        if scene is None:
-            from twinkit.surface.closest import Surface
+    try:
+        net = derive_network(mesh.v, mesh.f, labels_for_mask, params, ctx.log, curbs=curbs, rgb=mesh.rgb,
+                             points_xy=points_xy)
+        net.stats["curbs"] = curbs
+        net.stats["point_spacing_m"] = spacing
+        if params.sidewalks and curbs:
+            add_sidewalks(net, mesh.v, mesh.f, labels, params)
+        add_heights_and_signals(net, mesh.v, mesh.f, labels, params)
+        cut = trim_unsupported(net, mesh.v, mesh.f, params)
+        if cut["cut_m"] or cut["dropped_roads"]:
+            ctx.log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
+                         "scanned ground", cut["cut_m"], cut["dropped_roads"])
+        work = out_opendrive_xodr.parent / "scan_plain"
+        rounds = []
+        scene = None
+        for rnd in range(params.lane_check_rounds + 1):
+            nod, edg = write_plain(net, params, frame.proj_string(), work)
+            info = netconvert_plain(nod, edg, out_opendrive_xodr, params, ctx.log)
+            if rnd == params.lane_check_rounds:
+                break
+            # the lanes netconvert built (junctions included) must lie on the scan at their heights
+            if scene is None:
+                from twinkit.surface.closest import Surface
 
-            scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene
-        chk = check_lanes(net, out_opendrive_xodr.read_text(encoding="utf-8"), mesh.v, mesh.f, params, scene)
-        row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
-               "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
-               "roads_off": len(chk["bad_points"])}
-        rounds.append(row)
-        if not chk["bad_points"] and not chk["bad_junctions"]:
-            break
-        before = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
-        cut2 = cut_arms(net, chk["bad_points"], params, keep_junction_ends=False)
-        gone = detach_junctions(net, [k for k in chk["bad_junctions"] if k in net.nodes], params)
-        row.update({"cut_m": cut2["cut_m"], "dropped_roads": cut2["dropped_roads"] + gone})
-        if (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes)) == before:
-            break  # what is off cannot be cut (single shape points): the drop test reports it
-        ctx.log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface; %d "
-                     "road(s) off it in places (%.1f m cut), %d junction(s) taken apart (%s), %d road(s) dropped; "
-                     "netconvert again", rnd + 1, 100 * chk["on_share"], len(chk["bad_points"]), cut2["cut_m"],
-                     len(chk["bad_junctions"]), ", ".join(f"n{k}: {100 * v:.0f} % on" for k, v in
-                                                         chk["bad_junctions"].items()) or "-",
-                     row["dropped_roads"])
-        if not net.arms:
-            raise InputError("none of the roads derived from the scan keeps its lanes on the scanned surface (they "
-                             "float over banks or sink into slopes): see scan_roads.png; give an OSM extract "
-                             "(site.inputs.osm), or road_source=none")
-    net.stats["lane_check"] = rounds
+                scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene
+            chk = check_lanes(net, out_opendrive_xodr.read_text(encoding="utf-8"), mesh.v, mesh.f, params, scene)
+            row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
+                   "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
+                   "roads_off": len(chk["bad_points"])}
+            rounds.append(row)
+            if not chk["bad_points"] and not chk["bad_junctions"]:
+                break
+            before = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
+            cut2 = cut_arms(net, chk["bad_points"], params, keep_junction_ends=False)
+            gone = detach_junctions(net, [k for k in chk["bad_junctions"] if k in net.nodes], params)
+            row.update({"cut_m": cut2["cut_m"], "dropped_roads": cut2["dropped_roads"] + gone})
+            if (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes)) == before:
+                break  # what is off cannot be cut (single shape points): the drop test reports it
+            ctx.log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface; %d "
+                         "road(s) off it in places (%.1f m cut), %d junction(s) taken apart (%s), %d road(s) dropped; "
+                         "netconvert again", rnd + 1, 100 * chk["on_share"], len(chk["bad_points"]), cut2["cut_m"],
+                         len(chk["bad_junctions"]), ", ".join(f"n{k}: {100 * v:.0f} % on" for k, v in
+                                                             chk["bad_junctions"].items()) or "-",
+                         row["dropped_roads"])
+            if not net.arms:
+                raise NoRoads("none of the roads derived from the scan keeps its lanes on the scanned surface (they "
+                              "float over banks or sink into slopes)", derived=True)
+        net.stats["lane_check"] = rounds
+    except NoRoads as exc:
+        return _no_roads(exc, ctx, mesh, labels, which, frame, out_opendrive_xodr, out_scan_roads_json,
+                         out_scan_roads_png, t0)
     text = mark_source(out_opendrive_xodr.read_text(encoding="utf-8"))
     out_opendrive_xodr.write_text(text, encoding="utf-8")
     doc = describe(net)
