@@ -437,3 +437,22 @@ def test_a_scan_without_roads_gives_a_map_without_roads_and_the_road_steps_pass_
     assert scan.is_empty_map(text2) and doc2["derived_then_dropped"]
     step2 = json.loads((tmp_path / "dropped" / "scan" / "result" / "step.json").read_text())
     assert any("none kept" in e["reason"] for e in step2["metrics"]["degraded"])
+
+
+def test_taking_a_junction_apart_drops_the_roads_that_lie_inside_it():
+    """detach_junctions on a T: the two long roads are cut back to outside the junction's reach (widest
+    road + 2 m) and end there; the 6 m stub lies inside it and goes, with its end node."""
+    xs = np.linspace(0.0, 20.0, 11)[:, None]
+    east = np.c_[xs, np.zeros_like(xs)]
+    west = -east
+    stub = np.c_[np.zeros(4), np.linspace(6.0, 0.0, 4)]
+    nodes = {0: {"xy": np.zeros(2), "z": 0.0, "kind": "junction"}, 1: {"xy": east[-1], "z": 0.0, "kind": "end"},
+             2: {"xy": stub[0], "z": 0.0, "kind": "end"}, 3: {"xy": west[-1], "z": 0.0, "kind": "end"}}
+    arms = [scan.Arm(0, 1, east, 4.0, z=np.zeros(len(east))), scan.Arm(2, 0, stub, 4.0, z=np.zeros(len(stub))),
+            scan.Arm(0, 3, west, 4.0, z=np.zeros(len(west)))]
+    net = scan.Network(nodes, arms, np.zeros((1, 1), bool), None, None, {})
+    assert scan.detach_junctions(net, [0], scan.ScanSourceParams()) == 1
+    assert len(net.arms) == 2 and 0 not in net.nodes and 2 not in net.nodes
+    for arm in net.arms:
+        assert np.hypot(*arm.xy.T).min() > 6.0 and len(arm.z) == len(arm.xy)
+        assert all(net.nodes[n]["kind"] == "end" for n in (arm.a, arm.b))

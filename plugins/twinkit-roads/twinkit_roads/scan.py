@@ -993,24 +993,20 @@ def detach_junctions(net: Network, nodes: list[int], p: ScanSourceParams) -> int
             continue
         mine = [a for a in net.arms if nid in (a.a, a.b)]
         reach = max((a.width_m for a in mine), default=0.0) + 2.0
-        for arm in mine:
-            if arm.a == nid and arm.b == nid:
-                net.arms.remove(arm)
+        out = []
+        for arm in net.arms:  # (arms compared by identity: a dataclass of arrays has no usable ==)
+            if nid not in (arm.a, arm.b):
+                out.append(arm)
+                continue
+            far = np.flatnonzero(np.hypot(*(arm.xy - np.asarray(nd["xy"])).T) > reach)
+            if arm.a == arm.b or not len(far):
                 dropped += 1
                 continue
-            far = np.hypot(*(arm.xy - np.asarray(nd["xy"])).T) > reach
-            idx = np.flatnonzero(far)
-            if not len(idx):
-                net.arms.remove(arm)
-                dropped += 1
-                continue
-            i, j = (idx[0], len(arm.xy)) if arm.a == nid else (0, idx[-1] + 1)
+            i, j = (far[0], len(arm.xy)) if arm.a == nid else (0, far[-1] + 1)
             seg = arm.xy[i:j]
             if len(seg) < 3 or float(np.hypot(*np.diff(seg, axis=0).T).sum()) < p.min_road_length_m:
-                net.arms.remove(arm)
                 dropped += 1
                 continue
-            k = net.arms.index(arm)
             piece = dataclasses.replace(arm, xy=seg, **{a: getattr(arm, a)[i:j] for a in ("z", "z_left", "z_right")
                                                         if getattr(arm, a) is not None})
             new = max(net.nodes) + 1
@@ -1018,7 +1014,8 @@ def detach_junctions(net: Network, nodes: list[int], p: ScanSourceParams) -> int
             net.nodes[new] = {"xy": seg[end_i], "z": float(piece.z[end_i]) if piece.z is not None else 0.0,
                               "kind": "end", "signals": False}
             setattr(piece, "a" if arm.a == nid else "b", new)
-            net.arms[k] = piece
+            out.append(piece)
+        net.arms = out
         net.nodes.pop(nid, None)
     used = {n for arm in net.arms for n in (arm.a, arm.b)}
     net.nodes = {k: nd for k, nd in net.nodes.items() if k in used}
