@@ -456,3 +456,28 @@ def test_taking_a_junction_apart_drops_the_roads_that_lie_inside_it():
     for arm in net.arms:
         assert np.hypot(*arm.xy.T).min() > 6.0 and len(arm.z) == len(arm.xy)
         assert all(net.nodes[n]["kind"] == "end" for n in (arm.a, arm.b))
+
+
+def test_the_scans_own_network_is_refined_onto_its_kerbs(four_way, tmp_path):
+    """The scan's edges come from a 0.25 m raster: a network drawn from the scan can sit a few cm off its
+    kerbs (the demo: 4 cm). align_roads applies no rigid fit to it, but the kerb refinement does apply: the
+    cross's network moved 8 cm east comes back onto the side street's kerbs."""
+    import json
+
+    from twinkit.mesh import Mesh, write_ply
+    from twinkit.testing import plugin_from_module, run_step
+
+    import twinkit_roads.plugin as roads
+    from twinkit_roads.align import transform_xodr
+
+    v, f, lab, truth, net, text = four_way
+    moved = transform_xodr(text, 0.0, 0.08, 0.0)
+    assert 'value="scan"' in moved
+    (tmp_path / "moved.xodr").write_text(moved)
+    write_ply(tmp_path / "cross.ply", Mesh(v, f))
+    al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp_path / "al",
+                  {"in_roads_xodr": tmp_path / "moved.xodr", "in_textured_mesh_ply": tmp_path / "cross.ply"},
+                  site={"name": "x", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}})
+    a = json.loads(al["alignment.json"].read_text())
+    assert a["kerbs"]["applied"], a["kerbs"]
+    assert a["tx_m"] == pytest.approx(-0.08, abs=0.03) and abs(a["yaw_deg"]) < 0.1
