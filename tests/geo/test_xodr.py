@@ -67,3 +67,20 @@ def test_unknown_length_attributes_stop_a_scaled_move():
     bad = DOC.replace("<objects>", '<mystery s="3" length="4"/><objects>')
     with pytest.raises(XodrFrameError, match="mystery"):
         transform_xodr(bad, 0.0, 1.01, scale_heights=False)
+
+
+def test_twinkits_header_tags_are_read_in_both_spellings():
+    """from_scan / has_no_roads read road_source=scan's header tags as written, and after an XML round trip
+    (ElementTree writes ``value="scan" />``); a map without them is neither."""
+    import xml.etree.ElementTree as ET
+
+    from twinkit.geo.xodr import NO_ROADS_TAG, SCAN_TAG, from_scan, has_no_roads
+
+    text = f'<?xml version="1.0"?>\n<OpenDRIVE><header revMajor="1" revMinor="4">{SCAN_TAG}{NO_ROADS_TAG}</header></OpenDRIVE>'
+    again = ET.tostring(ET.fromstring(text.split("\n", 1)[1]), encoding="unicode")
+    assert 'value="scan" />' in again
+    for t in (text, again):
+        assert from_scan(t) and has_no_roads(t)
+    plain = '<OpenDRIVE><header revMajor="1" revMinor="4"><userData code="other" value="scan"/></header></OpenDRIVE>'
+    assert not from_scan(plain) and not has_no_roads(plain)
+    assert from_scan(text.replace(NO_ROADS_TAG, "")) and not has_no_roads(text.replace(NO_ROADS_TAG, ""))

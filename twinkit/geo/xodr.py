@@ -282,3 +282,29 @@ def _bounds(header: ET.Element, c: float, s: float, scale: float, t=(0.0, 0.0)) 
     header.set("south", f"{min(ys):.3f}")
     header.set("east", f"{max(xs):.3f}")
     header.set("west", f"{min(xs):.3f}")
+
+
+# --------------------------------------------------------------------------- twinkit's own header tags
+
+#: ``<userData code="twinkit_road_source" value="scan"/>``: the map was derived from the scan itself
+#: (road_source=scan); ``<userData code="twinkit_roads" value="none"/>``: the scan holds no road, the map
+#: has none (a twin without a road network). Read by the road steps and the exporters.
+SCAN_TAG = '<userData code="twinkit_road_source" value="scan"/>'
+NO_ROADS_TAG = '<userData code="twinkit_roads" value="none"/>'
+
+
+def _has_user_data(text: str, code: str, value: str) -> bool:
+    import re
+
+    # the header comes first; an XML round trip may write ``value="scan" />``
+    return re.search(rf'<userData\s+code="{code}"\s+value="{value}"\s*/?>', text[:4000]) is not None
+
+
+def from_scan(text: str) -> bool:
+    """The OpenDRIVE text was derived from the scan (road_source=scan)."""
+    return _has_user_data(text, "twinkit_road_source", "scan")
+
+
+def has_no_roads(text: str) -> bool:
+    """The OpenDRIVE text is road_source=scan's map of a scan that holds no road."""
+    return _has_user_data(text, "twinkit_roads", "none")

@@ -171,7 +171,9 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     except Exception as exc:
         raise InputError(f"{in_points_ply}: not a readable PLY ({exc}); re-run read_cloud") from None
     text = Path(in_aligned_xodr).read_text(encoding="utf-8", errors="replace")
-    from_scan = 'code="twinkit_road_source" value="scan"' in text[:4000]
+    from twinkit.geo.xodr import from_scan as _from_scan
+
+    from_scan = _from_scan(text)
     try:
         rays = lane_rays(text, params.spacing_m)
     except Exception as exc:

@@ -310,13 +310,12 @@ def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Pa
 
 def _no_roads_map(xodr: Path) -> bool:
     """The map road_source=scan writes when the scan holds no road (userData twinkit_roads=none)."""
-    import re
+    from twinkit.geo.xodr import has_no_roads
 
     try:
-        head = xodr.read_text(encoding="utf-8", errors="replace")[:4000]
+        return has_no_roads(xodr.read_text(encoding="utf-8", errors="replace"))
     except OSError:
         return False
-    return re.search(r'code="twinkit_roads"\s+value="none"', head) is not None
 
 
 def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path,

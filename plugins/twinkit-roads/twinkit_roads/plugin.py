@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import List
 
 from twinkit import InputError, hookimpl
+from twinkit.geo.xodr import from_scan as from_scan_tag
 from twinkit.ranges import param
 
 from . import __version__
@@ -80,7 +81,7 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
             ctx.log.info("road_source gave an OpenDRIVE map: %s is not converted", in_osm_osm.name)
         text = Path(in_opendrive_xodr).read_text(encoding="utf-8")
         out_roads_xodr.write_text(text, encoding="utf-8")
-        if 'code="twinkit_road_source" value="scan"' in text[:4000]:
+        if from_scan_tag(text):
             info = {"source": "scan", "netconvert_s": 0.0}
             conv = "none: road_source=scan (derived from the scan and converted there, see scan_roads.json)"
         else:
@@ -217,7 +218,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     # against a cruder road surface (the ground level, which takes ramped sidewalks too), can only move it
     # off (Lille: turned 2.6 deg, lanes onto the curb); it is measured, not applied. The kerb refinement
     # below is finer than the scan's own edges (a 0.25 m raster): it applies (demo: 4 cm off the kerbs)
-    from_scan = 'code="twinkit_road_source" value="scan"' in xodr_text[:4000]
+    from_scan = from_scan_tag(xodr_text)
     try:
         res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=0.0 if from_scan else params.search_m,
                   yaw_range_deg=params.yaw_range_deg, huber_m=params.huber_m, margin_m=params.margin_m,

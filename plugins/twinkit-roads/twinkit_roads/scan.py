@@ -1098,8 +1098,9 @@ def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=
 
 def mark_source(xodr_text: str) -> str:
     """Tag the header so later steps (and people) know the map came from the scan."""
-    tag = '<userData code="twinkit_road_source" value="scan"/>'
-    if tag in xodr_text:
+    from twinkit.geo.xodr import SCAN_TAG as tag, from_scan
+
+    if from_scan(xodr_text):
         return xodr_text
     i = xodr_text.find("<header")
     j = xodr_text.find(">", i)
@@ -1227,18 +1228,19 @@ def empty_map(proj: str) -> str:
     """An OpenDRIVE map with no roads (carla.Map reads it: no waypoints), tagged as the scan's and as empty."""
     from xml.sax.saxutils import escape
 
+    from twinkit.geo.xodr import NO_ROADS_TAG, SCAN_TAG
+
     return ('<?xml version="1.0" encoding="UTF-8"?>\n<OpenDRIVE>\n    <header revMajor="1" revMinor="4" name="" '
             'version="1.00" north="0" south="0" east="0" west="0">\n'
             f"        <geoReference><![CDATA[{escape(proj)}]]></geoReference>\n"
-            '        <userData code="twinkit_road_source" value="scan"/>\n'
-            '        <userData code="twinkit_roads" value="none"/>\n    </header>\n</OpenDRIVE>\n')
+            f"        {SCAN_TAG}\n        {NO_ROADS_TAG}\n    </header>\n</OpenDRIVE>\n")
 
 
 def is_empty_map(xodr_text: str) -> bool:
     """The map ``scan_source`` writes when the scan holds no road."""
-    import re
+    from twinkit.geo.xodr import has_no_roads
 
-    return re.search(r'code="twinkit_roads"\s+value="none"', xodr_text[:4000]) is not None
+    return has_no_roads(xodr_text)
 
 
 def _no_roads(exc: "NoRoads", ctx, mesh, labels, which, frame, out_xodr: Path, out_json: Path, out_png: Path,
