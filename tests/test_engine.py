@@ -358,6 +358,7 @@ def test_kind_none_leaves_out_its_step_and_the_optional_steps_that_depend_on_it(
     assert r.rc == 0, r.text
     assert "road_source=none was chosen" in r.text
     assert re.search(r"convert\s+skipped\s+.*road_source=none", r.text), r.text
+    assert re.search(r"convert\s+skipped\s+optional step: no osm \(in_osm_txt\)", r.text), r.text  # the empty input named
     assert re.search(r"align\s+skipped\s+optional step: its input in_net_txt comes from convert, which was left out", r.text), r.text
     assert (project.ws / "03_export" / "export.txt").read_text() == "no roads\n"
     assert set(project.counts()) == {"export_all"}  # make and double reused; no road step ran

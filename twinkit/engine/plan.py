@@ -263,7 +263,7 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
         # wire inputs
         inputs: dict[str, Source | None] = {}
         try:
-            empty: list[ConfigError] = []
+            empty: list[tuple[Port, ConfigError]] = []
             for port in signature.inputs:
                 want = spec.inputs.get(port.param)
                 key = (want or port.name).partition(".")[0]
@@ -280,12 +280,13 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                     if not (port.optional and "needs input" in str(exc)):
                         raise
                     inputs[port.param] = None
-                    empty.append(exc)
+                    empty.append((port, exc))
             # an optional input whose site input is left empty ('???') is not given when an earlier step
             # feeds the step another input (osm_to_opendrive after road_source=scan on a site without OSM);
             # with nothing else to work on the empty site input is the error
             if empty and not any(src is not None and src.step_index is not None for src in inputs.values()):
-                raise empty[0]
+                port = empty[0][0]  # the skipped-step message below names this port
+                raise empty[0][1]
         except ConfigError as exc:
             # a site input left empty ('???') fails even an optional step, unless a '<kind>=none' choice left
             # out the step that would have used it (site mex's osm with road_source=none)
