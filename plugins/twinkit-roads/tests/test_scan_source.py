@@ -110,6 +110,9 @@ def test_curbs_alone_without_labels(tmp_path):
     (6.7, 1, 3.25, 0.1, True),    # a little wider: the lanes stay clear of the curb
     (7.4, 1, 3.55, 0.15, True),   # wider lanes rather than a strip narrower than min_strip_m, curb_clearance_m free
     (4.0, 1, 3.7, 0.15, False),   # a narrow one-lane street
+    # narrower than two nominal lanes: narrower lanes inside the edges (they were 3.25 m, 0.65 m over them)
+    (5.2, 1, 2.5, 0.1, True),     # a village street: two lanes of min_lane_width_m
+    (6.0, 1, 2.85, 0.15, True),   # curb_clearance_m kept free
 ])
 def test_lane_layout(width, lanes, lane_m, strip_m, two_way):
     lay = scan.lane_layout(width, scan.ScanSourceParams())
@@ -458,26 +461,35 @@ def test_taking_a_junction_apart_drops_the_roads_that_lie_inside_it():
         assert all(net.nodes[n]["kind"] == "end" for n in (arm.a, arm.b))
 
 
-def test_the_scans_own_network_is_refined_onto_its_kerbs(four_way, tmp_path):
-    """The scan's edges come from a 0.25 m raster: a network drawn from the scan can sit a few cm off its
-    kerbs (the demo: 4 cm). align_roads applies no rigid fit to it, but the kerb refinement does apply: the
-    cross's network moved 8 cm east comes back onto the side street's kerbs."""
-    import json
+def test_a_road_wider_than_the_ground_that_holds_it_is_narrowed(tmp_path):
+    """check_lanes against a scan where the south 0.5 m of the lane dropped 0.5 m (a bank the grey mask took
+    as road; Autzen's path beside its dry grass): that side's outermost edge_band_m is off the scan while
+    the rest is on, so narrow_arms takes 0.5 m off it and moves the axis 0.25 m north; netconvert's lanes
+    then end 0.5 m further north on that side and no further on the other. On the lane as scanned nothing
+    is narrowed."""
+    import carla
 
-    from twinkit.mesh import Mesh, write_ply
-    from twinkit.testing import plugin_from_module, run_step
+    v, f, lab, rgb, axis, _ = aerial_lane()
+    p = scan.ScanSourceParams()
+    net = scan.derive_network(v, f, lab, p, curbs=False, rgb=rgb)
+    scan.add_heights_and_signals(net, v, f, lab, p)
 
-    import twinkit_roads.plugin as roads
-    from twinkit_roads.align import transform_xodr
+    def edges(tag):
+        nod, edg = scan.write_plain(net, p, PROJ, tmp_path / tag)
+        scan.netconvert_plain(nod, edg, tmp_path / f"{tag}.xodr", p)
+        text = (tmp_path / f"{tag}.xodr").read_text()
+        w = [x for x in carla.Map(tag, text).generate_waypoints(1.0)
+             if x.lane_type == carla.LaneType.Driving and abs(x.transform.location.x) < 30]
+        ys = [(-x.transform.location.y - x.lane_width / 2, -x.transform.location.y + x.lane_width / 2) for x in w]
+        return text, min(a for a, _ in ys), max(b for _, b in ys)
 
-    v, f, lab, truth, net, text = four_way
-    moved = transform_xodr(text, 0.0, 0.08, 0.0)
-    assert 'value="scan"' in moved
-    (tmp_path / "moved.xodr").write_text(moved)
-    write_ply(tmp_path / "cross.ply", Mesh(v, f))
-    al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp_path / "al",
-                  {"in_roads_xodr": tmp_path / "moved.xodr", "in_textured_mesh_ply": tmp_path / "cross.ply"},
-                  site={"name": "x", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}})
-    a = json.loads(al["alignment.json"].read_text())
-    assert a["kerbs"]["applied"], a["kerbs"]
-    assert a["tx_m"] == pytest.approx(-0.08, abs=0.03) and abs(a["yaw_deg"]) < 0.1
+    text, south, north = edges("before")
+    assert not scan.check_lanes(net, text, v, f, p)["narrow"]
+    bank = v.copy()
+    bank[(bank[:, 1] >= -3.01) & (bank[:, 1] <= -2.49), 2] -= 0.5
+    chk = scan.check_lanes(net, text, bank, f, p)
+    (k, sides), = chk["narrow"].items()
+    width = net.arms[k].width_m
+    assert scan.narrow_arms(net, chk["narrow"], p) == 1 and net.arms[k].width_m == pytest.approx(width - 0.5)
+    _, south2, north2 = edges("after")
+    assert south2 == pytest.approx(south + 0.5, abs=0.1) and north2 == pytest.approx(north, abs=0.1)

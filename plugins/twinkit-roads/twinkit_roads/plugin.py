@@ -216,8 +216,9 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     sec = sample_sections(xodr_text, 1.0)
     # a network drawn from this very mesh (road_source=scan) is already where the mesh's roads are: the fit,
     # against a cruder road surface (the ground level, which takes ramped sidewalks too), can only move it
-    # off (Lille: turned 2.6 deg, lanes onto the curb); it is measured, not applied. The kerb refinement
-    # below is finer than the scan's own edges (a 0.25 m raster): it applies (demo: 4 cm off the kerbs)
+    # off (Lille: turned 2.6 deg, lanes onto the curb); it is measured, not applied. Nor is the kerb
+    # refinement: it puts driving-lane borders on the kerbs' feet, and the scan's lanes keep
+    # curb_clearance_m (a strip) from the edges they were drawn on
     from_scan = from_scan_tag(xodr_text)
     try:
         res = fit(sec, mask, grid, fit_scale=params.fit_scale, search_m=0.0 if from_scan else params.search_m,
@@ -236,7 +237,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         res = FitResult(Transform2D(about=tuple(sec.c.mean(0)) if len(sec.c) else (0.0, 0.0)), nan, nan,
                         len(sec.c), 0, 0, False, kept_identity=True)
     kerb = None
-    if params.kerbs:
+    if params.kerbs and not from_scan:
         from .align import lane_lines, refine_to_kerbs
 
         lines = lane_lines(xodr_text, 1.0)
@@ -296,8 +297,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
                                     "<laneOffset> by apply_alignment after the rigid move (each road onto its own "
                                     "kerbs); edit or empty it by hand like the numbers above")
     if from_scan:
-        ctx.log.info("alignment: the network was derived from this scan (road_source=scan): no rigid fit%s",
-                     " (the kerb refinement above applies)" if kerb is not None and kerb.applied else ": kept in place")
+        ctx.log.info("alignment: the network was derived from this scan (road_source=scan): kept in place")
     elif res.kept_identity:
         ctx.log.info("alignment: no rigid move fits the road surface better than the network as it is: kept in place")
     if res.degenerate:

@@ -98,6 +98,10 @@ class ScanSourceParams:
     lane_tol_m: float = param(0.3, gt=0, le=2)
     min_lane_support: float = param(0.8, ge=0, le=1)
     lane_check_rounds: int = param(3, ge=0, le=10)
+    # ...and a side of a road whose outermost edge_band_m is off the scan (more than 1 - min_lane_support of
+    # its samples along the road) while the rest of that side is on is narrowed by it, per round (not below
+    # min_road_width_m; sides with a sidewalk lane stay). 0: no narrowing
+    edge_band_m: float = param(0.5, ge=0, le=3)
     timeout_s: float = param(300.0, gt=0)  # netconvert wall-clock limit
 
 
@@ -448,6 +452,10 @@ def lane_layout(width_m: float, p: ScanSourceParams) -> dict:
     # widen the lanes, but keep curb_clearance_m free at the curb: the found edge lies a little outside the
     # curb's foot (a reconstructed curb is a ramp), and a lane reaching onto the curb drops the drop test
     lane = min(p.max_lane_width_m, max(p.lane_width_m, (half - p.curb_clearance_m) / n))
+    if n * p.lane_width_m > half:  # a carriageway narrower than two nominal lanes (5-6.5 m: a village street):
+        # narrower lanes (not below min_lane_width_m), not nominal ones that reach over the edges (a 5.2 m
+        # street had two 3.25 m lanes, 0.65 m beyond each edge, over verges and walls: IGN, Autzen)
+        lane = max(p.min_lane_width_m, min(p.lane_width_m, half - p.curb_clearance_m))
     return {"two_way": True, "lanes": n, "lane_m": round(lane, 3), "strip_m": round(max(half - n * lane, 0.0), 3)}
 
 
@@ -953,7 +961,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
 
     lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene)
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
-    res = {"bad_points": {}, "bad_junctions": {}, "samples": int(len(on)),
+    res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "samples": int(len(on)),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
     judged = on | off
     for nid in net.nodes:
@@ -980,7 +988,46 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
         b = bad_pt[owner == k][np.argsort(index[owner == k])]
         if b.any():
             res["bad_points"][k] = b
+    # each side's outermost edge_band_m: off the scan along the road while the rest of that side is on (the
+    # lanes wider than the paved band: a path between grass, a lane edge on a wall's foot) -> narrower
+    if p.edge_band_m <= 0:
+        return res
+    nrm = np.concatenate([_normals(a.xy) for a in net.arms])
+    lateral = ((xy[src] - axis[i]) * nrm[i]).sum(axis=1)  # + left of the road's direction
+    off_s, arm_s = off[src], owner[i]
+    bad_share = 1.0 - p.min_lane_support
+    for k, arm in enumerate(net.arms):
+        lay = lane_layout(arm.width_m, p)
+        reach = lay["lanes"] * lay["lane_m"] + lay["strip_m"] if lay["two_way"] else lay["lane_m"] / 2 + lay["strip_m"]
+        sides = []
+        for sgn, walk in ((1, arm.sidewalk_left_m), (-1, arm.sidewalk_right_m)):
+            if walk > 0:  # a sidewalk lane lies beyond: that edge is a kerb, drawn from the scan's curbs
+                continue
+            side = (arm_s == k) & (sgn * lateral > 0)
+            outer = side & (sgn * lateral > reach - p.edge_band_m)
+            inner = side & ~outer
+            if (outer.sum() >= 10 and off_s[outer].mean() > bad_share
+                    and (inner.sum() < 10 or off_s[inner].mean() <= bad_share)):
+                sides.append(sgn)
+        if sides:
+            res["narrow"][k] = sides
     return res
+
+
+def narrow_arms(net: Network, narrow: dict[int, list[int]], p: ScanSourceParams) -> int:
+    """Take ``edge_band_m`` off the given sides (+1 left, -1 right) of the arms: the carriageway width shrinks
+    and the axis moves half that away from each trimmed side (not below ``min_road_width_m``). Returns
+    how many roads changed."""
+    changed = 0
+    for k, sides in narrow.items():
+        arm = net.arms[k]
+        width = arm.width_m - p.edge_band_m * len(sides)
+        if width < p.min_road_width_m:
+            continue
+        arm.xy = arm.xy - 0.5 * p.edge_band_m * sum(sides) * _normals(arm.xy)
+        arm.width_m = width
+        changed += 1
+    return changed
 
 
 def detach_junctions(net: Network, nodes: list[int], p: ScanSourceParams) -> int:
@@ -1367,17 +1414,19 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
                    "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
                    "roads_off": len(chk["bad_points"])}
             rounds.append(row)
-            if not chk["bad_points"] and not chk["bad_junctions"]:
+            if not chk["bad_points"] and not chk["bad_junctions"] and not chk["narrow"]:
                 break
             before = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
+            row["roads_narrowed"] = narrow_arms(net, chk["narrow"], params)  # in place: the indices stay
             cut2 = cut_arms(net, chk["bad_points"], params, keep_junction_ends=False)
             gone = detach_junctions(net, [k for k in chk["bad_junctions"] if k in net.nodes], params)
             row.update({"cut_m": cut2["cut_m"], "dropped_roads": cut2["dropped_roads"] + gone})
-            if (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes)) == before:
+            if not row["roads_narrowed"] and (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes)) == before:
                 break  # what is off cannot be cut (single shape points): the drop test reports it
             ctx.log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface; %d "
-                         "road(s) off it in places (%.1f m cut), %d junction(s) taken apart (%s), %d road(s) dropped; "
-                         "netconvert again", rnd + 1, 100 * chk["on_share"], len(chk["bad_points"]), cut2["cut_m"],
+                         "road(s) off it in places (%.1f m cut), %d narrowed, %d junction(s) taken apart (%s), %d road(s) "
+                         "dropped; netconvert again", rnd + 1, 100 * chk["on_share"], len(chk["bad_points"]), cut2["cut_m"],
+                         row["roads_narrowed"],
                          len(chk["bad_junctions"]), ", ".join(f"n{k}: {100 * v:.0f} % on" for k, v in
                                                              chk["bad_junctions"].items()) or "-",
                          row["dropped_roads"])
