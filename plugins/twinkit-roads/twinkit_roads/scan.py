@@ -805,7 +805,8 @@ def _true_runs(b: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
-def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3, min_support: float = 0.8) -> dict:
+def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3, min_support: float = 0.8,
+                     scene=None) -> dict:
     """A derived lane must lie on scanned ground. Along each road, the share of its carriageway's cross
     section (7 samples, 0.3 m in from each edge) where a vertical ray meets the surface within ``tol_m`` of
     the road's height there; from a road's free end (not a junction) the road is cut back while that share is under
@@ -817,7 +818,8 @@ def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3
 
     from twinkit.surface.closest import Surface
 
-    scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
+    if scene is None:
+        scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
     bad: dict[int, np.ndarray] = {}
     for k, arm in enumerate(net.arms):
         if arm.z is None or len(arm.xy) < 3:
@@ -1392,23 +1394,21 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
         if params.sidewalks and curbs:
             add_sidewalks(net, mesh.v, mesh.f, labels, params)
         add_heights_and_signals(net, mesh.v, mesh.f, labels, params)
-        cut = trim_unsupported(net, mesh.v, mesh.f, params)
+        from twinkit.surface.closest import Surface
+
+        scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene  # one BVH for both checks
+        cut = trim_unsupported(net, mesh.v, mesh.f, params, scene=scene)
         if cut["cut_m"] or cut["dropped_roads"]:
             ctx.log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
                          "scanned ground", cut["cut_m"], cut["dropped_roads"])
         work = out_opendrive_xodr.parent / "scan_plain"
         rounds = []
-        scene = None
         for rnd in range(params.lane_check_rounds + 1):
             nod, edg = write_plain(net, params, frame.proj_string(), work)
             info = netconvert_plain(nod, edg, out_opendrive_xodr, params, ctx.log)
             if rnd == params.lane_check_rounds:
                 break
             # the lanes netconvert built (junctions included) must lie on the scan at their heights
-            if scene is None:
-                from twinkit.surface.closest import Surface
-
-                scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene
             chk = check_lanes(net, out_opendrive_xodr.read_text(encoding="utf-8"), mesh.v, mesh.f, params, scene)
             row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
                    "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
