@@ -130,6 +130,8 @@ def measure(name: str, cfg: dict) -> dict:
     fr = _metrics(name, "fetch_roads")
     if fr:
         res["roads"] = f"{fr.get('roads')} roads, {fr.get('driving_lanes')} lanes"
+        if fr.get("kept_share") is not None:  # of the road length first derived, what the checks kept
+            res["roads"] += f" ({100 * fr['kept_share']:.0f} % kept)"
     dt = _metrics(name, "drop_test")
     res.update(drop_driving=dt.get("driving_hit_pct"), drop_fall=dt.get("driving_fall_through_pct"))
     pts_dir = _step(name, "read_cloud")

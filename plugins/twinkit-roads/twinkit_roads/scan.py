@@ -102,6 +102,16 @@ class ScanSourceParams:
     # its samples along the road) while the rest of that side is on is narrowed by it, per round (not below
     # min_road_width_m; sides with a sidewalk lane stay). 0: no narrowing
     edge_band_m: float = param(0.5, ge=0, le=3)
+    # across a lane, the surface under neighbouring samples (a sixth of the lane's width apart) may differ
+    # by at most lane_step_m: beyond a larger step (a low wall, a hedge's foot, a yard above the street) a
+    # sample is off the scan even within lane_tol_m (a wheel catches on it). 0: no step test
+    lane_step_m: float = param(0.1, ge=0, le=2)
+    # ...and a sample with anything over it lower than lane_clear_m above the lane (a hedge, a wall's top, a
+    # low roof) is off, whatever lies under it. 0: no such test
+    lane_clear_m: float = param(2.0, ge=0, le=10)
+    # when the checks (trim_unsupported, the lane check) keep less than this share of the road length first
+    # derived, a warning says the map covers less of the streets than the scan shows
+    min_kept_share: float = param(0.5, ge=0, le=1)
     timeout_s: float = param(300.0, gt=0)  # netconvert wall-clock limit
 
 
@@ -900,13 +910,19 @@ def cut_arms(net: Network, bad: dict[int, np.ndarray], p: ScanSourceParams, keep
 
 
 def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.0, above_m: float = 1.0,
-                 below_m: float = 3.0, covered_m: float = 15.0, scene=None) -> dict:
+                 below_m: float = 3.0, covered_m: float = 15.0, scene=None, step_m: float = 0.0,
+                 edge_in_m: float = 0.05, clear_m: float = 0.0) -> dict:
     """Do the driving lanes carla.Map reads from the OpenDRIVE lie on the scanned surface at their heights?
-    Samples every ``spacing_m`` along each driving lane, 7 across it. A sample is **on** when the surface
+    Samples every ``spacing_m`` along each driving lane, 7 across it (the outermost ``edge_in_m`` inside its
+    borders). A sample is **on** when the surface
     lies within ``tol_m`` of the lane's height; **off** when it lies elsewhere: up to ``below_m`` under the
     lane (the lane floats over a bank or a yard), up to ``above_m`` over it (the lane is buried in a
     slope), or not at all under a roof up to ``covered_m`` over the lane (it runs into a house); an open
-    hole in the mesh is left to the drop test. Returns the samples' x, y, whether on and
+    hole in the mesh is left to the drop test. With ``step_m`` > 0, a sample is also off when the surface
+    between it and the lane's middle steps by more than ``step_m`` from one sample to the next (the lane's
+    edge over a low wall or a yard above the street: within ``tol_m``, yet no road). With ``clear_m`` > 0, a
+    sample with any surface over it less than ``clear_m`` above the lane is off too, ground or not (a hedge,
+    a wall's top, a low roof: a car drives into it). Returns the samples' x, y, whether on and
     off, and the junction (its OpenDRIVE name, netconvert's node id) of those inside one ('' elsewhere)."""
     import re
 
@@ -919,14 +935,14 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     names = {int(i): nm for nm, i in re.findall(r'<junction\s+name="([^"]*)"\s+id="(-?\d+)"', xodr_text)}
     names.update({int(i): nm for i, nm in re.findall(r'<junction\s+id="(-?\d+)"\s+name="([^"]*)"', xodr_text)})
     pts, junc = [], []
-    across = np.linspace(-0.45, 0.45, 7)  # to 5 % of the width from either border
+    across = np.linspace(-0.5, 0.5, 7)  # border to border, the outermost edge_in_m in (where a tyre's edge runs)
     for w in m.generate_waypoints(spacing_m):
         if w.lane_type != carla.LaneType.Driving:
             continue
         loc = w.transform.location
         rv = w.transform.get_right_vector()
         nx, ny = rv.x, -rv.y  # CARLA's y points south
-        off = across * float(w.lane_width)
+        off = across * max(float(w.lane_width) - 2 * edge_in_m, 0.0)
         pts.append(np.c_[loc.x + off * nx, -loc.y + off * ny, np.full(len(off), loc.z)])
         junc += [names.get(w.get_junction().id, str(w.get_junction().id)) if w.is_junction else ""] * len(off)
     if not pts:
@@ -950,8 +966,41 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     q[:, :2] = r[:, :2]
     q[:, 2] = r[:, 2] + tol_m
     q[:, 5] = 1.0
-    covered = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy() <= covered_m
-    return {"xy": r[:, :2], "on": on, "off": ~on & (below | above | covered), "junction": np.array(junc)}
+    t_up = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
+    covered = t_up <= covered_m
+    off = ~on & (below | above | covered)
+    if clear_m > 0:
+        low = t_up <= clear_m - tol_m
+        off |= low
+        on &= ~low
+    if step_m > 0:
+        stepped = steps_across(r, scene, len(across), above_m, below_m, step_m)
+        off |= stepped
+        on &= ~stepped
+    return {"xy": r[:, :2], "on": on, "off": off, "junction": np.array(junc)}
+
+
+def steps_across(r: np.ndarray, scene, k: int, above_m: float, below_m: float, step_m: float) -> np.ndarray:
+    """(n,) bool for lane samples laid out ``k`` across per cross-section (consecutive rows of ``r``): the
+    top surface between ``above_m`` over and ``below_m`` under the lane changes by more than ``step_m``
+    between this sample and the lane's middle sample. Where a sample has no surface (an open hole, left to
+    the drop test), no step is counted on either side of it."""
+    import open3d as o3d
+
+    q = np.zeros((len(r), 6), np.float32)
+    q[:, :2] = r[:, :2]
+    q[:, 2] = r[:, 2] + above_m
+    q[:, 5] = -1.0
+    t = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
+    z = np.where(t <= above_m + below_m, r[:, 2] + above_m - t, np.nan).reshape(-1, k)
+    mid = k // 2
+    out = np.zeros(z.shape, bool)
+    with np.errstate(invalid="ignore"):
+        right = np.abs(np.diff(z[:, mid:], axis=1)) > step_m  # mid -> k-1
+        left = np.abs(np.diff(z[:, mid::-1], axis=1)) > step_m  # mid -> 0
+    out[:, mid + 1:] = np.logical_or.accumulate(right, axis=1)
+    out[:, mid - 1::-1] = np.logical_or.accumulate(left, axis=1)
+    return out.ravel()
 
 
 def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=None) -> dict:
@@ -961,7 +1010,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     bool array}, "bad_junctions": {node id: share on}, "on_share": share of all samples on}``."""
     from scipy.spatial import cKDTree
 
-    lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene)
+    lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene, step_m=p.lane_step_m, clear_m=p.lane_clear_m)
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
     res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "samples": int(len(on)),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
@@ -1013,7 +1062,46 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
                 sides.append(sgn)
         if sides:
             res["narrow"][k] = sides
+    # ...and where only a stretch of one side is off (a hedge, a wall's corner beside the road for a few
+    # metres) while the other side's edge there is on: that stretch of the road moves away from it
+    res["nudge"] = {}
+    start = np.cumsum([0] + [len(a.xy) for a in net.arms])
+    for k, arm in enumerate(net.arms):
+        if k in res["narrow"] or arm.sidewalk_left_m > 0 or arm.sidewalk_right_m > 0:
+            continue
+        lay = lane_layout(arm.width_m, p)
+        reach = lay["lanes"] * lay["lane_m"] + lay["strip_m"] if lay["two_way"] else lay["lane_m"] / 2 + lay["strip_m"]
+        n = len(arm.xy)
+        share = {}
+        for sgn in (1, -1):
+            sel = (arm_s == k) & (sgn * lateral > reach - p.edge_band_m)
+            j = i[sel] - start[k]
+            win = np.ones(5)  # about 10 m of road (shape points every sample_m)
+            tot = np.convolve(np.bincount(j, minlength=n).astype(float), win, "same")
+            bad = np.convolve(np.bincount(j, weights=off_s[sel].astype(float), minlength=n), win, "same")
+            share[sgn] = np.where(tot >= 4, bad / np.maximum(tot, 1.0), 0.0) > bad_share
+        move = share[-1].astype(float) - share[1].astype(float)  # +1: to the left (the right edge is off)
+        if move.any():
+            res["nudge"][k] = move
     return res
+
+
+def nudge_arms(net: Network, nudge: dict[int, np.ndarray], p: ScanSourceParams) -> int:
+    """Move stretches of roads sideways by half ``edge_band_m`` (per shape point: +1 to the left of the road's
+    direction, -1 to the right), tapered over the neighbouring points; ends at a junction stay. Returns
+    how many roads moved."""
+    moved = 0
+    for k, mv in nudge.items():
+        arm = net.arms[k]
+        m = np.clip(np.convolve(mv, [0.5, 1.0, 0.5], "same"), -1.0, 1.0)
+        for end, nid in ((0, arm.a), (-1, arm.b)):
+            if net.nodes.get(nid, {}).get("kind") == "junction":
+                m[end] = 0.0
+        if not m.any():
+            continue
+        arm.xy = arm.xy + 0.5 * p.edge_band_m * m[:, None] * _normals(arm.xy)
+        moved += 1
+    return moved
 
 
 def narrow_arms(net: Network, narrow: dict[int, list[int]], p: ScanSourceParams) -> int:
@@ -1158,6 +1246,11 @@ def mark_source(xodr_text: str) -> str:
     if xodr_text[j - 1] == "/":  # <header .../>
         return xodr_text[:j - 1] + ">" + tag + "</header>" + xodr_text[j + 1:]
     return xodr_text[:j + 1] + "\n        " + tag + xodr_text[j + 1:]
+
+
+def network_length(net: Network) -> float:
+    """Metres of road axis in the network."""
+    return float(sum(np.hypot(*np.diff(a.xy, axis=0).T).sum() for a in net.arms if len(a.xy) > 1))
 
 
 def describe(net: Network) -> dict:
@@ -1391,12 +1484,13 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
                              points_xy=points_xy)
         net.stats["curbs"] = curbs
         net.stats["point_spacing_m"] = spacing
+        derived_m = network_length(net)
         if params.sidewalks and curbs:
             add_sidewalks(net, mesh.v, mesh.f, labels, params)
         add_heights_and_signals(net, mesh.v, mesh.f, labels, params)
         from twinkit.surface.closest import Surface
 
-        scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene  # one BVH for both checks
+        scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene
         cut = trim_unsupported(net, mesh.v, mesh.f, params, scene=scene)
         if cut["cut_m"] or cut["dropped_roads"]:
             ctx.log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
@@ -1414,14 +1508,15 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
                    "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
                    "roads_off": len(chk["bad_points"])}
             rounds.append(row)
-            if not chk["bad_points"] and not chk["bad_junctions"] and not chk["narrow"]:
+            if not chk["bad_points"] and not chk["bad_junctions"] and not chk["narrow"] and not chk["nudge"]:
                 break
             before = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
             row["roads_narrowed"] = narrow_arms(net, chk["narrow"], params)  # in place: the indices stay
+            row["roads_moved"] = nudge_arms(net, chk["nudge"], params)
             cut2 = cut_arms(net, chk["bad_points"], params, keep_junction_ends=False)
             gone = detach_junctions(net, [k for k in chk["bad_junctions"] if k in net.nodes], params)
             row.update({"cut_m": cut2["cut_m"], "dropped_roads": cut2["dropped_roads"] + gone})
-            if not row["roads_narrowed"] and (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes)) == before:
+            if not row["roads_narrowed"] and not row["roads_moved"] and (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes)) == before:
                 break  # what is off cannot be cut (single shape points): the drop test reports it
             ctx.log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface; %d "
                          "road(s) off it in places (%.1f m cut), %d narrowed, %d junction(s) taken apart (%s), %d road(s) "
@@ -1434,6 +1529,9 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
                 raise NoRoads("none of the roads derived from the scan keeps its lanes on the scanned surface (they "
                               "float over banks or sink into slopes)", derived=True)
         net.stats["lane_check"] = rounds
+        kept_m = network_length(net)
+        net.stats.update({"derived_m": round(derived_m, 1), "kept_m": round(kept_m, 1),
+                          "kept_share": round(kept_m / derived_m, 3) if derived_m else None})
     except NoRoads as exc:
         return _no_roads(exc, ctx, mesh, labels, which, frame, out_opendrive_xodr, out_scan_roads_json,
                          out_scan_roads_png, t0)
@@ -1475,6 +1573,14 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
         if doc["lanes_on_road"]["on_road_share"] < 0.9:
             ctx.log.warning("only %.0f %% of the derived driving lanes lie on road-labelled surface: check "
                             "scan_roads.png", 100 * doc["lanes_on_road"]["on_road_share"])
+    if net.stats.get("kept_share") is not None:
+        metrics["kept_share"] = net.stats["kept_share"]
+        if net.stats["kept_share"] < params.min_kept_share:
+            ctx.log.warning("the checks against the scan kept only %.0f %% of the %.0f m of road derived from it (lanes "
+                            "over walls, hedges, banks or roofs were cut; scan_roads.json lane_check): the map covers "
+                            "less of the streets than the scan shows, see scan_roads.png; an OSM extract "
+                            "(site.inputs.osm) gives the whole network", 100 * net.stats["kept_share"],
+                            net.stats["derived_m"])
     if "centreline_rmse_m" in doc:
         metrics["centreline_rmse_m"] = doc["centreline_rmse_m"]
         ctx.log.info("derived lane centre lines vs truth: RMSE %.3f m (%d points), lanes on road %.1f %%",
