@@ -166,6 +166,16 @@ def sec_roads(ctx) -> str:
         keys += "<span class=\"key truth\">site's reference lanes</span>" if any(c == "truth" for c, _ in layers) else ""
         parts.append(f"<figure class=\"wide\">{''.join(svg)}<figcaption>Road network over the orthophoto. "
                      f"{keys}<br><span class=\"dim\">{ctx.esc('; '.join(sources))}</span></figcaption></figure>")
+    for s, f in ctx.find("scan_roads.json")[:1]:  # roads from the scan: how much of them the checks kept
+        d = ctx.read_json(f) or {}
+        if d.get("kept_share") is None:
+            continue
+        low = d["kept_share"] < (d.get("params") or {}).get("min_kept_share", 0.5)
+        parts.append(f"<p class=\"{'warn' if low else 'dim'}\">Roads from the scan: {len(d.get('roads', []))} roads; "
+                     f"the checks against the scan kept {100 * d['kept_share']:.0f} % of the {d.get('derived_m', 0):.0f} m "
+                     "of road first derived (lanes over walls, hedges, banks or roofs are cut, moved or narrowed; "
+                     f"{ctx.esc(f.name)} lane_check)"
+                     + (": the map covers less of the streets than the scan shows" if low else "") + ".</p>")
     if qa:
         parts.append("<div class=\"figs\">" + "".join(qa) + "</div>")
     return "".join(parts)
