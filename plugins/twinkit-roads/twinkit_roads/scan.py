@@ -951,17 +951,18 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     if scene is None:
         scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
 
-    def down(z0, reach):  # the first surface under z0 within reach
+    def down(z0):  # distance to the first surface under z0 (inf: none)
         q = np.zeros((len(r), 6), np.float32)
         q[:, :2] = r[:, :2]
         q[:, 2] = z0
         q[:, 5] = -1.0
-        t = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
-        return t <= reach
+        return scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
 
-    on = down(r[:, 2] + tol_m, 2 * tol_m)
-    below = down(r[:, 2] + tol_m, tol_m + below_m)
-    above = down(r[:, 2] + above_m, above_m - tol_m)
+    t_mid = down(r[:, 2] + tol_m)
+    on = t_mid <= 2 * tol_m
+    below = t_mid <= tol_m + below_m
+    t_top = down(r[:, 2] + above_m)  # the top surface, from above_m over the lane
+    above = t_top <= above_m - tol_m
     q = np.zeros((len(r), 6), np.float32)  # a roof over a lane with no ground under it: the lane runs into a house
     q[:, :2] = r[:, :2]
     q[:, 2] = r[:, 2] + tol_m
@@ -974,25 +975,19 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
         off |= low
         on &= ~low
     if step_m > 0:
-        stepped = steps_across(r, scene, len(across), above_m, below_m, step_m)
+        top = np.where(t_top <= above_m + below_m, r[:, 2] + above_m - t_top, np.nan)
+        stepped = steps_across(top, len(across), step_m)
         off |= stepped
         on &= ~stepped
     return {"xy": r[:, :2], "on": on, "off": off, "junction": np.array(junc)}
 
 
-def steps_across(r: np.ndarray, scene, k: int, above_m: float, below_m: float, step_m: float) -> np.ndarray:
-    """(n,) bool for lane samples laid out ``k`` across per cross-section (consecutive rows of ``r``): the
-    top surface between ``above_m`` over and ``below_m`` under the lane changes by more than ``step_m``
-    between this sample and the lane's middle sample. Where a sample has no surface (an open hole, left to
-    the drop test), no step is counted on either side of it."""
-    import open3d as o3d
-
-    q = np.zeros((len(r), 6), np.float32)
-    q[:, :2] = r[:, :2]
-    q[:, 2] = r[:, 2] + above_m
-    q[:, 5] = -1.0
-    t = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
-    z = np.where(t <= above_m + below_m, r[:, 2] + above_m - t, np.nan).reshape(-1, k)
+def steps_across(top: np.ndarray, k: int, step_m: float) -> np.ndarray:
+    """(n,) bool for lane samples laid out ``k`` across per cross-section (consecutive entries of ``top``, the
+    height of the top surface under each, nan where there is none): the surface changes by more than
+    ``step_m`` from one sample to the next between this sample and the lane's middle one. Where a sample has
+    no surface (an open hole, left to the drop test), no step is counted on either side of it."""
+    z = top.reshape(-1, k)
     mid = k // 2
     out = np.zeros(z.shape, bool)
     with np.errstate(invalid="ignore"):
@@ -1048,8 +1043,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     off_s, arm_s = off[src], owner[i]
     bad_share = 1.0 - p.min_lane_support
     for k, arm in enumerate(net.arms):
-        lay = lane_layout(arm.width_m, p)
-        reach = lay["lanes"] * lay["lane_m"] + lay["strip_m"] if lay["two_way"] else lay["lane_m"] / 2 + lay["strip_m"]
+        reach = _lanes_reach(arm, p)
         sides = []
         for sgn, walk in ((1, arm.sidewalk_left_m), (-1, arm.sidewalk_right_m)):
             if walk > 0:  # a sidewalk lane lies beyond: that edge is a kerb, drawn from the scan's curbs
@@ -1069,8 +1063,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     for k, arm in enumerate(net.arms):
         if k in res["narrow"] or arm.sidewalk_left_m > 0 or arm.sidewalk_right_m > 0:
             continue
-        lay = lane_layout(arm.width_m, p)
-        reach = lay["lanes"] * lay["lane_m"] + lay["strip_m"] if lay["two_way"] else lay["lane_m"] / 2 + lay["strip_m"]
+        reach = _lanes_reach(arm, p)
         n = len(arm.xy)
         share = {}
         for sgn in (1, -1):
@@ -1084,6 +1077,12 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
         if move.any():
             res["nudge"][k] = move
     return res
+
+
+def _lanes_reach(arm: Arm, p: ScanSourceParams) -> float:
+    """How far from the axis a road's outermost lane edge lies (lane_layout; a one-way road's lane is centred)."""
+    lay = lane_layout(arm.width_m, p)
+    return lay["lanes"] * lay["lane_m"] + lay["strip_m"] if lay["two_way"] else lay["lane_m"] / 2 + lay["strip_m"]
 
 
 def nudge_arms(net: Network, nudge: dict[int, np.ndarray], p: ScanSourceParams) -> int:
@@ -1250,7 +1249,7 @@ def mark_source(xodr_text: str) -> str:
 
 def network_length(net: Network) -> float:
     """Metres of road axis in the network."""
-    return float(sum(np.hypot(*np.diff(a.xy, axis=0).T).sum() for a in net.arms if len(a.xy) > 1))
+    return float(sum(np.hypot(*np.diff(a.xy, axis=0).T).sum() for a in net.arms))
 
 
 def describe(net: Network) -> dict:
@@ -1490,7 +1489,7 @@ def scan_source(params: ScanSourceParams, ctx, *, in_textured_mesh_ply: Path, ou
         add_heights_and_signals(net, mesh.v, mesh.f, labels, params)
         from twinkit.surface.closest import Surface
 
-        scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene
+        scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene  # one BVH for both checks
         cut = trim_unsupported(net, mesh.v, mesh.f, params, scene=scene)
         if cut["cut_m"] or cut["dropped_roads"]:
             ctx.log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
