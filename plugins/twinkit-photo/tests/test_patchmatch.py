@@ -193,3 +193,30 @@ def test_fusion_drops_points_that_only_near_parallel_rays_agree_on():
         from_a = xyz[src == 0]
         assert (from_a[:, 0] > 2.5).sum() > 500  # the part c sees: kept either way
         assert ((from_a[:, 0] < 1.5).sum() > 500) == both, angle
+
+
+def test_the_ground_under_the_camera_finds_the_street_far_ahead():
+    """A forward walk 2 m per photo: the road 8-20 m ahead is seen at 5-11 degrees from grazing, where no
+    random normal of the PatchMatch start lies (they stay within about 80 degrees of facing the camera) and
+    propagation from the near road reaches only part of it. With the ground planes (ground_planes: the SfM
+    points' lowest heights under the camera) tried at every pixel, the depth is right on most of it (measured
+    0.84 against 0.62 without; 2-8 m ahead 0.85 against 0.79). A photo without SfM points gets no plane."""
+    photos, cams, depths = render_street(n_photos=5, step_m=2.0, size=(160, 120), f_px=140.0)
+    views = _views(photos, cams)
+    r, gt = views[2], depths[2]
+    h, w = gt.shape
+    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    Xc = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(r.K).T * gt[..., None]
+    road = (gt > 0) & (np.abs((Xc @ r.R_wc.T + r.C)[..., 2]) < 0.01)
+    assert D.ground_planes(r, D.DenseOptions()) == []
+    pick = np.random.default_rng(0).choice(np.flatnonzero((gt > 0).ravel()), 200, replace=False)
+    r.pts_cam = Xc.reshape(-1, 3)[pick]  # "SfM points": road and façades
+    planes = D.ground_planes(r, D.DenseOptions())
+    assert len(planes) == 3 and all(abs(-c - 1.6) < 0.05 for _, c in planes)  # the camera is 1.6 m up
+    far = road & (gt >= 8) & (gt < 20)
+    share = {}
+    for gp in (False, True):
+        depth, _ = D.patchmatch_view(r, [views[i] for i in (0, 1, 3, 4)],
+                                     D.DenseOptions(threads=1, ground_planes=gp), PMOptions(threads=1))
+        share[gp] = float(((depth > 0) & (np.abs(depth - gt) < 0.05 * gt))[far].mean())
+    assert share[True] > 0.75 and share[True] > share[False] + 0.15

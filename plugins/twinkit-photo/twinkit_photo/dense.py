@@ -56,6 +56,7 @@ class DenseOptions:
     threads: int = 2
     average_depths: bool = True  # fuse: average each point's depth with the depth maps that agree
     min_triangulation_deg: float = 0.0  # fuse: keep a point only if an agreeing map sees it this far apart
+    ground_planes: bool = True  # PatchMatch: try the ground under the camera (from the SfM points) at every pixel
 
 
 @dataclass
@@ -401,6 +402,23 @@ def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarra
     return depth, score.astype(np.float32)
 
 
+def ground_planes(r: View, opt: DenseOptions, radius_m: float = 20.0) -> list:
+    """The ground under a photo as planes (n, c) of its camera frame (n . X = c, n = the world's up, facing the
+    camera from below): horizontal, at the heights below the camera of the lowest SfM points it sees within
+    ``radius_m`` (their 75th, 85th and 95th percentile of depth below it: the ground, not a mismatch under
+    it). None without 10 such points."""
+    up = np.asarray(opt.up, float)
+    up_cam = r.R_cw @ (up / np.linalg.norm(up))
+    if r.pts_cam is None or len(r.pts_cam) < 10:
+        return []
+    below = -(r.pts_cam @ up_cam)  # height of each point under the camera
+    horiz = np.linalg.norm(r.pts_cam - np.outer(r.pts_cam @ up_cam, up_cam), axis=1)
+    b = below[(horiz <= radius_m) & (below > 0)]
+    if len(b) < 10:
+        return []
+    return [(up_cam.astype(np.float32), -float(h)) for h in np.percentile(b, [75, 85, 95])]
+
+
 def patchmatch_view(r: View, nbrs: list[View], opt: DenseOptions, pm=None) -> tuple[np.ndarray, np.ndarray]:
     """Depth (0 = unknown) and NCC of the reference view by PatchMatch (twinkit_photo.patchmatch); sets
     ``r.normal`` (world, facing the photo) where a depth was kept."""
@@ -408,7 +426,8 @@ def patchmatch_view(r: View, nbrs: list[View], opt: DenseOptions, pm=None) -> tu
 
     pm = pm or PMOptions(threads=opt.threads)
     rel = [(n.gray, n.K, n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C)) for n in nbrs]
-    depth, n_cam, score = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm)
+    depth, n_cam, score = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm,
+                                     planes=ground_planes(r, opt) if opt.ground_planes else ())
     nrm = n_cam.reshape(-1, 3) @ r.R_wc.T
     nrm = nrm.reshape(n_cam.shape)
     nrm[depth <= 0] = np.nan

@@ -215,9 +215,11 @@ def _run_level(L: _Level, n, c, cost, iters: int, opt: PMOptions, inv_lo, inv_hi
     return n, c, cost
 
 
-def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions):
+def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions, planes=()):
     """Depth (h, w; 0 = none), normals (h, w, 3, reference camera frame, facing it) and NCC (h, w) of the
-    reference photo. ``nbrs``: (gray, K, R_nr, t_nr) per neighbour, X_n = R_nr X_r + t_nr."""
+    reference photo. ``nbrs``: (gray, K, R_nr, t_nr) per neighbour, X_n = R_nr X_r + t_nr. ``planes``: (n, c)
+    planes of the scene known beforehand (the ground under the camera), tried at every pixel after the random
+    start; a random normal is never as grazing as the street seen far ahead from eye height."""
     import cv2
 
     cv2.setNumThreads(max(1, int(opt.threads)))
@@ -237,6 +239,15 @@ def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions):
     Lc = _Level(g_r, Kc, [(*_half(g, K), R, t) for g, K, R, t in nbrs], opt)
     n, c = _random_planes(hs * ws, Lc.rays, inv_lo, inv_hi, rng)
     cost = Lc.cost(n, c, opt.top_k)
+    for pn, pc in planes:  # known planes, where they match better
+        nn_ = np.broadcast_to(np.asarray(pn, np.float32), n.shape).copy()
+        cc = np.full(len(c), pc, np.float32)
+        d = Lc.depth(nn_, cc)
+        cst = Lc.cost(nn_, cc, opt.top_k)
+        better = (cst < cost) & (d > dmin) & (d < dmax)
+        cost = np.where(better, cst, cost)
+        n = np.where(better[:, None], nn_, n)
+        c = np.where(better, cc, c)
     n, c, cost = _run_level(Lc, n, c, cost, opt.iters_coarse, opt, inv_lo, inv_hi, rng, 0.5, True)
     del Lc
     # fine: the planes carry over as they are (nearest upsampling)
