@@ -406,7 +406,9 @@ def ground_planes(r: View, opt: DenseOptions, radius_m: float = 20.0) -> list:
     """The ground under a photo as planes (n, c) of its camera frame (n . X = c, n = the world's up, facing the
     camera from below): horizontal, at the heights below the camera of the lowest SfM points it sees within
     ``radius_m`` (their 75th, 85th and 95th percentile of depth below it: the ground, not a mismatch under
-    it). None without 10 such points."""
+    it). Per photo, not the region of interest's one ground plane (``near_limit_from_ground``): a walk of
+    hundreds of metres climbs and turns, and the ground just ahead of each photo is what counts. An empty
+    list without 10 such points."""
     up = np.asarray(opt.up, float)
     up_cam = r.R_cw @ (up / np.linalg.norm(up))
     if r.pts_cam is None or len(r.pts_cam) < 10:

@@ -204,15 +204,17 @@ def _run_level(L: _Level, n, c, cost, iters: int, opt: PMOptions, inv_lo, inv_hi
                 n_p, c_p = _perturb(n, c, L.rays, depth, scale, inv_lo, inv_hi, rng, md, mn)
                 cands.append(np.concatenate([n_p, c_p[:, None]], 1))
         for f in cands:
-            nn_, cc = f[:, :3], f[:, 3]
-            d = L.depth(nn_, cc)
-            cst = L.cost(nn_, cc, opt.top_k)
-            better = (cst < cost) & (d > dnear) & (d < dfar)
-            cost = np.where(better, cst, cost)
-            n = np.where(better[:, None], nn_, n)
-            c = np.where(better, cc, c)
+            n, c, cost = _keep_better(L, n, c, cost, f[:, :3], f[:, 3], opt.top_k, dnear, dfar)
         scale *= 0.5
     return n, c, cost
+
+
+def _keep_better(L: _Level, n, c, cost, n_try, c_try, top_k: int, dnear: float, dfar: float):
+    """Per pixel, the tried plane where it costs less than the current one and its depth is in range."""
+    d = L.depth(n_try, c_try)
+    cst = L.cost(n_try, c_try, top_k)
+    better = (cst < cost) & (d > dnear) & (d < dfar)
+    return (np.where(better[:, None], n_try, n), np.where(better, c_try, c), np.where(better, cst, cost))
 
 
 def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions, planes=()):
@@ -240,14 +242,8 @@ def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions, pl
     n, c = _random_planes(hs * ws, Lc.rays, inv_lo, inv_hi, rng)
     cost = Lc.cost(n, c, opt.top_k)
     for pn, pc in planes:  # known planes, where they match better
-        nn_ = np.broadcast_to(np.asarray(pn, np.float32), n.shape).copy()
-        cc = np.full(len(c), pc, np.float32)
-        d = Lc.depth(nn_, cc)
-        cst = Lc.cost(nn_, cc, opt.top_k)
-        better = (cst < cost) & (d > dmin) & (d < dmax)
-        cost = np.where(better, cst, cost)
-        n = np.where(better[:, None], nn_, n)
-        c = np.where(better, cc, c)
+        n, c, cost = _keep_better(Lc, n, c, cost, np.broadcast_to(np.asarray(pn, np.float32), n.shape).copy(),
+                                  np.full(len(c), pc, np.float32), opt.top_k, dmin, dmax)
     n, c, cost = _run_level(Lc, n, c, cost, opt.iters_coarse, opt, inv_lo, inv_hi, rng, 0.5, True)
     del Lc
     # fine: the planes carry over as they are (nearest upsampling)
