@@ -426,3 +426,37 @@ def test_preflight_refuses_before_the_first_step_runs(project):
     r = project.run("site=p", "recipe=late", "site.roads_offline=false")
     assert r.rc == 0, r.text
     assert project.counts() == {"make": 1, "toy_roads": 1, "double": 1, "read_seed": 1}
+
+
+def _open_and_hash(args):
+    """One process of a sweep: a hash cache on the shared database, released at one instant."""
+    from twinkit.hashing import HashCache
+    db, path, start = args
+    while time.time() < start:
+        pass
+    cache = HashCache(Path(db))
+    try:
+        cache.hash(Path(path))
+        cache.remember(Path(path), "0" * 64)
+        return "ok"
+    except sqlite3.OperationalError as exc:
+        return str(exc)
+    finally:
+        cache.close()
+
+
+def test_parallel_jobs_opening_a_new_hash_cache_together_wait_for_each_other(tmp_path):
+    """A sweep's jobs open a new site's hash database at the same moment; SQLite refuses the second
+    switch to WAL at once ('database is locked', no busy wait): each job must wait, not fail."""
+    import multiprocessing as mp
+    src = tmp_path / "input.txt"
+    src.write_text("street")
+    ctx = mp.get_context("fork")
+    with ctx.Pool(4) as pool:
+        for trial in range(12):
+            db = tmp_path / f"site{trial}" / ".cache" / "hashes.sqlite"
+            start = time.time() + 0.2
+            answers = pool.map(_open_and_hash, [(str(db), str(src), start)] * 4)
+            assert answers == ["ok"] * 4, (trial, answers)
+            rows = sqlite3.connect(db).execute("SELECT count(*) FROM hashes").fetchone()[0]
+            assert rows == 1

@@ -13,9 +13,30 @@ import hashlib
 import os
 import sqlite3
 import threading
+import time
 from pathlib import Path
 
 CHUNK = 1 << 20
+BUSY_WAIT_S = 60.0  # how long a run waits for another run (a sweep's parallel job) holding the database
+
+
+def _patient(call, *args):
+    """``call(*args)``, retried while SQLite answers "database is locked" at once.
+
+    The connection's own timeout covers ordinary waits, but SQLite gives up without waiting in some
+    cases, e.g. when two processes open a new database together and both switch it to WAL: the
+    second one's ``PRAGMA journal_mode`` fails immediately. Such a failure is retried with a growing
+    pause for up to ``BUSY_WAIT_S``; any other error is raised as it is."""
+    deadline, pause = time.monotonic() + BUSY_WAIT_S, 0.01
+    while True:
+        try:
+            return call(*args)
+        except sqlite3.OperationalError as exc:
+            text = str(exc)
+            if ("locked" not in text and "busy" not in text) or time.monotonic() > deadline:
+                raise
+        time.sleep(pause)
+        pause = min(pause * 2, 0.5)
 
 
 def sha256_file(path: Path) -> str:
@@ -55,17 +76,28 @@ class HashCache:
             return self._conn
         if self._conn is None:
             self.db_path.parent.mkdir(parents=True, exist_ok=True)
-            self._conn = sqlite3.connect(str(self.db_path), timeout=60, isolation_level=None)
-            self._conn.execute("PRAGMA journal_mode=WAL")
-            self._conn.execute("PRAGMA synchronous=NORMAL")
-            cols = [r[1] for r in self._conn.execute("PRAGMA table_info(hashes)").fetchall()]
-            if cols and "ctime" not in cols:  # remembered before ctime was part of the signature
-                self._conn.execute("DROP TABLE hashes")
-            self._conn.execute(
-                "CREATE TABLE IF NOT EXISTS hashes (dev INTEGER, ino INTEGER, size INTEGER, mtime INTEGER, "
-                "ctime INTEGER, sha256 TEXT, PRIMARY KEY (dev, ino, size, mtime, ctime))"
-            )
+            conn = sqlite3.connect(str(self.db_path), timeout=BUSY_WAIT_S, isolation_level=None)
+            try:
+                _patient(self._set_up, conn)
+            except BaseException:
+                conn.close()
+                raise
+            self._conn = conn
         return self._conn
+
+    @staticmethod
+    def _set_up(conn: sqlite3.Connection) -> None:
+        """WAL mode and the table; safe to repeat (``_patient`` retries it whole)."""
+        if conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+            conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute("PRAGMA synchronous=NORMAL")
+        cols = [r[1] for r in conn.execute("PRAGMA table_info(hashes)").fetchall()]
+        if cols and "ctime" not in cols:  # remembered before ctime was part of the signature
+            conn.execute("DROP TABLE IF EXISTS hashes")
+        conn.execute(
+            "CREATE TABLE IF NOT EXISTS hashes (dev INTEGER, ino INTEGER, size INTEGER, mtime INTEGER, "
+            "ctime INTEGER, sha256 TEXT, PRIMARY KEY (dev, ino, size, mtime, ctime))"
+        )
 
     @staticmethod
     def signature(st: os.stat_result) -> tuple[int, int, int, int, int]:
@@ -81,7 +113,7 @@ class HashCache:
         with self._lock:
             db = self._db()
             if db is not None:
-                db.execute("INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?,?)", (*sig, digest))
+                _patient(db.execute, "INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?,?)", (*sig, digest))
 
     def hash(self, path: Path) -> str:
         st = os.stat(path)
@@ -112,7 +144,7 @@ class HashCache:
                 with self._lock:
                     db = self._db()
                     if db is not None:
-                        db.execute("INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?,?)", (*sig, digest))
+                        _patient(db.execute, "INSERT OR REPLACE INTO hashes VALUES (?,?,?,?,?,?)", (*sig, digest))
         return digest
 
     def prune(self, keep: set[tuple[int, int, int, int, int]]) -> int:
@@ -123,7 +155,7 @@ class HashCache:
                 return 0
             rows = db.execute("SELECT dev, ino, size, mtime, ctime FROM hashes").fetchall()
             doomed = [r for r in rows if tuple(r) not in keep]
-            db.execute("BEGIN")
+            _patient(db.execute, "BEGIN IMMEDIATE")  # the write lock now, or wait for it: never a failed upgrade
             db.executemany("DELETE FROM hashes WHERE dev=? AND ino=? AND size=? AND mtime=? AND ctime=?", doomed)
             db.execute("COMMIT")
             self._mem = {k: v for k, v in self._mem.items() if k in keep}
