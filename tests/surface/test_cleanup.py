@@ -172,6 +172,39 @@ def test_ground_fill_fills_shadow_not_building():
     assert filled.n_faces > plain.n_faces
 
 
+def _two_levels(rise_m: float):
+    """Up-facing points on 14 x 6 m: z = 0 for x <= 4, z = ``rise_m`` for x >= 9, nothing in between (5 m);
+    the mesh the same without faces over the gap."""
+    g = np.arange(0, 14.0001, 0.05)
+    X, Y = np.meshgrid(g, np.arange(0, 6.0001, 0.05))
+    p = np.c_[X.ravel(), Y.ravel(), np.where(X.ravel() >= 9, rise_m, 0.0)]
+    p = p[(p[:, 0] <= 4) | (p[:, 0] >= 9)]
+    mesh = grid_mesh(141, size=14.0)
+    mesh.vertices[:, 2] = np.where(mesh.vertices[:, 0] >= 9 - 1e-9, rise_m, 0.0)
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    from twinkit.mesh import compact
+
+    mesh = compact(mesh, ((c[:, 0] < 4) | (c[:, 0] > 9)) & (c[:, 1] < 6))
+    return mesh, p, np.tile([0.0, 0.0, 1.0], (len(p), 1))
+
+
+def test_ground_fill_does_not_ramp_between_ground_at_different_levels():
+    """A shadow in the ground joins two sides no more than a kerb step plus a street's steepest slope over
+    the gap apart (0.3 m + 0.15 x 5 m here). On a photo walk a hedge's top or a car roof with no lower ground
+    within the local window counts as ground; the fill ramped 1.6 m up to it and covered a third of a
+    held-out photo with a sheet textured from other photos."""
+    from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
+
+    for rise, fills in ((0.5, True), (1.5, False)):
+        mesh, pts, nrm = _two_levels(rise)
+        out, rep = fill_ground_holes(mesh, pts, nrm, None, GroundFillOptions(cell_m=0.1))
+        new = out.vertices[mesh.n_vertices:]
+        gap = (new[:, 0] > 4.3) & (new[:, 0] < 8.7)
+        assert gap.any() == fills, (rise, rep)
+        if fills:  # the ramp between the two levels
+            assert rep["hole_cells"] > 1500 and new[gap, 2].min() >= 0 and new[gap, 2].max() <= rise
+
+
 def test_pin_holes_after_simplification_are_closed():
     from twinkit.surface.simplify import close_collapse_holes
 

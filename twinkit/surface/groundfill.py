@@ -10,6 +10,9 @@ This module fills such patches on a 2.5D grid:
    car's side, a fence, a pole) or *empty*;
 2. an empty cell is a hole when, looking along x and along y, the first non-empty cell on both
    sides is ground and the two are at most ``max_gap_m`` apart: a shadow between ground cells.
+   The two sides' heights differ by at most a kerb step plus a street's steepest slope over the gap
+   (``kerb_step_m`` + ``max_slope`` x gap): a flat roof, a hedge's top or a car roof that passes for
+   ground where no lower ground lies within the local window is not ramped up to.
    The inside of a building (walls on every side) and the land outside the scan (nothing on
    one side) are never filled;
 3. (``passes`` times, the cells filled so far counting as ground) its height is interpolated linearly between those two ground cells (mean of the x and y
@@ -315,7 +318,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
     hz = np.full((ny, nx), np.nan)
     n_ground = int((cls == 1).sum())
     for _ in range(max(1, int(opt.passes))):
-        new, z = _holes(cls, gz, max_cells)
+        new, z = _holes(cls, gz, max_cells, max_rise=(opt.kerb_step_m, opt.max_slope * c))
         if not new.any():
             break
         hole |= new

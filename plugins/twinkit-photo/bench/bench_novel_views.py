@@ -106,9 +106,9 @@ def compare(photo: np.ndarray, rgb: np.ndarray, hit: np.ndarray, dirs: np.ndarra
         mse = float(np.mean((photo[hit].astype(np.float64) - rgb[hit]) ** 2))
         psnr = 10 * np.log10(255.0 ** 2 / max(mse, 1e-9))
     else:
-        psnr = float("nan")
+        mse, psnr = float("nan"), float("nan")
     return {"covered_below_horizon": round(cov_below, 4), "covered_all": round(float(hit.mean()), 4),
-            "psnr_db": round(float(psnr), 2)}
+            "psnr_db": round(float(psnr), 2), "covered_px": int(hit.sum()), "mse": mse}
 
 
 def _run_params(run: Path, plugin: str) -> dict:
@@ -209,6 +209,11 @@ def main(argv=None) -> int:
         print(r, flush=True)
     mean = {k: round(float(np.nanmean([r[k] for r in rows])), 4) for k in ("covered_below_horizon", "covered_all",
                                                                            "psnr_db")}
+    # every covered pixel of every held-out photo weighs the same (the mean above weighs each photo the same,
+    # so a photo with 3 % covered counts as much as one with 90 %)
+    px = sum(r["covered_px"] for r in rows)
+    sse = sum(r["mse"] * r["covered_px"] for r in rows if r["covered_px"])
+    mean["psnr_pooled_db"] = round(float(10 * np.log10(255.0 ** 2 / max(sse / px, 1e-9))), 2) if px else float("nan")
     doc = {"run": str(run), "photos": str(photos), "every": a.every, "held_out": rows, "mean": mean,
            "mesh": str(mesh_path), "units": "metres" if cams_doc.get("scaled", True) else "model units"}
     (out / "novel_views.json").write_text(json.dumps(doc, indent=2))
@@ -216,6 +221,7 @@ def main(argv=None) -> int:
     for r in rows + [{"photo": "**mean**", **mean}]:
         print(f"| {r['photo']} | {100 * r['covered_below_horizon']:.1f} % | {100 * r['covered_all']:.1f} % | "
               f"{r['psnr_db']:.2f} |")
+    print(f"| **all covered pixels pooled** | | | {mean['psnr_pooled_db']:.2f} |")
     return 0
 
 

@@ -220,3 +220,39 @@ def test_the_ground_under_the_camera_finds_the_street_far_ahead():
                                      D.DenseOptions(threads=1, ground_planes=gp), PMOptions(threads=1))
         share[gp] = float(((depth > 0) & (np.abs(depth - gt) < 0.05 * gt))[far].mean())
     assert share[True] > 0.75 and share[True] > share[False] + 0.15
+
+
+def test_the_geometric_pass_makes_the_depth_maps_agree_with_each_other_and_the_truth():
+    """Photometric maps of a forward walk disagree where the photos are ambiguous; the second pass adds the
+    forward-backward reprojection error against the neighbours' maps to the cost. Measured on this street
+    (1.5 m apart): depth within 2 % of the truth 0.33 -> 0.41 of the pixels, off by over 10 % 0.11 -> 0.08,
+    and the fusion keeps 3.4x the points."""
+    photos, cams, depths = render_street(n_photos=5, step_m=1.5, size=(160, 120), f_px=140.0)
+    views = _views(photos, cams)
+    opt, pm = D.DenseOptions(threads=1), PMOptions(threads=1)
+    others = {i: [j for j in range(5) if j != i] for i in range(5)}
+    for i, v in enumerate(views):
+        v.depth, _ = D.patchmatch_view(v, [views[j] for j in others[i]], opt, pm)
+    photometric = [v.depth for v in views]
+
+    def scores(maps):
+        good = bad = n = 0
+        for d, gt in zip(maps, depths):
+            m = (gt > 0) & (gt < 30)
+            err = np.abs(d - gt) / np.maximum(gt, 1e-6)
+            good += int(((d > 0) & (err < 0.02))[m].sum())
+            bad += int(((d > 0) & (err > 0.1))[m].sum())
+            n += int(m.sum())
+        for v, d in zip(views, maps):
+            v.depth = d
+        return good / n, bad / n, len(D.fuse(views, D.DenseOptions(rel_tol=0.01))[0])
+
+    before = scores(photometric)
+    for i, v in enumerate(views):
+        v.depth, _ = D.patchmatch_geom_view(v, [views[j] for j in others[i]], [photometric[j] for j in others[i]],
+                                            opt, pm)
+        assert v.planes[0].shape == (120, 160, 3) and v.planes[1].shape == (120, 160)
+    after = scores([v.depth for v in views])
+    assert after[0] > before[0] + 0.05  # more pixels right
+    assert after[1] < before[1] - 0.015  # fewer wrong
+    assert after[2] > 2 * before[2]  # the maps agree: the fusion keeps far more

@@ -70,6 +70,7 @@ class View:
     dmin: float = 0.0
     dmax: float = 0.0
     depth: np.ndarray | None = None
+    planes: tuple | None = None  # PatchMatch's per-pixel planes (normals (h, w, 3), offsets (h, w)), camera frame
     pts_cam: np.ndarray | None = None  # SfM points seen by the photo, camera frame
     normal: np.ndarray | None = None
 
@@ -428,12 +429,30 @@ def patchmatch_view(r: View, nbrs: list[View], opt: DenseOptions, pm=None) -> tu
 
     pm = pm or PMOptions(threads=opt.threads)
     rel = [(n.gray, n.K, n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C)) for n in nbrs]
-    depth, n_cam, score = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm,
-                                     planes=ground_planes(r, opt) if opt.ground_planes else ())
+    depth, n_cam, score, r.planes = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm,
+                                               planes=ground_planes(r, opt) if opt.ground_planes else ())
+    _set_normals(r, depth, n_cam)
+    return depth, score
+
+
+def _set_normals(r: View, depth, n_cam) -> None:
     nrm = n_cam.reshape(-1, 3) @ r.R_wc.T
     nrm = nrm.reshape(n_cam.shape)
     nrm[depth <= 0] = np.nan
     r.normal = nrm
+
+
+def patchmatch_geom_view(r: View, nbrs: list[View], nbr_depths: list[np.ndarray], opt: DenseOptions,
+                         pm=None) -> tuple[np.ndarray, np.ndarray]:
+    """The geometric pass of ``r`` (after ``patchmatch_view`` of every photo): its planes refined with the
+    neighbours' photometric depth maps ``nbr_depths`` as a second cost (twinkit_photo.patchmatch)."""
+    from .patchmatch import PMOptions, patchmatch
+
+    pm = pm or PMOptions(threads=opt.threads)
+    rel = [(n.gray, n.K, n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C)) for n in nbrs]
+    geo = [d if d is not None else np.zeros(n.gray.shape, np.float32) for d, n in zip(nbr_depths, nbrs)]
+    depth, n_cam, score, r.planes = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm, init=r.planes, geo=geo)
+    _set_normals(r, depth, n_cam)
     return depth, score
 
 

@@ -23,6 +23,10 @@ random planes to start, then per iteration every pixel tries
   * a fresh random plane,
 and keeps the cheapest. This runs coarse to fine: at half the working resolution first (planes do not
 depend on the resolution, so they carry over as they are), then at the working resolution.
+
+A geometric pass (Schönberger et al. 2016) follows once every photo has its map: the planes are refined
+again at the working resolution with the forward-backward reprojection error against each neighbour's map
+added to that neighbour's cost (``patchmatch(init=..., geo=...)``).
 """
 from __future__ import annotations
 
@@ -43,13 +47,16 @@ class PMOptions:
     min_texture: float = 1e-4  # reference window variance (gray 0..1) below this: no depth
     seed: int = 0
     threads: int = 2
+    geom_weight: float = 0.3  # geometric pass: cost += weight * min(forward-backward error px, geom_max_px)
+    geom_max_px: float = 3.0
 
 
 class _Level:
     """One resolution: the reference window samples and the neighbours' constant homography parts.
     Arrays are sample-major, (S, P): S window samples of P pixels, float32."""
 
-    def __init__(self, ref_gray, K_r, nbrs, opt: PMOptions):
+    def __init__(self, ref_gray, K_r, nbrs, opt: PMOptions, geo=None):
+        """``geo``: per neighbour its depth map at this resolution (0 = none), for the geometric term."""
         import cv2
 
         self.h, self.w = h, w = ref_gray.shape
@@ -78,6 +85,12 @@ class _Level:
             a = (K_n @ t_nr).astype(np.float32)
             base = [H0[i, 0] * self.qx + H0[i, 1] * self.qy + H0[i, 2] for i in range(3)]
             self.nb.append((np.ascontiguousarray(gray_n, np.float32), base, a))
+        self.geo = None
+        if geo is not None:
+            self.geo = [(np.ascontiguousarray(D, np.float32), np.asarray(K_n, np.float32), np.asarray(R_nr, np.float32),
+                         np.asarray(t_nr, np.float32)) for D, (_g, K_n, R_nr, t_nr) in zip(geo, nbrs)]
+            self.pix = np.stack([u, v], 1)
+            self.geom_weight, self.geom_max = float(opt.geom_weight), float(opt.geom_max_px)
         self.Kinv32 = self.Kinv.astype(np.float32)
 
     def depth(self, n, c):
@@ -103,11 +116,42 @@ class _Level:
             num = (self.ref_hat * smp).sum(0)  # ref_hat is zero-mean: the neighbour's mean drops out
             ncc = num / np.sqrt(np.maximum(var, 1e-12))
             costs[j] = np.where(full & (var > self.S * 1e-5), 1.0 - ncc, 2.0)
+            if self.geo is not None:
+                costs[j] = np.where(costs[j] < 2.0, costs[j] + self.geom_weight * self._fb_error(j, n, c), 2.0)
         k = min(top_k, len(costs))
         if k < len(costs):
             costs = np.partition(costs, k - 1, axis=0)[:k]
         out = costs.mean(0)
         return np.where(self.textured, out, 2.0).astype(np.float32)
+
+
+def _fb_error_impl(L, j, n, c):
+    """Forward-backward reprojection error (px, at most geom_max) of each pixel's plane against neighbour j's
+    depth map: the pixel goes out at its plane's depth, comes back at the depth the neighbour saw there
+    (Schönberger et al. 2016's geometric consistency). geom_max where the neighbour has no depth there."""
+    D, K_n, R_nr, t_nr = L.geo[j]
+    hn, wn = D.shape
+    X = L.rays * L.depth(n, c)[:, None]
+    Xn = X @ R_nr.T + t_nr
+    z = Xn[:, 2]
+    zs = np.where(z > 1e-6, z, 1e-6)
+    un = K_n[0, 0] * Xn[:, 0] / zs + K_n[0, 2]
+    vn = K_n[1, 1] * Xn[:, 1] / zs + K_n[1, 2]
+    iu, iv = np.rint(un).astype(np.int64), np.rint(vn).astype(np.int64)
+    ok = (z > 1e-6) & (iu >= 0) & (iu < wn) & (iv >= 0) & (iv < hn)
+    dn = np.zeros(len(z), np.float32)
+    dn[ok] = D[iv[ok], iu[ok]]
+    ok &= dn > 0
+    back = np.stack([(un - K_n[0, 2]) / K_n[0, 0], (vn - K_n[1, 2]) / K_n[1, 1], np.ones_like(un)], 1) * dn[:, None]
+    Xr = (back - t_nr) @ R_nr  # R_nr^T (X_n - t)
+    zr = np.where(Xr[:, 2] > 1e-6, Xr[:, 2], 1e-6)
+    ur = L.K[0, 0] * Xr[:, 0] / zr + L.K[0, 2]
+    vr = L.K[1, 1] * Xr[:, 1] / zr + L.K[1, 2]
+    err = np.hypot(ur - L.pix[:, 0], vr - L.pix[:, 1])
+    return np.where(ok & (Xr[:, 2] > 1e-6), np.minimum(err, L.geom_max), L.geom_max).astype(np.float32)
+
+
+_Level._fb_error = _fb_error_impl
 
 
 def _remap(img, x, y, h, w, border: bool):
@@ -217,17 +261,32 @@ def _keep_better(L: _Level, n, c, cost, n_try, c_try, top_k: int, dnear: float, 
     return (np.where(better[:, None], n_try, n), np.where(better, c_try, c), np.where(better, cst, cost))
 
 
-def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions, planes=()):
+def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions, planes=(), init=None, geo=None):
     """Depth (h, w; 0 = none), normals (h, w, 3, reference camera frame, facing it) and NCC (h, w) of the
     reference photo. ``nbrs``: (gray, K, R_nr, t_nr) per neighbour, X_n = R_nr X_r + t_nr. ``planes``: (n, c)
     planes of the scene known beforehand (the ground under the camera), tried at every pixel after the random
-    start; a random normal is never as grazing as the street seen far ahead from eye height."""
+    start; a random normal is never as grazing as the street seen far ahead from eye height.
+
+    The geometric pass (``init`` and ``geo`` given): ``init`` = (normals (h, w, 3), offsets (h, w)) of this photo's
+    photometric pass, ``geo`` the neighbours' depth maps (same order as ``nbrs``, the working resolution); the
+    planes are refined at the working resolution with the cost plus ``geom_weight`` times the forward-backward
+    reprojection error against those maps, so each map settles on the depth its neighbours agree with where
+    the photos alone leave it ambiguous. A depth is kept where the plane's photometric NCC alone reaches
+    ``min_ncc``. The planes (n, c) come back as the fourth value of either pass."""
     import cv2
 
     cv2.setNumThreads(max(1, int(opt.threads)))
     rng = np.random.default_rng(int(opt.seed))
     inv_lo, inv_hi = 1.0 / dmin, 1.0 / dmax  # inverse depth: near (large) .. far (small)
     h, w = ref_gray.shape
+    if init is not None:
+        Lf = _Level(ref_gray, K_r, nbrs, opt, geo=geo)
+        n = np.ascontiguousarray(np.asarray(init[0], np.float32).reshape(-1, 3))
+        c = np.ascontiguousarray(np.asarray(init[1], np.float32).reshape(-1))
+        cost = Lf.cost(n, c, opt.top_k)
+        n, c, cost = _run_level(Lf, n, c, cost, opt.iters_fine, opt, inv_lo, inv_hi, rng, 0.06, False)
+        Lf.geo = None  # the acceptance test is photometric
+        return _finish(Lf, n, c, Lf.cost(n, c, opt.top_k), dmin, dmax, opt, h, w)
     f = 0.5
     hs, ws = int(round(h * f)), int(round(w * f))
 
@@ -254,8 +313,12 @@ def patchmatch(ref_gray, K_r, nbrs, dmin: float, dmax: float, opt: PMOptions, pl
     n, c = n[idx], c[idx]
     cost = Lf.cost(n, c, opt.top_k)
     n, c, cost = _run_level(Lf, n, c, cost, opt.iters_fine, opt, inv_lo, inv_hi, rng, 0.06, False)
+    return _finish(Lf, n, c, cost, dmin, dmax, opt, h, w)
+
+
+def _finish(Lf, n, c, cost, dmin, dmax, opt: PMOptions, h, w):
     depth = Lf.depth(n, c)
     ok = (cost <= 1.0 - opt.min_ncc) & (depth > dmin) & (depth < dmax)
     depth = np.where(ok, depth, 0.0)
     return (depth.reshape(h, w).astype(np.float32), n.reshape(h, w, 3).astype(np.float32),
-            (1.0 - cost).reshape(h, w).astype(np.float32))
+            (1.0 - cost).reshape(h, w).astype(np.float32), (n.reshape(h, w, 3), c.reshape(h, w)))

@@ -116,6 +116,13 @@ class DenseParams:
     pm_iters_fine: int = param(3, ge=0, le=32)  # then at the working resolution
     pm_top_k: int = param(2, ge=1, le=16)  # a pixel's cost: mean NCC cost of its best top_k neighbours
     pm_min_ncc: float = param(0.5, ge=-1, le=1)  # patchmatch: keep a depth whose aggregated NCC reaches this
+    # patchmatch: a second pass over every photo whose cost adds the forward-backward reprojection error against
+    # the neighbours' depth maps (geometric consistency): where the photos alone are ambiguous (a walked street's
+    # far road, repeated cobbles) each map settles on the depth its neighbours see. Lund: 50 -> 60 % of held-out
+    # pixels covered; about doubles the depth maps' time
+    pm_geometric: bool = True
+    pm_geom_weight: float = param(0.3, ge=0)  # cost per pixel of forward-backward error ...
+    pm_geom_max_px: float = param(3.0, gt=0)  # ... counted up to this many pixels
     # fewer kept points per depth map than this: the run ends "degraded" (the demo keeps ~10,000 per photo; the
     # CPU sweep kept 148 per photo on Lund, a 5 m² mesh)
     degraded_below_points_per_photo: int = param(1000, ge=0)
@@ -720,7 +727,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
 
     pm = PMOptions(window=params.pm_window, dilation=params.pm_dilation, iters_coarse=params.pm_iters_coarse,
                    iters_fine=params.pm_iters_fine, top_k=params.pm_top_k, min_ncc=params.pm_min_ncc,
-                   threads=opt.threads)
+                   geom_weight=params.pm_geom_weight, geom_max_px=params.pm_geom_max_px, threads=opt.threads)
     views = D.load_views(Path(in_photos_dir), cams, opt.max_image_px)
     D.depth_ranges(views, sp, vis_arr, max_depth)
     nb = D.choose_neighbors(views, vis_arr, opt, sp)
@@ -739,6 +746,14 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
         else:
             v.depth, _ = D.plane_sweep(v, [views[j] for j in nb[i]], opt)
         n_maps += 1
+    if params.cpu_method == "patchmatch" and params.pm_geometric and n_maps > 1:
+        photometric = [v.depth for v in views]
+        for i in ctx.progress(range(len(views)), total=len(views), desc="depth maps, geometric pass"):
+            v = views[i]
+            if v.depth is None:
+                continue
+            v.depth, _ = D.patchmatch_geom_view(v, [views[j] for j in nb[i]], [photometric[j] for j in nb[i]], opt, pm)
+        del photometric
     t_sweep = time.perf_counter() - t_sweep
     if n_maps == 0:
         raise InputError(f"{in_cameras_site_json}: no photo has a neighbour with a usable baseline "
@@ -752,6 +767,8 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                                     out_points_meta_json, f"{params.cpu_method} + fusion",
                                     "depth maps" if params.cpu_method == "sweep" else "patchmatch planes", dense_info={
                                         "backend": "cpu", "method": params.cpu_method, "depth_maps": n_maps, "photos": len(views),
+                                        "geometric_pass": bool(params.cpu_method == "patchmatch" and params.pm_geometric
+                                                               and n_maps > 1),
                                         "working_px": params.max_image_px, "rel_tol": rel_tol, "rel_tol_from": rel_why,
                                         "neighbours": {views[i].name: [views[j].name for j in nb[i]] for i in nb},
                                         "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean()))
