@@ -256,3 +256,11 @@ def test_the_geometric_pass_makes_the_depth_maps_agree_with_each_other_and_the_t
     assert after[0] > before[0] + 0.05  # more pixels right
     assert after[1] < before[1] - 0.015  # fewer wrong
     assert after[2] > 2 * before[2]  # the maps agree: the fusion keeps far more
+    # a neighbour without a map of its own votes by the photos alone, and the pass still runs
+    v = views[2]
+    v.planes = None
+    v.depth, _ = D.patchmatch_view(v, [views[j] for j in others[2]], opt, pm)
+    maps = [photometric[j] for j in others[2]]
+    maps[0] = None
+    depth, _ = D.patchmatch_geom_view(v, [views[j] for j in others[2]], maps, opt, pm)
+    assert depth.shape == (120, 160) and (depth > 0).mean() > 0.3

@@ -445,13 +445,14 @@ def _set_normals(r: View, depth, n_cam) -> None:
 def patchmatch_geom_view(r: View, nbrs: list[View], nbr_depths: list[np.ndarray], opt: DenseOptions,
                          pm=None) -> tuple[np.ndarray, np.ndarray]:
     """The geometric pass of ``r`` (after ``patchmatch_view`` of every photo): its planes refined with the
-    neighbours' photometric depth maps ``nbr_depths`` as a second cost (twinkit_photo.patchmatch)."""
+    neighbours' photometric depth maps ``nbr_depths`` as a second cost (twinkit_photo.patchmatch); a neighbour
+    whose map is None (it had no usable neighbour of its own) is judged by the photos alone."""
     from .patchmatch import PMOptions, patchmatch
 
     pm = pm or PMOptions(threads=opt.threads)
     rel = [(n.gray, n.K, n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C)) for n in nbrs]
-    geo = [d if d is not None else np.zeros(n.gray.shape, np.float32) for d, n in zip(nbr_depths, nbrs)]
-    depth, n_cam, score, r.planes = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm, init=r.planes, geo=geo)
+    depth, n_cam, score, r.planes = patchmatch(r.gray, r.K, rel, r.dmin, r.dmax, pm, init=r.planes,
+                                               geo=list(nbr_depths))
     _set_normals(r, depth, n_cam)
     return depth, score
 

@@ -56,7 +56,8 @@ class _Level:
     Arrays are sample-major, (S, P): S window samples of P pixels, float32."""
 
     def __init__(self, ref_gray, K_r, nbrs, opt: PMOptions, geo=None):
-        """``geo``: per neighbour its depth map at this resolution (0 = none), for the geometric term."""
+        """``geo``: per neighbour its depth map at this resolution (0 = no depth there; None = no map), for the
+        geometric term."""
         import cv2
 
         self.h, self.w = h, w = ref_gray.shape
@@ -87,8 +88,10 @@ class _Level:
             self.nb.append((np.ascontiguousarray(gray_n, np.float32), base, a))
         self.geo = None
         if geo is not None:
-            self.geo = [(np.ascontiguousarray(D, np.float32), np.asarray(K_n, np.float32), np.asarray(R_nr, np.float32),
-                         np.asarray(t_nr, np.float32)) for D, (_g, K_n, R_nr, t_nr) in zip(geo, nbrs)]
+            # a neighbour without a map (None) is judged by the photos alone
+            self.geo = [None if D is None else (np.ascontiguousarray(D, np.float32), np.asarray(K_n, np.float32),
+                                                np.asarray(R_nr, np.float32), np.asarray(t_nr, np.float32))
+                        for D, (_g, K_n, R_nr, t_nr) in zip(geo, nbrs)]
             self.pix = np.stack([u, v], 1)
             self.geom_weight, self.geom_max = float(opt.geom_weight), float(opt.geom_max_px)
         self.Kinv32 = self.Kinv.astype(np.float32)
@@ -116,7 +119,7 @@ class _Level:
             num = (self.ref_hat * smp).sum(0)  # ref_hat is zero-mean: the neighbour's mean drops out
             ncc = num / np.sqrt(np.maximum(var, 1e-12))
             costs[j] = np.where(full & (var > self.S * 1e-5), 1.0 - ncc, 2.0)
-            if self.geo is not None:
+            if self.geo is not None and self.geo[j] is not None:
                 costs[j] = np.where(costs[j] < 2.0, costs[j] + self.geom_weight * self._fb_error(j, n, c), 2.0)
         k = min(top_k, len(costs))
         if k < len(costs):
