@@ -53,7 +53,9 @@ def test_the_section_shows_dropped_photos_outliers_the_gps_map_and_coverage(tmp_
                                                      "mean_reprojection_error_px": 0.7}))
     s3 = tmp_path / "04_dense"
     s3.mkdir()
-    (s3 / "points_meta.json").write_text(json.dumps({"dense": {"valid_ratio": {"00.jpg": 0.42}}}))
+    (s3 / "points_meta.json").write_text(json.dumps({"dense": {
+        "valid_ratio": {"00.jpg": 0.42},
+        "per_photo": {"00.jpg": 21000, "01.jpg": 20000, "02.jpg": 19000, "03.jpg": 1200}}}))
     steps = [_step("sfm", s1, ["sfm_report.json"]), _step("georeference", geo["georef.json"].parent, ["georef.json"]),
              _step("dense", s3, ["points_meta.json"])]
     html = sec_photos(_ctx(steps))
@@ -61,6 +63,8 @@ def test_the_section_shows_dropped_photos_outliers_the_gps_map_and_coverage(tmp_
     assert "05.jpg" in html and "from its own GPS fix" in html  # the outlier camera and why
     assert html.count("<circle") == 8 and "#c0392b" in html  # 8 cameras on the map, the outlier in red
     assert "42.0 %" in html  # depth-map coverage from the dense step
+    assert "21,000" in html and "1,200 (under a tenth of the median" in html  # points kept; the thin photo flagged
+    assert "20,000 (" not in html
     assert "Unscaled" not in html and "up from" in html and "final vertical vs. the photos&#x27; horizon" in html
     # nothing of this plugin ran: no section
     assert sec_photos(_ctx([])) == ""

@@ -1,12 +1,16 @@
 """twinkit-photo's section of the run report: the photos (registered and dropped), the georeference (how the
 frame was levelled and scaled, outlier cameras), a top-down map of the cameras against their GPS fixes, and a
-table per photo (GPS residual, outlier reason, depth-map coverage where the dense step records it).
+table per photo (GPS residual, outlier reason, depth-map coverage and dense points kept where the dense step
+records them; a photo keeping under a tenth of the median is flagged).
 
 Registered through ``twinkit_register_report_sections`` (plugin.py exposes the hook implementation). It reads
 only the files of this distribution's own steps: ``sfm_report.json`` (sfm), ``georef.json`` (georeference) and
-``points_meta.json`` (dense: ``dense.valid_ratio``, the share of each photo's pixels with a depth).
+``points_meta.json`` (dense: ``dense.valid_ratio``, the share of each photo's pixels with a depth, and
+``dense.per_photo``, the points of each photo's map that the fusion kept).
 """
 from __future__ import annotations
+
+import numpy as np
 
 import math
 
@@ -150,10 +154,15 @@ def sec_photos(ctx) -> str:
         if photos:
             parts.append("<h3>Cameras (blue; outliers red) against their GPS fixes (orange), top-down</h3>"
                          + camera_map_svg(photos, units=units))
-            cover = {}
+            cover, kept = {}, {}
             dense = _own(ctx, "points_meta.json")
             if dense is not None:
                 cover = ((dense[2].get("dense") or {}).get("valid_ratio") or {})
+                kept = ((dense[2].get("dense") or {}).get("per_photo") or {})
+            # a photo whose depth map keeps under a tenth of the median: a stretch of the walk the fusion could
+            # not confirm (photos too far apart, a white wall), where the mesh will be thin
+            counts = [int(v) for v in kept.values() if isinstance(v, (int, float))]
+            thin = 0.1 * float(np.median(counts)) if counts else 0.0
             rows = []
             for n in sorted(set(photos) | set((sfm[2].get("unregistered") or []) if sfm else [])):
                 p = photos.get(n)
@@ -161,8 +170,14 @@ def sec_photos(ctx) -> str:
                     rows.append([n, "no", "", "", ""])
                     continue
                 c = cover.get(n)
+                k = kept.get(n)
+                kcell = ""
+                if isinstance(k, (int, float)):
+                    kcell = f"{int(k):,}" + (" (under a tenth of the median: little here is confirmed by a second "
+                                             "photo)" if k < thin else "")
                 rows.append([n, "yes", p.get("gps_residual_m") if p.get("gps_residual_m") is not None else "",
-                             p.get("outlier") or "", f"{100 * c:.1f} %" if isinstance(c, (int, float)) else ""])
+                             p.get("outlier") or "", f"{100 * c:.1f} %" if isinstance(c, (int, float)) else "", kcell])
             parts.append("<h3>Per photo</h3>" + ctx.table(
-                ["photo", "registered", f"GPS residual ({units})", "outlier camera", "depth-map coverage"], rows))
+                ["photo", "registered", f"GPS residual ({units})", "outlier camera", "depth-map coverage",
+                 "dense points kept"], rows))
     return "".join(parts)
