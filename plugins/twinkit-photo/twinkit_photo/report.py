@@ -167,7 +167,7 @@ def sec_photos(ctx) -> str:
             for n in sorted(set(photos) | set((sfm[2].get("unregistered") or []) if sfm else [])):
                 p = photos.get(n)
                 if p is None:
-                    rows.append([n, "no", "", "", ""])
+                    rows.append([n, "no", "", "", "", ""])
                     continue
                 c = cover.get(n)
                 k = kept.get(n)
