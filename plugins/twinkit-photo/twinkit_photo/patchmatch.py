@@ -127,34 +127,30 @@ class _Level:
         out = costs.mean(0)
         return np.where(self.textured, out, 2.0).astype(np.float32)
 
-
-def _fb_error_impl(L, j, n, c):
-    """Forward-backward reprojection error (px, at most geom_max) of each pixel's plane against neighbour j's
-    depth map: the pixel goes out at its plane's depth, comes back at the depth the neighbour saw there
-    (Schönberger et al. 2016's geometric consistency). geom_max where the neighbour has no depth there."""
-    D, K_n, R_nr, t_nr = L.geo[j]
-    hn, wn = D.shape
-    X = L.rays * L.depth(n, c)[:, None]
-    Xn = X @ R_nr.T + t_nr
-    z = Xn[:, 2]
-    zs = np.where(z > 1e-6, z, 1e-6)
-    un = K_n[0, 0] * Xn[:, 0] / zs + K_n[0, 2]
-    vn = K_n[1, 1] * Xn[:, 1] / zs + K_n[1, 2]
-    iu, iv = np.rint(un).astype(np.int64), np.rint(vn).astype(np.int64)
-    ok = (z > 1e-6) & (iu >= 0) & (iu < wn) & (iv >= 0) & (iv < hn)
-    dn = np.zeros(len(z), np.float32)
-    dn[ok] = D[iv[ok], iu[ok]]
-    ok &= dn > 0
-    back = np.stack([(un - K_n[0, 2]) / K_n[0, 0], (vn - K_n[1, 2]) / K_n[1, 1], np.ones_like(un)], 1) * dn[:, None]
-    Xr = (back - t_nr) @ R_nr  # R_nr^T (X_n - t)
-    zr = np.where(Xr[:, 2] > 1e-6, Xr[:, 2], 1e-6)
-    ur = L.K[0, 0] * Xr[:, 0] / zr + L.K[0, 2]
-    vr = L.K[1, 1] * Xr[:, 1] / zr + L.K[1, 2]
-    err = np.hypot(ur - L.pix[:, 0], vr - L.pix[:, 1])
-    return np.where(ok & (Xr[:, 2] > 1e-6), np.minimum(err, L.geom_max), L.geom_max).astype(np.float32)
-
-
-_Level._fb_error = _fb_error_impl
+    def _fb_error(self, j, n, c):
+        """Forward-backward reprojection error (px, at most geom_max) of each pixel's plane against neighbour j's
+        depth map: the pixel goes out at its plane's depth, comes back at the depth the neighbour saw there
+        (Schönberger et al. 2016's geometric consistency). geom_max where the neighbour has no depth there."""
+        D, K_n, R_nr, t_nr = self.geo[j]
+        hn, wn = D.shape
+        X = self.rays * self.depth(n, c)[:, None]
+        Xn = X @ R_nr.T + t_nr
+        z = Xn[:, 2]
+        zs = np.where(z > 1e-6, z, 1e-6)
+        un = K_n[0, 0] * Xn[:, 0] / zs + K_n[0, 2]
+        vn = K_n[1, 1] * Xn[:, 1] / zs + K_n[1, 2]
+        iu, iv = np.rint(un).astype(np.int64), np.rint(vn).astype(np.int64)
+        ok = (z > 1e-6) & (iu >= 0) & (iu < wn) & (iv >= 0) & (iv < hn)
+        dn = np.zeros(len(z), np.float32)
+        dn[ok] = D[iv[ok], iu[ok]]
+        ok &= dn > 0
+        back = np.stack([(un - K_n[0, 2]) / K_n[0, 0], (vn - K_n[1, 2]) / K_n[1, 1], np.ones_like(un)], 1) * dn[:, None]
+        Xr = (back - t_nr) @ R_nr  # R_nr^T (X_n - t)
+        zr = np.where(Xr[:, 2] > 1e-6, Xr[:, 2], 1e-6)
+        ur = self.K[0, 0] * Xr[:, 0] / zr + self.K[0, 2]
+        vr = self.K[1, 1] * Xr[:, 1] / zr + self.K[1, 2]
+        err = np.hypot(ur - self.pix[:, 0], vr - self.pix[:, 1])
+        return np.where(ok & (Xr[:, 2] > 1e-6), np.minimum(err, self.geom_max), self.geom_max).astype(np.float32)
 
 
 def _remap(img, x, y, h, w, border: bool):

@@ -10,9 +10,8 @@ only the files of this distribution's own steps: ``sfm_report.json`` (sfm), ``ge
 """
 from __future__ import annotations
 
-import numpy as np
-
 import math
+import statistics
 
 from twinkit import hookimpl
 
@@ -162,7 +161,7 @@ def sec_photos(ctx) -> str:
             # a photo whose depth map keeps under a tenth of the median: a stretch of the walk the fusion could
             # not confirm (photos too far apart, a white wall), where the mesh will be thin
             counts = [int(v) for v in kept.values() if isinstance(v, (int, float))]
-            thin = 0.1 * float(np.median(counts)) if counts else 0.0
+            thin = 0.1 * statistics.median(counts) if counts else 0.0
             rows = []
             for n in sorted(set(photos) | set((sfm[2].get("unregistered") or []) if sfm else [])):
                 p = photos.get(n)
