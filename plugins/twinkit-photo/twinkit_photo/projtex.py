@@ -22,6 +22,7 @@ class PhotoView:
     R_wc: np.ndarray  # world-from-camera rotation (OpenCV camera)
     C: np.ndarray  # centre, site frame
     image: np.ndarray  # (h, w, 3) uint8
+    small: np.ndarray | None = None  # the photo at half size (made when first needed)
 
 
 def _project(v: PhotoView, X: np.ndarray):
@@ -72,6 +73,7 @@ class _Visibility:
 def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, base: np.ndarray,
                     views: list[PhotoView], *, max_views: int = 3, min_cos: float = 0.15, max_dist_m: float = 40.0,
                     sharpness: float = 4.0, margin_px: float = 2.0, tol_m: float = 0.03, tol_rel: float = 0.002,
+                    consistency_views: int = 0, consistency_levels: float = 40.0,
                     threads: int = 0, progress=None) -> tuple[np.ndarray, dict]:
     """Return (texture (s, s, 3) uint8, info): ``base`` with every texel a photo sees replaced by the blend of
     its best photos. ``uv`` per face corner (m, 3, 2) in [0, 1], v up; ``base`` the current texture (s, s, 3)."""
@@ -85,8 +87,10 @@ def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bas
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
     m = len(faces)
     k = max(1, int(max_views))
-    best_cam = np.full((m, k), -1, np.int64)
-    best_score = np.zeros((m, k), np.float32)
+    nc = max(k, int(consistency_views))  # candidates kept per face for the photo-consistency check
+    best_cam = np.full((m, nc), -1, np.int64)
+    best_score = np.zeros((m, nc), np.float32)
+    best_col = np.zeros((m, nc, 3), np.float32)
     # 1. per face: the photos that see its centre, ranked
     it = range(len(views))
     if progress is not None:
@@ -106,13 +110,21 @@ def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bas
         ok = vis.visible(v.C, cen[idx], tol_m, tol_rel)
         idx = idx[ok]
         score = (cos[idx] / dist[idx]).astype(np.float32)
-        # insert into the per-face top-k lists
+        # insert into the per-face top-nc lists
         sc = np.concatenate([best_score[idx], score[:, None]], 1)
         cam = np.concatenate([best_cam[idx], np.full((len(idx), 1), ci)], 1)
-        order = np.argsort(-sc, axis=1)[:, :k]
+        order = np.argsort(-sc, axis=1)[:, :nc]
         best_score[idx] = np.take_along_axis(sc, order, 1)
         best_cam[idx] = np.take_along_axis(cam, order, 1)
+        if nc > k:
+            col = np.concatenate([best_col[idx], _face_colour(v, tri[idx])[:, None]], 1)
+            best_col[idx] = np.take_along_axis(col, order[:, :, None], 1)
     seen_faces = int((best_cam[:, 0] >= 0).sum())
+    rejected = 0
+    if nc > k:
+        best_cam, best_score, rejected = _consistent(best_cam, best_score, best_col, k, float(consistency_levels))
+    else:
+        best_cam, best_score = best_cam[:, :k], best_score[:, :k]
     # 2. per texel: blend the face's best photos
     out = base.copy()
     acc_w = np.zeros((size, size), np.float32)
@@ -154,5 +166,68 @@ def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bas
     info = {"photos": len(views), "faces_seen": seen_faces, "faces_seen_ratio": round(seen_faces / max(m, 1), 4),
             "texels": texels, "texels_from_photos": n_got,
             "texels_from_photos_ratio": round(n_got / max(texels, 1), 4),
+            "views_rejected_inconsistent": int(rejected),
             "best_view_faces": {views[i].name: int(c) for i, c in enumerate(views_used) if c}}
     return out, info
+
+
+# where a face's colour is read in a photo: its centre and six points around it (barycentric coordinates), so
+# the colour is the face's own average whatever the distance it is seen from
+_FACE_SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.6, 0.2, 0.2], [0.2, 0.6, 0.2], [0.2, 0.2, 0.6],
+                          [0.4, 0.4, 0.2], [0.4, 0.2, 0.4], [0.2, 0.4, 0.4]])
+
+
+def _face_colour(v: PhotoView, tri: np.ndarray) -> np.ndarray:
+    """The mean colour (n, 3) of faces ``tri`` (n, 3, 3) in photo ``v``: seven points spread over each face,
+    read from the photo at half size (area-averaged). A fixed block of pixels would not do: it covers a
+    near face's detail but a far face and its surroundings, so near and far photos would disagree."""
+    if v.small is None:
+        import cv2
+
+        h, w = v.image.shape[:2]
+        v.small = cv2.resize(v.image, (max(1, w // 2), max(1, h // 2)), interpolation=cv2.INTER_AREA)
+    X = np.einsum("sk,nkd->nsd", _FACE_SAMPLES, tri).reshape(-1, 3)
+    px, _z = _project(v, X)
+    hs, ws = v.small.shape[:2]
+    q = np.clip(px / 2.0, 0.5, [ws - 0.5, hs - 0.5])
+    return _sample(v.small, q).reshape(len(tri), len(_FACE_SAMPLES), 3).mean(1)
+
+
+def _consistent(cams, scores, cols, k: int, levels: float):
+    """Per face, the ``k`` best-scored candidate photos whose colour of the face agrees with the consensus of
+    all its candidates (Waechter et al. 2014's photo-consistency check): an occluder the mesh lacks -- a
+    tree, a parked car or a walker in front of a façade in some photos only -- gives those photos a colour
+    the others do not see. The consensus is a mean shift in RGB (Gaussian kernel of ``levels`` / 2, five
+    rounds) from the candidate colour with the most support around it, each candidate weighted by its
+    score over the best one's, so that many far, grazing photos do not outvote the close ones. (On the
+    demo a fence reconstructed as a sheet is seen against the sky from afar and against the grass behind
+    it from close by: unweighted, the sky won, -1.2 dB.) A candidate farther than ``levels`` from the
+    consensus is dropped. Faces with fewer than three candidates, or where fewer than two would stay, keep
+    them all (no majority to judge by)."""
+    m, nc = cams.shape
+    have = cams >= 0
+    cnt = have.sum(1)
+    # a candidate's say in the consensus: its score relative to the face's best
+    sw = np.where(have, scores / np.maximum(scores[:, :1], 1e-12), 0.0)
+    sig2 = (0.5 * levels) ** 2
+    # start from the candidate colour with the most weighted support around it (the densest mode), not from
+    # the mean, which two disagreeing groups put between them
+    pair = ((cols[:, :, None, :] - cols[:, None, :, :]) ** 2).sum(-1)  # (m, nc, nc)
+    support = (sw[:, None, :] * np.exp(-pair / (2 * sig2))).sum(2)
+    support = np.where(have, support, -1.0)
+    mu = np.take_along_axis(cols, np.argmax(support, axis=1)[:, None, None], 1)[:, 0]
+    for _ in range(5):
+        d2 = ((cols - mu[:, None]) ** 2).sum(-1)
+        wgt = sw * np.exp(-d2 / (2 * sig2))
+        mu = (cols * wgt[..., None]).sum(1) / np.maximum(wgt.sum(1), 1e-12)[:, None]
+    d = np.sqrt(((cols - mu[:, None]) ** 2).sum(-1))
+    keep = have & (d <= levels)
+    judged = (cnt >= 3) & (keep.sum(1) >= 2)
+    keep = np.where(judged[:, None], keep, have)
+    rejected = int((have & ~keep).sum())
+    # the kept candidates first, by score (the lists are sorted by score already)
+    order = np.argsort(~keep, axis=1, kind="stable")[:, :k]
+    c2 = np.take_along_axis(np.where(keep, cams, -1), order, 1)
+    s2 = np.take_along_axis(np.where(keep, scores, 0.0), order, 1).astype(np.float32)
+    return c2, s2, rejected
+
