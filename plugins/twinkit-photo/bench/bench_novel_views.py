@@ -12,8 +12,8 @@ The real-data check of view synthesis where no ground truth exists. From a finis
    parameters the run used (read from each step folder's ``step.json``), through the installed plugins
    (twinkit.testing.run_plugin);
    the poses come from the full run's sfm, so a held-out photo has a pose but gave no pixel to the model;
-3. renders that mesh at each held-out photo's pose (Open3D ray casting, texture looked up per pixel) and
-   compares with the photo at ``--max-px`` (long side):
+3. renders that mesh at each held-out photo's pose (Open3D ray casting, ``--supersample`` x ``--supersample``
+   rays per pixel, their texels averaged) and compares with the photo at ``--max-px`` (long side):
 
    * ``covered_below_horizon``: the share of the photo's pixels whose ray points below the horizontal (the
      street and the lower facades; the sky and roofs above the camera do not count) that hit the mesh;
@@ -192,7 +192,7 @@ def main(argv=None) -> int:
     ap.add_argument("--mesh", help="skip the rebuild: evaluate this textured mesh PLY (e.g. one built before)")
     ap.add_argument("--supersample", type=int, default=3,
                     help="rays per pixel side, averaged (default 3: the render filtered as the photo is; 1: one "
-                         "nearest texel per pixel, the bench before 28 Nov 2026, about 0.3 dB lower on Lund)")
+                         "nearest texel per pixel, as the bench measured until 28 Nov 2026: about 0.3 dB lower on Lund)")
     a = ap.parse_args(argv)
     if not a.run:  # make bench runs every script bare: this one needs a finished run to measure
         print("bench_novel_views: no run folder given (--run outputs/<site> of a finished image_site run); "

@@ -195,6 +195,34 @@ def test_fusion_drops_points_that_only_near_parallel_rays_agree_on():
         assert ((from_a[:, 0] < 1.5).sum() > 500) == both, angle
 
 
+def test_a_point_no_second_photo_could_confirm_needs_one_agreeing_map():
+    """A forward walk: what a photo sees ahead, the photos behind it see from farther. A wall 10 m ahead of
+    photo a is confirmed by b (12 m from it); a photo 30 m behind sees it from 40 m, 4x as far, with a wrong
+    depth. Two agreeing maps are out of reach there: with confirm_max_scale 3 the far photo is not asked and
+    one agreeing map keeps the point; with 0 (min_consistent everywhere) the point is lost. Where a second
+    photo at a similar distance (c, 13 m) could confirm and disagrees, the point is dropped either way."""
+    K = np.array([[100.0, 0, 40], [0, 100.0, 30], [0, 0, 1]])
+
+    def view(name, x, z, depth):
+        v = D.View(name, K, np.eye(3), np.array([x, 0.0, z]), np.zeros((60, 80), np.float32),
+                   np.zeros((60, 80, 3), np.uint8))
+        v.depth = np.full((60, 80), depth, np.float32)  # the wall at world z = 10 (or a wrong depth)
+        v.normal = np.broadcast_to(np.array([0.0, 0.0, -1.0]), (60, 80, 3)).copy()
+        v.dmin, v.dmax = 1.0, 60.0
+        return v
+
+    def kept(views, scale):
+        xyz, _, _, src = D.fuse(views, D.DenseOptions(min_consistent=2, rel_tol=0.005, confirm_max_scale=scale))
+        return int((src == 0).sum())
+
+    a, b, far = view("a", 0.0, 0.0, 10.0), view("b", 1.0, -2.0, 12.0), view("far", 0.0, -30.0, 30.0)
+    assert kept([a, b, far], 0.0) == 0
+    assert kept([a, b, far], 3.0) > 0.9 * 60 * 80
+    assert kept([a, b, far], 5.0) == 0  # asked of the far photo too (40 m is 4x 10 m): lost again
+    c = view("c", -1.0, -3.0, 20.0)  # could confirm (13 m), and disagrees
+    assert kept([a, b, far, c], 3.0) < 0.1 * 60 * 80
+
+
 def test_the_ground_under_the_camera_finds_the_street_far_ahead():
     """A forward walk 2 m per photo: the road 8-20 m ahead is seen at 5-11 degrees from grazing, where no
     random normal of the PatchMatch start lies (they stay within about 80 degrees of facing the camera) and

@@ -12,7 +12,8 @@ direction, many shared SfM points):
   fine: passes at full working resolution with 9 per-pixel depth hypotheses around the current depth
   (cv2.remap), a parabola for sub-sample precision; weak, textureless or edge-of-search pixels dropped.
 Fusion: every depth is projected into the other photos' depth maps; a pixel survives when at least
-``min_consistent`` other depth maps agree within ``rel_tol`` of the depth. Normals come from the depth
+``min_consistent`` other depth maps agree within ``rel_tol`` of the depth (one, where fewer other photos could
+confirm it at all: ``confirm_max_scale``). Normals come from the depth
 map (cross product of neighbouring points), oriented towards the photo; colours from the photo.
 """
 from __future__ import annotations
@@ -56,6 +57,9 @@ class DenseOptions:
     threads: int = 2
     average_depths: bool = True  # fuse: average each point's depth with the depth maps that agree
     min_triangulation_deg: float = 0.0  # fuse: keep a point only if an agreeing map sees it this far apart
+    # fuse: a point needs min_consistent agreeing maps only where that many other photos could confirm it (it
+    # lies in their frame and depth range, seen from at most this many times its distance); else one. 0 = always
+    confirm_max_scale: float = 0.0
     ground_planes: bool = True  # PatchMatch: try the ground under the camera (from the SfM points) at every pixel
 
 
@@ -500,6 +504,8 @@ def fuse(views: list[View], opt: DenseOptions, progress=None):
         nrm = v.normal if v.normal is not None else depth_normals(v, pts, d)
         P = pts[valid]
         cnt = np.zeros(len(P), np.int32)
+        could = np.zeros(len(P), np.int32)  # other photos that could confirm the point (confirm_max_scale)
+        z_ref = d[valid]
         ratio_sum = np.ones(len(P), np.float64)  # this view's own depth counts once (ratio 1)
         min_ang = opt.min_triangulation_deg
         best_cos = np.ones(len(P), np.float64) if min_ang > 0 else None
@@ -524,13 +530,19 @@ def fuse(views: list[View], opt: DenseOptions, progress=None):
             dz[inside] = o.depth[vv[inside], u[inside]]
             ok = inside & (dz > 0) & (np.abs(dz - z) < opt.rel_tol * z)
             cnt += ok
+            if opt.confirm_max_scale > 0:
+                could += (inside & (z > o.dmin) & ((o.dmax <= 0) | (z < o.dmax))
+                          & (z <= opt.confirm_max_scale * z_ref))
             if best_cos is not None and ok.any():
                 k = np.flatnonzero(ok)
                 ray_j = P[k] - o.C
                 c = np.sum(ray_i[k] * ray_j, 1) / np.maximum(np.linalg.norm(ray_j, axis=1), 1e-12)
                 best_cos[k] = np.minimum(best_cos[k], c)
             ratio_sum[ok] += dz[ok] / z[ok]
-        keep = cnt >= opt.min_consistent
+        need = opt.min_consistent
+        if opt.confirm_max_scale > 0:
+            need = np.minimum(opt.min_consistent, np.maximum(could, 1))
+        keep = cnt >= need
         if best_cos is not None:
             keep &= best_cos <= np.cos(np.radians(min_ang))
         if opt.average_depths:

@@ -97,6 +97,13 @@ class DenseParams:
     window_px: int = param(7, ge=1, le=63)
     min_ncc: float = param(0.55, ge=-1, le=1)
     min_consistent: int = param(2, ge=0)  # other depth maps that must agree
+    # ... where that many other photos could confirm the point: it lies in their frame and depth range and they
+    # see it from at most this many times its distance (farther, a photo sees it at under a third of the
+    # resolution and cannot confirm a depth to rel_tol); where fewer could, one agreeing map is enough. A
+    # forward walk with photos 8-13 m apart sees the road ahead of a photo only from the photos behind it,
+    # 3-5x as far: two agreeing maps there are out of reach (Lund held-out: 26.jpg 4 -> 33 % covered, mean
+    # 58.0 -> 63.2 %; demo mesh 2.71 -> 2.70 cm; docs/photo.md). 0 = min_consistent everywhere
+    confirm_max_scale: float = param(3.0, ge=0)
     # agreement: |depth difference| < rel_tol * depth. -1 = auto: 0.3 % for photos whose SfM model reprojects
     # within 0.35 px (the demo's GCP-georeferenced model: the tightest tolerance that keeps its 3 cm), growing in
     # proportion to the model's mean reprojection error (sfm_report.json) up to 1 %: depth maps cannot agree
@@ -729,6 +736,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                          window_px=params.window_px, min_ncc=params.min_ncc, min_consistent=params.min_consistent,
                          rel_tol=rel_tol, average_depths=params.average_depths,
                          min_triangulation_deg=params.min_triangulation_deg, max_depth_m=max_depth, coarse_scale=params.coarse_scale,
+                         confirm_max_scale=params.confirm_max_scale,
                          refine_passes=params.refine_passes, threads=_threads(ctx))
     from .patchmatch import PMOptions
 
@@ -777,6 +785,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
                                         "backend": "cpu", "method": params.cpu_method, "depth_maps": n_maps, "photos": len(views),
                                         "geometric_pass": geometric,
                                         "working_px": params.max_image_px, "rel_tol": rel_tol, "rel_tol_from": rel_why,
+                                        "confirm_max_scale": params.confirm_max_scale,
                                         "neighbours": {views[i].name: [views[j].name for j in nb[i]] for i in nb},
                                         "valid_ratio": {v.name: (None if v.depth is None else float((v.depth > 0).mean()))
                                                         for v in views},

@@ -212,10 +212,13 @@ def _consistent(cams, scores, cols, k: int, levels: float):
     sig2 = (0.5 * levels) ** 2
     # start from the candidate colour with the most weighted support around it (the densest mode), not from
     # the mean, which two disagreeing groups put between them
-    pair = ((cols[:, :, None, :] - cols[:, None, :, :]) ** 2).sum(-1)  # (m, nc, nc)
-    support = (sw[:, None, :] * np.exp(-pair / (2 * sig2))).sum(2)
-    support = np.where(have, support, -1.0)
-    mu = np.take_along_axis(cols, np.argmax(support, axis=1)[:, None, None], 1)[:, 0]
+    start = np.zeros(m, np.int64)
+    for a in range(0, m, 65536):  # (faces, nc, nc) distances, a chunk of faces at a time
+        c = cols[a:a + 65536]
+        pair = ((c[:, :, None, :] - c[:, None, :, :]) ** 2).sum(-1)
+        support = (sw[a:a + 65536, None, :] * np.exp(-pair / (2 * sig2))).sum(2)
+        start[a:a + 65536] = np.argmax(np.where(have[a:a + 65536], support, -1.0), axis=1)
+    mu = np.take_along_axis(cols, start[:, None, None], 1)[:, 0]
     for _ in range(5):
         d2 = ((cols - mu[:, None]) ** 2).sum(-1)
         wgt = sw * np.exp(-d2 / (2 * sig2))
