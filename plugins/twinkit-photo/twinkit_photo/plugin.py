@@ -146,8 +146,8 @@ class PhotoTextureParams:
     # photo-consistency check (Waechter et al. 2014): of a face's best this-many photos, those whose colour of the
     # face is over consistency_levels (RGB distance, 0-255) from the consensus of all of them are not used -- a
     # tree, a parked car or a walker in front of the surface in some photos only, which the mesh lacks.
-    # Sceaux held-out PSNR 15.5 -> 17.2 dB (the chestnut tree's leaves were painted onto the façade), Lund
-    # +0.02 dB (docs/photo.md). 0 = off
+    # Held-out PSNR: Sceaux 15.8 -> 17.7 dB (the chestnut tree's leaves were painted onto the façade), Lund
+    # unchanged; the demo's texture bench -0.3 dB (railings reconstructed as a sheet; docs/photo.md). 0 = off
     consistency_views: int = param(8, ge=0)
     consistency_levels: float = param(45.0, gt=0)
 
