@@ -126,18 +126,34 @@ def compare(photo: np.ndarray, rgb: np.ndarray, hit: np.ndarray, dirs: np.ndarra
             "psnr_db": round(float(psnr), 2), "covered_px": int(hit.sum()), "mse": mse}
 
 
+# --param overrides: {plugin: {name: value}}, applied over the run's own parameters
+OVERRIDES: dict[str, dict] = {}
+
+
 def _run_params(run: Path, plugin: str) -> dict:
     """The parameters the run's ``plugin`` step used (its step folder's step.json), so the rebuild measures
-    the run's own settings (e.g. ``steps.dense.cpu_method=patchmatch``), not the plugins' defaults."""
+    the run's own settings (e.g. ``steps.dense.cpu_method=patchmatch``), not the plugins' defaults; then the
+    bench's ``--param`` overrides for that plugin (to measure today's default on an older run)."""
     for step in sorted(run.glob("[0-9][0-9]_*/step.json"), reverse=True):
         try:
             doc = json.loads(step.read_text())
         except (OSError, ValueError):
             continue
         if doc.get("plugin") == plugin:
-            return dict(doc.get("params") or {})
+            return {**dict(doc.get("params") or {}), **OVERRIDES.get(plugin, {})}
     print(f"warning: {run} has no {plugin} step; its defaults are used", flush=True)
-    return {}
+    return dict(OVERRIDES.get(plugin, {}))
+
+
+def _parse_override(text: str) -> tuple[str, str, object]:
+    """``step/photo_texture.max_views=6`` -> ("step/photo_texture", "max_views", 6) (the value read as YAML)."""
+    import yaml
+
+    key, sep, value = text.partition("=")
+    plugin, dot, name = key.rpartition(".")
+    if not sep or not dot or not plugin or not name:
+        sys.exit(f"--param {text!r}: write it as kind/plugin.name=value, e.g. step/photo_texture.max_views=6")
+    return plugin, name, yaml.safe_load(value)
 
 
 def build_from_rest(run: Path, photos: Path, keep: list[dict], cams_doc: dict, out: Path, dense_px: int) -> Path:
@@ -193,7 +209,13 @@ def main(argv=None) -> int:
     ap.add_argument("--supersample", type=int, default=3,
                     help="rays per pixel side, averaged (default 3: the render filtered as the photo is; 1: one "
                          "nearest texel per pixel, as the bench measured until 28 Nov 2026: about 0.3 dB lower on Lund)")
+    ap.add_argument("--param", action="append", default=[], metavar="KIND/PLUGIN.NAME=VALUE",
+                    help="override a parameter the run used, for the rebuild (repeatable), e.g. "
+                         "step/photo_texture.max_views=6: measures a newer default on an older run")
     a = ap.parse_args(argv)
+    for text in a.param:
+        plugin, name, value = _parse_override(text)
+        OVERRIDES.setdefault(plugin, {})[name] = value
     if not a.run:  # make bench runs every script bare: this one needs a finished run to measure
         print("bench_novel_views: no run folder given (--run outputs/<site> of a finished image_site run); "
               "nothing measured")
@@ -232,7 +254,7 @@ def main(argv=None) -> int:
     px = sum(r["covered_px"] for r in rows)
     sse = sum(r["mse"] * r["covered_px"] for r in rows if r["covered_px"])
     mean["psnr_pooled_db"] = round(float(10 * np.log10(255.0 ** 2 / max(sse / px, 1e-9))), 2) if px else float("nan")
-    doc = {"run": str(run), "photos": str(photos), "every": a.every, "supersample": a.supersample,
+    doc = {"run": str(run), "photos": str(photos), "every": a.every, "supersample": a.supersample, "param_overrides": OVERRIDES,
            "held_out": rows, "mean": mean,
            "mesh": str(mesh_path), "units": "metres" if cams_doc.get("scaled", True) else "model units"}
     (out / "novel_views.json").write_text(json.dumps(doc, indent=2))

@@ -6,9 +6,10 @@ view beats a far, grazing one. With ``consistency_views`` > ``max_views``, the p
 face disagrees with the consensus of the face's best ``consistency_views`` photos are left out first (an
 occluder the mesh lacks: ``_consistent``). Each texel is then projected into the face's best ``max_views`` photos,
 checked for occlusion again (a texel can be hidden where its face's centre is not), and the photos'
-colours are blended with weights ``score ** sharpness``: the best view dominates (sharp texture), the
-others soften the seams where the best view changes from one face to the next. Texels no photo sees
-keep the colour they had (the bake from the dense cloud).
+colours are blended with weights ``score ** sharpness``: 0 (the step's default) averages them alike, which
+after the consistency check is nearer the surface's own colour than any one photo (noise, exposure, glare
+differ per photo); a large sharpness lets the best view dominate. Texels no photo sees keep the colour
+they had (the bake from the dense cloud).
 """
 from __future__ import annotations
 
@@ -73,8 +74,8 @@ class _Visibility:
 
 
 def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, base: np.ndarray,
-                    views: list[PhotoView], *, max_views: int = 3, min_cos: float = 0.15, max_dist_m: float = 40.0,
-                    sharpness: float = 4.0, margin_px: float = 2.0, tol_m: float = 0.03, tol_rel: float = 0.002,
+                    views: list[PhotoView], *, max_views: int = 6, min_cos: float = 0.15, max_dist_m: float = 40.0,
+                    sharpness: float = 0.0, margin_px: float = 2.0, tol_m: float = 0.03, tol_rel: float = 0.002,
                     consistency_views: int = 0, consistency_levels: float = 45.0,
                     threads: int = 0, progress=None) -> tuple[np.ndarray, dict]:
     """Return (texture (s, s, 3) uint8, info): ``base`` with every texel a photo sees replaced by the blend of
