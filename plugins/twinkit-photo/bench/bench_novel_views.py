@@ -254,8 +254,8 @@ def main(argv=None) -> int:
     px = sum(r["covered_px"] for r in rows)
     sse = sum(r["mse"] * r["covered_px"] for r in rows if r["covered_px"])
     mean["psnr_pooled_db"] = round(float(10 * np.log10(255.0 ** 2 / max(sse / px, 1e-9))), 2) if px else float("nan")
-    doc = {"run": str(run), "photos": str(photos), "every": a.every, "supersample": a.supersample, "param_overrides": OVERRIDES,
-           "held_out": rows, "mean": mean,
+    doc = {"run": str(run), "photos": str(photos), "every": a.every, "supersample": a.supersample,
+           "param_overrides": OVERRIDES, "held_out": rows, "mean": mean,
            "mesh": str(mesh_path), "units": "metres" if cams_doc.get("scaled", True) else "model units"}
     (out / "novel_views.json").write_text(json.dumps(doc, indent=2))
     print("\n| photo | covered below the horizon | covered (all) | PSNR on covered (dB) |\n|---|---|---|---|")

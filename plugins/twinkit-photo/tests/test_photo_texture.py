@@ -194,7 +194,7 @@ def test_the_default_blend_averages_the_consistent_photos_and_lands_nearer_the_t
     truth = pattern(x, y)
     p = PhotoTextureParams()
     kw = dict(consistency_views=p.consistency_views, consistency_levels=p.consistency_levels, threads=1)
-    tex, info = project_texture(pv, pf, puv, base, views, max_views=p.max_views, sharpness=p.sharpness, **kw)
+    tex, _ = project_texture(pv, pf, puv, base, views, max_views=p.max_views, sharpness=p.sharpness, **kw)
     best, _ = project_texture(pv, pf, puv, base, views, max_views=1, **kw)
     err = np.abs(tex[clear].astype(np.float32) - truth[clear]).mean()
     err_best = np.abs(best[clear].astype(np.float32) - truth[clear]).mean()
