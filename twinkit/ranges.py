@@ -29,6 +29,7 @@ from typing import Any, Iterator
 from twinkit.errors import ConfigError
 
 META = "twinkit_check"
+HELP = "twinkit_help"
 
 
 def _num(x: float) -> str:
@@ -105,14 +106,17 @@ class Pattern:
 
 def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: float | None = None,
           le: float | None = None, lt: float | None = None, also: tuple = (), choices: tuple | None = None,
-          pattern: str | None = None, words: str = "", default_factory: Any = dataclasses.MISSING) -> Any:
+          pattern: str | None = None, words: str = "", default_factory: Any = dataclasses.MISSING,
+          help: str = "") -> Any:
     """A dataclass field with its valid values: ``ge``/``gt``/``le``/``lt`` for numbers, ``choices`` for the rest.
 
     ``pattern`` (a regular expression the whole string must match, ``words`` saying it for the error)
     is for strings that reach a command line or a script. ``also`` lists special values outside the
     range (``-1`` = automatic). With no bound at all the
     field still counts as declared ("any number"): say so on purpose, for signed offsets and angles.
-    For a list the check applies to each element.
+    For a list the check applies to each element. ``help`` is the one-paragraph description
+    ``twinkit plugins <kind>/<name>`` prints (what the value does, its unit, when to change it);
+    measurements and their history belong in the docs, not here.
     """
     if pattern is not None:
         check: Range | Choices | Pattern = Pattern(pattern, words)
@@ -124,8 +128,13 @@ def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: fl
         check = Range(lo=gt if gt is not None else ge, hi=lt if lt is not None else le,
                       lo_open=gt is not None, hi_open=lt is not None, also=tuple(also))
     if default_factory is not dataclasses.MISSING:
-        return dataclasses.field(default_factory=default_factory, metadata={META: check})
-    return dataclasses.field(default=default, metadata={META: check})
+        return dataclasses.field(default_factory=default_factory, metadata={META: check, HELP: help})
+    return dataclasses.field(default=default, metadata={META: check, HELP: help})
+
+
+def help_of(f: dataclasses.Field) -> str:
+    """The ``help`` text a field was declared with (empty when it has none)."""
+    return (f.metadata.get(HELP) if f.metadata else "") or ""
 
 
 def check_of(f: dataclasses.Field) -> Range | Choices | Pattern | None:
