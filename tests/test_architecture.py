@@ -68,9 +68,9 @@ def test_importing_twinkit_and_its_shared_library_stays_light():
     """``import twinkit`` and the shared library's package modules load no heavy library at import time."""
     code = ("import sys, twinkit, twinkit.plugins, twinkit.cityscapes\n"
             "import importlib\n"
-            "for m in ('twinkit.geo', 'twinkit.mesh', 'twinkit.surface'):\n"
+            "for m in ('twinkit.geo', 'twinkit.mesh', 'twinkit.street', 'twinkit.surface'):\n"
             "    importlib.import_module(m)\n"
-            "heavy = [m for m in ('open3d', 'torch', 'bpy', 'pycolmap', 'pyproj', 'trimesh', 'scipy') if m in sys.modules]\n"
+            "heavy = [m for m in ('open3d', 'torch', 'bpy', 'pycolmap', 'pyproj', 'trimesh', 'scipy', 'carla') if m in sys.modules]\n"
             "print(','.join(heavy))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "", f"heavy libraries imported at import time: {out}"

@@ -53,7 +53,7 @@ def _file_digest(path: str, mtime_ns: int) -> str:
 #: Core modules whose code shapes what steps write: the shared library that plugins build on (site frame,
 #: mesh I/O and operations, surface algorithms, the CityScapes classes). A plugin's code hash covers those
 #: it imports; the framework's own modules (engine, CLI, report) do not change results and are left out.
-SHARED_LIBRARY: tuple[str, ...] = ("cityscapes", "geo", "mesh", "surface")
+SHARED_LIBRARY: tuple[str, ...] = ("cityscapes", "geo", "mesh", "street", "surface")
 _CORE = Path(__file__).resolve().parent
 _TWINKIT_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+twinkit((?:\.\w+)*)[ \t]+import[ \t]+\(?([\w \t,]+)"
                              r"|import[ \t]+twinkit\.(\w+))", re.M)
