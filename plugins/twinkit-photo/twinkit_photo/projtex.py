@@ -237,3 +237,54 @@ def _consistent(cams, scores, cols, k: int, levels: float):
     s2 = np.take_along_axis(np.where(keep, scores, 0.0), order, 1).astype(np.float32)
     return c2, s2, rejected
 
+
+
+# --------------------------------------------------------------------------- the photo_texture step's inputs
+
+def read_textured_mesh(src):
+    """A baked, UV-mapped mesh (bake_texture's PLY) and its texture: (Mesh, uv (F, 3, 2) float64, texture
+    (H, W, 3) uint8). InputError without per-face texture coordinates or the texture image beside it."""
+    from pathlib import Path
+
+    from PIL import Image
+    from twinkit import InputError
+    from twinkit.mesh import read_ply
+
+    src = Path(src)
+    try:
+        mesh = read_ply(src)
+    except Exception as exc:  # noqa: BLE001 - any parse error is the file's fault
+        raise InputError(f"{src}: cannot read the textured mesh ({exc}); re-run the texture step") from None
+    tc = mesh.face_attrs.get("texcoord")
+    png_name = next((c.split(None, 1)[1] for c in mesh.comments if c.startswith("TextureFile")), src.stem + ".png")
+    png = src.parent / png_name
+    if tc is None or mesh.faces is None or not png.exists():
+        raise InputError(f"{src}: needs per-face texture coordinates and its texture image ({png.name}) beside it; "
+                         f"give it the output of bake_texture")
+    uv = np.asarray(tc, np.float64).reshape(-1, 3, 2)
+    base = np.asarray(Image.open(png).convert("RGB"))
+    return mesh, uv, base
+
+
+def photo_views(cameras: list[dict], photos_dir) -> list[PhotoView]:
+    """The site-frame cameras (cameras_site.json rows) with their photos loaded; K rescaled where a photo's
+    size differs from the camera's."""
+    from pathlib import Path
+
+    from PIL import Image
+    from twinkit import InputError
+
+    views = []
+    for c in cameras:
+        path = Path(photos_dir) / c["image"]
+        try:
+            img = np.asarray(Image.open(path).convert("RGB"))
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read the photo ({exc}); re-export or remove it") from None
+        K = np.asarray(c["K"], float)
+        if img.shape[1] != int(c["width"]) or img.shape[0] != int(c["height"]):
+            sx, sy = img.shape[1] / float(c["width"]), img.shape[0] / float(c["height"])
+            K = np.diag([sx, sy, 1.0]) @ K
+        views.append(PhotoView(c["image"], K, np.asarray(c["R_world_from_camera"], float),
+                               np.asarray(c["center"], float), img))
+    return views

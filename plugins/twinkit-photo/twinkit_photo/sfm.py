@@ -229,3 +229,118 @@ def sparse_points(rec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     rgb = np.array([rec.points3D[i].color for i in ids], np.uint8).reshape(-1, 3)
     err = np.array([rec.points3D[i].error for i in ids], float)
     return xyz, rgb, err
+
+
+# --------------------------------------------------------------------------- the sfm step's parts
+
+def choose_intrinsics(mode: str, folder: Path, infos: list, cameras_json: Path | None) -> tuple[list | None, str]:
+    """The intrinsics to start from and where they came from: (K 3x3 in pixels at full photo size, or None
+    for EXIF, source). ``auto``: K.txt beside the photos, else the site's cameras.json when its size matches
+    (one photo size only), else EXIF; ``exif``: EXIF."""
+    from .files import read_json
+    from .images import read_k_txt
+
+    sizes = {(i.width, i.height) for i in infos}
+    K, k_source = None, "exif"
+    if mode == "auto":
+        K = read_k_txt(folder)
+        if K is not None:
+            k_source = "K.txt"
+        elif cameras_json is not None and len(sizes) == 1:
+            intr = read_json(cameras_json, "camera file").get("intrinsics") or {}
+            if "K" in intr and (intr.get("width"), intr.get("height")) in sizes:
+                K, k_source = intr["K"], Path(cameras_json).name
+    elif mode != "exif":
+        raise InputError(f"sfm: intrinsics='{mode}' must be auto or exif")
+    if K is not None and len(sizes) != 1:
+        K, k_source = None, "exif"
+    return K, k_source
+
+
+def run_sfm_in_temp(folder: Path, names: list[str], opt: SfmOptions, *, has_gps: bool, log) -> SfmResult:
+    """:func:`run_sfm` in a throw-away folder (COLMAP database and attempts), removed afterwards."""
+    import tempfile
+
+    work = Path(tempfile.mkdtemp(prefix="twinkit_sfm_"))
+    try:
+        return run_sfm(folder, names, work, opt, has_gps=has_gps, log=log)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def check_registration(names: list[str], registered: list[str], min_ratio: float, degraded_ratio: float,
+                       folder: Path, degraded) -> tuple[float, list[str]]:
+    """(registered share, unregistered names); an InputError under ``min_ratio``, ``degraded(...)`` under
+    ``degraded_ratio``."""
+    n_reg = len(registered)
+    ratio = n_reg / len(names)
+    missing = sorted(set(names) - set(registered))
+    listed = f"{', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}"
+    if ratio < min_ratio:
+        raise InputError(f"{folder}: structure from motion registered only {n_reg} of {len(names)} photos "
+                         f"({100 * ratio:.0f} % < sfm.min_registered_ratio {100 * min_ratio:.0f} %); "
+                         f"unregistered: {listed}. Take more "
+                         f"overlapping photos, try sfm.matching=exhaustive or sequential, or lower the ratio")
+    if ratio < degraded_ratio:
+        degraded(f"structure from motion registered only {n_reg} of {len(names)} photos; unregistered: {listed}",
+                 "take more overlapping photos, or try steps.sfm.matching=exhaustive")
+    return ratio, missing
+
+
+def visibility(rec) -> tuple[list[str], list[int]]:
+    """Which sparse point each registered photo sees, as two parallel lists (photo name, index into
+    :func:`sparse_points`' order): the dense step's depth ranges and neighbours."""
+    pid = {p: k for k, p in enumerate(rec.points3D.keys())}
+    vis_img, vis_pt = [], []
+    for iid in rec.reg_image_ids():
+        im = rec.images[iid]
+        ids = [pid[p.point3D_id] for p in im.points2D if p.has_point3D()]
+        vis_img += [im.name] * len(ids)
+        vis_pt += ids
+    return vis_img, vis_pt
+
+
+def write_model(out: Path, rec, infos: list) -> int:
+    """The sfm/ folder: COLMAP's model, sparse.npz (xyz, rgb, error, visibility), cameras_model.json (model
+    frame, OpenCV convention, with the EXIF GPS fixes) and sparse_model.ply. Returns the sparse point count."""
+    from twinkit.jsonio import write_json
+
+    from .files import write_cloud
+
+    out.mkdir(parents=True, exist_ok=True)
+    rec.write(str(out))
+    cams = camera_table(rec)
+    xyz, rgb, err = sparse_points(rec)
+    vis_img, vis_pt = visibility(rec)
+    np.savez_compressed(out / "sparse.npz", xyz=xyz, rgb=rgb, error=err, vis_image=np.array(vis_img),
+                        vis_point=np.array(vis_pt, np.int64))
+    gps = {i.name: [i.lat, i.lon, i.alt] for i in infos if i.has_gps}
+    write_json(out / "cameras_model.json", {"frame": "SfM model frame (arbitrary scale and orientation)",
+                                             "convention": "OpenCV camera, R_world_from_camera, center",
+                                             "cameras": cams, "exif_gps": gps})
+    write_cloud(out / "sparse_model.ply", xyz, rgb, comments=["twinkit-photo sfm sparse points, model frame"])
+    return int(len(xyz))
+
+
+def mean_reprojection_error(rec) -> float:
+    """The model's mean reprojection error in pixels (NaN with no registered photo)."""
+    return float(rec.compute_mean_reprojection_error()) if len(rec.reg_image_ids()) else float("nan")
+
+
+def sfm_report(rec, res: SfmResult, infos: list, groups: list[dict], ratio: float, missing: list[str], *,
+               mapper: str, k_source: str, n_gps: int, n_points: int, reproj: float, total_s: float) -> dict:
+    """sfm_report.json: registration, reprojection error, tracks, matching, attempts, intrinsics, timings."""
+    n_reg = len(res.registered)
+    track = float(np.mean([rec.points3D[p].track.length() for p in rec.points3D])) if n_points else 0.0
+    return {
+        "photos": len(infos), "registered": n_reg, "registered_ratio": round(ratio, 4),
+        "unregistered": missing, "mean_reprojection_error_px": round(reproj, 4),
+        "sparse_points": n_points, "mean_track_length": round(track, 3),
+        "matching": res.matching, "mapper": mapper, "attempts": res.attempts,
+        "intrinsics_from": k_source, "photos_with_gps": n_gps,
+        "camera_groups": [dict(g, photos=len(g["photos"]),
+                               registered=sum(1 for n in g["photos"] if n in set(res.registered))) for g in groups],
+        "cameras": [{"id": int(cid), "model": c.model.name, "params": [float(v) for v in c.params]}
+                    for cid, c in rec.cameras.items()],
+        "timings_s": {**res.timings_s, "total": round(total_s, 3)},
+    }
