@@ -76,6 +76,8 @@ def _best_model(recs: dict):
 
 
 def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, has_gps: bool, log) -> SfmResult:
+    """Features, matching and mapping of the photos ``names`` in ``image_dir``; the COLMAP database and the
+    mapping attempts go to ``work``. The model that registers the most photos wins."""
     import pycolmap
 
     work = Path(work)
@@ -89,6 +91,32 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
     # COLMAP's multi-threaded RANSAC and mapping are not reproducible: on lund_street two runs of the
     # same settings registered 29 and 21 photos. One thread makes every run the same (measured: 69 s).
     solve_threads = 1 if opt.deterministic else opt.threads
+    _extract_features(db, image_dir, names, opt)
+    timings["features"] = round(time.perf_counter() - t0, 3)
+
+    t0 = time.perf_counter()
+    n = len(names)
+    matching = _match(db, n, opt, has_gps, solve_threads)
+    timings["matching"] = round(time.perf_counter() - t0, 3)
+    counts = _pairing_counts(db)
+    log.info("sfm: %d photos, matching %s: %d verified pairs", n, matching, counts["verified_pairs"])
+    if counts["verified_pairs"] == 0:
+        raise InputError(f"{image_dir}: no two photos share enough features to be matched; the photos must "
+                         f"overlap (take one every few steps, 60-80 % overlap)")
+
+    t0 = time.perf_counter()
+    best, attempts = _map(db, image_dir, work, n, opt, has_gps, solve_threads, log)
+    timings["mapping"] = round(time.perf_counter() - t0, 3)
+    if best is None:
+        raise InputError(f"{image_dir}: structure from motion registered no photos ({counts['verified_pairs']} "
+                         f"matched pairs); take more overlapping photos or try sfm.matching=exhaustive")
+    registered = sorted(best.images[i].name for i in best.reg_image_ids())
+    return SfmResult(best, n, registered, attempts, timings, matching)
+
+
+def _extract_features(db: Path, image_dir: Path, names: list[str], opt: SfmOptions) -> None:
+    """SIFT features of every photo into the database, one COLMAP camera per group (or per photo)."""
+    import pycolmap
 
     ext = pycolmap.FeatureExtractionOptions()
     ext.num_threads = opt.threads
@@ -114,10 +142,12 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
     else:
         pycolmap.extract_features(db, image_dir, image_names=list(names), camera_mode=pycolmap.CameraMode.AUTO,
                                   reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu)
-    timings["features"] = round(time.perf_counter() - t0, 3)
 
-    t0 = time.perf_counter()
-    n = len(names)
+
+def _match(db: Path, n: int, opt: SfmOptions, has_gps: bool, solve_threads: int) -> str:
+    """Match the photo pairs of the matching mode (auto resolved for ``n`` photos); the mode used."""
+    import pycolmap
+
     matching = opt.matching
     if matching == "auto":
         matching = "exhaustive" if n <= opt.exhaustive_max else "sequential"
@@ -145,14 +175,39 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
         else:
             raise InputError(f"sfm: unknown matching '{part}' (exhaustive, sequential, spatial, "
                              f"sequential+spatial or auto)")
-    timings["matching"] = round(time.perf_counter() - t0, 3)
-    counts = _pairing_counts(db)
-    log.info("sfm: %d photos, matching %s: %d verified pairs", n, matching, counts["verified_pairs"])
-    if counts["verified_pairs"] == 0:
-        raise InputError(f"{image_dir}: no two photos share enough features to be matched; the photos must "
-                         f"overlap (take one every few steps, 60-80 % overlap)")
+    return matching
 
-    t0 = time.perf_counter()
+
+def _incremental_options(attempt: str, opt: SfmOptions, solve_threads: int):
+    """COLMAP's incremental mapping options for one attempt (default, relaxed_init, relaxed_init+gps_prior)."""
+    import pycolmap
+
+    popt = pycolmap.IncrementalPipelineOptions()
+    popt.num_threads = solve_threads
+    popt.random_seed = int(opt.seed)
+    popt.min_model_size = 3
+    if opt.intrinsics is not None:
+        popt.ba_refine_focal_length = False  # a known calibration stays fixed
+    if attempt.startswith("relaxed_init"):
+        # forward motion: accept a small initial triangulation angle and weaker image registrations
+        popt.mapper.init_min_tri_angle = 4.0
+        popt.mapper.init_max_forward_motion = 0.999
+        popt.mapper.init_min_num_inliers = 30
+        popt.mapper.abs_pose_min_num_inliers = 15
+        popt.mapper.abs_pose_min_inlier_ratio = 0.1
+        popt.mapper.filter_min_tri_angle = 0.5
+        popt.min_num_matches = 10
+        popt.init_num_trials = 400
+    if attempt.endswith("gps_prior"):
+        popt.use_prior_position = True  # EXIF GPS as position priors in bundle adjustment
+    return popt
+
+
+def _map(db: Path, image_dir: Path, work: Path, n: int, opt: SfmOptions, has_gps: bool, solve_threads: int, log):
+    """Mapping attempts (default, then relaxed initialisation, then with GPS priors) until one registers
+    ``retry_below_ratio`` of the photos; (the best model or None, the attempts' summary)."""
+    import pycolmap
+
     attempts = []
     best = None
     plan = ["default", "relaxed_init"] + (["relaxed_init+gps_prior"] if has_gps and opt.mapper == "incremental" else [])
@@ -166,25 +221,8 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
             gopt.num_threads = solve_threads
             recs = pycolmap.global_mapping(db, image_dir, out, options=gopt)
         elif opt.mapper == "incremental":
-            popt = pycolmap.IncrementalPipelineOptions()
-            popt.num_threads = solve_threads
-            popt.random_seed = int(opt.seed)
-            popt.min_model_size = 3
-            if opt.intrinsics is not None:
-                popt.ba_refine_focal_length = False  # a known calibration stays fixed
-            if attempt.startswith("relaxed_init"):
-                # forward motion: accept a small initial triangulation angle and weaker image registrations
-                popt.mapper.init_min_tri_angle = 4.0
-                popt.mapper.init_max_forward_motion = 0.999
-                popt.mapper.init_min_num_inliers = 30
-                popt.mapper.abs_pose_min_num_inliers = 15
-                popt.mapper.abs_pose_min_inlier_ratio = 0.1
-                popt.mapper.filter_min_tri_angle = 0.5
-                popt.min_num_matches = 10
-                popt.init_num_trials = 400
-            if attempt.endswith("gps_prior"):
-                popt.use_prior_position = True  # EXIF GPS as position priors in bundle adjustment
-            recs = pycolmap.incremental_mapping(db, image_dir, out, options=popt)
+            recs = pycolmap.incremental_mapping(db, image_dir, out, options=_incremental_options(attempt, opt,
+                                                                                                 solve_threads))
         else:
             raise InputError(f"sfm: unknown mapper '{opt.mapper}' (incremental or global)")
         rec = _best_model(recs)
@@ -196,12 +234,7 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
             best = rec
         if best is not None and best.num_reg_images() >= opt.retry_below_ratio * n:
             break
-    timings["mapping"] = round(time.perf_counter() - t0, 3)
-    if best is None:
-        raise InputError(f"{image_dir}: structure from motion registered no photos ({counts['verified_pairs']} "
-                         f"matched pairs); take more overlapping photos or try sfm.matching=exhaustive")
-    registered = sorted(best.images[i].name for i in best.reg_image_ids())
-    return SfmResult(best, n, registered, attempts, timings, matching)
+    return best, attempts
 
 
 def camera_table(rec) -> list[dict]:
