@@ -124,22 +124,15 @@ def ground_border(vertices: np.ndarray, faces: np.ndarray, footprint: Footprint,
 
 def height_above_ground(vertices: np.ndarray, ground_xyz: np.ndarray, cell_m: float = 0.5,
                         window_m: float = 4.0) -> np.ndarray:
-    """Per vertex, its height above the local ground: the lowest of ``ground_xyz`` (points with an upward
-    normal) within ``window_m`` (inf where there is none)."""
-    from scipy.ndimage import minimum_filter
+    """(n,) float64: each of ``vertices``' height above the local ground, the lowest of ``ground_xyz`` (points
+    with an upward normal) within ``window_m`` (:class:`twinkit.street.ground.LocalGround`'s window minimum);
+    -inf where there is none within the window, inf everywhere when ``ground_xyz`` is empty."""
+    from twinkit.street.ground import LocalGround
 
     if len(ground_xyz) == 0:
         return np.full(len(vertices), np.inf)
-    lo = np.minimum(ground_xyz[:, :2].min(axis=0), vertices[:, :2].min(axis=0)) - cell_m
-    hi = np.maximum(ground_xyz[:, :2].max(axis=0), vertices[:, :2].max(axis=0)) + cell_m
-    nx, ny = (np.ceil((hi - lo) / cell_m).astype(int) + 1)
-    zmin = np.full((ny, nx), np.inf)
-    ij = np.floor((ground_xyz[:, :2] - lo) / cell_m).astype(np.int64)
-    np.minimum.at(zmin, (ij[:, 1], ij[:, 0]), ground_xyz[:, 2])
-    w = max(3, int(round(window_m / cell_m)) | 1)
-    zl = minimum_filter(zmin, size=w, mode="nearest")
-    vij = np.floor((vertices[:, :2] - lo) / cell_m).astype(np.int64)
-    return vertices[:, 2] - zl[vij[:, 1], vij[:, 0]]
+    return LocalGround(ground_xyz, cell_m=cell_m, window="min", window_m=window_m, min_window_cells=3,
+                       cover_xy=vertices[:, :2]).height(vertices)
 
 
 def drop_test(vertices: np.ndarray, faces: np.ndarray, samples: np.ndarray, tol_m: float = 0.05,

@@ -76,17 +76,12 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray | None, normals: np.n
 
 
 def height_above_ground(vertices: np.ndarray, cell_m: float = 2.0) -> np.ndarray:
-    """Height of each vertex above the lowest vertex of its ``cell_m`` grid cell and its 8 neighbours."""
+    """(n,) float64: each vertex's height above the lowest vertex of its ``cell_m`` grid cell and its 8
+    neighbours (:class:`twinkit.street.ground.LocalGround`'s minimum over a 3-cell window)."""
+    from twinkit.street.ground import LocalGround
+
     v = np.asarray(vertices, dtype=np.float64)
-    ij = np.floor((v[:, :2] - v[:, :2].min(axis=0)) / cell_m).astype(np.int64)
-    nx, ny = ij.max(axis=0) + 3
-    low = np.full((nx, ny), np.inf)
-    np.minimum.at(low, (ij[:, 0] + 1, ij[:, 1] + 1), v[:, 2])
-    pad = low.copy()
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            pad = np.minimum(pad, np.roll(np.roll(low, dx, 0), dy, 1))
-    return v[:, 2] - pad[ij[:, 0] + 1, ij[:, 1] + 1]
+    return LocalGround(v, cell_m=cell_m, window="min", window_m=3 * cell_m, pad_cells=0).height(v)
 
 
 def stretch(x: np.ndarray, lo_q: float = 0.02, hi_q: float = 0.98) -> np.ndarray:

@@ -149,25 +149,14 @@ def _face_areas(v, f) -> np.ndarray:
 
 def _window_level(v, f, up, curb_tol_m: float, cell_m: float = 1.0, window_m: float = 9.0) -> np.ndarray:
     """The flat-street test: faces ``up`` within ``curb_tol_m`` of the local lowest walkable level (per-cell
-    minima, their minimum over ``window_m``, raised to the window's 10th percentile less the tolerance so
-    a deep hole does not pull it down)."""
-    from scipy import ndimage
+    minima of the face centres, their minimum over ``window_m``, raised to the window's 10th percentile less
+    the tolerance so a deep hole does not pull it down: :class:`twinkit.street.ground.LocalGround`)."""
+    from twinkit.street.ground import LocalGround
 
-    tri = v[f[up]]
-    cz = tri[:, :, 2].mean(1)
-    cxy = tri[:, :, :2].mean(1)
-    lo = cxy.min(0)
-    ij = np.floor((cxy - lo) / cell_m).astype(int)
-    shape = tuple(ij.max(0) + 1)
-    zmin = np.full(shape, np.inf)
-    np.minimum.at(zmin, (ij[:, 0], ij[:, 1]), cz)
-    k = max(1, int(round(window_m / cell_m)))
-    level = ndimage.minimum_filter(zmin, size=k, mode="nearest")
-    finite = np.where(np.isfinite(zmin), zmin, np.nan)
-    filled = np.nan_to_num(finite, nan=float(np.nanmax(finite)))
-    pct = ndimage.percentile_filter(filled, 10, size=k, mode="nearest")
-    level = np.maximum(level, pct - curb_tol_m)
-    return up[cz - level[ij[:, 0], ij[:, 1]] < curb_tol_m]
+    cen = v[f[up]].mean(1)
+    g = LocalGround(cen, cell_m=cell_m, window="min", window_m=window_m, odd_window=False, pad_cells=0,
+                    floor_pct=10, floor_below_m=curb_tol_m)
+    return up[g.height(cen) < curb_tol_m]
 
 
 def _step_level(v, f, up, curb_tol_m: float) -> np.ndarray:
