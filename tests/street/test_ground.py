@@ -40,7 +40,8 @@ def interior(p, margin=1.6):
 
 def test_opening_removes_the_car_keeps_slope_and_kerb_and_fills_the_shadow():
     p, up = street()
-    g = LocalGround(p, up, cell_m=0.25, window="opening", window_m=1.0 + 1.8)  # wider than a car, narrower than a pavement
+    # a window wider than a car (1.8 m), narrower than the pavement (4 m)
+    g = LocalGround(p, up, cell_m=0.25, window="opening", window_m=2.75)
     h = g.height(p)
     roof = car(p[:, 0], p[:, 1]) & (np.abs(p[:, 0]) < 2.0) & (np.abs(p[:, 1] + 1.0) < 0.7)
     assert np.abs(h[roof] - ROOF).max() < SLOPE * 1.5 + 0.02  # the roof stands above the ground

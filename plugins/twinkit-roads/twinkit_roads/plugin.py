@@ -494,7 +494,8 @@ class RoadEvidenceParams:
     max_height_m: float = param(0.45, ge=0)  # ...and at most this high above the local lowest ground
     curb_min_m: float = param(0.06, ge=0)  # raised (pavement) level: at least this above the local lowest ground...
     curb_max_m: float = param(0.35, ge=0)  # ...and at most this; below curb_min_m is the carriageway level
-    window_m: float = param(8.0, gt=0)  # local lowest ground: minimum over this window of 0.5 m cells' 5th percentiles
+    window_m: float = param(8.0, gt=0, help="metres: the local lowest ground is the minimum over this window of the "
+                                          "0.5 m cells' 5th percentiles of up-facing vertices (street.ground.LocalGround)")
     max_disagreement: float = param(0.5, ge=0, le=1)  # a lane, or a road, whose surface disagrees more than this casts no vote
     max_network_disagreement: float = param(0.10, ge=0, le=1)  # driving-like lanes of the whole network: above this no lane votes (aligned 1-3 %, 10 m shifts 17-56 %)
     plateau: bool = True  # a raised plateau an agreeing sidewalk lane lies on becomes sidewalk (its road votes)
