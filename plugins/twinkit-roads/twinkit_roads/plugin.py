@@ -366,7 +366,7 @@ class SignalParams:
     max_size_m: float = param(2.0, gt=0)  # a cluster wider or taller than this is a mislabelled patch of something else
     min_pole_vertices: int = param(3, ge=0)  # pole-labelled vertices below the cluster (within pole_radius_m): it hangs on a pole
     pole_radius_m: float = param(0.6, gt=0)
-    ground_radius_m: float = param(3.0, gt=0)  # local ground = 2nd percentile of the mesh height within this radius
+    ground_radius_m: float = param(3.0, gt=0, help="metres: the local ground under a signal is the 2nd percentile of the mesh's heights within this radius (street.ground.LocalGround, disc mode)")
     plate_depth_m: float = param(0.12, ge=0)  # a "light" cluster thinner than this across is a sign plate (heads are boxes)
     # poles carrying an unlabelled head (signals.find_pole_heads): candidates for lights the labels miss,
     # offered only to netconvert light heads left unpaired by the labelled lights
