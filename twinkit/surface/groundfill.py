@@ -78,7 +78,7 @@ def _first_nonempty(cls: np.ndarray, axis: int, reverse: bool):
     return np.moveaxis(prev, -1, axis)
 
 
-def ground_grid(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions, with_local: bool = False):
+def cell_classes(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions, with_local: bool = False):
     """(classes (ny, nx) int8: 0 empty, 1 ground, 2 blocked; ground height (ny, nx); origin (2,)); with
     ``with_local`` also the local lowest up-facing height (ny, nx) (inf where none within the window) and,
     per cell, the lowest and the highest blocking point above it (inf / -inf where none).
@@ -303,7 +303,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
 
     opt = opt or GroundFillOptions()
     c = float(opt.cell_m)
-    cls, gz, lo, zloc, bmin, bmax = ground_grid(points, normals, opt, with_local=True)
+    cls, gz, lo, zloc, bmin, bmax = cell_classes(points, normals, opt, with_local=True)
     cls0, gz0 = cls, gz
     ny, nx = cls.shape
     max_cells = int(opt.max_gap_m / c)

@@ -122,17 +122,19 @@ def ground_border(vertices: np.ndarray, faces: np.ndarray, footprint: Footprint,
     }
 
 
-def height_above_ground(vertices: np.ndarray, ground_xyz: np.ndarray, cell_m: float = 0.5,
-                        window_m: float = 4.0) -> np.ndarray:
-    """(n,) float64: each of ``vertices``' height above the local ground, the lowest of ``ground_xyz`` (points
-    with an upward normal) within ``window_m`` (:class:`twinkit.street.ground.LocalGround`'s window minimum);
-    -inf where there is none within the window, inf everywhere when ``ground_xyz`` is empty."""
+def at_ground_level(vertices: np.ndarray, points: np.ndarray, normals: np.ndarray | None,
+                    tol_m: float = 0.5) -> np.ndarray:
+    """(n,) bool: the ``vertices`` within ``tol_m`` of the cloud's local ground, the lowest of its up-facing
+    ``points`` (normal z >= 0.85; none without ``normals``) within 4 m, on a 0.5 m grid
+    (:class:`twinkit.street.ground.LocalGround`'s window minimum). False where no up-facing point lies within
+    the window."""
     from twinkit.street.ground import LocalGround
 
-    if len(ground_xyz) == 0:
-        return np.full(len(vertices), np.inf)
-    return LocalGround(ground_xyz, cell_m=cell_m, window="min", window_m=window_m, min_window_cells=3,
-                       cover_xy=vertices[:, :2]).height(vertices)
+    up = normals[:, 2] >= 0.85 if normals is not None else np.zeros(len(points), bool)
+    if not up.any():
+        return np.zeros(len(vertices), bool)
+    g = LocalGround(points[up], cell_m=0.5, window="min", window_m=4.0, min_window_cells=3, cover_xy=vertices[:, :2])
+    return np.abs(g.height(vertices)) <= tol_m
 
 
 def drop_test(vertices: np.ndarray, faces: np.ndarray, samples: np.ndarray, tol_m: float = 0.05,
@@ -214,8 +216,7 @@ def ground_border_report(vertices: np.ndarray, faces: np.ndarray, points: np.nda
     with a picture at ``png``. For the steps that make a site mesh (clean_mesh, merge_tiles)."""
     if len(faces) == 0 or normals is None:
         return None
-    up = normals[:, 2] >= 0.85
-    ground_v = np.abs(height_above_ground(vertices, points[up])) <= 0.5
+    ground_v = at_ground_level(vertices, points, normals)
     fp = Footprint.from_points(points, fill_limit_m=max(float(fill_limit_m), 1.0))
     rep = ground_border(vertices, faces, fp, ground_v)
     edges = rep.pop("_edges")
