@@ -43,6 +43,7 @@ def test_opening_removes_the_car_keeps_slope_and_kerb_and_fills_the_shadow():
     # a window wider than a car (1.8 m), narrower than the pavement (4 m)
     g = LocalGround(p, up, cell_m=0.25, window="opening", window_m=2.75)
     h = g.height(p)
+    assert np.array_equal(g.height(), h)  # without points: the samples' own heights
     roof = car(p[:, 0], p[:, 1]) & (np.abs(p[:, 0]) < 2.0) & (np.abs(p[:, 1] + 1.0) < 0.7)
     assert np.abs(h[roof] - ROOF).max() < SLOPE * 1.5 + 0.02  # the roof stands above the ground
     ok = interior(p) & ~car(p[:, 0], p[:, 1])

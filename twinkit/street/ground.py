@@ -62,7 +62,8 @@ class LocalGround:
     ``ny``; ``surface`` (ny, nx) the per-cell statistic (inf where empty; filled with the opening),
     ``has_surface`` (ny, nx) bool cells holding a candidate, ``level`` (ny, nx) the window's result,
     ``z`` (ny, nx) the ground (after the fill), ``has_z`` (ny, nx) bool cells with ground before the fill,
-    ``ground_points`` (n,) bool (with ``ground_tol_m``; else None), ``window_cells`` (int).
+    ``ground_points`` (n,) bool (with ``ground_tol_m``; else None), ``window_cells`` (int), ``flat`` (n,)
+    int64 each sample's cell as ``j * nx + i``.
     """
 
     def __init__(self, points: np.ndarray, up: np.ndarray | None = None, *, cell_m: float = 0.25,
@@ -101,7 +102,7 @@ class LocalGround:
         top = [a.max(axis=0) for a in (ij, None if cover is None else self._ij(cover)) if a is not None and len(a)]
         top = top[0] if len(top) == 1 else np.maximum(*top)
         self.nx, self.ny = int(top[0]) + 1 + pad_cells, int(top[1]) + 1 + pad_cells
-        flat = ij[:, 1] * self.nx + ij[:, 0]
+        self.flat = flat = ij[:, 1] * self.nx + ij[:, 0]
         surface = self._surface(flat, p[:, 2], cand, self.pct)
         self.has_surface = has = np.isfinite(surface)
         w = int(round(window_m / c))
@@ -209,9 +210,15 @@ class LocalGround:
         j, i = self.cells(xy)
         return self.z[j, i]
 
-    def height(self, points: np.ndarray) -> np.ndarray:
-        """(n,) float64: each point's height above the local ground (negative: below it)."""
-        p = np.asarray(points, np.float64)
+    def height(self, points: np.ndarray | None = None) -> np.ndarray:
+        """(n,) float64: each point's height above the local ground (negative: below it); without ``points``,
+        each sample's the model was built from."""
+        if points is None:
+            p = self.points
+            if self.window != "disc":
+                return p[:, 2] - self.z.ravel()[self.flat]
+        else:
+            p = np.asarray(points, np.float64)
         return p[:, 2] - self.at(p[:, :2])
 
     # ------------------------------------------------------------------ steps (curbs) on the surface

@@ -90,8 +90,7 @@ def cell_classes(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions
     g = LocalGround(points, nz >= opt.up_normal_z, cell_m=opt.cell_m, window="min", window_m=opt.local_window_m,
                     min_window_cells=3, ground_tol_m=opt.ground_tol_m, ground_stat="lowest", fill="none")
     nx, ny, lo = g.nx, g.ny, g.lo
-    j, i = g.cells(points[:, :2])
-    flat = j * nx + i
+    flat = g.flat
     zloc = g.level.ravel()
     ground = g.has_z.ravel()
     # blocking: near-horizontal normals above the ground level of the neighbourhood

@@ -175,7 +175,7 @@ def measure(name: str, cfg: dict) -> dict:
         area = 0.5 * np.linalg.norm(fn, axis=1)
         fn /= np.maximum(2 * area[:, None], 1e-12)
         ground = LocalGround(v, cell_m=GROUND_CELL_M, window="min", window_m=3 * GROUND_CELL_M, pad_cells=0)
-        h = ground.height(v)[f].mean(axis=1)  # the height shading's ground
+        h = ground.height()[f].mean(axis=1)  # the height shading's ground
         fl = lab[f[:, 0]]  # a face's label: its first vertex's
         vert = (np.abs(fn[:, 2]) < 0.3) & (h > 2.0) & (fl != 255)
         low = (np.abs(fn[:, 2]) > 0.9) & (h < 0.5) & (fl != 255)

@@ -108,7 +108,7 @@ def vertex_colours(mode: str, vertices: np.ndarray, normals: np.ndarray,
 
         v = np.asarray(vertices, dtype=np.float64)
         ground = LocalGround(v, cell_m=GROUND_CELL_M, window="min", window_m=3 * GROUND_CELL_M, pad_cells=0)
-        h = np.clip(ground.height(v) / 8.0, 0.0, 1.0)
+        h = np.clip(ground.height() / 8.0, 0.0, 1.0)
         base = 0.15 + 0.8 * shade
         tint = np.stack([1.0 + 0.25 * np.sin(np.pi * h), 1.0 - 0.1 * h, 1.0 - 0.25 * np.sin(np.pi * h) + 0.3 * h],
                         axis=1)

@@ -202,7 +202,7 @@ def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[
     vn = vertex_normals(v, f)
     up = vn[:, 2] >= normal_min_z
     h = LocalGround(v, up, cell_m=cell_m, window="min", window_m=window_m, pct=ground_pct, odd_window=False,
-                    pad_cells=0, fill="lowest", if_none_up="all").height(v)
+                    pad_cells=0, fill="lowest", if_none_up="all").height()
     ground = up & (h <= max_height_m)
     raised = ground & (h >= curb_min_m) & (h <= curb_max_m)
     low = ground & (h < curb_min_m)

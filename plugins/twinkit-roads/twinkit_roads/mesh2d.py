@@ -143,7 +143,7 @@ def level_faces(v: np.ndarray, f: np.ndarray, curb_tol_m: float = 0.07) -> np.nd
         cen = v[f[flat]].mean(1)
         g = LocalGround(cen, cell_m=1.0, window="min", window_m=9.0, odd_window=False, pad_cells=0, floor_pct=10,
                         floor_below_m=curb_tol_m)
-        win = flat[g.height(cen) < curb_tol_m]
+        win = flat[g.height() < curb_tol_m]
     steps = _step_level(v, f, up, curb_tol_m)
     area = _face_areas(v, f)
     if area[win].sum() >= 0.75 * area[steps].sum():

@@ -331,7 +331,7 @@ def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOpt
     nz = np.asarray(normals, np.float64)[:, 2]
     up = nz >= opt.up_normal_z
     g = LocalGround(v, up, window="opening", window_m=opt.ground_window_m, cell_m=opt.cell_m)
-    h = g.height(v)
+    h = g.height()
     ground = up & (h <= opt.max_curb_m)
     out = {"height": h, "ground": ground, "raised": h > opt.min_object_m, "high": h > opt.max_vehicle_m}
     # curb: step cells (surface min_curb..max_curb above the lowest surface nearby), then vertices on
