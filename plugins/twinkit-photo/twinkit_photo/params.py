@@ -25,21 +25,17 @@ class SfmParams:
     max_image_px: int = param(1600, ge=0, help="features are found on photos downscaled to this long side "
                                                "(0 = full size)")
     max_features: int = param(4096, ge=1, help="most SIFT features per photo")
-    camera_model: str = param("SIMPLE_RADIAL", pattern=r"(?s).*", words="a COLMAP camera model name",
-                              help="COLMAP camera model of the intrinsics that are refined")
-    single_camera: bool = param(True, choices=(True, False),
-                                help="one set of intrinsics per camera group (same size, EXIF make/model, "
-                                     "focal); false: one per photo")
-    intrinsics: str = param("auto", pattern=r"(?s).*", words="auto or exif (the sfm step checks it)",
-                            help="auto: K.txt beside the photos, else the site's cameras.json, else EXIF; "
-                                 "exif: EXIF only")
+    camera_model: str = param("SIMPLE_RADIAL", help="COLMAP camera model of the intrinsics that are refined")
+    single_camera: bool = param(True, help="one set of intrinsics per camera group (same size, EXIF make/model, "
+                                           "focal); false: one per photo")
+    intrinsics: str = param("auto", help="auto: K.txt beside the photos, else the site's cameras.json, else EXIF; "
+                                         "exif: EXIF only")
     min_registered_ratio: float = param(0.5, ge=0, le=1, help="fewer registered photos than this share: error")
     degraded_below_ratio: float = param(0.8, ge=0, le=1,
                                         help="fewer registered photos than this share: the run ends degraded")
     seed: int = param(0, ge=0, help="random seed of matching and mapping")
-    deterministic: bool = param(True, choices=(True, False),
-                                help="one thread for matching and mapping, so a re-run gives the same model "
-                                     "(false: faster)")
+    deterministic: bool = param(True, help="one thread for matching and mapping, so a re-run gives the same model "
+                                           "(false: faster)")
 
 
 @dataclass
@@ -50,9 +46,8 @@ class GeorefParams:
                         help="auto: ground-control points, else EXIF GPS, else none (levelled and centred only)")
     gps_threshold_m: float = param(8.0, gt=0, help="RANSAC inlier distance for GPS fixes, metres (about 3 sigma "
                                                    "of phone GPS)")
-    gps_use_z: bool = param(False, choices=(True, False),
-                                help="fit the scale to the GPS heights too (false: x, y only; GPS heights are "
-                                     "the noisiest)")
+    gps_use_z: bool = param(False, help="fit the scale to the GPS heights too (false: x, y only; GPS heights are "
+                                        "the noisiest)")
     height_from: str = param("gps", choices=("gps", "ground"),
                              help="ground: put the sparse ground plane at ground_z_m instead of the GPS height")
     ground_z_m: float = param(0.0, help="height_from=ground: the ground's height in the site frame, metres")
@@ -69,9 +64,8 @@ class GeorefParams:
     ground_agree_deg: float = param(2.0, ge=0, le=90,
                                     help="levelling: a ground plane counts only within this angle of the photos' "
                                          "up (or 3x its standard error)")
-    vertical_lines: bool = param(True, choices=(True, False),
-                                help="refine the photos' horizon with vertical lines (building edges) in "
-                                     "the photos")
+    vertical_lines: bool = param(True, help="refine the photos' horizon with vertical lines (building edges) in "
+                                            "the photos")
     up_model: list[float] = param(default_factory=list,
                                   help="the up vector [x, y, z] in the SfM model frame (sfm/sparse_model.ply); "
                                        "replaces levelling")
@@ -119,8 +113,7 @@ class DenseParams:
     rel_tol: float = param(-1.0, gt=0, also=(-1,),
                            help="depth maps agree when |depth difference| < rel_tol * depth; -1 = auto from the "
                                 "SfM model's reprojection error (0.3 % .. 1 %)")
-    average_depths: bool = param(True, choices=(True, False),
-                                help="a kept point's depth is the mean of the depth maps that agree with it")
+    average_depths: bool = param(True, help="a kept point's depth is the mean of the depth maps that agree with it")
     min_triangulation_deg: float = param(3.0, ge=0, le=60,
                                          help="a kept point needs an agreeing photo that sees it at least this "
                                               "angle apart")
@@ -134,9 +127,8 @@ class DenseParams:
     pm_top_k: int = param(2, ge=1, le=16, help="patchmatch: a pixel's cost is the mean NCC cost of its best top_k "
                                                "neighbours")
     pm_min_ncc: float = param(0.5, ge=-1, le=1, help="patchmatch: keep a depth whose aggregated NCC reaches this")
-    pm_geometric: bool = param(True, choices=(True, False),
-                                help="patchmatch: a second, geometric-consistency pass against the "
-                                     "neighbours' depth maps (about doubles the time)")
+    pm_geometric: bool = param(True, help="patchmatch: a second, geometric-consistency pass against the "
+                                          "neighbours' depth maps (about doubles the time)")
     pm_geom_weight: float = param(0.3, ge=0, help="patchmatch geometric pass: cost per pixel of forward-backward "
                                                   "error ...")
     pm_geom_max_px: float = param(3.0, gt=0, help="... counted up to this many pixels")
