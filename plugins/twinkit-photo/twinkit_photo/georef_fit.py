@@ -21,7 +21,7 @@ from .georef import Transform, level, robust_umeyama, triangulate, umeyama
 
 
 @dataclass
-class Model:
+class SfmModel:
     """The sfm step's model as the georeference step reads it: cameras_model.json and sparse.npz."""
 
     doc: dict                      # cameras_model.json
@@ -87,7 +87,7 @@ def suggest_site(model: dict, names: list[str]) -> str:
 
 # --------------------------------------------------------------------------- choose the method
 
-def choose_method(params, m: Model, gcp_rows: list, n_gcps: int, gcp_json: Path | None, frame, log,
+def choose_method(params, m: SfmModel, gcp_rows: list, n_gcps: int, gcp_json: Path | None, frame, log,
                   info: dict) -> str:
     """The route: ``params.method``, or for auto GCPs (3 usable), else GPS (3 fixes and a site CRS), else
     none; a 4x4 ``transform_model_to_site`` wins over all. Why a GCP file or the GPS went unused goes into
@@ -114,7 +114,7 @@ def choose_method(params, m: Model, gcp_rows: list, n_gcps: int, gcp_json: Path 
     return method
 
 
-def _auto_method(params, m: Model, gcp_rows: list, gps_ok: list[str], frame, log, info: dict) -> str:
+def _auto_method(params, m: SfmModel, gcp_rows: list, gps_ok: list[str], frame, log, info: dict) -> str:
     if len(gcp_rows) >= 3:
         return "gcp"
     if len(gps_ok) >= 3 and frame is not None:
@@ -133,7 +133,7 @@ def _auto_method(params, m: Model, gcp_rows: list, gps_ok: list[str], frame, log
 
 # --------------------------------------------------------------------------- compute: the fits
 
-def level_model(params, m: Model, photos_dir: Path | None, log) -> tuple[np.ndarray, dict]:
+def level_model(params, m: SfmModel, photos_dir: Path | None, log) -> tuple[np.ndarray, dict]:
     """:func:`georef.level` with the step's options: the rotation that makes the model's up +z, and its info.
     With ``vertical_lines`` (and no ``up_model``) the photos' vertical lines refine the horizon."""
     lv: dict[str, Any] = {"up_model": list(params.up_model) or None, "min_ground_support": params.min_ground_support,
@@ -169,7 +169,7 @@ def fit_gcp(params, gcp_rows: list, gcp_json, log, info: dict) -> Transform:
     return T
 
 
-def fit_gps(params, m: Model, frame, sfm_dir: Path, photos_dir, log, info: dict) -> tuple[Transform, dict]:
+def fit_gps(params, m: SfmModel, frame, sfm_dir: Path, photos_dir, log, info: dict) -> tuple[Transform, dict]:
     """Level, then twinkit.geo's robust yaw-only similarity of the camera centres onto their EXIF GPS fixes
     (site frame). Returns the transform and {photo: its GPS fix in the site frame}."""
     from twinkit.geo import fit_similarity
@@ -202,7 +202,7 @@ def fit_gps(params, m: Model, frame, sfm_dir: Path, photos_dir, log, info: dict)
     return T, {n: dst[k].tolist() for k, n in enumerate(gps_names)}
 
 
-def fit_none(params, m: Model, known: float | None, photos_dir, log, info: dict) -> Transform:
+def fit_none(params, m: SfmModel, known: float | None, photos_dir, log, info: dict) -> Transform:
     """Level and centre on the mean camera; the scale from the known distance, else ``params.scale``."""
     R_lvl, info["level"] = level_model(params, m, photos_dir, log)
     scale = float(params.scale)
@@ -231,7 +231,7 @@ def user_transform(m16) -> Transform:
     return Transform(s, U @ Vt, M[:3, 3].copy())
 
 
-def fit(method: str, params, m: Model, *, gcp_rows: list, gcp_json, known: float | None, frame, sfm_dir: Path,
+def fit(method: str, params, m: SfmModel, *, gcp_rows: list, gcp_json, known: float | None, frame, sfm_dir: Path,
         photos_dir, log, info: dict) -> tuple[Transform, dict]:
     """The model -> site transform by ``method``; (transform, {photo: GPS fix in the site frame})."""
     if method == "gcp":
@@ -308,7 +308,7 @@ def outlier_cameras(names: list[str], centres, gps_residual: dict, params, metri
     return out
 
 
-def flag_outliers(method: str, params, m: Model, T: Transform, log, degraded, info: dict) -> dict[str, str]:
+def flag_outliers(method: str, params, m: SfmModel, T: Transform, log, degraded, info: dict) -> dict[str, str]:
     """:func:`outlier_cameras` for the fitted model, logged (the run degraded past a fifth of the photos);
     info gets "outlier_cameras" and, per photo, where the model puts the camera and its GPS fix."""
     outliers = outlier_cameras(m.names, T.apply(m.C), info.get("gps", {}).get("residual_m", {}), params,
@@ -323,7 +323,7 @@ def flag_outliers(method: str, params, m: Model, T: Transform, log, degraded, in
     return outliers
 
 
-def photos_table(m: Model, T: Transform, gps_site: dict, outliers: dict, info: dict) -> dict:
+def photos_table(m: SfmModel, T: Transform, gps_site: dict, outliers: dict, info: dict) -> dict:
     """Per photo, for the report's map and residual table: camera and GPS fix in the site frame, residual."""
     C_site = T.apply(m.C)
     res_map = info.get("gps", {}).get("residual_m", {})
@@ -333,7 +333,7 @@ def photos_table(m: Model, T: Transform, gps_site: dict, outliers: dict, info: d
             for k, n in enumerate(m.names)}
 
 
-def site_cameras(m: Model, T: Transform, outliers: dict) -> list[dict]:
+def site_cameras(m: SfmModel, T: Transform, outliers: dict) -> list[dict]:
     """The cameras_site.json rows: the registered cameras but the outliers, moved into the site frame."""
     cams_out = []
     for n in m.names:
@@ -346,7 +346,7 @@ def site_cameras(m: Model, T: Transform, outliers: dict) -> list[dict]:
     return cams_out
 
 
-def truth_check(m: Model, cams_out: list[dict], truth: dict, method: str, log) -> dict:
+def truth_check(m: SfmModel, cams_out: list[dict], truth: dict, method: str, log) -> dict:
     """With the site's true cameras (cameras.json): the camera centres' error in the site frame, and after the
     best similarity onto the truth (the SfM shape alone: what GCPs could reach at best). {} under 3 common."""
     centres = np.array([c["center"] for c in cams_out])

@@ -112,7 +112,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     params = params or GeorefParams()
     t0 = time.perf_counter()
     sfm_dir = Path(in_sfm_dir)
-    m = G.Model(read_json(sfm_dir / "cameras_model.json", "SfM cameras"), np.load(sfm_dir / "sparse.npz"))
+    m = G.SfmModel(read_json(sfm_dir / "cameras_model.json", "SfM cameras"), np.load(sfm_dir / "sparse.npz"))
     frame = _frame(ctx)
     known = G.known_distance(params)
     gcps = read_gcp_file(in_gcp_json, frame) if in_gcp_json is not None and params.method in ("auto", "gcp") else []

@@ -67,11 +67,12 @@ def camera_map_svg(photos: dict, width: int = 560, height: int = 420, units: str
                        f'L{gx + 3:.1f},{gy - 3:.1f}" stroke="#e67e22" stroke-width="1.5"><title>{html.escape(name)} GPS'
                        f'</title></path>')
         col = "#c0392b" if p.get("outlier") else "#2c6fbb"
+        why = f' (outlier: {html.escape(str(p["outlier"]))})' if p.get("outlier") else ""
         out.append(f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="{4 if p.get("outlier") else 3}" fill="{col}">'
-                   f'<title>{html.escape(name)}{" (outlier: " + html.escape(str(p["outlier"])) + ")" if p.get("outlier") else ""}'
-                   f'</title></circle>')
+                   f'<title>{html.escape(name)}{why}</title></circle>')
         if p.get("outlier"):
-            out.append(f'<text x="{cx + 6:.1f}" y="{cy - 4:.1f}" font-size="11" fill="#c0392b">{html.escape(name)}</text>')
+            out.append(f'<text x="{cx + 6:.1f}" y="{cy - 4:.1f}" font-size="11" fill="#c0392b">'
+                       f'{html.escape(name)}</text>')
     # scale bar: a round length near a fifth of the map
     target = span / 5
     bar = 10 ** math.floor(math.log10(target))
