@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from twinkit.cityscapes import BUILDING, CAR, IGNORE, POLE, ROAD, SIDEWALK, TERRAIN, TRAFFIC_SIGN
 
 #: what ``make_street(bad_faces=True)`` appends: {kind: count}
 BAD_FACES = {"back_to_back": 3, "same_winding_duplicate": 1, "degenerate": 2}
@@ -25,25 +26,25 @@ def make_street(nx: int = 40, ny: int = 30, size_m: float = 40.0, seed: int = 0,
     ys = np.linspace(-size_m * ny / nx / 2, size_m * ny / nx / 2, ny)
     gx, gy = np.meshgrid(xs, ys)
     gz = 0.02 * np.sin(gx * 0.7) * np.cos(gy * 0.5)
-    labels = np.full(gx.shape, 9, np.uint8)  # terrain
+    labels = np.full(gx.shape, TERRAIN, np.uint8)
     half = ys.max()
-    labels[np.abs(gy) < 0.45 * half] = 1  # sidewalk
-    labels[np.abs(gy) < 0.30 * half] = 0  # road
+    labels[np.abs(gy) < 0.45 * half] = SIDEWALK
+    labels[np.abs(gy) < 0.30 * half] = ROAD
     bld = (gx > size_m * 0.2) & (gy > 0.6 * half)
-    labels[bld] = 2
+    labels[bld] = BUILDING
     gz = np.where(bld, 6.0, gz)
     pole = (np.abs(gx + size_m * 0.3) < size_m / nx * 0.6) & (np.abs(gy - 0.4 * half) < half / ny * 1.5)
-    labels[pole] = 5
+    labels[pole] = POLE
     car = (np.abs(gx) < size_m * 0.08) & (np.abs(gy + 0.1 * half) < 0.08 * half)
-    labels[car] = 13
+    labels[car] = CAR
     gz = np.where(car, 1.4, gz)
     verts = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
     lab = labels.ravel().copy()
     # unlabelled corner patch and a few lone vertices with a label none of their neighbours has
-    lab[(gx.ravel() < -size_m * 0.45) & (gy.ravel() < -0.8 * half)] = 255
-    interior = np.nonzero((np.abs(gx.ravel()) < size_m * 0.15) & (np.abs(gy.ravel()) < 0.25 * half) & (lab == 0))[0]
+    lab[(gx.ravel() < -size_m * 0.45) & (gy.ravel() < -0.8 * half)] = IGNORE
+    interior = np.nonzero((np.abs(gx.ravel()) < size_m * 0.15) & (np.abs(gy.ravel()) < 0.25 * half) & (lab == ROAD))[0]
     lone = rng.choice(interior, size=min(3, len(interior)), replace=False)
-    lab[lone] = 7  # traffic sign
+    lab[lone] = TRAFFIC_SIGN
     i = np.arange(nx * ny).reshape(ny, nx)
     a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
     faces = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
