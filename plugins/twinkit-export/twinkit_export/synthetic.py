@@ -72,19 +72,14 @@ def texture_image(px: int, seed: int = 0) -> np.ndarray:
 
 def write_obj(path: Path, verts: np.ndarray, faces: np.ndarray, uv: np.ndarray, texture_px: int = 256,
               seed: int = 0) -> Path:
-    """Write ``path`` (.obj) + .mtl + .png like the texture step does; returns the OBJ path."""
+    """Write ``path`` (.obj) + .mtl + .png like the texture step does (twinkit.mesh.write_obj, per-vertex UVs);
+    returns the OBJ path."""
     from PIL import Image
 
+    from twinkit.mesh import write_obj as write_mesh_obj
+
     path = Path(path)
-    stem = path.stem
     Image.fromarray(texture_image(texture_px, seed)).save(path.with_suffix(".png"))
-    path.with_suffix(".mtl").write_text(
-        f"newmtl twinkit_texture\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\nmap_Kd {stem}.png\n")
-    f1 = faces + 1
-    with open(path, "w") as fh:
-        fh.write(f"# synthetic street\nmtllib {stem}.mtl\n")
-        np.savetxt(fh, verts, fmt="v %.6f %.6f %.6f")
-        np.savetxt(fh, uv, fmt="vt %.6f %.6f")
-        fh.write("usemtl twinkit_texture\n")
-        np.savetxt(fh, np.repeat(f1, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+    write_mesh_obj(path, verts, faces, uv, f"{path.stem}.png", comment="synthetic street", mtl_comment=None,
+                   uv_decimals=6)
     return path
