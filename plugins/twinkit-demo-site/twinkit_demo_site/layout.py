@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from twinkit import cityscapes
-from twinkit_demo_site.meshbuild import Mesh, MeshBuilder
+from twinkit.mesh import Mesh
+from twinkit_demo_site.meshbuild import MeshBuilder
 from twinkit_demo_site.textures import CAR_PAINTS, FACADES, Atlas
 
 #: the CityScapes classes the demo site builds: name -> trainId (twinkit.cityscapes), in trainId order

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit_demo_site.meshbuild import Mesh
+from twinkit.mesh import Mesh
 from twinkit_demo_site.textures import Atlas
 from twinkit_demo_site.weathering import apply_weathering
 
@@ -35,8 +35,8 @@ class Tracer:
         v = mesh.vertices[mesh.faces]
         n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         self.face_normals = (n / (np.linalg.norm(n, axis=1, keepdims=True) + 1e-20)).astype(np.float32)
-        self.face_uv = mesh.uvs[mesh.faces].astype(np.float32)  # (m, 3, 2)
-        self.face_labels = mesh.face_labels
+        self.face_uv = mesh.attrs["uv"][mesh.faces].astype(np.float32)  # (m, 3, 2)
+        self.face_labels = mesh.face_attrs["label"]
 
     # ------------------------------------------------------------------ primitives
     def cast(self, origins: np.ndarray, dirs: np.ndarray):
