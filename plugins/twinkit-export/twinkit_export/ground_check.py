@@ -53,42 +53,20 @@ SIDEWALK = ("sidewalk",)
 def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
     """Ray positions over the lanes, site frame: {"driving": (k, 3), "sidewalk": (k, 3)} (x, y, lane z).
 
-    carla.Map (offline) gives waypoints every ``spacing_m`` on the driving lanes; the other lanes are
-    reached sideways from them (get_left_lane / get_right_lane). Across a lane, rays every
-    ``spacing_m`` from border to border (half a step in from each)."""
-    import carla
+    Every lane every ``spacing_m`` (:meth:`LaneMap.lanes`: the driving lanes and the lanes reached sideways
+    from them); across a lane, rays every ``spacing_m`` from border to border (half a step in from each)."""
+    from twinkit.street.lanes import LaneMap
 
-    m = carla.Map("drop_test", xodr_text)
-    seen: set[tuple] = set()
+    lanes = LaneMap(xodr_text, "drop_test").lanes(spacing_m)
     out: dict[str, list] = {"driving": [], "sidewalk": []}
-
-    def add(w):
-        t = str(w.lane_type).lower()
-        kind = "driving" if t in DRIVING else "sidewalk" if t in SIDEWALK else None
-        if kind is None:
-            return
-        key = (w.road_id, w.section_id, w.lane_id, round(float(w.s), 3))
-        if key in seen:
-            return
-        seen.add(key)
-        loc = w.transform.location
-        rv = w.transform.get_right_vector()
-        n = np.array([rv.x, -rv.y])  # CARLA's y points south: site frame is x east, y north
-        n /= np.linalg.norm(n) or 1.0
-        h = float(w.lane_width) / 2
+    kinds = np.where(lanes.is_type(*DRIVING), "driving", np.where(lanes.is_type(*SIDEWALK), "sidewalk", ""))
+    nrm = lanes.normal
+    for i in np.flatnonzero(kinds != ""):
+        h = float(lanes.width[i]) / 2
         k = max(1, int(np.floor(2 * h / spacing_m)))
         off = (np.arange(k) + 0.5) * (2 * h / k) - h
-        out[kind].append(np.c_[loc.x + off * n[0], -loc.y + off * n[1], np.full(k, loc.z)])
-
-    for w in m.generate_waypoints(spacing_m):
-        add(w)
-        for side in ("get_right_lane", "get_left_lane"):
-            o = getattr(w, side)()
-            hops = 0
-            while o is not None and hops < 8 and o.lane_type != carla.LaneType.Driving:
-                add(o)
-                o = getattr(o, side)()
-                hops += 1
+        x, y, z = lanes.xyz[i]
+        out[str(kinds[i])].append(np.c_[x + off * nrm[i, 0], y + off * nrm[i, 1], np.full(k, z)])
     return {k: (np.vstack(v) if v else np.zeros((0, 3))) for k, v in out.items()}
 
 
