@@ -10,8 +10,8 @@ import pytest
 pytest.importorskip("carla")
 
 from twinkit.errors import InputError  # noqa: E402
-from twinkit.street.lanes import (LaneMap, OpenDriveError, carla_to_site, carla_yaw_to_heading,  # noqa: E402
-                                  heading_to_carla_yaw, site_to_carla)
+from twinkit.street.lanes import (LaneMap, OpenDriveError, from_carla, to_carla, yaw_from_carla,  # noqa: E402
+                                  yaw_to_carla)
 
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "opendrive"
 
@@ -41,9 +41,10 @@ def road_xodr(x0: float = 5.0, y0: float = 2.0, hdg: float = 0.0) -> str:
 
 def test_the_y_flip_round_trips_and_negates_headings():
     p = np.array([[1.0, 2.0, 3.0], [-4.5, -0.25, 0.0]])
-    assert np.array_equal(carla_to_site(site_to_carla(p)), p)
-    assert np.array_equal(site_to_carla(p)[:, 1], -p[:, 1]) and np.array_equal(site_to_carla(p)[:, [0, 2]], p[:, [0, 2]])
-    assert heading_to_carla_yaw(carla_yaw_to_heading(33.0)) == 33.0 and carla_yaw_to_heading(90.0) == -90.0
+    assert np.array_equal(from_carla(to_carla(p)), p)
+    assert np.array_equal(to_carla(p)[:, 1], -p[:, 1]) and np.array_equal(to_carla(p)[:, [0, 2]], p[:, [0, 2]])
+    assert yaw_to_carla(yaw_from_carla(33.0)) == 33.0 and yaw_from_carla(90.0) == -90.0
+    assert np.array_equal(yaw_from_carla(np.array([10.0, -170.0])), [-10.0, 170.0])
 
 
 def test_lanes_lie_in_the_site_frame_right_lanes_to_the_right():
@@ -136,7 +137,7 @@ def test_site_frame_samples_are_carla_waypoints_flipped():
     wp = LaneMap(text).waypoints(1.0)
     assert len(wp) == len(raw) > 100
     loc = np.array([(w.transform.location.x, w.transform.location.y, w.transform.location.z) for w in raw])
-    assert np.array_equal(wp.xyz, carla_to_site(loc))
+    assert np.array_equal(wp.xyz, from_carla(loc))
     assert np.array_equal(wp.width, [w.lane_width for w in raw]) and np.array_equal(wp.s, [w.s for w in raw])
     assert np.array_equal(wp.heading_deg, [-w.transform.rotation.yaw for w in raw])
     assert len(LaneMap(text).topology()) == len(carla.Map("raw", text).get_topology()) > 0

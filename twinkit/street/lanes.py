@@ -3,8 +3,9 @@
 The one place twinkit walks OpenDRIVE lane geometry, and the one place that knows CARLA's frame: CARLA
 (Unreal) is left-handed with y = -north, the site frame is right-handed (x east, y north, z up, metres). A
 point at CARLA (x, y, z) is at site (x, -y, z); a heading counter-clockwise from east is minus CARLA's yaw.
-:func:`carla_to_site` / :func:`site_to_carla` and :func:`carla_yaw_to_heading` /
-:func:`heading_to_carla_yaw` are those two rules; everything else here hands out site-frame numbers.
+:func:`from_carla` / :func:`to_carla` and :func:`yaw_from_carla` / :func:`yaw_to_carla` are those two rules
+(the CARLA package's frame, right-handed like the site frame, mirrors into CARLA the same way); everything
+else here hands out site-frame numbers.
 
 CARLA evaluates the whole lane model (reference-line geometries, ``laneOffset``, every lane section, width
 polynomials, elevation), so a sample's width and borders are what CARLA drives on.
@@ -37,29 +38,28 @@ class OpenDriveError(InputError):
     """``carla.Map`` cannot read the OpenDRIVE text; the message names the file and what to do."""
 
 
-def carla_to_site(xyz) -> np.ndarray:
-    """(n, 2|3) CARLA (Unreal, left-handed: y = -north) -> site frame (y north): y negated. float64.
-
-    Its own inverse: :func:`site_to_carla` is the same flip."""
+def from_carla(xyz) -> np.ndarray:
+    """(..., 2|3) CARLA's frame (Unreal, left-handed: y = -north) -> the right-handed frame of the OpenDRIVE file
+    (the site frame, or the CARLA package's frame: y north): y negated. float64, a copy. Its own inverse."""
     a = np.array(xyz, dtype=float)
     a[..., 1] = -a[..., 1]
     return a
 
 
-def site_to_carla(xyz) -> np.ndarray:
-    """(n, 2|3) site frame -> CARLA's frame (y = -north): y negated. float64."""
-    return carla_to_site(xyz)
+def to_carla(xyz) -> np.ndarray:
+    """(..., 2|3) the OpenDRIVE file's right-handed frame (y north) -> CARLA's frame (y = -north): y negated."""
+    return from_carla(xyz)
 
 
-def carla_yaw_to_heading(yaw_deg):
-    """CARLA's yaw (degrees, clockwise from east seen from above in the site frame) -> heading (degrees,
-    counter-clockwise from east, site frame). Its own inverse."""
+def yaw_from_carla(yaw_deg):
+    """CARLA's yaw (degrees; clockwise from east seen from above, y being -north) -> heading in the right-handed
+    frame (degrees, counter-clockwise from east): negated. Its own inverse."""
     return -np.asarray(yaw_deg, float) if np.ndim(yaw_deg) else -float(yaw_deg)
 
 
-def heading_to_carla_yaw(heading_deg):
-    """Heading (degrees, counter-clockwise from east, site frame) -> CARLA's yaw (degrees)."""
-    return carla_yaw_to_heading(heading_deg)
+def yaw_to_carla(heading_deg):
+    """Heading (degrees, counter-clockwise from east, right-handed frame) -> CARLA's yaw (degrees): negated."""
+    return yaw_from_carla(heading_deg)
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,7 @@ class LaneSamples:
         col = list(zip(*rows)) if n else [()] * 13
         f = np.asarray
         return cls(xyz=f(col[0:3], float).T.reshape(n, 3), right=f(col[3:5], float).T.reshape(n, 2),
-                   heading_deg=-f(col[5], float), carla_pitch_deg=f(col[6], float), carla_roll_deg=f(col[7], float),
+                   heading_deg=yaw_from_carla(f(col[5], float)), carla_pitch_deg=f(col[6], float), carla_roll_deg=f(col[7], float),
                    width=f(col[8], float), s=f(col[9], float), road=f(col[10], np.int64).reshape(n),
                    section=f(col[11], np.int64).reshape(n), lane=f(col[12], np.int64).reshape(n),
                    type=np.array([r[13] for r in rows], dtype=object).reshape(n),

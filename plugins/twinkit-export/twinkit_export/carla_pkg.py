@@ -101,7 +101,7 @@ def spawn_points(lanes, spacing_m: float = 20.0, height_m: float = 0.5, skip_jun
     left-handed frame (y = -north). ``site`` gives the same point in the site frame (y north) with
     the heading counter-clockwise from east.
     """
-    from twinkit.street.lanes import carla_yaw_to_heading, heading_to_carla_yaw, site_to_carla
+    from twinkit.street.lanes import to_carla, yaw_from_carla, yaw_to_carla
 
     wp = lanes.waypoints(float(spacing_m))
     keep = wp.is_type("driving")
@@ -112,8 +112,8 @@ def spawn_points(lanes, spacing_m: float = 20.0, height_m: float = 0.5, skip_jun
     for i in range(len(wp)):
         x, y, z = wp.xyz[i].tolist()
         z += height_m
-        cx, cy, _ = site_to_carla([x, y, z]).tolist()
-        pitch, yaw, roll = (_wrap180(float(a)) for a in (wp.carla_pitch_deg[i], heading_to_carla_yaw(wp.heading_deg[i]),
+        cx, cy, _ = to_carla([x, y, z]).tolist()
+        pitch, yaw, roll = (_wrap180(float(a)) for a in (wp.carla_pitch_deg[i], yaw_to_carla(wp.heading_deg[i]),
                                                           wp.carla_roll_deg[i]))
         out.append({
             "road_id": int(wp.road[i]), "section_id": int(wp.section[i]), "lane_id": int(wp.lane[i]),
@@ -121,7 +121,7 @@ def spawn_points(lanes, spacing_m: float = 20.0, height_m: float = 0.5, skip_jun
             "carla": {"x": round(cx, 3), "y": round(cy, 3), "z": round(z, 3),
                       "pitch": round(pitch, 3), "yaw": round(yaw, 3), "roll": round(roll, 3)},
             "site": {"x": round(x, 3), "y": round(y, 3), "z": round(z, 3),
-                     "heading_deg": round(_wrap180(carla_yaw_to_heading(yaw)), 3)},
+                     "heading_deg": round(_wrap180(yaw_from_carla(yaw)), 3)},
         })
     return out
 
