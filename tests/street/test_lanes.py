@@ -60,8 +60,9 @@ def test_lanes_lie_in_the_site_frame_right_lanes_to_the_right():
     assert first.heading_deg[0] == pytest.approx(math.degrees(math.atan2(-0.01, 1.0)), abs=1e-4)
     assert np.allclose(right.normal, [0.0, -1.0], atol=0.011)  # the lane's right: south (turned by the widening)
     assert np.allclose(np.hypot(*right.normal.T), 1.0)
-    left = wp.take(wp.lane == 1)
-    assert np.all(left.xyz[:, 1] > 2.0)
+    left = wp.take(wp.lane == 1)  # driven westwards: its right is north
+    assert np.all(left.xyz[:, 1] > 2.0) and np.allclose(left.normal, [0.0, 1.0], atol=1e-5)
+    assert np.allclose(np.abs(left.heading_deg), 180.0, atol=1e-4)
 
 
 def test_a_turned_road_turns_its_lanes_the_same_way():

@@ -35,7 +35,12 @@ DRIVING_TYPES = ("driving",)
 
 
 class OpenDriveError(InputError):
-    """``carla.Map`` cannot read the OpenDRIVE text; the message names the file and what to do."""
+    """``carla.Map`` cannot read the OpenDRIVE text; the message names the file (``source``) and what to do
+    (``why``), so a caller that knows the file better can say ``f"{path}: {exc.why}"``."""
+
+    def __init__(self, source: str, why: str):
+        super().__init__(f"{source}: {why}")
+        self.source, self.why = source, why
 
 
 def from_carla(xyz) -> np.ndarray:
@@ -67,13 +72,14 @@ class LaneSamples:
     """Lane-centre samples, one row per sample, in the site frame; arrays of equal length n.
 
     ``xyz`` (n, 3) float64 m: the lane's centre (height from the OpenDRIVE elevation);
-    ``right`` (n, 2) float64: CARLA's right vector of the lane (the driving direction's right, unit up to
-    CARLA's float32; :attr:`normal` is it normalised); ``heading_deg`` (n,) float64: the direction of the
-    lane's centre line (its driving direction), counter-clockwise from east; ``carla_pitch_deg`` / ``carla_roll_deg`` (n,) float64: the
-    pitch and roll CARLA reports (its frame); ``width`` (n,) float64 m: the lane's width there (width
-    polynomial of its lane section); ``s`` (n,) float64 m along the road; ``road`` / ``section`` / ``lane``
-    (n,) int64 ids; ``type`` (n,) str: CARLA's lane-type name (``Driving``, ``Sidewalk``, ``OnRamp``, ...;
-    compare with :meth:`is_type`); ``junction`` (n,) int64: the junction id, -1 outside junctions.
+    ``right`` (n, 2) float64: CARLA's right vector of the lane (to the right of its driving direction, unit
+    up to CARLA's float32; :attr:`normal` is it normalised); ``heading_deg`` (n,) float64: the direction of
+    the lane's centre line (its driving direction), counter-clockwise from east; ``carla_pitch_deg`` /
+    ``carla_roll_deg`` (n,) float64: the pitch and roll CARLA reports (its frame); ``width`` (n,) float64 m:
+    the lane's width there (the width polynomial of its lane section); ``s`` (n,) float64 m along the road;
+    ``road`` / ``section`` / ``lane`` (n,) int64 ids; ``type`` (n,) str: CARLA's lane-type name
+    (``Driving``, ``Sidewalk``, ``OnRamp``, ...; compare with :meth:`is_type`); ``junction`` (n,) int64: the
+    junction id, -1 outside junctions.
     """
 
     xyz: np.ndarray
@@ -99,15 +105,11 @@ class LaneSamples:
     @classmethod
     def _from_rows(cls, rows: list[tuple]) -> "LaneSamples":
         """Rows as :func:`_row` makes them -> columns."""
-        n = len(rows)
-        col = list(zip(*rows)) if n else [()] * 13
-        f = np.asarray
-        return cls(xyz=f(col[0:3], float).T.reshape(n, 3), right=f(col[3:5], float).T.reshape(n, 2),
-                   heading_deg=yaw_from_carla(f(col[5], float)), carla_pitch_deg=f(col[6], float), carla_roll_deg=f(col[7], float),
-                   width=f(col[8], float), s=f(col[9], float), road=f(col[10], np.int64).reshape(n),
-                   section=f(col[11], np.int64).reshape(n), lane=f(col[12], np.int64).reshape(n),
-                   type=np.array([r[13] for r in rows], dtype=object).reshape(n),
-                   junction=np.array([r[14] for r in rows], np.int64).reshape(n))
+        a = np.array([r[:14] for r in rows], float).reshape(-1, 14)
+        ids = a[:, 10:14].astype(np.int64)
+        return cls(xyz=a[:, 0:3], right=a[:, 3:5], heading_deg=yaw_from_carla(a[:, 5]), carla_pitch_deg=a[:, 6],
+                   carla_roll_deg=a[:, 7], width=a[:, 8], s=a[:, 9], road=ids[:, 0], section=ids[:, 1],
+                   lane=ids[:, 2], junction=ids[:, 3], type=np.array([r[14] for r in rows], dtype=object))
 
     def take(self, idx) -> "LaneSamples":
         """The samples at ``idx`` (indices or a boolean mask), in that order."""
@@ -185,11 +187,11 @@ class Landmark:
 
 def _row(w) -> tuple:
     """One CARLA waypoint -> (x, y, z, right x, right y, yaw, pitch, roll, width, s, road, section, lane,
-    type, junction): positions and the right vector already in the site frame, angles as CARLA has them."""
+    junction, type): position and right vector already in the site frame, angles as CARLA has them."""
     t = w.transform
     loc, rot, rv = t.location, t.rotation, t.get_right_vector()
-    return (loc.x, -loc.y, loc.z, rv.x, -rv.y, rot.yaw, rot.pitch, rot.roll, float(w.lane_width), float(w.s),
-            w.road_id, w.section_id, w.lane_id, str(w.lane_type), w.junction_id if w.is_junction else -1)
+    return (loc.x, -loc.y, loc.z, rv.x, -rv.y, rot.yaw, rot.pitch, rot.roll, w.lane_width, w.s, w.road_id,
+            w.section_id, w.lane_id, w.junction_id if w.is_junction else -1, str(w.lane_type))
 
 
 class LaneMap:
@@ -202,14 +204,14 @@ class LaneMap:
 
         self.source = str(source if source is not None else name)
         if "<OpenDRIVE" not in xodr_text:
-            raise OpenDriveError(f"{self.source}: not an OpenDRIVE file (no <OpenDRIVE> element); give the .xodr "
-                                 "a road source wrote (e.g. osm_to_opendrive's)")
+            raise OpenDriveError(self.source, "not an OpenDRIVE file (no <OpenDRIVE> element); give the .xodr a road "
+                                 "source wrote (e.g. osm_to_opendrive's)")
         try:
             self._map = carla.Map(name, xodr_text)
         except Exception as exc:  # noqa: BLE001 - CARLA raises RuntimeError("failed to generate map")
-            raise OpenDriveError(f"{self.source}: carla.Map cannot read it ({type(exc).__name__}: {exc}); check "
-                                 "that it is well-formed XML (xmllint --noout) and valid OpenDRIVE 1.4-1.6 (open "
-                                 "it in an OpenDRIVE viewer), or write it again with its road source") from None
+            raise OpenDriveError(self.source, f"carla.Map cannot read it ({type(exc).__name__}: {exc}); check that "
+                                 "it is well-formed XML (xmllint --noout) and valid OpenDRIVE 1.4-1.6 (open it in "
+                                 "an OpenDRIVE viewer), or write it again with its road source") from None
 
     @classmethod
     def from_file(cls, path: str | Path, name: str | None = None) -> "LaneMap":

@@ -1,13 +1,13 @@
 """The ``drop_test`` step: does the static mesh hold up a car and a walker everywhere the map sends them?
 
 The way a simulator sees the ground: vertical rays on a grid (``spacing_m``, 10 cm) over every driving
-and sidewalk lane of the OpenDRIVE map (carla.Map, offline), inside the scanned site (the cloud's
-footprint, :class:`twinkit.surface.watertight.Footprint`). A ray passes when the static mesh (after
-``lift_movables``: what CARLA gets as its map) crosses it within ``tol_m`` of the lane's height. A lane's
-height is the map's road elevation plus the lane's own ``<height>`` records, if any; a sidewalk lane
-without one (netconvert writes none) is expected at the height of the pavement beside the road, up to
-``curb_max_m`` above the road (a kerb), and passes when the mesh is within ``tol_m`` of any height in
-that band.
+and sidewalk lane of the OpenDRIVE map (:class:`twinkit.street.lanes.LaneMap`: carla.Map, offline), inside
+the scanned site (the cloud's footprint, :class:`twinkit.surface.watertight.Footprint`). A ray passes when
+the static mesh (after ``lift_movables``: what CARLA gets as its map) crosses it within ``tol_m`` of the
+lane's height. A lane's height is the map's road elevation plus the lane's own ``<height>`` records, if
+any; a sidewalk lane without one (netconvert writes none) is expected at the height of the pavement beside
+the road, up to ``curb_max_m`` above the road (a kerb), and passes when the mesh is within ``tol_m`` of
+any height in that band.
 
 Writes ``drop_test.json`` (per lane type: rays, hits, the share, the misses grouped in clusters with
 their positions) and ``drop_test.png`` (misses in orange over the mesh seen from above, with the open
@@ -30,20 +30,25 @@ from twinkit.ranges import param
 class DropTestParams:
     """Vertical rays over the lanes: does the static mesh hold up cars and walkers?"""
 
-    spacing_m: float = param(0.10, gt=0)  # ray grid along and across each lane
-    tol_m: float = param(0.05, gt=0)  # a ray passes when the surface is this close to the lane's height
-    curb_max_m: float = param(0.30, ge=0)  # a sidewalk without <height> records may lie up to this above the road (a kerb)
-    min_driving_pct: float = param(99.9, ge=0, le=100)  # below this share of hits on driving lanes: a warning, ok = false
-    min_sidewalk_pct: float = param(99.5, ge=0, le=100)  # ... on sidewalks
-    footprint_margin_m: float = param(1.0, ge=0)  # rays this close to the scan's edge are not counted (the site ends there)
-    fill_limit_m: float = param(8.0, ge=0)  # unscanned gaps narrower than this count as inside the site (the ground fill's limit)
-    fall_m: float = param(0.5, gt=0)  # a missed ray with no surface this close to the lane falls through (a hole), else off height
-    max_hole_m: float = param(0.25, ge=0)  # any hole wider than this (falling rays' extent + one spacing) fails the lane, whatever
-    #                           the share: it swallows a tyre's contact patch (about 0.2 m) or a shoe
-    # the surface's continuity: a ray holds when the surface under it lies within tol_m of the surface's
-    # mean height over this window around it (a crack, a step, a bump fail; a camber the lane's one
-    # height cannot follow does not). 0: off (the lane height alone decides the degraded flag)
-    local_window_m: float = param(0.5, ge=0)
+    spacing_m: float = param(0.10, gt=0, help="Ray grid along and across each lane, m.")
+    tol_m: float = param(0.05, gt=0, help="A ray passes when the surface is this close to the lane's height, m.")
+    curb_max_m: float = param(0.30, ge=0, help="A sidewalk without <height> records may lie up to this above the "
+                              "road (a kerb), m.")
+    min_driving_pct: float = param(99.9, ge=0, le=100, help="Below this share of hits on driving lanes: a warning "
+                                   "and ok = false, %.")
+    min_sidewalk_pct: float = param(99.5, ge=0, le=100, help="The same on sidewalk lanes, %.")
+    footprint_margin_m: float = param(1.0, ge=0, help="Rays this close to the scan's edge are not counted (the "
+                                      "site ends there), m.")
+    fill_limit_m: float = param(8.0, ge=0, help="Unscanned gaps narrower than this count as inside the site (the "
+                                "ground fill's limit), m.")
+    fall_m: float = param(0.5, gt=0, help="A missed ray with no surface this close to the lane falls through (a "
+                          "hole); otherwise it is off height, m.")
+    max_hole_m: float = param(0.25, ge=0, help="Any hole wider than this (falling rays' extent + one spacing) fails "
+                              "the lane whatever the share: it swallows a tyre's contact patch (about 0.2 m) or a "
+                              "shoe, m.")
+    local_window_m: float = param(0.5, ge=0, help="The surface's continuity: a ray holds when the surface under it "
+                                  "lies within tol_m of its mean height over this window (a crack, a step, a bump "
+                                  "fail; a camber does not); 0: off (the lane height alone decides), m.")
 
 
 DRIVING = ("driving", "bidirectional", "parking", "stop", "entry", "exit", "onramp", "offramp")

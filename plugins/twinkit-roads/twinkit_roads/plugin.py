@@ -507,6 +507,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
     import numpy as np
 
+    from twinkit.street.lanes import OpenDriveError
+
     from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
                            S_RELABEL, draw_evidence, lane_polygons, road_evidence as vote)
     from .mesh2d import Grid, read_mesh
@@ -542,6 +544,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         text = in_aligned_xodr.read_text(encoding="utf-8")
         lanes = lane_polygons(text, params.step_m, tuple(t.lower() for t in params.road_types),
                               tuple(t.lower() for t in params.sidewalk_types))
+    except OpenDriveError as exc:
+        raise InputError(f"{in_aligned_xodr}: {exc.why}; re-run apply_alignment") from None
     except (OSError, UnicodeDecodeError, RuntimeError, ValueError) as exc:
         raise InputError(f"{in_aligned_xodr}: not a readable OpenDRIVE ({exc}); re-run apply_alignment") from None
     if not lanes:
