@@ -123,6 +123,11 @@ def test_a_malformed_file_names_the_file_and_the_fix(tmp_path):
         LaneMap.from_file(bad)
     with pytest.raises(InputError, match=r"roads\.json: not an OpenDRIVE file"):
         LaneMap('{"roads": []}', source="roads.json")
+    # parses, but CARLA cannot walk a lane section without its centre lane
+    no_centre = road_xodr().replace('<center><lane id="0" type="none" level="false"/></center>', "")
+    with pytest.raises(OpenDriveError, match=r"m\.xodr: carla\.Map cannot walk its lanes.*<center>") as e:
+        LaneMap(no_centre, source="m.xodr").lanes(1.0)
+    assert e.value.source == "m.xodr" and e.value.why.startswith("carla.Map cannot walk")
 
 
 @pytest.mark.shared

@@ -30,9 +30,6 @@ from twinkit.errors import InputError
 #: (road id, lane-section id, lane id): one lane of one lane section
 LaneKey = tuple[int, int, int]
 
-#: lane types (CARLA's names, lower case) a car drives on; ``driving`` is what ``generate_waypoints`` gives
-DRIVING_TYPES = ("driving",)
-
 
 class OpenDriveError(InputError):
     """``carla.Map`` cannot read the OpenDRIVE text; the message names the file (``source``) and what to do
@@ -99,10 +96,6 @@ class LaneSamples:
         return len(self.s)
 
     @classmethod
-    def empty(cls) -> "LaneSamples":
-        return cls._from_rows([])
-
-    @classmethod
     def _from_rows(cls, rows: list[tuple]) -> "LaneSamples":
         """Rows as :func:`_row` makes them -> columns."""
         a = np.array([r[:14] for r in rows], float).reshape(-1, 14)
@@ -114,11 +107,6 @@ class LaneSamples:
     def take(self, idx) -> "LaneSamples":
         """The samples at ``idx`` (indices or a boolean mask), in that order."""
         return LaneSamples(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
-
-    @property
-    def keys(self) -> np.ndarray:
-        """(n, 3) int64: road, section, lane of each sample."""
-        return np.stack([self.road, self.section, self.lane], 1)
 
     @property
     def in_junction(self) -> np.ndarray:
@@ -219,10 +207,19 @@ class LaneMap:
         p = Path(path)
         return cls(p.read_text(encoding="utf-8"), name or p.stem or "site", source=p)
 
+    def _generate(self, step_m: float) -> list:
+        """carla.Map.generate_waypoints; CARLA's errors on lanes it cannot walk as an OpenDriveError."""
+        try:
+            return self._map.generate_waypoints(float(step_m))
+        except Exception as exc:  # noqa: BLE001 - e.g. IndexError("map::at") for a road without a centre lane
+            raise OpenDriveError(self.source, f"carla.Map cannot walk its lanes ({type(exc).__name__}: {exc}); "
+                                 "check that every lane section has its <center> lane and every link names a road, "
+                                 "lane and junction that exist (open it in an OpenDRIVE viewer)") from None
+
     def waypoints(self, step_m: float) -> LaneSamples:
         """CARLA's waypoints every ``step_m`` along every driving lane (``generate_waypoints``), as CARLA
         orders them, duplicates kept."""
-        return LaneSamples._from_rows([_row(w) for w in self._map.generate_waypoints(float(step_m))])
+        return LaneSamples._from_rows([_row(w) for w in self._generate(step_m)])
 
     def lanes(self, step_m: float, max_hops: int = 8) -> LaneSamples:
         """Every lane of every type every ``step_m``: the driving waypoints and, from each, the lanes reached
@@ -232,7 +229,7 @@ class LaneMap:
 
         driving = carla.LaneType.Driving
         rows = []
-        for w in self._map.generate_waypoints(float(step_m)):
+        for w in self._generate(step_m):
             rows.append(_row(w))
             for side in ("get_right_lane", "get_left_lane"):
                 o = getattr(w, side)()
