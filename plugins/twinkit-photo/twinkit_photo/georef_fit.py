@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 
 from twinkit import InputError
+from twinkit.geo.similarity import closed_form_similarity
 
-from .georef import Transform, level, robust_umeyama, triangulate, umeyama
+from .georef import Transform, level, robust_umeyama, triangulate
 
 
 @dataclass
@@ -358,7 +359,7 @@ def truth_check(m: SfmModel, cams_out: list[dict], truth: dict, method: str, log
     est = centres[common]
     tru = np.array([tmap[m.names[k]] for k in common])
     e = np.linalg.norm(est - tru, axis=1)
-    Tb = umeyama(est, tru)
+    Tb = closed_form_similarity(est, tru)
     eb = np.linalg.norm(Tb.apply(est) - tru, axis=1)
     log.info("georeference (%s): camera centres %.3f m from the truth on average (max %.3f); "
              "SfM shape alone %.3f m", method, e.mean(), e.max(), eb.mean())
