@@ -150,7 +150,7 @@ def _report(func):
         if isinstance(exc, (ConfigCompositionException, MissingConfigException, OverrideParseException,
                             OmegaConfBaseException)):
             sys.exit(_err(str(_composition_error(exc)), 2))
-        return _ORIGINAL_REPORT[0](lambda: (_ for _ in ()).throw(exc))
+        return _ORIGINAL_REPORT[0](lambda e=exc: (_ for _ in ()).throw(e))
 
 
 _ORIGINAL_REPORT: list = []

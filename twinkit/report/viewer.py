@@ -243,7 +243,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
     if not vendor_three(vdir, cache):
         return ("<p class=\"warn\">The 3D view needs three.js, which is not installed: run <code>npm ci</code> "
                 "in the twinkit repository and run again. "
-                f"The model is here: <a href=\"viewer/model.glb\">viewer/model.glb</a></p>")
+                "The model is here: <a href=\"viewer/model.glb\">viewer/model.glb</a></p>")
     glb_stat = (vdir / "model.glb").stat()
     js_cached = cache / f"model-{glb_stat.st_ino}-{glb_stat.st_size}-{glb_stat.st_mtime_ns}.glb.js"
     if not js_cached.is_file():

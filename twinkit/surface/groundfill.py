@@ -298,8 +298,6 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
 def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None = None,
                       opt: GroundFillOptions | None = None, tree=None) -> tuple[Mesh, dict]:
     """Add grid patches over the ground's occlusion shadows; returns (mesh, report)."""
-    from scipy.spatial import cKDTree
-
     opt = opt or GroundFillOptions()
     c = float(opt.cell_m)
     cls, gz, lo, zloc, bmin, bmax = cell_classes(points, normals, opt, with_local=True)

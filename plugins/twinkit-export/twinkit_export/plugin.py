@@ -399,7 +399,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     # CARLA's import rules, read from its source (carla_contract): a package that breaks one fails here
     rep = check_package(out, package, expect_decals=params.decals)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
     topo = lanes.topology()
@@ -466,7 +466,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     rep = check_package(out, package, expect_decals=None)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
     ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "

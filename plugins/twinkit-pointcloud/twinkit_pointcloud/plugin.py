@@ -293,7 +293,7 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.mesh import read_ply, write_ply
+    from twinkit.mesh import write_ply
     from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
     from twinkit.surface.poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth

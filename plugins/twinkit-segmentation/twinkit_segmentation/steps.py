@@ -737,7 +737,7 @@ def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels
     if in_segments_npy is not None:
         upper = scores(majority_labels(np.load(in_segments_npy), gt), gt, res["classes"])
     out_seg_metrics_json.write_text(json.dumps({"scores": res, "upper_bound": upper}, indent=1))
-    md = [f"# Segmentation vs ground truth\n", f"mIoU **{res['miou']:.1f}**, mF1 **{res['mf1']:.1f}**, "
+    md = ["# Segmentation vs ground truth\n", f"mIoU **{res['miou']:.1f}**, mF1 **{res['mf1']:.1f}**, "
           f"accuracy {res['accuracy']:.1f} %, labelled {100 * res['labelled_fraction']:.1f} % of vertices"]
     if upper:
         md.append(f"; over-segmentation upper bound mIoU {upper['miou']:.1f}")
