@@ -12,6 +12,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.memory import release_memory
 from twinkit.engine.records import RECORD, StepOutcome, read_record
 from twinkit.engine.store import compute_into_store, with_site
@@ -46,7 +47,7 @@ def _run_item_task(task: dict) -> dict:
         release_memory()
 
 
-class FanoutMixin:
+class FanoutMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: run a ``foreach`` step through the executor
     (``self.executor_factory``, or the configured ``executor``, or a local pool)."""
 

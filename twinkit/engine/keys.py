@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.plan import PlannedStep
 from twinkit.engine.store import site_fields, with_site
 from twinkit.errors import InputError
@@ -24,7 +25,7 @@ def missing_input(path: Path, step_id: str) -> str:
             f"on the command line")
 
 
-class KeysMixin:
+class KeysMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: inputs, descriptor and key of a planned step
     (``self.outcomes`` of the steps before it, ``self.hashes``)."""
 
