@@ -46,6 +46,7 @@ class KeysMixin(EngineBase):
                 paths[param] = src.path
                 hashes[param] = artefact_hash(src.path, self.hashes) if src.path.is_dir() else self.hashes.hash(src.path)
             else:
+                assert src.step_index is not None  # a Source has a path or a producing step
                 prod = self.outcomes[src.step_index - 1]
                 paths[param] = prod.outputs[src.filename]
                 hashes[param] = prod.hashes[src.filename]
@@ -53,7 +54,7 @@ class KeysMixin(EngineBase):
 
     def _descriptor(self, ps: PlannedStep, input_hashes: dict[str, Any]) -> dict:
         if ps.plugin is None:
-            plugin = {"kind": "manual", "instructions": ps.spec.manual.get("instructions")}
+            plugin = {"kind": "manual", "instructions": (ps.spec.manual or {}).get("instructions")}
         else:
             plugin = {"kind": ps.plugin.kind, "name": ps.plugin.name, "version": ps.plugin.version,
                       "code": ps.plugin.code_hash()}

@@ -164,8 +164,9 @@ class LockMixin(EngineBase):
                 shutil.rmtree(d, ignore_errors=True)
 
     def _release(self) -> None:
-        if getattr(self, "_store_lock", None) is not None:
-            self._store_lock.release()
+        store_lock = getattr(self, "_store_lock", None)
+        if store_lock is not None:
+            store_lock.release()
             self._store_lock = None
         if self._lock is not None:
             self._lock.release()

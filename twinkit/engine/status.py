@@ -58,10 +58,11 @@ class StatusMixin(EngineBase):
                     rows.append((ps.folder, "up to date" if state == "unchanged" else "edited",
                                  "" if state == "unchanged" else ", ".join(files)))
                 if ps.foreach is not None:
-                    hashes = rec["artefacts"] if state == "unchanged" else None
-                    if hashes is None:
+                    artefacts = rec["artefacts"] if state == "unchanged" else None
+                    if artefacts is None:
                         dirty = True
                         continue
+                    hashes = artefacts
                 else:
                     _, hashes = self._outputs_of(folder, ps, rec, current=state == "edited")
             else:

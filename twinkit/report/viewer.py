@@ -228,7 +228,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
         if not cached.is_file():
             t = time.perf_counter()
             mesh = pics._mesh()
-            if mesh is None or not len(mesh.faces):
+            if mesh is None or mesh.faces is None or not len(mesh.faces):
                 return ""
             labels = lab[0] if lab else mesh.attrs.get("label")
             xyz, faces, near = decimate(mesh.vertices, mesh.faces, VIEWER_MAX_FACES)
