@@ -272,7 +272,7 @@ def _bounds(header: ET.Element, c: float, s: float, scale: float, t=(0.0, 0.0)) 
     """The header's north/south/east/west: the box of the moved corners of the old box."""
     try:
         n, so, e, w = (_num(header.attrib[k]) for k in ("north", "south", "east", "west"))
-    except (TypeError, ValueError):
+    except (KeyError, ValueError):  # a header without its box, or not numbers
         return
     xs, ys = [], []
     for x, y in ((w, so), (w, n), (e, so), (e, n)):
