@@ -176,7 +176,8 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
         idx += 1
         where = f"recipe '{rname}', step '{spec.id}'"
         plugin: Plugin | None = None
-        params_obj, params_dict = None, {}  # type: ignore[var-annotated]
+        params_obj: Any = None
+        params_dict: dict[str, Any] = {}
         components: dict[str, Any] = {}
         if spec.manual is not None:
             outs = spec.manual.get("outputs") or []
