@@ -19,7 +19,7 @@ from twinkit.ranges import param
 class EngineConfig:
     """Engine settings (``engine.<key>=...`` on the command line)."""
 
-    outputs_dir: str = param("outputs", help="Folder that holds the runs (one subfolder per run).")
+    outputs_dir: str = param("outputs", help="Folder that holds the runs' outputs.")
     threads: int = param(0, ge=0, help="Threads the run may use; 0 = every core.")
     interactive: str = param("auto",
                              help="Whether a manual step waits for its file (else the run stops and says what to "

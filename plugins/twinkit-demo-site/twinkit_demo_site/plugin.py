@@ -28,8 +28,8 @@ PRESETS = {
 @dataclass
 class DemoSiteParams:
     size: str = param("small", choices=("small", "default", "large"),
-                      help="Preset of the generated intersection: small, default or large (area, point density, "
-                           "photo count).")
+                      help="Preset of the generated intersection (PRESETS): small, default or large; it sets the "
+                           "site's size, the scanner's point density and the photo count.")
     seed: int = param(0, ge=0, help="Random seed: the same seed and size give the same site, scan and photos.")
     photo_count: int = param(0, ge=0, le=10000, help="Number of photos to render; 0 = the preset's count.")
     photo_width_px: int = param(1024, ge=16, le=16384, help="Width of each rendered photo (px).")
@@ -53,8 +53,8 @@ class DemoSiteParams:
                                          "about the base point.")
     shadows: bool = param(True, help="Cast sun shadows in the scan's and the photos' colours.")
     weathering: float = param(0.6, ge=0, le=1,
-                              help="Strength of world-space stains in the photos, so that no two places look alike "
-                                   "(helps photo matching); 0 = off.")
+                              help="Strength of world-space stains in the photos, so that no two places look alike; 0 = "
+                                   "off.")
     weathering_scan: bool = param(False,
                                   help="Weather the scanner's colours too (changes the segmentation demo's input).")
     gcp_survey_noise_m: float = param(0.005, ge=0,

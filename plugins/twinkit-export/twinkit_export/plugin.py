@@ -92,7 +92,7 @@ class CarlaPackageParams:
     skip_junctions: bool = param(True, help="Put no spawn points inside junctions.")
     decals: bool = param(False,
                          help="Let CARLA add its default random road decals (dirt, cracks, tyre marks, road lines).")
-    carla_version: str = param("0.9.16", help="The CARLA version the package is made for (named in its README).")
+    carla_version: str = param("0.9.16", help="The CARLA version the package is made for.")
     frame: str = param("carla", choices=("carla", "site"),
                        help="carla: a true-north frame at the base point, in which CARLA's geolocation works; site: "
                             "the site frame (CARLA's geolocation is then wrong).")

@@ -35,7 +35,8 @@ class OpenDriveSourceParams:
     path: str = param("", help="The .xodr file; empty = the site's input (site.inputs.xodr=/path/map.xodr).")
     georeference: str = param("",
                               help="The map's frame when it has no (or a wrong) <geoReference>: a PROJ string or an "
-                                   "EPSG code; \"site\" = already in the site frame; empty = the map's own.")
+                                   "EPSG code; \"site\" = already in the site frame; empty = the map's own "
+                                   "<geoReference>.")
     heights: str = param("datum", choices=("datum", "keep"),
                          help="datum: the map's z are heights in the site's vertical datum (z - the base point's "
                               "altitude); keep: leave them unchanged.")

@@ -411,7 +411,7 @@ class AutoStreetSampler:
 @dataclass
 class CombinedParams:
     use: List[str] = param(default_factory=lambda: ["auto_street", "uniform", "random"], free=True,
-                           help="The samplers whose views are combined, in order (auto_street, street_points, "
+                           help="The samplers whose views are combined (of auto_street, street_points, "
                                 "uniform, random).")
     auto_street: AutoStreetParams = param(default_factory=AutoStreetParams, free=True,
                                           help="Options of the auto_street sampler when it is in use.")
