@@ -22,8 +22,8 @@ TO_CONVERT = frozenset({
     "step/road_evidence", "step/place_signals",
     # twinkit-photo
     "step/sfm", "step/georeference", "step/roi", "step/dense", "step/photo_texture",
-    # twinkit-export: lift_step.py, ground_check.py
-    "step/lift_movables", "step/drop_test",
+    # twinkit-export: lift_step.py
+    "step/lift_movables",
 })
 
 
