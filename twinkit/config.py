@@ -19,13 +19,18 @@ from twinkit.ranges import param
 class EngineConfig:
     """Engine settings (``engine.<key>=...`` on the command line)."""
 
-    outputs_dir: str = "outputs"
-    threads: int = param(0, ge=0)  # 0 = every core
-    interactive: str = "auto"  # auto (a terminal) | true | false
-    manual_timeout_s: Optional[float] = param(None, gt=0)
-    report: bool = True
-    # exit status of a run that finished with a degraded result (docs/engine.md "Degraded results"); 0 = exit 0
-    degraded_exit_code: int = param(4, ge=0, le=125)
+    outputs_dir: str = param("outputs", help="Folder that holds the runs' outputs.")
+    threads: int = param(0, ge=0, help="Threads the run may use; 0 = every core.")
+    interactive: str = param("auto",
+                             help="Whether a manual step waits for its file (else the run stops and says what to "
+                                  "provide): auto = when attached to a terminal, true or false.")
+    manual_timeout_s: Optional[float] = param(None, gt=0,
+                                              help="How long (s) an interactive run waits at a manual step for its "
+                                                   "file; null = no limit.")
+    report: bool = param(True, help="Write the run report (report.html) at the end of the run.")
+    degraded_exit_code: int = param(4, ge=0, le=125,
+                                    help="Exit status of a run that finished with a degraded result (docs/engine.md "
+                                         '"Degraded results"); 0 = exit 0 as for a clean run.')
 
 
 def find_config_dir() -> Path:
