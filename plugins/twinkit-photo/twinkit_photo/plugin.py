@@ -61,8 +61,8 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
         in_cameras_json: Path | None = None) -> dict:
     """Features, matching and mapping with pycolmap; a COLMAP model folder and a report."""
     from .images import camera_groups
-    from .sfm import (SfmOptions, check_registration, choose_intrinsics, mean_reprojection_error,
-                      run_sfm_in_temp, sfm_report, write_model)
+    from .sfm import (check_registration, choose_intrinsics, mean_reprojection_error, run_sfm_in_temp, sfm_options,
+                      sfm_report, write_model)
 
     params = params or SfmParams()
     t_all = time.perf_counter()
@@ -76,12 +76,7 @@ def sfm(params: SfmParams, ctx, *, in_photos_dir: Path, out_sfm_dir: Path, out_s
         ctx.log.info("sfm: %d camera groups (size, make/model, focal), each with its own intrinsics: %s", len(groups),
                      "; ".join(f"{g['size'][0]}x{g['size'][1]} {g['make'] or ''} {g['model'] or ''}".strip()
                                + f" ({len(g['photos'])})" for g in groups))
-    opt = SfmOptions(matching=params.matching, exhaustive_max=params.exhaustive_max, overlap=params.overlap,
-                     spatial_neighbors=params.spatial_neighbors, mapper=params.mapper,
-                     max_image_px=params.max_image_px, max_features=params.max_features,
-                     camera_model=params.camera_model, single_camera=params.single_camera, intrinsics=K,
-                     groups=[g["photos"] for g in groups],
-                     threads=_threads(ctx), seed=params.seed, deterministic=params.deterministic)
+    opt = sfm_options(params, K, groups, _threads(ctx))
     names = [i.name for i in infos]
     res = run_sfm_in_temp(folder, names, opt, has_gps=n_gps >= max(3, len(infos) // 2), log=ctx.log)
     ratio, missing = check_registration(names, res.registered, params.min_registered_ratio,

@@ -290,6 +290,17 @@ def choose_intrinsics(mode: str, folder: Path, infos: list, cameras_json: Path |
     return K, k_source
 
 
+def sfm_options(params, K, groups: list[dict], threads: int) -> SfmOptions:
+    """The sfm step's parameters, the starting intrinsics ``K`` (or None) and the camera groups as
+    :class:`SfmOptions`."""
+    return SfmOptions(matching=params.matching, exhaustive_max=params.exhaustive_max, overlap=params.overlap,
+                      spatial_neighbors=params.spatial_neighbors, mapper=params.mapper,
+                      max_image_px=params.max_image_px, max_features=params.max_features,
+                      camera_model=params.camera_model, single_camera=params.single_camera, intrinsics=K,
+                      groups=[g["photos"] for g in groups],
+                      threads=threads, seed=params.seed, deterministic=params.deterministic)
+
+
 def run_sfm_in_temp(folder: Path, names: list[str], opt: SfmOptions, *, has_gps: bool, log) -> SfmResult:
     """:func:`run_sfm` in a throw-away folder (COLMAP database and attempts), removed afterwards."""
     import tempfile
