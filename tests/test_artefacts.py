@@ -170,7 +170,8 @@ def test_xml_and_photos_round_trip(tmp_path):
     CATALOGUE["aligned.xodr"].check(tmp_path / "aligned.xodr")
     osm = '<?xml version="1.0"?>\n<osm version="0.6"></osm>\n'
     A.write_osm(tmp_path / "roads.osm", osm)
-    assert A.read_osm(tmp_path / "roads.osm") == osm
+    assert A.read_osm(tmp_path / "roads.osm") == tmp_path / "roads.osm"
+    assert (tmp_path / "roads.osm").read_text() == osm
     with pytest.raises(ArtefactError, match="<osm>, not <OpenDRIVE>"):
         CATALOGUE["aligned.xodr"].check(tmp_path / "roads.osm")
     with pytest.raises(ArtefactError, match="holds no photo"):
@@ -289,22 +290,52 @@ def _mentions(node: ast.AST, tainted: set[str]) -> bool:
     return False
 
 
+def _scope(node: ast.AST):
+    """The nodes of one scope: a function's body (or the module's top level) without the functions in it."""
+    todo = list(ast.iter_child_nodes(node))
+    while todo:
+        n = todo.pop()
+        yield n
+        if not isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):
+            todo.extend(ast.iter_child_nodes(n))
+        elif isinstance(n, ast.ClassDef):
+            todo.extend(c for c in n.body if not isinstance(c, (ast.FunctionDef, ast.AsyncFunctionDef)))
+
+
+def _catalogue_names(tree: ast.AST) -> tuple[set[str], set[str]]:
+    """(module aliases of twinkit.artefacts, functions imported from it): calls through them are the catalogue."""
+    mods, funcs = set(), set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and n.module == "twinkit":
+            mods |= {a.asname or a.name for a in n.names if a.name == "artefacts"}
+        elif isinstance(n, ast.ImportFrom) and (n.module or "").startswith("twinkit.artefacts"):
+            funcs |= {a.asname or a.name for a in n.names}
+        elif isinstance(n, ast.Import):
+            mods |= {a.asname for a in n.names if a.name == "twinkit.artefacts" and a.asname}
+    return mods, funcs
+
+
 def hand_io(source: str, where: str = "<source>") -> list[str]:
     """Hand reads and writes of catalogued artefacts in a module's source: ``file:line: call``."""
     tree = ast.parse(source)
+    mods, funcs = _catalogue_names(tree)
     found = []
-    for fn in [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))] + [tree]:
+    scopes = [tree] + [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    for scope in scopes:
+        nodes = list(_scope(scope))
         tainted = set(_PORTS)
         for _ in range(3):  # names assigned from a port (src = in_labels_npy or ...), a few levels deep
-            for node in ast.walk(fn):
+            for node in nodes:
                 if isinstance(node, ast.Assign) and _mentions(node.value, tainted):
                     tainted |= {t.id for t in node.targets if isinstance(t, ast.Name)}
-        for node in ast.walk(fn):
+        for node in nodes:
             if not isinstance(node, ast.Call):
                 continue
             f = node.func
             name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
-            if name not in HAND_IO:
+            through_catalogue = (isinstance(f, ast.Name) and f.id in funcs) or (
+                isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id in mods)
+            if name not in HAND_IO or through_catalogue:
                 continue
             args = list(node.args) + [k.value for k in node.keywords]
             if isinstance(f, ast.Attribute) and name in ("read_text", "write_text", "read_bytes", "write_bytes",
@@ -342,6 +373,7 @@ def test_the_allowlist_names_existing_code():
 
 FAKE_PLUGIN = '''
 import json
+from twinkit import artefacts as A
 from pathlib import Path
 import numpy as np
 
@@ -354,6 +386,7 @@ def scan(params, ctx, *, in_labels_npy, in_points_meta_json=None, in_aligned_xod
     with open(ctx.workdir / "points_meta.json") as fh:
         fh.read()
     ok = np.load(ctx.workdir / "something_else.npy")
+    A.write_osm(in_roads_osm, "<osm/>")
     return {}
 '''
 
@@ -361,7 +394,7 @@ def scan(params, ctx, *, in_labels_npy, in_points_meta_json=None, in_aligned_xod
 def test_the_meta_test_catches_hand_reads_in_a_fake_plugin():
     found = hand_io(FAKE_PLUGIN, "fake.py")
     lines = sorted(int(f.split(":")[1]) for f in found)
-    assert lines == [8, 9, 10, 11, 12], found
+    assert lines == [9, 10, 11, 12, 13], found
     clean = FAKE_PLUGIN.replace("np.load(src)", "A.read_labels(src)").replace(
         "json.loads(Path(in_points_meta_json).read_text())", "A.read_points_meta(in_points_meta_json)")
-    assert sorted(int(f.split(":")[1]) for f in hand_io(clean, "fake.py")) == [10, 11, 12]
+    assert sorted(int(f.split(":")[1]) for f in hand_io(clean, "fake.py")) == [11, 12, 13]

@@ -13,13 +13,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Callable
 
 from . import files as F
 from .schemas import (ArtefactError, CamerasSite, DemoCameras, GroundControl, JsonSchema, PointsMeta, RoadsTruth,
                       SiteInfo)
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "Artefact", "ArtefactError", "CATALOGUE", "check_output", "lookup",
@@ -83,6 +84,8 @@ def read_points_meta(path: str | Path, points: str | Path | np.ndarray | None = 
 
 
 def _measure(points: str | Path | np.ndarray) -> dict:
+    import numpy as np
+
     from twinkit.surface import density
 
     xyz = read_points(points).vertices if isinstance(points, (str, Path)) else np.asarray(points)
@@ -154,6 +157,8 @@ def read_labels(path: str | Path, n_vertices: int | None = None, mesh_name: str 
     """``labels.npy`` / ``gt_labels.npy`` -> (n,) integer trainIds (uint8 as written; 255 = unlabelled).
 
     ``n_vertices``: when given, a count that differs is an :class:`ArtefactError` naming ``mesh_name``."""
+    import numpy as np
+
     path = Path(path)
     fix = F.LabelsNpy.FIX if "gt_" not in path.name else "re-run transfer_gt_labels"
     try:
@@ -171,6 +176,8 @@ def read_labels(path: str | Path, n_vertices: int | None = None, mesh_name: str 
 
 def write_labels(path: str | Path, labels: np.ndarray) -> None:
     """Write (n,) trainIds as a 1-D ``uint8`` ``.npy``; raises :class:`ArtefactError` on values outside 0-255."""
+    import numpy as np
+
     arr = np.asarray(labels)
     if arr.ndim != 1 or arr.dtype.kind not in "iub":
         raise ArtefactError(f"{path}: labels must be a 1-D integer array, got {arr.dtype} {arr.shape}")
@@ -202,7 +209,13 @@ def read_textured_mesh(path: str | Path):
     """``textured_mesh.ply`` -> :class:`twinkit.mesh.Mesh` with faces and texture (``read_mesh``'s checks)."""
     from twinkit.mesh import read_mesh
 
-    return read_mesh(Path(path))
+    return _with_faces(read_mesh(Path(path)), path, F.TexturedMeshPly.FIX)
+
+
+def _with_faces(mesh, path, fix: str):
+    if mesh.n_faces == 0:
+        raise ArtefactError(f"{path}: the mesh has no faces; {fix}")
+    return mesh
 
 
 def write_textured_mesh(path: str | Path, mesh, **kw) -> None:
@@ -213,13 +226,12 @@ def write_textured_mesh(path: str | Path, mesh, **kw) -> None:
 
 
 def read_gt_mesh(path: str | Path):
-    """``gt_mesh.ply`` -> :class:`twinkit.mesh.Mesh` with a ``label`` on faces or vertices."""
+    """``gt_mesh.ply`` -> :class:`twinkit.mesh.Mesh` (``read_mesh``'s checks). The demo site writes ``label``
+    on faces and vertices; a site's own ground truth may name it otherwise (``class``, ...), which each
+    reader's label lookup handles."""
     from twinkit.mesh import read_mesh
 
-    mesh = read_mesh(Path(path))
-    if "label" not in mesh.attrs and "label" not in mesh.face_attrs:
-        raise ArtefactError(f"{path}: no 'label' property on faces or vertices; {F.GtMeshPly.FIX}")
-    return mesh
+    return _with_faces(read_mesh(Path(path)), path, F.GtMeshPly.FIX)
 
 
 def write_gt_mesh(path: str | Path, mesh, **kw) -> None:
@@ -265,9 +277,11 @@ def write_opendrive(path: str | Path, text: str) -> None:
     Path(path).write_text(text, encoding="utf-8")
 
 
-def read_osm(path: str | Path) -> str:
-    """``roads.osm`` -> its OpenStreetMap XML text."""
-    return _read_text(path, F.OsmXml.FIX)
+def read_osm(path: str | Path) -> Path:
+    """``roads.osm`` -> its path, checked to be OpenStreetMap XML (root ``<osm>``), for an OSM library
+    (osmium, or the roads plugin's reader) to parse."""
+    F.OsmXml.check(Path(path))
+    return Path(path)
 
 
 def write_osm(path: str | Path, text: str) -> None:

@@ -10,8 +10,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-import numpy as np
-
 from .schemas import ArtefactError
 
 
@@ -104,10 +102,12 @@ class LabelsNpy:
     VERSION: ClassVar[int] = 1
     FILE: ClassVar[str] = "labels.npy"
     FIX: ClassVar[str] = "re-run the segmentation"
-    DTYPE: ClassVar[np.dtype] = np.dtype(np.uint8)
+    DTYPE: ClassVar[str] = "uint8"
 
     @classmethod
     def check(cls, path: Path) -> None:
+        import numpy as np
+
         try:
             arr = np.load(path, mmap_mode="r")
         except Exception as exc:  # noqa: BLE001

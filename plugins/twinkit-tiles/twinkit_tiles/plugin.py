@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional
 
+from twinkit import artefacts as A
 from twinkit import hookimpl
 from twinkit.ranges import param
 
@@ -116,7 +117,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
                out_tile_points_dir: Path) -> dict:
     """Split the site into overlapping XY tiles; write one point chunk per padded tile and tiles.json."""
     import numpy as np
-    from twinkit.mesh import Mesh, read_ply, write_ply
+    from twinkit.mesh import Mesh, write_ply
     from twinkit.surface.measure import Measure
 
     from .tiling import choose_grid, estimate_tile_mb, in_box
@@ -127,10 +128,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
     if params.overlap_m < 0:
         raise _input_error(f"plan_tiles: overlap_m must be >= 0 (got {params.overlap_m})")
     with Measure() as meas:
-        try:
-            cloud = read_ply(in_points_ply)
-        except Exception as exc:
-            raise _input_error(f"{Path(in_points_ply).name}: cannot read the points ({exc}); re-run read_cloud") from exc
+        cloud = A.read_points(in_points_ply)
         if cloud.n_vertices < 10:
             raise _input_error(f"{Path(in_points_ply).name}: too few points ({cloud.n_vertices}) to tile")
         if cloud.normals is None:
@@ -432,7 +430,6 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
     seam planes vs. crossing control planes through the tiles' interiors (and, with ground truth, the
     changes the ground truth does not have; accuracy near the seams vs. elsewhere) -> seam_labels.json."""
     import numpy as np
-    from twinkit.mesh import read_ply
 
     from .seam_labels import seam_label_stats
     from .edges import seam_planes
@@ -447,9 +444,9 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
                 planes.append(("xy".index(axis), float(val)))
             except ValueError:
                 raise _input_error(f"evaluate_seam_labels.planes: {text!r} is not like 'x=-10' or 'y=12.5'") from None
-    mesh = read_ply(in_textured_mesh_ply)
-    labels = np.load(in_labels_npy)
-    gt = np.load(in_gt_labels_npy) if in_gt_labels_npy is not None else None
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    labels = A.read_labels(in_labels_npy)
+    gt = A.read_labels(in_gt_labels_npy) if in_gt_labels_npy is not None else None
     for name, arr in (("labels", labels), ("ground truth", gt)):
         if arr is not None and len(arr) != mesh.n_vertices:
             raise _input_error(f"{Path(in_textured_mesh_ply).name} has {mesh.n_vertices} vertices but the {name} "
