@@ -27,7 +27,7 @@ __all__ = [
     "read_points_meta", "write_points_meta", "read_cameras_site", "write_cameras_site",
     "read_demo_cameras", "write_demo_cameras", "read_gcp", "write_gcp", "read_roads_truth", "write_roads_truth",
     "read_site_info", "write_site_info", "read_labels", "write_labels", "read_points", "write_points",
-    "read_textured_mesh", "write_textured_mesh", "read_gt_mesh", "write_gt_mesh", "read_textured_obj",
+    "read_textured_mesh", "write_textured_mesh", "read_clean_mesh", "write_clean_mesh", "read_gt_mesh", "write_gt_mesh", "read_textured_obj",
     "write_textured_obj", "read_opendrive", "write_opendrive", "read_osm", "write_osm", "list_photos",
     "write_photo", "PointsMeta", "CamerasSite", "DemoCameras", "GroundControl", "RoadsTruth", "SiteInfo",
 ]
@@ -225,6 +225,24 @@ def write_textured_mesh(path: str | Path, mesh, **kw) -> None:
     write_ply(path, mesh, **kw)
 
 
+def read_clean_mesh(path: str | Path):
+    """``clean_mesh.ply`` -> :class:`twinkit.mesh.Mesh` (``read_ply``: vertices (n, 3) float64, faces (m, 3))."""
+    from twinkit.mesh import read_ply
+
+    try:
+        mesh = read_ply(Path(path))
+    except Exception as exc:  # noqa: BLE001
+        raise ArtefactError(f"{path}: not a readable PLY mesh ({exc}); {F.CleanMeshPly.FIX}") from None
+    return _with_faces(mesh, path, F.CleanMeshPly.FIX)
+
+
+def write_clean_mesh(path: str | Path, mesh, **kw) -> None:
+    """Write ``clean_mesh.ply`` from a :class:`twinkit.mesh.Mesh` with faces."""
+    from twinkit.mesh import write_ply
+
+    write_ply(path, mesh, **kw)
+
+
 def read_gt_mesh(path: str | Path):
     """``gt_mesh.ply`` -> :class:`twinkit.mesh.Mesh` (``read_mesh``'s checks). The demo site writes ``label``
     on faces and vertices; a site's own ground truth may name it otherwise (``class``, ...), which each
@@ -340,45 +358,70 @@ class Artefact:
             self.schema.check(Path(path))
 
 
-def _entry(name, fmt, schema, writers, readers, read, write) -> tuple[str, Artefact]:
+def _entry(name, fmt, schema, read, write, *, writers: str, readers: str) -> tuple[str, Artefact]:
     return name, Artefact(name, fmt, schema, tuple(writers.split()), tuple(readers.split()), read, write)
 
 
 #: file name -> :class:`Artefact`, for every file that crosses a plugin boundary.
 CATALOGUE: dict[str, Artefact] = dict([
-    _entry("points.ply", "PLY cloud", F.PointsPly, "pointcloud:read_cloud photo:dense",
-           "pointcloud:poisson,clean_mesh,bake_texture,evaluate segmentation:sample_views,backproject "
-           "roads:scan_source export:drop_test tiles:*", read_points, write_points),
-    _entry("points_meta.json", "JSON", PointsMeta, "pointcloud:read_cloud photo:dense", "roads:scan_source",
-           read_points_meta, write_points_meta),
-    _entry("textured_mesh.ply", "PLY mesh", F.TexturedMeshPly, "pointcloud:bake_texture photo:photo_texture",
-           "segmentation:* roads:* tiles:* pointcloud:evaluate photo:photo_texture", read_textured_mesh,
-           write_textured_mesh),
-    _entry("textured_mesh.obj", "OBJ + MTL", F.TexturedObj,
-           "pointcloud:bake_texture photo:photo_texture export:lift_movables",
-           "export:gt_labels,split_classes,drop_test,lift_movables", read_textured_obj, write_textured_obj),
-    _entry("labels.npy", "NumPy uint8 (n,)", F.LabelsNpy,
-           "segmentation:fuse_labels,import_labels roads:road_evidence export:gt_labels,lift_movables",
-           "roads:* export:split_classes,lift_movables tiles:* segmentation:*", read_labels, write_labels),
-    _entry("gt_labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, "segmentation:transfer_gt_labels",
-           "roads:road_evidence,scan_source segmentation:* tiles:*", read_labels, write_labels),
-    _entry("gt_mesh.ply", "PLY mesh with label", F.GtMeshPly, "demo_site:site",
-           "export:gt_labels pointcloud:evaluate segmentation:transfer_gt_labels", read_gt_mesh, write_gt_mesh),
-    _entry("aligned.xodr", "OpenDRIVE XML", F.OpenDrive, "roads:apply_alignment,signals",
-           "export:carla_package,drop_test roads:signals,road_evidence", read_opendrive, write_opendrive),
-    _entry("roads.osm", "OSM XML", F.OsmXml, "demo_site:site", "roads:osm_source segmentation:sample_views",
-           read_osm, write_osm),
-    _entry("roads_truth.json", "JSON", RoadsTruth, "demo_site:site", "roads:apply_alignment,scan_source",
-           read_roads_truth, write_roads_truth),
-    _entry("site.json", "JSON", SiteInfo, "demo_site:site", "export:fbx,usd,glb,carla_package",
-           read_site_info, write_site_info),
-    _entry("cameras.json", "JSON", DemoCameras, "demo_site:site", "photo:sfm,georeference",
-           read_demo_cameras, write_demo_cameras),
-    _entry("gcp.json", "JSON", GroundControl, "demo_site:site", "photo:georeference", read_gcp, write_gcp),
-    _entry("cameras_site.json", "JSON", CamerasSite, "photo:georeference",
-           "photo:roi,dense,photo_texture segmentation:photo_views", read_cameras_site, write_cameras_site),
-    _entry("photos", "folder of JPEG/PNG", F.PhotosDir, "demo_site:site",
-           "photo:sfm,georeference,dense,photo_texture segmentation:photo_views", list_photos, write_photo),
+    _entry("points.ply", "PLY cloud", F.PointsPly, read_points, write_points,
+           writers="photo:dense pointcloud:read_cloud",
+           readers="export:drop_test pointcloud:bake_texture pointcloud:clean_mesh "
+                   "pointcloud:evaluate_reconstruction pointcloud:reconstructor/poisson roads:road_source/scan "
+                   "segmentation:backproject segmentation:sample_views tiles:merge_tiles tiles:plan_tiles"),
+    _entry("points_meta.json", "JSON", PointsMeta, read_points_meta, write_points_meta,
+           writers="photo:dense pointcloud:read_cloud",
+           readers="roads:road_source/scan"),
+    _entry("textured_mesh.ply", "PLY mesh", F.TexturedMeshPly, read_textured_mesh, write_textured_mesh,
+           writers="photo:photo_texture pointcloud:bake_texture",
+           readers="photo:photo_texture pointcloud:evaluate_reconstruction roads:align_roads roads:apply_alignment "
+                   "roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
+                   "segmentation:import_labels segmentation:photo_views segmentation:render_views "
+                   "segmentation:sample_views segmentation:segmenter/felzenszwalb segmentation:segmenter/vertices "
+                   "segmentation:transfer_gt_labels tiles:evaluate_seam_labels"),
+    _entry("clean_mesh.ply", "PLY mesh", F.CleanMeshPly, read_clean_mesh, write_clean_mesh,
+           writers="pointcloud:clean_mesh tiles:merge_tiles",
+           readers="pointcloud:bake_texture pointcloud:simplify"),
+    _entry("textured_mesh.obj", "OBJ + MTL", F.TexturedObj, read_textured_obj, write_textured_obj,
+           writers="export:lift_movables photo:photo_texture pointcloud:bake_texture",
+           readers="export:drop_test export:gt_labels export:lift_movables export:split_classes"),
+    _entry("labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
+           writers="export:gt_labels export:lift_movables roads:road_evidence segmentation:backproject "
+                   "segmentation:import_labels",
+           readers="export:lift_movables export:split_classes roads:align_roads roads:place_signals "
+                   "roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
+                   "segmentation:import_labels tiles:evaluate_seam_labels"),
+    _entry("gt_labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
+           writers="segmentation:transfer_gt_labels",
+           readers="roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
+                   "segmentation:predict_views tiles:evaluate_seam_labels"),
+    _entry("gt_mesh.ply", "PLY mesh with label", F.GtMeshPly, read_gt_mesh, write_gt_mesh,
+           writers="demo-site:site_generator/demo_intersection",
+           readers="export:gt_labels pointcloud:evaluate_reconstruction segmentation:transfer_gt_labels"),
+    _entry("aligned.xodr", "OpenDRIVE XML", F.OpenDrive, read_opendrive, write_opendrive,
+           writers="roads:apply_alignment roads:place_signals",
+           readers="export:drop_test export:exporter/carla_package roads:place_signals roads:road_evidence"),
+    _entry("roads.osm", "OSM XML", F.OsmXml, read_osm, write_osm,
+           writers="demo-site:site_generator/demo_intersection",
+           readers="roads:road_source/file segmentation:photo_views segmentation:sample_views"),
+    _entry("roads_truth.json", "JSON", RoadsTruth, read_roads_truth, write_roads_truth,
+           writers="demo-site:site_generator/demo_intersection",
+           readers="roads:apply_alignment roads:road_source/scan"),
+    _entry("site.json", "JSON", SiteInfo, read_site_info, write_site_info,
+           writers="demo-site:site_generator/demo_intersection",
+           readers="export:exporter/carla_package export:exporter/fbx export:exporter/gltf export:exporter/usd"),
+    _entry("cameras.json", "JSON", DemoCameras, read_demo_cameras, write_demo_cameras,
+           writers="demo-site:site_generator/demo_intersection",
+           readers="photo:georeference photo:sfm"),
+    _entry("gcp.json", "JSON", GroundControl, read_gcp, write_gcp,
+           writers="demo-site:site_generator/demo_intersection",
+           readers="photo:georeference"),
+    _entry("cameras_site.json", "JSON", CamerasSite, read_cameras_site, write_cameras_site,
+           writers="photo:georeference",
+           readers="photo:dense photo:photo_texture photo:roi segmentation:photo_views"),
+    _entry("photos", "folder of JPEG/PNG", F.PhotosDir, list_photos, write_photo,
+           writers="demo-site:site_generator/demo_intersection",
+           readers="photo:dense photo:georeference photo:photo_texture photo:sfm segmentation:photo_views"),
 ])
 
 

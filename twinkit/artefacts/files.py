@@ -85,6 +85,15 @@ class TexturedMeshPly(PlySchema):
     FACES = True
 
 
+class CleanMeshPly(PlySchema):
+    """``clean_mesh.ply``: the cleaned triangle mesh in the site frame (the point-cloud branch's clean_mesh,
+    or the tiled branch's merge_tiles), before simplification and texturing."""
+
+    FILE = "clean_mesh.ply"
+    FIX = "re-run the step that wrote it (clean_mesh, or merge_tiles on the tiled branch)"
+    FACES = True
+
+
 class GtMeshPly(PlySchema):
     """``gt_mesh.ply``: a ground-truth mesh with a ``label`` (trainId) on faces or vertices."""
 

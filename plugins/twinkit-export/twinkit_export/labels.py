@@ -1,8 +1,6 @@
 """Ground-truth labels on the reconstructed mesh (stand-in until segmentation lands)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 

@@ -174,7 +174,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     """Read an E57 / LAS / LAZ / PLY cloud into the site frame (float64 shift, then float32 PLY)."""
     import numpy as np
 
-    from twinkit.mesh import Mesh, write_ply
+    from twinkit.mesh import Mesh
     from twinkit.surface.measure import Measure
     from .localframe import apply_cloud_frame
     from .normals import check_file_normals, estimate_normals, orient_normals
@@ -294,7 +294,7 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.mesh import read_ply, write_ply
+    from twinkit.mesh import write_ply
     from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
     from twinkit.surface.poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth
@@ -345,7 +345,6 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     """Trim bubbles (distance) and low-density parts, keep large components, repair, close small holes."""
     import numpy as np
 
-    from twinkit.mesh import write_ply
     from twinkit.surface.cleanup import CleanOptions, clean_mesh as _clean
     from twinkit.surface.measure import Measure
     from .metrics import topdown_map
@@ -364,7 +363,7 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                            fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
         mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
-        write_ply(out_clean_mesh_ply, mesh)
+        A.write_clean_mesh(out_clean_mesh_ply, mesh)
         d = mesh.attrs["dist_to_cloud_m"]
         vmax = params.colormap_max_m or opt.max_dist_m or float(np.quantile(d, 0.99))
         topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
@@ -439,7 +438,7 @@ def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_p
 
     params = params or SimplifyParams()
     with Measure() as meas, _Outputs(out_mesh_ply):
-        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        dense = A.read_clean_mesh(in_clean_mesh_ply)
         mesh, method = simplify_mesh(dense, params.target_faces, method=params.method,
                                      cluster_above_faces=params.cluster_above_faces,
                                      preserve_border=params.preserve_border,
@@ -471,7 +470,6 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.mesh import write_obj, write_ply
     from twinkit.surface.measure import Measure, StepTimer
     from twinkit.surface.simplify import resample_attributes
     from twinkit.surface.texture import write_png
@@ -489,7 +487,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     png = out_obj.with_suffix(".png")
     with Measure() as meas, _Outputs(out_textured_mesh_obj, out_textured_mesh_ply):
         mesh = _read_mesh_input(in_mesh_ply, "mesh")
-        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        dense = A.read_clean_mesh(in_clean_mesh_ply)
         auto_size = None
         if size == -1:
             from twinkit.surface import density

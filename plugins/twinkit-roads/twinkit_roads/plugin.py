@@ -506,8 +506,6 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                   in_labels_npy: Path, out_labels_npy: Path, out_road_evidence_json: Path,
                   out_road_evidence_png: Path, in_gt_labels_npy: Path | None = None) -> dict:
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
-    import numpy as np
-
     from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
                            S_RELABEL, draw_evidence, lane_polygons, road_evidence as vote)
     from .mesh2d import Grid, from_mesh

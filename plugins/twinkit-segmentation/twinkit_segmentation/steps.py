@@ -779,8 +779,6 @@ def import_labels(params: ImportLabelsParams, ctx: StepContext, *, in_labels_ply
                   in_textured_mesh_ply: Path | None = None, out_labels_npy: Path,
                   out_label_changes_json: Path) -> dict:
     """Read a repainted labels.ply back (nearest palette colour -> class); labels.npy for later steps."""
-    import numpy as np
-
     before = A.read_labels(in_labels_npy)
     after = read_repainted(in_labels_ply, len(before), reference_ply=in_textured_mesh_ply)
     changed = before != after
