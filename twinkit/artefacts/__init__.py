@@ -27,8 +27,9 @@ __all__ = [
     "read_points_meta", "write_points_meta", "read_cameras_site", "write_cameras_site",
     "read_demo_cameras", "write_demo_cameras", "read_gcp", "write_gcp", "read_roads_truth", "write_roads_truth",
     "read_site_info", "write_site_info", "read_labels", "write_labels", "read_points", "write_points",
-    "read_textured_mesh", "write_textured_mesh", "read_clean_mesh", "write_clean_mesh", "read_gt_mesh", "write_gt_mesh", "read_textured_obj",
-    "write_textured_obj", "read_opendrive", "write_opendrive", "read_osm", "write_osm", "list_photos",
+    "read_textured_mesh", "write_textured_mesh", "read_clean_mesh", "write_clean_mesh", "read_gt_mesh",
+    "write_gt_mesh", "read_textured_obj", "write_textured_obj", "read_opendrive", "write_opendrive", "read_osm",
+    "write_osm", "list_photos",
     "write_photo", "PointsMeta", "CamerasSite", "DemoCameras", "GroundControl", "RoadsTruth", "SiteInfo",
 ]
 
@@ -47,20 +48,16 @@ def _read_json_doc(schema: type[JsonSchema], path: str | Path):
 
 
 def _write_json_doc(schema: type[JsonSchema], path: str | Path, doc: JsonSchema | dict) -> None:
-    from twinkit.jsonio import write_json
+    from twinkit.jsonio import json_default, write_json
 
     if isinstance(doc, schema):
         data = doc.to_json()
     else:  # validated as it will read back; written as given (the same bytes as before the catalogue)
-        schema.from_json(json.loads(json.dumps(doc, default=_plain)), path)
+        schema.from_json(json.loads(json.dumps(doc, default=json_default)), path)
         data = doc
     write_json(path, data, indent=schema.INDENT)
 
 
-def _plain(o: Any):
-    from twinkit.jsonio import json_default
-
-    return json_default(o)
 
 
 def read_points_meta(path: str | Path, points: str | Path | np.ndarray | None = None) -> PointsMeta:

@@ -140,7 +140,8 @@ class XmlSchema:
         import xml.etree.ElementTree as ET
 
         try:
-            root = next(ET.iterparse(str(path), events=("start",)))[1]
+            with open(path, "rb") as fh:  # the root element only: the first event
+                root = next(ET.iterparse(fh, events=("start",)))[1]
         except (OSError, ET.ParseError, StopIteration) as exc:
             raise ArtefactError(f"{path}: not a readable XML file ({exc}); {cls.FIX}") from None
         if root.tag != cls.ROOT:
