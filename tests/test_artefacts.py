@@ -152,6 +152,11 @@ def test_meshes_and_clouds_round_trip(tmp_path):
     CATALOGUE["textured_mesh.ply"].check(tmp_path / "textured_mesh.ply")
     with pytest.raises(ArtefactError, match="label"):
         CATALOGUE["gt_mesh.ply"].check(tmp_path / "textured_mesh.ply")
+    A.write_clean_mesh(tmp_path / "clean_mesh.ply", m)
+    assert np.array_equal(A.read_clean_mesh(tmp_path / "clean_mesh.ply").faces, m.faces)
+    CATALOGUE["clean_mesh.ply"].check(tmp_path / "clean_mesh.ply")
+    with pytest.raises(ArtefactError, match="no faces"):
+        A.read_clean_mesh(tmp_path / "points.ply")
     g = _tri_mesh(label=True)
     A.write_gt_mesh(tmp_path / "gt_mesh.ply", g)
     assert np.array_equal(A.read_gt_mesh(tmp_path / "gt_mesh.ply").face_attrs["label"], [0, 8])
