@@ -103,7 +103,8 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
     t0 = time.perf_counter()
     budget = params.auto_max_views if params.max_views < 0 else params.max_views
     capture = _capture(in_points_ply, ctx)
-    views, sampled = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, budget, with_total=True,
+    roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None
+    views, sampled = _sample_views(mesh, ctx, roads_osm, in_street_points_txt, budget, with_total=True,
                                    capture=capture)
     if not views:
         raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
@@ -378,7 +379,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
             except (OSError, ValueError, KeyError) as exc:
                 raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
         else:
-            views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
+            roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None
+            views = _sample_views(mesh, ctx, roads_osm, in_street_points_txt, params.max_views)
             (out_renders_dir / "views.json").write_text(json.dumps({"views": views}, indent=1))
         if not views:
             raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another "
