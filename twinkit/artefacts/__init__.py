@@ -50,6 +50,7 @@ def _read_json_doc(schema: type[JsonSchema], path: str | Path):
 def _write_json_doc(schema: type[JsonSchema], path: str | Path, doc: JsonSchema | dict) -> None:
     from twinkit.jsonio import json_default, write_json
 
+    data: Any
     if isinstance(doc, schema):
         data = doc.to_json()
     else:  # validated as it will read back; written as given (the same bytes as before the catalogue)
@@ -329,7 +330,7 @@ class Artefact:
 
     name: str
     format: str
-    schema: type
+    schema: Any  # a JsonSchema subclass or a schema class of twinkit.artefacts.files
     writers: tuple[str, ...]
     readers: tuple[str, ...]
     read: Callable[..., Any]

@@ -22,7 +22,7 @@ class ArtefactError(InputError):
     """A catalogued artefact does not follow its schema; the message names the file, the field and the fix."""
 
 
-_JSON_TYPES = {"dict": dict, "list": list, "str": str, "number": (int, float), "int": int, "bool": bool}
+_JSON_TYPES: dict[str, type | tuple[type, ...]] = {"dict": dict, "list": list, "str": str, "number": (int, float), "int": int, "bool": bool}
 
 
 def _type_ok(value: Any, kind: str) -> bool:
@@ -49,6 +49,12 @@ class JsonSchema:
     INDENT: ClassVar[int] = 2  # the writer's indent (the demo site's files keep their 1)
 
     extra: dict = field(default_factory=dict, repr=False)
+    #: the schema's fields the file had (None: built in code); an optional field it lacked stays absent
+    _present: set[str] | None = field(default=None, init=False, repr=False, compare=False)
+
+    @classmethod
+    def _known(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls) if f.name not in ("extra", "_present")]
 
     @classmethod
     def _fail(cls, path: Any, what: str) -> ArtefactError:
@@ -60,7 +66,7 @@ class JsonSchema:
         """Validate ``data`` (the parsed JSON) and build the schema object; ``path`` names the file in errors."""
         if not isinstance(data, dict):
             raise cls._fail(path, f"expected a JSON object, found {type(data).__name__}")
-        names = [f.name for f in dataclasses.fields(cls) if f.name != "extra"]
+        names = cls._known()
         for name in names:
             kind = cls.KINDS.get(name, "dict")
             if name not in data:
@@ -88,17 +94,13 @@ class JsonSchema:
 
     def to_json(self) -> dict:
         """The plain dict the writer stores (the known fields and ``extra``)."""
-        present = getattr(self, "_present", None)
         out = dict(self.extra)
-        for f in dataclasses.fields(self):
-            if f.name == "extra":
-                continue
-            v = getattr(self, f.name)
-            if present is not None and f.name not in present and v is None:
-                continue  # an optional field the file did not have stays absent
-            if present is None and v is None and self.KINDS.get(f.name, "").endswith("?"):
-                continue
-            out[f.name] = v
+        for name in self._known():
+            v = getattr(self, name)
+            if v is None and (name not in self._present if self._present is not None
+                              else self.KINDS.get(name, "").endswith("?")):
+                continue  # an optional field the file did not have (or the code did not set) stays absent
+            out[name] = v
         return out
 
     # a document reads like the dict it came from
