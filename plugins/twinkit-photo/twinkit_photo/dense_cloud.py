@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from twinkit import InputError
-from twinkit.jsonio import write_json
 
 FUSION_TOL_BASE = 0.003  # relative depth agreement for a model that reprojects within FUSION_TOL_AT_PX
 FUSION_TOL_AT_PX = 0.35
@@ -182,9 +181,12 @@ def dense_gate(degraded, written: int, n_maps: int, params, backend: str) -> Non
 def write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_points_ply, out_points_meta_json,
                 method: str, normals_from: str, dense_info: dict, times: dict) -> tuple[int, int]:
     """Both routes' end: keep the points inside the region of interest, merge duplicates per voxel, write
-    points.ply and points_meta.json (the format read_cloud writes). Returns (points written, points fused)."""
+    points.ply and points_meta.json (the format read_cloud writes, with its density block) through the artefact
+    catalogue. Returns (points written, points fused)."""
+    from twinkit.artefacts import write_points, write_points_meta
+
     from . import dense as D
-    from .files import write_cloud
+    from .files import cloud
 
     n_fused = int(len(xyz))
     keep = np.all((xyz >= bmin) & (xyz <= bmax), axis=1)
@@ -192,9 +194,9 @@ def write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_po
     if len(xyz) < 100:
         raise InputError(f"{in_photos_dir}: dense matching ({method}) kept only {len(xyz)} points inside the region "
                          f"of interest; check roi.json (box) and the photos' overlap")
-    write_cloud(out_points_ply, xyz, rgb, nrm, comments=[f"twinkit-photo dense ({method})"])
+    write_points(out_points_ply, cloud(xyz, rgb, nrm, comments=[f"twinkit-photo dense ({method})"]))
     lo, hi = xyz.min(0), xyz.max(0)
-    write_json(out_points_meta_json, {
+    write_points_meta(out_points_meta_json, {  # its density block measured from the points written
         "source": {"file": Path(in_photos_dir).name, "format": "photos (dense stereo)",
                    "fields": ["x", "y", "z", "normals", "colors"]},
         "counts": {"read": n_fused, "dropped_invalid": int(n_fused - keep.sum()), "written": int(len(xyz))},
@@ -202,5 +204,5 @@ def write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_po
                    "intensity": False, "classification": False, "scanner": False, "extra": []},
         "frame": {"kind": "site", "note": "from the georeference step"},
         "bounds_m": [lo.tolist(), hi.tolist()],
-        "dense": dense_info, "time": times})
+        "dense": dense_info, "time": times}, points=xyz)
     return int(len(xyz)), n_fused

@@ -17,12 +17,20 @@ def read_json(path: Path, what: str) -> dict:
 
 def write_cloud(path: Path, xyz, rgb=None, normals=None, comments=()) -> None:
     """A point cloud as PLY: ``xyz`` (N, 3) float, optional ``rgb`` (N, 3) uint8 and ``normals`` (N, 3) float32."""
+    from twinkit.mesh import write_ply
+
+    write_ply(path, cloud(xyz, rgb, normals, comments))
+
+
+def cloud(xyz, rgb=None, normals=None, comments=()):
+    """A :class:`twinkit.mesh.Mesh` without faces: ``xyz`` (N, 3) float64, optional ``rgb`` (N, 3) uint8 and
+    ``normals`` (N, 3) float32 as attributes."""
     import numpy as np
-    from twinkit.mesh import Mesh, write_ply
+    from twinkit.mesh import Mesh
 
     attrs = {}
     if normals is not None:
         attrs["normals"] = np.asarray(normals, np.float32)
     if rgb is not None:
         attrs["colors"] = np.asarray(rgb, np.uint8)
-    write_ply(path, Mesh(vertices=np.asarray(xyz, float), attrs=attrs, comments=list(comments)))
+    return Mesh(vertices=np.asarray(xyz, float), attrs=attrs, comments=list(comments))

@@ -100,6 +100,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
                  in_cameras_json: Path | None = None, in_photos_dir: Path | None = None) -> dict:
     """Level the model, then map it into the site frame from GCPs, EXIF GPS or (without either) as is."""
     import numpy as np
+    from twinkit.artefacts import write_cameras_site
 
     from . import georef_fit as G
     from .georef import read_gcp_file
@@ -126,7 +127,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     report = {"method": method, "transform": T.to_json(), **info, "cameras": len(cams_out)}
     if in_cameras_json is not None:
         report.update(G.truth_check(m, cams_out, read_json(in_cameras_json, "camera truth"), method, ctx.log))
-    write_json(out_cameras_site_json, G.cameras_site_doc(method, scaled, cams_out))
+    write_cameras_site(out_cameras_site_json, G.cameras_site_doc(method, scaled, cams_out))
     write_cloud(out_sparse_site_ply, xyz, m.sparse["rgb"], comments=[f"twinkit-photo georeference ({method})"])
     np.savez_compressed(Path(out_sparse_site_ply).with_suffix(".npz"), vis_image=m.sparse["vis_image"],
                         vis_point=m.sparse["vis_point"])
@@ -140,14 +141,15 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
 def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_ply: Path, out_roi_json: Path) -> dict:
     """Region of interest: a box around the camera positions, standing on a RANSAC ground plane."""
     import numpy as np
+    from twinkit.artefacts import read_cameras_site
     from twinkit.mesh import read_ply
 
     from .roi import ground_plane, roi_box, roi_doc
 
     params = params or RoiParams()
-    cdoc = read_json(in_cameras_site_json, "site-frame cameras")
-    cams = cdoc["cameras"]
-    scaled = bool(cdoc.get("scaled", True))
+    cdoc = read_cameras_site(in_cameras_site_json)
+    cams = cdoc.cameras
+    scaled = bool(cdoc.extra.get("scaled", True))
     if not scaled:
         # the margins, the ground threshold and max_depth_m below are metres; this frame is not
         ctx.degraded("the site frame is unscaled (no GPS with a site CRS, no GCPs, no known distance): the region "
@@ -174,6 +176,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
     PatchMatch (or plane sweep), or COLMAP's patch-match stereo where pycolmap has CUDA (needs the sfm
     model and georef.json)."""
     import cv2
+    from twinkit.artefacts import read_cameras_site
 
     from .dense_cloud import choose_backend, roi_limits
 
@@ -181,7 +184,7 @@ def dense(params: DenseParams, ctx, *, in_photos_dir: Path, in_cameras_site_json
     backend = choose_backend(params.backend, in_sfm_dir is not None and in_georef_json is not None)
     t0 = time.perf_counter()
     cv2.setNumThreads(_threads(ctx))
-    cams = read_json(in_cameras_site_json, "site-frame cameras")["cameras"]
+    cams = read_cameras_site(in_cameras_site_json).cameras
     roi_doc = read_json(in_roi_json, "region of interest")
     bmin, bmax, max_depth = roi_limits(roi_doc, in_roi_json)
     if backend == "patchmatch":
@@ -260,7 +263,7 @@ def _dense_colmap(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_georef
 def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path, in_photos_dir: Path,
                   in_cameras_site_json: Path, out_textured_mesh_obj: Path, out_textured_mesh_ply: Path) -> dict:
     """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel."""
-    from twinkit.mesh import write_obj, write_ply
+    from twinkit.artefacts import read_cameras_site, write_textured_mesh, write_textured_obj
     from twinkit.surface.texture import write_png
 
     from .projtex import photo_views, project_texture, read_textured_mesh
@@ -268,7 +271,7 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     params = params or PhotoTextureParams()
     t0 = time.perf_counter()
     mesh, uv, base = read_textured_mesh(in_textured_mesh_ply)
-    views = photo_views(read_json(in_cameras_site_json, "site-frame cameras")["cameras"], in_photos_dir)
+    views = photo_views(read_cameras_site(in_cameras_site_json).cameras, in_photos_dir)
     if not views:
         raise InputError(f"{in_cameras_site_json}: no cameras")
     img, info = project_texture(mesh.vertices, mesh.faces, uv, base, views, max_views=params.max_views,
@@ -279,9 +282,9 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     out_obj = Path(out_textured_mesh_obj)
     out_png = out_obj.with_suffix(".png")
     write_png(out_png, img)
-    write_obj(out_obj, mesh.vertices, mesh.faces, uv, out_png.name, normals=mesh.attrs.get("normals"))
+    write_textured_obj(out_obj, mesh.vertices, mesh.faces, uv, out_png.name, normals=mesh.attrs.get("normals"))
     mesh.comments = [f"TextureFile {out_png.name}"]
-    write_ply(out_textured_mesh_ply, mesh)
+    write_textured_mesh(out_textured_mesh_ply, mesh)
     info["seconds"] = round(time.perf_counter() - t0, 3)
     ctx.log.info("photo texture: %.1f %% of the texels from %d photos (%.1f %% of the faces seen; %d photo views of "
                  "faces left out as inconsistent with the others: occluders the mesh lacks), %.1f s",
