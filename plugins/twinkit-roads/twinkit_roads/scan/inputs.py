@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from twinkit import InputError
+from twinkit.cityscapes import ROAD
 
-from .model import ROAD, ScanSourceParams
+from .model import ScanSourceParams
 
 
 def read_labels(which: str, n_vertices: int, mesh_name: str, in_labels_npy: Path | None,

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from twinkit.cityscapes import ROAD, SIDEWALK
+
 from ..mesh2d import level_faces
-from .model import ROAD, SIDEWALK, ScanSourceParams
+from .model import ScanSourceParams
 
 
 def rasterize_faces(v, f, fidx, grid) -> np.ndarray:

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from twinkit.cityscapes import ROAD
+
 from .masks import rasterize_faces
-from .model import ROAD, Network
+from .model import Network
 
 
 def network_length(net: Network) -> float:

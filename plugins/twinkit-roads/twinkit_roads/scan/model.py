@@ -9,9 +9,6 @@ from twinkit import InputError
 from twinkit.ranges import param
 
 
-ROAD, SIDEWALK, TRAFFIC_LIGHT = 0, 1, 6
-
-
 class NoRoads(InputError):
     """The scan holds no road: no carriageway, or no derived road kept its lanes on the scan (``derived``:
     roads were derived and the checks dropped them all). ``scan_source`` writes a map without roads."""

@@ -6,10 +6,12 @@ import time
 
 import numpy as np
 
+from twinkit.cityscapes import SIDEWALK, TRAFFIC_LIGHT
+
 from ..mesh2d import level_faces
 from .geometry import fit_axis, junction_point, lane_layout, normals, ray_lengths, resample, smooth, unit
 from .masks import carriageway_mask, grey_ground, level_raster, rasterize_faces
-from .model import SIDEWALK, TRAFFIC_LIGHT, Arm, Network, NoRoads, ScanSourceParams
+from .model import Arm, Network, NoRoads, ScanSourceParams
 from .skeleton import skeleton_graph, thin
 
 
