@@ -158,7 +158,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
     from twinkit.jsonio import write_json
     from twinkit.mesh import read_obj, read_ply
-    from twinkit.surface.watertight import Footprint, draw_border, drop_test, ground_border, height_above_ground
+    from twinkit.surface.watertight import Footprint, at_ground_level, draw_border, drop_test, ground_border
 
     params = params or DropTestParams()
     t0 = time.perf_counter()
@@ -280,8 +280,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
                          f"ground (target {lane['target_pct']} %)"
                          + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
                             if hole else ""), hint)
-    up = cloud.normals[:, 2] >= 0.85 if cloud.normals is not None else np.zeros(cloud.n_vertices, bool)
-    gv = np.abs(height_above_ground(mesh.vertices, cloud.vertices[up])) <= 0.5
+    gv = at_ground_level(mesh.vertices, cloud.vertices, cloud.normals)
     border = ground_border(mesh.vertices, mesh.faces, fp, gv)
     edges = border.pop("_edges")
     res["open_border_at_ground_level"] = border

@@ -144,30 +144,6 @@ def vertex_areas(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return np.bincount(f.ravel(), weights=np.repeat(a, 3), minlength=len(v))
 
 
-def local_ground(v: np.ndarray, up: np.ndarray, cell_m: float, window_m: float, pct: float) -> np.ndarray:
-    """Per vertex: the local lowest ground height (a low percentile of up-facing vertices per cell,
-    then the minimum over a window; empty cells take the window's level)."""
-    from scipy import ndimage
-
-    xy = v[:, :2]
-    lo = xy.min(0)
-    ij = np.floor((xy - lo) / cell_m).astype(int)
-    shape = tuple(ij.max(0) + 1)
-    src = np.flatnonzero(up) if up.any() else np.arange(len(v))
-    order = np.lexsort((v[src, 2], ij[src, 1], ij[src, 0]))
-    s = src[order]
-    cid = ij[s, 0] * shape[1] + ij[s, 1]
-    start = np.r_[0, np.flatnonzero(np.diff(cid)) + 1]
-    cnt = np.diff(np.r_[start, len(s)])
-    pick = start + np.floor((cnt - 1) * pct / 100.0).astype(int)
-    cell = np.full(shape, np.inf)
-    cell.flat[cid[pick]] = v[s[pick], 2]
-    k = max(1, int(round(window_m / cell_m)))
-    level = ndimage.minimum_filter(cell, size=k, mode="nearest")
-    level[~np.isfinite(level)] = np.nanmin(np.where(np.isfinite(cell), cell, np.nan))
-    return level[ij[:, 0], ij[:, 1]]
-
-
 def plateaus(v: np.ndarray, raised: np.ndarray, cell_m: float, close_m: float) -> np.ndarray:
     """Per vertex the id (1..) of the raised plateau it lies on, 0 for vertices not raised."""
     from scipy import ndimage
@@ -219,12 +195,14 @@ def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[
                   relabel_from=GROUND) -> Evidence:
     """Vote the lanes into ``labels`` (see the module docstring); returns the new labels and why."""
     from twinkit.mesh.core import vertex_normals
+    from twinkit.street.ground import LocalGround
 
     labels = np.asarray(labels)
     n = len(v)
     vn = vertex_normals(v, f)
     up = vn[:, 2] >= normal_min_z
-    h = v[:, 2] - local_ground(v, up, cell_m, window_m, ground_pct)
+    h = LocalGround(v, up, cell_m=cell_m, window="min", window_m=window_m, pct=ground_pct, odd_window=False,
+                    pad_cells=0, fill="lowest", if_none_up="all").height()
     ground = up & (h <= max_height_m)
     raised = ground & (h >= curb_min_m) & (h <= curb_max_m)
     low = ground & (h < curb_min_m)

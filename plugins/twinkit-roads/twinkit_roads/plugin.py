@@ -367,7 +367,7 @@ class SignalParams:
     max_size_m: float = param(2.0, gt=0)  # a cluster wider or taller than this is a mislabelled patch of something else
     min_pole_vertices: int = param(3, ge=0)  # pole-labelled vertices below the cluster (within pole_radius_m): it hangs on a pole
     pole_radius_m: float = param(0.6, gt=0)
-    ground_radius_m: float = param(3.0, gt=0)  # local ground = 2nd percentile of the mesh height within this radius
+    ground_radius_m: float = param(3.0, gt=0, help="metres: the local ground under a signal is the 2nd percentile of the mesh's heights within this radius (street.ground.LocalGround, disc mode)")
     plate_depth_m: float = param(0.12, ge=0)  # a "light" cluster thinner than this across is a sign plate (heads are boxes)
     # poles carrying an unlabelled head (signals.find_pole_heads): candidates for lights the labels miss,
     # offered only to netconvert light heads left unpaired by the labelled lights
@@ -495,7 +495,8 @@ class RoadEvidenceParams:
     max_height_m: float = param(0.45, ge=0)  # ...and at most this high above the local lowest ground
     curb_min_m: float = param(0.06, ge=0)  # raised (pavement) level: at least this above the local lowest ground...
     curb_max_m: float = param(0.35, ge=0)  # ...and at most this; below curb_min_m is the carriageway level
-    window_m: float = param(8.0, gt=0)  # local lowest ground: minimum over this window of 0.5 m cells' 5th percentiles
+    window_m: float = param(8.0, gt=0, help="metres: the local lowest ground is the minimum over this window of the "
+                                          "0.5 m cells' 5th percentiles of up-facing vertices (street.ground.LocalGround)")
     max_disagreement: float = param(0.5, ge=0, le=1)  # a lane, or a road, whose surface disagrees more than this casts no vote
     max_network_disagreement: float = param(0.10, ge=0, le=1)  # driving-like lanes of the whole network: above this no lane votes (aligned 1-3 %, 10 m shifts 17-56 %)
     plateau: bool = True  # a raised plateau an agreeing sidewalk lane lies on becomes sidewalk (its road votes)
