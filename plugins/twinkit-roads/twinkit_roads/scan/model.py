@@ -29,8 +29,7 @@ class ScanSourceParams:
     raster_m: float = param(0.25, gt=0, le=2, help="top-view resolution of the carriageway mask (m)")
     curb_tol_m: float = param(0.07, ge=0, le=1,
                               help="height above the local lowest ground still on the carriageway, below the curb (m)")
-    use_curbs: bool = param(True, choices=(True, False),
-                            help="false: the road labels alone draw the carriageway's edges")
+    use_curbs: bool = param(True, help="false: the road labels alone draw the carriageway's edges")
     curb_max_spacing_m: float = param(0.10, ge=0, le=5,
                                       help="a cloud with a coarser median point spacing (points_meta.json) shows no "
                                            "curbs: the carriageway is the grey, up-facing, paved-labelled ground and "
@@ -65,8 +64,7 @@ class ScanSourceParams:
     strip_type: str = param("parking", choices=("parking", "driving", "none"),
                             help="the strip at the curb: parking = lane type none (no traffic), driving = another "
                                  "lane")
-    sidewalks: bool = param(True, choices=(True, False),
-                            help="sidewalk lanes where the scan shows sidewalk beyond the curb")
+    sidewalks: bool = param(True, help="sidewalk lanes where the scan shows sidewalk beyond the curb")
     min_sidewalk_m: float = param(1.0, ge=0, le=20, help="narrower sidewalk surface makes no sidewalk lane (m)")
     max_sidewalk_m: float = param(6.0, gt=0, le=30, help="sidewalk lanes are at most this wide (m)")
     traffic_light_radius_m: float = param(12.0, ge=0,
