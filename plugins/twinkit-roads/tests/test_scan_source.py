@@ -568,3 +568,11 @@ def test_a_lane_under_a_low_overhang_is_off_the_scan_though_its_ground_is_there(
     assert chk["nudge"] or chk["narrow"] or chk["bad_points"]
     chk0 = scan.check_lanes(net, text, v2, f2, dataclasses.replace(p, lane_clear_m=0.0))
     assert not (chk0["nudge"] or chk0["narrow"] or chk0["bad_points"])
+
+
+def test_every_scan_parameter_says_what_it_does():
+    """Each road_source=scan parameter carries its one line of help (param(help=...)), not a # comment."""
+    from twinkit.ranges import help_of
+
+    missing = [f.name for f in dataclasses.fields(scan.ScanSourceParams) if not help_of(f)]
+    assert not missing, missing
