@@ -67,49 +67,15 @@ def _lane_vote(t: str, road_types, sidewalk_types) -> int:
 
 def lane_polygons(xodr_text: str, step_m: float = 0.5, road_types=ROAD_TYPES,
                   sidewalk_types=SIDEWALK_TYPES) -> list[Lane]:
-    """Every lane of every type as a pair of border polylines (site frame), from carla.Map offline.
+    """Every lane of every type as a pair of border polylines (site frame): :meth:`LaneMap.lanes`, so a
+    lane not next to a driving lane is not seen."""
+    from twinkit.street.lanes import LaneMap
 
-    carla.Map.generate_waypoints gives driving lanes only; the others are reached sideways from
-    them (get_right_lane / get_left_lane), so a lane not next to a driving lane is not seen.
-    """
-    import carla
-
-    from .align import _site
-
-    m = carla.Map("evidence", xodr_text)
-    seen: dict[tuple, dict] = {}
-
-    def add(w):
-        key = (w.road_id, w.section_id, w.lane_id)
-        d = seen.setdefault(key, {"pts": {}, "type": str(w.lane_type).lower(), "junction": bool(w.is_junction)})
-        s = round(float(w.s), 3)
-        if s in d["pts"]:
-            return False
-        x, y, _ = _site(w.transform.location)
-        rv = w.transform.get_right_vector()
-        n = np.array([rv.x, -rv.y])
-        n /= np.linalg.norm(n) or 1.0
-        h = float(w.lane_width) / 2
-        d["pts"][s] = ((x - n[0] * h, y - n[1] * h), (x + n[0] * h, y + n[1] * h))
-        return True
-
-    for w in m.generate_waypoints(step_m):
-        add(w)
-        for side in ("get_right_lane", "get_left_lane"):
-            o = getattr(w, side)()
-            hops = 0
-            while o is not None and hops < 8:
-                if o.lane_type == carla.LaneType.Driving:
-                    break  # reached from its own generate_waypoints sample
-                add(o)
-                o = getattr(o, side)()
-                hops += 1
     lanes = []
-    for key, d in seen.items():
-        ss = sorted(d["pts"])
-        L = np.array([d["pts"][s][0] for s in ss])
-        R = np.array([d["pts"][s][1] for s in ss])
-        lanes.append(Lane(key, d["type"], _lane_vote(d["type"], road_types, sidewalk_types), L, R, d["junction"]))
+    for ln in LaneMap(xodr_text, "evidence").lanes(step_m).per_lane():
+        t = str(ln.type[0]).lower()
+        L, R = ln.borders()
+        lanes.append(Lane(ln.key, t, _lane_vote(t, road_types, sidewalk_types), L, R, bool(ln.in_junction[0])))
     return lanes
 
 

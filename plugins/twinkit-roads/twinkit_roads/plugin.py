@@ -428,21 +428,19 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                                      sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m)
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
-    import carla
+    from twinkit.street.lanes import LaneMap, OpenDriveError
 
     try:
-        m = carla.Map("signals", moved)
-    except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{in_aligned_xodr.name} with the scanned signals does not parse in carla.Map ({exc})"
-                         ) from None
+        m = LaneMap(moved, "signals", source=f"{in_aligned_xodr.name} with the scanned signals")
+    except OpenDriveError as exc:
+        raise InputError(str(exc)) from None
     # what CARLA makes of each signal, against where we meant it to be
     want = {p.id: p.new_xy for p in placed}
     carla_err = {}
-    for lm in m.get_all_landmarks():
+    for lm in m.landmarks():
         w = want.get(lm.id)
         if w is not None:
-            loc = lm.transform.location
-            carla_err[lm.id] = round(float(math.hypot(loc.x - w[0], -loc.y - w[1])), 4)
+            carla_err[lm.id] = round(float(math.hypot(lm.xyz[0] - w[0], lm.xyz[1] - w[1])), 4)
     out_aligned_xodr.write_text(moved, encoding="utf-8")
     for p in placed:
         if p.source == "netconvert":
@@ -511,6 +509,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
     import numpy as np
 
+    from twinkit.street.lanes import OpenDriveError
+
     from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
                            S_RELABEL, draw_evidence, lane_polygons, road_evidence as vote)
     from .mesh2d import Grid, read_mesh
@@ -546,6 +546,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         text = in_aligned_xodr.read_text(encoding="utf-8")
         lanes = lane_polygons(text, params.step_m, tuple(t.lower() for t in params.road_types),
                               tuple(t.lower() for t in params.sidewalk_types))
+    except OpenDriveError as exc:
+        raise InputError(f"{in_aligned_xodr}: {exc.why}; re-run apply_alignment") from None
     except (OSError, UnicodeDecodeError, RuntimeError, ValueError) as exc:
         raise InputError(f"{in_aligned_xodr}: not a readable OpenDRIVE ({exc}); re-run apply_alignment") from None
     if not lanes:
