@@ -119,30 +119,21 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     sample with any surface over it less than ``clear_m`` above the lane is off too, ground or not (a hedge,
     a wall's top, a low roof: a car drives into it). Returns the samples' x, y, whether on and
     off, and the junction (its OpenDRIVE name, netconvert's node id) of those inside one ('' elsewhere)."""
-    import re
-
-    import carla
     import open3d as o3d
 
+    from twinkit.street.lanes import LaneMap
     from twinkit.surface.closest import Surface
 
-    m = carla.Map("scan_lane_heights", xodr_text)
-    names = {int(i): nm for nm, i in re.findall(r'<junction\s+name="([^"]*)"\s+id="(-?\d+)"', xodr_text)}
-    names.update({int(i): nm for i, nm in re.findall(r'<junction\s+id="(-?\d+)"\s+name="([^"]*)"', xodr_text)})
-    pts, junc = [], []
-    across = np.linspace(-0.5, 0.5, 7)  # border to border, the outermost edge_in_m in (where a tyre's edge runs)
-    for w in m.generate_waypoints(spacing_m):
-        if w.lane_type != carla.LaneType.Driving:
-            continue
-        loc = w.transform.location
-        rv = w.transform.get_right_vector()
-        nx, ny = rv.x, -rv.y  # CARLA's y points south
-        off = across * max(float(w.lane_width) - 2 * edge_in_m, 0.0)
-        pts.append(np.c_[loc.x + off * nx, -loc.y + off * ny, np.full(len(off), loc.z)])
-        junc += [names.get(w.get_junction().id, str(w.get_junction().id)) if w.is_junction else ""] * len(off)
-    if not pts:
+    wp = LaneMap(xodr_text, "scan_lane_heights").waypoints(spacing_m)
+    wp = wp.take(wp.is_type("driving"))
+    if not len(wp):
         return {"xy": np.zeros((0, 2)), "on": np.zeros(0, bool), "off": np.zeros(0, bool), "junction": np.zeros(0, str)}
-    r = np.vstack(pts)
+    across = np.linspace(-0.5, 0.5, 7)  # border to border, the outermost edge_in_m in (where a tyre's edge runs)
+    off = across[None, :] * np.maximum(wp.width - 2 * edge_in_m, 0.0)[:, None]  # (waypoints, 7)
+    r = np.stack([wp.xyz[:, :1] + off * wp.right[:, :1], wp.xyz[:, 1:2] + off * wp.right[:, 1:2],
+                  np.broadcast_to(wp.xyz[:, 2:], off.shape)], -1).reshape(-1, 3)
+    names = _junction_names(xodr_text)
+    junc = np.repeat([names.get(int(j), str(int(j))) if j >= 0 else "" for j in wp.junction], len(across))
     if scene is None:
         scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
 
@@ -174,7 +165,16 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
         stepped = steps_across(top, len(across), step_m)
         off |= stepped
         on &= ~stepped
-    return {"xy": r[:, :2], "on": on, "off": off, "junction": np.array(junc)}
+    return {"xy": r[:, :2], "on": on, "off": off, "junction": junc}
+
+
+def _junction_names(xodr_text: str) -> dict[int, str]:
+    """OpenDRIVE junction id -> its name (netconvert's node id), either attribute order."""
+    import re
+
+    names = {int(i): nm for nm, i in re.findall(r'<junction\s+name="([^"]*)"\s+id="(-?\d+)"', xodr_text)}
+    names.update({int(i): nm for i, nm in re.findall(r'<junction\s+id="(-?\d+)"\s+name="([^"]*)"', xodr_text)})
+    return names
 
 
 def steps_across(top: np.ndarray, k: int, step_m: float) -> np.ndarray:
