@@ -104,6 +104,3 @@ def asprs_allowed() -> np.ndarray:
     for code, ids in ASPRS_TO_TRAINIDS.items():
         table[code, list(ids)] = True
     return table
-
-#: trainId of traffic lights (the scan road source counts them around a junction).
-TRAFFIC_LIGHT = 6
