@@ -202,7 +202,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
 
     lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene, step_m=p.lane_step_m, clear_m=p.lane_clear_m)
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
-    res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "samples": int(len(on)),
+    res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "nudge": {}, "samples": int(len(on)),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
     judged = on | off
     for nid in net.nodes:
@@ -235,8 +235,17 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
         return res
     nrm = np.concatenate([normals(a.xy) for a in net.arms])
     lateral = ((xy[src] - axis[i]) * nrm[i]).sum(axis=1)  # + left of the road's direction
-    off_s, arm_s = off[src], owner[i]
+    res["narrow"] = _narrow_sides(net, p, lateral, off[src], owner[i])
+    res["nudge"] = _nudge_stretches(net, p, lateral, off[src], owner[i], i, res["narrow"])
+    return res
+
+
+def _narrow_sides(net: Network, p: ScanSourceParams, lateral, off_s, arm_s) -> dict[int, list[int]]:
+    """Arm index -> the sides (+1 left, -1 right) whose outermost ``edge_band_m`` is off the scan along the road
+    while the rest of that side is on. ``lateral`` (k,) m left of the axis, ``off_s`` (k,) bool and ``arm_s``
+    (k,) the arm of each road sample near an axis."""
     bad_share = 1.0 - p.min_lane_support
+    narrow = {}
     for k, arm in enumerate(net.arms):
         reach = lanes_reach(arm, p)
         sides = []
@@ -250,13 +259,19 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
                     and (inner.sum() < 10 or off_s[inner].mean() <= bad_share)):
                 sides.append(sgn)
         if sides:
-            res["narrow"][k] = sides
-    # ...and where only a stretch of one side is off (a hedge, a wall's corner beside the road for a few
-    # metres) while the other side's edge there is on: that stretch of the road moves away from it
-    res["nudge"] = {}
+            narrow[k] = sides
+    return narrow
+
+
+def _nudge_stretches(net: Network, p: ScanSourceParams, lateral, off_s, arm_s, i, narrow: dict) -> dict:
+    """Arm index -> per shape point +1 (move left), -1 (right) or 0: where only a stretch of one side is off (a
+    hedge, a wall's corner beside the road for a few metres) while the other side's edge there is on, that
+    stretch moves away from it. ``i`` (k,) the axis point (over all arms) nearest each road sample."""
+    bad_share = 1.0 - p.min_lane_support
+    nudge = {}
     start = np.cumsum([0] + [len(a.xy) for a in net.arms])
     for k, arm in enumerate(net.arms):
-        if k in res["narrow"] or arm.sidewalk_left_m > 0 or arm.sidewalk_right_m > 0:
+        if k in narrow or arm.sidewalk_left_m > 0 or arm.sidewalk_right_m > 0:
             continue
         reach = lanes_reach(arm, p)
         n = len(arm.xy)
@@ -270,8 +285,8 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
             share[sgn] = np.where(tot >= 4, bad / np.maximum(tot, 1.0), 0.0) > bad_share
         move = share[-1].astype(float) - share[1].astype(float)  # +1: to the left (the right edge is off)
         if move.any():
-            res["nudge"][k] = move
-    return res
+            nudge[k] = move
+    return nudge
 
 
 def nudge_arms(net: Network, nudge: dict[int, np.ndarray], p: ScanSourceParams) -> int:
