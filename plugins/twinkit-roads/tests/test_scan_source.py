@@ -576,3 +576,10 @@ def test_every_scan_parameter_says_what_it_does():
 
     missing = [f.name for f in dataclasses.fields(scan.ScanSourceParams) if not help_of(f)]
     assert not missing, missing
+
+
+def test_the_lane_check_without_edge_bands_still_says_nothing_to_nudge(four_way):
+    """edge_band_m=0 (no narrowing) leaves narrow and nudge empty; the source's round reads both."""
+    v, f, lab, truth, net, text = four_way
+    chk = scan.check_lanes(net, text, v, f, scan.ScanSourceParams(edge_band_m=0.0))
+    assert chk["narrow"] == {} and chk["nudge"] == {}
