@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError
+from twinkit import artefacts as A
 from twinkit.geo import SiteFrame, check_bbox
 from twinkit.ranges import param
 
@@ -103,7 +104,8 @@ def file_source(params: FileSourceParams, ctx, *, out_osm_osm: Path, in_osm: Pat
     Which file: ``road_source.path``, else the site input ``osm`` (site.inputs.osm), else a
     ``roads.osm`` written by an earlier step (the demo site generator).
     """
-    src = Path(params.path).expanduser() if params.path else (in_osm or in_roads_osm)
+    roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None  # the demo site's, checked
+    src = Path(params.path).expanduser() if params.path else (in_osm or roads_osm)
     if src is None:
         raise InputError("road_source=file needs an OSM file: set site.inputs.osm=/path/to/area.osm.pbf or "
                          "road_source.path=..., or choose road_source=overpass / osm_api to download by box")
