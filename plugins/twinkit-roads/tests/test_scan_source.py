@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from scan_fixtures import ROAD, SIDEWALK, aerial_lane, cambered_street, cross_mesh
+from scan_fixtures import ROAD, SIDEWALK, aerial_lane, cambered_street, cross_mesh, write_aerial_meta
 from twinkit_roads import scan
 from twinkit_roads.align import centreline_rmse, lane_lines
 
@@ -210,7 +210,7 @@ def test_an_aerial_scan_without_curbs_finds_the_grey_lane_on_its_embankment(tmp_
     write_ply(mesh_p, Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
     np.save(tmp_path / "labels.npy", lab)
     meta = tmp_path / "points_meta.json"
-    meta.write_text(json.dumps({"density": {"spacing_m": 0.3, "capture": "aerial"}}))
+    write_aerial_meta(meta)
     site = {"name": "lane", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
     out = run_plugin("road_source", "scan", tmp_path / "scan",
                      {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy",
@@ -246,7 +246,7 @@ def _aerial_scan(tmp_path, name, v, f, lab, rgb, cloud, **params):
     write_ply(d / "textured_mesh.ply", Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
     write_ply(d / "points.ply", Mesh(cloud, None))
     np.save(d / "labels.npy", lab)
-    (d / "points_meta.json").write_text(json.dumps({"density": {"spacing_m": 0.3, "capture": "aerial"}}))
+    write_aerial_meta(d / "points_meta.json")
     site = {"name": "lane", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
     out = run_plugin("road_source", "scan", d / "scan",
                      {"in_textured_mesh_ply": d / "textured_mesh.ply", "in_labels_npy": d / "labels.npy",

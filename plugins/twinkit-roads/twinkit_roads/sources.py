@@ -218,16 +218,18 @@ def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: 
     lanes -> OpenDRIVE in the site frame (``opendrive.xodr``, checked by osm_to_opendrive like a map)."""
     import json
 
-    from .mesh2d import read_mesh
+    from twinkit import artefacts as A
+
+    from .mesh2d import from_mesh
     from .scan import (NoRoads, ScanSourceParams, build_network, choose_curbs, cloud_xy, draw_scan_roads,
                        mark_source, point_spacing, read_labels, read_truth, scan_metrics, scan_report)
 
     params = params or ScanSourceParams()
     t0 = time.perf_counter()
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
     which, src, labels = read_labels(params.labels, len(mesh.v), in_textured_mesh_ply.name, in_labels_npy,
                                      in_gt_labels_npy, ctx.log)
-    spacing = point_spacing(in_points_meta_json)
+    spacing = point_spacing(in_points_meta_json, in_points_ply)
     labels_for_mask, curbs = choose_curbs(labels, spacing, params, src, ctx.log)
     use_cloud = not curbs and in_points_ply is not None and params.min_point_density > 0
     points_xy = cloud_xy(in_points_ply) if use_cloud else None

@@ -2,12 +2,12 @@
 the true lane centre lines."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from twinkit import InputError
+from twinkit import artefacts as A
 from twinkit.cityscapes import ROAD
 
 from .model import ScanSourceParams
@@ -30,24 +30,15 @@ def read_labels(which: str, n_vertices: int, mesh_name: str, in_labels_npy: Path
                 else "gt_labels.npy (a site with ground truth: the demo)")
         raise InputError(f"road_source=scan with labels={which} needs {what}; none was written before this "
                          "step. Use road_source.labels=none for the curbs alone")
-    try:
-        labels = np.load(src).astype(np.int64).reshape(-1)
-    except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{src}: not a readable .npy label array ({exc}); re-run the segmentation") from None
-    if len(labels) != n_vertices:
-        raise InputError(f"{src}: {len(labels)} labels for the {n_vertices} vertices of "
-                         f"{mesh_name}; give the per-vertex labels of this mesh")
-    return which, src, labels
+    return which, src, A.read_labels(src, n_vertices, mesh_name).astype(np.int64)
 
 
-def point_spacing(in_points_meta_json: Path | None) -> float | None:
-    """The cloud's median point spacing (m) from points_meta.json's density block; None when unknown."""
+def point_spacing(in_points_meta_json: Path | None, in_points_ply: Path | None = None) -> float | None:
+    """The cloud's median point spacing (m) from points_meta.json's density block (measured from points.ply when
+    an older file lacks it); None without points_meta.json."""
     if in_points_meta_json is None:
         return None
-    try:
-        return (json.loads(Path(in_points_meta_json).read_text()).get("density") or {}).get("spacing_m")
-    except (OSError, ValueError):
-        return None
+    return A.read_points_meta(in_points_meta_json, points=in_points_ply).spacing_m
 
 
 def choose_curbs(labels: np.ndarray | None, spacing: float | None, p: ScanSourceParams, src: Path | None,
@@ -76,17 +67,11 @@ def choose_curbs(labels: np.ndarray | None, spacing: float | None, p: ScanSource
 
 def cloud_xy(in_points_ply: Path) -> np.ndarray:
     """(n, 2) float64 x, y of the cloud's points (site frame)."""
-    from twinkit.mesh import read_ply
-
-    try:
-        return np.asarray(read_ply(Path(in_points_ply)).vertices, np.float64)[:, :2]
-    except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{in_points_ply}: not a readable PLY ({exc}); re-run read_cloud") from None
+    return np.asarray(A.read_points(in_points_ply).vertices, np.float64)[:, :2]
 
 
 def read_truth(in_roads_truth_json: Path | None) -> list[np.ndarray] | None:
     """The true lane centre lines ((k, 2) site-frame x, y each) of roads_truth.json; None when not given."""
     if in_roads_truth_json is None:
         return None
-    tj = json.loads(Path(in_roads_truth_json).read_text())
-    return [np.asarray(ln["points"], float)[:, :2] for ln in tj.get("lanes", [])] or None
+    return [np.asarray(ln["points"], float)[:, :2] for ln in A.read_roads_truth(in_roads_truth_json).lanes] or None
