@@ -138,6 +138,7 @@ def test_scan_source_through_the_engine_then_the_carla_check(tmp_path):
     osm_to_opendrive's carla.Map check of its opendrive.xodr: source scan, lanes inside the site."""
     import json
 
+    from twinkit import artefacts as A
     from twinkit.mesh import Mesh, write_ply
     from twinkit.testing import run_plugin
 
@@ -147,8 +148,10 @@ def test_scan_source_through_the_engine_then_the_carla_check(tmp_path):
     mesh_p = tmp_path / "textured_mesh.ply"
     write_ply(mesh_p, Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
     np.save(tmp_path / "labels.npy", lab)
-    tj = {"lanes": [{"points": [[*p, 0.0] for p in t.tolist()]} for t in truth]}
-    (tmp_path / "roads_truth.json").write_text(json.dumps(tj))
+    A.write_roads_truth(tmp_path / "roads_truth.json",
+                        {"roads": [], "frame": "site", "lanes": [{"road": "cross", "direction": 1,
+                                                                  "points": [[*p, 0.0] for p in t.tolist()]}
+                                                                 for t in truth]})
     site = {"name": "cross", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
     out = run_plugin("road_source", "scan", tmp_path / "scan",
                      {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy",
