@@ -298,7 +298,6 @@ def test_a_good_output_and_an_uncatalogued_one_pass(tmp_path):
 #: Files whose owners (other helpers of issue 43) move their reads and writes onto the catalogue at their
 #: end; each line says whose it is. A path matches when it starts with the prefix.
 ALLOWLIST = (
-    "plugins/twinkit-roads/twinkit_roads/scan",  # helper "lanes"/scan split: scan.py and the scan* modules
     "plugins/twinkit-export/twinkit_export/movables",  # movables.py and its split modules
 )
 

@@ -30,7 +30,7 @@ from . import __version__
 from .convert import ConvertParams
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
-                      site_radius)
+                      scan_source, site_radius)
 
 
 def _source_version() -> str:
@@ -39,8 +39,9 @@ def _source_version() -> str:
     import hashlib
 
     h = hashlib.sha256()
-    for f in sorted(Path(__file__).parent.glob("*.py")):
-        h.update(f.name.encode() + f.read_bytes())
+    root = Path(__file__).parent
+    for f in sorted(root.rglob("*.py"), key=lambda f: f.relative_to(root).as_posix()):  # the scan/ package too
+        h.update(f.relative_to(root).as_posix().encode() + f.read_bytes())
     return f"{__version__}+src.{h.hexdigest()[:12]}"
 
 
@@ -660,7 +661,7 @@ def twinkit_register_road_sources(register):
              description="OpenStreetMap API /map by box around the base point (cached)")
     register("overpass", overpass_source, params=DownloadParams, version=VERSION, preflight=overpass_preflight,
              description="Overpass API query for highways by box around the base point (cached)")
-    from .scan import ScanSourceParams, scan_source
+    from .scan import ScanSourceParams
 
     register("scan", scan_source, params=ScanSourceParams, version=VERSION,
              description="roads derived from the scan itself (no OSM): the labelled road surface, curbs and "
