@@ -17,11 +17,6 @@ from twinkit.ranges import _nested, check_of, check_values, help_of, param
 #: the helpers that own those files); remove a plugin from here once it is converted: the test below fails
 #: when one of these already has help on every field
 TO_CONVERT = frozenset({
-    # twinkit-roads: scan.py, plugin.py (align, evidence, signals, overview)
-    "road_source/scan", "step/align_roads", "step/apply_alignment", "step/roads_overview",
-    "step/road_evidence", "step/place_signals",
-    # twinkit-photo
-    "step/sfm", "step/georeference", "step/roi", "step/dense", "step/photo_texture",
     # twinkit-export: lift_step.py
     "step/lift_movables",
 })
