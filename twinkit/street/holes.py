@@ -13,6 +13,14 @@ seen from above for a hole in an up-facing surface). Everything is in the site f
 - :func:`fan`: the named fall-back for a loop no triangulation of its outline can take (it crosses
   itself seen from above, or two of its vertices stand on one vertical line): a fan round the loop's
   centroid closes the border whatever its shape, some triangles overlapping, at the ring's heights.
+- :func:`patch`: the named mode for ground to cover that no loop of open border bounds (a footprint
+  left uncovered because its hole ran off the scan, a spot a ray at the ground falls through): the
+  Delaunay triangulation seen from above of nearby border vertices and of new points on the ground,
+  keeping the triangles the caller selects.
+- :func:`stitch`: the named mode for the ground fill of occlusion shadows: cells to cover, joined to the
+  mesh's open border nearby (no loop needed: the border's edges are fixed edges of one CDT).
+- :func:`grid_patch`: the named mode for a fill on its own grid, not joined to the mesh (the ground
+  fill with ``stitch`` off).
 - :func:`close_ground_holes`: every hole of a mesh that lies on the ground and is small enough, each
   closed by :func:`close_hole` at the heights of its own border.
 
@@ -92,6 +100,175 @@ def fan(vertices: np.ndarray, loop: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     nb = np.roll(np.arange(len(ccw)), -1)
     faces = np.stack([np.full(len(ccw), len(vertices)), ccw, ccw[nb]], axis=1)
     return faces, vertices[ccw].mean(axis=0)[None]
+
+
+def patch(vertices: np.ndarray, border: np.ndarray, xy: np.ndarray, z: np.ndarray,
+          keep: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Cover ground no loop bounds: the Delaunay triangulation, seen from above, of the ``border`` vertices
+    ((b,) ids into ``vertices`` (n, 3): the patch shares them, so it joins the mesh where the border's edges
+    are Delaunay edges) and of new points ``xy`` (k, 2) at heights ``z`` (k,); of its triangles, those
+    ``keep`` selects (a function of their corners seen from above (t, 3, 2) -> (t,) bool). Returns (faces
+    (f, 3) int64 counter-clockwise seen from above, the new vertices they use (u, 3) float64, the faces'
+    centres seen from above (f, 2)), or None when there is no triangle to keep.
+
+    The triangulation is scipy's (Qhull), not the CDT: the points lie on a grid, so many are cocircular,
+    and on the lift's test of a hole whose border is no simple loop the CDT's choice of diagonals let
+    8 more of 6,561 rays at the ground miss it by over 5 cm."""
+    from scipy.spatial import Delaunay
+
+    border = np.asarray(border, np.int64)
+    nb, nv = len(border), len(vertices)
+    p2 = np.vstack([vertices[border, :2], xy])
+    try:
+        tri = Delaunay(p2).simplices
+    except Exception:  # noqa: BLE001 - fewer than 3 points, or all on a line
+        return None
+    tc2 = p2[tri]
+    sel = keep(tc2)
+    tri = tri[sel]
+    if len(tri) == 0:
+        return None
+    e1, e2 = tc2[sel, 1] - tc2[sel, 0], tc2[sel, 2] - tc2[sel, 0]
+    cw = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    tri[cw] = tri[cw][:, [0, 2, 1]]
+    used = np.unique(tri)
+    ids = np.empty(len(p2), np.int64)
+    ids[:nb] = border
+    new_pts = used[used >= nb]
+    ids[new_pts] = nv + np.arange(len(new_pts))
+    zs = np.concatenate([vertices[border, 2], z])
+    return ids[tri], np.c_[p2[new_pts], zs[new_pts]], p2[tri].mean(axis=1)
+
+
+def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.ndarray, z: np.ndarray,
+           keep: Callable[[np.ndarray, np.ndarray], np.ndarray], min_gap_m: float,
+           workers: int = -1) -> tuple[np.ndarray, np.ndarray]:
+    """Cover ground cells joined to a mesh (``vertices`` (m, 3), ``faces`` (f, 3)): the constrained Delaunay
+    triangulation, seen from above, of the open ``border`` (e, 2) (vertex-id pairs, fixed edges; one 2D
+    vertex per position within 1 mm, so a vertical border edge counts once; border edges that cross seen
+    from above are resolved, the crossing at the height of the nearest input vertex) and of new points
+    ``xy`` (k, 2) at heights ``z`` (k,), less those within ``min_gap_m`` of the border (slivers). Of its
+    triangles, those ``keep`` selects (a function of their centres (t, 3) and longest edge seen from above
+    (t,) -> (t,) bool), counter-clockwise seen from above, less the faces that would break the surface (a
+    directed edge used twice, an edge of three faces). Returns (new vertices (u, 3), faces (n, 3) indexing
+    ``vertices`` then the new vertices)."""
+    import pythoncdt as cdt
+    from scipy.spatial import cKDTree
+
+    v, f = vertices, np.asarray(faces)
+    m = int(v.shape[0])
+    border = np.asarray(border, np.int64).reshape(-1, 2)
+    gxy, gz = np.asarray(xy, np.float64).reshape(-1, 2), np.asarray(z, np.float64)
+    rep_id, e = _border_from_above(v, border)
+    bxy = v[rep_id, :2]
+    # the cells' centres, less those too close to the border (slivers)
+    if len(bxy):
+        mids = np.vstack([bxy, 0.5 * (bxy[e[:, 0]] + bxy[e[:, 1]])]) if len(e) else bxy
+        dmin, _ = cKDTree(mids).query(gxy, workers=workers)
+        far = dmin >= min_gap_m
+        gxy, gz = gxy[far], gz[far]
+    pts = np.vstack([bxy, gxy]).astype(np.float64)
+    zs = np.r_[v[rep_id, 2], gz]
+    nb = len(bxy)
+    if len(pts) < 3:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
+    tri.insert_vertices(np.ascontiguousarray(pts))
+    if len(e):
+        tri.insert_edges(np.ascontiguousarray(e.astype(np.uintc)))
+    tri.erase_super_triangle()
+    va = tri.vertices_array()
+    allxy = np.c_[va["x"], va["y"]] if va.dtype.names else np.asarray(va, np.float64).reshape(-1, 2)
+    if len(allxy) > len(pts):  # crossings of border edges seen from above: height of the nearest input vertex
+        _, near = cKDTree(pts).query(allxy[len(pts):])
+        zs = np.r_[zs, zs[near]]
+    t = np.asarray(tri.triangles_array()["vertices"], np.int64).reshape(-1, 3)
+    p3 = np.c_[allxy, zs]
+    a, b, d = p3[t[:, 0]], p3[t[:, 1]], p3[t[:, 2]]
+    cen = (a + b + d) / 3.0
+    edge2d = np.max(np.stack([np.linalg.norm((b - a)[:, :2], axis=1), np.linalg.norm((d - b)[:, :2], axis=1),
+                              np.linalg.norm((a - d)[:, :2], axis=1)]), axis=0)
+    sel = keep(cen, edge2d)
+    t = t[sel]
+    # counter-clockwise seen from above
+    a, b, d = allxy[t[:, 0]], allxy[t[:, 1]], allxy[t[:, 2]]
+    area = (b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0])
+    t = np.where((area < 0)[:, None], t[:, [0, 2, 1]], t)
+    t = t[np.abs(area) > 1e-12]
+    # to mesh ids: border vertices are the mesh's own, the others new
+    n_new = len(allxy) - nb
+    gid = np.r_[rep_id, m + np.arange(n_new)]
+    nf = gid[t]
+    for _ in range(4):
+        if not len(nf):
+            break
+        bad = _bad_new_faces(np.vstack([f, nf]), len(f))
+        if not bad.any():
+            break
+        nf = nf[~bad]
+    used = np.unique(nf[nf >= m]) - m
+    remap = np.full(n_new, -1, np.int64)
+    remap[used] = np.arange(len(used))
+    nf = np.where(nf >= m, m + remap[np.maximum(nf - m, 0)], nf)
+    newv = p3[nb:][used]
+    return newv, nf
+
+
+def _border_from_above(v: np.ndarray, border: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ``border`` (e, 2) seen from above: one vertex per 2D position within 1 mm (a vertical border edge
+    has both ends at one xy), (its representative mesh vertex ids (b,), the edges between them (e', 2) as
+    indices into those ids, each once, none of zero length)."""
+    bids = np.unique(border)
+    key = np.round(v[bids, :2] / 1e-3).astype(np.int64)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    local = np.full(len(v), -1, np.int64)
+    local[bids] = inv.ravel()
+    e = local[border]
+    e = e[e[:, 0] != e[:, 1]]
+    return bids[first], np.unique(np.sort(e, axis=1), axis=0)
+
+
+def _bad_new_faces(faces: np.ndarray, n_old: int) -> np.ndarray:
+    """Among ``faces[n_old:]``, those that break the surface: a directed edge already used by another face
+    (overlapping or flipped) or an edge shared by more than two faces."""
+    n = len(faces)
+    m = int(faces.max()) + 1
+    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2).astype(np.int64)
+    fid = np.repeat(np.arange(n), 3)
+    dkey = he[:, 0] * m + he[:, 1]
+    ukey = np.minimum(he[:, 0], he[:, 1]) * m + np.maximum(he[:, 0], he[:, 1])
+    _, dinv, dcnt = np.unique(dkey, return_inverse=True, return_counts=True)
+    _, uinv, ucnt = np.unique(ukey, return_inverse=True, return_counts=True)
+    bad_he = (dcnt[dinv] > 1) | (ucnt[uinv] > 2)
+    bad = np.zeros(n, bool)
+    bad[fid[bad_he]] = True
+    bad[:n_old] = False
+    return bad[n_old:]
+
+
+def grid_patch(cells: np.ndarray, z: np.ndarray, lo: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The named mode for a fill on its own grid, not joined to the mesh (the ground fill with ``stitch``
+    off): a vertex at the centre of every ``cells`` (ny, nx) bool cell (x = ``lo[0]`` + (i + 0.5) ``cell_m``,
+    y likewise, height ``z`` (ny, nx)), two triangles per 2 x 2 block of them (one where exactly three are
+    there), counter-clockwise seen from above. Returns (vertices (k, 3) of the cells the triangles use,
+    faces (f, 3) indexing them)."""
+    jj, ii = np.nonzero(cells)
+    centres = np.c_[lo[0] + (ii + 0.5) * cell_m, lo[1] + (jj + 0.5) * cell_m, z[jj, ii]]
+    vid = np.full(cells.shape, -1, np.int64)
+    vid[jj, ii] = np.arange(len(jj))
+    v00, v10, v01, v11 = vid[:-1, :-1], vid[:-1, 1:], vid[1:, :-1], vid[1:, 1:]
+    tris = []
+    full = (v00 >= 0) & (v10 >= 0) & (v01 >= 0) & (v11 >= 0)
+    tris.append(np.c_[v00[full], v10[full], v11[full]])
+    tris.append(np.c_[v00[full], v11[full], v01[full]])
+    for a_, b_, c_, miss in ((v00, v10, v11, v01), (v00, v11, v01, v10), (v00, v10, v01, v11), (v10, v11, v01, v00)):
+        three = (a_ >= 0) & (b_ >= 0) & (c_ >= 0) & (miss < 0)
+        tris.append(np.c_[a_[three], b_[three], c_[three]])
+    pf = np.vstack(tris).astype(np.int64)
+    used = np.unique(pf)
+    remap = np.full(len(jj), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return centres[used], remap[pf] if len(pf) else pf
 
 
 def is_hole_from_above(vertices: np.ndarray, loop: np.ndarray) -> bool:

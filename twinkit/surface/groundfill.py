@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twinkit.mesh import Mesh
+from twinkit.street.holes import grid_patch, stitch
 
 
 @dataclass
@@ -169,31 +170,11 @@ def _cover(scene, xy: np.ndarray, z: np.ndarray, band: float) -> np.ndarray:
     return t <= 2 * band
 
 
-def _bad_new_faces(faces: np.ndarray, n_old: int) -> np.ndarray:
-    """Among ``faces[n_old:]``, those that break the surface: a directed edge already used by another face
-    (overlapping or flipped) or an edge shared by more than two faces."""
-    n = len(faces)
-    m = int(faces.max()) + 1
-    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2).astype(np.int64)
-    fid = np.repeat(np.arange(n), 3)
-    dkey = he[:, 0] * m + he[:, 1]
-    ukey = np.minimum(he[:, 0], he[:, 1]) * m + np.maximum(he[:, 0], he[:, 1])
-    _, dinv, dcnt = np.unique(dkey, return_inverse=True, return_counts=True)
-    _, uinv, ucnt = np.unique(ukey, return_inverse=True, return_counts=True)
-    bad_he = (dcnt[dinv] > 1) | (ucnt[uinv] > 2)
-    bad = np.zeros(n, bool)
-    bad[fid[bad_he]] = True
-    bad[:n_old] = False
-    return bad[n_old:]
-
-
 def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.ndarray, lo: np.ndarray,
                    opt: GroundFillOptions, rep: dict):
     """The fill joined to the mesh: (new vertices (k, 3), new faces (f, 3) indexing ``mesh.vertices`` then the
     new vertices). ``cand``: cells to cover (ny, nx) bool, ``height`` their ground height."""
-    import pythoncdt as cdt
     from scipy.ndimage import binary_dilation
-    from scipy.spatial import cKDTree
 
     from .closest import Surface
 
@@ -236,69 +217,14 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
     inzone = np.zeros(m, bool)
     inzone[bv] = ok & zone[ij[:, 1], ij[:, 0]]
     border = border[level[border].all(axis=1) & inzone[border].any(axis=1)]
-    bids = np.unique(border)
-    # one 2D vertex per position (a vertical border edge has both ends at one xy)
-    key = np.round(v[bids, :2] / 1e-3).astype(np.int64)
-    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    rep_id = bids[first]  # representative mesh vertex per 2D position
-    bxy = v[rep_id, :2]
-    local = np.full(m, -1, np.int64)
-    local[bids] = inv.ravel()
-    e = local[border]
-    e = e[e[:, 0] != e[:, 1]]
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    # the cells' centres, less those too close to the border (slivers)
-    if len(bxy):
-        mids = np.vstack([bxy, 0.5 * (bxy[e[:, 0]] + bxy[e[:, 1]])]) if len(e) else bxy
-        dmin, _ = cKDTree(mids).query(gxy, workers=opt.threads)
-        keep = dmin >= 0.4 * c
-        gxy, gz = gxy[keep], gz[keep]
-    pts = np.vstack([bxy, gxy]).astype(np.float64)
-    zs = np.r_[v[rep_id, 2], gz]
-    nb = len(bxy)
-    if len(pts) < 3:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
-    tri.insert_vertices(np.ascontiguousarray(pts))
-    if len(e):
-        tri.insert_edges(np.ascontiguousarray(e.astype(np.uintc)))
-    tri.erase_super_triangle()
-    va = tri.vertices_array()
-    allxy = np.c_[va["x"], va["y"]] if va.dtype.names else np.asarray(va, np.float64).reshape(-1, 2)
-    if len(allxy) > len(pts):  # crossings of border edges seen from above: height of the nearest input vertex
-        _, near = cKDTree(pts).query(allxy[len(pts):])
-        zs = np.r_[zs, zs[near]]
-    t = np.asarray(tri.triangles_array()["vertices"], np.int64).reshape(-1, 3)
-    p3 = np.c_[allxy, zs]
-    a, b, d = p3[t[:, 0]], p3[t[:, 1]], p3[t[:, 2]]
-    cen = (a + b + d) / 3.0
-    edge2d = np.max(np.stack([np.linalg.norm((b - a)[:, :2], axis=1), np.linalg.norm((d - b)[:, :2], axis=1),
-                              np.linalg.norm((a - d)[:, :2], axis=1)]), axis=0)
-    cij, cok = cell_of(cen[:, :2])
-    sel = cok & zone[cij[:, 1], cij[:, 0]] & (edge2d <= 5 * c)
-    sel[sel] = ~_cover(scene, cen[sel, :2], cen[sel, 2], opt.cover_band_m)
-    t = t[sel]
-    # counter-clockwise seen from above
-    a, b, d = allxy[t[:, 0]], allxy[t[:, 1]], allxy[t[:, 2]]
-    area = (b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0])
-    t = np.where((area < 0)[:, None], t[:, [0, 2, 1]], t)
-    t = t[np.abs(area) > 1e-12]
-    # to mesh ids: border vertices are the mesh's own, the others new
-    n_new = len(allxy) - nb
-    gid = np.r_[rep_id, m + np.arange(n_new)]
-    nf = gid[t]
-    for _ in range(4):
-        if not len(nf):
-            break
-        bad = _bad_new_faces(np.vstack([f, nf]), len(f))
-        if not bad.any():
-            break
-        nf = nf[~bad]
-    used = np.unique(nf[nf >= m]) - m
-    remap = np.full(n_new, -1, np.int64)
-    remap[used] = np.arange(len(used))
-    nf = np.where(nf >= m, m + remap[np.maximum(nf - m, 0)], nf)
-    newv = p3[nb:][used]
+
+    def keep(cen: np.ndarray, edge2d: np.ndarray) -> np.ndarray:
+        cij, cok = cell_of(cen[:, :2])
+        sel = cok & zone[cij[:, 1], cij[:, 0]] & (edge2d <= 5 * c)
+        sel[sel] = ~_cover(scene, cen[sel, :2], cen[sel, 2], opt.cover_band_m)
+        return sel
+
+    newv, nf = stitch(v, f, border, gxy, gz, keep, 0.4 * c, opt.threads)
     rep["border_vertices_joined"] = int(len(np.unique(nf[nf < m])))
     return newv, nf
 
@@ -368,26 +294,13 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
         fill = d > opt.keep_if_mesh_within_m
     else:
         fill = np.ones(len(centres), bool)
-    vid = np.full((ny, nx), -1, np.int64)
-    vid[jj[fill], ii[fill]] = np.arange(int(fill.sum()))
-    # two triangles per 2 x 2 block of filled cells (one where exactly three are filled), counter-clockwise from above
-    v00, v10, v01, v11 = vid[:-1, :-1], vid[:-1, 1:], vid[1:, :-1], vid[1:, 1:]
-    tris = []
-    full = (v00 >= 0) & (v10 >= 0) & (v01 >= 0) & (v11 >= 0)
-    tris.append(np.c_[v00[full], v10[full], v11[full]])
-    tris.append(np.c_[v00[full], v11[full], v01[full]])
-    for a_, b_, c_, miss in ((v00, v10, v11, v01), (v00, v11, v01, v10), (v00, v10, v01, v11), (v10, v11, v01, v00)):
-        three = (a_ >= 0) & (b_ >= 0) & (c_ >= 0) & (miss < 0)
-        tris.append(np.c_[a_[three], b_[three], c_[three]])
-    pf = np.vstack(tris).astype(np.int64)
+    cells = np.zeros((ny, nx), bool)
+    cells[jj[fill], ii[fill]] = True
+    pv, pf = grid_patch(cells, hz, lo, c)
     if len(pf) == 0:
         rep.update(filled_cells=0, faces_added=0)
         return mesh, rep
-    used = np.unique(pf)
-    remap = np.full(int(fill.sum()), -1, np.int64)
-    remap[used] = np.arange(len(used))
-    pv = centres[fill][used]
-    pf = remap[pf] + mesh.n_vertices
+    pf = pf + mesh.n_vertices
     return _append(mesh, pv, pf, points, colors, tree, opt, rep)
 
 

@@ -11,7 +11,7 @@ import dataclasses
 
 import numpy as np
 
-from twinkit.street.holes import close_hole, fan, is_hole_from_above
+from twinkit.street.holes import close_hole, fan, is_hole_from_above, patch
 
 from .detect import Instance, in_box
 from .ground import GroundGrid
@@ -265,11 +265,11 @@ def ground_gaps(v: np.ndarray, f: np.ndarray, grid: GroundGrid, cell_m: float, m
 
 
 def patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptions, max_edge_m: float | None = None):
-    """Ground patches where a footprint is still uncovered: a 2D Delaunay triangulation of the static
-    mesh's border vertices there (so the patch shares them: joined to the ground where the border's
-    edges are Delaunay edges) and grid points at the ground height, keeping the triangles over
-    uncovered ground inside the footprint. Returns (new vertices, faces, their labels, face UVs)."""
-    from scipy.spatial import Delaunay, cKDTree
+    """Ground patches where a footprint is still uncovered (:func:`twinkit.street.holes.patch` of the static
+    mesh's border vertices there and of ``patch_cell_m`` grid points at the ground height, keeping the
+    triangles over uncovered ground inside the footprint). ``v`` (n, 3), ``f`` (m, 3), ``lab`` (n,), ``tc``
+    (m, 6) or None. Returns (new vertices, faces, their labels, face UVs)."""
+    from scipy.spatial import cKDTree
 
     c = float(opt.patch_cell_m)
     nv = len(v)
@@ -297,45 +297,33 @@ def patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOption
         if unc.sum() < 3 and (max_edge_m is None or unc.sum() + len(bnear) < 3):
             continue
         p_new = pts[unc]
-        p2 = np.vstack([v[bnear, :2], p_new])
-        z = np.concatenate([v[bnear, 2], grid.at(p_new)])
-        try:
-            tri = Delaunay(p2).simplices
-        except Exception:
+
+        def keep(tc2, cen=cen, length=length, width=width, yaw=yaw, m=m, tri_xy=tri_xy):
+            centre = tc2.mean(axis=1)
+            edge = np.max(np.linalg.norm(tc2 - np.roll(tc2, 1, axis=1), axis=2), axis=1)
+            return (in_box(centre, cen, length, width, yaw, m) & (edge <= (max_edge_m or 3.0 * c))
+                    & ~covered(centre, tri_xy))
+
+        res = patch(v, bnear, p_new, grid.at(p_new), keep)
+        if res is None:
             continue
-        tc2 = p2[tri]
-        centre = tc2.mean(axis=1)
-        edge = np.max(np.linalg.norm(tc2 - np.roll(tc2, 1, axis=1), axis=2), axis=1)
-        keep = (in_box(centre, cen, length, width, yaw, m) & (edge <= (max_edge_m or 3.0 * c))
-                & ~covered(centre, tri_xy))
-        tri = tri[keep]
-        if len(tri) == 0:
-            continue
-        e1, e2 = tc2[keep, 1] - tc2[keep, 0], tc2[keep, 2] - tc2[keep, 0]
-        cw = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
-        tri[cw] = tri[cw][:, [0, 2, 1]]
-        used = np.unique(tri)
+        faces_new, new_v, tri_cen = res
+        faces_new = np.where(faces_new >= nv, faces_new + len(out_v), faces_new)
+        out_v.extend(list(new_v))
         nb = len(bnear)
-        ids = np.empty(len(p2), np.int64)
-        ids[:nb] = bnear
-        new_pts = used[used >= nb]
-        ids[new_pts] = nv + len(out_v) + np.arange(len(new_pts))
-        for k in new_pts:
-            out_v.append(np.array([p2[k, 0], p2[k, 1], z[k]]))
-        faces_new = ids[tri]
         lab_ring = lab[bnear] if nb else lab[f[near].ravel()]
         gl = lab_ring[np.isin(lab_ring, GROUND)]
         cls = int(np.bincount(gl).argmax()) if len(gl) else 0
-        out_lab.extend([cls] * len(new_pts))
+        out_lab.extend([cls] * len(new_v))
         out_f.append(faces_new)
         if tc is not None:
             gf = np.nonzero(near)[0]
             gf = gf[np.isin(lab[f[gf]], GROUND).all(axis=1)] if len(gf) else gf
             if len(gf):
-                _, nn = cKDTree(fxy[gf].mean(axis=1)).query(p2[tri].mean(axis=1))
+                _, nn = cKDTree(fxy[gf].mean(axis=1)).query(tri_cen)
                 out_tc.append(np.asarray(tc)[gf[nn]])
             else:
-                out_tc.append(np.zeros((len(tri), 6), np.float32))
+                out_tc.append(np.zeros((len(faces_new), 6), np.float32))
     if not out_f:
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.uint8), np.zeros((0, 6), np.float32)
     return (np.asarray(out_v).reshape(-1, 3), np.vstack(out_f), np.asarray(out_lab, np.uint8),
