@@ -13,6 +13,8 @@ seen from above for a hole in an up-facing surface). Everything is in the site f
 - :func:`fan`: the named fall-back for a loop no triangulation of its outline can take (it crosses
   itself seen from above, or two of its vertices stand on one vertical line): a fan round the loop's
   centroid closes the border whatever its shape, some triangles overlapping, at the ring's heights.
+- :func:`fan_fill`: the fan on a :class:`~twinkit.mesh.Mesh` with its attributes, for holes anywhere on a
+  surface (pin-holes after simplification, a wall's small holes, seams between tiles), not seen from above.
 - :func:`patch`: the named mode for ground to cover that no loop of open border bounds (a footprint
   left uncovered because its hole ran off the scan, a spot a ray at the ground falls through): the
   Delaunay triangulation seen from above of nearby border vertices and of new points on the ground,
@@ -32,6 +34,8 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
+
+from twinkit.mesh.core import Mesh
 
 #: ground_z: (k, 2) float64 xy in metres -> (k,) float64 ground height in metres
 GroundZ = Callable[[np.ndarray], np.ndarray]
@@ -96,10 +100,49 @@ def fan(vertices: np.ndarray, loop: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     mean of the loop's vertices (the loop walked backwards: counter-clockwise seen from above for a hole in
     an up-facing surface). Returns (faces (m, 3) int64, the centroid (1, 3) float64); the centroid's id is
     ``len(vertices)``."""
-    ccw = np.asarray(loop, np.int64)[::-1]
+    loop = np.asarray(loop, np.int64)
+    ccw = loop[::-1]
     nb = np.roll(np.arange(len(ccw)), -1)
     faces = np.stack([np.full(len(ccw), len(vertices)), ccw, ccw[nb]], axis=1)
-    return faces, vertices[ccw].mean(axis=0)[None]
+    return faces, vertices[loop].mean(axis=0)[None]
+
+
+def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute_normals: bool = True) -> Mesh:
+    """The :func:`fan` of each boundary loop (vertex indices in boundary order) added to ``mesh``, for holes
+    anywhere on a surface (pin-holes an edge collapse left, a wall's small holes, a seam between tiles): a
+    triangle as one face, a longer loop a fan round a new centroid vertex whose attributes are the loop's
+    mean. Face attributes of the new faces get ``face_fill`` (integers) or 0. Vertex normals, if any, are
+    recomputed from the faces unless ``recompute_normals`` is false (new vertices then get the mean)."""
+    from twinkit.mesh.core import vertex_normals
+
+    if not loops:
+        return mesh
+    new_v, new_f, new_attrs = [], [], {k: [] for k in mesh.attrs}
+    nv = mesh.n_vertices
+    for lp in loops:
+        if len(lp) == 3:
+            new_f.append(np.asarray([[lp[2], lp[1], lp[0]]], np.int64))
+            continue
+        faces, centre = fan(mesh.vertices, lp)
+        faces[:, 0] = nv + len(new_v)
+        new_v.append(centre[0])
+        for k, a in mesh.attrs.items():
+            val = a[lp].astype(np.float64).mean(axis=0)
+            new_attrs[k].append(val.astype(a.dtype) if a.dtype.kind == "f" else np.rint(val).astype(a.dtype))
+        new_f.append(np.roll(faces[::-1], -1, axis=0)[:, [1, 2, 0]])  # (loop[i+1], loop[i], centre), i = 0, 1, ...
+    verts = np.vstack([mesh.vertices] + ([np.asarray(new_v)] if new_v else []))
+    attrs = {}
+    for k, a in mesh.attrs.items():
+        attrs[k] = np.concatenate([a, np.asarray(new_attrs[k], dtype=a.dtype).reshape((-1,) + a.shape[1:])]) if new_v else a
+    faces_new = np.vstack(new_f).astype(np.int64)
+    face_attrs = {k: np.concatenate([a, np.full((len(faces_new),) + a.shape[1:],
+                                                face_fill if a.dtype.kind == "i" else 0, a.dtype)])
+                  for k, a in mesh.face_attrs.items()}
+    out = Mesh(vertices=verts, faces=np.vstack([mesh.faces, faces_new]), attrs=attrs, face_attrs=face_attrs,
+               comments=list(mesh.comments))
+    if recompute_normals and "normals" in out.attrs:
+        out.attrs["normals"] = vertex_normals(out.vertices, out.faces)
+    return out
 
 
 def patch(vertices: np.ndarray, border: np.ndarray, xy: np.ndarray, z: np.ndarray,

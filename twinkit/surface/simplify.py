@@ -96,7 +96,8 @@ def close_collapse_holes(mesh: Mesh, max_edges: int = 12) -> tuple[Mesh, int]:
     """Close the pin-holes edge collapses leave (a face dropped as degenerate, a collapse the border rule
     refused next to another): boundary loops of at most ``max_edges`` edges, by a fan. The clean-up before
     closed every hole up to 60 edges, so a loop this small here is the simplifier's, not the scan's."""
-    from twinkit.mesh.topology import boundary_loops, fan_fill
+    from twinkit.mesh.topology import boundary_loops
+    from twinkit.street.holes import fan_fill
 
     if max_edges < 3 or mesh.n_faces == 0:
         return mesh, 0

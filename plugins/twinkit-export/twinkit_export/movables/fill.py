@@ -19,7 +19,7 @@ from .kinds import GROUND
 from .options import LiftOptions
 
 
-class StaticMesh:
+class Additions:
     """The static mesh as the hole closing grows it: the input's vertices ``v`` (n, 3) float64 (the objects'
     feet are lowered in place), the ``kept`` faces (m, 3) int64, per-vertex ``labels`` (n,) uint8, per-face
     UVs ``kept_tc`` (m, 6) float32 or None without a texture; and what each fill adds (``add_*``)."""
@@ -50,7 +50,7 @@ class StaticMesh:
                 self.add_tc.append(ptc)
 
 
-def close_object_holes(sm: StaticMesh, touched: np.ndarray, grid: GroundGrid, instances: list[Instance],
+def close_object_holes(sm: Additions, touched: np.ndarray, grid: GroundGrid, instances: list[Instance],
                        opt: LiftOptions, rep: dict) -> None:
     """Close the loops of open border the cut opened (a loop near a footprint or through a vertex of a lifted
     face, ``touched`` (n,) bool) that reach no farther than ``max_fill_extent_m`` beyond the footprint: the
@@ -120,7 +120,7 @@ def _flatten_feet(v: np.ndarray, lp: np.ndarray, hits: list, grid: GroundGrid, o
     return int(foot.sum())
 
 
-def _add_fill(sm: StaticMesh, lp: np.ndarray, ring: np.ndarray, kcen: np.ndarray, faces_new: np.ndarray,
+def _add_fill(sm: Additions, lp: np.ndarray, ring: np.ndarray, kcen: np.ndarray, faces_new: np.ndarray,
               new_pts: np.ndarray) -> None:
     """Append one loop's fill: its new vertices take the ring's majority ground class, its faces the UVs of
     the nearest ground face of the ``ring`` (kept faces at the loop; ``kcen`` their centres)."""
@@ -146,7 +146,7 @@ def _add_fill(sm: StaticMesh, lp: np.ndarray, ring: np.ndarray, kcen: np.ndarray
         sm.add_tc.append(np.zeros((len(faces_new), 6), np.float32))
 
 
-def close_other_holes(sm: StaticMesh, grid: GroundGrid, instances: list[Instance], opt: LiftOptions,
+def close_other_holes(sm: Additions, grid: GroundGrid, instances: list[Instance], opt: LiftOptions,
                       rep: dict) -> None:
     """After the loops under the objects: a ground patch where a footprint is still uncovered (the hole ran
     into a scan shadow reaching the scan's edge, so no loop could be closed safely; ``patch_cell_m``), every
@@ -172,7 +172,7 @@ def close_other_holes(sm: StaticMesh, grid: GroundGrid, instances: list[Instance
         rep["ground_gap_faces"] = int(len(pf))
 
 
-def _close_ground_holes(sm: StaticMesh, grid: GroundGrid, opt: LiftOptions, rep: dict) -> None:
+def _close_ground_holes(sm: Additions, grid: GroundGrid, opt: LiftOptions, rep: dict) -> None:
     """Every other hole of the ground, closed at its border's heights; each new vertex takes the class of the
     nearest ground vertex of the mesh (road, sidewalk, terrain), each new face the UVs of the nearest ground
     face."""

@@ -13,7 +13,7 @@ from twinkit.mesh import Mesh
 from twinkit.mesh.core import compact, vertex_normals
 
 from .detect import Instance, claim_debris, find_instances
-from .fill import StaticMesh, border_edges, close_object_holes, close_other_holes
+from .fill import Additions, border_edges, close_object_holes, close_other_holes
 from .ground import GroundGrid
 from .kinds import GROUND, MOVABLE, NAMES
 from .options import LiftOptions
@@ -53,7 +53,7 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
     touched[f[removed].ravel()] = True
     kept = f[~removed]
     tc = mesh.face_attrs.get("texcoord")
-    sm = StaticMesh(v, kept, relabel_left(v, kept, h, labels, mov, opt, rep),
+    sm = Additions(v, kept, relabel_left(v, kept, h, labels, mov, opt, rep),
                     None if tc is None else np.asarray(tc)[~removed])
     close_object_holes(sm, touched, grid, instances, opt, rep)
     close_other_holes(sm, grid, instances, opt, rep)
@@ -94,7 +94,7 @@ def relabel_left(v: np.ndarray, kept: np.ndarray, h: np.ndarray, labels: np.ndar
     return new_labels
 
 
-def _static_mesh(mesh: Mesh, f: np.ndarray, sm: StaticMesh, rep: dict) -> tuple[Mesh, np.ndarray]:
+def _static_mesh(mesh: Mesh, f: np.ndarray, sm: Additions, rep: dict) -> tuple[Mesh, np.ndarray]:
     """The static mesh out of ``sm`` (new vertices' normals from the faces, unreferenced vertices dropped) and
     its labels; ``new_open_border_m`` (open border the lift added, against the input's faces ``f``) goes to
     ``rep``."""
