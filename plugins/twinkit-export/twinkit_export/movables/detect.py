@@ -16,6 +16,8 @@ from .options import LiftOptions
 
 @dataclass
 class Instance:
+    """One movable object: its faces in the input mesh and its oriented box (site frame, metres)."""
+
     id: int
     class_id: int
     faces: np.ndarray  # indices into the input mesh's faces
