@@ -97,3 +97,19 @@ def test_close_ground_holes_closes_a_crack_and_leaves_a_hole_up_a_wall():
     v2[:, 2] = 2.0  # the same hole, 2 m above the ground
     _, nf2, done2, rep2 = holes.close_ground_holes(v2, f, lambda xy: np.zeros(len(xy)))
     assert rep2["closed"] == 0 and len(nf2) == 0 and rep2["left_open_m"]["not_on_the_ground"] > 0
+
+
+def test_span_fans_a_star_shaped_loop_and_ear_clips_another():
+    a = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    hexa = np.c_[np.cos(a), np.sin(a), 0.1 * np.sin(3 * a)]  # star-shaped round its centroid
+    lp = np.arange(8)[::-1]  # clockwise seen from above: a hole in an up-facing surface
+    faces, new = holes.span(hexa, lp)
+    assert len(new) == 1 and len(faces) == 8 and np.allclose(new[0], hexa.mean(axis=0))
+    ell = np.array([[0, 0, 0], [3, 0, 0], [3, 1, 0], [1, 1, 0], [1, 3, 0], [0, 3, 0]], float)  # an L
+    ell[2:4] += [0, 0, 0.2]
+    lp = np.arange(6)[::-1]
+    assert holes.close_hole(ell, lp, lambda xy: np.zeros(len(xy)), 0.25) is not None
+    faces, new = holes.span(ell, lp)  # no point sees the whole L: ear clipping, the loop's own vertices
+    assert len(new) == 0 and len(faces) == 4
+    assert (face_normals(ell, faces)[:, 2] > 0).all()
+    assert holes.span(ell, lp[::-1]) is None  # no hole seen from above

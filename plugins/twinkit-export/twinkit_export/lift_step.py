@@ -41,7 +41,7 @@ class LiftParams:
                                                              "with a near-horizontal normal")
     margin_m: float = param(0.3, ge=0, help="footprint widening when collecting an object's faces")
     fill_cell_m: float = param(0.1, ge=0, help="holes left under an object are filled on this grid at the "
-                                               "ground's height (0: from their border's vertices alone)")
+                                               "ground's height (0: spanned at the ring's heights: a fan or ear clipping)")
     flatten_feet_m: float = param(0.5, ge=0, help="the object's cut-off feet up to this high are lowered onto "
                                                   "the ground (0: kept)")
     max_fill_extent_m: float = param(3.0, ge=0, help="holes reaching farther than this beyond an object's "

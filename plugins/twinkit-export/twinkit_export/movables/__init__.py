@@ -32,8 +32,9 @@ the class alone does not make an object; 3D cues decide (all in the site frame, 
    to the ground outside it (the reconstructed underside) go with the object.
 5. **Fill**: every boundary loop the cut opened is closed with a patch at the ring's height (the
    local ground): a constrained Delaunay triangulation of the loop seen from above with grid points
-   inside at the ground's height (``twinkit.street.holes.close_hole``), a fan where the outline is no
-   simple polygon seen from above. Each patch face copies the texture coordinates of the
+   inside at the ground's height (``twinkit.street.holes.close_hole``); where the outline is no
+   simple polygon seen from above, at the ring's heights (``span``: a fan round the centroid where the
+   loop is star-shaped, else ear clipping of its outline). Each patch face copies the texture coordinates of the
    nearest ground face of the ring (a plausible piece of the surrounding ground), and its vertices
    take the ring's majority ground class (road, sidewalk, terrain). No open border is left unless
    a loop cannot be closed safely (it runs off the footprint: the object stood at the scan's edge;

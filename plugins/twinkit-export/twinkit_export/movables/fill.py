@@ -1,6 +1,6 @@
 """Closing the ground where the movable objects stood: every loop of open border the cut opened is
-closed on the ground (:func:`twinkit.street.holes.close_hole`, a fan where the outline is no simple polygon
-seen from above), footprints still uncovered get a ground patch, then every other hole of the ground and
+closed on the ground (:func:`twinkit.street.holes.close_hole`; at the ring's heights,
+:func:`twinkit.street.holes.span`, where the outline is no simple polygon seen from above), footprints still uncovered get a ground patch, then every other hole of the ground and
 the spots a ray at the ground falls through. Each new face copies the UVs of the nearest ground face of its
 ring, each new vertex takes the ring's majority ground class (road, sidewalk, terrain).
 
@@ -11,7 +11,7 @@ import dataclasses
 
 import numpy as np
 
-from twinkit.street.holes import close_hole, fan, is_hole_from_above, patch
+from twinkit.street.holes import close_hole, fan, is_hole_from_above, patch, span
 
 from .detect import Instance, in_box
 from .ground import GroundGrid
@@ -55,8 +55,8 @@ def close_object_holes(sm: Additions, touched: np.ndarray, grid: GroundGrid, ins
     """Close the loops of open border the cut opened (a loop near a footprint or through a vertex of a lifted
     face, ``touched`` (n,) bool) that reach no farther than ``max_fill_extent_m`` beyond the footprint: the
     object's cut-off feet up to ``flatten_feet_m`` are lowered onto the ground, then the hole is closed on
-    the ground (:func:`close_hole` on a ``fill_cell_m`` grid at ``grid``'s height; a :func:`fan` where the
-    outline is no simple polygon seen from above). A loop of at most ``small_loop_m`` at an object's foot
+    the ground (:func:`close_hole` on a ``fill_cell_m`` grid at ``grid``'s height; at the ring's heights,
+    :func:`span`, where the outline is no simple polygon seen from above or ``fill_cell_m`` is 0). A loop of at most ``small_loop_m`` at an object's foot
     that is no hole seen from above (a fold of the cut-off feet) is closed by a fan. Counts go to ``rep``."""
     from twinkit.mesh.topology import boundary_loops
 
@@ -83,7 +83,7 @@ def close_object_holes(sm: Additions, touched: np.ndarray, grid: GroundGrid, ins
                 if opt.flatten_feet_m > 0 and hits:
                     cnt["flattened"] += _flatten_feet(v, lp, hits, grid, opt)
                 # on the ground: the inside follows the road, joined to the border
-                res = close_hole(v, lp, grid.at, opt.fill_cell_m) or fan(v, lp)
+                res = (close_hole(v, lp, grid.at, opt.fill_cell_m) if opt.fill_cell_m > 0 else None) or span(v, lp)
             ln = float(np.linalg.norm(v[lp] - v[np.roll(lp, -1)], axis=1).sum())
             if res is None and ok_box and hits and ln <= opt.small_loop_m:
                 # a small loop at an object's foot that is no hole seen from above (a fold of the cut-off feet,

@@ -33,7 +33,7 @@ class LiftOptions:
     patch_cell_m: float = param(0.2, ge=0, help="grid of the ground patch where a footprint stays uncovered; "
                                                 "0 = no patch")
     fill_cell_m: float = param(0.1, ge=0, help="a closed hole under an object is filled on this grid at the "
-                                               "ground's height (0: its border's own vertices only)")
+                                               "ground's height (0: spanned at the ring's heights)")
     flatten_feet_m: float = param(0.5, ge=0, help="the hole's border inside the footprint, up to this high, is "
                                                   "lowered onto the ground (0: kept)")
     gap_max_m: float = param(1.0, ge=0, help="smaller spots a ray at the ground falls through, surface all "
