@@ -112,12 +112,17 @@ def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: fl
 
     ``pattern`` (a regular expression the whole string must match, ``words`` saying it for the error)
     is for strings that reach a command line or a script. ``also`` lists special values outside the
-    range (``-1`` = automatic). With no bound at all the
-    field still counts as declared ("any number"): say so on purpose, for signed offsets and angles.
+    range (``-1`` = automatic). With no bound at all a number
+    still counts as declared ("any number"): say so on purpose, for signed offsets and angles; a flag or a
+    free string without choices carries only its ``help``.
     For a list the check applies to each element. ``help`` is the one-paragraph description
     ``twinkit plugins <kind>/<name>`` prints (what the value does, its unit, when to change it);
     measurements and their history belong in the docs, not here.
     """
+    unbounded = all(b is None for b in (ge, gt, le, lt, choices, pattern)) and not also
+    if unbounded and isinstance(default, (bool, str)):
+        # a flag or a free string: nothing to range-check, only the help to carry
+        return dataclasses.field(default=default, metadata={HELP: help})
     if pattern is not None:
         check: Range | Choices | Pattern = Pattern(pattern, words)
     elif choices is not None:

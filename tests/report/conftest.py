@@ -113,6 +113,7 @@ XODR = """<?xml version="1.0" standalone="yes"?>
  <geometry s="6" x="0" y="15" hdg="1.5707963" length="15"><arc curvature="0.03"/></geometry></planView>
  <lanes><laneSection s="0">
   <left><lane id="1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></left>
+  <center><lane id="0" type="none"/></center>
   <right><lane id="-1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></right>
  </laneSection></lanes></road>
 </OpenDRIVE>

@@ -324,7 +324,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
                          in_movables_dir: Path | None = None) -> dict:
     """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points;
     the lifted movable objects as actors (actors.json, spawn_actors.py) and scanned props."""
-    from .carla_pkg import PackageError, check_names, load_map, spawn_points, write_package, xodr_georeference
+    from .carla_pkg import PackageError, check_names, lane_map, spawn_points, write_package, xodr_georeference
     from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, site_spawn, write_frame_json
 
     params = params or CarlaPackageParams()
@@ -351,8 +351,8 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     package = params.package or f"{map_name}Twin"
     try:
         check_names(package, map_name)
-        cmap = load_map(text, map_name)
-        spawn = site_spawn(spawn_points(cmap, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
+        lanes = lane_map(text, map_name)
+        spawn = site_spawn(spawn_points(lanes, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
                            frame)
     except PackageError as exc:
         raise InputError(f"carla_package: {exc}") from None
@@ -394,14 +394,14 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
         write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
-    load_map((pkg / f"{map_name}.xodr").read_text(), map_name)
+    lane_map((pkg / f"{map_name}.xodr").read_text(), map_name)
     # CARLA's import rules, read from its source (carla_contract): a package that breaks one fails here
     rep = check_package(out, package, expect_decals=params.decals)
     if not rep.ok:
         raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
-    topo = cmap.get_topology()
+    topo = lanes.topology()
     return {"package": package, "map": map_name, "spawn_points": len(spawn), "topology_edges": len(topo),
             "map_meshes": placed["map_meshes"], "props": placed["props"],
             "faces_by_tag": summ["faces_by_tag"], "wrong_terrain_share": summ["wrong_terrain_share"],

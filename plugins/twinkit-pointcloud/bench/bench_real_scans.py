@@ -166,14 +166,16 @@ def measure(name: str, cfg: dict) -> dict:
                 res["building_kept"] = float((d <= 2 * res["spacing_m"]).mean())
     bp = _step(name, "backproject")
     if bp is not None and (bp / "labels.npy").is_file():
-        from twinkit_pointcloud.shading import height_above_ground
+        from twinkit.street.ground import LocalGround
+        from twinkit_pointcloud.shading import GROUND_CELL_M
 
         lab = np.load(bp / "labels.npy")
         v, f = mesh.vertices, mesh.faces
         fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
         area = 0.5 * np.linalg.norm(fn, axis=1)
         fn /= np.maximum(2 * area[:, None], 1e-12)
-        h = height_above_ground(v, cell_m=2.0)[f].mean(axis=1)
+        ground = LocalGround(v, cell_m=GROUND_CELL_M, window="min", window_m=3 * GROUND_CELL_M, pad_cells=0)
+        h = ground.height()[f].mean(axis=1)  # the height shading's ground
         fl = lab[f[:, 0]]  # a face's label: its first vertex's
         vert = (np.abs(fn[:, 2]) < 0.3) & (h > 2.0) & (fl != 255)
         low = (np.abs(fn[:, 2]) > 0.9) & (h < 0.5) & (fl != 255)

@@ -6,7 +6,7 @@ import pytest
 from twinkit.cityscapes import N_CLASSES
 from twinkit.mesh import edges as mesh_edges
 from twinkit.mesh.core import vertex_normals
-from twinkit.surface.localground import LocalGround
+from twinkit.street.ground import LocalGround
 from twinkit_segmentation.context import CUES, DEFAULT_CUES, ContextOptions, fuse_with_context, geometric_context
 
 ROAD, SIDEWALK, BUILDING, VEGETATION, TERRAIN, CAR = 0, 1, 2, 8, 9, 13
@@ -39,7 +39,7 @@ def in_box(v, x0, x1, y0, y1):
 def test_local_ground_ignores_a_car_and_follows_a_slope():
     car = lambda x, y: np.where((np.abs(x) <= 2.25) & (np.abs(y) <= 0.9), 1.5, 0.0)  # noqa: E731
     v, f, n, _ = heightfield(lambda x, y: 0.08 * x + car(x, y))  # an 8 % street with a car on it
-    h = LocalGround(v, n, window_m=3.0).height(v)
+    h = LocalGround(v, n[:, 2] >= 0.85, window="opening", window_m=3.0).height(v)
     roof = in_box(v, -2.0, 2.0, -0.7, 0.7)
     assert np.abs(h[roof] - 1.5).max() < 0.1  # the roof is 1.5 m above the ground, not ground
     inner = in_box(v, -10.5, 10.5, -6.5, 6.5) & ~in_box(v, -2.5, 2.5, -1.2, 1.2)  # (at the scan's edge the
@@ -261,7 +261,7 @@ def test_objects_above_the_ground_split_and_measure_a_post_and_a_wall():
     post = solid_box([0, 0, 0], [0.2, 0.2, 4.0], top=False)
     wall = solid_box([3, -4, 0], [3.25, 4, 1.9])
     v, n, e, (mp, mw) = scene(post, wall)
-    h = LocalGround(v, n).height(v)
+    h = LocalGround(v, n[:, 2] >= 0.85).height(v)
     ob = objects_above_ground(v, h, h > 0.3, e)
     assert ob["n_objects"] == 2
     op, ow = ob["object"][mp & (h > 0.3)][0], ob["object"][mw & (h > 0.3)][0]

@@ -8,7 +8,7 @@ unanimous evidence can still win over a cue and nothing is decided by the cue al
 - ``ground``: an up-facing vertex (normal z >= ``up_normal_z``) at most ``max_curb_m`` above the
   local ground is ground. Its classes other than road, sidewalk and terrain are scaled by
   ``ground_factor`` (a flat surface at ground level is not a car, a bush, a wall). The local
-  ground is :class:`twinkit.surface.localground.LocalGround` with a window of ``ground_window_m``,
+  ground is :class:`twinkit.street.ground.LocalGround` (its opening) with a window of ``ground_window_m``,
   wider than any vehicle is wide, so a car roof never counts as ground.
 - ``raised``: a vertex more than ``min_object_m`` above the local ground (above any curb) is not
   road, sidewalk or terrain: those are scaled by ``raised_factor``.
@@ -324,14 +324,14 @@ def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOpt
                       edges: np.ndarray | None = None) -> dict:
     """Per-vertex cue masks and the heights they come from: ``{"height": h, "ground": bool(n), ...}``.
     The shape cues need the mesh's ``edges`` (vertex pairs); without them their masks are empty."""
-    from twinkit.surface.localground import LocalGround
+    from twinkit.street.ground import LocalGround
 
     opt = opt or ContextOptions()
     v = np.asarray(vertices, np.float64)
     nz = np.asarray(normals, np.float64)[:, 2]
-    g = LocalGround(v, normals, window_m=opt.ground_window_m, cell_m=opt.cell_m, up_normal_z=opt.up_normal_z)
-    h = g.height(v)
     up = nz >= opt.up_normal_z
+    g = LocalGround(v, up, window="opening", window_m=opt.ground_window_m, cell_m=opt.cell_m)
+    h = g.height()
     ground = up & (h <= opt.max_curb_m)
     out = {"height": h, "ground": ground, "raised": h > opt.min_object_m, "high": h > opt.max_vehicle_m}
     # curb: step cells (surface min_curb..max_curb above the lowest surface nearby), then vertices on
@@ -343,7 +343,7 @@ def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOpt
     curb = np.zeros(len(v), bool)
     if step.any():
         d, (iy, ix) = distance_transform_edt(~step, return_indices=True)
-        j, i = g._cells(v[:, :2])
+        j, i = g.cells(v[:, :2])
         sj, si = iy[j, i], ix[j, i]
         top, foot = g.surface[sj, si], low[sj, si]
         above_foot = v[:, 2] - foot

@@ -541,7 +541,7 @@ class BackprojectParams:
     # (docs/segmentation.md "Shape cues")
     context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb", "column", "mounted",
                                                              "low", "narrow"])
-    ground_window_m: float = param(3.0, gt=0)  # local ground window: wider than the widest vehicle (2.55 m)
+    ground_window_m: float = param(3.0, gt=0, help="metres: the local ground's window (street.ground.LocalGround, opening); wider than the widest vehicle (2.55 m)")
     max_curb_m: float = param(0.30, ge=0)  # up-facing, at most this above the local ground = ground (the highest curb)
     min_object_m: float = param(0.50, ge=0)  # more than this above the local ground = not road / sidewalk / terrain
     max_vehicle_m: float = param(4.70, ge=0)  # more than this above the local ground = no vehicle or person
