@@ -30,7 +30,7 @@ from twinkit.ranges import param
 class LiftParams:
     """Lift vehicles, riders and pedestrians out of the static mesh (see twinkit_export.movables)."""
 
-    lift: bool = param(True, choices=(True, False), help="false: keep every movable object in the static map (files pass through "
+    lift: bool = param(True, help="false: keep every movable object in the static map (files pass through "
                                   "unchanged)")
     min_height_m: float = param(0.25, ge=0, help="movable-labelled surface at most this above the local ground is "
                                                  "ground")

@@ -43,7 +43,7 @@ the class alone does not make an object; 3D cues decide (all in the site frame, 
    clusters) take the label of the nearest non-movable vertex (a ground class when the vertex is
    at ground height), so the static map carries no movable class.
 
-Where each stage lives: :mod:`.ground` (1), :mod:`.kinds` and :mod:`.detect` (2-4), :mod:`.fill` (5),
+Where each stage lives: :func:`.lift.ground_under` (1, the street library's ``LocalGround``), :mod:`.kinds` and :mod:`.detect` (2-4), :mod:`.fill` (5),
 :func:`.lift.relabel_left` (6), :mod:`.lift` (the order of the stages), :mod:`.actors` (the CARLA
 blueprint, ``actors.json`` and one PLY per object), :mod:`.options` (every threshold).
 """

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .ground import GroundGrid
+from twinkit.street.ground import LocalGround
+
 from .kinds import CLASS_LIMITS, MOVABLE, NAMES, choose_class, refine_class
 from .options import LiftOptions
 
@@ -115,7 +116,7 @@ def split_along(xy: np.ndarray, h: np.ndarray, yaw_deg: float, min_piece_m: floa
     return [b <= k, b > k]
 
 def find_instances(v: np.ndarray, f: np.ndarray, h: np.ndarray, normals: np.ndarray, labels: np.ndarray,
-                   grid: GroundGrid, opt: LiftOptions, rep: dict) -> tuple[list[Instance], np.ndarray]:
+                   grid: LocalGround, opt: LiftOptions, rep: dict) -> tuple[list[Instance], np.ndarray]:
     """The objects: movable-labelled vertices ``h`` > ``min_height_m`` above the ground, clustered in 3D
     (``cluster_gap_m``), each cluster judged by its shape (:func:`choose_class`, cut in two where it is too
     long, :func:`split_along`) and grown over the mesh (:func:`grow_faces`). ``v`` (n, 3), ``f`` (m, 3),
@@ -197,7 +198,7 @@ def grow_faces(v: np.ndarray, f: np.ndarray, h: np.ndarray, seed_f: np.ndarray, 
     return sel[np.isin(comp, keep_comp)]
 
 
-def _instance(k: int, v, f, h, vid, mine, grid: GroundGrid, cid: int, cls_counts, class_by: str,
+def _instance(k: int, v, f, h, vid, mine, grid: LocalGround, cid: int, cls_counts, class_by: str,
               opt: LiftOptions) -> Instance:
     """Instance ``k`` of the cluster ``vid`` whose faces are ``mine``: its box is that of its body above the
     cut (not the wall feet on the ground), from the ground under the cluster to its top."""

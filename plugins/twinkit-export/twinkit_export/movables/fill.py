@@ -11,10 +11,10 @@ import dataclasses
 
 import numpy as np
 
+from twinkit.street.ground import LocalGround
 from twinkit.street.holes import close_hole, fan, is_hole_from_above, patch, span
 
 from .detect import Instance, in_box
-from .ground import GroundGrid
 from .kinds import GROUND
 from .options import LiftOptions
 
@@ -50,7 +50,7 @@ class Additions:
                 self.add_tc.append(ptc)
 
 
-def close_object_holes(sm: Additions, touched: np.ndarray, grid: GroundGrid, instances: list[Instance],
+def close_object_holes(sm: Additions, touched: np.ndarray, grid: LocalGround, instances: list[Instance],
                        opt: LiftOptions, rep: dict) -> None:
     """Close the loops of open border the cut opened (a loop near a footprint or through a vertex of a lifted
     face, ``touched`` (n,) bool) that reach no farther than ``max_fill_extent_m`` beyond the footprint: the
@@ -104,7 +104,7 @@ def close_object_holes(sm: Additions, touched: np.ndarray, grid: GroundGrid, ins
                open_border_left_by_reason_m=open_why)
 
 
-def _flatten_feet(v: np.ndarray, lp: np.ndarray, hits: list, grid: GroundGrid, opt: LiftOptions) -> int:
+def _flatten_feet(v: np.ndarray, lp: np.ndarray, hits: list, grid: LocalGround, opt: LiftOptions) -> int:
     """The object's cut-off feet (its faces with a corner below the cut stay in the static mesh, a ridge up to
     ~0.4 m a wheel would hit): the loop's vertices inside a footprint it ``hits``, 2 cm to ``flatten_feet_m``
     above the ground, go down to the ground (in place in ``v``), which flattens those faces onto the road.
@@ -146,7 +146,7 @@ def _add_fill(sm: Additions, lp: np.ndarray, ring: np.ndarray, kcen: np.ndarray,
         sm.add_tc.append(np.zeros((len(faces_new), 6), np.float32))
 
 
-def close_other_holes(sm: Additions, grid: GroundGrid, instances: list[Instance], opt: LiftOptions,
+def close_other_holes(sm: Additions, grid: LocalGround, instances: list[Instance], opt: LiftOptions,
                       rep: dict) -> None:
     """After the loops under the objects: a ground patch where a footprint is still uncovered (the hole ran
     into a scan shadow reaching the scan's edge, so no loop could be closed safely; ``patch_cell_m``), every
@@ -172,7 +172,7 @@ def close_other_holes(sm: Additions, grid: GroundGrid, instances: list[Instance]
         rep["ground_gap_faces"] = int(len(pf))
 
 
-def _close_ground_holes(sm: Additions, grid: GroundGrid, opt: LiftOptions, rep: dict) -> None:
+def _close_ground_holes(sm: Additions, grid: LocalGround, opt: LiftOptions, rep: dict) -> None:
     """Every other hole of the ground, closed at its border's heights; each new vertex takes the class of the
     nearest ground vertex of the mesh (road, sidewalk, terrain), each new face the UVs of the nearest ground
     face."""
@@ -218,7 +218,7 @@ def covered(pts: np.ndarray, tri_xy: np.ndarray) -> np.ndarray:
     return out
 
 
-def ground_gaps(v: np.ndarray, f: np.ndarray, grid: GroundGrid, cell_m: float, max_extent_m: float) -> list:
+def ground_gaps(v: np.ndarray, f: np.ndarray, grid: LocalGround, cell_m: float, max_extent_m: float) -> list:
     """Small places where a vertical ray at the ground finds no surface within 0.5 m of the ground (a wheel
     or a foot would drop in) with surface all round them: the remains of a hole whose border is no
     simple loop (it runs up an object's foot, or crosses itself seen from above). Each as a box
@@ -264,7 +264,7 @@ def ground_gaps(v: np.ndarray, f: np.ndarray, grid: GroundGrid, cell_m: float, m
     return out
 
 
-def patch_footprints(v, f, lab, tc, grid: GroundGrid, instances, opt: LiftOptions, max_edge_m: float | None = None):
+def patch_footprints(v, f, lab, tc, grid: LocalGround, instances, opt: LiftOptions, max_edge_m: float | None = None):
     """Ground patches where a footprint is still uncovered (:func:`twinkit.street.holes.patch` of the static
     mesh's border vertices there and of ``patch_cell_m`` grid points at the ground height, keeping the
     triangles over uncovered ground inside the footprint). ``v`` (n, 3), ``f`` (m, 3), ``lab`` (n,), ``tc``

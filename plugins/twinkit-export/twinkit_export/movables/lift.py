@@ -1,6 +1,7 @@
 """``lift_movables``: the movable objects cut out of the labelled mesh, the ground closed beneath them.
 
-The stages, each in the module named after it: the ground (:mod:`.ground`), the objects
+The stages, each in the module named after it: the ground (:func:`ground_under`, a
+:class:`twinkit.street.ground.LocalGround`), the objects
 (:mod:`.detect`, their classes in :mod:`.kinds`), the labels left (:func:`relabel_left`), the holes
 (:mod:`.fill`)."""
 from __future__ import annotations
@@ -11,10 +12,10 @@ import numpy as np
 
 from twinkit.mesh import Mesh
 from twinkit.mesh.core import compact, vertex_normals
+from twinkit.street.ground import LocalGround
 
 from .detect import Instance, claim_debris, find_instances
 from .fill import Additions, border_edges, close_object_holes, close_other_holes
-from .ground import GroundGrid
 from .kinds import GROUND, MOVABLE, NAMES
 from .options import LiftOptions
 
@@ -39,11 +40,11 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
     v = np.array(mesh.vertices, float)  # a copy: the objects' feet are lowered onto the ground below
     f = np.asarray(mesh.faces, np.int64)
     normals = np.asarray(mesh.normals if mesh.normals is not None else vertex_normals(v, f), float)
-    grid = GroundGrid(v, normals, opt)
+    grid = ground_under(v, normals, opt)
     h = v[:, 2] - grid.at(v[:, :2])
     mov = np.isin(labels, MOVABLE)
     rep: dict = {"movable_vertices": int(mov.sum()), "candidate_vertices": int((mov & (h > opt.min_height_m)).sum()),
-                 "ground_cells": int(grid.has_ground.sum())}
+                 "ground_cells": int(grid.has_z.sum())}
     instances, face_owner = find_instances(v, f, h, normals, labels, grid, opt, rep)
     if instances:
         claim_debris(v, f, h, face_owner, instances, opt, rep)
@@ -66,6 +67,16 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
                  "the surrounding class", len(instances), rep["faces_lifted"], rep["loops_filled"],
                  rep["loops_left_open"], rep["relabelled_vertices"])
     return LiftResult(out, out_labels, instances, mesh, labels, rep)
+
+
+def ground_under(v: np.ndarray, normals: np.ndarray, opt: LiftOptions) -> LocalGround:
+    """The ground under the objects (stage 1): on a ``cell_m`` grid, the up-facing vertices (normal z >=
+    ``up_normal_z``) no higher than ``ground_tol_m`` above the lowest up-facing vertex within
+    ``ground_window_m`` (at least 3 cells) are ground; a cell's height is their mean; cells without ground
+    (under a car's roof) take the nearest ground cell's. ``v``, ``normals`` (n, 3) float64."""
+    return LocalGround(v, normals[:, 2] >= opt.up_normal_z, cell_m=opt.cell_m, window="min",
+                       window_m=opt.ground_window_m, min_window_cells=3, ground_tol_m=opt.ground_tol_m,
+                       ground_stat="mean", fill="nearest")
 
 
 def relabel_left(v: np.ndarray, kept: np.ndarray, h: np.ndarray, labels: np.ndarray, mov: np.ndarray,
