@@ -139,13 +139,13 @@ class FutureRun(DemoRun):
 def future_run(demo_run) -> FutureRun:
     from PIL import Image
 
-    from twinkit.report.render import ViewMesh
+    from twinkit.report.render import read_view_mesh
 
     ws = demo_run.ws
     seg = ws / "08_segment"
     seg.mkdir(exist_ok=True)
-    mesh = ViewMesh.read(ws / "06_texture" / "textured_mesh.ply")
-    np.save(seg / "labels.npy", _fake_labels(mesh.xyz, mesh.colors))
+    mesh = read_view_mesh(ws / "06_texture" / "textured_mesh.ply")
+    np.save(seg / "labels.npy", _fake_labels(mesh.vertices, mesh.colors))
     (seg / "seg_metrics.json").write_text(json.dumps(SEG_METRICS))
     (seg / "alignment.json").write_text(json.dumps({"residual_rms_m": 0.042, "residual_max_m": 0.118, "pairs": 38}))
     (seg / "roads.xodr").write_text(XODR)

@@ -291,10 +291,10 @@ def test_ply_reader_matches_plyfile(demo_run):
     from plyfile import PlyData
 
     path = demo_run.ws / "06_texture" / "textured_mesh.ply"
-    mesh = render.ViewMesh.read(path)
+    mesh = render.read_view_mesh(path)
     ref = PlyData.read(str(path))
     v = ref["vertex"]
-    np.testing.assert_allclose(mesh.xyz[:, 0], np.asarray(v["x"], float))
+    np.testing.assert_allclose(mesh.vertices[:, 0], np.asarray(v["x"], float))
     np.testing.assert_array_equal(mesh.colors[:, 2], np.asarray(v["blue"]))
     faces = np.stack(ref["face"].data["vertex_indices"])
     np.testing.assert_array_equal(mesh.faces, faces)

@@ -178,8 +178,8 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
 
     H = scene.dims.half_m
     zmax = float(mesh.vertices[:, 2].max())
-    labels_present = sorted(int(v) for v in np.unique(mesh.face_labels))
-    counts = {**scene.counts, "points": n_points, "ghost_points": int((cloud["label"] == 11).sum()),
+    labels_present = sorted(int(v) for v in np.unique(mesh.face_attrs["label"]))
+    counts = {**scene.counts, "points": n_points, "ghost_points": int((cloud["label"] == LABELS["person"]).sum()),
               "photos": n_photos, "scanner_positions": int(len(traj["xyz"]))}
     site = {
         **geo.georef_json(),

@@ -124,8 +124,9 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
     """Per-vertex trainIds of the textured mesh from the ground-truth mesh (closest surface point)."""
     import numpy as np
 
-    from .labels import read_labelled_ply, transfer_labels
+    from .labels import read_labelled_ply
     from twinkit.mesh import read_obj
+    from twinkit.street.truth import transfer_labels
 
     params = params or GtLabelsParams()
     try:
@@ -140,7 +141,7 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
         # the mesh *is* the ground-truth mesh (same vertices): copy, do not guess at coincident vertices
         lab, dist = gl.copy(), np.zeros(len(gl), np.float32)
     else:
-        lab, dist = transfer_labels(gv, gf, gl, mesh.vertices)
+        lab, dist = transfer_labels(gv, gf, mesh.vertices, vertex_labels=gl)
     far = dist > params.max_dist_m
     lab[far] = 255
     np.save(out_labels_npy, lab.astype(np.uint8))

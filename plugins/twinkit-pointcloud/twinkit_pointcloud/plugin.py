@@ -571,11 +571,12 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
     """Cloud <-> mesh distances (and against a ground-truth mesh when given), counts, a colour map."""
     import numpy as np
 
+    from twinkit import cityscapes
     from twinkit.surface.closest import Surface
     from twinkit.surface.measure import Measure
     from twinkit.surface.metrics import cloud_to_mesh
 
-    from .metrics import (TRAIN_ID_NAMES, coverage_by_label, distance_near_exact, sample_surface,
+    from .metrics import (coverage_by_label, distance_near_exact, sample_surface,
                           sample_surface_by_label, stats, topdown_map)
 
     params = params or EvalParams()
@@ -620,7 +621,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
                                                    "observed_m": params.observed_m}
                 acc_lab = np.asarray(glab)[gsurf.closest(mesh.vertices)[0]]
                 res["gt"]["accuracy_by_class_mean_m"] = {
-                    TRAIN_ID_NAMES.get(int(c), str(int(c))): float(acc[acc_lab == c].mean()) for c in np.unique(acc_lab)}
+                    cityscapes.name_of(int(c)): float(acc[acc_lab == c].mean()) for c in np.unique(acc_lab)}
         vmax = params.colormap_max_m or float(np.quantile(c2m, 0.95)) or 0.01
         png = Path(out_recon_metrics_json).with_suffix(".png")
         topdown_map(cloud.vertices, c2m, png, vmax, size_px=params.image_px, title="cloud -> mesh distance")

@@ -35,8 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-ROAD, SIDEWALK, TERRAIN = 0, 1, 9
-GROUND = (ROAD, SIDEWALK, TERRAIN)
+from twinkit.cityscapes import GROUND, ROAD, SIDEWALK, TERRAIN
 
 #: OpenDRIVE lane type (as written in the file, lower case) -> the class it votes for.
 ROAD_TYPES = ("driving", "bidirectional", "parking", "shoulder", "entry", "exit", "onramp", "offramp",

@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from twinkit import InputError
-
-ROAD = 0  # CityScapes trainId of road
+from twinkit.cityscapes import ROAD
 
 
 @dataclass

@@ -25,7 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-POLE, LIGHT, SIGN = 5, 6, 7  # CityScapes trainIds
+from twinkit.cityscapes import POLE
+from twinkit.cityscapes import TRAFFIC_LIGHT as LIGHT
+from twinkit.cityscapes import TRAFFIC_SIGN as SIGN
+
 # SignalType::IsTrafficLight (LibCarla/source/carla/road/SignalType.cpp, carla 0.9.16)
 CARLA_LIGHT_TYPES = {"1000001", "1000002", "1000009", "1000010", "1000011", "1000007", "1000014", "1000015",
                      "1000016", "1000017", "1000018", "1000019", "1000013", "1000020", "1000008", "1000012",

@@ -62,18 +62,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twinkit.cityscapes import N_CLASSES
+from twinkit.cityscapes import (BUILDING, GROUND, MOVABLE, N_CLASSES, ROAD, SIDEWALK, STREET_FURNITURE,
+                                TRAFFIC_LIGHT, TRAFFIC_SIGN, VEGETATION, WIDE_VEHICLES)
 
-ROAD, SIDEWALK, TERRAIN = 0, 1, 9
-GROUND_CLASSES = (ROAD, SIDEWALK, TERRAIN)
-#: people and vehicles (person, rider, car, truck, bus, train, motorcycle, bicycle)
-MOVABLE_CLASSES = (11, 12, 13, 14, 15, 16, 17, 18)
-#: the classes of street furniture: pole, traffic light, traffic sign
-POLE, LIGHT, SIGN = 5, 6, 7
-BUILDING = 2
-#: vehicles with four wheels or more (car, truck, bus, train)
-WIDE_VEHICLES = (13, 14, 15, 16)
-VEGETATION = 8
 SHAPE_CUES = ("column", "mounted", "low", "narrow", "slender")
 CUES = ("ground", "raised", "high", "curb") + SHAPE_CUES
 #: on by default: every cue that helped on each measured seed (slender helps only where the 2D model
@@ -373,24 +364,24 @@ def context_prior(ctx: dict, opt: ContextOptions | None = None, cues=CUES) -> np
     opt = opt or ContextOptions()
     n = len(ctx["height"])
     prior = np.ones((n, N_CLASSES))
-    other = [c for c in range(N_CLASSES) if c not in GROUND_CLASSES]
+    other = [c for c in range(N_CLASSES) if c not in GROUND]
     if "ground" in cues:
         prior[np.ix_(ctx["ground"], other)] *= opt.ground_factor
     if "raised" in cues:
-        prior[np.ix_(ctx["raised"], list(GROUND_CLASSES))] *= opt.raised_factor
+        prior[np.ix_(ctx["raised"], list(GROUND))] *= opt.raised_factor
     if "high" in cues:
-        prior[np.ix_(ctx["high"], list(MOVABLE_CLASSES))] *= opt.high_factor
+        prior[np.ix_(ctx["high"], list(MOVABLE))] *= opt.high_factor
     if "curb" in cues:
         prior[ctx["curb"], ROAD] *= opt.curb_factor
-    furniture_out = [c for c in range(N_CLASSES) if c not in (POLE, LIGHT, SIGN)]
+    furniture_out = [c for c in range(N_CLASSES) if c not in STREET_FURNITURE]
     if "column" in cues:
         prior[np.ix_(ctx["column"], furniture_out)] *= opt.shape_factor
     if "mounted" in cues:
         prior[np.ix_(ctx["mounted"], furniture_out)] *= opt.shape_factor
-        prior[ctx["plate"], LIGHT] *= opt.mount_factor
-        prior[ctx["box"], SIGN] *= opt.mount_factor
+        prior[ctx["plate"], TRAFFIC_LIGHT] *= opt.mount_factor
+        prior[ctx["box"], TRAFFIC_SIGN] *= opt.mount_factor
     if "low" in cues:
-        prior[np.ix_(ctx["low"], [BUILDING, LIGHT])] *= opt.shape_factor
+        prior[np.ix_(ctx["low"], [BUILDING, TRAFFIC_LIGHT])] *= opt.shape_factor
     if "narrow" in cues:
         prior[np.ix_(ctx["narrow"], list(WIDE_VEHICLES))] *= opt.shape_factor
     if "slender" in cues:

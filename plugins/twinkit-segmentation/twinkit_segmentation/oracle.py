@@ -10,11 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from twinkit.cityscapes import N_CLASSES, SKY
 from twinkit.errors import InputError
 from twinkit.ranges import param
-
-N_CLASSES = 19
-SKY = 10
 
 
 @dataclass

@@ -699,45 +699,21 @@ def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh
 
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import read_mesh
+    from twinkit.street.truth import transfer_labels
     from twinkit_segmentation.segmesh import face_labels, vertex_labels, write_labels_ply
 
     gt = read_mesh(in_gt_mesh_ply)
     if face_labels(gt) is None and vertex_labels(gt) is None:
         raise InputError(f"{in_gt_mesh_ply}: no 'label' property on faces or vertices")
     mesh = read_mesh(in_textured_mesh_ply)
-    labels, dist = transfer_labels(gt, mesh.vertices)
+    labels, dist = transfer_labels(gt.vertices, gt.faces, mesh.vertices, face_labels=face_labels(gt),
+                                   vertex_labels=vertex_labels(gt))
     labels[dist > params.max_distance_m] = IGNORE
     np.save(out_gt_labels_npy, labels)
     write_labels_ply(out_gt_labels_ply, mesh, labels, comment="ground truth transferred from the nearest gt face")
     return {"vertices": int(len(labels)), "mean_distance_m": float(dist.mean()),
             "unlabelled": int((labels == IGNORE).sum()),
             "classes": sorted(int(c) for c in np.unique(labels) if c != IGNORE)}
-
-
-def transfer_labels(gt, points):
-    """(labels of the nearest ground-truth face (or nearest face corner's vertex label), distances)."""
-    import numpy as np
-    import open3d as o3d
-
-    tm = o3d.t.geometry.TriangleMesh()
-    tm.vertex.positions = o3d.core.Tensor(gt.vertices.astype(np.float32))
-    tm.triangle.indices = o3d.core.Tensor(gt.faces.astype(np.int32))
-    rc = o3d.t.geometry.RaycastingScene()
-    rc.add_triangles(tm)
-    q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
-    ans = rc.compute_closest_points(q)
-    prim = ans["primitive_ids"].numpy().astype(np.int64)
-    closest = ans["points"].numpy()
-    dist = np.linalg.norm(closest - np.asarray(points, dtype=np.float32), axis=1)
-    from twinkit_segmentation.segmesh import face_labels, vertex_labels
-
-    if face_labels(gt) is not None:
-        labels = face_labels(gt)[prim].astype(np.uint8)
-    else:
-        f = gt.faces[prim]
-        d = np.linalg.norm(gt.vertices[f] - np.asarray(points)[:, None, :], axis=2)
-        labels = vertex_labels(gt)[f[np.arange(len(f)), d.argmin(axis=1)]].astype(np.uint8)
-    return labels, dist
 
 
 @dataclass
