@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from twinkit import InputError
+from twinkit import cityscapes as cs
 
 #: the file of a ``movables`` folder that lists the actors
 ACTORS = "actors.json"
@@ -19,7 +20,7 @@ FRAME = "site local: metres, x east, y north, z up; yaw counter-clockwise from e
 #: real models' nominal dimensions (manufacturer figures, rounded), not CARLA's bounding boxes, which a
 #: running simulator reports (``actor.bounding_box``) -- close enough to pick a model by size.
 BLUEPRINTS: dict[int, list[tuple[str, tuple[float, float, float]]]] = {
-    13: [("vehicle.micro.microlino", (2.52, 1.47, 1.50)),
+    cs.CAR: [("vehicle.micro.microlino", (2.52, 1.47, 1.50)),
          ("vehicle.mini.cooper_s_2021", (3.88, 1.73, 1.43)),
          ("vehicle.nissan.micra", (3.78, 1.67, 1.52)),
          ("vehicle.audi.a2", (3.83, 1.67, 1.55)),
@@ -33,20 +34,20 @@ BLUEPRINTS: dict[int, list[tuple[str, tuple[float, float, float]]]] = {
          ("vehicle.lincoln.mkz_2020", (4.93, 1.86, 1.48)),
          ("vehicle.dodge.charger_2020", (5.04, 1.91, 1.48)),
          ("vehicle.nissan.patrol_2021", (5.17, 1.99, 1.94))],
-    14: [("vehicle.mercedes.sprinter", (5.93, 2.02, 2.59)),
+    cs.TRUCK: [("vehicle.mercedes.sprinter", (5.93, 2.02, 2.59)),
          ("vehicle.ford.ambulance", (6.40, 2.30, 2.80)),
          ("vehicle.carlamotors.carlacola", (5.20, 2.60, 2.60)),
          ("vehicle.carlamotors.firetruck", (8.50, 2.50, 3.30))],
-    15: [("vehicle.mitsubishi.fusorosa", (10.30, 2.40, 3.20))],
-    17: [("vehicle.vespa.zx125", (1.80, 0.70, 1.15)),
+    cs.BUS: [("vehicle.mitsubishi.fusorosa", (10.30, 2.40, 3.20))],
+    cs.MOTORCYCLE: [("vehicle.vespa.zx125", (1.80, 0.70, 1.15)),
          ("vehicle.yamaha.yzf", (2.05, 0.70, 1.10)),
          ("vehicle.kawasaki.ninja", (2.00, 0.75, 1.10)),
          ("vehicle.harley-davidson.low_rider", (2.35, 0.90, 1.10))],
-    18: [("vehicle.bh.crossbike", (1.75, 0.60, 1.05)),
+    cs.BICYCLE: [("vehicle.bh.crossbike", (1.75, 0.60, 1.05)),
          ("vehicle.diamondback.century", (1.75, 0.55, 1.05)),
          ("vehicle.gazelle.omafiets", (1.85, 0.65, 1.15))],
-    11: [("walker.pedestrian.0001", (0.5, 0.5, 1.8))],
-    12: [("walker.pedestrian.0001", (0.5, 0.5, 1.8))],  # CARLA has no rider; a walker, the bicycle is its own actor
+    cs.PERSON: [("walker.pedestrian.0001", (0.5, 0.5, 1.8))],
+    cs.RIDER: [("walker.pedestrian.0001", (0.5, 0.5, 1.8))],  # CARLA has no rider; a walker, the bicycle is its own actor
 }
 
 

@@ -9,19 +9,19 @@ from twinkit import cityscapes as cs
 from .options import LiftOptions
 
 #: CityScapes trainIds of movable objects: person, rider, car, truck, bus, train, motorcycle, bicycle
-MOVABLE = tuple(range(cs.NAMES.index("person"), cs.NAMES.index("bicycle") + 1))
+MOVABLE = cs.MOVABLE
 #: ground classes a filled patch can take (road, sidewalk, terrain)
-GROUND = (cs.ROAD, cs.SIDEWALK, cs.TERRAIN)
+GROUND = cs.GROUND
 #: per class: (min top above ground m, max top m, max footprint length m, min vertices)
 CLASS_LIMITS = {
-    11: (0.9, 2.4, 1.6, 20),  # person
-    12: (0.9, 2.5, 2.6, 20),  # rider
-    13: (0.7, 2.6, 7.0, 40),  # car
-    14: (1.2, 4.6, 14.0, 40),  # truck
-    15: (1.8, 4.6, 20.0, 40),  # bus
-    16: (1.8, 5.0, 40.0, 40),  # train
-    17: (0.5, 2.0, 3.0, 20),  # motorcycle
-    18: (0.5, 1.9, 2.5, 20),  # bicycle
+    cs.PERSON: (0.9, 2.4, 1.6, 20),
+    cs.RIDER: (0.9, 2.5, 2.6, 20),
+    cs.CAR: (0.7, 2.6, 7.0, 40),
+    cs.TRUCK: (1.2, 4.6, 14.0, 40),
+    cs.BUS: (1.8, 4.6, 20.0, 40),
+    cs.TRAIN: (1.8, 5.0, 40.0, 40),
+    cs.MOTORCYCLE: (0.5, 2.0, 3.0, 20),
+    cs.BICYCLE: (0.5, 1.9, 2.5, 20),
 }
 #: actor names per class: "Person", "Car", ...
 NAMES = {c: cs.NAMES[c].title() for c in MOVABLE}
@@ -31,10 +31,10 @@ def refine_class(cid: int, votes: np.ndarray, length: float, width: float) -> in
     """The class by label votes, unless the size rules it out: a car, truck, bus or train narrower than
     1 m and shorter than 2.8 m is a two-wheeler (labels confuse them; a scan sees a motorcycle's side):
     motorcycle or bicycle by their votes, else by length (a motorcycle is 1.9 m or longer)."""
-    if cid in (13, 14, 15, 16) and width < 1.0 and length < 2.8:
-        if votes[17] or votes[18]:
-            return 17 if votes[17] >= votes[18] else 18
-        return 17 if length >= 1.9 else 18
+    if cid in cs.WIDE_VEHICLES and width < 1.0 and length < 2.8:
+        if votes[cs.MOTORCYCLE] or votes[cs.BICYCLE]:
+            return cs.MOTORCYCLE if votes[cs.MOTORCYCLE] >= votes[cs.BICYCLE] else cs.BICYCLE
+        return cs.MOTORCYCLE if length >= 1.9 else cs.BICYCLE
     return cid
 
 
@@ -84,10 +84,10 @@ def choose_class(votes: np.ndarray, n: int, top: float, length: float, width: fl
         if votes[c] >= SECOND_VOTE_SHARE * n and why_not(c, n, top, length, vert_share, opt) is None:
             return c, None, "labels"
     if width >= VEHICLE_MIN_WIDTH_M:
-        if why_not(13, n, top, length, vert_share, opt) is None:
-            return 13, None, "size"
-        if not split_tried and why_not(13, n, top, 0.0, vert_share, opt) is None:
+        if why_not(cs.CAR, n, top, length, vert_share, opt) is None:
+            return cs.CAR, None, "size"
+        if not split_tried and why_not(cs.CAR, n, top, 0.0, vert_share, opt) is None:
             return first, "too_long", "labels"  # a car's height and width, longer: maybe several (split_along)
-        if top >= TRUCK_MIN_TOP_M and why_not(14, n, top, length, vert_share, opt) is None:
-            return 14, None, "size"
+        if top >= TRUCK_MIN_TOP_M and why_not(cs.TRUCK, n, top, length, vert_share, opt) is None:
+            return cs.TRUCK, None, "size"
     return first, why, "labels"
