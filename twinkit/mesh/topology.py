@@ -12,7 +12,8 @@ from .core import Mesh, compact
 
 def remove_vertices(mesh: Mesh, drop: np.ndarray) -> Mesh:
     """Drop the vertices flagged by ``drop`` ((n,) bool) and every face that uses one."""
-    keep_faces = ~drop[mesh.faces].any(axis=1)
+    assert mesh.faces is not None  # a mesh, not a cloud
+    keep_faces = np.asarray(~drop[mesh.faces].any(axis=1))
     return compact(mesh, keep_faces)
 
 

@@ -94,7 +94,8 @@ def close_hole(vertices: np.ndarray, loop: np.ndarray, ground_z: GroundZ | None 
     ids = np.empty(len(pts), np.int64)
     ids[:n] = loop
     ids[used] = len(vertices) + np.arange(len(used))
-    new = np.c_[pts[used], np.asarray(ground_z(pts[used]), np.float64)] if len(used) else np.zeros((0, 3))
+    new = (np.c_[pts[used], np.asarray(ground_z(pts[used]), np.float64)] if len(used) and ground_z is not None
+           else np.zeros((0, 3)))
     return ids[t], new
 
 
@@ -144,7 +145,7 @@ def _ear_clip(p: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray | None
     the outline is not simple enough to clip."""
     n = len(p)
     idx = list(range(n))
-    tris = []
+    tris: list[tuple[int, ...]] = []
     ids = np.arange(n) if ids is None else np.asarray(ids)
 
     def cross(o, a, b):
@@ -195,7 +196,10 @@ def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute
 
     if not loops:
         return mesh
-    new_v, new_f, new_attrs = [], [], {k: [] for k in mesh.attrs}
+    assert mesh.faces is not None  # a mesh, not a cloud
+    new_v: list[np.ndarray] = []
+    new_f: list[np.ndarray] = []
+    new_attrs: dict[str, list[np.ndarray]] = {k: [] for k in mesh.attrs}
     nv = mesh.n_vertices
     for lp in loops:
         if len(lp) == 3:
@@ -216,10 +220,10 @@ def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute
     face_attrs = {k: np.concatenate([a, np.full((len(faces_new),) + a.shape[1:],
                                                 face_fill if a.dtype.kind == "i" else 0, a.dtype)])
                   for k, a in mesh.face_attrs.items()}
-    out = Mesh(vertices=verts, faces=np.vstack([mesh.faces, faces_new]), attrs=attrs, face_attrs=face_attrs,
-               comments=list(mesh.comments))
+    faces = np.vstack([mesh.faces, faces_new])
+    out = Mesh(vertices=verts, faces=faces, attrs=attrs, face_attrs=face_attrs, comments=list(mesh.comments))
     if recompute_normals and "normals" in out.attrs:
-        out.attrs["normals"] = vertex_normals(out.vertices, out.faces)
+        out.attrs["normals"] = vertex_normals(out.vertices, faces)
     return out
 
 
@@ -452,7 +456,7 @@ def close_ground_holes(vertices: np.ndarray, faces: np.ndarray, ground_z: Ground
     add_v: list[np.ndarray] = []
     add_f: list[np.ndarray] = []
     done: list[np.ndarray] = []
-    rep = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
+    rep: dict = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
     nv = len(v)
 
     def left(why: str, ln: float) -> None:

@@ -166,6 +166,7 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
                    opt: GroundFillOptions, rep: dict):
     """The fill joined to the mesh: (new vertices (k, 3), new faces (f, 3) indexing ``mesh.vertices`` then the
     new vertices). ``cand``: cells to cover (ny, nx) bool, ``height`` their ground height."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     from scipy.ndimage import binary_dilation
 
     from .closest import Surface
@@ -224,8 +225,7 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
 def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None = None,
                       opt: GroundFillOptions | None = None, tree=None) -> tuple[Mesh, dict]:
     """Add grid patches over the ground's occlusion shadows; returns (mesh, report)."""
-    from scipy.spatial import cKDTree
-
+    assert mesh.faces is not None  # a mesh, not a cloud
     opt = opt or GroundFillOptions()
     c = float(opt.cell_m)
     cls, gz, lo, zloc, bmin, bmax = cell_classes(points, normals, opt, with_local=True)
@@ -299,6 +299,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
 def _append(mesh: Mesh, pv: np.ndarray, pf: np.ndarray, points, colors, tree, opt: GroundFillOptions,
             rep: dict) -> tuple[Mesh, dict]:
     """The mesh with new vertices ``pv`` (colour of the nearest point, normal up) and faces ``pf``."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     from scipy.spatial import cKDTree
 
     from twinkit.mesh import face_areas

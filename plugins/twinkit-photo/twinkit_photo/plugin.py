@@ -9,11 +9,14 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twinkit import InputError, hookimpl
 from twinkit.jsonio import write_json
 from twinkit.ranges import param
+
+if TYPE_CHECKING:
+    from .georef import Transform
 
 
 # ----------------------------------------------------------------------------- parameters
