@@ -61,8 +61,8 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
     """Cut vehicles, riders and pedestrians out of the static mesh; one PLY + actor entry per object."""
     import numpy as np
 
+    from twinkit import artefacts as A
     from twinkit.jsonio import write_json
-    from twinkit.mesh import write_obj
 
     from .movables import LiftOptions, lift_movables, open_border_near
     from .movables.actors import ACTORS, FRAME, write_actors
@@ -86,8 +86,8 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
     res = lift_movables(mesh, labels, opt, ctx.log)
     out = res.mesh
     tc = out.corner_uv if out.corner_uv is not None else np.zeros((out.n_faces, 3, 2), np.float32)
-    write_obj(out_obj, out.vertices, out.faces, tc, tex_name or "", normals=out.normals)
-    np.save(out_labels_npy, res.labels.astype(np.uint8))
+    A.write_textured_obj(out_obj, out.vertices, out.faces, tc, tex_name or "", normals=out.normals)
+    A.write_labels(out_labels_npy, res.labels.astype(np.uint8))
     mtex = None
     if tex_name:
         mtex = "texture" + Path(tex_name).suffix
@@ -103,18 +103,10 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
 
 def _read_inputs(src_obj: Path, labels_npy: Path):
     """(the textured mesh, its per-vertex labels (n,)); InputError when unreadable or not per vertex."""
-    import numpy as np
+    from twinkit import artefacts as A
 
-    from twinkit.mesh import read_obj
-
-    try:
-        labels = np.load(labels_npy)
-    except Exception as exc:
-        raise InputError(f"{labels_npy}: not a readable .npy ({exc})") from None
-    try:
-        mesh = read_obj(src_obj)
-    except Exception as exc:
-        raise InputError(f"{src_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    labels = A.read_labels(labels_npy)
+    mesh = A.read_textured_obj(src_obj)
     if labels.ndim != 1 or len(labels) != mesh.n_vertices:
         raise InputError(f"{labels_npy.name}: {labels.shape} labels for {mesh.n_vertices} vertices of "
                          f"{src_obj.name}; the labels must be per vertex of this mesh (re-run the segmentation on it)")
@@ -123,10 +115,10 @@ def _read_inputs(src_obj: Path, labels_npy: Path):
 
 def _pass_through(src_obj: Path, out_obj: Path, labels, out_labels_npy: Path) -> None:
     """``lift: false``: the mesh (with its .mtl) and the labels unchanged."""
-    import numpy as np
+    from twinkit import artefacts as A
 
     shutil.copyfile(src_obj, out_obj)
     mtl = src_obj.with_suffix(".mtl")
     if mtl.exists():
         shutil.copyfile(mtl, out_obj.with_suffix(".mtl"))
-    np.save(out_labels_npy, labels)
+    A.write_labels(out_labels_npy, labels)
