@@ -5,6 +5,7 @@
     twinkit ... --cfg job                                      print the composed config, run nothing
     twinkit status [overrides]                                 what a run would do, per step, without running
     twinkit plugins                                            loaded plugins with distributions and versions
+    twinkit plugins <kind>/<name>                              a plugin's parameters: type, range, default, help
     twinkit verify <manifest.json | run folder>                check a run's manifest against the files on disk
     twinkit gc [--dry-run] [site=<name>] [engine.outputs_dir=..] delete stored results no step folder refers to
 """
@@ -700,6 +701,8 @@ def cmd_plugins(args: list[str]) -> int:
     from twinkit.plugins import get_registry
 
     reg = get_registry()
+    if args:
+        return _plugin_params(reg, args)
     rows = [(p.kind, p.name, p.version, p.distribution, p.description) for p in reg.all()]
     if not rows:
         print("no plugins loaded (TWINKIT_PLUGINS=%r)" % os.environ.get("TWINKIT_PLUGINS"))
@@ -708,6 +711,37 @@ def cmd_plugins(args: list[str]) -> int:
     print(f"{'kind':<{w[0]}}  {'name':<{w[1]}}  {'version':<{w[2]}}  {'distribution':<{w[3]}}  description")
     for r in rows:
         print(f"{r[0]:<{w[0]}}  {r[1]:<{w[1]}}  {r[2]:<{w[2]}}  {r[3]:<{w[3]}}  {r[4]}")
+    return 0
+
+
+def _plugin_params(reg, args: list[str]) -> int:
+    """``twinkit plugins <kind>/<name>``: every parameter with its type, range, default and help."""
+    import textwrap
+
+    from twinkit.errors import PluginError
+    from twinkit.ranges import describe_params
+
+    if len(args) != 1:
+        return _err("usage: twinkit plugins [<kind>/<name>]")
+    kind, _, name = args[0].rpartition("/")
+    found = [p for p in reg.all() if p.name == name and (not kind or p.kind == kind)]
+    if len(found) != 1:
+        have = ", ".join(p.qualname for p in reg.all()) or "none loaded"
+        what = "several plugins named" if found else "no plugin"
+        raise PluginError(f"{what} '{args[0]}' (available: {have})")
+    plugin = found[0]
+    print(f"{plugin.qualname}  {plugin.version}  {plugin.distribution}  {plugin.description}".rstrip())
+    rows = describe_params(plugin.params)
+    if not rows:
+        print("  no parameters")
+        return 0
+    head = ("parameter", "type", "range", "default")
+    w = [max(len(x) for x in col) for col in zip(head, *[(r.name, r.type, r.range, r.default) for r in rows])]
+    print("  " + "  ".join(f"{h:<{w[i]}}" for i, h in enumerate(head)).rstrip())
+    for r in rows:
+        print("  " + "  ".join(f"{v:<{w[i]}}" for i, v in enumerate((r.name, r.type, r.range, r.default))).rstrip())
+        if r.help:
+            print(textwrap.fill(r.help, width=100, initial_indent=" " * 6, subsequent_indent=" " * 6))
     return 0
 
 
