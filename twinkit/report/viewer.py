@@ -14,7 +14,8 @@ from pathlib import Path
 
 from twinkit.mesh import ply_vertex_count
 from twinkit.mesh.glb import decimate, write_colored_glb
-from twinkit.report.page import ASSETS, esc, palette, size
+from twinkit.report.html import esc, link
+from twinkit.report.page import ASSETS, palette, size
 from twinkit.report.render import RENDER_VERSION, TopDown, labels_for, mesh_for_ortho
 from twinkit.report.run import RunView, copy_into, link_or_copy, read_json, rel, touch
 
@@ -209,7 +210,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
     if glbs and glbs[0][1].stat().st_size > MAX_GLB_BYTES:
         s, f = glbs[0]
         note = (f" {esc(s.get('folder'))}/{esc(f.name)} ({size(f.stat().st_size)}) is too heavy for the page; "
-                f"<a href=\"{rel(f, out)}\">download it</a>.")
+                f"{link(rel(f, out), 'download it')}.")
         glbs = []
     if glbs:
         s, f = glbs[0]
@@ -243,7 +244,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
     if not vendor_three(vdir, cache):
         return ("<p class=\"warn\">The 3D view needs three.js, which is not installed: run <code>npm ci</code> "
                 "in the twinkit repository and run again. "
-                f"The model is here: <a href=\"viewer/model.glb\">viewer/model.glb</a></p>")
+                f"The model is here: {link('viewer/model.glb')}</p>")
     glb_stat = (vdir / "model.glb").stat()
     js_cached = cache / f"model-{glb_stat.st_ino}-{glb_stat.st_size}-{glb_stat.st_mtime_ns}.glb.js"
     if not js_cached.is_file():
@@ -259,7 +260,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
         "<label><input type=\"radio\" name=\"colours\" id=\"mode-segmentation\" value=\"segmentation\"> segmentation"
         "</label><button id=\"view-reset\" type=\"button\">reset view</button>"
         "<span id=\"viewer-status\">loading…</span></div></div>"
-        f"<p class=\"dim\">From {esc(source)}: <a href=\"viewer/model.glb\">model.glb</a> "
+        f"<p class=\"dim\">From {esc(source)}: {link('viewer/model.glb', 'model.glb')} "
         f"({size((vdir / 'model.glb').stat().st_size)}).{note} Drag to orbit, right-drag to pan, wheel to zoom.</p>"
         "<script src=\"viewer/three-bundle.js\"></script><script src=\"viewer/model.glb.js\"></script>"
         "<script src=\"viewer/viewer.js\"></script>"

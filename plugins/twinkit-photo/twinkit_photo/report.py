@@ -14,6 +14,7 @@ import math
 import statistics
 
 from twinkit import hookimpl
+from twinkit.report.html import esc
 
 
 @hookimpl
@@ -63,14 +64,14 @@ def camera_map_svg(photos: dict, width: int = 560, height: int = 420, units: str
             out.append(f'<line x1="{cx:.1f}" y1="{cy:.1f}" x2="{gx:.1f}" y2="{gy:.1f}" stroke="#999" '
                        f'stroke-width="0.8"/>')
             out.append(f'<path d="M{gx - 3:.1f},{gy - 3:.1f}L{gx + 3:.1f},{gy + 3:.1f}M{gx - 3:.1f},{gy + 3:.1f}'
-                       f'L{gx + 3:.1f},{gy - 3:.1f}" stroke="#e67e22" stroke-width="1.5"><title>{_esc(name)} GPS'
+                       f'L{gx + 3:.1f},{gy - 3:.1f}" stroke="#e67e22" stroke-width="1.5"><title>{esc(name)} GPS'
                        f'</title></path>')
         col = "#c0392b" if p.get("outlier") else "#2c6fbb"
         out.append(f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="{4 if p.get("outlier") else 3}" fill="{col}">'
-                   f'<title>{_esc(name)}{" (outlier: " + _esc(p["outlier"]) + ")" if p.get("outlier") else ""}'
+                   f'<title>{esc(name)}{" (outlier: " + esc(p["outlier"]) + ")" if p.get("outlier") else ""}'
                    f'</title></circle>')
         if p.get("outlier"):
-            out.append(f'<text x="{cx + 6:.1f}" y="{cy - 4:.1f}" font-size="11" fill="#c0392b">{_esc(name)}</text>')
+            out.append(f'<text x="{cx + 6:.1f}" y="{cy - 4:.1f}" font-size="11" fill="#c0392b">{esc(name)}</text>')
     # scale bar: a round length near a fifth of the map
     target = span / 5
     bar = 10 ** math.floor(math.log10(target))
@@ -83,12 +84,6 @@ def camera_map_svg(photos: dict, width: int = 560, height: int = 420, units: str
                f'stroke-width="2"/><text x="10" y="{height - 16}" font-size="11">{bar:g} {units}</text>')
     out.append("</svg>")
     return "".join(out)
-
-
-def _esc(x) -> str:
-    import html
-
-    return html.escape(str(x), quote=True)
 
 
 def sec_photos(ctx) -> str:
