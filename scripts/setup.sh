@@ -45,8 +45,8 @@ args=(-e .)
 for d in plugins/*/; do
   [ -f "$d/pyproject.toml" ] && args+=(-e "$d")
 done
-# test tools; plyfile is the example plugin's dependency (its tests run in `make test`; the plugin itself is
-# installed only by the test that checks a third-party install); trimesh reads twinkit.mesh's files back in
+# test tools; plyfile (GPL-3.0) reads twinkit's PLY files back in tests, as an independent reader (twinkit
+# itself never imports it: twinkit.mesh.ply reads and writes PLY with numpy); trimesh reads twinkit.mesh's files back in
 # tests/mesh and is the baseline of bench/bench_meshio.py (twinkit itself does not import it)
 "${PIP[@]}" "${args[@]}" pytest pytest-timeout "plyfile>=1.0" "selenium>=4.20" "trimesh>=4"
 # 5. Blender as a module for the FBX exporter. bpy 5.0.1 (wheels for Python 3.11 only) declares numpy<2 but
