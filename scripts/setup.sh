@@ -59,7 +59,9 @@ done
 # the TFLite CityScapes model, and the readers used by the exporters' round-trip tests
 "${PIP[@]}" "transformers>=4.40" "ai-edge-litert" "ufbx>=0.0.5" "pygltflib>=1.16"
 
-# 6. three.js for the report's 3D view (registry only; copied into each report, never fetched at view time)
+# 6. three.js for the report's 3D view (registry only), bundled once by esbuild into
+#    twinkit/report_assets/three-bundle.js, which each report copies (never fetched at view time)
 npm ci --no-audit --no-fund --loglevel=error
+npm run --silent bundle
 
 echo "setup: done ($(.venv/bin/python --version); $(ls -d plugins/*/ | wc -l) plugin packages)"
