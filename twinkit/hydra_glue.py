@@ -19,6 +19,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import os
 import sys
@@ -40,19 +41,30 @@ JOB_NAME = "twinkit"
 
 def parse_overrides(overrides: list[str]) -> list:
     """``key=value`` strings as Hydra's ``Override`` objects; raises Hydra's OverrideParseException."""
+    return _parser().parse_overrides(list(overrides))
+
+
+@functools.lru_cache(maxsize=1)
+def _parser():
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
-    return OverridesParser.create().parse_overrides(list(overrides))
+    return OverridesParser.create()
 
 
-def _parsed_or_none(overrides: list[str]) -> list | None:
-    """The parsed overrides, or None when they do not parse (composition reports that, in Hydra's words)."""
+@functools.lru_cache(maxsize=16)
+def _parsed(overrides: tuple[str, ...]) -> tuple | None:
     from hydra.errors import HydraException
 
     try:
-        return parse_overrides(overrides)
+        return tuple(parse_overrides(list(overrides)))
     except (HydraException, ValueError, TypeError):
         return None
+
+
+def _parsed_or_none(overrides: list[str]) -> tuple | None:
+    """The parsed overrides, or None when they do not parse (composition reports that, in Hydra's words).
+    Parsed once per list: a run reads the same command line several times before it composes."""
+    return _parsed(tuple(overrides))
 
 
 def group_choices(overrides: list[str], group: str, options: list[str]) -> list[str] | None:
