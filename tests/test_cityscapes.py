@@ -31,3 +31,14 @@ def test_report_uses_the_shared_palette():
 
     assert np.array_equal(report.palette(), cs.lut())
     assert [n for n, _ in report.CITYSCAPES] == list(cs.NAMES)
+
+
+def test_named_ids_and_groups():
+    """Every trainId constant names its own class, and the groups hold the ids the callers relied on."""
+    for i, name in enumerate(cs.NAMES):
+        assert getattr(cs, name.upper().replace(" ", "_")) == i == cs.ID[name]
+    assert cs.GROUND == (0, 1, 9)
+    assert cs.MOVABLE == (11, 12, 13, 14, 15, 16, 17, 18)
+    assert cs.WIDE_VEHICLES == (13, 14, 15, 16)
+    assert cs.STREET_FURNITURE == (5, 6, 7)
+    assert cs.name_of(13) == "car" and cs.name_of(cs.IGNORE) == "255"

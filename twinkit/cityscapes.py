@@ -17,6 +17,27 @@ N_CLASSES = len(NAMES)
 IGNORE = 255
 IGNORE_RGB = (0, 0, 0)
 
+#: every trainId by name (the order of :data:`NAMES`); use these, never a bare number.
+(ROAD, SIDEWALK, BUILDING, WALL, FENCE, POLE, TRAFFIC_LIGHT, TRAFFIC_SIGN, VEGETATION, TERRAIN, SKY,
+ PERSON, RIDER, CAR, TRUCK, BUS, TRAIN, MOTORCYCLE, BICYCLE) = range(N_CLASSES)
+#: class name (as in :data:`NAMES`) -> trainId.
+ID: dict[str, int] = {name: i for i, name in enumerate(NAMES)}
+
+# ----------------------------------------------------------------------------- class groups
+#: the walkable / drivable surface: road, sidewalk, terrain (what the local ground is made of).
+GROUND: tuple[int, ...] = (ROAD, SIDEWALK, TERRAIN)
+#: people and vehicles, the classes that move: person, rider, car, truck, bus, train, motorcycle, bicycle.
+MOVABLE: tuple[int, ...] = (PERSON, RIDER, CAR, TRUCK, BUS, TRAIN, MOTORCYCLE, BICYCLE)
+#: vehicles with four wheels or more: car, truck, bus, train.
+WIDE_VEHICLES: tuple[int, ...] = (CAR, TRUCK, BUS, TRAIN)
+#: street furniture: pole, traffic light, traffic sign.
+STREET_FURNITURE: tuple[int, ...] = (POLE, TRAFFIC_LIGHT, TRAFFIC_SIGN)
+
+
+def name_of(train_id: int) -> str:
+    """Class name of a trainId; any other value (255, unknown ids) -> the number as text, e.g. ``"255"``."""
+    return NAMES[train_id] if 0 <= train_id < N_CLASSES else str(int(train_id))
+
 #: trainId -> sRGB colour of the official CityScapes palette, (19, 3) uint8.
 PALETTE = np.array([
     (128, 64, 128), (244, 35, 232), (70, 70, 70), (102, 102, 156), (190, 153, 153),
@@ -59,7 +80,6 @@ def nearest_class(rgb: np.ndarray) -> np.ndarray:
 #: classified, 1 unclassified, 7/18 noise, 9 water and 10 rail, which CityScapes' 19 classes have no class
 #: for, 12 overlap, 13/14 wires, 16 wire connector, 19+ overhead structures and user classes) are silent:
 #: they add nothing, so nothing is invented where the file says nothing (docs/segmentation.md "File classes").
-ROAD, SIDEWALK, BUILDING, WALL, POLE, VEGETATION, TERRAIN = 0, 1, 2, 3, 5, 8, 9
 ASPRS_TO_TRAINIDS: dict[int, tuple[int, ...]] = {
     2: (ROAD, SIDEWALK, TERRAIN),        # ground
     3: (VEGETATION, TERRAIN),            # low vegetation: grass (terrain) or low plants

@@ -120,6 +120,16 @@ def _job_interrupted(exc: KeyboardInterrupt) -> int:
     return _STATE["interrupted"]
 
 
+def _plain(node, resolve: bool = True) -> dict:
+    """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one."""
+    from omegaconf import OmegaConf
+
+    out = OmegaConf.to_container(node, resolve=resolve)
+    if not isinstance(out, dict):
+        raise TypeError(f"not a mapping config node: {type(out).__name__}")
+    return out
+
+
 def _job_body(cfg) -> int:
     """A Hydra (multirun) job: read Hydra's runtime state, then execute."""
     from twinkit.hydra_glue import job_state
@@ -162,7 +172,7 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
         cfg = cfg.copy()
         with open_dict(cfg):
             del cfg["hydra"]
-    container = OmegaConf.to_container(cfg, resolve=True)
+    container = _plain(cfg)
     from twinkit.engine import GIVEN_KEY, given_params
     from twinkit.manifest import env_secrets, redact
 
@@ -450,7 +460,6 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
     ``hydra.sweeper.params`` and the command line's sweeps. Whatever this cannot enumerate is left to
     Hydra (and each job checks its own values again).
     """
-    from omegaconf import OmegaConf
 
     from twinkit.config import check_config
     from twinkit.hydra_glue import compose, parse_overrides, sweep_jobs
@@ -474,7 +483,7 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
         if rest not in composed:
             cfg = compose(conf_dir, list(rest) + [f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}"
                                                   for k, v in values.items()])
-            composed[rest] = OmegaConf.to_container(cfg, resolve=True)
+            composed[rest] = _plain(cfg)
             container = composed[rest]
         else:
             container = _with_values(composed[rest], values)
@@ -516,7 +525,6 @@ def _run_single(conf_dir: Path, overrides: list[str]) -> int:
 
 
 def _compose(overrides: list[str]):
-    from omegaconf import OmegaConf
 
     from twinkit.config import check_choices, check_configs_are_data, find_config_dir
     from twinkit.hydra_glue import compose, open_site_inputs, register_configs, use_libyaml
@@ -531,7 +539,7 @@ def _compose(overrides: list[str]):
     cfg = compose(conf_dir, overrides)
     from twinkit.engine import GIVEN_KEY, given_params
 
-    container = OmegaConf.to_container(cfg, resolve=True)
+    container = _plain(cfg)
     container[GIVEN_KEY] = given_params(container, overrides)
     from twinkit.config import check_config
 
@@ -642,7 +650,8 @@ def cmd_gc(args: list[str]) -> int:
     from twinkit.engine.locks import gc_locks
 
     if not site_root.is_dir():
-        doomed, size, forgotten = [], 0, 0
+        doomed: list[Path] = []
+        size, forgotten = 0, 0
     else:
         with gc_locks(site_root):
             doomed, size = collect_garbage(site_root, dry_run=dry)

@@ -202,11 +202,14 @@ def sweep_jobs(conf_dir: Path, overrides: list[str]) -> list[list[str]] | None:
 
     try:
         parsed = parse_overrides(overrides)
-        fixed = [o.input_line for o in parsed if not o.is_sweep_override() and not o.key_or_group.startswith("hydra")]
+        fixed = [o.input_line for o in parsed if o.input_line is not None and not o.is_sweep_override()
+                 and not o.key_or_group.startswith("hydra")]
         base = compose(conf_dir, fixed, hydra_config=True)
         node = base.hydra.sweeper.get("params")
         params = OmegaConf.to_container(node, resolve=False) if node is not None else {}
-        combined = parse_overrides([f"{k}={v}" for k, v in params.items()] + list(overrides))
+        if not isinstance(params, dict):
+            return None
+        combined = parse_overrides(["=".join((str(k), str(v))) for k, v in params.items()] + list(overrides))
     except (ConfigError, HydraException, OmegaConfBaseException, ValueError, TypeError, AttributeError):
         return None
     per_key: dict[str, list[str]] = {}
@@ -280,7 +283,7 @@ def job_state() -> JobState:
 
     hc = HydraConfig.get()
     multirun = is_multirun()
-    n_jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1) if multirun else 1
+    n_jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1) if multirun else 1  # type: ignore[arg-type]  # a DictConfig
     return JobState(multirun=multirun, output_dir=Path(hc.runtime.output_dir), overrides=list(hc.overrides.task),
                     n_jobs=n_jobs, num=int(hc.job.num or 0) if multirun else 0)
 
@@ -290,6 +293,8 @@ def job_error(message: str, exit_code: int):
     from hydra.errors import CompactHydraException
 
     class TwinkitJobError(CompactHydraException):
+        exit_code: int
+
         def __reduce__(self):
             return job_error, (self.args[0], self.exit_code)
 
@@ -372,5 +377,5 @@ def use_libyaml() -> bool:
 
     _utils.get_yaml_loader = lambda: CLoader
     basecontainer.get_yaml_loader = _utils.get_yaml_loader
-    _utils._twinkit_libyaml = True
+    setattr(_utils, "_twinkit_libyaml", True)  # noqa: B010 -- a mark on omegaconf's module (read above)
     return True

@@ -116,3 +116,22 @@ def test_bad_faces_duplicates_any_winding_and_degenerates():
     assert m.face_attrs["texcoord"][:, 0].tolist() == [0, 12]
     clean, none = drop_bad_faces(m)
     assert clean is m and none == {"degenerate_faces": 0, "duplicate_faces": 0, "back_to_back_faces": 0}
+
+
+def test_write_obj_per_vertex_uvs_groups_and_the_mtl(tmp_path):
+    """The one OBJ writer in the forms its callers write: per-vertex UVs (demo site, synthetic street),
+    ``g`` runs, the producer's comments and precision; the texture step's per-corner form is above."""
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.123456789], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1.0]])
+    write_obj(tmp_path / "a.obj", v, f, uv, "a.png", material="atlas", comment="one\ntwo", mtl_comment=None,
+              mtl_dissolve=False, decimals=5, uv_decimals=6, groups=[("road_0", 1), ("car_13", 1)])
+    assert (tmp_path / "a.obj").read_text() == (
+        "# one\n# two\nmtllib a.mtl\n"
+        "v 0.00000 0.00000 0.00000\nv 1.00000 0.00000 0.00000\nv 1.00000 1.00000 0.12346\nv 0.00000 1.00000 0.00000\n"
+        "vt 0.000000 0.000000\nvt 1.000000 0.000000\nvt 1.000000 1.000000\nvt 0.000000 1.000000\n"
+        "usemtl atlas\ng road_0\nf 1/1 2/2 3/3\ng car_13\nf 1/1 3/3 4/4\n")
+    assert (tmp_path / "a.mtl").read_text() == "newmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd a.png\n"
+    back = read_obj(tmp_path / "a.obj")
+    assert np.array_equal(back.faces, f) and np.abs(back.vertices - v).max() < 1e-5

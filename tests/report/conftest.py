@@ -113,6 +113,7 @@ XODR = """<?xml version="1.0" standalone="yes"?>
  <geometry s="6" x="0" y="15" hdg="1.5707963" length="15"><arc curvature="0.03"/></geometry></planView>
  <lanes><laneSection s="0">
   <left><lane id="1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></left>
+  <center><lane id="0" type="none"/></center>
   <right><lane id="-1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></right>
  </laneSection></lanes></road>
 </OpenDRIVE>
@@ -138,13 +139,13 @@ class FutureRun(DemoRun):
 def future_run(demo_run) -> FutureRun:
     from PIL import Image
 
-    from twinkit.report.render import ViewMesh
+    from twinkit.report.render import read_view_mesh
 
     ws = demo_run.ws
     seg = ws / "08_segment"
     seg.mkdir(exist_ok=True)
-    mesh = ViewMesh.read(ws / "06_texture" / "textured_mesh.ply")
-    np.save(seg / "labels.npy", _fake_labels(mesh.xyz, mesh.colors))
+    mesh = read_view_mesh(ws / "06_texture" / "textured_mesh.ply")
+    np.save(seg / "labels.npy", _fake_labels(mesh.vertices, mesh.colors))
     (seg / "seg_metrics.json").write_text(json.dumps(SEG_METRICS))
     (seg / "alignment.json").write_text(json.dumps({"residual_rms_m": 0.042, "residual_max_m": 0.118, "pairs": 38}))
     (seg / "roads.xodr").write_text(XODR)

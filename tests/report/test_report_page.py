@@ -195,14 +195,15 @@ def test_road_network_is_drawn_over_the_orthophoto(future_run):
     sec = text.split("<section id=\"roads\">", 1)[1].split("</section>", 1)[0]
     assert "<image href=\"img/ortho.png\"" in sec
     lines = re.findall(r"<polyline class=\"xodr\" points=\"([^\"]+)\"", sec)
-    assert len(lines) == 2
-    # road 1 runs west-east along y = 0: the middle row of the picture
+    assert len(lines) == 6  # the driving lanes' centre lines: 4 on road 1, 2 on road 2
+    assert len(re.findall(r"<polygon class=\"band\"", sec)) == 6  # and each lane's paved band
+    # road 1 runs west-east along y = 0: its lane -1 half a lane (1.625 m) south of it, from x = -30
     meta = json.loads(next((future_run.ws / ".cache" / "report").glob("ortho-*.json")).read_text())
     w, h = meta["size"]
     b = meta["bounds"]
-    pts = [tuple(map(float, p.split(","))) for p in lines[0].split()]
-    expect = (b[3] - 0) / (b[3] - b[1]) * h
-    assert all(abs(y - expect) < 0.2 for _, y in pts)
+    expect = (b[3] + 1.625) / (b[3] - b[1]) * h
+    lanes = [[tuple(map(float, p.split(","))) for p in ln.split()] for ln in lines]
+    (pts,) = [p for p in lanes if all(abs(y - expect) < 0.2 for _, y in p)]
     assert min(x for x, _ in pts) == pytest.approx((-30 - b[0]) / (b[2] - b[0]) * w, abs=0.2)
     assert "road_qa.png" in sec
 
@@ -290,10 +291,10 @@ def test_ply_reader_matches_plyfile(demo_run):
     from plyfile import PlyData
 
     path = demo_run.ws / "06_texture" / "textured_mesh.ply"
-    mesh = render.ViewMesh.read(path)
+    mesh = render.read_view_mesh(path)
     ref = PlyData.read(str(path))
     v = ref["vertex"]
-    np.testing.assert_allclose(mesh.xyz[:, 0], np.asarray(v["x"], float))
+    np.testing.assert_allclose(mesh.vertices[:, 0], np.asarray(v["x"], float))
     np.testing.assert_array_equal(mesh.colors[:, 2], np.asarray(v["blue"]))
     faces = np.stack(ref["face"].data["vertex_indices"])
     np.testing.assert_array_equal(mesh.faces, faces)

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from twinkit.context import StepContext
+from twinkit.engine.base import EngineBase
 from twinkit.engine.memory import _PeakRSS
 from twinkit.engine.records import RECORD, RECORD_SCHEMA, _now, read_record
 from twinkit.errors import StepError
@@ -200,7 +201,7 @@ def _swap_in(tmp: Path, final: Path) -> None:
     os.replace(tmp, final)
 
 
-class StoreMixin:
+class StoreMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: is a stored result still intact (``self.store``,
     ``self.hashes``)."""
 

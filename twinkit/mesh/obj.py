@@ -76,7 +76,7 @@ def read_obj(path: Path) -> Mesh:
     ncomp = 1 + int(has_vt) + int(has_vn)
     flat = _parse(" ".join(f).replace("//", " ").replace("/", " "), np.int64)
     tri = flat is not None and flat.size == len(f) * 3 * ncomp and len(f[0].split()) == 3
-    if tri:
+    if tri and flat is not None:
         idx = flat.reshape(len(f), 3, ncomp)
     else:  # polygons: fan triangulation
         rows = []
@@ -121,36 +121,64 @@ def read_obj(path: Path) -> Mesh:
 
 
 
+def write_mtl(path: Path, material: str, texture_name: str, *, comment: str | None = "twinkit-pointcloud",
+              dissolve: bool = True) -> None:
+    """The MTL of a textured OBJ: one material ``material`` (white, unlit: ``illum 1``) whose ``map_Kd`` is
+    ``texture_name`` (a file next to it); ``comment`` (a ``#`` line first) and ``dissolve`` (a ``d 1`` line,
+    opaque) as the file's producer writes them."""
+    head = f"# {comment}\n" if comment is not None else ""
+    d = "d 1\n" if dissolve else ""
+    Path(path).write_text(f"{head}newmtl {material}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\n{d}illum 1\nmap_Kd {texture_name}\n")
+
+
 def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, texture_name: str,
-              normals: np.ndarray | None = None, material: str = "twinkit_texture") -> None:
-    """Write an OBJ + MTL beside it (same stem): ``vertices`` (n, 3) metres, ``faces`` (m, 3),
-    ``uv`` per corner (m, 3, 2) in [0, 1], v up (corners with equal UVs share a ``vt``), optional
-    unit ``normals`` (n, 3); the MTL's ``map_Kd`` names ``texture_name`` (a file next to it)."""
+              normals: np.ndarray | None = None, material: str = "twinkit_texture", *,
+              comment: str | None = None, mtl_comment: str | None = "twinkit-pointcloud", mtl_dissolve: bool = True,
+              decimals: int = 6, uv_decimals: int = 7, groups: list[tuple[str | None, int]] | None = None) -> None:
+    """Write an OBJ + MTL beside it (same stem; :func:`write_mtl`), the one OBJ writer.
+
+    ``vertices`` (n, 3) metres, written with ``decimals``; ``faces`` (m, 3) 0-based; ``uv`` in [0, 1], v up,
+    either per corner (m, 3, 2: corners with equal UVs, rounded to ``uv_decimals``, share a ``vt``) or per
+    vertex (n, 2: ``vt`` i is vertex i's); optional unit ``normals`` (n, 3). ``comment``: the ``#`` lines
+    at the top (``\n`` separates lines; None: the vertex and face count). ``groups``: (name, face count)
+    runs in face order, each preceded by ``g name`` (the counts add up to m). The MTL's ``map_Kd`` names
+    ``texture_name``; ``mtl_comment`` and ``mtl_dissolve`` go to :func:`write_mtl`."""
     path = Path(path)
     mtl = path.with_suffix(".mtl")
-    mtl.write_text(f"# twinkit-pointcloud\nnewmtl {material}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n"
-                   f"map_Kd {texture_name}\n")
+    write_mtl(mtl, material, texture_name, comment=mtl_comment, dissolve=mtl_dissolve)
     m = len(faces)
-    # share vt between corners with identical UVs (corners of the same chart)
-    flat = np.round(uv.reshape(-1, 2), 7)
-    uniq, inv = np.unique(flat, axis=0, return_inverse=True)
-    inv = inv.reshape(m, 3)
+    uv = np.asarray(uv)
+    if uv.ndim == 3:  # per corner: share vt between corners with identical UVs (corners of the same chart)
+        flat = np.round(uv.reshape(-1, 2), uv_decimals)
+        vt, inv = np.unique(flat, axis=0, return_inverse=True)
+        t1 = inv.reshape(m, 3) + 1
+    else:
+        vt, t1 = uv, None
+    if comment is None:
+        comment = f"twinkit-pointcloud textured mesh: {len(vertices)} vertices, {m} faces"
     with open(path, "w") as fh:
-        fh.write(f"# twinkit-pointcloud textured mesh: {len(vertices)} vertices, {m} faces\n")
+        fh.write("".join(f"# {ln}\n" for ln in comment.split("\n")))
         fh.write(f"mtllib {mtl.name}\n")
-        _rows(fh, vertices, "v %.6f %.6f %.6f")
-        _rows(fh, uniq, "vt %.7f %.7f")
+        _rows(fh, vertices, "v" + f" %.{decimals}f" * 3)
+        _rows(fh, vt, "vt" + f" %.{uv_decimals}f" * 2)
         if normals is not None:
             _rows(fh, normals, "vn %.4f %.4f %.4f")
         fh.write(f"usemtl {material}\n")
         f1 = faces + 1
-        t1 = inv + 1
+        if t1 is None:
+            t1 = f1
         if normals is not None:
             arr = np.stack([f1[:, 0], t1[:, 0], f1[:, 0], f1[:, 1], t1[:, 1], f1[:, 1], f1[:, 2], t1[:, 2], f1[:, 2]], axis=1)
-            _rows(fh, arr, "f %d/%d/%d %d/%d/%d %d/%d/%d")
+            fmt = "f %d/%d/%d %d/%d/%d %d/%d/%d"
         else:
             arr = np.stack([f1[:, 0], t1[:, 0], f1[:, 1], t1[:, 1], f1[:, 2], t1[:, 2]], axis=1)
-            _rows(fh, arr, "f %d/%d %d/%d %d/%d")
+            fmt = "f %d/%d %d/%d %d/%d"
+        start = 0
+        for name, count in groups or [(None, m)]:
+            if name is not None:
+                fh.write(f"g {name}\n")
+            _rows(fh, arr[start:start + count], fmt)
+            start += count
 
 
 def _rows(fh, arr: np.ndarray, fmt: str, chunk: int = 100_000) -> None:

@@ -13,12 +13,11 @@ import json
 import logging
 import os
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from twinkit.mesh import ply_vertex_count, read_ply
+from twinkit.mesh import Mesh, ply_vertex_count, read_ply
 from twinkit.report.page import palette
 from twinkit.report.run import RunView, link_or_copy, touch, write_text
 
@@ -63,23 +62,15 @@ void main() { frag = vec4(flat_shade == 1 ? f_col : v_col, 1.0); }
 
 
 
-@dataclass
-class ViewMesh:
-    """What the pictures and the 3D view need of a mesh: ``xyz`` (n, 3) float64 site frame, ``faces`` (m, 3)
-    (empty for a cloud), ``colors`` (n, 3) uint8 or None, ``labels`` (n,) uint8 trainIds from a vertex
-    ``label`` property or None."""
-
-    xyz: np.ndarray
-    faces: np.ndarray
-    colors: np.ndarray | None
-    labels: np.ndarray | None
-
-    @classmethod
-    def read(cls, path: Path) -> "ViewMesh":
-        m = read_ply(path)
-        faces = m.faces if m.faces is not None else np.zeros((0, 3), np.int64)
-        labels = np.asarray(m.attrs["label"]).astype(np.uint8) if "label" in m.attrs else None
-        return cls(m.vertices, faces, m.colors, labels)
+def read_view_mesh(path: Path) -> Mesh:
+    """The mesh the pictures and the 3D view show (twinkit.mesh.read_ply): ``faces`` (m, 3), empty (0, 3) for a
+    cloud; a vertex ``label`` property as ``attrs["label"]`` (n,) uint8 trainIds; ``colors`` (n, 3) uint8 or None."""
+    m = read_ply(path)
+    if m.faces is None:
+        m.faces = np.zeros((0, 3), np.int64)
+    if "label" in m.attrs:
+        m.attrs["label"] = np.asarray(m.attrs["label"]).astype(np.uint8)
+    return m
 
 def _gl_context():
     if "ctx" not in _GL:
@@ -195,18 +186,18 @@ class TopDown:
         self.run, self.out = run, out
         self.img = out / "img"
         self.frame: dict | None = None
-        self.mesh: ViewMesh | None = None
+        self.mesh: Mesh | None = None
         self.mesh_key = ""
         self.timings: dict[str, float] = {}
 
-    def _mesh(self) -> ViewMesh | None:
+    def _mesh(self) -> Mesh | None:
         if self.mesh is None:
             hit = mesh_for_ortho(self.run)
             if hit is None:
                 return None
             s, f = hit
             t = time.perf_counter()
-            self.mesh = ViewMesh.read(f)
+            self.mesh = read_view_mesh(f)
             self.mesh_src = f
             self.mesh_key = self.run.key_of(s, f)
             self.timings["read_mesh_s"] = round(time.perf_counter() - t, 3)
@@ -233,17 +224,17 @@ class TopDown:
         t0 = time.perf_counter()
         if not (tex_c.is_file() and meta_c.is_file()):
             mesh = self._mesh()
-            if mesh is None or mesh.colors is None or not len(mesh.faces):
+            if mesh is None or mesh.colors is None or mesh.faces is None or not len(mesh.faces):
                 return None
-            bounds, w, h = ortho_frame(mesh.xyz)
+            bounds, w, h = ortho_frame(mesh.vertices)
             t = time.perf_counter()
-            img = render_topdown(mesh.xyz, mesh.faces, mesh.colors, bounds, w, h)
+            img = render_topdown(mesh.vertices, mesh.faces, mesh.colors, bounds, w, h)
             self.timings["ortho_render_s"] = round(time.perf_counter() - t, 3)
             save_png(img, tex_c)
-            labels = lab_hit if lab_hit is not None else mesh.labels
+            labels = lab_hit if lab_hit is not None else mesh.attrs.get("label")
             labels_name = labels_name or (f.name + " (vertex labels)")
             if labels is not None:
-                seg = render_topdown(mesh.xyz, mesh.faces, palette()[labels], bounds, w, h, flat=True)
+                seg = render_topdown(mesh.vertices, mesh.faces, palette()[labels], bounds, w, h, flat=True)
                 save_png(seg, seg_c)
             write_text(meta_c, json.dumps({"bounds": bounds, "size": [w, h], "mesh": str(f),
                                             "segmentation": labels is not None, "labels": labels_name}))

@@ -92,10 +92,10 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
         if not cached.is_file():
             t = time.perf_counter()
             mesh = pics._mesh()
-            if mesh is None or not len(mesh.faces):
+            if mesh is None or mesh.faces is None or not len(mesh.faces):
                 return ""
-            labels = lab[0] if lab else mesh.labels
-            xyz, faces, near = decimate(mesh.xyz, mesh.faces, VIEWER_MAX_FACES)
+            labels = lab[0] if lab else mesh.attrs.get("label")
+            xyz, faces, near = decimate(mesh.vertices, mesh.faces, VIEWER_MAX_FACES)
             cols = mesh.colors[near] if mesh.colors is not None else None
             seg = palette()[labels[near]] if labels is not None else None
             write_colored_glb(cached, xyz, faces, cols, seg)

@@ -38,6 +38,22 @@ class Surface:
             dist[s:s + len(part)] = np.linalg.norm(pts - part, axis=1)
         return fid, bary, dist
 
+    def nearest(self, query: np.ndarray, chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For (q, 3) points: (face id (q,) int64, closest point (q, 3) float32, distance (q,) float32)."""
+        import open3d as o3d
+
+        q = len(query)
+        fid = np.empty(q, np.int64)
+        pts = np.empty((q, 3), np.float32)
+        dist = np.empty(q, np.float32)
+        for s in range(0, q, chunk):
+            part = np.ascontiguousarray(query[s:s + chunk], np.float32)
+            ans = self.scene.compute_closest_points(o3d.core.Tensor(part))
+            fid[s:s + len(part)] = ans["primitive_ids"].numpy()
+            pts[s:s + len(part)] = ans["points"].numpy()
+            dist[s:s + len(part)] = np.linalg.norm(pts[s:s + len(part)] - part, axis=1)
+        return fid, pts, dist
+
     def interpolate(self, values: np.ndarray, fid: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """Per-vertex ``values`` (n, c) interpolated at (face id, barycentric) -> (q, c) float32."""
         tri = self.faces[fid]

@@ -78,28 +78,21 @@ def _first_nonempty(cls: np.ndarray, axis: int, reverse: bool):
     return np.moveaxis(prev, -1, axis)
 
 
-def ground_grid(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions, with_local: bool = False):
+def cell_classes(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions, with_local: bool = False):
     """(classes (ny, nx) int8: 0 empty, 1 ground, 2 blocked; ground height (ny, nx); origin (2,)); with
     ``with_local`` also the local lowest up-facing height (ny, nx) (inf where none within the window) and,
-    per cell, the lowest and the highest blocking point above it (inf / -inf where none)."""
-    from scipy.ndimage import minimum_filter
+    per cell, the lowest and the highest blocking point above it (inf / -inf where none).
+    The ground is :class:`twinkit.street.ground.LocalGround`'s window minimum over ``local_window_m``
+    (rejects car roofs, tables, the tops of walls), its ground points within ``ground_tol_m`` of it."""
+    from twinkit.street.ground import LocalGround
 
-    c = float(opt.cell_m)
-    lo = points[:, :2].min(axis=0) - c
-    ij = np.floor((points[:, :2] - lo) / c).astype(np.int64)
-    nx, ny = int(ij[:, 0].max()) + 2, int(ij[:, 1].max()) + 2
-    flat = ij[:, 1] * nx + ij[:, 0]
     nz = normals[:, 2]
-    up = nz >= opt.up_normal_z
-    zmin = np.full(nx * ny, np.inf)
-    np.minimum.at(zmin, flat[up], points[up, 2])
-    # local lowest up-facing surface (rejects car roofs, tables, the tops of walls)
-    w = max(3, int(round(opt.local_window_m / c)) | 1)
-    zloc = minimum_filter(zmin.reshape(ny, nx), size=w, mode="nearest").ravel()
-    is_ground_pt = up & (points[:, 2] <= zloc[flat] + opt.ground_tol_m)
-    gz = np.full(nx * ny, np.inf)
-    np.minimum.at(gz, flat[is_ground_pt], points[is_ground_pt, 2])
-    ground = np.isfinite(gz)
+    g = LocalGround(points, nz >= opt.up_normal_z, cell_m=opt.cell_m, window="min", window_m=opt.local_window_m,
+                    min_window_cells=3, ground_tol_m=opt.ground_tol_m, ground_stat="lowest", fill="none")
+    nx, ny, lo = g.nx, g.ny, g.lo
+    flat = g.flat
+    zloc = g.level.ravel()
+    ground = g.has_z.ravel()
     # blocking: near-horizontal normals above the ground level of the neighbourhood
     wall = (np.abs(nz) < opt.wall_normal_z) & (points[:, 2] > np.where(np.isfinite(zloc[flat]), zloc[flat], -np.inf)
                                                 + opt.ground_tol_m)
@@ -118,9 +111,8 @@ def ground_grid(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions,
     cls[ground] = 1
     cls[blocked] = 2
     if with_local:
-        return (cls.reshape(ny, nx), gz.reshape(ny, nx), lo, zloc.reshape(ny, nx), bmin.reshape(ny, nx),
-                bmax.reshape(ny, nx))
-    return cls.reshape(ny, nx), gz.reshape(ny, nx), lo
+        return (cls.reshape(ny, nx), g.z, lo, g.level, bmin.reshape(ny, nx), bmax.reshape(ny, nx))
+    return cls.reshape(ny, nx), g.z, lo
 
 
 def _holes(cls: np.ndarray, gz: np.ndarray, max_cells: int, max_rise: tuple[float, float] | None = None):
@@ -191,6 +183,7 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
                    opt: GroundFillOptions, rep: dict):
     """The fill joined to the mesh: (new vertices (k, 3), new faces (f, 3) indexing ``mesh.vertices`` then the
     new vertices). ``cand``: cells to cover (ny, nx) bool, ``height`` their ground height."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     import pythoncdt as cdt
     from scipy.ndimage import binary_dilation
     from scipy.spatial import cKDTree
@@ -306,11 +299,10 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
 def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None = None,
                       opt: GroundFillOptions | None = None, tree=None) -> tuple[Mesh, dict]:
     """Add grid patches over the ground's occlusion shadows; returns (mesh, report)."""
-    from scipy.spatial import cKDTree
-
+    assert mesh.faces is not None  # a mesh, not a cloud
     opt = opt or GroundFillOptions()
     c = float(opt.cell_m)
-    cls, gz, lo, zloc, bmin, bmax = ground_grid(points, normals, opt, with_local=True)
+    cls, gz, lo, zloc, bmin, bmax = cell_classes(points, normals, opt, with_local=True)
     cls0, gz0 = cls, gz
     ny, nx = cls.shape
     max_cells = int(opt.max_gap_m / c)
@@ -394,6 +386,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
 def _append(mesh: Mesh, pv: np.ndarray, pf: np.ndarray, points, colors, tree, opt: GroundFillOptions,
             rep: dict) -> tuple[Mesh, dict]:
     """The mesh with new vertices ``pv`` (colour of the nearest point, normal up) and faces ``pf``."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     from scipy.spatial import cKDTree
 
     from twinkit.mesh import face_areas
@@ -522,7 +515,7 @@ def close_ground_holes(vertices: np.ndarray, faces: np.ndarray, ground_z, *, max
     add_v: list[np.ndarray] = []
     add_f: list[np.ndarray] = []
     done: list[np.ndarray] = []
-    rep = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
+    rep: dict = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
     nv = len(v)
 
     def left(why: str, ln: float) -> None:

@@ -122,24 +122,19 @@ def ground_border(vertices: np.ndarray, faces: np.ndarray, footprint: Footprint,
     }
 
 
-def height_above_ground(vertices: np.ndarray, ground_xyz: np.ndarray, cell_m: float = 0.5,
-                        window_m: float = 4.0) -> np.ndarray:
-    """Per vertex, its height above the local ground: the lowest of ``ground_xyz`` (points with an upward
-    normal) within ``window_m`` (inf where there is none)."""
-    from scipy.ndimage import minimum_filter
+def at_ground_level(vertices: np.ndarray, points: np.ndarray, normals: np.ndarray | None,
+                    tol_m: float = 0.5) -> np.ndarray:
+    """(n,) bool: the ``vertices`` within ``tol_m`` of the cloud's local ground, the lowest of its up-facing
+    ``points`` (normal z >= 0.85; none without ``normals``) within 4 m, on a 0.5 m grid
+    (:class:`twinkit.street.ground.LocalGround`'s window minimum). False where no up-facing point lies within
+    the window."""
+    from twinkit.street.ground import LocalGround
 
-    if len(ground_xyz) == 0:
-        return np.full(len(vertices), np.inf)
-    lo = np.minimum(ground_xyz[:, :2].min(axis=0), vertices[:, :2].min(axis=0)) - cell_m
-    hi = np.maximum(ground_xyz[:, :2].max(axis=0), vertices[:, :2].max(axis=0)) + cell_m
-    nx, ny = (np.ceil((hi - lo) / cell_m).astype(int) + 1)
-    zmin = np.full((ny, nx), np.inf)
-    ij = np.floor((ground_xyz[:, :2] - lo) / cell_m).astype(np.int64)
-    np.minimum.at(zmin, (ij[:, 1], ij[:, 0]), ground_xyz[:, 2])
-    w = max(3, int(round(window_m / cell_m)) | 1)
-    zl = minimum_filter(zmin, size=w, mode="nearest")
-    vij = np.floor((vertices[:, :2] - lo) / cell_m).astype(np.int64)
-    return vertices[:, 2] - zl[vij[:, 1], vij[:, 0]]
+    up = normals[:, 2] >= 0.85 if normals is not None else np.zeros(len(points), bool)
+    if not up.any():
+        return np.zeros(len(vertices), bool)
+    g = LocalGround(points[up], cell_m=0.5, window="min", window_m=4.0, min_window_cells=3, cover_xy=vertices[:, :2])
+    return np.abs(g.height(vertices)) <= tol_m
 
 
 def drop_test(vertices: np.ndarray, faces: np.ndarray, samples: np.ndarray, tol_m: float = 0.05,
@@ -221,8 +216,7 @@ def ground_border_report(vertices: np.ndarray, faces: np.ndarray, points: np.nda
     with a picture at ``png``. For the steps that make a site mesh (clean_mesh, merge_tiles)."""
     if len(faces) == 0 or normals is None:
         return None
-    up = normals[:, 2] >= 0.85
-    ground_v = np.abs(height_above_ground(vertices, points[up])) <= 0.5
+    ground_v = at_ground_level(vertices, points, normals)
     fp = Footprint.from_points(points, fill_limit_m=max(float(fill_limit_m), 1.0))
     rep = ground_border(vertices, faces, fp, ground_v)
     edges = rep.pop("_edges")

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from twinkit.cityscapes import PERSON
+
 REQUIRED_CLASSES = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 17, 18}
-PERSON = 11
 
 
 def _all_files(folder: Path) -> dict[str, bytes]:

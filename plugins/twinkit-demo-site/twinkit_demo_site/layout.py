@@ -20,22 +20,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twinkit_demo_site.meshbuild import Mesh, MeshBuilder
+from twinkit import cityscapes
+from twinkit.mesh import Mesh
+from twinkit_demo_site.meshbuild import MeshBuilder
 from twinkit_demo_site.textures import CAR_PAINTS, FACADES, Atlas
 
-LABELS = {
-    "road": 0, "sidewalk": 1, "building": 2, "wall": 3, "fence": 4, "pole": 5, "traffic light": 6,
-    "traffic sign": 7, "vegetation": 8, "terrain": 9, "sky": 10, "person": 11, "car": 13,
-    "motorcycle": 17, "bicycle": 18,
-}
+#: the CityScapes classes the demo site builds: name -> trainId (twinkit.cityscapes), in trainId order
+LABELS = {name: cityscapes.ID[name] for name in (
+    "road", "sidewalk", "building", "wall", "fence", "pole", "traffic light", "traffic sign", "vegetation",
+    "terrain", "sky", "person", "car", "motorcycle", "bicycle")}
 L = LABELS
 
 GROUND_KINDS = {  # kind -> (material, label, raised)
-    "asphalt": ("asphalt", 0, False),
-    "marking": ("marking", 0, False),
-    "paving": ("paving", 1, True),
-    "curb": ("granite", 1, True),
-    "grass": ("grass", 9, True),
+    "asphalt": ("asphalt", cityscapes.ROAD, False),
+    "marking": ("marking", cityscapes.ROAD, False),
+    "paving": ("paving", cityscapes.SIDEWALK, True),
+    "curb": ("granite", cityscapes.SIDEWALK, True),
+    "grass": ("grass", cityscapes.TERRAIN, True),
 }
 KIND_NAMES = ["none", *GROUND_KINDS]
 GROUND_PERIOD_M = 4.0

@@ -3,33 +3,22 @@
 Every primitive owns its vertices (no vertex is shared between two primitives),
 so a vertex's label is the label of all its faces. UVs are atlas coordinates
 (OBJ convention: v up) produced by :meth:`textures.Atlas.uv`.
+
+The finished mesh is a :class:`twinkit.mesh.Mesh` (site frame, metres, z up): ``vertices`` (n, 3) float64,
+``faces`` (m, 3) int64, ``attrs["uv"]`` (n, 2) float64 atlas UV, ``attrs["label"]`` (n,) uint8 and
+``face_attrs["label"]`` (m,) uint8 CityScapes trainIds.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
+from twinkit.mesh import Mesh
 from twinkit_demo_site.textures import Atlas
 
 
 MAX_ASPECT = 6.0
-
-
-@dataclass
-class Mesh:
-    """Arrays of the finished mesh (site frame, metres, z up).
-
-    vertices: (n, 3) float64; uvs: (n, 2) float64 atlas UV; faces: (m, 3) int64;
-    face_labels: (m,) uint8 CityScapes trainId; vertex_labels: (n,) uint8.
-    """
-
-    vertices: np.ndarray
-    uvs: np.ndarray
-    faces: np.ndarray
-    face_labels: np.ndarray
-    vertex_labels: np.ndarray
 
 
 def _unit(v):
@@ -72,7 +61,7 @@ class MeshBuilder:
         fl = np.concatenate(self._l)
         vl = np.zeros(len(v), np.uint8)
         vl[f.ravel()] = np.repeat(fl, 3)
-        return Mesh(vertices=v, uvs=np.concatenate(self._uv), faces=f, face_labels=fl, vertex_labels=vl)
+        return Mesh(vertices=v, faces=f, attrs={"uv": np.concatenate(self._uv), "label": vl}, face_attrs={"label": fl})
 
     # ------------------------------------------------------------ quads
     def quad(self, p0, eu, ev, lu: float, lv: float, material: str, label: int,

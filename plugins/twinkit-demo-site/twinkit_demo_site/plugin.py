@@ -27,25 +27,41 @@ PRESETS = {
 
 @dataclass
 class DemoSiteParams:
-    size: str = param("small", choices=("small", "default", "large"))  # small | default | large
-    seed: int = param(0, ge=0)
-    photo_count: int = param(0, ge=0, le=10000)  # 0 = the preset's count
-    photo_width_px: int = param(1024, ge=16, le=16384)
-    photo_height_px: int = param(768, ge=16, le=16384)
-    focal_px: float = param(820.0, gt=0)
-    photo_supersample: int = param(1, ge=1, le=8)  # colour rays per pixel side (2 = 4 + 1 rays per pixel)
-    noise_mm: float = param(3.0, ge=0)  # scanner range noise (1 sigma, clipped at 3 sigma)
-    scanner_height_m: float = param(2.0, gt=0)
-    max_range_m: float = param(80.0, gt=0)
-    density_scale: float = param(1.0, gt=0, le=100)  # multiplies the preset's point density
-    gps_noise_m: float = param(2.5, ge=0)  # EXIF GPS noise (1 sigma horizontal; vertical 1.6x)
-    osm_shift_m: float = param(3.5, ge=0)  # length of the known OSM translation
-    osm_rotation_deg: float = param(0.8, ge=0, le=180)  # magnitude of the known OSM rotation about the base point
-    shadows: bool = True
-    weathering: float = param(0.6, ge=0, le=1)  # world-space stains in the photos so no two places look alike; 0 = off
-    weathering_scan: bool = False  # the scanner's colours weathered too (changes the segmentation demo's input)
-    gcp_survey_noise_m: float = param(0.005, ge=0)  # noise of the surveyed ground-control points (gcp.json)
-    gcp_pixel_noise_px: float = param(0.5, ge=0)  # noise of their pixel observations (a user clicking them)
+    size: str = param("small", choices=("small", "default", "large"),
+                      help="Preset of the generated intersection (PRESETS): small, default or large; it sets the "
+                           "site's size, the scanner's point density and the photo count.")
+    seed: int = param(0, ge=0, help="Random seed: the same seed and size give the same site, scan and photos.")
+    photo_count: int = param(0, ge=0, le=10000, help="Number of photos to render; 0 = the preset's count.")
+    photo_width_px: int = param(1024, ge=16, le=16384, help="Width of each rendered photo (px).")
+    photo_height_px: int = param(768, ge=16, le=16384, help="Height of each rendered photo (px).")
+    focal_px: float = param(820.0, gt=0, help="Focal length of the photo camera (px).")
+    photo_supersample: int = param(1, ge=1, le=8,
+                                   help="Colour rays per pixel side when rendering photos (2 = 4 + 1 rays per "
+                                        "pixel); higher = smoother and slower.")
+    noise_mm: float = param(3.0, ge=0, help="Range noise of the simulated scanner (mm, 1 sigma, clipped at 3 sigma).")
+    scanner_height_m: float = param(2.0, gt=0, help="Height (m) of the simulated scanner above the road.")
+    max_range_m: float = param(80.0, gt=0, help="Maximum range (m) of the simulated scanner.")
+    density_scale: float = param(1.0, gt=0, le=100, help="Multiplies the preset's point density.")
+    gps_noise_m: float = param(2.5, ge=0,
+                               help="Noise of the photos' EXIF GPS positions (m, 1 sigma horizontal; vertical "
+                                    "1.6x).")
+    osm_shift_m: float = param(3.5, ge=0,
+                               help="Length (m) of the known translation applied to the generated OSM roads (what "
+                                    "road alignment must recover).")
+    osm_rotation_deg: float = param(0.8, ge=0, le=180,
+                                    help="Magnitude (degrees) of the known rotation of the generated OSM roads "
+                                         "about the base point.")
+    shadows: bool = param(True, help="Cast sun shadows in the scan's and the photos' colours.")
+    weathering: float = param(0.6, ge=0, le=1,
+                              help="Strength of world-space stains in the photos, so that no two places look alike; 0 = "
+                                   "off.")
+    weathering_scan: bool = param(False,
+                                  help="Weather the scanner's colours too (changes the segmentation demo's input).")
+    gcp_survey_noise_m: float = param(0.005, ge=0,
+                                      help="Noise (m) of the surveyed ground-control points written to gcp.json.")
+    gcp_pixel_noise_px: float = param(0.5, ge=0,
+                                      help="Noise (px) of the ground-control points' pixel observations (a user "
+                                           "clicking them).")
 
 
 def _osm_transform(params: DemoSiteParams, seed: int) -> dict:
@@ -178,8 +194,8 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
 
     H = scene.dims.half_m
     zmax = float(mesh.vertices[:, 2].max())
-    labels_present = sorted(int(v) for v in np.unique(mesh.face_labels))
-    counts = {**scene.counts, "points": n_points, "ghost_points": int((cloud["label"] == 11).sum()),
+    labels_present = sorted(int(v) for v in np.unique(mesh.face_attrs["label"]))
+    counts = {**scene.counts, "points": n_points, "ghost_points": int((cloud["label"] == LABELS["person"]).sum()),
               "photos": n_photos, "scanner_positions": int(len(traj["xyz"]))}
     site = {
         **geo.georef_json(),

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit_demo_site.meshbuild import Mesh
+from twinkit.cityscapes import IGNORE
+from twinkit.mesh import Mesh
 from twinkit_demo_site.textures import Atlas
 from twinkit_demo_site.weathering import apply_weathering
 
 SUN_DIR = np.array([-0.45, -0.55, 0.70])
 SUN_DIR = SUN_DIR / np.linalg.norm(SUN_DIR)
-SKY_ID = 255
 
 
 class Tracer:
@@ -35,8 +35,8 @@ class Tracer:
         v = mesh.vertices[mesh.faces]
         n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         self.face_normals = (n / (np.linalg.norm(n, axis=1, keepdims=True) + 1e-20)).astype(np.float32)
-        self.face_uv = mesh.uvs[mesh.faces].astype(np.float32)  # (m, 3, 2)
-        self.face_labels = mesh.face_labels
+        self.face_uv = mesh.attrs["uv"][mesh.faces].astype(np.float32)  # (m, 3, 2)
+        self.face_labels = mesh.face_attrs["label"]
 
     # ------------------------------------------------------------------ primitives
     def cast(self, origins: np.ndarray, dirs: np.ndarray):
@@ -146,7 +146,7 @@ class Tracer:
                 col[hi] = self.shade(p, nrm, self.albedo(ph, ans["primitive_uvs"].numpy()[hi], p), shadows=shadows)
             rgb_acc += col
             if k == 0:
-                label = np.full(n, SKY_ID, np.uint8)
+                label = np.full(n, IGNORE, np.uint8)  # sky: no surface, unlabelled
                 label[hi] = self.face_labels[prim[hi]]
                 depth = np.full(n, np.inf, np.float32)
                 depth[hi] = t[hi] * dc[hi, 2]

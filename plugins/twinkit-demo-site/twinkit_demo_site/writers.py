@@ -10,8 +10,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from twinkit.mesh import Mesh
 from twinkit_demo_site.layout import LABELS
-from twinkit_demo_site.meshbuild import Mesh
 from twinkit_demo_site.textures import Atlas
 
 LABEL_NAMES = {v: k for k, v in LABELS.items()}
@@ -39,36 +39,29 @@ def _json_default(o):
 
 # ---------------------------------------------------------------- mesh
 def _face_order(mesh: Mesh) -> np.ndarray:
-    return np.argsort(mesh.face_labels, kind="stable")
+    return np.argsort(mesh.face_attrs["label"], kind="stable")
 
 
 def write_obj(path: Path, mesh: Mesh, atlas: Atlas) -> None:
-    """OBJ + MTL + PNG atlas (companions share the OBJ's stem). Faces grouped by class (``g road`` ...)."""
+    """OBJ + MTL + PNG atlas (companions share the OBJ's stem; twinkit.mesh.write_obj). Faces grouped by
+    class (``g road_0`` ...)."""
     from PIL import Image
 
+    from twinkit.mesh import write_obj as write_mesh_obj
+
     path = Path(path)
-    mtl = path.with_suffix(".mtl")
     png = path.with_suffix(".png")
     Image.fromarray(atlas.image).save(png, optimize=False, compress_level=6)
-    mtl.write_text(f"# twinkit demo site ground truth\nnewmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {png.name}\n")
     order = _face_order(mesh)
-    with open(path, "w") as fh:
-        fh.write("# twinkit demo site: ground-truth mesh, site frame (metres, z up)\n")
-        fh.write(f"# {len(mesh.vertices)} vertices, {len(mesh.faces)} faces; groups are CityScapes classes (trainId in name)\n")
-        fh.write(f"mtllib {mtl.name}\n")
-        np.savetxt(fh, mesh.vertices, fmt="v %.5f %.5f %.5f")
-        np.savetxt(fh, mesh.uvs, fmt="vt %.6f %.6f")
-        fh.write("usemtl atlas\n")
-        f = mesh.faces[order] + 1
-        lab = mesh.face_labels[order]
-        bounds = np.flatnonzero(np.diff(lab)) + 1
-        for part in np.split(np.arange(len(f)), bounds):
-            if not len(part):
-                continue
-            lb = int(lab[part[0]])
-            fh.write(f"g {LABEL_NAMES.get(lb, 'class').replace(' ', '_')}_{lb}\n")
-            ff = f[part]
-            np.savetxt(fh, np.repeat(ff, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+    lab = mesh.face_attrs["label"][order]
+    ids, counts = np.unique(lab, return_counts=True)  # sorted, as the faces are
+    groups = [(f"{LABEL_NAMES.get(int(lb), 'class').replace(' ', '_')}_{int(lb)}", int(c)) for lb, c in zip(ids, counts)]
+    write_mesh_obj(path, mesh.vertices, mesh.faces[order], mesh.attrs["uv"], png.name, material="atlas",
+                   comment="twinkit demo site: ground-truth mesh, site frame (metres, z up)\n"
+                           f"{len(mesh.vertices)} vertices, {len(mesh.faces)} faces; groups are CityScapes classes "
+                           "(trainId in name)",
+                   mtl_comment="twinkit demo site ground truth", mtl_dissolve=False, decimals=5, uv_decimals=6,
+                   groups=groups)
 
 
 def write_mesh_ply(path: Path, mesh: Mesh, atlas: Atlas) -> None:
@@ -77,15 +70,15 @@ def write_mesh_ply(path: Path, mesh: Mesh, atlas: Atlas) -> None:
 
     Face order equals the OBJ's (grouped by class); vertex colours are the texture at the vertex UV.
     """
-    from twinkit.mesh import Mesh as PlyMesh, write_ply
+    from twinkit.mesh import write_ply
 
-    col = np.clip(atlas.sample(mesh.uvs) * 255 + 0.5, 0, 255).astype(np.uint8)
-    uv = np.asarray(mesh.uvs).astype(np.float32)
+    col = np.clip(atlas.sample(mesh.attrs["uv"]) * 255 + 0.5, 0, 255).astype(np.uint8)
+    uv = np.asarray(mesh.attrs["uv"]).astype(np.float32)
     order = _face_order(mesh)
-    write_ply(path, PlyMesh(
+    write_ply(path, Mesh(
         vertices=mesh.vertices, faces=mesh.faces[order],
-        attrs={"u": uv[:, 0], "v": uv[:, 1], "colors": col, "label": mesh.vertex_labels.astype(np.uint8, copy=False)},
-        face_attrs={"label": mesh.face_labels[order].astype(np.uint8, copy=False)},
+        attrs={"u": uv[:, 0], "v": uv[:, 1], "colors": col, "label": mesh.attrs["label"].astype(np.uint8, copy=False)},
+        face_attrs={"label": mesh.face_attrs["label"][order].astype(np.uint8, copy=False)},
         comments=["twinkit demo site ground truth, site frame (metres, z up); label = CityScapes trainId"]))
 
 
@@ -93,9 +86,9 @@ def write_mesh_ply(path: Path, mesh: Mesh, atlas: Atlas) -> None:
 def write_cloud_ply(path: Path, cloud: dict) -> None:
     """Binary PLY point cloud in the site frame (twinkit.mesh.write_ply; vertex rows written in slices):
     x y z nx ny nz (float32) red green blue label (uchar) scanner (uint)."""
-    from twinkit.mesh import Mesh as PlyMesh, write_ply
+    from twinkit.mesh import write_ply
 
-    write_ply(path, PlyMesh(
+    write_ply(path, Mesh(
         vertices=cloud["xyz"],
         attrs={"normals": cloud["normals"], "colors": cloud["rgb"],
                "label": np.asarray(cloud["label"]).astype(np.uint8, copy=False),

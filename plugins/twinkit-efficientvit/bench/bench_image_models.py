@@ -32,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
+from twinkit import cityscapes
+
 HERE = Path(__file__).resolve()
 REPO_ROOT = HERE.parents[3]
 LUND = REPO_ROOT / ".." / "shared" / "data" / "photos" / "lund_street"
@@ -128,7 +130,7 @@ def sanity(models: list[str], hf_model: str) -> list[tuple]:
     rows = []
     for name, lab in preds.items():
         h, w = lab.shape[1:]
-        road = (lab[:, int(0.85 * h):, int(0.4 * w):int(0.6 * w)] == 0).mean(axis=(1, 2))
+        road = (lab[:, int(0.85 * h):, int(0.4 * w):int(0.6 * w)] == cityscapes.ROAD).mean(axis=(1, 2))
         top = np.isin(lab[:, : int(0.05 * h)], [2, 8, 10]).mean(axis=(1, 2))
         agree = float((lab == ref).mean()) if ref is not None else float("nan")
         rows.append((name, float(road.mean()), float(road.min()), float(top.mean()), float(top.min()), agree))

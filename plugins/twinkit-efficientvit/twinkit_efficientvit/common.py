@@ -22,29 +22,32 @@ CITYSCAPES_CLASSES: list[str] = list(cityscapes.NAMES)
 N_CLASSES = cityscapes.N_CLASSES
 IGNORE_ID = cityscapes.IGNORE
 
-#: Other label names (lower case, words separated by one space) -> CityScapes trainId.
+#: CityScapes class name -> other names for it (lower case, words separated by one space), and
+#: :data:`LABEL_SYNONYMS`, every such name -> its trainId.
 #: Covers the spellings of CityScapes-, ADE20K-, COCO-stuff- and Mapillary-style label sets.
-LABEL_SYNONYMS: dict[str, int] = {
-    "road": 0, "street": 0, "roadway": 0, "road route": 0, "route": 0, "lane marking general": 0,
-    "sidewalk": 1, "pavement": 1, "sidewalk pavement": 1, "footway": 1,
-    "building": 2, "house": 2, "skyscraper": 2, "edifice": 2,
-    "wall": 3,
-    "fence": 4, "fencing": 4, "guard rail": 4, "railing": 4,
-    "pole": 5, "utility pole": 5, "street light": 5, "streetlight": 5, "street lamp": 5,
-    "traffic light": 6, "traffic signal": 6, "traffic light front": 6,
-    "traffic sign": 7, "traffic sign front": 7, "stop sign": 7,
-    "vegetation": 8, "tree": 8, "plant": 8, "flora": 8, "palm": 8, "palm tree": 8,
-    "terrain": 9, "grass": 9, "earth": 9, "ground": 9, "field": 9, "dirt": 9, "sand": 9,
-    "sky": 10,
-    "person": 11, "pedestrian": 11, "people": 11, "individual": 11,
-    "rider": 12, "bicyclist": 12, "motorcyclist": 12, "other rider": 12,
-    "car": 13, "automobile": 13, "auto": 13, "van": 13,
-    "truck": 14, "lorry": 14,
-    "bus": 15, "autobus": 15,
-    "train": 16, "on rails": 16, "tram": 16,
-    "motorcycle": 17, "motorbike": 17, "minibike": 17,
-    "bicycle": 18, "bike": 18,
+_SPELLINGS: dict[str, tuple[str, ...]] = {
+    "road": ("street", "roadway", "road route", "route", "lane marking general"),
+    "sidewalk": ("pavement", "sidewalk pavement", "footway"),
+    "building": ("house", "skyscraper", "edifice"),
+    "wall": (),
+    "fence": ("fencing", "guard rail", "railing"),
+    "pole": ("utility pole", "street light", "streetlight", "street lamp"),
+    "traffic light": ("traffic signal", "traffic light front"),
+    "traffic sign": ("traffic sign front", "stop sign"),
+    "vegetation": ("tree", "plant", "flora", "palm", "palm tree"),
+    "terrain": ("grass", "earth", "ground", "field", "dirt", "sand"),
+    "sky": (),
+    "person": ("pedestrian", "people", "individual"),
+    "rider": ("bicyclist", "motorcyclist", "other rider"),
+    "car": ("automobile", "auto", "van"),
+    "truck": ("lorry",),
+    "bus": ("autobus",),
+    "train": ("on rails", "tram"),
+    "motorcycle": ("motorbike", "minibike"),
+    "bicycle": ("bike",),
 }
+LABEL_SYNONYMS: dict[str, int] = {spelling: cityscapes.ID[name] for name, more in _SPELLINGS.items()
+                                   for spelling in (name, *more)}
 
 
 def normalise_label(name: str) -> str:

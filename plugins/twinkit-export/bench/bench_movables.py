@@ -31,12 +31,10 @@ def _latest(out: Path, suffix: str) -> Path | None:
 
 def waypoints(xodr_text: str, step_m: float = 0.5) -> np.ndarray:
     """(n, 3) driving-lane waypoints in the package frame (x, y north, z)."""
-    import carla
+    from twinkit.street.lanes import LaneMap
 
-    m = carla.Map("bench", xodr_text)
-    pts = [(w.transform.location.x, -w.transform.location.y, w.transform.location.z)
-           for w in m.generate_waypoints(step_m) if w.lane_type == carla.LaneType.Driving]
-    return np.asarray(pts, float)
+    wp = LaneMap(xodr_text, "bench").waypoints(step_m)
+    return wp.xyz[wp.is_type("driving")].reshape(-1, 3)
 
 
 def blocked(meshes: list[tuple[np.ndarray, np.ndarray]], wp: np.ndarray, lo: float = 0.15, hi: float = 2.0):

@@ -38,9 +38,11 @@ def site_to_carla(xyz, yaw_site_deg: float, frame) -> tuple[dict, float]:
     if frame is not None:
         p = frame.site_to_package(p)
         rot, scale = math.degrees(frame.rotation_rad), float(frame.scale)
-    x, y, z = (float(t) for t in p[0])
-    return ({"x": round(x, 3), "y": round(-y, 3), "z": round(z, 3), "pitch": 0.0,
-             "yaw": round(_wrap180(-(yaw_site_deg + rot)), 3), "roll": 0.0}, scale)
+    from twinkit.street.lanes import to_carla, yaw_to_carla
+
+    x, y, z = (float(t) for t in to_carla(p)[0])
+    return ({"x": round(x, 3), "y": round(y, 3), "z": round(z, 3), "pitch": 0.0,
+             "yaw": round(_wrap180(yaw_to_carla(yaw_site_deg + rot)), 3), "roll": 0.0}, scale)
 
 
 def carla_actors(actors: list[dict], frame, map_name: str, spawn_z_m: float = 0.2) -> list[dict]:

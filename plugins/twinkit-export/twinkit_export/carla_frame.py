@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -94,7 +93,9 @@ def site_spawn(spawn: list[dict], frame) -> list[dict]:
     and a ``wgs84`` block (exact, through the geoReference). Unchanged when ``frame`` is None."""
     if frame is None or not spawn:
         return spawn
-    pkg = np.array([[p["carla"]["x"], -p["carla"]["y"], p["carla"]["z"]] for p in spawn], float)
+    from twinkit.street.lanes import from_carla
+
+    pkg = from_carla([[p["carla"]["x"], p["carla"]["y"], p["carla"]["z"]] for p in spawn])
     site = frame.package_to_site(pkg)
     ll = frame.package_to_lonlat(pkg[:, :2])
     rot = math.degrees(frame.rotation_rad)

@@ -82,46 +82,46 @@ def prop_size(extent_m: float) -> str:
     return "Huge"
 
 
-def load_map(xodr_text: str, name: str):
-    """carla.Map parsed offline; raises PackageError when the file has no driving lane."""
-    import carla
+def lane_map(xodr_text: str, name: str):
+    """The package's OpenDRIVE parsed offline (:class:`twinkit.street.lanes.LaneMap`); PackageError when it
+    does not parse."""
+    from twinkit.street.lanes import LaneMap, OpenDriveError
 
-    if "<OpenDRIVE" not in xodr_text:
-        raise PackageError("not an OpenDRIVE file (no <OpenDRIVE> element)")
-    m = carla.Map(name, xodr_text)
-    return m
+    try:
+        return LaneMap(xodr_text, name)
+    except OpenDriveError as exc:
+        raise PackageError(str(exc)) from None
 
 
-def spawn_points(cmap, spacing_m: float = 20.0, height_m: float = 0.5, skip_junctions: bool = True) -> list[dict]:
-    """Spawn points on driving lanes, every ``spacing_m`` along each lane, raised by ``height_m``.
+def spawn_points(lanes, spacing_m: float = 20.0, height_m: float = 0.5, skip_junctions: bool = True) -> list[dict]:
+    """Spawn points on driving lanes of ``lanes`` (a LaneMap), every ``spacing_m`` along each lane, raised by
+    ``height_m``.
 
     CARLA coordinates (``carla`` block) are what ``carla.Transform`` takes: metres, Unreal's
     left-handed frame (y = -north). ``site`` gives the same point in the site frame (y north) with
     the heading counter-clockwise from east.
     """
-    import carla
+    from twinkit.street.lanes import to_carla, yaw_from_carla, yaw_to_carla
 
+    wp = lanes.waypoints(float(spacing_m))
+    keep = wp.is_type("driving")
+    if skip_junctions:
+        keep &= ~wp.in_junction
+    wp = wp.take(keep).unique(2)
     out = []
-    seen = set()
-    for w in cmap.generate_waypoints(float(spacing_m)):
-        if w.lane_type != carla.LaneType.Driving:
-            continue
-        if skip_junctions and w.is_junction:
-            continue
-        t = w.transform
-        key = (w.road_id, w.section_id, w.lane_id, round(w.s, 2))
-        if key in seen:
-            continue
-        seen.add(key)
-        x, y, z = t.location.x, t.location.y, t.location.z + height_m
-        pitch, yaw, roll = (_wrap180(a) for a in (t.rotation.pitch, t.rotation.yaw, t.rotation.roll))
+    for i in range(len(wp)):
+        x, y, z = wp.xyz[i].tolist()
+        z += height_m
+        cx, cy, _ = to_carla([x, y, z]).tolist()
+        pitch, yaw, roll = (_wrap180(float(a)) for a in (wp.carla_pitch_deg[i], yaw_to_carla(wp.heading_deg[i]),
+                                                          wp.carla_roll_deg[i]))
         out.append({
-            "road_id": int(w.road_id), "section_id": int(w.section_id), "lane_id": int(w.lane_id),
-            "s": round(float(w.s), 3),
-            "carla": {"x": round(x, 3), "y": round(y, 3), "z": round(z, 3),
+            "road_id": int(wp.road[i]), "section_id": int(wp.section[i]), "lane_id": int(wp.lane[i]),
+            "s": round(float(wp.s[i]), 3),
+            "carla": {"x": round(cx, 3), "y": round(cy, 3), "z": round(z, 3),
                       "pitch": round(pitch, 3), "yaw": round(yaw, 3), "roll": round(roll, 3)},
-            "site": {"x": round(x, 3), "y": round(-y, 3), "z": round(z, 3),
-                     "heading_deg": round(_wrap180(-yaw), 3)},
+            "site": {"x": round(x, 3), "y": round(y, 3), "z": round(z, 3),
+                     "heading_deg": round(_wrap180(yaw_from_carla(yaw)), 3)},
         })
     return out
 

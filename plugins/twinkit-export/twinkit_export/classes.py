@@ -43,25 +43,25 @@ class ClassInfo:
 # carla==0.9.16 Python module): (sub-mesh name, Static/<folder>, intended tag, its id, tag given by name alone).
 # The class names and colours are the shared definition in twinkit.cityscapes.
 _CARLA: dict[int, tuple[str, str, str, int, str]] = {
-    0: ("Road_Road", "Road", "Roads", 1, "Roads"),  # road
-    1: ("Road_Sidewalk", "SideWalk", "Sidewalks", 2, "Sidewalks"),  # sidewalk
-    2: ("Building", "Building", "Buildings", 3, "Terrain"),  # building
-    3: ("Wall", "Wall", "Walls", 4, "Terrain"),  # wall
-    4: ("Fence", "Fence", "Fences", 5, "Terrain"),  # fence
-    5: ("Pole", "Pole", "Poles", 6, "Terrain"),  # pole
-    6: ("TrafficLight", "TrafficLight", "TrafficLight", 7, "Terrain"),  # traffic light
-    7: ("TrafficSign", "TrafficSign", "TrafficSigns", 8, "Terrain"),  # traffic sign
-    8: ("Vegetation", "Vegetation", "Vegetation", 9, "Terrain"),  # vegetation
-    9: ("Terrain", "Terrain", "Terrain", 10, "Terrain"),  # terrain
-    10: ("Sky", "Sky", "Sky", 11, "Terrain"),  # sky
-    11: ("Pedestrian", "Pedestrian", "Pedestrians", 12, "Terrain"),  # person
-    12: ("Rider", "Rider", "Rider", 13, "Terrain"),  # rider
-    13: ("Car", "Car", "Car", 14, "Terrain"),  # car
-    14: ("Truck", "Truck", "Truck", 15, "Terrain"),  # truck
-    15: ("Bus", "Bus", "Bus", 16, "Terrain"),  # bus
-    16: ("Train", "Train", "Train", 17, "Terrain"),  # train
-    17: ("Motorcycle", "Motorcycle", "Motorcycle", 18, "Terrain"),  # motorcycle
-    18: ("Bicycle", "Bicycle", "Bicycle", 19, "Terrain"),  # bicycle
+    cityscapes.ROAD: ("Road_Road", "Road", "Roads", 1, "Roads"),
+    cityscapes.SIDEWALK: ("Road_Sidewalk", "SideWalk", "Sidewalks", 2, "Sidewalks"),
+    cityscapes.BUILDING: ("Building", "Building", "Buildings", 3, "Terrain"),
+    cityscapes.WALL: ("Wall", "Wall", "Walls", 4, "Terrain"),
+    cityscapes.FENCE: ("Fence", "Fence", "Fences", 5, "Terrain"),
+    cityscapes.POLE: ("Pole", "Pole", "Poles", 6, "Terrain"),
+    cityscapes.TRAFFIC_LIGHT: ("TrafficLight", "TrafficLight", "TrafficLight", 7, "Terrain"),
+    cityscapes.TRAFFIC_SIGN: ("TrafficSign", "TrafficSign", "TrafficSigns", 8, "Terrain"),
+    cityscapes.VEGETATION: ("Vegetation", "Vegetation", "Vegetation", 9, "Terrain"),
+    cityscapes.TERRAIN: ("Terrain", "Terrain", "Terrain", 10, "Terrain"),
+    cityscapes.SKY: ("Sky", "Sky", "Sky", 11, "Terrain"),
+    cityscapes.PERSON: ("Pedestrian", "Pedestrian", "Pedestrians", 12, "Terrain"),
+    cityscapes.RIDER: ("Rider", "Rider", "Rider", 13, "Terrain"),
+    cityscapes.CAR: ("Car", "Car", "Car", 14, "Terrain"),
+    cityscapes.TRUCK: ("Truck", "Truck", "Truck", 15, "Terrain"),
+    cityscapes.BUS: ("Bus", "Bus", "Bus", 16, "Terrain"),
+    cityscapes.TRAIN: ("Train", "Train", "Train", 17, "Terrain"),
+    cityscapes.MOTORCYCLE: ("Motorcycle", "Motorcycle", "Motorcycle", 18, "Terrain"),
+    cityscapes.BICYCLE: ("Bicycle", "Bicycle", "Bicycle", 19, "Terrain"),
 }
 CLASSES: tuple[ClassInfo, ...] = tuple(
     ClassInfo(i, cityscapes.NAMES[i], tuple(int(v) for v in cityscapes.PALETTE[i]), *_CARLA[i])

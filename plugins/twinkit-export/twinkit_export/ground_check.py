@@ -1,13 +1,13 @@
 """The ``drop_test`` step: does the static mesh hold up a car and a walker everywhere the map sends them?
 
 The way a simulator sees the ground: vertical rays on a grid (``spacing_m``, 10 cm) over every driving
-and sidewalk lane of the OpenDRIVE map (carla.Map, offline), inside the scanned site (the cloud's
-footprint, :class:`twinkit.surface.watertight.Footprint`). A ray passes when the static mesh (after
-``lift_movables``: what CARLA gets as its map) crosses it within ``tol_m`` of the lane's height. A lane's
-height is the map's road elevation plus the lane's own ``<height>`` records, if any; a sidewalk lane
-without one (netconvert writes none) is expected at the height of the pavement beside the road, up to
-``curb_max_m`` above the road (a kerb), and passes when the mesh is within ``tol_m`` of any height in
-that band.
+and sidewalk lane of the OpenDRIVE map (:class:`twinkit.street.lanes.LaneMap`: carla.Map, offline), inside
+the scanned site (the cloud's footprint, :class:`twinkit.surface.watertight.Footprint`). A ray passes when
+the static mesh (after ``lift_movables``: what CARLA gets as its map) crosses it within ``tol_m`` of the
+lane's height. A lane's height is the map's road elevation plus the lane's own ``<height>`` records, if
+any; a sidewalk lane without one (netconvert writes none) is expected at the height of the pavement beside
+the road, up to ``curb_max_m`` above the road (a kerb), and passes when the mesh is within ``tol_m`` of
+any height in that band.
 
 Writes ``drop_test.json`` (per lane type: rays, hits, the share, the misses grouped in clusters with
 their positions) and ``drop_test.png`` (misses in orange over the mesh seen from above, with the open
@@ -30,20 +30,25 @@ from twinkit.ranges import param
 class DropTestParams:
     """Vertical rays over the lanes: does the static mesh hold up cars and walkers?"""
 
-    spacing_m: float = param(0.10, gt=0)  # ray grid along and across each lane
-    tol_m: float = param(0.05, gt=0)  # a ray passes when the surface is this close to the lane's height
-    curb_max_m: float = param(0.30, ge=0)  # a sidewalk without <height> records may lie up to this above the road (a kerb)
-    min_driving_pct: float = param(99.9, ge=0, le=100)  # below this share of hits on driving lanes: a warning, ok = false
-    min_sidewalk_pct: float = param(99.5, ge=0, le=100)  # ... on sidewalks
-    footprint_margin_m: float = param(1.0, ge=0)  # rays this close to the scan's edge are not counted (the site ends there)
-    fill_limit_m: float = param(8.0, ge=0)  # unscanned gaps narrower than this count as inside the site (the ground fill's limit)
-    fall_m: float = param(0.5, gt=0)  # a missed ray with no surface this close to the lane falls through (a hole), else off height
-    max_hole_m: float = param(0.25, ge=0)  # any hole wider than this (falling rays' extent + one spacing) fails the lane, whatever
-    #                           the share: it swallows a tyre's contact patch (about 0.2 m) or a shoe
-    # the surface's continuity: a ray holds when the surface under it lies within tol_m of the surface's
-    # mean height over this window around it (a crack, a step, a bump fail; a camber the lane's one
-    # height cannot follow does not). 0: off (the lane height alone decides the degraded flag)
-    local_window_m: float = param(0.5, ge=0)
+    spacing_m: float = param(0.10, gt=0, help="Ray grid along and across each lane, m.")
+    tol_m: float = param(0.05, gt=0, help="A ray passes when the surface is this close to the lane's height, m.")
+    curb_max_m: float = param(0.30, ge=0, help="A sidewalk without <height> records may lie up to this above the "
+                              "road (a kerb), m.")
+    min_driving_pct: float = param(99.9, ge=0, le=100, help="Below this share of hits on driving lanes: a warning "
+                                   "and ok = false, %.")
+    min_sidewalk_pct: float = param(99.5, ge=0, le=100, help="The same on sidewalk lanes, %.")
+    footprint_margin_m: float = param(1.0, ge=0, help="Rays this close to the scan's edge are not counted (the "
+                                      "site ends there), m.")
+    fill_limit_m: float = param(8.0, ge=0, help="Unscanned gaps narrower than this count as inside the site (the "
+                                "ground fill's limit), m.")
+    fall_m: float = param(0.5, gt=0, help="A missed ray with no surface this close to the lane falls through (a "
+                          "hole); otherwise it is off height, m.")
+    max_hole_m: float = param(0.25, ge=0, help="Any hole wider than this (falling rays' extent + one spacing) fails "
+                              "the lane whatever the share: it swallows a tyre's contact patch (about 0.2 m) or a "
+                              "shoe, m.")
+    local_window_m: float = param(0.5, ge=0, help="The surface's continuity: a ray holds when the surface under it "
+                                  "lies within tol_m of its mean height over this window (a crack, a step, a bump "
+                                  "fail; a camber does not); 0: off (the lane height alone decides), m.")
 
 
 DRIVING = ("driving", "bidirectional", "parking", "stop", "entry", "exit", "onramp", "offramp")
@@ -53,42 +58,20 @@ SIDEWALK = ("sidewalk",)
 def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
     """Ray positions over the lanes, site frame: {"driving": (k, 3), "sidewalk": (k, 3)} (x, y, lane z).
 
-    carla.Map (offline) gives waypoints every ``spacing_m`` on the driving lanes; the other lanes are
-    reached sideways from them (get_left_lane / get_right_lane). Across a lane, rays every
-    ``spacing_m`` from border to border (half a step in from each)."""
-    import carla
+    Every lane every ``spacing_m`` (:meth:`LaneMap.lanes`: the driving lanes and the lanes reached sideways
+    from them); across a lane, rays every ``spacing_m`` from border to border (half a step in from each)."""
+    from twinkit.street.lanes import LaneMap
 
-    m = carla.Map("drop_test", xodr_text)
-    seen: set[tuple] = set()
+    lanes = LaneMap(xodr_text, "drop_test").lanes(spacing_m)
     out: dict[str, list] = {"driving": [], "sidewalk": []}
-
-    def add(w):
-        t = str(w.lane_type).lower()
-        kind = "driving" if t in DRIVING else "sidewalk" if t in SIDEWALK else None
-        if kind is None:
-            return
-        key = (w.road_id, w.section_id, w.lane_id, round(float(w.s), 3))
-        if key in seen:
-            return
-        seen.add(key)
-        loc = w.transform.location
-        rv = w.transform.get_right_vector()
-        n = np.array([rv.x, -rv.y])  # CARLA's y points south: site frame is x east, y north
-        n /= np.linalg.norm(n) or 1.0
-        h = float(w.lane_width) / 2
+    kinds = np.where(lanes.is_type(*DRIVING), "driving", np.where(lanes.is_type(*SIDEWALK), "sidewalk", ""))
+    nrm = lanes.normal
+    for i in np.flatnonzero(kinds != ""):
+        h = float(lanes.width[i]) / 2
         k = max(1, int(np.floor(2 * h / spacing_m)))
         off = (np.arange(k) + 0.5) * (2 * h / k) - h
-        out[kind].append(np.c_[loc.x + off * n[0], -loc.y + off * n[1], np.full(k, loc.z)])
-
-    for w in m.generate_waypoints(spacing_m):
-        add(w)
-        for side in ("get_right_lane", "get_left_lane"):
-            o = getattr(w, side)()
-            hops = 0
-            while o is not None and hops < 8 and o.lane_type != carla.LaneType.Driving:
-                add(o)
-                o = getattr(o, side)()
-                hops += 1
+        x, y, z = lanes.xyz[i]
+        out[str(kinds[i])].append(np.c_[x + off * nrm[i, 0], y + off * nrm[i, 1], np.full(k, z)])
     return {k: (np.vstack(v) if v else np.zeros((0, 3))) for k, v in out.items()}
 
 
@@ -158,7 +141,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
     from twinkit.jsonio import write_json
     from twinkit.mesh import read_obj, read_ply
-    from twinkit.surface.watertight import Footprint, draw_border, drop_test, ground_border, height_above_ground
+    from twinkit.surface.watertight import Footprint, at_ground_level, draw_border, drop_test, ground_border
 
     params = params or DropTestParams()
     t0 = time.perf_counter()
@@ -280,8 +263,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
                          f"ground (target {lane['target_pct']} %)"
                          + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
                             if hole else ""), hint)
-    up = cloud.normals[:, 2] >= 0.85 if cloud.normals is not None else np.zeros(cloud.n_vertices, bool)
-    gv = np.abs(height_above_ground(mesh.vertices, cloud.vertices[up])) <= 0.5
+    gv = at_ground_level(mesh.vertices, cloud.vertices, cloud.normals)
     border = ground_border(mesh.vertices, mesh.faces, fp, gv)
     edges = border.pop("_edges")
     res["open_border_at_ground_level"] = border

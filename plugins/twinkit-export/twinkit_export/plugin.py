@@ -24,61 +24,87 @@ from .lift_step import LiftParams, lift_movables_step
 class GtLabelsParams:
     """Transfer ground-truth labels to the reconstructed mesh."""
 
-    max_dist_m: float = param(0.5, gt=0)  # vertices farther than this from the ground-truth surface stay unlabelled (255)
+    max_dist_m: float = param(0.5, gt=0,
+                              help="Vertices farther than this (m) from the ground-truth surface stay unlabelled "
+                                   "(255).")
 
 
 @dataclass
 class SplitParams:
     """Split the labelled, textured mesh into one sub-mesh per class."""
 
-    max_texture_px: int = param(8192, ge=0, le=65536)  # a larger atlas is downscaled to this size (Unreal's default limit); 0 = keep
+    max_texture_px: int = param(8192, ge=0, le=65536,
+                                help="A larger texture atlas is downscaled to this size (px; 8192 is Unreal's "
+                                     "default limit); 0 = keep the size.")
 
 
 @dataclass
 class FbxParams:
     """FBX through Blender (bpy) in a subprocess."""
 
-    embed_texture: bool = False  # True: the texture is embedded in the FBX too (bigger file)
-    save_blend: bool = False  # also write twin.blend (for inspection in Blender)
+    embed_texture: bool = param(False, help="Embed the texture in the FBX too (a bigger file).")
+    save_blend: bool = param(False, help="Also write twin.blend, for inspection in Blender.")
 
 
 @dataclass
 class UsdParams:
     """USD through usd-core."""
 
-    validate: bool = True  # run usd-core's validators; errors fail the step
-    semantics_taxonomy: str = "class"  # instance name of SemanticsLabelsAPI (semantics:labels:<taxonomy>)
-    colliders: bool = True  # UsdPhysics collision (triangle mesh) on the static classes, not on movable ones
-    isaac_legacy_semantics: bool = True  # also the older Semantics schema (SemanticsAPI), read by Isaac Sim < 5.0
-    geo_schemas: bool = True  # georeference for consumers: Omniverse WGS84 reference position + Cesium origin
+    validate: bool = param(True, help="Run usd-core's validators; an error fails the step.")
+    semantics_taxonomy: str = param("class",
+                                    help="Instance name of the SemanticsLabelsAPI (semantics:labels:<taxonomy>).")
+    colliders: bool = param(True,
+                            help="Add UsdPhysics collision (triangle mesh) to the static classes, not to the "
+                                 "movable ones.")
+    isaac_legacy_semantics: bool = param(True,
+                                         help="Also write the older Semantics schema (SemanticsAPI), read by Isaac "
+                                              "Sim before 5.0.")
+    geo_schemas: bool = param(True,
+                              help="Georeference the stage for its consumers: the Omniverse WGS84 reference "
+                                   "position and a Cesium origin.")
 
 
 @dataclass
 class GltfParams:
     """GLB for viewing in a browser."""
 
-    texture_format: str = param("jpeg", choices=("jpeg", "png"))  # jpeg (smaller, for the web) | png (lossless)
-    jpeg_quality: int = param(90, ge=1, le=100)
-    unlit: bool = True  # KHR_materials_unlit: the texture already holds the captured light
-    variants: bool = True  # KHR_materials_variants: "photo" and "segmentation" (flat class colours)
+    texture_format: str = param("jpeg", choices=("jpeg", "png"),
+                                help="Texture encoding in the GLB: jpeg (smaller, for the web) or png (lossless).")
+    jpeg_quality: int = param(90, ge=1, le=100, help="JPEG quality (1..100) with texture_format=jpeg.")
+    unlit: bool = param(True,
+                        help="Mark the materials unlit (KHR_materials_unlit): the texture already holds the "
+                             "captured light.")
+    variants: bool = param(True,
+                           help='Add material variants (KHR_materials_variants): "photo" and "segmentation" (flat '
+                                "class colours).")
 
 
 @dataclass
 class CarlaPackageParams:
     """CARLA import package (``Import/<Package>/``)."""
 
-    package: str = ""  # package name; empty = "<Site>Twin" from the site name
-    map_name: str = ""  # map name (FBX and XODR names); empty = "<Site>"
-    use_carla_materials: bool = False  # True: CARLA replaces road/sidewalk/terrain materials by its own
-    spawn_spacing_m: float = param(20.0, gt=0)  # distance between spawn points along a driving lane
-    spawn_height_m: float = param(0.5, ge=0)  # spawn points are raised by this much above the lane
-    skip_junctions: bool = True  # no spawn points inside junctions
-    decals: bool = False  # True: CARLA's default random road decals (dirt, cracks, tyre marks, road lines)
-    carla_version: str = "0.9.16"
-    frame: str = param("carla", choices=("carla", "site"))  # carla: true-north frame at the base point, CARLA's geolocation works | site: site frame
-    frame_scale: str = param("auto", choices=("auto", "site", "true", "minimax"))  # auto | site (rotation only) | true (true metres) | minimax (see docs/georeferencing.md)
-    geolocation_radius_m: float = param(150.0, gt=0)  # CARLA's geolocation is held within the tolerance up to this distance
-    geolocation_tolerance_m: float = param(0.5, gt=0)
+    package: str = param("", help='Package name; empty = "<Site>Twin" from the site name.')
+    map_name: str = param("", help='Map name (the FBX and XODR file names); empty = "<Site>".')
+    use_carla_materials: bool = param(False,
+                                      help="Let CARLA replace the road, sidewalk and terrain materials by its own.")
+    spawn_spacing_m: float = param(20.0, gt=0, help="Distance (m) between spawn points along a driving lane.")
+    spawn_height_m: float = param(0.5, ge=0, help="Spawn points are raised this much (m) above the lane.")
+    skip_junctions: bool = param(True, help="Put no spawn points inside junctions.")
+    decals: bool = param(False,
+                         help="Let CARLA add its default random road decals (dirt, cracks, tyre marks, road lines).")
+    carla_version: str = param("0.9.16", help="The CARLA version the package is made for.")
+    frame: str = param("carla", choices=("carla", "site"),
+                       help="carla: a true-north frame at the base point, in which CARLA's geolocation works; site: "
+                            "the site frame (CARLA's geolocation is then wrong).")
+    frame_scale: str = param("auto", choices=("auto", "site", "true", "minimax"),
+                             help="Scale of the carla frame: auto, site (rotation only), true (true metres) or "
+                                  "minimax (see docs/georeferencing.md).")
+    geolocation_radius_m: float = param(150.0, gt=0,
+                                        help="CARLA's geolocation is held within geolocation_tolerance_m up to this "
+                                             "distance (m) from the base point.")
+    geolocation_tolerance_m: float = param(0.5, gt=0,
+                                           help="The error (m) CARLA's geolocation may have within "
+                                                "geolocation_radius_m; a warning when the frame cannot meet it.")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -124,8 +150,9 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
     """Per-vertex trainIds of the textured mesh from the ground-truth mesh (closest surface point)."""
     import numpy as np
 
-    from .labels import read_labelled_ply, transfer_labels
+    from .labels import read_labelled_ply
     from twinkit.mesh import read_obj
+    from twinkit.street.truth import transfer_labels
 
     params = params or GtLabelsParams()
     try:
@@ -140,7 +167,7 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
         # the mesh *is* the ground-truth mesh (same vertices): copy, do not guess at coincident vertices
         lab, dist = gl.copy(), np.zeros(len(gl), np.float32)
     else:
-        lab, dist = transfer_labels(gv, gf, gl, mesh.vertices)
+        lab, dist = transfer_labels(gv, gf, mesh.vertices, vertex_labels=gl)
     far = dist > params.max_dist_m
     lab[far] = 255
     np.save(out_labels_npy, lab.astype(np.uint8))
@@ -324,7 +351,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
                          in_movables_dir: Path | None = None) -> dict:
     """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points;
     the lifted movable objects as actors (actors.json, spawn_actors.py) and scanned props."""
-    from .carla_pkg import PackageError, check_names, load_map, spawn_points, write_package, xodr_georeference
+    from .carla_pkg import PackageError, check_names, lane_map, spawn_points, write_package, xodr_georeference
     from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, site_spawn, write_frame_json
 
     params = params or CarlaPackageParams()
@@ -351,8 +378,8 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     package = params.package or f"{map_name}Twin"
     try:
         check_names(package, map_name)
-        cmap = load_map(text, map_name)
-        spawn = site_spawn(spawn_points(cmap, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
+        lanes = lane_map(text, map_name)
+        spawn = site_spawn(spawn_points(lanes, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
                            frame)
     except PackageError as exc:
         raise InputError(f"carla_package: {exc}") from None
@@ -394,14 +421,14 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
         write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
-    load_map((pkg / f"{map_name}.xodr").read_text(), map_name)
+    lane_map((pkg / f"{map_name}.xodr").read_text(), map_name)
     # CARLA's import rules, read from its source (carla_contract): a package that breaks one fails here
     rep = check_package(out, package, expect_decals=params.decals)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
-    topo = cmap.get_topology()
+    topo = lanes.topology()
     return {"package": package, "map": map_name, "spawn_points": len(spawn), "topology_edges": len(topo),
             "map_meshes": placed["map_meshes"], "props": placed["props"],
             "faces_by_tag": summ["faces_by_tag"], "wrong_terrain_share": summ["wrong_terrain_share"],
@@ -465,7 +492,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     rep = check_package(out, package, expect_decals=None)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
     ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "

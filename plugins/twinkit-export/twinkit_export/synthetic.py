@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from twinkit.cityscapes import BUILDING, CAR, IGNORE, POLE, ROAD, SIDEWALK, TERRAIN, TRAFFIC_SIGN
 
 #: what ``make_street(bad_faces=True)`` appends: {kind: count}
 BAD_FACES = {"back_to_back": 3, "same_winding_duplicate": 1, "degenerate": 2}
@@ -25,25 +26,25 @@ def make_street(nx: int = 40, ny: int = 30, size_m: float = 40.0, seed: int = 0,
     ys = np.linspace(-size_m * ny / nx / 2, size_m * ny / nx / 2, ny)
     gx, gy = np.meshgrid(xs, ys)
     gz = 0.02 * np.sin(gx * 0.7) * np.cos(gy * 0.5)
-    labels = np.full(gx.shape, 9, np.uint8)  # terrain
+    labels = np.full(gx.shape, TERRAIN, np.uint8)
     half = ys.max()
-    labels[np.abs(gy) < 0.45 * half] = 1  # sidewalk
-    labels[np.abs(gy) < 0.30 * half] = 0  # road
+    labels[np.abs(gy) < 0.45 * half] = SIDEWALK
+    labels[np.abs(gy) < 0.30 * half] = ROAD
     bld = (gx > size_m * 0.2) & (gy > 0.6 * half)
-    labels[bld] = 2
+    labels[bld] = BUILDING
     gz = np.where(bld, 6.0, gz)
     pole = (np.abs(gx + size_m * 0.3) < size_m / nx * 0.6) & (np.abs(gy - 0.4 * half) < half / ny * 1.5)
-    labels[pole] = 5
+    labels[pole] = POLE
     car = (np.abs(gx) < size_m * 0.08) & (np.abs(gy + 0.1 * half) < 0.08 * half)
-    labels[car] = 13
+    labels[car] = CAR
     gz = np.where(car, 1.4, gz)
     verts = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
     lab = labels.ravel().copy()
     # unlabelled corner patch and a few lone vertices with a label none of their neighbours has
-    lab[(gx.ravel() < -size_m * 0.45) & (gy.ravel() < -0.8 * half)] = 255
-    interior = np.nonzero((np.abs(gx.ravel()) < size_m * 0.15) & (np.abs(gy.ravel()) < 0.25 * half) & (lab == 0))[0]
+    lab[(gx.ravel() < -size_m * 0.45) & (gy.ravel() < -0.8 * half)] = IGNORE
+    interior = np.nonzero((np.abs(gx.ravel()) < size_m * 0.15) & (np.abs(gy.ravel()) < 0.25 * half) & (lab == ROAD))[0]
     lone = rng.choice(interior, size=min(3, len(interior)), replace=False)
-    lab[lone] = 7  # traffic sign
+    lab[lone] = TRAFFIC_SIGN
     i = np.arange(nx * ny).reshape(ny, nx)
     a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
     faces = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
@@ -71,19 +72,14 @@ def texture_image(px: int, seed: int = 0) -> np.ndarray:
 
 def write_obj(path: Path, verts: np.ndarray, faces: np.ndarray, uv: np.ndarray, texture_px: int = 256,
               seed: int = 0) -> Path:
-    """Write ``path`` (.obj) + .mtl + .png like the texture step does; returns the OBJ path."""
+    """Write ``path`` (.obj) + .mtl + .png like the texture step does (twinkit.mesh.write_obj, per-vertex UVs);
+    returns the OBJ path."""
     from PIL import Image
 
+    from twinkit.mesh import write_obj as write_mesh_obj
+
     path = Path(path)
-    stem = path.stem
     Image.fromarray(texture_image(texture_px, seed)).save(path.with_suffix(".png"))
-    path.with_suffix(".mtl").write_text(
-        f"newmtl twinkit_texture\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\nmap_Kd {stem}.png\n")
-    f1 = faces + 1
-    with open(path, "w") as fh:
-        fh.write(f"# synthetic street\nmtllib {stem}.mtl\n")
-        np.savetxt(fh, verts, fmt="v %.6f %.6f %.6f")
-        np.savetxt(fh, uv, fmt="vt %.6f %.6f")
-        fh.write("usemtl twinkit_texture\n")
-        np.savetxt(fh, np.repeat(f1, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+    write_mesh_obj(path, verts, faces, uv, f"{path.stem}.png", comment="synthetic street", mtl_comment=None,
+                   uv_decimals=6)
     return path

@@ -9,7 +9,8 @@ from PIL import Image
 
 from twinkit import InputError
 from twinkit_photo import dense as D
-from twinkit_photo.georef import Transform, level, robust_umeyama, rotation_between, triangulate, umeyama
+from twinkit.geo.similarity import closed_form_similarity
+from twinkit_photo.georef import Transform, level, robust_umeyama, rotation_between, triangulate
 from twinkit_photo.images import list_images, read_info
 
 
@@ -79,7 +80,7 @@ def test_umeyama_recovers_similarity():
     rng = np.random.default_rng(1)
     src = rng.normal(size=(20, 3))
     T = Transform(2.5, _rand_rot(rng), np.array([10.0, -3.0, 1.0]))
-    est = umeyama(src, T.apply(src))
+    est = closed_form_similarity(src, T.apply(src))
     assert est.scale == pytest.approx(2.5, rel=1e-9)
     np.testing.assert_allclose(est.R, T.R, atol=1e-9)
     np.testing.assert_allclose(est.apply(src), T.apply(src), atol=1e-9)
@@ -91,7 +92,7 @@ def test_robust_umeyama_leaves_out_a_misclicked_gcp():
     src = rng.uniform(-10, 10, (10, 3))
     dst = T.apply(src) + rng.normal(0, 0.005, (10, 3))
     dst[4] += [0.4, 0.0, 0.0]  # one point clicked on the wrong corner
-    plain = umeyama(src, dst)
+    plain = closed_form_similarity(src, dst)
     est, keep = robust_umeyama(src, dst, outlier_m=0.05)
     assert keep.sum() == 9 and not keep[4]
     err_plain = np.abs(plain.apply(src[keep]) - dst[keep]).max()

@@ -16,50 +16,13 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from twinkit import InputError
-
-
-@dataclass
-class Transform:
-    """x_site = scale * R @ x_model + t"""
-
-    scale: float
-    R: np.ndarray
-    t: np.ndarray
-
-    def apply(self, p) -> np.ndarray:
-        p = np.asarray(p, float).reshape(-1, 3)
-        return self.scale * p @ self.R.T + self.t
-
-    def rotate(self, R_wc: np.ndarray) -> np.ndarray:
-        return self.R @ R_wc
-
-    def compose_after(self, other: "Transform") -> "Transform":
-        """self o other"""
-        return Transform(self.scale * other.scale, self.R @ other.R, self.scale * self.R @ other.t + self.t)
-
-    def to_json(self) -> dict:
-        return {"scale": float(self.scale), "R": self.R.tolist(), "t": self.t.tolist(),
-                "definition": "x_site = scale * R @ x_model + t"}
-
-
-def umeyama(src, dst, with_scale: bool = True) -> Transform:
-    src, dst = np.asarray(src, float), np.asarray(dst, float)
-    ms, md = src.mean(0), dst.mean(0)
-    a, b = src - ms, dst - md
-    U, S, Vt = np.linalg.svd(b.T @ a / len(src))
-    D = np.eye(3)
-    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
-        D[2, 2] = -1
-    R = U @ D @ Vt
-    var = float((a ** 2).sum() / len(src))
-    s = float(np.trace(np.diag(S) @ D) / var) if with_scale and var > 0 else 1.0
-    return Transform(s, R, md - s * R @ ms)
+from twinkit.geo.similarity import SimilarityTransform as Transform  # the photo branch's name for it
+from twinkit.geo.similarity import closed_form_similarity
 
 
 def robust_umeyama(src, dst, outlier_m: float, min_keep: int = 3) -> tuple[Transform, np.ndarray]:
@@ -69,14 +32,14 @@ def robust_umeyama(src, dst, outlier_m: float, min_keep: int = 3) -> tuple[Trans
     the mask of the points kept."""
     src, dst = np.asarray(src, float), np.asarray(dst, float)
     keep = np.ones(len(src), bool)
-    T = umeyama(src, dst)
+    T = closed_form_similarity(src, dst)
     while keep.sum() > min_keep:
         res = np.linalg.norm(T.apply(src) - dst, axis=1)
         worst = int(np.argmax(np.where(keep, res, -1.0)))
         if res[worst] <= max(outlier_m, 3.0 * float(np.median(res[keep]))):
             break
         keep[worst] = False
-        T = umeyama(src[keep], dst[keep])
+        T = closed_form_similarity(src[keep], dst[keep])
     return T, keep
 
 

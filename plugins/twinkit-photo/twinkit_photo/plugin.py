@@ -9,11 +9,14 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twinkit import InputError, hookimpl
 from twinkit.jsonio import write_json
 from twinkit.ranges import param
+
+if TYPE_CHECKING:
+    from .georef import Transform
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -384,7 +387,9 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     """Level the model, then map it into the site frame from GCPs, EXIF GPS or (without either) as is."""
     import numpy as np
 
-    from .georef import Transform, level, read_gcp_file, robust_umeyama, triangulate, umeyama
+    from twinkit.geo.similarity import closed_form_similarity
+
+    from .georef import Transform, level, read_gcp_file, robust_umeyama, triangulate
 
     params = params or GeorefParams()
     t0 = time.perf_counter()
@@ -590,7 +595,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
             tru = np.array([tmap[names[k]] for k in common])
             e = np.linalg.norm(est - tru, axis=1)
             # the SfM shape alone: best similarity onto the truth (what GCPs could reach at best)
-            Tb = umeyama(est, tru)
+            Tb = closed_form_similarity(est, tru)
             eb = np.linalg.norm(Tb.apply(est) - tru, axis=1)
             report["camera_centre_error_m"] = {"mean": float(e.mean()), "median": float(np.median(e)),
                                                "max": float(e.max()), "n": len(common),

@@ -28,6 +28,8 @@ import sys
 import time
 from pathlib import Path
 
+from twinkit import cityscapes
+
 HERE = Path(__file__).resolve()
 REPO = HERE.parents[3]
 DATA = REPO.parent / "shared" / "data" / "pointclouds"
@@ -40,9 +42,8 @@ CLOUDS = {
     # an indoor scan of a pump (4.6 x 4.5 m): not a street, to be refused before any step runs (exit 2)
     "pump": {"file": "pump_colored_scan.e57", "args": ["site=mex", "site.name=pump"]},
 }
-BUILDING_WALL = (2, 3)
-FACADE_OK = (2, 3, 5, 8)  # building, wall, pole, vegetation
-GROUND_OK = (0, 1, 9)  # road, sidewalk, terrain
+BUILDING_WALL = (cityscapes.BUILDING, cityscapes.WALL)
+FACADE_OK = (cityscapes.BUILDING, cityscapes.WALL, cityscapes.POLE, cityscapes.VEGETATION)
 
 
 def centre_latlon(path: Path) -> tuple[float, float, float]:
@@ -160,20 +161,22 @@ def measure(name: str, cfg: dict) -> dict:
         cloud = read_ply(pts_dir / "points.ply")
         cls = cloud.attrs.get("classification")
         if cls is not None:
-            b = cloud.vertices[np.asarray(cls) == 6]
+            b = cloud.vertices[np.asarray(cls) == cityscapes.TRAFFIC_LIGHT]
             if len(b):
                 d = Surface(mesh.vertices, mesh.faces, 1).distance(b)
                 res["building_kept"] = float((d <= 2 * res["spacing_m"]).mean())
     bp = _step(name, "backproject")
     if bp is not None and (bp / "labels.npy").is_file():
-        from twinkit_pointcloud.shading import height_above_ground
+        from twinkit.street.ground import LocalGround
+        from twinkit_pointcloud.shading import GROUND_CELL_M
 
         lab = np.load(bp / "labels.npy")
         v, f = mesh.vertices, mesh.faces
         fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
         area = 0.5 * np.linalg.norm(fn, axis=1)
         fn /= np.maximum(2 * area[:, None], 1e-12)
-        h = height_above_ground(v, cell_m=2.0)[f].mean(axis=1)
+        ground = LocalGround(v, cell_m=GROUND_CELL_M, window="min", window_m=3 * GROUND_CELL_M, pad_cells=0)
+        h = ground.height()[f].mean(axis=1)  # the height shading's ground
         fl = lab[f[:, 0]]  # a face's label: its first vertex's
         vert = (np.abs(fn[:, 2]) < 0.3) & (h > 2.0) & (fl != 255)
         low = (np.abs(fn[:, 2]) > 0.9) & (h < 0.5) & (fl != 255)
@@ -181,7 +184,7 @@ def measure(name: str, cfg: dict) -> dict:
             res["facade_ok"] = float(area[vert & np.isin(fl, FACADE_OK)].sum() / area[vert].sum())
             res["facade_building"] = float(area[vert & np.isin(fl, BUILDING_WALL)].sum() / area[vert].sum())
         if low.any():
-            res["ground_ok"] = float(area[low & np.isin(fl, GROUND_OK)].sum() / area[low].sum())
+            res["ground_ok"] = float(area[low & np.isin(fl, cityscapes.GROUND)].sum() / area[low].sum())
     return res
 
 

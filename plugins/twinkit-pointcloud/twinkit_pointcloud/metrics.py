@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from twinkit import cityscapes
+
 
 def stats(d: np.ndarray) -> dict:
     d = np.asarray(d, np.float64)
@@ -82,12 +84,6 @@ def mesh_with_distance_colors(vertices: np.ndarray, faces: np.ndarray, dist: np.
     return Mesh(vertices=vertices, faces=faces, attrs={"colors": colormap(dist, vmax), "dist_to_cloud_m": dist})
 
 
-#: CityScapes trainId -> name (the demo site's ``label`` per ground-truth face)
-TRAIN_ID_NAMES = {0: "road", 1: "sidewalk", 2: "building", 3: "wall", 4: "fence", 5: "pole", 6: "traffic light",
-                  7: "traffic sign", 8: "vegetation", 9: "terrain", 10: "sky", 11: "person", 12: "rider", 13: "car",
-                  14: "truck", 15: "bus", 16: "train", 17: "motorcycle", 18: "bicycle"}
-
-
 def sample_surface_by_label(vertices: np.ndarray, faces: np.ndarray, face_labels: np.ndarray, n_total: int,
                             min_per_label: int = 20_000, seed: int = 0):
     """Area-weighted samples per face label: each label gets its share of ``n_total`` by area, at
@@ -119,7 +115,7 @@ def coverage_by_label(dist_to_mesh: np.ndarray, labels: np.ndarray, areas: dict,
     area the scan saw (a point within ``observed_m``: ``observed``) and the coverage of that seen
     area (``covered_observed``). Also ``mean_dist_m`` (GT -> mesh, capped at 1 m, so holes count but
     unseen roofs do not dominate)."""
-    names = TRAIN_ID_NAMES if names is None else names
+    names = dict(enumerate(cityscapes.NAMES)) if names is None else names
     out = {}
     for c, area in sorted(areas.items()):
         sel = labels == c

@@ -48,6 +48,8 @@ def light(normals: np.ndarray) -> np.ndarray:
 #: lit by per-vertex normals is a bumpy pattern the 2D model reads as foliage (Lille: facades 86 %
 #: vegetation); averaged, a wall is one flat shade as a painted wall would be
 SMOOTH_RADIUS_M = 0.5
+#: the ``height`` tint's ground: the lowest vertex within a 3 x 3 block of cells this wide (LocalGround)
+GROUND_CELL_M = 2.0
 
 
 def smooth_normals(vertices: np.ndarray, faces: np.ndarray | None, normals: np.ndarray,
@@ -73,20 +75,6 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray | None, normals: np.n
     for _ in range(iters):
         out = a @ out
     return _unit(out)
-
-
-def height_above_ground(vertices: np.ndarray, cell_m: float = 2.0) -> np.ndarray:
-    """Height of each vertex above the lowest vertex of its ``cell_m`` grid cell and its 8 neighbours."""
-    v = np.asarray(vertices, dtype=np.float64)
-    ij = np.floor((v[:, :2] - v[:, :2].min(axis=0)) / cell_m).astype(np.int64)
-    nx, ny = ij.max(axis=0) + 3
-    low = np.full((nx, ny), np.inf)
-    np.minimum.at(low, (ij[:, 0] + 1, ij[:, 1] + 1), v[:, 2])
-    pad = low.copy()
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            pad = np.minimum(pad, np.roll(np.roll(low, dx, 0), dy, 1))
-    return v[:, 2] - pad[ij[:, 0] + 1, ij[:, 1] + 1]
 
 
 def stretch(x: np.ndarray, lo_q: float = 0.02, hi_q: float = 0.98) -> np.ndarray:
@@ -116,7 +104,11 @@ def vertex_colours(mode: str, vertices: np.ndarray, normals: np.ndarray,
     elif mode == "shaded":
         rgb = np.repeat((0.15 + 0.8 * shade)[:, None], 3, axis=1)
     elif mode == "height":
-        h = np.clip(height_above_ground(vertices) / 8.0, 0.0, 1.0)
+        from twinkit.street.ground import LocalGround
+
+        v = np.asarray(vertices, dtype=np.float64)
+        ground = LocalGround(v, cell_m=GROUND_CELL_M, window="min", window_m=3 * GROUND_CELL_M, pad_cells=0)
+        h = np.clip(ground.height() / 8.0, 0.0, 1.0)
         base = 0.15 + 0.8 * shade
         tint = np.stack([1.0 + 0.25 * np.sin(np.pi * h), 1.0 - 0.1 * h, 1.0 - 0.25 * np.sin(np.pi * h) + 0.3 * h],
                         axis=1)

@@ -29,10 +29,9 @@ SPOTS = {"Rautatientori": (60.1710, 24.9440), "Erottaja": (60.1664, 24.9440), "K
 
 
 def waypoints(xodr: Path, step: float = 0.25) -> np.ndarray:
-    import carla
+    from twinkit.street.lanes import LaneMap
 
-    m = carla.Map("b", xodr.read_text())
-    return np.array([(w.transform.location.x, -w.transform.location.y) for w in m.generate_waypoints(step)])
+    return LaneMap(xodr.read_text(), "b").waypoints(step).xyz[:, :2]
 
 
 def lane_offsets(cropped: Path, whole: Path, half: float) -> tuple:

@@ -57,11 +57,9 @@ def gt_instances(gt_mesh: Path, label: int, link_m: float = 0.6) -> list[np.ndar
 
 
 def landmark_xy(xodr_text: str, lights: bool) -> np.ndarray:
-    import carla
+    from twinkit.street.lanes import LaneMap
 
-    m = carla.Map("bench", xodr_text)
-    pts = [(lm.transform.location.x, -lm.transform.location.y) for lm in m.get_all_landmarks()
-           if (lm.type in CARLA_LIGHT_TYPES) == lights]
+    pts = [lm.xyz[:2] for lm in LaneMap(xodr_text, "bench").landmarks() if (lm.type in CARLA_LIGHT_TYPES) == lights]
     return np.array(pts, float).reshape(-1, 2)
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-ROAD, SIDEWALK, TERRAIN = 0, 1, 9
+from twinkit.cityscapes import ROAD, SIDEWALK, TERRAIN
 
 
 def cross_mesh(half_m: float = 40.0, main_half_m: float = 8.7, side_half_m: float = 3.25, sidewalk_m: float = 3.5,

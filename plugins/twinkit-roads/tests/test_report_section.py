@@ -1,10 +1,10 @@
-"""twinkit-roads' report sections: the OpenDRIVE sampling behind the road network drawing."""
+"""twinkit-roads' report sections: the lanes behind the road network drawing."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from twinkit_roads.report import offset_polyline, read_opendrive
+from twinkit_roads.report import network_items
 
 XODR = """<?xml version="1.0" standalone="yes"?>
 <OpenDRIVE><header revMajor="1" revMinor="6" name="test"/>
@@ -14,39 +14,34 @@ XODR = """<?xml version="1.0" standalone="yes"?>
   <left><lane id="2" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane>
         <lane id="1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></left>
   <center><lane id="0" type="none"/></center>
-  <right><lane id="-1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane>
-         <lane id="-2" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></right>
- </laneSection></lanes></road>
-<road id="2" length="21" junction="-1"><planView>
- <geometry s="0" x="0" y="9" hdg="1.5707963" length="6"><line/></geometry>
- <geometry s="6" x="0" y="15" hdg="1.5707963" length="15"><arc curvature="0.03"/></geometry></planView>
- <lanes><laneSection s="0">
+  <right><lane id="-1" type="driving"><width sOffset="0" a="3.25" b="0.025" c="0" d="0"/></lane>
+         <lane id="-2" type="sidewalk"><width sOffset="0" a="2" b="0" c="0" d="0"/></lane></right>
+ </laneSection>
+ <laneSection s="30">
   <left><lane id="1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></left>
-  <right><lane id="-1" type="driving"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></right>
+  <center><lane id="0" type="none"/></center>
+  <right><lane id="-1" type="driving"><width sOffset="0" a="4" b="0" c="0" d="0"/></lane></right>
  </laneSection></lanes></road>
 </OpenDRIVE>
 """
 
 
-def test_opendrive_geometry_sampling(tmp_path):
+def test_the_network_is_drawn_with_the_lane_widths_and_sections_carla_reads(tmp_path):
+    """Paved bands follow each lane's width polynomial and every lane section; the sidewalk is no band."""
     p = tmp_path / "r.xodr"
     p.write_text(XODR)
-    roads = read_opendrive(p)
-    assert [r["id"] for r in roads] == ["1", "2"]
-    assert roads[0]["width"] == pytest.approx(13.0)
-    x, y = roads[0]["points"][-1]
-    assert (x, y) == pytest.approx((30, 0), abs=1e-6)
-    # arc of curvature 0.03 over 15 m from (0, 15) heading north: ends at x = -(1 - cos(0.45)) / 0.03
-    x, y = roads[1]["points"][-1]
-    assert x == pytest.approx(-(1 - np.cos(0.45)) / 0.03, abs=0.01)
-    assert y == pytest.approx(15 + np.sin(0.45) / 0.03, abs=0.01)
-
-
-def test_lane_bands_follow_each_side_of_the_reference_line():
-    east = [(0.0, 0.0), (10.0, 0.0)]
-    assert offset_polyline(east, 2.0) == [(0.0, 2.0), (10.0, 2.0)]  # left of eastward = north
-    north = [(0.0, 0.0), (0.0, 10.0)]
-    assert offset_polyline(north, 1.5) == [(-1.5, 0.0), (-1.5, 10.0)]
+    items = network_items(p)
+    bands = [np.array(pts) for pts, cls in items if cls == "band"]
+    lines = [np.array(pts) for pts, cls in items if cls == "xodr"]
+    assert len(bands) == 5 and len(lines) == 5  # 3 driving lanes in the first section, 2 in the second
+    lane_m1 = [b for b in bands if b[:, 1].max() <= 1e-3]  # right of the reference line (y = 0): lane -1
+    assert len(lane_m1) == 2
+    first, second = sorted(lane_m1, key=lambda b: b[:, 0].min())
+    # a ring: the left border out, the right border back; its width where it starts and ends
+    k = len(first) // 2
+    assert np.hypot(*(first[0] - first[-1])) == pytest.approx(3.25, abs=1e-3)
+    assert np.hypot(*(first[k - 1] - first[k])) == pytest.approx(3.25 + 0.025 * 29, abs=0.03)
+    assert second[:, 1].min() == pytest.approx(-4.0, abs=1e-3)
 
 
 def test_the_sections_are_registered():

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -28,10 +27,6 @@ class Sections:
     hw: np.ndarray  # (n,) half widths of the driving carriageway
     z: np.ndarray  # (n,) road height in the OpenDRIVE
     road: np.ndarray  # (n,) road id
-
-
-def _site(loc) -> tuple[float, float, float]:
-    return loc.x, -loc.y, loc.z  # CARLA is left-handed: y flipped
 
 
 def network_mask(lines: list[dict], grid: Grid) -> np.ndarray:
@@ -372,29 +367,15 @@ def transform_xodr(text: str, yaw_rad: float, tx: float, ty: float, dz: float = 
 
 def lane_lines(xodr_text: str, step_m: float = 1.0, junctions: bool = False) -> list[dict]:
     """Centre lines and borders of driving lanes (site frame), one polyline per lane segment."""
-    import carla
+    from twinkit.street.lanes import LaneMap
 
-    m = carla.Map("lines", xodr_text)
-    out: dict[tuple, dict] = {}
-    for w in m.generate_waypoints(step_m):
-        if w.lane_type != carla.LaneType.Driving or (w.is_junction and not junctions):
-            continue
-        key = (w.road_id, w.section_id, w.lane_id)
-        x, y, z = _site(w.transform.location)
-        rv = w.transform.get_right_vector()
-        n = np.array([rv.x, -rv.y])
-        n /= np.linalg.norm(n) or 1.0
-        d = out.setdefault(key, {"s": [], "c": [], "z": [], "l": [], "r": [], "junction": bool(w.is_junction)})
-        d["s"].append(w.s)
-        d["c"].append((x, y))
-        d["z"].append(z)
-        d["l"].append((x - n[0] * w.lane_width / 2, y - n[1] * w.lane_width / 2))
-        d["r"].append((x + n[0] * w.lane_width / 2, y + n[1] * w.lane_width / 2))
+    wp = LaneMap(xodr_text, "lines").waypoints(step_m)
+    wp = wp.take(wp.is_type("driving") & (junctions | ~wp.in_junction))
     lines = []
-    for key, d in out.items():
-        o = np.argsort(d["s"])
-        lines.append({"id": key, "junction": d["junction"], "centre": np.array(d["c"])[o], "z": np.array(d["z"])[o],
-                      "left": np.array(d["l"])[o], "right": np.array(d["r"])[o]})
+    for ln in wp.per_lane():
+        L, R = ln.borders()
+        lines.append({"id": ln.key, "junction": bool(ln.in_junction[0]), "centre": ln.xyz[:, :2], "z": ln.xyz[:, 2],
+                      "left": L, "right": R})
     return lines
 
 

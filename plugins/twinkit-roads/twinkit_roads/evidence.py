@@ -35,8 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-ROAD, SIDEWALK, TERRAIN = 0, 1, 9
-GROUND = (ROAD, SIDEWALK, TERRAIN)
+from twinkit.cityscapes import GROUND, ROAD, SIDEWALK, TERRAIN
 
 #: OpenDRIVE lane type (as written in the file, lower case) -> the class it votes for.
 ROAD_TYPES = ("driving", "bidirectional", "parking", "shoulder", "entry", "exit", "onramp", "offramp",
@@ -67,49 +66,15 @@ def _lane_vote(t: str, road_types, sidewalk_types) -> int:
 
 def lane_polygons(xodr_text: str, step_m: float = 0.5, road_types=ROAD_TYPES,
                   sidewalk_types=SIDEWALK_TYPES) -> list[Lane]:
-    """Every lane of every type as a pair of border polylines (site frame), from carla.Map offline.
+    """Every lane of every type as a pair of border polylines (site frame): :meth:`LaneMap.lanes`, so a
+    lane not next to a driving lane is not seen."""
+    from twinkit.street.lanes import LaneMap
 
-    carla.Map.generate_waypoints gives driving lanes only; the others are reached sideways from
-    them (get_right_lane / get_left_lane), so a lane not next to a driving lane is not seen.
-    """
-    import carla
-
-    from .align import _site
-
-    m = carla.Map("evidence", xodr_text)
-    seen: dict[tuple, dict] = {}
-
-    def add(w):
-        key = (w.road_id, w.section_id, w.lane_id)
-        d = seen.setdefault(key, {"pts": {}, "type": str(w.lane_type).lower(), "junction": bool(w.is_junction)})
-        s = round(float(w.s), 3)
-        if s in d["pts"]:
-            return False
-        x, y, _ = _site(w.transform.location)
-        rv = w.transform.get_right_vector()
-        n = np.array([rv.x, -rv.y])
-        n /= np.linalg.norm(n) or 1.0
-        h = float(w.lane_width) / 2
-        d["pts"][s] = ((x - n[0] * h, y - n[1] * h), (x + n[0] * h, y + n[1] * h))
-        return True
-
-    for w in m.generate_waypoints(step_m):
-        add(w)
-        for side in ("get_right_lane", "get_left_lane"):
-            o = getattr(w, side)()
-            hops = 0
-            while o is not None and hops < 8:
-                if o.lane_type == carla.LaneType.Driving:
-                    break  # reached from its own generate_waypoints sample
-                add(o)
-                o = getattr(o, side)()
-                hops += 1
     lanes = []
-    for key, d in seen.items():
-        ss = sorted(d["pts"])
-        L = np.array([d["pts"][s][0] for s in ss])
-        R = np.array([d["pts"][s][1] for s in ss])
-        lanes.append(Lane(key, d["type"], _lane_vote(d["type"], road_types, sidewalk_types), L, R, d["junction"]))
+    for ln in LaneMap(xodr_text, "evidence").lanes(step_m).per_lane():
+        t = str(ln.type[0]).lower()
+        L, R = ln.borders()
+        lanes.append(Lane(ln.key, t, _lane_vote(t, road_types, sidewalk_types), L, R, bool(ln.in_junction[0])))
     return lanes
 
 
@@ -142,30 +107,6 @@ def vertex_areas(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 
     a = face_areas(v, f) / 3.0
     return np.bincount(f.ravel(), weights=np.repeat(a, 3), minlength=len(v))
-
-
-def local_ground(v: np.ndarray, up: np.ndarray, cell_m: float, window_m: float, pct: float) -> np.ndarray:
-    """Per vertex: the local lowest ground height (a low percentile of up-facing vertices per cell,
-    then the minimum over a window; empty cells take the window's level)."""
-    from scipy import ndimage
-
-    xy = v[:, :2]
-    lo = xy.min(0)
-    ij = np.floor((xy - lo) / cell_m).astype(int)
-    shape = tuple(ij.max(0) + 1)
-    src = np.flatnonzero(up) if up.any() else np.arange(len(v))
-    order = np.lexsort((v[src, 2], ij[src, 1], ij[src, 0]))
-    s = src[order]
-    cid = ij[s, 0] * shape[1] + ij[s, 1]
-    start = np.r_[0, np.flatnonzero(np.diff(cid)) + 1]
-    cnt = np.diff(np.r_[start, len(s)])
-    pick = start + np.floor((cnt - 1) * pct / 100.0).astype(int)
-    cell = np.full(shape, np.inf)
-    cell.flat[cid[pick]] = v[s[pick], 2]
-    k = max(1, int(round(window_m / cell_m)))
-    level = ndimage.minimum_filter(cell, size=k, mode="nearest")
-    level[~np.isfinite(level)] = np.nanmin(np.where(np.isfinite(cell), cell, np.nan))
-    return level[ij[:, 0], ij[:, 1]]
 
 
 def plateaus(v: np.ndarray, raised: np.ndarray, cell_m: float, close_m: float) -> np.ndarray:
@@ -219,12 +160,14 @@ def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[
                   relabel_from=GROUND) -> Evidence:
     """Vote the lanes into ``labels`` (see the module docstring); returns the new labels and why."""
     from twinkit.mesh.core import vertex_normals
+    from twinkit.street.ground import LocalGround
 
     labels = np.asarray(labels)
     n = len(v)
     vn = vertex_normals(v, f)
     up = vn[:, 2] >= normal_min_z
-    h = v[:, 2] - local_ground(v, up, cell_m, window_m, ground_pct)
+    h = LocalGround(v, up, cell_m=cell_m, window="min", window_m=window_m, pct=ground_pct, odd_window=False,
+                    pad_cells=0, fill="lowest", if_none_up="all").height()
     ground = up & (h <= max_height_m)
     raised = ground & (h >= curb_min_m) & (h <= curb_max_m)
     low = ground & (h < curb_min_m)

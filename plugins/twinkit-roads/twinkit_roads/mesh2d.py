@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from twinkit import InputError
-
-ROAD = 0  # CityScapes trainId of road
+from twinkit.cityscapes import ROAD
 
 
 @dataclass
@@ -123,7 +122,7 @@ def level_faces(v: np.ndarray, f: np.ndarray, curb_tol_m: float = 0.07) -> np.nd
     """Up-facing faces on the carriageway level: the ground below its curbs. The one test of the carriageway
     level for align_roads' ground fallback and road_source=scan.
 
-    First the flat-street test (``_window_level``): within ``curb_tol_m`` of the lowest ground within 9 m.
+    First the flat-street test: within ``curb_tol_m`` of the lowest ground within 9 m (``LocalGround``).
     A real street slopes along its length and is cambered across (Lille: the crown 15 cm above the gutter,
     a drain 20 cm lower still), and there that test keeps a sliver or the gutters: when it keeps less than
     three quarters of the ground that the step test finds low, the step test decides (``step_pieces``: the ground cut into
@@ -135,7 +134,15 @@ def level_faces(v: np.ndarray, f: np.ndarray, curb_tol_m: float = 0.07) -> np.nd
     if len(up) == 0:
         raise InputError("the mesh has no upward-facing faces; cannot find the ground")
     flat = up[nz[up] > 0.95]
-    win = _window_level(v, f, flat, curb_tol_m) if len(flat) else flat
+    win = flat
+    if len(flat):  # the face centres' local lowest level: 1 m cells' minima, the minimum over 9 m raised to
+        # the 9 m window's 10th percentile less the tolerance (a deep hole does not pull it down)
+        from twinkit.street.ground import LocalGround
+
+        cen = v[f[flat]].mean(1)
+        g = LocalGround(cen, cell_m=1.0, window="min", window_m=9.0, odd_window=False, pad_cells=0, floor_pct=10,
+                        floor_below_m=curb_tol_m)
+        win = flat[g.height() < curb_tol_m]
     steps = _step_level(v, f, up, curb_tol_m)
     area = _face_areas(v, f)
     if area[win].sum() >= 0.75 * area[steps].sum():
@@ -145,29 +152,6 @@ def level_faces(v: np.ndarray, f: np.ndarray, curb_tol_m: float = 0.07) -> np.nd
 
 def _face_areas(v, f) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-
-
-def _window_level(v, f, up, curb_tol_m: float, cell_m: float = 1.0, window_m: float = 9.0) -> np.ndarray:
-    """The flat-street test: faces ``up`` within ``curb_tol_m`` of the local lowest walkable level (per-cell
-    minima, their minimum over ``window_m``, raised to the window's 10th percentile less the tolerance so
-    a deep hole does not pull it down)."""
-    from scipy import ndimage
-
-    tri = v[f[up]]
-    cz = tri[:, :, 2].mean(1)
-    cxy = tri[:, :, :2].mean(1)
-    lo = cxy.min(0)
-    ij = np.floor((cxy - lo) / cell_m).astype(int)
-    shape = tuple(ij.max(0) + 1)
-    zmin = np.full(shape, np.inf)
-    np.minimum.at(zmin, (ij[:, 0], ij[:, 1]), cz)
-    k = max(1, int(round(window_m / cell_m)))
-    level = ndimage.minimum_filter(zmin, size=k, mode="nearest")
-    finite = np.where(np.isfinite(zmin), zmin, np.nan)
-    filled = np.nan_to_num(finite, nan=float(np.nanmax(finite)))
-    pct = ndimage.percentile_filter(filled, 10, size=k, mode="nearest")
-    level = np.maximum(level, pct - curb_tol_m)
-    return up[cz - level[ij[:, 0], ij[:, 1]] < curb_tol_m]
 
 
 def _step_level(v, f, up, curb_tol_m: float) -> np.ndarray:

@@ -366,7 +366,7 @@ class SignalParams:
     max_size_m: float = param(2.0, gt=0)  # a cluster wider or taller than this is a mislabelled patch of something else
     min_pole_vertices: int = param(3, ge=0)  # pole-labelled vertices below the cluster (within pole_radius_m): it hangs on a pole
     pole_radius_m: float = param(0.6, gt=0)
-    ground_radius_m: float = param(3.0, gt=0)  # local ground = 2nd percentile of the mesh height within this radius
+    ground_radius_m: float = param(3.0, gt=0, help="metres: the local ground under a signal is the 2nd percentile of the mesh's heights within this radius (street.ground.LocalGround, disc mode)")
     plate_depth_m: float = param(0.12, ge=0)  # a "light" cluster thinner than this across is a sign plate (heads are boxes)
     # poles carrying an unlabelled head (signals.find_pole_heads): candidates for lights the labels miss,
     # offered only to netconvert light heads left unpaired by the labelled lights
@@ -427,21 +427,19 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                                      sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m)
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
-    import carla
+    from twinkit.street.lanes import LaneMap, OpenDriveError
 
     try:
-        m = carla.Map("signals", moved)
-    except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{in_aligned_xodr.name} with the scanned signals does not parse in carla.Map ({exc})"
-                         ) from None
+        m = LaneMap(moved, "signals", source=f"{in_aligned_xodr.name} with the scanned signals")
+    except OpenDriveError as exc:
+        raise InputError(str(exc)) from None
     # what CARLA makes of each signal, against where we meant it to be
     want = {p.id: p.new_xy for p in placed}
     carla_err = {}
-    for lm in m.get_all_landmarks():
+    for lm in m.landmarks():
         w = want.get(lm.id)
         if w is not None:
-            loc = lm.transform.location
-            carla_err[lm.id] = round(float(math.hypot(loc.x - w[0], -loc.y - w[1])), 4)
+            carla_err[lm.id] = round(float(math.hypot(lm.xyz[0] - w[0], lm.xyz[1] - w[1])), 4)
     out_aligned_xodr.write_text(moved, encoding="utf-8")
     for p in placed:
         if p.source == "netconvert":
@@ -494,7 +492,8 @@ class RoadEvidenceParams:
     max_height_m: float = param(0.45, ge=0)  # ...and at most this high above the local lowest ground
     curb_min_m: float = param(0.06, ge=0)  # raised (pavement) level: at least this above the local lowest ground...
     curb_max_m: float = param(0.35, ge=0)  # ...and at most this; below curb_min_m is the carriageway level
-    window_m: float = param(8.0, gt=0)  # local lowest ground: minimum over this window of 0.5 m cells' 5th percentiles
+    window_m: float = param(8.0, gt=0, help="metres: the local lowest ground is the minimum over this window of the "
+                                          "0.5 m cells' 5th percentiles of up-facing vertices (street.ground.LocalGround)")
     max_disagreement: float = param(0.5, ge=0, le=1)  # a lane, or a road, whose surface disagrees more than this casts no vote
     max_network_disagreement: float = param(0.10, ge=0, le=1)  # driving-like lanes of the whole network: above this no lane votes (aligned 1-3 %, 10 m shifts 17-56 %)
     plateau: bool = True  # a raised plateau an agreeing sidewalk lane lies on becomes sidewalk (its road votes)
@@ -508,6 +507,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                   out_road_evidence_png: Path, in_gt_labels_npy: Path | None = None) -> dict:
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
     import numpy as np
+
+    from twinkit.street.lanes import OpenDriveError
 
     from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
                            S_RELABEL, draw_evidence, lane_polygons, road_evidence as vote)
@@ -544,6 +545,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         text = in_aligned_xodr.read_text(encoding="utf-8")
         lanes = lane_polygons(text, params.step_m, tuple(t.lower() for t in params.road_types),
                               tuple(t.lower() for t in params.sidewalk_types))
+    except OpenDriveError as exc:
+        raise InputError(f"{in_aligned_xodr}: {exc.why}; re-run apply_alignment") from None
     except (OSError, UnicodeDecodeError, RuntimeError, ValueError) as exc:
         raise InputError(f"{in_aligned_xodr}: not a readable OpenDRIVE ({exc}); re-run apply_alignment") from None
     if not lanes:

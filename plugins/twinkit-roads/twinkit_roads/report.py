@@ -1,12 +1,10 @@
-"""twinkit-roads' sections of the run report: the road network over the orthophoto (with its OpenDRIVE
-sampler) and the alignment numbers.
+"""twinkit-roads' sections of the run report: the road network over the orthophoto (its lanes as CARLA reads
+them, twinkit.street.lanes) and the alignment numbers.
 
 Registered through ``twinkit_register_report_sections`` (plugin.py exposes the hook implementation).
 """
 from __future__ import annotations
 
-import math
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from twinkit import hookimpl
@@ -22,119 +20,51 @@ def twinkit_register_report_sections(register):
 
 # --------------------------------------------------------------------------- OpenDRIVE, sampled for drawing
 
-def _sample_geometry(g: ET.Element, step: float = 0.5) -> list[tuple[float, float]]:
+#: lane types (CARLA's names, lower case) drawn as paved bands
+_PAVED = ("driving", "bidirectional", "parking", "shoulder", "biking", "entry", "exit", "onramp", "offramp")
+
+
+def network_items(path: Path, step_m: float = 1.0) -> list[tuple[list[tuple[float, float]], str]]:
+    """The OpenDRIVE network as drawing items (site frame, or the file's own frame): one closed ring per paved
+    lane segment (class ``band``: its two borders, with the widths and lane sections CARLA reads), then one
+    polyline per driving-lane centre line (``xodr``; ``xodr junction`` inside junctions)."""
     import numpy as np
-    x0, y0 = float(g.get("x", 0)), float(g.get("y", 0))
-    hdg, length = float(g.get("hdg", 0)), float(g.get("length", 0))
-    n = max(2, int(math.ceil(length / step)) + 1)
-    kind = next(iter(g), None)
-    tag = kind.tag if kind is not None else "line"
-    ch, sh = math.cos(hdg), math.sin(hdg)
-    if tag == "paramPoly3":
-        c = {k: float(kind.get(k, 0)) for k in ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV")}
-        pmax = 1.0 if kind.get("pRange", "normalized") == "normalized" else length
-        pts = []
-        for p in np.linspace(0, pmax, n):
-            u = c["aU"] + c["bU"] * p + c["cU"] * p * p + c["dU"] * p ** 3
-            v = c["aV"] + c["bV"] * p + c["cV"] * p * p + c["dV"] * p ** 3
-            pts.append((x0 + u * ch - v * sh, y0 + u * sh + v * ch))
-        return pts
-    if tag == "poly3":
-        c = [float(kind.get(k, 0)) for k in ("a", "b", "c", "d")]
-        return [(x0 + u * ch - (c[0] + c[1] * u + c[2] * u * u + c[3] * u ** 3) * sh,
-                 y0 + u * sh + (c[0] + c[1] * u + c[2] * u * u + c[3] * u ** 3) * ch)
-                for u in np.linspace(0, length, n)]
-    k0 = k1 = 0.0
-    if tag == "arc":
-        k0 = k1 = float(kind.get("curvature", 0))
-    elif tag == "spiral":
-        k0, k1 = float(kind.get("curvStart", 0)), float(kind.get("curvEnd", 0))
-    pts = [(x0, y0)]
-    x, y, h = x0, y0, hdg
-    ds = length / (n - 1)
-    for i in range(n - 1):
-        s_mid = (i + 0.5) * ds
-        k = k0 + (k1 - k0) * s_mid / max(length, 1e-9)
-        hm = h + k * ds / 2
-        x, y = x + ds * math.cos(hm), y + ds * math.sin(hm)
-        h += k * ds
-        pts.append((x, y))
-    return pts
 
+    from twinkit.street.lanes import LaneMap
 
-def read_opendrive(path: Path) -> list[dict]:
-    """Each road's reference line (sampled) and its paved width at s = 0 (sum of lane widths)."""
-    root = ET.parse(path).getroot()
-    off = root.find("header/offset")
-    ox = float(off.get("x", 0)) if off is not None else 0.0
-    oy = float(off.get("y", 0)) if off is not None else 0.0
-    roads = []
-    for road in root.iter("road"):
-        pts: list[tuple[float, float]] = []
-        for g in road.findall("planView/geometry"):
-            seg = _sample_geometry(g)
-            pts.extend(seg if not pts else seg[1:])
-        widths = {"left": 0.0, "right": 0.0}
-        ls = road.find("lanes/laneSection")
-        if ls is not None:
-            for side in widths:
-                for lane in ls.findall(f"{side}/lane"):
-                    w = lane.find("width")
-                    if w is not None and lane.get("type", "driving") in _PAVED:
-                        widths[side] += float(w.get("a", 0))
-        lo = road.find("lanes/laneOffset")
-        offset = float(lo.get("a", 0)) if lo is not None else 0.0
-        roads.append({"id": road.get("id"), "junction": road.get("junction", "-1"),
-                      "points": [(x + ox, y + oy) for x, y in pts], "width": widths["left"] + widths["right"],
-                      "left": widths["left"], "right": widths["right"], "offset": offset})
-    return roads
-
-
-_PAVED = ("driving", "bidirectional", "parking", "shoulder", "biking", "entry", "exit", "onRamp", "offRamp")
-
-
-def offset_polyline(pts: list[tuple[float, float]], d: float) -> list[tuple[float, float]]:
-    """The polyline moved sideways by ``d`` metres (positive: to the left of its direction)."""
-    import numpy as np
-    a = np.asarray(pts, float)
-    if len(a) < 2 or d == 0:
-        return [tuple(p) for p in a]
-    t = np.gradient(a, axis=0)
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-    n = np.column_stack([-t[:, 1], t[:, 0]])
-    return [tuple(p) for p in a + n * d]
-
+    lm = LaneMap.from_file(path)
+    items = []
+    for ln in lm.lanes(step_m).per_lane():
+        if str(ln.type[0]).lower() in _PAVED and len(ln) >= 2:
+            left, right = ln.borders()
+            items.append(([tuple(p) for p in np.concatenate([left, right[::-1]]).tolist()], "band"))
+    wp = lm.waypoints(step_m)
+    for ln in wp.take(wp.is_type("driving")).per_lane():
+        cls = "xodr junction" if ln.in_junction[0] else "xodr"
+        items.append(([tuple(p) for p in ln.xyz[:, :2].tolist()], cls))
+    return items
 
 
 # --------------------------------------------------------------------------- sections
 
 def sec_roads(ctx) -> str:
     """The road network (the latest OpenDRIVE, and the site's reference lanes) over the orthophoto; road QA pictures."""
-    layers = []  # (class, list of (points, width))
+    layers = []  # (layer, list of (points, class))
     sources = []
     for s, f in ctx.find("*.xodr"):
         try:
-            roads = read_opendrive(f)
+            items = network_items(f)
         except Exception as exc:
             ctx.log.warning("twinkit: report: cannot read %s (%s)", f, exc)
             continue
-        shift = _projected_shift(ctx, roads)
-        items = []
-        for r in roads:
-            ref = [(x - shift[0], y - shift[1]) for x, y in r["points"]]
-            if r["junction"] in ("-1", "", None):  # paved bands of the normal roads, each side of the lane offset
-                for side, sign in (("left", 1), ("right", -1)):
-                    if r[side] > 0:
-                        items.append((offset_polyline(ref, r["offset"] + sign * r[side] / 2), r[side], "band"))
-                items.append((ref, 0.0, "xodr"))
-            else:
-                items.append((ref, 0.0, "xodr junction"))
-        layers.append(("xodr", items))
-        sources.append(f"{s.get('folder')}/{f.name} ({len(roads)} roads)")
+        shift = _projected_shift(ctx, items)
+        layers.append(("xodr", [([(x - shift[0], y - shift[1]) for x, y in pts], cls) for pts, cls in items]))
+        n = sum(cls == "band" for _, cls in items)
+        sources.append(f"{s.get('folder')}/{f.name} ({n} paved lane segments)")
         break
     for s, f in ctx.find("roads_truth.json")[:1]:
         d = ctx.read_json(f) or {}
-        lanes = [([tuple(p[:2]) for p in ln.get("points", [])], 0.0, "truth") for ln in d.get("lanes", [])
+        lanes = [([tuple(p[:2]) for p in ln.get("points", [])], "truth") for ln in d.get("lanes", [])
                  if ln.get("points")]
         if lanes:
             layers.append(("truth", lanes))
@@ -153,15 +83,15 @@ def sec_roads(ctx) -> str:
         sx, sy = w / (b[2] - b[0]), h / (b[3] - b[1])
         svg = [f"<svg class=\"roads\" viewBox=\"0 0 {w} {h}\" xmlns=\"http://www.w3.org/2000/svg\">",
                f"<image href=\"{ctx.url(frame['texture'])}\" x=\"0\" y=\"0\" width=\"{w}\" height=\"{h}\" opacity=\"0.85\"/>"]
-        drawn = sorted((it for _, items in layers for it in items), key=lambda it: 0 if it[2] == "band" else 1)
-        for pts, width, cls in drawn:  # bands first, lines over them
+        drawn = sorted((it for _, items in layers for it in items), key=lambda it: 0 if it[1] == "band" else 1)
+        for pts, cls in drawn:  # bands first, lines over them
             if len(pts) < 2:
                 continue
             d = " ".join(f"{(x - b[0]) * sx:.1f},{(b[3] - y) * sy:.1f}" for x, y in pts)
-            sw = f" stroke-width=\"{width * sx:.1f}\"" if cls == "band" else ""
-            svg.append(f"<polyline{ctx.attr('class', cls)} points=\"{d}\"{sw}/>")
+            shape = "polygon" if cls == "band" else "polyline"
+            svg.append(f"<{shape}{ctx.attr('class', cls)} points=\"{d}\"/>")
         svg.append("</svg>")
-        keys = "<span class=\"key xodr\">OpenDRIVE reference lines (band: paved lanes; thin: junctions)</span>" if any(
+        keys = "<span class=\"key xodr\">OpenDRIVE driving-lane centre lines (band: paved lanes; thin: junctions)</span>" if any(
             c == "xodr" for c, _ in layers) else ""
         keys += "<span class=\"key truth\">site's reference lanes</span>" if any(c == "truth" for c, _ in layers) else ""
         parts.append(f"<figure class=\"wide\">{''.join(svg)}<figcaption>Road network over the orthophoto. "
@@ -181,9 +111,9 @@ def sec_roads(ctx) -> str:
     return "".join(parts)
 
 
-def _projected_shift(ctx, roads: list[dict]) -> tuple[float, float]:
+def _projected_shift(ctx, items: list) -> tuple[float, float]:
     """OpenDRIVE in projected coordinates -> site frame, using the site's base point."""
-    xs = [abs(x) for r in roads for x, _ in r["points"][:1]]
+    xs = [abs(x) for pts, _ in items for x, _ in pts[:1]]
     if not xs or max(xs) < 1e4:
         return (0.0, 0.0)
     hit = ctx.first("site.json")

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from twinkit import InputError
+from twinkit.geo.similarity import closed_form_similarity
 
 from .sources import OpenDriveSourceParams  # noqa: F401 (the source's parameters live with the sources)
 
@@ -50,18 +51,6 @@ class Similarity2D:
     def is_identity(self, extent_m: float) -> bool:
         return abs(self.k - 1) * max(extent_m, 1.0) < 1e-9 and abs(self.theta) * max(extent_m, 1.0) < 1e-9 \
             and float(np.abs(self.t).max()) < 1e-9
-
-
-def fit_similarity_2d(p: np.ndarray, q: np.ndarray) -> Similarity2D:
-    """Least-squares ``q ~ k R(theta) p + t`` (closed form)."""
-    cp, cq = p.mean(0), q.mean(0)
-    a, b = p - cp, q - cq
-    theta = math.atan2(float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])), float(np.sum(a * b)))
-    c, s = math.cos(theta), math.sin(theta)
-    ra = a @ np.array([[c, s], [-s, c]])
-    den = float(np.sum(ra * ra))
-    k = float(np.sum(ra * b)) / den if den > 1e-12 else 1.0
-    return Similarity2D(k, theta, cq - k * (cp @ np.array([[c, s], [-s, c]])))
 
 
 # --------------------------------------------------------------------------- reading
@@ -164,7 +153,8 @@ def to_site_frame(src: Path, frame, params: OpenDriveSourceParams, log=None) -> 
         if not np.all(np.isfinite(q)):
             raise InputError(f"{src}: pyproj cannot move the map from '{declared[:120]}' into the site CRS "
                              f"{frame.crs} (points outside the CRS's area); check the geoReference and site.crs")
-        sim = fit_similarity_2d(p, q)
+        fit = closed_form_similarity(p, q)
+        sim = Similarity2D(fit.scale, fit.angle_rad, fit.t)
         # float noise of a pure translation (same projection, another base point): no scale, no turn
         if abs(sim.k - 1) * max(extent, 1.0) < 1e-9:
             sim.k = 1.0

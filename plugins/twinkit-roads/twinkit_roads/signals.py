@@ -25,7 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-POLE, LIGHT, SIGN = 5, 6, 7  # CityScapes trainIds
+from twinkit.cityscapes import POLE
+from twinkit.cityscapes import TRAFFIC_LIGHT as LIGHT
+from twinkit.cityscapes import TRAFFIC_SIGN as SIGN
+
 # SignalType::IsTrafficLight (LibCarla/source/carla/road/SignalType.cpp, carla 0.9.16)
 CARLA_LIGHT_TYPES = {"1000001", "1000002", "1000009", "1000010", "1000011", "1000007", "1000014", "1000015",
                      "1000016", "1000017", "1000018", "1000019", "1000013", "1000020", "1000008", "1000012",
@@ -217,10 +220,12 @@ def find_instances(V: np.ndarray, labels: np.ndarray, *, link_m: float = 0.35, m
     """
     from scipy.spatial import cKDTree
 
+    from twinkit.street.ground import LocalGround
+
     labels = np.asarray(labels)
     if len(labels) != len(V):
         raise ValueError(f"{len(labels)} labels for {len(V)} vertices")
-    tree2 = cKDTree(V[:, :2])
+    ground_at = LocalGround(V, window="disc", window_m=2 * ground_radius_m, pct=2).at
     pole = V[labels == POLE]
     ptree = cKDTree(pole[:, :2]) if len(pole) else None
     kept, rejected = [], []
@@ -237,8 +242,9 @@ def find_instances(V: np.ndarray, labels: np.ndarray, *, link_m: float = 0.35, m
             else:
                 ext = np.zeros(2)
             size = np.array([ext[1], ext[0], P[:, 2].max() - P[:, 2].min()])
-            near = tree2.query_ball_point(c[:2], ground_radius_m)
-            ground = float(np.percentile(V[near, 2], 2)) if near else float(P[:, 2].min())
+            ground = float(ground_at(c[:2])[0])
+            if np.isnan(ground):
+                ground = float(P[:, 2].min())
             n_pole = 0
             if ptree is not None:
                 cand = ptree.query_ball_point(c[:2], pole_radius_m)
@@ -284,18 +290,18 @@ def find_pole_heads(V: np.ndarray, labels: np.ndarray, known: list[Instance], *,
     facade). Poles within ``known_m`` of a light found by its label are left out. The head's
     position is the centroid of its vertices not labelled as sign.
     """
-    from scipy.spatial import cKDTree
+    from twinkit.street.ground import LocalGround
 
     labels = np.asarray(labels)
-    tree2 = cKDTree(V[:, :2])
+    local = LocalGround(V, window="disc", window_m=2 * ground_radius_m, pct=2)
+    tree2 = local.tree
     idx = np.flatnonzero(labels == POLE)
     out = []
     for comp in _clusters(V[idx], link_m):
         if len(comp) < min_pole_vertices:
             continue
         c = np.median(V[idx[comp], :2], 0)
-        near = tree2.query_ball_point(c, ground_radius_m)
-        ground = float(np.percentile(V[near, 2], 2))
+        ground = float(local.at(c)[0])
         if any(k.kind == "light" and np.hypot(*(k.centre[:2] - c)) <= known_m for k in known):
             continue
         ring = np.asarray(tree2.query_ball_point(c, clear_ring_m[1]), int)

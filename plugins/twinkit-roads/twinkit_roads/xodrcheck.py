@@ -3,9 +3,7 @@
     python -m twinkit_roads.xodrcheck file.xodr '[xmin, ymin, xmax, ymax]' 2.0 [samples.npy]
 
 With a fourth argument, the lane centres of the waypoints are saved there as an (n, 6) array:
-x, y (site convention), z, road id, lane id, s.
-
-CARLA's frame is left-handed: a waypoint at carla (x, y) is at site (x, -y).
+x, y, z (site frame), road id, lane id, s. The map is read through :class:`twinkit.street.lanes.LaneMap`.
 """
 from __future__ import annotations
 
@@ -14,42 +12,39 @@ import sys
 import time
 from pathlib import Path
 
+#: OpenDRIVE signal types CARLA makes traffic lights of
+TRAFFIC_LIGHT_TYPES = ("1000001", "1000002", "1000011")
+
 
 def main(argv: list[str]) -> int:
     path, bounds, step = Path(argv[0]), json.loads(argv[1]), float(argv[2])
     t0 = time.perf_counter()
-    import carla
+    from twinkit.street.lanes import LaneMap, OpenDriveError
 
-    text = path.read_text(encoding="utf-8")
     try:
-        m = carla.Map(path.stem or "site", text)
-    except Exception as exc:  # noqa: BLE001 - reported to the parent
-        print(json.dumps({"error": f"{type(exc).__name__}: {exc}"}))
+        m = LaneMap.from_file(path, path.stem or "site")
+    except OpenDriveError as exc:  # reported to the parent
+        print(json.dumps({"error": str(exc)}))
         return 0
     t_parse = time.perf_counter() - t0
-    topo = m.get_topology()
-    wps = m.generate_waypoints(step)
+    topo = m.topology()
+    wps = m.waypoints(step)
     t_wp = time.perf_counter() - t0 - t_parse
-    xmin, ymin, xmax, ymax = bounds
-    inside = 0
-    junctions = set()
-    lane_types: dict[str, int] = {}
-    for w in wps:
-        loc = w.transform.location
-        x, y = loc.x, -loc.y
-        if xmin <= x <= xmax and ymin <= y <= ymax:
-            inside += 1
-        if w.is_junction:
-            junctions.add(w.junction_id)
-        lane_types[str(w.lane_type)] = lane_types.get(str(w.lane_type), 0) + 1
-    if len(argv) > 3:
-        import numpy as np
+    import numpy as np
 
-        np.save(argv[3], np.array([(w.transform.location.x, -w.transform.location.y, w.transform.location.z,
-                                    w.road_id, w.lane_id, w.s) for w in wps], float).reshape(-1, 6))
-    lights = [lm for lm in m.get_all_landmarks() if lm.type in ("1000001", "1000002", "1000011")]
+    xmin, ymin, xmax, ymax = bounds
+    x, y = wps.xyz[:, 0], wps.xyz[:, 1]
+    inside = int(((xmin <= x) & (x <= xmax) & (ymin <= y) & (y <= ymax)).sum())
+    junctions = set(wps.junction[wps.in_junction].tolist())
+    lane_types: dict[str, int] = {}
+    for t in wps.type:
+        lane_types[t] = lane_types.get(t, 0) + 1
+    if len(argv) > 3:
+        np.save(argv[3], np.c_[wps.xyz, wps.road, wps.lane, wps.s].astype(float).reshape(-1, 6))
+    marks = m.landmarks()
+    lights = [lm for lm in marks if lm.type in TRAFFIC_LIGHT_TYPES]
     print(json.dumps({"topology_segments": len(topo), "waypoints": len(wps), "waypoints_inside": inside,
-                      "junctions_with_waypoints": len(junctions), "landmarks": len(m.get_all_landmarks()),
+                      "junctions_with_waypoints": len(junctions), "landmarks": len(marks),
                       "traffic_light_landmarks": len(lights), "lane_types": lane_types,
                       "parse_s": round(t_parse, 3), "waypoints_s": round(t_wp, 3)}))
     return 0

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from twinkit import cityscapes
+
 ROOT = Path(__file__).resolve().parents[3]
 IGN = ROOT.parent / "shared" / "data" / "pointclouds" / "ign_lidarhd_village_street.laz"
 RUN_IGN = ["recipe=pointcloud_site", "site=mex", "site.name=ign", "site.crs=EPSG:2154",
@@ -77,7 +79,7 @@ def point_table(points: np.ndarray, codes: np.ndarray, vertices: np.ndarray, run
                 agree[k][0] += int(ok.sum())
                 agree[k][1] += int(known.sum())
             cells_out.append(f"{100 * (1 - ok[known].mean()):.1f} %" if voting and known.any() else "(silent)")
-            cells_car.append(f"{100 * (lab == 13).mean():.1f} %")
+            cells_car.append(f"{100 * (lab == cityscapes.CAR).mean():.1f} %")
             vals, cnt = np.unique(lab[known], return_counts=True)
             top = np.argsort(-cnt)[:3]
             common.append(", ".join(f"{NAMES[vals[i]]} {100 * cnt[i] / max(known.sum(), 1):.0f}" for i in top) or "-")

@@ -60,13 +60,14 @@ def main(argv=None) -> int:
 
     from twinkit.plugins import build_component
     from twinkit_segmentation import views as V
-    from twinkit.cityscapes import NAMES as CLASSES, N_CLASSES
+    from twinkit.cityscapes import N_CLASSES
     from twinkit.mesh import edges as mesh_edges, read_mesh
-    from twinkit_segmentation.segmesh import unit_normals
+    from twinkit.street.truth import transfer_labels
+    from twinkit_segmentation.segmesh import face_labels, unit_normals, vertex_labels
     from twinkit_segmentation.metrics import blend_decide, decide, majority_labels, propagate, scores
     from twinkit_segmentation.oversegment import felzenszwalb_mesh
     from twinkit_segmentation.render import Renderer, load_texture
-    from twinkit_segmentation.steps import BackprojectParams, FelzenszwalbParams, transfer_labels
+    from twinkit_segmentation.steps import BackprojectParams, FelzenszwalbParams
 
     alpha = BackprojectParams().segment_weight if a.segment_weight is None else a.segment_weight
 
@@ -79,7 +80,8 @@ def main(argv=None) -> int:
         mesh = read_mesh(mesh_path)
         normals = unit_normals(mesh)
     gt_mesh = read_mesh(site / "01_site" / "gt_mesh.ply")
-    gt, _ = transfer_labels(gt_mesh, mesh.vertices)
+    gt, _ = transfer_labels(gt_mesh.vertices, gt_mesh.faces, mesh.vertices, face_labels=face_labels(gt_mesh),
+                            vertex_labels=vertex_labels(gt_mesh))
     site_json = json.loads((site / "01_site" / "site.json").read_text())
     fp = FelzenszwalbParams()
     if a.k_threshold is not None:
@@ -157,7 +159,6 @@ def main(argv=None) -> int:
                 ctx_t = T(f"back-projection ({model_name}, combined)")
             else:
                 ctx_t = None
-            t0 = time.perf_counter()
             if ctx_t:
                 ctx_t.__enter__()
             lab, _ = blend_decide(seg, vv, alpha, ignore_classes=[10])

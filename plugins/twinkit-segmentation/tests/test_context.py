@@ -3,13 +3,12 @@ only there (each test fails with its cue switched off)."""
 import numpy as np
 import pytest
 
-from twinkit.cityscapes import N_CLASSES
+from twinkit.cityscapes import (BICYCLE, BUILDING, CAR, FENCE, MOTORCYCLE, N_CLASSES, POLE, ROAD, SIDEWALK, TERRAIN,
+                                TRAFFIC_LIGHT, TRAFFIC_SIGN, VEGETATION, WALL)
 from twinkit.mesh import edges as mesh_edges
 from twinkit.mesh.core import vertex_normals
-from twinkit.surface.localground import LocalGround
+from twinkit.street.ground import LocalGround
 from twinkit_segmentation.context import CUES, DEFAULT_CUES, ContextOptions, fuse_with_context, geometric_context
-
-ROAD, SIDEWALK, BUILDING, VEGETATION, TERRAIN, CAR = 0, 1, 2, 8, 9, 13
 
 
 def heightfield(z_of, size=(24.0, 16.0), step=0.25):
@@ -39,7 +38,7 @@ def in_box(v, x0, x1, y0, y1):
 def test_local_ground_ignores_a_car_and_follows_a_slope():
     car = lambda x, y: np.where((np.abs(x) <= 2.25) & (np.abs(y) <= 0.9), 1.5, 0.0)  # noqa: E731
     v, f, n, _ = heightfield(lambda x, y: 0.08 * x + car(x, y))  # an 8 % street with a car on it
-    h = LocalGround(v, n, window_m=3.0).height(v)
+    h = LocalGround(v, n[:, 2] >= 0.85, window="opening", window_m=3.0).height(v)
     roof = in_box(v, -2.0, 2.0, -0.7, 0.7)
     assert np.abs(h[roof] - 1.5).max() < 0.1  # the roof is 1.5 m above the ground, not ground
     inner = in_box(v, -10.5, 10.5, -6.5, 6.5) & ~in_box(v, -2.5, 2.5, -1.2, 1.2)  # (at the scan's edge the
@@ -203,7 +202,6 @@ def test_backproject_step_context_metrics_and_bad_cue_name(tmp_path, scene_files
 
 
 # ------------------------------------------------------------------ objects above the ground and their shape
-WALL, FENCE, POLE, LIGHT, SIGN, MOTORCYCLE, BICYCLE = 3, 4, 5, 6, 7, 17, 18
 SHAPE_OFF = {c: [x for x in CUES if x != c] for c in ("column", "mounted", "low", "narrow", "slender")}
 
 
@@ -261,7 +259,7 @@ def test_objects_above_the_ground_split_and_measure_a_post_and_a_wall():
     post = solid_box([0, 0, 0], [0.2, 0.2, 4.0], top=False)
     wall = solid_box([3, -4, 0], [3.25, 4, 1.9])
     v, n, e, (mp, mw) = scene(post, wall)
-    h = LocalGround(v, n).height(v)
+    h = LocalGround(v, n[:, 2] >= 0.85).height(v)
     ob = objects_above_ground(v, h, h > 0.3, e)
     assert ob["n_objects"] == 2
     op, ow = ob["object"][mp & (h > 0.3)][0], ob["object"][mw & (h > 0.3)][0]
@@ -296,12 +294,12 @@ def test_mounted_cue_a_free_plate_is_a_sign_a_box_on_a_post_is_a_light():
     chip = solid_box([0, 5.7, 3.0], [0.5, 5.9, 3.5], step=0.05)  # a bit of facade the mesh split off
     v, n, e, (mpl, mpo, mh, mf, mch) = scene(plate, post, head, facade, chip)
     p = votes(len(v), road=1.0)
-    p[mpl] = votes(1, building=0.5, vegetation=0.14, light=0.2, sign=0.16)  # light ahead: a plate is a sign
-    p[mpo | mh] = votes(1, building=0.5, sign=0.2, light=0.16, pole=0.14)  # sign ahead: a box is a light
-    p[mf | mch] = votes(1, building=0.6, sign=0.4)
+    p[mpl] = votes(1, building=0.5, vegetation=0.14, traffic_light=0.2, traffic_sign=0.16)  # light ahead: a plate is a sign
+    p[mpo | mh] = votes(1, building=0.5, traffic_sign=0.2, traffic_light=0.16, pole=0.14)  # sign ahead: a box is a light
+    p[mf | mch] = votes(1, building=0.6, traffic_sign=0.4)
     lab, _, met = fuse_with_context(p, v, n, e)
-    assert (lab[mpl] == SIGN).mean() > 0.95 and met["mounted_changed"] > 0
-    assert (lab[mh] == LIGHT).mean() > 0.9
+    assert (lab[mpl] == TRAFFIC_SIGN).mean() > 0.95 and met["mounted_changed"] > 0
+    assert (lab[mh] == TRAFFIC_LIGHT).mean() > 0.9
     assert (lab[mch] == BUILDING).all() and (lab[mf] == BUILDING).all()  # a facade fragment is no sign
     off, _, _ = fuse_with_context(p, v, n, e, cues=SHAPE_OFF["mounted"])
     assert (off[mpl] == BUILDING).all() and (off[mh] == BUILDING).all()
@@ -376,10 +374,10 @@ def test_low_cue_no_signal_head_on_a_low_object():
     box = solid_box([0, 0, 0], [0.4, 0.4, 1.2], step=0.05)  # a control cabinet at the kerb
     v, n, e, (mb,) = scene(box)
     p = votes(len(v), road=1.0)
-    p[mb] = votes(1, light=0.6, pole=0.4)
+    p[mb] = votes(1, traffic_light=0.6, pole=0.4)
     body = mb & (v[:, 2] > 0.35)
     assert (fuse_with_context(p, v, n, e)[0][body] == POLE).all()
-    assert (fuse_with_context(p, v, n, e, cues=SHAPE_OFF["low"])[0][body] == LIGHT).all()
+    assert (fuse_with_context(p, v, n, e, cues=SHAPE_OFF["low"])[0][body] == TRAFFIC_LIGHT).all()
 
 
 def test_objects_join_parts_that_share_positions_a_car_built_of_separate_sides_stays_one_car():

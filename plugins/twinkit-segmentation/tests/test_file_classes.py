@@ -5,13 +5,11 @@ import json
 import numpy as np
 import pytest
 
-from twinkit.cityscapes import ASPRS_TO_TRAINIDS, asprs_allowed
+from twinkit.cityscapes import ASPRS_TO_TRAINIDS, BUILDING, CAR, ROAD, SIDEWALK, TERRAIN, asprs_allowed
 from twinkit.mesh import Mesh, read_mesh, write_ply
 from twinkit.testing import plugin_from_module, run_step
 
 import twinkit_segmentation.plugin as P
-
-ROAD, SIDEWALK, BUILDING, TERRAIN, CAR = 0, 1, 2, 9, 13
 
 
 def _backproject(tmp_path, name, inputs, **params):
