@@ -41,10 +41,11 @@ def declared_libraries(distributions: tuple[str, ...] | list[str]) -> list[str]:
     extras: dict[str, set[str]] = {}  # extras of each distribution that are used
     for d in dists:
         try:
-            raw = md.requires(d) or []
-            offered = md.metadata(d).get_all("Provides-Extra") or []
+            dist = md.distribution(d)
         except md.PackageNotFoundError:
             continue
+        raw = dist.requires or []
+        offered = dist.metadata.get_all("Provides-Extra") or []
         reqs = []
         for line in raw:
             try:
