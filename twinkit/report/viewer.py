@@ -109,6 +109,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
                 "npm run bundle</code> (or scripts/setup.sh) in the twinkit repository and run again. "
                 f"The model is here: {link('viewer/model.glb')}</p>")
     glb_stat = (vdir / "model.glb").stat()
+    cache.mkdir(parents=True, exist_ok=True)
     js_cached = cache / f"model-{glb_stat.st_ino}-{glb_stat.st_size}-{glb_stat.st_mtime_ns}.glb.js"
     if not js_cached.is_file():
         write_glb_js(vdir / "model.glb", js_cached)
