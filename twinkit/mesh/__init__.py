@@ -14,7 +14,8 @@ Modules, by concept:
   closing a boundary loop is :mod:`twinkit.street.holes` (``fan_fill`` for holes anywhere on a surface);
 - :mod:`twinkit.mesh.o3d`: ``to_o3d_mesh`` / ``to_o3d_cloud`` (open3d imported when called).
 
-Only numpy is imported with this package; scipy, plyfile, open3d and Pillow are imported by the
+Only numpy is imported with this package (PLY is read and written with numpy alone); scipy, open3d
+and Pillow are imported by the
 functions that need them (install them with the ``twinkit[mesh]`` extra). ``import twinkit``
 does not import this package.
 """

@@ -10,11 +10,11 @@ only the files of this distribution's own steps: ``sfm_report.json`` (sfm), ``ge
 """
 from __future__ import annotations
 
-import html
 import math
 import statistics
 
 from twinkit import hookimpl
+from twinkit.report.html import esc
 
 
 @hookimpl
@@ -64,15 +64,15 @@ def camera_map_svg(photos: dict, width: int = 560, height: int = 420, units: str
             out.append(f'<line x1="{cx:.1f}" y1="{cy:.1f}" x2="{gx:.1f}" y2="{gy:.1f}" stroke="#999" '
                        f'stroke-width="0.8"/>')
             out.append(f'<path d="M{gx - 3:.1f},{gy - 3:.1f}L{gx + 3:.1f},{gy + 3:.1f}M{gx - 3:.1f},{gy + 3:.1f}'
-                       f'L{gx + 3:.1f},{gy - 3:.1f}" stroke="#e67e22" stroke-width="1.5"><title>{html.escape(name)} GPS'
+                       f'L{gx + 3:.1f},{gy - 3:.1f}" stroke="#e67e22" stroke-width="1.5"><title>{esc(name)} GPS'
                        f'</title></path>')
         col = "#c0392b" if p.get("outlier") else "#2c6fbb"
-        why = f' (outlier: {html.escape(str(p["outlier"]))})' if p.get("outlier") else ""
+        why = f' (outlier: {esc(p["outlier"])})' if p.get("outlier") else ""
         out.append(f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="{4 if p.get("outlier") else 3}" fill="{col}">'
-                   f'<title>{html.escape(name)}{why}</title></circle>')
+                   f'<title>{esc(name)}{why}</title></circle>')
         if p.get("outlier"):
             out.append(f'<text x="{cx + 6:.1f}" y="{cy - 4:.1f}" font-size="11" fill="#c0392b">'
-                       f'{html.escape(name)}</text>')
+                       f'{esc(name)}</text>')
     # scale bar: a round length near a fifth of the map
     target = span / 5
     bar = 10 ** math.floor(math.log10(target))
