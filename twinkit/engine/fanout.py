@@ -12,6 +12,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.memory import release_memory
 from twinkit.engine.records import RECORD, StepOutcome, read_record
 from twinkit.engine.store import compute_into_store, with_site
@@ -46,7 +47,7 @@ def _run_item_task(task: dict) -> dict:
         release_memory()
 
 
-class FanoutMixin:
+class FanoutMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: run a ``foreach`` step through the executor
     (``self.executor_factory``, or the configured ``executor``, or a local pool)."""
 
@@ -124,18 +125,18 @@ class FanoutMixin:
         read = sorted(set(fields).union(*[(read_record(self.store / k) or {}).get("site_fields") or [] for k in keys]))
         if read != sorted(fields):
             key, desc = with_site(desc0, site, read)
-        stored = [read_record(self.store / k) for k in keys]
-        files: dict[str, Any] = {}
+        stored: list[Any] = [read_record(self.store / k) for k in keys]  # each item's record, just written
+        item_files: dict[str, Any] = {}
         for i, r in enumerate(stored):
             for rel, info in r["files"].items():
                 if rel != RECORD:
-                    files[f"{i:03d}/{rel}"] = info
+                    item_files[f"{i:03d}/{rel}"] = info
         artefacts = {p.filename: [r["artefacts"][p.filename] for r in stored] for p in ps.outputs}
         metrics = {"items": len(items), "computed": len(tasks),
                    "per_item": [r.get("metrics", {}) | {"peak_rss_mb": r.get("peak_rss_mb"), "start_rss_mb": r.get("start_rss_mb"),
                                                         "duration_s": r.get("duration_s")} for r in stored]}
         status = "ran" if tasks else "cached"
-        record = self._workspace_record(ps, key, desc, {"files": files, "artefacts": artefacts, "metrics": metrics,
+        record = self._workspace_record(ps, key, desc, {"files": item_files, "artefacts": artefacts, "metrics": metrics,
                                                         "duration_s": round(duration, 3), "site_fields": read},
                                         status, why, in_paths)
         record["item_keys"] = keys

@@ -176,7 +176,8 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
         idx += 1
         where = f"recipe '{rname}', step '{spec.id}'"
         plugin: Plugin | None = None
-        params_obj, params_dict = None, {}
+        params_obj: Any = None
+        params_dict: dict[str, Any] = {}
         components: dict[str, Any] = {}
         if spec.manual is not None:
             outs = spec.manual.get("outputs") or []
@@ -189,9 +190,9 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
             signature = Signature((), tuple(ports), False)
             in_names = spec.manual.get("inputs") or []
             for n in in_names:
-                stem, _, ext = str(n).partition(".")
-                ext = ext or None
-                signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{ext}" if ext else ""), stem, ext),), signature.outputs, False)
+                stem, _, suffix = str(n).partition(".")
+                in_ext = suffix or None
+                signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{in_ext}" if in_ext else ""), stem, in_ext),), signature.outputs, False)
         else:
             uses = str(spec.uses)
             if "/" in uses:

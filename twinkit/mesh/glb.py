@@ -165,8 +165,8 @@ def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str
         # one glTF vertex per distinct (vertex, uv) corner
         corner_v = part.faces.reshape(-1).astype(np.int64)
         corner_uv = part.corner_uv.reshape(-1, 2)
-        key = np.column_stack([corner_v.astype(np.float64), corner_uv.astype(np.float64)])
-        _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        corner = np.column_stack([corner_v.astype(np.float64), corner_uv.astype(np.float64)])
+        _, first, inv = np.unique(corner, axis=0, return_index=True, return_inverse=True)
         inv = inv.ravel()
         src_v = corner_v[first]
         pos = site_to_gltf(part.vertices[src_v]).astype(np.float32)
@@ -205,7 +205,7 @@ def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str
         gl_meshes.append({"name": part.name, "primitives": [prim]})
         nodes.append({"name": part.name, "mesh": len(gl_meshes) - 1, "extras": part.extras})
         stats[part.name] = {"vertices": int(len(pos)), "faces": n_faces}
-    material = {"name": "M_twinkit", "doubleSided": False,
+    material: dict = {"name": "M_twinkit", "doubleSided": False,
                 "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0}}
     ext_used = []
     if unlit:

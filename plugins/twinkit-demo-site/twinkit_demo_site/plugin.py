@@ -109,6 +109,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     """Write a procedural four-way intersection with exact ground truth."""
     import numpy as np
 
+    from twinkit import artefacts as A
     from twinkit_demo_site import writers
     from twinkit_demo_site.layout import LABELS, build_scene
     from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
@@ -139,7 +140,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     mesh = scene.mesh
     lap("scene")
     writers.write_obj(out_gt_mesh_obj, mesh, atlas)
-    writers.write_mesh_ply(out_gt_mesh_ply, mesh, atlas)
+    A.write_gt_mesh(out_gt_mesh_ply, writers.gt_ply_mesh(mesh, atlas))
     lap("mesh_files")
 
     tracer = Tracer(mesh, atlas, threads=ctx.threads, weathering=params.weathering, seed=seed)
@@ -177,8 +178,8 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                          width=params.photo_width_px, height=params.photo_height_px, focal_px=params.focal_px,
                          gps_noise_m=params.gps_noise_m, supersample=params.photo_supersample,
                          shadows=params.shadows, progress=ctx.progress)
-    writers.write_json(out_cameras_json, cams)
-    writers.write_json(out_gcp_json, gcp_observations(
+    A.write_demo_cameras(out_cameras_json, cams)
+    A.write_gcp(out_gcp_json, gcp_observations(
         tracer, cams, scene.gcp_points, np.random.default_rng([seed, 8]),
         survey_noise_m=params.gcp_survey_noise_m, pixel_noise_px=params.gcp_pixel_noise_px))
     lap("photos")
@@ -188,8 +189,8 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     xy = np.array([scene.osm["nodes"][i][:2] for i in ids])
     moved = apply_osm_transform(xy, tf)
     nodes = {i: (float(p[0]), float(p[1]), scene.osm["nodes"][i][2]) for i, p in zip(ids, moved)}
-    writers.write_osm(out_roads_osm, nodes, scene.osm["ways"], geo)
-    writers.write_json(out_roads_truth_json, scene.roads_truth)
+    A.write_osm(out_roads_osm, writers.osm_text(nodes, scene.osm["ways"], geo))
+    A.write_roads_truth(out_roads_truth_json, scene.roads_truth)
     lap("roads")
 
     H = scene.dims.half_m
@@ -212,7 +213,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                   "gcp": "gcp.json (zebra-corner ground-control points with their pixels in the photos)", "roads": "roads.osm, roads_truth.json"},
         "params": {k: getattr(params, k) for k in params.__dataclass_fields__},
     }
-    writers.write_json(out_site_json, site)
+    A.write_site_info(out_site_json, site)
     lap("site_json")
     ctx.log.info("demo site: %d faces, %d points, %d photos; timings %s", len(mesh.faces), n_points, n_photos, timings)
     return {"points": n_points, "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),

@@ -111,7 +111,7 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
     it = progress(starts, total=len(starts), desc="scanning") if progress else starts
     for c0 in it:
         idx = np.arange(c0, min(P, c0 + chunk_profiles))
-        xyz, head, tim = traj["xyz"][idx], traj["heading"][idx], traj["time_s"][idx]
+        xyz, head = traj["xyz"][idx], traj["heading"][idx]
         org_list, dir_list, sid_list = [], [], []
         for h_off in heads:
             # the scan plane contains z and w; its normal is the driving direction turned by h_off

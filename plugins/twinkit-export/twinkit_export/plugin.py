@@ -150,19 +150,17 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
     """Per-vertex trainIds of the textured mesh from the ground-truth mesh (closest surface point)."""
     import numpy as np
 
-    from .labels import read_labelled_ply
-    from twinkit.mesh import read_obj
+    from twinkit import artefacts as A
     from twinkit.street.truth import transfer_labels
+
+    from .labels import labelled_arrays
 
     params = params or GtLabelsParams()
     try:
-        gv, gf, gl = read_labelled_ply(Path(in_gt_mesh_ply))
-    except Exception as exc:
+        gv, gf, gl = labelled_arrays(A.read_gt_mesh(in_gt_mesh_ply))
+    except ValueError as exc:
         raise InputError(f"{in_gt_mesh_ply}: not a ground-truth mesh with per-vertex labels ({exc})") from None
-    try:
-        mesh = read_obj(Path(in_textured_mesh_obj))
-    except Exception as exc:
-        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    mesh = A.read_textured_obj(in_textured_mesh_obj)
     if len(gv) == len(mesh.vertices) and np.abs(gv - mesh.vertices).max() < 1e-4:
         # the mesh *is* the ground-truth mesh (same vertices): copy, do not guess at coincident vertices
         lab, dist = gl.copy(), np.zeros(len(gl), np.float32)
@@ -170,7 +168,7 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
         lab, dist = transfer_labels(gv, gf, mesh.vertices, vertex_labels=gl)
     far = dist > params.max_dist_m
     lab[far] = 255
-    np.save(out_labels_npy, lab.astype(np.uint8))
+    A.write_labels(out_labels_npy, lab.astype(np.uint8))
     hist = {int(k): int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
     ctx.log.info("labelled %d vertices (%d farther than %.2f m left unlabelled)", len(lab), int(far.sum()),
                  params.max_dist_m)
@@ -183,22 +181,16 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
     """One PLY per class (palette colours, class_id, source_index, face UVs) + classes.json + the texture."""
     import numpy as np
 
-    from .classes import info
-    from twinkit.mesh import read_obj
+    from twinkit import artefacts as A
 
+    from .classes import info
     from .classmesh import write_class_ply
     from .split import MANIFEST, split_mesh
 
     params = params or SplitParams()
     t0 = time.perf_counter()
-    try:
-        labels = np.load(in_labels_npy)
-    except Exception as exc:
-        raise InputError(f"{in_labels_npy}: not a readable .npy ({exc})") from None
-    try:
-        mesh = read_obj(Path(in_textured_mesh_obj))
-    except Exception as exc:
-        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    labels = A.read_labels(in_labels_npy)
+    mesh = A.read_textured_obj(in_textured_mesh_obj)
     if labels.ndim != 1 or len(labels) != len(mesh.vertices):
         raise InputError(f"{Path(in_labels_npy).name}: {labels.shape} labels for {len(mesh.vertices)} vertices of "
                          f"{Path(in_textured_mesh_obj).name}; the labels must be per vertex of this mesh "
@@ -337,11 +329,12 @@ def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Pa
 
 def _no_roads_map(xodr: Path) -> bool:
     """The map road_source=scan writes when the scan holds no road (userData twinkit_roads=none)."""
+    from twinkit.artefacts import ArtefactError, read_opendrive
     from twinkit.geo.xodr import has_no_roads
 
     try:
-        return has_no_roads(xodr.read_text(encoding="utf-8", errors="replace"))
-    except OSError:
+        return has_no_roads(read_opendrive(xodr))
+    except ArtefactError:  # unreadable: the package step says so when it reads the map
         return False
 
 
@@ -364,11 +357,10 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
         return _carla_props_only(params, ctx, in_twin_fbx=in_twin_fbx, in_class_meshes_dir=in_class_meshes_dir,
                                  out_carla_import_dir=out_carla_import_dir, out_spawn_points_json=out_spawn_points_json,
                                  in_site_json=in_site_json, in_movables_dir=in_movables_dir, t0=t0)
+    from twinkit.artefacts import read_opendrive
+
     xodr = Path(in_aligned_xodr)
-    try:
-        text = xodr.read_text()
-    except Exception as exc:
-        raise InputError(f"{xodr}: cannot read ({exc})") from None
+    text = read_opendrive(xodr)
     site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
     # the package is written in CARLA's frame (true north at the base point): carla_frame.py
     frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
@@ -425,7 +417,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     # CARLA's import rules, read from its source (carla_contract): a package that breaks one fails here
     rep = check_package(out, package, expect_decals=params.decals)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
     topo = lanes.topology()
@@ -492,7 +484,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     rep = check_package(out, package, expect_decals=None)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
     ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from twinkit import hookimpl
+from twinkit import artefacts as A
 from twinkit.jsonio import write_json
 from twinkit.ranges import param
 
@@ -240,7 +241,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     """Read an E57 / LAS / LAZ / PLY cloud into the site frame (float64 shift, then float32 PLY)."""
     import numpy as np
 
-    from twinkit.mesh import Mesh, write_ply
+    from twinkit.mesh import Mesh
     from twinkit.surface.measure import Measure
     from .localframe import apply_cloud_frame
     from .normals import check_file_normals, estimate_normals, orient_normals
@@ -335,9 +336,9 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
         }
         for note in cloud.frame.notes:
             ctx.log.info("%s: %s", in_cloud.name, note)
-        write_ply(out_points_ply, Mesh(vertices=pts, attrs=attrs, comments=comments))
+        A.write_points(out_points_ply, Mesh(vertices=pts, attrs=attrs, comments=comments))
         meta["time"] = {"seconds": round(meas_now(meas), 3)}
-        write_json(out_points_meta_json, meta)
+        A.write_points_meta(out_points_meta_json, meta)
     out = {"points": int(len(pts)), "normals": normals_source, "colors": raw.colors is not None,
            "shift_m": cloud.frame.shift, "spacing_m": dens["spacing_m"], "capture": dens["capture"],
            **meas.as_dict()}
@@ -360,14 +361,14 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.mesh import read_ply, write_ply
+    from twinkit.mesh import write_ply
     from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
     from twinkit.surface.poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth
 
     params = params or PoissonParams()
     with Measure() as meas, _Outputs(out_dense_mesh_ply):
-        cloud = _read_mesh_input(in_points_ply, "points")
+        cloud = A.read_points(in_points_ply)
         pts = cloud.vertices
         if len(pts) < 10:
             raise InputError(f"{Path(in_points_ply).name}: too few points ({len(pts)}) for a surface")
@@ -411,7 +412,6 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     """Trim bubbles (distance) and low-density parts, keep large components, repair, close small holes."""
     import numpy as np
 
-    from twinkit.mesh import write_ply
     from twinkit.surface.cleanup import CleanOptions, clean_mesh as _clean
     from twinkit.surface.measure import Measure
     from .metrics import topdown_map
@@ -419,7 +419,7 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     params = params or CleanParams()
     with Measure() as meas, _Outputs(out_clean_mesh_ply, out_clean_report_json):
         dense = _read_mesh_input(in_dense_mesh_ply, "dense mesh")
-        cloud = _read_mesh_input(in_points_ply, "points")
+        cloud = A.read_points(in_points_ply)
         auto = _clean_auto(params, cloud, ctx.log)
         opt = CleanOptions(max_dist_m=auto["max_dist_m"], gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
                            density_quantile=params.density_quantile,
@@ -430,7 +430,7 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                            fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
         mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
-        write_ply(out_clean_mesh_ply, mesh)
+        A.write_clean_mesh(out_clean_mesh_ply, mesh)
         d = mesh.attrs["dist_to_cloud_m"]
         vmax = params.colormap_max_m or opt.max_dist_m or float(np.quantile(d, 0.99))
         topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
@@ -505,7 +505,7 @@ def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_p
 
     params = params or SimplifyParams()
     with Measure() as meas, _Outputs(out_mesh_ply):
-        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        dense = A.read_clean_mesh(in_clean_mesh_ply)
         mesh, method = simplify_mesh(dense, params.target_faces, method=params.method,
                                      cluster_above_faces=params.cluster_above_faces,
                                      preserve_border=params.preserve_border,
@@ -537,7 +537,6 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.mesh import write_obj, write_ply
     from twinkit.surface.measure import Measure, StepTimer
     from twinkit.surface.simplify import resample_attributes
     from twinkit.surface.texture import write_png
@@ -555,7 +554,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     png = out_obj.with_suffix(".png")
     with Measure() as meas, _Outputs(out_textured_mesh_obj, out_textured_mesh_ply):
         mesh = _read_mesh_input(in_mesh_ply, "mesh")
-        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        dense = A.read_clean_mesh(in_clean_mesh_ply)
         auto_size = None
         if size == -1:
             from twinkit.surface import density
@@ -589,10 +588,10 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
             else:
                 mesh.attrs["colors"] = np.full((mesh.n_vertices, 3), 128, np.uint8)
             normals = mesh.attrs.get("normals")
-            write_obj(out_obj, mesh.vertices, mesh.faces, uv, png.name, normals=normals)
+            A.write_textured_obj(out_obj, mesh.vertices, mesh.faces, uv, png.name, normals=normals)
             mesh.face_attrs["texcoord"] = uv.reshape(-1, 6).astype(np.float32)
             mesh.comments = [f"TextureFile {png.name}"]
-            write_ply(out_textured_mesh_ply, mesh)
+            A.write_textured_mesh(out_textured_mesh_ply, mesh)
     return {"texture_px": size, "texture_px_auto": auto_size is not None, "uv_method": params.uv_method,
             "neutral_texture": colors is None or colourless == "grey", "colourless": colourless,
             "vertices": mesh.n_vertices, "faces": mesh.n_faces, **{f"uv_{k}": v for k, v in uinfo.items()},
@@ -608,7 +607,7 @@ def _colourless(mode: str, dense, in_points_ply, ctx):
 
     intensity = None
     if mode in ("auto", "intensity") and in_points_ply is not None:
-        cloud = _read_mesh_input(in_points_ply, "points")
+        cloud = A.read_points(in_points_ply)
         inten = cloud.attrs.get("intensity")
         if inten is not None and np.isfinite(inten).any() and float(np.nanstd(inten)) > 0:
             from scipy.spatial import cKDTree
@@ -648,8 +647,8 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
 
     params = params or EvalParams()
     with Measure() as meas, _Outputs(out_recon_metrics_json):
-        mesh = _read_mesh_input(in_textured_mesh_ply, "textured mesh")
-        cloud = _read_mesh_input(in_points_ply, "points")
+        mesh = A.read_textured_mesh(in_textured_mesh_ply)
+        cloud = A.read_points(in_points_ply)
         from scipy.spatial import cKDTree
 
         c2m = cloud_to_mesh(cloud.vertices, mesh.vertices, mesh.faces, _threads(ctx))
@@ -662,7 +661,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
             "cloud_within_m": {str(t): float((c2m <= t).mean()) for t in (0.01, 0.02, 0.05, 0.1)},
         }
         if in_gt_mesh_ply is not None:
-            gt = _read_mesh_input(in_gt_mesh_ply, "ground-truth mesh")
+            gt = A.read_gt_mesh(in_gt_mesh_ply)
             gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
             acc = gsurf.distance(mesh.vertices)
             samples = sample_surface(gt.vertices, gt.faces, params.gt_samples)

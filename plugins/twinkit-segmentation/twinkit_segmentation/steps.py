@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import List
 
 from twinkit import InputError, StepContext
+from twinkit import artefacts as A
 from twinkit.ranges import param
 
 
@@ -47,11 +48,11 @@ def oversegment(params: FelzenszwalbParams, ctx: StepContext, *, in_textured_mes
     """Felzenszwalb over-segmentation of the mesh graph (normals + colours); segments.npy per vertex."""
     import numpy as np
 
-    from twinkit.mesh import read_mesh, write_colored_ply
+    from twinkit.mesh import write_colored_ply
     from twinkit_segmentation.segmesh import random_colors, unit_normals
     from twinkit_segmentation.oversegment import felzenszwalb_mesh
 
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     t0, c0 = time.perf_counter(), time.process_time()
     seg = felzenszwalb_mesh(mesh.vertices, mesh.faces, unit_normals(mesh), mesh.colors,
                             params.k_threshold, params.min_vertices, params.max_vertices,
@@ -77,9 +78,9 @@ def no_oversegment(params: NoSegmentsParams, ctx: StepContext, *, in_textured_me
     """No over-segmentation: every vertex is its own segment (the thesis's ablation)."""
     import numpy as np
 
-    from twinkit.mesh import read_mesh, write_colored_ply
+    from twinkit.mesh import write_colored_ply
 
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     seg = np.arange(len(mesh.vertices), dtype=np.int32)
     np.save(out_segments_npy, seg)
     cols = mesh.colors if mesh.colors is not None else np.full((len(seg), 3), 128, np.uint8)
@@ -103,13 +104,13 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
                  in_roads_osm: Path | None = None, in_street_points_txt: Path | None = None,
                  in_points_ply: Path | None = None, out_views_json: Path) -> dict:
     """Camera views from the selected view sampler (view_sampler=auto_street|street_points|uniform|random|combined)."""
-    from twinkit.mesh import read_mesh
 
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     t0 = time.perf_counter()
     budget = params.auto_max_views if params.max_views < 0 else params.max_views
     capture = _capture(in_points_ply, ctx)
-    views, sampled = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, budget, with_total=True,
+    roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None
+    views, sampled = _sample_views(mesh, ctx, roads_osm, in_street_points_txt, budget, with_total=True,
                                    capture=capture)
     if not views:
         raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
@@ -129,10 +130,9 @@ def _capture(points_ply: Path | None, ctx) -> str | None:
     """The capture type of the cloud (twinkit.surface.density), when the run has one."""
     if points_ply is None or not Path(points_ply).is_file():
         return None
-    from twinkit.mesh import read_ply
     from twinkit.surface import density
 
-    m = density.measure(read_ply(points_ply).vertices)
+    m = density.measure(A.read_points(points_ply).vertices)
     ctx.log.info("sample_views: %s", density.describe(m))
     return m["capture"]
 
@@ -178,14 +178,13 @@ class RenderParams:
 def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
                  out_renders_dir: Path) -> dict:
     """Render every view unlit with a sky background; per pixel the nearest vertex (<view>_vertex.npz)."""
-    from twinkit.mesh import read_mesh
     from twinkit_segmentation.render import load_texture
 
     try:
         views = json.loads(Path(in_views_json).read_text())["views"]
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     tex = load_texture(mesh.texture) if mesh.texture is not None else None
     if tex is None:
         ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
@@ -313,7 +312,6 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
     import numpy as np
     from PIL import Image
 
-    from twinkit.mesh import read_mesh
     from twinkit_segmentation.photoviews import (PhotoCamera, max_distortion_px, photo_view_image, projection_from_K,
                                                  view_matrix_opencv)
     from twinkit_segmentation.render import Renderer, load_texture
@@ -324,17 +322,14 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
     if use_photos and (in_cameras_site_json is None or in_photos_dir is None):
         raise InputError("photo_views: source=photos needs cameras_site.json and the photos folder (the photo "
                          "branch's georeference step and site.inputs.photos); use source=rendered without photos")
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     out_renders_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     kept: list = []
     dropped: list = []
     out: dict = {"source": params.source}
     if use_photos:
-        try:
-            cams = json.loads(Path(in_cameras_site_json).read_text())["cameras"]
-        except (OSError, ValueError, KeyError) as exc:
-            raise InputError(f"{in_cameras_site_json}: not a cameras file ({exc}); re-run georeference") from None
+        cams = A.read_cameras_site(in_cameras_site_json).cameras
         if params.max_photos and len(cams) > params.max_photos:
             cams = [cams[i] for i in np.linspace(0, len(cams) - 1, params.max_photos).round().astype(int)]
         renderers: dict = {}
@@ -406,7 +401,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
             except (OSError, ValueError, KeyError) as exc:
                 raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
         else:
-            views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
+            roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None
+            views = _sample_views(mesh, ctx, roads_osm, in_street_points_txt, params.max_views)
             (out_renders_dir / "views.json").write_text(json.dumps({"views": views}, indent=1))
         if not views:
             raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another "
@@ -481,7 +477,7 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     if getattr(model, "needs_ground_truth", False):
         if in_gt_labels_npy is None:
             raise InputError("image_model=oracle needs gt_labels.npy: add the transfer_gt_labels step before predict_views")
-        model.set_ground_truth(np.load(in_gt_labels_npy))
+        model.set_ground_truth(A.read_labels(in_gt_labels_npy))
     out_predictions_dir.mkdir(parents=True, exist_ok=True)
     votes = np.zeros((n, N_CLASSES), dtype=np.float64)
     pal = np.zeros(768, dtype=np.uint8)
@@ -640,14 +636,14 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     import numpy as np
 
     from twinkit.cityscapes import IGNORE
-    from twinkit.mesh import edges as mesh_edges, read_mesh
+    from twinkit.mesh import edges as mesh_edges
     from twinkit_segmentation.segmesh import write_labels_ply
     from twinkit_segmentation.context import CUES, fuse_with_context, near_unanimous, potts_smooth
     from twinkit_segmentation.metrics import _weighted_votes, blend_distribution, decide_distribution, propagate
     from twinkit_segmentation.segmesh import unit_normals
 
     t0 = time.perf_counter()
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     seg = np.load(in_segments_npy)
     votes = np.load(in_vertex_votes_npy).astype(np.float64)
     if len(seg) != len(mesh.vertices) or len(votes) != len(mesh.vertices):
@@ -706,7 +702,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
                      "%.1f %% of them a class the file rules out, the fused labels %.1f %% (prior factor %g)",
                      finfo["vertices_with_class"], finfo["vertices"], 100 * finfo["against_file_before"],
                      100 * finfo["against_file_after"], params.file_class_factor)
-    np.save(out_labels_npy, labels.astype(np.uint8))
+    A.write_labels(out_labels_npy, labels.astype(np.uint8))
     np.save(out_confidence_npy, conf.astype(np.float32))
     write_labels_ply(out_labels_ply, mesh, labels)
     return {"unlabelled_before_fill": unlabelled_before, "unlabelled": int((labels == IGNORE).sum()),
@@ -755,18 +751,17 @@ def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh
     import numpy as np
 
     from twinkit.cityscapes import IGNORE
-    from twinkit.mesh import read_mesh
     from twinkit.street.truth import transfer_labels
     from twinkit_segmentation.segmesh import face_labels, vertex_labels, write_labels_ply
 
-    gt = read_mesh(in_gt_mesh_ply)
+    gt = A.read_gt_mesh(in_gt_mesh_ply)
     if face_labels(gt) is None and vertex_labels(gt) is None:
         raise InputError(f"{in_gt_mesh_ply}: no 'label' property on faces or vertices")
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     labels, dist = transfer_labels(gt.vertices, gt.faces, mesh.vertices, face_labels=face_labels(gt),
                                    vertex_labels=vertex_labels(gt))
     labels[dist > params.max_distance_m] = IGNORE
-    np.save(out_gt_labels_npy, labels)
+    A.write_labels(out_gt_labels_npy, labels)
     write_labels_ply(out_gt_labels_ply, mesh, labels, comment="ground truth transferred from the nearest gt face")
     return {"vertices": int(len(labels)), "mean_distance_m": float(dist.mean()),
             "unlabelled": int((labels == IGNORE).sum()),
@@ -788,7 +783,7 @@ def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels
 
     from twinkit_segmentation.metrics import majority_labels, markdown_table, scores
 
-    pred, gt = np.load(in_labels_npy), np.load(in_gt_labels_npy)
+    pred, gt = A.read_labels(in_labels_npy), A.read_labels(in_gt_labels_npy)
     if len(pred) != len(gt):
         raise InputError(f"{in_labels_npy.name} has {len(pred)} vertices but {in_gt_labels_npy.name} has {len(gt)}")
     res = scores(pred, gt, list(params.classes) or None)
@@ -796,7 +791,7 @@ def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels
     if in_segments_npy is not None:
         upper = scores(majority_labels(np.load(in_segments_npy), gt), gt, res["classes"])
     out_seg_metrics_json.write_text(json.dumps({"scores": res, "upper_bound": upper}, indent=1))
-    md = [f"# Segmentation vs ground truth\n", f"mIoU **{res['miou']:.1f}**, mF1 **{res['mf1']:.1f}**, "
+    md = ["# Segmentation vs ground truth\n", f"mIoU **{res['miou']:.1f}**, mF1 **{res['mf1']:.1f}**, "
           f"accuracy {res['accuracy']:.1f} %, labelled {100 * res['labelled_fraction']:.1f} % of vertices"]
     if upper:
         md.append(f"; over-segmentation upper bound mIoU {upper['miou']:.1f}")
@@ -821,9 +816,7 @@ def import_labels(params: ImportLabelsParams, ctx: StepContext, *, in_labels_ply
                   in_textured_mesh_ply: Path | None = None, out_labels_npy: Path,
                   out_label_changes_json: Path) -> dict:
     """Read a repainted labels.ply back (nearest palette colour -> class); labels.npy for later steps."""
-    import numpy as np
-
-    before = np.load(in_labels_npy)
+    before = A.read_labels(in_labels_npy)
     after = read_repainted(in_labels_ply, len(before), reference_ply=in_textured_mesh_ply)
     changed = before != after
     per = {}
@@ -833,7 +826,7 @@ def import_labels(params: ImportLabelsParams, ctx: StepContext, *, in_labels_ply
     for a, b in zip(before[changed].tolist(), after[changed].tolist()):
         key = f"{name(a)} -> {name(b)}"
         per[key] = per.get(key, 0) + 1
-    np.save(out_labels_npy, after)
+    A.write_labels(out_labels_npy, after)
     out_label_changes_json.write_text(json.dumps({"changed": int(changed.sum()), "transitions": per}, indent=1))
     ctx.log.info("%d vertices changed by hand", int(changed.sum()))
     return {"changed": int(changed.sum())}
@@ -853,7 +846,7 @@ def read_repainted(path: Path, n_vertices: int, reference_ply: Path | None = Non
                          f"no merge/split), or export again")
     ref = vertices
     if ref is None and reference_ply is not None:
-        ref = read_mesh(reference_ply).vertices
+        ref = A.read_textured_mesh(reference_ply).vertices
     if ref is not None:
         moved = np.linalg.norm(m.vertices - ref, axis=1)
         if np.percentile(moved, 99) > 1e-3:

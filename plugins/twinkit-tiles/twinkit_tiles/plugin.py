@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import List, Optional
 
+from twinkit import artefacts as A
 from twinkit import hookimpl
 from twinkit.ranges import param
 
@@ -179,7 +180,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
                out_tile_points_dir: Path) -> dict:
     """Split the site into overlapping XY tiles; write one point chunk per padded tile and tiles.json."""
     import numpy as np
-    from twinkit.mesh import Mesh, read_ply, write_ply
+    from twinkit.mesh import Mesh, write_ply
     from twinkit.surface.measure import Measure
 
     from .tiling import choose_grid, estimate_tile_mb, in_box
@@ -190,10 +191,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
     if params.overlap_m < 0:
         raise _input_error(f"plan_tiles: overlap_m must be >= 0 (got {params.overlap_m})")
     with Measure() as meas:
-        try:
-            cloud = read_ply(in_points_ply)
-        except Exception as exc:
-            raise _input_error(f"{Path(in_points_ply).name}: cannot read the points ({exc}); re-run read_cloud") from exc
+        cloud = A.read_points(in_points_ply)
         if cloud.n_vertices < 10:
             raise _input_error(f"{Path(in_points_ply).name}: too few points ({cloud.n_vertices}) to tile")
         if cloud.normals is None:
@@ -339,7 +337,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                 out_clean_mesh_ply: Path, out_tile_seams_json: Path, in_seam_votes_npz: list | None = None) -> dict:
     """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
     import numpy as np
-    from twinkit.mesh import read_ply, write_ply
+    from twinkit.mesh import read_ply
     from twinkit.surface.measure import Measure
 
     from .edges import edge_counts, seam_planes
@@ -381,7 +379,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         band_rep = None
         cloud = None
         if trim.get("seam_band_m", 0) > 0:
-            cloud = _read_points(in_points_ply)
+            cloud = A.read_points(in_points_ply)
             threads = max(1, int(getattr(ctx, "threads", 1) or 1))
             votes = _read_votes(in_seam_votes_npz) if params.vote_radius_m > 0 or params.vote_reach_m > 0 else None
             merged, band_rep = trim_seam_bands(
@@ -424,7 +422,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
 
             if cloud is None:
-                cloud = _read_points(in_points_ply)
+                cloud = A.read_points(in_points_ply)
             if cloud.normals is not None:
                 threads = max(1, int(getattr(ctx, "threads", 1) or 1))
                 merged, ground = fill_ground_holes(merged, cloud.vertices, cloud.normals, cloud.colors,
@@ -434,7 +432,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                 ctx.log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled",
                              ground.get("filled_cells", 0), ground.get("area_m2", 0.0))
         if cloud is None:
-            cloud = _read_points(in_points_ply)
+            cloud = A.read_points(in_points_ply)
         from twinkit.surface.watertight import ground_border_report
 
         # the merged mesh's open border at ground level, inside the site and on its edge (picture beside)
@@ -451,7 +449,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         near_lines = open_near_line_sets(merged, {"seams": planes, "controls": controls}, params.line_band_m)
         near_lines["control_planes"] = [["xyz"[a], round(v, 4)] for a, v in controls]
         merged.comments = [f"twinkit-tiles merge of {len(keep)} tiles"]
-        write_ply(out_clean_mesh_ply, merged)
+        A.write_clean_mesh(out_clean_mesh_ply, merged)
         report = {
             "tiles": len(tiles), "tiles_with_faces": len(keep), "planes": [["xyz"[a], v] for a, v in planes],
             "seam_boundary_edges_before": before, "seam_boundary_edges_after_zipper": after_zipper,
@@ -494,9 +492,6 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
     """Do the semantic labels change where the tiles meet? Label changes along mesh edges crossing the
     seam planes vs. crossing control planes through the tiles' interiors (and, with ground truth, the
     changes the ground truth does not have; accuracy near the seams vs. elsewhere) -> seam_labels.json."""
-    import numpy as np
-    from twinkit.mesh import read_ply
-
     from .seam_labels import seam_label_stats
     from .edges import seam_planes
 
@@ -510,9 +505,9 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
                 planes.append(("xy".index(axis), float(val)))
             except ValueError:
                 raise _input_error(f"evaluate_seam_labels.planes: {text!r} is not like 'x=-10' or 'y=12.5'") from None
-    mesh = read_ply(in_textured_mesh_ply)
-    labels = np.load(in_labels_npy)
-    gt = np.load(in_gt_labels_npy) if in_gt_labels_npy is not None else None
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    labels = A.read_labels(in_labels_npy)
+    gt = A.read_labels(in_gt_labels_npy) if in_gt_labels_npy is not None else None
     for name, arr in (("labels", labels), ("ground truth", gt)):
         if arr is not None and len(arr) != mesh.n_vertices:
             raise _input_error(f"{Path(in_textured_mesh_ply).name} has {mesh.n_vertices} vertices but the {name} "
@@ -549,15 +544,6 @@ def _read_votes(paths):
             raise _input_error(f"{p}: cannot read the tile's seam votes ({exc}); re-run reconstruct_tiles "
                                f"(twinkit ... 'rerun=[reconstruct_tiles]')") from exc
     return np.vstack(out) if out else None
-
-
-def _read_points(path: Path):
-    from twinkit.mesh import read_ply
-
-    try:
-        return read_ply(path)
-    except Exception as exc:
-        raise _input_error(f"{Path(path).name}: cannot read the points ({exc}); re-run read_cloud") from exc
 
 
 def _tile_trim(comments: list) -> dict:
