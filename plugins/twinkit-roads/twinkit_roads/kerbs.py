@@ -8,8 +8,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # align imports this module (its step's names), so the class is imported where it is built
+    from .align import Transform2D
 
 
 @dataclass
