@@ -45,10 +45,11 @@ args=(-e .)
 for d in plugins/*/; do
   [ -f "$d/pyproject.toml" ] && args+=(-e "$d")
 done
-# test tools; plyfile is the example plugin's dependency (its tests run in `make test`; the plugin itself is
-# installed only by the test that checks a third-party install); trimesh reads twinkit.mesh's files back in
+# test tools: ruff and mypy are the static checks `make test` runs first (pinned to a minor version, so that their
+# rules do not change under the code); plyfile is the example plugin's dependency (its tests run in `make test`;
+# the plugin itself is installed only by the test that checks a third-party install); trimesh reads twinkit.mesh's files back in
 # tests/mesh and is the baseline of bench/bench_meshio.py (twinkit itself does not import it)
-"${PIP[@]}" "${args[@]}" pytest pytest-timeout "plyfile>=1.0" "selenium>=4.20" "trimesh>=4"
+"${PIP[@]}" "${args[@]}" pytest pytest-timeout "ruff~=0.17.6" "mypy~=2.4.1" "plyfile>=1.0" "selenium>=4.20" "trimesh>=4"
 # 5. Blender as a module for the FBX exporter. bpy 5.0.1 (wheels for Python 3.11 only) declares numpy<2 but
 #    its FBX export runs with numpy 2 (tested), which other plugins need: install it without its pin.
 .venv/bin/python -c 'import bpy' 2>/dev/null || {

@@ -9,8 +9,6 @@ import sqlite3
 import time
 from pathlib import Path
 
-import pytest
-
 
 def test_first_run_then_everything_reused(project):
     r = project.run("site=t", "recipe=chain")
@@ -250,7 +248,7 @@ def test_status_shows_decisions_without_running(project):
 
 
 def test_manifest_records_and_verifies(project):
-    r = project.run("site=t", "recipe=chain")
+    project.run("site=t", "recipe=chain")
     run_dir = sorted((project.ws / "runs").iterdir())[-1]
     m = json.loads((run_dir / "manifest.json").read_text())
     assert m["schema_version"] == 1 and m["status"] == "ok"

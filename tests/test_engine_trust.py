@@ -4,12 +4,8 @@ from __future__ import annotations
 
 import json
 import os
-import re
-import subprocess
 import time
 from pathlib import Path
-
-import pytest
 
 
 def _site_with_base(project, x: int) -> None:

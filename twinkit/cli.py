@@ -127,12 +127,24 @@ def _job_error(message: str, exit_code: int):
     from hydra.errors import CompactHydraException
 
     class TwinkitJobError(CompactHydraException):
+        exit_code: int
+
         def __reduce__(self):
             return _job_error, (self.args[0], self.exit_code)
 
     err = TwinkitJobError(message)
     err.exit_code = exit_code
     return err
+
+
+def _plain(node, resolve: bool = True) -> dict:
+    """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one."""
+    from omegaconf import OmegaConf
+
+    out = OmegaConf.to_container(node, resolve=resolve)
+    if not isinstance(out, dict):
+        raise TypeError(f"not a mapping config node: {type(out).__name__}")
+    return out
 
 
 def _report(func):
@@ -150,7 +162,7 @@ def _report(func):
         if isinstance(exc, (ConfigCompositionException, MissingConfigException, OverrideParseException,
                             OmegaConfBaseException)):
             sys.exit(_err(str(_composition_error(exc)), 2))
-        return _ORIGINAL_REPORT[0](lambda: (_ for _ in ()).throw(exc))
+        return _ORIGINAL_REPORT[0](lambda e=exc: (_ for _ in ()).throw(e))
 
 
 _ORIGINAL_REPORT: list = []
@@ -175,7 +187,7 @@ def _job_body(cfg) -> int:
 
         from twinkit.threads import cores
 
-        jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)
+        jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)  # type: ignore[arg-type]  # a DictConfig
         jobs = cores() if jobs <= 0 else jobs  # joblib's -1: as many jobs as cores
     from twinkit.signals import sigterm_as_interrupt
 
@@ -203,7 +215,7 @@ def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
         cfg = cfg.copy()
         with open_dict(cfg):
             del cfg["hydra"]
-    container = OmegaConf.to_container(cfg, resolve=True)
+    container = _plain(cfg)
     from twinkit.engine import GIVEN_KEY, given_params
     from twinkit.manifest import env_secrets, redact
 
@@ -538,7 +550,6 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
-    from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
 
     from twinkit.config import check_config
@@ -547,11 +558,12 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
     parser = OverridesParser.create()
     try:
         parsed = parser.parse_overrides(overrides)
-        fixed = [o.input_line for o in parsed if not o.is_sweep_override() and not o.key_or_group.startswith("hydra")]
+        fixed = [o.input_line for o in parsed if o.input_line is not None and not o.is_sweep_override()
+                 and not o.key_or_group.startswith("hydra")]
         with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
             base = compose(config_name="config", overrides=fixed, return_hydra_config=True)
         node = base.hydra.sweeper.get("params")
-        params = OmegaConf.to_container(node, resolve=False) if node is not None else {}
+        params = _plain(node, resolve=False) if node is not None else {}
         combined = parser.parse_overrides([f"{k}={v}" for k, v in params.items()] + list(overrides))
         batches = BasicSweeper.split_arguments(combined, None)
     except (HydraException, OmegaConfBaseException, ValueError, TypeError, AttributeError):
@@ -574,7 +586,7 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
                     cfg = compose(config_name="config", overrides=list(rest) + [f"{k}={v!r}" if isinstance(v, str)
                                                                                  else f"{k}={v}"
                                                                                  for k, v in values.items()])
-                composed[rest] = OmegaConf.to_container(cfg, resolve=True)
+                composed[rest] = _plain(cfg)
                 container = composed[rest]
             else:
                 container = _with_values(composed[rest], values)
@@ -648,7 +660,6 @@ def _run_single(conf_dir: Path, overrides: list[str]) -> int:
 
 def _compose(overrides: list[str]):
     from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
 
     from twinkit.config import check_choices, check_configs_are_data, find_config_dir, register_configs, use_libyaml
     from twinkit.plugins import get_registry
@@ -663,7 +674,7 @@ def _compose(overrides: list[str]):
         cfg = compose(config_name="config", overrides=overrides)
     from twinkit.engine import GIVEN_KEY, given_params
 
-    container = OmegaConf.to_container(cfg, resolve=True)
+    container = _plain(cfg)
     container[GIVEN_KEY] = given_params(container, overrides)
     from twinkit.config import check_config
 
@@ -741,7 +752,8 @@ def cmd_gc(args: list[str]) -> int:
     from twinkit.engine.locks import gc_locks
 
     if not site_root.is_dir():
-        doomed, size, forgotten = [], 0, 0
+        doomed: list[Path] = []
+        size, forgotten = 0, 0
     else:
         with gc_locks(site_root):
             doomed, size = collect_garbage(site_root, dry_run=dry)

@@ -19,13 +19,18 @@ from twinkit.ranges import param
 class EngineConfig:
     """Engine settings (``engine.<key>=...`` on the command line)."""
 
-    outputs_dir: str = "outputs"
-    threads: int = param(0, ge=0)  # 0 = every core
-    interactive: str = "auto"  # auto (a terminal) | true | false
-    manual_timeout_s: Optional[float] = param(None, gt=0)
-    report: bool = True
-    # exit status of a run that finished with a degraded result (docs/engine.md "Degraded results"); 0 = exit 0
-    degraded_exit_code: int = param(4, ge=0, le=125)
+    outputs_dir: str = param("outputs", help="Folder that holds the runs' outputs.")
+    threads: int = param(0, ge=0, help="Threads the run may use; 0 = every core.")
+    interactive: str = param("auto",
+                             help="Whether a manual step waits for its file (else the run stops and says what to "
+                                  "provide): auto = when attached to a terminal, true or false.")
+    manual_timeout_s: Optional[float] = param(None, gt=0,
+                                              help="How long (s) an interactive run waits at a manual step for its "
+                                                   "file; null = no limit.")
+    report: bool = param(True, help="Write the run report (report.html) at the end of the run.")
+    degraded_exit_code: int = param(4, ge=0, le=125,
+                                    help="Exit status of a run that finished with a degraded result (docs/engine.md "
+                                         '"Degraded results"); 0 = exit 0 as for a clean run.')
 
 
 def find_config_dir() -> Path:
@@ -71,7 +76,7 @@ def use_libyaml() -> bool:
 
     _utils.get_yaml_loader = lambda: CLoader
     basecontainer.get_yaml_loader = _utils.get_yaml_loader
-    _utils._twinkit_libyaml = True
+    setattr(_utils, "_twinkit_libyaml", True)  # noqa: B010 -- a mark on omegaconf's module (read above)
     return True
 
 
@@ -234,12 +239,12 @@ def check_config(cfg: dict, registry: Registry, site_file: str | None = None) ->
             plugin = registry.plugins[kind][node["plugin"]]
             check_values(plugin.params, node, kind, plugin.qualname)
     for name, node in (cfg.get("steps") or {}).items():
-        plugin = registry.plugins.get("step", {}).get(name)
-        if plugin is not None:
-            check_values(plugin.params, node, f"steps.{name}", plugin.qualname)
+        step = registry.plugins.get("step", {}).get(name)
+        if step is not None:
+            check_values(step.params, node, f"steps.{name}", step.qualname)
     site = cfg.get("site") or {}
     if isinstance(site, dict):
-        gen = registry.plugins.get("site_generator", {}).get(site.get("generator"))
+        gen = registry.plugins.get("site_generator", {}).get(str(site.get("generator")))
         if gen is not None:
             check_values(gen.params, site, "site", gen.qualname)
         _check_site(site, site_file)
@@ -322,7 +327,7 @@ def config_file_problem(path: Path, group: str) -> str | None:
     package = package.replace("_group_", group.replace("/", ".")) if group else package.replace("_group_", "")
     if package.startswith("_global_"):
         package = package[len("_global_"):].lstrip(".")
-    root = {}
+    root: dict = {}
     node: dict = root
     parts = [p for p in package.split(".") if p]
     for p in parts[:-1]:

@@ -64,7 +64,7 @@ class StepContext:
         if self._component_factory is None:
             from twinkit.plugins import build_component
 
-            return build_component(kind, name, self.config)
+            return build_component(kind, name, dict(self.config))
         return self._component_factory(kind, name)
 
     def map(self, fn: Callable[..., T], items: list[Any]) -> list[T]:

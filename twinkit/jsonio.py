@@ -22,9 +22,9 @@ def json_default(o: Any):
     return str(o)
 
 
-def write_json(path: str | os.PathLike, data: Any) -> None:
-    """Write ``data`` to ``path`` atomically (sorted keys, indent 2, trailing newline)."""
+def write_json(path: str | os.PathLike, data: Any, indent: int = 2) -> None:
+    """Write ``data`` to ``path`` atomically (sorted keys, ``indent`` spaces, trailing newline)."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=json_default) + "\n")
+    tmp.write_text(json.dumps(data, indent=indent, sort_keys=True, default=json_default) + "\n")
     os.replace(tmp, path)

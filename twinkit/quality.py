@@ -20,7 +20,7 @@ def _entries(value: Any, step: str | None = None) -> list[dict]:
         if isinstance(e, str):
             e = {"reason": e}
         if isinstance(e, dict) and e.get("reason"):
-            entry = {"reason": str(e["reason"])}
+            entry: dict[str, Any] = {"reason": str(e["reason"])}
             if e.get("hint"):
                 entry["hint"] = str(e["hint"])
             if e.get("item") is not None:

@@ -107,21 +107,26 @@ class Pattern:
 def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: float | None = None,
           le: float | None = None, lt: float | None = None, also: tuple = (), choices: tuple | None = None,
           pattern: str | None = None, words: str = "", default_factory: Any = dataclasses.MISSING,
-          help: str = "") -> Any:
+          help: str = "", free: bool = False) -> Any:
     """A dataclass field with its valid values: ``ge``/``gt``/``le``/``lt`` for numbers, ``choices`` for the rest.
 
     ``pattern`` (a regular expression the whole string must match, ``words`` saying it for the error)
     is for strings that reach a command line or a script. ``also`` lists special values outside the
     range (``-1`` = automatic). With no bound at all a number
     still counts as declared ("any number"): say so on purpose, for signed offsets and angles; a flag or a
-    free string without choices carries only its ``help``.
+    free string without choices carries only its ``help``, and so does a field marked ``free=True``
+    (a list of strings, a mapping, an optional string, a nested group of options: any value of its type).
     For a list the check applies to each element. ``help`` is the one-paragraph description
     ``twinkit plugins <kind>/<name>`` prints (what the value does, its unit, when to change it);
     measurements and their history belong in the docs, not here.
     """
     unbounded = all(b is None for b in (ge, gt, le, lt, choices, pattern)) and not also
-    if unbounded and isinstance(default, (bool, str)):
-        # a flag or a free string: nothing to range-check, only the help to carry
+    if free and not unbounded:
+        raise TypeError("free=True takes no range, choices or pattern")
+    if free or unbounded and isinstance(default, (bool, str)):
+        # a flag, a free string or a free value: nothing to range-check, only the help to carry
+        if default_factory is not dataclasses.MISSING:
+            return dataclasses.field(default_factory=default_factory, metadata={HELP: help})
         return dataclasses.field(default=default, metadata={HELP: help})
     if pattern is not None:
         check: Range | Choices | Pattern = Pattern(pattern, words)
@@ -155,10 +160,10 @@ def _numeric(tp: Any) -> bool:
 
 
 def _nested(tp: Any) -> type | None:
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return tp
     args = [a for a in typing.get_args(tp) if a is not type(None)]
-    return args[0] if len(args) == 1 and dataclasses.is_dataclass(args[0]) else None
+    return args[0] if len(args) == 1 and isinstance(args[0], type) and dataclasses.is_dataclass(args[0]) else None
 
 
 def undeclared(cls: type, prefix: str = "") -> Iterator[str]:

@@ -111,7 +111,7 @@ def pid_alive(pid: int) -> bool:
 
 
 def _children(pid: int) -> list[int]:
-    out = []
+    out: list[int] = []
     try:
         names = os.listdir("/proc")
     except OSError:

@@ -47,7 +47,8 @@ def check_plugin(plugin) -> None:
 
     assert plugin.name and plugin.version, f"{plugin.qualname}: needs a name and a version"
     if plugin.params is not None:
-        assert dataclasses.is_dataclass(plugin.params), f"{plugin.qualname}: params must be a dataclass"
+        assert isinstance(plugin.params, type) and dataclasses.is_dataclass(plugin.params), \
+            f"{plugin.qualname}: params must be a dataclass"
         obj = plugin.params()  # every parameter must have a default
         for f in dataclasses.fields(obj):
             assert f.type is not None, f"{plugin.qualname}: parameter {f.name} needs a type"

@@ -84,15 +84,16 @@ def registered() -> Iterator[None]:
     """Count this process as an active run while the block runs."""
     folder = runtime_dir() / "runs"
     path = folder / str(os.getpid())
+    written = True
     try:
         folder.mkdir(parents=True, exist_ok=True)
         path.write_text(f"{' '.join(sys.argv)[:500]}\n")
     except OSError:
-        path = None
+        written = False
     try:
         yield
     finally:
-        if path is not None:
+        if written:
             with contextlib.suppress(OSError):
                 path.unlink()
 

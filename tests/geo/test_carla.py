@@ -14,7 +14,7 @@ import pytest
 
 from twinkit import InputError
 from twinkit.geo import SiteFrame
-from twinkit.geo.carla import carla_frame, carla_lonlat, carla_xy
+from twinkit.geo.carla import carla_lonlat, carla_xy
 
 carla = pytest.importorskip("carla")
 

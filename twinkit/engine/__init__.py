@@ -20,6 +20,8 @@ Where each part lives (``twinkit/engine/``):
 - ``plan.py``: a recipe's steps -> ordered :class:`PlannedStep` list: plugin, params, wired inputs
 - ``params.py``: a plugin's parameters from its dataclass defaults and the config / recipe layers
 - ``runner.py``: :class:`Engine`: the loop over the plan and the decision run / reuse / cached per step
+- ``base.py``: :class:`EngineBase`: the attributes and methods the Engine's mix-ins share, declared for the type
+  checker (every mix-in below inherits it)
 - ``keys.py``: a step's cache key: its descriptor (plugin, params, components, input hashes) and why it changed
 - ``store.py``: the content store ``.cache/steps/<key>``: atomic compute into it, validity of an entry
 - ``records.py``: ``step.json`` records and the :class:`StepOutcome` of a step

@@ -7,6 +7,7 @@ import logging
 import shutil
 from pathlib import Path
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.records import RECORD
 from twinkit.hashing import list_files
 
@@ -14,7 +15,7 @@ from twinkit.hashing import list_files
 log = logging.getLogger("twinkit")
 
 
-class EditsMixin:
+class EditsMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: compare a folder with its record (``self.hashes``) and
     keep what a person changed (``self.edits_dir``)."""
 

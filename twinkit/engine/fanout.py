@@ -12,6 +12,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.memory import release_memory
 from twinkit.engine.records import RECORD, StepOutcome, read_record
 from twinkit.engine.store import compute_into_store, with_site
@@ -46,7 +47,7 @@ def _run_item_task(task: dict) -> dict:
         release_memory()
 
 
-class FanoutMixin:
+class FanoutMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: run a ``foreach`` step through the executor
     (``self.executor_factory``, or the configured ``executor``, or a local pool)."""
 
@@ -160,7 +161,7 @@ class FanoutMixin:
 
     def _fanout_results(self, ps, keys: list[str], n_items: int, n_computed: int):
         """The stored items' files (under their ``NNN/`` folders), artefact hashes per output and metrics."""
-        stored = [read_record(self.store / k) for k in keys]
+        stored: list[Any] = [read_record(self.store / k) for k in keys]  # each item's record, just written
         files: dict[str, Any] = {}
         for i, r in enumerate(stored):
             for rel, info in r["files"].items():

@@ -127,7 +127,7 @@ def run_in_child(fn: Callable[..., Any], kwargs: dict, *, threads: int | None = 
         if cleanup is not None:
             cleanup(pid)
         sig = os.WTERMSIG(status)
-        what = {signal.SIGKILL: "killed (SIGKILL: out of memory, or killed by hand)"}.get(sig, f"crashed with {_signal_name(sig)}")
+        what = {int(signal.SIGKILL): "killed (SIGKILL: out of memory, or killed by hand)"}.get(sig, f"crashed with {_signal_name(sig)}")
         raise NativeCrash(f"the process running it {what}, in native code; the Python stack of the crash, "
                           f"where known, is in the run log")
     try:

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.plan import PlannedStep
 from twinkit.engine.store import site_fields, with_site
 from twinkit.errors import InputError
@@ -24,7 +25,7 @@ def missing_input(path: Path, step_id: str) -> str:
             f"on the command line")
 
 
-class KeysMixin:
+class KeysMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: inputs, descriptor and key of a planned step
     (``self.outcomes`` of the steps before it, ``self.hashes``)."""
 
@@ -45,6 +46,7 @@ class KeysMixin:
                 paths[param] = src.path
                 hashes[param] = artefact_hash(src.path, self.hashes) if src.path.is_dir() else self.hashes.hash(src.path)
             else:
+                assert src.step_index is not None  # a Source has a path or a producing step
                 prod = self.outcomes[src.step_index - 1]
                 paths[param] = prod.outputs[src.filename]
                 hashes[param] = prod.hashes[src.filename]
@@ -52,7 +54,7 @@ class KeysMixin:
 
     def _descriptor(self, ps: PlannedStep, input_hashes: dict[str, Any]) -> dict:
         if ps.plugin is None:
-            plugin = {"kind": "manual", "instructions": ps.spec.manual.get("instructions")}
+            plugin = {"kind": "manual", "instructions": (ps.spec.manual or {}).get("instructions")}
         else:
             plugin = {"kind": ps.plugin.kind, "name": ps.plugin.name, "version": ps.plugin.version,
                       "code": ps.plugin.code_hash()}

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 from typing import Iterator
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.records import _now
 from twinkit.errors import InputError, LockedError
 
@@ -115,7 +116,7 @@ def _pid_alive(pid: int) -> bool:
     return pid <= 0 or pid_alive(pid)  # no pid in the name: kept, as before
 
 
-class LockMixin:
+class LockMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: take the workspace (``self.workspace``, ``self.store``)
     before a run and give it back after (``self._lock``, ``self.hashes``)."""
 
@@ -163,8 +164,9 @@ class LockMixin:
                 shutil.rmtree(d, ignore_errors=True)
 
     def _release(self) -> None:
-        if getattr(self, "_store_lock", None) is not None:
-            self._store_lock.release()
+        store_lock = getattr(self, "_store_lock", None)
+        if store_lock is not None:
+            store_lock.release()
             self._store_lock = None
         if self._lock is not None:
             self._lock.release()

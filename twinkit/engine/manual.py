@@ -7,6 +7,7 @@ import threading
 import time
 from pathlib import Path
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.records import RECORD, RECORD_SCHEMA, StepOutcome, _now
 from twinkit.errors import ManualActionPending
 from twinkit.hashing import artefact_hash, list_files
@@ -15,7 +16,7 @@ from twinkit.jsonio import write_json as write_json_atomic
 log = logging.getLogger("twinkit")
 
 
-class ManualMixin:
+class ManualMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: record a manual step's files once they exist
     (``self.interactive``, ``self.manual_timeout_s``)."""
 

@@ -156,7 +156,8 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
         idx += 1
         where = f"recipe '{rname}', step '{spec.id}'"
         plugin: Plugin | None = None
-        params_obj, params_dict = None, {}
+        params_obj: Any = None
+        params_dict: dict[str, Any] = {}
         components: dict[str, Any] = {}
         if spec.manual is not None:
             signature = _manual_signature(spec, where)
@@ -233,19 +234,20 @@ def _recipe_specs(cfg: dict) -> tuple[str, list[StepSpec]]:
 
 def _manual_signature(spec: StepSpec, where: str) -> Signature:
     """The signature of a manual step: its ``outputs`` and ``inputs`` file names as ports."""
-    outs = spec.manual.get("outputs") or []
-    if not outs or not spec.manual.get("instructions"):
+    manual = spec.manual or {}
+    outs = manual.get("outputs") or []
+    if not outs or not manual.get("instructions"):
         raise ConfigError(f"{where}: a manual step needs 'instructions' and 'outputs'")
     ports = []
     for o in outs:
         stem, _, ext = str(o).partition(".")
         ports.append(Port(f"out_{stem}_{ext}", stem, ext or "dir"))
     signature = Signature((), tuple(ports), False)
-    in_names = spec.manual.get("inputs") or []
+    in_names = manual.get("inputs") or []
     for n in in_names:
-        stem, _, ext = str(n).partition(".")
-        ext = ext or None
-        signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{ext}" if ext else ""), stem, ext),), signature.outputs, False)
+        stem, _, suffix = str(n).partition(".")
+        in_ext = suffix or None
+        signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{in_ext}" if in_ext else ""), stem, in_ext),), signature.outputs, False)
     return signature
 
 
@@ -297,7 +299,7 @@ def _fallback_if_needed(plugin: Plugin, kind: str, name: str, spec: StepSpec, no
     alt = None
     if why:
         try:
-            alt = st.registry.get(kind, plugin.fallback)
+            alt = st.registry.get(kind, str(plugin.fallback))
         except TwinkitError as exc:
             raise ConfigError(f"{where}: {why}, and its fallback: {exc}") from None
         # a fallback that cannot serve the site either: the chosen plugin stays, with its own error

@@ -13,6 +13,7 @@ import os
 import re
 from pathlib import Path
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.records import read_record
 
 log = logging.getLogger("twinkit")
@@ -60,7 +61,7 @@ def parked_folder(workspace: Path, recipe: str) -> Path:
     return workspace / "recipes" / _safe(recipe)
 
 
-class RecipesMixin:
+class RecipesMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine` (``self.workspace``, ``self.site_root``,
     ``self.edits_dir``, ``self.cfg``)."""
 

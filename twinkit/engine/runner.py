@@ -205,6 +205,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
                                     f"it was written; is something else writing to {self.store}?") from None
                 log.warning("  stored result %s/%s differs from its record; computing it again", key, exc.rel)
                 shutil.rmtree(self.store / key, ignore_errors=True)
+        assert stored is not None  # the loop above ends with a stored result or raises
         outputs, hashes = self._outputs_of(folder, ps, stored, current=False)
         return StepOutcome(ps.id, ps.folder, ps.label, status, why, key,
                            stored.get("duration_s", 0.0) if status == "ran" else 0.0, outputs, hashes,

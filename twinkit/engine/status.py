@@ -2,6 +2,7 @@
 writing nothing."""
 from __future__ import annotations
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.recipes import parked_folder
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.errors import TwinkitError
@@ -9,7 +10,7 @@ from twinkit.hashing import HashCache, artefact_hash
 from twinkit.quality import degraded_of, describe
 
 
-class StatusMixin:
+class StatusMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`."""
 
     def status(self) -> list[tuple[str, str, str]]:
@@ -57,10 +58,11 @@ class StatusMixin:
                     rows.append((ps.folder, "up to date" if state == "unchanged" else "edited",
                                  "" if state == "unchanged" else ", ".join(files)))
                 if ps.foreach is not None:
-                    hashes = rec["artefacts"] if state == "unchanged" else None
-                    if hashes is None:
+                    artefacts = rec["artefacts"] if state == "unchanged" else None
+                    if artefacts is None:
                         dirty = True
                         continue
+                    hashes = artefacts
                 else:
                     _, hashes = self._outputs_of(folder, ps, rec, current=state == "edited")
             else:

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from twinkit.context import StepContext
+from twinkit.engine.base import EngineBase
 from twinkit.engine.memory import _PeakRSS
 from twinkit.engine.records import RECORD, RECORD_SCHEMA, _now, read_record
 from twinkit.errors import StepError
@@ -193,6 +194,7 @@ def _run_into(tmp: Path, run: Callable, params: Any, ctx_kwargs: dict, inputs: d
         shutil.rmtree(tmp, ignore_errors=True)
         what = f"did not write {missing}" if missing else f"wrote files where folders were declared (or the reverse): {wrong}"
         raise StepError(f"step '{ctx.step_id}' {what}; nothing from this attempt was kept")
+    _check_catalogued(outputs, tmp, ctx.step_id)
     return metrics, duration, mem
 
 
@@ -221,13 +223,29 @@ def _record_of(tmp: Path, key: str, used: list[str], duration: float, mem, metri
     return record
 
 
+def _check_catalogued(outputs: tuple[Port, ...], tmp: Path, step_id: str) -> None:
+    """Each output that is a catalogued artefact (twinkit.artefacts) must follow its schema; a file that does
+    not fails the step (the temporary folder is removed, nothing is stored)."""
+    from twinkit.artefacts import ArtefactError, check_output
+
+    for p in outputs:
+        try:
+            check_output(tmp / p.filename)
+        except ArtefactError as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            msg = str(exc).replace(str(tmp / p.filename), p.filename)
+            raise StepError(f"step '{step_id}' wrote {p.filename} against its schema in the artefact catalogue "
+                            f"(docs/engine.md, 'Artefacts between plugins'): {msg}; nothing from this attempt "
+                            f"was kept") from None
+
+
 def _swap_in(tmp: Path, final: Path) -> None:
     if final.exists():
         shutil.rmtree(final)
     os.replace(tmp, final)
 
 
-class StoreMixin:
+class StoreMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: is a stored result still intact (``self.store``,
     ``self.hashes``)."""
 

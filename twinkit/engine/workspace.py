@@ -15,6 +15,7 @@ import os
 import shutil
 from pathlib import Path
 
+from twinkit.engine.base import EngineBase
 from twinkit.engine.plan import PlannedStep
 from twinkit.engine.records import RECORD, RECORD_SCHEMA, _now, read_record
 from twinkit.hashing import CHUNK, HashCache, artefact_hash, list_files
@@ -55,7 +56,7 @@ def copy_checked(src: Path, dst: Path, expect: str | None, cache: HashCache) -> 
     return digest
 
 
-class WorkspaceMixin:
+class WorkspaceMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine`: write and read the numbered folders of
     ``self.workspace``."""
 

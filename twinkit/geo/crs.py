@@ -202,7 +202,7 @@ def check_base_point_area(site: Mapping[str, Any], where: str) -> None:
     import math
 
     if not (math.isfinite(lat) and math.isfinite(lon)):
-        why = f"the base point {dict(bp)} has no position in {crs_in}"
+        why: str | None = f"the base point {dict(bp)} has no position in {crs_in}"
     else:
         why = outside_area_of_use(crs, lat, lon)
     if why is None:

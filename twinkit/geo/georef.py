@@ -1,7 +1,6 @@
 """The site georeference block written into every export (FBX/USD/glTF metadata, the CARLA package)."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -17,7 +16,9 @@ def site_georef(site: Mapping[str, Any] | None, site_json: Path | None = None) -
     """
     src: dict = {}
     if site_json is not None and Path(site_json).exists():
-        src = json.loads(Path(site_json).read_text())
+        from twinkit.artefacts import read_site_info
+
+        src = read_site_info(site_json).to_json()
     elif site:
         src = dict(site)
     bp = dict(src.get("base_point") or {})

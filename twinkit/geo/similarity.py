@@ -109,6 +109,7 @@ def closed_form_similarity(src, dst, *, with_scale: bool = True, about_z: bool =
 
 def _robust_result(src: np.ndarray, dst: np.ndarray, use_z: bool, inliers: np.ndarray) -> Similarity:
     T = closed_form_similarity(src, dst, about_z=True, scale_dims=3 if use_z else 2)
+    assert T.angle_rad is not None  # a planar fit (about_z) has its angle
     return Similarity(T.scale, T.angle_rad, T.t, inliers, 0.0)
 
 

@@ -115,7 +115,7 @@ def _scale_attrs(el: ET.Element, names, factor: float) -> None:
         return
     for n in names:
         if n in el.attrib:
-            el.set(n, _fmt(_num(el.get(n)) * factor))
+            el.set(n, _fmt(_num(el.attrib[n]) * factor))
 
 
 def _scale_poly(el: ET.Element, value_power: int, coeffs, scale: float) -> None:
@@ -124,7 +124,7 @@ def _scale_poly(el: ET.Element, value_power: int, coeffs, scale: float) -> None:
     q = scale ** value_power
     for i, n in enumerate(coeffs):
         if n in el.attrib:
-            el.set(n, _fmt(_num(el.get(n)) * q / scale ** i))
+            el.set(n, _fmt(_num(el.attrib[n]) * q / scale ** i))
 
 
 def _move_point(el: ET.Element, c: float, s: float, scale: float, rot: float, t=(0.0, 0.0)) -> None:
@@ -132,7 +132,7 @@ def _move_point(el: ET.Element, c: float, s: float, scale: float, rot: float, t=
     el.set("x", _fmt(scale * (c * x - s * y) + t[0]))
     el.set("y", _fmt(scale * (s * x + c * y) + t[1]))
     if el.tag in ANGLE_TAGS and "hdg" in el.attrib and rot:
-        el.set("hdg", _fmt(_num(el.get("hdg")) + rot))
+        el.set("hdg", _fmt(_num(el.attrib["hdg"]) + rot))
 
 
 def transform_xodr(text: str, rotation_rad: float, scale: float, geo_reference: str | None = None, *,
@@ -225,7 +225,7 @@ def _move_element(el: ET.Element, parent: ET.Element, mv: _Motion) -> None:
         if mv.moves:
             _move_point(el, mv.c, mv.s, scale, mv.rotation_rad, mv.t)
         if mv.dz and "z" in el.attrib:
-            el.set("z", _fmt(_num(el.get("z")) * mv.hscale + mv.dz))
+            el.set("z", _fmt(_num(el.attrib["z"]) * mv.hscale + mv.dz))
     if tag in LENGTHS:
         names = LENGTHS[tag]
         if not mv.scale_heights:
@@ -313,8 +313,8 @@ def _shift_elevation(root: ET.Element, dz: float) -> None:
 def _bounds(header: ET.Element, c: float, s: float, scale: float, t=(0.0, 0.0)) -> None:
     """The header's north/south/east/west: the box of the moved corners of the old box."""
     try:
-        n, so, e, w = (_num(header.get(k)) for k in ("north", "south", "east", "west"))
-    except (TypeError, ValueError):
+        n, so, e, w = (_num(header.attrib[k]) for k in ("north", "south", "east", "west"))
+    except (KeyError, ValueError):  # a header without its box, or not numbers
         return
     xs, ys = [], []
     for x, y in ((w, so), (w, n), (e, so), (e, n)):

@@ -56,6 +56,7 @@ class Mesh:
 
 def compact(mesh: Mesh, keep_faces: np.ndarray | None = None) -> Mesh:
     """Keep the faces selected by ``keep_faces`` ((m,) bool mask) and drop unreferenced vertices."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     faces = mesh.faces if keep_faces is None else mesh.faces[keep_faces]
     face_attrs = {k: (v if keep_faces is None else v[keep_faces]) for k, v in mesh.face_attrs.items()}
     used = np.zeros(mesh.n_vertices, bool)

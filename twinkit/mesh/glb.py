@@ -168,8 +168,8 @@ def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str
         gl_meshes.append({"name": part.name, "primitives": [prim]})
         nodes.append({"name": part.name, "mesh": len(gl_meshes) - 1, "extras": part.extras})
         stats[part.name] = {"vertices": n_vertices, "faces": n_faces}
-    material = {"name": "M_twinkit", "doubleSided": False,
-                "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0}}
+    material: dict = {"name": "M_twinkit", "doubleSided": False,
+                      "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0}}
     ext_used = []
     if unlit:
         material["extensions"] = {"KHR_materials_unlit": {}}
@@ -200,8 +200,8 @@ def _textured_primitive(b: GlbBuilder, part) -> tuple[dict, int]:
     extra attributes; returns it and its vertex count."""
     corner_v = part.faces.reshape(-1).astype(np.int64)
     corner_uv = part.corner_uv.reshape(-1, 2)
-    key = np.column_stack([corner_v.astype(np.float64), corner_uv.astype(np.float64)])
-    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    corner = np.column_stack([corner_v.astype(np.float64), corner_uv.astype(np.float64)])
+    _, first, inv = np.unique(corner, axis=0, return_index=True, return_inverse=True)
     inv = inv.ravel()
     src_v = corner_v[first]
     pos = site_to_gltf(part.vertices[src_v]).astype(np.float32)

@@ -76,7 +76,7 @@ def read_obj(path: Path) -> Mesh:
     ncomp = 1 + int(has_vt) + int(has_vn)
     flat = _parse(" ".join(f).replace("//", " ").replace("/", " "), np.int64)
     tri = flat is not None and flat.size == len(f) * 3 * ncomp and len(f[0].split()) == 3
-    if tri:
+    if tri and flat is not None:
         idx = flat.reshape(len(f), 3, ncomp)
     else:  # polygons: fan triangulation
         rows = []
@@ -134,7 +134,7 @@ def write_mtl(path: Path, material: str, texture_name: str, *, comment: str | No
 def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, texture_name: str,
               normals: np.ndarray | None = None, material: str = "twinkit_texture", *,
               comment: str | None = None, mtl_comment: str | None = "twinkit-pointcloud", mtl_dissolve: bool = True,
-              decimals: int = 6, uv_decimals: int = 7, groups: list[tuple[str, int]] | None = None) -> None:
+              decimals: int = 6, uv_decimals: int = 7, groups: list[tuple[str | None, int]] | None = None) -> None:
     """Write an OBJ + MTL beside it (same stem; :func:`write_mtl`), the one OBJ writer.
 
     ``vertices`` (n, 3) metres, written with ``decimals``; ``faces`` (m, 3) 0-based; ``uv`` in [0, 1], v up,

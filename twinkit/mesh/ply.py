@@ -268,16 +268,19 @@ def read_ply(path: Path | str) -> Mesh:
     simple = (end is not None and names[:1] == ["vertex"]
               and all(p[0] != "list" for p in elements[0][2])
               and all(n == "face" for n in names[1:]) and len(names) <= 2)
-    if not simple:
+    if not simple or end is None:
         return _read_ply_plyfile(path)
     vdt = np.dtype([(p[1], end + _PLY_TYPES[p[0]]) for p in elements[0][2]])
     nv = elements[0][1]
     size = path.stat().st_size
     face_arr = None
     if len(elements) == 2:
-        fdt = _face_dtype(path, offset + vdt.itemsize * nv, elements[1][2], end)
+        face_dtype = _face_dtype(path, offset + vdt.itemsize * nv, elements[1][2], end)
+        if face_dtype is None:
+            return _read_ply_plyfile(path)
+        fdt = face_dtype
         nf = elements[1][1]
-        if fdt is None or offset + vdt.itemsize * nv + fdt.itemsize * nf != size:
+        if offset + vdt.itemsize * nv + fdt.itemsize * nf != size:
             return _read_ply_plyfile(path)  # polygons or variable lists (plyfile also detects truncation)
     elif offset + vdt.itemsize * nv > size:
         raise ValueError(f"truncated PLY: {nv} vertices declared, file too short")
@@ -286,16 +289,17 @@ def read_ply(path: Path | str) -> Mesh:
         v = np.fromfile(fh, dtype=vdt, count=nv)
         if len(elements) == 2:
             face_arr = np.fromfile(fh, dtype=fdt, count=nf)
-            key = "vertex_indices" if "vertex_indices" in fdt.names else "vertex_index"
-            if key not in fdt.names or face_arr[key].shape[1:] != (3,):
+            fnames = fdt.names or ()
+            key = "vertex_indices" if "vertex_indices" in fnames else "vertex_index"
+            if key not in fnames or face_arr[key].shape[1:] != (3,):
                 return _read_ply_plyfile(path)
-            for n in fdt.names:
-                if n.endswith("_n") and n[:-2] in fdt.names and not np.all(face_arr[n] == fdt[n[:-2]].shape[0]):
+            for n in fnames:
+                if n.endswith("_n") and n[:-2] in fnames and not np.all(face_arr[n] == fdt[n[:-2]].shape[0]):
                     return _read_ply_plyfile(path)
     if len(v) < nv:
         raise ValueError(f"truncated PLY: {nv} vertices declared, {len(v)} present")
     if face_arr is not None:
-        keep = [n for n in face_arr.dtype.names if not n.endswith("_n")]
+        keep = [n for n in face_arr.dtype.names or () if not n.endswith("_n")]
         face_arr = face_arr[keep]
     return _mesh_from_arrays(v, face_arr, comments)
 
@@ -309,10 +313,10 @@ def _ply_header(path: Path) -> tuple[list[str], int]:
             raise ValueError("not a PLY file (no 'ply' magic)")
         lines = []
         while True:
-            ln = fh.readline()
-            if not ln:
+            raw = fh.readline()
+            if not raw:
                 raise ValueError("truncated PLY header (no end_header)")
-            ln = ln.decode("ascii", "replace").strip()
+            ln = raw.decode("ascii", "replace").strip()
             if ln == "end_header":
                 break
             lines.append(ln)
@@ -341,7 +345,7 @@ def _face_dtype(path: Path, face_offset: int, props: list[list[str]], end: str) 
     with open(path, "rb") as fh:
         fh.seek(face_offset)
         first_face = fh.read(4096)
-    fdt = []
+    fields: list[tuple] = []
     pos = 0
     for p in props:
         if p[0] == "list":
@@ -349,13 +353,13 @@ def _face_dtype(path: Path, face_offset: int, props: list[list[str]], end: str) 
             if pos + ct.itemsize > len(first_face):
                 return None
             cnt = int(np.frombuffer(first_face[pos:pos + ct.itemsize], ct)[0])
-            fdt += [(p[3] + "_n", ct), (p[3], it, (cnt,))]
+            fields += [(p[3] + "_n", ct), (p[3], it, (cnt,))]
             pos += ct.itemsize + cnt * it.itemsize
         else:
             t = np.dtype(end + _PLY_TYPES[p[0]])
-            fdt.append((p[1], t))
+            fields.append((p[1], t))
             pos += t.itemsize
-    return np.dtype(fdt)
+    return np.dtype(fields)
 
 
 def read_mesh(path: Path | str) -> Mesh:

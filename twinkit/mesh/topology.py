@@ -12,7 +12,8 @@ from .core import Mesh, compact, vertex_normals
 
 def remove_vertices(mesh: Mesh, drop: np.ndarray) -> Mesh:
     """Drop the vertices flagged by ``drop`` ((n,) bool) and every face that uses one."""
-    keep_faces = ~drop[mesh.faces].any(axis=1)
+    assert mesh.faces is not None  # a mesh, not a cloud
+    keep_faces = np.asarray(~drop[mesh.faces].any(axis=1))
     return compact(mesh, keep_faces)
 
 
@@ -77,7 +78,10 @@ def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute
     recomputed from the faces unless ``recompute_normals`` is false (new vertices then get the mean)."""
     if not loops:
         return mesh
-    new_v, new_f, new_attrs = [], [], {k: [] for k in mesh.attrs}
+    assert mesh.faces is not None  # a mesh, not a cloud
+    new_v: list[np.ndarray] = []
+    new_f: list = []
+    new_attrs: dict[str, list[np.ndarray]] = {k: [] for k in mesh.attrs}
     nv = mesh.n_vertices
     for lp in loops:
         if len(lp) == 3:
@@ -98,10 +102,10 @@ def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute
     face_attrs = {k: np.concatenate([a, np.full((len(faces_new),) + a.shape[1:],
                                                 face_fill if a.dtype.kind == "i" else 0, a.dtype)])
                   for k, a in mesh.face_attrs.items()}
-    out = Mesh(vertices=verts, faces=np.vstack([mesh.faces, faces_new]), attrs=attrs, face_attrs=face_attrs,
-               comments=list(mesh.comments))
+    faces = np.vstack([mesh.faces, faces_new])
+    out = Mesh(vertices=verts, faces=faces, attrs=attrs, face_attrs=face_attrs, comments=list(mesh.comments))
     if recompute_normals and "normals" in out.attrs:
-        out.attrs["normals"] = vertex_normals(out.vertices, out.faces)
+        out.attrs["normals"] = vertex_normals(out.vertices, faces)
     return out
 
 

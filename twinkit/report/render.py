@@ -224,7 +224,7 @@ class TopDown:
         t0 = time.perf_counter()
         if not (tex_c.is_file() and meta_c.is_file()):
             mesh = self._mesh()
-            if mesh is None or mesh.colors is None or not len(mesh.faces):
+            if mesh is None or mesh.colors is None or mesh.faces is None or not len(mesh.faces):
                 return None
             bounds, w, h = ortho_frame(mesh.vertices)
             t = time.perf_counter()

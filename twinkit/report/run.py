@@ -102,6 +102,7 @@ def file_key(p: Path, known: dict[str, str] | None = None) -> str:
     if known and p.name in known:
         return known[p.name]
     st = p.stat()
+    return f"{st.st_size}-{st.st_mtime_ns}-{st.st_ino}"
 
 
 class RunView:

@@ -39,7 +39,7 @@ _SKIP_METRIC = re.compile(r"(peak|rss|delta_peak|seconds|timings|substeps|shift_
 
 def sweep_rows(sweep_dir: Path) -> tuple[list[str], list[str], list[dict]]:
     """(swept keys, metric names, one row per job: {'job', 'status', 'duration_s', 'params', 'metrics'})."""
-    rows = []
+    rows: list[dict[str, Any]] = []
     for mf in sorted(Path(sweep_dir).glob("job*/manifest.json"), key=lambda p: _job_num(p.parent.name)):
         m = read_json(mf, limit=50_000_000)
         if not isinstance(m, dict):
@@ -163,10 +163,10 @@ def write_sweep_summary(sweep_dir: Path) -> Path:
         same = [m for m in varying if all(_num(r["metrics"].get(m)) == _num(r["params"][k]) for r in rows)]
         for metric in sorted((m for m in varying if m not in same), key=interest)[:MAX_PLOTS]:
             pts = [(_num(r["params"][k]), _num(r["metrics"].get(metric)), r["job"]) for r in rows]
-            pts = [p for p in pts if p[1] is not None]
-            if len(pts) >= 2:
-                plots.append(_svg_plot([p[0] for p in pts], [p[1] for p in pts], k, metric,
-                                       labels=[p[2] for p in pts]))
+            xy = [(x, y, job) for x, y, job in pts if x is not None and y is not None]  # x: numeric, always set
+            if len(xy) >= 2:
+                plots.append(_svg_plot([p[0] for p in xy], [p[1] for p in xy], k, metric,
+                                       labels=[p[2] for p in xy]))
     if plots:
         page.add("plots", "Metrics against the swept parameter", "<div class=\"plots\">" + "".join(plots) + "</div>")
     elif rows and not numeric:
@@ -180,10 +180,10 @@ def write_sweep_summary(sweep_dir: Path) -> Path:
 try:  # a Hydra callback: conf/config.yaml -> hydra.callbacks.report._target_: twinkit.report.SweepSummaryCallback
     from hydra.experimental.callback import Callback as _HydraCallback
 except Exception:  # pragma: no cover - Hydra is a dependency; this keeps the module importable without it
-    _HydraCallback = object
+    _HydraCallback = object  # type: ignore[misc, assignment]
 
 
-class SweepSummaryCallback(_HydraCallback):  # type: ignore[misc, valid-type]
+class SweepSummaryCallback(_HydraCallback):
     """Writes the sweep summary when a multirun ends (never fails the sweep)."""
 
     _done: set = set()

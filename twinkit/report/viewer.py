@@ -228,7 +228,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
         if not cached.is_file():
             t = time.perf_counter()
             mesh = pics._mesh()
-            if mesh is None or not len(mesh.faces):
+            if mesh is None or mesh.faces is None or not len(mesh.faces):
                 return ""
             labels = lab[0] if lab else mesh.attrs.get("label")
             xyz, faces, near = decimate(mesh.vertices, mesh.faces, VIEWER_MAX_FACES)
@@ -243,7 +243,7 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
     if not vendor_three(vdir, cache):
         return ("<p class=\"warn\">The 3D view needs three.js, which is not installed: run <code>npm ci</code> "
                 "in the twinkit repository and run again. "
-                f"The model is here: <a href=\"viewer/model.glb\">viewer/model.glb</a></p>")
+                "The model is here: <a href=\"viewer/model.glb\">viewer/model.glb</a></p>")
     glb_stat = (vdir / "model.glb").stat()
     js_cached = cache / f"model-{glb_stat.st_ino}-{glb_stat.st_size}-{glb_stat.st_mtime_ns}.glb.js"
     if not js_cached.is_file():

@@ -150,8 +150,8 @@ class LaneSamples:
         for i, k in enumerate(zip(self.road.tolist(), self.section.tolist(), self.lane.tolist())):
             groups.setdefault(k, []).append(i)
         out = []
-        for idx in groups.values():
-            idx = np.asarray(idx, np.int64)
+        for members in groups.values():
+            idx = np.asarray(members, np.int64)
             out.append(self.take(idx[np.argsort(self.s[idx], kind="stable")]))
         return out
 

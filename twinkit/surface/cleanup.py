@@ -114,6 +114,7 @@ def two_sided(vertices: np.ndarray, points: np.ndarray, normals: np.ndarray, rea
 def keep_large_components(mesh: Mesh, min_faces: int, min_ratio: float = 0.0) -> tuple[Mesh, int, int]:
     """Drop components with fewer faces than ``max(min_faces, min_ratio * largest)``.
     Returns (mesh, components before, components kept)."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     n, lab = components(mesh.n_vertices, mesh.faces)
     if n == 0:
         return mesh, 0, 0
@@ -128,6 +129,7 @@ def keep_large_components(mesh: Mesh, min_faces: int, min_ratio: float = 0.0) ->
 def repair_non_manifold_edges(mesh: Mesh) -> tuple[Mesh, int]:
     """Remove the smallest faces at every edge shared by more than two faces, until all edges
     have at most two. Returns (mesh, faces removed)."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     removed = 0
     for _ in range(10):
         if mesh.n_faces == 0:
@@ -155,6 +157,7 @@ def repair_non_manifold_edges(mesh: Mesh) -> tuple[Mesh, int]:
 def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
     """Fill every boundary loop of 3..``max_edges`` edges with a fan around a new centroid
     vertex (attributes: mean of the loop). Returns (mesh, holes closed)."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     if max_edges < 3 or mesh.n_faces == 0:
         return mesh, 0
     loops = [lp for lp in boundary_loops(mesh.faces) if len(lp) <= max_edges]
@@ -223,6 +226,7 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
             if "normals" in mesh.attrs and len(mesh.attrs["normals"]) == mesh.n_vertices:
                 nrm = mesh.attrs["normals"][lm]
             else:
+                assert mesh.faces is not None  # a mesh, not a cloud
                 nrm = vertex_normals(mesh.vertices, mesh.faces[lm[mesh.faces].any(axis=1)])[lm]  # faces there only
             rep["loose_samples"] = {"points": mesh.vertices[lm].copy(), "normals": np.asarray(nrm, np.float32),
                                     "keep": ~drop[lm]}

@@ -183,6 +183,7 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
                    opt: GroundFillOptions, rep: dict):
     """The fill joined to the mesh: (new vertices (k, 3), new faces (f, 3) indexing ``mesh.vertices`` then the
     new vertices). ``cand``: cells to cover (ny, nx) bool, ``height`` their ground height."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     import pythoncdt as cdt
     from scipy.ndimage import binary_dilation
     from scipy.spatial import cKDTree
@@ -298,8 +299,7 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
 def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None = None,
                       opt: GroundFillOptions | None = None, tree=None) -> tuple[Mesh, dict]:
     """Add grid patches over the ground's occlusion shadows; returns (mesh, report)."""
-    from scipy.spatial import cKDTree
-
+    assert mesh.faces is not None  # a mesh, not a cloud
     opt = opt or GroundFillOptions()
     c = float(opt.cell_m)
     cls, gz, lo, zloc, bmin, bmax = cell_classes(points, normals, opt, with_local=True)
@@ -386,6 +386,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
 def _append(mesh: Mesh, pv: np.ndarray, pf: np.ndarray, points, colors, tree, opt: GroundFillOptions,
             rep: dict) -> tuple[Mesh, dict]:
     """The mesh with new vertices ``pv`` (colour of the nearest point, normal up) and faces ``pf``."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     from scipy.spatial import cKDTree
 
     from twinkit.mesh import face_areas
@@ -514,7 +515,7 @@ def close_ground_holes(vertices: np.ndarray, faces: np.ndarray, ground_z, *, max
     add_v: list[np.ndarray] = []
     add_f: list[np.ndarray] = []
     done: list[np.ndarray] = []
-    rep = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
+    rep: dict = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
     nv = len(v)
 
     def left(why: str, ln: float) -> None:

@@ -18,6 +18,7 @@ from twinkit.mesh import Mesh, compact, face_areas
 
 
 def simplify_quadric(mesh: Mesh, target_faces: int, *, preserve_border: bool = True, aggressiveness: float = 7.0) -> Mesh:
+    assert mesh.faces is not None  # a mesh, not a cloud
     import fast_simplification
 
     if mesh.n_faces <= target_faces:
@@ -31,6 +32,7 @@ def simplify_quadric(mesh: Mesh, target_faces: int, *, preserve_border: bool = T
 
 
 def simplify_clustering(mesh: Mesh, target_faces: int) -> Mesh:
+    assert mesh.faces is not None  # a mesh, not a cloud
     import open3d as o3d
 
     from twinkit.mesh import to_o3d_mesh
@@ -45,6 +47,7 @@ def simplify_clustering(mesh: Mesh, target_faces: int) -> Mesh:
 
 
 def _drop_degenerate(mesh: Mesh) -> Mesh:
+    assert mesh.faces is not None  # a mesh, not a cloud
     f = mesh.faces
     ok = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
     ok &= face_areas(mesh.vertices, f) > 0
@@ -53,6 +56,8 @@ def _drop_degenerate(mesh: Mesh) -> Mesh:
 
 def resample_attributes(simple: Mesh, dense: Mesh, threads: int = 0, names=("colors",)) -> Mesh:
     """Copy per-vertex attributes from ``dense`` to ``simple`` at the closest dense surface point."""
+    assert simple.faces is not None  # a mesh, not a cloud
+    assert dense.faces is not None  # a mesh, not a cloud
     from twinkit.mesh import vertex_normals
     from .closest import Surface
 
@@ -96,6 +101,7 @@ def close_collapse_holes(mesh: Mesh, max_edges: int = 12) -> tuple[Mesh, int]:
     """Close the pin-holes edge collapses leave (a face dropped as degenerate, a collapse the border rule
     refused next to another): boundary loops of at most ``max_edges`` edges, by a fan. The clean-up before
     closed every hole up to 60 edges, so a loop this small here is the simplifier's, not the scan's."""
+    assert mesh.faces is not None  # a mesh, not a cloud
     from twinkit.mesh.topology import boundary_loops, fan_fill
 
     if max_edges < 3 or mesh.n_faces == 0:

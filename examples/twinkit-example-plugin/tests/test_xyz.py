@@ -1,6 +1,4 @@
 """The example plugin's own tests, written with twinkit's helpers for plugin authors."""
-from pathlib import Path
-
 import numpy as np
 import pytest
 

@@ -9,9 +9,14 @@ from twinkit.ranges import param
 
 @dataclass
 class LocalExecutorParams:
-    workers: int = param(2, ge=1, le=1024)  # worker processes for fanned-out items (1 = run in the main process)
-    threads_per_worker: int = param(0, ge=0)  # cap on each worker's native thread pools (OpenMP, BLAS); 0 = cores / workers
-    max_items_per_worker: int = param(0, ge=0)  # > 0: a fresh worker process after this many items (bounds memory carried over)
+    workers: int = param(2, ge=1, le=1024,
+                         help="Worker processes for fanned-out items; 1 = run them in the main process.")
+    threads_per_worker: int = param(0, ge=0,
+                                    help="Cap on each worker's native thread pools (OpenMP, BLAS); 0 = cores / "
+                                         "workers.")
+    max_items_per_worker: int = param(0, ge=0,
+                                      help="> 0: start a fresh worker process after this many items (bounds the "
+                                           "memory a worker carries over); 0 = never.")
 
 
 def local_executor(params: LocalExecutorParams):

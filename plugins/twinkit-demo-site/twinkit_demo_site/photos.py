@@ -96,6 +96,8 @@ def render_photos(tracer: Tracer, poses: list[dict], out_dir: Path, geo, rng: np
     """Render, write ``photo_XXXX.jpg`` (+ ``labels/photo_XXXX.png`` trainIds, 255 = sky); return cameras.json content."""
     from PIL import Image
 
+    from twinkit.artefacts import write_photo
+
     out_dir = Path(out_dir)
     (out_dir / "labels").mkdir(parents=True, exist_ok=True)
     K = np.array([[focal_px, 0, width / 2], [0, focal_px, height / 2], [0, 0, 1.0]])
@@ -114,7 +116,7 @@ def render_photos(tracer: Tracer, poses: list[dict], out_dir: Path, geo, rng: np
         buf = io.BytesIO()
         Image.fromarray(rgb).save(buf, format="JPEG", quality=92, subsampling=0,
                                   exif=exif_bytes(focal_px, width, height, lat, lon, alt, i, heading_deg))
-        (out_dir / name).write_bytes(buf.getvalue())
+        write_photo(out_dir, name, buf.getvalue())
         Image.fromarray(lab).save(out_dir / "labels" / f"photo_{i:04d}.png")
         cams.append({
             "image": name, "label_image": f"labels/photo_{i:04d}.png",

@@ -27,25 +27,41 @@ PRESETS = {
 
 @dataclass
 class DemoSiteParams:
-    size: str = param("small", choices=("small", "default", "large"))  # small | default | large
-    seed: int = param(0, ge=0)
-    photo_count: int = param(0, ge=0, le=10000)  # 0 = the preset's count
-    photo_width_px: int = param(1024, ge=16, le=16384)
-    photo_height_px: int = param(768, ge=16, le=16384)
-    focal_px: float = param(820.0, gt=0)
-    photo_supersample: int = param(1, ge=1, le=8)  # colour rays per pixel side (2 = 4 + 1 rays per pixel)
-    noise_mm: float = param(3.0, ge=0)  # scanner range noise (1 sigma, clipped at 3 sigma)
-    scanner_height_m: float = param(2.0, gt=0)
-    max_range_m: float = param(80.0, gt=0)
-    density_scale: float = param(1.0, gt=0, le=100)  # multiplies the preset's point density
-    gps_noise_m: float = param(2.5, ge=0)  # EXIF GPS noise (1 sigma horizontal; vertical 1.6x)
-    osm_shift_m: float = param(3.5, ge=0)  # length of the known OSM translation
-    osm_rotation_deg: float = param(0.8, ge=0, le=180)  # magnitude of the known OSM rotation about the base point
-    shadows: bool = True
-    weathering: float = param(0.6, ge=0, le=1)  # world-space stains in the photos so no two places look alike; 0 = off
-    weathering_scan: bool = False  # the scanner's colours weathered too (changes the segmentation demo's input)
-    gcp_survey_noise_m: float = param(0.005, ge=0)  # noise of the surveyed ground-control points (gcp.json)
-    gcp_pixel_noise_px: float = param(0.5, ge=0)  # noise of their pixel observations (a user clicking them)
+    size: str = param("small", choices=("small", "default", "large"),
+                      help="Preset of the generated intersection (PRESETS): small, default or large; it sets the "
+                           "site's size, the scanner's point density and the photo count.")
+    seed: int = param(0, ge=0, help="Random seed: the same seed and size give the same site, scan and photos.")
+    photo_count: int = param(0, ge=0, le=10000, help="Number of photos to render; 0 = the preset's count.")
+    photo_width_px: int = param(1024, ge=16, le=16384, help="Width of each rendered photo (px).")
+    photo_height_px: int = param(768, ge=16, le=16384, help="Height of each rendered photo (px).")
+    focal_px: float = param(820.0, gt=0, help="Focal length of the photo camera (px).")
+    photo_supersample: int = param(1, ge=1, le=8,
+                                   help="Colour rays per pixel side when rendering photos (2 = 4 + 1 rays per "
+                                        "pixel); higher = smoother and slower.")
+    noise_mm: float = param(3.0, ge=0, help="Range noise of the simulated scanner (mm, 1 sigma, clipped at 3 sigma).")
+    scanner_height_m: float = param(2.0, gt=0, help="Height (m) of the simulated scanner above the road.")
+    max_range_m: float = param(80.0, gt=0, help="Maximum range (m) of the simulated scanner.")
+    density_scale: float = param(1.0, gt=0, le=100, help="Multiplies the preset's point density.")
+    gps_noise_m: float = param(2.5, ge=0,
+                               help="Noise of the photos' EXIF GPS positions (m, 1 sigma horizontal; vertical "
+                                    "1.6x).")
+    osm_shift_m: float = param(3.5, ge=0,
+                               help="Length (m) of the known translation applied to the generated OSM roads (what "
+                                    "road alignment must recover).")
+    osm_rotation_deg: float = param(0.8, ge=0, le=180,
+                                    help="Magnitude (degrees) of the known rotation of the generated OSM roads "
+                                         "about the base point.")
+    shadows: bool = param(True, help="Cast sun shadows in the scan's and the photos' colours.")
+    weathering: float = param(0.6, ge=0, le=1,
+                              help="Strength of world-space stains in the photos, so that no two places look alike; 0 = "
+                                   "off.")
+    weathering_scan: bool = param(False,
+                                  help="Weather the scanner's colours too (changes the segmentation demo's input).")
+    gcp_survey_noise_m: float = param(0.005, ge=0,
+                                      help="Noise (m) of the surveyed ground-control points written to gcp.json.")
+    gcp_pixel_noise_px: float = param(0.5, ge=0,
+                                      help="Noise (px) of the ground-control points' pixel observations (a user "
+                                           "clicking them).")
 
 
 def _osm_transform(params: DemoSiteParams, seed: int) -> dict:
@@ -91,6 +107,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                        out_gcp_json: Path,
                        out_roads_osm: Path, out_roads_truth_json: Path, out_site_json: Path) -> dict:
     """Write a procedural four-way intersection with exact ground truth."""
+    from twinkit import artefacts as A
     from twinkit_demo_site import writers
     from twinkit_demo_site.layout import build_scene
     from twinkit_demo_site.raycast import Tracer
@@ -115,7 +132,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     mesh = scene.mesh
     lap("scene")
     writers.write_obj(out_gt_mesh_obj, mesh, atlas)
-    writers.write_mesh_ply(out_gt_mesh_ply, mesh, atlas)
+    A.write_gt_mesh(out_gt_mesh_ply, writers.gt_ply_mesh(mesh, atlas))
     lap("mesh_files")
 
     tracer = Tracer(mesh, atlas, threads=ctx.threads, weathering=params.weathering, seed=seed)
@@ -134,7 +151,7 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     lap("roads")
 
     site = _site_json(scene, params, geo, tf, cloud, traj, n_photos)
-    writers.write_json(out_site_json, site)
+    A.write_site_info(out_site_json, site)
     lap("site_json")
     n_points = site["counts"]["points"]
     ctx.log.info("demo site: %d faces, %d points, %d photos; timings %s", len(mesh.faces), n_points, n_photos, timings)
@@ -197,7 +214,7 @@ def _photos(scene, tracer, params: DemoSiteParams, pre: dict, seed: int, geo, ct
     """Render the photo walk, write the cameras and the ground-control points; returns the photo count."""
     import numpy as np
 
-    from twinkit_demo_site import writers
+    from twinkit import artefacts as A
     from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
 
     n_photos = params.photo_count or pre["photos"]
@@ -207,8 +224,8 @@ def _photos(scene, tracer, params: DemoSiteParams, pre: dict, seed: int, geo, ct
                          width=params.photo_width_px, height=params.photo_height_px, focal_px=params.focal_px,
                          gps_noise_m=params.gps_noise_m, supersample=params.photo_supersample,
                          shadows=params.shadows, progress=ctx.progress)
-    writers.write_json(out_cameras_json, cams)
-    writers.write_json(out_gcp_json, gcp_observations(
+    A.write_demo_cameras(out_cameras_json, cams)
+    A.write_gcp(out_gcp_json, gcp_observations(
         tracer, cams, scene.gcp_points, np.random.default_rng([seed, 8]),
         survey_noise_m=params.gcp_survey_noise_m, pixel_noise_px=params.gcp_pixel_noise_px))
     return n_photos
@@ -218,14 +235,15 @@ def _write_roads(scene, tf: dict, geo, *, out_roads_osm: Path, out_roads_truth_j
     """roads.osm (its nodes moved by the known OSM transform ``tf``) and roads_truth.json."""
     import numpy as np
 
+    from twinkit import artefacts as A
     from twinkit_demo_site import writers
 
     ids = sorted(scene.osm["nodes"])
     xy = np.array([scene.osm["nodes"][i][:2] for i in ids])
     moved = apply_osm_transform(xy, tf)
     nodes = {i: (float(p[0]), float(p[1]), scene.osm["nodes"][i][2]) for i, p in zip(ids, moved)}
-    writers.write_osm(out_roads_osm, nodes, scene.osm["ways"], geo)
-    writers.write_json(out_roads_truth_json, scene.roads_truth)
+    A.write_osm(out_roads_osm, writers.osm_text(nodes, scene.osm["ways"], geo))
+    A.write_roads_truth(out_roads_truth_json, scene.roads_truth)
 
 
 def _site_json(scene, params: DemoSiteParams, geo, tf: dict, cloud: dict, traj: dict, n_photos: int) -> dict:

@@ -64,22 +64,20 @@ def write_obj(path: Path, mesh: Mesh, atlas: Atlas) -> None:
                    groups=groups)
 
 
-def write_mesh_ply(path: Path, mesh: Mesh, atlas: Atlas) -> None:
-    """Binary PLY (twinkit.mesh.write_ply): vertex x y z (float32) u v red green blue label;
-    face vertex_indices label.
+def gt_ply_mesh(mesh: Mesh, atlas: Atlas):
+    """The ground truth as the PLY of ``gt_mesh.ply`` (a :class:`twinkit.mesh.Mesh`): vertex x y z (float32)
+    u v red green blue label; face vertex_indices label.
 
     Face order equals the OBJ's (grouped by class); vertex colours are the texture at the vertex UV.
     """
-    from twinkit.mesh import write_ply
-
     col = np.clip(atlas.sample(mesh.attrs["uv"]) * 255 + 0.5, 0, 255).astype(np.uint8)
     uv = np.asarray(mesh.attrs["uv"]).astype(np.float32)
     order = _face_order(mesh)
-    write_ply(path, Mesh(
+    return Mesh(
         vertices=mesh.vertices, faces=mesh.faces[order],
         attrs={"u": uv[:, 0], "v": uv[:, 1], "colors": col, "label": mesh.attrs["label"].astype(np.uint8, copy=False)},
         face_attrs={"label": mesh.face_attrs["label"][order].astype(np.uint8, copy=False)},
-        comments=["twinkit demo site ground truth, site frame (metres, z up); label = CityScapes trainId"]))
+        comments=["twinkit demo site ground truth, site frame (metres, z up); label = CityScapes trainId"])
 
 
 # ---------------------------------------------------------------- point cloud
@@ -288,8 +286,9 @@ def _e57_write_points(imf, points, XYZ, cloud: dict) -> None:
 
 
 # ---------------------------------------------------------------- OSM
-def write_osm(path: Path, nodes: dict[int, tuple[float, float, dict]], ways: list, geo) -> None:
-    """OpenStreetMap XML 0.6; node coordinates are site-frame metres converted with ``geo``."""
+def osm_text(nodes: dict[int, tuple[float, float, dict]], ways: list, geo) -> str:
+    """OpenStreetMap XML 0.6 (the text of ``roads.osm``); node coordinates are site-frame metres converted
+    with ``geo``."""
     ids = sorted(nodes)
     xy = np.array([[nodes[i][0], nodes[i][1]] for i in ids])
     ll = geo.local_to_lonlat(xy)
@@ -314,4 +313,4 @@ def write_osm(path: Path, nodes: dict[int, tuple[float, float, dict]], ways: lis
             lines.append(f"    <tag k={quoteattr(k)} v={quoteattr(str(tags[k]))}/>")
         lines.append("  </way>")
     lines.append("</osm>")
-    Path(path).write_text("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"

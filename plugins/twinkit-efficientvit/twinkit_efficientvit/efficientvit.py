@@ -26,37 +26,35 @@ OFFICIAL = f"model id {HF_REPO}, file {WEIGHTS_FILE} ({WEIGHTS_URL})"
 
 @dataclass
 class EfficientViTParams:
-    """Parameters of image model ``efficientvit_b0``.
+    """Parameters of image model ``efficientvit_b0``."""
 
-    weights_path: checkpoint file or folder holding it; empty = search
-        ``$TWINKIT_MODELS_DIR``, ``../shared/models`` (cwd, then repo root) and the
-        download cache.
-    weights_sha256: expected sha256; empty = the official file's hash when
-        ``weights_path`` is empty, no check for a given path.
-    download_if_missing: fetch the official file (needs internet) if no copy is found.
-    threads: torch CPU threads during inference (0 = leave torch's default).
-    batch_size: images per forward pass; 0 = automatic (1 on CPU, where larger batches
-        gave no speed-up here but more memory; 8 on CUDA).
-    device: "auto" (cuda if available), "cpu", "cuda" or "cuda:N".
-    input_long_side_px: the network sees the image with its long side scaled to
-        this (0 = native size); logits are upsampled back to the input size.
-    size_multiple_px: each network side is rounded to a multiple of this (32 needed).
-    optimize: fold BatchNorm into the convs and run channels-last (about 2x faster
-        on CPU; same labels up to float rounding). False = the checkpoint's modules as loaded.
-    flip_tta: test-time augmentation: average the logits of the image and of its mirror
-        image (twice the inference time).
-    """
-
-    weights_path: str = ""
-    weights_sha256: str = ""
-    download_if_missing: bool = False
-    threads: int = param(0, ge=0)
-    batch_size: int = param(0, ge=0, le=1024)
-    device: str = "auto"
-    input_long_side_px: int = param(1024, ge=32, le=8192)
-    size_multiple_px: int = param(32, ge=1, le=1024)
-    optimize: bool = True
-    flip_tta: bool = False
+    weights_path: str = param("",
+                              help="Checkpoint file, or a folder holding it; empty = search $TWINKIT_MODELS_DIR, "
+                                   "../shared/models (from the working directory, then the repository root) and the "
+                                   "download cache.")
+    weights_sha256: str = param("",
+                                help="Expected sha256 of the checkpoint; empty = the official file's hash when "
+                                     "weights_path is empty, no check for a given path.")
+    download_if_missing: bool = param(False,
+                                      help="Fetch the official checkpoint (needs internet) when no copy is found.")
+    threads: int = param(0, ge=0, help="torch CPU threads during inference; 0 = torch's default.")
+    batch_size: int = param(0, ge=0, le=1024,
+                            help="Images per forward pass; 0 = automatic (1 on CPU, 8 on CUDA). Larger batches need "
+                                 "more memory.")
+    device: str = param("auto", help="Where the model runs: auto (CUDA when available), cpu, cuda or cuda:N.")
+    input_long_side_px: int = param(1024, ge=32, le=8192,
+                                    help="The network sees the image with its long side scaled to this (px); the "
+                                         "logits are upsampled back to the input size.")
+    size_multiple_px: int = param(32, ge=1, le=1024,
+                                  help="Each side the network sees is rounded to a multiple of this (px); the model "
+                                       "needs 32.")
+    optimize: bool = param(True,
+                           help="Fold BatchNorm into the convolutions and run channels-last (about 2x faster on "
+                                "CPU, the same labels up to float rounding); false = the checkpoint's modules as "
+                                "loaded.")
+    flip_tta: bool = param(False,
+                           help="Test-time augmentation: average the logits of the image and of its mirror image "
+                                "(twice the inference time).")
 
 
 class EfficientViTModel:

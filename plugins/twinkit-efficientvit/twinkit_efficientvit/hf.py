@@ -9,7 +9,7 @@ become 255 in :meth:`predict` and are dropped from :meth:`predict_proba`.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -34,29 +34,27 @@ UNIVERSAL_TYPES = ("mask2former", "maskformer")
 
 @dataclass
 class HFParams:
-    """Parameters of image model ``hf_segformer``.
+    """Parameters of image model ``hf_segformer``."""
 
-    model: Hub model id or local folder (``save_pretrained`` output).
-    revision: Hub revision (branch, tag or commit); ignored for a folder.
-    local_files_only: never touch the network (also implied by a local folder or
-        ``HF_HUB_OFFLINE=1``).
-    threads / batch_size / device: as for ``efficientvit_b0`` (batch_size 0 = 1 on CPU, 8 on CUDA).
-    input_long_side_px: 0 = let the model's image processor resize (its own
-        training size); > 0 = resize to this long side keeping the aspect ratio,
-        sides rounded to ``size_multiple_px``, and tell the processor not to resize.
-    label_map: label name -> CityScapes trainId overrides (-1 = ignore the label),
-        applied before the built-in name table.
-    """
-
-    model: str = "nvidia/segformer-b0-finetuned-cityscapes-1024-1024"
-    revision: str = "main"
-    local_files_only: bool = False
-    threads: int = param(0, ge=0)
-    batch_size: int = param(0, ge=0, le=1024)
-    device: str = "auto"
-    input_long_side_px: int = param(0, ge=0, le=8192)
-    size_multiple_px: int = param(32, ge=1, le=1024)
-    label_map: dict[str, int] = field(default_factory=dict)
+    model: str = param("nvidia/segformer-b0-finetuned-cityscapes-1024-1024",
+                       help="Hugging Face Hub model id, or a local folder (save_pretrained output).")
+    revision: str = param("main", help="Hub revision (branch, tag or commit); ignored for a local folder.")
+    local_files_only: bool = param(False,
+                                   help="Never touch the network (also implied by a local folder or "
+                                        "HF_HUB_OFFLINE=1).")
+    threads: int = param(0, ge=0, help="torch CPU threads during inference; 0 = torch's default.")
+    batch_size: int = param(0, ge=0, le=1024, help="Images per forward pass; 0 = automatic (1 on CPU, 8 on CUDA).")
+    device: str = param("auto", help="Where the model runs: auto (CUDA when available), cpu, cuda or cuda:N.")
+    input_long_side_px: int = param(0, ge=0, le=8192,
+                                    help="0 = let the model's image processor resize (to its own training size); > "
+                                         "0 = resize to this long side (px) keeping the aspect ratio, sides rounded "
+                                         "to size_multiple_px, and tell the processor not to resize.")
+    size_multiple_px: int = param(32, ge=1, le=1024,
+                                  help="With input_long_side_px > 0: each side is rounded to a multiple of this "
+                                       "(px).")
+    label_map: dict[str, int] = param(default_factory=dict, free=True,
+                                      help="Overrides of the model's label name -> CityScapes trainId (-1 = ignore "
+                                           "the label), applied before the built-in name table.")
 
 
 class HFSegmentationModel:

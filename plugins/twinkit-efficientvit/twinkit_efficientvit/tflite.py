@@ -29,17 +29,18 @@ SIZE = 513
 
 @dataclass
 class DeepLabTFLiteParams:
-    """Parameters of image model ``deeplab_edgetpu_tflite``.
+    """Parameters of image model ``deeplab_edgetpu_tflite``."""
 
-    weights_path / weights_sha256: as for ``efficientvit_b0`` (no automatic download).
-    threads: interpreter CPU threads (0 = the runtime's default).
-    resize_mode: "stretch" (to 513x513, default) or "pad" (aspect kept, grey padding).
-    """
-
-    weights_path: str = ""
-    weights_sha256: str = ""
-    threads: int = param(0, ge=0)
-    resize_mode: str = param("stretch", choices=("stretch", "pad"))
+    weights_path: str = param("",
+                              help="The .tflite model file, or a folder holding it; empty = search the default "
+                                   "model folders, as for efficientvit_b0 (no automatic download).")
+    weights_sha256: str = param("",
+                                help="Expected sha256 of the model file; empty = the known file's hash when "
+                                     "weights_path is empty, no check for a given path.")
+    threads: int = param(0, ge=0, help="Interpreter CPU threads; 0 = the runtime's default.")
+    resize_mode: str = param("stretch", choices=("stretch", "pad"),
+                             help="How an image becomes the model's 513x513 input: stretch it, or pad it (aspect "
+                                  "ratio kept, grey padding).")
 
 
 def litert_available() -> bool:

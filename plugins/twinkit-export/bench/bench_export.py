@@ -99,7 +99,7 @@ def main() -> int:
                                                          "in_aligned_xodr": args.xodr}, "carla", "carla_import")
             rows.append(("CARLA package (copy FBX+texture+XODR, spawn points)", dt, _size(pkg["carla_import"]),
                          "whole Import/<Package> folder"))
-        print(f"\n### twinkit-export benchmark\n")
+        print("\n### twinkit-export benchmark\n")
         print(f"Source: {source}; {st['source_vertices']:,} vertices, {st['source_faces']:,} faces, "
               f"{st['classes']} classes; texture {man.get('texture_px')} px, {_mb(_size(tex)) if tex else 0} MB PNG "
               f"(input made in {t_make:.1f} s).  ")

@@ -101,7 +101,7 @@ def usd_out(class_dir, tmp_path_factory):
 
 
 def test_usd_validates_with_zero_errors(usd_out):
-    from pxr import UsdValidation  # usd-core >= 24.11 provides it; the exporter falls back otherwise
+    from pxr import UsdValidation  # noqa: F401 -- usd-core >= 24.11 provides it; the exporter falls back otherwise
 
     from twinkit_export.usd import validation_report
 
@@ -123,7 +123,6 @@ def test_usd_round_trip(usd_out, class_dir):
     assert root.GetPath().pathString == "/Site" and root.IsA(UsdGeom.Xform)
     meshes = {p.GetName(): p for p in root.GetChildren() if p.IsA(UsdGeom.Mesh)}
     assert set(meshes) == {m.name for m in cs.meshes}
-    lut = palette_lut()
     for m in cs.meshes:
         prim = meshes[m.name]
         mesh = UsdGeom.Mesh(prim)

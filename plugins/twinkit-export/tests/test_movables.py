@@ -318,7 +318,7 @@ def test_holes_in_the_ground_away_from_objects_are_closed_on_the_ground(tmp_path
     crack = (np.abs(cen[:, 0] + 8) < 0.15) & (np.abs(cen[:, 1] + 5) < 0.3)  # 0.3 x 0.6 m in a lane
     kerb = (np.abs(cen[:, 0] - 8) < 0.75) & (np.abs(cen[:, 1] - 3) < 0.5)  # 1.5 m across the kerb line
     wide = (np.abs(cen[:, 0] - 6) < 6) & (np.abs(cen[:, 1] - 12) < 3)  # 12 x 6 m: wider than 8 m
-    wall = np.zeros(len(v), bool)  # a hole 2 m up a wall: a raised block with a hole in its top
+    # a hole 2 m up a wall: a raised block with a hole in its top
     blk = (np.abs(v[:, 0] + 10) < 1.5) & (np.abs(v[:, 1] - 12) < 1.5)
     v[blk, 2] = 2.0
     wall_hole = (np.abs(cen[:, 0] + 10) < 0.3) & (np.abs(cen[:, 1] - 12) < 0.3)

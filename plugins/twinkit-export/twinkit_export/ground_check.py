@@ -139,21 +139,15 @@ def continuous(rays: np.ndarray, surf: np.ndarray, spacing_m: float, window_m: f
 def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh_obj: Path, in_aligned_xodr: Path,
                    in_points_ply: Path, out_drop_test_json: Path, out_drop_test_png: Path) -> dict:
     """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
+    from twinkit import artefacts as A
     from twinkit.jsonio import write_json
-    from twinkit.mesh import read_obj, read_ply
     from twinkit.surface.watertight import Footprint, at_ground_level, draw_border, drop_test, ground_border
 
     params = params or DropTestParams()
     t0 = time.perf_counter()
-    try:
-        mesh = read_obj(Path(in_textured_mesh_obj))
-    except Exception as exc:
-        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the step that wrote it") from None
-    try:
-        cloud = read_ply(Path(in_points_ply))
-    except Exception as exc:
-        raise InputError(f"{in_points_ply}: not a readable PLY ({exc}); re-run read_cloud") from None
-    text = Path(in_aligned_xodr).read_text(encoding="utf-8", errors="replace")
+    mesh = A.read_textured_obj(in_textured_mesh_obj)
+    cloud = A.read_points(in_points_ply)
+    text = A.read_opendrive(in_aligned_xodr)
     from twinkit.geo.xodr import from_scan as _from_scan
 
     from_scan = _from_scan(text)

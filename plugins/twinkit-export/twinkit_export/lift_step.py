@@ -92,7 +92,7 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
     import numpy as np
 
     from twinkit.jsonio import write_json
-    from twinkit.mesh import read_obj, write_obj
+    from twinkit import artefacts as A
 
     from .classmesh import write_class_ply
     from .movables import NAMES, LiftOptions, lift_movables, open_border_near
@@ -100,14 +100,8 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
     params = params or LiftParams()
     t0 = time.perf_counter()
     src_obj = Path(in_textured_mesh_obj)
-    try:
-        labels = np.load(in_labels_npy)
-    except Exception as exc:
-        raise InputError(f"{in_labels_npy}: not a readable .npy ({exc})") from None
-    try:
-        mesh = read_obj(src_obj)
-    except Exception as exc:
-        raise InputError(f"{src_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    labels = A.read_labels(in_labels_npy)
+    mesh = A.read_textured_obj(src_obj)
     if labels.ndim != 1 or len(labels) != mesh.n_vertices:
         raise InputError(f"{Path(in_labels_npy).name}: {labels.shape} labels for {mesh.n_vertices} vertices of "
                          f"{src_obj.name}; the labels must be per vertex of this mesh (re-run the segmentation on it)")
@@ -124,7 +118,7 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
         mtl = src_obj.with_suffix(".mtl")
         if mtl.exists():
             shutil.copyfile(mtl, out_obj.with_suffix(".mtl"))
-        np.save(out_labels_npy, labels)
+        A.write_labels(out_labels_npy, labels)
         write_json(mov_dir / ACTORS, {"lifted": False, "frame": frame, "texture": None, "actors": []})
         ctx.log.info("lift=false: movable objects stay in the static map")
         return {"lifted": False, "instances": 0}
@@ -133,8 +127,8 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
     res = lift_movables(mesh, labels, opt, ctx.log)
     out = res.mesh
     tc = out.corner_uv if out.corner_uv is not None else np.zeros((out.n_faces, 3, 2), np.float32)
-    write_obj(out_obj, out.vertices, out.faces, tc, tex_name or "", normals=out.normals)
-    np.save(out_labels_npy, res.labels.astype(np.uint8))
+    A.write_textured_obj(out_obj, out.vertices, out.faces, tc, tex_name or "", normals=out.normals)
+    A.write_labels(out_labels_npy, res.labels.astype(np.uint8))
     mtex = None
     if tex_name:
         mtex = "texture" + Path(tex_name).suffix

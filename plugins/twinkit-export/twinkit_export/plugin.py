@@ -24,61 +24,87 @@ from .lift_step import LiftParams, lift_movables_step
 class GtLabelsParams:
     """Transfer ground-truth labels to the reconstructed mesh."""
 
-    max_dist_m: float = param(0.5, gt=0)  # vertices farther than this from the ground-truth surface stay unlabelled (255)
+    max_dist_m: float = param(0.5, gt=0,
+                              help="Vertices farther than this (m) from the ground-truth surface stay unlabelled "
+                                   "(255).")
 
 
 @dataclass
 class SplitParams:
     """Split the labelled, textured mesh into one sub-mesh per class."""
 
-    max_texture_px: int = param(8192, ge=0, le=65536)  # a larger atlas is downscaled to this size (Unreal's default limit); 0 = keep
+    max_texture_px: int = param(8192, ge=0, le=65536,
+                                help="A larger texture atlas is downscaled to this size (px; 8192 is Unreal's "
+                                     "default limit); 0 = keep the size.")
 
 
 @dataclass
 class FbxParams:
     """FBX through Blender (bpy) in a subprocess."""
 
-    embed_texture: bool = False  # True: the texture is embedded in the FBX too (bigger file)
-    save_blend: bool = False  # also write twin.blend (for inspection in Blender)
+    embed_texture: bool = param(False, help="Embed the texture in the FBX too (a bigger file).")
+    save_blend: bool = param(False, help="Also write twin.blend, for inspection in Blender.")
 
 
 @dataclass
 class UsdParams:
     """USD through usd-core."""
 
-    validate: bool = True  # run usd-core's validators; errors fail the step
-    semantics_taxonomy: str = "class"  # instance name of SemanticsLabelsAPI (semantics:labels:<taxonomy>)
-    colliders: bool = True  # UsdPhysics collision (triangle mesh) on the static classes, not on movable ones
-    isaac_legacy_semantics: bool = True  # also the older Semantics schema (SemanticsAPI), read by Isaac Sim < 5.0
-    geo_schemas: bool = True  # georeference for consumers: Omniverse WGS84 reference position + Cesium origin
+    validate: bool = param(True, help="Run usd-core's validators; an error fails the step.")
+    semantics_taxonomy: str = param("class",
+                                    help="Instance name of the SemanticsLabelsAPI (semantics:labels:<taxonomy>).")
+    colliders: bool = param(True,
+                            help="Add UsdPhysics collision (triangle mesh) to the static classes, not to the "
+                                 "movable ones.")
+    isaac_legacy_semantics: bool = param(True,
+                                         help="Also write the older Semantics schema (SemanticsAPI), read by Isaac "
+                                              "Sim before 5.0.")
+    geo_schemas: bool = param(True,
+                              help="Georeference the stage for its consumers: the Omniverse WGS84 reference "
+                                   "position and a Cesium origin.")
 
 
 @dataclass
 class GltfParams:
     """GLB for viewing in a browser."""
 
-    texture_format: str = param("jpeg", choices=("jpeg", "png"))  # jpeg (smaller, for the web) | png (lossless)
-    jpeg_quality: int = param(90, ge=1, le=100)
-    unlit: bool = True  # KHR_materials_unlit: the texture already holds the captured light
-    variants: bool = True  # KHR_materials_variants: "photo" and "segmentation" (flat class colours)
+    texture_format: str = param("jpeg", choices=("jpeg", "png"),
+                                help="Texture encoding in the GLB: jpeg (smaller, for the web) or png (lossless).")
+    jpeg_quality: int = param(90, ge=1, le=100, help="JPEG quality (1..100) with texture_format=jpeg.")
+    unlit: bool = param(True,
+                        help="Mark the materials unlit (KHR_materials_unlit): the texture already holds the "
+                             "captured light.")
+    variants: bool = param(True,
+                           help='Add material variants (KHR_materials_variants): "photo" and "segmentation" (flat '
+                                "class colours).")
 
 
 @dataclass
 class CarlaPackageParams:
     """CARLA import package (``Import/<Package>/``)."""
 
-    package: str = ""  # package name; empty = "<Site>Twin" from the site name
-    map_name: str = ""  # map name (FBX and XODR names); empty = "<Site>"
-    use_carla_materials: bool = False  # True: CARLA replaces road/sidewalk/terrain materials by its own
-    spawn_spacing_m: float = param(20.0, gt=0)  # distance between spawn points along a driving lane
-    spawn_height_m: float = param(0.5, ge=0)  # spawn points are raised by this much above the lane
-    skip_junctions: bool = True  # no spawn points inside junctions
-    decals: bool = False  # True: CARLA's default random road decals (dirt, cracks, tyre marks, road lines)
-    carla_version: str = "0.9.16"
-    frame: str = param("carla", choices=("carla", "site"))  # carla: true-north frame at the base point, CARLA's geolocation works | site: site frame
-    frame_scale: str = param("auto", choices=("auto", "site", "true", "minimax"))  # auto | site (rotation only) | true (true metres) | minimax (see docs/georeferencing.md)
-    geolocation_radius_m: float = param(150.0, gt=0)  # CARLA's geolocation is held within the tolerance up to this distance
-    geolocation_tolerance_m: float = param(0.5, gt=0)
+    package: str = param("", help='Package name; empty = "<Site>Twin" from the site name.')
+    map_name: str = param("", help='Map name (the FBX and XODR file names); empty = "<Site>".')
+    use_carla_materials: bool = param(False,
+                                      help="Let CARLA replace the road, sidewalk and terrain materials by its own.")
+    spawn_spacing_m: float = param(20.0, gt=0, help="Distance (m) between spawn points along a driving lane.")
+    spawn_height_m: float = param(0.5, ge=0, help="Spawn points are raised this much (m) above the lane.")
+    skip_junctions: bool = param(True, help="Put no spawn points inside junctions.")
+    decals: bool = param(False,
+                         help="Let CARLA add its default random road decals (dirt, cracks, tyre marks, road lines).")
+    carla_version: str = param("0.9.16", help="The CARLA version the package is made for.")
+    frame: str = param("carla", choices=("carla", "site"),
+                       help="carla: a true-north frame at the base point, in which CARLA's geolocation works; site: "
+                            "the site frame (CARLA's geolocation is then wrong).")
+    frame_scale: str = param("auto", choices=("auto", "site", "true", "minimax"),
+                             help="Scale of the carla frame: auto, site (rotation only), true (true metres) or "
+                                  "minimax (see docs/georeferencing.md).")
+    geolocation_radius_m: float = param(150.0, gt=0,
+                                        help="CARLA's geolocation is held within geolocation_tolerance_m up to this "
+                                             "distance (m) from the base point.")
+    geolocation_tolerance_m: float = param(0.5, gt=0,
+                                           help="The error (m) CARLA's geolocation may have within "
+                                                "geolocation_radius_m; a warning when the frame cannot meet it.")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -124,19 +150,17 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
     """Per-vertex trainIds of the textured mesh from the ground-truth mesh (closest surface point)."""
     import numpy as np
 
-    from .labels import read_labelled_ply
-    from twinkit.mesh import read_obj
+    from twinkit import artefacts as A
     from twinkit.street.truth import transfer_labels
+
+    from .labels import labelled_arrays
 
     params = params or GtLabelsParams()
     try:
-        gv, gf, gl = read_labelled_ply(Path(in_gt_mesh_ply))
-    except Exception as exc:
+        gv, gf, gl = labelled_arrays(A.read_gt_mesh(in_gt_mesh_ply))
+    except ValueError as exc:
         raise InputError(f"{in_gt_mesh_ply}: not a ground-truth mesh with per-vertex labels ({exc})") from None
-    try:
-        mesh = read_obj(Path(in_textured_mesh_obj))
-    except Exception as exc:
-        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    mesh = A.read_textured_obj(in_textured_mesh_obj)
     if len(gv) == len(mesh.vertices) and np.abs(gv - mesh.vertices).max() < 1e-4:
         # the mesh *is* the ground-truth mesh (same vertices): copy, do not guess at coincident vertices
         lab, dist = gl.copy(), np.zeros(len(gl), np.float32)
@@ -144,7 +168,7 @@ def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
         lab, dist = transfer_labels(gv, gf, mesh.vertices, vertex_labels=gl)
     far = dist > params.max_dist_m
     lab[far] = 255
-    np.save(out_labels_npy, lab.astype(np.uint8))
+    A.write_labels(out_labels_npy, lab.astype(np.uint8))
     hist = {int(k): int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
     ctx.log.info("labelled %d vertices (%d farther than %.2f m left unlabelled)", len(lab), int(far.sum()),
                  params.max_dist_m)
@@ -157,22 +181,16 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
     """One PLY per class (palette colours, class_id, source_index, face UVs) + classes.json + the texture."""
     import numpy as np
 
-    from .classes import info
-    from twinkit.mesh import read_obj
+    from twinkit import artefacts as A
 
+    from .classes import info
     from .classmesh import write_class_ply
     from .split import MANIFEST, split_mesh
 
     params = params or SplitParams()
     t0 = time.perf_counter()
-    try:
-        labels = np.load(in_labels_npy)
-    except Exception as exc:
-        raise InputError(f"{in_labels_npy}: not a readable .npy ({exc})") from None
-    try:
-        mesh = read_obj(Path(in_textured_mesh_obj))
-    except Exception as exc:
-        raise InputError(f"{in_textured_mesh_obj}: not a readable OBJ ({exc}); re-run the texture step") from None
+    labels = A.read_labels(in_labels_npy)
+    mesh = A.read_textured_obj(in_textured_mesh_obj)
     if labels.ndim != 1 or len(labels) != len(mesh.vertices):
         raise InputError(f"{Path(in_labels_npy).name}: {labels.shape} labels for {len(mesh.vertices)} vertices of "
                          f"{Path(in_textured_mesh_obj).name}; the labels must be per vertex of this mesh "
@@ -311,11 +329,12 @@ def export_gltf(params: GltfParams, ctx: StepContext, *, in_class_meshes_dir: Pa
 
 def _no_roads_map(xodr: Path) -> bool:
     """The map road_source=scan writes when the scan holds no road (userData twinkit_roads=none)."""
+    from twinkit.artefacts import ArtefactError, read_opendrive
     from twinkit.geo.xodr import has_no_roads
 
     try:
-        return has_no_roads(xodr.read_text(encoding="utf-8", errors="replace"))
-    except OSError:
+        return has_no_roads(read_opendrive(xodr))
+    except ArtefactError:  # unreadable: the package step says so when it reads the map
         return False
 
 
@@ -338,11 +357,10 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
         return _carla_props_only(params, ctx, in_twin_fbx=in_twin_fbx, in_class_meshes_dir=in_class_meshes_dir,
                                  out_carla_import_dir=out_carla_import_dir, out_spawn_points_json=out_spawn_points_json,
                                  in_site_json=in_site_json, in_movables_dir=in_movables_dir, t0=t0)
+    from twinkit.artefacts import read_opendrive
+
     xodr = Path(in_aligned_xodr)
-    try:
-        text = xodr.read_text()
-    except Exception as exc:
-        raise InputError(f"{xodr}: cannot read ({exc})") from None
+    text = read_opendrive(xodr)
     site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
     # the package is written in CARLA's frame (true north at the base point): carla_frame.py
     frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
@@ -399,7 +417,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     # CARLA's import rules, read from its source (carla_contract): a package that breaks one fails here
     rep = check_package(out, package, expect_decals=params.decals)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
     topo = lanes.topology()
@@ -466,7 +484,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     rep = check_package(out, package, expect_decals=None)
     if not rep.ok:
-        raise RuntimeError(f"carla_package: the package breaks CARLA's import rules:\n  "
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     summ = rep.summary()
     ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "

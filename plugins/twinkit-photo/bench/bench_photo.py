@@ -54,28 +54,12 @@ def bench_demo(out: Path) -> str:
     return f"### demo site (exit code {rc}, wall {wall:.0f} s)\n\n" + _table(rows, ["step", "status", "seconds", "peak MB", "result"]) + gt
 
 
-class _Registered:
-    """The point-cloud steps by name through the plugin registry (this plugin does not import another's modules)."""
-
-    def __init__(self):
-        from twinkit.plugins import load_registry
-
-        self.reg = load_registry()
-
-    def get(self, kind: str, name: str):
-        return self.reg.get(kind, name)
-
-    def params(self, kind: str, name: str, **kw):
-        return self.reg.get(kind, name).params(**kw)
-
-
 def bench_sceaux(out: Path) -> str:
     if not SCEAUX.exists():
         return "### Sceaux: skipped (../shared/data/photos/sceaux_castle not present)"
     from twinkit.testing import run_plugin
     import twinkit_photo.plugin as photo
 
-    pc = _Registered()
     rows = []
 
     def step(kind, name, inputs, params=None, label=None, **overrides):
@@ -125,7 +109,6 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     from twinkit.testing import run_plugin
     import twinkit_photo.plugin as photo
 
-    pc = _Registered()
     cj = json.loads((site_dir / "cameras.json").read_text())
     intr = cj["intrinsics"]
     cams = [{"image": c["image"], "model": "PINHOLE", "width": intr["width"], "height": intr["height"],

@@ -293,8 +293,6 @@ def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarra
 
     h, w = r.gray.shape
     k = int(opt.window_px) | 1
-    inv = np.linspace(1.0 / r.dmin, 1.0 / r.dmax, opt.planes).astype(np.float64)  # near -> far
-    e3 = np.array([0.0, 0.0, 1.0])
     rel = [(n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C), n) for n in nbrs]
 
     # ---- coarse: (optionally reduced resolution) homographies

@@ -58,8 +58,6 @@ class _Level:
     def __init__(self, ref_gray, K_r, nbrs, opt: PMOptions, geo=None):
         """``geo``: per neighbour its depth map at this resolution (0 = no depth there; None = no map), for the
         geometric term."""
-        import cv2
-
         self.h, self.w = h, w = ref_gray.shape
         self.K = K_r
         self.Kinv = np.linalg.inv(K_r)

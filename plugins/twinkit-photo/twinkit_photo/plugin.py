@@ -9,11 +9,14 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twinkit import InputError, hookimpl
 from twinkit.jsonio import write_json
 from twinkit.ranges import param
+
+if TYPE_CHECKING:
+    from .georef import Transform
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -858,7 +861,9 @@ def _write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_p
                          f"of interest; check roi.json (box) and the photos' overlap")
     _write_cloud(out_points_ply, xyz, rgb, nrm, comments=[f"twinkit-photo dense ({method})"])
     lo, hi = xyz.min(0), xyz.max(0)
-    write_json(out_points_meta_json, {
+    from twinkit.artefacts import write_points_meta
+
+    write_points_meta(out_points_meta_json, {  # its density block measured from the points written
         "source": {"file": Path(in_photos_dir).name, "format": "photos (dense stereo)",
                    "fields": ["x", "y", "z", "normals", "colors"]},
         "counts": {"read": n_fused, "dropped_invalid": int(n_fused - keep.sum()), "written": int(len(xyz))},
@@ -866,7 +871,7 @@ def _write_dense(xyz, rgb, nrm, bmin, bmax, voxel_m: float, in_photos_dir, out_p
                    "intensity": False, "classification": False, "scanner": False, "extra": []},
         "frame": {"kind": "site", "note": "from the georeference step"},
         "bounds_m": [lo.tolist(), hi.tolist()],
-        "dense": dense_info, "time": times})
+        "dense": dense_info, "time": times}, points=xyz)
     return int(len(xyz)), n_fused
 
 

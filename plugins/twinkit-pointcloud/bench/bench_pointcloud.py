@@ -88,7 +88,6 @@ def prep_demo(preset: str, work: Path, threads: int) -> dict:
 
 def gt_eval(mesh_ply: Path, work: Path, threads: int, samples: int = 300_000) -> dict | None:
     """Mesh -> ground truth accuracy and per-class GT area coverage (demo sites only)."""
-    import numpy as np
     from scipy.spatial import cKDTree
 
     from twinkit.mesh import read_ply

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import logging
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -204,9 +203,9 @@ def test_evaluate_against_ground_truth_mesh(pipeline, tmp_path):
     gt.face_attrs["label"] = np.r_[np.zeros(len(gf)), np.full(int(keep.sum()), 2)].astype(np.uint8)  # road, building
     write_ply(tmp_path / "gt_mesh.ply", gt)
     ctx = make_context(tmp_path / "w")
-    r = P.evaluate(P.EvalParams(gt_samples=50_000), ctx, in_textured_mesh_ply=w / "textured_mesh.ply",
-                   in_points_ply=w / "points.ply", out_recon_metrics_json=ctx.workdir / "recon_metrics.json",
-                   in_gt_mesh_ply=tmp_path / "gt_mesh.ply")
+    P.evaluate(P.EvalParams(gt_samples=50_000), ctx, in_textured_mesh_ply=w / "textured_mesh.ply",
+               in_points_ply=w / "points.ply", out_recon_metrics_json=ctx.workdir / "recon_metrics.json",
+               in_gt_mesh_ply=tmp_path / "gt_mesh.ply")
     met = json.loads((ctx.workdir / "recon_metrics.json").read_text())
     assert met["gt"]["accuracy_mesh_to_gt_m"]["mean"] < 0.01
     assert met["gt"]["gt_covered_within_5cm"] > 0.9

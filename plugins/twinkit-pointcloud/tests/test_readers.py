@@ -283,7 +283,6 @@ def test_e57_several_scans_merged_with_poses(tmp_path, ctx):
     # two scans of the same plane z = 0, each in its scanner's frame; scanners at 1.5 m height
     rng = np.random.default_rng(1)
     world = np.c_[rng.uniform(-4, 4, 3000), rng.uniform(-4, 4, 3000), np.zeros(3000)]
-    c, s = np.cos(np.pi / 2), np.sin(np.pi / 2)
     scans = []
     for tr, yaw in (([0.0, 0.0, 1.5], 0.0), ([3.0, 1.0, 1.5], np.pi / 2)):
         R = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])

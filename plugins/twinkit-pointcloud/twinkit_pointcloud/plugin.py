@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from twinkit import hookimpl
+from twinkit import artefacts as A
 from twinkit.jsonio import write_json
 from twinkit.ranges import param
 
@@ -19,108 +20,175 @@ from .report import twinkit_register_report_sections  # noqa: F401 (this plugin'
 class ReadCloudParams:
     """Reading a cloud into the site frame."""
 
-    estimate_normals: bool = True  # estimate normals when the file has none
-    normals_k: int = param(24, ge=3, le=1000)  # neighbours for PCA normals
-    normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"))  # auto | scanner | mst | up (see normals.py)
-    reorient_existing_normals: bool = False  # True: normals from the file are re-oriented wholesale (normals_orientation)
-    # normals from the file are compared with a consistent orientation of the same lines (normals_orientation);
-    # those pointing into the surface are flipped when more than this share disagrees (0 = always; 1 = never
-    # flip, only measure). docs/pointcloud.md "Normals from the file"
-    file_normals_flip_share: float = param(0.01, ge=0, le=1)
-    min_points: int = param(10, ge=1)  # fewer points -> "too few points" error
-    drop_invalid_points: bool = True  # drop NaN/inf points with a warning (False: error)
-    max_offset_km: float = param(20.0, gt=0)  # without site bounds: cloud centre farther from the base point = wrong CRS
-    bounds_margin_m: float = param(50.0, ge=0)  # with site bounds: margin around them for the wrong-CRS check
-    max_base_point_offset_m: float = param(250.0, ge=0)  # preflight: base point farther outside the cloud's box is refused (0: off); docs/pointcloud.md
-    use_colors: bool = True  # false: drop the file's colours (the colourless path on a coloured cloud, to measure it)
-    # a cloud shorter than this on its longer horizontal side is refused as no street (an object or indoor scan),
-    # in the preflight from the header's box and here from the points (street.py); 0 = off
-    min_street_extent_m: float = param(10.0, ge=0)
+    estimate_normals: bool = param(True,
+                                   help="Estimate normals (PCA over normals_k neighbours) when the file has none.")
+    normals_k: int = param(24, ge=3, le=1000, help="Neighbours used for the PCA normals.")
+    normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"),
+                                     help="How estimated normals are turned outwards: auto, toward the scanner "
+                                          "positions, along a minimum spanning tree (mst), or up (see normals.py).")
+    reorient_existing_normals: bool = param(False,
+                                            help="True: re-orient the file's own normals wholesale with "
+                                                 "normals_orientation instead of only flipping the inward ones.")
+    file_normals_flip_share: float = param(0.01, ge=0, le=1,
+                                           help="The file's normals are compared with a consistent orientation of "
+                                                "the same points; those pointing into the surface are flipped when "
+                                                "more than this share disagrees. 0 = always flip them, 1 = never "
+                                                'flip (only measure); docs/pointcloud.md "Normals from the file".')
+    min_points: int = param(10, ge=1, help='A cloud with fewer points is refused with a "too few points" error.')
+    drop_invalid_points: bool = param(True,
+                                      help="Drop points with NaN or infinite coordinates with a warning; false: "
+                                           "refuse the file instead.")
+    max_offset_km: float = param(20.0, gt=0,
+                                 help="Without site bounds: a cloud whose centre lies farther than this from the "
+                                      "base point (km) is refused as being in the wrong CRS.")
+    bounds_margin_m: float = param(50.0, ge=0,
+                                   help="With site bounds: the margin (m) around them that the cloud may reach "
+                                        "before it is refused as being in the wrong CRS.")
+    max_base_point_offset_m: float = param(250.0, ge=0,
+                                           help="Preflight: a base point farther than this (m) outside the cloud's "
+                                                "bounding box is refused; 0 = off (docs/pointcloud.md).")
+    use_colors: bool = param(True,
+                             help="False: ignore the file's colours (runs the colourless path on a coloured cloud, "
+                                  "to measure it).")
+    min_street_extent_m: float = param(10.0, ge=0,
+                                       help="A cloud shorter than this (m) along its longer horizontal side is "
+                                            "refused as not a street (an object or an indoor scan); checked in the "
+                                            "preflight from the header's box and again from the points. 0 = off.")
 
 
 @dataclass
 class PoissonParams:
     """Screened Poisson reconstruction."""
 
-    # octree depth (Open3D needs >= 2; 30 crashed it); voxel = scene size * scale / 2**depth. -1 = auto: the depth
-    # whose voxel is about the cloud's median point spacing, 6..11 (street scans: 11 as before)
-    depth: int = param(-1, ge=2, le=14, also=(-1,))
-    voxel_m: float = param(0.0, ge=0)  # > 0: derive the depth from this target voxel size (metres) instead
-    scale: float = param(1.1, ge=1, le=10)  # reconstruction cube / bounding cube of the samples
-    point_weight: float = param(4.0, ge=0)  # screening weight (interpolation vs smoothness)
-    samples_per_node: float = param(1.5, ge=1, le=100)
-    linear_fit: bool = False
-    backend: str = param("open3d", choices=("open3d", "pymeshlab"))  # open3d | pymeshlab (optional dependency, the thesis's route)
-    normals_k: int = param(24, ge=3, le=1000)  # only used when the points have no normals
-    normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"))
-    # threads of the solver. 1: the same mesh on every machine and run (measured on the demo: open3d's parallel
-    # solver gives a different mesh on each run with 2 threads, a 0.3 m sidewalk hole in one; 1 thread costs
-    # about 10 % more time). 0: the step's share of the cores (faster, not repeatable)
-    threads: int = param(1, ge=0)
+    depth: int = param(-1, ge=2, le=14, also=(-1,),
+                       help="Octree depth of the Poisson solver (voxel = scene size x scale / 2**depth); higher = "
+                            "finer and slower. -1 = auto: the depth whose voxel is about the cloud's median point "
+                            "spacing, 6..11.")
+    voxel_m: float = param(0.0, ge=0,
+                           help="> 0: derive the depth from this target voxel size (m) instead of depth; 0 = use "
+                                "depth.")
+    scale: float = param(1.1, ge=1, le=10,
+                         help="Size of the reconstruction cube relative to the bounding cube of the samples.")
+    point_weight: float = param(4.0, ge=0,
+                                help="Screening weight: higher follows the points more closely (interpolation), "
+                                     "lower gives a smoother surface.")
+    samples_per_node: float = param(1.5, ge=1, le=100,
+                                    help="Minimum number of points per octree node; raise it for noisy clouds "
+                                         "(smoother), lower it for clean ones.")
+    linear_fit: bool = param(False,
+                             help="open3d backend only: place the iso-surface vertices by linear interpolation (the "
+                                  "solver's linear_fit).")
+    backend: str = param("open3d", choices=("open3d", "pymeshlab"),
+                         help="Poisson implementation: open3d, or pymeshlab (an optional dependency).")
+    normals_k: int = param(24, ge=3, le=1000,
+                           help="Neighbours for PCA normals; used only when the points have no normals.")
+    normals_orientation: str = param("auto", choices=("auto", "scanner", "mst", "up"),
+                                     help="How normals estimated here are oriented (auto, scanner, mst, up); used "
+                                          "only when the points have no normals.")
+    threads: int = param(1, ge=0,
+                         help="Threads of the solver. 1 = the same mesh on every machine and run; 0 = the step's "
+                              "share of the cores (faster, but the mesh differs from run to run).")
 
 
 @dataclass
 class CleanParams:
     """Trimming and repair of the dense mesh."""
 
-    # remove vertices farther than this from every input point ("bubbles"); 0 = off; -1 = auto: 2 x the cloud's
-    # p90 point spacing, never below 0.10 m (street scans: 0.10 as before; aerial lidar ~0.3 m spacing: ~0.8 m)
-    max_dist_m: float = param(-1.0, ge=0, also=(-1,))
-    gap_dist_m: float = param(0.5, ge=0)  # ... but keep those up to this far that lie on the points' tangent planes; 0 = off
-    gap_plane_m: float = param(0.02, ge=0)  # "on the plane": median distance to the tangent planes of the k nearest points
-    density_quantile: float = param(0.0, ge=0, lt=1)  # remove vertices below this quantile of Poisson density; 0 = off
-    min_component_faces: int = param(200, ge=0)  # drop connected components smaller than this
-    min_component_ratio: float = param(0.0, ge=0, le=1)  # ... or smaller than this fraction of the largest
-    repair_non_manifold: bool = True
-    max_hole_edges: int = param(60, ge=0)  # close holes whose boundary has at most this many edges; < 3 = off
-    # fill the ground's occlusion shadows on a grid of this cell size; 0 = off; -1 = auto: the median point
-    # spacing, never below 0.10 m (a finer grid than the samples only costs time)
-    fill_ground_cell_m: float = param(-1.0, ge=0, also=(-1,))
-    fill_ground_max_gap_m: float = param(8.0, ge=0)  # ... when ground lies on both sides at most this far apart
-    fill_ground_stitch: bool = True  # join the fill to the mesh's own open border (one surface, no seam);
-    #                                  false: separate grid patches (the fill before 25 Nov 2026)
-    colormap_max_m: float = param(0.0, ge=0)  # distance colour map saturates here; 0 = max_dist_m (or p99)
-    # the run is marked degraded (ctx.degraded) when the distance trim removes more than this share of the faces
-    max_trim_share: float = param(0.9, gt=0, le=1)
+    max_dist_m: float = param(-1.0, ge=0, also=(-1,),
+                              help='Remove mesh vertices farther than this (m) from every input point ("bubbles"). '
+                                   "0 = off; -1 = auto: 2 x the cloud's p90 point spacing, never below 0.10 m.")
+    gap_dist_m: float = param(0.5, ge=0,
+                              help="Exception to max_dist_m: keep vertices up to this far (m) from the points when "
+                                   "they lie on the points' tangent planes (bridges small gaps); 0 = off.")
+    gap_plane_m: float = param(0.02, ge=0,
+                               help="What \"on the tangent planes\" means for gap_dist_m: the vertex's median "
+                                    "distance (m) to the tangent planes of its k nearest points is at most this.")
+    density_quantile: float = param(0.0, ge=0, lt=1,
+                                    help="Remove vertices below this quantile of the Poisson density (weakly "
+                                         "supported surface); 0 = off.")
+    min_component_faces: int = param(200, ge=0, help="Drop connected components with fewer faces than this.")
+    min_component_ratio: float = param(0.0, ge=0, le=1,
+                                       help="Also drop components smaller than this fraction of the largest one; 0 "
+                                            "= off.")
+    repair_non_manifold: bool = param(True, help="Repair non-manifold edges and vertices after the trim.")
+    max_hole_edges: int = param(60, ge=0, help="Close holes whose boundary has at most this many edges; < 3 = off.")
+    fill_ground_cell_m: float = param(-1.0, ge=0, also=(-1,),
+                                      help="Fill the ground's occlusion shadows on a grid of this cell size (m). 0 "
+                                           "= off; -1 = auto: the median point spacing, never below 0.10 m (a grid "
+                                           "finer than the samples only costs time).")
+    fill_ground_max_gap_m: float = param(8.0, ge=0,
+                                         help="Fill a ground shadow only where ground lies on both sides of it at "
+                                              "most this far apart (m).")
+    fill_ground_stitch: bool = param(True,
+                                     help="Join the ground fill to the mesh's own open border (one surface, no "
+                                          "seam); false: add the fill as separate grid patches.")
+    colormap_max_m: float = param(0.0, ge=0,
+                                  help="The distance colour map of the report saturates at this distance (m); 0 = "
+                                       "max_dist_m (or the p99 distance).")
+    max_trim_share: float = param(0.9, gt=0, le=1,
+                                  help="The run is marked degraded when the distance trim removes more than this "
+                                       "share of the faces.")
 
 
 @dataclass
 class SimplifyParams:
     """Decimation to a target face count."""
 
-    target_faces: int = param(500_000, ge=1)
-    method: str = param("auto", choices=("auto", "quadric", "clustering"))  # auto | quadric | clustering
-    cluster_above_faces: int = param(20_000_000, ge=1)  # auto: clustering first above this size
-    preserve_border: bool = True  # open boundaries never collapse
-    aggressiveness: float = param(7.0, gt=0)  # fast-simplification's agg (lower = slower, more faithful)
-    max_overshoot: float = param(0.2, ge=0)  # more faces than target x (1 + this): degraded (ctx.degraded)
+    target_faces: int = param(500_000, ge=1, help="Number of faces to decimate the mesh to.")
+    method: str = param("auto", choices=("auto", "quadric", "clustering"),
+                        help="Decimation method: quadric (edge collapse), clustering (vertex clustering, fast on "
+                             "huge meshes), or auto (clustering first above cluster_above_faces, then quadric).")
+    cluster_above_faces: int = param(20_000_000, ge=1,
+                                     help="With method=auto: meshes with more faces than this are first reduced by "
+                                          "clustering.")
+    preserve_border: bool = param(True,
+                                  help="Never collapse the edges of open boundaries (keeps the mesh's outline and "
+                                       "hole borders).")
+    aggressiveness: float = param(7.0, gt=0,
+                                  help="fast-simplification's aggressiveness: lower is slower and more faithful.")
+    max_overshoot: float = param(0.2, ge=0,
+                                 help="The run is marked degraded when the result has more than target_faces x (1 + "
+                                      "this) faces.")
 
 
 @dataclass
 class BakeParams:
     """UV atlas and colour baking."""
 
-    # 4096, 8192 or 16384 (any power of two from 256 accepted); -1 = auto: texels of a quarter of the dense mesh's
-    # median edge (>= 1 cm) over the simplified mesh's area, 1024..8192 (twinkit.surface.density.texture_size)
-    texture_px: int = param(-1, ge=256, le=16384, also=(-1,))
-    uv_method: str = param("charts", choices=("charts", "xatlas"))  # charts (built in) | xatlas (optional dependency, slower)
-    pad_px: int = param(2, ge=0, le=64)  # gutter around each chart, texels
-    # a cloud without colours: what the texture shows (shading.py): auto = intensity when the cloud has it, else
-    # shaded | intensity | shaded | height | grey (the flat grey before issue 28)
-    colourless: str = param("auto", choices=("auto", "intensity", "shaded", "height", "grey"))
+    texture_px: int = param(-1, ge=256, le=16384, also=(-1,),
+                            help="Side of the texture atlas in texels: a power of two from 256 (4096, 8192 or 16384 "
+                                 "usually). -1 = auto: texels of a quarter of the dense mesh's median edge (>= 1 "
+                                 "cm) over the simplified mesh's area, 1024..8192.")
+    uv_method: str = param("charts", choices=("charts", "xatlas"),
+                           help="UV unwrapping: charts (built in) or xatlas (an optional dependency, slower).")
+    pad_px: int = param(2, ge=0, le=64, help="Gutter around each chart in the atlas, in texels.")
+    colourless: str = param("auto", choices=("auto", "intensity", "shaded", "height", "grey"),
+                            help="What the texture shows for a cloud without colours: intensity, shaded (lit "
+                                 "geometry), height, or a flat grey; auto = intensity when the cloud has it, else "
+                                 "shaded.")
 
 
 @dataclass
 class EvalParams:
     """Distances between the cloud, the mesh and an optional ground-truth mesh."""
 
-    colormap_max_m: float = param(0.0, ge=0)  # colour map saturates here; 0 = p95 of the cloud -> mesh distances
-    gt_samples: int = param(1_000_000, ge=1000)  # points sampled on the ground-truth surface
-    gt_min_samples_per_class: int = param(20_000, ge=0)  # per-class coverage: at least this many samples per GT label
-    coverage_within_m: float = param(0.05, gt=0)  # a GT sample is covered when the mesh is within this distance
-    observed_m: float = param(0.10, gt=0)  # a GT sample was seen by the scan when an input point is within this distance
-    exact_within_m: float = param(0.5, gt=0)  # GT -> mesh distances are exact up to here, nearest-vertex distances beyond
-    image_px: int = param(1024, ge=64, le=16384)
+    colormap_max_m: float = param(0.0, ge=0,
+                                  help="The distance colour maps saturate at this distance (m); 0 = the p95 of the "
+                                       "cloud -> mesh distances.")
+    gt_samples: int = param(1_000_000, ge=1000, help="Points sampled on the ground-truth surface for the distances.")
+    gt_min_samples_per_class: int = param(20_000, ge=0,
+                                          help="Per-class coverage: at least this many samples for each "
+                                               "ground-truth label.")
+    coverage_within_m: float = param(0.05, gt=0,
+                                     help="A ground-truth sample counts as covered when the mesh is within this "
+                                          "distance (m).")
+    observed_m: float = param(0.10, gt=0,
+                              help="A ground-truth sample counts as seen by the scan when an input point is within "
+                                   "this distance (m).")
+    exact_within_m: float = param(0.5, gt=0,
+                                  help="Ground truth -> mesh distances are exact up to this distance (m), "
+                                       "nearest-vertex distances beyond.")
+    image_px: int = param(1024, ge=64, le=16384, help="Size of the evaluation images (px).")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -173,7 +241,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     """Read an E57 / LAS / LAZ / PLY cloud into the site frame (float64 shift, then float32 PLY)."""
     import numpy as np
 
-    from twinkit.mesh import Mesh, write_ply
+    from twinkit.mesh import Mesh
     from twinkit.surface.measure import Measure
     from .localframe import apply_cloud_frame
     from .normals import check_file_normals, estimate_normals, orient_normals
@@ -268,9 +336,9 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
         }
         for note in cloud.frame.notes:
             ctx.log.info("%s: %s", in_cloud.name, note)
-        write_ply(out_points_ply, Mesh(vertices=pts, attrs=attrs, comments=comments))
+        A.write_points(out_points_ply, Mesh(vertices=pts, attrs=attrs, comments=comments))
         meta["time"] = {"seconds": round(meas_now(meas), 3)}
-        write_json(out_points_meta_json, meta)
+        A.write_points_meta(out_points_meta_json, meta)
     out = {"points": int(len(pts)), "normals": normals_source, "colors": raw.colors is not None,
            "shift_m": cloud.frame.shift, "spacing_m": dens["spacing_m"], "capture": dens["capture"],
            **meas.as_dict()}
@@ -293,14 +361,14 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.mesh import read_ply, write_ply
+    from twinkit.mesh import write_ply
     from twinkit.surface.measure import Measure
     from .normals import estimate_normals, orient_normals
     from twinkit.surface.poisson import depth_for_voxel, poisson_open3d, poisson_pymeshlab, voxel_for_depth
 
     params = params or PoissonParams()
     with Measure() as meas, _Outputs(out_dense_mesh_ply):
-        cloud = _read_mesh_input(in_points_ply, "points")
+        cloud = A.read_points(in_points_ply)
         pts = cloud.vertices
         if len(pts) < 10:
             raise InputError(f"{Path(in_points_ply).name}: too few points ({len(pts)}) for a surface")
@@ -344,7 +412,6 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     """Trim bubbles (distance) and low-density parts, keep large components, repair, close small holes."""
     import numpy as np
 
-    from twinkit.mesh import write_ply
     from twinkit.surface.cleanup import CleanOptions, clean_mesh as _clean
     from twinkit.surface.measure import Measure
     from .metrics import topdown_map
@@ -352,7 +419,7 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
     params = params or CleanParams()
     with Measure() as meas, _Outputs(out_clean_mesh_ply, out_clean_report_json):
         dense = _read_mesh_input(in_dense_mesh_ply, "dense mesh")
-        cloud = _read_mesh_input(in_points_ply, "points")
+        cloud = A.read_points(in_points_ply)
         auto = _clean_auto(params, cloud, ctx.log)
         opt = CleanOptions(max_dist_m=auto["max_dist_m"], gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
                            density_quantile=params.density_quantile,
@@ -363,7 +430,7 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                            fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
         mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
-        write_ply(out_clean_mesh_ply, mesh)
+        A.write_clean_mesh(out_clean_mesh_ply, mesh)
         d = mesh.attrs["dist_to_cloud_m"]
         vmax = params.colormap_max_m or opt.max_dist_m or float(np.quantile(d, 0.99))
         topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
@@ -438,7 +505,7 @@ def simplify(params: SimplifyParams, ctx, *, in_clean_mesh_ply: Path, out_mesh_p
 
     params = params or SimplifyParams()
     with Measure() as meas, _Outputs(out_mesh_ply):
-        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        dense = A.read_clean_mesh(in_clean_mesh_ply)
         mesh, method = simplify_mesh(dense, params.target_faces, method=params.method,
                                      cluster_above_faces=params.cluster_above_faces,
                                      preserve_border=params.preserve_border,
@@ -470,7 +537,6 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.mesh import write_obj, write_ply
     from twinkit.surface.measure import Measure, StepTimer
     from twinkit.surface.simplify import resample_attributes
     from twinkit.surface.texture import write_png
@@ -488,7 +554,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     png = out_obj.with_suffix(".png")
     with Measure() as meas, _Outputs(out_textured_mesh_obj, out_textured_mesh_ply):
         mesh = _read_mesh_input(in_mesh_ply, "mesh")
-        dense = _read_mesh_input(in_clean_mesh_ply, "clean mesh")
+        dense = A.read_clean_mesh(in_clean_mesh_ply)
         auto_size = None
         if size == -1:
             from twinkit.surface import density
@@ -522,10 +588,10 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
             else:
                 mesh.attrs["colors"] = np.full((mesh.n_vertices, 3), 128, np.uint8)
             normals = mesh.attrs.get("normals")
-            write_obj(out_obj, mesh.vertices, mesh.faces, uv, png.name, normals=normals)
+            A.write_textured_obj(out_obj, mesh.vertices, mesh.faces, uv, png.name, normals=normals)
             mesh.face_attrs["texcoord"] = uv.reshape(-1, 6).astype(np.float32)
             mesh.comments = [f"TextureFile {png.name}"]
-            write_ply(out_textured_mesh_ply, mesh)
+            A.write_textured_mesh(out_textured_mesh_ply, mesh)
     return {"texture_px": size, "texture_px_auto": auto_size is not None, "uv_method": params.uv_method,
             "neutral_texture": colors is None or colourless == "grey", "colourless": colourless,
             "vertices": mesh.n_vertices, "faces": mesh.n_faces, **{f"uv_{k}": v for k, v in uinfo.items()},
@@ -541,7 +607,7 @@ def _colourless(mode: str, dense, in_points_ply, ctx):
 
     intensity = None
     if mode in ("auto", "intensity") and in_points_ply is not None:
-        cloud = _read_mesh_input(in_points_ply, "points")
+        cloud = A.read_points(in_points_ply)
         inten = cloud.attrs.get("intensity")
         if inten is not None and np.isfinite(inten).any() and float(np.nanstd(inten)) > 0:
             from scipy.spatial import cKDTree
@@ -581,8 +647,8 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
 
     params = params or EvalParams()
     with Measure() as meas, _Outputs(out_recon_metrics_json):
-        mesh = _read_mesh_input(in_textured_mesh_ply, "textured mesh")
-        cloud = _read_mesh_input(in_points_ply, "points")
+        mesh = A.read_textured_mesh(in_textured_mesh_ply)
+        cloud = A.read_points(in_points_ply)
         from scipy.spatial import cKDTree
 
         c2m = cloud_to_mesh(cloud.vertices, mesh.vertices, mesh.faces, _threads(ctx))
@@ -595,7 +661,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
             "cloud_within_m": {str(t): float((c2m <= t).mean()) for t in (0.01, 0.02, 0.05, 0.1)},
         }
         if in_gt_mesh_ply is not None:
-            gt = _read_mesh_input(in_gt_mesh_ply, "ground-truth mesh")
+            gt = A.read_gt_mesh(in_gt_mesh_ply)
             gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
             acc = gsurf.distance(mesh.vertices)
             samples = sample_surface(gt.vertices, gt.faces, params.gt_samples)

@@ -93,8 +93,6 @@ def _e57_crs(root) -> str | None:
 
 
 def _child(struct, name):
-    from pye57 import libe57
-
     if not struct.isDefined(name):
         return None
     return struct.get(name)

@@ -7,7 +7,7 @@ import re
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError
@@ -20,20 +20,37 @@ CARLA_WAY_TYPES = ["motorway", "motorway_link", "trunk", "trunk_link", "primary"
 
 @dataclass
 class ConvertParams:
-    lane_width_m: float = param(3.25, gt=0, le=20)  # --default.lanewidth for ways without width tags (CARLA's importer: 4.0)
-    way_types: list[str] = field(default_factory=lambda: list(CARLA_WAY_TYPES))  # highway=* kept
-    traffic_lights: bool = True  # --tls.guess-signals from highway=traffic_signals nodes (CARLA: generate_traffic_lights)
-    all_junctions_traffic_lights: bool = False  # --tls.guess: signalise every junction (CARLA: all_junctions_with_traffic_lights)
-    sidewalks: bool = True  # --sidewalks.guess: sidewalk lanes beside urban streets (CARLA: default_sidewalk_width)
-    sidewalk_width_m: float = param(2.0, gt=0, le=20)  # --default.sidewalk-width (CARLA's default)
-    osm_sidewalk_tags: bool = False  # --osm.sidewalks: use sidewalk=* tags (shifts one-way streets, see docs/roads.md)
-    layer_elevation_m: float = param(0.0, ge=0)  # --osm.layer-elevation (CARLA: elevation_layer_height); 0 = flat
-    junction_corner_detail: int = param(5, ge=0)  # points on junction corners
-    step_m: float = param(2.0, gt=0)  # waypoint spacing of the check
-    check_radius_m: float = param(-1.0)  # half-side of the site box for the check; <0: site.osm_radius_m (default 150)
-    min_waypoints_inside: int = param(10, ge=0)  # fewer waypoints inside the site box fail the step
-    timeout_s: float = param(600.0, gt=0)  # netconvert wall-clock limit
-    extra_args: list[str] = field(default_factory=list)  # more netconvert options, appended verbatim
+    lane_width_m: float = param(3.25, gt=0, le=20,
+                                help="Lane width (m) for ways without width tags (netconvert --default.lanewidth; "
+                                     "CARLA's importer uses 4.0).")
+    way_types: list[str] = param(default_factory=lambda: list(CARLA_WAY_TYPES), free=True,
+                                 help="The highway=* types kept (CARLA's default way types).")
+    traffic_lights: bool = param(True,
+                                 help="Guess traffic lights from highway=traffic_signals nodes "
+                                      "(--tls.guess-signals; CARLA's generate_traffic_lights).")
+    all_junctions_traffic_lights: bool = param(False,
+                                               help="Signalise every junction (--tls.guess; CARLA's "
+                                                    "all_junctions_with_traffic_lights).")
+    sidewalks: bool = param(True, help="Add sidewalk lanes beside urban streets (--sidewalks.guess).")
+    sidewalk_width_m: float = param(2.0, gt=0, le=20,
+                                    help="Width (m) of the guessed sidewalks (--default.sidewalk-width; CARLA's "
+                                         "default).")
+    osm_sidewalk_tags: bool = param(False,
+                                    help="Use OSM's sidewalk=* tags (--osm.sidewalks); shifts one-way streets, see "
+                                         "docs/roads.md.")
+    layer_elevation_m: float = param(0.0, ge=0,
+                                     help="Height (m) of one OSM layer (bridges, tunnels; --osm.layer-elevation, "
+                                          "CARLA's elevation_layer_height); 0 = flat.")
+    junction_corner_detail: int = param(5, ge=0,
+                                        help="Points on each rounded junction corner (--junctions.corner-detail).")
+    step_m: float = param(2.0, gt=0, help="Waypoint spacing (m) of the check of the converted map.")
+    check_radius_m: float = param(-1.0,
+                                  help="Half side (m) of the site box for the check; < 0 = site.osm_radius_m "
+                                       "(default 150).")
+    min_waypoints_inside: int = param(10, ge=0,
+                                      help="The step fails when fewer waypoints than this lie inside the site box.")
+    timeout_s: float = param(600.0, gt=0, help="Wall-clock limit (s) of netconvert.")
+    extra_args: list[str] = param(default_factory=list, free=True, help="More netconvert options, appended verbatim.")
 
 
 def netconvert_path() -> Path:

@@ -18,22 +18,19 @@ class Mesh:
     vlabel: np.ndarray | None  # (n,) per-vertex label if the file has one
 
 
-def read_mesh(path: Path) -> Mesh:
-    """PLY mesh in the site frame (twinkit.mesh.read_ply): vertices, triangles, colours and the
-    per-vertex ``label`` when the file has one."""
-    from twinkit.mesh import read_ply
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: mesh not found")
-    try:
-        m = read_ply(path)
-    except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{path}: not a readable PLY mesh ({exc})") from None
-    if m.faces is None:
-        raise InputError(f"{path}: not a readable PLY mesh (no face element)")
+def from_mesh(m) -> Mesh:
+    """The roads' view of a :class:`twinkit.mesh.Mesh` (site frame): vertices, triangles, colours and the
+    per-vertex ``label`` (int32) when it has one."""
     vlabel = np.asarray(m.attrs["label"]).astype(np.int32) if "label" in m.attrs else None
     return Mesh(m.vertices, m.faces, m.colors, vlabel)
+
+
+def read_mesh(path: Path) -> Mesh:
+    """``textured_mesh.ply`` read through the artefact catalogue (:func:`twinkit.artefacts.read_textured_mesh`)
+    as :class:`Mesh`."""
+    from twinkit.artefacts import read_textured_mesh
+
+    return from_mesh(read_textured_mesh(path))
 
 
 @dataclass

@@ -18,6 +18,8 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from twinkit import artefacts as A
 from typing import List
 
 from twinkit import InputError, hookimpl
@@ -193,7 +195,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     import numpy as np
 
     from .align import fit, sample_sections
-    from .mesh2d import Grid, read_mesh, road_faces, road_mask
+    from .mesh2d import Grid, from_mesh, road_faces, road_mask
     from .scan import is_empty_map
 
     if is_empty_map(in_roads_xodr.read_text(encoding="utf-8")):  # road_source=scan found no road
@@ -203,10 +205,10 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         out_alignment_json.write_text(json.dumps(doc, indent=1))
         ctx.log.info("alignment: no roads in the map (the scan holds none): nothing to align")
         return {"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "dz_m": 0.0, "kept_identity": True, "no_roads": True}
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
     labels = None
     if in_labels_npy is not None and params.use_labels:
-        labels = np.load(in_labels_npy)
+        labels = A.read_labels(in_labels_npy)
     fidx, how = road_faces(mesh, labels, curb_tol_m=params.curb_tol_m)
     if len(fidx) < 10:
         raise InputError(f"{in_textured_mesh_ply.name}: no road surface found ({how}); nothing to align to")
@@ -336,11 +338,11 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
                          "(and dz_m; lane_offsets_m: road id -> metres)") from None
     text = in_roads_xodr.read_text(encoding="utf-8")
     moved = set_lane_offsets(transform_xodr(text, yaw, tx, ty, dz), offsets)
-    out_aligned_xodr.write_text(moved, encoding="utf-8")
+    A.write_opendrive(out_aligned_xodr, moved)
     metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets)}
     truth = None
     if in_roads_truth_json is not None:
-        tj = json.loads(in_roads_truth_json.read_text())
+        tj = A.read_roads_truth(in_roads_truth_json)
         truth = [np.asarray(ln["points"], float) for ln in tj.get("lanes", [])]
     if truth:
         allp = np.concatenate(truth)[:, :2]
@@ -393,20 +395,17 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     import numpy as np
 
     from .align import lane_lines
-    from .mesh2d import read_mesh
+    from .mesh2d import from_mesh
     from .signals import draw_signals, find_instances, find_pole_heads, place_signals as place
 
     params = params or SignalParams()
-    mesh = read_mesh(in_textured_mesh_ply)
-    try:
-        labels = np.load(in_labels_npy)
-    except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{in_labels_npy}: not a readable .npy label array ({exc})") from None
+    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
+    labels = A.read_labels(in_labels_npy)
     if labels.ndim != 1 or len(labels) != len(mesh.v):
         raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
                          f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
                          "labels.npy)")
-    text = in_aligned_xodr.read_text(encoding="utf-8")
+    text = A.read_opendrive(in_aligned_xodr)
     kept, rejected = find_instances(
         mesh.v, labels, link_m=params.link_m, min_vertices=params.min_vertices, min_height_m=params.min_height_m,
         max_height_m=params.max_height_m, max_size_m=params.max_size_m, ground_radius_m=params.ground_radius_m,
@@ -440,7 +439,7 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
         w = want.get(lm.id)
         if w is not None:
             carla_err[lm.id] = round(float(math.hypot(lm.xyz[0] - w[0], lm.xyz[1] - w[1])), 4)
-    out_aligned_xodr.write_text(moved, encoding="utf-8")
+    A.write_opendrive(out_aligned_xodr, moved)
     for p in placed:
         if p.source == "netconvert":
             ctx.log.warning("signal %s (road %s): %s", p.id, p.road, p.note)
@@ -506,24 +505,19 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                   in_labels_npy: Path, out_labels_npy: Path, out_road_evidence_json: Path,
                   out_road_evidence_png: Path, in_gt_labels_npy: Path | None = None) -> dict:
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
-    import numpy as np
-
     from twinkit.street.lanes import OpenDriveError
 
     from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
                            S_RELABEL, draw_evidence, lane_polygons, road_evidence as vote)
-    from .mesh2d import Grid, read_mesh
+    from .mesh2d import Grid, from_mesh
 
     params = params or RoadEvidenceParams()
-    try:
-        labels = np.load(in_labels_npy)
-    except Exception as exc:  # noqa: BLE001
-        raise InputError(f"{in_labels_npy}: not a readable .npy label array ({exc}); re-run the segmentation") from None
+    labels = A.read_labels(in_labels_npy)
     from .scan import is_empty_map
 
-    no_roads = is_empty_map(in_aligned_xodr.read_text(encoding="utf-8"))
+    no_roads = is_empty_map(A.read_opendrive(in_aligned_xodr))
     if not params.enabled or no_roads:
-        np.save(out_labels_npy, labels)
+        A.write_labels(out_labels_npy, labels)
         why = ("no roads in the map (the scan holds none)" if no_roads else
                "switched off (steps.road_evidence.enabled=false or site road_evidence: false)")
         doc = {"enabled": bool(params.enabled), "no_roads": no_roads,
@@ -536,13 +530,13 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         img.save(out_road_evidence_png)
         ctx.log.info("road evidence: %s; labels unchanged", why)
         return {"enabled": bool(params.enabled), "changed_vertices": 0, **({"no_roads": True} if no_roads else {})}
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
     if labels.ndim != 1 or len(labels) != len(mesh.v):
         raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
                          f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
                          "labels.npy)")
     try:
-        text = in_aligned_xodr.read_text(encoding="utf-8")
+        text = A.read_opendrive(in_aligned_xodr)
         lanes = lane_polygons(text, params.step_m, tuple(t.lower() for t in params.road_types),
                               tuple(t.lower() for t in params.sidewalk_types))
     except OpenDriveError as exc:
@@ -558,7 +552,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
               max_network_disagreement=params.max_network_disagreement, plateau=params.plateau,
               relabel_from=tuple(int(c) for c in params.relabel_classes))
     new = ev.labels if params.relabel else labels.copy()
-    np.save(out_labels_npy, new.astype(labels.dtype))
+    A.write_labels(out_labels_npy, new.astype(labels.dtype))
     from twinkit.cityscapes import NAMES
 
     name = lambda c: NAMES[c] if c < len(NAMES) else "unlabelled"  # noqa: E731
@@ -602,7 +596,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                "disagreement_fraction": doc["disagreement_fraction"], "vetoed_lanes": len(doc["vetoed_lanes"]),
                "network_disagreement": doc["network_disagreement"], "network_vetoed": ev.network_vetoed}
     if in_gt_labels_npy is not None:
-        gt = np.load(in_gt_labels_npy)
+        gt = A.read_labels(in_gt_labels_npy)
         if len(gt) == len(labels):
             before, after = _iou(labels, gt), _iou(new, gt)
             doc["evaluation"] = {"iou_before": before, "iou_after": after}

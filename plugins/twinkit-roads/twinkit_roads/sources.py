@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError
+from twinkit import artefacts as A
 from twinkit.geo import SiteFrame, check_bbox
 from twinkit.ranges import param
 
@@ -18,32 +19,54 @@ from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
 
 @dataclass
 class FileSourceParams:
-    path: str = ""  # a local .osm / .osm.bz2 / .osm.pbf; empty: the step's input (site.inputs.osm or a generated roads.osm)
-    crop_radius_m: float = param(-1.0)  # <0: the site box (site.osm_radius_m, default 150 m) plus crop_margin_m; 0: the whole file; >0: this half side
-    crop_margin_m: float = param(150.0, ge=0)  # added to the site box when crop_radius_m < 0 (bench_crop.py: 150 m gives the lanes of the whole extract inside the box)
+    path: str = param("",
+                      help="A local .osm, .osm.bz2 or .osm.pbf file; empty = the step's input (site.inputs.osm, or "
+                           "a generated roads.osm).")
+    crop_radius_m: float = param(-1.0,
+                                 help="Crop the file around the base point: < 0 = the site box (site.osm_radius_m, "
+                                      "default 150 m) plus crop_margin_m; 0 = keep the whole file; > 0 = a box of "
+                                      "this half side (m).")
+    crop_margin_m: float = param(150.0, ge=0,
+                                 help="Margin (m) added to the site box when crop_radius_m < 0, so that the ways "
+                                      'reaching into the site are kept whole (docs/roads.md "Crop first").')
 
 
 @dataclass
 class OpenDriveSourceParams:
-    path: str = ""  # the .xodr; empty: the site input xodr (site.inputs.xodr=/path/map.xodr)
-    georeference: str = ""  # the map's frame when it has no (or a wrong) <geoReference>: PROJ string or EPSG code; "site": already the site frame
-    heights: str = param("datum", choices=("datum", "keep"))  # "datum": the map's z are heights in the site's vertical datum (z - base point alt); "keep": unchanged
-    max_residual_m: float = param(0.01, gt=0)  # largest distance between the similarity and pyproj at a lane centre
-    sample_step_m: float = param(2.0, gt=0)  # lane-centre spacing of the residual check
+    path: str = param("", help="The .xodr file; empty = the site's input (site.inputs.xodr=/path/map.xodr).")
+    georeference: str = param("",
+                              help="The map's frame when it has no (or a wrong) <geoReference>: a PROJ string or an "
+                                   "EPSG code; \"site\" = already in the site frame; empty = the map's own "
+                                   "<geoReference>.")
+    heights: str = param("datum", choices=("datum", "keep"),
+                         help="datum: the map's z are heights in the site's vertical datum (z - the base point's "
+                              "altitude); keep: leave them unchanged.")
+    max_residual_m: float = param(0.01, gt=0,
+                                  help="Largest distance (m) allowed at a lane centre between the similarity that "
+                                       "moves the map into the site frame and the exact pyproj transform.")
+    sample_step_m: float = param(2.0, gt=0, help="Spacing (m) of the lane-centre samples of that residual check.")
 
 
 @dataclass
 class DownloadParams:
-    url: str = ""  # empty: the public default of the source
-    radius_m: float = param(-1.0, gt=0, also=(-1,))  # half-side of the box around the base point; <0: site.osm_radius_m (default 150)
-    bbox: str = ""  # explicit "south,west,north,east" (degrees) instead of a box around the base point
-    timeout_s: float = param(60.0, gt=0)  # per read (connect: at most 15 s)
-    deadline_s: float = param(120.0, gt=0)  # the whole download, retries included (a trickling server cannot stall it)
-    retries: int = param(3, ge=0, le=100)
-    backoff_s: float = param(2.0, ge=0)
-    user_agent: str = ""  # empty: twinkit-roads/<version> (+project URL); public servers require a real one
-    cache_dir: str = ""  # empty: $XDG_CACHE_HOME/twinkit/osm
-    cache_max_age_days: float = param(30.0, ge=0)
+    url: str = param("", help="Server URL; empty = the source's public default.")
+    radius_m: float = param(-1.0, gt=0, also=(-1,),
+                            help="Half side (m) of the box around the base point to download; -1 = "
+                                 "site.osm_radius_m (default 150).")
+    bbox: str = param("",
+                      help='An explicit box "south,west,north,east" (degrees) instead of a box around the base '
+                           "point.")
+    timeout_s: float = param(60.0, gt=0, help="Timeout (s) of each read (connecting: at most 15 s).")
+    deadline_s: float = param(120.0, gt=0,
+                              help="Limit (s) of the whole download, retries included (a trickling server cannot "
+                                   "stall the run).")
+    retries: int = param(3, ge=0, le=100, help="Retries after a failed request.")
+    backoff_s: float = param(2.0, ge=0, help="Wait (s) before the first retry; it doubles with each further retry.")
+    user_agent: str = param("",
+                            help="HTTP User-Agent; empty = twinkit-roads/<version> (+ the project URL). Public "
+                                 "servers require a real one.")
+    cache_dir: str = param("", help="Where downloads are cached; empty = $XDG_CACHE_HOME/twinkit/osm.")
+    cache_max_age_days: float = param(30.0, ge=0, help="A cached download older than this (days) is fetched again.")
 
 
 def site_radius(site, radius_m: float) -> float:
@@ -81,7 +104,8 @@ def file_source(params: FileSourceParams, ctx, *, out_osm_osm: Path, in_osm: Pat
     Which file: ``road_source.path``, else the site input ``osm`` (site.inputs.osm), else a
     ``roads.osm`` written by an earlier step (the demo site generator).
     """
-    src = Path(params.path).expanduser() if params.path else (in_osm or in_roads_osm)
+    roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None  # the demo site's, checked
+    src = Path(params.path).expanduser() if params.path else (in_osm or roads_osm)
     if src is None:
         raise InputError("road_source=file needs an OSM file: set site.inputs.osm=/path/to/area.osm.pbf or "
                          "road_source.path=..., or choose road_source=overpass / osm_api to download by box")

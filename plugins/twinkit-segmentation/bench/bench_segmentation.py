@@ -60,7 +60,7 @@ def main(argv=None) -> int:
 
     from twinkit.plugins import build_component
     from twinkit_segmentation import views as V
-    from twinkit.cityscapes import NAMES as CLASSES, N_CLASSES
+    from twinkit.cityscapes import N_CLASSES
     from twinkit.mesh import edges as mesh_edges, read_mesh
     from twinkit.street.truth import transfer_labels
     from twinkit_segmentation.segmesh import face_labels, unit_normals, vertex_labels
@@ -159,7 +159,6 @@ def main(argv=None) -> int:
                 ctx_t = T(f"back-projection ({model_name}, combined)")
             else:
                 ctx_t = None
-            t0 = time.perf_counter()
             if ctx_t:
                 ctx_t.__enter__()
             lab, _ = blend_decide(seg, vv, alpha, ignore_classes=[10])

@@ -8,7 +8,6 @@ from twinkit import InputError
 from twinkit.testing import check_plugin, plugin_from_module, run_step
 
 import twinkit_segmentation.plugin as P
-from twinkit.cityscapes import IGNORE
 from twinkit.mesh import read_mesh
 from twinkit_segmentation.segmesh import vertex_labels
 from twinkit_segmentation.synthetic import egl_available, street_scene

@@ -64,6 +64,7 @@ import numpy as np
 
 from twinkit.cityscapes import (BUILDING, GROUND, MOVABLE, N_CLASSES, ROAD, SIDEWALK, STREET_FURNITURE,
                                 TRAFFIC_LIGHT, TRAFFIC_SIGN, VEGETATION, WIDE_VEHICLES)
+from twinkit.ranges import param
 
 SHAPE_CUES = ("column", "mounted", "low", "narrow", "slender")
 CUES = ("ground", "raised", "high", "curb") + SHAPE_CUES
@@ -74,41 +75,86 @@ DEFAULT_CUES = tuple(c for c in CUES if c != "slender")
 
 @dataclass
 class ContextOptions:
-    ground_window_m: float = 3.0  # wider than the widest vehicle (a bus is 2.55 m wide)
-    cell_m: float = 0.25
-    up_normal_z: float = 0.85  # up-facing: at most ~32 degrees from level (ramps are under 15 %)
-    max_curb_m: float = 0.30  # the highest curb; up-facing vertices up to this above the ground are ground
-    min_object_m: float = 0.50  # above any curb and step: an object, not the ground
-    max_vehicle_m: float = 4.70  # above the tallest road vehicle (buses and trucks: 4.0-4.6 m)
-    min_curb_m: float = 0.05  # the lowest curb step
-    step_radius_m: float = 0.5  # a curb rises within this distance (a road's slope or camber does not)
-    band_width_m: float = 4.0  # a sidewalk band: at most this far from its curb
-    level_tol_m: float = 0.06  # the band is level with the curb's top (cross slope)
-    ground_factor: float = 0.1
-    raised_factor: float = 0.1
-    high_factor: float = 0.1
-    curb_factor: float = 0.2
-    curb_face: bool = True  # the curb's own face and edge count as the band (and as ground)
-    band_default: bool = True  # band vertices whose votes are explained away become sidewalk
+    ground_window_m: float = param(3.0,
+                                   help="Window (m) of the local ground model, wider than the widest vehicle (a bus "
+                                        "is 2.55 m wide), so a car roof never counts as ground.")
+    cell_m: float = param(0.25,
+                          help="Cell size (m) of the local ground grid and of the grid on which curb steps are "
+                               "found.")
+    up_normal_z: float = param(0.85,
+                               help="A vertex is up-facing when its normal's z is at least this (about 32 degrees "
+                                    "from level; ramps are under 15 %).")
+    max_curb_m: float = param(0.30,
+                              help="The highest curb (m): up-facing vertices up to this above the local ground are "
+                                   "ground.")
+    min_object_m: float = param(0.50,
+                                help="Above any curb and step (m): a vertex higher than this above the local ground "
+                                     "is an object, not the ground.")
+    max_vehicle_m: float = param(4.70,
+                                 help="Above the tallest road vehicle (m; buses and trucks are 4.0-4.6 m): nothing "
+                                      "higher is a vehicle or a person.")
+    min_curb_m: float = param(0.05, help="The lowest curb step (m).")
+    step_radius_m: float = param(0.5,
+                                 help="A curb rises within this distance (m); a road's slope or camber does not.")
+    band_width_m: float = param(4.0, help="A sidewalk band lies at most this far (m) from its curb.")
+    level_tol_m: float = param(0.06,
+                               help="The band is level with the curb's top within this (m), allowing for the cross "
+                                    "slope.")
+    ground_factor: float = param(0.1,
+                                 help="Prior of the classes other than road, sidewalk and terrain on a ground "
+                                      "vertex (the ground cue).")
+    raised_factor: float = param(0.1,
+                                 help="Prior of road, sidewalk and terrain on a vertex above min_object_m (the "
+                                      "raised cue).")
+    high_factor: float = param(0.1, help="Prior of vehicles, riders and persons above max_vehicle_m (the high cue).")
+    curb_factor: float = param(0.2, help="Prior of road on a raised band beside a curb (the curb cue).")
+    curb_face: bool = param(True, help="The curb's own face and edge count as the band (and as ground).")
+    band_default: bool = param(True, help="Band vertices whose votes the cues explained away become sidewalk.")
     # objects above the ground and their shape (lengths: physical sizes, see docs/segmentation.md)
-    slice_m: float = 0.25  # height of a slice: finer than any signal head (>= 0.3 m) or sign plate (>= 0.4 m)
-    column_width_m: float = 0.40  # a post is at most ~0.3 m across (lamp posts 0.1-0.3 m); + reconstruction blur
-    column_span_m: float = 1.5  # a post's bare shaft runs from the curb to its load above head height
-    column_top_m: float = 2.2  # signs and signal heads hang above head clearance (>= 2.2 m over a footway)
-    crown_m: float = 1.5  # a tree crown is wider than this both ways; a plate, a head, a lamp arm is not
-    float_m: float = 1.0  # an object whose lowest point is this far up stands on nothing the scan saw
-    compact_m: float = 1.5  # a sign plate or a signal head is at most this large in any direction
-    clear_m: float = 0.5  # a free-standing sign or head stands clear of facades and crowns (sidewalk clearance)
-    mount_min_m: float = 1.5  # mounted items hang between these heights above the ground
-    mount_max_m: float = 8.0  # (overhead signals reach ~6-7 m, lamps 8-10 m)
-    plate_m: float = 0.30  # a sign plate with its post is thinner (a plate is cm, a post <= 0.2 m); a signal
-    # head (>= 0.25 m deep) beside its post is thicker
-    low_top_m: float = 2.5  # every building is taller (a storey is >= 2.5 m), every signal post too (heads hang
-    # >= 2 m up); walls, fences, hedges, cars are lower
-    narrow_m: float = 1.2  # narrower than any car (the narrowest, quadricycles, are 1.24 m wide)
-    hedge_min_m: float = 0.4  # even a trimmed hedge is thicker; a fence, a wall, a bike, a post is thinner
-    shape_factor: float = 0.1
-    mount_factor: float = 0.2  # a light on a plate, a sign on a box: unlikely, not ruled out
+    slice_m: float = param(0.25,
+                           help="Height (m) of one horizontal slice of an object above the ground: finer than any "
+                                "signal head (>= 0.3 m) or sign plate (>= 0.4 m).")
+    column_width_m: float = param(0.40,
+                                  help="A post's slice is at most this wide (m): posts are at most ~0.3 m across "
+                                       "(lamp posts 0.1-0.3 m), plus the reconstruction's blur.")
+    column_span_m: float = param(1.5,
+                                 help="A post's bare shaft spans at least this height (m), from the curb to its "
+                                      "load above head height.")
+    column_top_m: float = param(2.2,
+                                help="A post's top stands at least this high (m): signs and signal heads hang above "
+                                     "head clearance (>= 2.2 m over a footway).")
+    crown_m: float = param(1.5,
+                           help="A tree crown is wider than this (m) both ways; a plate, a signal head or a lamp "
+                                "arm is not.")
+    float_m: float = param(1.0,
+                           help="An object whose lowest point is this far up (m) stands on nothing the scan saw (it "
+                                "floats).")
+    compact_m: float = param(1.5, help="A sign plate or a signal head is at most this large (m) in any direction.")
+    clear_m: float = param(0.5,
+                           help="A free-standing sign or signal head stands at least this far (m) clear of facades "
+                                "and crowns (sidewalk clearance).")
+    mount_min_m: float = param(1.5,
+                               help="Mounted items hang between mount_min_m and mount_max_m (m) above the ground.")
+    mount_max_m: float = param(8.0,
+                               help="Upper height (m) of mounted items (overhead signals reach ~6-7 m, lamps 8-10 "
+                                    "m).")
+    plate_m: float = param(0.30,
+                           help="A sign plate with its post is thinner than this (m; a plate is centimetres, a post "
+                                "<= 0.2 m); a signal head (>= 0.25 m deep) beside its post is thicker.")
+    low_top_m: float = param(2.5,
+                             help="An object whose top is lower than this (m) is no building (a storey is >= 2.5 m) "
+                                  "and carries no signal head (heads hang >= 2 m up); walls, fences, hedges and "
+                                  "cars are lower.")
+    narrow_m: float = param(1.2,
+                            help="An object narrower than this (m) is no car, truck, bus or train (the narrowest "
+                                 "cars, quadricycles, are 1.24 m wide).")
+    hedge_min_m: float = param(0.4,
+                               help="Even a trimmed hedge is thicker than this (m); a fence, a wall, a bicycle or a "
+                                    "post is thinner.")
+    shape_factor: float = param(0.1, help="Prior of the classes a shape cue rules out.")
+    mount_factor: float = param(0.2,
+                                help="Prior of the less likely reading of a mounted item (a light on a plate, a "
+                                     "sign on a box): unlikely, not ruled out.")
 
 
 def _extent_2d(xy: np.ndarray, key: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -64,18 +64,15 @@ def file_class_prior(vertex_codes: np.ndarray, factor: float) -> tuple[np.ndarra
 def read_point_classes(points_ply: Path):
     """(points (n, 3), codes (n,) uint8) of a points.ply whose vertices carry ``classification``; None
     when the file has no such field (the header is read first, so a cloud without classes costs nothing)."""
-    from twinkit.mesh import read_ply
+    from twinkit.artefacts import read_points
+    from twinkit.artefacts.files import ply_header
 
-    with open(points_ply, "rb") as fh:
-        head = b""
-        while b"end_header" not in head and len(head) < 65536:
-            line = fh.readline()
-            if not line:
-                break
-            head += line
-    if b" classification\n" not in head.replace(b"\r\n", b"\n"):
+    try:
+        if "classification" not in ply_header(points_ply).get("vertex", (0, []))[1]:
+            return None
+    except ValueError:  # not a PLY: no classes to read
         return None
-    m = read_ply(points_ply)
+    m = read_points(points_ply)
     codes = m.attrs.get("classification")
     if codes is None:
         return None

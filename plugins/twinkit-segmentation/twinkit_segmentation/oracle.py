@@ -17,8 +17,10 @@ from twinkit.ranges import param
 
 @dataclass
 class OracleParams:
-    noise_fraction: float = param(0.0, ge=0, le=1)  # share of pixels given a random class
-    seed: int = param(0, ge=0)
+    noise_fraction: float = param(0.0, ge=0, le=1,
+                                  help="Share of the pixels given a random class (to simulate a weaker 2D model); 0 "
+                                       "= the ground truth as is.")
+    seed: int = param(0, ge=0, help="Random seed of the noise.")
 
 
 class OracleModel:

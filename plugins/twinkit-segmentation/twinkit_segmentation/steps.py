@@ -19,22 +19,28 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import List
 
 from twinkit import InputError, StepContext
+from twinkit import artefacts as A
 from twinkit.ranges import param
 
 
 # ----------------------------------------------------------------------------- over-segmentation
 @dataclass
 class FelzenszwalbParams:
-    k_threshold: float = param(0.3, ge=0)  # larger = larger segments
-    min_vertices: int = param(10, ge=0)  # merge smaller segments into a neighbour along the lightest edge (0 = off)
-    max_vertices: int = param(5000, ge=0)  # never grow a segment beyond this (0 = unlimited)
-    normal_weight: float = param(1.0, ge=0)  # weight of 1 - n1.n2 (squared on convex edges)
-    colour_weight: float = param(1.0, ge=0)  # weight of the RGB distance (0..1)
+    k_threshold: float = param(0.3, ge=0, help="Felzenszwalb's k: larger = larger segments.")
+    min_vertices: int = param(10, ge=0,
+                              help="Merge segments smaller than this into a neighbour along the lightest edge; 0 = "
+                                   "off.")
+    max_vertices: int = param(5000, ge=0, help="Never grow a segment beyond this many vertices; 0 = unlimited.")
+    normal_weight: float = param(1.0, ge=0,
+                                 help="Weight of the normal difference (1 - n1.n2, squared on convex edges) in an "
+                                      "edge's cost.")
+    colour_weight: float = param(1.0, ge=0,
+                                 help="Weight of the RGB distance (0..1) in an edge's cost; 0 = geometry only.")
 
 
 def oversegment(params: FelzenszwalbParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
@@ -42,11 +48,11 @@ def oversegment(params: FelzenszwalbParams, ctx: StepContext, *, in_textured_mes
     """Felzenszwalb over-segmentation of the mesh graph (normals + colours); segments.npy per vertex."""
     import numpy as np
 
-    from twinkit.mesh import read_mesh, write_colored_ply
+    from twinkit.mesh import write_colored_ply
     from twinkit_segmentation.segmesh import random_colors, unit_normals
     from twinkit_segmentation.oversegment import felzenszwalb_mesh
 
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     t0, c0 = time.perf_counter(), time.process_time()
     seg = felzenszwalb_mesh(mesh.vertices, mesh.faces, unit_normals(mesh), mesh.colors,
                             params.k_threshold, params.min_vertices, params.max_vertices,
@@ -72,9 +78,9 @@ def no_oversegment(params: NoSegmentsParams, ctx: StepContext, *, in_textured_me
     """No over-segmentation: every vertex is its own segment (the thesis's ablation)."""
     import numpy as np
 
-    from twinkit.mesh import read_mesh, write_colored_ply
+    from twinkit.mesh import write_colored_ply
 
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     seg = np.arange(len(mesh.vertices), dtype=np.int32)
     np.save(out_segments_npy, seg)
     cols = mesh.colors if mesh.colors is not None else np.full((len(seg), 3), 128, np.uint8)
@@ -85,25 +91,26 @@ def no_oversegment(params: NoSegmentsParams, ctx: StepContext, *, in_textured_me
 # ----------------------------------------------------------------------------- view sampling
 @dataclass
 class SampleViewsParams:
-    # keep at most this many views: whole camera positions (all their heights and headings), the positions
-    # spread over the site by farthest-point order; 0 = all; -1 = auto (auto_max_views)
-    max_views: int = param(-1, ge=0, also=(-1,))
-    # the budget of max_views=-1: rendering + the 2D model take ~0.25 s a view on 2 cores, so 480 views are
-    # about 2 minutes (the demo's 336 views all stay; IGN had 1,896 and Autzen 2,784 before the cap)
-    auto_max_views: int = param(480, ge=1)
+    max_views: int = param(-1, ge=0, also=(-1,),
+                           help="Keep at most this many views, as whole camera positions (all their heights and "
+                                "headings) spread over the site in farthest-point order. 0 = all; -1 = auto "
+                                "(auto_max_views).")
+    auto_max_views: int = param(480, ge=1,
+                                help="The view budget of max_views=-1 (rendering and the 2D model take about 0.25 s "
+                                     "a view on 2 cores: 480 views are about 2 minutes).")
 
 
 def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
                  in_roads_osm: Path | None = None, in_street_points_txt: Path | None = None,
                  in_points_ply: Path | None = None, out_views_json: Path) -> dict:
     """Camera views from the selected view sampler (view_sampler=auto_street|street_points|uniform|random|combined)."""
-    from twinkit.mesh import read_mesh
 
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     t0 = time.perf_counter()
     budget = params.auto_max_views if params.max_views < 0 else params.max_views
     capture = _capture(in_points_ply, ctx)
-    views, sampled = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, budget, with_total=True,
+    roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None
+    views, sampled = _sample_views(mesh, ctx, roads_osm, in_street_points_txt, budget, with_total=True,
                                    capture=capture)
     if not views:
         raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another view_sampler")
@@ -123,10 +130,9 @@ def _capture(points_ply: Path | None, ctx) -> str | None:
     """The capture type of the cloud (twinkit.surface.density), when the run has one."""
     if points_ply is None or not Path(points_ply).is_file():
         return None
-    from twinkit.mesh import read_ply
     from twinkit.surface import density
 
-    m = density.measure(read_ply(points_ply).vertices)
+    m = density.measure(A.read_points(points_ply).vertices)
     ctx.log.info("sample_views: %s", density.describe(m))
     return m["capture"]
 
@@ -151,29 +157,34 @@ def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int, with_tota
 # ----------------------------------------------------------------------------- rendering
 @dataclass
 class RenderParams:
-    max_empty_fraction: float = param(0.6, ge=0, le=1)  # drop views whose image is more than this much background
-    # background below the horizon is a hole in the mesh (or the capture's edge), never sky: paint it with
-    # the nearest surface's colour so the 2D model does not read sky-blue patches in the street (no votes
-    # come from those pixels either way). False = the plain sky-blue background everywhere.
-    fill_holes: bool = True
-    max_hole_px: float = param(16.0, ge=0)  # a hole is a background gap at most 2x this wide; wider = past the capture's edge
-    # a view whose mesh pixels vary less than this (standard deviation of the grey level, 0..255) is blank: the
-    # 2D model reads nothing from a flat grey silhouette (a colourless cloud with colourless=grey: 0; the demo: median 35)
-    min_signal_std: float = param(4.0, ge=0)
-    max_blank_share: float = param(0.5, ge=0, le=1)  # more blank views than this share: degraded (ctx.degraded)
+    max_empty_fraction: float = param(0.6, ge=0, le=1,
+                                      help="Drop views whose image is more than this share background.")
+    fill_holes: bool = param(True,
+                             help="Paint background below the horizon (a hole in the mesh or the capture's edge, "
+                                  "never sky) with the nearest surface's colour, so the 2D model does not read "
+                                  "sky-blue patches in the street; false = plain sky-blue background everywhere.")
+    max_hole_px: float = param(16.0, ge=0,
+                               help="fill_holes: a background gap at most 2x this wide (px) is a hole; wider = past "
+                                    "the capture's edge, left as background.")
+    min_signal_std: float = param(4.0, ge=0,
+                                  help="A view whose mesh pixels vary less than this (standard deviation of the "
+                                       "grey level, 0..255) is blank: the 2D model reads nothing from a flat grey "
+                                       "silhouette.")
+    max_blank_share: float = param(0.5, ge=0, le=1,
+                                   help="The run is marked degraded when more than this share of the views is "
+                                        "blank.")
 
 
 def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_views_json: Path,
                  out_renders_dir: Path) -> dict:
     """Render every view unlit with a sky background; per pixel the nearest vertex (<view>_vertex.npz)."""
-    from twinkit.mesh import read_mesh
     from twinkit_segmentation.render import load_texture
 
     try:
         views = json.loads(Path(in_views_json).read_text())["views"]
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     tex = load_texture(mesh.texture) if mesh.texture is not None else None
     if tex is None:
         ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
@@ -273,12 +284,22 @@ def _render_view_set(mesh, tex, views: list, out_dir: Path, max_empty_fraction: 
 # ----------------------------------------------------------------------------- the capture's photos as views
 @dataclass
 class PhotoViewsParams:
-    source: str = param("photos", choices=("photos", "rendered", "both"))  # photos (the registered photos) | rendered (views.json, as render_views) | both
-    long_side_px: int = param(1024, ge=0)  # photos downscaled to this long side (the 2D models' CityScapes scale; 0 = full)
-    min_coverage: float = param(0.1, ge=0, le=1)  # drop a photo whose pose sees the mesh in fewer of its pixels (missed the mesh)
-    max_empty_fraction: float = param(0.6, ge=0, le=1)  # rendered views: as render_views
-    max_photos: int = param(0, ge=0)  # at most this many photos (evenly spread in file order), 0 = all
-    max_views: int = param(0, ge=0)  # rendered views sampled here (no views.json wired): at most this many, 0 = all
+    source: str = param("photos", choices=("photos", "rendered", "both"),
+                        help="Which views to label: photos (the registered photos), rendered (views.json, as "
+                             "render_views), or both.")
+    long_side_px: int = param(1024, ge=0,
+                              help="Downscale photos to this long side (px), the scale the CityScapes 2D models "
+                                   "expect; 0 = full size.")
+    min_coverage: float = param(0.1, ge=0, le=1,
+                                help="Drop a photo whose pose sees the mesh in fewer than this share of its pixels "
+                                     "(it missed the mesh).")
+    max_empty_fraction: float = param(0.6, ge=0, le=1,
+                                      help="Rendered views: drop those with more than this share background (as "
+                                           "render_views).")
+    max_photos: int = param(0, ge=0, help="Use at most this many photos, evenly spread in file order; 0 = all.")
+    max_views: int = param(0, ge=0,
+                           help="Rendered views sampled here (when no views.json is wired): at most this many; 0 = "
+                                "all.")
 
 
 def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_ply: Path,
@@ -291,7 +312,6 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
     import numpy as np
     from PIL import Image
 
-    from twinkit.mesh import read_mesh
     from twinkit_segmentation.photoviews import (PhotoCamera, max_distortion_px, photo_view_image, projection_from_K,
                                                  view_matrix_opencv)
     from twinkit_segmentation.render import Renderer, load_texture
@@ -302,17 +322,14 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
     if use_photos and (in_cameras_site_json is None or in_photos_dir is None):
         raise InputError("photo_views: source=photos needs cameras_site.json and the photos folder (the photo "
                          "branch's georeference step and site.inputs.photos); use source=rendered without photos")
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     out_renders_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     kept: list = []
     dropped: list = []
     out: dict = {"source": params.source}
     if use_photos:
-        try:
-            cams = json.loads(Path(in_cameras_site_json).read_text())["cameras"]
-        except (OSError, ValueError, KeyError) as exc:
-            raise InputError(f"{in_cameras_site_json}: not a cameras file ({exc}); re-run georeference") from None
+        cams = A.read_cameras_site(in_cameras_site_json).cameras
         if params.max_photos and len(cams) > params.max_photos:
             cams = [cams[i] for i in np.linspace(0, len(cams) - 1, params.max_photos).round().astype(int)]
         renderers: dict = {}
@@ -384,7 +401,8 @@ def photo_views(params: PhotoViewsParams, ctx: StepContext, *, in_textured_mesh_
             except (OSError, ValueError, KeyError) as exc:
                 raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
         else:
-            views = _sample_views(mesh, ctx, in_roads_osm, in_street_points_txt, params.max_views)
+            roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None
+            views = _sample_views(mesh, ctx, roads_osm, in_street_points_txt, params.max_views)
             (out_renders_dir / "views.json").write_text(json.dumps({"views": views}, indent=1))
         if not views:
             raise InputError(f"{in_textured_mesh_ply}: the view sampler produced no views; try another "
@@ -430,10 +448,14 @@ def _photo_view_id(image: str, used: set) -> str:
 # ----------------------------------------------------------------------------- 2D prediction
 @dataclass
 class PredictParams:
-    soft_votes: bool = False  # vote with the softmax probabilities instead of one vote per pixel
-    vote_per_view: bool = True  # each view gives each vertex it sees one vote, shared by its pixels' classes
-    batch_views: int = param(4, ge=1, le=1024)
-    save_pngs: bool = True  # predictions/<view>.png (palette PNG, pixel value = trainId)
+    soft_votes: bool = param(False, help="Vote with the softmax probabilities instead of one vote per pixel.")
+    vote_per_view: bool = param(True,
+                                help="Each view gives each vertex it sees one vote in total, shared by its pixels' "
+                                     "classes (false: one vote per pixel).")
+    batch_views: int = param(4, ge=1, le=1024,
+                             help="Views sent to the 2D model at once; lower it when the model runs out of memory.")
+    save_pngs: bool = param(True,
+                            help="Write predictions/<view>.png (a palette PNG whose pixel value is the trainId).")
 
 
 def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Path,
@@ -455,7 +477,7 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     if getattr(model, "needs_ground_truth", False):
         if in_gt_labels_npy is None:
             raise InputError("image_model=oracle needs gt_labels.npy: add the transfer_gt_labels step before predict_views")
-        model.set_ground_truth(np.load(in_gt_labels_npy))
+        model.set_ground_truth(A.read_labels(in_gt_labels_npy))
     out_predictions_dir.mkdir(parents=True, exist_ok=True)
     votes = np.zeros((n, N_CLASSES), dtype=np.float64)
     pal = np.zeros(768, dtype=np.uint8)
@@ -528,40 +550,69 @@ def _size_batches(kept: list, step: int, folder: Path) -> list:
 # ----------------------------------------------------------------------------- back-projection
 @dataclass
 class BackprojectParams:
-    use_segments: bool = True  # vote per segment (False: per vertex)
-    segment_weight: float = param(0.5, ge=0, le=1)  # share of the segment's vote against the vertex's own (1 = segment only)
-    ignore_classes: List[int] = param(default_factory=lambda: [10], ge=0, le=255)  # outside the target set (sky)
-    class_weights: List[float] = param(default_factory=list, ge=0)  # 19 weights (trainId order), empty = all 1
-    min_votes: float = param(0.0, ge=0)  # fewer votes than this = unlabelled
-    fill_unlabelled: bool = True  # unseen vertices take their neighbours' label
-    # 3D context (docs/segmentation.md "3D context in the vote"): geometric cues from the mesh scale the
-    # blended vote; lengths are physical sizes, not tuned to a site
-    context: bool = True  # False = no geometric cues (with smooth_beta 0 too: the plain blended vote)
-    # all of context.CUES but slender, which helps only where the model votes fence at all
-    # (docs/segmentation.md "Shape cues")
-    context_cues: List[str] = field(default_factory=lambda: ["ground", "raised", "high", "curb", "column", "mounted",
-                                                             "low", "narrow"])
+    use_segments: bool = param(True,
+                               help="Vote per segment of the over-segmentation, blended with the vertex's own votes "
+                                    "(false: per vertex only).")
+    segment_weight: float = param(0.5, ge=0, le=1,
+                                  help="Share of the segment's vote against the vertex's own (1 = the segment "
+                                       "only).")
+    ignore_classes: List[int] = param(default_factory=lambda: [10], ge=0, le=255,
+                                      help="trainIds outside the target set, whose votes are ignored (10 = sky).")
+    class_weights: List[float] = param(default_factory=list, ge=0,
+                                       help="One weight per class (19, in trainId order) multiplying its votes; "
+                                            "empty = all 1.")
+    min_votes: float = param(0.0, ge=0, help="Vertices with fewer votes than this stay unlabelled.")
+    fill_unlabelled: bool = param(True, help="Vertices no view saw take their neighbours' label.")
+    context: bool = param(True,
+                          help='Scale the blended vote by geometric cues of the mesh (docs/segmentation.md "3D '
+                               'context in the vote"); false = no cues (with smooth_beta 0 too: the plain blended '
+                               "vote).")
+    context_cues: List[str] = param(default_factory=lambda: ["ground", "raised", "high", "curb", "column", "mounted",
+                                                             "low", "narrow"], free=True,
+                                    help="Which geometric cues act (of ground, raised, high, curb, column, mounted, "
+                                         "low, narrow, slender). slender is off by default: it helps only where the "
+                                         'model votes fence at all (docs/segmentation.md "Shape cues").')
     ground_window_m: float = param(3.0, gt=0, help="metres: the local ground's window (street.ground.LocalGround, opening); wider than the widest vehicle (2.55 m)")
-    max_curb_m: float = param(0.30, ge=0)  # up-facing, at most this above the local ground = ground (the highest curb)
-    min_object_m: float = param(0.50, ge=0)  # more than this above the local ground = not road / sidewalk / terrain
-    max_vehicle_m: float = param(4.70, ge=0)  # more than this above the local ground = no vehicle or person
-    min_curb_m: float = param(0.05, ge=0)  # the lowest curb step
-    band_width_m: float = param(4.0, ge=0)  # a sidewalk lies at most this far from its curb
-    context_factor: float = param(0.1, ge=0, le=1)  # prior of a class the geometry rules out (ground, raised, high)
-    curb_factor: float = param(0.2, ge=0, le=1)  # prior of road on a raised band beside the carriageway
-    curb_face: bool = True  # the curb's own face and rounded edge count as the band (CityScapes: sidewalk)
-    band_default: bool = True  # band vertices whose votes the cues explained away become sidewalk
-    min_retained: float = param(0.2, ge=0, le=1)  # less of a vertex's votes left by the cues = its neighbours decide (0 = off)
-    keep_share: float = param(1.0, ge=0, le=1)  # the floor: a vertex whose own votes give one class this share (0 = off) ...
-    keep_votes: float = param(32.0, ge=0)  # ... of at least this many votes (views) keeps the plain vote's label: no cue acts
-    smooth_beta: float = param(1.0, ge=0)  # Potts smoothing on the vertex graph (weight of the neighbours' labels; 0 = off)
-    smooth_iters: int = param(5, ge=0)
-    # the scan file's own classes (ASPRS codes in points.ply's classification; docs/segmentation.md "File
-    # classes"): a prior beside the views. A class the file rules out (car on ASPRS ground) keeps this factor
-    # of its votes -- the same strength as a class the geometry rules out (context_factor)
-    file_classes: bool = True
-    file_class_factor: float = param(0.1, ge=0, le=1)
-    file_class_spacings: float = param(3.0, gt=0)  # a vertex takes the class of its nearest point within this many point spacings
+    max_curb_m: float = param(0.30, ge=0,
+                              help="An up-facing vertex at most this high (m) above the local ground is ground (the "
+                                   "highest curb).")
+    min_object_m: float = param(0.50, ge=0,
+                                help="A vertex more than this (m) above the local ground is not road, sidewalk or "
+                                     "terrain.")
+    max_vehicle_m: float = param(4.70, ge=0,
+                                 help="A vertex more than this (m) above the local ground is no vehicle or person "
+                                      "(above the tallest bus or truck).")
+    min_curb_m: float = param(0.05, ge=0, help="The lowest curb step (m).")
+    band_width_m: float = param(4.0, ge=0, help="A sidewalk lies at most this far (m) from its curb.")
+    context_factor: float = param(0.1, ge=0, le=1,
+                                  help="Prior (vote factor) of a class the geometry rules out (ground, raised, high "
+                                       "cues).")
+    curb_factor: float = param(0.2, ge=0, le=1,
+                               help="Prior (vote factor) of road on a raised band beside the carriageway.")
+    curb_face: bool = param(True,
+                            help="The curb's own face and rounded edge count as the band (CityScapes labels them "
+                                 "sidewalk).")
+    band_default: bool = param(True, help="Band vertices whose votes the cues explained away become sidewalk.")
+    min_retained: float = param(0.2, ge=0, le=1,
+                                help="A vertex whose cues leave less than this share of its votes is decided by its "
+                                     "neighbours; 0 = off.")
+    keep_share: float = param(1.0, ge=0, le=1,
+                              help="The floor: a vertex whose own votes give one class at least this share (from at "
+                                   "least keep_votes votes) keeps the plain vote's label, no cue acts; 0 = off.")
+    keep_votes: float = param(32.0, ge=0, help="The floor (keep_share) needs at least this many votes (views).")
+    smooth_beta: float = param(1.0, ge=0,
+                               help="Potts smoothing on the vertex graph: the weight of the neighbours' labels; 0 = "
+                                    "off.")
+    smooth_iters: int = param(5, ge=0, help="Iterations of the Potts smoothing.")
+    file_classes: bool = param(True,
+                               help="Use the scan file's own classes (ASPRS codes in points.ply's classification) "
+                                    'as a prior beside the views (docs/segmentation.md "File classes").')
+    file_class_factor: float = param(0.1, ge=0, le=1,
+                                     help="A class the file's classification rules out (a car on ASPRS ground) "
+                                          "keeps this factor of its votes; the same strength as context_factor.")
+    file_class_spacings: float = param(3.0, gt=0,
+                                       help="A vertex takes the class of its nearest point within this many point "
+                                            "spacings.")
 
 
 def context_options(params: BackprojectParams):
@@ -585,14 +636,14 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     import numpy as np
 
     from twinkit.cityscapes import IGNORE
-    from twinkit.mesh import edges as mesh_edges, read_mesh
+    from twinkit.mesh import edges as mesh_edges
     from twinkit_segmentation.segmesh import write_labels_ply
     from twinkit_segmentation.context import CUES, fuse_with_context, near_unanimous, potts_smooth
     from twinkit_segmentation.metrics import _weighted_votes, blend_distribution, decide_distribution, propagate
     from twinkit_segmentation.segmesh import unit_normals
 
     t0 = time.perf_counter()
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     seg = np.load(in_segments_npy)
     votes = np.load(in_vertex_votes_npy).astype(np.float64)
     if len(seg) != len(mesh.vertices) or len(votes) != len(mesh.vertices):
@@ -651,7 +702,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
                      "%.1f %% of them a class the file rules out, the fused labels %.1f %% (prior factor %g)",
                      finfo["vertices_with_class"], finfo["vertices"], 100 * finfo["against_file_before"],
                      100 * finfo["against_file_after"], params.file_class_factor)
-    np.save(out_labels_npy, labels.astype(np.uint8))
+    A.write_labels(out_labels_npy, labels.astype(np.uint8))
     np.save(out_confidence_npy, conf.astype(np.float32))
     write_labels_ply(out_labels_ply, mesh, labels)
     return {"unlabelled_before_fill": unlabelled_before, "unlabelled": int((labels == IGNORE).sum()),
@@ -689,7 +740,9 @@ def _file_classes(params: BackprojectParams, ctx: StepContext, points_ply: Path 
 # ----------------------------------------------------------------------------- ground truth and evaluation
 @dataclass
 class TransferGtParams:
-    max_distance_m: float = param(0.5, gt=0)  # farther from any ground-truth face = unlabelled (255)
+    max_distance_m: float = param(0.5, gt=0,
+                                  help="Vertices farther than this (m) from any ground-truth face stay unlabelled "
+                                       "(255).")
 
 
 def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
@@ -698,18 +751,17 @@ def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh
     import numpy as np
 
     from twinkit.cityscapes import IGNORE
-    from twinkit.mesh import read_mesh
     from twinkit.street.truth import transfer_labels
     from twinkit_segmentation.segmesh import face_labels, vertex_labels, write_labels_ply
 
-    gt = read_mesh(in_gt_mesh_ply)
+    gt = A.read_gt_mesh(in_gt_mesh_ply)
     if face_labels(gt) is None and vertex_labels(gt) is None:
         raise InputError(f"{in_gt_mesh_ply}: no 'label' property on faces or vertices")
-    mesh = read_mesh(in_textured_mesh_ply)
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     labels, dist = transfer_labels(gt.vertices, gt.faces, mesh.vertices, face_labels=face_labels(gt),
                                    vertex_labels=vertex_labels(gt))
     labels[dist > params.max_distance_m] = IGNORE
-    np.save(out_gt_labels_npy, labels)
+    A.write_labels(out_gt_labels_npy, labels)
     write_labels_ply(out_gt_labels_ply, mesh, labels, comment="ground truth transferred from the nearest gt face")
     return {"vertices": int(len(labels)), "mean_distance_m": float(dist.mean()),
             "unlabelled": int((labels == IGNORE).sum()),
@@ -718,7 +770,9 @@ def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh
 
 @dataclass
 class EvaluateParams:
-    classes: List[int] = param(default_factory=list, ge=0, le=255)  # trainIds to average over; empty = those in the ground truth
+    classes: List[int] = param(default_factory=list, ge=0, le=255,
+                               help="trainIds to average the scores over; empty = those present in the ground "
+                                    "truth.")
 
 
 def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels_npy: Path, in_gt_labels_npy: Path,
@@ -729,7 +783,7 @@ def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels
 
     from twinkit_segmentation.metrics import majority_labels, markdown_table, scores
 
-    pred, gt = np.load(in_labels_npy), np.load(in_gt_labels_npy)
+    pred, gt = A.read_labels(in_labels_npy), A.read_labels(in_gt_labels_npy)
     if len(pred) != len(gt):
         raise InputError(f"{in_labels_npy.name} has {len(pred)} vertices but {in_gt_labels_npy.name} has {len(gt)}")
     res = scores(pred, gt, list(params.classes) or None)
@@ -737,7 +791,7 @@ def evaluate_segmentation(params: EvaluateParams, ctx: StepContext, *, in_labels
     if in_segments_npy is not None:
         upper = scores(majority_labels(np.load(in_segments_npy), gt), gt, res["classes"])
     out_seg_metrics_json.write_text(json.dumps({"scores": res, "upper_bound": upper}, indent=1))
-    md = [f"# Segmentation vs ground truth\n", f"mIoU **{res['miou']:.1f}**, mF1 **{res['mf1']:.1f}**, "
+    md = ["# Segmentation vs ground truth\n", f"mIoU **{res['miou']:.1f}**, mF1 **{res['mf1']:.1f}**, "
           f"accuracy {res['accuracy']:.1f} %, labelled {100 * res['labelled_fraction']:.1f} % of vertices"]
     if upper:
         md.append(f"; over-segmentation upper bound mIoU {upper['miou']:.1f}")
@@ -762,9 +816,7 @@ def import_labels(params: ImportLabelsParams, ctx: StepContext, *, in_labels_ply
                   in_textured_mesh_ply: Path | None = None, out_labels_npy: Path,
                   out_label_changes_json: Path) -> dict:
     """Read a repainted labels.ply back (nearest palette colour -> class); labels.npy for later steps."""
-    import numpy as np
-
-    before = np.load(in_labels_npy)
+    before = A.read_labels(in_labels_npy)
     after = read_repainted(in_labels_ply, len(before), reference_ply=in_textured_mesh_ply)
     changed = before != after
     per = {}
@@ -774,7 +826,7 @@ def import_labels(params: ImportLabelsParams, ctx: StepContext, *, in_labels_ply
     for a, b in zip(before[changed].tolist(), after[changed].tolist()):
         key = f"{name(a)} -> {name(b)}"
         per[key] = per.get(key, 0) + 1
-    np.save(out_labels_npy, after)
+    A.write_labels(out_labels_npy, after)
     out_label_changes_json.write_text(json.dumps({"changed": int(changed.sum()), "transitions": per}, indent=1))
     ctx.log.info("%d vertices changed by hand", int(changed.sum()))
     return {"changed": int(changed.sum())}
@@ -794,7 +846,7 @@ def read_repainted(path: Path, n_vertices: int, reference_ply: Path | None = Non
                          f"no merge/split), or export again")
     ref = vertices
     if ref is None and reference_ply is not None:
-        ref = read_mesh(reference_ply).vertices
+        ref = A.read_textured_mesh(reference_ply).vertices
     if ref is not None:
         moved = np.linalg.norm(m.vertices - ref, axis=1)
         if np.percentile(moved, 99) > 1e-3:

@@ -81,7 +81,8 @@ def write_scene(folder: Path, step=0.5):
     """textured_mesh.ply (+ .png) and gt_mesh.ply of :func:`street_scene` into ``folder``."""
     from PIL import Image
 
-    from twinkit.mesh import Mesh, write_ply
+    from twinkit.artefacts import write_gt_mesh, write_textured_mesh
+    from twinkit.mesh import Mesh
 
     folder.mkdir(parents=True, exist_ok=True)
     v, f, n, flab = street_scene(step)
@@ -101,11 +102,11 @@ def write_scene(folder: Path, step=0.5):
     vlab = np.zeros(len(v), np.uint8)
     vlab[f.reshape(-1)] = np.repeat(flab, 3)
     vcol = np.array([CLASS_RGB[int(c)] for c in vlab], np.uint8)
-    write_ply(folder / "textured_mesh.ply", Mesh(
+    write_textured_mesh(folder / "textured_mesh.ply", Mesh(
         vertices=v, faces=f, attrs={"normals": n, "colors": vcol},
         face_attrs={"texcoord": uv.reshape(-1, 6)}, comments=["TextureFile textured_mesh.png"]))
-    write_ply(folder / "gt_mesh.ply", Mesh(vertices=v, faces=f, attrs={"label": vlab},
-                                           face_attrs={"label": np.asarray(flab, np.uint8)}))
+    write_gt_mesh(folder / "gt_mesh.ply", Mesh(vertices=v, faces=f, attrs={"label": vlab},
+                                               face_attrs={"label": np.asarray(flab, np.uint8)}))
     return folder / "textured_mesh.ply", folder / "gt_mesh.ply", vlab
 
 

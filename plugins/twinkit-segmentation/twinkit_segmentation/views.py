@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import List
 
@@ -25,10 +25,10 @@ from twinkit.ranges import param
 
 @dataclass
 class CameraParams:
-    width_px: int = param(1024, ge=16, le=16384)
-    height_px: int = param(512, ge=16, le=16384)
-    hfov_deg: float = param(75.0, gt=0, lt=180)
-    pitch_deg: float = param(-8.0, ge=-90, le=90)
+    width_px: int = param(1024, ge=16, le=16384, help="Width of each rendered view (px).")
+    height_px: int = param(512, ge=16, le=16384, help="Height of each rendered view (px).")
+    hfov_deg: float = param(75.0, gt=0, lt=180, help="Horizontal field of view of each view (degrees).")
+    pitch_deg: float = param(-8.0, ge=-90, le=90, help="Camera pitch (degrees; negative looks down).")
 
 
 class Scene:
@@ -124,10 +124,14 @@ def _thin(points: np.ndarray, min_dist: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- uniform
 @dataclass
 class UniformParams(CameraParams):
-    spacing_m: float = param(4.0, gt=0)
-    heights_m: List[float] = param(default_factory=lambda: [2.0], gt=0)  # above the lowest ground level
-    headings: int = param(8, ge=1, le=360)
-    margin_m: float = param(2.0, ge=0)
+    spacing_m: float = param(4.0, gt=0,
+                             help="Spacing (m) of the grid of camera positions over the mesh's bounding box.")
+    heights_m: List[float] = param(default_factory=lambda: [2.0], gt=0,
+                                   help="Camera heights (m) above the lowest ground level (the 2nd percentile of "
+                                        "vertex z).")
+    headings: int = param(8, ge=1, le=360,
+                          help="Viewing directions at each position, evenly spread around the circle.")
+    margin_m: float = param(2.0, ge=0, help="Keep camera positions this far (m) inside the mesh's bounding box.")
 
 
 class UniformSampler:
@@ -150,10 +154,13 @@ class UniformSampler:
 # ----------------------------------------------------------------------------- random
 @dataclass
 class RandomParams(CameraParams):
-    n_views: int = param(300, ge=1)
-    offset_min_m: float = param(2.0, ge=0)
-    offset_max_m: float = param(6.0, gt=0)
-    seed: int = param(0, ge=0)
+    n_views: int = param(300, ge=1, help="Number of random views.")
+    offset_min_m: float = param(2.0, ge=0,
+                                help="Each camera stands between offset_min_m and offset_max_m (m) off a random "
+                                     "vertex along its normal, looking back at it.")
+    offset_max_m: float = param(6.0, gt=0,
+                                help="Upper end (m) of the random distance from the vertex (see offset_min_m).")
+    seed: int = param(0, ge=0, help="Random seed (the same seed gives the same views).")
 
 
 class RandomSampler:
@@ -189,9 +196,13 @@ class RandomSampler:
 # ----------------------------------------------------------------------------- street points (file)
 @dataclass
 class StreetPointsParams(CameraParams):
-    points_file: str = ""  # CloudCompare point list ("x y z" per line); empty = the step's street_points.txt
-    heights_m: List[float] = param(default_factory=lambda: [1.5, 3.0, 4.5], gt=0)
-    headings: int = param(8, ge=1, le=360)
+    points_file: str = param("",
+                             help='A CloudCompare point list ("x y z" per line) of camera positions; empty = the '
+                                  "step's street_points.txt.")
+    heights_m: List[float] = param(default_factory=lambda: [1.5, 3.0, 4.5], gt=0,
+                                   help="Camera heights (m) above each listed point.")
+    headings: int = param(8, ge=1, le=360,
+                          help="Viewing directions at each position, evenly spread around the circle.")
 
 
 def read_point_list(path: Path) -> np.ndarray:
@@ -270,17 +281,31 @@ def cap_views(views: list[dict], max_views: int) -> list[dict]:
 # ----------------------------------------------------------------------------- automatic street points
 @dataclass
 class AutoStreetParams(CameraParams):
-    spacing_m: float = param(6.0, gt=0)  # between camera positions along roads / on the ground grid
-    heights_m: List[float] = param(default_factory=lambda: [1.5, 3.0, 4.5], gt=0)
-    headings: int = param(8, ge=1, le=360)
-    use_roads: bool = True  # use the road network (roads.osm) when available
-    min_clearance_m: float = param(1.0, ge=0)  # free space around a camera position (horizontal rays at 1.5 m)
-    min_headroom_m: float = param(5.0, ge=0)  # nothing overhead (trees, roofs) within this height
-    max_ground_step_m: float = param(0.35, ge=0)  # ground points higher than the lowest ground level + this are not street
-    # an aerial capture (twinkit.surface.density: few points on walls) has walls Poisson drew between roof and
-    # ground: the street-level heights look along the ground; these higher, steeper views see roofs and ground
-    aerial_heights_m: List[float] = param(default_factory=lambda: [3.0, 6.0, 10.0], gt=0)
-    aerial_pitch_deg: float = param(-20.0, ge=-90, le=90)
+    spacing_m: float = param(6.0, gt=0,
+                             help="Distance (m) between camera positions along the roads, or on the ground grid "
+                                  "without roads.")
+    heights_m: List[float] = param(default_factory=lambda: [1.5, 3.0, 4.5], gt=0,
+                                   help="Camera heights (m) above the street at each position.")
+    headings: int = param(8, ge=1, le=360,
+                          help="Viewing directions at each position, evenly spread around the circle.")
+    use_roads: bool = param(True,
+                            help="Place cameras along the road network (roads.osm) when the run has one; otherwise "
+                                 "on a grid over the ground.")
+    min_clearance_m: float = param(1.0, ge=0,
+                                   help="Free space (m) a camera position needs around it (tested with horizontal "
+                                        "rays at 1.5 m).")
+    min_headroom_m: float = param(5.0, ge=0,
+                                  help="Nothing (trees, roofs) may hang over a camera position within this height "
+                                       "(m).")
+    max_ground_step_m: float = param(0.35, ge=0,
+                                     help="Ground higher than the lowest ground level + this (m) is not street.")
+    aerial_heights_m: List[float] = param(default_factory=lambda: [3.0, 6.0, 10.0], gt=0,
+                                          help="Camera heights (m) for an aerial capture (few points on walls, see "
+                                               "twinkit.surface.density), used instead of heights_m: higher, "
+                                               "steeper views see roofs and ground rather than the walls Poisson "
+                                               "drew between them.")
+    aerial_pitch_deg: float = param(-20.0, ge=-90, le=90,
+                                    help="Camera pitch (degrees) for an aerial capture, used instead of pitch_deg.")
 
 
 def osm_roads_local(path: Path, site: dict) -> list[np.ndarray]:
@@ -385,11 +410,17 @@ class AutoStreetSampler:
 # ----------------------------------------------------------------------------- combined
 @dataclass
 class CombinedParams:
-    use: List[str] = field(default_factory=lambda: ["auto_street", "uniform", "random"])
-    auto_street: AutoStreetParams = field(default_factory=AutoStreetParams)
-    street_points: StreetPointsParams = field(default_factory=StreetPointsParams)
-    uniform: UniformParams = field(default_factory=UniformParams)
-    random: RandomParams = field(default_factory=RandomParams)
+    use: List[str] = param(default_factory=lambda: ["auto_street", "uniform", "random"], free=True,
+                           help="The samplers whose views are combined (of auto_street, street_points, "
+                                "uniform, random).")
+    auto_street: AutoStreetParams = param(default_factory=AutoStreetParams, free=True,
+                                          help="Options of the auto_street sampler when it is in use.")
+    street_points: StreetPointsParams = param(default_factory=StreetPointsParams, free=True,
+                                              help="Options of the street_points sampler when it is in use.")
+    uniform: UniformParams = param(default_factory=UniformParams, free=True,
+                                   help="Options of the uniform sampler when it is in use.")
+    random: RandomParams = param(default_factory=RandomParams, free=True,
+                                 help="Options of the random sampler when it is in use.")
 
 
 SAMPLERS = {

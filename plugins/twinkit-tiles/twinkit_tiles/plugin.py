@@ -11,10 +11,11 @@ Heavy libraries are imported inside the functions only.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import List, Optional
 
+from twinkit import artefacts as A
 from twinkit import hookimpl
 from twinkit.ranges import param
 
@@ -25,64 +26,119 @@ from .report import twinkit_register_report_sections  # noqa: F401 (this plugin'
 class PlanTilesParams:
     """How the site is cut into tiles."""
 
-    tile_m: float = param(0.0, ge=0)  # core size of a tile (metres); 0 = automatic from memory_budget_gb and the point density
-    overlap_m: float = param(2.0, ge=0)  # each tile also reconstructs this much of its neighbours (guides the cut only)
-    memory_budget_gb: float = param(4.0, gt=0)  # automatic tile size: predicted peak memory of one tile stays below this
-    voxel_m: float = param(0.03, gt=0)  # finest Poisson voxel of every tile (passed to reconstruct_tile in tiles.json)
-    max_tiles: int = param(256, ge=1)  # refuse a plan with more tiles than this
-    seam_search_m: float = param(1.0, ge=0)  # move each seam by up to this to where the fewest upright surfaces (poles,
-    #                              trunks, crowns, cars) cross it; 0 = evenly spaced seams
-    target_faces: int = param(0, ge=0)  # > 0: each tile is simplified after its cut to its share of this many faces
-    #                        (shared by the points in its core; seam borders are kept), which bounds
-    #                        the memory of the merge and of the steps after it; 0 = full resolution
+    tile_m: float = param(0.0, ge=0,
+                          help="Core size of a tile (m); 0 = automatic, from memory_budget_gb and the point "
+                               "density.")
+    overlap_m: float = param(2.0, ge=0,
+                             help="Each tile also reconstructs this much (m) of its neighbours; the overlap only "
+                                  "guides the cut and is removed after it.")
+    memory_budget_gb: float = param(4.0, gt=0,
+                                    help="Automatic tile size: the predicted peak memory of one tile (GB) stays "
+                                         "below this. Lower it on small machines or with many workers.")
+    voxel_m: float = param(0.03, gt=0,
+                           help="Finest Poisson voxel (m) of every tile (passed to reconstruct_tile through "
+                                "tiles.json).")
+    max_tiles: int = param(256, ge=1,
+                           help="Refuse a plan with more tiles than this (guards against a tiny tile_m or a wrong "
+                                "unit).")
+    seam_search_m: float = param(1.0, ge=0,
+                                 help="Move each seam by up to this (m) to where the fewest upright surfaces "
+                                      "(poles, trunks, crowns, cars) cross it; 0 = evenly spaced seams.")
+    target_faces: int = param(0, ge=0,
+                              help="> 0: simplify each tile after its cut to its share (by the points in its core) "
+                                   "of this many faces, keeping seam borders; this bounds the memory of the merge "
+                                   "and of the steps after it. 0 = full resolution.")
 
 
 @dataclass
 class ReconstructTileParams:
     """Poisson + clean-up of one padded tile, then the exact cut to its core."""
 
-    point_weight: float = param(4.0, ge=0)
-    samples_per_node: float = param(1.5, ge=1, le=100)
-    max_dist_m: float = param(0.10, ge=0)  # trim vertices farther than this from every point of the tile ("bubbles")
-    gap_dist_m: float = param(0.5, ge=0)  # ... but keep those up to this far on the points' tangent planes (clean_mesh's gap rule)
-    gap_plane_m: float = param(0.02, ge=0)
-    density_quantile: float = param(0.0, ge=0, lt=1)  # trim vertices below this quantile of Poisson density; 0 = off
-    min_component_faces: int = param(200, ge=0)  # drop smaller connected components (judged on the padded tile)
-    max_hole_edges: int = param(60, ge=0)  # close holes up to this many edges (before the cut, so no cap on a seam)
-    threads: int = param(1, ge=0)  # threads per tile (1 = parallelism comes from the workers); 0 = all the step may use
-    seam_band_m: float = param(1.0, ge=0)  # within this of an interior seam the tile trims only loosely (seam_loose_dist_m);
-    seam_loose_dist_m: float = param(1.0, ge=0)  # merge_tiles then applies the trim above once, to both sides; 0 = off
+    point_weight: float = param(4.0, ge=0,
+                                help="Poisson screening weight: higher follows the points more closely, lower is "
+                                     "smoother.")
+    samples_per_node: float = param(1.5, ge=1, le=100,
+                                    help="Poisson: minimum number of points per octree node (higher = smoother on "
+                                         "noisy clouds).")
+    max_dist_m: float = param(0.10, ge=0,
+                              help='Trim vertices farther than this (m) from every point of the tile ("bubbles").')
+    gap_dist_m: float = param(0.5, ge=0,
+                              help="Exception to max_dist_m: keep vertices up to this far (m) that lie on the "
+                                   "points' tangent planes (clean_mesh's gap rule); 0 = off.")
+    gap_plane_m: float = param(0.02, ge=0,
+                               help='What "on the tangent planes" means for gap_dist_m: median distance (m) to the '
+                                    "tangent planes of the nearest points at most this.")
+    density_quantile: float = param(0.0, ge=0, lt=1,
+                                    help="Trim vertices below this quantile of the Poisson density; 0 = off.")
+    min_component_faces: int = param(200, ge=0,
+                                     help="Drop connected components with fewer faces than this (judged on the "
+                                          "padded tile).")
+    max_hole_edges: int = param(60, ge=0,
+                                help="Close holes with up to this many boundary edges (before the cut, so no cap is "
+                                     "put on a seam).")
+    threads: int = param(1, ge=0,
+                         help="Threads per tile: 1 = the parallelism comes from the workers; 0 = all the threads "
+                              "the step may use.")
+    seam_band_m: float = param(1.0, ge=0,
+                               help="Within this distance (m) of an interior seam the tile trims only loosely "
+                                    "(seam_loose_dist_m); merge_tiles then trims that band once, for both sides. 0 "
+                                    "= off.")
+    seam_loose_dist_m: float = param(1.0, ge=0,
+                                     help="The loose trim distance (m) used inside seam_band_m (never below "
+                                          "max_dist_m); 0 = off.")
 
 
 @dataclass
 class MergeTilesParams:
     """Stitching of the tiles into one mesh."""
 
-    max_gap_m: float = param(0.10, ge=0)  # borders farther apart than this are not stitched (counted as open)
-    seam_tol_m: float = param(0.001, ge=0)  # an edge within this of a seam plane counts as a seam edge in the statistics
-    max_hole_edges: int = param(120, ge=0)  # after stitching, fill loops up to this many edges that touch a seam; 0 = off
-    vote_reach_m: float = param(0.15, ge=0)  # the seam-band trim asks each tile's full-resolution surface: the tile's nearest
-    #                             vote within this (and within vote_plane_m of its tangent plane) is that tile's
-    #                             verdict; a vertex is kept when some tile's verdict is "keep", dropped when every
-    #                             tile's is "drop", and judged on its own only where no tile voted; 0 = off
-    vote_plane_m: float = param(0.05, ge=0)  # a vote counts for vertices this close to its tangent plane (not a bubble above)
-    drop_hanging_faces: bool = True  # after the trim near the seams, remove a face left on a seam edge whose
-    #                                  other side the trim removed, so that the trim's boundary crosses the seam
-    #                                  instead of running along it (docs/tiles.md)
-    vote_radius_m: float = param(0.0, ge=0)  # also keep a vertex with any "keep" vote this close (the seventh session's rule:
-    #                             0.05 there; wider radii keep surface the trim would drop, docs/tiles.md)
-    line_band_m: float = param(0.05, ge=0)  # open border within this of the seams vs. of control lines (tile_seams.json)
-    fill_ground_cell_m: float = param(0.10, ge=0)  # fill the ground's occlusion shadows on the merged mesh (clean_mesh's
-    fill_ground_max_gap_m: float = param(8.0, ge=0)  # ground fill, over the whole site at once so it has no tile edges); 0 = off
+    max_gap_m: float = param(0.10, ge=0,
+                             help="Tile borders farther apart than this (m) are not stitched; they are counted as "
+                                  "open.")
+    seam_tol_m: float = param(0.001, ge=0,
+                              help="An edge within this distance (m) of a seam plane counts as a seam edge in the "
+                                   "statistics.")
+    max_hole_edges: int = param(120, ge=0,
+                                help="After stitching, fill loops that touch a seam with up to this many edges; 0 = "
+                                     "off.")
+    vote_reach_m: float = param(0.15, ge=0,
+                                help="The seam-band trim asks each tile's full-resolution surface: the tile's "
+                                     "nearest vote within this distance (m), and within vote_plane_m of its tangent "
+                                     "plane, is that tile's verdict. A vertex is kept when some tile says \"keep\", "
+                                     'dropped when every tile says "drop", and judged on its own where no tile '
+                                     "voted. 0 = off.")
+    vote_plane_m: float = param(0.05, ge=0,
+                                help="A vote counts only for vertices this close (m) to its tangent plane (not for "
+                                     "a bubble above it).")
+    drop_hanging_faces: bool = param(True,
+                                     help="After the seam-band trim, remove a face left on a seam edge whose other "
+                                          "side was trimmed, so the trim's boundary crosses the seam instead of "
+                                          "running along it (docs/tiles.md).")
+    vote_radius_m: float = param(0.0, ge=0,
+                                 help='Also keep a vertex that has any "keep" vote this close (m); 0 = off. Wider '
+                                      "radii keep surface the trim would drop (docs/tiles.md).")
+    line_band_m: float = param(0.05, ge=0,
+                               help="Open borders within this distance (m) of the seams, and of the control lines, "
+                                    "are counted separately in tile_seams.json.")
+    fill_ground_cell_m: float = param(0.10, ge=0,
+                                      help="Fill the ground's occlusion shadows on the merged mesh on a grid of "
+                                           "this cell size (m), over the whole site at once so the fill has no tile "
+                                           "edges (clean_mesh's ground fill); 0 = off.")
+    fill_ground_max_gap_m: float = param(8.0, ge=0,
+                                         help="Fill a ground shadow only where ground lies on both sides of it at "
+                                              "most this far apart (m).")
 
 
 @dataclass
 class EvaluateSeamLabelsParams:
     """Label agreement across the seams of a tiled, segmented mesh."""
 
-    band_m: float = param(1.0, gt=0)  # accuracy within this of a seam vs. farther away (with ground truth)
-    planes: List[str] = field(default_factory=list)  # e.g. ["x=-10", "y=10"]: check these planes instead of
-    #                                                  tiles.json's seams (the same lines on an untiled run)
+    band_m: float = param(1.0, gt=0,
+                          help="Label accuracy within this distance (m) of a seam is compared with the accuracy "
+                               "farther away (needs ground truth).")
+    planes: List[str] = param(default_factory=list, free=True,
+                              help="Check these planes instead of tiles.json's seams, e.g. [\"x=-10\", \"y=10\"] (the "
+                                   "same lines on an untiled run); empty = the seams.")
 
 
 _SLURM_WORD = dict(pattern=r"[\w.:@+-]*", words="letters, digits and . : @ + - only (it is written into the SLURM job script)")
@@ -92,16 +148,24 @@ _SLURM_WORD = dict(pattern=r"[\w.:@+-]*", words="letters, digits and . : @ + - o
 class DaskExecutorParams:
     """Run fanned-out items on a Dask distributed cluster."""
 
-    address: Optional[str] = None  # tcp://host:8786 of an existing scheduler; null = start a local cluster
-    n_workers: int = param(2, ge=1)  # worker processes of the local cluster (or SLURM jobs)
-    threads_per_worker: int = param(1, ge=1)
-    memory_limit: str = param("auto", **_SLURM_WORD)  # per worker, e.g. 6GiB; auto = RAM / n_workers; 0 = no limit
-    cluster: str = param("local", choices=("local", "slurm"))  # local | slurm (dask-jobqueue; used when address is null)
-    slurm_queue: str = param("", **_SLURM_WORD)
-    slurm_cores: int = param(4, ge=1)
-    slurm_memory: str = param("16GB", **_SLURM_WORD)
-    slurm_walltime: str = param("02:00:00", **_SLURM_WORD)
-    slurm_account: str = param("", **_SLURM_WORD)
+    address: Optional[str] = param(None, free=True,
+                                   help="Address of an existing Dask scheduler (e.g. tcp://host:8786); null = start "
+                                        "a cluster (see cluster).")
+    n_workers: int = param(2, ge=1, help="Worker processes of the local cluster, or SLURM jobs with cluster=slurm.")
+    threads_per_worker: int = param(1, ge=1, help="Threads of each worker process.")
+    memory_limit: str = param("auto", **_SLURM_WORD,
+                              help="Memory limit per worker, e.g. 6GiB; auto = the machine's RAM / n_workers; 0 = "
+                                   "no limit.")
+    cluster: str = param("local", choices=("local", "slurm"),
+                         help="Which cluster to start when address is null: local processes, or SLURM jobs (needs "
+                              "dask-jobqueue).")
+    slurm_queue: str = param("", **_SLURM_WORD,
+                             help="cluster=slurm: the partition (queue) to submit to; empty = the site's default.")
+    slurm_cores: int = param(4, ge=1, help="cluster=slurm: cores of each job.")
+    slurm_memory: str = param("16GB", **_SLURM_WORD, help="cluster=slurm: memory of each job, e.g. 16GB.")
+    slurm_walltime: str = param("02:00:00", **_SLURM_WORD,
+                                help="cluster=slurm: wall-time limit of each job (HH:MM:SS).")
+    slurm_account: str = param("", **_SLURM_WORD, help="cluster=slurm: the account to charge; empty = the default.")
 
 
 # ----------------------------------------------------------------------------- steps
@@ -116,7 +180,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
                out_tile_points_dir: Path) -> dict:
     """Split the site into overlapping XY tiles; write one point chunk per padded tile and tiles.json."""
     import numpy as np
-    from twinkit.mesh import Mesh, read_ply, write_ply
+    from twinkit.mesh import Mesh, write_ply
     from twinkit.surface.measure import Measure
 
     from .tiling import choose_grid, estimate_tile_mb, in_box
@@ -127,10 +191,7 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
     if params.overlap_m < 0:
         raise _input_error(f"plan_tiles: overlap_m must be >= 0 (got {params.overlap_m})")
     with Measure() as meas:
-        try:
-            cloud = read_ply(in_points_ply)
-        except Exception as exc:
-            raise _input_error(f"{Path(in_points_ply).name}: cannot read the points ({exc}); re-run read_cloud") from exc
+        cloud = A.read_points(in_points_ply)
         if cloud.n_vertices < 10:
             raise _input_error(f"{Path(in_points_ply).name}: too few points ({cloud.n_vertices}) to tile")
         if cloud.normals is None:
@@ -276,7 +337,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                 out_clean_mesh_ply: Path, out_tile_seams_json: Path, in_seam_votes_npz: list | None = None) -> dict:
     """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
     import numpy as np
-    from twinkit.mesh import read_ply, write_ply
+    from twinkit.mesh import read_ply
     from twinkit.surface.measure import Measure
 
     from .edges import edge_counts, seam_planes
@@ -318,7 +379,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         band_rep = None
         cloud = None
         if trim.get("seam_band_m", 0) > 0:
-            cloud = _read_points(in_points_ply)
+            cloud = A.read_points(in_points_ply)
             threads = max(1, int(getattr(ctx, "threads", 1) or 1))
             votes = _read_votes(in_seam_votes_npz) if params.vote_radius_m > 0 or params.vote_reach_m > 0 else None
             merged, band_rep = trim_seam_bands(
@@ -361,7 +422,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
             from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
 
             if cloud is None:
-                cloud = _read_points(in_points_ply)
+                cloud = A.read_points(in_points_ply)
             if cloud.normals is not None:
                 threads = max(1, int(getattr(ctx, "threads", 1) or 1))
                 merged, ground = fill_ground_holes(merged, cloud.vertices, cloud.normals, cloud.colors,
@@ -371,7 +432,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
                 ctx.log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled",
                              ground.get("filled_cells", 0), ground.get("area_m2", 0.0))
         if cloud is None:
-            cloud = _read_points(in_points_ply)
+            cloud = A.read_points(in_points_ply)
         from twinkit.surface.watertight import ground_border_report
 
         # the merged mesh's open border at ground level, inside the site and on its edge (picture beside)
@@ -388,7 +449,7 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         near_lines = open_near_line_sets(merged, {"seams": planes, "controls": controls}, params.line_band_m)
         near_lines["control_planes"] = [["xyz"[a], round(v, 4)] for a, v in controls]
         merged.comments = [f"twinkit-tiles merge of {len(keep)} tiles"]
-        write_ply(out_clean_mesh_ply, merged)
+        A.write_clean_mesh(out_clean_mesh_ply, merged)
         report = {
             "tiles": len(tiles), "tiles_with_faces": len(keep), "planes": [["xyz"[a], v] for a, v in planes],
             "seam_boundary_edges_before": before, "seam_boundary_edges_after_zipper": after_zipper,
@@ -431,9 +492,6 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
     """Do the semantic labels change where the tiles meet? Label changes along mesh edges crossing the
     seam planes vs. crossing control planes through the tiles' interiors (and, with ground truth, the
     changes the ground truth does not have; accuracy near the seams vs. elsewhere) -> seam_labels.json."""
-    import numpy as np
-    from twinkit.mesh import read_ply
-
     from .seam_labels import seam_label_stats
     from .edges import seam_planes
 
@@ -447,9 +505,9 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
                 planes.append(("xy".index(axis), float(val)))
             except ValueError:
                 raise _input_error(f"evaluate_seam_labels.planes: {text!r} is not like 'x=-10' or 'y=12.5'") from None
-    mesh = read_ply(in_textured_mesh_ply)
-    labels = np.load(in_labels_npy)
-    gt = np.load(in_gt_labels_npy) if in_gt_labels_npy is not None else None
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    labels = A.read_labels(in_labels_npy)
+    gt = A.read_labels(in_gt_labels_npy) if in_gt_labels_npy is not None else None
     for name, arr in (("labels", labels), ("ground truth", gt)):
         if arr is not None and len(arr) != mesh.n_vertices:
             raise _input_error(f"{Path(in_textured_mesh_ply).name} has {mesh.n_vertices} vertices but the {name} "
@@ -486,15 +544,6 @@ def _read_votes(paths):
             raise _input_error(f"{p}: cannot read the tile's seam votes ({exc}); re-run reconstruct_tiles "
                                f"(twinkit ... 'rerun=[reconstruct_tiles]')") from exc
     return np.vstack(out) if out else None
-
-
-def _read_points(path: Path):
-    from twinkit.mesh import read_ply
-
-    try:
-        return read_ply(path)
-    except Exception as exc:
-        raise _input_error(f"{Path(path).name}: cannot read the points ({exc}); re-run read_cloud") from exc
 
 
 def _tile_trim(comments: list) -> dict:
