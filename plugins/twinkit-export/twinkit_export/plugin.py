@@ -288,7 +288,7 @@ def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path
         tex = out.with_suffix(cs.texture.suffix)
         _link_or_copy(cs.texture, tex)
         tex_name = tex.name
-    from .lift_step import load_actors
+    from .movables.actors import load_actors
 
     _, movables = load_actors(in_movables_dir)  # lifted objects: /Site/Movables/<Name>, no collider
     stats = write_usd(cs.meshes, tex_name, out, _georef(ctx, in_site_json),
@@ -391,7 +391,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     work = Path(ctx.workdir) / "carla_frame_meshes"
     class_dir = package_class_dir(frame, cs, tex, work)
     from .carla_actors import carla_actors, scanned_props, write_actor_files
-    from .lift_step import load_actors
+    from .movables.actors import load_actors
 
     mov_data, movables = load_actors(in_movables_dir)
     scanned = scanned_props(movables, map_name, frame, work / "scanned", tex.name if tex else None)
@@ -444,7 +444,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     from .carla_contract import check_package
     from .carla_pkg import NO_MAP_NOTE, PackageError, check_names, write_package
     from .fbx import FbxExportError, bpy_python
-    from .lift_step import load_actors
+    from .movables.actors import load_actors
 
     site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
     map_name = params.map_name or _camel(site_name)

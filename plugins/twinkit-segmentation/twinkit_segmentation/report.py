@@ -188,6 +188,6 @@ def sec_seg_metrics(ctx) -> str:
             parts.append(ctx.table(["class"] + cols, rows))
         md = f.with_suffix(".md")
         if tables and md.is_file():
-            parts.append(f"<p class=\"dim\">also as text: <a href=\"{ctx.href(md)}\">"
-                         f"{ctx.esc(s.get('folder'))}/{ctx.esc(md.name)}</a></p>")
+            name = f"{s.get('folder')}/{md.name}"
+            parts.append(f"<p class=\"dim\">also as text: {ctx.link(ctx.href(md), name)}</p>")
     return "".join(parts)

@@ -38,7 +38,8 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     within ``hanging_tol_m`` of a plane is on it), so that the trim's boundary crosses a seam and
     never runs along it."""
     from scipy.spatial import cKDTree
-    from twinkit.mesh import boundary_loops, components, fan_fill, remove_vertices
+    from twinkit.mesh import boundary_loops, components, remove_vertices
+    from twinkit.street.holes import fan_fill
     from twinkit.surface.cleanup import CleanOptions, trim_mask, vertex_cloud_distance
 
     rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "vertices_kept_by_votes": 0,
