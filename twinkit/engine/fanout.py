@@ -65,14 +65,7 @@ class FanoutMixin(EngineBase):
     def _run_fanout(self, ps, folder, key, desc, rec, in_paths, forced, desc0=None, index=None,
                     fields=()) -> StepOutcome:
         items_path = in_paths.pop("__foreach__")
-        try:
-            items = json.loads(Path(items_path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise InputError(f"{items_path}: the 'foreach' list of step '{ps.id}' is not readable JSON ({exc})") from None
-        if isinstance(items, dict) and "items" in items:
-            items = items["items"]
-        if not isinstance(items, list):
-            raise InputError(f"{items_path}: 'foreach' of step '{ps.id}' needs a JSON list (or {{\"items\": [...]}})")
+        items = _read_items(items_path, ps.id)
         # each item is keyed by its own content and the step's other inputs, not by the whole list,
         # so adding a tile computes only the new tile
         desc0 = desc if desc0 is None else desc0
@@ -81,62 +74,17 @@ class FanoutMixin(EngineBase):
         item_descs = [{"step": base, "item": it} for it in items]
         keys = [with_site(d, site, fields)[0] for d in item_descs]
         if rec is not None and rec.get("key") == key and "site_fields" in rec and not forced:
-            state, files = self._check_workspace(folder, rec)
-            if state in ("unchanged", "edited"):
-                outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
-                if state == "unchanged":
-                    hashes = rec["artefacts"]
-                else:
-                    hashes = {f: [artefact_hash(x, self.hashes) for x in paths] for f, paths in outputs.items()}
-                status = "reused" if state == "unchanged" else "edited"
-                return StepOutcome(ps.id, ps.folder, ps.label, status,
-                                   "unchanged" if state == "unchanged" else f"kept hand-edited {', '.join(files)}",
-                                   key, 0.0, outputs, hashes, rec.get("metrics", {}))
+            kept = self._fanout_kept(ps, folder, key, rec, len(items))
+            if kept is not None:
+                return kept
         why = "forced by rerun" if forced else self._why(rec, desc)
-        todo = [i for i, k in enumerate(keys) if forced or self._store_valid(k) is None]
-        # items that say what they cost ("cost": any number) start costliest first, so that a big
-        # item does not start last and leave the other workers idle (results are keyed, not ordered)
-        todo.sort(key=lambda i: -_item_cost(items[i]))
-        if todo:
-            self._share_threads()
-        tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
-                      store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
-                      item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path,
-                      key_descriptor=item_descs[i], fields=list(fields), index=index,
-                      run_pid=os.getpid(), threads=self.threads) for i in todo]
-        for t in tasks:
-            t["ctx_kwargs"].pop("log")
-        t0 = time.perf_counter()
-        if tasks:
-            log.debug("  %s: running %s on %d of %d items ...", ps.folder, ps.label, len(tasks), len(items))
-            ex = self._executor()
-            results = ex.map(_run_item_task, tasks)
-            try:
-                for i, res in zip(todo, _track(results, len(tasks), ps.id)):
-                    if isinstance(res, dict) and res.get("key"):
-                        keys[i] = res["key"]  # an item that read a new site field is stored under the key with it
-            except BrokenProcessPool as exc:
-                from twinkit.engine.isolate import NativeCrash
-
-                raise NativeCrash("a worker process died while running its items (a crash in native code, or "
-                                  "killed: out of memory?); the Python stack of a crash, where known, is in the "
-                                  "run log") from exc
-        duration = time.perf_counter() - t0
+        n_computed, duration = self._compute_items(ps, in_paths, items, keys, item_descs, forced, index, fields)
         read = sorted(set(fields).union(*[(read_record(self.store / k) or {}).get("site_fields") or [] for k in keys]))
         if read != sorted(fields):
             key, desc = with_site(desc0, site, read)
-        stored: list[Any] = [read_record(self.store / k) for k in keys]  # each item's record, just written
-        item_files: dict[str, Any] = {}
-        for i, r in enumerate(stored):
-            for rel, info in r["files"].items():
-                if rel != RECORD:
-                    item_files[f"{i:03d}/{rel}"] = info
-        artefacts = {p.filename: [r["artefacts"][p.filename] for r in stored] for p in ps.outputs}
-        metrics = {"items": len(items), "computed": len(tasks),
-                   "per_item": [r.get("metrics", {}) | {"peak_rss_mb": r.get("peak_rss_mb"), "start_rss_mb": r.get("start_rss_mb"),
-                                                        "duration_s": r.get("duration_s")} for r in stored]}
-        status = "ran" if tasks else "cached"
-        record = self._workspace_record(ps, key, desc, {"files": item_files, "artefacts": artefacts, "metrics": metrics,
+        files, artefacts, metrics = self._fanout_results(ps, keys, len(items), n_computed)
+        status = "ran" if n_computed else "cached"
+        record = self._workspace_record(ps, key, desc, {"files": files, "artefacts": artefacts, "metrics": metrics,
                                                         "duration_s": round(duration, 3), "site_fields": read},
                                         status, why, in_paths)
         record["item_keys"] = keys
@@ -156,8 +104,87 @@ class FanoutMixin(EngineBase):
             finally:
                 self._fanout_retry = False
         outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
-        return StepOutcome(ps.id, ps.folder, ps.label, status, why + f" ({len(tasks)}/{len(items)} items computed)",
+        return StepOutcome(ps.id, ps.folder, ps.label, status, why + f" ({n_computed}/{len(items)} items computed)",
                            key, duration, outputs, artefacts, metrics)
+
+    def _fanout_kept(self, ps, folder, key, rec, n_items: int) -> StepOutcome | None:
+        """The outcome of a fan-out step whose workspace folder still holds its recorded items (reused) or
+        hand-edited ones (kept); None when it must run."""
+        state, files = self._check_workspace(folder, rec)
+        if state not in ("unchanged", "edited"):
+            return None
+        outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(n_items)] for p in ps.outputs}
+        if state == "unchanged":
+            hashes = rec["artefacts"]
+        else:
+            hashes = {f: [artefact_hash(x, self.hashes) for x in paths] for f, paths in outputs.items()}
+        status = "reused" if state == "unchanged" else "edited"
+        return StepOutcome(ps.id, ps.folder, ps.label, status,
+                           "unchanged" if state == "unchanged" else f"kept hand-edited {', '.join(files)}",
+                           key, 0.0, outputs, hashes, rec.get("metrics", {}))
+
+    def _compute_items(self, ps, in_paths, items: list, keys: list[str], item_descs: list[dict], forced, index,
+                       fields) -> tuple[int, float]:
+        """Compute the items not in the store (all when ``forced``) through the executor, costliest first;
+        ``keys`` is updated in place for items that read a new site field. Returns how many were computed and
+        the seconds that took."""
+        todo = [i for i, k in enumerate(keys) if forced or self._store_valid(k) is None]
+        # items that say what they cost ("cost": any number) start costliest first, so that a big
+        # item does not start last and leave the other workers idle (results are keyed, not ordered)
+        todo.sort(key=lambda i: -_item_cost(items[i]))
+        if todo:
+            self._share_threads()
+        tasks = [dict(run=ps.plugin.run, params=ps.params, inputs=in_paths, outputs=ps.outputs, key=keys[i],
+                      store=self.store, ctx_kwargs={**self._ctx_kwargs(ps), "log": None, "config": self.cfg},
+                      item=items[i], wants_item=True, force=forced, hash_db=self.hashes.db_path,
+                      key_descriptor=item_descs[i], fields=list(fields), index=index,
+                      run_pid=os.getpid(), threads=self.threads) for i in todo]
+        for t in tasks:
+            t["ctx_kwargs"].pop("log")
+        t0 = time.perf_counter()
+        if not tasks:
+            return 0, time.perf_counter() - t0
+        log.debug("  %s: running %s on %d of %d items ...", ps.folder, ps.label, len(tasks), len(items))
+        ex = self._executor()
+        results = ex.map(_run_item_task, tasks)
+        try:
+            for i, res in zip(todo, _track(results, len(tasks), ps.id)):
+                if isinstance(res, dict) and res.get("key"):
+                    keys[i] = res["key"]  # an item that read a new site field is stored under the key with it
+        except BrokenProcessPool as exc:
+            from twinkit.engine.isolate import NativeCrash
+
+            raise NativeCrash("a worker process died while running its items (a crash in native code, or "
+                              "killed: out of memory?); the Python stack of a crash, where known, is in the "
+                              "run log") from exc
+        return len(tasks), time.perf_counter() - t0
+
+    def _fanout_results(self, ps, keys: list[str], n_items: int, n_computed: int):
+        """The stored items' files (under their ``NNN/`` folders), artefact hashes per output and metrics."""
+        stored: list[Any] = [read_record(self.store / k) for k in keys]  # each item's record, just written
+        files: dict[str, Any] = {}
+        for i, r in enumerate(stored):
+            for rel, info in r["files"].items():
+                if rel != RECORD:
+                    files[f"{i:03d}/{rel}"] = info
+        artefacts = {p.filename: [r["artefacts"][p.filename] for r in stored] for p in ps.outputs}
+        metrics = {"items": n_items, "computed": n_computed,
+                   "per_item": [r.get("metrics", {}) | {"peak_rss_mb": r.get("peak_rss_mb"), "start_rss_mb": r.get("start_rss_mb"),
+                                                        "duration_s": r.get("duration_s")} for r in stored]}
+        return files, artefacts, metrics
+
+
+def _read_items(items_path, step_id: str) -> list:
+    """The ``foreach`` list of a step: a JSON list, or the ``items`` of a JSON object; InputError otherwise."""
+    try:
+        items = json.loads(Path(items_path).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(f"{items_path}: the 'foreach' list of step '{step_id}' is not readable JSON ({exc})") from None
+    if isinstance(items, dict) and "items" in items:
+        items = items["items"]
+    if not isinstance(items, list):
+        raise InputError(f"{items_path}: 'foreach' of step '{step_id}' needs a JSON list (or {{\"items\": [...]}})")
+    return items
 
 
 def _track(iterable, total, desc):

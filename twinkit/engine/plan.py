@@ -146,6 +146,75 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
     plugin, key or file at fault.
     """
     site = cfg.get("site") or {}
+    rname, specs = _recipe_specs(cfg)
+    st = _Planning(cfg=cfg, registry=registry, site=site, site_inputs=_site_inputs(site),
+                   given=cfg.get(GIVEN_KEY) or {}, site_name=site.get("name", "?"),
+                   base_dir=config_root or Path.cwd(), skipped=skipped, fallbacks=fallbacks)
+    plan: list[PlannedStep] = []
+    idx = 0
+    for spec in specs:
+        idx += 1
+        where = f"recipe '{rname}', step '{spec.id}'"
+        plugin: Plugin | None = None
+        params_obj: Any = None
+        params_dict: dict[str, Any] = {}
+        components: dict[str, Any] = {}
+        if spec.manual is not None:
+            signature = _manual_signature(spec, where)
+        else:
+            chosen = _bind_plugin(spec, where, st)
+            if chosen is None:  # '<kind>=none'
+                idx -= 1
+                continue
+            plugin, params_obj, params_dict, signature, components = chosen
+        inputs = _wire_inputs(spec, signature, where, st)
+        if inputs is None or _reads_nothing_that_runs(spec, signature, inputs, st):
+            idx -= 1
+            continue
+        unknown_wiring = set(spec.inputs) - {p.param for p in signature.inputs}
+        if unknown_wiring:
+            raise ConfigError(
+                f"{where}: 'inputs' names {sorted(unknown_wiring)}, but {plugin.qualname if plugin else 'the step'} "
+                f"reads only {[p.param for p in signature.inputs]}"
+            )
+        foreach_src = None
+        if spec.foreach:
+            fport = Port("foreach", str(spec.foreach).partition(".")[0], str(spec.foreach).partition(".")[2] or None)
+            foreach_src = _resolve_input(fport, spec.foreach, st.produced, st.site_inputs, st.site_name, where,
+                                         st.base_dir, False)
+            if not signature.wants_item:
+                raise ConfigError(f"{where}: 'foreach' needs a plugin whose run() takes an 'item' parameter")
+        ps = PlannedStep(idx, spec, plugin, params_obj, params_dict, signature, inputs, signature.outputs,
+                         components, foreach_src)
+        plan.append(ps)
+        for o in ps.outputs:
+            st.produced.append((o.filename, o.is_dir, idx))
+    return plan
+
+
+@dataclass
+class _Planning:
+    """What :func:`build_plan` knows while it walks the recipe's steps."""
+
+    cfg: dict
+    registry: Registry
+    site: dict
+    site_inputs: dict
+    given: dict  # the command line's params (GIVEN_KEY)
+    site_name: str
+    base_dir: Path
+    skipped: list[tuple[str, str]] | None
+    fallbacks: list[tuple[str, str]] | None
+    produced: list[tuple[str, bool, int]] = field(default_factory=list)  # (filename, is_dir, producer index)
+    chosen_none: list[str] = field(default_factory=list)  # '<kind>=none' choices that left a step out (see NONE)
+    left_out: list[tuple[str, bool, str]] = field(default_factory=list)  # (filename, is_dir, step id) of optional steps left out
+    freed: set[str] = field(default_factory=set)  # site input keys read only by a plugin its fallback replaced
+
+
+def _recipe_specs(cfg: dict) -> tuple[str, list[StepSpec]]:
+    """The recipe's name and its steps (the site generator's first when the site names one); ConfigError on an
+    empty recipe or a step id used twice."""
+    site = cfg.get("site") or {}
     recipe = cfg.get("recipe") or {}
     rname = recipe.get("name", "?")
     raw_steps = list(recipe.get("steps") or [])
@@ -160,175 +229,172 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
     dup = {i for i in ids if ids.count(i) > 1}
     if dup:
         raise ConfigError(f"recipe '{rname}': step ids used twice: {sorted(dup)}")
+    return rname, specs
 
-    plan: list[PlannedStep] = []
-    produced: list[tuple[str, bool, int]] = []  # (filename, is_dir, producer index)
-    site_inputs = _site_inputs(site)
-    given = cfg.get(GIVEN_KEY) or {}
-    site_name = site.get("name", "?")
-    base_dir = config_root or Path.cwd()
 
-    idx = 0
-    chosen_none: list[str] = []  # '<kind>=none' choices that left a step out (see NONE)
-    left_out: list[tuple[str, bool, str]] = []  # (filename, is_dir, step id) of optional steps left out
-    freed: set[str] = set()  # site input keys read only by a plugin its fallback replaced (Plugin.fallback)
-    for spec in specs:
-        idx += 1
-        where = f"recipe '{rname}', step '{spec.id}'"
-        plugin: Plugin | None = None
-        params_obj: Any = None
-        params_dict: dict[str, Any] = {}
-        components: dict[str, Any] = {}
-        if spec.manual is not None:
-            outs = spec.manual.get("outputs") or []
-            if not outs or not spec.manual.get("instructions"):
-                raise ConfigError(f"{where}: a manual step needs 'instructions' and 'outputs'")
-            ports = []
-            for o in outs:
-                stem, _, ext = str(o).partition(".")
-                ports.append(Port(f"out_{stem}_{ext}", stem, ext or "dir"))
-            signature = Signature((), tuple(ports), False)
-            in_names = spec.manual.get("inputs") or []
-            for n in in_names:
-                stem, _, suffix = str(n).partition(".")
-                in_ext = suffix or None
-                signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{in_ext}" if in_ext else ""), stem, in_ext),), signature.outputs, False)
-        else:
-            uses = str(spec.uses)
-            if "/" in uses:
-                kind, name = uses.split("/", 1)
-            else:
-                kind, name = uses, None
-            if kind not in STEP_KINDS:
-                raise ConfigError(f"{where}: 'uses: {uses}' — kind must be one of {', '.join(STEP_KINDS)}")
-            node = dict(cfg.get(kind) or {}) if kind != "step" else {}
-            if name is None:
-                name = node.get("plugin")
-                if not name:
-                    raise ConfigError(f"{where}: no {kind} selected; add '{kind}=<name>' or 'uses: {kind}/<name>'")
-            if name == NONE and kind not in ("step", "site_generator"):
-                # an explicit choice of nothing (road_source=none): the step is left out, and so are the
-                # optional steps after it that read nothing a running step writes
-                chosen_none.append(f"{kind}={NONE}")
-                if skipped is not None:
-                    skipped.append((spec.id, f"{kind}={NONE} was chosen (no {kind})"))
-                idx -= 1
+def _manual_signature(spec: StepSpec, where: str) -> Signature:
+    """The signature of a manual step: its ``outputs`` and ``inputs`` file names as ports."""
+    manual = spec.manual or {}
+    outs = manual.get("outputs") or []
+    if not outs or not manual.get("instructions"):
+        raise ConfigError(f"{where}: a manual step needs 'instructions' and 'outputs'")
+    ports = []
+    for o in outs:
+        stem, _, ext = str(o).partition(".")
+        ports.append(Port(f"out_{stem}_{ext}", stem, ext or "dir"))
+    signature = Signature((), tuple(ports), False)
+    in_names = manual.get("inputs") or []
+    for n in in_names:
+        stem, _, suffix = str(n).partition(".")
+        in_ext = suffix or None
+        signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{in_ext}" if in_ext else ""), stem, in_ext),), signature.outputs, False)
+    return signature
+
+
+def _bind_plugin(spec: StepSpec, where: str, st: _Planning):
+    """The plugin a step uses (after its fallback, when the chosen one cannot serve the site), its resolved
+    params, signature and components: (plugin, params, params_dict, signature, components); None when the kind is
+    chosen as ``none`` (recorded in ``st.chosen_none`` and ``skipped``)."""
+    uses = str(spec.uses)
+    if "/" in uses:
+        kind, name = uses.split("/", 1)
+    else:
+        kind, name = uses, None
+    if kind not in STEP_KINDS:
+        raise ConfigError(f"{where}: 'uses: {uses}' — kind must be one of {', '.join(STEP_KINDS)}")
+    node = dict(st.cfg.get(kind) or {}) if kind != "step" else {}
+    if name is None:
+        name = node.get("plugin")
+        if not name:
+            raise ConfigError(f"{where}: no {kind} selected; add '{kind}=<name>' or 'uses: {kind}/<name>'")
+    if name == NONE and kind not in ("step", "site_generator"):
+        # an explicit choice of nothing (road_source=none): the step is left out, and so are the
+        # optional steps after it that read nothing a running step writes
+        st.chosen_none.append(f"{kind}={NONE}")
+        if st.skipped is not None:
+            st.skipped.append((spec.id, f"{kind}={NONE} was chosen (no {kind})"))
+        return None
+    try:
+        plugin = st.registry.get(kind, name)
+    except TwinkitError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    if plugin.fallback and (st.given.get(CHOSEN) or {}).get(kind) != name:
+        alt = _fallback_if_needed(plugin, kind, name, spec, node, where, st)
+        if alt is not plugin:
+            plugin, name = alt, alt.name
+    params_obj, params_dict = resolve_params(plugin, *_param_layers(kind, name, plugin, node, spec, st), where=where)
+    try:
+        signature = parse_signature(plugin.run)
+    except ValueError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    components = {ckind: st.cfg.get(ckind) for ckind in plugin.uses}
+    return plugin, params_obj, params_dict, signature, components
+
+
+def _fallback_if_needed(plugin: Plugin, kind: str, name: str, spec: StepSpec, node: dict, where: str,
+                        st: _Planning) -> Plugin:
+    """``plugin``, or its registered fallback when it cannot serve the site and the fallback can (logged, and
+    recorded in ``fallbacks``; the replaced plugin's site inputs go to ``st.freed``)."""
+    why = _cannot_serve(plugin, spec, node, st.produced, st.site, st.site_inputs, st.site_name, where, st.base_dir)
+    alt = None
+    if why:
+        try:
+            alt = st.registry.get(kind, str(plugin.fallback))
+        except TwinkitError as exc:
+            raise ConfigError(f"{where}: {why}, and its fallback: {exc}") from None
+        # a fallback that cannot serve the site either: the chosen plugin stays, with its own error
+        if _cannot_serve(alt, spec, {}, st.produced, st.site, st.site_inputs, st.site_name, where, st.base_dir):
+            alt = None
+    if alt is None:
+        return plugin
+    # the site inputs the replaced plugin read: left empty ('???') they stop nothing, and
+    # the later steps' optional inputs do not read them (_wire_inputs)
+    st.freed |= {port.name for port in parse_signature(plugin.run).inputs}
+    log.warning("step '%s': %s=%s cannot serve this site (%s): using %s=%s instead (choose "
+                "%s=%s on the command line to insist, or %s=none to leave out the steps that use it)",
+                spec.id, kind, name, why, kind, alt.name, kind, name, kind)
+    if st.fallbacks is not None:
+        st.fallbacks.append((spec.id, f"{kind}={alt.name} instead of {kind}={name}: {why}"))
+    return alt
+
+
+def _param_layers(kind: str, name: str, plugin: Plugin, node: dict, spec: StepSpec, st: _Planning) -> list[dict]:
+    """The parameter layers of a step, lowest first: the site's (generator) or the config's, the recipe's fixed
+    params, then what the user typed on the command line."""
+    layers: list[dict] = []
+    if kind == "site_generator":
+        fields = [f.name for f in dataclasses.fields(plugin.params)] if plugin.params else []
+        layers.append({k: st.site[k] for k in fields if k in st.site})
+    elif kind == "step":
+        layers.append(dict((st.cfg.get("steps") or {}).get(name) or {}))
+    elif node.get("plugin") == name:
+        layers.append(node)
+    layers.append(spec.params)
+    # what the user typed on the command line beats the recipe's fixed params
+    if kind == "step":
+        layers.append(dict((st.given.get("steps") or {}).get(name) or {}))
+    elif kind != "site_generator" and node.get("plugin") == name:
+        layers.append(dict(st.given.get(kind) or {}))
+    return layers
+
+
+def _wire_inputs(spec: StepSpec, signature: Signature, where: str, st: _Planning) -> dict[str, Source | None] | None:
+    """Each input port's source (None: an optional input not given); None when an optional step is left out
+    because an input is unavailable (recorded in ``skipped`` and ``st.left_out``)."""
+    inputs: dict[str, Source | None] = {}
+    try:
+        empty: list[tuple[Port, ConfigError]] = []
+        for port in signature.inputs:
+            want = spec.inputs.get(port.param)
+            key = (want or port.name).partition(".")[0]
+            # a site input of a plugin its fallback replaced (an OSM file that does not cover the site) is
+            # not read by the later steps' optional inputs either: they take the fallback's files
+            if port.optional and key in st.freed and not any(port.accepts(f, d) for f, d, _ in st.produced):
+                inputs[port.param] = None
                 continue
             try:
-                plugin = registry.get(kind, name)
-            except TwinkitError as exc:
-                raise ConfigError(f"{where}: {exc}") from None
-            if plugin.fallback and (given.get(CHOSEN) or {}).get(kind) != name:
-                why = _cannot_serve(plugin, spec, node, produced, site, site_inputs, site_name, where, base_dir)
-                alt = None
-                if why:
-                    try:
-                        alt = registry.get(kind, plugin.fallback)
-                    except TwinkitError as exc:
-                        raise ConfigError(f"{where}: {why}, and its fallback: {exc}") from None
-                    # a fallback that cannot serve the site either: the chosen plugin stays, with its own error
-                    if _cannot_serve(alt, spec, {}, produced, site, site_inputs, site_name, where, base_dir):
-                        alt = None
-                if alt is not None:
-                    # the site inputs the replaced plugin read: left empty ('???') they stop nothing, and
-                    # the later steps' optional inputs do not read them (below)
-                    freed |= {port.name for port in parse_signature(plugin.run).inputs}
-                    plugin = alt
-                    log.warning("step '%s': %s=%s cannot serve this site (%s): using %s=%s instead (choose "
-                                "%s=%s on the command line to insist, or %s=none to leave out the steps that use it)",
-                                spec.id, kind, name, why, kind, plugin.name, kind, name, kind)
-                    if fallbacks is not None:
-                        fallbacks.append((spec.id, f"{kind}={plugin.name} instead of {kind}={name}: {why}"))
-                    name = plugin.name
-            layers: list[dict] = []
-            if kind == "site_generator":
-                fields = [f.name for f in dataclasses.fields(plugin.params)] if plugin.params else []
-                layers.append({k: site[k] for k in fields if k in site})
-            elif kind == "step":
-                layers.append(dict((cfg.get("steps") or {}).get(name) or {}))
-            elif node.get("plugin") == name:
-                layers.append(node)
-            layers.append(spec.params)
-            # what the user typed on the command line beats the recipe's fixed params
-            if kind == "step":
-                layers.append(dict((given.get("steps") or {}).get(name) or {}))
-            elif kind != "site_generator" and node.get("plugin") == name:
-                layers.append(dict(given.get(kind) or {}))
-            params_obj, params_dict = resolve_params(plugin, *layers, where=where)
-            try:
-                signature = parse_signature(plugin.run)
-            except ValueError as exc:
-                raise ConfigError(f"{where}: {exc}") from None
-            for ckind in plugin.uses:
-                components[ckind] = cfg.get(ckind)
-        # wire inputs
-        inputs: dict[str, Source | None] = {}
-        try:
-            empty: list[tuple[Port, ConfigError]] = []
-            for port in signature.inputs:
-                want = spec.inputs.get(port.param)
-                key = (want or port.name).partition(".")[0]
-                # a site input of a plugin its fallback replaced (an OSM file that does not cover the site) is
-                # not read by the later steps' optional inputs either: they take the fallback's files
-                if port.optional and key in freed and not any(port.accepts(f, d) for f, d, _ in produced):
-                    inputs[port.param] = None
-                    continue
-                try:
-                    inputs[port.param] = _resolve_input(
-                        port, want, produced, site_inputs, site_name, where, base_dir, optional=port.optional
-                    )
-                except ConfigError as exc:
-                    if not (port.optional and "needs input" in str(exc)):
-                        raise
-                    inputs[port.param] = None
-                    empty.append((port, exc))
-            # an optional input whose site input is left empty ('???') is not given when an earlier step
-            # feeds the step another input (osm_to_opendrive after road_source=scan on a site without OSM);
-            # with nothing else to work on the empty site input is the error
-            if empty and not any(src is not None and src.step_index is not None for src in inputs.values()):
-                port = empty[0][0]  # the skipped-step message below names this port
-                raise empty[0][1]
-        except ConfigError as exc:
-            # a site input left empty ('???') fails even an optional step, unless a '<kind>=none' choice left
-            # out the step that would have used it (site mex's osm with road_source=none)
-            if not spec.optional or ("needs input" in str(exc) and not chosen_none):
-                raise
-            by = next((sid for f, d, sid in reversed(left_out) if port.accepts(f, d)), None)
-            if skipped is not None:
-                if by is not None:
-                    skipped.append((spec.id, f"optional step: its input {port.param} comes from {by}, which was left out"))
-                else:
-                    why = f" ({', '.join(chosen_none)})" if chosen_none and "needs input" in str(exc) else ""
-                    skipped.append((spec.id, f"optional step: no {port.name} ({port.param}) on this site{why}"))
-            left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
-            idx -= 1
-            continue
-        if spec.optional and chosen_none and signature.inputs and not any(
-                src is not None and src.step_index is not None for src in inputs.values()):
-            if skipped is not None:
-                skipped.append((spec.id, f"optional step: none of its inputs ({', '.join(p.param for p in signature.inputs)}) is "
-                                         f"written by a step that runs ({', '.join(chosen_none)})"))
-            left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
-            idx -= 1
-            continue
-        unknown_wiring = set(spec.inputs) - {p.param for p in signature.inputs}
-        if unknown_wiring:
-            raise ConfigError(
-                f"{where}: 'inputs' names {sorted(unknown_wiring)}, but {plugin.qualname if plugin else 'the step'} "
-                f"reads only {[p.param for p in signature.inputs]}"
-            )
-        foreach_src = None
-        if spec.foreach:
-            fport = Port("foreach", str(spec.foreach).partition(".")[0], str(spec.foreach).partition(".")[2] or None)
-            foreach_src = _resolve_input(fport, spec.foreach, produced, site_inputs, site_name, where, base_dir, False)
-            if not signature.wants_item:
-                raise ConfigError(f"{where}: 'foreach' needs a plugin whose run() takes an 'item' parameter")
-        ps = PlannedStep(idx, spec, plugin, params_obj, params_dict, signature, inputs, signature.outputs,
-                         components, foreach_src)
-        plan.append(ps)
-        for o in ps.outputs:
-            produced.append((o.filename, o.is_dir, idx))
-    return plan
+                inputs[port.param] = _resolve_input(
+                    port, want, st.produced, st.site_inputs, st.site_name, where, st.base_dir, optional=port.optional
+                )
+            except ConfigError as exc:
+                if not (port.optional and "needs input" in str(exc)):
+                    raise
+                inputs[port.param] = None
+                empty.append((port, exc))
+        # an optional input whose site input is left empty ('???') is not given when an earlier step
+        # feeds the step another input (osm_to_opendrive after road_source=scan on a site without OSM);
+        # with nothing else to work on the empty site input is the error
+        if empty and not any(src is not None and src.step_index is not None for src in inputs.values()):
+            port = empty[0][0]  # the skipped-step message below names this port
+            raise empty[0][1]
+    except ConfigError as exc:
+        # a site input left empty ('???') fails even an optional step, unless a '<kind>=none' choice left
+        # out the step that would have used it (site mex's osm with road_source=none)
+        if not spec.optional or ("needs input" in str(exc) and not st.chosen_none):
+            raise
+        by = next((sid for f, d, sid in reversed(st.left_out) if port.accepts(f, d)), None)
+        if st.skipped is not None:
+            if by is not None:
+                st.skipped.append((spec.id, f"optional step: its input {port.param} comes from {by}, which was left out"))
+            else:
+                why = f" ({', '.join(st.chosen_none)})" if st.chosen_none and "needs input" in str(exc) else ""
+                st.skipped.append((spec.id, f"optional step: no {port.name} ({port.param}) on this site{why}"))
+        st.left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
+        return None
+    return inputs
+
+
+def _reads_nothing_that_runs(spec: StepSpec, signature: Signature, inputs: dict, st: _Planning) -> bool:
+    """After a '<kind>=none' choice: is this an optional step none of whose inputs a running step writes (then it
+    is left out, recorded in ``skipped`` and ``st.left_out``)?"""
+    if spec.optional and st.chosen_none and signature.inputs and not any(
+            src is not None and src.step_index is not None for src in inputs.values()):
+        if st.skipped is not None:
+            st.skipped.append((spec.id, f"optional step: none of its inputs ({', '.join(p.param for p in signature.inputs)}) is "
+                                        f"written by a step that runs ({', '.join(st.chosen_none)})"))
+        st.left_out.extend((o.filename, o.is_dir, spec.id) for o in signature.outputs)
+        return True
+    return False
 
 
 def _cannot_serve(plugin: Plugin, spec: StepSpec, node: dict, produced, site: dict, site_inputs: dict,

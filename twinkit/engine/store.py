@@ -126,41 +126,16 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
     final = store / key
     lock_key = key
     with FileLock(str(store / f"{key}.lock")):
-        if final.is_dir() and (final / RECORD).is_file() and not force:
-            rec = json.loads((final / RECORD).read_text())
-            if "site_fields" in rec:  # an entry of an older twinkit, which did not track them, is computed again
-                rec["_computed_here"] = False
+        if not force:
+            rec = _stored_record(final)
+            if rec is not None:
                 return rec
         site = SiteReads(ctx_kwargs.get("site"))
         ctx_kwargs = dict(ctx_kwargs, site=site)
         if isinstance(ctx_kwargs.get("config"), Mapping):
             ctx_kwargs["config"] = {**ctx_kwargs["config"], "site": site}
         tmp = store / ".tmp" / f"{key}-{os.getpid()}-{threading.get_ident()}"
-        if tmp.exists():
-            shutil.rmtree(tmp)
-        tmp.mkdir(parents=True)
-        out_paths = {p.param: tmp / p.filename for p in outputs}
-        ctx = StepContext(workdir=tmp, **ctx_kwargs)
-        kwargs = dict(inputs)
-        kwargs.update(out_paths)
-        if wants_item:
-            kwargs["item"] = item
-        t0 = time.perf_counter()
-        try:
-            with _PeakRSS() as mem:
-                metrics = run(params, ctx, **kwargs)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
-        duration = time.perf_counter() - t0
-        metrics = with_degraded(metrics if isinstance(metrics, dict) else {}, ctx._degraded)
-        missing = [p.filename for p in outputs if not (tmp / p.filename).exists()]
-        wrong = [p.filename for p in outputs if (tmp / p.filename).exists() and p.is_dir != (tmp / p.filename).is_dir()]
-        if missing or wrong:
-            shutil.rmtree(tmp, ignore_errors=True)
-            what = f"did not write {missing}" if missing else f"wrote files where folders were declared (or the reverse): {wrong}"
-            raise StepError(f"step '{ctx.step_id}' {what}; nothing from this attempt was kept")
-        _check_catalogued(outputs, tmp, ctx.step_id)
+        metrics, duration, mem = _run_into(tmp, run, params, ctx_kwargs, inputs, outputs, item, wants_item)
         used = sorted(set(fields or ()) | site.seen)
         if key_descriptor is not None and set(used) != set(fields or ()):
             key, _ = with_site(key_descriptor, site._data, used)
@@ -168,24 +143,7 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
         if index is not None and used:
             _note_site_fields(store, index, set(used))
         _read_only(tmp)
-        cache = HashCache(hash_db)
-        files = {rel.as_posix(): {"sha256": cache.hash(tmp / rel), "size": (tmp / rel).stat().st_size}
-                 for rel in list_files(tmp)}
-        record = {
-            "schema": RECORD_SCHEMA,
-            "key": key,
-            "site_fields": used,
-            "duration_s": round(duration, 3),
-            "peak_rss_mb": round(mem.peak / 2**20, 1) if mem.peak else None,
-            # what the process held before the step began (a pooled worker keeps memory from earlier items)
-            "start_rss_mb": round(mem.start / 2**20, 1) if mem.start else None,
-            "metrics": metrics if isinstance(metrics, dict) else {},
-            "files": files,
-            "artefacts": {p.filename: artefact_hash(tmp / p.filename, cache) for p in outputs},
-            "computed_at": _now(),
-            "item": item,
-        }
-        cache.close()
+        record = _record_of(tmp, key, used, duration, mem, metrics, outputs, item, hash_db)
         write_json_atomic(tmp / RECORD, record)
         if final.name != lock_key:  # stored under the key that covers the site fields it read
             with FileLock(str(store / f"{final.name}.lock")):
@@ -194,6 +152,75 @@ def compute_into_store(run: Callable, params: Any, inputs: dict[str, Any], outpu
             _swap_in(tmp, final)
         record["_computed_here"] = True
         return record
+
+
+def _stored_record(final: Path) -> dict | None:
+    """The record of the stored entry ``final`` (marked not computed here), or None when there is none or it comes
+    from an older twinkit that did not track the site fields (then it is computed again)."""
+    if final.is_dir() and (final / RECORD).is_file():
+        rec = json.loads((final / RECORD).read_text())
+        if "site_fields" in rec:
+            rec["_computed_here"] = False
+            return rec
+    return None
+
+
+def _run_into(tmp: Path, run: Callable, params: Any, ctx_kwargs: dict, inputs: dict[str, Any],
+              outputs: tuple[Port, ...], item: Any, wants_item: bool):
+    """Run the step with its outputs in the fresh folder ``tmp``: (metrics with degradations, seconds, _PeakRSS).
+    StepError (and ``tmp`` removed) when a declared output is missing or of the wrong kind; ``tmp`` is removed
+    when the step raises."""
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    out_paths = {p.param: tmp / p.filename for p in outputs}
+    ctx = StepContext(workdir=tmp, **ctx_kwargs)
+    kwargs = dict(inputs)
+    kwargs.update(out_paths)
+    if wants_item:
+        kwargs["item"] = item
+    t0 = time.perf_counter()
+    try:
+        with _PeakRSS() as mem:
+            metrics = run(params, ctx, **kwargs)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    duration = time.perf_counter() - t0
+    metrics = with_degraded(metrics if isinstance(metrics, dict) else {}, ctx._degraded)
+    missing = [p.filename for p in outputs if not (tmp / p.filename).exists()]
+    wrong = [p.filename for p in outputs if (tmp / p.filename).exists() and p.is_dir != (tmp / p.filename).is_dir()]
+    if missing or wrong:
+        shutil.rmtree(tmp, ignore_errors=True)
+        what = f"did not write {missing}" if missing else f"wrote files where folders were declared (or the reverse): {wrong}"
+        raise StepError(f"step '{ctx.step_id}' {what}; nothing from this attempt was kept")
+    _check_catalogued(outputs, tmp, ctx.step_id)
+    return metrics, duration, mem
+
+
+def _record_of(tmp: Path, key: str, used: list[str], duration: float, mem, metrics, outputs: tuple[Port, ...],
+               item: Any, hash_db: Path | None) -> dict:
+    """The store record of the files in ``tmp``: their sha256 and sizes, the outputs' artefact hashes, the site
+    fields read, time and memory."""
+    cache = HashCache(hash_db)
+    files = {rel.as_posix(): {"sha256": cache.hash(tmp / rel), "size": (tmp / rel).stat().st_size}
+             for rel in list_files(tmp)}
+    record = {
+        "schema": RECORD_SCHEMA,
+        "key": key,
+        "site_fields": used,
+        "duration_s": round(duration, 3),
+        "peak_rss_mb": round(mem.peak / 2**20, 1) if mem.peak else None,
+        # what the process held before the step began (a pooled worker keeps memory from earlier items)
+        "start_rss_mb": round(mem.start / 2**20, 1) if mem.start else None,
+        "metrics": metrics if isinstance(metrics, dict) else {},
+        "files": files,
+        "artefacts": {p.filename: artefact_hash(tmp / p.filename, cache) for p in outputs},
+        "computed_at": _now(),
+        "item": item,
+    }
+    cache.close()
+    return record
 
 
 def _check_catalogued(outputs: tuple[Port, ...], tmp: Path, step_id: str) -> None:

@@ -245,67 +245,87 @@ def to_site_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], name: str,
 
     Raises :class:`twinkit.InputError` when the cloud cannot belong to the site (wrong CRS).
     """
-    from twinkit import InputError
-
     xyz = np.array(xyz, dtype=np.float64, copy=True)
     src = parse_crs(file_crs)
     site_crs_s = site.get("crs")
     site_crs = parse_crs(site_crs_s) if site_crs_s else None
     info = FrameInfo(shift=[0.0, 0.0, 0.0], source_crs=src.to_wkt() if src is not None else None,
                      target_crs=None)
-    target = None
     if src is not None:
-        fxy, fz = unit_factors(src)
-        vertical_in_src = bool(src.is_compound)
-        if site_crs is not None and not src.equals(site_crs, ignore_axis_order=True):
-            from pyproj import Transformer
-
-            t = Transformer.from_crs(src, site_crs, always_xy=True)
-            x, y = t.transform(xyz[:, 0], xyz[:, 1])
-            sfxy, _ = unit_factors(site_crs)
-            xyz[:, 0], xyz[:, 1] = np.asarray(x) * sfxy, np.asarray(y) * sfxy
-            if not vertical_in_src:
-                xyz[:, 2] *= fz
-            info.reprojected = True
-            info.unit_factor_z = fz if not vertical_in_src else 1.0
-            info.notes.append(f"reprojected from {short_crs(src.to_wkt())} to {short_crs(site_crs.to_wkt())}")
-            target = site_crs
-        else:
-            if src.is_geographic:
-                raise InputError(
-                    f"{name}: coordinates are geographic (degrees, {src.name}) and the site has no projected CRS; "
-                    f"set site.crs to a projected CRS (e.g. the local UTM zone)")
-            xyz[:, :2] *= fxy
-            xyz[:, 2] *= fz
-            info.unit_factor_xy, info.unit_factor_z = fxy, fz
-            if fxy != 1.0 or fz != 1.0:
-                info.notes.append(f"converted file units to metres (x, y x{fxy:g}, z x{fz:g})")
-            target = src
+        target = _into_metres(xyz, src, site_crs, name, info)
         projected = True
     else:
         projected = bool(np.nanmax(np.abs(xyz[:, :2])) > LARGE_COORD_M) if len(xyz) else False
         target = site_crs
     info.projected = projected
     info.target_crs = target.to_wkt() if target is not None else (str(site_crs_s) if site_crs_s else None)
-
-    base = base_point_in(target, site) if projected else None
     if projected:
-        if base is not None:
-            shift = base
-            info.shift_source = "base_point"
-        else:
-            lo, hi = np.nanmin(xyz, axis=0), np.nanmax(xyz, axis=0)
-            c = 0.5 * (lo + hi)
-            shift = np.array([np.round(c[0] / 100.0) * 100.0, np.round(c[1] / 100.0) * 100.0, np.round(c[2])])
-            info.shift_source = "rounded_centre"
-            info.notes.append(
-                f"projected coordinates and no site base point: shifted by the rounded cloud centre "
-                f"{shift.tolist()} (record it; set site.base_point to use a fixed origin)")
-        xyz -= shift
-        info.shift = [float(v) for v in shift]
+        _shift_to_origin(xyz, base_point_in(target, site), info)
     else:
         info.notes.append("local coordinates (no CRS, small values): used as they are")
+    _check_on_site(xyz, site, info, name, max_offset_m=max_offset_m, bounds_margin_m=bounds_margin_m,
+                   min_inside_fraction=min_inside_fraction)
+    return xyz, info
 
+
+def _into_metres(xyz: np.ndarray, src, site_crs, name: str, info: FrameInfo):
+    """Reproject ``xyz`` (n, 3, in place) from ``src`` into the site's CRS, or, when the site has none or the same,
+    convert the file's units to metres; returns the CRS the coordinates are now in. InputError for geographic
+    coordinates with no projected site CRS."""
+    from twinkit import InputError
+
+    fxy, fz = unit_factors(src)
+    vertical_in_src = bool(src.is_compound)
+    if site_crs is not None and not src.equals(site_crs, ignore_axis_order=True):
+        from pyproj import Transformer
+
+        t = Transformer.from_crs(src, site_crs, always_xy=True)
+        x, y = t.transform(xyz[:, 0], xyz[:, 1])
+        sfxy, _ = unit_factors(site_crs)
+        xyz[:, 0], xyz[:, 1] = np.asarray(x) * sfxy, np.asarray(y) * sfxy
+        if not vertical_in_src:
+            xyz[:, 2] *= fz
+        info.reprojected = True
+        info.unit_factor_z = fz if not vertical_in_src else 1.0
+        info.notes.append(f"reprojected from {short_crs(src.to_wkt())} to {short_crs(site_crs.to_wkt())}")
+        return site_crs
+    if src.is_geographic:
+        raise InputError(
+            f"{name}: coordinates are geographic (degrees, {src.name}) and the site has no projected CRS; "
+            f"set site.crs to a projected CRS (e.g. the local UTM zone)")
+    xyz[:, :2] *= fxy
+    xyz[:, 2] *= fz
+    info.unit_factor_xy, info.unit_factor_z = fxy, fz
+    if fxy != 1.0 or fz != 1.0:
+        info.notes.append(f"converted file units to metres (x, y x{fxy:g}, z x{fz:g})")
+    return src
+
+
+def _shift_to_origin(xyz: np.ndarray, base, info: FrameInfo) -> None:
+    """Subtract the site base point ``base`` (projected metres) from ``xyz`` (in place), or without one the cloud's
+    rounded centre (100 m in x, y; 1 m in z); noted in ``info``."""
+    if base is not None:
+        shift = base
+        info.shift_source = "base_point"
+    else:
+        lo, hi = np.nanmin(xyz, axis=0), np.nanmax(xyz, axis=0)
+        c = 0.5 * (lo + hi)
+        shift = np.array([np.round(c[0] / 100.0) * 100.0, np.round(c[1] / 100.0) * 100.0, np.round(c[2])])
+        info.shift_source = "rounded_centre"
+        info.notes.append(
+            f"projected coordinates and no site base point: shifted by the rounded cloud centre "
+            f"{shift.tolist()} (record it; set site.base_point to use a fixed origin)")
+    xyz -= shift
+    info.shift = [float(v) for v in shift]
+
+
+def _check_on_site(xyz: np.ndarray, site: Mapping[str, Any], info: FrameInfo, name: str, *, max_offset_m: float,
+                   bounds_margin_m: float, min_inside_fraction: float) -> None:
+    """InputError when the site-frame cloud cannot belong to the site: too few points inside the site's
+    ``bounds_m`` (+ margin), or, without bounds, its centre too far from the base point (a wrong CRS)."""
+    from twinkit import InputError
+
+    site_crs_s = site.get("crs")
     bounds = site.get("bounds_m")
     finite = np.isfinite(xyz).all(axis=1)
     pts = xyz[finite]
@@ -328,7 +348,6 @@ def to_site_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], name: str,
                 f"{name}: the cloud centre is {d / 1000:.1f} km from the site base point (limit {max_offset_m / 1000:g} km); "
                 f"it is probably in the wrong CRS for this site (file CRS: {short_crs(info.source_crs)}, "
                 f"site CRS: {site_crs_s}); reproject it or fix site.crs / site.base_point")
-    return xyz, info
 
 
 def apply_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], info: FrameInfo) -> np.ndarray:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 
 # attributes that are lengths (scale 1), per element tag
 LENGTHS: dict[str, tuple[str, ...]] = {
@@ -144,6 +145,34 @@ def transform_xodr(text: str, rotation_rad: float, scale: float, geo_reference: 
     ``scale_heights=False``: heights keep their values (see the module doc); ``dz`` is added to every road's
     elevation (a road without one gets a constant one) and to inertial heights. The identity (rotation 0,
     scale 1, no translation) leaves every coordinate as it is written."""
+    root = _parse_opendrive(text, name)
+    scale = float(scale)
+    if not (scale > 0 and math.isfinite(scale)):
+        raise XodrFrameError(f"{name}: scale must be positive, got {scale}")
+    t = (float(translation[0]), float(translation[1]))
+    mv = _Motion(name=name, c=math.cos(rotation_rad), s=math.sin(rotation_rad), rotation_rad=rotation_rad,
+                 scale=scale, t=t, moves=not (rotation_rad == 0 and scale == 1.0 and t == (0.0, 0.0)),
+                 scale_heights=scale_heights, hscale=scale if scale_heights else 1.0, dz=dz)
+    header = root.find("header")
+    if header is not None:
+        off = header.find("offset")
+        if off is not None and any(abs(_num(off.get(k, "0"))) > 0 for k in ("x", "y", "z", "hdg")):
+            raise XodrFrameError(f"{name}: the header has an <offset> (x, y, z, hdg); twinkit writes the package "
+                                 "frame without one: remove it (apply it to the geometry) and run again")
+    _move_tree(root, mv)
+    if dz:
+        _shift_elevation(root, dz)
+    if header is not None:
+        if mv.moves:
+            _bounds(header, mv.c, mv.s, scale, t)
+        if geo_reference is not None:
+            _set_georeference(header, geo_reference, keep_georeference_as)
+    body = ET.tostring(root, encoding="unicode")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n"
+
+
+def _parse_opendrive(text: str | bytes, name: str) -> ET.Element:
+    """The document's <OpenDRIVE> root, comments kept; XodrFrameError when it is not well-formed or not OpenDRIVE."""
     try:
         root = ET.fromstring(text.encode() if isinstance(text, str) else text,
                              parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
@@ -151,93 +180,106 @@ def transform_xodr(text: str, rotation_rad: float, scale: float, geo_reference: 
         raise XodrFrameError(f"{name}: not well-formed XML ({exc}); re-run the road alignment step") from None
     if root.tag != "OpenDRIVE":
         raise XodrFrameError(f"{name}: the root element is <{root.tag}>, not <OpenDRIVE>")
-    scale = float(scale)
-    if not (scale > 0 and math.isfinite(scale)):
-        raise XodrFrameError(f"{name}: scale must be positive, got {scale}")
-    c, s = math.cos(rotation_rad), math.sin(rotation_rad)
-    t = (float(translation[0]), float(translation[1]))
-    moves = not (rotation_rad == 0 and scale == 1.0 and t == (0.0, 0.0))
-    hscale = scale if scale_heights else 1.0
-    header = root.find("header")
-    if header is not None:
-        off = header.find("offset")
-        if off is not None and any(abs(_num(off.get(k, "0"))) > 0 for k in ("x", "y", "z", "hdg")):
-            raise XodrFrameError(f"{name}: the header has an <offset> (x, y, z, hdg); twinkit writes the package "
-                                 "frame without one: remove it (apply it to the geometry) and run again")
-    def walk(parent: ET.Element) -> None:
-        for el in parent:
-            if not isinstance(el.tag, str) or el.tag == "userData":
-                continue  # comments; vendor data (RoadRunner's vector* records) are not road geometry
-            _move(el, parent)
-            if not (el.tag == "geometry" and parent.tag == "planView"):
-                walk(el)
+    return root
 
-    def _move(el: ET.Element, parent: ET.Element) -> None:
-        tag = el.tag
-        if tag == "geometry" and parent.tag == "planView":
-            if moves:
-                _move_point(el, c, s, scale, 0.0, t)
-                if rotation_rad:
-                    el.set("hdg", _fmt(_num(el.get("hdg", "0")) + rotation_rad))
-            _scale_attrs(el, ("s", "length"), scale)
-            for g in el:
-                if not isinstance(g.tag, str):
-                    continue
-                if g.tag == "arc":
-                    _scale_attrs(g, ("curvature",), 1.0 / scale)
-                elif g.tag == "spiral":
-                    _scale_attrs(g, ("curvStart", "curvEnd"), 1.0 / scale)
-                elif g.tag == "poly3":
-                    _scale_poly(g, *POLYS["poly3"], scale)
-                elif g.tag == "paramPoly3":
-                    if g.get("pRange", "normalized") == "arcLength":
-                        _scale_poly(g, 1, ("aU", "bU", "cU", "dU"), scale)
-                        _scale_poly(g, 1, ("aV", "bV", "cV", "dV"), scale)
-                    else:  # p in [0, 1]: every coefficient is a length
-                        _scale_attrs(g, ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV"), scale)
-            return
-        if tag == "border" and parent.tag == "lane":
-            _scale_attrs(el, LANE_BORDER_LENGTHS, scale)
-            _scale_poly(el, 1, ("a", "b", "c", "d"), scale)
-            return
-        if tag in POINT_TAGS:
-            if moves:
-                _move_point(el, c, s, scale, rotation_rad, t)
-            if dz and "z" in el.attrib:
-                el.set("z", _fmt(_num(el.attrib["z"]) * hscale + dz))
-        if tag in LENGTHS:
-            names = LENGTHS[tag]
-            if not scale_heights:
-                _scale_attrs(el, [n for n in names if n not in HEIGHTS], scale)
-            else:
-                _scale_attrs(el, [n for n in names if not (dz and tag in POINT_TAGS and n == "z")], scale)
-        if tag in POLYS and tag != "poly3":
-            power, coeffs = POLYS[tag]
-            _scale_poly(el, 0 if (tag in HEIGHT_POLYS and not scale_heights) else power, coeffs, scale)
-        if scale != 1.0 and tag not in LENGTHS and tag not in POLYS and tag not in _NO_LENGTHS:
-            suspicious = [k for k in el.attrib if k in _LENGTH_NAMES]
-            if suspicious:
-                raise XodrFrameError(f"{name}: <{tag}> has {', '.join(suspicious)}, which twinkit does not know "
-                                     f"how to scale; use the scale mode 'site' (no scale) or remove the element")
 
-    walk(root)
-    if dz:
-        _shift_elevation(root, dz)
-    if header is not None:
-        if moves:
-            _bounds(header, c, s, scale, t)
-        if geo_reference is not None:
-            geo = header.find("geoReference")
-            old = (geo.text or "").strip() if geo is not None else ""
-            if geo is None:
-                geo = ET.Element("geoReference")
-                header.insert(0, geo)
-            geo.text = geo_reference
-            if old and keep_georeference_as:
-                ud = ET.SubElement(header, "userData", {"code": keep_georeference_as, "value": old})
-                ud.tail = "\n    "
-    body = ET.tostring(root, encoding="unicode")
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n"
+@dataclass(frozen=True)
+class _Motion:
+    """The move :func:`transform_xodr` applies: ``scale * Rz(rotation_rad) + t`` (c, s: its cosine and sine);
+    ``moves``: not the identity; ``hscale``: the factor on heights; ``dz``: metres added to heights."""
+
+    name: str
+    c: float
+    s: float
+    rotation_rad: float
+    scale: float
+    t: tuple[float, float]
+    moves: bool
+    scale_heights: bool
+    hscale: float
+    dz: float
+
+
+def _move_tree(parent: ET.Element, mv: _Motion) -> None:
+    """Move every element under ``parent`` (a plan-view geometry's children are moved with it)."""
+    for el in parent:
+        if not isinstance(el.tag, str) or el.tag == "userData":
+            continue  # comments; vendor data (RoadRunner's vector* records) are not road geometry
+        _move_element(el, parent, mv)
+        if not (el.tag == "geometry" and parent.tag == "planView"):
+            _move_tree(el, mv)
+
+
+def _move_element(el: ET.Element, parent: ET.Element, mv: _Motion) -> None:
+    """Move one element's own attributes: points, lengths, polynomial coefficients; XodrFrameError for an
+    element with length-like attributes twinkit does not know how to scale (when scaling)."""
+    tag, scale = el.tag, mv.scale
+    if tag == "geometry" and parent.tag == "planView":
+        _move_plan_geometry(el, mv)
+        return
+    if tag == "border" and parent.tag == "lane":
+        _scale_attrs(el, LANE_BORDER_LENGTHS, scale)
+        _scale_poly(el, 1, ("a", "b", "c", "d"), scale)
+        return
+    if tag in POINT_TAGS:
+        if mv.moves:
+            _move_point(el, mv.c, mv.s, scale, mv.rotation_rad, mv.t)
+        if mv.dz and "z" in el.attrib:
+            el.set("z", _fmt(_num(el.attrib["z"]) * mv.hscale + mv.dz))
+    if tag in LENGTHS:
+        names = LENGTHS[tag]
+        if not mv.scale_heights:
+            _scale_attrs(el, [n for n in names if n not in HEIGHTS], scale)
+        else:
+            _scale_attrs(el, [n for n in names if not (mv.dz and tag in POINT_TAGS and n == "z")], scale)
+    if tag in POLYS and tag != "poly3":
+        power, coeffs = POLYS[tag]
+        _scale_poly(el, 0 if (tag in HEIGHT_POLYS and not mv.scale_heights) else power, coeffs, scale)
+    if scale != 1.0 and tag not in LENGTHS and tag not in POLYS and tag not in _NO_LENGTHS:
+        suspicious = [k for k in el.attrib if k in _LENGTH_NAMES]
+        if suspicious:
+            raise XodrFrameError(f"{mv.name}: <{tag}> has {', '.join(suspicious)}, which twinkit does not know "
+                                 f"how to scale; use the scale mode 'site' (no scale) or remove the element")
+
+
+def _move_plan_geometry(el: ET.Element, mv: _Motion) -> None:
+    """A plan-view <geometry>: its start point and heading moved, its s and length scaled, and its shape
+    (arc, spiral, poly3, paramPoly3) scaled to match."""
+    scale = mv.scale
+    if mv.moves:
+        _move_point(el, mv.c, mv.s, scale, 0.0, mv.t)
+        if mv.rotation_rad:
+            el.set("hdg", _fmt(_num(el.get("hdg", "0")) + mv.rotation_rad))
+    _scale_attrs(el, ("s", "length"), scale)
+    for g in el:
+        if not isinstance(g.tag, str):
+            continue
+        if g.tag == "arc":
+            _scale_attrs(g, ("curvature",), 1.0 / scale)
+        elif g.tag == "spiral":
+            _scale_attrs(g, ("curvStart", "curvEnd"), 1.0 / scale)
+        elif g.tag == "poly3":
+            _scale_poly(g, *POLYS["poly3"], scale)
+        elif g.tag == "paramPoly3":
+            if g.get("pRange", "normalized") == "arcLength":
+                _scale_poly(g, 1, ("aU", "bU", "cU", "dU"), scale)
+                _scale_poly(g, 1, ("aV", "bV", "cV", "dV"), scale)
+            else:  # p in [0, 1]: every coefficient is a length
+                _scale_attrs(g, ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV"), scale)
+
+
+def _set_georeference(header: ET.Element, geo_reference: str, keep_georeference_as: str) -> None:
+    """Set the header's <geoReference> (created first in the header when missing); the old one, when not empty,
+    is kept in a ``userData`` named ``keep_georeference_as`` (when that is not empty either)."""
+    geo = header.find("geoReference")
+    old = (geo.text or "").strip() if geo is not None else ""
+    if geo is None:
+        geo = ET.Element("geoReference")
+        header.insert(0, geo)
+    geo.text = geo_reference
+    if old and keep_georeference_as:
+        ud = ET.SubElement(header, "userData", {"code": keep_georeference_as, "value": old})
+        ud.tail = "\n    "
 
 
 # elements without lengths, and the attribute names that would be lengths on an unknown element

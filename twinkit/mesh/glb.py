@@ -162,51 +162,14 @@ def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str
         n_faces = int(len(part.faces))
         if n_faces == 0:
             continue
-        # one glTF vertex per distinct (vertex, uv) corner
-        corner_v = part.faces.reshape(-1).astype(np.int64)
-        corner_uv = part.corner_uv.reshape(-1, 2)
-        corner = np.column_stack([corner_v.astype(np.float64), corner_uv.astype(np.float64)])
-        _, first, inv = np.unique(corner, axis=0, return_index=True, return_inverse=True)
-        inv = inv.ravel()
-        src_v = corner_v[first]
-        pos = site_to_gltf(part.vertices[src_v]).astype(np.float32)
-        nrm = site_to_gltf(part.normals[src_v].astype(np.float64)).astype(np.float32)
-        ln = np.linalg.norm(nrm, axis=1, keepdims=True)
-        nrm = np.where(ln > 0, nrm / np.where(ln > 0, ln, 1), np.array([0, 1, 0], np.float32)).astype(np.float32)
-        uv = corner_uv[first].astype(np.float32).copy()
-        uv[:, 1] = 1.0 - uv[:, 1]
-        attrs = {
-            "POSITION": b.accessor(pos, FLOAT, "VEC3", minmax=True),
-            "NORMAL": b.accessor(nrm, FLOAT, "VEC3"),
-            "TEXCOORD_0": b.accessor(uv, FLOAT, "VEC2"),
-        }
-        if part.colors is not None:
-            attrs["COLOR_0"] = b.accessor(srgb_to_linear(part.colors[src_v]), FLOAT, "VEC3")
-        for name, a in part.color_attrs.items():
-            attrs[name] = b.accessor(srgb_to_linear(np.asarray(a)[src_v]), FLOAT, "VEC3")
-        for name, a in part.ubyte_attrs.items():
-            attrs[name] = b.accessor(np.asarray(a)[src_v].astype(np.uint8), UBYTE, "SCALAR")
-        ind = b.accessor(inv.astype(np.uint32), UINT, "SCALAR", target=ELEMENT_ARRAY_BUFFER)
-        prim = {"attributes": attrs, "indices": ind, "material": 0, "mode": 4}
+        prim, n_vertices = _textured_primitive(b, part)
         if variants:
-            key = tuple(int(c) for c in (part.variant_color or (128, 128, 128)))
-            if key not in seg_materials:
-                lin = [float(x) for x in _srgb_to_linear64(np.array([key]))[0]]
-                m = {"name": "M_segmentation_%02x%02x%02x" % key,
-                     "pbrMetallicRoughness": {"baseColorFactor": lin + [1.0], "metallicFactor": 0.0,
-                                              "roughnessFactor": 1.0}}
-                if unlit:
-                    m["extensions"] = {"KHR_materials_unlit": {}}
-                materials_extra.append(m)
-                seg_materials[key] = len(materials_extra)  # index after M_twinkit
-            prim["extensions"] = {"KHR_materials_variants": {"mappings": [
-                {"material": 0, "variants": [VARIANTS.index("photo")]},
-                {"material": seg_materials[key], "variants": [VARIANTS.index("segmentation")]}]}}
+            _add_segmentation_variant(prim, part, seg_materials, materials_extra, unlit)
         gl_meshes.append({"name": part.name, "primitives": [prim]})
         nodes.append({"name": part.name, "mesh": len(gl_meshes) - 1, "extras": part.extras})
-        stats[part.name] = {"vertices": int(len(pos)), "faces": n_faces}
+        stats[part.name] = {"vertices": n_vertices, "faces": n_faces}
     material: dict = {"name": "M_twinkit", "doubleSided": False,
-                "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0}}
+                      "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0}}
     ext_used = []
     if unlit:
         material["extensions"] = {"KHR_materials_unlit": {}}
@@ -224,25 +187,81 @@ def write_textured_glb(out: Path, parts, texture: Path | None, *, generator: str
         ext_used.append("KHR_materials_variants")
         doc["extensions"] = {"KHR_materials_variants": {"variants": [{"name": v} for v in VARIANTS]}}
     if texture is not None:
-        from PIL import Image
-
-        img = Image.open(texture).convert("RGB")
-        buf = io.BytesIO()
-        if texture_format == "png":
-            img.save(buf, format="PNG")
-            mime = "image/png"
-        else:
-            img.save(buf, format="JPEG", quality=int(jpeg_quality))
-            mime = "image/jpeg"
-        iv = b.view(buf.getvalue(), None)
-        doc["images"] = [{"bufferView": iv, "mimeType": mime, "name": "texture"}]
-        doc["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]
-        doc["textures"] = [{"source": 0, "sampler": 0}]
-        material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0, "texCoord": 0}
+        _embed_texture(b, doc, material, texture, texture_format, jpeg_quality)
     if ext_used:
         doc["extensionsUsed"] = ext_used
     b.write(Path(out), doc)
     return stats
+
+
+def _textured_primitive(b: GlbBuilder, part) -> tuple[dict, int]:
+    """A part's triangle primitive (material 0) with one glTF vertex per distinct (vertex, uv) corner: positions and
+    unit normals in the glTF frame (float32), UVs flipped to glTF's top-left origin, linear colours and the part's
+    extra attributes; returns it and its vertex count."""
+    corner_v = part.faces.reshape(-1).astype(np.int64)
+    corner_uv = part.corner_uv.reshape(-1, 2)
+    corner = np.column_stack([corner_v.astype(np.float64), corner_uv.astype(np.float64)])
+    _, first, inv = np.unique(corner, axis=0, return_index=True, return_inverse=True)
+    inv = inv.ravel()
+    src_v = corner_v[first]
+    pos = site_to_gltf(part.vertices[src_v]).astype(np.float32)
+    nrm = site_to_gltf(part.normals[src_v].astype(np.float64)).astype(np.float32)
+    ln = np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm = np.where(ln > 0, nrm / np.where(ln > 0, ln, 1), np.array([0, 1, 0], np.float32)).astype(np.float32)
+    uv = corner_uv[first].astype(np.float32).copy()
+    uv[:, 1] = 1.0 - uv[:, 1]
+    attrs = {
+        "POSITION": b.accessor(pos, FLOAT, "VEC3", minmax=True),
+        "NORMAL": b.accessor(nrm, FLOAT, "VEC3"),
+        "TEXCOORD_0": b.accessor(uv, FLOAT, "VEC2"),
+    }
+    if part.colors is not None:
+        attrs["COLOR_0"] = b.accessor(srgb_to_linear(part.colors[src_v]), FLOAT, "VEC3")
+    for name, a in part.color_attrs.items():
+        attrs[name] = b.accessor(srgb_to_linear(np.asarray(a)[src_v]), FLOAT, "VEC3")
+    for name, a in part.ubyte_attrs.items():
+        attrs[name] = b.accessor(np.asarray(a)[src_v].astype(np.uint8), UBYTE, "SCALAR")
+    ind = b.accessor(inv.astype(np.uint32), UINT, "SCALAR", target=ELEMENT_ARRAY_BUFFER)
+    return {"attributes": attrs, "indices": ind, "material": 0, "mode": 4}, int(len(pos))
+
+
+def _add_segmentation_variant(prim: dict, part, seg_materials: dict[tuple, int], materials_extra: list[dict],
+                              unlit: bool) -> None:
+    """Map ``prim`` to material 0 in the "photo" variant and to a flat material of the part's ``variant_color``
+    (created once per colour in ``materials_extra``) in the "segmentation" variant."""
+    key = tuple(int(c) for c in (part.variant_color or (128, 128, 128)))
+    if key not in seg_materials:
+        lin = [float(x) for x in _srgb_to_linear64(np.array([key]))[0]]
+        m = {"name": "M_segmentation_%02x%02x%02x" % key,
+             "pbrMetallicRoughness": {"baseColorFactor": lin + [1.0], "metallicFactor": 0.0,
+                                      "roughnessFactor": 1.0}}
+        if unlit:
+            m["extensions"] = {"KHR_materials_unlit": {}}
+        materials_extra.append(m)
+        seg_materials[key] = len(materials_extra)  # index after M_twinkit
+    prim["extensions"] = {"KHR_materials_variants": {"mappings": [
+        {"material": 0, "variants": [VARIANTS.index("photo")]},
+        {"material": seg_materials[key], "variants": [VARIANTS.index("segmentation")]}]}}
+
+
+def _embed_texture(b: GlbBuilder, doc: dict, material: dict, texture: Path, texture_format: str,
+                   jpeg_quality: int) -> None:
+    """Embed ``texture`` (as PNG, or JPEG of ``jpeg_quality``) as the base colour of ``material``."""
+    from PIL import Image
+
+    img = Image.open(texture).convert("RGB")
+    buf = io.BytesIO()
+    if texture_format == "png":
+        img.save(buf, format="PNG")
+        mime = "image/png"
+    else:
+        img.save(buf, format="JPEG", quality=int(jpeg_quality))
+        mime = "image/jpeg"
+    iv = b.view(buf.getvalue(), None)
+    doc["images"] = [{"bufferView": iv, "mimeType": mime, "name": "texture"}]
+    doc["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]
+    doc["textures"] = [{"source": 0, "sampler": 0}]
+    material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0, "texCoord": 0}
 
 
 def write_colored_glb(path: Path, xyz: np.ndarray, faces: np.ndarray, colors: np.ndarray | None,

@@ -406,31 +406,8 @@ def read_ply(path: Path | str) -> Mesh:
     Binary files (either byte order) whose faces are all triangles are parsed directly with numpy;
     anything else goes through the general reader (polygons are fan-triangulated)."""
     path = Path(path)
-    with open(path, "rb") as fh:
-        first = fh.readline()
-        if first.strip() != b"ply":
-            raise ValueError("not a PLY file (no 'ply' magic)")
-        lines = []
-        while True:
-            raw = fh.readline()
-            if not raw:
-                raise ValueError("truncated PLY header (no end_header)")
-            ln = raw.decode("ascii", "replace").strip()
-            if ln == "end_header":
-                break
-            lines.append(ln)
-        offset = fh.tell()
-    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format")), "")
-    elements: list[list] = []
-    comments = []
-    for ln in lines:
-        parts = ln.split()
-        if parts[0] == "comment":
-            comments.append(ln[len("comment "):])
-        elif parts[0] == "element":
-            elements.append([parts[1], int(parts[2]), []])
-        elif parts[0] == "property" and elements:
-            elements[-1][2].append(parts[1:])
+    lines, offset = _ply_header(path)
+    fmt, elements, comments = _ply_elements(lines)
     names = [e[0] for e in elements]
     end = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
     simple = (end is not None and names[:1] == ["vertex"]
@@ -443,25 +420,10 @@ def read_ply(path: Path | str) -> Mesh:
     size = path.stat().st_size
     face_arr = None
     if len(elements) == 2:
-        # assume every list has the length it has in the first face; verified below
-        with open(path, "rb") as fh:
-            fh.seek(offset + vdt.itemsize * nv)
-            first_face = fh.read(4096)
-        fields: list[tuple] = []
-        pos = 0
-        for p in elements[1][2]:
-            if p[0] == "list":
-                ct, it = np.dtype(end + _PLY_TYPES[p[1]]), np.dtype(end + _PLY_TYPES[p[2]])
-                if pos + ct.itemsize > len(first_face):
-                    return _read_ply_general(path, fmt, offset, elements, comments)
-                cnt = int(np.frombuffer(first_face[pos:pos + ct.itemsize], ct)[0])
-                fields += [(p[3] + "_n", ct), (p[3], it, (cnt,))]
-                pos += ct.itemsize + cnt * it.itemsize
-            else:
-                t = np.dtype(end + _PLY_TYPES[p[0]])
-                fields.append((p[1], t))
-                pos += t.itemsize
-        fdt = np.dtype(fields)
+        face_dtype = _face_dtype(path, offset + vdt.itemsize * nv, elements[1][2], end)
+        if face_dtype is None:
+            return _read_ply_general(path, fmt, offset, elements, comments)
+        fdt = face_dtype
         nf = elements[1][1]
         if offset + vdt.itemsize * nv + fdt.itemsize * nf != size:
             return _read_ply_general(path, fmt, offset, elements, comments)  # polygons or variable lists
@@ -485,6 +447,64 @@ def read_ply(path: Path | str) -> Mesh:
         keep = [n for n in face_arr.dtype.names or () if not n.endswith("_n")]
         face_arr = face_arr[keep]
     return _mesh_from_arrays(v, face_arr, comments)
+
+
+def _ply_header(path: Path) -> tuple[list[str], int]:
+    """The header lines between the 'ply' magic and 'end_header' (stripped) and the byte offset of the data;
+    ValueError when the magic or the end of the header is missing."""
+    with open(path, "rb") as fh:
+        first = fh.readline()
+        if first.strip() != b"ply":
+            raise ValueError("not a PLY file (no 'ply' magic)")
+        lines = []
+        while True:
+            raw = fh.readline()
+            if not raw:
+                raise ValueError("truncated PLY header (no end_header)")
+            ln = raw.decode("ascii", "replace").strip()
+            if ln == "end_header":
+                break
+            lines.append(ln)
+        return lines, fh.tell()
+
+
+def _ply_elements(lines: list[str]) -> tuple[str, list[list], list[str]]:
+    """The header's format name, elements as [name, count, [property words]] and comments."""
+    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format")), "")
+    elements: list[list] = []
+    comments = []
+    for ln in lines:
+        parts = ln.split()
+        if parts[0] == "comment":
+            comments.append(ln[len("comment "):])
+        elif parts[0] == "element":
+            elements.append([parts[1], int(parts[2]), []])
+        elif parts[0] == "property" and elements:
+            elements[-1][2].append(parts[1:])
+    return fmt, elements, comments
+
+
+def _face_dtype(path: Path, face_offset: int, props: list[list[str]], end: str) -> np.dtype | None:
+    """The fixed record of the face element whose properties are ``props`` (byte order ``end``), assuming every
+    list has the length it has in the first face (verified by the caller); None when the first face is not there."""
+    with open(path, "rb") as fh:
+        fh.seek(face_offset)
+        first_face = fh.read(4096)
+    fields: list[tuple] = []
+    pos = 0
+    for p in props:
+        if p[0] == "list":
+            ct, it = np.dtype(end + _PLY_TYPES[p[1]]), np.dtype(end + _PLY_TYPES[p[2]])
+            if pos + ct.itemsize > len(first_face):
+                return None
+            cnt = int(np.frombuffer(first_face[pos:pos + ct.itemsize], ct)[0])
+            fields += [(p[3] + "_n", ct), (p[3], it, (cnt,))]
+            pos += ct.itemsize + cnt * it.itemsize
+        else:
+            t = np.dtype(end + _PLY_TYPES[p[0]])
+            fields.append((p[1], t))
+            pos += t.itemsize
+    return np.dtype(fields)
 
 
 def read_mesh(path: Path | str) -> Mesh:

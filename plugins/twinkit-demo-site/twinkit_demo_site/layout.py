@@ -12,6 +12,8 @@ Layout (right-hand traffic, as in Finland):
   and a building, SE a fenced park with trees and bushes. Street lamps,
   traffic lights on the four corners, traffic signs, street trees, parked cars,
   a motorcycle and a bicycle.
+
+The objects themselves (buildings, fences, plants, street furniture, vehicles) are built by objects.py.
 """
 from __future__ import annotations
 
@@ -22,14 +24,10 @@ import numpy as np
 
 from twinkit import cityscapes
 from twinkit.mesh import Mesh
-from twinkit_demo_site.meshbuild import MeshBuilder
+from twinkit_demo_site import objects as ob
+from twinkit_demo_site.meshbuild import MAX_ASPECT, MeshBuilder
+from twinkit_demo_site.objects import LABELS, L  # noqa: F401  (LABELS: the site's classes, imported from here too)
 from twinkit_demo_site.textures import CAR_PAINTS, FACADES, Atlas
-
-#: the CityScapes classes the demo site builds: name -> trainId (twinkit.cityscapes), in trainId order
-LABELS = {name: cityscapes.ID[name] for name in (
-    "road", "sidewalk", "building", "wall", "fence", "pole", "traffic light", "traffic sign", "vegetation",
-    "terrain", "sky", "person", "car", "motorcycle", "bicycle")}
-L = LABELS
 
 GROUND_KINDS = {  # kind -> (material, label, raised)
     "asphalt": ("asphalt", cityscapes.ROAD, False),
@@ -90,6 +88,16 @@ class Scene:
 # ---------------------------------------------------------------- ground
 def _ground(mb: MeshBuilder, rects: list[tuple[str, float, float, float, float]], d: Dims) -> None:
     """Rasterise painter-ordered rectangles on the rectilinear grid of their edges; emit cells and curb faces."""
+    xs, ys, kind = _ground_grid(rects, d)
+    raised = np.array([False] + [GROUND_KINDS[n][2] for n in KIND_NAMES[1:]])
+    z = np.where(raised[kind], d.curb_m, 0.0)
+    _ground_cells(mb, xs, ys, kind, z)
+    _curb_faces(mb, xs, ys, kind, z, d)
+
+
+def _ground_grid(rects: list[tuple[str, float, float, float, float]], d: Dims):
+    """Cell edges ``xs`` (nx + 1,), ``ys`` (ny + 1,) in metres (the rectangles' edges and every GROUND_PERIOD_M) and
+    ``kind`` (ny, nx) int64: the KIND_NAMES index of the last rectangle covering each cell centre (0 = none)."""
     H = d.half_m
     per = GROUND_PERIOD_M
     xs = {-H, H}
@@ -113,12 +121,13 @@ def _ground(mb: MeshBuilder, rects: list[tuple[str, float, float, float, float]]
         mi = (cx > x0) & (cx < x1)
         mj = (cy > y0) & (cy < y1)
         kind[np.ix_(mj, mi)] = KIND_NAMES.index(name)
-    raised = np.array([False] + [GROUND_KINDS[n][2] for n in KIND_NAMES[1:]])
-    z = np.where(raised[kind], d.curb_m, 0.0)
-    J, I = np.nonzero(kind)
-    # horizontal cells, grouped by kind
-    from twinkit_demo_site.meshbuild import MAX_ASPECT
+    return xs, ys, kind
 
+
+def _ground_cells(mb: MeshBuilder, xs, ys, kind, z) -> None:
+    """The horizontal ground cells at their height ``z`` (ny, nx): slivers one by one, the rest batched per kind."""
+    per = GROUND_PERIOD_M
+    J, I = np.nonzero(kind)
     wx = (xs[1:] - xs[:-1])[I]
     wy = (ys[1:] - ys[:-1])[J]
     thin = (wx > MAX_ASPECT * wy) | (wy > MAX_ASPECT * wx)
@@ -147,7 +156,11 @@ def _ground(mb: MeshBuilder, rects: list[tuple[str, float, float, float, float]]
         faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], 1).reshape(-1, 3)
         mat, lab, _ = GROUND_KINDS[KIND_NAMES[kid]]
         mb.add(verts, st, faces, mat, lab)
-    # vertical curb faces between neighbours of different height (both cells present)
+
+
+def _curb_faces(mb: MeshBuilder, xs, ys, kind, z, d: Dims) -> None:
+    """Vertical curb faces between neighbouring cells of different height, looking towards the lower one."""
+    per = GROUND_PERIOD_M
     lab_of = np.array([0] + [GROUND_KINDS[n][1] for n in KIND_NAMES[1:]])
     quads = []  # (p0, p1 bottom edge, zlo, zhi, label)
     for axis in (0, 1):
@@ -164,16 +177,11 @@ def _ground(mb: MeshBuilder, rects: list[tuple[str, float, float, float, float]]
             if axis == 0:
                 xe = xs[i + 1]
                 p, q = np.array([xe, ys[j]]), np.array([xe, ys[j + 1]])
-                # face must look towards the lower cell
-                if not hi_is_a:
-                    p, q = q, p
-                else:
-                    pass
             else:
                 ye = ys[j + 1]
                 p, q = np.array([xs[i + 1], ye]), np.array([xs[i], ye])
-                if not hi_is_a:
-                    p, q = q, p
+            if not hi_is_a:  # face must look towards the lower cell
+                p, q = q, p
             quads.append((p, q, 0.0, d.curb_m, lab))
     for p, q, z0, z1, lab in quads:
         eu = np.array([q[0] - p[0], q[1] - p[1], 0.0])
@@ -191,195 +199,23 @@ def _dashes(x_from: float, x_to: float, dash: float = 3.0, gap: float = 3.0):
     return out
 
 
-# ---------------------------------------------------------------- objects
-def _building(mb: MeshBuilder, x0, x1, y0, y1, z0, floors: int, variant: str, street_sides: set[str]) -> dict:
-    fh = 3.2
-    h = floors * fh
-    sides = {  # name: (p0, eu, length)  (eu x z points outward)
-        "-y": ([x0, y0, z0], [1, 0, 0], x1 - x0),
-        "+x": ([x1, y0, z0], [0, 1, 0], y1 - y0),
-        "+y": ([x1, y1, z0], [-1, 0, 0], x1 - x0),
-        "-x": ([x0, y1, z0], [0, -1, 0], y1 - y0),
-    }
-    for name, (p0, eu, ln) in sides.items():
-        bays = max(1, round(ln / 3.0))
-        shop = name in street_sides
-
-        def mat(i, j, shop=shop):
-            if j == 0 and shop:
-                return f"shop_{variant}"
-            return f"facade_{variant}"
-
-        mb.tiled_rect(p0, eu, [0, 0, 1], ln, h, "", L["building"], ln / bays, fh, material_fn=mat)
-    # roof with a low parapet
-    mb.tiled_rect([x0, y0, z0 + h], [1, 0, 0], [0, 1, 0], x1 - x0, y1 - y0, "roof", L["building"], 4.0, 4.0)
-    return {"min": [x0, y0, z0], "max": [x1, y1, z0 + h], "floors": floors, "facade": variant}
+# ---------------------------------------------------------------- road surface and marks
+@dataclass
+class Marks:
+    """Where the junction's painted marks are (site frame, metres)."""
+    zx0: float  # the zebras across the main road span |x| = zx0 .. zx1
+    zx1: float
+    zy0: float  # the zebras across the side street span |y| = zy0 .. zy1
+    zy1: float
+    sl_x: float  # stop lines before the main road's zebras start at |x| = sl_x
+    sl_y: float  # and the side street's at |y| = sl_y
+    x_start: float  # the main road's lane lines start at |x| = x_start
+    gcp_points: list[dict]  # the zebras' outer stripe corners, {"id", "xyz", "what"}
 
 
-def _fence(mb: MeshBuilder, a, b, z0: float, height: float = 1.4) -> None:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    ln = float(np.linalg.norm(b - a))
-    e = (b - a) / ln
-    n = np.array([-e[1], e[0]])
-    lab = L["fence"]
-
-    def seg_box(p, q, w, zlo, zhi):
-        lo = np.minimum(p, q) - w / 2
-        hi = np.maximum(p, q) + w / 2
-        mb.box([lo[0], lo[1], zlo], [hi[0], hi[1], zhi], lab, "fence")
-
-    nposts = max(1, int(math.ceil(ln / 2.5)))
-    for k in range(nposts + 1):
-        p = a + e * ln * k / nposts
-        seg_box(p, p, 0.07, z0, z0 + height + 0.05)
-    seg_box(a, b, 0.045, z0 + height - 0.06, z0 + height - 0.015)
-    seg_box(a, b, 0.045, z0 + 0.10, z0 + 0.145)
-    nb = int(ln / 0.13)
-    for k in range(1, nb):
-        p = a + e * ln * k / nb
-        if min(abs((ln * k / nb) - ln * kk / nposts) for kk in range(nposts + 1)) < 0.06:
-            continue
-        seg_box(p, p, 0.022, z0 + 0.145, z0 + height - 0.06)
-    _ = n
-
-
-def _tree(mb: MeshBuilder, rng, x, y, z0, scale=1.0) -> None:
-    r = rng.uniform(1.8, 2.6) * scale
-    trunk_h = rng.uniform(2.5, 3.2)  # crowns start above head height
-    cz = z0 + trunk_h + r * 0.9
-    mb.cylinder([x, y, z0], [x, y, cz], 0.16 * scale, 0.11 * scale, L["vegetation"], "bark", segments=10, cap=False, v_period=4.0)
-    mb.blob([x, y, cz], [r, r * rng.uniform(0.85, 1.1), r * 0.85], rng, L["vegetation"], "foliage", subdiv=3, roughness=0.15)
-
-
-def _bush(mb: MeshBuilder, rng, x, y, z0) -> None:
-    r = rng.uniform(0.55, 0.95)
-    mb.blob([x, y, z0 + r * 0.45], [r * 1.3, r, r * 0.7], rng, L["vegetation"], "hedge", subdiv=2, roughness=0.12, tex_size_m=1.2)
-
-
-def _lamp(mb: MeshBuilder, x, y, z0, towards) -> None:
-    t = np.array([towards[0], towards[1], 0.0])
-    top = np.array([x, y, z0 + 7.0])
-    mb.cylinder([x, y, z0], top, 0.10, 0.06, L["pole"], "pole", segments=10, v_period=4.0)
-    end = top + t * 1.6 + [0, 0, 0.2]
-    mb.cylinder(top - [0, 0, 0.1], end, 0.045, 0.04, L["pole"], "pole", segments=8)
-    c = end + t * 0.3
-    yaw = math.atan2(t[1], t[0])
-    mb.oriented_box(c, (0.7, 0.28, 0.14), yaw, L["pole"], "dark_metal", z0=c[2] - 0.1)
-
-
-def _traffic_light(mb: MeshBuilder, x, y, z0, facing) -> None:
-    f = np.array([facing[0], facing[1]], float)
-    mb.cylinder([x, y, z0], [x, y, z0 + 3.6], 0.075, 0.065, L["pole"], "pole", segments=10, v_period=4.0)
-    c = np.array([x, y]) + f * (0.075 + 0.14)
-    yaw = math.atan2(f[1], f[0])
-    mats = {"front": "tl_front", "rear": "tl_housing", "left": "tl_housing", "right": "tl_housing", "top": "tl_housing"}
-    # oriented_box 'front' is +length direction: length along facing
-    mb.oriented_box(c, (0.26, 0.34, 0.95), yaw, L["traffic light"], mats, z0=z0 + 2.45)
-    # a second, pedestrian head facing sideways (smaller)
-    side = np.array([-f[1], f[0]])
-    c2 = np.array([x, y]) + side * (0.075 + 0.12)
-    mb.oriented_box(c2, (0.22, 0.26, 0.6), math.atan2(side[1], side[0]), L["traffic light"], mats, z0=z0 + 1.9)
-
-
-SIGN_SHAPES = {
-    "crossing": [(0, 0), (1, 0), (1, 1), (0, 1)],
-    "no_entry": [(0.5 + 0.5 * math.cos(a), 0.5 + 0.5 * math.sin(a)) for a in np.linspace(0, 2 * np.pi, 17)[:-1]],
-    "speed": [(0.5 + 0.5 * math.cos(a), 0.5 + 0.5 * math.sin(a)) for a in np.linspace(0, 2 * np.pi, 17)[:-1]],
-    "stop": [(0.5 + 0.52 * math.cos(a), 0.5 + 0.52 * math.sin(a)) for a in np.linspace(np.pi / 8, 2 * np.pi + np.pi / 8, 9)[:-1]],
-    "yield": [(0.0, 0.97), (0.5, 0.05), (1.0, 0.97)][::-1],
-}
-
-
-def _sign(mb: MeshBuilder, x, y, z0, facing, kind: str, size=0.65) -> None:
-    f = np.array([facing[0], facing[1], 0.0], float)
-    top = z0 + 2.75
-    mb.cylinder([x, y, z0], [x, y, top], 0.035, 0.035, L["pole"], "pole", segments=8)
-    right = np.cross(-f, [0, 0, 1.0])
-    centre = np.array([x, y, top - size / 2 - 0.02]) + f * (0.035 + 0.02)
-    eu, ev = right * size, np.array([0, 0, size])
-    shape = SIGN_SHAPES[kind]
-    q = np.clip(np.array(shape), 0, 1)
-    if kind == "yield":
-        q = q[::-1]
-    # keep the outline counter-clockwise seen from the front
-    area = 0.5 * np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1])
-    if area < 0:
-        q = q[::-1]
-    mb.prism(q, centre - eu / 2 - ev / 2, eu, ev, 0.02, L["traffic sign"], f"sign_{kind}", "sign_back")
-
-
-def _car(mb: MeshBuilder, rng, x, y, z0, yaw, paint: str) -> dict:
-    Lc, Wc = rng.uniform(4.1, 4.6), rng.uniform(1.75, 1.85)
-    c, s = math.cos(yaw), math.sin(yaw)
-    fwd, left = np.array([c, s]), np.array([-s, c])
-    p = f"car_{paint}"
-    body = {"front": f"{p}_front", "rear": f"{p}_rear", "left": f"{p}_side", "right": f"{p}_side", "top": f"{p}_paint"}
-    mb.oriented_box([x, y], (Lc, Wc, 0.62), yaw, L["car"], body, z0=z0 + 0.30)
-    cab = {"front": f"{p}_window", "rear": f"{p}_window", "left": f"{p}_window", "right": f"{p}_window", "top": f"{p}_paint"}
-    cc = np.array([x, y]) - fwd * Lc * 0.06
-    mb.oriented_box(cc, (Lc * 0.55, Wc * 0.92, 0.55), yaw, L["car"], cab, z0=z0 + 0.92, top_scale=0.82)
-    r = 0.33
-    for a in (-1, 1):
-        for b in (-1, 1):
-            wc = np.array([x, y]) + fwd * a * (Lc / 2 - 0.8) + left * b * (Wc / 2 - 0.12)
-            p0 = np.array([wc[0], wc[1], z0 + r]) - np.array([left[0], left[1], 0]) * 0.11
-            p1 = p0 + np.array([left[0], left[1], 0]) * 0.22
-            mb.cylinder(p0, p1, r, r, L["car"], "tire", segments=14)
-    return {"center": [x, y], "yaw": yaw, "length": Lc, "width": Wc}
-
-
-def _bicycle(mb: MeshBuilder, x, y, z0, yaw) -> None:
-    c, s = math.cos(yaw), math.sin(yaw)
-    fwd, left = np.array([c, s, 0.0]), np.array([-s, c, 0.0])
-    o = np.array([x, y, z0])
-
-    def P(a, h, b=0.0):
-        return o + fwd * a + left * b + np.array([0, 0, h])
-
-    lab = L["bicycle"]
-    for a in (-0.53, 0.53):
-        mb.ring(P(a, 0.35), left, 0.33, 0.022, lab, "tire", segments=24)
-        mb.cylinder(P(a, 0.35, -0.05), P(a, 0.35, 0.05), 0.03, 0.03, lab, "dark_metal", segments=6)
-    tubes = [((-0.53, 0.35), (0.0, 0.3)), ((0.0, 0.3), (-0.12, 0.85)), ((-0.12, 0.85), (0.42, 0.85)),
-             ((0.0, 0.3), (0.42, 0.8)), ((-0.53, 0.35), (-0.12, 0.85)), ((0.42, 0.85), (0.53, 0.35)),
-             ((0.42, 0.85), (0.38, 1.02)), ((-0.12, 0.85), (-0.15, 0.98))]
-    for (a0, h0), (a1, h1) in tubes:
-        mb.cylinder(P(a0, h0), P(a1, h1), 0.02, 0.02, lab, "bike_frame", segments=6)
-    mb.cylinder(P(0.38, 1.02, -0.28), P(0.38, 1.02, 0.28), 0.014, 0.014, lab, "dark_metal", segments=6)
-    mb.oriented_box(P(-0.15, 0)[:2], (0.26, 0.12, 0.06), yaw, lab, "dark_metal", z0=z0 + 0.98)
-
-
-def _motorcycle(mb: MeshBuilder, x, y, z0, yaw) -> None:
-    c, s = math.cos(yaw), math.sin(yaw)
-    fwd, left = np.array([c, s, 0.0]), np.array([-s, c, 0.0])
-    o = np.array([x, y, z0])
-    lab = L["motorcycle"]
-
-    def P(a, h, b=0.0):
-        return o + fwd * a + left * b + np.array([0, 0, h])
-
-    for a in (-0.72, 0.72):
-        mb.ring(P(a, 0.31), left, 0.25, 0.07, lab, "tire", segments=20, tube_segments=8)
-        mb.cylinder(P(a, 0.31, -0.06), P(a, 0.31, 0.06), 0.16, 0.16, lab, "dark_metal", segments=12)
-    mb.oriented_box(P(0.0, 0)[:2], (0.75, 0.34, 0.32), yaw, lab, "dark_metal", z0=z0 + 0.30)  # engine
-    mb.oriented_box(P(0.2, 0)[:2], (0.55, 0.36, 0.22), yaw, lab, "moto_body", z0=z0 + 0.68, top_scale=0.8)  # tank
-    mb.oriented_box(P(-0.35, 0)[:2], (0.6, 0.3, 0.12), yaw, lab, "dark_metal", z0=z0 + 0.72)  # seat
-    mb.oriented_box(P(-0.65, 0)[:2], (0.45, 0.22, 0.12), yaw, lab, "moto_body", z0=z0 + 0.62)  # tail
-    mb.cylinder(P(0.72, 0.31), P(0.5, 1.0), 0.025, 0.025, lab, "pole", segments=6)  # fork
-    mb.cylinder(P(0.5, 1.0, -0.35), P(0.5, 1.0, 0.35), 0.015, 0.015, lab, "dark_metal", segments=6)
-    mb.cylinder(P(-0.72, 0.31), P(-0.1, 0.45), 0.03, 0.03, lab, "pole", segments=6)  # swing arm
-    mb.cylinder(P(-0.2, 0.25, -0.2), P(-0.9, 0.45, -0.2), 0.045, 0.04, lab, "pole", segments=8)  # exhaust
-
-
-# ---------------------------------------------------------------- the whole site
-def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
-    rng = np.random.default_rng([seed, 1])
-    d = Dims(half_m=half_m, curb_m=round(float(rng.uniform(0.10, 0.15)), 3))
-    H, rm, rs, bm, bs, cz = d.half_m, d.rm, d.rs, d.bm, d.bs, d.curb_m
-    mb = MeshBuilder(atlas)
-    scene = Scene(mesh=None, atlas=atlas, dims=d)  # type: ignore[arg-type]
-    rects: list[tuple[str, float, float, float, float]] = []
-    R = rects.append
+def _surfaces(d: Dims, R) -> None:
+    """Grass everywhere, the two roads' asphalt, the raised sidewalks with their curb strips (painter order)."""
+    H, rm, rs, bm, bs = d.half_m, d.rm, d.rs, d.bm, d.bs
     BIG = H + 1
     R(("grass", -BIG, BIG, -BIG, BIG))
     R(("asphalt", -BIG, BIG, -rm, rm))
@@ -392,9 +228,14 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
         R(("curb", *sorted((sx * rs, sx * (rs + 0.15))), -BIG, BIG))
     R(("asphalt", -BIG, BIG, -rm, rm))  # road wins over the side-street sidewalks
     R(("asphalt", -rs, rs, -BIG, BIG))
-    # zebra crossings
+
+
+def _zebras(d: Dims, R) -> tuple[float, float, float, float, list[dict]]:
+    """Zebra crossings on all four arms: (zx0, zx1, zy0, zy1, gcp_points), the ground-control points being the outer
+    corners of each zebra's first and last stripe at road level (what a surveyor measures and a user clicks)."""
+    rm, rs = d.rm, d.rs
     zx0, zx1 = rs + 0.5, rs + 3.5  # across the main road, on both arms
-    gcps = []  # natural ground-control points: the outer corners of each zebra's first and last stripe
+    gcps = []
     for sx in (-1, 1):
         y = -rm + 0.25
         stripes = []
@@ -414,17 +255,21 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
             x += 1.0
         gcps += [((xx, sy * yy), f"{'north' if sy > 0 else 'south'} zebra corner")
                  for xx in (stripes[0], stripes[-1] + 0.5) for yy in (zy0, zy1)]
-    # (road level: the painted corners a surveyor measures and a user clicks in the photos)
     gcp_points = [{"id": f"Z{k + 1:02d}", "xyz": [float(x), float(y), 0.0], "what": w}
                   for k, ((x, y), w) in enumerate(gcps)]
-    # stop lines (traffic towards the junction)
+    return zx0, zx1, zy0, zy1, gcp_points
+
+
+def _road_marks(d: Dims, R) -> Marks:
+    """Paint the zebras, the stop lines (traffic towards the junction) and the lane lines."""
+    H, rs = d.half_m, d.rs
+    zx0, zx1, zy0, zy1, gcp_points = _zebras(d, R)
     sl_x = zx1 + 1.0
     R(("marking", sl_x, sl_x + 0.3, 0.0, d.main_traffic))            # east arm, westbound
     R(("marking", -sl_x - 0.3, -sl_x, -d.main_traffic, 0.0))          # west arm, eastbound
     sl_y = zy1 + 1.0
     R(("marking", -rs, rs, sl_y, sl_y + 0.3))                          # north arm, one-way southbound
     R(("marking", 0.0, rs, -sl_y - 0.3, -sl_y))                        # south arm, northbound lane
-    # lane lines
     lw = 0.12
     x_start = sl_x + 0.3
     for sx in (-1, 1):
@@ -444,82 +289,103 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
     R(("marking", -lw / 2, lw / 2, -(y_start + 10), -y_start))
     for a, b in _dashes(y_start + 13, H + 3):
         R(("marking", -lw / 2, lw / 2, -b, -a))           # south arm centre line
+    return Marks(zx0, zx1, zy0, zy1, sl_x, sl_y, x_start, gcp_points)
 
-    # ------------------------------------------------ blocks
-    buildings: list[dict] = []
-    walls: list[tuple] = []
-    fences: list[tuple] = []
-    trees: list[tuple] = []
-    bushes: list[tuple] = []
+
+# ---------------------------------------------------------------- blocks
+@dataclass
+class Blocks:
+    """What stands in the four blocks: building solids (as objects.building returns them), walls
+    (xa, xb, ya, yb, height), fences ((x, y), (x, y)), trees (x, y, scale) and bushes (x, y)."""
+    buildings: list[dict] = field(default_factory=list)
+    walls: list[tuple] = field(default_factory=list)
+    fences: list[tuple] = field(default_factory=list)
+    trees: list[tuple] = field(default_factory=list)
+    bushes: list[tuple] = field(default_factory=list)
+
+
+def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from, x_to, depth_lo=10.5, depth_hi=13.0):
+    """Buildings along the main-road frontage of block (sx, sy) between |x| = x_from..x_to; returns the last's depth."""
     facade_names = list(FACADES)
-
-    def row(sx, sy, x_from, x_to, depth_lo=10.5, depth_hi=13.0):
-        """Buildings along the main-road frontage of block (sx, sy) between |x| = x_from..x_to."""
-        x = x_from
-        first = True
-        while True:
-            w = float(rng.uniform(11.0, 20.0))
-            if x + w > x_to:
-                w = x_to - x
-                if w < 8.0:
-                    break
-            depth = float(rng.uniform(depth_lo, depth_hi))
-            floors = int(rng.integers(3, 7))
-            xa, xb = sorted((sx * x, sx * (x + w)))
-            ya, yb = sorted((sy * bm, sy * (bm + depth)))
-            street = {"-y" if sy > 0 else "+y"}
-            if first and abs(x - bs) < 1e-6:
-                street.add("-x" if sx > 0 else "+x")
-            b = _building(mb, xa, xb, ya, yb, cz, floors, facade_names[int(rng.integers(len(facade_names)))], street)
-            buildings.append(b)
-            R(("none", xa, xb, ya, yb))
-            x += w + float(rng.uniform(2.0, 3.5))
-            first = False
-            if x >= x_to - 8.0:
+    x = x_from
+    first = True
+    while True:
+        w = float(rng.uniform(11.0, 20.0))
+        if x + w > x_to:
+            w = x_to - x
+            if w < 8.0:
                 break
-        return buildings[-1]["max"][1] if sy > 0 else -buildings[-1]["min"][1]
+        depth = float(rng.uniform(depth_lo, depth_hi))
+        floors = int(rng.integers(3, 7))
+        xa, xb = sorted((sx * x, sx * (x + w)))
+        ya, yb = sorted((sy * d.bm, sy * (d.bm + depth)))
+        street = {"-y" if sy > 0 else "+y"}
+        if first and abs(x - d.bs) < 1e-6:
+            street.add("-x" if sx > 0 else "+x")
+        b = ob.building(mb, xa, xb, ya, yb, d.curb_m, floors, facade_names[int(rng.integers(len(facade_names)))], street)
+        buildings.append(b)
+        R(("none", xa, xb, ya, yb))
+        x += w + float(rng.uniform(2.0, 3.5))
+        first = False
+        if x >= x_to - 8.0:
+            break
+    return buildings[-1]["max"][1] if sy > 0 else -buildings[-1]["min"][1]
 
-    def side_row(sx, sy, y_from, y_to):
-        """Buildings facing the side street in block (sx, sy) between |y| = y_from..y_to."""
-        y = y_from
-        while y_to - y >= 10.0:
-            w = min(float(rng.uniform(11.0, 20.0)), y_to - y)
-            if y_to - y - w < 8.0:
-                w = y_to - y
-            depth = float(rng.uniform(10.5, 13.0))
-            floors = int(rng.integers(3, 7))
-            xa, xb = sorted((sx * bs, sx * (bs + depth)))
-            ya, yb = sorted((sy * y, sy * (y + w)))
-            b = _building(mb, xa, xb, ya, yb, cz, floors, facade_names[int(rng.integers(len(facade_names)))],
-                          {"-x" if sx > 0 else "+x"})
-            buildings.append(b)
-            R(("none", xa, xb, ya, yb))
-            y += w + float(rng.uniform(2.0, 3.5))
 
+def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y_from, y_to) -> None:
+    """Buildings facing the side street in block (sx, sy) between |y| = y_from..y_to."""
+    facade_names = list(FACADES)
+    y = y_from
+    while y_to - y >= 10.0:
+        w = min(float(rng.uniform(11.0, 20.0)), y_to - y)
+        if y_to - y - w < 8.0:
+            w = y_to - y
+        depth = float(rng.uniform(10.5, 13.0))
+        floors = int(rng.integers(3, 7))
+        xa, xb = sorted((sx * d.bs, sx * (d.bs + depth)))
+        ya, yb = sorted((sy * y, sy * (y + w)))
+        b = ob.building(mb, xa, xb, ya, yb, d.curb_m, floors, facade_names[int(rng.integers(len(facade_names)))],
+                        {"-x" if sx > 0 else "+x"})
+        buildings.append(b)
+        R(("none", xa, xb, ya, yb))
+        y += w + float(rng.uniform(2.0, 3.5))
+
+
+def _blocks(mb: MeshBuilder, rng, d: Dims, R) -> Blocks:
+    """The buildings of the NE, NW and SW blocks (built now), the SW yard's walls and plants and the SE park."""
+    H, bm, bs = d.half_m, d.bm, d.bs
+    bl = Blocks()
+    buildings = bl.buildings
     # NE: a row of buildings from the corner, more along the side street on big sites
-    row(1, 1, bs, H - 0.5)
+    _row(mb, rng, d, R, buildings, 1, 1, bs, H - 0.5)
     depth_ne = max(b["max"][1] for b in buildings)
-    side_row(1, 1, depth_ne + 3.0, H - 0.5)
+    _side_row(mb, rng, d, R, buildings, 1, 1, depth_ne + 3.0, H - 0.5)
     # NW: row from the corner; behind it buildings (big sites) or a wall along the side street
     n_before = len(buildings)
-    row(-1, 1, bs, H - 0.5)
+    _row(mb, rng, d, R, buildings, -1, 1, bs, H - 0.5)
     depth_nw = max(b["max"][1] for b in buildings[n_before:])
     if H - 0.5 - (depth_nw + 3.0) >= 10.0:
-        side_row(-1, 1, depth_nw + 3.0, H - 0.5)
+        _side_row(mb, rng, d, R, buildings, -1, 1, depth_nw + 3.0, H - 0.5)
     elif H - depth_nw > 4.0:
-        walls.append((-bs - 0.3, -bs, depth_nw + 2.0, H - 0.3, 2.0))
+        bl.walls.append((-bs - 0.3, -bs, depth_nw + 2.0, H - 0.3, 2.0))
     # SW: walled yard at the corner, then buildings
     yard_x = bs + 8.0
     wall_end = min(H - 0.3, bm + 18.0)
-    walls.append((-bs - 0.25, -bs, -wall_end, -bm, 1.9))
-    walls.append((-yard_x, -bs - 0.25, -bm - 0.25, -bm, 1.9))
-    row(-1, -1, yard_x + 1.0, H - 0.5)
-    side_row(-1, -1, wall_end + 3.0, H - 0.5)
-    bushes += [(-bs - 2.0, -bm - 2.5), (-bs - 4.5, -bm - 1.6)]
-    trees.append((-bs - 4.0, -bm - 5.5, 0.9))
-    # SE: fenced park with trees and bushes
-    fences.append(((bs + 0.15, -bm - 0.15), (H - 0.3, -bm - 0.15)))
-    fences.append(((bs + 0.15, -(H - 0.3)), (bs + 0.15, -bm - 0.15)))
+    bl.walls.append((-bs - 0.25, -bs, -wall_end, -bm, 1.9))
+    bl.walls.append((-yard_x, -bs - 0.25, -bm - 0.25, -bm, 1.9))
+    _row(mb, rng, d, R, buildings, -1, -1, yard_x + 1.0, H - 0.5)
+    _side_row(mb, rng, d, R, buildings, -1, -1, wall_end + 3.0, H - 0.5)
+    bl.bushes += [(-bs - 2.0, -bm - 2.5), (-bs - 4.5, -bm - 1.6)]
+    bl.trees.append((-bs - 4.0, -bm - 5.5, 0.9))
+    _park(rng, d, R, bl)
+    return bl
+
+
+def _park(rng, d: Dims, R, bl: Blocks) -> None:
+    """SE: a fenced park with trees and bushes, and street trees in grass pits on the sidewalk in front of it."""
+    H, bm, bs = d.half_m, d.bm, d.bs
+    bl.fences.append(((bs + 0.15, -bm - 0.15), (H - 0.3, -bm - 0.15)))
+    bl.fences.append(((bs + 0.15, -(H - 0.3)), (bs + 0.15, -bm - 0.15)))
     tries = 0
     park_trees = []
     while tries < 400 and len(park_trees) < max(3, int((H - bs) * (H - bm) / 60)):
@@ -527,61 +393,71 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
         px, py = rng.uniform(bs + 3.5, H - 2.5), -rng.uniform(bm + 3.5, H - 2.5)
         if all(math.hypot(px - qx, py - qy) > 5.0 for qx, qy in park_trees):
             park_trees.append((px, py))
-    trees += [(x, y, 1.0) for x, y in park_trees]
+    bl.trees += [(x, y, 1.0) for x, y in park_trees]
     xb_ = bs + 1.2
     while xb_ < H - 1.5:
         if rng.random() < 0.75:
-            bushes.append((xb_, -bm - 1.1))
+            bl.bushes.append((xb_, -bm - 1.1))
         xb_ += rng.uniform(1.6, 2.6)
-    # street trees in grass pits on the south sidewalk in front of the park
     xt = bs + 7.5
     while xt < H - 2.0:
         R(("grass", xt - 0.7, xt + 0.7, -bm + 0.6, -bm + 2.0))
-        trees.append((xt, -bm + 1.3, 0.8))
+        bl.trees.append((xt, -bm + 1.3, 0.8))
         xt += 9.0
 
-    for (xa, xb, ya, yb, h) in walls:
+
+def _build_block_things(mb: MeshBuilder, rng, d: Dims, R, bl: Blocks) -> None:
+    """Build the walls (their footprint left bare of ground), fences, trees and bushes, in that order."""
+    cz = d.curb_m
+    for (xa, xb, ya, yb, h) in bl.walls:
         mb.box([xa, ya, cz], [xb, yb, cz + h], L["wall"], "concrete_wall", period=3.0)
         R(("none", xa, xb, ya, yb))
-    for a, b in fences:
-        _fence(mb, a, b, cz)
-    for x, y, sc in trees:
-        _tree(mb, rng, x, y, cz, sc)
-    for x, y in bushes:
-        _bush(mb, rng, x, y, cz)
+    for a, b in bl.fences:
+        ob.fence(mb, a, b, cz)
+    for x, y, sc in bl.trees:
+        ob.tree(mb, rng, x, y, cz, sc)
+    for x, y in bl.bushes:
+        ob.bush(mb, rng, x, y, cz)
 
-    # ------------------------------------------------ street furniture
+
+# ---------------------------------------------------------------- street furniture and vehicles
+def _street_furniture(mb: MeshBuilder, d: Dims, m: Marks) -> None:
+    """Street lamps along the main road, traffic lights on the four corners and the traffic signs."""
+    H, rm, rs, cz = d.half_m, d.rm, d.rs, d.curb_m
     lamp_y = rm + 0.55
     xl = 10.0
     while xl < H - 2.0:
         for sx in (-1, 1):
-            _lamp(mb, sx * xl, lamp_y, cz, (0, -1))
+            ob.lamp(mb, sx * xl, lamp_y, cz, (0, -1))
         xl += 14.0
     xl = 17.0
     while xl < H - 2.0:
-        _lamp(mb, -xl, -(rm + 0.35), cz, (0, 1))
+        ob.lamp(mb, -xl, -(rm + 0.35), cz, (0, 1))
         xl += 14.0
     c0 = 0.55
-    _traffic_light(mb, rs + c0, rm + c0, cz, (1, 0))      # westbound approach (east arm)
-    _traffic_light(mb, -rs - c0, -rm - c0, cz, (-1, 0))   # eastbound approach (west arm)
-    _traffic_light(mb, -rs - c0, rm + c0, cz, (0, 1))     # southbound approach (north arm)
-    _traffic_light(mb, rs + c0, -rm - c0, cz, (0, -1))    # northbound approach (south arm)
-    _sign(mb, zx1 + 0.4, rm + 0.45, cz, (1, 0), "crossing")
-    _sign(mb, -zx1 - 0.4, -rm - 0.45, cz, (-1, 0), "crossing")
-    _sign(mb, -rs - 0.45, zy1 + 0.4, cz, (0, 1), "crossing")
-    _sign(mb, rs + 0.45, -zy1 - 0.4, cz, (0, -1), "crossing")
-    _sign(mb, rs + 0.45, zy0 - 0.1, cz, (0, -1), "no_entry")
-    _sign(mb, rs + 0.45, -sl_y - 2.5, cz, (0, -1), "stop")
-    _sign(mb, -(H - 5.0), -rm - 0.45, cz, (-1, 0), "speed")
-    _sign(mb, -rs - 0.45, -sl_y - 2.5, cz, (0, 1), "yield")
+    ob.traffic_light(mb, rs + c0, rm + c0, cz, (1, 0))      # westbound approach (east arm)
+    ob.traffic_light(mb, -rs - c0, -rm - c0, cz, (-1, 0))   # eastbound approach (west arm)
+    ob.traffic_light(mb, -rs - c0, rm + c0, cz, (0, 1))     # southbound approach (north arm)
+    ob.traffic_light(mb, rs + c0, -rm - c0, cz, (0, -1))    # northbound approach (south arm)
+    ob.sign(mb, m.zx1 + 0.4, rm + 0.45, cz, (1, 0), "crossing")
+    ob.sign(mb, -m.zx1 - 0.4, -rm - 0.45, cz, (-1, 0), "crossing")
+    ob.sign(mb, -rs - 0.45, m.zy1 + 0.4, cz, (0, 1), "crossing")
+    ob.sign(mb, rs + 0.45, -m.zy1 - 0.4, cz, (0, -1), "crossing")
+    ob.sign(mb, rs + 0.45, m.zy0 - 0.1, cz, (0, -1), "no_entry")
+    ob.sign(mb, rs + 0.45, -m.sl_y - 2.5, cz, (0, -1), "stop")
+    ob.sign(mb, -(H - 5.0), -rm - 0.45, cz, (-1, 0), "speed")
+    ob.sign(mb, -rs - 0.45, -m.sl_y - 2.5, cz, (0, 1), "yield")
     if H - 5.0 > 20:
-        _sign(mb, H - 5.0, rm + 0.45, cz, (1, 0), "speed")
+        ob.sign(mb, H - 5.0, rm + 0.45, cz, (1, 0), "speed")
 
-    # ------------------------------------------------ vehicles
+
+def _vehicles(mb: MeshBuilder, rng, d: Dims, m: Marks) -> list[dict]:
+    """Parked cars and a motorcycle, a car at the north arm's stop line, a bicycle; returns the cars' records."""
+    H = d.half_m
     paints = list(CAR_PAINTS)
     cars = []
     slots = []
-    xs_ = x_start + 4.0
+    xs_ = m.x_start + 4.0
     while xs_ + 2.4 < H - 0.5:
         for sx in (-1, 1):
             for sy in (-1, 1):
@@ -592,21 +468,22 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
     for k, (x, sy, _sx) in enumerate(slots):
         yaw = 0.0 if sy < 0 else math.pi
         if k == moto_slot:
-            _motorcycle(mb, x, sy * ypark, 0.0, yaw + 0.25)
+            ob.motorcycle(mb, x, sy * ypark, 0.0, yaw + 0.25)
             continue
         if rng.random() < 0.65:
-            cars.append(_car(mb, rng, x + rng.uniform(-0.4, 0.4), sy * (ypark + rng.uniform(-0.1, 0.1)), 0.0, yaw,
-                             paints[int(rng.integers(len(paints)))]))
-    # a car waiting at the north arm's stop line
-    cars.append(_car(mb, rng, -d.lane_m / 2, sl_y + 0.3 + 0.6 + 2.3, 0.0, -math.pi / 2, paints[int(rng.integers(len(paints)))]))
-    _bicycle(mb, bs + 6.0, bm - 0.6, cz, 0.0)
+            cars.append(ob.car(mb, rng, x + rng.uniform(-0.4, 0.4), sy * (ypark + rng.uniform(-0.1, 0.1)), 0.0, yaw,
+                               paints[int(rng.integers(len(paints)))]))
+    cars.append(ob.car(mb, rng, -d.lane_m / 2, m.sl_y + 0.3 + 0.6 + 2.3, 0.0, -math.pi / 2,
+                       paints[int(rng.integers(len(paints)))]))
+    ob.bicycle(mb, d.bs + 6.0, d.bm - 0.6, d.curb_m, 0.0)
+    return cars
 
-    _ground(mb, rects, d)
-    scene.mesh = mb.finish()
-    scene.buildings = buildings
-    scene.solids = buildings + [{"min": [w[0], w[2], cz], "max": [w[1], w[3], cz + w[4]]} for w in walls]
 
-    # ------------------------------------------------ truth for roads
+# ---------------------------------------------------------------- truth and routes
+def _roads_truth(d: Dims, m: Marks) -> dict:
+    """roads_truth.json: the roads, junction, lanes (driving direction) and crossings in the site frame."""
+    H, rm, rs = d.half_m, d.rm, d.rs
+    zx0, zx1, zy0, zy1 = m.zx0, m.zx1, m.zy0, m.zy1
     lane_lines = []
     for yl, dirn in ((-d.lane_m * 1.5, 1), (-d.lane_m * 0.5, 1), (d.lane_m * 0.5, -1), (d.lane_m * 1.5, -1)):
         xs_line = [-H, H] if dirn > 0 else [H, -H]
@@ -616,7 +493,7 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
         lane_lines.append({"road": "side_north", "direction": "south", "points": [[xl_, H, 0.0], [xl_, rm, 0.0]]})
     lane_lines.append({"road": "side_south", "direction": "south", "points": [[-d.lane_m / 2, -rm, 0.0], [-d.lane_m / 2, -H, 0.0]]})
     lane_lines.append({"road": "side_south", "direction": "north", "points": [[d.lane_m / 2, -H, 0.0], [d.lane_m / 2, -rm, 0.0]]})
-    scene.roads_truth = {
+    return {
         "frame": "site local (metres, x east, y north, z up; origin = base point)",
         "roads": [
             {"name": "main", "centerline": [[-H, 0.0, 0.0], [H, 0.0, 0.0]], "width_m": 2 * rm,
@@ -638,8 +515,13 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
         "sidewalk_width_m": d.sidewalk_m,
         "curb_height_m": d.curb_m,
     }
-    zxm, zym = (zx0 + zx1) / 2, (zy0 + zy1) / 2
-    scene.osm = {
+
+
+def _osm(d: Dims, m: Marks) -> dict:
+    """The OpenStreetMap view of the junction in the true site frame: nodes id -> (x, y, tags), ways."""
+    H = d.half_m
+    zxm, zym = (m.zx0 + m.zx1) / 2, (m.zy0 + m.zy1) / 2
+    return {
         "nodes": {  # id -> (x, y, tags)
             1: (-H, 0.0, {}), 2: (-zxm, 0.0, {"highway": "crossing", "crossing": "zebra", "crossing:markings": "zebra"}),
             3: (0.0, 0.0, {"highway": "traffic_signals"}),
@@ -656,6 +538,11 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
                               "lanes:forward": "1", "lanes:backward": "1", "sidewalk": "both", "maxspeed": "30", "surface": "asphalt"}),
         ],
     }
+
+
+def _routes(scene: Scene, d: Dims, m: Marks) -> None:
+    """The scanner car's passes, the photo walks and the pedestrian crossing during the first pass."""
+    H, rm, rs, bm, bs = d.half_m, d.rm, d.rs, d.bm, d.bs
     # scanner car passes (lane centres, 1 m inside the site edge)
     e = H - 1.0
     scene.scan_passes = [
@@ -666,10 +553,10 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
     ]
     # photo walk: a loop over the four crossings, plus the main sidewalks on bigger sites
     swm, sws = (rm + bm) / 2, (rs + bs) / 2
-    zx = (zx0 + zx1) / 2
+    zx = (m.zx0 + m.zx1) / 2
+    zym = (m.zy0 + m.zy1) / 2
     loop = [(zx, -swm), (zx, swm), (-sws, zym), (-zx, swm), (-zx, -swm), (sws, -zym), (zx, -swm)]
     scene.walk_path = np.array(loop, float)
-    scene.gcp_points = gcp_points
     # bigger presets: out and back along every main-road sidewalk (crossing the main road on the zebras)
     ys_ = -rm - 0.85  # south sidewalk, clear of the street trees and lamps
     scene.walk_extra = np.array([
@@ -678,7 +565,35 @@ def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
     ], float)
     # a pedestrian walking over the west crossing while the first scanner pass goes by
     scene.pedestrian = {"x": -zx, "y0": -rm + 0.4, "speed_mps": 1.3, "pass": 0, "radius_m": 0.23, "height_m": 1.75}
-    scene.counts = {"buildings": len(buildings), "cars": len(cars), "trees": len(trees), "bushes": len(bushes),
-                    "walls": len(walls), "fences": len(fences), "faces": int(len(scene.mesh.faces)),
-                    "vertices": int(len(scene.mesh.vertices))}
+
+
+# ---------------------------------------------------------------- the whole site
+def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
+    """The demo intersection of half size ``half_m`` (metres) for ``seed``: its textured, labelled mesh and truths.
+
+    One generator drives every random choice, in the order below, so a seed gives the same site byte for byte."""
+    rng = np.random.default_rng([seed, 1])
+    d = Dims(half_m=half_m, curb_m=round(float(rng.uniform(0.10, 0.15)), 3))
+    mb = MeshBuilder(atlas)
+    scene = Scene(mesh=None, atlas=atlas, dims=d)  # type: ignore[arg-type]
+    rects: list[tuple[str, float, float, float, float]] = []  # painter-ordered ground rectangles
+    R = rects.append
+    _surfaces(d, R)
+    marks = _road_marks(d, R)
+    blocks = _blocks(mb, rng, d, R)
+    _build_block_things(mb, rng, d, R, blocks)
+    _street_furniture(mb, d, marks)
+    cars = _vehicles(mb, rng, d, marks)
+    _ground(mb, rects, d)
+    scene.mesh = mb.finish()
+    cz = d.curb_m
+    scene.buildings = blocks.buildings
+    scene.solids = blocks.buildings + [{"min": [w[0], w[2], cz], "max": [w[1], w[3], cz + w[4]]} for w in blocks.walls]
+    scene.roads_truth = _roads_truth(d, marks)
+    scene.osm = _osm(d, marks)
+    _routes(scene, d, marks)
+    scene.gcp_points = marks.gcp_points
+    scene.counts = {"buildings": len(blocks.buildings), "cars": len(cars), "trees": len(blocks.trees),
+                    "bushes": len(blocks.bushes), "walls": len(blocks.walls), "fences": len(blocks.fences),
+                    "faces": int(len(scene.mesh.faces)), "vertices": int(len(scene.mesh.vertices))}
     return scene

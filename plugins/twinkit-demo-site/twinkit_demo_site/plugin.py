@@ -107,21 +107,13 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                        out_gcp_json: Path,
                        out_roads_osm: Path, out_roads_truth_json: Path, out_site_json: Path) -> dict:
     """Write a procedural four-way intersection with exact ground truth."""
-    import numpy as np
-
     from twinkit import artefacts as A
     from twinkit_demo_site import writers
-    from twinkit_demo_site.layout import LABELS, build_scene
-    from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
+    from twinkit_demo_site.layout import build_scene
     from twinkit_demo_site.raycast import Tracer
-    from twinkit_demo_site.scanner import ScanSettings, scan, trajectory
     from twinkit_demo_site.textures import build_atlas
 
-    if params.size not in PRESETS:
-        from twinkit import InputError
-
-        raise InputError(f"demo_intersection: unknown size '{params.size}'; choose one of {', '.join(PRESETS)}")
-    pre = PRESETS[params.size]
+    pre = _preset(params.size)
     seed = int(params.seed)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -144,6 +136,45 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     lap("mesh_files")
 
     tracer = Tracer(mesh, atlas, threads=ctx.threads, weathering=params.weathering, seed=seed)
+    cloud, traj, settings = _scan_cloud(scene, tracer, params, pre, seed, ctx)
+    lap("scan")
+    _write_cloud_files(cloud, traj, settings, geo, (seed, params.size), out_cloud_ply=out_cloud_ply,
+                       out_cloud_las=out_cloud_las, out_cloud_e57=out_cloud_e57, out_scanners_json=out_scanners_json)
+    lap("cloud_files")
+
+    n_photos = _photos(scene, tracer, params, pre, seed, geo, ctx, out_photos_dir=out_photos_dir,
+                       out_cameras_json=out_cameras_json, out_gcp_json=out_gcp_json)
+    lap("photos")
+
+    tf = _osm_transform(params, seed)
+    _write_roads(scene, tf, geo, out_roads_osm=out_roads_osm, out_roads_truth_json=out_roads_truth_json)
+    lap("roads")
+
+    site = _site_json(scene, params, geo, tf, cloud, traj, n_photos)
+    A.write_site_info(out_site_json, site)
+    lap("site_json")
+    n_points = site["counts"]["points"]
+    ctx.log.info("demo site: %d faces, %d points, %d photos; timings %s", len(mesh.faces), n_points, n_photos, timings)
+    return {"points": n_points, "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
+            "photos": n_photos, "ghost_points": site["counts"]["ghost_points"], "timings_s": timings}
+
+
+def _preset(size: str) -> dict:
+    """The size preset's settings (PRESETS); an unknown size is an InputError."""
+    if size not in PRESETS:
+        from twinkit import InputError
+
+        raise InputError(f"demo_intersection: unknown size '{size}'; choose one of {', '.join(PRESETS)}")
+    return PRESETS[size]
+
+
+def _scan_cloud(scene, tracer, params: DemoSiteParams, pre: dict, seed: int, ctx: StepContext):
+    """Drive the scanner van along its passes: (cloud, trajectory, ScanSettings), the cloud being a dict of xyz (n, 3)
+    site frame, normals, rgb, label, scanner (trajectory index) and intensity arrays."""
+    import numpy as np
+
+    from twinkit_demo_site.scanner import ScanSettings, scan, trajectory
+
     dens = math.sqrt(max(params.density_scale, 1e-3))
     settings = ScanSettings(profile_spacing_m=pre["profile_spacing_m"] / dens,
                             rays_per_profile=int(round(pre["rays_per_profile"] * dens)),
@@ -153,12 +184,19 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     traj = trajectory(scene, settings, np.random.default_rng([seed, 2]))
     chunks = list(scan(scene, tracer, settings, traj, np.random.default_rng([seed, 3]), progress=ctx.progress))
     cloud = {k: np.concatenate([getattr(c, k) for c in chunks]) for k in ("xyz", "normals", "rgb", "label", "scanner", "intensity")}
-    del chunks
-    n_points = len(cloud["xyz"])
-    lap("scan")
+    return cloud, traj, settings
+
+
+def _write_cloud_files(cloud: dict, traj: dict, settings, geo, guid_seed, *, out_cloud_ply: Path, out_cloud_las: Path,
+                       out_cloud_e57: Path, out_scanners_json: Path) -> None:
+    """The cloud as PLY (site frame), LAS and E57 (projected), and the scanner positions as JSON."""
+    import numpy as np
+
+    from twinkit_demo_site import writers
+
     writers.write_cloud_ply(out_cloud_ply, cloud)
     writers.write_las(out_cloud_las, cloud, geo, traj["time_s"][cloud["scanner"]])
-    writers.write_e57(out_cloud_e57, cloud, geo, (seed, params.size), traj["xyz"])
+    writers.write_e57(out_cloud_e57, cloud, geo, guid_seed, traj["xyz"])
     writers.write_json(out_scanners_json, {
         "frame": "site local (metres, z up)",
         "description": "mobile-mapping van positions; each position fires one 360-degree profile per head; "
@@ -169,7 +207,15 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
         "positions": np.round(traj["xyz"], 4), "heading_rad": np.round(traj["heading"], 6),
         "time_s": np.round(traj["time_s"], 5), "pass": traj["pass"],
     })
-    lap("cloud_files")
+
+
+def _photos(scene, tracer, params: DemoSiteParams, pre: dict, seed: int, geo, ctx: StepContext, *,
+            out_photos_dir: Path, out_cameras_json: Path, out_gcp_json: Path) -> int:
+    """Render the photo walk, write the cameras and the ground-control points; returns the photo count."""
+    import numpy as np
+
+    from twinkit import artefacts as A
+    from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
 
     n_photos = params.photo_count or pre["photos"]
     path = scene.walk_path if params.size == "small" else np.concatenate([scene.walk_path, scene.walk_extra])
@@ -182,29 +228,43 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
     A.write_gcp(out_gcp_json, gcp_observations(
         tracer, cams, scene.gcp_points, np.random.default_rng([seed, 8]),
         survey_noise_m=params.gcp_survey_noise_m, pixel_noise_px=params.gcp_pixel_noise_px))
-    lap("photos")
+    return n_photos
 
-    tf = _osm_transform(params, seed)
+
+def _write_roads(scene, tf: dict, geo, *, out_roads_osm: Path, out_roads_truth_json: Path) -> None:
+    """roads.osm (its nodes moved by the known OSM transform ``tf``) and roads_truth.json."""
+    import numpy as np
+
+    from twinkit import artefacts as A
+    from twinkit_demo_site import writers
+
     ids = sorted(scene.osm["nodes"])
     xy = np.array([scene.osm["nodes"][i][:2] for i in ids])
     moved = apply_osm_transform(xy, tf)
     nodes = {i: (float(p[0]), float(p[1]), scene.osm["nodes"][i][2]) for i, p in zip(ids, moved)}
     A.write_osm(out_roads_osm, writers.osm_text(nodes, scene.osm["ways"], geo))
     A.write_roads_truth(out_roads_truth_json, scene.roads_truth)
-    lap("roads")
 
+
+def _site_json(scene, params: DemoSiteParams, geo, tf: dict, cloud: dict, traj: dict, n_photos: int) -> dict:
+    """site.json: the georeference, bounds, OSM transform, counts, labels, solids, files and parameters."""
+    import numpy as np
+
+    from twinkit_demo_site.layout import LABELS
+
+    mesh = scene.mesh
     H = scene.dims.half_m
     zmax = float(mesh.vertices[:, 2].max())
     labels_present = sorted(int(v) for v in np.unique(mesh.face_attrs["label"]))
-    counts = {**scene.counts, "points": n_points, "ghost_points": int((cloud["label"] == LABELS["person"]).sum()),
+    counts = {**scene.counts, "points": len(cloud["xyz"]), "ghost_points": int((cloud["label"] == LABELS["person"]).sum()),
               "photos": n_photos, "scanner_positions": int(len(traj["xyz"]))}
-    site = {
+    return {
         **geo.georef_json(),
         "frame": "site local: metres, x east, y north, z up; origin = base point; "
                  "projected = local + base_point_projected (LAS and E57 are in projected coordinates, z + alt)",
         "bounds_local": {"min": [-H, -H, 0.0], "max": [H, H, round(zmax, 4)]},
         "osm_transform": tf,
-        "preset": params.size, "seed": seed, "counts": counts,
+        "preset": params.size, "seed": int(params.seed), "counts": counts,
         "labels_present": labels_present,
         "label_names": {str(v): k for k, v in sorted(LABELS.items(), key=lambda kv: kv[1])},
         "solids": [{"min": np.round(s["min"], 4), "max": np.round(s["max"], 4)} for s in scene.solids],
@@ -213,11 +273,6 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
                   "gcp": "gcp.json (zebra-corner ground-control points with their pixels in the photos)", "roads": "roads.osm, roads_truth.json"},
         "params": {k: getattr(params, k) for k in params.__dataclass_fields__},
     }
-    A.write_site_info(out_site_json, site)
-    lap("site_json")
-    ctx.log.info("demo site: %d faces, %d points, %d photos; timings %s", len(mesh.faces), n_points, n_photos, timings)
-    return {"points": n_points, "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
-            "photos": n_photos, "ghost_points": counts["ghost_points"], "timings_s": timings}
 
 
 def output_paths(folder: Path) -> dict[str, Path]:

@@ -99,8 +99,6 @@ def _person_hits(org, dirs, centre_xy, radius, height):
 def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.random.Generator,
          chunk_profiles: int = 400, progress=None):
     """Yield :class:`ScanChunk` objects, one per block of ``chunk_profiles`` trajectory positions."""
-    R = int(s.rays_per_profile)
-    heads = (math.radians(45.0), math.radians(-45.0))
     ped = scene.pedestrian
     P = len(traj["xyz"])
     # pedestrian timing: he steps onto the crossing when the first pass is 12 m before it
@@ -111,45 +109,14 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
     it = progress(starts, total=len(starts), desc="scanning") if progress else starts
     for c0 in it:
         idx = np.arange(c0, min(P, c0 + chunk_profiles))
-        xyz, head = traj["xyz"][idx], traj["heading"][idx]
-        org_list, dir_list, sid_list = [], [], []
-        for h_off in heads:
-            # the scan plane contains z and w; its normal is the driving direction turned by h_off
-            w_yaw = head + h_off + math.pi / 2
-            w = np.stack([np.cos(w_yaw), np.sin(w_yaw), np.zeros_like(head)], 1)
-            phase = rng.uniform(0, 2 * math.pi / R, len(idx))
-            th = phase[:, None] + np.arange(R)[None, :] * (2 * math.pi / R)
-            keep = np.sin(th) > -0.86  # the van's roof blocks steep downward rays
-            ct, stt = np.cos(th), np.sin(th)
-            d = w[:, None, :] * ct[..., None] + np.array([0, 0, 1.0]) * stt[..., None]
-            d = d[keep]
-            o = np.broadcast_to(xyz[:, None, :], (len(idx), R, 3))[keep]
-            sid = np.broadcast_to(idx[:, None], (len(idx), R))[keep]
-            org_list.append(o)
-            dir_list.append(d)
-            sid_list.append(sid)
-        org = np.concatenate(org_list).astype(np.float64)
-        dirs = np.concatenate(dir_list).astype(np.float64)
-        sid = np.concatenate(sid_list)
+        org, dirs, sid = _profile_rays(s, traj, idx, rng)
         t, prim, bary = tracer.cast(org.astype(np.float32), dirs.astype(np.float32))
         t = t.astype(np.float64)
         hit = (prim >= 0) & (t < s.max_range_m)
         # returns thin out with range (weak far returns)
         u = rng.random(len(t))
         hit &= u < 1.0 - 0.55 * np.clip(t / s.max_range_m, 0, 1) ** 1.5
-        # pedestrian
-        ptime = traj["time_s"][sid]
-        walking = (ptime > t_cross) & (ptime < t_cross + 14.0 / ped["speed_mps"])
-        ghost = np.zeros(len(t), bool)
-        t_person = np.full(len(t), np.inf)
-        if walking.any():
-            w_idx = np.nonzero(walking)[0]
-            cy = ped["y0"] + (ptime[w_idx] - t_cross) * ped["speed_mps"]
-            cxy = np.stack([np.full(len(w_idx), ped["x"]), cy], 1)
-            tp = _person_hits(org[w_idx], dirs[w_idx], cxy, ped["radius_m"], ped["height_m"])
-            closer = tp < np.where(hit[w_idx], t[w_idx], np.inf)
-            ghost[w_idx[closer]] = True
-            t_person[w_idx[closer]] = tp[closer]
+        ghost, t_person = _pedestrian_hits(ped, traj["time_s"][sid], t_cross, org, dirs, t, hit)
         sel = np.nonzero(hit | ghost)[0]
         g = ghost[sel]
         tr = np.where(g, t_person[sel], t[sel])
@@ -166,19 +133,8 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
         alb = tracer.albedo(prim_s, bary[sel][ps], exact if s.weathered else None)
         col[ps] = tracer.shade(exact, nrm[ps], alb, shadows=s.shadows)
         lab[ps] = tracer.face_labels[prim_s]
-        # ghost part
         if g.any():
-            gi = np.nonzero(g)[0]
-            n_xy = pts[gi, :2] - np.stack([np.full(len(gi), ped["x"]), pts[gi, 1] * 0 + 0], 1)
-            n3 = -dirs[sel][gi].astype(np.float32)
-            n3[:, 2] = 0
-            n3 /= np.linalg.norm(n3, axis=1, keepdims=True) + 1e-9
-            nrm[gi] = n3
-            zrel = pts[gi, 2] / ped["height_m"]
-            part = np.where(zrel > 0.85, 2, np.where(zrel > 0.5, 0, 1))
-            col[gi] = PERSON_COLOURS[part] * (0.7 + 0.3 * rng.random((len(gi), 1))).astype(np.float32)
-            lab[gi] = LABELS["person"]
-            _ = n_xy
+            _ghost_points(ped, pts, dirs[sel], np.nonzero(g)[0], nrm, col, lab, rng)
         # drop surface points whose nearest face carries another label (mm from a label boundary)
         keep = np.ones(len(sel), bool)
         if ps.any():
@@ -189,3 +145,61 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
         k = keep
         yield ScanChunk(xyz=pts[k], normals=nrm[k], rgb=col8[k], label=lab[k], scanner=sid[sel][k].astype(np.uint32),
                         intensity=intensity[k].astype(np.uint16))
+
+
+def _profile_rays(s: ScanSettings, traj: dict, idx: np.ndarray, rng: np.random.Generator):
+    """The rays both heads fire at trajectory positions ``idx``: origins (k, 3) and unit directions (k, 3) float64,
+    and the position index (k,) of each; one profile per head and position, with a random phase."""
+    R = int(s.rays_per_profile)
+    heads = (math.radians(45.0), math.radians(-45.0))
+    xyz, head = traj["xyz"][idx], traj["heading"][idx]
+    org_list, dir_list, sid_list = [], [], []
+    for h_off in heads:
+        # the scan plane contains z and w; its normal is the driving direction turned by h_off
+        w_yaw = head + h_off + math.pi / 2
+        w = np.stack([np.cos(w_yaw), np.sin(w_yaw), np.zeros_like(head)], 1)
+        phase = rng.uniform(0, 2 * math.pi / R, len(idx))
+        th = phase[:, None] + np.arange(R)[None, :] * (2 * math.pi / R)
+        keep = np.sin(th) > -0.86  # the van's roof blocks steep downward rays
+        ct, stt = np.cos(th), np.sin(th)
+        d = w[:, None, :] * ct[..., None] + np.array([0, 0, 1.0]) * stt[..., None]
+        d = d[keep]
+        o = np.broadcast_to(xyz[:, None, :], (len(idx), R, 3))[keep]
+        sid = np.broadcast_to(idx[:, None], (len(idx), R))[keep]
+        org_list.append(o)
+        dir_list.append(d)
+        sid_list.append(sid)
+    org = np.concatenate(org_list).astype(np.float64)
+    dirs = np.concatenate(dir_list).astype(np.float64)
+    sid = np.concatenate(sid_list)
+    return org, dirs, sid
+
+
+def _pedestrian_hits(ped: dict, ptime: np.ndarray, t_cross: float, org, dirs, t, hit):
+    """Which rays (fired at times ``ptime``) hit the pedestrian walking over the crossing before the surface:
+    ``ghost`` (k,) bool and the range to him ``t_person`` (k,) (inf elsewhere)."""
+    walking = (ptime > t_cross) & (ptime < t_cross + 14.0 / ped["speed_mps"])
+    ghost = np.zeros(len(t), bool)
+    t_person = np.full(len(t), np.inf)
+    if walking.any():
+        w_idx = np.nonzero(walking)[0]
+        cy = ped["y0"] + (ptime[w_idx] - t_cross) * ped["speed_mps"]
+        cxy = np.stack([np.full(len(w_idx), ped["x"]), cy], 1)
+        tp = _person_hits(org[w_idx], dirs[w_idx], cxy, ped["radius_m"], ped["height_m"])
+        closer = tp < np.where(hit[w_idx], t[w_idx], np.inf)
+        ghost[w_idx[closer]] = True
+        t_person[w_idx[closer]] = tp[closer]
+    return ghost, t_person
+
+
+def _ghost_points(ped: dict, pts, dirs, gi, nrm, col, lab, rng: np.random.Generator) -> None:
+    """Fill the normals, colours and label of the pedestrian's points ``gi`` (in place): horizontal normals facing
+    the scanner, clothes coloured by height."""
+    n3 = -dirs[gi].astype(np.float32)
+    n3[:, 2] = 0
+    n3 /= np.linalg.norm(n3, axis=1, keepdims=True) + 1e-9
+    nrm[gi] = n3
+    zrel = pts[gi, 2] / ped["height_m"]
+    part = np.where(zrel > 0.85, 2, np.where(zrel > 0.5, 0, 1))
+    col[gi] = PERSON_COLOURS[part] * (0.7 + 0.3 * rng.random((len(gi), 1))).astype(np.float32)
+    lab[gi] = LABELS["person"]

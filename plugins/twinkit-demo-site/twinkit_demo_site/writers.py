@@ -154,105 +154,135 @@ def write_e57(path: Path, cloud: dict, geo, guid_seed, scanner_xyz: np.ndarray) 
     Written with libE57Format (via pye57's bindings) with fixed GUIDs and dates.
     """
     from pye57 import libe57
-    from pyproj import CRS
 
     path = str(path)
-    n = len(cloud["xyz"])
     imf = libe57.ImageFile(path, "w")
     try:
-        imf.extensionsAdd("nor", "http://www.libe57.org/E57_NOR_surface_normals.txt")
-        root = imf.root()
-        root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
-        root.set("guid", libe57.StringNode(imf, det_guid("file", *guid_seed)))
-        root.set("versionMajor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MAJOR))
-        root.set("versionMinor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MINOR))
-        root.set("e57LibraryVersion", libe57.StringNode(imf, libe57.E57_LIBRARY_ID))
-        root.set("coordinateMetadata", libe57.StringNode(imf, CRS.from_user_input(geo.crs).to_wkt()))
-        cdt = libe57.StructureNode(imf)
-        cdt.set("dateTimeValue", libe57.FloatNode(imf, 1401235200.0))  # fixed GPS time (2024-06-01)
-        cdt.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
-        root.set("creationDateTime", cdt)
-        data3d = libe57.VectorNode(imf, True)
-        root.set("data3D", data3d)
-        root.set("images2D", libe57.VectorNode(imf, True))
-
-        scan = libe57.StructureNode(imf)
-        scan.set("guid", libe57.StringNode(imf, det_guid("scan", *guid_seed)))
-        scan.set("name", libe57.StringNode(imf, "twinkit demo site mobile mapping"))
-        scan.set("description", libe57.StringNode(imf, "simulated mobile mapping, coordinates in " + geo.crs))
+        data3d = _e57_root(imf, geo, guid_seed)
         X = cloud["xyz"][:, 0] + geo.easting
         Y = cloud["xyz"][:, 1] + geo.northing
         Z = cloud["xyz"][:, 2] + geo.alt
         lo = [float(X.min()), float(Y.min()), float(Z.min())]
         hi = [float(X.max()), float(Y.max()), float(Z.max())]
-        bb = libe57.StructureNode(imf)
-        for k, a, b in zip("xyz", lo, hi):
-            bb.set(f"{k}Minimum", libe57.FloatNode(imf, a))
-            bb.set(f"{k}Maximum", libe57.FloatNode(imf, b))
-        scan.set("cartesianBounds", bb)
-        cl = libe57.StructureNode(imf)
-        for c in ("Red", "Green", "Blue"):
-            cl.set(f"color{c}Minimum", libe57.IntegerNode(imf, 0))
-            cl.set(f"color{c}Maximum", libe57.IntegerNode(imf, 255))
-        scan.set("colorLimits", cl)
-        il = libe57.StructureNode(imf)
-        il.set("intensityMinimum", libe57.FloatNode(imf, 0.0))
-        il.set("intensityMaximum", libe57.FloatNode(imf, 1.0))
-        scan.set("intensityLimits", il)
-        pose = libe57.StructureNode(imf)
-        rot = libe57.StructureNode(imf)
-        for k, v in zip("wxyz", (1.0, 0.0, 0.0, 0.0)):
-            rot.set(k, libe57.FloatNode(imf, v))
-        tr = libe57.StructureNode(imf)
-        for k in "xyz":
-            tr.set(k, libe57.FloatNode(imf, 0.0))
-        pose.set("rotation", rot)
-        pose.set("translation", tr)
-        scan.set("pose", pose)
-        for key, val in (("acquisitionStart", 1401235200.0), ("acquisitionEnd", 1401235200.0 + 600)):
-            st = libe57.StructureNode(imf)
-            st.set("dateTimeValue", libe57.FloatNode(imf, val))
-            st.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
-            scan.set(key, st)
-
-        proto = libe57.StructureNode(imf)
-        for k, a, b in zip(("cartesianX", "cartesianY", "cartesianZ"), lo, hi):
-            proto.set(k, libe57.FloatNode(imf, a, libe57.E57_DOUBLE, a, b))
-        for c in ("colorRed", "colorGreen", "colorBlue"):
-            proto.set(c, libe57.IntegerNode(imf, 0, 0, 255))
-        proto.set("intensity", libe57.FloatNode(imf, 0.0, libe57.E57_SINGLE, 0.0, 1.0))
-        for k in ("nor:normalX", "nor:normalY", "nor:normalZ"):
-            proto.set(k, libe57.FloatNode(imf, 0.0, libe57.E57_SINGLE, -1.0, 1.0))
-        points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
+        scan = _e57_scan(imf, geo, guid_seed, lo, hi)
+        points = libe57.CompressedVectorNode(imf, _e57_prototype(imf, lo, hi), libe57.VectorNode(imf, True))
         scan.set("points", points)
         data3d.append(scan)
-
-        cap = min(SLICE, max(n, 1))
-        arrs = {
-            "cartesianX": np.empty(cap, "d"), "cartesianY": np.empty(cap, "d"), "cartesianZ": np.empty(cap, "d"),
-            "colorRed": np.empty(cap, "B"), "colorGreen": np.empty(cap, "B"), "colorBlue": np.empty(cap, "B"),
-            "intensity": np.empty(cap, "f"),
-            "nor:normalX": np.empty(cap, "f"), "nor:normalY": np.empty(cap, "f"), "nor:normalZ": np.empty(cap, "f"),
-        }
-        bufs = libe57.VectorSourceDestBuffer()
-        for k, a in arrs.items():
-            bufs.append(libe57.SourceDestBuffer(imf, k, a, cap, True, True))
-        writer = points.writer(bufs)
-        for a in range(0, n, cap):
-            b = min(n, a + cap)
-            m = b - a
-            arrs["cartesianX"][:m] = X[a:b]
-            arrs["cartesianY"][:m] = Y[a:b]
-            arrs["cartesianZ"][:m] = Z[a:b]
-            for i, c in enumerate(("colorRed", "colorGreen", "colorBlue")):
-                arrs[c][:m] = cloud["rgb"][a:b, i]
-            arrs["intensity"][:m] = cloud["intensity"][a:b] / 65535.0
-            for i, k in enumerate(("nor:normalX", "nor:normalY", "nor:normalZ")):
-                arrs[k][:m] = cloud["normals"][a:b, i]
-            writer.write(m)
-        writer.close()
+        _e57_write_points(imf, points, (X, Y, Z), cloud)
     finally:
         imf.close()
+
+
+def _e57_root(imf, geo, guid_seed):
+    """Fill the file's root (format, GUID, CRS as WKT, fixed creation date); returns its empty data3D vector."""
+    from pye57 import libe57
+    from pyproj import CRS
+
+    imf.extensionsAdd("nor", "http://www.libe57.org/E57_NOR_surface_normals.txt")
+    root = imf.root()
+    root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
+    root.set("guid", libe57.StringNode(imf, det_guid("file", *guid_seed)))
+    root.set("versionMajor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MAJOR))
+    root.set("versionMinor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MINOR))
+    root.set("e57LibraryVersion", libe57.StringNode(imf, libe57.E57_LIBRARY_ID))
+    root.set("coordinateMetadata", libe57.StringNode(imf, CRS.from_user_input(geo.crs).to_wkt()))
+    cdt = libe57.StructureNode(imf)
+    cdt.set("dateTimeValue", libe57.FloatNode(imf, 1401235200.0))  # fixed GPS time (2024-06-01)
+    cdt.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
+    root.set("creationDateTime", cdt)
+    data3d = libe57.VectorNode(imf, True)
+    root.set("data3D", data3d)
+    root.set("images2D", libe57.VectorNode(imf, True))
+    return data3d
+
+
+def _e57_scan(imf, geo, guid_seed, lo: list[float], hi: list[float]):
+    """The scan's header: GUID, name, bounds ``lo``/``hi`` (projected metres), colour and intensity limits, identity
+    pose and fixed acquisition times."""
+    from pye57 import libe57
+
+    scan = libe57.StructureNode(imf)
+    scan.set("guid", libe57.StringNode(imf, det_guid("scan", *guid_seed)))
+    scan.set("name", libe57.StringNode(imf, "twinkit demo site mobile mapping"))
+    scan.set("description", libe57.StringNode(imf, "simulated mobile mapping, coordinates in " + geo.crs))
+    bb = libe57.StructureNode(imf)
+    for k, a, b in zip("xyz", lo, hi):
+        bb.set(f"{k}Minimum", libe57.FloatNode(imf, a))
+        bb.set(f"{k}Maximum", libe57.FloatNode(imf, b))
+    scan.set("cartesianBounds", bb)
+    cl = libe57.StructureNode(imf)
+    for c in ("Red", "Green", "Blue"):
+        cl.set(f"color{c}Minimum", libe57.IntegerNode(imf, 0))
+        cl.set(f"color{c}Maximum", libe57.IntegerNode(imf, 255))
+    scan.set("colorLimits", cl)
+    il = libe57.StructureNode(imf)
+    il.set("intensityMinimum", libe57.FloatNode(imf, 0.0))
+    il.set("intensityMaximum", libe57.FloatNode(imf, 1.0))
+    scan.set("intensityLimits", il)
+    pose = libe57.StructureNode(imf)
+    rot = libe57.StructureNode(imf)
+    for k, v in zip("wxyz", (1.0, 0.0, 0.0, 0.0)):
+        rot.set(k, libe57.FloatNode(imf, v))
+    tr = libe57.StructureNode(imf)
+    for k in "xyz":
+        tr.set(k, libe57.FloatNode(imf, 0.0))
+    pose.set("rotation", rot)
+    pose.set("translation", tr)
+    scan.set("pose", pose)
+    for key, val in (("acquisitionStart", 1401235200.0), ("acquisitionEnd", 1401235200.0 + 600)):
+        st = libe57.StructureNode(imf)
+        st.set("dateTimeValue", libe57.FloatNode(imf, val))
+        st.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
+        scan.set(key, st)
+    return scan
+
+
+def _e57_prototype(imf, lo: list[float], hi: list[float]):
+    """The point record: cartesianX/Y/Z (float64 within the bounds), 8-bit RGB, float32 intensity and normals."""
+    from pye57 import libe57
+
+    proto = libe57.StructureNode(imf)
+    for k, a, b in zip(("cartesianX", "cartesianY", "cartesianZ"), lo, hi):
+        proto.set(k, libe57.FloatNode(imf, a, libe57.E57_DOUBLE, a, b))
+    for c in ("colorRed", "colorGreen", "colorBlue"):
+        proto.set(c, libe57.IntegerNode(imf, 0, 0, 255))
+    proto.set("intensity", libe57.FloatNode(imf, 0.0, libe57.E57_SINGLE, 0.0, 1.0))
+    for k in ("nor:normalX", "nor:normalY", "nor:normalZ"):
+        proto.set(k, libe57.FloatNode(imf, 0.0, libe57.E57_SINGLE, -1.0, 1.0))
+    return proto
+
+
+def _e57_write_points(imf, points, XYZ, cloud: dict) -> None:
+    """Stream the points into ``points`` in slices of SLICE: projected ``XYZ`` (three (n,) float64 arrays), the
+    cloud's rgb, intensity (uint16 -> 0..1) and normals."""
+    from pye57 import libe57
+
+    X, Y, Z = XYZ
+    n = len(cloud["xyz"])
+    cap = min(SLICE, max(n, 1))
+    arrs = {
+        "cartesianX": np.empty(cap, "d"), "cartesianY": np.empty(cap, "d"), "cartesianZ": np.empty(cap, "d"),
+        "colorRed": np.empty(cap, "B"), "colorGreen": np.empty(cap, "B"), "colorBlue": np.empty(cap, "B"),
+        "intensity": np.empty(cap, "f"),
+        "nor:normalX": np.empty(cap, "f"), "nor:normalY": np.empty(cap, "f"), "nor:normalZ": np.empty(cap, "f"),
+    }
+    bufs = libe57.VectorSourceDestBuffer()
+    for k, a in arrs.items():
+        bufs.append(libe57.SourceDestBuffer(imf, k, a, cap, True, True))
+    writer = points.writer(bufs)
+    for a in range(0, n, cap):
+        b = min(n, a + cap)
+        m = b - a
+        arrs["cartesianX"][:m] = X[a:b]
+        arrs["cartesianY"][:m] = Y[a:b]
+        arrs["cartesianZ"][:m] = Z[a:b]
+        for i, c in enumerate(("colorRed", "colorGreen", "colorBlue")):
+            arrs[c][:m] = cloud["rgb"][a:b, i]
+        arrs["intensity"][:m] = cloud["intensity"][a:b] / 65535.0
+        for i, k in enumerate(("nor:normalX", "nor:normalY", "nor:normalZ")):
+            arrs[k][:m] = cloud["normals"][a:b, i]
+        writer.write(m)
+    writer.close()
 
 
 # ---------------------------------------------------------------- OSM
