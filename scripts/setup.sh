@@ -46,8 +46,8 @@ for d in plugins/*/; do
   [ -f "$d/pyproject.toml" ] && args+=(-e "$d")
 done
 # test tools: ruff and mypy are the static checks `make test` runs first (pinned to a minor version, so that their
-# rules do not change under the code); plyfile is the example plugin's dependency (its tests run in `make test`;
-# the plugin itself is installed only by the test that checks a third-party install); trimesh reads twinkit.mesh's files back in
+# rules do not change under the code); plyfile (GPL-3.0) reads twinkit's PLY files back in tests, as an independent
+# reader (twinkit itself never imports it: twinkit.mesh.ply reads and writes PLY with numpy); trimesh reads twinkit.mesh's files back in
 # tests/mesh and is the baseline of bench/bench_meshio.py (twinkit itself does not import it)
 "${PIP[@]}" "${args[@]}" pytest pytest-timeout "ruff~=0.17.6" "mypy~=2.4.1" "plyfile>=1.0" "selenium>=4.20" "trimesh>=4"
 # 5. Blender as a module for the FBX exporter. bpy 5.0.1 (wheels for Python 3.11 only) declares numpy<2 but
@@ -60,7 +60,9 @@ done
 # the TFLite CityScapes model, and the readers used by the exporters' round-trip tests
 "${PIP[@]}" "transformers>=4.40" "ai-edge-litert" "ufbx>=0.0.5" "pygltflib>=1.16"
 
-# 6. three.js for the report's 3D view (registry only; copied into each report, never fetched at view time)
+# 6. three.js for the report's 3D view (registry only), bundled once by esbuild into
+#    twinkit/report_assets/three-bundle.js, which each report copies (never fetched at view time)
 npm ci --no-audit --no-fund --loglevel=error
+npm run --silent bundle
 
 echo "setup: done ($(.venv/bin/python --version); $(ls -d plugins/*/ | wc -l) plugin packages)"

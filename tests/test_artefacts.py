@@ -297,11 +297,7 @@ def test_a_good_output_and_an_uncatalogued_one_pass(tmp_path):
 
 #: Files whose owners (other helpers of issue 43) move their reads and writes onto the catalogue at their
 #: end; each line says whose it is. A path matches when it starts with the prefix.
-ALLOWLIST = (
-    "plugins/twinkit-roads/twinkit_roads/scan",  # helper "lanes"/scan split: scan.py and the scan* modules
-    "plugins/twinkit-photo/twinkit_photo/",  # the photo plugin's split (plugin.py and the modules it becomes)
-    "plugins/twinkit-export/twinkit_export/movables",  # movables.py and its split modules
-)
+ALLOWLIST: tuple[str, ...] = ()
 
 #: calls that read or write a file by themselves
 HAND_IO = {"load", "loads", "save", "savez", "savez_compressed", "open", "read_text", "write_text", "read_bytes",

@@ -184,3 +184,22 @@ def test_unknown_plugin_on_the_command_line(project):
     assert r.rc == 2
     assert "no executor plugin named 'nope' (available: local)" in r.err
     assert r.err.strip().count("\n") == 0, r.err
+
+
+def test_plugins_command_prints_a_plugins_parameters(project):
+    r = project.run("plugins", "step/scale")
+    assert r.rc == 0, r.text
+    lines = r.out.splitlines()
+    assert lines[0].startswith("step/scale") and "Multiply by a factor." in lines[0]
+    assert re.match(r"\s+parameter\s+type\s+range\s+default$", lines[1]), r.out
+    assert re.search(r"^\s+factor\s+int\s+any number\s+3$", r.out, re.M), r.out
+    assert re.search(r"^\s+degrade_below\s+int\s+>= 0\s+0$", r.out, re.M), r.out
+    assert re.search(r"^\s+a result below this says it is degraded \(ctx\.degraded\)$", r.out, re.M), r.out
+    r = project.run("plugins", "step/double")
+    assert r.rc == 0 and "no parameters" in r.out, r.text
+
+
+def test_plugins_command_names_what_exists_for_an_unknown_plugin(project):
+    r = project.run("plugins", "step/nope")
+    assert r.rc == 2 and r.err.strip().count("\n") == 0, r.text
+    assert "no plugin 'step/nope'" in r.err and "step/scale" in r.err and "executor/local" in r.err

@@ -6,7 +6,7 @@ import yaml
 import yaml.cyaml
 from omegaconf import OmegaConf
 
-from twinkit.config import use_libyaml
+from twinkit.hydra_glue import use_libyaml
 
 DOC = """
 a: 1

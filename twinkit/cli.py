@@ -5,6 +5,7 @@
     twinkit ... --cfg job                                      print the composed config, run nothing
     twinkit status [overrides]                                 what a run would do, per step, without running
     twinkit plugins                                            loaded plugins with distributions and versions
+    twinkit plugins <kind>/<name>                              a plugin's parameters: type, range, default, help
     twinkit verify <manifest.json | run folder>                check a run's manifest against the files on disk
     twinkit gc [--dry-run] [site=<name>] [engine.outputs_dir=..] delete stored results no step folder refers to
 """
@@ -74,11 +75,9 @@ def _interactive(setting: str) -> bool:
 def _check_writable(overrides: list[str], conf_dir: Path | None = None) -> None:
     from twinkit.config import local_outputs_dirs
     from twinkit.engine import unwritable
+    from twinkit.hydra_glue import override_value
 
-    outputs = None
-    for ov in overrides:
-        if ov.lstrip("+").startswith("engine.outputs_dir="):
-            outputs = ov.split("=", 1)[1]
+    outputs = override_value(overrides, "engine.outputs_dir")
     # conf/local/<site>.yaml may move the outputs (engine.outputs_dir there), and is honoured here too
     candidates = [outputs] if outputs is not None else (local_outputs_dirs(overrides, conf_dir) if conf_dir else [])
     for outputs in candidates or ["outputs"]:
@@ -96,18 +95,17 @@ _STATE: dict = {}
 
 def _job(cfg) -> int:
     """One Hydra job. A TwinkitError becomes a one-line message and an exit code, not a traceback."""
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
+    from twinkit.hydra_glue import is_multirun, job_error
 
     try:
         return _job_body(cfg)
     except TwinkitError as exc:
-        if HydraConfig.get().mode == RunMode.MULTIRUN:
-            raise _job_error(f"twinkit: error: {exc}", exc.exit_code) from None
+        if is_multirun():
+            raise job_error(f"twinkit: error: {exc}", exc.exit_code) from None
         _STATE["error"] = exc
         return exc.exit_code
     except KeyboardInterrupt as exc:
-        if HydraConfig.get().mode != RunMode.MULTIRUN:
+        if not is_multirun():
             raise
         return _job_interrupted(exc)
 
@@ -122,21 +120,6 @@ def _job_interrupted(exc: KeyboardInterrupt) -> int:
     return _STATE["interrupted"]
 
 
-def _job_error(message: str, exit_code: int):
-    """A multirun job's TwinkitError, carried to the parent process with its exit code (see _report)."""
-    from hydra.errors import CompactHydraException
-
-    class TwinkitJobError(CompactHydraException):
-        exit_code: int
-
-        def __reduce__(self):
-            return _job_error, (self.args[0], self.exit_code)
-
-    err = TwinkitJobError(message)
-    err.exit_code = exit_code
-    return err
-
-
 def _plain(node, resolve: bool = True) -> dict:
     """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one."""
     from omegaconf import OmegaConf
@@ -147,53 +130,27 @@ def _plain(node, resolve: bool = True) -> dict:
     return out
 
 
-def _report(func):
-    """Hydra's ``run_and_report`` for multirun: one line, and twinkit's exit code (2 for a config error, not 1)."""
-    from hydra.errors import ConfigCompositionException, MissingConfigException, OverrideParseException
-    from omegaconf.errors import OmegaConfBaseException
-
-    try:
-        return func()
-    except Exception as exc:  # noqa: BLE001 -- sorted below; anything else gets Hydra's own report
-        code = getattr(exc, "exit_code", None)
-        if isinstance(code, int):
-            print(str(exc), file=sys.stderr)
-            sys.exit(code)
-        if isinstance(exc, (ConfigCompositionException, MissingConfigException, OverrideParseException,
-                            OmegaConfBaseException)):
-            sys.exit(_err(str(_composition_error(exc)), 2))
-        return _ORIGINAL_REPORT[0](lambda e=exc: (_ for _ in ()).throw(e))
-
-
-_ORIGINAL_REPORT: list = []
-
-
 def _job_body(cfg) -> int:
     """A Hydra (multirun) job: read Hydra's runtime state, then execute."""
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
+    from twinkit.hydra_glue import job_state
 
-    hc = HydraConfig.get()
-    multirun = hc.mode == RunMode.MULTIRUN
+    job = job_state()
     jobs = 1
-    if multirun and _STATE.get("interrupted"):
-        log.info("twinkit: job %s not started: the sweep was interrupted", hc.job.num)
+    if job.multirun and _STATE.get("interrupted"):
+        log.info("twinkit: job %s not started: the sweep was interrupted", job.num)
         return _STATE["interrupted"]
-    if multirun:
+    if job.multirun:
         from twinkit.executors import use_standard_start_method
 
         use_standard_start_method()  # a job runs in a loky worker: its fan-out pools must not inherit 'loky'
-        from omegaconf import OmegaConf
-
         from twinkit.threads import cores
 
-        jobs = int(OmegaConf.select(hc, "launcher.n_jobs", default=1) or 1)  # type: ignore[arg-type]  # a DictConfig
-        jobs = cores() if jobs <= 0 else jobs  # joblib's -1: as many jobs as cores
+        jobs = cores() if job.n_jobs <= 0 else job.n_jobs  # joblib's -1: as many jobs as cores
     from twinkit.signals import sigterm_as_interrupt
 
     with sigterm_as_interrupt():  # a job's process (a joblib worker) stops like a single run
-        return _execute(cfg, run_dir=Path(hc.runtime.output_dir), multirun=multirun,
-                        overrides=list(hc.overrides.task), concurrent_jobs=jobs)
+        return _execute(cfg, run_dir=job.output_dir, multirun=job.multirun, overrides=job.overrides,
+                        concurrent_jobs=jobs)
 
 
 def _execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurrent_jobs: int = 1) -> int:
@@ -433,42 +390,9 @@ def _write_report(run_dir: Path, manifest: dict, engine) -> None:
         log.info("twinkit: report file://%s", path.resolve())
 
 
-_VALUE_OPTIONS = {"--cfg", "-c", "--package", "-p", "--info", "-i", "--config-path", "-cp", "--config-name", "-cn",
-                  "--config-dir", "-cd", "--experimental-rerun", "--shell-completion", "-sc"}
-
-
-def options_first(argv: list[str]) -> list[str]:
-    """Hydra's parser wants options before overrides; accept them in any order."""
-    opts: list[str] = []
-    overrides: list[str] = []
-    i = 0
-    while i < len(argv):
-        a = argv[i]
-        if a.startswith("-") and "=" not in a.split(" ")[0][:2]:
-            opts.append(a)
-            if a in _VALUE_OPTIONS and i + 1 < len(argv) and not argv[i + 1].startswith("-") and "=" not in argv[i + 1]:
-                opts.append(argv[i + 1])
-                i += 1
-        else:
-            overrides.append(a)
-        i += 1
-    return opts + overrides
-
-
-def open_site_inputs(args: list[str]) -> list[str]:
-    """``site.inputs.<name>=value`` adds the input when the site file does not list it.
-
-    Site inputs are open-ended (a recipe may want photos, a GCP file, an OSM extract...), so a
-    plain override adds or replaces the key (Hydra's ``++``); every other key stays strict, so a
-    misspelled ``site.sede=3`` still fails at composition.
-    """
-    return [("++" + a) if a.startswith("site.inputs.") and "=" in a else a for a in args]
-
-
 def _run_hydra(argv: list[str]) -> int:
-    import hydra
-
-    from twinkit.config import check_choices, check_configs_are_data, find_config_dir, register_configs, use_libyaml
+    from twinkit.config import check_choices, check_configs_are_data, find_config_dir
+    from twinkit.hydra_glue import open_site_inputs, options_first, register_configs, run_app, use_libyaml
     from twinkit.plugins import get_registry
 
     use_libyaml()
@@ -485,26 +409,16 @@ def _run_hydra(argv: list[str]) -> int:
         return _run_single(conf_dir, overrides)
     if "-m" in argv or "--multirun" in argv:
         _precheck_sweep(conf_dir, overrides)
-    app = hydra.main(config_path=str(conf_dir), config_name="config", version_base="1.3")(_job)
-    saved = sys.argv
-    sys.argv = ["twinkit", *argv]
     _STATE.pop("error", None)
-    from hydra._internal import utils as hydra_utils
-
     from twinkit.signals import forward_to_children
 
-    _ORIGINAL_REPORT[:] = [hydra_utils.run_and_report]
-    hydra_utils.run_and_report = _report
     with forward_to_children() as signalled:  # jobs stop like single runs, with their manifests
         try:
-            app()
+            run_app(conf_dir, argv, _job)
         except BaseException:
             if "exc" in signalled:
                 raise signalled["exc"] from None
             raise
-        finally:
-            sys.argv = saved
-            hydra_utils.run_and_report = _ORIGINAL_REPORT[0]
     if "exc" in signalled:
         raise signalled["exc"]
     if _STATE.get("error") is not None:
@@ -546,52 +460,33 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
     ``hydra.sweeper.params`` and the command line's sweeps. Whatever this cannot enumerate is left to
     Hydra (and each job checks its own values again).
     """
-    from hydra import compose, initialize_config_dir
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
 
     from twinkit.config import check_config
+    from twinkit.hydra_glue import compose, parse_overrides, sweep_jobs
     from twinkit.plugins import get_registry
 
-    parser = OverridesParser.create()
-    try:
-        parsed = parser.parse_overrides(overrides)
-        fixed = [o.input_line for o in parsed if o.input_line is not None and not o.is_sweep_override()
-                 and not o.key_or_group.startswith("hydra")]
-        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
-            base = compose(config_name="config", overrides=fixed, return_hydra_config=True)
-        node = base.hydra.sweeper.get("params")
-        params = _plain(node, resolve=False) if node is not None else {}
-        combined = parser.parse_overrides([f"{k}={v}" for k, v in params.items()] + list(overrides))
-        batches = BasicSweeper.split_arguments(combined, None)
-    except (HydraException, OmegaConfBaseException, ValueError, TypeError, AttributeError):
+    jobs = sweep_jobs(conf_dir, overrides)
+    if jobs is None:
         return  # Hydra reports it in its own words
     registry = get_registry()
     composed: dict[tuple, dict] = {}  # one composition per set of group choices; plain values are laid over it
-    for job in (batches[0] if batches else []):
+    for job in jobs:
         job = [o for o in job if not o.lstrip("+~").startswith("hydra")]
         try:
-            parsed_job = parser.parse_overrides(job)
+            parsed_job = parse_overrides(job)
             values = {o.key_or_group: o.value() for o in parsed_job
                       if "." in o.key_or_group and not o.is_delete() and not o.is_add() and not o.is_force_add()
                       and "/" not in o.key_or_group and isinstance(o.value(), (int, float, str, bool))}
         except Exception:  # noqa: BLE001 -- then compose this job as it is
             values = {}
         rest = tuple(o for o in job if o.split("=", 1)[0].lstrip("+~") not in values)
-        try:
-            if rest not in composed:
-                with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
-                    cfg = compose(config_name="config", overrides=list(rest) + [f"{k}={v!r}" if isinstance(v, str)
-                                                                                 else f"{k}={v}"
-                                                                                 for k, v in values.items()])
-                composed[rest] = _plain(cfg)
-                container = composed[rest]
-            else:
-                container = _with_values(composed[rest], values)
-        except (HydraException, OmegaConfBaseException) as exc:
-            raise _composition_error(exc) from None
+        if rest not in composed:
+            cfg = compose(conf_dir, list(rest) + [f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}"
+                                                  for k, v in values.items()])
+            composed[rest] = _plain(cfg)
+            container = composed[rest]
+        else:
+            container = _with_values(composed[rest], values)
         try:
             check_config(container, registry)
         except ConfigError as exc:
@@ -614,42 +509,13 @@ def _with_values(container: dict, values: dict) -> dict:
     return out
 
 
-def _composition_error(exc: Exception) -> ConfigError:
-    """Hydra/OmegaConf composition errors, folded into one line."""
-    import re
-
-    m = re.search(r"Could not find '([\w/]+)/([^']+)'\s*\nAvailable options in '[^']+':\s*\n(.*?)\nConfig search path",
-                  str(exc), re.S)
-    if m:
-        options = ", ".join(o.strip() for o in m.group(3).splitlines() if o.strip()) or "none"
-        return ConfigError(f"no {m.group(1).split('/')[-1]} plugin named '{m.group(2)}' (available: {options}); "
-                           f"install the package that provides it, or check TWINKIT_PLUGINS")
-    parts = [str(exc)]
-    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
-        parts.append(str(exc.__cause__))
-    lines = []
-    for part in parts:
-        for line in part.splitlines():
-            t = line.strip()
-            if t and not t.startswith(("full_key", "object_type", "reference_type", "To append", "Set the environment")):
-                lines.append(t.rstrip("."))
-    return ConfigError(". ".join(dict.fromkeys(lines)))
-
-
 def _run_single(conf_dir: Path, overrides: list[str]) -> int:
     """One run, composed once with Hydra's compose API (Hydra's own entry composes twice)."""
-    from hydra import compose, initialize_config_dir
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
+    from twinkit.hydra_glue import compose, set_run_config
 
-    try:
-        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3", job_name="twinkit"):
-            cfg = compose(config_name="config", overrides=overrides, return_hydra_config=True)
-        HydraConfig.instance().set_config(cfg)
-        run_dir = Path(cfg.hydra.run.dir)
-    except (HydraException, OmegaConfBaseException) as exc:
-        raise _composition_error(exc) from None
+    cfg = compose(conf_dir, overrides, hydra_config=True)
+    set_run_config(cfg)
+    run_dir = Path(cfg.hydra.run.dir)
     _check_writable([f"engine.outputs_dir={cfg.engine.outputs_dir}"])  # wherever the composed config puts it
     run_dir.mkdir(parents=True, exist_ok=True)
     return _execute(cfg, run_dir=run_dir, multirun=False, overrides=overrides)
@@ -659,9 +525,9 @@ def _run_single(conf_dir: Path, overrides: list[str]) -> int:
 
 
 def _compose(overrides: list[str]):
-    from hydra import compose, initialize_config_dir
 
-    from twinkit.config import check_choices, check_configs_are_data, find_config_dir, register_configs, use_libyaml
+    from twinkit.config import check_choices, check_configs_are_data, find_config_dir
+    from twinkit.hydra_glue import compose, open_site_inputs, register_configs, use_libyaml
     from twinkit.plugins import get_registry
 
     use_libyaml()
@@ -670,8 +536,7 @@ def _compose(overrides: list[str]):
     check_configs_are_data(conf_dir)
     check_choices(overrides, conf_dir)
     register_configs(get_registry())
-    with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
-        cfg = compose(config_name="config", overrides=overrides)
+    cfg = compose(conf_dir, overrides)
     from twinkit.engine import GIVEN_KEY, given_params
 
     container = _plain(cfg)
@@ -711,6 +576,8 @@ def cmd_plugins(args: list[str]) -> int:
     from twinkit.plugins import get_registry
 
     reg = get_registry()
+    if args:
+        return _plugin_params(reg, args)
     rows = [(p.kind, p.name, p.version, p.distribution, p.description) for p in reg.all()]
     if not rows:
         print("no plugins loaded (TWINKIT_PLUGINS=%r)" % os.environ.get("TWINKIT_PLUGINS"))
@@ -719,6 +586,37 @@ def cmd_plugins(args: list[str]) -> int:
     print(f"{'kind':<{w[0]}}  {'name':<{w[1]}}  {'version':<{w[2]}}  {'distribution':<{w[3]}}  description")
     for r in rows:
         print(f"{r[0]:<{w[0]}}  {r[1]:<{w[1]}}  {r[2]:<{w[2]}}  {r[3]:<{w[3]}}  {r[4]}")
+    return 0
+
+
+def _plugin_params(reg, args: list[str]) -> int:
+    """``twinkit plugins <kind>/<name>``: every parameter with its type, range, default and help."""
+    import textwrap
+
+    from twinkit.errors import PluginError
+    from twinkit.ranges import describe_params
+
+    if len(args) != 1:
+        return _err("usage: twinkit plugins [<kind>/<name>]")
+    kind, _, name = args[0].rpartition("/")
+    found = [p for p in reg.all() if p.name == name and (not kind or p.kind == kind)]
+    if len(found) != 1:
+        have = ", ".join(p.qualname for p in reg.all()) or "none loaded"
+        what = "several plugins named" if found else "no plugin"
+        raise PluginError(f"{what} '{args[0]}' (available: {have})")
+    plugin = found[0]
+    print(f"{plugin.qualname}  {plugin.version}  {plugin.distribution}  {plugin.description}".rstrip())
+    rows = describe_params(plugin.params)
+    if not rows:
+        print("  no parameters")
+        return 0
+    head = ("parameter", "type", "range", "default")
+    w = [max(len(x) for x in col) for col in zip(head, *[(r.name, r.type, r.range, r.default) for r in rows])]
+    print("  " + "  ".join(f"{h:<{w[i]}}" for i, h in enumerate(head)).rstrip())
+    for r in rows:
+        print("  " + "  ".join(f"{v:<{w[i]}}" for i, v in enumerate((r.name, r.type, r.range, r.default))).rstrip())
+        if r.help:
+            print(textwrap.fill(r.help, width=100, initial_indent=" " * 6, subsequent_indent=" " * 6))
     return 0
 
 

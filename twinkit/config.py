@@ -1,12 +1,13 @@
-"""Configuration: where configs live, structured configs from plugins, early checks of CLI choices."""
+"""Configuration: where configs live, the engine's settings, early checks of CLI choices and config values.
+
+Everything that talks to Hydra is in :mod:`twinkit.hydra_glue`."""
 from __future__ import annotations
 
-import dataclasses
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, List, Optional
+from typing import Any, Optional
 
 import yaml
 
@@ -51,76 +52,6 @@ def project_root(conf_dir: Path) -> Path:
     return conf_dir.parent
 
 
-def use_libyaml() -> bool:
-    """Make OmegaConf (and so Hydra) parse YAML with libyaml's C parser, same rules as its own loader.
-
-    OmegaConf's loader is PyYAML's pure-Python SafeLoader plus a duplicate-key check and a
-    float resolver; both live on the class, so a subclass with the C parser keeps them. Parsing a
-    long recipe gets several times faster. Returns False where PyYAML was built without libyaml.
-    """
-    import yaml
-    import yaml.cyaml
-    from omegaconf import _utils, basecontainer
-
-    if getattr(_utils, "_twinkit_libyaml", False):
-        return True
-    if not getattr(yaml, "__with_libyaml__", False):
-        return False
-    base = _utils.get_yaml_loader()
-
-    class CLoader(yaml.cyaml.CParser, base):  # type: ignore[misc, valid-type]
-        def __init__(self, stream):
-            yaml.cyaml.CParser.__init__(self, stream)
-            yaml.constructor.SafeConstructor.__init__(self)
-            yaml.resolver.Resolver.__init__(self)
-
-    _utils.get_yaml_loader = lambda: CLoader
-    basecontainer.get_yaml_loader = _utils.get_yaml_loader
-    setattr(_utils, "_twinkit_libyaml", True)  # noqa: B010 -- a mark on omegaconf's module (read above)
-    return True
-
-
-def _with_plugin_field(plugin_name: str, params: type | None) -> type:
-    base = (params,) if params is not None else ()
-    return dataclasses.make_dataclass(
-        f"{(params.__name__ if params else 'NoParams')}_{plugin_name}",
-        [("plugin", str, field(default=plugin_name))],
-        bases=base,
-    )
-
-
-def register_configs(registry: Registry) -> None:
-    """Put every plugin's parameters into Hydra's ConfigStore (typos fail at composition)."""
-    from hydra.core.config_store import ConfigStore
-
-    cs = ConfigStore.instance()
-    for kind in (*STEP_KINDS, *COMPONENT_KINDS):
-        if kind in ("step", "site_generator"):
-            continue
-        for name, plugin in registry.plugins[kind].items():
-            cs.store(group=kind, name=name, node=_with_plugin_field(name, plugin.params))
-        if kind in STEP_KINDS:
-            # '<kind>=none' chooses no plugin: the steps using the kind are left out (twinkit/engine/plan.py NONE)
-            cs.store(group=kind, name="none", node=_with_plugin_field("none", None))
-    steps_fields = []
-    for name, plugin in sorted(registry.plugins["step"].items()):
-        if plugin.params is not None:
-            steps_fields.append((name, plugin.params, field(default_factory=plugin.params)))
-    Steps = dataclasses.make_dataclass("Steps", steps_fields)
-
-    Base = dataclasses.make_dataclass("TwinkitBase", [
-        ("engine", EngineConfig, field(default_factory=EngineConfig)),
-        ("steps", Steps, field(default_factory=Steps)),
-        ("rerun", List[str], field(default_factory=list)),
-        ("site", Any, None),
-        ("recipe", Any, None),
-    ] + [(kind, Any, None) for kind in (*STEP_KINDS, *COMPONENT_KINDS) if kind not in ("step", "site_generator")])
-    cs.store(name="twinkit_base", node=Base)
-
-
-_CHOICE = re.compile(r"^(\+{0,2})(site|recipe)=(.*)$")
-
-
 def _available(folder: Path) -> list[str]:
     return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
 
@@ -155,6 +86,9 @@ def local_outputs_dirs(overrides: list[str], conf_dir: Path) -> list[str]:
 
 
 def _chosen(overrides: list[str], conf_dir: Path) -> dict[str, list[str]]:
+    """The sites and recipes a run (or each job of a sweep) uses: the command line's choice, else config.yaml's."""
+    from twinkit.hydra_glue import group_choices
+
     chosen: dict[str, list[str]] = {"site": [], "recipe": []}
     try:
         defaults = yaml.safe_load((conf_dir / "config.yaml").read_text()).get("defaults", [])
@@ -165,12 +99,10 @@ def _chosen(overrides: list[str], conf_dir: Path) -> dict[str, list[str]]:
             for k in ("site", "recipe"):
                 if k in d:
                     chosen[k] = [d[k]]
-    for ov in overrides:
-        m = _CHOICE.match(ov)
-        if not m:
-            continue
-        value = re.sub(r"^(choice|glob)\((.*)\)$", r"\2", m.group(3))
-        chosen[m.group(2)] = [v.strip() for v in value.split(",")]
+    for group in ("site", "recipe"):
+        given = group_choices(overrides, group, _available(conf_dir / group))
+        if given is not None:
+            chosen[group] = given
     return chosen
 
 

@@ -16,22 +16,67 @@ from twinkit.hashing import sha256_file
 
 SCHEMA_VERSION = 1
 
-#: libraries whose versions are recorded when installed.
-LIBRARIES = [
-    "twinkit", "hydra-core", "omegaconf", "pluggy", "numpy", "scipy", "open3d", "torch", "pyproj", "laspy",
-    "pye57", "plyfile", "pillow", "fast-simplification", "pymeshlab", "xatlas", "bpy", "usd-core", "carla",
-    "eclipse-sumo", "pycolmap", "opencv-python-headless", "moderngl", "transformers", "dask", "distributed",
-]
+#: optional-dependency groups that are tools around a package, not libraries its code runs with
+TOOL_EXTRAS = ("test", "tests", "bench", "dev", "docs", "lint")
 
 
 @functools.lru_cache(maxsize=None)
-def _library_versions() -> tuple:
-    return tuple(library_versions().items())
+def _library_versions(distributions: tuple[str, ...]) -> tuple:
+    return tuple(library_versions(distributions).items())
 
 
-def library_versions() -> dict[str, str]:
+def _canon(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def declared_libraries(distributions: tuple[str, ...] | list[str]) -> list[str]:
+    """The libraries the given distributions declare (``importlib.metadata.requires``): each one's
+    requirements, with those of its optional groups but the tool groups (:data:`TOOL_EXTRAS`), and
+    ``twinkit``'s own requirements with every extra a distribution asks of it (``twinkit[geo,mesh]``).
+    Names as the requirements spell them, sorted; distributions that are not installed are skipped."""
+    from packaging.requirements import InvalidRequirement, Requirement
+
+    dists = [d for d in dict.fromkeys(["twinkit", *distributions])]
+    parsed: dict[str, list] = {}
+    extras: dict[str, set[str]] = {}  # extras of each distribution that are used
+    for d in dists:
+        try:
+            dist = md.distribution(d)
+        except md.PackageNotFoundError:
+            continue
+        raw = dist.requires or []
+        offered = dist.metadata.get_all("Provides-Extra") or []
+        reqs = []
+        for line in raw:
+            try:
+                reqs.append(Requirement(line))
+            except InvalidRequirement:
+                continue
+        parsed[_canon(d)] = reqs
+        extras.setdefault(_canon(d), set()).update(e for e in offered if e not in TOOL_EXTRAS and d != "twinkit")
+    for reqs in parsed.values():
+        for r in reqs:
+            if r.extras and (r.marker is None or r.marker.evaluate({"extra": ""})):
+                extras.setdefault(_canon(r.name), set()).update(r.extras)
+    for d in [d for d in extras if d not in parsed]:  # a library asked for with extras: dask[distributed]
+        try:
+            parsed[d] = [Requirement(line) for line in md.requires(d) or [] if "extra ==" in line]
+        except (md.PackageNotFoundError, InvalidRequirement):
+            continue
+    names: dict[str, str] = {}
+    for d, reqs in parsed.items():
+        for r in reqs:
+            wanted = r.marker is None or any(r.marker.evaluate({"extra": e}) for e in ("", *extras.get(d, ())))
+            if wanted:
+                names.setdefault(_canon(r.name), r.name)
+    return sorted(names.values(), key=_canon)
+
+
+def library_versions(distributions: tuple[str, ...] | list[str] = ()) -> dict[str, str]:
+    """Installed versions of ``twinkit`` and of every library :func:`declared_libraries` finds for the
+    loaded plugins' ``distributions``."""
     out = {}
-    for name in LIBRARIES:
+    for name in ["twinkit", *declared_libraries(tuple(distributions))]:
         try:
             out[name] = md.version(name)
         except md.PackageNotFoundError:
@@ -113,7 +158,7 @@ def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site:
         "git": dict(_git_state(Path(project_root))),  # once per process: the manifest is written at start and end
         "python": {"version": sys.version.split()[0], "implementation": platform.python_implementation(),
                    "platform": platform.platform()},
-        "libraries": dict(_library_versions()),
+        "libraries": dict(_library_versions(tuple(sorted({p.distribution for p in registry.all()})))),
         "plugins": plugins,
         "steps": steps,
         "inputs": inputs,

@@ -217,3 +217,44 @@ def check_values(cls: type | None, values: Any, prefix: str, plugin: str = "") -
             each = " (each element)" if isinstance(values[f.name], (list, tuple)) else ""
             what = "is out of range" if isinstance(check, Range) else "is not allowed"
             raise ConfigError(f"{key}={bad} {what}{whose}: {key}{each} must be {check.describe()}")
+
+
+@dataclass(frozen=True)
+class ParamInfo:
+    """One parameter as ``twinkit plugins <kind>/<name>`` shows it (all fields are display text)."""
+
+    name: str      # dotted for a nested dataclass's fields: ``filter.radius_m``
+    type: str      # ``int``, ``list[float]``, ``str | None``
+    range: str     # the declared check in words, ``-`` when there is none
+    default: str   # repr of the default (a default_factory is called), ``required`` when there is none
+    help: str      # the param(help=...) text, ``""`` when there is none
+
+
+def _type_text(tp: Any) -> str:
+    if isinstance(tp, type) and not typing.get_args(tp):
+        return tp.__name__
+    return str(tp).replace("typing.", "").replace("NoneType", "None")
+
+
+def describe_params(cls: type | None, prefix: str = "") -> list[ParamInfo]:
+    """Every field of the params dataclass ``cls`` (nested dataclasses walked, names dotted), in order."""
+    if cls is None:
+        return []
+    hints = typing.get_type_hints(cls)
+    out: list[ParamInfo] = []
+    for f in dataclasses.fields(cls):
+        tp = hints.get(f.name, Any)
+        sub = _nested(tp)
+        if sub is not None:
+            out.extend(describe_params(sub, f"{prefix}{f.name}."))
+            continue
+        if f.default is not dataclasses.MISSING:
+            default = repr(f.default)
+        elif f.default_factory is not dataclasses.MISSING:
+            default = repr(f.default_factory())
+        else:
+            default = "required"
+        check = check_of(f)
+        out.append(ParamInfo(prefix + f.name, _type_text(tp), check.describe() if check is not None else "-",
+                             default, help_of(f)))
+    return out

@@ -8,13 +8,12 @@ both. Files of dead processes are ignored and removed. A multirun job is also ca
 ``cores // n_jobs`` from its start, before the other jobs have registered.
 
 :func:`limit_threads` applies a count to the native thread pools: the environment variables read when a
-library starts (OpenMP, OpenBLAS, MKL, numba), the pools of libraries already loaded (found in
-``/proc/self/maps``, set through their own C functions) and torch when imported.
+library starts (OpenMP, OpenBLAS, MKL, numba), the pools of libraries already loaded (through
+threadpoolctl) and torch when imported.
 """
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import os
 import sys
 import tempfile
@@ -99,33 +98,19 @@ def registered() -> Iterator[None]:
 
 
 def limit_threads(n: int) -> None:
-    """Cap this process's native thread pools at ``n`` threads (libraries loaded now and later)."""
+    """Cap this process's native thread pools at ``n`` threads (libraries loaded now and later).
+
+    Libraries loaded later read the environment variables; the OpenMP, BLAS and MKL pools already loaded
+    are set through threadpoolctl; torch, when imported, through its own call.
+    """
+    from threadpoolctl import threadpool_limits
+
     n = max(1, int(n))
     for var in THREAD_ENV:
         os.environ[var] = str(n)
     os.environ[BUDGET_ENV] = str(n)
-    for path in _loaded_pool_libraries():
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for fn in ("openblas_set_num_threads", "openblas_set_num_threads64_", "omp_set_num_threads",
-                   "MKL_Set_Num_Threads"):
-            f = getattr(lib, fn, None)
-            if f is not None:
-                with contextlib.suppress(Exception):
-                    f(ctypes.c_int(n))
+    threadpool_limits(limits=n)  # applied now, kept (not used as a context manager)
     torch = sys.modules.get("torch")
     if torch is not None:
         with contextlib.suppress(Exception):
             torch.set_num_threads(n)
-
-
-def _loaded_pool_libraries() -> list[str]:
-    keys = ("openblas", "libgomp", "libomp", "libiomp", "mkl_rt")
-    try:
-        with open("/proc/self/maps") as f:
-            paths = {line.split(None, 5)[-1].strip() for line in f if ".so" in line}
-    except OSError:
-        return []
-    return sorted(p for p in paths if p.startswith("/") and any(k in os.path.basename(p) for k in keys))

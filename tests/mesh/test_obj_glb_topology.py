@@ -7,7 +7,8 @@ import struct
 import numpy as np
 import pytest
 
-from twinkit.mesh import Mesh, boundary_loops, components, edges, fan_fill, read_obj, write_obj
+from twinkit.mesh import Mesh, boundary_loops, components, edges, read_obj, write_obj
+from twinkit.street.holes import fan_fill
 from twinkit.mesh.glb import GlbPart, srgb_to_linear, write_colored_glb, write_textured_glb
 
 from tests.mesh.meshes import grid_mesh

@@ -213,10 +213,10 @@ def browser():
         from selenium.webdriver.chrome.service import Service
     except ImportError:
         pytest.skip("Selenium is not installed (pip install selenium; scripts/setup.sh should do it)")
-    from twinkit.report.viewer import find_node_modules
+    from twinkit.report.viewer import three_bundle
 
-    if find_node_modules() is None:
-        pytest.skip("three.js is not installed: run 'npm ci' in the repository root")
+    if three_bundle() is None:
+        pytest.skip("three.js is not bundled: run 'npm ci && npm run bundle' in the repository root")
     chrome, driver = find_chromium()
     if not chrome:
         pytest.skip("no Chromium: apt-get install chromium chromium-driver (or set TWINKIT_CHROMIUM)")

@@ -301,10 +301,10 @@ def test_ply_reader_matches_plyfile(demo_run):
 
 
 def test_three_bundle_is_a_classic_script(tmp_path):
-    nm = viewer.find_node_modules()
-    if nm is None:
-        pytest.skip("three.js is not installed: run 'npm ci' in the repository root")
-    text = viewer.bundle_three(nm)
+    bundle = viewer.three_bundle()
+    if bundle is None:
+        pytest.skip("three.js is not bundled: run 'npm ci && npm run bundle' in the repository root")
+    text = bundle.read_text(encoding="utf-8")
     assert not re.search(r"^\s*(import|export)\s*[{*]", text, re.M)
     assert "window.TWINKIT_THREE" in text
     node = shutil.which("node")
@@ -315,11 +315,12 @@ def test_three_bundle_is_a_classic_script(tmp_path):
                         "console.log(typeof T.THREE.WebGLRenderer, typeof T.GLTFLoader, typeof T.OrbitControls, T.version)",
                         str(tmp_path / "b.js")], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split()[:3] == ["function"] * 3
+    pinned = json.loads((Path(__file__).resolve().parents[2] / "package.json").read_text())["dependencies"]["three"]
+    assert r.stdout.split() == ["function"] * 3 + [pinned]
 
 
 def test_without_three_the_report_is_written_without_its_3d_view(demo_run, tmp_path, monkeypatch, caplog):
-    monkeypatch.setattr(viewer, "find_node_modules", lambda start=None: None)
+    monkeypatch.setattr(viewer, "three_bundle", lambda: None)
     run_dir = tmp_path / "run"
     run_dir.mkdir()
     with caplog.at_level(logging.WARNING, logger="twinkit"):

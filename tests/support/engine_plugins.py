@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import hookimpl
+from twinkit.ranges import param
 
 
 def _count(name: str) -> None:
@@ -58,8 +59,8 @@ def double(params, ctx, *, in_data_txt: Path, out_double_txt: Path) -> dict:
 
 @dataclass
 class ScaleParams:
-    factor: int = 3
-    degrade_below: int = 0  # a result below this says it is degraded (ctx.degraded)
+    factor: int = param(3, help="what the doubled value is multiplied by")
+    degrade_below: int = param(0, ge=0, help="a result below this says it is degraded (ctx.degraded)")
 
 
 def scale(params: ScaleParams, ctx, *, in_double_txt: Path, out_scaled_txt: Path) -> dict:

@@ -124,7 +124,7 @@ def test_drop_test_finds_a_30cm_hole_in_a_lane_and_passes_once_filled():
 
 def test_hole_under_a_lifted_object_is_closed_on_the_ground():
     from twinkit.mesh.topology import boundary_loops
-    from twinkit.surface.groundfill import fill_loop_on_ground
+    from twinkit.street.holes import close_hole, fan
 
     ground = grid_mesh(61, size=6.0)  # 10 cm spacing
     c = ground.vertices[ground.faces].mean(axis=1)
@@ -136,7 +136,7 @@ def test_hole_under_a_lifted_object_is_closed_on_the_ground():
     v[feet, 2] = 0.1 + 0.2 * (v[feet, 0] - 1.5) / 3.0
     loops = [lp for lp in boundary_loops(m.faces) if len(lp) < 200]
     assert len(loops) == 1
-    res = fill_loop_on_ground(v, loops[0], lambda xy: np.zeros(len(xy)), 0.1)
+    res = close_hole(v, loops[0], lambda xy: np.zeros(len(xy)), 0.1)
     assert res is not None
     faces, new = res
     assert len(new) > 400 and np.allclose(new[:, 2], 0.0)  # 3 x 2 m of ground points
@@ -151,6 +151,5 @@ def test_hole_under_a_lifted_object_is_closed_on_the_ground():
     lane = _lane_samples(1.8, 4.2, 2.3, 3.7)
     assert drop_test(allv, allf, lane).all()
     # the fan of before spans the hole at the border's heights: the same lane misses along the raised side
-    fan = np.c_[np.full(len(loops[0]), len(v)), loops[0][::-1], np.roll(loops[0][::-1], -1)]
-    fv = np.vstack([v, v[loops[0]].mean(axis=0)])
-    assert not drop_test(fv, np.vstack([m.faces, fan]), lane).all()
+    ff, centre = fan(v, loops[0])
+    assert not drop_test(np.vstack([v, centre]), np.vstack([m.faces, ff]), lane).all()

@@ -10,11 +10,12 @@ Modules, by concept:
 - :mod:`twinkit.mesh.obj`: textured OBJ + MTL (``read_obj``, ``write_obj``);
 - :mod:`twinkit.mesh.glb`: the one GLB writer (``write_textured_glb``, ``write_colored_glb``);
 - :mod:`twinkit.mesh.topology`: ``components``, ``edge_face_incidence``, ``boundary_loops``,
-  ``fan_fill``, ``remove_vertices``, ``bad_faces`` / ``drop_bad_faces`` (duplicate and
-  degenerate faces);
+  ``remove_vertices``, ``bad_faces`` / ``drop_bad_faces`` (duplicate and degenerate faces);
+  closing a boundary loop is :mod:`twinkit.street.holes` (``fan_fill`` for holes anywhere on a surface);
 - :mod:`twinkit.mesh.o3d`: ``to_o3d_mesh`` / ``to_o3d_cloud`` (open3d imported when called).
 
-Only numpy is imported with this package; scipy, plyfile, open3d and Pillow are imported by the
+Only numpy is imported with this package (PLY is read and written with numpy alone); scipy, open3d
+and Pillow are imported by the
 functions that need them (install them with the ``twinkit[mesh]`` extra). ``import twinkit``
 does not import this package.
 """
@@ -24,13 +25,12 @@ from .core import Mesh, compact, edges, face_areas, face_normals, vertex_normals
 from .o3d import to_o3d_cloud, to_o3d_mesh
 from .obj import read_obj, write_obj
 from .ply import ply_vertex_count, read_mesh, read_ply, write_colored_ply, write_ply
-from .topology import (bad_faces, boundary_loops, components, drop_bad_faces, edge_face_incidence, fan_fill,
-                       remove_vertices)
+from .topology import bad_faces, boundary_loops, components, drop_bad_faces, edge_face_incidence, remove_vertices
 
 __all__ = [
     "Mesh", "compact", "edges", "face_areas", "face_normals", "vertex_normals",
     "to_o3d_cloud", "to_o3d_mesh", "read_obj", "write_obj", "ply_vertex_count",
     "read_mesh", "read_ply", "write_colored_ply", "write_ply",
-    "bad_faces", "boundary_loops", "components", "drop_bad_faces", "edge_face_incidence", "fan_fill",
+    "bad_faces", "boundary_loops", "components", "drop_bad_faces", "edge_face_incidence",
     "remove_vertices",
 ]

@@ -2,7 +2,9 @@
 
 Binary PLY (little- or big-endian) whose faces are all triangles is parsed directly with numpy
 (``np.fromfile``, one pass); anything else (ASCII, polygons, variable lists, extra elements)
-goes through plyfile. Files are written binary little-endian (ASCII through plyfile on request).
+goes through the general reader here (numpy too, row by row only where list lengths vary). Files
+are written binary little-endian (ASCII on request). No PLY library is needed (plyfile, GPL-3.0,
+is only a test tool that checks these files against an independent reader).
 
 Vertex properties map to ``Mesh.attrs``: ``nx ny nz`` -> ``normals`` (n, 3) float32,
 ``red green blue`` (also ``r g b``, ``diffuse_*``; floats in [0, 1] and 16-bit values rescaled) ->
@@ -40,62 +42,205 @@ def _ply_scalar(arr):
         return arr.astype(np.uint8)
     return arr
 
-def _write_ply_plyfile(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool = False) -> None:
-    """Write ``mesh`` as PLY with plyfile (slow for big meshes; used for ASCII)."""
-    from plyfile import PlyData, PlyElement
-
-    n = mesh.n_vertices
-    cols: list[tuple[str, str]] = [("x", xyz_dtype), ("y", xyz_dtype), ("z", xyz_dtype)]
-    data: dict[str, np.ndarray] = {
-        "x": mesh.vertices[:, 0], "y": mesh.vertices[:, 1], "z": mesh.vertices[:, 2]}
-    for name, arr in mesh.attrs.items():
-        arr = np.asarray(arr)
-        if name == "normals":
-            for i, c in enumerate(("nx", "ny", "nz")):
-                cols.append((c, "f4"))
-                data[c] = arr[:, i]
-        elif name == "colors":
-            for i, c in enumerate(("red", "green", "blue")):
-                cols.append((c, "u1"))
-                data[c] = arr[:, i]
-        else:
-            arr = _ply_scalar(arr)
-            dt = _SCALAR_DTYPES.get(arr.dtype, "f4")
-            cols.append((name, dt))
-            data[name] = arr
-    vert = np.empty(n, dtype=cols)
-    for c, _ in cols:
-        vert[c] = data[c]
-    elements = [PlyElement.describe(vert, "vertex")]
+def _write_ply_ascii(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4") -> None:
+    """Write ``mesh`` as ASCII PLY: the header :func:`write_ply` writes, one row per line, values as
+    ``%.18g`` (every float32/float64 reads back exactly)."""
+    cols = _vertex_columns(mesh, xyz_dtype)
+    head = ["ply", "format ascii 1.0"] + [f"comment {c}" for c in mesh.comments]
+    head.append(f"element vertex {mesh.n_vertices}")
+    head += [f"property {_PLY_NAMES[t]} {c}" for c, t, _ in cols]
+    fcols: list[np.ndarray] = []
     if mesh.faces is not None:
-        fcols: list[tuple] = [("vertex_indices", "i4", (3,))]
+        head += [f"element face {mesh.n_faces}", "property list uchar int vertex_indices"]
+        fcols.append(np.full((mesh.n_faces, 1), 3))
+        fcols.append(np.asarray(mesh.faces, np.int64).reshape(-1, 3))
         for name, arr in mesh.face_attrs.items():
             arr = np.asarray(arr)
             if arr.ndim == 2:
-                fcols.append((name, "f4", (arr.shape[1],)))
+                head.append(f"property list uchar float {name}")
+                fcols += [np.full((len(arr), 1), arr.shape[1]), arr.astype(np.float32)]
             else:
-                fcols.append((name, _SCALAR_DTYPES.get(arr.dtype, "f4")))
-        face = np.empty(len(mesh.faces), dtype=fcols)
-        face["vertex_indices"] = mesh.faces.astype(np.int32)
-        for name, arr in mesh.face_attrs.items():
-            face[name] = arr
-        # list properties: plyfile writes fixed-shape subarrays as lists with uchar counts
-        elements.append(PlyElement.describe(face, "face", len_types={k[0]: "u1" for k in fcols},
-                                            val_types={"vertex_indices": "i4"}))
-    PlyData(elements, text=text, comments=list(mesh.comments)).write(str(path))
+                t = _SCALAR_DTYPES.get(arr.dtype, "f4")
+                head.append(f"property {_PLY_NAMES[t]} {name}")
+                fcols.append(arr.astype(t).reshape(-1, 1))
+    head.append("end_header")
+
+    def rows(columns: list[np.ndarray]) -> str:
+        text = [[f"{x:.18g}" for x in np.asarray(c).ravel()] for c in columns]
+        widths = [np.asarray(c).reshape(len(np.asarray(c)), -1).shape[1] for c in columns]
+        n = len(np.asarray(columns[0])) if columns else 0
+        out = []
+        for i in range(n):
+            out.append(" ".join(t for col, w in zip(text, widths) for t in col[i * w:(i + 1) * w]))
+        return "".join(line + "\n" for line in out)
+
+    vcols = [np.asarray(arr).astype(t) for _, t, arr in cols]
+    with open(path, "w", encoding="ascii") as fh:
+        fh.write("\n".join(head) + "\n")
+        fh.write(rows(vcols))
+        if fcols:
+            fh.write(rows(fcols))
 
 
-def _read_ply_plyfile(path: Path | str) -> Mesh:
-    from plyfile import PlyData
+def _element_dtype(props: list[list[str]], end: str, counts: dict[str, int] | None = None) -> np.dtype:
+    """The numpy dtype of one element's rows; a list property becomes ``<name>_n`` (its count) and
+    ``<name>`` (``counts[name]`` values), so every row must hold lists of those lengths."""
+    fields: list[tuple] = []
+    for p in props:
+        if p[0] == "list":
+            fields += [(p[3] + "_n", end + _PLY_TYPES[p[1]]), (p[3], end + _PLY_TYPES[p[2]], ((counts or {})[p[3]],))]
+        else:
+            fields.append((p[1], end + _PLY_TYPES[p[0]]))
+    return np.dtype(fields)
 
-    ply = PlyData.read(str(path))
-    return _mesh_from_arrays(ply["vertex"].data, _faces_from_plyfile(ply), list(ply.comments))
+
+def _as_lists(arr: np.ndarray, props: list[list[str]]) -> np.ndarray:
+    """Rows read with fixed list lengths -> the element's structured array (the count fields dropped)."""
+    keep = [p[3] if p[0] == "list" else p[1] for p in props]
+    return arr[keep]
 
 
-def _faces_from_plyfile(ply):
-    if "face" not in ply:
-        return None
-    return ply["face"].data
+def _object_rows(rows: list[list], props: list[list[str]], end: str) -> np.ndarray:
+    """Rows whose lists vary in length -> a structured array with an object field per list property."""
+    fields = [(p[3], object) if p[0] == "list" else (p[1], end + _PLY_TYPES[p[0]]) for p in props]
+    out = np.empty(len(rows), dtype=fields)
+    for i, row in enumerate(rows):
+        out[i] = tuple(row)
+    return out
+
+
+def _read_binary_element(buf: memoryview, pos: int, count: int, props: list[list[str]], end: str):
+    """One element of a binary PLY from ``buf`` at byte ``pos``: (structured array, next position).
+    Lists of one length in every row are read in one pass; otherwise row by row."""
+    has_list = any(p[0] == "list" for p in props)
+    if count == 0:
+        return np.empty(0, _element_dtype(props, end, {p[3]: 0 for p in props if p[0] == "list"})), pos
+    if not has_list:
+        dt = _element_dtype(props, end)
+        if pos + dt.itemsize * count > len(buf):
+            raise ValueError(f"truncated PLY: {count} rows declared, file too short")
+        return np.frombuffer(buf, dt, count, pos).copy(), pos + dt.itemsize * count
+    # lengths of the first row's lists, then check every row has them
+    counts: dict[str, int] = {}
+    q = pos
+    for p in props:
+        if p[0] == "list":
+            ct, it = np.dtype(end + _PLY_TYPES[p[1]]), np.dtype(end + _PLY_TYPES[p[2]])
+            if q + ct.itemsize > len(buf):
+                raise ValueError("truncated PLY: file too short")
+            counts[p[3]] = int(np.frombuffer(buf, ct, 1, q)[0])
+            q += ct.itemsize + counts[p[3]] * it.itemsize
+        else:
+            q += np.dtype(_PLY_TYPES[p[0]]).itemsize
+    dt = _element_dtype(props, end, counts)
+    if pos + dt.itemsize * count <= len(buf):
+        arr = np.frombuffer(buf, dt, count, pos)
+        if all(np.all(arr[n + "_n"] == c) for n, c in counts.items()):
+            return _as_lists(arr, props).copy(), pos + dt.itemsize * count
+    rows = []
+    for _ in range(count):
+        row = []
+        for p in props:
+            if p[0] == "list":
+                ct, it = np.dtype(end + _PLY_TYPES[p[1]]), np.dtype(end + _PLY_TYPES[p[2]])
+                if pos + ct.itemsize > len(buf):
+                    raise ValueError("truncated PLY: file too short")
+                n = int(np.frombuffer(buf, ct, 1, pos)[0])
+                pos += ct.itemsize
+                if pos + n * it.itemsize > len(buf):
+                    raise ValueError("truncated PLY: file too short")
+                row.append(np.frombuffer(buf, it, n, pos).copy())
+                pos += n * it.itemsize
+            else:
+                t = np.dtype(end + _PLY_TYPES[p[0]])
+                if pos + t.itemsize > len(buf):
+                    raise ValueError("truncated PLY: file too short")
+                row.append(np.frombuffer(buf, t, 1, pos)[0])
+                pos += t.itemsize
+        rows.append(row)
+    return _object_rows(rows, props, end), pos
+
+
+def _read_ascii_element(tokens: list[bytes], pos: int, count: int, props: list[list[str]]):
+    """One element of an ASCII PLY from the body's ``tokens`` at index ``pos``: (structured array, next
+    index). Lists of one length in every row are converted in one pass; otherwise row by row."""
+    if count == 0:
+        return np.empty(0, _element_dtype(props, "=", {p[3]: 0 for p in props if p[0] == "list"})), pos
+    counts: dict[str, int] = {}
+    q = pos
+    for p in props:  # the first row's list lengths
+        if p[0] == "list":
+            if q >= len(tokens):
+                raise ValueError("truncated PLY: file too short")
+            counts[p[3]] = int(float(tokens[q]))
+            q += 1 + counts[p[3]]
+        else:
+            q += 1
+    dt = _element_dtype(props, "=", counts)
+    width = q - pos
+    if pos + width * count > len(tokens):
+        raise ValueError(f"truncated PLY: {count} rows declared, file too short")
+    block = np.asarray(tokens[pos:pos + width * count]).astype(np.float64).reshape(count, width)
+    uniform = True
+    col = 0
+    for p in props:
+        if p[0] == "list":
+            uniform &= bool(np.all(block[:, col] == counts[p[3]]))
+            col += 1 + counts[p[3]]
+        else:
+            col += 1
+    if uniform:
+        arr = np.empty(count, dtype=dt)
+        col = 0
+        for p in props:
+            if p[0] == "list":
+                arr[p[3] + "_n"] = block[:, col]
+                arr[p[3]] = block[:, col + 1:col + 1 + counts[p[3]]]
+                col += 1 + counts[p[3]]
+            else:
+                arr[p[1]] = block[:, col]
+                col += 1
+        return _as_lists(arr, props), pos + width * count
+    rows = []
+    for _ in range(count):
+        row: list = []
+        for p in props:
+            if pos >= len(tokens):
+                raise ValueError("truncated PLY: file too short")
+            if p[0] == "list":
+                n = int(float(tokens[pos]))
+                vals = tokens[pos + 1:pos + 1 + n]
+                if len(vals) < n:
+                    raise ValueError("truncated PLY: file too short")
+                row.append(np.asarray(vals).astype(np.float64).astype(_PLY_TYPES[p[2]]))
+                pos += 1 + n
+            else:
+                row.append(float(tokens[pos]))
+                pos += 1
+        rows.append(row)
+    return _object_rows(rows, props, "="), pos
+
+
+def _read_ply_general(path: Path, fmt: str, offset: int, elements: list[list], comments: list[str]) -> Mesh:
+    """Any PLY the fast path does not take: ASCII, polygons, lists of varying length, other elements
+    (read past and left out). Polygons are fan-triangulated by :func:`_mesh_from_arrays`."""
+    data = path.read_bytes()[offset:]
+    found: dict[str, np.ndarray] = {}
+    if fmt == "ascii":
+        tokens = data.split()
+        pos = 0
+        for name, count, props in elements:
+            found[name], pos = _read_ascii_element(tokens, pos, count, props)
+    elif fmt in ("binary_little_endian", "binary_big_endian"):
+        end = "<" if fmt == "binary_little_endian" else ">"
+        buf, pos = memoryview(data), 0
+        for name, count, props in elements:
+            found[name], pos = _read_binary_element(buf, pos, count, props, end)
+    else:
+        raise ValueError(f"unknown PLY format {fmt!r}")
+    if "vertex" not in found:
+        raise ValueError("no vertex element")
+    return _mesh_from_arrays(found["vertex"], found.get("face"), comments)
 
 
 def _stack_fields(v, names, dtype=None) -> np.ndarray:
@@ -212,7 +357,7 @@ def write_ply(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool
     ``uchar int`` lists; fixed-size face attributes such as ``texcoord`` (m, 6) as ``uchar float`` lists).
     ``xyz_dtype``: "f4" (float32, default) or "f8"."""
     if text:
-        return _write_ply_plyfile(path, mesh, xyz_dtype=xyz_dtype, text=True)
+        return _write_ply_ascii(path, mesh, xyz_dtype=xyz_dtype)
     cols = _vertex_columns(mesh, xyz_dtype)
     vdt = np.dtype([(c, "<" + t) for c, t, _ in cols])
     head = ["ply", "format binary_little_endian 1.0"] + [f"comment {c}" for c in mesh.comments]
@@ -259,7 +404,7 @@ def read_ply(path: Path | str) -> Mesh:
     """Read a PLY (cloud or triangle mesh) into a :class:`Mesh`; float64 vertices.
 
     Binary files (either byte order) whose faces are all triangles are parsed directly with numpy;
-    anything else goes through plyfile (polygons are fan-triangulated)."""
+    anything else goes through the general reader (polygons are fan-triangulated)."""
     path = Path(path)
     with open(path, "rb") as fh:
         first = fh.readline()
@@ -292,7 +437,7 @@ def read_ply(path: Path | str) -> Mesh:
               and all(p[0] != "list" for p in elements[0][2])
               and all(n == "face" for n in names[1:]) and len(names) <= 2)
     if not simple or end is None:
-        return _read_ply_plyfile(path)
+        return _read_ply_general(path, fmt, offset, elements, comments)
     vdt = np.dtype([(p[1], end + _PLY_TYPES[p[0]]) for p in elements[0][2]])
     nv = elements[0][1]
     size = path.stat().st_size
@@ -308,7 +453,7 @@ def read_ply(path: Path | str) -> Mesh:
             if p[0] == "list":
                 ct, it = np.dtype(end + _PLY_TYPES[p[1]]), np.dtype(end + _PLY_TYPES[p[2]])
                 if pos + ct.itemsize > len(first_face):
-                    return _read_ply_plyfile(path)
+                    return _read_ply_general(path, fmt, offset, elements, comments)
                 cnt = int(np.frombuffer(first_face[pos:pos + ct.itemsize], ct)[0])
                 fields += [(p[3] + "_n", ct), (p[3], it, (cnt,))]
                 pos += ct.itemsize + cnt * it.itemsize
@@ -319,7 +464,7 @@ def read_ply(path: Path | str) -> Mesh:
         fdt = np.dtype(fields)
         nf = elements[1][1]
         if offset + vdt.itemsize * nv + fdt.itemsize * nf != size:
-            return _read_ply_plyfile(path)  # polygons or variable lists (plyfile also detects truncation)
+            return _read_ply_general(path, fmt, offset, elements, comments)  # polygons or variable lists
     elif offset + vdt.itemsize * nv > size:
         raise ValueError(f"truncated PLY: {nv} vertices declared, file too short")
     with open(path, "rb") as fh:
@@ -330,10 +475,10 @@ def read_ply(path: Path | str) -> Mesh:
             fnames = fdt.names or ()
             key = "vertex_indices" if "vertex_indices" in fnames else "vertex_index"
             if key not in fnames or face_arr[key].shape[1:] != (3,):
-                return _read_ply_plyfile(path)
+                return _read_ply_general(path, fmt, offset, elements, comments)
             for n in fnames:
                 if n.endswith("_n") and n[:-2] in fnames and not np.all(face_arr[n] == fdt[n[:-2]].shape[0]):
-                    return _read_ply_plyfile(path)
+                    return _read_ply_general(path, fmt, offset, elements, comments)
     if len(v) < nv:
         raise ValueError(f"truncated PLY: {nv} vertices declared, {len(v)} present")
     if face_arr is not None:

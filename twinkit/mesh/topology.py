@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core import Mesh, compact, vertex_normals
+from .core import Mesh, compact
 
 
 def remove_vertices(mesh: Mesh, drop: np.ndarray) -> Mesh:
@@ -69,44 +69,6 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
             if cur == start and len(loop) >= 3:
                 loops.append(np.asarray(loop, np.int64))
     return loops
-
-
-def fan_fill(mesh: Mesh, loops: list[np.ndarray], face_fill: int = -1, recompute_normals: bool = True) -> Mesh:
-    """Close each given boundary loop (vertex indices in boundary order): a triangle as one face,
-    longer loops with a fan around a new centroid vertex whose attributes are the loop's mean.
-    Face attributes of the new faces get ``face_fill`` (integers) or 0. Vertex normals, if any, are
-    recomputed from the faces unless ``recompute_normals`` is false (new vertices then get the mean)."""
-    if not loops:
-        return mesh
-    assert mesh.faces is not None  # a mesh, not a cloud
-    new_v: list[np.ndarray] = []
-    new_f: list = []
-    new_attrs: dict[str, list[np.ndarray]] = {k: [] for k in mesh.attrs}
-    nv = mesh.n_vertices
-    for lp in loops:
-        if len(lp) == 3:
-            new_f.append([lp[2], lp[1], lp[0]])
-            continue
-        c = nv + len(new_v)
-        new_v.append(mesh.vertices[lp].mean(axis=0))
-        for k, a in mesh.attrs.items():
-            val = a[lp].astype(np.float64).mean(axis=0)
-            new_attrs[k].append(val.astype(a.dtype) if a.dtype.kind == "f" else np.rint(val).astype(a.dtype))
-        nb = np.roll(lp, -1)
-        new_f.extend(np.stack([nb, lp, np.full(len(lp), c)], axis=1).tolist())
-    verts = np.vstack([mesh.vertices] + ([np.asarray(new_v)] if new_v else []))
-    attrs = {}
-    for k, a in mesh.attrs.items():
-        attrs[k] = np.concatenate([a, np.asarray(new_attrs[k], dtype=a.dtype).reshape((-1,) + a.shape[1:])]) if new_v else a
-    faces_new = np.asarray(new_f, np.int64)
-    face_attrs = {k: np.concatenate([a, np.full((len(faces_new),) + a.shape[1:],
-                                                face_fill if a.dtype.kind == "i" else 0, a.dtype)])
-                  for k, a in mesh.face_attrs.items()}
-    faces = np.vstack([mesh.faces, faces_new])
-    out = Mesh(vertices=verts, faces=faces, attrs=attrs, face_attrs=face_attrs, comments=list(mesh.comments))
-    if recompute_normals and "normals" in out.attrs:
-        out.attrs["normals"] = vertex_normals(out.vertices, faces)
-    return out
 
 
 def bad_faces(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None,

@@ -33,7 +33,8 @@ import time
 from pathlib import Path
 
 from twinkit.report.context import SectionContext
-from twinkit.report.page import (ASSETS, CITYSCAPES, CSS_FILE, IGNORE_COLOR, Page, degraded_banner, esc, palette,
+from twinkit.report.html import esc
+from twinkit.report.page import (ASSETS, CITYSCAPES, CSS_FILE, IGNORE_COLOR, Page, degraded_banner, palette,
                                  render_page, status_badge)
 from twinkit.report.render import ORTHO_PX, TopDown
 from twinkit.report.run import REPORT_DIR, RunView, prune_cache

@@ -15,8 +15,10 @@ The context offers, all read-only except the report folder:
   plugins of the distribution that registered the section), ``ctx.outputs(step)`` (the step's declared
   outputs by name, from ``step.json``), ``ctx.find(pattern, steps=None)`` and ``ctx.first(pattern)``
   (files by glob, latest step first), ``ctx.read_json(path)``;
-- HTML helpers: ``ctx.table``, ``ctx.figure``, ``ctx.legend``, ``ctx.esc``, ``ctx.fmt``, ``ctx.size``,
-  ``ctx.CITYSCAPES``, ``ctx.palette()``, ``ctx.flatten`` (nested dict -> ``{'a.b': v}``) (see :mod:`twinkit.report.page`);
+- HTML helpers: ``ctx.esc``, ``ctx.attr``, ``ctx.url``, ``ctx.link`` (the only way a value from the run goes
+  into the page: :mod:`twinkit.report.html`), ``ctx.table``, ``ctx.figure``, ``ctx.legend``, ``ctx.fmt``,
+  ``ctx.size``, ``ctx.CITYSCAPES``, ``ctx.palette()``, ``ctx.flatten`` (nested dict -> ``{'a.b': v}``) (see
+  :mod:`twinkit.report.page`);
 - pictures: ``ctx.ortho()``: the cached top-down orthophoto of the run's mesh (``{'texture': 'img/ortho.png',
   'segmentation': ..., 'bounds': (xmin, ymin, xmax, ymax), 'size': (w, h), 'mesh': Path, 'step': dict}``
   or None), ``ctx.render_topdown`` (the renderer itself), ``ctx.cache_dir`` and ``ctx.key_of(step, path)``
@@ -32,6 +34,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from twinkit.report import html as _html
 from twinkit.report import page as _page
 from twinkit.report.render import TopDown, render_topdown
 from twinkit.report.run import RunView, copy_into, file_key, flatten, read_json, rel, touch
@@ -42,7 +45,10 @@ log = logging.getLogger("twinkit.report")
 class SectionContext:
     """The run, its step folders and the report being written, as one report section sees them."""
 
-    esc = staticmethod(_page.esc)
+    esc = staticmethod(_html.esc)
+    attr = staticmethod(_html.attr)
+    url = staticmethod(_html.url)
+    link = staticmethod(_html.link)
     fmt = staticmethod(_page.fmt)
     size = staticmethod(_page.size)
     table = staticmethod(_page.table)

@@ -1,14 +1,14 @@
 """Page assembly and the HTML helpers that sections use.
 
-Helpers (all return HTML text; every value passed in is escaped unless marked ``("html", text)``):
+Helpers (all return HTML text; every value passed in is escaped unless marked ``("html", text)``; the
+escaping itself is :mod:`twinkit.report.html`: ``esc``, ``attr``, ``url``, ``link``):
 
-- ``esc(x)``: HTML-escaped ``str(x)``.
 - ``fmt(v)``: a number as the report prints it (thin-space thousands, 4 significant digits...).
 - ``size(n)``: a byte count as ``12.3 MB``.
 - ``table(headers, rows, cls="")``: a table; a cell ``("html", text)`` is put in as it is; numbers are
   right-aligned and formatted with ``fmt``.
 - ``figure(src, caption, extra="")``: a linked picture (``src`` relative to the report folder, e.g. what
-  ``SectionContext.add_image`` returns) with its caption (HTML) and extra HTML after it.
+  ``SectionContext.add_image`` returns; made safe with ``url``) with its caption (HTML) and extra HTML after it.
 - ``legend(present=None)``: the CityScapes colour legend (all classes, or the trainIds in ``present``).
 - ``status_badge(status)``: a step status badge (ran, cached, reused, ...).
 
@@ -17,13 +17,13 @@ Helpers (all return HTML text; every value passed in is escaped unless marked ``
 from __future__ import annotations
 
 import datetime as _dt
-import html
 from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
 
 from twinkit import cityscapes
+from twinkit.report.html import attr, esc, link, url
 
 ASSETS = Path(__file__).resolve().parents[1] / "report_assets"
 CSS_FILE = "report.css"
@@ -36,10 +36,6 @@ IGNORE_COLOR = cityscapes.IGNORE_RGB
 def palette() -> np.ndarray:
     """256 x 3 uint8: CityScapes colours for trainIds 0..18, black for everything else (255 = ignore)."""
     return cityscapes.lut()
-
-
-def esc(x: Any) -> str:
-    return html.escape(str(x), quote=True)
 
 
 def fmt(v: Any) -> str:
@@ -96,16 +92,16 @@ def table(headers: list[str], rows: list[list[Any]], cls: str = "") -> str:
                 num = isinstance(x, (int, float)) and not isinstance(x, bool)
                 cells.append(f"<td class=\"num\">{esc(fmt(x))}</td>" if num else f"<td>{esc(fmt(x))}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
-    return f"<table class=\"{cls}\"><thead><tr>{h}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    return f"<table{attr('class', cls)}><thead><tr>{h}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
 def figure(src: str, caption: str, extra: str = "") -> str:
-    return (f"<figure><a href=\"{src}\"><img src=\"{src}\" alt=\"{esc(caption)}\" loading=\"lazy\"></a>"
-            f"<figcaption>{caption}{extra}</figcaption></figure>")
+    img = f"<img src=\"{url(src)}\"{attr('alt', caption)} loading=\"lazy\">"
+    return f"<figure>{link(src, text_html=img)}<figcaption>{caption}{extra}</figcaption></figure>"
 
 
 def status_badge(status: str) -> str:
-    return f"<span class=\"badge st-{esc(status)}\">{esc(status)}</span>"
+    return f"<span{attr('class', f'badge st-{status}')}>{esc(status)}</span>"
 
 
 def legend(present: Iterable[int] | None = None) -> str:
@@ -128,20 +124,20 @@ def degraded_banner(entries: list[dict]) -> str:
 def failed_banner(failed: dict) -> str:
     """The red box of a failed run: the step it stopped in and the error."""
     return (f"<div class=\"degraded failed\" id=\"failed\"><b>Failed run:</b> it stopped in step "
-            f"<a href=\"#step-{esc(failed.get('folder', ''))}\"><b>{esc(failed.get('id', '?'))}</b></a> "
+            f"{link('#step-' + str(failed.get('folder', '')), text_html='<b>' + esc(failed.get('id', '?')) + '</b>')} "
             f"({esc(failed.get('status', 'failed'))}): {esc(failed.get('error', ''))}. The steps before it are "
             f"shown as they ran.</div>")
 
 
 def render_page(title: str, page: Page, subtitle: str = "") -> str:
-    nav = "".join(f"<a href=\"#{sid}\">{esc(t)}</a>" for sid, t, _ in page.sections)
-    body = "".join(f"<section id=\"{sid}\"><h2>{esc(t)}</h2>{h}</section>" for sid, t, h in page.sections)
+    nav = "".join(link(f"#{sid}", t) for sid, t, _ in page.sections)
+    body = "".join(f"<section{attr('id', sid)}><h2>{esc(t)}</h2>{h}</section>" for sid, t, h in page.sections)
     notes = "".join(f"<p class=\"warn\">{esc(n)}</p>" for n in page.notes)
     gen = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     return (
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
-        f"<title>{esc(title)}</title><link rel=\"stylesheet\" href=\"{CSS_FILE}\"></head><body>"
+        f"<title>{esc(title)}</title><link rel=\"stylesheet\" href=\"{url(CSS_FILE)}\"></head><body>"
         f"<header><h1>{esc(title)}</h1><p>{subtitle}</p><nav>{nav}</nav></header>{page.banner}{notes}<main>{body}</main>"
         f"<footer>written by twinkit.report at {gen}</footer></body></html>\n"
     )

@@ -23,7 +23,8 @@ from pathlib import Path
 from twinkit.plugins import ReportSection
 from twinkit.quality import degraded_of
 from twinkit.report.context import SectionContext
-from twinkit.report.page import esc, figure, fmt, legend, size, status_badge, table
+from twinkit.report.html import attr, esc, link
+from twinkit.report.page import figure, fmt, legend, size, status_badge, table
 from twinkit.report.run import RunView, flatten, rel
 from twinkit.report.viewer import sec_viewer
 
@@ -48,9 +49,9 @@ def _summary(run: RunView, out: Path) -> str:
         ["steps", ", ".join(f"{v} {k}" for k, v in counts.items())],
         ["overrides", " ".join(m.get("overrides") or []) or "(none)"],
         ["git", f"{(git.get('commit') or '?')[:12]}{' (uncommitted changes)' if git.get('dirty') else ''}"],
-        ["workspace", ("html", f"<a href=\"{rel(run.workspace, out)}\">{esc(run.workspace)}</a>")],
-        ["manifest", ("html", f"<a href=\"{rel(run.run_dir / 'manifest.json', out)}\">manifest.json</a> · "
-                              f"<a href=\"{rel(run.run_dir / 'run.log', out)}\">run.log</a>")],
+        ["workspace", ("html", link(rel(run.workspace, out), run.workspace))],
+        ["manifest", ("html", f"{link(rel(run.run_dir / 'manifest.json', out), 'manifest.json')} · "
+                              f"{link(rel(run.run_dir / 'run.log', out), 'run.log')}")],
     ]
     return table(["", ""], rows, "kv")
 
@@ -62,11 +63,11 @@ def _timeline(run: RunView) -> str:
     rows = []
     for i, s in enumerate(run.steps, 1):
         d = float(s.get("duration_s") or 0)
-        bar = (f"<div class=\"bar st-{esc(s.get('status'))}\" style=\"width:{max(0.5, 100 * d / total):.1f}%\""
+        bar = (f"<div{attr('class', 'bar st-' + str(s.get('status')))} style=\"width:{max(0.5, 100 * d / total):.1f}%\""
                f" title=\"{d:.1f} s\"></div>")
         rows.append("<tr>" + "".join([
             f"<td class=\"num\">{i}</td>",
-            f"<td><a href=\"#step-{esc(s.get('folder'))}\">{esc(s.get('folder'))}</a></td>",
+            f"<td>{link('#step-' + str(s.get('folder')), s.get('folder'))}</td>",
             f"<td>{esc(s.get('plugin', ''))}</td>",
             f"<td>{status_badge(str(s.get('status', '?')))}"
             f"{(' ' + status_badge('degraded')) if degraded_of(s.get('metrics')) else ''}</td>",
@@ -113,7 +114,7 @@ def _provenance(run: RunView, out: Path) -> str:
 
 
 def file_link(p: Path, out: Path) -> str:
-    return f"<a href=\"{rel(p, out)}\">{esc(p.name)}</a>"
+    return link(rel(p, out), p.name)
 
 
 def _files(run: RunView, out: Path) -> str:
@@ -128,10 +129,10 @@ def _files(run: RunView, out: Path) -> str:
                 nbytes = f.stat().st_size
             except OSError:
                 nbytes = 0
-            rows.append([("html", f"<a href=\"{rel(f, out)}\">{esc(name)}</a>"), size(nbytes),
+            rows.append([("html", link(rel(f, out), name)), size(nbytes),
                          (s["hashes"].get(str(name)) or "")[:16]])
         shown = rows[:MAX_FILES_LISTED]
-        more = f"<p>and {len(rows) - len(shown)} more in <a href=\"{rel(s['dir'], out)}\">the folder</a></p>" \
+        more = f"<p>and {len(rows) - len(shown)} more in {link(rel(s['dir'], out), 'the folder')}</p>" \
             if len(rows) > len(shown) else ""
         metrics = s.get("metrics") or {}
         mt = ""
@@ -140,9 +141,9 @@ def _files(run: RunView, out: Path) -> str:
             mt = "<details><summary>step metrics</summary>" + table(
                 ["metric", "value"], [[k, v] for k, v in flat.items()], "kv small") + "</details>"
         blocks.append(
-            f"<details class=\"stepfiles\" id=\"step-{esc(s.get('folder'))}\"><summary><b>{esc(s.get('folder'))}</b> "
+            f"<details class=\"stepfiles\"{attr('id', 'step-' + str(s.get('folder')))}><summary><b>{esc(s.get('folder'))}</b> "
             f"{status_badge(str(s.get('status', '?')))} {len(rows)} file(s) · "
-            f"<a href=\"{rel(s['dir'], out)}\">folder</a></summary>"
+            f"{link(rel(s['dir'], out), 'folder')}</summary>"
             + table(["file", "size", "sha256"], shown, "files") + more + mt + "</details>")
     return "".join(blocks)
 

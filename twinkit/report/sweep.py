@@ -10,7 +10,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from twinkit.report.page import ASSETS, CSS_FILE, Page, esc, fmt, render_page, table
+from twinkit.report.html import esc, link
+from twinkit.report.page import ASSETS, CSS_FILE, Page, fmt, render_page, table
 from twinkit.report.run import REPORT_DIR, flatten, read_json, rel
 
 log = logging.getLogger("twinkit.report")
@@ -145,7 +146,7 @@ def write_sweep_summary(sweep_dir: Path) -> Path:
     trs = []
     for r in rows:
         rep = r["dir"] / REPORT_DIR / "report.html"
-        job = ("html", f"<a href=\"{rel(rep, out)}\">{esc(r['job'])}</a>") if rep.is_file() else r["job"]
+        job = ("html", link(rel(rep, out), r["job"])) if rep.is_file() else r["job"]
         trs.append([job, r["status"] or "?"] + [_num(r["params"].get(k)) if _num(r["params"].get(k)) is not None
                                                  else r["params"].get(k, "") for k in swept]
                    + [r["duration_s"] or 0] + [r["metrics"].get(k, "") for k in shown])

@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from twinkit.mesh import Mesh, compact, face_areas, vertex_normals
-from twinkit.mesh.topology import boundary_loops, components, edge_face_incidence, fan_fill, remove_vertices
+from twinkit.mesh.topology import boundary_loops, components, edge_face_incidence, remove_vertices
+from twinkit.street.holes import fan_fill
 
 
 @dataclass

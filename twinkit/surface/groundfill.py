@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twinkit.mesh import Mesh
+from twinkit.street.holes import grid_patch, stitch
 
 
 @dataclass
@@ -161,32 +162,12 @@ def _cover(scene, xy: np.ndarray, z: np.ndarray, band: float) -> np.ndarray:
     return t <= 2 * band
 
 
-def _bad_new_faces(faces: np.ndarray, n_old: int) -> np.ndarray:
-    """Among ``faces[n_old:]``, those that break the surface: a directed edge already used by another face
-    (overlapping or flipped) or an edge shared by more than two faces."""
-    n = len(faces)
-    m = int(faces.max()) + 1
-    he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2).astype(np.int64)
-    fid = np.repeat(np.arange(n), 3)
-    dkey = he[:, 0] * m + he[:, 1]
-    ukey = np.minimum(he[:, 0], he[:, 1]) * m + np.maximum(he[:, 0], he[:, 1])
-    _, dinv, dcnt = np.unique(dkey, return_inverse=True, return_counts=True)
-    _, uinv, ucnt = np.unique(ukey, return_inverse=True, return_counts=True)
-    bad_he = (dcnt[dinv] > 1) | (ucnt[uinv] > 2)
-    bad = np.zeros(n, bool)
-    bad[fid[bad_he]] = True
-    bad[:n_old] = False
-    return bad[n_old:]
-
-
 def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.ndarray, lo: np.ndarray,
                    opt: GroundFillOptions, rep: dict):
     """The fill joined to the mesh: (new vertices (k, 3), new faces (f, 3) indexing ``mesh.vertices`` then the
     new vertices). ``cand``: cells to cover (ny, nx) bool, ``height`` their ground height."""
     assert mesh.faces is not None  # a mesh, not a cloud
-    import pythoncdt as cdt
     from scipy.ndimage import binary_dilation
-    from scipy.spatial import cKDTree
 
     from .closest import Surface
 
@@ -229,69 +210,14 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
     inzone = np.zeros(m, bool)
     inzone[bv] = ok & zone[ij[:, 1], ij[:, 0]]
     border = border[level[border].all(axis=1) & inzone[border].any(axis=1)]
-    bids = np.unique(border)
-    # one 2D vertex per position (a vertical border edge has both ends at one xy)
-    key = np.round(v[bids, :2] / 1e-3).astype(np.int64)
-    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    rep_id = bids[first]  # representative mesh vertex per 2D position
-    bxy = v[rep_id, :2]
-    local = np.full(m, -1, np.int64)
-    local[bids] = inv.ravel()
-    e = local[border]
-    e = e[e[:, 0] != e[:, 1]]
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    # the cells' centres, less those too close to the border (slivers)
-    if len(bxy):
-        mids = np.vstack([bxy, 0.5 * (bxy[e[:, 0]] + bxy[e[:, 1]])]) if len(e) else bxy
-        dmin, _ = cKDTree(mids).query(gxy, workers=opt.threads)
-        keep = dmin >= 0.4 * c
-        gxy, gz = gxy[keep], gz[keep]
-    pts = np.vstack([bxy, gxy]).astype(np.float64)
-    zs = np.r_[v[rep_id, 2], gz]
-    nb = len(bxy)
-    if len(pts) < 3:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
-    tri.insert_vertices(np.ascontiguousarray(pts))
-    if len(e):
-        tri.insert_edges(np.ascontiguousarray(e.astype(np.uintc)))
-    tri.erase_super_triangle()
-    va = tri.vertices_array()
-    allxy = np.c_[va["x"], va["y"]] if va.dtype.names else np.asarray(va, np.float64).reshape(-1, 2)
-    if len(allxy) > len(pts):  # crossings of border edges seen from above: height of the nearest input vertex
-        _, near = cKDTree(pts).query(allxy[len(pts):])
-        zs = np.r_[zs, zs[near]]
-    t = np.asarray(tri.triangles_array()["vertices"], np.int64).reshape(-1, 3)
-    p3 = np.c_[allxy, zs]
-    a, b, d = p3[t[:, 0]], p3[t[:, 1]], p3[t[:, 2]]
-    cen = (a + b + d) / 3.0
-    edge2d = np.max(np.stack([np.linalg.norm((b - a)[:, :2], axis=1), np.linalg.norm((d - b)[:, :2], axis=1),
-                              np.linalg.norm((a - d)[:, :2], axis=1)]), axis=0)
-    cij, cok = cell_of(cen[:, :2])
-    sel = cok & zone[cij[:, 1], cij[:, 0]] & (edge2d <= 5 * c)
-    sel[sel] = ~_cover(scene, cen[sel, :2], cen[sel, 2], opt.cover_band_m)
-    t = t[sel]
-    # counter-clockwise seen from above
-    a, b, d = allxy[t[:, 0]], allxy[t[:, 1]], allxy[t[:, 2]]
-    area = (b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0])
-    t = np.where((area < 0)[:, None], t[:, [0, 2, 1]], t)
-    t = t[np.abs(area) > 1e-12]
-    # to mesh ids: border vertices are the mesh's own, the others new
-    n_new = len(allxy) - nb
-    gid = np.r_[rep_id, m + np.arange(n_new)]
-    nf = gid[t]
-    for _ in range(4):
-        if not len(nf):
-            break
-        bad = _bad_new_faces(np.vstack([f, nf]), len(f))
-        if not bad.any():
-            break
-        nf = nf[~bad]
-    used = np.unique(nf[nf >= m]) - m
-    remap = np.full(n_new, -1, np.int64)
-    remap[used] = np.arange(len(used))
-    nf = np.where(nf >= m, m + remap[np.maximum(nf - m, 0)], nf)
-    newv = p3[nb:][used]
+
+    def keep(cen: np.ndarray, edge2d: np.ndarray) -> np.ndarray:
+        cij, cok = cell_of(cen[:, :2])
+        sel = cok & zone[cij[:, 1], cij[:, 0]] & (edge2d <= 5 * c)
+        sel[sel] = ~_cover(scene, cen[sel, :2], cen[sel, 2], opt.cover_band_m)
+        return sel
+
+    newv, nf = stitch(v, f, border, gxy, gz, keep, 0.4 * c, opt.threads)
     rep["border_vertices_joined"] = int(len(np.unique(nf[nf < m])))
     return newv, nf
 
@@ -360,26 +286,13 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
         fill = d > opt.keep_if_mesh_within_m
     else:
         fill = np.ones(len(centres), bool)
-    vid = np.full((ny, nx), -1, np.int64)
-    vid[jj[fill], ii[fill]] = np.arange(int(fill.sum()))
-    # two triangles per 2 x 2 block of filled cells (one where exactly three are filled), counter-clockwise from above
-    v00, v10, v01, v11 = vid[:-1, :-1], vid[:-1, 1:], vid[1:, :-1], vid[1:, 1:]
-    tris = []
-    full = (v00 >= 0) & (v10 >= 0) & (v01 >= 0) & (v11 >= 0)
-    tris.append(np.c_[v00[full], v10[full], v11[full]])
-    tris.append(np.c_[v00[full], v11[full], v01[full]])
-    for a_, b_, c_, miss in ((v00, v10, v11, v01), (v00, v11, v01, v10), (v00, v10, v01, v11), (v10, v11, v01, v00)):
-        three = (a_ >= 0) & (b_ >= 0) & (c_ >= 0) & (miss < 0)
-        tris.append(np.c_[a_[three], b_[three], c_[three]])
-    pf = np.vstack(tris).astype(np.int64)
+    cells = np.zeros((ny, nx), bool)
+    cells[jj[fill], ii[fill]] = True
+    pv, pf = grid_patch(cells, hz, lo, c)
     if len(pf) == 0:
         rep.update(filled_cells=0, faces_added=0)
         return mesh, rep
-    used = np.unique(pf)
-    remap = np.full(int(fill.sum()), -1, np.int64)
-    remap[used] = np.arange(len(used))
-    pv = centres[fill][used]
-    pf = remap[pf] + mesh.n_vertices
+    pf = pf + mesh.n_vertices
     return _append(mesh, pv, pf, points, colors, tree, opt, rep)
 
 
@@ -409,146 +322,3 @@ def _append(mesh: Mesh, pv: np.ndarray, pf: np.ndarray, points, colors, tree, op
     area = float(face_areas(out.vertices, np.asarray(pf, np.int64)).sum()) if len(pf) else 0.0
     rep.update(filled_cells=int(len(pv)), faces_added=int(len(pf)), area_m2=round(area, 2))
     return out, rep
-
-
-def fill_loop_on_ground(vertices: np.ndarray, loop: np.ndarray, ground_z, cell_m: float = 0.10):
-    """Close one hole of a mesh (``loop``: its border's vertex ids in order) with a surface that lies on
-    the ground: a constrained Delaunay triangulation, seen from above, of the loop's vertices and of
-    points on a ``cell_m`` grid inside it at ``ground_z(xy)`` (a function (k, 2) -> (k,)), with the loop's
-    edges fixed. The border keeps its own heights; inside, the surface follows the ground instead of
-    spanning the border (a car's cut-off feet stand above the road). Returns (faces (f, 3), new vertices
-    (k, 3)) where ids >= len(vertices) are the new vertices in order, counter-clockwise seen from above;
-    None when the loop seen from above is not a simple polygon (it crosses itself)."""
-    import pythoncdt as cdt
-    from scipy.spatial import cKDTree
-
-    loop = np.asarray(loop, np.int64)
-    if len(loop) < 3:
-        return None
-    xy = vertices[loop, :2].astype(np.float64)
-    if len(np.unique(np.round(xy / 1e-4).astype(np.int64), axis=0)) < len(xy):
-        return None  # two border vertices on one vertical line: not a simple polygon seen from above
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    gx = np.arange(lo[0] + cell_m / 2, hi[0], cell_m)
-    gy = np.arange(lo[1] + cell_m / 2, hi[1], cell_m)
-    g = np.c_[np.repeat(gx, len(gy)), np.tile(gy, len(gx))] if len(gx) and len(gy) else np.zeros((0, 2))
-    if len(g):
-        g = g[_inside_polygon(g, xy)]
-    if len(g):
-        d, _ = cKDTree(xy).query(g)
-        g = g[d >= 0.4 * cell_m]
-    pts = np.vstack([xy, g])
-    n = len(loop)
-    edges = np.c_[np.arange(n), (np.arange(n) + 1) % n].astype(np.uintc)
-    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.NOT_ALLOWED, 0.0)
-    try:
-        tri.insert_vertices(np.ascontiguousarray(pts))
-        tri.insert_edges(np.ascontiguousarray(edges))
-        tri.erase_outer_triangles_and_holes()
-    except Exception:  # noqa: BLE001 - crossing border edges: not a simple polygon
-        return None
-    if tri.vertices_count() != len(pts):
-        return None
-    t = np.asarray(tri.triangles_array()["vertices"], np.int64).reshape(-1, 3)
-    if len(t) == 0:
-        return None
-    a, b, c = pts[t[:, 0]], pts[t[:, 1]], pts[t[:, 2]]
-    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-    t = np.where((area < 0)[:, None], t[:, [0, 2, 1]], t)
-    used = np.unique(t[t >= n]) if (t >= n).any() else np.zeros(0, np.int64)
-    ids = np.empty(len(pts), np.int64)
-    ids[:n] = loop
-    ids[used] = len(vertices) + np.arange(len(used))
-    new = np.c_[pts[used], np.asarray(ground_z(pts[used]), np.float64)] if len(used) else np.zeros((0, 3))
-    return ids[t], new
-
-
-def _inside_polygon(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd point-in-polygon test for (k, 2) points against one ring (m, 2)."""
-    x, y = p[:, 0][:, None], p[:, 1][:, None]
-    x1, y1 = poly[:, 0][None, :], poly[:, 1][None, :]
-    x2, y2 = np.roll(poly[:, 0], -1)[None, :], np.roll(poly[:, 1], -1)[None, :]
-    cross = ((y1 > y) != (y2 > y)) & (x < (x2 - x1) * (y - y1) / np.where(y2 == y1, 1e-300, y2 - y1) + x1)
-    return (cross.sum(axis=1) % 2) == 1
-
-
-def _border_heights(border: np.ndarray, k: int = 4):
-    """z(xy) inside a hole: the inverse-distance weighted height of the ``k`` nearest border vertices."""
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(border[:, :2])
-    k = min(k, len(border))
-
-    def z(xy: np.ndarray) -> np.ndarray:
-        xy = np.asarray(xy, np.float64).reshape(-1, 2)
-        if len(xy) == 0:
-            return np.zeros(0)
-        d, i = tree.query(xy, k=k)
-        d, i = np.atleast_2d(d).reshape(len(xy), -1), np.atleast_2d(i).reshape(len(xy), -1)
-        w = 1.0 / np.maximum(d, 1e-6) ** 2
-        return (w * border[i, 2]).sum(axis=1) / w.sum(axis=1)
-
-    return z
-
-
-def close_ground_holes(vertices: np.ndarray, faces: np.ndarray, ground_z, *, max_extent_m: float = 8.0,
-                       max_rise_m: float = 0.5, level_m: float = 0.3, cell_m: float = 0.10,
-                       skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], dict]:
-    """Close every hole of the ground that the scan did not leave: a closed loop of open border (a hole
-    enclosed by surface, so never the site's edge) at most ``max_extent_m`` across seen from above (the
-    ground fill's limit: a wider gap is an unscanned area and stays open), lying on the ground (its
-    border's median height above ``ground_z(xy)``, the carriageway level, at most ``level_m``: a pavement
-    on its kerb; none of it above ``max_rise_m``: a wall or a car body is no ground), and open towards
-    the sky (oriented as a hole in an up-facing surface; the open bottom of an object runs the other
-    way). Each is closed by :func:`fill_loop_on_ground` on a ``cell_m`` grid whose points take the
-    heights of the nearest border vertices (inverse-distance weighted: a hole on a pavement is closed at
-    the pavement's height, one across a kerb keeps both levels). Loops listed in ``skip`` (a bool mask
-    over vertices: any border vertex marked) are left to the caller.
-
-    Returns (new vertices (k, 3), new faces (f, 3) indexing the old and new vertices, the closed loops,
-    a report: ``closed``, ``closed_m`` (their border's length), ``left_open_m`` by reason)."""
-    from twinkit.mesh.topology import boundary_loops
-
-    v = np.asarray(vertices, np.float64)
-    f = np.asarray(faces, np.int64)
-    loops = boundary_loops(f) if len(f) else []
-    add_v: list[np.ndarray] = []
-    add_f: list[np.ndarray] = []
-    done: list[np.ndarray] = []
-    rep: dict = {"closed": 0, "closed_m": 0.0, "left_open_m": {}}
-    nv = len(v)
-
-    def left(why: str, ln: float) -> None:
-        rep["left_open_m"][why] = round(rep["left_open_m"].get(why, 0.0) + ln, 3)
-
-    for lp in loops:
-        ln = float(np.linalg.norm(v[lp] - v[np.roll(lp, -1)], axis=1).sum())
-        if skip is not None and skip[lp].any():
-            continue
-        xy = v[lp, :2]
-        if float(np.ptp(xy, axis=0).max()) > max_extent_m:
-            left("wider_than_the_fill_limit", ln)
-            continue
-        h = v[lp, 2] - np.asarray(ground_z(xy), np.float64)
-        if float(np.median(np.abs(h))) > level_m or float(np.abs(h).max()) > max_rise_m:
-            left("not_on_the_ground", ln)
-            continue
-        x, y = xy[::-1, 0], xy[::-1, 1]
-        if 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)) <= 0:
-            left("not_a_hole_seen_from_above", ln)
-            continue
-        res = fill_loop_on_ground(np.vstack([v] + add_v) if add_v else v, lp, _border_heights(v[lp]), cell_m)
-        if res is None:
-            left("not_simple_seen_from_above", ln)
-            continue
-        fn, new = res
-        add_f.append(fn)
-        if len(new):
-            add_v.append(new)
-        done.append(lp)
-        rep["closed"] += 1
-        rep["closed_m"] = round(rep["closed_m"] + ln, 3)
-    new_v = np.vstack(add_v) if add_v else np.zeros((0, 3))
-    new_f = np.vstack(add_f).astype(np.int64) if add_f else np.zeros((0, 3), np.int64)
-    assert new_f.size == 0 or new_f.max() < nv + len(new_v)
-    return new_v, new_f, done, rep

@@ -102,7 +102,8 @@ def close_collapse_holes(mesh: Mesh, max_edges: int = 12) -> tuple[Mesh, int]:
     refused next to another): boundary loops of at most ``max_edges`` edges, by a fan. The clean-up before
     closed every hole up to 60 edges, so a loop this small here is the simplifier's, not the scan's."""
     assert mesh.faces is not None  # a mesh, not a cloud
-    from twinkit.mesh.topology import boundary_loops, fan_fill
+    from twinkit.mesh.topology import boundary_loops
+    from twinkit.street.holes import fan_fill
 
     if max_edges < 3 or mesh.n_faces == 0:
         return mesh, 0

@@ -40,7 +40,7 @@ def points_section(ctx) -> str | None:
         out = ctx.outputs(step).get("points.xyz")  # declared outputs, from step.json
         if out is not None:
             points = (step.get("metrics") or {}).get("points", "?")
-            link = ("html", f'<a href="{ctx.href(out)}">{ctx.esc(out.name)}</a>')
+            link = ("html", ctx.link(ctx.href(out), out.name))
             rows.append([step["folder"], points, link])
     return ctx.table(["step", "points", "file"], rows) if rows else None  # None: no section
 

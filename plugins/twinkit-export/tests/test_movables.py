@@ -497,3 +497,18 @@ def test_a_fin_at_a_cars_foot_goes_with_it_a_wall_beside_it_stays():
     # what stays open inside the square is the wall's own outline (a strip: its top and its ends)
     on_wall = (np.abs(mid[:, 0] - side[0]) < 4.1) & (np.abs(mid[:, 1] - side[1]) < 0.1)
     assert np.all(on_wall[inner]), mid[inner & ~on_wall]
+
+
+def test_the_ground_under_a_car_is_the_road():
+    """The lift's ground model (street.ground.LocalGround, window minimum, mean of the ground points, empty
+    cells from the nearest): under the car's roof, the road's height; the roof is no ground."""
+    from twinkit.mesh.core import vertex_normals
+    from twinkit_export.movables.lift import ground_under
+    from twinkit_export.movables.options import LiftOptions
+
+    v, f, uv, lab, car = scene()
+    g = ground_under(v, vertex_normals(v, f), LiftOptions())
+    road = 0.01 * np.sin(v[car, 0])
+    assert np.abs(g.at(v[car, :2]) - road).max() < 0.03
+    assert not g.has_z[g.cells(v[car][len(v[car]) // 2, None, :2])].any()  # under the roof: filled, not seen
+    assert np.abs(g.height(v[car]) - CAR_H).max() < 0.05

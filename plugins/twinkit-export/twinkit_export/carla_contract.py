@@ -307,6 +307,103 @@ def _entry_ok(rep, desc_path: Path, where: str, entry, keys: tuple[str, ...]) ->
     return True
 
 
+def _intended(cid, class_tags: dict[int, str] | None) -> str | None:
+    """The carla.CityObjectLabel name a trainId should end in (``class_tags`` first, then the class table)."""
+    from .classes import info
+
+    if cid is None:
+        return None
+    if class_tags and int(cid) in class_tags:
+        return class_tags[int(cid)]
+    return info(int(cid)).carla_tag
+
+
+def _check_maps(rep: ContractReport, desc_path: Path, pkg: Path, maps: list, class_tags) -> list[str]:
+    """The description's maps: entries, names, files, and each FBX mesh's fate; returns the map names."""
+    from .classes import info
+
+    map_names = []
+    for i, m in enumerate(maps):
+        if not _entry_ok(rep, desc_path, f"maps[{i}]", m, ("name", "source", "xodr", "use_carla_materials")):
+            continue
+        if not isinstance(m["use_carla_materials"], bool):
+            rep.add("json", f"{desc_path.name}: maps[{i}].use_carla_materials must be a JSON boolean (GetBoolField)")
+        name = str(m["name"])
+        map_names.append(name)
+        for p in name_problems(name, what="map name"):
+            rep.add("names_dropped" if "light" in p or "'sign'" in p else "names_tile" if TILE_MARK in p
+                    else "routing", f"{p}; rename it, e.g. {suggest_name(name)!r}")
+        src, xodr = pkg / str(m["source"]), pkg / str(m["xodr"])
+        if not src.is_file():
+            rep.add("json", f"{desc_path.name}: maps[{i}].source {m['source']!r} does not exist in {pkg}")
+            continue
+        if not xodr.is_file():
+            rep.add("json", f"{desc_path.name}: maps[{i}].xodr {m['xodr']!r} does not exist in {pkg}")
+        if src.stem != name or xodr.stem != name:
+            rep.add("names_match", f"map {name!r}: source {src.name} and xodr {xodr.name} should be {name}.fbx and "
+                                   f"{name}.xodr")
+        fs = _read_fbx(rep, src, pkg)
+        if fs is None:
+            continue
+        for mesh in fs.meshes:
+            asset = map_asset_name(src.stem, mesh.name)
+            folder = move_assets_folder(asset)
+            cid = mesh.properties.get("class_id")
+            fate = MeshFate("map", src.name, mesh.name, asset, folder, tagger_label(folder), folder in SPAWNED_FOLDERS,
+                            bool(dropped_words(asset) or any(dropped_words(mt) for mt in mesh.materials)),
+                            mesh.faces, cid, _intended(cid, class_tags), NAV_AREAS.get(mesh.name, "block"))
+            rep.meshes.append(fate)
+            _check_mesh(rep, fate, mesh.materials)
+            if cid is not None and info(int(cid)).carla_name == "Road_Sidewalk" and mesh.name != "Road_Sidewalk":
+                rep.add("navmesh", f"{src.name}: sidewalk mesh {mesh.name!r} is not named exactly 'Road_Sidewalk': "
+                                   f"the navmesh tool would not make it walkable")
+    return map_names
+
+
+def _check_props(rep: ContractReport, desc_path: Path, pkg: Path, props: list, class_tags) -> list[str]:
+    """The description's props: entries, sizes, one mesh per FBX, each mesh's fate; returns the prop names."""
+    prop_names = []
+    for i, p in enumerate(props):
+        if not _entry_ok(rep, desc_path, f"props[{i}]", p, ("name", "source", "tag", "size")):
+            continue
+        if p["size"] not in PROP_SIZES:
+            rep.add("prop_size", f"{desc_path.name}: props[{i}].size {p['size']!r} is not one of {PROP_SIZES}")
+        name, tag = str(p["name"]), str(p["tag"])
+        prop_names.append(name)
+        src = pkg / str(p["source"])
+        if not src.is_file():
+            rep.add("json", f"{desc_path.name}: props[{i}].source {p['source']!r} does not exist in {pkg}")
+            continue
+        fs = _read_fbx(rep, src, pkg)
+        if fs is None:
+            continue
+        if len(fs.meshes) != 1:
+            rep.add("prop_single_mesh", f"{src.name}: {len(fs.meshes)} meshes; a prop FBX must hold exactly one "
+                                        f"(its asset is registered as {src.stem}.{src.stem})")
+        for mesh in fs.meshes:
+            asset = src.stem if len(fs.meshes) == 1 else map_asset_name(src.stem, mesh.name)
+            cid = mesh.properties.get("class_id")
+            fate = MeshFate("prop", src.name, mesh.name, asset, tag, tagger_label(tag), False,
+                            bool(dropped_words(asset) or any(dropped_words(mt) for mt in mesh.materials)),
+                            mesh.faces, cid, _intended(cid, class_tags))
+            rep.meshes.append(fate)
+            _check_mesh(rep, fate, mesh.materials)
+    if len(set(prop_names)) != len(prop_names):
+        rep.add("json", f"{desc_path.name}: prop names repeat; blueprint ids static.prop.<name> must be unique")
+    return prop_names
+
+
+def _check_placement(rep: ContractReport, prop_names: list[str], script: Path) -> None:
+    """make import never places props: ``script`` must spawn every one (static.prop.<name>)."""
+    text = script.read_text() if script.is_file() else ""
+    missing = [n for n in prop_names if f"static.prop.{n.lower()}" not in text]
+    if not text:
+        rep.add("placement", f"{script.name} is missing: make import never places props in the map, so the "
+                             f"package must carry the script that spawns them")
+    elif missing:
+        rep.add("placement", f"{script.name} does not spawn {', '.join(missing)}")
+
+
 def check_package(root: Path, package: str | None = None, *, class_tags: dict[int, str] | None = None,
                   expect_decals: bool | None = None, spawn_script: Path | None = None) -> ContractReport:
     """Apply CARLA's import rules to ``root/Import/<package>/`` (``root`` may also be the Import folder).
@@ -315,8 +412,6 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     default: twinkit's class table. expect_decals: the decals setting the package must carry (None:
     only report it). spawn_script: the file that must place every prop (default ``root/spawn_props.py``).
     """
-    from .classes import info
-
     root = Path(root)
     imp = root if root.name == "Import" else root / "Import"
     if not imp.is_dir():
@@ -350,88 +445,11 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         # a props-only package is what CARLA imports without an OpenDRIVE; it must say that it has no map
         rep.add("json", f"{desc_path.name}: no map ('maps' is empty) and no README.md saying why")
 
-    def intended(cid):
-        if cid is None:
-            return None
-        if class_tags and int(cid) in class_tags:
-            return class_tags[int(cid)]
-        return info(int(cid)).carla_tag
-
-    # maps -----------------------------------------------------------------------------------------
-    map_names = []
-    for i, m in enumerate(maps):
-        if not _entry_ok(rep, desc_path, f"maps[{i}]", m, ("name", "source", "xodr", "use_carla_materials")):
-            continue
-        if not isinstance(m["use_carla_materials"], bool):
-            rep.add("json", f"{desc_path.name}: maps[{i}].use_carla_materials must be a JSON boolean (GetBoolField)")
-        name = str(m["name"])
-        map_names.append(name)
-        for p in name_problems(name, what="map name"):
-            rep.add("names_dropped" if "light" in p or "'sign'" in p else "names_tile" if TILE_MARK in p
-                    else "routing", f"{p}; rename it, e.g. {suggest_name(name)!r}")
-        src, xodr = pkg / str(m["source"]), pkg / str(m["xodr"])
-        if not src.is_file():
-            rep.add("json", f"{desc_path.name}: maps[{i}].source {m['source']!r} does not exist in {pkg}")
-            continue
-        if not xodr.is_file():
-            rep.add("json", f"{desc_path.name}: maps[{i}].xodr {m['xodr']!r} does not exist in {pkg}")
-        if src.stem != name or xodr.stem != name:
-            rep.add("names_match", f"map {name!r}: source {src.name} and xodr {xodr.name} should be {name}.fbx and "
-                                   f"{name}.xodr")
-        fs = _read_fbx(rep, src, pkg)
-        if fs is None:
-            continue
-        for mesh in fs.meshes:
-            asset = map_asset_name(src.stem, mesh.name)
-            folder = move_assets_folder(asset)
-            cid = mesh.properties.get("class_id")
-            fate = MeshFate("map", src.name, mesh.name, asset, folder, tagger_label(folder), folder in SPAWNED_FOLDERS,
-                            bool(dropped_words(asset) or any(dropped_words(mt) for mt in mesh.materials)),
-                            mesh.faces, cid, intended(cid), NAV_AREAS.get(mesh.name, "block"))
-            rep.meshes.append(fate)
-            _check_mesh(rep, fate, mesh.materials)
-            if cid is not None and info(int(cid)).carla_name == "Road_Sidewalk" and mesh.name != "Road_Sidewalk":
-                rep.add("navmesh", f"{src.name}: sidewalk mesh {mesh.name!r} is not named exactly 'Road_Sidewalk': "
-                                   f"the navmesh tool would not make it walkable")
-    # props ----------------------------------------------------------------------------------------
-    prop_names = []
-    for i, p in enumerate(props):
-        if not _entry_ok(rep, desc_path, f"props[{i}]", p, ("name", "source", "tag", "size")):
-            continue
-        if p["size"] not in PROP_SIZES:
-            rep.add("prop_size", f"{desc_path.name}: props[{i}].size {p['size']!r} is not one of {PROP_SIZES}")
-        name, tag = str(p["name"]), str(p["tag"])
-        prop_names.append(name)
-        src = pkg / str(p["source"])
-        if not src.is_file():
-            rep.add("json", f"{desc_path.name}: props[{i}].source {p['source']!r} does not exist in {pkg}")
-            continue
-        fs = _read_fbx(rep, src, pkg)
-        if fs is None:
-            continue
-        if len(fs.meshes) != 1:
-            rep.add("prop_single_mesh", f"{src.name}: {len(fs.meshes)} meshes; a prop FBX must hold exactly one "
-                                        f"(its asset is registered as {src.stem}.{src.stem})")
-        for mesh in fs.meshes:
-            asset = src.stem if len(fs.meshes) == 1 else map_asset_name(src.stem, mesh.name)
-            cid = mesh.properties.get("class_id")
-            fate = MeshFate("prop", src.name, mesh.name, asset, tag, tagger_label(tag), False,
-                            bool(dropped_words(asset) or any(dropped_words(mt) for mt in mesh.materials)),
-                            mesh.faces, cid, intended(cid))
-            rep.meshes.append(fate)
-            _check_mesh(rep, fate, mesh.materials)
-    if len(set(prop_names)) != len(prop_names):
-        rep.add("json", f"{desc_path.name}: prop names repeat; blueprint ids static.prop.<name> must be unique")
+    map_names = _check_maps(rep, desc_path, pkg, maps, class_tags)
+    prop_names = _check_props(rep, desc_path, pkg, props, class_tags)
     # placement: nothing in the import places props ------------------------------------------------
     if prop_names:
-        script = Path(spawn_script) if spawn_script else root / "spawn_props.py"
-        text = script.read_text() if script.is_file() else ""
-        missing = [n for n in prop_names if f"static.prop.{n.lower()}" not in text]
-        if not text:
-            rep.add("placement", f"{script.name} is missing: make import never places props in the map, so the "
-                                 f"package must carry the script that spawns them")
-        elif missing:
-            rep.add("placement", f"{script.name} does not spawn {', '.join(missing)}")
+        _check_placement(rep, prop_names, Path(spawn_script) if spawn_script else root / "spawn_props.py")
     # actors (twinkit's lifted movable objects): a transform and a spawn script ---------------------
     _check_actors(rep, root if root.name != "Import" else root.parent)
     # decals --------------------------------------------------------------------------------------

@@ -300,36 +300,24 @@ def _site_frames(georef: str) -> str:
             f"point {georef}). Unreal mirrors y on import of both, so they stay aligned.")
 
 
-def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path, classes: list[dict],
-                  texture: Path | None, xodr_text: str | None, spawn: list[dict], use_carla_materials: bool, georef: dict,
-                  decals: bool = False, python: str = "", log_path: Path | None = None,
-                  carla_version: str = "0.9.16", frames=None, scanned: list[dict] | None = None) -> tuple[Path, dict]:
-    """Write ``folder/Import/<package>/...``, ``Import/roadpainter_decals.json``, ``spawn_props.py``.
-
-    ``classes``: the class-mesh manifest entries (``class_id``, ``file``, ``faces``). Returns the
-    package folder and what went where (map classes, props). ``class_dir``'s meshes are in the
-    package's frame already. ``frames(georef_text) -> str``: the README's frame section (default: the
-    site frame). ``scanned``: the lifted movable objects as extra props (``carla_actors.scanned_props``:
-    name, ply, class_id, faces, mesh), registered like the others but spawned only on request.
-    ``xodr_text=None`` (no road network, ``road_source=none``): no map at all, every class is a prop
-    (``README_NO_MAP`` says why: CARLA's import needs an OpenDRIVE beside a map's FBX).
-    """
-    import shutil
-
-    from .carla_contract import DECALS_FILE, decals_entry, move_assets_folder, tagger_label
-    from .classes import info
+def _prop_entry(name: str, ply: Path, ci, faces: int, mesh: str) -> dict:
+    """A prop of the package: its name, class mesh file, class, tag folder, label, size and mesh name."""
+    from .carla_contract import tagger_label
     from .classmesh import read_class_ply
-    from .fbx import write_fbx_set
 
-    folder = Path(folder)
-    pkg = folder / "Import" / package
-    pkg.mkdir(parents=True, exist_ok=True)
-    tex = None
-    if texture is not None and Path(texture).exists():
-        tex = pkg / Path(texture).name
-        shutil.copyfile(texture, tex)
-    has_map = xodr_text is not None
-    present = [c for c in classes if c["faces"] > 0]
+    v = read_class_ply(ply).vertices
+    extent = float((v.max(0) - v.min(0)).max()) if len(v) else 0.0
+    return {"name": name, "ply": ply, "class": ci.name, "class_id": ci.train_id,
+            "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),
+            "faces": int(faces), "mesh": mesh}
+
+
+def _map_and_props(present: list[dict], class_dir: Path, map_name: str, has_map: bool, scanned: list[dict] | None
+                   ) -> tuple[list[Path], dict, list[dict]]:
+    """Which class meshes go into the map FBX and which become props (plus the scanned ones):
+    (map class mesh files, file -> FBX node name, prop entries)."""
+    from .classes import info
+
     map_files, map_names, props = [], {}, []
     for c in present:
         ci = info(c["class_id"])
@@ -338,37 +326,20 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
             map_files.append(ply)
             map_names[ply] = package_mesh_name(ci)
             continue
-        name = f"{map_name}_{package_mesh_name(ci)}"
-        v = read_class_ply(ply).vertices
-        extent = float((v.max(0) - v.min(0)).max()) if len(v) else 0.0
-        props.append({"name": name, "ply": ply, "class": ci.name, "class_id": ci.train_id,
-                      "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),
-                      "faces": int(c["faces"]), "mesh": package_mesh_name(ci)})
+        props.append(_prop_entry(f"{map_name}_{package_mesh_name(ci)}", ply, ci, c["faces"], package_mesh_name(ci)))
     for sp in scanned or []:
         ci = info(sp["class_id"])
-        v = read_class_ply(sp["ply"]).vertices
-        extent = float((v.max(0) - v.min(0)).max()) if len(v) else 0.0
-        props.append({"name": sp["name"], "ply": sp["ply"], "class": ci.name, "class_id": ci.train_id,
-                      "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),
-                      "faces": int(sp["faces"]), "mesh": sp["mesh"], "scanned": True})
+        props.append({**_prop_entry(sp["name"], sp["ply"], ci, sp["faces"], sp["mesh"]), "scanned": True})
     if has_map and not map_files:
         raise PackageError("no road, sidewalk or terrain mesh: a CARLA map needs ground geometry")
     if not has_map and not props:
         raise PackageError("no class mesh with faces: nothing to put in the package")
-    jobs = [(pkg / f"{map_name}.fbx", map_files, map_names)] if has_map else []
-    jobs += [(pkg / f"{p['name']}.fbx", [p["ply"]], {p["ply"]: p["mesh"]}) for p in props]
-    write_fbx_set(jobs, tex, georef=georef, python=python, log_path=log_path)
-    if has_map:
-        (pkg / f"{map_name}.xodr").write_text(xodr_text)
-    desc = {"maps": [{"name": map_name, "source": f"./{map_name}.fbx",
-                      "use_carla_materials": bool(use_carla_materials), "xodr": f"./{map_name}.xodr"}]
-            if has_map else [],
-            "props": [{"name": p["name"], "source": f"./{p['name']}.fbx", "tag": p["tag"], "size": p["size"]}
-                      for p in props]}
-    (pkg / f"{package}.json").write_text(json.dumps(desc, indent=2) + "\n")
-    # no map: an empty decals list (without the file, Import.py would write one with random decals)
-    (folder / "Import" / DECALS_FILE).write_text(json.dumps(
-        {"decals": [decals_entry(map_name, decals)] if has_map else []}, indent=2) + "\n")
+    return map_files, map_names, props
+
+
+def _write_spawn_files(folder: Path, package: str, map_name: str, has_map: bool, props: list[dict],
+                       spawn: list[dict]) -> None:
+    """``spawn_props.py`` (every prop's blueprint) and ``spawn_points.json`` in ``folder``."""
     spawn_list = [{"blueprint": f"static.prop.{p['name'].lower()}", "class": p["class"], "tag": p["label"],
                    "faces": p["faces"], **({"scanned": 1} if p.get("scanned") else {})} for p in props]
     script = folder / "spawn_props.py"
@@ -380,6 +351,13 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
          "frames": {"carla": "carla.Transform arguments: metres, degrees, Unreal left-handed (y = -north)",
                     "site": "site frame: x east, y north, z up; heading counter-clockwise from east"},
          "spawn_points": spawn, **({} if has_map else {"note": NO_MAP_NOTE})}, indent=1) + "\n")
+
+
+def _class_table(present: list[dict], props: list[dict], map_names: dict, class_dir: Path, map_name: str) -> list[str]:
+    """The README's markdown table: where each class ends (map node or prop), its tag and who places it."""
+    from .carla_contract import move_assets_folder
+    from .classes import info
+
     rows = ["| class | in the package | ends in | tag | placed by |", "|---|---|---|---|---|"]
     for c in present:
         ci = info(c["class_id"])
@@ -397,6 +375,54 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
             rows.append(f"| {p['class']} (scanned, lifted) | prop `{p['name']}` (`static.prop.{p['name'].lower()}`) | "
                         f"`Static/{p['tag']}/{p['name']}` | {p['label']} | `spawn_props.py --with-scanned` or "
                         f"`spawn_actors.py --scanned` (default: `spawn_actors.py` spawns CARLA actors instead) |")
+    return rows
+
+
+def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path, classes: list[dict],
+                  texture: Path | None, xodr_text: str | None, spawn: list[dict], use_carla_materials: bool, georef: dict,
+                  decals: bool = False, python: str = "", log_path: Path | None = None,
+                  carla_version: str = "0.9.16", frames=None, scanned: list[dict] | None = None) -> tuple[Path, dict]:
+    """Write ``folder/Import/<package>/...``, ``Import/roadpainter_decals.json``, ``spawn_props.py``.
+
+    ``classes``: the class-mesh manifest entries (``class_id``, ``file``, ``faces``). Returns the
+    package folder and what went where (map classes, props). ``class_dir``'s meshes are in the
+    package's frame already. ``frames(georef_text) -> str``: the README's frame section (default: the
+    site frame). ``scanned``: the lifted movable objects as extra props (``carla_actors.scanned_props``:
+    name, ply, class_id, faces, mesh), registered like the others but spawned only on request.
+    ``xodr_text=None`` (no road network, ``road_source=none``): no map at all, every class is a prop
+    (``README_NO_MAP`` says why: CARLA's import needs an OpenDRIVE beside a map's FBX).
+    """
+    import shutil
+
+    from .carla_contract import DECALS_FILE, decals_entry
+    from .fbx import write_fbx_set
+
+    folder = Path(folder)
+    pkg = folder / "Import" / package
+    pkg.mkdir(parents=True, exist_ok=True)
+    tex = None
+    if texture is not None and Path(texture).exists():
+        tex = pkg / Path(texture).name
+        shutil.copyfile(texture, tex)
+    has_map = xodr_text is not None
+    present = [c for c in classes if c["faces"] > 0]
+    map_files, map_names, props = _map_and_props(present, class_dir, map_name, has_map, scanned)
+    jobs = [(pkg / f"{map_name}.fbx", map_files, map_names)] if has_map else []
+    jobs += [(pkg / f"{p['name']}.fbx", [p["ply"]], {p["ply"]: p["mesh"]}) for p in props]
+    write_fbx_set(jobs, tex, georef=georef, python=python, log_path=log_path)
+    if has_map:
+        (pkg / f"{map_name}.xodr").write_text(xodr_text)
+    desc = {"maps": [{"name": map_name, "source": f"./{map_name}.fbx",
+                      "use_carla_materials": bool(use_carla_materials), "xodr": f"./{map_name}.xodr"}]
+            if has_map else [],
+            "props": [{"name": p["name"], "source": f"./{p['name']}.fbx", "tag": p["tag"], "size": p["size"]}
+                      for p in props]}
+    (pkg / f"{package}.json").write_text(json.dumps(desc, indent=2) + "\n")
+    # no map: an empty decals list (without the file, Import.py would write one with random decals)
+    (folder / "Import" / DECALS_FILE).write_text(json.dumps(
+        {"decals": [decals_entry(map_name, decals)] if has_map else []}, indent=2) + "\n")
+    _write_spawn_files(folder, package, map_name, has_map, props, spawn)
+    rows = _class_table(present, props, map_names, class_dir, map_name)
     geo = ", ".join(f"{k} {v}" for k, v in georef.items() if k in ("crs", "lat", "lon", "alt"))
     (pkg / "README.md").write_text((README if has_map else README_NO_MAP).format(
         package=package, map=map_name, texture=tex.name if tex else "(no texture)", n_spawn=len(spawn),

@@ -288,7 +288,7 @@ def export_usd(params: UsdParams, ctx: StepContext, *, in_class_meshes_dir: Path
         tex = out.with_suffix(cs.texture.suffix)
         _link_or_copy(cs.texture, tex)
         tex_name = tex.name
-    from .lift_step import load_actors
+    from .movables.actors import load_actors
 
     _, movables = load_actors(in_movables_dir)  # lifted objects: /Site/Movables/<Name>, no collider
     stats = write_usd(cs.meshes, tex_name, out, _georef(ctx, in_site_json),
@@ -422,7 +422,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     from .carla_actors import carla_actors, scanned_props, write_actor_files
     from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, write_frame_json
     from .carla_pkg import lane_map, xodr_georeference
-    from .lift_step import load_actors
+    from .movables.actors import load_actors
 
     params = params or CarlaPackageParams()
     t0 = time.perf_counter()
@@ -480,7 +480,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     the README and ``spawn_points.json`` say so, and so does the log."""
     from .carla_actors import carla_actors, scanned_props, write_actor_files
     from .carla_pkg import NO_MAP_NOTE
-    from .lift_step import load_actors
+    from .movables.actors import load_actors
 
     map_name, package = _package_names(params, ctx)
     cs = _load_set(in_class_meshes_dir)

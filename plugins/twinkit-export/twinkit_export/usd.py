@@ -97,28 +97,11 @@ def geo_anchor(georef: dict) -> dict:
     return out
 
 
-def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root_name: str = "Site",
-              semantics_taxonomy: str = "class", colliders: bool = True, old_semantics: bool = True,
-              geo_schemas: bool = True, movables=()) -> dict:
-    """Write the stage to ``out`` (.usd = binary crate, .usda = text); ``texture_name`` is relative to ``out``.
+def _georeference(stage, root, georef: dict, geo_schemas: bool) -> None:
+    """The georeference on the stage: layer custom data, and (``geo_schemas``, with lat/lon) the
+    Omniverse WGS84 reference position on the root prim and a Cesium georeference prim."""
+    from pxr import Gf, Sdf
 
-    ``movables``: class meshes of the objects lifted out of the static map (``lift_movables``), one
-    prim each under ``/<root>/Movables`` (named by the mesh's ``name``, e.g. ``Car_000``), with the
-    same semantics and material and never a collider, so they can be moved or deleted."""
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
-
-    try:
-        from pxr import UsdSemantics
-    except ImportError:  # older usd-core: a documented plain attribute instead
-        UsdSemantics = None
-
-    out = Path(out)
-    stage = Usd.Stage.CreateNew(str(out))
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    root = UsdGeom.Xform.Define(stage, f"/{root_name}")
-    stage.SetDefaultPrim(root.GetPrim())
-    Usd.ModelAPI(root.GetPrim()).SetKind("component")
     layer = stage.GetRootLayer()
     anchor = geo_anchor(georef) if geo_schemas else {}
     layer.customLayerData = {"twinkit:georeference": {**{k: v for k, v in georef.items()},
@@ -135,9 +118,12 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
         cg = stage.DefinePrim(CESIUM_GEOREFERENCE_PATH, "CesiumGeoreferencePrim")
         for k, v in (("latitude", georef["lat"]), ("longitude", georef["lon"]), ("height", anchor["height_m"])):
             cg.CreateAttribute(f"cesium:georeferenceOrigin:{k}", Sdf.ValueTypeNames.Double, custom=False).Set(float(v))
-    layer.documentation = "twinkit digital twin: one Mesh per CityScapes class (site frame, metres, z up)"
 
-    # material
+
+def _material(stage, root_name: str, texture_name: str | None):
+    """The one preview-surface material ``/<root>/Looks/M_twinkit``: the texture on st, else mid grey."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
     looks = UsdGeom.Scope.Define(stage, f"/{root_name}/Looks")
     mat = UsdShade.Material.Define(stage, looks.GetPath().AppendChild("M_twinkit"))
     surf = UsdShade.Shader.Define(stage, mat.GetPath().AppendChild("PreviewSurface"))
@@ -163,6 +149,86 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
         surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.ConnectableAPI(), "rgb")
     else:
         surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.5, 0.5, 0.5))
+    return mat
+
+
+def _mesh_geometry(mesh, cm) -> None:
+    """A class mesh's points, extent, triangles, normals and primvars (st faceVarying and indexed,
+    displayColor linear, class_id and source_index per vertex) on the UsdGeom.Mesh ``mesh``."""
+    from pxr import Gf, Sdf, UsdGeom, Vt
+
+    pts = cm.vertices.astype(np.float32)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
+    mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*pts.min(0).tolist()), Gf.Vec3f(*pts.max(0).tolist())]))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(cm.n_faces, 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(cm.faces.astype(np.int32).ravel()))
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(cm.normals.astype(np.float32)))
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    pv = UsdGeom.PrimvarsAPI(mesh.GetPrim())
+    # st: faceVarying, indexed (unique UVs)
+    uv = cm.corner_uv.reshape(-1, 2)
+    uniq, inv = np.unique(uv, axis=0, return_inverse=True)
+    st = pv.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set(Vt.Vec2fArray.FromNumpy(uniq.astype(np.float32)))
+    st.SetIndices(Vt.IntArray.FromNumpy(inv.astype(np.int32).ravel()))
+    dc = pv.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+    dc.Set(Vt.Vec3fArray.FromNumpy(_srgb_to_linear(cm.colors)))
+    cid = pv.CreatePrimvar("class_id", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
+    cid.Set(Vt.IntArray.FromNumpy(cm.vertex_class.astype(np.int32)))
+    src = pv.CreatePrimvar("source_index", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
+    src.Set(Vt.IntArray.FromNumpy(cm.source_index.astype(np.int32)))
+
+
+def _semantics(prim, cm, semantics_taxonomy: str, old_semantics: bool) -> None:
+    """The class on the prim: twinkit attributes, UsdSemantics labels (or a plain attribute on older
+    usd-core) and, with ``old_semantics``, Isaac Sim's older SemanticsAPI."""
+    from pxr import Sdf, Vt
+
+    try:
+        from pxr import UsdSemantics
+    except ImportError:  # older usd-core: a documented plain attribute instead
+        UsdSemantics = None
+    ci = info(cm.class_id)
+    prim.CreateAttribute("twinkit:classId", Sdf.ValueTypeNames.Int, custom=True).Set(int(cm.class_id))
+    prim.CreateAttribute("twinkit:cityscapesName", Sdf.ValueTypeNames.String, custom=True).Set(ci.name)
+    prim.CreateAttribute("twinkit:carlaTag", Sdf.ValueTypeNames.String, custom=True).Set(ci.carla_tag)
+    if UsdSemantics is not None:
+        labels = UsdSemantics.LabelsAPI.Apply(prim, semantics_taxonomy)
+        labels.CreateLabelsAttr().Set(Vt.TokenArray([ci.name]))
+    else:
+        prim.CreateAttribute("twinkit:semanticLabel", Sdf.ValueTypeNames.Token, custom=True).Set(ci.name)
+    if old_semantics:
+        inst = OLD_SEMANTICS_INSTANCE
+        prim.AddAppliedSchema(f"SemanticsAPI:{inst}")
+        prim.CreateAttribute(f"semantic:{inst}:params:semanticType", Sdf.ValueTypeNames.String,
+                             custom=False).Set("class")
+        prim.CreateAttribute(f"semantic:{inst}:params:semanticData", Sdf.ValueTypeNames.String,
+                             custom=False).Set(ci.name)
+
+
+def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root_name: str = "Site",
+              semantics_taxonomy: str = "class", colliders: bool = True, old_semantics: bool = True,
+              geo_schemas: bool = True, movables=()) -> dict:
+    """Write the stage to ``out`` (.usd = binary crate, .usda = text); ``texture_name`` is relative to ``out``.
+
+    ``movables``: class meshes of the objects lifted out of the static map (``lift_movables``), one
+    prim each under ``/<root>/Movables`` (named by the mesh's ``name``, e.g. ``Car_000``), with the
+    same semantics and material and never a collider, so they can be moved or deleted."""
+    from pxr import Usd, UsdGeom, UsdPhysics, UsdShade
+
+    out = Path(out)
+    stage = Usd.Stage.CreateNew(str(out))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdGeom.Xform.Define(stage, f"/{root_name}")
+    stage.SetDefaultPrim(root.GetPrim())
+    Usd.ModelAPI(root.GetPrim()).SetKind("component")
+    layer = stage.GetRootLayer()
+    _georeference(stage, root, georef, geo_schemas)
+    layer.documentation = "twinkit digital twin: one Mesh per CityScapes class (site frame, metres, z up)"
+    mat = _material(stage, root_name, texture_name)
 
     stats = {}
     mov_parent = None
@@ -171,47 +237,11 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
     for cm, parent in [(m, root.GetPath()) for m in meshes] + [(m, mov_parent) for m in movables]:
         if cm.n_faces == 0:
             continue
-        ci = info(cm.class_id)
         movable = parent != root.GetPath()
         mesh = UsdGeom.Mesh.Define(stage, parent.AppendChild(_prim_name(cm.name)))
         prim = mesh.GetPrim()
-        pts = cm.vertices.astype(np.float32)
-        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
-        mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*pts.min(0).tolist()), Gf.Vec3f(*pts.max(0).tolist())]))
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(cm.n_faces, 3, np.int32)))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(cm.faces.astype(np.int32).ravel()))
-        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
-        mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(cm.normals.astype(np.float32)))
-        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
-        pv = UsdGeom.PrimvarsAPI(prim)
-        # st: faceVarying, indexed (unique UVs)
-        uv = cm.corner_uv.reshape(-1, 2)
-        uniq, inv = np.unique(uv, axis=0, return_inverse=True)
-        st = pv.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
-        st.Set(Vt.Vec2fArray.FromNumpy(uniq.astype(np.float32)))
-        st.SetIndices(Vt.IntArray.FromNumpy(inv.astype(np.int32).ravel()))
-        dc = pv.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
-        dc.Set(Vt.Vec3fArray.FromNumpy(_srgb_to_linear(cm.colors)))
-        cid = pv.CreatePrimvar("class_id", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
-        cid.Set(Vt.IntArray.FromNumpy(cm.vertex_class.astype(np.int32)))
-        src = pv.CreatePrimvar("source_index", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
-        src.Set(Vt.IntArray.FromNumpy(cm.source_index.astype(np.int32)))
-        prim.CreateAttribute("twinkit:classId", Sdf.ValueTypeNames.Int, custom=True).Set(int(cm.class_id))
-        prim.CreateAttribute("twinkit:cityscapesName", Sdf.ValueTypeNames.String, custom=True).Set(ci.name)
-        prim.CreateAttribute("twinkit:carlaTag", Sdf.ValueTypeNames.String, custom=True).Set(ci.carla_tag)
-        if UsdSemantics is not None:
-            labels = UsdSemantics.LabelsAPI.Apply(prim, semantics_taxonomy)
-            labels.CreateLabelsAttr().Set(Vt.TokenArray([ci.name]))
-        else:
-            prim.CreateAttribute("twinkit:semanticLabel", Sdf.ValueTypeNames.Token, custom=True).Set(ci.name)
-        if old_semantics:
-            inst = OLD_SEMANTICS_INSTANCE
-            prim.AddAppliedSchema(f"SemanticsAPI:{inst}")
-            prim.CreateAttribute(f"semantic:{inst}:params:semanticType", Sdf.ValueTypeNames.String,
-                                 custom=False).Set("class")
-            prim.CreateAttribute(f"semantic:{inst}:params:semanticData", Sdf.ValueTypeNames.String,
-                                 custom=False).Set(ci.name)
+        _mesh_geometry(mesh, cm)
+        _semantics(prim, cm, semantics_taxonomy, old_semantics)
         collider = colliders and int(cm.class_id) not in NO_COLLIDER and not movable
         if collider:
             UsdPhysics.CollisionAPI.Apply(prim).CreateCollisionEnabledAttr(True)

@@ -108,6 +108,7 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     from twinkit.mesh import read_ply
     from twinkit.testing import run_plugin
     import twinkit_photo.plugin as photo
+    from twinkit_photo.files import write_cloud
 
     cj = json.loads((site_dir / "cameras.json").read_text())
     intr = cj["intrinsics"]
@@ -118,7 +119,7 @@ def bench_dense_true_poses(out: Path, site_dir: Path) -> str:
     work.mkdir(parents=True, exist_ok=True)
     (work / "cameras_site.json").write_text(json.dumps({"cameras": cams}))
     sparse = read_ply(site_dir / "cloud.ply").vertices[::300]  # stands in for SfM points (depth ranges only)
-    photo._write_cloud(work / "sparse_site.ply", sparse)
+    write_cloud(work / "sparse_site.ply", sparse)
     np.savez_compressed(work / "sparse_site.npz", vis_image=np.array([], str), vis_point=np.array([], np.int64))
     rows = []
 

@@ -57,7 +57,7 @@ def _street_inputs(tmp_path, photos, cams, depths):
 
     import cv2
 
-    import twinkit_photo.plugin as photo
+    from twinkit_photo.files import write_cloud
 
     folder = tmp_path / "photos"
     folder.mkdir()
@@ -94,7 +94,7 @@ def _street_inputs(tmp_path, photos, cams, depths):
         vis_i += [f"{i:02d}.png"] * len(k)
         vis_p += k.tolist()
     (tmp_path / "cameras_site.json").write_text(json.dumps({"cameras": out}))
-    photo._write_cloud(tmp_path / "sparse_site.ply", np.asarray(pts))
+    write_cloud(tmp_path / "sparse_site.ply", np.asarray(pts))
     np.savez_compressed(tmp_path / "sparse_site.npz", vis_image=np.array(vis_i), vis_point=np.array(vis_p, np.int64))
     (tmp_path / "roi.json").write_text(json.dumps({
         "box": {"min": [-10.0, -5.0, -1.0], "max": [10.0, 80.0, 15.0]}, "max_depth_m": 40.0,

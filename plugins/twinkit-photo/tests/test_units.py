@@ -217,13 +217,14 @@ def test_a_thin_dense_cloud_makes_the_run_degraded(tmp_path):
     from twinkit.testing import make_context
 
     import twinkit_photo.plugin as photo
+    from twinkit_photo.dense_cloud import dense_gate
 
     thin = make_context(tmp_path / "thin", step_id="dense")
-    photo._dense_gate(thin, 4280, 29, photo.DenseParams(), "cpu")
+    dense_gate(thin.degraded, 4280, 29, photo.DenseParams(), "cpu")
     (entry,) = thin.degraded_reasons
     assert "4,280 points from 29 photos (148 per photo" in entry["reason"] and "patchmatch" in entry["hint"]
     fine = make_context(tmp_path / "fine", step_id="dense")
-    photo._dense_gate(fine, 397_798, 40, photo.DenseParams(), "cpu")
+    dense_gate(fine.degraded, 397_798, 40, photo.DenseParams(), "cpu")
     assert fine.degraded_reasons == []
 
 
@@ -288,7 +289,7 @@ def test_level_takes_the_vertical_lines_over_the_photos_horizon_within_30_degree
 
 
 def test_fusion_tolerance_follows_the_sfm_reprojection_error(tmp_path):
-    from twinkit_photo.plugin import fusion_tolerance
+    from twinkit_photo.dense_cloud import fusion_tolerance
 
     rep = tmp_path / "sfm_report.json"
     assert fusion_tolerance(0.02, rep) == (0.02, "given")  # a given tolerance is used as it is

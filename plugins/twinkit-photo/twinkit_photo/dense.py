@@ -294,27 +294,17 @@ def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarra
     h, w = r.gray.shape
     k = int(opt.window_px) | 1
     rel = [(n.R_cw @ r.R_wc, n.R_cw @ (r.C - n.C), n) for n in nbrs]
+    invd_s, dinv = _coarse_sweep(r, rel, opt, k)
+    invd0 = cv2.resize(invd_s.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR).astype(np.float64)
+    return _refine_sweep(r, rel, invd0, 1.5 * dinv, opt, k)
 
-    # ---- coarse: (optionally reduced resolution) homographies
-    f = float(opt.coarse_scale)
 
-    def _scaled(gray, K):
-        return (gray, K) if f >= 1.0 else scaled_view(gray, K, f)
+def _sweep_planes(r: View, opt: DenseOptions, Kr: np.ndarray, rel: list) -> tuple[list, float, float]:
+    """The coarse sweep's planes (normal in the reference camera frame, 1 / offset), the widest baseline's
+    parallax in pixels per unit of 1 / depth, and the inverse-depth step of the sweep.
 
-    g_r, Kr = _scaled(r.gray, r.K)
-    hs, ws = g_r.shape
-    small = View(r.name, Kr, r.R_wc, r.C, g_r, r.rgb)
-    ks = k if f >= 1.0 else max(5, int(k * f) | 1)
-    mr = _box(g_r, ks)
-    stats_s = (mr, np.maximum(_box(g_r * g_r, ks) - mr * mr, 0))
-    g_n, Kn_s = [], []
-    for _, _, n in rel:
-        g, K2 = _scaled(n.gray, n.K)
-        g_n.append(g)
-        Kn_s.append(K2)
-    Kinv = np.linalg.inv(Kr)
-    # plane families (Gallup et al.): fronto-parallel, the ground, and the two street sides; normals in the
-    # reference camera frame, offsets d (n . X = d) from the SfM points the photo sees
+    Plane families (Gallup et al.): fronto-parallel, the ground, and the two street sides; offsets d
+    (n . X = d) from the SfM points the photo sees."""
     up_cam = r.R_cw @ np.asarray(opt.up, float)
     fwd = r.R_wc[:, 2] - np.asarray(opt.up, float) * (r.R_wc[:, 2] @ np.asarray(opt.up, float))
     fam = [np.array([0.0, 0.0, 1.0])]
@@ -344,6 +334,32 @@ def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarra
         npl = int(np.clip(np.ceil(span / opt.plane_step_px), 8, cap))
         for idep in np.linspace(1.0 / lo, 1.0 / hi, npl):
             planes.append((nrm, idep))
+    return planes, max_parallax, dinv
+
+
+def _coarse_sweep(r: View, rel: list, opt: DenseOptions, k: int) -> tuple[np.ndarray, float]:
+    """Inverse depth per pixel at ``coarse_scale`` (homography warps of every plane, best neighbour's NCC,
+    winner takes all) and the sweep's inverse-depth step."""
+    import cv2
+
+    f = float(opt.coarse_scale)
+
+    def _scaled(gray, K):
+        return (gray, K) if f >= 1.0 else scaled_view(gray, K, f)
+
+    g_r, Kr = _scaled(r.gray, r.K)
+    hs, ws = g_r.shape
+    small = View(r.name, Kr, r.R_wc, r.C, g_r, r.rgb)
+    ks = k if f >= 1.0 else max(5, int(k * f) | 1)
+    mr = _box(g_r, ks)
+    stats_s = (mr, np.maximum(_box(g_r * g_r, ks) - mr * mr, 0))
+    g_n, Kn_s = [], []
+    for _, _, n in rel:
+        g, K2 = _scaled(n.gray, n.K)
+        g_n.append(g)
+        Kn_s.append(K2)
+    Kinv = np.linalg.inv(Kr)
+    planes, _, dinv = _sweep_planes(r, opt, Kr, rel)
     cost = np.empty((len(planes), hs, ws), np.float32)
     per = np.empty((len(rel), hs, ws), np.float32)
     us, vs = np.meshgrid(np.arange(ws, dtype=np.float64), np.arange(hs, dtype=np.float64))
@@ -366,16 +382,22 @@ def plane_sweep(r: View, nbrs: list[View], opt: DenseOptions) -> tuple[np.ndarra
     N = np.array([p[0] for p in planes])[best]
     ID = np.array([p[1] for p in planes])[best]
     ndot = np.sum(rays_s * N, -1)
-    invd_s = np.where(ndot > 1e-6, ID * ndot, 1.0 / r.dmax)  # 1/depth = (n . ray) / d
+    return np.where(ndot > 1e-6, ID * ndot, 1.0 / r.dmax), dinv  # 1/depth = (n . ray) / d
 
-    # ---- fine: full resolution, per-pixel hypotheses around the coarse estimate
-    invd0 = cv2.resize(invd_s.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR).astype(np.float64)
+
+def _refine_sweep(r: View, rel: list, invd0: np.ndarray, width: float, opt: DenseOptions,
+                  k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Full resolution: ``refine_passes`` of 9 per-pixel inverse-depth hypotheses around ``invd0`` (within
+    +-``width``, narrowing), scored by remapping the neighbours; weak, textureless or edge-of-search pixels
+    dropped. Returns (depth float32, 0 = unknown; NCC score float32)."""
+    import cv2
+
+    h, w = r.gray.shape
     mr = _box(r.gray, k)
     stats = (mr, np.maximum(_box(r.gray * r.gray, k) - mr * mr, 0))
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(r.K).T  # (h, w, 3), z = 1
     invd = invd0
-    width = 1.5 * dinv
     for _pass in range(opt.refine_passes):
         offs = np.linspace(-width, width, 9)
         hyp = np.empty((len(offs), h, w), np.float64)

@@ -165,6 +165,40 @@ def tilt_components(up, ref, centres=None) -> dict:
     return out
 
 
+def _ground_plane_up(sparse, centres, up, up_cam, photos_agree: bool, sigma: float, min_ground_support: float,
+                     ground_agree_deg: float) -> tuple[dict, np.ndarray] | None:
+    """The levelling's ground-plane candidate: a RANSAC plane of the sparse points (threshold 1 % of the
+    cloud's spread), its normal turned to ``up``, and whether it may be used (below the cameras, enough
+    support, within ``max(ground_agree_deg, 3 sigma)`` of ``up`` where the photos agree). (info, normal) or
+    None without a plane."""
+    spread = float(np.median(np.linalg.norm(sparse - np.median(sparse, 0), axis=1)))
+    plane, inl = ransac_plane(sparse, 0.01 * spread, normal_hint=up_cam if photos_agree else None,
+                              max_angle_deg=30.0)
+    if plane is None:
+        return None
+    nv = plane[0]
+    if nv @ up < 0:
+        nv = -nv
+    below = float(np.median(centres @ nv + (plane[1] if nv @ plane[0] > 0 else -plane[1]))) > 0
+    ratio = float(inl.mean())
+    ang = _angle_deg(nv, up)
+    tol = max(ground_agree_deg, 3.0 * sigma)
+    g = {"inlier_ratio": round(ratio, 4), "below_cameras": below, "vs_photo_up_deg": round(ang, 3),
+         "tilt_vs_photo_up": tilt_components(nv, up, centres), "agree_limit_deg": round(tol, 3),
+         "min_support": min_ground_support}
+    if not below:
+        g["used"], g["why_not"] = False, "the plane is not below the cameras"
+    elif ratio < min_ground_support:
+        g["used"], g["why_not"] = False, (f"too little support: {100 * ratio:.1f} % of the points "
+                                          f"(needs {100 * min_ground_support:.0f} %)")
+    elif photos_agree and ang > tol:
+        g["used"], g["why_not"] = False, (f"{ang:.1f} degrees from the photos' vertical (limit {tol:.1f}): "
+                                          f"a sloped or cambered ground, or not the ground")
+    else:
+        g["used"] = True
+    return g, nv
+
+
 def level(centres: np.ndarray, R_wc: np.ndarray, sparse: np.ndarray, log=None, *, up_model=None,
           min_ground_support: float = 0.2, ground_agree_deg: float = 2.0, vertical: tuple | None = None,
           max_lines_vs_horizon_deg: float = 30.0) -> tuple[np.ndarray, dict]:
@@ -200,31 +234,10 @@ def level(centres: np.ndarray, R_wc: np.ndarray, sparse: np.ndarray, log=None, *
             up, up_from = v, "vertical_lines"
             sigma = min(sigma, float(vi.get("std_error_deg", sigma)))
     if len(sparse) >= 50:
-        # scale-free threshold: a fraction of the cloud's spread
-        spread = float(np.median(np.linalg.norm(sparse - np.median(sparse, 0), axis=1)))
-        plane, inl = ransac_plane(sparse, 0.01 * spread, normal_hint=up_cam if photos_agree else None,
-                                  max_angle_deg=30.0)
-        if plane is not None:
-            nv = plane[0]
-            if nv @ up < 0:
-                nv = -nv
-            below = float(np.median(centres @ nv + (plane[1] if nv @ plane[0] > 0 else -plane[1]))) > 0
-            ratio = float(inl.mean())
-            ang = _angle_deg(nv, up)
-            tol = max(ground_agree_deg, 3.0 * sigma)
-            g = {"inlier_ratio": round(ratio, 4), "below_cameras": below, "vs_photo_up_deg": round(ang, 3),
-                 "tilt_vs_photo_up": tilt_components(nv, up, centres), "agree_limit_deg": round(tol, 3),
-                 "min_support": min_ground_support}
-            if not below:
-                g["used"], g["why_not"] = False, "the plane is not below the cameras"
-            elif ratio < min_ground_support:
-                g["used"], g["why_not"] = False, (f"too little support: {100 * ratio:.1f} % of the points "
-                                                  f"(needs {100 * min_ground_support:.0f} %)")
-            elif photos_agree and ang > tol:
-                g["used"], g["why_not"] = False, (f"{ang:.1f} degrees from the photos' vertical (limit {tol:.1f}): "
-                                                  f"a sloped or cambered ground, or not the ground")
-            else:
-                g["used"] = True
+        gp = _ground_plane_up(sparse, centres, up, up_cam, photos_agree, sigma, min_ground_support, ground_agree_deg)
+        if gp is not None:
+            g, nv = gp
+            if g["used"]:
                 up, up_from = nv, "ground_plane"
             info["ground_plane"] = g
             info["ground_plane_inlier_ratio"] = g["inlier_ratio"]

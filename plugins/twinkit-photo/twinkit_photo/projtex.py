@@ -80,21 +80,45 @@ def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bas
                     threads: int = 0, progress=None) -> tuple[np.ndarray, dict]:
     """Return (texture (s, s, 3) uint8, info): ``base`` with every texel a photo sees replaced by the blend of
     its best photos. ``uv`` per face corner (m, 3, 2) in [0, 1], v up; ``base`` the current texture (s, s, 3)."""
-    from twinkit.surface.texture import rasterize
-
-    size = base.shape[0]
     vis = _Visibility(vertices, faces, threads)
+    m = len(faces)
+    k = max(1, int(max_views))
+    nc = max(k, int(consistency_views))  # candidates kept per face for the photo-consistency check
+    # 1. per face: the photos that see its centre, ranked
+    best_cam, best_score, best_col = _rank_views(vertices, faces, views, vis, nc, k, min_cos=min_cos,
+                                                 max_dist_m=max_dist_m, margin_px=margin_px, tol_m=tol_m,
+                                                 tol_rel=tol_rel, progress=progress)
+    seen_faces = int((best_cam[:, 0] >= 0).sum())
+    rejected = 0
+    if nc > k:
+        best_cam, best_score, rejected = _consistent(best_cam, best_score, best_col, k, float(consistency_levels))
+    else:
+        best_cam, best_score = best_cam[:, :k], best_score[:, :k]
+    # 2. per texel: blend the face's best photos
+    out, texels, n_got = _blend(vertices, faces, uv, base, views, vis, best_cam, best_score, k, sharpness,
+                                tol_m, tol_rel, progress)
+    views_used = np.bincount(best_cam[best_cam[:, 0] >= 0, 0], minlength=len(views))
+    info = {"photos": len(views), "faces_seen": seen_faces, "faces_seen_ratio": round(seen_faces / max(m, 1), 4),
+            "texels": texels, "texels_from_photos": n_got,
+            "texels_from_photos_ratio": round(n_got / max(texels, 1), 4),
+            "views_rejected_inconsistent": int(rejected),
+            "best_view_faces": {views[i].name: int(c) for i, c in enumerate(views_used) if c}}
+    return out, info
+
+
+def _rank_views(vertices, faces, views: list[PhotoView], vis: _Visibility, nc: int, k: int, *, min_cos: float,
+                max_dist_m: float, margin_px: float, tol_m: float, tol_rel: float, progress):
+    """Per face, the ``nc`` photos that see its centre unoccluded, best first by cos(view angle) / distance:
+    (photo index (m, nc) int64, -1 = none; score (m, nc) float32; the face's colour in each (m, nc, 3) float32,
+    filled only when ``nc > k``, for the consistency check)."""
     tri = vertices[faces]
     cen = tri.mean(1)
     nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
     m = len(faces)
-    k = max(1, int(max_views))
-    nc = max(k, int(consistency_views))  # candidates kept per face for the photo-consistency check
     best_cam = np.full((m, nc), -1, np.int64)
     best_score = np.zeros((m, nc), np.float32)
     best_col = np.zeros((m, nc, 3), np.float32)
-    # 1. per face: the photos that see its centre, ranked
     it = range(len(views))
     if progress is not None:
         it = progress(it, total=len(views), desc="photo visibility")
@@ -122,13 +146,16 @@ def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bas
         if nc > k:
             col = np.concatenate([best_col[idx], _face_colour(v, tri[idx])[:, None]], 1)
             best_col[idx] = np.take_along_axis(col, order[:, :, None], 1)
-    seen_faces = int((best_cam[:, 0] >= 0).sum())
-    rejected = 0
-    if nc > k:
-        best_cam, best_score, rejected = _consistent(best_cam, best_score, best_col, k, float(consistency_levels))
-    else:
-        best_cam, best_score = best_cam[:, :k], best_score[:, :k]
-    # 2. per texel: blend the face's best photos
+    return best_cam, best_score, best_col
+
+
+def _blend(vertices, faces, uv, base, views: list[PhotoView], vis: _Visibility, best_cam, best_score, k: int,
+           sharpness: float, tol_m: float, tol_rel: float, progress) -> tuple[np.ndarray, int, int]:
+    """Every texel projected into its face's best ``k`` photos (occlusion checked again), their colours
+    blended with weights score ** sharpness. (texture (s, s, 3) uint8, texels, texels from the photos)."""
+    from twinkit.surface.texture import rasterize
+
+    size = base.shape[0]
     out = base.copy()
     acc_w = np.zeros((size, size), np.float32)
     acc_c = np.zeros((size, size, 3), np.float32)
@@ -164,14 +191,7 @@ def project_texture(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bas
                 acc_c[r_, c_] += colr * wgt[:, None]
     got = acc_w > 0
     out[got] = np.clip(np.rint(acc_c[got] / acc_w[got][:, None]), 0, 255).astype(np.uint8)
-    n_got = int(got.sum())
-    views_used = np.bincount(best_cam[best_cam[:, 0] >= 0, 0], minlength=len(views))
-    info = {"photos": len(views), "faces_seen": seen_faces, "faces_seen_ratio": round(seen_faces / max(m, 1), 4),
-            "texels": texels, "texels_from_photos": n_got,
-            "texels_from_photos_ratio": round(n_got / max(texels, 1), 4),
-            "views_rejected_inconsistent": int(rejected),
-            "best_view_faces": {views[i].name: int(c) for i, c in enumerate(views_used) if c}}
-    return out, info
+    return out, texels, int(got.sum())
 
 
 # where a face's colour is read in a photo: its centre and six points around it (barycentric coordinates), so
@@ -237,3 +257,54 @@ def _consistent(cams, scores, cols, k: int, levels: float):
     s2 = np.take_along_axis(np.where(keep, scores, 0.0), order, 1).astype(np.float32)
     return c2, s2, rejected
 
+
+
+# --------------------------------------------------------------------------- the photo_texture step's inputs
+
+def read_textured_mesh(src):
+    """A baked, UV-mapped mesh (bake_texture's PLY) and its texture: (Mesh, uv (F, 3, 2) float64, texture
+    (H, W, 3) uint8). InputError without per-face texture coordinates or the texture image beside it."""
+    from pathlib import Path
+
+    from PIL import Image
+    from twinkit import InputError
+    from twinkit.mesh import read_ply
+
+    src = Path(src)
+    try:
+        mesh = read_ply(src)
+    except Exception as exc:  # noqa: BLE001 - any parse error is the file's fault
+        raise InputError(f"{src}: cannot read the textured mesh ({exc}); re-run the texture step") from None
+    tc = mesh.face_attrs.get("texcoord")
+    png_name = next((c.split(None, 1)[1] for c in mesh.comments if c.startswith("TextureFile")), src.stem + ".png")
+    png = src.parent / png_name
+    if tc is None or mesh.faces is None or not png.exists():
+        raise InputError(f"{src}: needs per-face texture coordinates and its texture image ({png.name}) beside it; "
+                         f"give it the output of bake_texture")
+    uv = np.asarray(tc, np.float64).reshape(-1, 3, 2)
+    base = np.asarray(Image.open(png).convert("RGB"))
+    return mesh, uv, base
+
+
+def photo_views(cameras: list[dict], photos_dir) -> list[PhotoView]:
+    """The site-frame cameras (cameras_site.json rows) with their photos loaded; K rescaled where a photo's
+    size differs from the camera's."""
+    from pathlib import Path
+
+    from PIL import Image
+    from twinkit import InputError
+
+    views = []
+    for c in cameras:
+        path = Path(photos_dir) / c["image"]
+        try:
+            img = np.asarray(Image.open(path).convert("RGB"))
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read the photo ({exc}); re-export or remove it") from None
+        K = np.asarray(c["K"], float)
+        if img.shape[1] != int(c["width"]) or img.shape[0] != int(c["height"]):
+            sx, sy = img.shape[1] / float(c["width"]), img.shape[0] / float(c["height"])
+            K = np.diag([sx, sy, 1.0]) @ K
+        views.append(PhotoView(c["image"], K, np.asarray(c["R_world_from_camera"], float),
+                               np.asarray(c["center"], float), img))
+    return views

@@ -14,6 +14,7 @@ import math
 import statistics
 
 from twinkit import hookimpl
+from twinkit.report.html import esc
 
 
 @hookimpl
@@ -63,14 +64,15 @@ def camera_map_svg(photos: dict, width: int = 560, height: int = 420, units: str
             out.append(f'<line x1="{cx:.1f}" y1="{cy:.1f}" x2="{gx:.1f}" y2="{gy:.1f}" stroke="#999" '
                        f'stroke-width="0.8"/>')
             out.append(f'<path d="M{gx - 3:.1f},{gy - 3:.1f}L{gx + 3:.1f},{gy + 3:.1f}M{gx - 3:.1f},{gy + 3:.1f}'
-                       f'L{gx + 3:.1f},{gy - 3:.1f}" stroke="#e67e22" stroke-width="1.5"><title>{_esc(name)} GPS'
+                       f'L{gx + 3:.1f},{gy - 3:.1f}" stroke="#e67e22" stroke-width="1.5"><title>{esc(name)} GPS'
                        f'</title></path>')
         col = "#c0392b" if p.get("outlier") else "#2c6fbb"
+        why = f' (outlier: {esc(p["outlier"])})' if p.get("outlier") else ""
         out.append(f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="{4 if p.get("outlier") else 3}" fill="{col}">'
-                   f'<title>{_esc(name)}{" (outlier: " + _esc(p["outlier"]) + ")" if p.get("outlier") else ""}'
-                   f'</title></circle>')
+                   f'<title>{esc(name)}{why}</title></circle>')
         if p.get("outlier"):
-            out.append(f'<text x="{cx + 6:.1f}" y="{cy - 4:.1f}" font-size="11" fill="#c0392b">{_esc(name)}</text>')
+            out.append(f'<text x="{cx + 6:.1f}" y="{cy - 4:.1f}" font-size="11" fill="#c0392b">'
+                       f'{esc(name)}</text>')
     # scale bar: a round length near a fifth of the map
     target = span / 5
     bar = 10 ** math.floor(math.log10(target))
@@ -85,12 +87,6 @@ def camera_map_svg(photos: dict, width: int = 560, height: int = 420, units: str
     return "".join(out)
 
 
-def _esc(x) -> str:
-    import html
-
-    return html.escape(str(x), quote=True)
-
-
 def sec_photos(ctx) -> str:
     sfm = _own(ctx, "sfm_report.json")
     geo = _own(ctx, "georef.json")
@@ -98,85 +94,100 @@ def sec_photos(ctx) -> str:
         return ""
     parts = []
     if sfm is not None:
-        r = sfm[2]
-        rows = [["photos", r.get("photos")], ["registered", r.get("registered")],
-                ["mean reprojection error (px)", r.get("mean_reprojection_error_px")],
-                ["sparse points", r.get("sparse_points")], ["intrinsics from", r.get("intrinsics_from")],
-                ["photos with GPS", r.get("photos_with_gps")]]
-        unreg = r.get("unregistered") or []
-        rows.append(["dropped (not registered)", ", ".join(unreg) if unreg else "none"])
-        parts.append("<h3>Structure from motion</h3>" + ctx.table(["", "value"], rows))
-        groups = r.get("camera_groups") or []
-        if len(groups) > 1:
-            parts.append(ctx.table(["camera group (size, make, model)", "photos", "registered"],
-                                   [[f"{g['size'][0]}x{g['size'][1]} {g.get('make') or ''} {g.get('model') or ''}",
-                                     g.get("photos"), g.get("registered")] for g in groups]))
+        parts += _sfm_part(ctx, sfm[2])
     if geo is not None:
         g = geo[2]
-        lvl = g.get("level") or {}
         units = "m" if g.get("scaled", True) else "model units"
-        rows = [["method", g.get("method")], ["units", g.get("units", "metres")],
-                ["scale (site units per model unit)", (g.get("transform") or {}).get("scale")],
-                ["up from", lvl.get("up_from")],
-                ["final vertical vs. the photos' horizon (deg)", g.get("level_vs_camera_horizon_deg")]]
-        hz = lvl.get("camera_horizon") or {}
-        if hz:
-            rows.append(["photos' horizon: photos used, spread (deg)", f"{hz.get('used')} of {hz.get('photos')}, "
-                                                                       f"{hz.get('spread_deg')}"])
-        vl = lvl.get("vertical_lines")
-        if vl:
-            rows.append(["vertical lines: lines, photos, vs. horizon (deg)",
-                         f"{vl.get('lines')}, {vl.get('photos_with_lines')}, {vl.get('vs_camera_horizon_deg')}"])
-        gp = lvl.get("ground_plane")
-        if gp:
-            rows.append(["ground plane", ("used" if gp.get("used") else f"not used: {gp.get('why_not')}")
-                         + f" ({100 * gp.get('inlier_ratio', 0):.1f} % of the points, {gp.get('vs_photo_up_deg')} deg "
-                           f"from the photos' vertical)"])
-        if "gps" in g:
-            rows.append(["GPS fit: inliers / photos with GPS, rmse (m)",
-                         f"{g['gps'].get('inliers')} / {g['gps'].get('photos_with_gps')}, {g['gps'].get('rmse_m')}"])
-        if "gcp" in g:
-            rows.append(["GCPs used, rmse (m)", f"{g['gcp'].get('used')}, {g['gcp'].get('rmse_m')}"])
-        for key, label in (("gcp_unused", "GCP file not used"), ("gps_unused", "EXIF GPS not used")):
-            if key in g:
-                u = g[key]
-                rows.append([label, f"{u.get('why')}; " + (f"used instead: {u['used_instead']}" if "used_instead" in u
-                                                           else u.get("suggestion", ""))])
-        outl = g.get("outlier_cameras") or {}
-        rows.append(["outlier cameras (left out of the later steps)",
-                     "; ".join(f"{n}: {w}" for n, w in outl.items()) if outl else "none"])
         warn = "" if g.get("scaled", True) else (
             "<p class=\"degraded\"><b>Unscaled:</b> no GPS with a site CRS, no GCPs and no known distance: the site frame "
             "is in model units, and every length in this report is in those units, not metres.</p>")
-        parts.append("<h3>Georeference</h3>" + warn + ctx.table(["", "value"], rows))
+        parts.append("<h3>Georeference</h3>" + warn + ctx.table(["", "value"], _georef_rows(g)))
         photos = g.get("photos") or {}
         if photos:
             parts.append("<h3>Cameras (blue; outliers red) against their GPS fixes (orange), top-down</h3>"
                          + camera_map_svg(photos, units=units))
-            cover, kept = {}, {}
-            dense = _own(ctx, "points_meta.json")
-            if dense is not None:
-                cover = ((dense[2].get("dense") or {}).get("valid_ratio") or {})
-                kept = ((dense[2].get("dense") or {}).get("per_photo") or {})
-            # a photo whose depth map keeps under a tenth of the median: a stretch of the walk the fusion could
-            # not confirm (photos too far apart, a white wall), where the mesh will be thin
-            counts = [int(v) for v in kept.values() if isinstance(v, (int, float))]
-            thin = 0.1 * statistics.median(counts) if counts else 0.0
-            rows = []
-            for n in sorted(set(photos) | set((sfm[2].get("unregistered") or []) if sfm else [])):
-                p = photos.get(n)
-                if p is None:
-                    rows.append([n, "no", "", "", "", ""])
-                    continue
-                c = cover.get(n)
-                k = kept.get(n)
-                kcell = ""
-                if isinstance(k, (int, float)):
-                    kcell = f"{int(k):,}" + (" (under a tenth of the median: little here is confirmed by a second "
-                                             "photo)" if k < thin else "")
-                rows.append([n, "yes", p.get("gps_residual_m") if p.get("gps_residual_m") is not None else "",
-                             p.get("outlier") or "", f"{100 * c:.1f} %" if isinstance(c, (int, float)) else "", kcell])
-            parts.append("<h3>Per photo</h3>" + ctx.table(
-                ["photo", "registered", f"GPS residual ({units})", "outlier camera", "depth-map coverage",
-                 "dense points kept"], rows))
+            parts.append(_per_photo_part(ctx, photos, sfm, units))
     return "".join(parts)
+
+
+def _sfm_part(ctx, r: dict) -> list[str]:
+    """The structure-from-motion table (and the camera groups' where there are several)."""
+    rows = [["photos", r.get("photos")], ["registered", r.get("registered")],
+            ["mean reprojection error (px)", r.get("mean_reprojection_error_px")],
+            ["sparse points", r.get("sparse_points")], ["intrinsics from", r.get("intrinsics_from")],
+            ["photos with GPS", r.get("photos_with_gps")]]
+    unreg = r.get("unregistered") or []
+    rows.append(["dropped (not registered)", ", ".join(unreg) if unreg else "none"])
+    parts = ["<h3>Structure from motion</h3>" + ctx.table(["", "value"], rows)]
+    groups = r.get("camera_groups") or []
+    if len(groups) > 1:
+        parts.append(ctx.table(["camera group (size, make, model)", "photos", "registered"],
+                               [[f"{g['size'][0]}x{g['size'][1]} {g.get('make') or ''} {g.get('model') or ''}",
+                                 g.get("photos"), g.get("registered")] for g in groups]))
+    return parts
+
+
+def _georef_rows(g: dict) -> list[list]:
+    """The georeference table's rows: method, units, scale, levelling, fits, unused inputs, outlier cameras."""
+    lvl = g.get("level") or {}
+    rows = [["method", g.get("method")], ["units", g.get("units", "metres")],
+            ["scale (site units per model unit)", (g.get("transform") or {}).get("scale")],
+            ["up from", lvl.get("up_from")],
+            ["final vertical vs. the photos' horizon (deg)", g.get("level_vs_camera_horizon_deg")]]
+    hz = lvl.get("camera_horizon") or {}
+    if hz:
+        rows.append(["photos' horizon: photos used, spread (deg)", f"{hz.get('used')} of {hz.get('photos')}, "
+                                                                   f"{hz.get('spread_deg')}"])
+    vl = lvl.get("vertical_lines")
+    if vl:
+        rows.append(["vertical lines: lines, photos, vs. horizon (deg)",
+                     f"{vl.get('lines')}, {vl.get('photos_with_lines')}, {vl.get('vs_camera_horizon_deg')}"])
+    gp = lvl.get("ground_plane")
+    if gp:
+        rows.append(["ground plane", ("used" if gp.get("used") else f"not used: {gp.get('why_not')}")
+                     + f" ({100 * gp.get('inlier_ratio', 0):.1f} % of the points, {gp.get('vs_photo_up_deg')} deg "
+                       f"from the photos' vertical)"])
+    if "gps" in g:
+        rows.append(["GPS fit: inliers / photos with GPS, rmse (m)",
+                     f"{g['gps'].get('inliers')} / {g['gps'].get('photos_with_gps')}, {g['gps'].get('rmse_m')}"])
+    if "gcp" in g:
+        rows.append(["GCPs used, rmse (m)", f"{g['gcp'].get('used')}, {g['gcp'].get('rmse_m')}"])
+    for key, label in (("gcp_unused", "GCP file not used"), ("gps_unused", "EXIF GPS not used")):
+        if key in g:
+            u = g[key]
+            rows.append([label, f"{u.get('why')}; " + (f"used instead: {u['used_instead']}" if "used_instead" in u
+                                                       else u.get("suggestion", ""))])
+    outl = g.get("outlier_cameras") or {}
+    rows.append(["outlier cameras (left out of the later steps)",
+                 "; ".join(f"{n}: {w}" for n, w in outl.items()) if outl else "none"])
+    return rows
+
+
+def _per_photo_part(ctx, photos: dict, sfm, units: str) -> str:
+    """The per-photo table: registered, GPS residual, outlier reason, depth-map coverage, dense points kept."""
+    cover, kept = {}, {}
+    dense = _own(ctx, "points_meta.json")
+    if dense is not None:
+        cover = ((dense[2].get("dense") or {}).get("valid_ratio") or {})
+        kept = ((dense[2].get("dense") or {}).get("per_photo") or {})
+    # a photo whose depth map keeps under a tenth of the median: a stretch of the walk the fusion could
+    # not confirm (photos too far apart, a white wall), where the mesh will be thin
+    counts = [int(v) for v in kept.values() if isinstance(v, (int, float))]
+    thin = 0.1 * statistics.median(counts) if counts else 0.0
+    rows = []
+    for n in sorted(set(photos) | set((sfm[2].get("unregistered") or []) if sfm else [])):
+        p = photos.get(n)
+        if p is None:
+            rows.append([n, "no", "", "", "", ""])
+            continue
+        c = cover.get(n)
+        k = kept.get(n)
+        kcell = ""
+        if isinstance(k, (int, float)):
+            kcell = f"{int(k):,}" + (" (under a tenth of the median: little here is confirmed by a second "
+                                     "photo)" if k < thin else "")
+        rows.append([n, "yes", p.get("gps_residual_m") if p.get("gps_residual_m") is not None else "",
+                     p.get("outlier") or "", f"{100 * c:.1f} %" if isinstance(c, (int, float)) else "", kcell])
+    return "<h3>Per photo</h3>" + ctx.table(
+        ["photo", "registered", f"GPS residual ({units})", "outlier camera", "depth-map coverage",
+         "dense points kept"], rows)

@@ -76,6 +76,8 @@ def _best_model(recs: dict):
 
 
 def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, has_gps: bool, log) -> SfmResult:
+    """Features, matching and mapping of the photos ``names`` in ``image_dir``; the COLMAP database and the
+    mapping attempts go to ``work``. The model that registers the most photos wins."""
     import pycolmap
 
     work = Path(work)
@@ -89,6 +91,32 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
     # COLMAP's multi-threaded RANSAC and mapping are not reproducible: on lund_street two runs of the
     # same settings registered 29 and 21 photos. One thread makes every run the same (measured: 69 s).
     solve_threads = 1 if opt.deterministic else opt.threads
+    _extract_features(db, image_dir, names, opt)
+    timings["features"] = round(time.perf_counter() - t0, 3)
+
+    t0 = time.perf_counter()
+    n = len(names)
+    matching = _match(db, n, opt, has_gps, solve_threads)
+    timings["matching"] = round(time.perf_counter() - t0, 3)
+    counts = _pairing_counts(db)
+    log.info("sfm: %d photos, matching %s: %d verified pairs", n, matching, counts["verified_pairs"])
+    if counts["verified_pairs"] == 0:
+        raise InputError(f"{image_dir}: no two photos share enough features to be matched; the photos must "
+                         f"overlap (take one every few steps, 60-80 % overlap)")
+
+    t0 = time.perf_counter()
+    best, attempts = _map(db, image_dir, work, n, opt, has_gps, solve_threads, log)
+    timings["mapping"] = round(time.perf_counter() - t0, 3)
+    if best is None:
+        raise InputError(f"{image_dir}: structure from motion registered no photos ({counts['verified_pairs']} "
+                         f"matched pairs); take more overlapping photos or try sfm.matching=exhaustive")
+    registered = sorted(best.images[i].name for i in best.reg_image_ids())
+    return SfmResult(best, n, registered, attempts, timings, matching)
+
+
+def _extract_features(db: Path, image_dir: Path, names: list[str], opt: SfmOptions) -> None:
+    """SIFT features of every photo into the database, one COLMAP camera per group (or per photo)."""
+    import pycolmap
 
     ext = pycolmap.FeatureExtractionOptions()
     ext.num_threads = opt.threads
@@ -114,10 +142,12 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
     else:
         pycolmap.extract_features(db, image_dir, image_names=list(names), camera_mode=pycolmap.CameraMode.AUTO,
                                   reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu)
-    timings["features"] = round(time.perf_counter() - t0, 3)
 
-    t0 = time.perf_counter()
-    n = len(names)
+
+def _match(db: Path, n: int, opt: SfmOptions, has_gps: bool, solve_threads: int) -> str:
+    """Match the photo pairs of the matching mode (auto resolved for ``n`` photos); the mode used."""
+    import pycolmap
+
     matching = opt.matching
     if matching == "auto":
         matching = "exhaustive" if n <= opt.exhaustive_max else "sequential"
@@ -145,14 +175,39 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
         else:
             raise InputError(f"sfm: unknown matching '{part}' (exhaustive, sequential, spatial, "
                              f"sequential+spatial or auto)")
-    timings["matching"] = round(time.perf_counter() - t0, 3)
-    counts = _pairing_counts(db)
-    log.info("sfm: %d photos, matching %s: %d verified pairs", n, matching, counts["verified_pairs"])
-    if counts["verified_pairs"] == 0:
-        raise InputError(f"{image_dir}: no two photos share enough features to be matched; the photos must "
-                         f"overlap (take one every few steps, 60-80 % overlap)")
+    return matching
 
-    t0 = time.perf_counter()
+
+def _incremental_options(attempt: str, opt: SfmOptions, solve_threads: int):
+    """COLMAP's incremental mapping options for one attempt (default, relaxed_init, relaxed_init+gps_prior)."""
+    import pycolmap
+
+    popt = pycolmap.IncrementalPipelineOptions()
+    popt.num_threads = solve_threads
+    popt.random_seed = int(opt.seed)
+    popt.min_model_size = 3
+    if opt.intrinsics is not None:
+        popt.ba_refine_focal_length = False  # a known calibration stays fixed
+    if attempt.startswith("relaxed_init"):
+        # forward motion: accept a small initial triangulation angle and weaker image registrations
+        popt.mapper.init_min_tri_angle = 4.0
+        popt.mapper.init_max_forward_motion = 0.999
+        popt.mapper.init_min_num_inliers = 30
+        popt.mapper.abs_pose_min_num_inliers = 15
+        popt.mapper.abs_pose_min_inlier_ratio = 0.1
+        popt.mapper.filter_min_tri_angle = 0.5
+        popt.min_num_matches = 10
+        popt.init_num_trials = 400
+    if attempt.endswith("gps_prior"):
+        popt.use_prior_position = True  # EXIF GPS as position priors in bundle adjustment
+    return popt
+
+
+def _map(db: Path, image_dir: Path, work: Path, n: int, opt: SfmOptions, has_gps: bool, solve_threads: int, log):
+    """Mapping attempts (default, then relaxed initialisation, then with GPS priors) until one registers
+    ``retry_below_ratio`` of the photos; (the best model or None, the attempts' summary)."""
+    import pycolmap
+
     attempts = []
     best = None
     plan = ["default", "relaxed_init"] + (["relaxed_init+gps_prior"] if has_gps and opt.mapper == "incremental" else [])
@@ -166,25 +221,8 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
             gopt.num_threads = solve_threads
             recs = pycolmap.global_mapping(db, image_dir, out, options=gopt)
         elif opt.mapper == "incremental":
-            popt = pycolmap.IncrementalPipelineOptions()
-            popt.num_threads = solve_threads
-            popt.random_seed = int(opt.seed)
-            popt.min_model_size = 3
-            if opt.intrinsics is not None:
-                popt.ba_refine_focal_length = False  # a known calibration stays fixed
-            if attempt.startswith("relaxed_init"):
-                # forward motion: accept a small initial triangulation angle and weaker image registrations
-                popt.mapper.init_min_tri_angle = 4.0
-                popt.mapper.init_max_forward_motion = 0.999
-                popt.mapper.init_min_num_inliers = 30
-                popt.mapper.abs_pose_min_num_inliers = 15
-                popt.mapper.abs_pose_min_inlier_ratio = 0.1
-                popt.mapper.filter_min_tri_angle = 0.5
-                popt.min_num_matches = 10
-                popt.init_num_trials = 400
-            if attempt.endswith("gps_prior"):
-                popt.use_prior_position = True  # EXIF GPS as position priors in bundle adjustment
-            recs = pycolmap.incremental_mapping(db, image_dir, out, options=popt)
+            recs = pycolmap.incremental_mapping(db, image_dir, out, options=_incremental_options(attempt, opt,
+                                                                                                 solve_threads))
         else:
             raise InputError(f"sfm: unknown mapper '{opt.mapper}' (incremental or global)")
         rec = _best_model(recs)
@@ -196,12 +234,7 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
             best = rec
         if best is not None and best.num_reg_images() >= opt.retry_below_ratio * n:
             break
-    timings["mapping"] = round(time.perf_counter() - t0, 3)
-    if best is None:
-        raise InputError(f"{image_dir}: structure from motion registered no photos ({counts['verified_pairs']} "
-                         f"matched pairs); take more overlapping photos or try sfm.matching=exhaustive")
-    registered = sorted(best.images[i].name for i in best.reg_image_ids())
-    return SfmResult(best, n, registered, attempts, timings, matching)
+    return best, attempts
 
 
 def camera_table(rec) -> list[dict]:
@@ -229,3 +262,129 @@ def sparse_points(rec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     rgb = np.array([rec.points3D[i].color for i in ids], np.uint8).reshape(-1, 3)
     err = np.array([rec.points3D[i].error for i in ids], float)
     return xyz, rgb, err
+
+
+# --------------------------------------------------------------------------- the sfm step's parts
+
+def choose_intrinsics(mode: str, folder: Path, infos: list, cameras_json: Path | None) -> tuple[list | None, str]:
+    """The intrinsics to start from and where they came from: (K 3x3 in pixels at full photo size, or None
+    for EXIF, source). ``auto``: K.txt beside the photos, else the site's cameras.json when its size matches
+    (one photo size only), else EXIF; ``exif``: EXIF."""
+    from .files import read_json
+    from .images import read_k_txt
+
+    sizes = {(i.width, i.height) for i in infos}
+    K, k_source = None, "exif"
+    if mode == "auto":
+        K = read_k_txt(folder)
+        if K is not None:
+            k_source = "K.txt"
+        elif cameras_json is not None and len(sizes) == 1:
+            intr = read_json(cameras_json, "camera file").get("intrinsics") or {}
+            if "K" in intr and (intr.get("width"), intr.get("height")) in sizes:
+                K, k_source = intr["K"], Path(cameras_json).name
+    elif mode != "exif":
+        raise InputError(f"sfm: intrinsics='{mode}' must be auto or exif")
+    if K is not None and len(sizes) != 1:
+        K, k_source = None, "exif"
+    return K, k_source
+
+
+def sfm_options(params, K, groups: list[dict], threads: int) -> SfmOptions:
+    """The sfm step's parameters, the starting intrinsics ``K`` (or None) and the camera groups as
+    :class:`SfmOptions`."""
+    return SfmOptions(matching=params.matching, exhaustive_max=params.exhaustive_max, overlap=params.overlap,
+                      spatial_neighbors=params.spatial_neighbors, mapper=params.mapper,
+                      max_image_px=params.max_image_px, max_features=params.max_features,
+                      camera_model=params.camera_model, single_camera=params.single_camera, intrinsics=K,
+                      groups=[g["photos"] for g in groups],
+                      threads=threads, seed=params.seed, deterministic=params.deterministic)
+
+
+def run_sfm_in_temp(folder: Path, names: list[str], opt: SfmOptions, *, has_gps: bool, log) -> SfmResult:
+    """:func:`run_sfm` in a throw-away folder (COLMAP database and attempts), removed afterwards."""
+    import tempfile
+
+    work = Path(tempfile.mkdtemp(prefix="twinkit_sfm_"))
+    try:
+        return run_sfm(folder, names, work, opt, has_gps=has_gps, log=log)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def check_registration(names: list[str], registered: list[str], min_ratio: float, degraded_ratio: float,
+                       folder: Path, degraded) -> tuple[float, list[str]]:
+    """(registered share, unregistered names); an InputError under ``min_ratio``, ``degraded(...)`` under
+    ``degraded_ratio``."""
+    n_reg = len(registered)
+    ratio = n_reg / len(names)
+    missing = sorted(set(names) - set(registered))
+    listed = f"{', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}"
+    if ratio < min_ratio:
+        raise InputError(f"{folder}: structure from motion registered only {n_reg} of {len(names)} photos "
+                         f"({100 * ratio:.0f} % < sfm.min_registered_ratio {100 * min_ratio:.0f} %); "
+                         f"unregistered: {listed}. Take more "
+                         f"overlapping photos, try sfm.matching=exhaustive or sequential, or lower the ratio")
+    if ratio < degraded_ratio:
+        degraded(f"structure from motion registered only {n_reg} of {len(names)} photos; unregistered: {listed}",
+                 "take more overlapping photos, or try steps.sfm.matching=exhaustive")
+    return ratio, missing
+
+
+def visibility(rec) -> tuple[list[str], list[int]]:
+    """Which sparse point each registered photo sees, as two parallel lists (photo name, index into
+    :func:`sparse_points`' order): the dense step's depth ranges and neighbours."""
+    pid = {p: k for k, p in enumerate(rec.points3D.keys())}
+    vis_img, vis_pt = [], []
+    for iid in rec.reg_image_ids():
+        im = rec.images[iid]
+        ids = [pid[p.point3D_id] for p in im.points2D if p.has_point3D()]
+        vis_img += [im.name] * len(ids)
+        vis_pt += ids
+    return vis_img, vis_pt
+
+
+def write_model(out: Path, rec, infos: list) -> int:
+    """The sfm/ folder: COLMAP's model, sparse.npz (xyz, rgb, error, visibility), cameras_model.json (model
+    frame, OpenCV convention, with the EXIF GPS fixes) and sparse_model.ply. Returns the sparse point count."""
+    from twinkit.jsonio import write_json
+
+    from .files import write_cloud
+
+    out.mkdir(parents=True, exist_ok=True)
+    rec.write(str(out))
+    cams = camera_table(rec)
+    xyz, rgb, err = sparse_points(rec)
+    vis_img, vis_pt = visibility(rec)
+    np.savez_compressed(out / "sparse.npz", xyz=xyz, rgb=rgb, error=err, vis_image=np.array(vis_img),
+                        vis_point=np.array(vis_pt, np.int64))
+    gps = {i.name: [i.lat, i.lon, i.alt] for i in infos if i.has_gps}
+    write_json(out / "cameras_model.json", {"frame": "SfM model frame (arbitrary scale and orientation)",
+                                             "convention": "OpenCV camera, R_world_from_camera, center",
+                                             "cameras": cams, "exif_gps": gps})
+    write_cloud(out / "sparse_model.ply", xyz, rgb, comments=["twinkit-photo sfm sparse points, model frame"])
+    return int(len(xyz))
+
+
+def mean_reprojection_error(rec) -> float:
+    """The model's mean reprojection error in pixels (NaN with no registered photo)."""
+    return float(rec.compute_mean_reprojection_error()) if len(rec.reg_image_ids()) else float("nan")
+
+
+def sfm_report(rec, res: SfmResult, infos: list, groups: list[dict], ratio: float, missing: list[str], *,
+               mapper: str, k_source: str, n_gps: int, n_points: int, reproj: float, total_s: float) -> dict:
+    """sfm_report.json: registration, reprojection error, tracks, matching, attempts, intrinsics, timings."""
+    n_reg = len(res.registered)
+    track = float(np.mean([rec.points3D[p].track.length() for p in rec.points3D])) if n_points else 0.0
+    return {
+        "photos": len(infos), "registered": n_reg, "registered_ratio": round(ratio, 4),
+        "unregistered": missing, "mean_reprojection_error_px": round(reproj, 4),
+        "sparse_points": n_points, "mean_track_length": round(track, 3),
+        "matching": res.matching, "mapper": mapper, "attempts": res.attempts,
+        "intrinsics_from": k_source, "photos_with_gps": n_gps,
+        "camera_groups": [dict(g, photos=len(g["photos"]),
+                               registered=sum(1 for n in g["photos"] if n in set(res.registered))) for g in groups],
+        "cameras": [{"id": int(cid), "model": c.model.name, "params": [float(v) for v in c.params]}
+                    for cid, c in rec.cameras.items()],
+        "timings_s": {**res.timings_s, "total": round(total_s, 3)},
+    }

@@ -75,9 +75,10 @@ def test_plugin_registers(monkeypatch):
         import twinkit.signature  # noqa: F401
     except ImportError:
         pytest.skip("twinkit.signature not available yet: contract check skipped")
-    for p in reg.all():
-        if p.distribution == "twinkit-pointcloud":
-            check_plugin(p)
+    own = [p for p in reg.all() if p.distribution == "twinkit-pointcloud"]
+    assert own, "the plugin's steps were not registered"
+    for p in own:
+        check_plugin(p)
 
 
 def test_import_is_light():

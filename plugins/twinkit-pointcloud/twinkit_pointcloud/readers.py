@@ -109,6 +109,156 @@ def _quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
     ])
 
 
+def _read_fields(imf, points, names: list[str], n: int, path: Path, i: int) -> dict[str, np.ndarray]:
+    """Every field of a scan's ``points`` (n,) float64, read in blocks of at most 2 million points."""
+    from pye57 import libe57
+
+    out = {nm: np.empty(n, np.float64) for nm in names}
+    cap = int(min(n, 2_000_000))
+    bufs_np = {nm: np.empty(cap, np.float64) for nm in names}
+    bufs = libe57.VectorSourceDestBuffer()
+    for nm in names:
+        bufs.append(libe57.SourceDestBuffer(imf, nm, bufs_np[nm], cap, True, True))
+    reader = points.reader(bufs)
+    got = 0
+    try:
+        while got < n:
+            k = reader.read()
+            if k == 0:
+                break
+            for nm in names:
+                out[nm][got:got + k] = bufs_np[nm][:k]
+            got += k
+    finally:
+        reader.close()
+    if got < n:
+        raise _input_error(f"{path.name}: scan {i} declares {n} points but only {got} could be read; "
+                           f"the file is truncated - re-export it")
+    return out
+
+
+def _scan_xyz(out: dict[str, np.ndarray], path: Path, i: int) -> np.ndarray:
+    """(n, 3) float64 points in the scan's own frame, from cartesian or else spherical fields."""
+    if "cartesianX" in out:
+        return np.stack([out["cartesianX"], out["cartesianY"], out["cartesianZ"]], axis=1)
+    if "sphericalRange" in out:
+        r, az, el = out["sphericalRange"], out["sphericalAzimuth"], out["sphericalElevation"]
+        return np.stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)], axis=1)
+    raise _input_error(f"{path.name}: scan {i} has neither cartesian nor spherical coordinates")
+
+
+def _scan_colors(scan, out: dict[str, np.ndarray]) -> np.ndarray:
+    """(n, 3) uint8 colours scaled by the scan's colorLimits (else 0..255, or 0..max when above 255)."""
+    from pye57 import libe57
+
+    lim = _child(scan, "colorLimits")
+    cols = []
+    for c in ("Red", "Green", "Blue"):
+        lo, hi = 0.0, 255.0
+        if lim is not None:
+            ls = libe57.StructureNode(lim)
+            lo_n, hi_n = _child(ls, f"color{c}Minimum"), _child(ls, f"color{c}Maximum")
+            lo = float(_node_value(lo_n)) if lo_n is not None else 0.0
+            hi = float(_node_value(hi_n)) if hi_n is not None else float(out[f"color{c}"].max())
+        else:
+            hi = 255.0 if out[f"color{c}"].max() <= 255 else float(out[f"color{c}"].max())
+        cols.append((out[f"color{c}"] - lo) / max(hi - lo, 1e-12))
+    return np.clip(np.rint(np.stack(cols, axis=1) * 255), 0, 255).astype(np.uint8)
+
+
+def _scan_intensity(scan, v: np.ndarray) -> np.ndarray:
+    """(n,) float32 intensity scaled to 0..1 by the scan's intensityLimits (else its own min..max)."""
+    from pye57 import libe57
+
+    lim = _child(scan, "intensityLimits")
+    lo, hi = float(v.min()), float(v.max())
+    if lim is not None:
+        ls = libe57.StructureNode(lim)
+        a, b = _child(ls, "intensityMinimum"), _child(ls, "intensityMaximum")
+        lo = float(_node_value(a)) if a is not None else lo
+        hi = float(_node_value(b)) if b is not None else hi
+    return ((v - lo) / max(hi - lo, 1e-12)).astype(np.float32)
+
+
+def _scan_pose(pose) -> tuple[np.ndarray, np.ndarray]:
+    """The scan's pose node as (R (3, 3), t (3,)): scan frame -> file frame, p' = R p + t."""
+    from pye57 import libe57
+
+    ps = libe57.StructureNode(pose)
+    R = np.eye(3)
+    t = np.zeros(3)
+    rot = _child(ps, "rotation")
+    if rot is not None:
+        rs = libe57.StructureNode(rot)
+        R = _quat_to_matrix(*(float(_node_value(rs.get(c))) for c in "wxyz"))
+    tr = _child(ps, "translation")
+    if tr is not None:
+        ts = libe57.StructureNode(tr)
+        t = np.array([float(_node_value(ts.get(c))) for c in "xyz"])
+    return R, t
+
+
+def _scan_part(scan, out: dict[str, np.ndarray], names: list[str], path: Path, i: int, notes: list[str]
+               ) -> tuple[dict[str, np.ndarray], list]:
+    """One scan's valid points in the file frame (xyz, and normals, colors, intensity, classification,
+    scanner index where present) and its scanner position ([nan] * 3 when unknown)."""
+    valid = np.ones(len(next(iter(out.values()))), bool)
+    for st in ("cartesianInvalidState", "sphericalInvalidState"):
+        if st in out:
+            valid &= out[st] == 0
+    part: dict[str, np.ndarray] = {"xyz": _scan_xyz(out, path, i)}
+    nor = [f"nor:normal{c}" for c in "XYZ"]
+    if all(c in out for c in nor):
+        part["normals"] = np.stack([out[c] for c in nor], axis=1)
+    if all(f"color{c}" in out for c in ("Red", "Green", "Blue")):
+        part["colors"] = _scan_colors(scan, out)
+    if "intensity" in out:
+        part["intensity"] = _scan_intensity(scan, out["intensity"])
+    cls_field = _class_field(names)
+    if cls_field is not None:  # an extension field of per-point classes (ASPRS codes)
+        part["classification"] = np.clip(np.rint(out[cls_field]), 0, 255).astype(np.uint8)
+    pose = _child(scan, "pose")
+    scanner_pos = [np.nan] * 3
+    if pose is not None:
+        R, t = _scan_pose(pose)
+        part["xyz"] = part["xyz"] @ R.T + t
+        if "normals" in part:
+            part["normals"] = part["normals"] @ R.T
+        scanner_pos = t.tolist()
+    elif "sphericalRange" in out or "rowIndex" in out:
+        # a structured (gridded) scan without a pose is in its scanner's own frame
+        scanner_pos = [0.0, 0.0, 0.0]
+        notes.append(f"scan {i}: no pose, gridded scan -> scanner assumed at its origin")
+    for k in list(part):
+        part[k] = part[k][valid]
+    part["scanner"] = np.full(int(valid.sum()), i, np.int32)
+    return part, scanner_pos
+
+
+def _merge_scans(path: Path, parts: list[dict], positions: list, fields_seen: set[str], notes: list[str],
+                 crs: str | None) -> RawCloud:
+    """The scans' parts concatenated into one RawCloud; a field only some scans have is dropped (noted)."""
+    if not parts:
+        return RawCloud(path, "e57", np.zeros((0, 3)), source_fields=sorted(fields_seen), crs=crs)
+
+    def cat(key, dtype=None):
+        if not all(key in p for p in parts):
+            if any(key in p for p in parts):
+                notes.append(f"'{key}' present in only some scans: dropped")
+            return None
+        a = np.concatenate([p[key] for p in parts])
+        return a.astype(dtype) if dtype else a
+
+    normals = cat("normals", np.float32)
+    if normals is not None:
+        ln = np.linalg.norm(normals, axis=1, keepdims=True)
+        normals = (normals / np.maximum(ln, 1e-12)).astype(np.float32)
+    return RawCloud(path=path, format="e57", xyz=cat("xyz"), normals=normals, colors=cat("colors"),
+                    intensity=cat("intensity"), classification=cat("classification", np.uint8), scanner=cat("scanner"),
+                    scanner_positions=np.asarray(positions, np.float64).reshape(-1, 3),
+                    crs=crs, source_fields=sorted(fields_seen), notes=notes)
+
+
 def read_e57(path: Path) -> RawCloud:
     """Read every scan of an E57 file, apply each scan's pose, and merge them."""
     from pye57 import libe57
@@ -140,97 +290,9 @@ def read_e57(path: Path) -> RawCloud:
             if n == 0:
                 positions.append([np.nan] * 3)
                 continue
-            out = {nm: np.empty(n, np.float64) for nm in names}
-            cap = int(min(n, 2_000_000))
-            bufs_np = {nm: np.empty(cap, np.float64) for nm in names}
-            bufs = libe57.VectorSourceDestBuffer()
-            for nm in names:
-                bufs.append(libe57.SourceDestBuffer(imf, nm, bufs_np[nm], cap, True, True))
-            reader = points.reader(bufs)
-            got = 0
-            try:
-                while got < n:
-                    k = reader.read()
-                    if k == 0:
-                        break
-                    for nm in names:
-                        out[nm][got:got + k] = bufs_np[nm][:k]
-                    got += k
-            finally:
-                reader.close()
-            if got < n:
-                raise _input_error(f"{path.name}: scan {i} declares {n} points but only {got} could be read; "
-                                   f"the file is truncated - re-export it")
-            # validity
-            valid = np.ones(n, bool)
-            for st in ("cartesianInvalidState", "sphericalInvalidState"):
-                if st in out:
-                    valid &= out[st] == 0
-            if "cartesianX" in out:
-                xyz = np.stack([out["cartesianX"], out["cartesianY"], out["cartesianZ"]], axis=1)
-            elif "sphericalRange" in out:
-                r, az, el = out["sphericalRange"], out["sphericalAzimuth"], out["sphericalElevation"]
-                xyz = np.stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)], axis=1)
-            else:
-                raise _input_error(f"{path.name}: scan {i} has neither cartesian nor spherical coordinates")
-            part: dict[str, np.ndarray] = {"xyz": xyz}
-            nor = [f"nor:normal{c}" for c in "XYZ"]
-            if all(c in out for c in nor):
-                part["normals"] = np.stack([out[c] for c in nor], axis=1)
-            if all(f"color{c}" in out for c in ("Red", "Green", "Blue")):
-                lim = _child(scan, "colorLimits")
-                cols = []
-                for c in ("Red", "Green", "Blue"):
-                    lo, hi = 0.0, 255.0
-                    if lim is not None:
-                        ls = libe57.StructureNode(lim)
-                        lo_n, hi_n = _child(ls, f"color{c}Minimum"), _child(ls, f"color{c}Maximum")
-                        lo = float(_node_value(lo_n)) if lo_n is not None else 0.0
-                        hi = float(_node_value(hi_n)) if hi_n is not None else float(out[f"color{c}"].max())
-                    else:
-                        hi = 255.0 if out[f"color{c}"].max() <= 255 else float(out[f"color{c}"].max())
-                    cols.append((out[f"color{c}"] - lo) / max(hi - lo, 1e-12))
-                part["colors"] = np.clip(np.rint(np.stack(cols, axis=1) * 255), 0, 255).astype(np.uint8)
-            if "intensity" in out:
-                lim = _child(scan, "intensityLimits")
-                v = out["intensity"]
-                lo, hi = float(v.min()), float(v.max())
-                if lim is not None:
-                    ls = libe57.StructureNode(lim)
-                    a, b = _child(ls, "intensityMinimum"), _child(ls, "intensityMaximum")
-                    lo = float(_node_value(a)) if a is not None else lo
-                    hi = float(_node_value(b)) if b is not None else hi
-                part["intensity"] = ((v - lo) / max(hi - lo, 1e-12)).astype(np.float32)
-            cls_field = _class_field(names)
-            if cls_field is not None:  # an extension field of per-point classes (ASPRS codes)
-                part["classification"] = np.clip(np.rint(out[cls_field]), 0, 255).astype(np.uint8)
-            # pose
-            pose = _child(scan, "pose")
-            scanner_pos = [np.nan] * 3
-            if pose is not None:
-                ps = libe57.StructureNode(pose)
-                R = np.eye(3)
-                t = np.zeros(3)
-                rot = _child(ps, "rotation")
-                if rot is not None:
-                    rs = libe57.StructureNode(rot)
-                    R = _quat_to_matrix(*(float(_node_value(rs.get(c))) for c in "wxyz"))
-                tr = _child(ps, "translation")
-                if tr is not None:
-                    ts = libe57.StructureNode(tr)
-                    t = np.array([float(_node_value(ts.get(c))) for c in "xyz"])
-                part["xyz"] = part["xyz"] @ R.T + t
-                if "normals" in part:
-                    part["normals"] = part["normals"] @ R.T
-                scanner_pos = t.tolist()
-            elif "sphericalRange" in out or "rowIndex" in out:
-                # a structured (gridded) scan without a pose is in its scanner's own frame
-                scanner_pos = [0.0, 0.0, 0.0]
-                notes.append(f"scan {i}: no pose, gridded scan -> scanner assumed at its origin")
+            out = _read_fields(imf, points, names, n, path, i)
+            part, scanner_pos = _scan_part(scan, out, names, path, i, notes)
             positions.append(scanner_pos)
-            for k in list(part):
-                part[k] = part[k][valid]
-            part["scanner"] = np.full(int(valid.sum()), i, np.int32)
             parts.append(part)
     except Exception as exc:
         from twinkit import InputError
@@ -244,25 +306,7 @@ def read_e57(path: Path) -> RawCloud:
             imf.close()
         except Exception:
             pass
-    if not parts:
-        return RawCloud(path, "e57", np.zeros((0, 3)), source_fields=sorted(fields_seen), crs=crs)
-
-    def cat(key, dtype=None):
-        if not all(key in p for p in parts):
-            if any(key in p for p in parts):
-                notes.append(f"'{key}' present in only some scans: dropped")
-            return None
-        a = np.concatenate([p[key] for p in parts])
-        return a.astype(dtype) if dtype else a
-
-    normals = cat("normals", np.float32)
-    if normals is not None:
-        ln = np.linalg.norm(normals, axis=1, keepdims=True)
-        normals = (normals / np.maximum(ln, 1e-12)).astype(np.float32)
-    return RawCloud(path=path, format="e57", xyz=cat("xyz"), normals=normals, colors=cat("colors"),
-                    intensity=cat("intensity"), classification=cat("classification", np.uint8), scanner=cat("scanner"),
-                    scanner_positions=np.asarray(positions, np.float64).reshape(-1, 3),
-                    crs=crs, source_fields=sorted(fields_seen), notes=notes)
+    return _merge_scans(path, parts, positions, fields_seen, notes, crs)
 
 
 # ----------------------------------------------------------------------------- LAS / LAZ

@@ -106,3 +106,11 @@ def cambered_street(half_m: float = 40.0, road_half_m: float = 7.0, camber: floa
     a = (i * nx + j).ravel()
     f = np.concatenate([np.stack([a, a + 1, a + nx + 1], 1), np.stack([a, a + nx + 1, a + nx], 1)])
     return v, f.astype(np.int64), lab, surface
+
+
+def write_aerial_meta(path, spacing_m: float = 0.3) -> None:
+    """A points_meta.json (through the artefact catalogue) of an aerial cloud with median spacing ``spacing_m``."""
+    from twinkit import artefacts as A
+
+    A.write_points_meta(path, {"source": {"reader": "test"}, "counts": {}, "fields": {}, "frame": {},
+                               "bounds_m": [], "density": {"points": 0, "spacing_m": spacing_m, "capture": "aerial"}})

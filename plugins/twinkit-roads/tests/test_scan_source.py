@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from scan_fixtures import ROAD, SIDEWALK, aerial_lane, cambered_street, cross_mesh
+from scan_fixtures import ROAD, SIDEWALK, aerial_lane, cambered_street, cross_mesh, write_aerial_meta
 from twinkit_roads import scan
 from twinkit_roads.align import centreline_rmse, lane_lines
 
@@ -138,6 +138,7 @@ def test_scan_source_through_the_engine_then_the_carla_check(tmp_path):
     osm_to_opendrive's carla.Map check of its opendrive.xodr: source scan, lanes inside the site."""
     import json
 
+    from twinkit import artefacts as A
     from twinkit.mesh import Mesh, write_ply
     from twinkit.testing import run_plugin
 
@@ -147,8 +148,10 @@ def test_scan_source_through_the_engine_then_the_carla_check(tmp_path):
     mesh_p = tmp_path / "textured_mesh.ply"
     write_ply(mesh_p, Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
     np.save(tmp_path / "labels.npy", lab)
-    tj = {"lanes": [{"points": [[*p, 0.0] for p in t.tolist()]} for t in truth]}
-    (tmp_path / "roads_truth.json").write_text(json.dumps(tj))
+    A.write_roads_truth(tmp_path / "roads_truth.json",
+                        {"roads": [], "frame": "site", "lanes": [{"road": "cross", "direction": 1,
+                                                                  "points": [[*p, 0.0] for p in t.tolist()]}
+                                                                 for t in truth]})
     site = {"name": "cross", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
     out = run_plugin("road_source", "scan", tmp_path / "scan",
                      {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy",
@@ -210,7 +213,7 @@ def test_an_aerial_scan_without_curbs_finds_the_grey_lane_on_its_embankment(tmp_
     write_ply(mesh_p, Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
     np.save(tmp_path / "labels.npy", lab)
     meta = tmp_path / "points_meta.json"
-    meta.write_text(json.dumps({"density": {"spacing_m": 0.3, "capture": "aerial"}}))
+    write_aerial_meta(meta)
     site = {"name": "lane", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
     out = run_plugin("road_source", "scan", tmp_path / "scan",
                      {"in_textured_mesh_ply": mesh_p, "in_labels_npy": tmp_path / "labels.npy",
@@ -246,7 +249,7 @@ def _aerial_scan(tmp_path, name, v, f, lab, rgb, cloud, **params):
     write_ply(d / "textured_mesh.ply", Mesh(v, f, attrs={"red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2]}))
     write_ply(d / "points.ply", Mesh(cloud, None))
     np.save(d / "labels.npy", lab)
-    (d / "points_meta.json").write_text(json.dumps({"density": {"spacing_m": 0.3, "capture": "aerial"}}))
+    write_aerial_meta(d / "points_meta.json")
     site = {"name": "lane", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
     out = run_plugin("road_source", "scan", d / "scan",
                      {"in_textured_mesh_ply": d / "textured_mesh.ply", "in_labels_npy": d / "labels.npy",
@@ -568,3 +571,18 @@ def test_a_lane_under_a_low_overhang_is_off_the_scan_though_its_ground_is_there(
     assert chk["nudge"] or chk["narrow"] or chk["bad_points"]
     chk0 = scan.check_lanes(net, text, v2, f2, dataclasses.replace(p, lane_clear_m=0.0))
     assert not (chk0["nudge"] or chk0["narrow"] or chk0["bad_points"])
+
+
+def test_every_scan_parameter_says_what_it_does():
+    """Each road_source=scan parameter carries its one line of help (param(help=...)), not a # comment."""
+    from twinkit.ranges import help_of
+
+    missing = [f.name for f in dataclasses.fields(scan.ScanSourceParams) if not help_of(f)]
+    assert not missing, missing
+
+
+def test_the_lane_check_without_edge_bands_still_says_nothing_to_nudge(four_way):
+    """edge_band_m=0 (no narrowing) leaves narrow and nudge empty; the source's round reads both."""
+    v, f, lab, truth, net, text = four_way
+    chk = scan.check_lanes(net, text, v, f, scan.ScanSourceParams(edge_band_m=0.0))
+    assert chk["narrow"] == {} and chk["nudge"] == {}

@@ -151,6 +151,67 @@ STATUS = {S_OUT: "outside the voting lanes", S_AGREE: "agrees", S_RELABEL: "rela
           S_LEVEL: "lane type contradicts the surface level (curb)", S_VETOED: "lane vetoed (mostly disagrees)"}
 
 
+def _lane_vetoes(lanes: list[Lane], li: np.ndarray, inl: np.ndarray, status: np.ndarray, area: np.ndarray,
+                 max_disagreement: float, max_network_disagreement: float):
+    """Which lanes may not vote: (vetoed per lane, area per lane m2, its disagreeing fraction, its road's
+    disagreeing fraction, the network's disagreeing fraction, whether the whole network is vetoed)."""
+    # per lane: how much of its area disagrees with the scan; a mostly-wrong lane does not vote
+    nl = len(lanes)
+    # geometry only: a lane over a building or on the wrong side of a curb; a label the scan got wrong
+    # (a car voted on the pavement) is no sign of a wrong map and is left out of both sums
+    counted = inl & (li >= 0) & (status != S_NONGROUND_LABEL)
+    a_tot = np.bincount(li[counted], weights=area[counted], minlength=nl)
+    dis = counted & np.isin(status, (S_NONGROUND_GEOM, S_LEVEL))
+    a_dis = np.bincount(li[dis], weights=area[dis], minlength=nl)
+    frac = np.where(a_tot > 0, a_dis / np.maximum(a_tot, 1e-12), 0.0)
+    # ...and a road (all its lanes together) that mostly disagrees silences all its lanes
+    rid = np.array([int(ln.key[0]) for ln in lanes], np.int64)
+    _, rinv = np.unique(rid, return_inverse=True)
+    r_tot = np.bincount(rinv, weights=a_tot, minlength=len(set(rid.tolist())))
+    r_dis = np.bincount(rinv, weights=a_dis, minlength=len(r_tot))
+    road_frac = np.where(r_tot > 0, r_dis / np.maximum(r_tot, 1e-12), 0.0)[rinv]
+    vetoed_lane = (frac > max_disagreement) | (road_frac > max_disagreement)
+    # ...and a network whose carriageway does not lie on the scan's carriageway (a wrong or outdated OSM,
+    # a failed alignment) casts no vote anywhere: driving-like lanes of a right network lie on low ground
+    drv = np.array([ln.vote == L_ROAD for ln in lanes], bool)
+    network_frac = float(a_dis[drv].sum() / a_tot[drv].sum()) if nl and a_tot[drv].sum() > 0 else 0.0
+    network_vetoed = network_frac > max_network_disagreement
+    if network_vetoed:
+        vetoed_lane[:] = True
+    return vetoed_lane, a_tot, frac, road_frac, network_frac, network_vetoed
+
+
+def _grow_plateaus(v: np.ndarray, raised: np.ndarray, lv: np.ndarray, area: np.ndarray, new: np.ndarray,
+                   status: np.ndarray, relabel_from, cell_m: float, close_m: float, min_agree_m2: float) -> None:
+    """Relabel sidewalk the raised ground plateaus the sidewalk lanes agree on (``new``, ``status`` in place)."""
+    # raised ground plateaus: connected cells of a top-down raster of the raised ground vertices, small
+    # gaps (a bollard, a mesh defect, a car's wheel) closed; curbs to the carriageway and buildings separate
+    comp = plateaus(v, raised, cell_m, close_m)
+    seed = (lv == L_SIDEWALK) & np.isin(status, (S_AGREE, S_RELABEL))
+    agree_area = np.bincount(comp[seed], weights=area[seed], minlength=comp.max() + 1)
+    road_area = np.bincount(comp[raised & (lv == L_ROAD)], weights=area[raised & (lv == L_ROAD)],
+                            minlength=comp.max() + 1)
+    pave = (agree_area >= min_agree_m2) & (road_area < agree_area)
+    pave[0] = False  # 0: not on a plateau
+    grow = raised & pave[comp] & np.isin(new, [c for c in relabel_from if c not in (SIDEWALK, TERRAIN)]) & \
+        (status != S_VETOED) & (lv != L_ROAD)
+    new[grow] = SIDEWALK
+    status[grow & (status == S_OUT)] = S_RELABEL
+
+
+def _lane_info(lanes: list[Lane], a_tot: np.ndarray, frac: np.ndarray, road_frac: np.ndarray,
+               vetoed_lane: np.ndarray) -> list[dict]:
+    """Per lane, what the report shows: its key, type, vote, area, disagreement and veto."""
+    lane_info = []
+    for i, ln in enumerate(lanes):
+        lane_info.append({"road": int(ln.key[0]), "section": int(ln.key[1]), "lane": int(ln.key[2]), "type": ln.type,
+                          "votes": {NONE: None, L_ROAD: "road", L_SIDEWALK: "sidewalk"}[ln.vote],
+                          "junction": ln.junction, "area_m2": round(float(a_tot[i]), 2),
+                          "disagreement": round(float(frac[i]), 3),
+                          "road_disagreement": round(float(road_frac[i]), 3), "vetoed": bool(vetoed_lane[i] and ln.vote)})
+    return lane_info
+
+
 def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[Lane], grid, *,
                   normal_min_z: float = 0.9, max_height_m: float = 0.45, curb_min_m: float = 0.06,
                   curb_max_m: float = 0.35, cell_m: float = 0.5, window_m: float = 8.0, ground_pct: float = 5.0,
@@ -187,55 +248,17 @@ def road_evidence(v: np.ndarray, f: np.ndarray, labels: np.ndarray, lanes: list[
     ok = gl & level_ok
     status[ok & (labels == want)] = S_AGREE
     status[ok & (labels != want)] = S_RELABEL
-    # per lane: how much of its area disagrees with the scan; a mostly-wrong lane does not vote
-    nl = len(lanes)
-    # geometry only: a lane over a building or on the wrong side of a curb; a label the scan got wrong
-    # (a car voted on the pavement) is no sign of a wrong map and is left out of both sums
-    counted = inl & (li >= 0) & (status != S_NONGROUND_LABEL)
-    a_tot = np.bincount(li[counted], weights=area[counted], minlength=nl)
-    dis = counted & np.isin(status, (S_NONGROUND_GEOM, S_LEVEL))
-    a_dis = np.bincount(li[dis], weights=area[dis], minlength=nl)
-    frac = np.where(a_tot > 0, a_dis / np.maximum(a_tot, 1e-12), 0.0)
-    # ...and a road (all its lanes together) that mostly disagrees silences all its lanes
-    rid = np.array([int(ln.key[0]) for ln in lanes], np.int64)
-    _, rinv = np.unique(rid, return_inverse=True)
-    r_tot = np.bincount(rinv, weights=a_tot, minlength=len(set(rid.tolist())))
-    r_dis = np.bincount(rinv, weights=a_dis, minlength=len(r_tot))
-    road_frac = np.where(r_tot > 0, r_dis / np.maximum(r_tot, 1e-12), 0.0)[rinv]
-    vetoed_lane = (frac > max_disagreement) | (road_frac > max_disagreement)
-    # ...and a network whose carriageway does not lie on the scan's carriageway (a wrong or outdated OSM,
-    # a failed alignment) casts no vote anywhere: driving-like lanes of a right network lie on low ground
-    drv = np.array([ln.vote == L_ROAD for ln in lanes], bool)
-    network_frac = float(a_dis[drv].sum() / a_tot[drv].sum()) if nl and a_tot[drv].sum() > 0 else 0.0
-    network_vetoed = network_frac > max_network_disagreement
-    if network_vetoed:
-        vetoed_lane[:] = True
+    vetoed_lane, a_tot, frac, road_frac, network_frac, network_vetoed = _lane_vetoes(
+        lanes, li, inl, status, area, max_disagreement, max_network_disagreement)
     vet = inl & (li >= 0) & vetoed_lane[np.maximum(li, 0)] & np.isin(status, (S_AGREE, S_RELABEL))
     status[vet] = S_VETOED
     new = labels.copy()
     rel = status == S_RELABEL
     new[rel] = want[rel]
     if plateau:
-        # raised ground plateaus: connected cells of a top-down raster of the raised ground vertices, small
-        # gaps (a bollard, a mesh defect, a car's wheel) closed; curbs to the carriageway and buildings separate
-        comp = plateaus(v, raised, plateau_cell_m, plateau_close_m)
-        seed = (lv == L_SIDEWALK) & np.isin(status, (S_AGREE, S_RELABEL))
-        agree_area = np.bincount(comp[seed], weights=area[seed], minlength=comp.max() + 1)
-        road_area = np.bincount(comp[raised & (lv == L_ROAD)], weights=area[raised & (lv == L_ROAD)],
-                                minlength=comp.max() + 1)
-        pave = (agree_area >= plateau_min_agree_m2) & (road_area < agree_area)
-        pave[0] = False  # 0: not on a plateau
-        grow = raised & pave[comp] & np.isin(new, [c for c in relabel_from if c not in (SIDEWALK, TERRAIN)]) & \
-            (status != S_VETOED) & (lv != L_ROAD)
-        new[grow] = SIDEWALK
-        status[grow & (status == S_OUT)] = S_RELABEL
-    lane_info = []
-    for i, ln in enumerate(lanes):
-        lane_info.append({"road": int(ln.key[0]), "section": int(ln.key[1]), "lane": int(ln.key[2]), "type": ln.type,
-                          "votes": {NONE: None, L_ROAD: "road", L_SIDEWALK: "sidewalk"}[ln.vote],
-                          "junction": ln.junction, "area_m2": round(float(a_tot[i]), 2),
-                          "disagreement": round(float(frac[i]), 3),
-                          "road_disagreement": round(float(road_frac[i]), 3), "vetoed": bool(vetoed_lane[i] and ln.vote)})
+        _grow_plateaus(v, raised, lv, area, new, status, relabel_from, plateau_cell_m, plateau_close_m,
+                       plateau_min_agree_m2)
+    lane_info = _lane_info(lanes, a_tot, frac, road_frac, vetoed_lane)
     return Evidence(new, new != labels, lv, status, lane_info, h, ground, area, network_frac, network_vetoed)
 
 

@@ -82,14 +82,14 @@ def sec_roads(ctx) -> str:
         b, (w, h) = frame["bounds"], frame["size"]
         sx, sy = w / (b[2] - b[0]), h / (b[3] - b[1])
         svg = [f"<svg class=\"roads\" viewBox=\"0 0 {w} {h}\" xmlns=\"http://www.w3.org/2000/svg\">",
-               f"<image href=\"{frame['texture']}\" x=\"0\" y=\"0\" width=\"{w}\" height=\"{h}\" opacity=\"0.85\"/>"]
+               f"<image href=\"{ctx.url(frame['texture'])}\" x=\"0\" y=\"0\" width=\"{w}\" height=\"{h}\" opacity=\"0.85\"/>"]
         drawn = sorted((it for _, items in layers for it in items), key=lambda it: 0 if it[1] == "band" else 1)
         for pts, cls in drawn:  # bands first, lines over them
             if len(pts) < 2:
                 continue
             d = " ".join(f"{(x - b[0]) * sx:.1f},{(b[3] - y) * sy:.1f}" for x, y in pts)
             shape = "polygon" if cls == "band" else "polyline"
-            svg.append(f"<{shape} class=\"{cls}\" points=\"{d}\"/>")
+            svg.append(f"<{shape}{ctx.attr('class', cls)} points=\"{d}\"/>")
         svg.append("</svg>")
         keys = "<span class=\"key xodr\">OpenDRIVE driving-lane centre lines (band: paved lanes; thin: junctions)</span>" if any(
             c == "xodr" for c, _ in layers) else ""

@@ -2,7 +2,7 @@
 
 netconvert guesses traffic lights from OSM nodes: it puts every signal of an approach at the
 road's end, inside the lanes, 5 m up. This module finds the scanned traffic lights and signs in the
-labelled mesh (CityScapes trainIds 5 pole, 6 traffic light, 7 traffic sign), moves each
+labelled mesh (CityScapes trainIds 5 pole, 6 traffic light, 7 traffic sign; instances.py), moves each
 netconvert light group onto the scanned light that matches it and adds the scanned signs.
 
 How CARLA reads a signal (carla 0.9.16, LibCarla/source/carla/road/MapBuilder.cpp,
@@ -25,9 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twinkit.cityscapes import POLE
-from twinkit.cityscapes import TRAFFIC_LIGHT as LIGHT
-from twinkit.cityscapes import TRAFFIC_SIGN as SIGN
+# the scanned instances (instances.py); the place_signals step imports its finders from here
+from .instances import Instance, find_instances, find_pole_heads  # noqa: F401
 
 # SignalType::IsTrafficLight (LibCarla/source/carla/road/SignalType.cpp, carla 0.9.16)
 CARLA_LIGHT_TYPES = {"1000001", "1000002", "1000009", "1000010", "1000011", "1000007", "1000014", "1000015",
@@ -167,167 +166,6 @@ def reference_lines(root: ET.Element, step: float = 0.05) -> dict[str, RefLine]:
     return out
 
 
-# --------------------------------------------------------------------------- scanned instances
-
-
-@dataclass
-class Instance:
-    kind: str  # "light" | "sign"
-    centre: np.ndarray  # (3,) site frame
-    size: np.ndarray  # (3,) extents along the horizontal principal axes and z
-    vertices: int
-    height_m: float  # centre above the local ground
-    pole_vertices: int  # pole-labelled vertices under it
-    label: int
-    id: int = -1
-    rejected: str = ""
-    evidence: str = "label"  # "label": a cluster of its label; "pole_head": a pole carrying a head, unlabelled
-
-    def to_json(self) -> dict:
-        return {"id": self.id, "kind": self.kind, "label": self.label,
-                "position": [round(float(v), 3) for v in self.centre],
-                "size_m": [round(float(v), 3) for v in self.size], "vertices": self.vertices,
-                "height_above_ground_m": round(self.height_m, 3), "pole_vertices": self.pole_vertices,
-                "evidence": self.evidence,
-                **({"rejected": self.rejected} if self.rejected else {})}
-
-
-def _clusters(P: np.ndarray, link_m: float) -> list[np.ndarray]:
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-
-    if len(P) == 0:
-        return []
-    pairs = cKDTree(P).query_pairs(link_m, output_type="ndarray")
-    A = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(P), len(P)))
-    n, cc = connected_components(A, directed=False)
-    return [np.flatnonzero(cc == k) for k in range(n)]
-
-
-def find_instances(V: np.ndarray, labels: np.ndarray, *, link_m: float = 0.35, min_vertices: int = 12,
-                   min_height_m: float = 1.5, max_height_m: float = 8.0, max_size_m: float = 2.0,
-                   ground_radius_m: float = 3.0, pole_radius_m: float = 0.6, min_pole_vertices: int = 3,
-                   plate_depth_m: float = 0.12) -> tuple[list[Instance], list[Instance]]:
-    """Scanned traffic lights and signs: clusters of label-6 / label-7 vertices, checked in 3D.
-
-    A cluster is kept when it has ``min_vertices``, floats ``min_height_m``..``max_height_m`` above the
-    local ground (a low percentile of the mesh within ``ground_radius_m``), is no bigger than
-    ``max_size_m`` (a head or a plate, not a facade patch) and stands on a pole (``min_pole_vertices``
-    pole-labelled vertices below it within ``pole_radius_m``). A "light" cluster that is a flat
-    plate (thinner than ``plate_depth_m`` across its horizontal minor axis) is a sign: light heads
-    are boxes. Returns (kept, rejected).
-    """
-    from scipy.spatial import cKDTree
-
-    from twinkit.street.ground import LocalGround
-
-    labels = np.asarray(labels)
-    if len(labels) != len(V):
-        raise ValueError(f"{len(labels)} labels for {len(V)} vertices")
-    ground_at = LocalGround(V, window="disc", window_m=2 * ground_radius_m, pct=2).at
-    pole = V[labels == POLE]
-    ptree = cKDTree(pole[:, :2]) if len(pole) else None
-    kept, rejected = [], []
-    for lab, kind in ((LIGHT, "light"), (SIGN, "sign")):
-        idx = np.flatnonzero(labels == lab)
-        for comp in _clusters(V[idx], link_m):
-            P = V[idx[comp]]
-            c = P.mean(0)
-            xy = P[:, :2] - c[:2]
-            if len(P) >= 2:
-                w, vec = np.linalg.eigh(np.cov(xy.T) + 1e-12 * np.eye(2))
-                proj = xy @ vec
-                ext = proj.max(0) - proj.min(0)  # (minor, major)
-            else:
-                ext = np.zeros(2)
-            size = np.array([ext[1], ext[0], P[:, 2].max() - P[:, 2].min()])
-            ground = float(ground_at(c[:2])[0])
-            if np.isnan(ground):
-                ground = float(P[:, 2].min())
-            n_pole = 0
-            if ptree is not None:
-                cand = ptree.query_ball_point(c[:2], pole_radius_m)
-                if cand:
-                    z = pole[cand, 2]
-                    n_pole = int(((z > ground + 0.2) & (z < P[:, 2].min() + 0.2)).sum())
-            k = kind
-            if kind == "light" and len(P) >= min_vertices and ext[0] < plate_depth_m:
-                k = "sign"
-            inst = Instance(k, c, size, int(len(P)), float(c[2] - ground), n_pole, lab)
-            why = []
-            if len(P) < min_vertices:
-                why.append(f"{len(P)} vertices < {min_vertices}")
-            if not (min_height_m <= inst.height_m <= max_height_m):
-                why.append(f"{inst.height_m:.2f} m above ground, outside {min_height_m}..{max_height_m}")
-            if max(size) > max_size_m:
-                why.append(f"{max(size):.2f} m across > {max_size_m}")
-            if n_pole < min_pole_vertices:
-                why.append(f"{n_pole} pole vertices under it < {min_pole_vertices}")
-            if why:
-                inst.rejected = "; ".join(why)
-                rejected.append(inst)
-            else:
-                kept.append(inst)
-    kept.sort(key=lambda i: (i.kind, round(float(i.centre[0]), 1), round(float(i.centre[1]), 1)))
-    for i, inst in enumerate(kept):
-        inst.id = i
-    return kept, rejected
-
-
-def find_pole_heads(V: np.ndarray, labels: np.ndarray, known: list[Instance], *, link_m: float = 0.35,
-                    min_pole_vertices: int = 10, head_z_m: tuple[float, float] = (1.8, 4.5),
-                    axis_radius_m: float = 0.6, head_width_m: tuple[float, float] = (0.3, 1.0),
-                    clear_ring_m: tuple[float, float] = (0.8, 1.5), ground_radius_m: float = 3.0,
-                    known_m: float = 1.0) -> list[Instance]:
-    """Poles that carry a head, whatever the head is labelled: candidates for lights the labels miss.
-
-    A pole is a cluster of pole-labelled vertices (``min_pole_vertices``). Its *head* is every mesh
-    vertex within ``axis_radius_m`` of the pole's axis at ``head_z_m`` above the local ground. It counts
-    when the head is bulky (narrowest horizontal extent ``head_width_m[0]`` or more: a bare pole or a
-    sign plate is thinner; lamps carry theirs higher), small (widest extent at most ``head_width_m[1]``)
-    and free-standing (no vertex at head height ``clear_ring_m`` from the axis: not a tree crown, not a
-    facade). Poles within ``known_m`` of a light found by its label are left out. The head's
-    position is the centroid of its vertices not labelled as sign.
-    """
-    from twinkit.street.ground import LocalGround
-
-    labels = np.asarray(labels)
-    local = LocalGround(V, window="disc", window_m=2 * ground_radius_m, pct=2)
-    tree2 = local.tree
-    idx = np.flatnonzero(labels == POLE)
-    out = []
-    for comp in _clusters(V[idx], link_m):
-        if len(comp) < min_pole_vertices:
-            continue
-        c = np.median(V[idx[comp], :2], 0)
-        ground = float(local.at(c)[0])
-        if any(k.kind == "light" and np.hypot(*(k.centre[:2] - c)) <= known_m for k in known):
-            continue
-        ring = np.asarray(tree2.query_ball_point(c, clear_ring_m[1]), int)
-        h = V[ring, 2] - ground
-        r = np.hypot(V[ring, 0] - c[0], V[ring, 1] - c[1])
-        band = (h >= head_z_m[0]) & (h <= head_z_m[1])
-        if np.any(band & (r > clear_ring_m[0])):
-            continue
-        head = ring[band & (r <= axis_radius_m)]
-        if len(head) < 3:
-            continue
-        xy = V[head, :2] - V[head, :2].mean(0)
-        w, vec = np.linalg.eigh(np.cov(xy.T) + 1e-12 * np.eye(2))
-        proj = xy @ vec
-        ext = proj.max(0) - proj.min(0)  # (minor, major)
-        if not (head_width_m[0] <= ext[0] and ext[1] <= head_width_m[1]):
-            continue
-        body = head[labels[head] != SIGN]
-        P = V[body if len(body) >= 3 else head]
-        ctr = P.mean(0)
-        size = np.array([ext[1], ext[0], P[:, 2].max() - P[:, 2].min()])
-        out.append(Instance("light", ctr, size, int(len(P)), float(ctr[2] - ground), int(len(comp)), POLE,
-                            evidence="pole_head"))
-    return out
-
-
 # --------------------------------------------------------------------------- placing
 
 
@@ -441,35 +279,18 @@ def _move_signal(root: ET.Element, road_el: ET.Element, host_id: str, sig: ET.El
     hs.insert(n_sig, sig)
 
 
-def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 15.0, group_m: float = 2.0,
-                  carla_light_shift_m: float = 0.25, add_signs: bool = True,
-                  sign_max_road_m: float = 12.0, reach_m: float = 0.05, wrong_side_m: float = 6.0
-                  ) -> tuple[str, list[Placed], list[str]]:
-    """Move netconvert's light groups onto the scanned lights; add the scanned signs.
+def _light_groups(root: ET.Element, refs: dict[str, RefLine], group_m: float, shift_m: float
+                  ) -> tuple[list[tuple[ET.Element, ET.Element, np.ndarray]], list[list[int]]]:
+    """netconvert's traffic lights, (road element, signal element, CARLA xy), and their groups.
 
-    A *group* is the traffic-light signals of one road and orientation within ``group_m`` of each
-    other along s (netconvert writes one per lane and turn arrow, all at the road's end): one head.
-    Groups and scanned lights are paired by the Hungarian method on horizontal distance (labelled
-    lights first, then poles carrying an unlabelled head), pairs farther than ``gate_m`` refused; a
-    light on the other side of the reference line than the head's lanes costs ``wrong_side_m`` more
-    (lights stand at their lanes' kerb; overhead or far-side lights still pair when nothing else fits).
-    Each signal of a paired group gets the light's position in its own road's reference-line frame
-    (s, t, zOffset = head centre above the road), or, past the road's end, in the frame of the road
-    that holds it, with a signalReference left on its own road; its id, lanes (validity), type,
-    controller and orientation stay. Unpaired groups keep netconvert's guess.
+    A group is the lights of one road and orientation within ``group_m`` of each other along s
+    (indices into the lights list, in document order).
     """
-    from scipy.optimize import linear_sum_assignment
-
-    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
-    root = ET.fromstring(xodr_text, parser=parser)
-    refs = reference_lines(root)
-    log: list[str] = []
-    # ---- netconvert light groups
     sigs = []  # (road element, signal element, xy)
     for road in root.iter("road"):
         ref = refs[road.get("id")]
         for sig in road.iter("signal"):
-            sigs.append((road, sig, _signal_xy(ref, sig, carla_light_shift_m)))
+            sigs.append((road, sig, _signal_xy(ref, sig, shift_m)))
     lights = [x for x in sigs if x[1].get("type") in CARLA_LIGHT_TYPES]
     groups: list[list[int]] = []
     for i, (road, sig, xy) in enumerate(lights):
@@ -481,17 +302,35 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
                 break
         else:
             groups.append([i])
-    scan_lights = [inst for inst in instances if inst.kind == "light"]
-    placed: list[Placed] = []
-    pairs: dict[int, Instance] = {}
-    G = np.array([np.mean([lights[i][2] for i in g], 0) for g in groups]).reshape(-1, 2)
-    # the side of the reference line the head's lanes are on: a light stands at its lanes' kerb
-    # (right-hand traffic: right lanes, negative ids, and the right kerb; left-hand traffic mirrored)
+    return lights, groups
+
+
+def _lane_sides(lights: list, groups: list[list[int]]) -> list[int]:
+    """Per group, the side of the reference line its lanes are on: -1 right, +1 left, 0 both or none.
+
+    A light stands at its lanes' kerb (right-hand traffic: right lanes, negative ids, and the right
+    kerb; left-hand traffic mirrored).
+    """
     side = []
     for g in groups:
         ids = [int(v.get(k)) for i in g for v in lights[i][1].findall("validity") for k in ("fromLane", "toLane")]
         side.append(-1 if ids and max(ids) < 0 else (1 if ids and min(ids) > 0 else 0))
-    # labelled lights first; poles carrying an unlabelled head only for the heads still unpaired
+    return side
+
+
+def _pair_groups(lights: list, groups: list[list[int]], refs: dict[str, RefLine], scan_lights: list[Instance],
+                 gate_m: float, wrong_side_m: float) -> dict[int, Instance]:
+    """Group index -> the scanned light it moves onto (Hungarian method on horizontal distance).
+
+    Labelled lights first; poles carrying an unlabelled head only for the groups still unpaired.
+    Pairs farther than ``gate_m`` are refused; a light on the other side of the reference line than
+    the group's lanes costs ``wrong_side_m`` more.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    pairs: dict[int, Instance] = {}
+    G = np.array([np.mean([lights[i][2] for i in g], 0) for g in groups]).reshape(-1, 2)
+    side = _lane_sides(lights, groups)
     for evidence in ("label", "pole_head"):
         cand = [inst for inst in scan_lights if inst.evidence == evidence]
         free = [gi for gi in range(len(groups)) if gi not in pairs]
@@ -510,103 +349,156 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
         for r, c in zip(rows, cols):
             if D[r, c] <= gate_m:
                 pairs[free[int(r)]] = cand[int(c)]
+    return pairs
+
+
+def _light_record(road: ET.Element, sig: ET.Element, xy: np.ndarray) -> Placed:
+    """The record of a netconvert light as netconvert wrote it."""
+    return Placed(sig.get("id"), "light", road.get("id"), float(sig.get("s")), float(sig.get("t", 0.0)),
+                  float(sig.get("zOffset", 0.0)), sig.get("orientation", "+"), "netconvert",
+                  type=sig.get("type", ""), subtype=sig.get("subtype", ""),
+                  old_xy=[float(v) for v in xy], new_xy=[float(v) for v in xy])
+
+
+def _move_light(root: ET.Element, refs: dict[str, RefLine], road: ET.Element, sig: ET.Element, xy: np.ndarray,
+                inst: Instance, rec: Placed, shift_m: float, reach_m: float) -> None:
+    """Rewrite ``sig`` (s, t, zOffset; its road if need be) so that CARLA puts it on ``inst``; fill ``rec``."""
+    ref = refs[road.get("id")]
+    s, t, over = ref.project(inst.centre[:2])
+    # CARLA moves a light shift_m along its heading (road tangent + hOffset): write the point that far
+    # back so that the light lands on the scanned head
+    ho = float(sig.get("hOffset", 0.0))
+    h_app = float(np.interp(s, ref.s, ref.hdg))
+    s_w, t_w = s - shift_m * math.cos(ho), t - shift_m * math.sin(ho)
+    host = ref
+    if over > reach_m or not (0.0 <= s_w <= ref.length):
+        # CARLA clamps s to the road (Road::GetDirectedPointInNoLaneOffset), so a light beyond the
+        # approach's end cannot be written on it. Define the signal on the road whose frame holds
+        # the light, and keep a <signalReference> with the lanes it controls on the approach.
+        hb = _host(refs, inst.centre[:2], reach_m, exclude=ref.road)
+        if hb is None:
+            rec.note = f"scanned light {over:.2f} m beyond the road's end and on no other road: s clamped"
+            s_w = min(max(s_w, 0.0), ref.length)
+        else:
+            host, hs, ht = hb
+            hh = float(np.interp(hs, host.s, host.hdg))
+            ho = float(sig.get("hOffset", 0.0))
+            # keep the light's heading: the same direction measured from the host road's tangent
+            ho_new = (h_app + ho - hh + math.pi) % (2 * math.pi) - math.pi
+            s_w = hs - shift_m * math.cos(ho_new)
+            t_w = ht - shift_m * math.sin(ho_new)
+            _move_signal(root, road, host.road, sig, ho_new)
+            rec.host_road = host.road
+            rec.note = (f"scanned light {over:.2f} m beyond road {ref.road}'s end: signal defined on road "
+                        f"{host.road}, referenced from road {ref.road} with its lanes (signalReference)")
+    zoff = float(inst.centre[2]) - host.z(s_w)
+    sig.set("s", _f(s_w))
+    sig.set("t", _f(t_w))
+    sig.set("zOffset", f"{zoff:.3f}")
+    new_xy = _signal_xy(host, sig, shift_m)
+    rec.s, rec.t, rec.z_offset, rec.source = s_w, t_w, zoff, "scan"
+    rec.instance = inst.id
+    if inst.evidence == "pole_head":
+        rec.note = ((rec.note + "; ") if rec.note else "") + \
+            "a pole carrying an unlabelled head (no traffic-light label there)"
+    rec.instance_position = [round(float(v), 3) for v in inst.centre]
+    rec.instance_size = [round(float(v), 3) for v in inst.size]
+    rec.moved_m = float(np.hypot(*(new_xy - xy)))
+    rec.new_xy = [float(v) for v in new_xy]
+
+
+def _place_lights(root: ET.Element, refs: dict[str, RefLine], instances: list[Instance], log: list[str], *,
+                  gate_m: float, group_m: float, shift_m: float, reach_m: float, wrong_side_m: float
+                  ) -> list[Placed]:
+    """Move netconvert's light groups onto the scanned lights (in place in ``root``); one record per signal."""
+    lights, groups = _light_groups(root, refs, group_m, shift_m)
+    scan_lights = [inst for inst in instances if inst.kind == "light"]
+    pairs = _pair_groups(lights, groups, refs, scan_lights, gate_m, wrong_side_m)
+    placed: list[Placed] = []
     used = set()
     for gi, g in enumerate(groups):
         inst = pairs.get(gi)
         for i in g:
             road, sig, xy = lights[i]
-            ref = refs[road.get("id")]
-            rec = Placed(sig.get("id"), "light", road.get("id"), float(sig.get("s")), float(sig.get("t", 0.0)),
-                         float(sig.get("zOffset", 0.0)), sig.get("orientation", "+"), "netconvert",
-                         type=sig.get("type", ""), subtype=sig.get("subtype", ""),
-                         old_xy=[float(v) for v in xy], new_xy=[float(v) for v in xy])
+            rec = _light_record(road, sig, xy)
             if inst is None:
                 rec.note = "no scanned traffic light within the gate: netconvert's guess kept"
-                placed.append(rec)
-                continue
-            used.add(inst.id)
-            s, t, over = ref.project(inst.centre[:2])
-            # CARLA moves a light carla_light_shift_m along its heading (road tangent + hOffset): write the
-            # point that far back so that the light lands on the scanned head
-            ho = float(sig.get("hOffset", 0.0))
-            h_app = float(np.interp(s, ref.s, ref.hdg))
-            s_w, t_w = s - carla_light_shift_m * math.cos(ho), t - carla_light_shift_m * math.sin(ho)
-            host = ref
-            if over > reach_m or not (0.0 <= s_w <= ref.length):
-                # CARLA clamps s to the road (Road::GetDirectedPointInNoLaneOffset), so a light beyond the
-                # approach's end cannot be written on it. Define the signal on the road whose frame holds
-                # the light, and keep a <signalReference> with the lanes it controls on the approach.
-                hb = _host(refs, inst.centre[:2], reach_m, exclude=ref.road)
-                if hb is None:
-                    rec.note = f"scanned light {over:.2f} m beyond the road's end and on no other road: s clamped"
-                    s_w = min(max(s_w, 0.0), ref.length)
-                else:
-                    host, hs, ht = hb
-                    hh = float(np.interp(hs, host.s, host.hdg))
-                    ho = float(sig.get("hOffset", 0.0))
-                    # keep the light's heading: the same direction measured from the host road's tangent
-                    ho_new = (h_app + ho - hh + math.pi) % (2 * math.pi) - math.pi
-                    s_w = hs - carla_light_shift_m * math.cos(ho_new)
-                    t_w = ht - carla_light_shift_m * math.sin(ho_new)
-                    _move_signal(root, road, host.road, sig, ho_new)
-                    rec.host_road = host.road
-                    rec.note = (f"scanned light {over:.2f} m beyond road {ref.road}'s end: signal defined on road "
-                                f"{host.road}, referenced from road {ref.road} with its lanes (signalReference)")
-            zoff = float(inst.centre[2]) - host.z(s_w)
-            sig.set("s", _f(s_w))
-            sig.set("t", _f(t_w))
-            sig.set("zOffset", f"{zoff:.3f}")
-            ref = host
-            new_xy = _signal_xy(ref, sig, carla_light_shift_m)
-            rec.s, rec.t, rec.z_offset, rec.source = s_w, t_w, zoff, "scan"
-            rec.instance = inst.id
-            if inst.evidence == "pole_head":
-                rec.note = ((rec.note + "; ") if rec.note else "") + \
-                    "a pole carrying an unlabelled head (no traffic-light label there)"
-            rec.instance_position = [round(float(v), 3) for v in inst.centre]
-            rec.instance_size = [round(float(v), 3) for v in inst.size]
-            rec.moved_m = float(np.hypot(*(new_xy - xy)))
-            rec.new_xy = [float(v) for v in new_xy]
+            else:
+                used.add(inst.id)
+                _move_light(root, refs, road, sig, xy, inst, rec, shift_m, reach_m)
             placed.append(rec)
     for inst in scan_lights:
         if inst.id not in used and inst.evidence == "label":
             log.append(f"scanned traffic light {inst.id} at ({inst.centre[0]:.2f}, {inst.centre[1]:.2f}) matches no "
                        "netconvert light group (none left within the gate): not written")
-    # ---- signs
+    return placed
+
+
+def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Instance], log: list[str], *,
+               sign_max_road_m: float, reach_m: float) -> list[Placed]:
+    """Add a generic (type -1) signal per scanned sign on the road whose frame holds it; their records."""
+    outside = {k: r for k, r in refs.items() if r.junction == "-1" and (r.lanes_right or r.lanes_left)}
+    drivable = {k: r for k, r in refs.items() if r.lanes_right or r.lanes_left}
+    placed: list[Placed] = []
+    n = 0
+    for inst in (i for i in instances if i.kind == "sign"):
+        # the road whose frame holds the sign (CARLA clamps s): outside junctions first
+        best = _host(outside, inst.centre[:2], reach_m)
+        if best is None or abs(best[2]) > sign_max_road_m:
+            best = _host(drivable, inst.centre[:2], reach_m)
+        if best is None or abs(best[2]) > sign_max_road_m:
+            log.append(f"scanned sign {inst.id}: no road within {sign_max_road_m} m; not written")
+            continue
+        ref, s, t = best
+        s = min(max(s, 0.0), ref.length)
+        # right-hand traffic: a sign right of the reference line faces the lanes driving +s
+        orient, lanes = ("+", ref.lanes_right) if t < 0 else ("-", ref.lanes_left)
+        if not lanes:
+            orient, lanes = ("-", ref.lanes_left) if t < 0 else ("+", ref.lanes_right)
+        road_el = next(r for r in root.iter("road") if r.get("id") == ref.road)
+        sg = _signals_el(road_el)
+        sid = f"scan_sign_{n}"
+        n += 1
+        zoff = float(inst.centre[2]) - ref.z(s)
+        el = ET.SubElement(sg, "signal", {
+            "id": sid, "name": "twinkit_scan", "s": _f(s), "t": _f(t), "zOffset": f"{zoff:.3f}",
+            "orientation": orient, "dynamic": "no", "country": "OpenDRIVE", "type": UNKNOWN_SIGN_TYPE,
+            "subtype": "-1", "height": f"{float(inst.size[2]):.3f}", "width": f"{float(inst.size[0]):.3f}"})
+        if lanes:
+            ET.SubElement(el, "validity", {"fromLane": str(min(lanes)), "toLane": str(max(lanes))})
+        xy = ref.point(s, t)
+        placed.append(Placed(sid, "sign", ref.road, s, t, zoff, orient, "scan", 0.0, inst.id,
+                             [round(float(v), 3) for v in inst.centre], [round(float(v), 3) for v in inst.size],
+                             UNKNOWN_SIGN_TYPE, "-1", None, [float(v) for v in xy],
+                             "type not told from the scan: generic (-1)"))
+    return placed
+
+
+def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 15.0, group_m: float = 2.0,
+                  carla_light_shift_m: float = 0.25, add_signs: bool = True,
+                  sign_max_road_m: float = 12.0, reach_m: float = 0.05, wrong_side_m: float = 6.0
+                  ) -> tuple[str, list[Placed], list[str]]:
+    """Move netconvert's light groups onto the scanned lights; add the scanned signs.
+
+    A *group* is the traffic-light signals of one road and orientation within ``group_m`` of each
+    other along s (netconvert writes one per lane and turn arrow, all at the road's end): one head.
+    Groups and scanned lights are paired by the Hungarian method on horizontal distance (labelled
+    lights first, then poles carrying an unlabelled head), pairs farther than ``gate_m`` refused; a
+    light on the other side of the reference line than the head's lanes costs ``wrong_side_m`` more
+    (lights stand at their lanes' kerb; overhead or far-side lights still pair when nothing else fits).
+    Each signal of a paired group gets the light's position in its own road's reference-line frame
+    (s, t, zOffset = head centre above the road), or, past the road's end, in the frame of the road
+    that holds it, with a signalReference left on its own road; its id, lanes (validity), type,
+    controller and orientation stay. Unpaired groups keep netconvert's guess.
+    """
+    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    root = ET.fromstring(xodr_text, parser=parser)
+    refs = reference_lines(root)
+    log: list[str] = []
+    placed = _place_lights(root, refs, instances, log, gate_m=gate_m, group_m=group_m, shift_m=carla_light_shift_m,
+                           reach_m=reach_m, wrong_side_m=wrong_side_m)
     if add_signs:
-        outside = {k: r for k, r in refs.items() if r.junction == "-1" and (r.lanes_right or r.lanes_left)}
-        drivable = {k: r for k, r in refs.items() if r.lanes_right or r.lanes_left}
-        n = 0
-        for inst in (i for i in instances if i.kind == "sign"):
-            # the road whose frame holds the sign (CARLA clamps s): outside junctions first
-            best = _host(outside, inst.centre[:2], reach_m)
-            if best is None or abs(best[2]) > sign_max_road_m:
-                best = _host(drivable, inst.centre[:2], reach_m)
-            if best is None or abs(best[2]) > sign_max_road_m:
-                log.append(f"scanned sign {inst.id}: no road within {sign_max_road_m} m; not written")
-                continue
-            ref, s, t = best
-            s = min(max(s, 0.0), ref.length)
-            # right-hand traffic: a sign right of the reference line faces the lanes driving +s
-            orient, lanes = ("+", ref.lanes_right) if t < 0 else ("-", ref.lanes_left)
-            if not lanes:
-                orient, lanes = ("-", ref.lanes_left) if t < 0 else ("+", ref.lanes_right)
-            road_el = next(r for r in root.iter("road") if r.get("id") == ref.road)
-            sg = _signals_el(road_el)
-            sid = f"scan_sign_{n}"
-            n += 1
-            zoff = float(inst.centre[2]) - ref.z(s)
-            el = ET.SubElement(sg, "signal", {
-                "id": sid, "name": "twinkit_scan", "s": _f(s), "t": _f(t), "zOffset": f"{zoff:.3f}",
-                "orientation": orient, "dynamic": "no", "country": "OpenDRIVE", "type": UNKNOWN_SIGN_TYPE,
-                "subtype": "-1", "height": f"{float(inst.size[2]):.3f}", "width": f"{float(inst.size[0]):.3f}"})
-            if lanes:
-                ET.SubElement(el, "validity", {"fromLane": str(min(lanes)), "toLane": str(max(lanes))})
-            xy = ref.point(s, t)
-            placed.append(Placed(sid, "sign", ref.road, s, t, zoff, orient, "scan", 0.0, inst.id,
-                                 [round(float(v), 3) for v in inst.centre], [round(float(v), 3) for v in inst.size],
-                                 UNKNOWN_SIGN_TYPE, "-1", None, [float(v) for v in xy],
-                                 "type not told from the scan: generic (-1)"))
+        placed += _add_signs(root, refs, instances, log, sign_max_road_m=sign_max_road_m, reach_m=reach_m)
     for sg in root.iter("signals"):  # tidy the blocks we edited (4-space indent, as netconvert writes)
         ET.indent(sg, space="    ", level=2)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

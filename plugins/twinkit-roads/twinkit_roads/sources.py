@@ -208,3 +208,68 @@ def opendrive_source(params, ctx, *, out_opendrive_xodr: Path, out_reprojection_
             "scale": rep["similarity"]["scale"], "rotation_deg": rep["similarity"]["rotation_deg"],
             "lane_centres": rep["lane_centres"], "identity": rep["similarity"]["identity"]}
 
+
+
+def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: Path,
+                out_scan_roads_json: Path, out_scan_roads_png: Path, in_labels_npy: Path | None = None,
+                in_gt_labels_npy: Path | None = None, in_roads_truth_json: Path | None = None,
+                in_points_meta_json: Path | None = None, in_points_ply: Path | None = None) -> dict:
+    """Roads from the scan itself (no OSM): the labelled mesh's carriageway, curbs and sidewalks ->
+    lanes -> OpenDRIVE in the site frame (``opendrive.xodr``, checked by osm_to_opendrive like a map)."""
+    import json
+
+    from twinkit import artefacts as A
+
+    from .mesh2d import from_mesh
+    from .scan import (NoRoads, ScanSourceParams, build_network, choose_curbs, cloud_xy, draw_scan_roads,
+                       mark_source, point_spacing, read_labels, read_truth, scan_metrics, scan_report)
+
+    params = params or ScanSourceParams()
+    t0 = time.perf_counter()
+    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
+    which, src, labels = read_labels(params.labels, len(mesh.v), in_textured_mesh_ply.name, in_labels_npy,
+                                     in_gt_labels_npy, ctx.log)
+    spacing = point_spacing(in_points_meta_json, in_points_ply)
+    labels_for_mask, curbs = choose_curbs(labels, spacing, params, src, ctx.log)
+    use_cloud = not curbs and in_points_ply is not None and params.min_point_density > 0
+    points_xy = cloud_xy(in_points_ply) if use_cloud else None
+    frame = SiteFrame.from_site(ctx.site)
+    try:
+        net, info = build_network(mesh, labels_for_mask, labels, params, frame.proj_string(), out_opendrive_xodr,
+                                  ctx.log, curbs=curbs, spacing=spacing, points_xy=points_xy)
+    except NoRoads as exc:
+        return _scan_no_roads(exc, ctx, mesh, labels, which, frame, out_opendrive_xodr, out_scan_roads_json,
+                              out_scan_roads_png, t0)
+    text = mark_source(out_opendrive_xodr.read_text(encoding="utf-8"))
+    out_opendrive_xodr.write_text(text, encoding="utf-8")
+    truth = read_truth(in_roads_truth_json)
+    doc = scan_report(net, text, mesh, labels, which, src, info, params, truth)
+    draw_scan_roads(mesh.v, mesh.f, labels, net, text, out_scan_roads_png, truth=truth)
+    doc["total_s"] = round(time.perf_counter() - t0, 3)
+    out_scan_roads_json.write_text(json.dumps(doc, indent=1))
+    return scan_metrics(net, doc, which, params, ctx.log)
+
+
+def _scan_no_roads(exc, ctx, mesh, labels, which, frame, out_xodr: Path, out_json: Path, out_png: Path,
+                   t0: float) -> dict:
+    """No road in the scan: a map without roads, so the twin goes on without a road network (the exports and
+    the CARLA package without a map, as with road_source=none). Roads derived and then all dropped by the
+    checks (the scan shows carriageway, none of it held up) make the run degraded; a scan with no carriageway
+    at all (a park, a yard) is a twin without roads, said in a warning."""
+    import json
+
+    from .scan import draw_scan_roads, empty_map, empty_network, no_roads_report
+
+    out_xodr.write_text(empty_map(frame.proj_string()), encoding="utf-8")
+    why = str(exc)
+    draw_scan_roads(mesh.v, mesh.f, labels, empty_network(), out_xodr.read_text(encoding="utf-8"), out_png,
+                    note=f"no roads: {why}")
+    doc, metrics = no_roads_report(exc, which)
+    doc["total_s"] = metrics["total_s"] = round(time.perf_counter() - t0, 3)
+    out_json.write_text(json.dumps(doc, indent=1))
+    ctx.log.warning("road_source=scan: no roads: %s. The twin has no road network (the CARLA package has no map); "
+                    "give an OSM extract (site.inputs.osm) for one", why)
+    if exc.derived:
+        ctx.degraded(f"roads from the scan: none kept ({why})",
+                     "see scan_roads.png; give an OSM extract (site.inputs.osm) for the map")
+    return metrics

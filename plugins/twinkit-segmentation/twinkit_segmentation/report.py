@@ -39,54 +39,50 @@ def _colourise(im, lut):
     return im.convert("RGB")
 
 
-def sec_contact(ctx) -> str:
-    """Sample views next to their 2D predictions (and ground truth), paired by file stem."""
-    import numpy as np
+def _role(d: Path) -> int:
+    """1 for a folder of predictions / labels / ground truth (by its name), 0 for one of views."""
+    n = d.name.lower()
+    if any(k in n for k in ("pred", "seg", "mask", "label", "gt", "truth")):
+        return 1
+    return 0
 
+
+def _image_folders(ctx) -> tuple[dict[Path, dict[str, Path]], dict[Path, dict]]:
+    """The run's picture folders below the step folders: folder -> {file stem: file}, folder -> its step."""
     dirs: dict[Path, dict[str, Path]] = {}
     owner: dict[Path, dict] = {}
     for s, f in ((s, f) for s in ctx.steps for f in s["files"]):
         if f.suffix.lower() in _IMG_EXT and f.parent != s["dir"]:
             dirs.setdefault(f.parent, {})[f.stem] = f
             owner[f.parent] = s
+    return dirs, owner
 
-    def role(d: Path) -> int:
-        n = d.name.lower()
-        if any(k in n for k in ("pred", "seg", "mask", "label", "gt", "truth")):
-            return 1
-        return 0
 
-    views = [d for d in dirs if role(d) == 0]
+def _sheet_columns(dirs: dict[Path, dict[str, Path]]) -> list[Path]:
+    """The contact sheet's columns: the views folder, then the label folders sharing its stems
+    (predictions first); [] when there is nothing to pair."""
+    views = [d for d in dirs if _role(d) == 0]
     if not views:
-        return ""
+        return []
+
     # prefer rendered views when they have predictions; else the photos
     def score(d):
-        matches = sum(1 for o in dirs if o != d and role(o) == 1 and set(dirs[o]) & set(dirs[d]))
+        matches = sum(1 for o in dirs if o != d and _role(o) == 1 and set(dirs[o]) & set(dirs[d]))
         return (matches, "render" in d.name.lower() or "view" in d.name.lower(), len(dirs[d]))
 
     vdir = max(views, key=score)
-    others = [d for d in dirs if d != vdir and role(d) == 1 and set(dirs[d]) & set(dirs[vdir])]
+    others = [d for d in dirs if d != vdir and _role(d) == 1 and set(dirs[d]) & set(dirs[vdir])]
     others.sort(key=lambda d: (0 if "pred" in d.name.lower() else 1, str(d)))
     if not others:
-        return ""
-    stems = sorted(set(dirs[vdir]) & set().union(*(set(dirs[o]) for o in others)))
-    if len(stems) > CONTACT_ROWS:
-        idx = np.linspace(0, len(stems) - 1, CONTACT_ROWS).round().astype(int)
-        stems = [stems[i] for i in idx]
+        return []
+    return [vdir] + others
+
+
+def _draw_sheet(cols: list[Path], stems: list[str], dirs: dict[Path, dict[str, Path]], owner: dict[Path, dict], lut):
+    """The contact sheet (PIL RGB image): a row per stem, a column per folder, 320 px wide cells,
+    label pictures in CityScapes colours (``lut``)."""
     from PIL import Image, ImageDraw
 
-    lut = ctx.palette()
-    cols = [vdir] + others
-    parts = [f"{CONTACT_VERSION}|contact"] + [f"{d}|{st}|{ctx.file_key(dirs[d][st])}" for st in stems for d in cols
-                                              if st in dirs[d]]
-    cached = ctx.cache_dir / f"contact-{hashlib.sha256(chr(10).join(parts).encode()).hexdigest()[:20]}.jpg"
-    cap = (f"{len(stems)} sample views ({ctx.esc(owner[vdir].get('folder'))}/{ctx.esc(vdir.name)}) with "
-           + ", ".join(f"{ctx.esc(owner[o].get('folder'))}/{ctx.esc(o.name)}" for o in others))
-    html_out = "<div class=\"figs\">" + ctx.figure("img/contact_sheet.jpg", cap, ctx.legend()) + "</div>"
-    if cached.is_file():
-        ctx.touch(cached)
-        ctx.add_image(cached, "contact_sheet.jpg")
-        return html_out
     tw = 320
     cells = []
     th = 0
@@ -98,8 +94,8 @@ def sec_contact(ctx) -> str:
                 row.append(None)
                 continue
             with Image.open(f) as im:
-                im = _colourise(im, lut) if role(d) == 1 else im.convert("RGB")
-                im = im.resize((tw, max(1, round(im.height * tw / im.width))), Image.NEAREST if role(d) else Image.BILINEAR)
+                im = _colourise(im, lut) if _role(d) == 1 else im.convert("RGB")
+                im = im.resize((tw, max(1, round(im.height * tw / im.width))), Image.NEAREST if _role(d) else Image.BILINEAR)
             th = max(th, im.height)
             row.append(im)
         cells.append(row)
@@ -114,13 +110,39 @@ def sec_contact(ctx) -> str:
         for j, im in enumerate(row):
             if im is not None:
                 sheet.paste(im, (pad + j * (tw + pad), y + 14))
+    return sheet
+
+
+def sec_contact(ctx) -> str:
+    """Sample views next to their 2D predictions (and ground truth), paired by file stem."""
+    import numpy as np
+
+    dirs, owner = _image_folders(ctx)
+    cols = _sheet_columns(dirs)
+    if not cols:
+        return ""
+    vdir, others = cols[0], cols[1:]
+    stems = sorted(set(dirs[vdir]) & set().union(*(set(dirs[o]) for o in others)))
+    if len(stems) > CONTACT_ROWS:
+        idx = np.linspace(0, len(stems) - 1, CONTACT_ROWS).round().astype(int)
+        stems = [stems[i] for i in idx]
+    parts = [f"{CONTACT_VERSION}|contact"] + [f"{d}|{st}|{ctx.file_key(dirs[d][st])}" for st in stems for d in cols
+                                              if st in dirs[d]]
+    cached = ctx.cache_dir / f"contact-{hashlib.sha256(chr(10).join(parts).encode()).hexdigest()[:20]}.jpg"
+    cap = (f"{len(stems)} sample views ({ctx.esc(owner[vdir].get('folder'))}/{ctx.esc(vdir.name)}) with "
+           + ", ".join(f"{ctx.esc(owner[o].get('folder'))}/{ctx.esc(o.name)}" for o in others))
+    html_out = "<div class=\"figs\">" + ctx.figure("img/contact_sheet.jpg", cap, ctx.legend()) + "</div>"
+    if cached.is_file():
+        ctx.touch(cached)
+        ctx.add_image(cached, "contact_sheet.jpg")
+        return html_out
+    sheet = _draw_sheet(cols, stems, dirs, owner, ctx.palette())
     cached.parent.mkdir(parents=True, exist_ok=True)
     tmp = cached.with_name(f".{cached.stem}.{os.getpid()}.tmp.jpg")
     sheet.save(tmp, quality=88)
     tmp.replace(cached)
     ctx.add_image(cached, "contact_sheet.jpg")
     return html_out
-
 
 
 _SCORE_KEY = re.compile(r"(^|[_\-. ])(iou|f1)($|[_\-. ])", re.I)
@@ -188,6 +210,6 @@ def sec_seg_metrics(ctx) -> str:
             parts.append(ctx.table(["class"] + cols, rows))
         md = f.with_suffix(".md")
         if tables and md.is_file():
-            parts.append(f"<p class=\"dim\">also as text: <a href=\"{ctx.href(md)}\">"
-                         f"{ctx.esc(s.get('folder'))}/{ctx.esc(md.name)}</a></p>")
+            name = f"{s.get('folder')}/{md.name}"
+            parts.append(f"<p class=\"dim\">also as text: {ctx.link(ctx.href(md), name)}</p>")
     return "".join(parts)

@@ -37,9 +37,7 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     edge whose other side the trim removed are removed too (:func:`drop_hanging_faces`; an edge
     within ``hanging_tol_m`` of a plane is on it), so that the trim's boundary crosses a seam and
     never runs along it."""
-    from scipy.spatial import cKDTree
-    from twinkit.mesh import boundary_loops, components, fan_fill, remove_vertices
-    from twinkit.surface.cleanup import CleanOptions, trim_mask, vertex_cloud_distance
+    from twinkit.mesh import remove_vertices
 
     rep = {"band_m": band_m, "vertices_in_band": 0, "vertices_trimmed": 0, "vertices_kept_by_votes": 0,
            "vertices_dropped_by_votes": 0, "components_removed": 0, "hanging_faces_removed": 0, "holes_closed": 0}
@@ -52,11 +50,8 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
     N = normals[near] if normals is not None else None
     if len(P) == 0:
         return mesh, rep
-    tree = cKDTree(P)
     idx = np.flatnonzero(inb)
-    d = vertex_cloud_distance(X[idx], P, threads, tree)
-    opt = CleanOptions(max_dist_m=max_dist_m, gap_dist_m=gap_dist_m, gap_plane_m=gap_plane_m, threads=threads)
-    drop, _ = trim_mask(X[idx], d, P, N, opt, tree)
+    drop = _band_drop(X[idx], P, N, max_dist_m, gap_dist_m, gap_plane_m, threads)
     if votes is not None and len(votes) and (vote_radius_m > 0 or vote_reach_m > 0):
         drop = _apply_votes(X[idx], drop, votes, planes, band_m, vote_radius_m, vote_plane_m, vote_reach_m,
                             threads, rep)
@@ -69,30 +64,59 @@ def trim_seam_bands(mesh: Mesh, planes: list[tuple[int, float]], points: np.ndar
         closed_before = ids[~op]
         mesh = _with_attr(mesh, "_vid", vid)
     mesh = remove_vertices(mesh, full)
-    # small components touching a band (pieces the trim cut off)
     if min_component_faces > 0 and mesh.n_faces:
-        _, flab = components(mesh.n_vertices, mesh.faces)  # per-face component label
-        size = np.bincount(flab)
-        touch = np.zeros(len(size), bool)
-        touch[flab[near_planes(mesh.vertices, planes, band_m)[mesh.faces].any(axis=1)]] = True
-        small = touch & (size < min_component_faces)
-        if small.any():
-
-            rep["components_removed"] = int(small.sum())
-            mesh = compact(mesh, ~small[flab])
+        mesh = _drop_small_band_components(mesh, planes, band_m, min_component_faces, rep)
     if hanging_tol_m > 0:
         vid = mesh.attrs.pop("_vid")
         mesh, rep["hanging_faces_removed"] = drop_hanging_faces(mesh, planes, hanging_tol_m, closed_before, vid)
     if max_hole_edges >= 3 and mesh.n_faces:
-        inb = near_planes(mesh.vertices, planes, band_m)
-        loops = []
-        for lp in boundary_loops(mesh.faces):
-            if len(lp) <= max_hole_edges and inb[lp].any():
-                loops.extend(sub for sub in _simple_loops(lp) if len(sub) >= 3)
-        if loops:
-            mesh = fan_fill(mesh, loops, face_fill=-1, recompute_normals=False)
-        rep["holes_closed"] = len(loops)
+        mesh, rep["holes_closed"] = _close_band_holes(mesh, planes, band_m, max_hole_edges)
     return mesh, rep
+
+
+def _band_drop(Xb: np.ndarray, P: np.ndarray, N: np.ndarray | None, max_dist_m: float, gap_dist_m: float,
+               gap_plane_m: float, threads: int) -> np.ndarray:
+    """The clean-up's distance trim (and gap rule with normals ``N``) of the band vertices ``Xb`` (k, 3)
+    against the points ``P`` near the bands: (k,) bool, True = drop."""
+    from scipy.spatial import cKDTree
+    from twinkit.surface.cleanup import CleanOptions, trim_mask, vertex_cloud_distance
+
+    tree = cKDTree(P)
+    d = vertex_cloud_distance(Xb, P, threads, tree)
+    opt = CleanOptions(max_dist_m=max_dist_m, gap_dist_m=gap_dist_m, gap_plane_m=gap_plane_m, threads=threads)
+    drop, _ = trim_mask(Xb, d, P, N, opt, tree)
+    return drop
+
+
+def _drop_small_band_components(mesh: Mesh, planes, band_m: float, min_faces: int, rep: dict) -> Mesh:
+    """Remove the components under ``min_faces`` faces that touch a band (pieces the trim cut off);
+    their count goes to ``rep["components_removed"]``."""
+    from twinkit.mesh import components
+
+    _, flab = components(mesh.n_vertices, mesh.faces)  # per-face component label
+    size = np.bincount(flab)
+    touch = np.zeros(len(size), bool)
+    touch[flab[near_planes(mesh.vertices, planes, band_m)[mesh.faces].any(axis=1)]] = True
+    small = touch & (size < min_faces)
+    if small.any():
+        rep["components_removed"] = int(small.sum())
+        mesh = compact(mesh, ~small[flab])
+    return mesh
+
+
+def _close_band_holes(mesh: Mesh, planes, band_m: float, max_hole_edges: int) -> tuple[Mesh, int]:
+    """Fan-fill the holes of at most ``max_hole_edges`` edges that touch a band: (mesh, holes closed)."""
+    from twinkit.mesh import boundary_loops
+    from twinkit.street.holes import fan_fill
+
+    inb = near_planes(mesh.vertices, planes, band_m)
+    loops = []
+    for lp in boundary_loops(mesh.faces):
+        if len(lp) <= max_hole_edges and inb[lp].any():
+            loops.extend(sub for sub in _simple_loops(lp) if len(sub) >= 3)
+    if loops:
+        mesh = fan_fill(mesh, loops, face_fill=-1, recompute_normals=False)
+    return mesh, len(loops)
 
 
 def _along_border(mesh: Mesh, planes, tol_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

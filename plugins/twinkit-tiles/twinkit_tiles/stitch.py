@@ -279,7 +279,8 @@ def close_seam_holes(mesh: Mesh, planes: list[tuple[int, float]], max_edges: int
     paired, e.g. in trees or at the corner where four tiles meet): each loop with at most
     ``max_edges`` edges and at least one edge on a seam plane gets a fan around its centroid.
     Face attribute ``tile`` of the new faces is -1. Returns (mesh, loops closed)."""
-    from twinkit.mesh import boundary_loops, fan_fill
+    from twinkit.mesh import boundary_loops
+    from twinkit.street.holes import fan_fill
 
     if max_edges < 3 or mesh.n_faces == 0 or not planes:
         return mesh, 0

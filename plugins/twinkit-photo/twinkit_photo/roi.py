@@ -1,0 +1,63 @@
+"""The region of interest of a photo site: a box around the cameras, standing on the ground plane.
+
+Site frame throughout (metres when the georeference was scaled, else model units). The dense step keeps
+only what lies inside the box; roi.json is meant to be edited by hand (the thesis's manual step 3.8.2).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .georef import ransac_plane
+
+
+def ground_plane(C: np.ndarray, pts: np.ndarray, threshold_m: float) -> dict:
+    """The ground under the cameras: a RANSAC plane of the sparse points below the cameras near the walk,
+    else 1.6 m under the cameras' median height. ``C`` (n, 3) camera centres, ``pts`` (N, 3) sparse points.
+    Returns {"z_m" under the cameras' mean x, y, "normal", "source", ("inliers", "tilt_deg")}."""
+    ground = {"z_m": float(np.median(C[:, 2]) - 1.6), "normal": [0.0, 0.0, 1.0], "source": "cameras - 1.6 m"}
+    if len(pts) < 50:
+        return ground
+    near = pts[np.linalg.norm(pts[:, :2] - C[:, :2].mean(0), axis=1) < 3 * max(5.0, np.ptp(C[:, :2], 0).max())]
+    below = near[near[:, 2] < np.median(C[:, 2])]
+    plane, inl = ransac_plane(below if len(below) >= 30 else near, threshold_m,
+                              normal_hint=np.array([0, 0, 1.0]), max_angle_deg=20.0)
+    if plane is not None and inl.sum() >= 20:
+        nv, d = plane
+        cx, cy = C[:, :2].mean(0)
+        z0 = float(-(d + nv[0] * cx + nv[1] * cy) / nv[2])
+        ground = {"z_m": z0, "normal": nv.tolist(), "source": "RANSAC on the sparse points",
+                  "inliers": int(inl.sum()),
+                  "tilt_deg": float(np.degrees(np.arccos(min(1.0, abs(nv[2])))))}
+    return ground
+
+
+def roi_box(C: np.ndarray, pts: np.ndarray, ground_z: float, params) -> dict:
+    """{"min": [x, y, z], "max": [x, y, z]}: the cameras' extent plus ``margin_m``, grown to what the photos
+    look at (2nd-98th percentile of the sparse points within ``max_depth_m`` of a camera), from
+    ``below_ground_m`` under the ground to at least ``above_ground_m`` over it."""
+    lo = C[:, :2].min(0) - params.margin_m
+    hi = C[:, :2].max(0) + params.margin_m
+    zlo, zhi = ground_z - params.below_ground_m, ground_z + params.above_ground_m
+    if len(pts) >= 50:
+        from scipy.spatial import cKDTree
+
+        seen = pts
+        if params.max_depth_m > 0:
+            dist, _ = cKDTree(C).query(pts)
+            seen = pts[dist <= params.max_depth_m]
+        if len(seen) >= 50:
+            q0, q1 = np.quantile(seen, [0.02, 0.98], axis=0)
+            lo, hi = np.minimum(lo, q0[:2]), np.maximum(hi, q1[:2])
+            zhi = max(zhi, float(q1[2]))
+    return {"min": [float(lo[0]), float(lo[1]), zlo], "max": [float(hi[0]), float(hi[1]), zhi]}
+
+
+def roi_doc(C: np.ndarray, pts: np.ndarray, box: dict, ground: dict, max_depth_m: float, scaled: bool) -> dict:
+    """roi.json: the box, the ground, the dense step's depth limit, and how much of the sparse cloud is inside."""
+    inside = np.all((pts >= box["min"]) & (pts <= box["max"]), axis=1).mean() if len(pts) else 0.0
+    return {"_comment": "Edit this file to change what the dense step keeps (the thesis's manual step 3.8.2): "
+                        "box min/max in site metres, ground z, max_depth_m. The next run keeps your edit and "
+                        "re-runs only the steps after it.",
+            "box": box, "ground": ground, "max_depth_m": max_depth_m, "scaled": scaled,
+            "units": "metres" if scaled else "model units (unscaled)",
+            "cameras_xy_extent_m": np.ptp(C[:, :2], 0).tolist(), "sparse_inside_ratio": float(inside)}

@@ -1,0 +1,115 @@
+"""The one hole closer on the ground (twinkit.street.holes): its modes on small generated holes."""
+from __future__ import annotations
+
+import numpy as np
+
+from tests.mesh.meshes import grid_mesh
+from twinkit.mesh import compact, face_normals
+from twinkit.mesh.topology import boundary_loops
+from twinkit.street import holes
+from twinkit.surface.watertight import drop_test, open_edges
+
+
+def _holed(size_cells=(4, 3)):
+    """A 3 x 3 m ground grid (10 cm) at z = 0 with a rectangular hole of ``size_cells`` cells near its
+    middle: (vertices, faces, the hole's loop)."""
+    m = grid_mesh(31, size=3.0)
+    c = m.vertices[m.faces].mean(axis=1)
+    w, h = size_cells[0] * 0.1, size_cells[1] * 0.1
+    hole = (np.abs(c[:, 0] - 1.5) < w / 2) & (np.abs(c[:, 1] - 1.5) < h / 2)
+    m = compact(m, ~hole)
+    loops = [lp for lp in boundary_loops(m.faces) if len(lp) < 100]
+    assert len(loops) == 1
+    return m.vertices.copy(), m.faces, loops[0]
+
+
+def _closed(v, f, res):
+    faces, new = res
+    return np.vstack([v, new]), np.vstack([f, faces]), faces
+
+
+def test_ground_mode_follows_the_ground_and_leaves_no_open_border():
+    v, f, lp = _holed((12, 10))
+    v[lp, 2] = 0.2  # the border stands 20 cm up (a car's cut-off feet)
+    res = holes.close_hole(v, lp, lambda xy: np.full(len(xy), -0.05), 0.1)
+    assert res is not None
+    allv, allf, faces = _closed(v, f, res)
+    assert len(res[1]) > 50 and np.allclose(res[1][:, 2], -0.05)
+    assert (face_normals(allv, faces)[:, 2] > 0).all()  # counter-clockwise seen from above
+    inner = open_edges(allf)
+    assert not (np.abs(allv[inner].mean(axis=1)[:, :2] - 1.5) < 1.0).all(axis=1).any()
+
+
+def test_border_mode_adds_no_vertex():
+    v, f, lp = _holed()
+    for res in (holes.close_hole(v, lp), holes.close_hole(v, lp, lambda xy: np.zeros(len(xy)), 0.0)):
+        assert res is not None and len(res[1]) == 0 and len(res[0]) == len(lp) - 2
+        allv, allf, faces = _closed(v, f, res)
+        assert (face_normals(allv, faces)[:, 2] > 0).all()
+        gx, gy = np.meshgrid(np.arange(1.33, 1.68, 0.05), np.arange(1.38, 1.63, 0.05))
+        rays = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]  # over the 0.4 x 0.3 m hole
+        assert drop_test(allv, allf, rays).all()
+
+
+def test_a_loop_with_two_vertices_on_one_vertical_line_is_left_to_the_fan():
+    v, f, lp = _holed()
+    v[lp[1]] = [v[lp[0], 0], v[lp[0], 1], 0.25]
+    assert holes.close_hole(v, lp, lambda xy: np.zeros(len(xy)), 0.1) is None
+    faces, centre = holes.fan(v, lp)
+    assert len(faces) == len(lp) and (faces[:, 0] == len(v)).all()
+    assert np.allclose(centre[0], v[lp].mean(axis=0))
+    assert not len(np.setdiff1d(open_edges(np.vstack([f, faces])), open_edges(f)))  # no new open edge
+
+
+def test_only_a_hole_seen_from_above_is_one():
+    v, f, lp = _holed()
+    assert holes.is_hole_from_above(v, lp) and not holes.is_hole_from_above(v, lp[::-1])
+
+
+def test_patch_keeps_the_selected_triangles_and_only_the_points_they_use():
+    v, f, lp = _holed((6, 6))
+    g = np.arange(1.225, 1.8, 0.05)
+    xy = np.c_[np.repeat(g, len(g)), np.tile(g, len(g))]
+    xy = xy[(np.abs(xy - 1.5) < 0.27).all(axis=1)]
+    res = holes.patch(v, lp, xy, np.zeros(len(xy)), lambda t: (np.abs(t.mean(axis=1) - 1.5) < 0.3).all(axis=1))
+    assert res is not None
+    faces, new, cen = res
+    assert len(new) == len(xy) and len(cen) == len(faces)
+    allv = np.vstack([v, new])
+    assert (face_normals(allv, faces)[:, 2] > 0).all()
+    assert holes.patch(v, lp, xy, np.zeros(len(xy)), lambda t: np.zeros(len(t), bool)) is None
+
+
+def test_grid_patch_two_triangles_per_block():
+    cells = np.zeros((4, 5), bool)
+    cells[1:3, 1:4] = True  # 2 x 3 cells: 2 blocks of 2 x 2
+    v, f = holes.grid_patch(cells, np.full(cells.shape, 0.3), np.array([10.0, 20.0]), 0.5)
+    assert len(v) == 6 and len(f) == 4 and np.allclose(v[:, 2], 0.3)
+    assert np.allclose(v[:, :2].min(axis=0), [10.75, 20.75])
+    assert (face_normals(v, f)[:, 2] > 0).all()
+
+
+def test_close_ground_holes_closes_a_crack_and_leaves_a_hole_up_a_wall():
+    v, f, lp = _holed()
+    nv, nf, done, rep = holes.close_ground_holes(v, f, lambda xy: np.zeros(len(xy)))
+    assert rep["closed"] == 1 and len(done) == 1
+    v2 = v.copy()
+    v2[:, 2] = 2.0  # the same hole, 2 m above the ground
+    _, nf2, done2, rep2 = holes.close_ground_holes(v2, f, lambda xy: np.zeros(len(xy)))
+    assert rep2["closed"] == 0 and len(nf2) == 0 and rep2["left_open_m"]["not_on_the_ground"] > 0
+
+
+def test_span_fans_a_star_shaped_loop_and_ear_clips_another():
+    a = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    hexa = np.c_[np.cos(a), np.sin(a), 0.1 * np.sin(3 * a)]  # star-shaped round its centroid
+    lp = np.arange(8)[::-1]  # clockwise seen from above: a hole in an up-facing surface
+    faces, new = holes.span(hexa, lp)
+    assert len(new) == 1 and len(faces) == 8 and np.allclose(new[0], hexa.mean(axis=0))
+    ell = np.array([[0, 0, 0], [3, 0, 0], [3, 1, 0], [1, 1, 0], [1, 3, 0], [0, 3, 0]], float)  # an L
+    ell[2:4] += [0, 0, 0.2]
+    lp = np.arange(6)[::-1]
+    assert holes.close_hole(ell, lp, lambda xy: np.zeros(len(xy)), 0.25) is not None
+    faces, new = holes.span(ell, lp)  # no point sees the whole L: ear clipping, the loop's own vertices
+    assert len(new) == 0 and len(faces) == 4
+    assert (face_normals(ell, faces)[:, 2] > 0).all()
+    assert holes.span(ell, lp[::-1]) is None  # no hole seen from above
