@@ -136,115 +136,117 @@ def continuous(rays: np.ndarray, surf: np.ndarray, spacing_m: float, window_m: f
     return ok & (np.abs(surf - mean) <= tol_m)
 
 
-def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh_obj: Path, in_aligned_xodr: Path,
-                   in_points_ply: Path, out_drop_test_json: Path, out_drop_test_png: Path) -> dict:
-    """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
-    from twinkit import artefacts as A
-    from twinkit.jsonio import write_json
-    from twinkit.surface.watertight import Footprint, at_ground_level, draw_border, drop_test, ground_border
+def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene,
+               params: DropTestParams) -> tuple[dict, list, np.ndarray]:
+    """One lane type's rays against the mesh: the ``drop_test.json`` record of that lane type, its holes, its misses.
 
-    params = params or DropTestParams()
-    t0 = time.perf_counter()
-    mesh = A.read_textured_obj(in_textured_mesh_obj)
-    cloud = A.read_points(in_points_ply)
-    text = A.read_opendrive(in_aligned_xodr)
-    from twinkit.geo.xodr import from_scan as _from_scan
+    ``r``: (n, 3) float rays inside the site (x, y, the lane's height; site frame, m); ``need``: the target
+    share, %; ``mesh``: the static mesh (``vertices``, ``faces``) and ``scene`` its BVH. The record holds the
+    hits, the share, the falls through, the kerb-line misses, the continuity share and the miss clusters;
+    the holes are the clusters of rays that fall through (``_clusters`` records); the misses the (m, 3) rays
+    that miss.
+    """
+    from twinkit.surface.watertight import drop_test
 
-    from_scan = _from_scan(text)
-    try:
-        rays = lane_rays(text, params.spacing_m)
-    except Exception as exc:
-        raise InputError(f"{in_aligned_xodr}: carla.Map could not read it ({exc}); re-run the road steps") from None
-    fp = Footprint.from_points(cloud.vertices, fill_limit_m=params.fill_limit_m, margin_m=params.footprint_margin_m)
-    from twinkit.surface.closest import Surface
+    if kind == "sidewalk":
+        # no <height> in the map: the pavement may sit up to curb_max_m above the road
+        band = np.arange(0.0, params.curb_max_m + 1e-9, params.tol_m)
+        hit = np.zeros(len(r), bool)
+        for dz in band:
+            todo = ~hit
+            hit[todo] = drop_test(mesh.vertices, mesh.faces, r[todo] + [0, 0, dz], params.tol_m, scene=scene)
+    else:
+        hit = drop_test(mesh.vertices, mesh.faces, r, params.tol_m, scene=scene)
+    n = int(len(r))
+    pct = round(100.0 * float(hit.mean()), 3) if n else None
+    # a miss either falls through (no surface within fall_m of the lane: a hole) or finds the surface at
+    # another height (a kerb face under the lane's edge, a bump): told apart for the reader
+    falls = np.zeros(len(r), bool)
+    if (~hit).any():
+        falls[~hit] = ~drop_test(mesh.vertices, mesh.faces, r[~hit], params.fall_m, scene=scene)
+    kerb = kerb_line(r, hit, falls, mesh, scene, params)
+    holes = _clusters(r[falls, :2], 3 * params.spacing_m)
+    widest = max((h["extent_m"] + params.spacing_m for h in holes), default=0.0)
+    ok = (pct is None or pct >= need) and widest <= params.max_hole_m
+    nk = n - int(kerb.sum())
+    pct_ground = round(100.0 * float(hit.sum()) / nk, 3) if nk else None
+    # the surface's continuity (the ground a wheel rolls on, whatever the lane's one height says)
+    pct_cont = None
+    if n and params.local_window_m > 0:
+        cont = continuous(r, surface_under(scene, r, params.fall_m), params.spacing_m, params.local_window_m,
+                          params.tol_m)
+        pct_cont = round(100.0 * float((cont | hit).mean()), 3)
+    best = max([x for x in (pct_ground, pct_cont) if x is not None], default=None)
+    lane = {"rays": n, "hits": int(hit.sum()), "hit_pct": pct, "target_pct": need, "ok": ok,
+            "kerb_line": int(kerb.sum()),
+            "kerb_line_pct": round(100.0 * float(kerb.mean()), 3) if n else None,
+            "hit_pct_off_kerb_line": pct_ground,
+            "continuous_pct": pct_cont,
+            "ground_ok": (best is None or best >= need) and widest <= params.max_hole_m,
+            "fall_through": int(falls.sum()),
+            "fall_through_pct": round(100.0 * float(falls.mean()), 3) if n else None,
+            "miss_clusters": _clusters(r[~hit, :2], 3 * params.spacing_m)[:50],
+            "fall_through_clusters": holes[:50], "widest_hole_m": round(widest, 3)}
+    return lane, holes, r[~hit]
 
-    scene = Surface(mesh.vertices, mesh.faces).scene  # one BVH for every set of rays below
-    res: dict = {"spacing_m": params.spacing_m, "tol_m": params.tol_m, "lanes": {}}
-    misses = []
-    ok_all = True
-    for kind, need in (("driving", params.min_driving_pct), ("sidewalk", params.min_sidewalk_pct)):
-        r = rays[kind]
-        r = r[fp.inside(r)] if len(r) else r
-        if kind == "sidewalk":
-            # no <height> in the map: the pavement may sit up to curb_max_m above the road
-            band = np.arange(0.0, params.curb_max_m + 1e-9, params.tol_m)
-            hit = np.zeros(len(r), bool)
-            for dz in band:
-                todo = ~hit
-                hit[todo] = drop_test(mesh.vertices, mesh.faces, r[todo] + [0, 0, dz], params.tol_m, scene=scene)
-        else:
-            hit = drop_test(mesh.vertices, mesh.faces, r, params.tol_m, scene=scene)
-        n = int(len(r))
-        pct = round(100.0 * float(hit.mean()), 3) if n else None
-        # a miss either falls through (no surface within fall_m of the lane: a hole) or finds the surface at
-        # another height (a kerb face under the lane's edge, a bump): told apart for the reader
-        falls = np.zeros(len(r), bool)
-        if (~hit).any():
-            falls[~hit] = ~drop_test(mesh.vertices, mesh.faces, r[~hit], params.fall_m, scene=scene)
-        # a miss on a kerb line: the surface there stands a kerb above the lane, and the lane's height is
-        # found within one ray spacing beside it (the lane's edge runs a few cm over the kerb: where the map
-        # meets the scan, not a gap in the ground)
-        kerb = np.zeros(len(r), bool)
-        off = ~hit & ~falls
-        if off.any():
-            ro = r[off]
-            up = drop_test(mesh.vertices, mesh.faces, ro + [0, 0, (params.curb_max_m + params.tol_m) / 2],
-                           (params.curb_max_m + params.tol_m) / 2, scene=scene)
-            beside = np.zeros(len(ro), bool)
-            for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                todo = up & ~beside
-                beside[todo] = drop_test(mesh.vertices, mesh.faces,
-                                         ro[todo] + [dx * params.spacing_m, dy * params.spacing_m, 0], params.tol_m,
-                                         scene=scene)
-            kerb[np.flatnonzero(off)[up & beside]] = True
-        holes = _clusters(r[falls, :2], 3 * params.spacing_m)
-        widest = max((h["extent_m"] + params.spacing_m for h in holes), default=0.0)
-        ok = (pct is None or pct >= need) and widest <= params.max_hole_m
-        ok_all &= ok
-        nk = n - int(kerb.sum())
-        pct_ground = round(100.0 * float(hit.sum()) / nk, 3) if nk else None
-        # the surface's continuity (the ground a wheel rolls on, whatever the lane's one height says)
-        pct_cont = None
-        if n and params.local_window_m > 0:
-            cont = continuous(r, surface_under(scene, r, params.fall_m), params.spacing_m, params.local_window_m,
-                              params.tol_m)
-            pct_cont = round(100.0 * float((cont | hit).mean()), 3)
-        best = max([x for x in (pct_ground, pct_cont) if x is not None], default=None)
-        res["lanes"][kind] = {"rays": n, "hits": int(hit.sum()), "hit_pct": pct, "target_pct": need, "ok": ok,
-                              "kerb_line": int(kerb.sum()),
-                              "kerb_line_pct": round(100.0 * float(kerb.mean()), 3) if n else None,
-                              "hit_pct_off_kerb_line": pct_ground,
-                              "continuous_pct": pct_cont,
-                              "ground_ok": (best is None or best >= need) and widest <= params.max_hole_m,
-                              "fall_through": int(falls.sum()),
-                              "fall_through_pct": round(100.0 * float(falls.mean()), 3) if n else None,
-                              "miss_clusters": _clusters(r[~hit, :2], 3 * params.spacing_m)[:50],
-                              "fall_through_clusters": holes[:50], "widest_hole_m": round(widest, 3)}
-        misses.append(r[~hit])
-        if n and widest > params.max_hole_m:
-            wh = max(holes, key=lambda h: h["extent_m"])
-            ctx.log.warning("drop test: a hole %.2f m wide at (%.1f, %.1f) under a %s lane (more than %.2f m: a wheel or "
-                            "a foot drops in)", widest, wh["x"], wh["y"], kind, params.max_hole_m)
-        if n and not ok and pct < need:
-            ctx.log.warning("drop test: %.2f %% of %d rays over %s lanes find the ground (target %.1f %%; %.3f %% "
-                            "fall through, %.3f %% meet a kerb beside the lane's height (the lane's edge over the "
-                            "kerb), the others the surface at another height); largest gap at (%.1f, %.1f), see %s",
-                            pct, n, kind, need, res["lanes"][kind]["fall_through_pct"],
-                            res["lanes"][kind]["kerb_line_pct"],
-                            res["lanes"][kind]["miss_clusters"][0]["x"], res["lanes"][kind]["miss_clusters"][0]["y"],
-                            Path(out_drop_test_png).name)
-        elif n:
-            ctx.log.info("drop test: %.2f %% of %d rays over %s lanes find the ground", pct, n, kind)
-        else:
-            ctx.log.warning("drop test: no %s lane of the map lies inside the scanned site", kind)
-    res["ok"] = bool(ok_all)
-    for kind, lane in res["lanes"].items():  # a wheel or a foot drops in: the twin is not fit to drive on
-        # (misses on a kerb line are the map's lane edge over the scanned kerb: a warning, not a failed ground)
+
+def kerb_line(r: np.ndarray, hit: np.ndarray, falls: np.ndarray, mesh, scene, params: DropTestParams) -> np.ndarray:
+    """(n,) bool: the misses on a kerb line among rays ``r`` (n, 3), given their ``hit`` and ``falls`` (n,) bool.
+
+    A miss on a kerb line: the surface there stands a kerb above the lane, and the lane's height is found
+    within one ray spacing beside it (the lane's edge runs a few cm over the kerb: where the map meets the
+    scan, not a gap in the ground).
+    """
+    from twinkit.surface.watertight import drop_test
+
+    kerb = np.zeros(len(r), bool)
+    off = ~hit & ~falls
+    if off.any():
+        ro = r[off]
+        up = drop_test(mesh.vertices, mesh.faces, ro + [0, 0, (params.curb_max_m + params.tol_m) / 2],
+                       (params.curb_max_m + params.tol_m) / 2, scene=scene)
+        beside = np.zeros(len(ro), bool)
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            todo = up & ~beside
+            beside[todo] = drop_test(mesh.vertices, mesh.faces,
+                                     ro[todo] + [dx * params.spacing_m, dy * params.spacing_m, 0], params.tol_m,
+                                     scene=scene)
+        kerb[np.flatnonzero(off)[up & beside]] = True
+    return kerb
+
+
+def log_lane(log, kind: str, lane: dict, holes: list, params: DropTestParams, png_name: str) -> None:
+    """Log one lane type's result: a hole too wide, a share below its target, or the share."""
+    n, pct, need = lane["rays"], lane["hit_pct"], lane["target_pct"]
+    widest = max((h["extent_m"] + params.spacing_m for h in holes), default=0.0)
+    if n and widest > params.max_hole_m:
+        wh = max(holes, key=lambda h: h["extent_m"])
+        log.warning("drop test: a hole %.2f m wide at (%.1f, %.1f) under a %s lane (more than %.2f m: a wheel or "
+                    "a foot drops in)", widest, wh["x"], wh["y"], kind, params.max_hole_m)
+    if n and not lane["ok"] and pct < need:
+        log.warning("drop test: %.2f %% of %d rays over %s lanes find the ground (target %.1f %%; %.3f %% "
+                    "fall through, %.3f %% meet a kerb beside the lane's height (the lane's edge over the "
+                    "kerb), the others the surface at another height); largest gap at (%.1f, %.1f), see %s",
+                    pct, n, kind, need, lane["fall_through_pct"], lane["kerb_line_pct"],
+                    lane["miss_clusters"][0]["x"], lane["miss_clusters"][0]["y"], png_name)
+    elif n:
+        log.info("drop test: %.2f %% of %d rays over %s lanes find the ground", pct, n, kind)
+    else:
+        log.warning("drop test: no %s lane of the map lies inside the scanned site", kind)
+
+
+def degraded_lanes(res: dict, params: DropTestParams, png_name: str, from_scan: bool) -> list[tuple[str, str]]:
+    """(what, hint) for each lane type whose ground fails: a wheel or a foot drops in, not fit to drive on.
+
+    Misses on a kerb line are the map's lane edge over the scanned kerb: a warning, not a failed ground.
+    """
+    out = []
+    for kind, lane in res["lanes"].items():
         if lane["rays"] and not lane["ground_ok"]:
             hole = lane["widest_hole_m"] > params.max_hole_m
             misses_n = lane["rays"] - lane["hits"]
             at_height = misses_n - lane["fall_through"]  # the ground is there, at another height than the lane
-            hint = f"misses in orange in {Path(out_drop_test_png).name}"
+            hint = f"misses in orange in {png_name}"
             if hole:
                 hint += "; the clean step fills scan gaps up to steps.clean.fill_ground_max_gap_m"
             if misses_n and at_height > 0.5 * misses_n:
@@ -253,31 +255,32 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
             if from_scan:
                 hint += ("; the lanes were derived from the scan (road_source=scan): see scan_roads.png, or give an "
                          "OSM extract (site.inputs.osm) for the map")
-            ctx.degraded(f"drop test over {kind} lanes: {lane['hit_pct']:.2f} % of {lane['rays']} rays find the "
-                         f"ground (target {lane['target_pct']} %)"
-                         + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
-                            if hole else ""), hint)
-    gv = at_ground_level(mesh.vertices, cloud.vertices, cloud.normals)
-    border = ground_border(mesh.vertices, mesh.faces, fp, gv)
-    edges = border.pop("_edges")
-    res["open_border_at_ground_level"] = border
-    # open border over the driving lanes: edges (any height within 0.5 m of the ground) whose middle has a
-    # driving-lane ray within a ray spacing; chains of them are loops a wheel can catch on
-    drv = rays["driving"]
-    drv = drv[fp.inside(drv)] if len(drv) else drv
-    ein = edges["inside"]
+            out.append((f"drop test over {kind} lanes: {lane['hit_pct']:.2f} % of {lane['rays']} rays find the "
+                        f"ground (target {lane['target_pct']} %)"
+                        + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
+                           if hole else ""), hint))
+    return out
+
+
+def border_over_lanes(vertices: np.ndarray, ein: np.ndarray, drv: np.ndarray, spacing_m: float) -> dict:
+    """The open border over the driving lanes: its length, its chains and where they are (longest first).
+
+    ``ein``: (e, 2) int open border edges inside the site (any height within 0.5 m of the ground) into
+    ``vertices`` (v, 3) float; ``drv``: (n, 3) driving-lane rays inside the site. An edge counts when its
+    middle has a ray within ``spacing_m``; chains of them are loops a wheel can catch on.
+    """
     over_m, over_chains = 0.0, 0
     over_at: list[dict] = []
     if len(drv) and len(ein):
         from scipy.spatial import cKDTree
 
-        mid = mesh.vertices[ein].mean(axis=1)
+        mid = vertices[ein].mean(axis=1)
         dd, _ = cKDTree(drv[:, :2]).query(mid[:, :2], workers=-1)
-        over = dd <= params.spacing_m
+        over = dd <= spacing_m
         if over.any():
             from twinkit.surface.watertight import chains_of
 
-            seg = np.linalg.norm(mesh.vertices[ein[over, 0]] - mesh.vertices[ein[over, 1]], axis=1)
+            seg = np.linalg.norm(vertices[ein[over, 0]] - vertices[ein[over, 1]], axis=1)
             over_m = float(seg.sum())
             ch = chains_of(ein[over])
             over_chains = int(len(np.unique(ch)))
@@ -287,9 +290,47 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
                 over_at.append({"x": round(float(p[:, 0].mean()), 2), "y": round(float(p[:, 1].mean()), 2),
                                 "length_m": round(float(seg[k].sum()), 2),
                                 "z_min": round(float(p[:, 2].min()), 3), "z_max": round(float(p[:, 2].max()), 3)})
-    res["open_border_over_driving_lanes_m"] = round(over_m, 2)
-    res["open_chains_over_driving_lanes"] = over_chains
-    res["open_chains_over_driving_lanes_at"] = sorted(over_at, key=lambda c: -c["length_m"])[:20]
+    return {"open_border_over_driving_lanes_m": round(over_m, 2), "open_chains_over_driving_lanes": over_chains,
+            "open_chains_over_driving_lanes_at": sorted(over_at, key=lambda c: -c["length_m"])[:20]}
+
+
+def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh_obj: Path, in_aligned_xodr: Path,
+                   in_points_ply: Path, out_drop_test_json: Path, out_drop_test_png: Path) -> dict:
+    """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
+    from twinkit import artefacts as A
+    from twinkit.geo.xodr import from_scan
+    from twinkit.jsonio import write_json
+    from twinkit.surface.closest import Surface
+    from twinkit.surface.watertight import Footprint, at_ground_level, draw_border, ground_border
+
+    params = params or DropTestParams()
+    t0 = time.perf_counter()
+    mesh = A.read_textured_obj(in_textured_mesh_obj)
+    cloud = A.read_points(in_points_ply)
+    text = A.read_opendrive(in_aligned_xodr)
+    scan_lanes = from_scan(text)
+    try:
+        rays = lane_rays(text, params.spacing_m)
+    except Exception as exc:
+        raise InputError(f"{in_aligned_xodr}: carla.Map could not read it ({exc}); re-run the road steps") from None
+    fp = Footprint.from_points(cloud.vertices, fill_limit_m=params.fill_limit_m, margin_m=params.footprint_margin_m)
+    scene = Surface(mesh.vertices, mesh.faces).scene  # one BVH for every set of rays below
+    res: dict = {"spacing_m": params.spacing_m, "tol_m": params.tol_m, "lanes": {}}
+    png, misses = Path(out_drop_test_png).name, []
+    for kind, need in (("driving", params.min_driving_pct), ("sidewalk", params.min_sidewalk_pct)):
+        r = rays[kind][fp.inside(rays[kind])] if len(rays[kind]) else rays[kind]
+        res["lanes"][kind], holes, miss = check_lane(kind, r, need, mesh, scene, params)
+        misses.append(miss)
+        log_lane(ctx.log, kind, res["lanes"][kind], holes, params, png)
+    res["ok"] = bool(all(lane["ok"] for lane in res["lanes"].values()))
+    for what, hint in degraded_lanes(res, params, png, scan_lanes):
+        ctx.degraded(what, hint)
+    gv = at_ground_level(mesh.vertices, cloud.vertices, cloud.normals)
+    border = ground_border(mesh.vertices, mesh.faces, fp, gv)
+    edges = border.pop("_edges")
+    res["open_border_at_ground_level"] = border
+    drv = rays["driving"][fp.inside(rays["driving"])] if len(rays["driving"]) else rays["driving"]
+    res.update(border_over_lanes(mesh.vertices, edges["inside"], drv, params.spacing_m))
     d, s = res["lanes"]["driving"], res["lanes"]["sidewalk"]
     draw_border(out_drop_test_png, mesh.vertices, mesh.faces, edges, ground_face=gv[mesh.faces].all(axis=1),
                 misses=np.vstack(misses) if misses else None,
@@ -304,4 +345,4 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
             "driving_rays": d["rays"], "sidewalk_rays": s["rays"],
             "open_border_inside_m": border["inside_m"],
             "open_border_over_driving_lanes_m": res["open_border_over_driving_lanes_m"],
-            "open_chains_over_driving_lanes": over_chains, "seconds": res["seconds"]}
+            "open_chains_over_driving_lanes": res["open_chains_over_driving_lanes"], "seconds": res["seconds"]}

@@ -338,14 +338,91 @@ def _no_roads_map(xodr: Path) -> bool:
         return False
 
 
+def _package_names(params: CarlaPackageParams, ctx: StepContext) -> tuple[str, str]:
+    """(map name, package name): the params', else the site's name in CamelCase; checked against CARLA's rules."""
+    from .carla_pkg import PackageError, check_names
+
+    site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
+    map_name = params.map_name or _camel(site_name)
+    package = params.package or f"{map_name}Twin"
+    try:
+        check_names(package, map_name)
+    except PackageError as exc:
+        raise InputError(f"carla_package: {exc}") from None
+    return map_name, package
+
+
+def _map_spawn(text: str, xodr_name: str, map_name: str, frame, params: CarlaPackageParams):
+    """(carla.Map of ``text``, spawn points in the package's frame); an InputError when there are none."""
+    from .carla_frame import site_spawn
+    from .carla_pkg import PackageError, lane_map, spawn_points
+
+    try:
+        lanes = lane_map(text, map_name)
+        spawn = site_spawn(spawn_points(lanes, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
+                           frame)
+    except PackageError as exc:
+        raise InputError(f"carla_package: {exc}") from None
+    if not spawn:
+        raise InputError(f"{xodr_name}: carla.Map found no driving lane outside junctions; "
+                         f"check the OpenDRIVE (lanes of type 'driving')")
+    return lanes, spawn
+
+
+def _texture(in_twin_fbx: Path, cs) -> Path | None:
+    """The texture beside the FBX (.png, .jpg, .jpeg), else the class set's."""
+    fbx = Path(in_twin_fbx)
+    return next((fbx.with_suffix(e) for e in (".png", ".jpg", ".jpeg") if fbx.with_suffix(e).exists()), None) \
+        or cs.texture
+
+
+def _write_package(out: Path, params: CarlaPackageParams, ctx: StepContext, **kw):
+    """:func:`carla_pkg.write_package` with the params' options and Blender; its errors as the step's."""
+    from .carla_pkg import PackageError, write_package
+    from .fbx import FbxExportError, bpy_python
+
+    try:
+        return write_package(out, use_carla_materials=params.use_carla_materials, decals=params.decals,
+                             python=bpy_python(), log_path=Path(ctx.workdir) / "bpy.log",
+                             carla_version=params.carla_version, **kw)
+    except PackageError as exc:
+        raise InputError(f"carla_package: {exc}") from None
+    except FbxExportError as exc:
+        raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
+
+
+def _checked_summary(out: Path, package: str, expect_decals) -> dict:
+    """CARLA's import rules, read from its source (carla_contract): the package's summary, or a RuntimeError."""
+    from .carla_contract import check_package
+
+    rep = check_package(out, package, expect_decals=expect_decals)
+    if not rep.ok:
+        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
+                           + "\n  ".join(str(v) for v in rep.violations))
+    return rep.summary()
+
+
+def _package_metrics(summ: dict, placed: dict, actors: list, out: Path) -> dict:
+    """The metrics both kinds of package report: placed meshes, the contract's summary, the actors, the size."""
+    return {"map_meshes": placed["map_meshes"], "props": placed["props"], "faces_by_tag": summ["faces_by_tag"],
+            "wrong_terrain_share": summ["wrong_terrain_share"], "dropped_assets": summ["dropped_assets"],
+            "walkable_faces": summ["walkable_faces"], "decals": summ["decals"], "actors": len(actors),
+            "actor_blueprints": sorted({a["blueprint"] for a in actors if a["blueprint"]}),
+            "package_bytes": _size(out)}
+
+
 def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path,
                          in_class_meshes_dir: Path, out_carla_import_dir: Path, out_spawn_points_json: Path,
                          in_aligned_xodr: Path | None = None, in_site_json: Path | None = None,
                          in_movables_dir: Path | None = None) -> dict:
     """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points;
     the lifted movable objects as actors (actors.json, spawn_actors.py) and scanned props."""
-    from .carla_pkg import PackageError, check_names, lane_map, spawn_points, write_package, xodr_georeference
-    from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, site_spawn, write_frame_json
+    from twinkit.artefacts import read_opendrive
+
+    from .carla_actors import carla_actors, scanned_props, write_actor_files
+    from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, write_frame_json
+    from .carla_pkg import lane_map, xodr_georeference
+    from .movables.actors import load_actors
 
     params = params or CarlaPackageParams()
     t0 = time.perf_counter()
@@ -357,55 +434,25 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
         return _carla_props_only(params, ctx, in_twin_fbx=in_twin_fbx, in_class_meshes_dir=in_class_meshes_dir,
                                  out_carla_import_dir=out_carla_import_dir, out_spawn_points_json=out_spawn_points_json,
                                  in_site_json=in_site_json, in_movables_dir=in_movables_dir, t0=t0)
-    from twinkit.artefacts import read_opendrive
-
     xodr = Path(in_aligned_xodr)
     text = read_opendrive(xodr)
-    site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
     # the package is written in CARLA's frame (true north at the base point): carla_frame.py
     frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
                           params.geolocation_radius_m, params.geolocation_tolerance_m, ctx.log)
     site_geo, text = xodr_georeference(text), package_xodr(text, frame, xodr.name)
-    map_name = params.map_name or _camel(site_name)
-    package = params.package or f"{map_name}Twin"
-    try:
-        check_names(package, map_name)
-        lanes = lane_map(text, map_name)
-        spawn = site_spawn(spawn_points(lanes, params.spawn_spacing_m, params.spawn_height_m, params.skip_junctions),
-                           frame)
-    except PackageError as exc:
-        raise InputError(f"carla_package: {exc}") from None
-    if not spawn:
-        raise InputError(f"{xodr.name}: carla.Map found no driving lane outside junctions; "
-                         f"check the OpenDRIVE (lanes of type 'driving')")
+    map_name, package = _package_names(params, ctx)
+    lanes, spawn = _map_spawn(text, xodr.name, map_name, frame, params)
     cs = _load_set(in_class_meshes_dir)
-    fbx = Path(in_twin_fbx)
-    tex = next((fbx.with_suffix(e) for e in (".png", ".jpg", ".jpeg") if fbx.with_suffix(e).exists()), None)
-    if tex is None:
-        tex = cs.texture
+    tex = _texture(in_twin_fbx, cs)
     georef = _georef(ctx, in_site_json)
     out = Path(out_carla_import_dir)
-    from .carla_contract import check_package
-    from .fbx import FbxExportError, bpy_python
-
     work = Path(ctx.workdir) / "carla_frame_meshes"
     class_dir = package_class_dir(frame, cs, tex, work)
-    from .carla_actors import carla_actors, scanned_props, write_actor_files
-    from .movables.actors import load_actors
-
     mov_data, movables = load_actors(in_movables_dir)
     scanned = scanned_props(movables, map_name, frame, work / "scanned", tex.name if tex else None)
-    try:
-        pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=class_dir,
-                                    classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
-                                    use_carla_materials=params.use_carla_materials, georef=georef,
-                                    decals=params.decals, python=bpy_python(),
-                                    log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version,
-                                    frames=lambda g: readme_frames(frame, g), scanned=scanned)
-    except PackageError as exc:
-        raise InputError(f"carla_package: {exc}") from None
-    except FbxExportError as exc:
-        raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
+    pkg, placed = _write_package(out, params, ctx, package=package, map_name=map_name, class_dir=class_dir,
+                                 classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
+                                 georef=georef, frames=lambda g: readme_frames(frame, g), scanned=scanned)
     shutil.rmtree(work, ignore_errors=True)
     write_frame_json(out / "carla_frame.json", frame, site_geo)
     actors = carla_actors(mov_data.get("actors", []), frame, map_name)
@@ -414,20 +461,11 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
     lane_map((pkg / f"{map_name}.xodr").read_text(), map_name)
-    # CARLA's import rules, read from its source (carla_contract): a package that breaks one fails here
-    rep = check_package(out, package, expect_decals=params.decals)
-    if not rep.ok:
-        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
-                           + "\n  ".join(str(v) for v in rep.violations))
-    summ = rep.summary()
-    topo = lanes.topology()
-    return {"package": package, "map": map_name, "spawn_points": len(spawn), "topology_edges": len(topo),
-            "map_meshes": placed["map_meshes"], "props": placed["props"],
-            "faces_by_tag": summ["faces_by_tag"], "wrong_terrain_share": summ["wrong_terrain_share"],
-            "dropped_assets": summ["dropped_assets"], "walkable_faces": summ["walkable_faces"],
-            "decals": summ["decals"], "actors": len(actors),
-            "actor_blueprints": sorted({a["blueprint"] for a in actors if a["blueprint"]}),
-            "xodr_georeference": xodr_georeference(text), "package_bytes": _size(out),
+    summ = _checked_summary(out, package, params.decals)
+    m = _package_metrics(summ, placed, actors, out)
+    return {"package": package, "map": map_name, "spawn_points": len(spawn),
+            "topology_edges": len(lanes.topology()), **{k: v for k, v in m.items() if k != "package_bytes"},
+            "xodr_georeference": xodr_georeference(text), "package_bytes": m["package_bytes"],
             "frame": frame.to_json() if frame is not None else "site",
             "seconds": round(time.perf_counter() - t0, 2)}
 
@@ -441,22 +479,12 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     the traffic manager's binary from it; a map entry without one fails), so a map is not written;
     the README and ``spawn_points.json`` say so, and so does the log."""
     from .carla_actors import carla_actors, scanned_props, write_actor_files
-    from .carla_contract import check_package
-    from .carla_pkg import NO_MAP_NOTE, PackageError, check_names, write_package
-    from .fbx import FbxExportError, bpy_python
+    from .carla_pkg import NO_MAP_NOTE
     from .movables.actors import load_actors
 
-    site_name = str((getattr(ctx, "site", None) or {}).get("name") or "Site")
-    map_name = params.map_name or _camel(site_name)
-    package = params.package or f"{map_name}Twin"
-    try:
-        check_names(package, map_name)
-    except PackageError as exc:
-        raise InputError(f"carla_package: {exc}") from None
+    map_name, package = _package_names(params, ctx)
     cs = _load_set(in_class_meshes_dir)
-    fbx = Path(in_twin_fbx)
-    tex = next((fbx.with_suffix(e) for e in (".png", ".jpg", ".jpeg") if fbx.with_suffix(e).exists()), None) \
-        or cs.texture
+    tex = _texture(in_twin_fbx, cs)
     georef = _georef(ctx, in_site_json)
     out = Path(out_carla_import_dir)
     work = Path(ctx.workdir) / "carla_frame_meshes"
@@ -466,36 +494,21 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     frames = (f"The props are in the site frame (x east, y north, z up, metres, origin at the base point "
               f"({geo_text})); spawned at a map's origin they lie where the twin's coordinates put them. Unreal "
               f"mirrors y on import.")
-    try:
-        pkg, placed = write_package(out, package=package, map_name=map_name, class_dir=Path(cs.folder),
-                                    classes=cs.manifest["classes"], texture=tex, xodr_text=None, spawn=[],
-                                    use_carla_materials=params.use_carla_materials, georef=georef,
-                                    decals=params.decals, python=bpy_python(),
-                                    log_path=Path(ctx.workdir) / "bpy.log", carla_version=params.carla_version,
-                                    frames=lambda g: frames, scanned=scanned)
-    except PackageError as exc:
-        raise InputError(f"carla_package: {exc}") from None
-    except FbxExportError as exc:
-        raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
+    pkg, placed = _write_package(out, params, ctx, package=package, map_name=map_name, class_dir=Path(cs.folder),
+                                 classes=cs.manifest["classes"], texture=tex, xodr_text=None, spawn=[],
+                                 georef=georef, frames=lambda g: frames, scanned=scanned)
     shutil.rmtree(work, ignore_errors=True)
     actors = carla_actors(mov_data.get("actors", []), None, map_name)
     if in_movables_dir is not None:
         write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data, has_map=False)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
-    rep = check_package(out, package, expect_decals=None)
-    if not rep.ok:
-        raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
-                           + "\n  ".join(str(v) for v in rep.violations))
-    summ = rep.summary()
+    summ = _checked_summary(out, package, None)
     ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "
                     "class meshes are props (no spawn points, no drivable lanes; %s/README.md)", package,
                     len(placed["props"]), package)
     return {"package": package, "map": None, "opendrive": False, "note": NO_MAP_NOTE, "spawn_points": 0,
-            "topology_edges": 0, "map_meshes": [], "props": placed["props"], "faces_by_tag": summ["faces_by_tag"],
-            "wrong_terrain_share": summ["wrong_terrain_share"], "dropped_assets": summ["dropped_assets"],
-            "walkable_faces": summ["walkable_faces"], "decals": summ["decals"], "actors": len(actors),
-            "actor_blueprints": sorted({a["blueprint"] for a in actors if a["blueprint"]}),
-            "package_bytes": _size(out), "frame": "site", "seconds": round(time.perf_counter() - t0, 2)}
+            "topology_edges": 0, **_package_metrics(summ, {**placed, "map_meshes": []}, actors, out), "frame": "site",
+            "seconds": round(time.perf_counter() - t0, 2)}
 
 
 # ----------------------------------------------------------------------------- registration

@@ -140,3 +140,41 @@ def check_file_normals(points: np.ndarray, normals: np.ndarray, method: str = "a
                  "near_horizontal_down_before": round(down_share(n), 4),
                  "near_horizontal_down_after": round(down_share(out), 4), "min_share": min_share,
                  "kept_because": kept_why}
+
+
+def cloud_normals(pts: np.ndarray, raw, params, name: str, log) -> tuple[np.ndarray | None, str | None,
+                                                                          dict | None, dict | None]:
+    """The normals read_cloud writes: the file's (re-oriented or checked), else estimated ones, else none.
+
+    ``pts``: (n, 3) float64 points (site frame, m); ``raw``: the read cloud (its ``normals``, ``scanner``,
+    ``scanner_positions``); ``params``: :class:`~twinkit_pointcloud.params.ReadCloudParams`. Returns
+    (normals (n, 3) or None, their source "file" / "estimated" / None, the orientation record or None,
+    the file normals' check record or None); logs what it did under ``name``.
+    """
+    normals = raw.normals
+    normals_source = "file" if normals is not None else None
+    orientation = None
+    normals_check = None
+    if normals is not None and params.reorient_existing_normals:
+        normals, orientation = orient_normals(pts, normals, params.normals_orientation,
+                                              scanner_index=raw.scanner, scanner_positions=raw.scanner_positions)
+    elif normals is not None and params.file_normals_flip_share < 1:
+        normals, normals_check = check_file_normals(pts, normals, params.normals_orientation,
+                                                    scanner_index=raw.scanner,
+                                                    scanner_positions=raw.scanner_positions,
+                                                    min_share=params.file_normals_flip_share)
+        say = log.warning if normals_check["flipped"] else log.info
+        say("%s: normals from the file: %.1f %% point into the surface against a consistent orientation (%s)%s; "
+            "near-horizontal normals pointing down %.1f %% -> %.1f %%", name,
+            100 * normals_check["disagreeing_share"], normals_check["method"],
+            f", {normals_check['flipped']} flipped" if normals_check["flipped"] else
+            f", kept as they are ({normals_check['kept_because']})" if normals_check["kept_because"] else
+            ", kept as they are",
+            100 * normals_check["near_horizontal_down_before"], 100 * normals_check["near_horizontal_down_after"])
+    if normals is None and params.estimate_normals:
+        log.info("%s: no normals in the file: estimating them (k=%d)", name, params.normals_k)
+        normals = estimate_normals(pts, k=params.normals_k)
+        normals, orientation = orient_normals(pts, normals, params.normals_orientation,
+                                              scanner_index=raw.scanner, scanner_positions=raw.scanner_positions)
+        normals_source = "estimated"
+    return normals, normals_source, orientation, normals_check

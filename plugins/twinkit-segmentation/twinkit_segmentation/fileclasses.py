@@ -100,3 +100,27 @@ def summary(vertex_codes: np.ndarray, voting: np.ndarray, allowed_prior: np.ndar
     return {"vertices_with_class": int(voting.sum()), "vertices": int(len(vertex_codes)),
             "per_code": {f"{int(c)} {ASPRS_NAMES.get(int(c), 'user/reserved')}": int(k) for c, k in zip(codes, counts)},
             "against_file_before": round(b / max(nb, 1), 4), "against_file_after": round(a / max(na, 1), 4)}
+
+
+def vertex_file_classes(params, ctx, points_ply, vertices):
+    """(prior (n, 19) or None, voting (n,), per-vertex codes, info) from the cloud's own classes: the
+    classification of ``points_ply`` carried to the mesh's ``vertices`` (n, 3) (``params``: backproject's
+    ``file_classes``, ``file_class_spacings``, ``file_class_factor``); None and why where it is not used."""
+    if not params.file_classes:
+        return None, None, None, {"used": False, "why": "file_classes: false"}
+    if points_ply is None:
+        return None, None, None, {"used": False, "why": "no points.ply"}
+    got = read_point_classes(Path(points_ply))
+    if got is None:
+        return None, None, None, {"used": False, "why": "the cloud has no classification field"}
+    pts, codes = got
+    vcodes, spacing, reach = classes_on_vertices(pts, codes, vertices, params.file_class_spacings,
+                                                 max(1, int(getattr(ctx, "threads", 1) or 1)))
+    prior, voting = file_class_prior(vcodes, params.file_class_factor)
+    info = {"used": bool(voting.any()), "point_spacing_m": round(spacing, 4), "reach_m": round(reach, 4),
+            "factor": params.file_class_factor}
+    if not voting.any():
+        ctx.log.info("file classes: none of the cloud's classes (%s) says anything the labels use; not used",
+                     ", ".join(str(int(c)) for c in np.unique(codes)[:12]))
+        return None, None, None, dict(info, why="only silent codes (0 never classified, 1 unclassified, ...)")
+    return prior, voting, vcodes, info

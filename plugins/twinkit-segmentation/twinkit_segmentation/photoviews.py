@@ -176,3 +176,106 @@ def photo_view_image(path, cam: PhotoCamera, long_side_px: int, min_shift_px: fl
         return np.ascontiguousarray(img), K, None, False
     und, valid = undistort_image(img, cam.params, K, w, h, scale=(w / cam.width, h / cam.height))
     return und, K, valid, True
+
+
+def photo_view_id(image: str, used: set) -> str:
+    """A file-name-safe, unique view id for a photo ("photo_<stem>"); adds it to ``used``."""
+    import re
+    from pathlib import Path
+
+    base = "photo_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(image).with_suffix("").as_posix())
+    vid, k = base, 1
+    while vid in used:
+        vid, k = f"{base}_{k}", k + 1
+    used.add(vid)
+    return vid
+
+
+def photo_view_set(mesh, cams: list, photos_dir, cameras_json, long_side_px: int, min_coverage: float, out_dir,
+                   progress) -> tuple[list, list, dict]:
+    """Each registered photo as a view in ``out_dir``: ``<id>.png`` (undistorted, long side ``long_side_px``)
+    and ``<id>_vertex.npz`` (the mesh's vertex index per pixel (h, w) int, -1 none, rendered from the
+    photo's pose). ``cams``: ``cameras_site.json`` records. A photo whose pose sees the mesh in fewer than
+    ``min_coverage`` of its pixels is dropped. Returns (kept view records, dropped records, {undistorted:
+    count, max_distortion_px, load_seconds, render_seconds}); InputError on an unreadable photo or camera."""
+    import time
+    from pathlib import Path
+
+    from PIL import Image
+
+    from twinkit import InputError
+
+    from .render import Renderer
+
+    kept: list = []
+    dropped: list = []
+    renderers: dict = {}
+    t_load = t_render = 0.0
+    n_undistorted = 0
+    shift = 0.0
+    used_ids: set = set()
+    try:
+        for c in progress(cams, total=len(cams), desc="photo views"):
+            try:
+                cam = PhotoCamera.from_json(c)
+            except (KeyError, ValueError) as exc:
+                raise InputError(f"{cameras_json}: camera of {c.get('image', '?')}: {exc}") from None
+            path = Path(photos_dir) / cam.image
+            t1 = time.perf_counter()
+            try:
+                img, K, valid, undist = photo_view_image(path, cam, long_side_px)
+            except OSError as exc:
+                raise InputError(f"{path}: cannot read the photo ({exc}); put the photos georeference used "
+                                 f"in {photos_dir}, or re-run sfm") from None
+            except ValueError as exc:
+                raise InputError(f"{path}: {exc}; use the photos the SfM registered") from None
+            t_load += time.perf_counter() - t1
+            h, w = img.shape[:2]
+            dist_px = max_distortion_px(cam.params, cam.width, cam.height, w / cam.width)
+            shift = max(shift, dist_px)
+            if (w, h) not in renderers:  # the vertex map only: no texture needed
+                renderers[(w, h)] = Renderer(mesh.vertices, mesh.faces, None, None, w, h)
+            t1 = time.perf_counter()
+            _, vertex = renderers[(w, h)].render(view_matrix_opencv(cam.R_wc, cam.center),
+                                                 projection_from_K(K, w, h))
+            t_render += time.perf_counter() - t1
+            if valid is not None:
+                vertex[~valid] = -1  # no photo pixel there after undistortion
+            coverage = float((vertex >= 0).mean())
+            vid = photo_view_id(cam.image, used_ids)
+            if coverage < min_coverage:
+                dropped.append({"id": vid, "image": cam.image, "reason": "off_mesh", "coverage": round(coverage, 4)})
+                continue
+            n_undistorted += int(undist)
+            Image.fromarray(img).save(out_dir / f"{vid}.png", compress_level=1)
+            np.savez_compressed(out_dir / f"{vid}_vertex.npz", vertex=vertex)
+            kept.append({"id": vid, "sampler": "photo", "image": cam.image, "width": w, "height": h,
+                         "K": K.round(4).tolist(), "R_world_from_camera": cam.R_wc.tolist(),
+                         "center": cam.center.tolist(), "undistorted": bool(undist),
+                         "max_distortion_px": round(dist_px, 3),
+                         "empty_fraction": round(1 - coverage, 4)})
+    finally:
+        for r in renderers.values():
+            r.release()
+    return kept, dropped, {"undistorted": n_undistorted, "max_distortion_px": shift, "load_seconds": t_load,
+                           "render_seconds": t_render}
+
+
+def photo_summary(kept: list, dropped: list, cams: list, stats: dict, min_coverage: float, log) -> dict:
+    """Log the photo views kept and dropped (a warning when most photos miss the mesh); their metrics."""
+    n_photo = len(kept)
+    off = [d for d in dropped if d["reason"] == "off_mesh"]
+    sizes = sorted({(v["width"], v["height"]) for v in kept})
+    shift = stats["max_distortion_px"]
+    log.info("photo views: %d of %d registered photos kept at %s px (%d of them undistorted; largest "
+             "distortion %.2f px, resampled from 0.25 px), %d dropped (the pose sees the mesh in < %.0f %% of the "
+             "pixels)", n_photo, len(cams), ", ".join(f"{a}x{b}" for a, b in sizes) or "-", stats["undistorted"],
+             shift, len(off), 100 * min_coverage)
+    if cams and len(off) > len(cams) / 2:
+        log.warning("photo views: %d of %d photos miss the mesh; check the georeference (cameras_site.json) "
+                    "against the mesh", len(off), len(cams))
+    return {"photos": len(cams), "photo_views": n_photo, "dropped_off_mesh": len(off),
+            "undistorted": stats["undistorted"], "max_distortion_px": round(shift, 3),
+            "photo_sizes": [list(s) for s in sizes],
+            "photo_load_seconds": round(stats["load_seconds"], 3),
+            "photo_render_seconds": round(stats["render_seconds"], 3)}

@@ -186,3 +186,78 @@ def load_texture(path) -> np.ndarray:
     Image.MAX_IMAGE_PIXELS = None
     with Image.open(path) as im:
         return np.asarray(im.convert("RGB"))
+
+
+def render_view_set(mesh, tex, views: list, out_dir, max_empty_fraction: float, ctx,
+                     fill_holes: bool = True, max_hole_px: float = 16.0):
+    """Render sampled views (views.json records) into ``out_dir``, holes in the ground filled (see
+    ``RenderParams``); (kept, dropped, render seconds, hole pixels of the kept views)."""
+    import time
+    from pathlib import Path
+
+    from PIL import Image
+
+    from twinkit_segmentation.views import view_matrices
+
+    out_dir = Path(out_dir)
+
+    renderers: dict = {}
+    kept, dropped = [], []
+    t_render = 0.0
+    hole_px = 0
+    try:
+        for v in ctx.progress(views, total=len(views), desc="render"):
+            size = (int(v["width"]), int(v["height"]))
+            if size not in renderers:
+                renderers[size] = Renderer(mesh.vertices, mesh.faces, mesh.corner_uv, tex, *size)
+            r = renderers[size]
+            vm, pm = view_matrices(v)
+            t1 = time.perf_counter()
+            rgb, vertex = r.render(vm, pm)
+            t_render += time.perf_counter() - t1
+            empty = float((vertex < 0).mean())
+            if empty > max_empty_fraction:
+                dropped.append({"id": v["id"], "empty_fraction": round(empty, 4)})
+                continue
+            hole_mask = ground_holes(vertex >= 0, below_horizon(vm, pm, *size), max_hole_px)
+            holes = int(hole_mask.sum())
+            hole_px += holes
+            if fill_holes:
+                fill_from_nearest(rgb, hole_mask, vertex >= 0)
+            Image.fromarray(rgb).save(out_dir / f"{v['id']}.png", compress_level=1)
+            np.savez_compressed(out_dir / f"{v['id']}_vertex.npz", vertex=vertex)
+            on = vertex >= 0
+            signal = float(rgb[on].astype(np.float32).mean(axis=1).std()) if on.any() else 0.0
+            kept.append(dict(v, empty_fraction=round(empty, 4), hole_fraction=round(holes / vertex.size, 4),
+                             signal_std=round(signal, 2)))
+    finally:
+        for r in renderers.values():
+            r.release()
+    return kept, dropped, t_render, hole_px
+
+
+def view_signal(kept: list, min_std: float, max_blank_share: float, ctx) -> dict:
+    """How much the kept views show (their ``signal_std``); too many blank views: degraded, with a hint."""
+    stds = np.array([float(v.get("signal_std", 0.0)) for v in kept])
+    if not len(stds):
+        return {}
+    blank = float((stds < min_std).mean())
+    out = {"signal_std_median": round(float(np.median(stds)), 2), "blank_views": int((stds < min_std).sum()),
+           "blank_share": round(blank, 4)}
+    if blank > max_blank_share:
+        ctx.degraded(f"{100 * blank:.0f} % of the {len(stds)} views are blank (grey level varies by less than "
+                     f"{min_std:g} over the mesh; median {out['signal_std_median']:g}): the 2D labels cannot be trusted",
+                     "a cloud without colours: keep bake_texture colourless at auto (intensity or shaded), "
+                     "not grey; else check the texture (docs/pointcloud.md 'Clouds without colour')")
+    elif blank > 0.2:
+        ctx.log.warning("%.0f %% of the %d views are nearly blank (grey level std < %g)", 100 * blank, len(stds),
+                        min_std)
+    return out
+
+
+def per_sampler(kept: list) -> dict:
+    """The kept views counted per sampler ({sampler: views})."""
+    per: dict = {}
+    for v in kept:
+        per[v["sampler"]] = per.get(v["sampler"], 0) + 1
+    return per

@@ -336,80 +336,40 @@ def reconstruct_tile(params: ReconstructTileParams, ctx, *, in_tile_points_dir: 
 def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_mesh_ply: list, in_points_ply: Path,
                 out_clean_mesh_ply: Path, out_tile_seams_json: Path, in_seam_votes_npz: list | None = None) -> dict:
     """Stitch the tile meshes into one crack-free mesh (clean_mesh.ply, read by simplify and bake_texture)."""
-    import numpy as np
-    from twinkit.mesh import read_ply
     from twinkit.surface.measure import Measure
+    from twinkit.surface.watertight import ground_border_report
 
-    from .edges import edge_counts, seam_planes
+    from .edges import seam_planes
+    from .merge import (fill_ground, log_merge, merge_metrics, merge_report, near_lines_report, open_seams,
+                        read_tile_meshes, seams_before, tile_trim, trim_bands)
     from .seam_map import seam_map_png
-    from .seam_stats import (faces_outside_core, open_near_line_sets, open_seam_runs, seam_border_length,
-                             seam_boundary_edges)
-    from .seam_trim import trim_seam_bands
-    from .stitch import _concat, close_seam_holes, merge_grid
+    from .seam_stats import faces_outside_core, open_seam_runs, seam_boundary_edges
+    from .stitch import close_seam_holes, merge_grid
 
     params = params or MergeTilesParams()
-    plan = json.loads(Path(in_tiles_json).read_text())
-    tiles = plan["items"]
+    tiles = json.loads(Path(in_tiles_json).read_text())["items"]
     paths = in_tile_mesh_ply if isinstance(in_tile_mesh_ply, list) else [in_tile_mesh_ply]
     if len(paths) != len(tiles):
         raise _input_error(f"{Path(in_tiles_json).name}: {len(tiles)} tiles but {len(paths)} tile meshes; "
                            f"re-run the tile steps")
+    threads = max(1, int(getattr(ctx, "threads", 1) or 1))
     with Measure() as meas:
-        meshes = [read_ply(p) for p in paths]
-        for m in meshes:
-            if m.faces is None:
-                m.faces = np.zeros((0, 3), np.int64)
-        keep = [k for k, m in enumerate(meshes) if m.n_faces]
-        if not keep:
-            raise _input_error("merge_tiles: every tile is empty; check the cloud and max_dist_m")
-        tiles_k = [tiles[k] for k in keep]
-        meshes_k = [meshes[k] for k in keep]
+        keep, tiles_k, meshes_k = read_tile_meshes(paths, tiles)
         planes = seam_planes(tiles)
-        cat = meshes_k[0]
-        for m in meshes_k[1:]:
-            cat = _concat(cat, m)
-        before = seam_boundary_edges(cat, planes, params.seam_tol_m)
-        seam_len = seam_border_length(cat, planes, params.seam_tol_m) / 2  # each tile brings one border
-        before_total = edge_counts(cat.faces)
-        del cat
+        before, seam_len, before_total = seams_before(meshes_k, planes, params.seam_tol_m)
         merged, seams = merge_grid(tiles_k, meshes_k, params.max_gap_m, log=ctx.log)
         after_zipper = seam_boundary_edges(merged, planes, params.seam_tol_m, tile_faces_only=True)
         merged, holes = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
-        trim = _tile_trim(meshes_k[0].comments)
-        band_rep = None
-        cloud = None
+        trim = tile_trim(meshes_k[0].comments)
+        band_rep, cloud = None, None
         if trim.get("seam_band_m", 0) > 0:
             cloud = A.read_points(in_points_ply)
-            threads = max(1, int(getattr(ctx, "threads", 1) or 1))
-            votes = _read_votes(in_seam_votes_npz) if params.vote_radius_m > 0 or params.vote_reach_m > 0 else None
-            merged, band_rep = trim_seam_bands(
-                merged, planes, cloud.vertices, cloud.normals, trim["seam_band_m"], trim["max_dist_m"],
-                trim.get("gap_dist_m", 0.0), trim.get("gap_plane_m", 0.02), int(trim.get("min_component_faces", 200)),
-                int(trim.get("max_hole_edges", 60)), threads, votes=votes, vote_radius_m=params.vote_radius_m,
-                vote_plane_m=params.vote_plane_m, vote_reach_m=params.vote_reach_m,
-                hanging_tol_m=params.seam_tol_m if params.drop_hanging_faces else 0.0)
-            del votes
-            merged, holes2 = close_seam_holes(merged, planes, params.max_hole_edges, params.seam_tol_m)
+            merged, holes2, band_rep = trim_bands(merged, planes, trim, cloud, params, threads, in_seam_votes_npz,
+                                                  ctx.log)
             holes += holes2
-            ctx.log.info("seam bands (%.2f m): %d of %d vertices trimmed (the tiles' votes kept %d and dropped %d), "
-                         "%d small components removed, %d faces left hanging on a seam removed, %d holes closed",
-                         band_rep["band_m"], band_rep["vertices_trimmed"], band_rep["vertices_in_band"],
-                         band_rep["vertices_kept_by_votes"], band_rep["vertices_dropped_by_votes"],
-                         band_rep["components_removed"], band_rep.get("hanging_faces_removed", 0),
-                         band_rep["holes_closed"])
         tile_attr = merged.face_attrs["tile"]
-        # the open edges on the seams as runs; cracks are the open edges of tile faces, split by what
-        # lies across the plane; the rest are strip edges (the mesh's own border crossing a seam)
         runs = open_seam_runs(merged, planes, reach_m=2 * params.max_gap_m, tol_m=params.seam_tol_m)
-        cracks = sum(r["tile_edges"] for r in runs)
-        kinds = {"facing_surface": sum(r["facing_edges"] for r in runs)}
-        kinds["surface_ends"] = cracks - kinds["facing_surface"]
-        ends = sum(r["edges"] for r in runs) - cracks
-        # lengths of the open edges of tile faces (the cracks), split by what lies across, and of strip edges
-        facing_len = sum(r["facing_length_m"] for r in runs)
-        open_len = {"facing_surface": round(facing_len, 3),
-                    "surface_ends": round(sum(r["tile_edges_length_m"] for r in runs) - facing_len, 3),
-                    "strip_edges": round(sum(r["length_m"] - r["tile_edges_length_m"] for r in runs), 3)}
+        cracks, kinds, ends, open_len = open_seams(runs)
         png = Path(out_tile_seams_json).with_suffix(".png")
         seam_map_png(merged, planes, runs, png,
                      title=f"{len(keep)} tiles: {cracks} open seam edges of {before} "
@@ -419,71 +379,24 @@ def merge_tiles(params: MergeTilesParams, ctx, *, in_tiles_json: Path, in_tile_m
         merged.face_attrs = {}
         ground = None
         if params.fill_ground_cell_m > 0:
-            from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
-
-            if cloud is None:
-                cloud = A.read_points(in_points_ply)
-            if cloud.normals is not None:
-                threads = max(1, int(getattr(ctx, "threads", 1) or 1))
-                merged, ground = fill_ground_holes(merged, cloud.vertices, cloud.normals, cloud.colors,
-                                                   GroundFillOptions(cell_m=params.fill_ground_cell_m,
-                                                                     max_gap_m=params.fill_ground_max_gap_m,
-                                                                     threads=threads))
-                ctx.log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled",
-                             ground.get("filled_cells", 0), ground.get("area_m2", 0.0))
-        if cloud is None:
-            cloud = A.read_points(in_points_ply)
-        from twinkit.surface.watertight import ground_border_report
-
+            cloud = A.read_points(in_points_ply) if cloud is None else cloud
+            merged, ground = fill_ground(merged, cloud, params, threads, ctx.log)
+        cloud = A.read_points(in_points_ply) if cloud is None else cloud
         # the merged mesh's open border at ground level, inside the site and on its edge (picture beside)
         ground_border = ground_border_report(merged.vertices, merged.faces, cloud.vertices, cloud.normals,
                                              params.fill_ground_max_gap_m,
                                              Path(out_tile_seams_json).with_name("open_border.png"), ctx.log)
         del cloud
-        after_total = edge_counts(merged.faces)
-        # open border near the seams vs. near lines half-way between them, per metre of surface cut: the
-        # seams add cracks where their figure is higher (compare with an untiled mesh at the same lines)
-        from .seam_labels import control_planes
-
-        controls = control_planes(planes, merged.vertices.min(axis=0), merged.vertices.max(axis=0))
-        near_lines = open_near_line_sets(merged, {"seams": planes, "controls": controls}, params.line_band_m)
-        near_lines["control_planes"] = [["xyz"[a], round(v, 4)] for a, v in controls]
+        near_lines = near_lines_report(merged, planes, params.line_band_m)
         merged.comments = [f"twinkit-tiles merge of {len(keep)} tiles"]
         A.write_clean_mesh(out_clean_mesh_ply, merged)
-        report = {
-            "tiles": len(tiles), "tiles_with_faces": len(keep), "planes": [["xyz"[a], v] for a, v in planes],
-            "seam_boundary_edges_before": before, "seam_boundary_edges_after_zipper": after_zipper,
-            "seam_holes_closed": holes, "seam_boundary_edges_after": cracks,
-            "seam_open_facing_surface": kinds["facing_surface"], "seam_open_surface_ends": kinds["surface_ends"],
-            "seam_border_crossings": ends, "seam_length_m": round(seam_len, 3), "seam_open_length_m": open_len,
-            "seam_open_runs": [r for r in runs if r["kind"] != "border_crossing"], "seam_map_png": png.name,
-            "faces_outside_core": outside,
-            "non_manifold_edges": after_total["non_manifold_edges"],
-            "non_manifold_edges_in_tiles": before_total["non_manifold_edges"],
-            "boundary_edges_before": before_total["boundary_edges"], "boundary_edges_after": after_total["boundary_edges"],
-            "stitched_faces": int((tile_attr < 0).sum()), "vertices": merged.n_vertices, "faces": merged.n_faces,
-            "ground_fill": ground, "open_border": ground_border, "seam_band_trim": band_rep, "open_near_lines": near_lines, "seams": seams,
-        }
-        gaps = [s["gap_mean_mm"] for s in seams if s["gap_mean_mm"] is not None]
-        report["gap_mean_mm"] = round(float(np.mean(gaps)), 3) if gaps else None
-        report["gap_max_mm"] = max((s["gap_max_mm"] for s in seams if s["gap_max_mm"] is not None), default=None)
+        report = merge_report(tiles, keep, planes, merged, tile_attr, seams, before_total, before=before,
+                              after_zipper=after_zipper, holes=holes, cracks=cracks, kinds=kinds, ends=ends,
+                              seam_len=seam_len, open_len=open_len, runs=runs, png=png, outside=outside,
+                              ground=ground, ground_border=ground_border, band_rep=band_rep, near_lines=near_lines)
         Path(out_tile_seams_json).write_text(json.dumps(report, indent=2))
-    ctx.log.info("merged %d tiles: %d faces; seam boundary edges %d -> %d (%.2f m of %.1f m of seam open), "
-                 "%d stitch faces; seam map %s", len(keep), merged.n_faces, before, cracks,
-                 open_len["facing_surface"] + open_len["surface_ends"], seam_len, report["stitched_faces"], png.name)
-    ns, nc = near_lines["seams"], near_lines["controls"]
-    if ns["open_per_section"] is not None and nc["open_per_section"] is not None:
-        ctx.log.info("open border within %.2f m of a line, per m of surface it cuts: seams %.3f, control lines %.3f",
-                     params.line_band_m, ns["open_per_section"], nc["open_per_section"])
-    return {k: report[k] for k in ("tiles", "faces", "vertices", "seam_boundary_edges_before",
-                                   "seam_boundary_edges_after", "seam_open_facing_surface", "seam_open_surface_ends",
-                                   "seam_holes_closed", "seam_border_crossings", "seam_length_m", "faces_outside_core",
-                                   "non_manifold_edges", "non_manifold_edges_in_tiles", "boundary_edges_before", "boundary_edges_after", "stitched_faces", "gap_mean_mm",
-                                   "gap_max_mm")} | {
-        "open_near_seams_per_m": near_lines["seams"]["open_per_section"],
-        "open_border_inside_m": (ground_border or {}).get("inside_m"),
-        "open_border_inside_m_per_m2": (ground_border or {}).get("inside_m_per_m2"),
-        "open_near_controls_per_m": near_lines["controls"]["open_per_section"]} | meas.as_dict()
+    log_merge(ctx.log, len(keep), report, seam_len, near_lines, params.line_band_m, png.name)
+    return merge_metrics(report, near_lines, ground_border, meas.as_dict())
 
 
 def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json: Path, in_textured_mesh_ply: Path,
@@ -523,39 +436,6 @@ def evaluate_seam_labels(params: EvaluateSeamLabelsParams, ctx, *, in_tiles_json
                      "" if gt is None else f" (not in the ground truth: {rep['seam_changes_not_in_gt_pct']} % vs "
                                            f"{rep['control_changes_not_in_gt_pct']} %)")
     return {k: v for k, v in rep.items() if not isinstance(v, list)}
-
-
-def _read_votes(paths):
-    """The tiles' votes near the seams (a tile's own full-resolution surface and its verdict under the
-    exact trim), all tiles together, as rows (x, y, z, nx, ny, nz, keep, tile); None when no tile list
-    is given."""
-    import numpy as np
-
-    if not paths:
-        return None
-    out = []
-    for t, p in enumerate(paths if isinstance(paths, list) else [paths]):
-        try:
-            with np.load(p) as z:
-                k = np.asarray(z["keep"], np.float64)
-                P = np.asarray(z["points"], np.float64)
-                out.append(np.hstack([P, np.asarray(z["normals"], np.float64), k[:, None], np.full((len(P), 1), t)]))
-        except Exception as exc:
-            raise _input_error(f"{p}: cannot read the tile's seam votes ({exc}); re-run reconstruct_tiles "
-                               f"(twinkit ... 'rerun=[reconstruct_tiles]')") from exc
-    return np.vstack(out) if out else None
-
-
-def _tile_trim(comments: list) -> dict:
-    """The trim parameters a tile mesh was made with (its ``twinkit-tiles trim ...`` comment); {} if absent."""
-    for c in comments or []:
-        if c.startswith("twinkit-tiles trim "):
-            w = c.split()[2:]
-            try:
-                return {w[i]: float(w[i + 1]) for i in range(0, len(w) - 1, 2)}
-            except ValueError:
-                return {}
-    return {}
 
 
 def dask_executor(params: DaskExecutorParams):
