@@ -38,7 +38,9 @@ class ApplyParams:
 
 @dataclass
 class SignalParams:
-    # finding scanned instances (instances.find_instances): CityScapes trainIds 5 pole, 6 light, 7 sign
+    """place_signals: finding the scanned instances (link_m .. plate_depth_m: ``instances.find_instances``,
+    CityScapes trainIds 5 pole, 6 light, 7 sign), poles carrying an unlabelled head (pole_heads .. head_clear_m:
+    ``instances.find_pole_heads``), placing them (gate_m ..: ``signals.place_signals``)."""
     link_m: float = param(0.35, gt=0, help="metres: vertices of one label (pole, light, sign) closer than this belong to one cluster")
     min_vertices: int = param(12, ge=0, help="clusters with fewer vertices are label noise and are dropped")
     min_height_m: float = param(1.5, ge=0, help="metres: a light head or a sign plate hangs at least this high above the local ground")
@@ -48,15 +50,12 @@ class SignalParams:
     pole_radius_m: float = param(0.6, gt=0, help="metres: radius around a cluster searched for the pole that carries it")
     ground_radius_m: float = param(3.0, gt=0, help="metres: the local ground under a signal is the 2nd percentile of the mesh's heights within this radius (street.ground.LocalGround, disc mode)")
     plate_depth_m: float = param(0.12, ge=0, help="metres: a 'light' cluster thinner than this across is a sign plate (light heads are boxes)")
-    # poles carrying an unlabelled head (instances.find_pole_heads): candidates for lights the labels miss,
-    # offered only to netconvert light heads left unpaired by the labelled lights
     pole_heads: bool = param(True, help="look for poles carrying an unlabelled head: light candidates the labels missed, offered only to netconvert light heads no labelled light paired with")
     head_min_m: float = param(1.8, ge=0, help="metres: bottom of the head band above the local ground, for heads on poles")
     head_max_m: float = param(4.5, gt=0, help="metres: top of that head band")
     head_min_width_m: float = param(0.3, ge=0, help="metres: narrowest extent of the head band; a bare pole or a sign plate is thinner")
     head_max_width_m: float = param(1.0, gt=0, help="metres: widest extent of the head band")
     head_clear_m: float = param(0.8, ge=0, help="metres: no vertex at head height from here to 1.5 m off the pole's axis (keeps trees and walls out)")
-    # placing (signals.place_signals)
     gate_m: float = param(15.0, gt=0, help="metres: a netconvert light group and a scanned light farther apart than this never pair")
     group_m: float = param(2.0, ge=0, help="metres: netconvert light signals of one road within this distance along s are one head")
     wrong_side_m: float = param(6.0, ge=0, help="metres: extra pairing cost of a light across the reference line from the lanes of its head")
