@@ -275,7 +275,7 @@ def draw_evidence(v: np.ndarray, f: np.ndarray, labels_before: np.ndarray, ev: E
 
     from twinkit.cityscapes import colorize
 
-    from .mesh2d import Mesh, picture_grid, rasterize
+    from .mesh2d import picture_grid, rasterize
 
     xy = v[:, :2]
     grid, res = picture_grid(xy, px_per_m, max_px)
@@ -285,7 +285,7 @@ def draw_evidence(v: np.ndarray, f: np.ndarray, labels_before: np.ndarray, ev: E
     ids = np.arange(len(f))
     ids = ids + (ids >= bg)
     idcol = np.stack([ids & 255, (ids >> 8) & 255, (ids >> 16) & 255], 1).astype(np.uint8)
-    top = rasterize(Mesh(v, f, None, None), grid, colours=idcol, mode="RGB").astype(np.int64)
+    top = rasterize(v, f, grid, colours=idcol, mode="RGB").astype(np.int64)
     top = top[..., 0] | (top[..., 1] << 8) | (top[..., 2] << 16)
     empty = top == bg
     top = np.where(top > bg, top - 1, top)

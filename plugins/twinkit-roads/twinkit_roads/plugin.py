@@ -170,7 +170,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     then onto the kerbs (kerbs.py)."""
     from .align import alignment_doc, alignment_metrics, fit_or_keep, no_roads_alignment, sample_sections, surface_dz
     from .kerbs import kerb_correction
-    from .mesh2d import Grid, from_mesh, road_faces, road_mask
+    from .mesh2d import Grid, road_faces, road_mask
     from .scan import is_empty_map
 
     xodr_text = in_roads_xodr.read_text(encoding="utf-8")
@@ -178,24 +178,24 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         out_alignment_json.write_text(json.dumps(no_roads_alignment(), indent=1))
         ctx.log.info("alignment: no roads in the map (the scan holds none): nothing to align")
         return {"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "dz_m": 0.0, "kept_identity": True, "no_roads": True}
-    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     labels = A.read_labels(in_labels_npy) if in_labels_npy is not None and params.use_labels else None
-    fidx, how = road_faces(mesh, labels, curb_tol_m=params.curb_tol_m)
+    fidx, how = road_faces(mesh.vertices, mesh.faces, labels, curb_tol_m=params.curb_tol_m)
     if len(fidx) < 10:
         raise InputError(f"{in_textured_mesh_ply.name}: no road surface found ({how}); nothing to align to")
-    grid = Grid.around(mesh.v[:, :2], params.raster_m)
+    grid = Grid.around(mesh.vertices[:, :2], params.raster_m)
     sec = sample_sections(xodr_text, 1.0)
     # a network drawn from this very mesh (road_source=scan) is kept where it was drawn: the fit is measured,
     # not applied, and the kerb refinement is not run (the scan's lanes keep curb_clearance_m from the edges)
     from_scan = from_scan_tag(xodr_text)
-    res = fit_or_keep(sec, road_mask(mesh, fidx, grid), grid, from_scan=from_scan, log=ctx.log,
+    res = fit_or_keep(sec, road_mask(mesh.vertices, mesh.faces, fidx, grid), grid, from_scan=from_scan, log=ctx.log,
                       search_m=params.search_m, fit_scale=params.fit_scale, yaw_range_deg=params.yaw_range_deg,
                       huber_m=params.huber_m, margin_m=params.margin_m, model=params.model)
     kerb, offsets = None, {}
     if params.kerbs and not from_scan:
-        kerb, offsets = kerb_correction(xodr_text, res, mesh.v, mesh.f, max_shift_m=params.kerb_max_shift_m,
+        kerb, offsets = kerb_correction(xodr_text, res, mesh.vertices, mesh.faces, max_shift_m=params.kerb_max_shift_m,
                                         road_offset_m=params.kerb_road_offset_m, log=ctx.log)
-    dz = surface_dz(mesh.v, mesh.f, fidx, res.tf, sec, from_scan) if params.fit_height else 0.0
+    dz = surface_dz(mesh.vertices, mesh.faces, fidx, res.tf, sec, from_scan) if params.fit_height else 0.0
     doc = alignment_doc(res, dz, how, params.model, kerb, offsets)
     if from_scan:
         ctx.log.info("alignment: the network was derived from this scan (road_source=scan): kept in place")
@@ -255,18 +255,17 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     """Move netconvert's traffic lights onto the scanned ones (instances.py), add the scanned signs (signals.py)."""
     from .align import lane_lines
     from .instances import scanned_instances
-    from .mesh2d import from_mesh
     from .signals import carla_position_errors, draw_signals, place_signals as place, signals_report
 
     params = params or SignalParams()
-    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     labels = A.read_labels(in_labels_npy)
-    if labels.ndim != 1 or len(labels) != len(mesh.v):
-        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
+    if labels.ndim != 1 or len(labels) != len(mesh.vertices):
+        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.vertices)} vertices of "
                          f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
                          "labels.npy)")
     text = A.read_opendrive(in_aligned_xodr)
-    kept, rejected = scanned_instances(mesh.v, labels, params)
+    kept, rejected = scanned_instances(mesh.vertices, labels, params)
     try:
         moved, placed, notes = place(text, kept, gate_m=params.gate_m, group_m=params.group_m,
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,
@@ -300,7 +299,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
     from .evidence import (add_evaluation, draw_evidence, draw_passthrough, evidence_report, lanes_of,
                            road_evidence as vote, unchanged)
-    from .mesh2d import Grid, from_mesh
+    from .mesh2d import Grid
     from .scan import is_empty_map
 
     params = params or RoadEvidenceParams()
@@ -317,14 +316,14 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         draw_passthrough(out_road_evidence_png, why)
         ctx.log.info("road evidence: %s; labels unchanged", why)
         return {"enabled": bool(params.enabled), "changed_vertices": 0, **({"no_roads": True} if no_roads else {})}
-    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
-    if labels.ndim != 1 or len(labels) != len(mesh.v):
-        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    if labels.ndim != 1 or len(labels) != len(mesh.vertices):
+        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.vertices)} vertices of "
                          f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
                          "labels.npy)")
     lanes = lanes_of(text, in_aligned_xodr, params.step_m, params.road_types, params.sidewalk_types)
-    grid = Grid.around(mesh.v[:, :2], params.raster_m)
-    ev = vote(mesh.v, mesh.f, labels, lanes, grid, normal_min_z=params.normal_min_z,
+    grid = Grid.around(mesh.vertices[:, :2], params.raster_m)
+    ev = vote(mesh.vertices, mesh.faces, labels, lanes, grid, normal_min_z=params.normal_min_z,
               max_height_m=params.max_height_m, curb_min_m=params.curb_min_m, curb_max_m=params.curb_max_m,
               window_m=params.window_m, max_disagreement=params.max_disagreement,
               max_network_disagreement=params.max_network_disagreement, plateau=params.plateau,
@@ -342,7 +341,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                          after.get("sidewalk", 0), before.get("terrain", 0), after.get("terrain", 0),
                          before["miou"], after["miou"])
     out_road_evidence_json.write_text(json.dumps(doc, indent=1))
-    draw_evidence(mesh.v, mesh.f, labels, ev if params.relabel else unchanged(ev, labels), lanes,
+    draw_evidence(mesh.vertices, mesh.faces, labels, ev if params.relabel else unchanged(ev, labels), lanes,
                   out_road_evidence_png, params.picture_px_per_m)
     ctx.log.info("road network evidence: %d vertices (%.1f m^2) relabelled %s; lanes disagree with the scan's "
                  "geometry over %.1f m^2 (%.1f %% of the lanes' area), %d lanes vetoed", doc["changed_vertices"],
