@@ -104,7 +104,8 @@ def bench_alignment(demo: Path | None, tmp: Path) -> None:
         al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp / f"al{i}", inputs, site=site_cfg)
         dt = time.perf_counter() - t0
         a = json.loads(al["alignment.json"].read_text())
-        from twinkit_roads.align import set_lane_offsets, transform_xodr
+        from twinkit_roads.align import transform_xodr
+        from twinkit_roads.kerbs import set_lane_offsets
 
         moved = set_lane_offsets(transform_xodr(xodr.read_text(), math.radians(a["yaw_deg"]), a["tx_m"], a["ty_m"],
                                                 a["dz_m"]), a.get("lane_offsets_m") or {})
