@@ -111,7 +111,7 @@ def _object_name(prop: str) -> str:
 
 
 @dataclass
-class FbxMesh:
+class FbxModel:
     name: str
     faces: int
     properties: dict
@@ -121,7 +121,7 @@ class FbxMesh:
 @dataclass
 class FbxSummary:
     version: int
-    meshes: list[FbxMesh]
+    meshes: list[FbxModel]
     materials: list[str]
     textures: list[dict]  # {"FileName": ..., "RelativeFilename": ...} of every Texture and Video object
 
@@ -165,6 +165,6 @@ def summarize(path: Path) -> FbxSummary:
                 model_geom[parent] = child
             elif child in mats and parent in models:
                 model_mats.setdefault(parent, []).append(mats[child])
-    meshes = [FbxMesh(name, geoms.get(model_geom.get(mid), 0), props, model_mats.get(mid, []))
+    meshes = [FbxModel(name, geoms.get(model_geom.get(mid), 0), props, model_mats.get(mid, []))
               for mid, (name, props) in models.items()]
     return FbxSummary(version, meshes, sorted(set(mats.values())), textures)
