@@ -108,14 +108,14 @@ def main() -> int:
     def pkg(v):
         return np.asarray(v, float) @ mat.T
 
-    static = [(pkg(m.vertices), m.faces) for m in load_class_set(split_dir / "class_meshes").meshes]
+    static = [(pkg(m.mesh.vertices), m.mesh.faces) for m in load_class_set(split_dir / "class_meshes").meshes]
     mov_dir = lift_dir / "movables"
     acts = json.loads((mov_dir / "actors.json").read_text())
     movs = [read_class_ply(mov_dir / a["file"]) for a in acts.get("actors", [])]
     rows = [("lifted (default)", static), ("objects put back (lift: false)",
-                                          static + [(pkg(m.vertices), m.faces) for m in movs])]
+                                          static + [(pkg(m.mesh.vertices), m.mesh.faces) for m in movs])]
     if main_out is not None and _latest(main_out, "split"):
-        rows.append((f"{main_out} class meshes", [(pkg(m.vertices), m.faces) for m in
+        rows.append((f"{main_out} class meshes", [(pkg(m.mesh.vertices), m.mesh.faces) for m in
                                                   load_class_set(_latest(main_out, "split") / "class_meshes").meshes]))
     print(f"## Driving-lane waypoints (0.5 m, carla.Map on {xodr.name}: {len(wp)}) under static geometry\n")
     print("| static geometry | waypoints with geometry 0.15-2 m above | waypoints with no surface within 0.3 m |")

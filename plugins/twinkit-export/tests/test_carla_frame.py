@@ -230,6 +230,6 @@ def test_package_fbx_is_baked_in_the_carla_frame(tmp_path, class_dir, fbx_out):
             continue
         matched += 1
         assert n["scale"] == [1.0, 1.0, 1.0]  # baked: no node transform for the navmesh tool to miss
-        np.testing.assert_allclose(np.array(n["positions"]), cm.vertices @ m.T, atol=1e-4)
+        np.testing.assert_allclose(np.array(n["positions"]), cm.mesh.vertices @ m.T, atol=1e-4)
     assert matched >= 1
     assert not list((tmp_path / "run").rglob("carla_frame_meshes"))  # the scratch FBX is not left in the result

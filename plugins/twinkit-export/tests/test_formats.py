@@ -48,17 +48,17 @@ def test_fbx_round_trip(fbx_out, class_dir, tmp_path):
     assert tex.exists()
     for m in cs.meshes:
         n = d["nodes"][m.name]
-        assert (n["num_vertices"], n["num_faces"]) == (m.n_vertices, m.n_faces), m.name
+        assert (n["num_vertices"], n["num_faces"]) == (m.mesh.n_vertices, m.mesh.n_faces), m.name
         assert n["scale"] == [1.0, 1.0, 1.0]
-        np.testing.assert_allclose(np.array(n["positions"]), m.vertices, atol=1e-4)  # site frame, metres
-        assert not bad_faces(m.vertices, m.faces)[0].any()  # same counts as the clean class mesh: no twins
+        np.testing.assert_allclose(np.array(n["positions"]), m.mesh.vertices, atol=1e-4)  # site frame, metres
+        assert not bad_faces(m.mesh.vertices, m.mesh.faces)[0].any()  # same counts as the clean class mesh: no twins
         got_uv = np.array(n["corner_uv"]).reshape(-1, 3, 2)
-        np.testing.assert_allclose(got_uv, m.corner_uv, atol=1e-5)
+        np.testing.assert_allclose(got_uv, m.mesh.corner_uv, atol=1e-5)
         assert n["uv_sets"] == ["UVMap"]
         assert n["n_materials"] == 1
         assert set(n["colors"]) >= {"segmentation", "class_id"}
-        np.testing.assert_array_equal(np.array(n["colors"]["segmentation"]), m.colors)
-        np.testing.assert_array_equal(np.array(n["colors"]["class_id"])[:, 0], m.vertex_class)
+        np.testing.assert_array_equal(np.array(n["colors"]["segmentation"]), m.mesh.colors)
+        np.testing.assert_array_equal(np.array(n["colors"]["class_id"])[:, 0], m.mesh.attrs["class_id"])
 
 
 def test_fbx_reads_back_in_blender(fbx_out, class_dir, tmp_path):
@@ -83,11 +83,11 @@ def test_fbx_reads_back_in_blender(fbx_out, class_dir, tmp_path):
     assert set(got) == {m.name for m in cs.meshes}
     for m in cs.meshes:
         g = got[m.name]
-        assert (g["v"], g["f"]) == (m.n_vertices, m.n_faces)
+        assert (g["v"], g["f"]) == (m.mesh.n_vertices, m.mesh.n_faces)
         assert g["uv"] == ["UVMap"] and g["class_id"] == m.class_id
         assert {"segmentation", "class_id"} <= set(g["colors"])
         assert any(Path(p).name == "twin.png" for p in g["images"])
-        ext = m.vertices.max(0) - m.vertices.min(0)
+        ext = m.mesh.vertices.max(0) - m.mesh.vertices.min(0)
         np.testing.assert_allclose(g["dims"], ext, atol=1e-3)  # metres in, metres out
 
 
@@ -127,18 +127,18 @@ def test_usd_round_trip(usd_out, class_dir):
         prim = meshes[m.name]
         mesh = UsdGeom.Mesh(prim)
         pts = np.array(mesh.GetPointsAttr().Get())
-        np.testing.assert_allclose(pts, m.vertices, atol=1e-4)
+        np.testing.assert_allclose(pts, m.mesh.vertices, atol=1e-4)
         idx = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
-        np.testing.assert_array_equal(idx, m.faces)
+        np.testing.assert_array_equal(idx, m.mesh.faces)
         assert not bad_faces(pts, idx)[0].any(), m.name  # the test street's twins and degenerates stay out
         pv = UsdGeom.PrimvarsAPI(prim)
         st = pv.GetPrimvar("st")
         assert st.GetInterpolation() == UsdGeom.Tokens.faceVarying
-        np.testing.assert_allclose(np.array(st.ComputeFlattened()).reshape(-1, 3, 2), m.corner_uv, atol=1e-7)
-        np.testing.assert_array_equal(np.array(pv.GetPrimvar("class_id").Get()), m.vertex_class)
-        np.testing.assert_array_equal(np.array(pv.GetPrimvar("source_index").Get()), m.source_index)
+        np.testing.assert_allclose(np.array(st.ComputeFlattened()).reshape(-1, 3, 2), m.mesh.corner_uv, atol=1e-7)
+        np.testing.assert_array_equal(np.array(pv.GetPrimvar("class_id").Get()), m.mesh.attrs["class_id"])
+        np.testing.assert_array_equal(np.array(pv.GetPrimvar("source_index").Get()), m.mesh.attrs["source_index"])
         dc = np.array(pv.GetPrimvar("displayColor").Get())
-        assert dc.shape == (m.n_vertices, 3)
+        assert dc.shape == (m.mesh.n_vertices, 3)
         labels = UsdSemantics.LabelsAPI(prim, "class").GetLabelsAttr().Get()
         assert list(labels) == [BY_ID[m.class_id].name]
         assert prim.GetAttribute("twinkit:classId").Get() == m.class_id
@@ -263,18 +263,18 @@ def test_glb_round_trip(glb_out, class_dir):
         cls = _accessor(g, blob, getattr(prim.attributes, "_CLASS_ID")).ravel()
         uv = _accessor(g, blob, prim.attributes.TEXCOORD_0)
         idx = _accessor(g, blob, prim.indices).ravel()
-        assert len(idx) == 3 * m.n_faces
+        assert len(idx) == 3 * m.mesh.n_faces
         # by position (glTF splits vertices at UV seams): no twin or degenerate face reached the GLB
         upos, weld = np.unique(pos, axis=0, return_inverse=True)
         assert not bad_faces(upos.astype(np.float64), weld.ravel()[idx].reshape(-1, 3))[0].any(), m.name
         # back to the site frame: glTF (x, y, z) = site (x, z, -y)
         site = np.column_stack([pos[:, 0], -pos[:, 2], pos[:, 1]])
-        np.testing.assert_allclose(site[idx].reshape(-1, 3, 3), m.vertices[m.faces].astype(np.float32), atol=1e-4)
+        np.testing.assert_allclose(site[idx].reshape(-1, 3, 3), m.mesh.vertices[m.mesh.faces].astype(np.float32), atol=1e-4)
         flip = uv.copy()
         flip[:, 1] = 1 - flip[:, 1]
-        np.testing.assert_allclose(flip[idx].reshape(-1, 3, 2), m.corner_uv, atol=1e-6)
+        np.testing.assert_allclose(flip[idx].reshape(-1, 3, 2), m.mesh.corner_uv, atol=1e-6)
         # palette colours and class ids per corner
-        lab_corner = m.vertex_class[m.faces].ravel()
+        lab_corner = m.mesh.attrs["class_id"][m.mesh.faces].ravel()
         np.testing.assert_array_equal(cls[idx], lab_corner)
         # glTF vertex colours are linear: the sRGB palette through the sRGB transfer curve
         np.testing.assert_allclose(col[idx], srgb_to_linear(lut[lab_corner]), atol=1e-6)
@@ -362,7 +362,7 @@ def test_glb_renders_as_bright_as_its_texture(glb_out, class_dir, glb_driver, tm
     # the same class meshes written the old way: palette as COLOR_0
     cs = load_class_set(class_dir)
     old = tmp_path / "old.glb"
-    write_textured_glb(old, [GlbPart(m.name, m.vertices, m.faces, m.normals, m.corner_uv, m.colors)
+    write_textured_glb(old, [GlbPart(m.name, m.mesh.vertices, m.mesh.faces, m.mesh.normals, m.mesh.corner_uv, m.mesh.colors)
                              for m in cs.meshes], cs.texture, generator="old layout")
     before = brightness_ratio(glb_driver, old, tmp_path / "old")
     before.pop("images")

@@ -53,7 +53,7 @@ def test_face_classes_majority_and_lone_vertices():
     assert st == {"mixed_faces": 3, "faces_given_to_lone_vertices": 1, "lone_vertices_left": 1}
     mesh = Mesh(np.eye(5, 3) + np.arange(5)[:, None], faces, face_attrs={"texcoord": np.zeros((3, 6), np.float32)})
     res = split_mesh(mesh, labels)
-    assert [(m.name, m.n_faces, m.own_vertices) for m in res.meshes] == [("Road_Road", 2, 3), ("Road_Sidewalk", 1, 1)]
+    assert [(m.name, m.mesh.n_faces, m.own_vertices) for m in res.meshes] == [("Road_Road", 2, 3), ("Road_Sidewalk", 1, 1)]
     # a class with no face at all cannot be drawn: its vertex is reported, not hidden
     assert res.stats["vertices_dropped"] == 1 and res.stats["loose_vertices"] == 1
 
@@ -81,9 +81,9 @@ def test_split_invariants(street):
     assert res.stats["degenerate_faces_dropped"] == synthetic.BAD_FACES["degenerate"]
     assert res.stats["duplicate_faces_dropped"] == 4 and res.stats["back_to_back_faces_dropped"] == 3
     # every other face in exactly one sub-mesh
-    assert sum(m.n_faces for m in res.meshes) == len(f) - n_bad
+    assert sum(m.mesh.n_faces for m in res.meshes) == len(f) - n_bad
     for m in res.meshes:
-        assert not bad_faces(m.vertices, m.faces)[0].any(), m.name
+        assert not bad_faces(m.mesh.vertices, m.mesh.faces)[0].any(), m.name
     # own-vertex counts equal the label histogram and add up to the source mesh
     for m in res.meshes:
         assert m.own_vertices == int((lab == m.class_id).sum()), m.name
@@ -94,16 +94,16 @@ def test_split_invariants(street):
     # attributes: positions, palette colours and labels of the source vertices
     lut = palette_lut()
     for m in res.meshes:
-        np.testing.assert_array_equal(m.vertices, mesh.vertices[m.source_index])
-        np.testing.assert_array_equal(m.vertex_class, lab[m.source_index])
-        np.testing.assert_array_equal(m.colors, lut[lab[m.source_index]])
+        np.testing.assert_array_equal(m.mesh.vertices, mesh.vertices[m.mesh.attrs["source_index"]])
+        np.testing.assert_array_equal(m.mesh.attrs["class_id"], lab[m.mesh.attrs["source_index"]])
+        np.testing.assert_array_equal(m.mesh.colors, lut[lab[m.mesh.attrs["source_index"]]])
         # faces map back to source faces with their UVs unchanged
-        src_faces = m.source_index[m.faces]
+        src_faces = m.mesh.attrs["source_index"][m.mesh.faces]
         key = {tuple(r): i for i, r in reversed(list(enumerate(f.tolist())))}  # the first of twins is kept
         idx = np.array([key[tuple(r)] for r in src_faces.tolist()])
-        np.testing.assert_allclose(m.corner_uv, mesh.corner_uv[idx], atol=0)
+        np.testing.assert_allclose(m.mesh.corner_uv, mesh.corner_uv[idx], atol=0)
     # border copies sit exactly on the source vertices (no cracks)
-    allsrc = np.concatenate([m.source_index for m in res.meshes])
+    allsrc = np.concatenate([m.mesh.attrs["source_index"] for m in res.meshes])
     assert len(np.unique(allsrc)) == len(v)
 
 
@@ -114,14 +114,19 @@ def test_class_ply_round_trip(street, tmp_path):
     write_class_ply(tmp_path / "c.ply", m, "texture.png")
     r = read_class_ply(tmp_path / "c.ply")
     assert (r.class_id, r.name) == (m.class_id, m.name)
-    for a in ("vertices", "normals", "colors", "vertex_class", "source_index", "faces", "corner_uv"):
-        np.testing.assert_array_equal(getattr(r, a), getattr(m, a))
+    pairs = [(r.mesh.vertices, m.mesh.vertices), (r.mesh.faces, m.mesh.faces)]
+    assert list(r.mesh.attrs) == list(m.mesh.attrs) == ["normals", "colors", "class_id", "source_index"]
+    pairs += [(r.mesh.attrs[k], m.mesh.attrs[k]) for k in m.mesh.attrs]
+    pairs += [(r.mesh.face_attrs["texcoord"], m.mesh.face_attrs["texcoord"])]
+    for got, want in pairs:
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
     # and an ordinary PLY reader sees the palette and class_id
     from plyfile import PlyData
 
     ply = PlyData.read(str(tmp_path / "c.ply"))
-    assert ply["vertex"].count == m.n_vertices
-    np.testing.assert_array_equal(ply["vertex"]["class_id"], m.vertex_class)
+    assert ply["vertex"].count == m.mesh.n_vertices
+    np.testing.assert_array_equal(ply["vertex"]["class_id"], m.mesh.attrs["class_id"])
 
 
 def test_split_step_writes_manifest(class_dir, street):

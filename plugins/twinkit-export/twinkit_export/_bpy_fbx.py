@@ -38,23 +38,23 @@ def _material(bpy, name: str, texture: str | None):
 
 
 def _mesh_object(bpy, cm, mat, georef: dict):
-    n, m = cm.n_vertices, cm.n_faces
+    n, m = cm.mesh.n_vertices, cm.mesh.n_faces
     me = bpy.data.meshes.new(cm.name)
     me.vertices.add(n)
-    me.vertices.foreach_set("co", cm.vertices.astype(np.float32).ravel())
+    me.vertices.foreach_set("co", cm.mesh.vertices.astype(np.float32).ravel())
     me.loops.add(3 * m)
-    me.loops.foreach_set("vertex_index", cm.faces.astype(np.int32).ravel())
+    me.loops.foreach_set("vertex_index", cm.mesh.faces.astype(np.int32).ravel())
     me.polygons.add(m)
     me.polygons.foreach_set("loop_start", np.arange(0, 3 * m, 3, dtype=np.int32))
     me.update(calc_edges=True)
     uv = me.uv_layers.new(name="UVMap")
-    uv.data.foreach_set("uv", cm.corner_uv.astype(np.float32).ravel())
+    uv.data.foreach_set("uv", cm.mesh.corner_uv.astype(np.float32).ravel())
     rgba = np.ones((n, 4), np.float32)
-    rgba[:, :3] = cm.colors / 255.0
+    rgba[:, :3] = cm.mesh.colors / 255.0
     seg = me.color_attributes.new("segmentation", "BYTE_COLOR", "POINT")
     seg.data.foreach_set("color_srgb", rgba.ravel())
     cid = np.ones((n, 4), np.float32)
-    cid[:, :3] = (cm.vertex_class.astype(np.float32) / 255.0)[:, None]
+    cid[:, :3] = (cm.mesh.attrs["class_id"].astype(np.float32) / 255.0)[:, None]
     cls = me.color_attributes.new("class_id", "BYTE_COLOR", "POINT")
     cls.data.foreach_set("color_srgb", cid.ravel())
     me.color_attributes.active_color = seg
@@ -63,10 +63,10 @@ def _mesh_object(bpy, cm, mat, georef: dict):
     except Exception:
         pass
     ia = me.attributes.new("class_id_int", "INT", "POINT")
-    ia.data.foreach_set("value", cm.vertex_class.astype(np.int32))
+    ia.data.foreach_set("value", cm.mesh.attrs["class_id"].astype(np.int32))
     me.polygons.foreach_set("use_smooth", np.ones(m, bool))
-    if cm.normals is not None and n:
-        me.normals_split_custom_set_from_vertices(cm.normals.astype(np.float32).reshape(-1, 3))
+    if cm.mesh.normals is not None and n:
+        me.normals_split_custom_set_from_vertices(cm.mesh.normals.astype(np.float32).reshape(-1, 3))
     me.materials.append(mat)
     ob = bpy.data.objects.new(cm.name, me)
     ob["class_id"] = int(cm.class_id)
@@ -112,7 +112,7 @@ def _export_one(bpy, job: dict, out: dict) -> None:
         cm.cityscapes = ci.name
         cm.carla_tag = ci.carla_tag
         cm.name = names.get(p, cm.name)
-        if cm.n_faces == 0:
+        if cm.mesh.n_faces == 0:
             continue
         ob = _mesh_object(bpy, cm, mat, job.get("georef", {}))
         scene.collection.objects.link(ob)

@@ -74,17 +74,18 @@ def scanned_props(movables: list, map_name: str, frame, work: Path, texture_name
     work.mkdir(parents=True, exist_ok=True)
     out = []
     for cm in movables:
-        if cm.n_faces == 0:
+        if cm.mesh.n_faces == 0:
             continue
         moved = cm
         if frame is not None:
             rot = frame.matrix / frame.scale
-            moved = dataclasses.replace(cm, vertices=frame.site_to_package(cm.vertices),
-                                        normals=(np.asarray(cm.normals, np.float64) @ rot.T).astype(np.float32))
+            moved = dataclasses.replace(cm, mesh=dataclasses.replace(
+                                        cm.mesh, vertices=frame.site_to_package(cm.mesh.vertices),
+                                        attrs={**cm.mesh.attrs, "normals": (np.asarray(cm.mesh.normals, np.float64) @ rot.T).astype(np.float32)}))
         mesh = f"Scanned{cm.name}"
         ply = work / f"{mesh}.ply"
         write_class_ply(ply, moved, texture_name)
-        out.append({"name": f"{map_name}_{mesh}", "ply": ply, "class_id": int(cm.class_id), "faces": cm.n_faces,
+        out.append({"name": f"{map_name}_{mesh}", "ply": ply, "class_id": int(cm.class_id), "faces": cm.mesh.n_faces,
                     "mesh": mesh})
     return out
 

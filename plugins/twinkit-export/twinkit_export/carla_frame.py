@@ -82,8 +82,9 @@ def package_class_dir(frame, class_set, texture: Path | None, work: Path) -> Pat
     for c, cm in zip(class_set.manifest["classes"], class_set.meshes):
         if c["faces"] <= 0:
             continue
-        moved = dataclasses.replace(cm, vertices=frame.site_to_package(cm.vertices),
-                                    normals=(np.asarray(cm.normals, np.float64) @ rot.T).astype(np.float32))
+        moved = dataclasses.replace(cm, mesh=dataclasses.replace(
+                                    cm.mesh, vertices=frame.site_to_package(cm.mesh.vertices),
+                                    attrs={**cm.mesh.attrs, "normals": (np.asarray(cm.mesh.normals, np.float64) @ rot.T).astype(np.float32)}))
         write_class_ply(work / c["file"], moved, texture.name if texture else None)
     return work
 

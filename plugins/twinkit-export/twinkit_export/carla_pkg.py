@@ -305,7 +305,7 @@ def _prop_entry(name: str, ply: Path, ci, faces: int, mesh: str) -> dict:
     from .carla_contract import tagger_label
     from .classmesh import read_class_ply
 
-    v = read_class_ply(ply).vertices
+    v = read_class_ply(ply).mesh.vertices
     extent = float((v.max(0) - v.min(0)).max()) if len(v) else 0.0
     return {"name": name, "ply": ply, "class": ci.name, "class_id": ci.train_id,
             "tag": prop_folder(ci), "label": tagger_label(prop_folder(ci)), "size": prop_size(extent),

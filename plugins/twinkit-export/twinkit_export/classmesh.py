@@ -19,55 +19,51 @@ from twinkit.mesh import Mesh, read_ply, write_ply
 
 
 @dataclass
-class ClassMesh:
-    """One class's sub-mesh.
+class ClassPart:
+    """One class's part of the export: its identity and its sub-mesh.
 
-    class_id: the sub-mesh's class (trainId)
-    vertices: (n, 3) float64 metres, site frame; normals (n, 3) float32
-    colors: (n, 3) uint8 CityScapes palette of each vertex's own label
-    vertex_class: (n,) uint8 each vertex's own label (border vertices keep theirs)
-    source_index: (n,) int32 index of the vertex in the source mesh
-    faces: (m, 3) int32; corner_uv (m, 3, 2) float32 (OBJ convention, v up)
+    class_id: the part's class (trainId); name: its CARLA-style name (e.g. ``Road_Road``)
+    mesh: the sub-mesh, site frame, metres: ``vertices`` (n, 3) float64, ``faces`` (m, 3) int32,
+    ``attrs`` ``normals`` (n, 3) float32, ``colors`` (n, 3) uint8 CityScapes palette of each vertex's own
+    label, ``class_id`` (n,) uint8 each vertex's own label (border vertices keep theirs), ``source_index``
+    (n,) int32 index of the vertex in the source mesh; ``face_attrs["texcoord"]`` (m, 6) float32
+    (OBJ convention, v up; ``mesh.corner_uv`` gives it as (m, 3, 2))
     """
 
     class_id: int
     name: str
-    vertices: np.ndarray
-    normals: np.ndarray
-    colors: np.ndarray
-    vertex_class: np.ndarray
-    source_index: np.ndarray
-    faces: np.ndarray
-    corner_uv: np.ndarray
-
-    @property
-    def n_vertices(self) -> int:
-        return int(len(self.vertices))
-
-    @property
-    def n_faces(self) -> int:
-        return int(len(self.faces))
+    mesh: Mesh
 
     @property
     def own_vertices(self) -> int:
-        return int(np.count_nonzero(self.vertex_class == self.class_id))
+        """How many of the sub-mesh's vertices carry the part's own class."""
+        return int(np.count_nonzero(self.mesh.attrs["class_id"] == self.class_id))
 
 
-def write_class_ply(path: Path, cm: ClassMesh, texture_name: str | None) -> None:
+def class_part(class_id: int, name: str, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
+               colors: np.ndarray, vertex_class: np.ndarray, source_index: np.ndarray,
+               corner_uv: np.ndarray) -> ClassPart:
+    """A :class:`ClassPart` from its arrays (shapes as there; ``corner_uv`` (m, 3, 2)), cast to the PLY dtypes."""
+    mesh = Mesh(vertices=np.asarray(vertices, np.float64), faces=np.asarray(faces, np.int32),
+                attrs={"normals": np.asarray(normals, np.float32), "colors": np.asarray(colors, np.uint8),
+                       "class_id": np.asarray(vertex_class, np.uint8),
+                       "source_index": np.asarray(source_index, np.int32)},
+                face_attrs={"texcoord": np.asarray(corner_uv, np.float32).reshape(-1, 6)})
+    return ClassPart(class_id=int(class_id), name=name, mesh=mesh)
+
+
+def write_class_ply(path: Path, part: ClassPart, texture_name: str | None) -> None:
     """Binary PLY readable by MeshLab/CloudCompare: palette colours, class_id, source_index, face texcoords."""
-    comments = [f"twinkit-export class {cm.class_id} {cm.name}"]
+    comments = [f"twinkit-export class {part.class_id} {part.name}"]
     if texture_name:
         comments.append(f"TextureFile {texture_name}")
-    mesh = Mesh(vertices=cm.vertices, faces=cm.faces,
-                attrs={"normals": cm.normals, "colors": cm.colors,
-                       "class_id": np.asarray(cm.vertex_class, np.uint8),
-                       "source_index": np.asarray(cm.source_index, np.int32)},
-                face_attrs={"texcoord": np.asarray(cm.corner_uv, np.float32).reshape(-1, 6)},
+    m = part.mesh
+    mesh = Mesh(vertices=m.vertices, faces=m.faces, attrs=dict(m.attrs), face_attrs=dict(m.face_attrs),
                 comments=comments)
     write_ply(path, mesh, xyz_dtype="f8")
 
 
-def read_class_ply(path: Path) -> ClassMesh:
+def read_class_ply(path: Path) -> ClassPart:
     """Read a file written by :func:`write_class_ply`."""
     path = Path(path)
     m = read_ply(path)
@@ -80,13 +76,8 @@ def read_class_ply(path: Path) -> ClassMesh:
             class_id, name = int(parts[2]), " ".join(parts[3:])
     faces = m.faces if m.faces is not None else np.zeros((0, 3), np.int64)
     tc = m.face_attrs.get("texcoord", np.zeros((len(faces), 6), np.float32))
-    return ClassMesh(
-        class_id=class_id, name=name,
-        vertices=m.vertices,
-        normals=np.asarray(m.normals, np.float32),
-        colors=m.colors,
-        vertex_class=np.asarray(m.attrs["class_id"], np.uint8).copy(),
+    return class_part(
+        class_id, name, vertices=m.vertices, faces=faces, normals=np.asarray(m.normals, np.float32),
+        colors=m.colors, vertex_class=np.asarray(m.attrs["class_id"], np.uint8).copy(),
         source_index=np.asarray(m.attrs["source_index"]).astype(np.int32),
-        faces=faces.astype(np.int32),
-        corner_uv=np.asarray(tc).reshape(-1, 3, 2).astype(np.float32),
-    )
+        corner_uv=np.asarray(tc).reshape(-1, 3, 2))

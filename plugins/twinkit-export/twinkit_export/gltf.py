@@ -30,9 +30,9 @@ def write_glb(meshes, texture: Path | None, out: Path, georef: dict, *, texture_
     parts = []
     for cm in meshes:
         ci = info(cm.class_id)
-        parts.append(GlbPart(name=cm.name, vertices=cm.vertices, faces=cm.faces, normals=cm.normals,
-                             corner_uv=cm.corner_uv, colors=None, color_attrs={"_CLASS_COLOR": cm.colors},
-                             ubyte_attrs={"_CLASS_ID": cm.vertex_class}, variant_color=ci.color,
+        parts.append(GlbPart(name=cm.name, vertices=cm.mesh.vertices, faces=cm.mesh.faces, normals=cm.mesh.normals,
+                             corner_uv=cm.mesh.corner_uv, colors=None, color_attrs={"_CLASS_COLOR": cm.mesh.colors},
+                             ubyte_attrs={"_CLASS_ID": cm.mesh.attrs["class_id"]}, variant_color=ci.color,
                              extras={"class_id": int(cm.class_id), "cityscapes_class": ci.name,
                                      "carla_tag": ci.carla_tag, "source_vertices_own": cm.own_vertices}))
     asset_extras = {"twinkit:georeference": georef,

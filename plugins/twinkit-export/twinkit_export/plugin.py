@@ -190,7 +190,7 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
         fname = f"{cm.class_id:03d}_{cm.name}.ply"
         write_class_ply(out / fname, cm, tex_name)
         classes.append({"class_id": cm.class_id, "cityscapes": ci.name, "name": cm.name, "file": fname,
-                        "vertices": cm.n_vertices, "own_vertices": cm.own_vertices, "faces": cm.n_faces,
+                        "vertices": cm.mesh.n_vertices, "own_vertices": cm.own_vertices, "faces": cm.mesh.n_faces,
                         "label_count": int(np.count_nonzero(labels == cm.class_id)),
                         "carla_tag": ci.carla_tag, "carla_auto_tag": ci.auto_tag, "carla_folder": ci.carla_folder,
                         "color": list(ci.color)})

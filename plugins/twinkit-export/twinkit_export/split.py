@@ -26,7 +26,7 @@ import numpy as np
 from twinkit.mesh import Mesh, drop_bad_faces, vertex_normals
 
 from .classes import info, palette_lut
-from .classmesh import ClassMesh, read_class_ply
+from .classmesh import ClassPart, class_part, read_class_ply
 
 
 def face_classes(faces: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -81,7 +81,7 @@ def face_classes(faces: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, dic
 
 @dataclass
 class SplitResult:
-    meshes: list[ClassMesh]
+    meshes: list[ClassPart]
     stats: dict
 
 
@@ -119,25 +119,18 @@ def split_mesh(mesh: Mesh, labels: np.ndarray) -> SplitResult:
         remap = np.full(n, -1, np.int64)
         remap[vids] = np.arange(len(vids))
         ci = info(int(cid))
-        meshes.append(ClassMesh(
-            class_id=int(cid), name=ci.carla_name,
-            vertices=mesh.vertices[vids].astype(np.float64),
-            normals=normals[vids].astype(np.float32),
-            colors=lut[labels[vids]],
-            vertex_class=labels[vids],
-            source_index=vids.astype(np.int32),
-            faces=remap[f].astype(np.int32),
-            corner_uv=corner_uv[sel].astype(np.float32),
-        ))
+        meshes.append(class_part(
+            int(cid), ci.carla_name, vertices=mesh.vertices[vids], faces=remap[f], normals=normals[vids],
+            colors=lut[labels[vids]], vertex_class=labels[vids], source_index=vids, corner_uv=corner_uv[sel]))
     own_total = sum(m.own_vertices for m in meshes)
     stats.update({
         "source_vertices": int(n), "input_faces": int(input_faces), "source_faces": int(len(mesh.faces)),
         "degenerate_faces_dropped": bad["degenerate_faces"], "duplicate_faces_dropped": bad["duplicate_faces"],
         "back_to_back_faces_dropped": bad["back_to_back_faces"],
         "classes": len(meshes),
-        "exported_vertices": int(sum(m.n_vertices for m in meshes)),
+        "exported_vertices": int(sum(m.mesh.n_vertices for m in meshes)),
         "own_vertices": int(own_total),
-        "border_copies": int(sum(m.n_vertices - m.own_vertices for m in meshes)),
+        "border_copies": int(sum(m.mesh.n_vertices - m.own_vertices for m in meshes)),
         "loose_vertices": int(len(loose)),
         "vertices_dropped": int(n - own_total),
     })
@@ -154,7 +147,7 @@ class ClassSet:
     """The content of a ``class_meshes`` folder."""
 
     folder: Path
-    meshes: list[ClassMesh]
+    meshes: list[ClassPart]
     texture: Path | None
     manifest: dict
 

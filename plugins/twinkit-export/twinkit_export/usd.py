@@ -157,28 +157,28 @@ def _mesh_geometry(mesh, cm) -> None:
     displayColor linear, class_id and source_index per vertex) on the UsdGeom.Mesh ``mesh``."""
     from pxr import Gf, Sdf, UsdGeom, Vt
 
-    pts = cm.vertices.astype(np.float32)
+    pts = cm.mesh.vertices.astype(np.float32)
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
     mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*pts.min(0).tolist()), Gf.Vec3f(*pts.max(0).tolist())]))
-    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(cm.n_faces, 3, np.int32)))
-    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(cm.faces.astype(np.int32).ravel()))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(cm.mesh.n_faces, 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(cm.mesh.faces.astype(np.int32).ravel()))
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
-    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(cm.normals.astype(np.float32)))
+    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(cm.mesh.normals.astype(np.float32)))
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     pv = UsdGeom.PrimvarsAPI(mesh.GetPrim())
     # st: faceVarying, indexed (unique UVs)
-    uv = cm.corner_uv.reshape(-1, 2)
+    uv = cm.mesh.corner_uv.reshape(-1, 2)
     uniq, inv = np.unique(uv, axis=0, return_inverse=True)
     st = pv.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
     st.Set(Vt.Vec2fArray.FromNumpy(uniq.astype(np.float32)))
     st.SetIndices(Vt.IntArray.FromNumpy(inv.astype(np.int32).ravel()))
     dc = pv.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
-    dc.Set(Vt.Vec3fArray.FromNumpy(_srgb_to_linear(cm.colors)))
+    dc.Set(Vt.Vec3fArray.FromNumpy(_srgb_to_linear(cm.mesh.colors)))
     cid = pv.CreatePrimvar("class_id", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
-    cid.Set(Vt.IntArray.FromNumpy(cm.vertex_class.astype(np.int32)))
+    cid.Set(Vt.IntArray.FromNumpy(cm.mesh.attrs["class_id"].astype(np.int32)))
     src = pv.CreatePrimvar("source_index", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex)
-    src.Set(Vt.IntArray.FromNumpy(cm.source_index.astype(np.int32)))
+    src.Set(Vt.IntArray.FromNumpy(cm.mesh.attrs["source_index"].astype(np.int32)))
 
 
 def _semantics(prim, cm, semantics_taxonomy: str, old_semantics: bool) -> None:
@@ -235,7 +235,7 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
     if movables:
         mov_parent = UsdGeom.Xform.Define(stage, root.GetPath().AppendChild("Movables")).GetPath()
     for cm, parent in [(m, root.GetPath()) for m in meshes] + [(m, mov_parent) for m in movables]:
-        if cm.n_faces == 0:
+        if cm.mesh.n_faces == 0:
             continue
         movable = parent != root.GetPath()
         mesh = UsdGeom.Mesh.Define(stage, parent.AppendChild(_prim_name(cm.name)))
@@ -247,7 +247,7 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
             UsdPhysics.CollisionAPI.Apply(prim).CreateCollisionEnabledAttr(True)
             UsdPhysics.MeshCollisionAPI.Apply(prim).CreateApproximationAttr(UsdPhysics.Tokens.none)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(mat)
-        stats[f"Movables/{cm.name}" if movable else cm.name] = {"points": cm.n_vertices, "faces": cm.n_faces, "collider": bool(collider)}
+        stats[f"Movables/{cm.name}" if movable else cm.name] = {"points": cm.mesh.n_vertices, "faces": cm.mesh.n_faces, "collider": bool(collider)}
     layer.Save()
     return stats
 

@@ -77,9 +77,9 @@ def actor_json(inst, file: str) -> dict:
 
 
 def instance_mesh(res, inst):
-    """The object's faces as a :class:`ClassMesh` (vertex_class = the object's class)."""
+    """The object's faces as a :class:`ClassPart` (every vertex labelled with the object's class)."""
     from ..classes import palette_lut
-    from ..classmesh import ClassMesh
+    from ..classmesh import class_part
     from twinkit.mesh.core import vertex_normals
 
     src = res.source
@@ -92,9 +92,9 @@ def instance_mesh(res, inst):
     uv = (np.asarray(tc, np.float32)[inst.faces].reshape(-1, 3, 2) if tc is not None
           else np.zeros((len(f), 3, 2), np.float32))
     cls = np.full(len(vids), inst.class_id, np.uint8)
-    return ClassMesh(class_id=inst.class_id, name=inst.name, vertices=src.vertices[vids].astype(np.float64),
-                     normals=np.asarray(nrm, np.float32)[vids], colors=palette_lut()[cls], vertex_class=cls,
-                     source_index=vids.astype(np.int32), faces=remap[f].astype(np.int32), corner_uv=uv)
+    return class_part(inst.class_id, inst.name, vertices=src.vertices[vids], faces=remap[f],
+                      normals=np.asarray(nrm, np.float32)[vids], colors=palette_lut()[cls], vertex_class=cls,
+                      source_index=vids, corner_uv=uv)
 
 
 def write_actors(mov_dir: Path, res, mtex: str | None, log=None) -> list[dict]:
@@ -117,7 +117,7 @@ def write_actors(mov_dir: Path, res, mtex: str | None, log=None) -> list[dict]:
 
 
 def load_actors(folder: Path | None) -> tuple[dict, list]:
-    """(actors.json content, [ClassMesh per actor]) of a ``movables`` folder; ({}, []) for None."""
+    """(actors.json content, [ClassPart per actor]) of a ``movables`` folder; ({}, []) for None."""
     from ..classmesh import read_class_ply
 
     if folder is None:
