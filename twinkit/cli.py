@@ -20,6 +20,9 @@ from twinkit.errors import ConfigError, TwinkitError, say_error
 from twinkit.execute import execute
 from twinkit.quality import DEGRADED_EXIT
 
+# here: the command line, a run or a sweep through Hydra; the subcommands are in twinkit/commands.py, one
+# run's execution (engine, progress lines, manifest, report, exit status) in twinkit/execute.py
+
 log = logging.getLogger("twinkit")
 
 SUBCOMMANDS = tuple(COMMANDS)  # status, plugins, verify, gc: twinkit/commands.py
