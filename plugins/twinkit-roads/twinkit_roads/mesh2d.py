@@ -67,27 +67,27 @@ def picture_grid(xy: np.ndarray, px_per_m: float, max_px: int) -> tuple[Grid, fl
     return Grid.around(xy, res), res
 
 
-def rasterize(mesh: Mesh, grid: Grid, faces: np.ndarray | None = None, colours: np.ndarray | None = None,
-              mode: str = "L") -> np.ndarray:
-    """Draw faces seen from above (painter's order by height, so the top surface wins)."""
-    from PIL import Image, ImageDraw
+def top_faces(mesh: Mesh, grid: Grid, faces: np.ndarray | None = None) -> np.ndarray:
+    """The face each pixel of ``grid`` sees from above: (h, w) int64 positions in ``faces`` (indices into
+    ``mesh.f``, default all), -1 where none. The top surface wins (painter's order by mean height); the
+    scanline edge rule of :func:`twinkit.mesh.raster.face_raster` (the pixels the roads' masks were made with)."""
+    from twinkit.mesh.raster import face_raster
 
-    fidx = np.arange(len(mesh.f)) if faces is None else np.asarray(faces)
-    img = Image.new(mode, (grid.w, grid.h), 0 if mode == "L" else (40, 40, 40))
-    if len(fidx) == 0:
-        return np.asarray(img)
-    tri = mesh.v[mesh.f[fidx]]
-    order = np.argsort(tri[:, :, 2].mean(1), kind="stable")
-    px = grid.to_px(tri[:, :, :2])
-    draw = ImageDraw.Draw(img)
+    f = mesh.f if faces is None else mesh.f[np.asarray(faces, np.int64)]
+    return face_raster(mesh.v, f, grid.x0, grid.y0, grid.res, (grid.h, grid.w),
+                       order=mesh.v[f, 2].mean(1) if len(f) else None, rule="scanline")
+
+
+def rasterize(mesh: Mesh, grid: Grid, faces: np.ndarray | None = None, colours: np.ndarray | None = None) -> np.ndarray:
+    """Faces seen from above (:func:`top_faces`): (h, w) uint8, 1 where a face is; with ``colours``
+    ((len(faces), 3) 0..255, one per face) an (h, w, 3) uint8 picture on a (40, 40, 40) background."""
+    top = top_faces(mesh, grid, faces)
+    hit = top >= 0
     if colours is None:
-        for i in order:
-            draw.polygon([tuple(q) for q in px[i]], fill=1)
-    else:
-        cols = [tuple(int(c) for c in col) for col in colours]
-        for i in order:
-            draw.polygon([tuple(q) for q in px[i]], fill=cols[i])
-    return np.asarray(img)
+        return hit.astype(np.uint8)
+    img = np.full((grid.h, grid.w, 3), 40, np.uint8)
+    img[hit] = np.asarray(colours).astype(np.int64)[top[hit]].astype(np.uint8)
+    return img
 
 
 def face_normals_z(mesh: Mesh, fidx=None) -> np.ndarray:
