@@ -87,9 +87,9 @@ def bench_alignment(demo: Path | None, tmp: Path) -> None:
 
     g = read_ply(gt)
     gv, glab = g.vertices, np.asarray(g.attrs["label"]).astype(np.uint8)
-    from twinkit_roads.mesh2d import read_mesh
+    from twinkit.artefacts import read_textured_mesh
 
-    mv = read_mesh(mesh).v
+    mv = read_textured_mesh(mesh).vertices
     labels = glab[cKDTree(gv).query(mv)[1]]
     np.save(tmp / "labels.npy", labels)
     np.save(tmp / "gt_labels.npy", glab)

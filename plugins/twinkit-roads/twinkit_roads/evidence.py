@@ -275,12 +275,12 @@ def draw_evidence(v: np.ndarray, f: np.ndarray, labels_before: np.ndarray, ev: E
 
     from twinkit.cityscapes import colorize
 
-    from .mesh2d import Mesh, picture_grid, top_faces
+    from .mesh2d import picture_grid, top_faces
 
     xy = v[:, :2]
     grid, res = picture_grid(xy, px_per_m, max_px)
 
-    top = top_faces(Mesh(v, f, None, None), grid)  # one rasterisation, then three colourings of it
+    top = top_faces(v, f, grid)  # one rasterisation, then three colourings of it
     empty = top < 0
     top[empty] = 0
 

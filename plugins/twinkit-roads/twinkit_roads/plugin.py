@@ -196,7 +196,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     import numpy as np
 
     from .align import fit, sample_sections
-    from .mesh2d import Grid, from_mesh, road_faces, road_mask
+    from .mesh2d import Grid, road_faces, road_mask
     from .scan import is_empty_map
 
     if is_empty_map(in_roads_xodr.read_text(encoding="utf-8")):  # road_source=scan found no road
@@ -206,15 +206,15 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         out_alignment_json.write_text(json.dumps(doc, indent=1))
         ctx.log.info("alignment: no roads in the map (the scan holds none): nothing to align")
         return {"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "dz_m": 0.0, "kept_identity": True, "no_roads": True}
-    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     labels = None
     if in_labels_npy is not None and params.use_labels:
         labels = A.read_labels(in_labels_npy)
-    fidx, how = road_faces(mesh, labels, curb_tol_m=params.curb_tol_m)
+    fidx, how = road_faces(mesh.vertices, mesh.faces, labels, curb_tol_m=params.curb_tol_m)
     if len(fidx) < 10:
         raise InputError(f"{in_textured_mesh_ply.name}: no road surface found ({how}); nothing to align to")
-    grid = Grid.around(mesh.v[:, :2], params.raster_m)
-    mask = road_mask(mesh, fidx, grid)
+    grid = Grid.around(mesh.vertices[:, :2], params.raster_m)
+    mask = road_mask(mesh.vertices, mesh.faces, fidx, grid)
     xodr_text = in_roads_xodr.read_text(encoding="utf-8")
     sec = sample_sections(xodr_text, 1.0)
     # a network drawn from this very mesh (road_source=scan) is already where the mesh's roads are: the fit,
@@ -244,7 +244,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         from .align import lane_lines, refine_to_kerbs
 
         lines = lane_lines(xodr_text, 1.0)
-        kerb = refine_to_kerbs(lines, res.tf, mesh.v, mesh.f, max_shift_m=params.kerb_max_shift_m)
+        kerb = refine_to_kerbs(lines, res.tf, mesh.vertices, mesh.faces, max_shift_m=params.kerb_max_shift_m)
         if kerb.applied:
             res.tf = kerb.tf
             ctx.log.info("alignment: lane edges onto %d kerb feet: median offset %.3f -> %.3f m (moved %.3f m, %.3f deg)",
@@ -255,7 +255,7 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     if kerb is not None and params.kerb_road_offset_m > 0:
         from .align import road_lane_offsets
 
-        offsets = road_lane_offsets(lines, res.tf, mesh.v, mesh.f,
+        offsets = road_lane_offsets(lines, res.tf, mesh.vertices, mesh.faces,
                                     max_offset_m=params.kerb_road_offset_m)
         if offsets:
             ctx.log.info("alignment: %d road(s) moved sideways onto their kerbs: %s", len(offsets),
@@ -267,15 +267,15 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         # (0 from OSM; the scanned heights from road_source=scan): one offset, the median of the differences
         from scipy.spatial import cKDTree
 
-        rv = np.unique(mesh.f[fidx].ravel())
-        d, i = cKDTree(mesh.v[rv, :2]).query(res.tf.apply(sec.c), distance_upper_bound=1.0)
+        rv = np.unique(mesh.faces[fidx].ravel())
+        d, i = cKDTree(mesh.vertices[rv, :2]).query(res.tf.apply(sec.c), distance_upper_bound=1.0)
         hit = np.isfinite(d)
         if hit.sum() >= 6:
-            dz = float(np.median(mesh.v[rv[i[hit]], 2] - sec.z[hit]))
+            dz = float(np.median(mesh.vertices[rv[i[hit]], 2] - sec.z[hit]))
         elif from_scan:  # the scan's network carries the scanned heights already
             dz = 0.0
         else:  # the middles find no road vertex near them: the medians of the whole surface and network
-            dz = float(np.median(mesh.v[rv, 2]) - np.median(sec.z))
+            dz = float(np.median(mesh.vertices[rv, 2]) - np.median(sec.z))
     doc = {
         "yaw_deg": round(math.degrees(yaw), 6), "tx_m": round(tx, 4), "ty_m": round(ty, 4), "dz_m": round(dz, 4),
         "scale_estimate": round(scale, 6),
@@ -396,24 +396,23 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     import numpy as np
 
     from .align import lane_lines
-    from .mesh2d import from_mesh
     from .signals import draw_signals, find_instances, find_pole_heads, place_signals as place
 
     params = params or SignalParams()
-    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
     labels = A.read_labels(in_labels_npy)
-    if labels.ndim != 1 or len(labels) != len(mesh.v):
-        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
+    if labels.ndim != 1 or len(labels) != len(mesh.vertices):
+        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.vertices)} vertices of "
                          f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
                          "labels.npy)")
     text = A.read_opendrive(in_aligned_xodr)
     kept, rejected = find_instances(
-        mesh.v, labels, link_m=params.link_m, min_vertices=params.min_vertices, min_height_m=params.min_height_m,
+        mesh.vertices, labels, link_m=params.link_m, min_vertices=params.min_vertices, min_height_m=params.min_height_m,
         max_height_m=params.max_height_m, max_size_m=params.max_size_m, ground_radius_m=params.ground_radius_m,
         pole_radius_m=params.pole_radius_m, min_pole_vertices=params.min_pole_vertices,
         plate_depth_m=params.plate_depth_m)
     if params.pole_heads:
-        heads = find_pole_heads(mesh.v, labels, kept, link_m=params.link_m,
+        heads = find_pole_heads(mesh.vertices, labels, kept, link_m=params.link_m,
                                 head_z_m=(params.head_min_m, params.head_max_m),
                                 head_width_m=(params.head_min_width_m, params.head_max_width_m),
                                 clear_ring_m=(params.head_clear_m, max(params.head_clear_m + 0.2, 1.5)),
@@ -510,7 +509,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
 
     from .evidence import (L_ROAD, L_SIDEWALK, STATUS, S_AGREE, S_LEVEL, S_NONGROUND_GEOM, S_NONGROUND_LABEL,
                            S_RELABEL, draw_evidence, lane_polygons, road_evidence as vote)
-    from .mesh2d import Grid, from_mesh
+    from .mesh2d import Grid
 
     params = params or RoadEvidenceParams()
     labels = A.read_labels(in_labels_npy)
@@ -531,9 +530,9 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         img.save(out_road_evidence_png)
         ctx.log.info("road evidence: %s; labels unchanged", why)
         return {"enabled": bool(params.enabled), "changed_vertices": 0, **({"no_roads": True} if no_roads else {})}
-    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
-    if labels.ndim != 1 or len(labels) != len(mesh.v):
-        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.v)} vertices of "
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    if labels.ndim != 1 or len(labels) != len(mesh.vertices):
+        raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.vertices)} vertices of "
                          f"{in_textured_mesh_ply.name}; give the per-vertex labels of this mesh (the segmentation's "
                          "labels.npy)")
     try:
@@ -546,8 +545,8 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
         raise InputError(f"{in_aligned_xodr}: not a readable OpenDRIVE ({exc}); re-run apply_alignment") from None
     if not lanes:
         raise InputError(f"{in_aligned_xodr}: carla.Map finds no lanes in it; check the OpenDRIVE (osm_to_opendrive)")
-    grid = Grid.around(mesh.v[:, :2], params.raster_m)
-    ev = vote(mesh.v, mesh.f, labels, lanes, grid, normal_min_z=params.normal_min_z,
+    grid = Grid.around(mesh.vertices[:, :2], params.raster_m)
+    ev = vote(mesh.vertices, mesh.faces, labels, lanes, grid, normal_min_z=params.normal_min_z,
               max_height_m=params.max_height_m, curb_min_m=params.curb_min_m, curb_max_m=params.curb_max_m,
               window_m=params.window_m, max_disagreement=params.max_disagreement,
               max_network_disagreement=params.max_network_disagreement, plateau=params.plateau,
@@ -608,7 +607,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                          after.get("sidewalk", 0), before.get("terrain", 0), after.get("terrain", 0),
                          before["miou"], after["miou"])
     out_road_evidence_json.write_text(json.dumps(doc, indent=1))
-    draw_evidence(mesh.v, mesh.f, labels, ev if params.relabel else _unchanged(ev, labels), lanes,
+    draw_evidence(mesh.vertices, mesh.faces, labels, ev if params.relabel else _unchanged(ev, labels), lanes,
                   out_road_evidence_png, params.picture_px_per_m)
     ctx.log.info("road network evidence: %d vertices (%.1f m^2) relabelled %s; lanes disagree with the scan's "
                  "geometry over %.1f m^2 (%.1f %% of the lanes' area), %d lanes vetoed", int(ch.sum()), a(ch), trans,

@@ -515,16 +515,18 @@ def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], reject
     from old to new."""
     from PIL import Image, ImageDraw
 
-    from .mesh2d import picture_grid, read_mesh, rasterize
+    from twinkit.artefacts import read_textured_mesh
 
-    mesh = read_mesh(mesh_path)
-    xy = mesh.v[:, :2]
+    from .mesh2d import picture_grid, rasterize
+
+    mesh = read_textured_mesh(mesh_path)
+    xy = mesh.vertices[:, :2]
     grid, res = picture_grid(xy, px_per_m, max_px)
-    if mesh.rgb is not None:
-        cols = (mesh.rgb[mesh.f].mean(1) * 0.6).astype(np.uint8)  # darkened: the markers must stand out
+    if mesh.colors is not None:
+        cols = (mesh.colors[mesh.faces].mean(1) * 0.6).astype(np.uint8)  # darkened: the markers must stand out
     else:
-        cols = np.full((len(mesh.f), 3), 80, np.uint8)
-    img = Image.fromarray(rasterize(mesh, grid, colours=cols))
+        cols = np.full((len(mesh.faces), 3), 80, np.uint8)
+    img = Image.fromarray(rasterize(mesh.vertices, mesh.faces, grid, colours=cols))
     d = ImageDraw.Draw(img)
     w = max(1, int(round(0.06 / res)))
     r = max(3, int(round(0.35 / res)))
