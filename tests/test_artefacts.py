@@ -213,6 +213,17 @@ NOT_CATALOGUED = {
 }
 
 
+def _recipe_renames():
+    """(step name, output parameter, file name) of every ``outputs:`` rename in recipes/*.yaml."""
+    import yaml
+
+    for path in sorted((Path(__file__).resolve().parents[1] / "recipes").glob("*.yaml")):
+        for st in (yaml.safe_load(path.read_text()).get("recipe") or {}).get("steps") or []:
+            if isinstance(st, dict) and st.get("outputs") and str(st.get("uses", "")).startswith("step/"):
+                for port, filename in st["outputs"].items():
+                    yield st["uses"].split("/", 1)[1], port, filename
+
+
 def _ports_by_plugin():
     """{file name: (writer tags, reader tags)} over every registered plugin (``plugin:step``)."""
     from collections import defaultdict
@@ -230,6 +241,10 @@ def _ports_by_plugin():
     for p in plugins:
         for o in parse_signature(p.run).outputs:
             writers[o.filename].add(tag(p))
+    for step, port, filename in _recipe_renames():  # a recipe step's 'outputs:' (export_demo's labels.npy)
+        p = next(p for p in plugins if p.kind == "step" and p.name == step)
+        writers[filename].add(tag(p))
+        assert port in {o.param for o in parse_signature(p.run).outputs}
     for p in plugins:
         for i in parse_signature(p.run).inputs:
             for name in writers:

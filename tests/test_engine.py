@@ -458,3 +458,20 @@ def test_parallel_jobs_opening_a_new_hash_cache_together_wait_for_each_other(tmp
             assert answers == ["ok"] * 4, (trial, answers)
             rows = sqlite3.connect(db).execute("SELECT count(*) FROM hashes").fetchone()[0]
             assert rows == 1
+
+
+def test_a_recipe_step_renames_its_outputs(project):
+    """``outputs: {out_double_txt: twice.txt}`` makes the step write twice.txt, which later steps read by that
+    name (export_demo's labels.npy from the segmentation's transfer_gt_labels); a changed extension fails the plan."""
+    project.recipe("renamed", ["{id: make, uses: step/make}",
+                               "{id: double, uses: step/double, outputs: {out_double_txt: twice.txt}}",
+                               "{id: scale, uses: step/scale, inputs: {in_double_txt: twice.txt}}"])
+    r = project.run("site=t", "recipe=renamed")
+    assert r.rc == 0, r.text
+    assert (project.ws / "02_double" / "twice.txt").read_text() == "2\n"
+    assert not (project.ws / "02_double" / "double.txt").exists()
+    assert (project.ws / "03_scale" / "scaled.txt").read_text() == "6\n"
+    project.recipe("bad", ["{id: make, uses: step/make}",
+                           "{id: double, uses: step/double, outputs: {out_double_txt: twice.json}}"])
+    r = project.run("site=t", "recipe=bad")
+    assert r.rc != 0 and "keep its kind" in r.text, r.text

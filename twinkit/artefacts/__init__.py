@@ -382,10 +382,10 @@ CATALOGUE: dict[str, Artefact] = dict([
            readers="pointcloud:bake_texture pointcloud:simplify"),
     _entry("textured_mesh.obj", "OBJ + MTL", F.TexturedObj, read_textured_obj, write_textured_obj,
            writers="export:lift_movables photo:photo_texture pointcloud:bake_texture",
-           readers="export:drop_test export:gt_labels export:lift_movables export:split_classes"),
+           readers="export:drop_test export:lift_movables export:split_classes"),
     _entry("labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
-           writers="export:gt_labels export:lift_movables roads:road_evidence segmentation:backproject "
-                   "segmentation:import_labels",
+           writers="export:lift_movables roads:road_evidence segmentation:backproject "
+                   "segmentation:import_labels segmentation:transfer_gt_labels",
            readers="export:lift_movables export:split_classes roads:align_roads roads:place_signals "
                    "roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
                    "segmentation:import_labels tiles:evaluate_seam_labels"),
@@ -395,7 +395,7 @@ CATALOGUE: dict[str, Artefact] = dict([
                    "segmentation:predict_views tiles:evaluate_seam_labels"),
     _entry("gt_mesh.ply", "PLY mesh with label", F.GtMeshPly, read_gt_mesh, write_gt_mesh,
            writers="demo-site:site_generator/demo_intersection",
-           readers="export:gt_labels pointcloud:evaluate_reconstruction segmentation:transfer_gt_labels"),
+           readers="pointcloud:evaluate_reconstruction segmentation:transfer_gt_labels"),
     _entry("aligned.xodr", "OpenDRIVE XML", F.OpenDrive, read_opendrive, write_opendrive,
            writers="roads:apply_alignment roads:place_signals",
            readers="export:drop_test export:exporter/carla_package roads:place_signals roads:road_evidence"),

@@ -18,7 +18,7 @@ from twinkit.signature import Port, Signature, parse_signature
 
 log = logging.getLogger("twinkit")
 
-_STEP_SPEC_KEYS = {"id", "uses", "params", "inputs", "foreach", "manual", "description", "optional"}
+_STEP_SPEC_KEYS = {"id", "uses", "params", "inputs", "outputs", "foreach", "manual", "description", "optional"}
 
 
 @dataclass
@@ -29,6 +29,7 @@ class StepSpec:
     uses: str | None = None
     params: dict = field(default_factory=dict)
     inputs: dict = field(default_factory=dict)
+    outputs: dict = field(default_factory=dict)  # {out_<name>_<ext>: file name}: the step writes that name instead
     foreach: str | None = None
     manual: dict | None = None
     description: str = ""
@@ -84,10 +85,14 @@ def _spec_from(raw: Any, recipe_name: str, i: int) -> StepSpec:
     spec = StepSpec(**{k: v for k, v in raw.items()})
     spec.params = dict(spec.params or {})
     spec.inputs = dict(spec.inputs or {})
+    spec.outputs = dict(spec.outputs or {})
     if not spec.id.replace("_", "").isalnum():
         raise ConfigError(f"recipe '{recipe_name}': step id {spec.id!r} must be letters, digits and '_'")
     if (spec.uses is None) == (spec.manual is None):
         raise ConfigError(f"recipe '{recipe_name}', step '{spec.id}': give exactly one of 'uses' or 'manual'")
+    if spec.manual is not None and spec.outputs:
+        raise ConfigError(f"recipe '{recipe_name}', step '{spec.id}': a manual step names its files in "
+                          f"'manual: {{outputs: [...]}}', not in 'outputs'")
     return spec
 
 
@@ -167,6 +172,7 @@ def build_plan(cfg: dict, registry: Registry, config_root: Path | None = None,
                 idx -= 1
                 continue
             plugin, params_obj, params_dict, signature, components = chosen
+            signature = _renamed_outputs(signature, spec.outputs, where)
         inputs = _wire_inputs(spec, signature, where, st)
         if inputs is None or _reads_nothing_that_runs(spec, signature, inputs, st):
             idx -= 1
@@ -249,6 +255,34 @@ def _manual_signature(spec: StepSpec, where: str) -> Signature:
         in_ext = suffix or None
         signature = Signature(signature.inputs + (Port(f"in_{stem}" + (f"_{in_ext}" if in_ext else ""), stem, in_ext),), signature.outputs, False)
     return signature
+
+
+def _renamed_outputs(signature: Signature, renames: dict, where: str) -> Signature:
+    """``signature`` with the outputs a recipe step renames (``outputs: {out_gt_labels_npy: labels.npy}``) writing
+    the new file names: the step function still receives the path under its own parameter, so one step can serve
+    recipes that call its file differently. ConfigError on an unknown parameter, a changed extension (or file
+    made folder) or two outputs of one name."""
+    if not renames:
+        return signature
+    by_param = {p.param: p for p in signature.outputs}
+    unknown = set(renames) - set(by_param)
+    if unknown:
+        raise ConfigError(f"{where}: 'outputs' names {sorted(unknown)}, but the step writes only {sorted(by_param)}")
+    ports = []
+    for p in signature.outputs:
+        new = renames.get(p.param)
+        if new is None:
+            ports.append(p)
+            continue
+        stem, dot, ext = str(new).partition(".")
+        if not stem or (ext if dot else "dir") != p.ext:
+            raise ConfigError(f"{where}: 'outputs' renames {p.param} ({p.filename}) to {new!r}; keep its kind "
+                              f"({'a folder name' if p.is_dir else '.' + str(p.ext)})")
+        ports.append(Port(p.param, stem, p.ext))
+    names = [p.filename for p in ports]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"{where}: 'outputs' gives two outputs one name: {names}")
+    return Signature(signature.inputs, tuple(ports), signature.wants_item)
 
 
 def _bind_plugin(spec: StepSpec, where: str, st: _Planning):

@@ -2,7 +2,7 @@
 
 A site with a ground-truth mesh (the demo site) carries CityScapes trainIds per face and per vertex;
 :func:`transfer_labels` moves them onto the reconstructed mesh's vertices (the segmentation's
-reference, ``transfer_gt_labels``; the export's stand-in labels, ``gt_labels``).
+``transfer_gt_labels`` step: its reference ``gt_labels.npy``, and export_demo's stand-in ``labels.npy``).
 """
 from __future__ import annotations
 

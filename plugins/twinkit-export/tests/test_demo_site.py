@@ -1,5 +1,5 @@
 """Demo-site targets on a reduced mesh: the demo site's textured ground-truth mesh (~76k faces)
-with labels transferred by ``gt_labels``, through split -> FBX -> USD -> CARLA package.
+with its own per-vertex ground-truth labels, through split -> FBX -> USD -> CARLA package.
 
 Targets: every class present in the labels is a correctly named sub-mesh in the FBX and the USD;
 per-class vertex counts add up to the source mesh; the USD validates with 0 errors; the XODR in
@@ -40,9 +40,12 @@ def demo_site(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def demo_split(demo_site, tmp_path_factory):
+    from twinkit import artefacts as A
+
     obj = demo_site / "gt_mesh.obj"
-    lab = run_step(plugin("step", "gt_labels"), tmp_path_factory.mktemp("demo_labels"),
-                   {"in_gt_mesh_ply": demo_site / "gt_mesh.ply", "in_textured_mesh_obj": obj})["labels.npy"]
+    # the textured mesh is the ground-truth mesh itself: its labels are the per-vertex ground truth
+    lab = tmp_path_factory.mktemp("demo_labels") / "labels.npy"
+    A.write_labels(lab, A.read_gt_mesh(demo_site / "gt_mesh.ply").attrs["label"])
     out = run_step(plugin("step", "split_classes"), tmp_path_factory.mktemp("demo_split"),
                    {"in_labels_npy": lab, "in_textured_mesh_obj": obj}, site=DEMO_SITE)
     return obj, np.load(lab), out["class_meshes"]

@@ -18,7 +18,7 @@ from twinkit_export.split import face_classes, load_class_set, split_mesh
 from conftest import SITE, plugin
 
 
-@pytest.mark.parametrize("kind,name", [("step", "gt_labels"), ("step", "split_classes"), ("exporter", "fbx"),
+@pytest.mark.parametrize("kind,name", [("step", "split_classes"), ("exporter", "fbx"),
                                        ("exporter", "usd"), ("exporter", "gltf"), ("exporter", "carla_package")])
 def test_contract(kind, name):
     check_plugin(plugin(kind, name))
@@ -153,21 +153,3 @@ def test_split_downscales_large_texture(street, tmp_path):
     man = json.loads((out["class_meshes"] / "classes.json").read_text())
     assert man["texture_downscaled_to"] == [128, 128]
     assert Image.open(out["class_meshes"] / man["texture"]).size == (128, 128)
-
-
-def test_gt_labels_transfer(street, tmp_path):
-    """gt_labels on the mesh itself returns its own labels (closest surface point = the vertex)."""
-    from plyfile import PlyData, PlyElement
-
-    _, obj, _, (v, f, uv, lab) = street
-    vert = np.empty(len(v), [("x", "f4"), ("y", "f4"), ("z", "f4"), ("label", "u1")])
-    vert["x"], vert["y"], vert["z"] = v.T
-    vert["label"] = lab
-    face = np.empty(len(f), [("vertex_indices", "i4", (3,))])
-    face["vertex_indices"] = f
-    gt = tmp_path / "gt_mesh.ply"
-    PlyData([PlyElement.describe(vert, "vertex"), PlyElement.describe(face, "face")]).write(str(gt))
-    out = run_step(plugin("step", "gt_labels"), tmp_path / "run", {"in_gt_mesh_ply": gt, "in_textured_mesh_obj": obj})
-    got = np.load(out["labels.npy"])
-    assert got.dtype == np.uint8 and got.shape == lab.shape
-    np.testing.assert_array_equal(got, lab)

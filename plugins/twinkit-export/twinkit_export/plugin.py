@@ -21,15 +21,6 @@ from .lift_step import LiftParams, lift_movables_step
 # ----------------------------------------------------------------------------- parameters
 
 @dataclass
-class GtLabelsParams:
-    """Transfer ground-truth labels to the reconstructed mesh."""
-
-    max_dist_m: float = param(0.5, gt=0,
-                              help="Vertices farther than this (m) from the ground-truth surface stay unlabelled "
-                                   "(255).")
-
-
-@dataclass
 class SplitParams:
     """Split the labelled, textured mesh into one sub-mesh per class."""
 
@@ -144,37 +135,6 @@ def _camel(name: str) -> str:
 
 
 # ----------------------------------------------------------------------------- steps
-
-def gt_labels(params: GtLabelsParams, ctx: StepContext, *, in_gt_mesh_ply: Path, in_textured_mesh_obj: Path,
-              out_labels_npy: Path) -> dict:
-    """Per-vertex trainIds of the textured mesh from the ground-truth mesh (closest surface point)."""
-    import numpy as np
-
-    from twinkit import artefacts as A
-    from twinkit.street.truth import transfer_labels
-
-    from .labels import labelled_arrays
-
-    params = params or GtLabelsParams()
-    try:
-        gv, gf, gl = labelled_arrays(A.read_gt_mesh(in_gt_mesh_ply))
-    except ValueError as exc:
-        raise InputError(f"{in_gt_mesh_ply}: not a ground-truth mesh with per-vertex labels ({exc})") from None
-    mesh = A.read_textured_obj(in_textured_mesh_obj)
-    if len(gv) == len(mesh.vertices) and np.abs(gv - mesh.vertices).max() < 1e-4:
-        # the mesh *is* the ground-truth mesh (same vertices): copy, do not guess at coincident vertices
-        lab, dist = gl.copy(), np.zeros(len(gl), np.float32)
-    else:
-        lab, dist = transfer_labels(gv, gf, mesh.vertices, vertex_labels=gl)
-    far = dist > params.max_dist_m
-    lab[far] = 255
-    A.write_labels(out_labels_npy, lab.astype(np.uint8))
-    hist = {int(k): int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
-    ctx.log.info("labelled %d vertices (%d farther than %.2f m left unlabelled)", len(lab), int(far.sum()),
-                 params.max_dist_m)
-    return {"vertices": int(len(lab)), "unlabelled_far": int(far.sum()),
-            "median_dist_m": float(np.median(dist)), "histogram": hist}
-
 
 def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path, in_textured_mesh_obj: Path,
                   out_class_meshes_dir: Path) -> dict:
@@ -515,8 +475,6 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
 
 @hookimpl
 def twinkit_register_steps(register):
-    register("gt_labels", gt_labels, params=GtLabelsParams,
-             description="ground-truth labels on the reconstructed mesh (until segmentation lands)")
     register("lift_movables", lift_movables_step, params=LiftParams,
              description="vehicles, riders, pedestrians out of the static mesh as actors; ground closed beneath")
     register("split_classes", split_classes, params=SplitParams,

@@ -31,6 +31,7 @@ from twinkit.testing import plugin_from_module, run_plugin, run_step
 
 import twinkit_roads.plugin as roads
 from twinkit_roads.align import transform_xodr
+from twinkit_roads.evidence import iou
 
 ROOT = Path(__file__).resolve().parents[3]
 RUNS = [ROOT / "outputs" / "demo", ROOT / "outputs" / "demo_s3" / "demo", ROOT / "outputs" / "demo_s7" / "demo"]
@@ -84,10 +85,6 @@ def sidewalk_area(labels_npy: Path, obj: Path, tmp: Path) -> float:
             m = read_ply(folder / c["file"])
             return float(face_areas(m.vertices, m.faces).sum()) if m.faces is not None and len(m.faces) else 0.0
     return 0.0
-
-
-def iou(pred: np.ndarray, gt: np.ndarray) -> dict:
-    return roads._iou(pred, gt)
 
 
 def bench_run(run: Path, tmp: Path) -> dict:

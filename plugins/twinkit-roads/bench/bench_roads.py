@@ -87,9 +87,9 @@ def bench_alignment(demo: Path | None, tmp: Path) -> None:
 
     g = read_ply(gt)
     gv, glab = g.vertices, np.asarray(g.attrs["label"]).astype(np.uint8)
-    from twinkit_roads.mesh2d import read_mesh
+    from twinkit.artefacts import read_textured_mesh
 
-    mv = read_mesh(mesh).v
+    mv = read_textured_mesh(mesh).vertices
     labels = glab[cKDTree(gv).query(mv)[1]]
     np.save(tmp / "labels.npy", labels)
     np.save(tmp / "gt_labels.npy", glab)
@@ -104,7 +104,8 @@ def bench_alignment(demo: Path | None, tmp: Path) -> None:
         al = run_step(plugin_from_module(roads, "step", "align_roads"), tmp / f"al{i}", inputs, site=site_cfg)
         dt = time.perf_counter() - t0
         a = json.loads(al["alignment.json"].read_text())
-        from twinkit_roads.align import set_lane_offsets, transform_xodr
+        from twinkit_roads.align import transform_xodr
+        from twinkit_roads.kerbs import set_lane_offsets
 
         moved = set_lane_offsets(transform_xodr(xodr.read_text(), math.radians(a["yaw_deg"]), a["tx_m"], a["ty_m"],
                                                 a["dz_m"]), a.get("lane_offsets_m") or {})

@@ -35,7 +35,7 @@ def one(folder: Path, pattern: str) -> Path | None:
 
 
 def bench_run(run: Path, tmp: Path, sources: list[str]) -> list[dict]:
-    from twinkit_roads.mesh2d import read_mesh
+    from twinkit.artefacts import read_textured_mesh
     from twinkit_roads.scan import lanes_on_road
 
     site_json = json.loads((run / "01_site" / "site.json").read_text()) if (run / "01_site" / "site.json").is_file() else {}
@@ -48,7 +48,7 @@ def bench_run(run: Path, tmp: Path, sources: list[str]) -> list[dict]:
     if not (mesh_p and gt_p and truth):
         sys.exit(f"{run}: not a finished demo run (textured_mesh.ply, gt_labels.npy, roads_truth.json needed)")
     site = _site(run)
-    mesh = read_mesh(mesh_p)
+    mesh = read_textured_mesh(mesh_p)
     gt = np.load(gt_p)
     rows = []
     for src in sources:
@@ -62,7 +62,7 @@ def bench_run(run: Path, tmp: Path, sources: list[str]) -> list[dict]:
         dt = time.perf_counter() - t0
         doc = json.loads(out["scan_roads.json"].read_text())
         text = out["opendrive.xodr"].read_text(encoding="utf-8")
-        on_gt = lanes_on_road(text, mesh.v, mesh.f, gt)
+        on_gt = lanes_on_road(text, mesh.vertices, mesh.faces, gt)
         rows.append({"labels": src, "roads": len(doc["roads"]),
                      "junctions": sum(n["kind"] == "junction" for n in doc["nodes"]),
                      "driving_lanes": sum(r["lanes"] * (2 if r["two_way"] else 1) for r in doc["roads"]),

@@ -119,7 +119,7 @@ def bench_run(run: Path, tmp: Path) -> None:
     # pairing: on the demo each light serves the approach whose right kerb it stands on (layout.py)
     import xml.etree.ElementTree as ET
 
-    from twinkit_roads.signals import reference_lines
+    from twinkit_roads.reflines import reference_lines
 
     refs = reference_lines(ET.fromstring(before))
     print("| labels | approaches paired with the light at their lanes' kerb (demo layout) |")

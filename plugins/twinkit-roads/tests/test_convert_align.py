@@ -208,7 +208,8 @@ def test_lane_edges_are_moved_onto_the_kerbs_feet(demo_site, demo_net):
     side streets: the main road's kerbs lie behind its parking strips) stays; a mesh without kerbs moves
     nothing."""
     from twinkit.mesh import read_ply
-    from twinkit_roads.align import Transform2D, lane_lines, refine_to_kerbs
+    from twinkit_roads.align import Transform2D, lane_lines
+    from twinkit_roads.kerbs import refine_to_kerbs
 
     xodr, truth = demo_net
     site = json.loads(demo_site["site.json"].read_text())["osm_transform"]
@@ -246,7 +247,8 @@ def test_a_road_drawn_off_its_neighbours_is_moved_onto_its_own_kerbs(demo_site, 
     neighbours: no rigid move fits it) gets a lane offset that brings it back within 2 cm; the others
     get none; apply_alignment writes it as the road's <laneOffset> and carla.Map reads it."""
     from twinkit.mesh import read_ply
-    from twinkit_roads.align import Transform2D, lane_lines, road_lane_offsets, set_lane_offsets
+    from twinkit_roads.align import Transform2D, lane_lines
+    from twinkit_roads.kerbs import road_lane_offsets, set_lane_offsets
 
     xodr, truth = demo_net
     site = json.loads(demo_site["site.json"].read_text())["osm_transform"]

@@ -18,7 +18,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from twinkit_roads.signals import find_instances, place_signals
+from twinkit_roads.instances import find_instances
+from twinkit_roads.signals import place_signals
 
 LANES = """<lanes><laneSection s="0">
   <left><lane id="1" type="driving" level="false"><width sOffset="0" a="3.25" b="0" c="0" d="0"/></lane></left>
@@ -225,7 +226,7 @@ def test_step_rejects_labels_of_another_mesh(tmp_path):
 
 
 def test_reference_line_of_an_arc_and_projection_round_trip():
-    from twinkit_roads.signals import reference_lines
+    from twinkit_roads.reflines import reference_lines
 
     road = """<OpenDRIVE><road id="2" length="21" junction="-1"><planView>
  <geometry s="0" x="0" y="9" hdg="1.5707963" length="6"><line/></geometry>
@@ -241,7 +242,7 @@ def test_reference_line_of_an_arc_and_projection_round_trip():
 
 
 def test_pole_with_an_unlabelled_head_fills_an_unpaired_light():
-    from twinkit_roads.signals import find_pole_heads
+    from twinkit_roads.instances import find_pole_heads
 
     # the segmentation calls the head "building" (2): only the pole is labelled
     V, L = scene(light=(40.0, -8.0), noise=False)
@@ -260,7 +261,7 @@ def test_pole_with_an_unlabelled_head_fills_an_unpaired_light():
 
 
 def test_bare_poles_sign_posts_and_trees_are_not_heads():
-    from twinkit_roads.signals import find_pole_heads
+    from twinkit_roads.instances import find_pole_heads
 
     V, L = scene(light=None, sign=(30.0, -8.0), noise=False)
     L = np.where(L == 7, 2, L)  # the plate unlabelled too: a thin plate is still no head

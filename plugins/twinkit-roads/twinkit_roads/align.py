@@ -17,7 +17,6 @@ import numpy as np
 
 from twinkit import InputError
 
-from .kerbs import KerbFit, refine_to_kerbs, road_lane_offsets, set_lane_offsets  # noqa: F401 (the align step's)
 from .mesh2d import Grid
 
 
@@ -422,3 +421,91 @@ def centreline_rmse(xodr_text: str, truth_lines: list[np.ndarray], bounds: tuple
         pts = pts[(pts[:, 0] >= xmin) & (pts[:, 0] <= xmax) & (pts[:, 1] >= ymin) & (pts[:, 1] <= ymax)]
     d = polyline_distance(pts, [np.asarray(t, float)[:, :2] for t in truth_lines])
     return float(np.sqrt(np.mean(d ** 2))), int(len(pts))
+
+
+DEFINITION = "aligned_xy = Rz(yaw_deg) @ xy + [tx_m, ty_m] about the site origin; z += dz_m"
+
+
+def no_roads_alignment() -> dict:
+    """alignment.json for a map without roads (road_source=scan found none): the identity."""
+    return {"yaw_deg": 0.0, "tx_m": 0.0, "ty_m": 0.0, "dz_m": 0.0, "scale_estimate": 1.0, "kept_identity": True,
+            "no_roads": True, "definition": DEFINITION, "note": "no roads in the map: nothing to align"}
+
+
+def fit_or_keep(sec: Sections, mask: np.ndarray, grid: Grid, *, from_scan: bool, log, search_m: float,
+                **fit_kw) -> FitResult:
+    """``fit`` of the sections to the road mask; a network drawn from this very mesh (``from_scan``) is not
+    searched for and keeps the identity unless a rigid move fits better, and when the fit finds no road
+    surface at all it is kept in place (``kept_identity``, residuals NaN) instead of failing the run.
+
+    A network from the scan is already where the mesh's roads are: a fit against a cruder road surface (the
+    ground level, which takes ramped sidewalks too) can only move it off; and that the cruder surface does not
+    find it is no reason to stop the run (paths drawn on paved-looking ground the ground test does not take)."""
+    try:
+        return fit(sec, mask, grid, search_m=0.0 if from_scan else search_m, keep_identity=from_scan, **fit_kw)
+    except InputError as exc:
+        if not from_scan:
+            raise
+        log.warning("alignment: the scan's own network is kept in place; its residual is not measured (%s)", exc)
+        nan = float("nan")
+        return FitResult(Transform2D(about=tuple(sec.c.mean(0)) if len(sec.c) else (0.0, 0.0)), nan, nan,
+                         len(sec.c), 0, 0, False, kept_identity=True)
+
+
+def surface_dz(vertices: np.ndarray, faces: np.ndarray, fidx: np.ndarray, tf: Transform2D, sec: Sections,
+               from_scan: bool) -> float:
+    """Metres to add to the OpenDRIVE's heights: the median, over the carriageway middles moved by ``tf``, of
+    the road surface's height (the nearest vertex of the road faces ``fidx`` within 1 m, site frame) minus the
+    OpenDRIVE's own height there (0 from OSM; the scanned heights from road_source=scan). With fewer than 6
+    middles on the surface: 0 for the scan's own network (it carries the scanned heights), else the difference
+    of the medians of the whole surface and network."""
+    from scipy.spatial import cKDTree
+
+    rv = np.unique(faces[fidx].ravel())
+    d, i = cKDTree(vertices[rv, :2]).query(tf.apply(sec.c), distance_upper_bound=1.0)
+    hit = np.isfinite(d)
+    if hit.sum() >= 6:
+        return float(np.median(vertices[rv[i[hit]], 2] - sec.z[hit]))
+    if from_scan:
+        return 0.0
+    return float(np.median(vertices[rv, 2]) - np.median(sec.z))
+
+
+def _r(x: float, nd: int) -> float | None:
+    return round(x, nd) if math.isfinite(x) else None
+
+
+def alignment_doc(res: FitResult, dz: float, how: str, model: str, kerb=None, offsets: dict | None = None) -> dict:
+    """alignment.json: the rigid move (``res.tf`` about the site origin), the height offset ``dz`` (m), the fit's
+    residuals and, when the kerb refinement ran (``kerb``: a ``kerbs.KerbFit``), its result and the per-road lane
+    offsets ({road id: metres to the left})."""
+    yaw, tx, ty, scale = res.tf.about_origin()
+    doc = {
+        "yaw_deg": round(math.degrees(yaw), 6), "tx_m": round(tx, 4), "ty_m": round(ty, 4), "dz_m": round(dz, 4),
+        "scale_estimate": round(scale, 6),
+        "definition": DEFINITION + ". Edit the numbers and re-run: later steps use your values.",
+        "residual_rmse_m": _r(res.rmse_after, 4), "residual_rmse_before_m": _r(res.rmse_before, 4),
+        "sections": res.n_sections, "sections_used": res.n_used, "iterations": res.iterations,
+        "degenerate": res.degenerate, "kept_identity": res.kept_identity, "road_surface_from": how,
+        "model": model,
+        "note": "residual = RMS offset between carriageway middles of the network and of the mesh's road surface",
+    }
+    if kerb is not None:
+        doc["kerbs"] = {"edges": kerb.edges, "applied": kerb.applied, "why_not": kerb.why or None,
+                        "median_offset_before_m": _r(kerb.before_m, 4), "median_offset_after_m": _r(kerb.after_m, 4),
+                        "shift_m": [round(x, 4) for x in kerb.shift_m], "yaw_deg": round(kerb.yaw_deg, 4),
+                        "note": "lane edges against the foot of the kerb beside them (profiles of vertical rays "
+                                "across each driving lane border); included in yaw_deg / tx_m / ty_m when applied"}
+        doc["lane_offsets_m"] = {str(k): v for k, v in sorted((offsets or {}).items())}
+        doc["lane_offsets_note"] = ("per OpenDRIVE road id: metres to the left of its reference line, added to its "
+                                    "<laneOffset> by apply_alignment after the rigid move (each road onto its own "
+                                    "kerbs); edit or empty it by hand like the numbers above")
+    return doc
+
+
+def alignment_metrics(doc: dict, kerb=None) -> dict:
+    """The align_roads step's metrics from its alignment.json ``doc`` and the kerb refinement."""
+    return {**{k: doc[k] for k in ("yaw_deg", "tx_m", "ty_m", "dz_m", "residual_rmse_m", "residual_rmse_before_m",
+                                   "sections_used", "road_surface_from", "kept_identity")},
+            "kerb_edges": kerb.edges if kerb else 0, "kerb_applied": bool(kerb and kerb.applied),
+            "kerb_offset_after_m": doc.get("kerbs", {}).get("median_offset_after_m")}

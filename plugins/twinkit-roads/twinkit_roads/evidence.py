@@ -275,20 +275,13 @@ def draw_evidence(v: np.ndarray, f: np.ndarray, labels_before: np.ndarray, ev: E
 
     from twinkit.cityscapes import colorize
 
-    from .mesh2d import Mesh, picture_grid, rasterize
+    from .mesh2d import picture_grid, top_faces
 
     xy = v[:, :2]
     grid, res = picture_grid(xy, px_per_m, max_px)
 
-    # one rasterisation: the top face's index per pixel (24 bits in RGB), then three colourings of it
-    bg = 40 | 40 << 8 | 40 << 16  # rasterize()'s background (40, 40, 40), never used as an id
-    ids = np.arange(len(f))
-    ids = ids + (ids >= bg)
-    idcol = np.stack([ids & 255, (ids >> 8) & 255, (ids >> 16) & 255], 1).astype(np.uint8)
-    top = rasterize(Mesh(v, f, None, None), grid, colours=idcol, mode="RGB").astype(np.int64)
-    top = top[..., 0] | (top[..., 1] << 8) | (top[..., 2] << 16)
-    empty = top == bg
-    top = np.where(top > bg, top - 1, top)
+    top = top_faces(v, f, grid)  # one rasterisation, then three colourings of it
+    empty = top < 0
     top[empty] = 0
 
     def face_rgb(per_vertex_rgb):
@@ -331,3 +324,120 @@ def draw_evidence(v: np.ndarray, f: np.ndarray, labels_before: np.ndarray, ev: E
     d.line([(8, H + 44), (8 + bar, H + 44)], fill=(255, 255, 255), width=3)
     d.text((14 + bar, H + 38), "10 m", fill=(255, 255, 255))
     canvas.save(out)
+
+
+def lanes_of(xodr_text: str, where, step_m: float, road_types, sidewalk_types) -> list[Lane]:
+    """``lane_polygons`` of an aligned OpenDRIVE map (``where``: its path, for the messages), the lane types
+    compared in lower case; an unreadable map or one without lanes is an ``InputError`` that names the fix."""
+    from twinkit import InputError
+    from twinkit.street.lanes import OpenDriveError
+
+    try:
+        lanes = lane_polygons(xodr_text, step_m, tuple(t.lower() for t in road_types),
+                              tuple(t.lower() for t in sidewalk_types))
+    except OpenDriveError as exc:
+        raise InputError(f"{where}: {exc.why}; re-run apply_alignment") from None
+    except (OSError, UnicodeDecodeError, RuntimeError, ValueError) as exc:
+        raise InputError(f"{where}: not a readable OpenDRIVE ({exc}); re-run apply_alignment") from None
+    if not lanes:
+        raise InputError(f"{where}: carla.Map finds no lanes in it; check the OpenDRIVE (osm_to_opendrive)")
+    return lanes
+
+
+def draw_passthrough(out, why: str) -> None:
+    """The evidence picture when no lane voted at all (switched off, no roads): one line that says ``why``."""
+    from PIL import Image, ImageDraw
+
+    img = Image.new("RGB", (420, 40), (0, 0, 0))
+    ImageDraw.Draw(img).text((10, 14), f"road network evidence: {why[:44]}; labels unchanged", fill=(255, 255, 255))
+    img.save(out)
+
+
+def unchanged(ev: Evidence, labels: np.ndarray) -> Evidence:
+    """``ev`` with the labels as they were (relabel=false: the picture shows the votes, no change)."""
+    import dataclasses
+
+    return dataclasses.replace(ev, labels=labels.copy())
+
+
+def _class_name(c: int) -> str:
+    from twinkit.cityscapes import NAMES
+
+    return NAMES[c] if c < len(NAMES) else "unlabelled"
+
+
+DEFINITION = ("areas in m^2 of mesh surface (a third of each adjacent triangle per vertex) under the lanes "
+              "that vote (driving-like: road, sidewalk: sidewalk). agrees: ground-level surface of the "
+              "lane's class; relabelled: ground class changed to the lane's; disagreements: the lane lies "
+              "over raised/non-ground geometry (a building, a wall, a car body), over ground the scan calls "
+              "a non-ground class, or on the wrong level (sidewalk lane on the carriageway level, driving "
+              "lane on a raised pavement); vetoed: a lane or road mostly disagreeing casts no vote")
+
+
+def evidence_report(ev: Evidence, labels: np.ndarray, new: np.ndarray, relabel: bool, params: dict) -> tuple[dict, dict]:
+    """road_evidence.json and the step's metrics: the labels changed (``labels`` -> ``new``, uint8 per vertex)
+    by class and transition, and the lanes' areas (m^2 of mesh surface) by status and vote."""
+    ch = new != labels
+    trans: dict[str, int] = {}
+    for a, b in zip(labels[ch].tolist(), new[ch].tolist()):
+        k = f"{_class_name(a)} -> {_class_name(b)}"
+        trans[k] = trans.get(k, 0) + 1
+    area = ev.area
+    a = lambda m: round(float(area[m].sum()), 2)  # noqa: E731
+    inl = ev.lane_vote > 0
+    geo = (ev.status == S_NONGROUND_GEOM) | (ev.status == S_LEVEL)
+    areas = {STATUS[s].replace(" ", "_"): a(ev.status == s) for s in STATUS if s}
+    per_vote = {nm: {"lane_area_m2": a(ev.lane_vote == lv), "agree_m2": a((ev.lane_vote == lv) & (ev.status == S_AGREE)),
+                     "relabelled_m2": a((ev.lane_vote == lv) & (ev.status == S_RELABEL)),
+                     "disagree_geometry_m2": a((ev.lane_vote == lv) & geo),
+                     "disagree_label_m2": a((ev.lane_vote == lv) & (ev.status == S_NONGROUND_LABEL))}
+                for nm, lv in (("road", L_ROAD), ("sidewalk", L_SIDEWALK))}
+    doc = {
+        "enabled": True, "relabel": relabel,
+        "changed_vertices": int(ch.sum()), "changed_area_m2": a(ch), "transitions": trans,
+        "changed_per_class": {_class_name(c): int(((new == c) & ch).sum()) - int(((labels == c) & ch).sum())
+                              for c in sorted(set(labels[ch].tolist()) | set(new[ch].tolist()))},
+        "lane_area_m2": a(inl), "areas_m2": areas, "per_vote": per_vote,
+        "disagreement_area_m2": a(inl & (geo | (ev.status == S_NONGROUND_LABEL))),
+        "disagreement_geometry_m2": a(inl & geo),
+        "disagreement_fraction": round(float(area[inl & geo].sum() / max(area[inl].sum(), 1e-9)), 4),
+        "network_disagreement": round(ev.network_disagreement, 4), "network_vetoed": ev.network_vetoed,
+        "vetoed_lanes": [ln for ln in ev.lanes if ln["vetoed"]],
+        "lanes": ev.lanes,
+        "definition": DEFINITION,
+        "params": params,
+    }
+    metrics = {"changed_vertices": int(ch.sum()), "changed_area_m2": a(ch),
+               "disagreement_geometry_m2": doc["disagreement_geometry_m2"],
+               "disagreement_fraction": doc["disagreement_fraction"], "vetoed_lanes": len(doc["vetoed_lanes"]),
+               "network_disagreement": doc["network_disagreement"], "network_vetoed": ev.network_vetoed}
+    return doc, metrics
+
+
+def add_evaluation(doc: dict, metrics: dict, labels: np.ndarray, new: np.ndarray, gt: np.ndarray) -> tuple[dict, dict]:
+    """The IoU (percent) of the labels before and after against the ground truth ``gt`` (per vertex), into
+    ``doc["evaluation"]`` and the road, sidewalk, terrain and mean IoU into ``metrics``. Returns (before, after)."""
+    before, after = iou(labels, gt), iou(new, gt)
+    doc["evaluation"] = {"iou_before": before, "iou_after": after}
+    metrics["iou_before"] = {k: before[k] for k in ("road", "sidewalk", "terrain", "miou") if k in before}
+    metrics["iou_after"] = {k: after[k] for k in ("road", "sidewalk", "terrain", "miou") if k in after}
+    return before, after
+
+
+def iou(pred, gt) -> dict:
+    """Per-class IoU (percent) over the classes present in the ground truth, and their mean (the segmentation
+    plugin's definition: unlabelled predictions are misses, unlabelled ground truth is left out)."""
+    from twinkit.cityscapes import N_CLASSES, NAMES
+
+    gt = np.asarray(gt).astype(np.int64)
+    pred = np.asarray(pred).astype(np.int64)
+    valid = gt < N_CLASSES
+    g, p = gt[valid], pred[valid]
+    out = {}
+    for c in np.unique(g):
+        tp = int(((p == c) & (g == c)).sum())
+        fp = int(((p == c) & (g != c)).sum())
+        fn = int(((p != c) & (g == c)).sum())
+        out[NAMES[c]] = round(100.0 * tp / max(tp + fp + fn, 1), 2)
+    out["miou"] = round(float(np.mean(list(out.values()))), 2) if out else 0.0
+    return out

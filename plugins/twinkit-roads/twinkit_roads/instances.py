@@ -7,12 +7,16 @@ unlabelled head (candidates for lights the labels miss).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twinkit.cityscapes import POLE
 from twinkit.cityscapes import TRAFFIC_LIGHT as LIGHT
 from twinkit.cityscapes import TRAFFIC_SIGN as SIGN
+
+if TYPE_CHECKING:
+    from .params import SignalParams
 
 
 @dataclass
@@ -171,3 +175,24 @@ def find_pole_heads(V: np.ndarray, labels: np.ndarray, known: list[Instance], *,
         out.append(Instance("light", ctr, size, int(len(P)), float(ctr[2] - ground), int(len(comp)), POLE,
                             evidence="pole_head"))
     return out
+
+
+def scanned_instances(V: np.ndarray, labels: np.ndarray, params: SignalParams) -> tuple[list[Instance], list[Instance]]:
+    """The place_signals step's instances: ``find_instances`` with ``params``, then (``params.pole_heads``)
+    ``find_pole_heads`` numbered after them. ``V`` (n, 3) float vertices (site frame, m), ``labels`` (n,)
+    CityScapes trainIds. Returns (kept, rejected)."""
+    kept, rejected = find_instances(
+        V, labels, link_m=params.link_m, min_vertices=params.min_vertices, min_height_m=params.min_height_m,
+        max_height_m=params.max_height_m, max_size_m=params.max_size_m, ground_radius_m=params.ground_radius_m,
+        pole_radius_m=params.pole_radius_m, min_pole_vertices=params.min_pole_vertices,
+        plate_depth_m=params.plate_depth_m)
+    if params.pole_heads:
+        heads = find_pole_heads(V, labels, kept, link_m=params.link_m,
+                                head_z_m=(params.head_min_m, params.head_max_m),
+                                head_width_m=(params.head_min_width_m, params.head_max_width_m),
+                                clear_ring_m=(params.head_clear_m, max(params.head_clear_m + 0.2, 1.5)),
+                                ground_radius_m=params.ground_radius_m)
+        for i, h in enumerate(heads):
+            h.id = len(kept) + i
+        kept = kept + heads
+    return kept, rejected

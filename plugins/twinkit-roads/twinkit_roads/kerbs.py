@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # align imports this module (its step's names), so the class is imported where it is built
-    from .align import Transform2D
+if TYPE_CHECKING:  # align's helpers are imported where they are used (kerbs extends align's fit)
+    from .align import FitResult, Transform2D
 
 
 @dataclass
@@ -114,7 +114,7 @@ def refine_to_kerbs(lines: list[dict], tf: Transform2D, vertices: np.ndarray, fa
     the directions the kerbs constrain move (kerbs along one axis fix nothing along it). Kept only when
     at least ``min_edges`` edges see a kerb, the correction stays within ``max_shift_m`` /
     ``max_yaw_deg``, and the median offset shrinks."""
-    from .align import Transform2D, _weights  # align imports this module for its step
+    from .align import Transform2D, _weights
 
     p0, o0, _, _ = lane_edges(lines)
     edge, out = tf.apply(p0), tf.apply_dir(o0)
@@ -200,3 +200,27 @@ def set_lane_offsets(text: str, offsets: dict) -> str:
         for o in offs:
             o.set("a", f"{float(o.get('a', 0.0)) + want[rid]:.6f}")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def kerb_correction(xodr_text: str, res: FitResult, vertices: np.ndarray, faces: np.ndarray, *, max_shift_m: float,
+                    road_offset_m: float, log) -> tuple[KerbFit, dict[int, float]]:
+    """The kerb step of the alignment: ``refine_to_kerbs`` on the lanes of ``xodr_text`` (``res.tf`` is replaced
+    by the refined transform when it is applied), then, when ``road_offset_m`` > 0, ``road_lane_offsets`` of at
+    most that many metres per road. Returns the refinement and {road id: metres to the left}."""
+    from .align import lane_lines
+
+    lines = lane_lines(xodr_text, 1.0)
+    kerb = refine_to_kerbs(lines, res.tf, vertices, faces, max_shift_m=max_shift_m)
+    if kerb.applied:
+        res.tf = kerb.tf
+        log.info("alignment: lane edges onto %d kerb feet: median offset %.3f -> %.3f m (moved %.3f m, %.3f deg)",
+                 kerb.edges, kerb.before_m, kerb.after_m, math.hypot(*kerb.shift_m), kerb.yaw_deg)
+    else:
+        log.info("alignment: kerb refinement not applied: %s", kerb.why)
+    offsets: dict[int, float] = {}
+    if road_offset_m > 0:
+        offsets = road_lane_offsets(lines, res.tf, vertices, faces, max_offset_m=road_offset_m)
+        if offsets:
+            log.info("alignment: %d road(s) moved sideways onto their kerbs: %s", len(offsets),
+                     ", ".join(f"road {k} {v:+.3f} m" for k, v in sorted(offsets.items())))
+    return kerb, offsets

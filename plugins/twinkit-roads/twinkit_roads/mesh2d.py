@@ -1,36 +1,16 @@
-"""Meshes seen from above: reading PLY, rasterising faces, the road-surface mask."""
+"""Meshes seen from above: rasterising faces, the road-surface mask.
+
+A mesh here is the core's arrays: ``v`` (n, 3) float64 vertices, metres, site frame, and ``f`` (m, 3) int
+triangles, as :class:`twinkit.mesh.Mesh` holds them (``vertices``, ``faces``; read through
+:func:`twinkit.artefacts.read_textured_mesh`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
-
 import numpy as np
 
 from twinkit import InputError
 from twinkit.cityscapes import ROAD
-
-
-@dataclass
-class Mesh:
-    v: np.ndarray  # (n, 3) float64, site frame
-    f: np.ndarray  # (m, 3) int
-    rgb: np.ndarray | None  # (n, 3) uint8
-    vlabel: np.ndarray | None  # (n,) per-vertex label if the file has one
-
-
-def from_mesh(m) -> Mesh:
-    """The roads' view of a :class:`twinkit.mesh.Mesh` (site frame): vertices, triangles, colours and the
-    per-vertex ``label`` (int32) when it has one."""
-    vlabel = np.asarray(m.attrs["label"]).astype(np.int32) if "label" in m.attrs else None
-    return Mesh(m.vertices, m.faces, m.colors, vlabel)
-
-
-def read_mesh(path: Path) -> Mesh:
-    """``textured_mesh.ply`` read through the artefact catalogue (:func:`twinkit.artefacts.read_textured_mesh`)
-    as :class:`Mesh`."""
-    from twinkit.artefacts import read_textured_mesh
-
-    return from_mesh(read_textured_mesh(path))
+from twinkit.mesh import face_areas
 
 
 @dataclass
@@ -67,52 +47,58 @@ def picture_grid(xy: np.ndarray, px_per_m: float, max_px: int) -> tuple[Grid, fl
     return Grid.around(xy, res), res
 
 
-def rasterize(mesh: Mesh, grid: Grid, faces: np.ndarray | None = None, colours: np.ndarray | None = None,
-              mode: str = "L") -> np.ndarray:
-    """Draw faces seen from above (painter's order by height, so the top surface wins)."""
-    from PIL import Image, ImageDraw
+def top_faces(v: np.ndarray, f: np.ndarray, grid: Grid, faces: np.ndarray | None = None) -> np.ndarray:
+    """The face each pixel of ``grid`` sees from above, of the triangles ``f`` of vertices ``v`` (site frame):
+    (h, w) int64 positions in ``faces`` (indices into ``f``, all when None), -1 where none. The top surface
+    wins (painter's order by mean height); the scanline edge rule of :func:`twinkit.mesh.raster.face_raster`
+    (the pixels the roads' masks were first drawn with)."""
+    from twinkit.mesh.raster import face_raster
 
-    fidx = np.arange(len(mesh.f)) if faces is None else np.asarray(faces)
-    img = Image.new(mode, (grid.w, grid.h), 0 if mode == "L" else (40, 40, 40))
-    if len(fidx) == 0:
-        return np.asarray(img)
-    tri = mesh.v[mesh.f[fidx]]
-    order = np.argsort(tri[:, :, 2].mean(1), kind="stable")
-    px = grid.to_px(tri[:, :, :2])
-    draw = ImageDraw.Draw(img)
+    ff = f if faces is None else f[np.asarray(faces, np.int64)]
+    return face_raster(v, ff, grid.x0, grid.y0, grid.res, (grid.h, grid.w),
+                       order=v[ff, 2].mean(1) if len(ff) else None, rule="scanline")
+
+
+def rasterize(v: np.ndarray, f: np.ndarray, grid: Grid, faces: np.ndarray | None = None,
+              colours: np.ndarray | None = None) -> np.ndarray:
+    """The faces ``faces`` of ``f`` seen from above (:func:`top_faces`): (h, w) uint8, 1 where a face is, 0
+    elsewhere; with ``colours`` ((len(faces), 3) 0..255, a row per face) an (h, w, 3) uint8 picture, (40, 40,
+    40) elsewhere."""
+    top = top_faces(v, f, grid, faces)
+    hit = top >= 0
     if colours is None:
-        for i in order:
-            draw.polygon([tuple(q) for q in px[i]], fill=1)
-    else:
-        cols = [tuple(int(c) for c in col) for col in colours]
-        for i in order:
-            draw.polygon([tuple(q) for q in px[i]], fill=cols[i])
-    return np.asarray(img)
+        return hit.astype(np.uint8)
+    img = np.full((grid.h, grid.w, 3), 40, np.uint8)
+    img[hit] = np.asarray(colours).astype(np.int64)[top[hit]].astype(np.uint8)
+    return img
 
-
-def face_normals_z(mesh: Mesh, fidx=None) -> np.ndarray:
-    f = mesh.f if fidx is None else mesh.f[fidx]
-    a, b, c = mesh.v[f[:, 0]], mesh.v[f[:, 1]], mesh.v[f[:, 2]]
+def face_normals_z(v: np.ndarray, f: np.ndarray, fidx: np.ndarray | None = None) -> np.ndarray:
+    """(k,) float64 z component of the unit normals of the faces ``fidx`` of ``f`` (all when None); 0 for a
+    degenerate face."""
+    f = f if fidx is None else f[fidx]
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     n = np.cross(b - a, c - a)
     ln = np.linalg.norm(n, axis=1)
     return np.where(ln > 0, n[:, 2] / np.maximum(ln, 1e-12), 0.0)
 
 
-def road_faces(mesh: Mesh, labels: np.ndarray | None, curb_tol_m: float = 0.07) -> tuple[np.ndarray, str]:
-    """Faces of the road surface: from per-vertex labels when given, else from the ground.
+def road_faces(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None,
+               curb_tol_m: float = 0.07) -> tuple[np.ndarray, str]:
+    """Faces of the road surface (indices into ``f``) and how they were found: from per-vertex labels when
+    given (two road corners of three), else from the ground.
 
     Without labels: the up-facing faces on the carriageway level, below the curbs (``level_faces``). It
     also takes low terrain and driveways; the fit is robust to that.
     """
     if labels is not None:
         labels = np.asarray(labels).reshape(-1)
-        if len(labels) != len(mesh.v):
-            raise InputError(f"labels.npy has {len(labels)} entries but the mesh has {len(mesh.v)} vertices; "
+        if len(labels) != len(v):
+            raise InputError(f"labels.npy has {len(labels)} entries but the mesh has {len(v)} vertices; "
                              "segment this mesh (the textured one) again")
-        lv = labels[mesh.f]
+        lv = labels[f]
         sel = np.flatnonzero((lv == ROAD).sum(1) >= 2)
         return sel, "labels"
-    return level_faces(mesh.v, mesh.f, curb_tol_m), "ground"
+    return level_faces(v, f, curb_tol_m), "ground"
 
 
 def level_faces(v: np.ndarray, f: np.ndarray, curb_tol_m: float = 0.07) -> np.ndarray:
@@ -126,7 +112,7 @@ def level_faces(v: np.ndarray, f: np.ndarray, curb_tol_m: float = 0.07) -> np.nd
     pieces at its steps, a piece low when no piece next to it lies lower across a step). The step test
     alone joins road and sidewalk wherever a curb is ramped (crossings, driveways), which is why it is
     second: on the demo it widened the derived roads by 4 m."""
-    nz = face_normals_z(Mesh(v, f, None, None))
+    nz = face_normals_z(v, f)
     up = np.flatnonzero(nz > 0.9)
     if len(up) == 0:
         raise InputError("the mesh has no upward-facing faces; cannot find the ground")
@@ -141,14 +127,10 @@ def level_faces(v: np.ndarray, f: np.ndarray, curb_tol_m: float = 0.07) -> np.nd
                         floor_below_m=curb_tol_m)
         win = flat[g.height() < curb_tol_m]
     steps = _step_level(v, f, up, curb_tol_m)
-    area = _face_areas(v, f)
+    area = face_areas(v, f)
     if area[win].sum() >= 0.75 * area[steps].sum():
         return win
     return steps
-
-
-def _face_areas(v, f) -> np.ndarray:
-    return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
 
 
 def _step_level(v, f, up, curb_tol_m: float) -> np.ndarray:
@@ -215,11 +197,12 @@ def step_pieces(z: np.ndarray, res: float, step_m: float, min_area_m2: float = 1
     return piece, low
 
 
-def road_mask(mesh: Mesh, fidx: np.ndarray, grid: Grid, close_m: float = 1.0) -> np.ndarray:
-    """Boolean road mask; small gaps closed and enclosed holes (cars, markings mislabelled) filled."""
+def road_mask(v: np.ndarray, f: np.ndarray, fidx: np.ndarray, grid: Grid, close_m: float = 1.0) -> np.ndarray:
+    """(h, w) bool road mask of the faces ``fidx`` on ``grid``; small gaps closed and enclosed holes (cars,
+    markings mislabelled) filled."""
     from scipy import ndimage
 
-    m = rasterize(mesh, grid, fidx) > 0
+    m = rasterize(v, f, grid, fidx) > 0
     r = max(1, int(round(close_m / grid.res)))
     st = np.ones((2 * r + 1, 2 * r + 1), bool)
     m = ndimage.binary_closing(m, structure=st, border_value=0)

@@ -12,18 +12,20 @@ def draw_qa(mesh_path: Path, lines: list[dict], before: list[dict] | None, out: 
     the network before alignment as thin yellow centre lines, the true centre lines (if known) in cyan."""
     from PIL import Image, ImageDraw
 
-    from .mesh2d import picture_grid, read_mesh, rasterize
+    from twinkit.artefacts import read_textured_mesh
 
-    mesh = read_mesh(mesh_path)
-    xy = mesh.v[:, :2]
+    from .mesh2d import picture_grid, rasterize
+
+    mesh = read_textured_mesh(mesh_path)
+    xy = mesh.vertices[:, :2]
     grid, res = picture_grid(xy, px_per_m, max_px)
-    if mesh.rgb is not None:
-        cols = mesh.rgb[mesh.f].mean(1).astype(np.uint8)
+    if mesh.colors is not None:
+        cols = mesh.colors[mesh.faces].mean(1).astype(np.uint8)
     else:  # no colours: shade by height
-        z = mesh.v[mesh.f, 2].mean(1)
+        z = mesh.vertices[mesh.faces, 2].mean(1)
         g = np.clip((z - np.percentile(z, 2)) / max(np.ptp(z), 1e-6) * 200 + 40, 0, 255).astype(np.uint8)
         cols = np.stack([g, g, g], 1)
-    img = Image.fromarray(rasterize(mesh, grid, colours=cols, mode="RGB"))
+    img = Image.fromarray(rasterize(mesh.vertices, mesh.faces, grid, colours=cols))
     d = ImageDraw.Draw(img)
     w = max(1, int(round(0.08 / res)))
 

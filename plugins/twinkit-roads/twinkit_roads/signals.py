@@ -21,149 +21,18 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-# the scanned instances (instances.py); the place_signals step imports its finders from here
-from .instances import Instance, find_instances, find_pole_heads  # noqa: F401
+from .instances import Instance
+from .reflines import RefLine, reference_lines
 
 # SignalType::IsTrafficLight (LibCarla/source/carla/road/SignalType.cpp, carla 0.9.16)
 CARLA_LIGHT_TYPES = {"1000001", "1000002", "1000009", "1000010", "1000011", "1000007", "1000014", "1000015",
                      "1000016", "1000017", "1000018", "1000019", "1000013", "1000020", "1000008", "1000012",
                      "F", "W", "A"}
 UNKNOWN_SIGN_TYPE = "-1"  # OpenDRIVE: "-1" = no type; CARLA keeps it as a landmark and spawns no sign actor
-
-
-# --------------------------------------------------------------------------- reference lines
-
-
-@dataclass
-class RefLine:
-    """A road's reference line sampled densely: s, x, y, heading, and its elevation polynomials."""
-    road: str
-    length: float
-    junction: str
-    s: np.ndarray
-    xy: np.ndarray
-    hdg: np.ndarray
-    elev: list = field(default_factory=list)  # (s, a, b, c, d)
-    lanes_right: list = field(default_factory=list)  # driving lane ids < 0 (first lane section)
-    lanes_left: list = field(default_factory=list)
-
-    def z(self, s: float) -> float:
-        rec = [e for e in self.elev if e[0] <= s + 1e-9] or self.elev[:1]
-        if not rec:
-            return 0.0
-        s0, a, b, c, d = rec[-1]
-        ds = s - s0
-        return a + b * ds + c * ds * ds + d * ds ** 3
-
-    def point(self, s: float, t: float) -> np.ndarray:
-        """Site-frame xy of road coordinates (s, t); s is clamped to the line like CARLA's Road does."""
-        s = min(max(s, 0.0), self.length)
-        i = int(np.clip(np.searchsorted(self.s, s) - 1, 0, len(self.s) - 2))
-        f = (s - self.s[i]) / max(self.s[i + 1] - self.s[i], 1e-12)
-        p = self.xy[i] + f * (self.xy[i + 1] - self.xy[i])
-        h = self.hdg[i]
-        return p + t * np.array([-math.sin(h), math.cos(h)])
-
-    def project(self, p) -> tuple[float, float, float]:
-        """(s, t, distance beyond the ends) of a site-frame xy point; t > 0 left of the line."""
-        p = np.asarray(p, float)[:2]
-        a, b = self.xy[:-1], self.xy[1:]
-        ab = b - a
-        L2 = np.maximum((ab ** 2).sum(1), 1e-12)
-        u = np.clip(((p - a) * ab).sum(1) / L2, 0, 1)
-        q = a + u[:, None] * ab
-        i = int(np.argmin(((p - q) ** 2).sum(1)))
-        s = self.s[i] + u[i] * (self.s[i + 1] - self.s[i])
-        d = ab[i] / math.sqrt(L2[i])
-        r = p - q[i]
-        t = d[0] * r[1] - d[1] * r[0]
-        # beyond an end: extend along the end tangent so the caller sees how far off the line it is
-        over = 0.0
-        if u[i] <= 0 and i == 0:
-            over = -float(np.dot(p - a[0], d))
-        elif u[i] >= 1 and i == len(ab) - 1:
-            over = float(np.dot(p - b[-1], d))
-        return float(s), float(t), max(over, 0.0)
-
-
-def _poly_geometry(g: ET.Element, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points and headings of one <geometry> record in its own s (0..length)."""
-    x0, y0, h0, L = (float(g.get(k)) for k in ("x", "y", "hdg", "length"))
-    kind = next(iter(g), None)
-    n = max(int(math.ceil(L / step)), 1)
-    ss = np.linspace(0.0, L, n + 1)
-    if kind is None or kind.tag == "line":
-        xy = np.stack([x0 + ss * math.cos(h0), y0 + ss * math.sin(h0)], 1)
-        return xy, np.full(len(ss), h0)
-    if kind.tag == "arc":
-        k = float(kind.get("curvature"))
-        if abs(k) < 1e-12:
-            xy = np.stack([x0 + ss * math.cos(h0), y0 + ss * math.sin(h0)], 1)
-            return xy, np.full(len(ss), h0)
-        h = h0 + k * ss
-        xy = np.stack([x0 + (np.sin(h) - math.sin(h0)) / k, y0 - (np.cos(h) - math.cos(h0)) / k], 1)
-        return xy, h
-    if kind.tag == "paramPoly3":
-        c = {k: float(kind.get(k, 0.0)) for k in ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV")}
-        normalized = kind.get("pRange", "normalized") == "normalized"
-        pmax = 1.0 if normalized else L
-        p = np.linspace(0.0, pmax, 20 * (n + 1))
-        u = c["aU"] + c["bU"] * p + c["cU"] * p ** 2 + c["dU"] * p ** 3
-        v = c["aV"] + c["bV"] * p + c["cV"] * p ** 2 + c["dV"] * p ** 3
-        ch, sh = math.cos(h0), math.sin(h0)
-        X, Y = x0 + u * ch - v * sh, y0 + u * sh + v * ch
-        seg = np.hypot(np.diff(X), np.diff(Y))
-        arc = np.concatenate([[0.0], np.cumsum(seg)])
-        arc *= L / max(arc[-1], 1e-12)  # the record's length is the arc length
-        xs, ys = np.interp(ss, arc, X), np.interp(ss, arc, Y)
-        du = c["bU"] + 2 * c["cU"] * p + 3 * c["dU"] * p ** 2
-        dv = c["bV"] + 2 * c["cV"] * p + 3 * c["dV"] * p ** 2
-        hh = np.unwrap(np.arctan2(du * sh + dv * ch, du * ch - dv * sh))
-        return np.stack([xs, ys], 1), np.interp(ss, arc, hh)
-    if kind.tag == "spiral":  # numerical integration of the clothoid
-        c0, c1 = float(kind.get("curvStart")), float(kind.get("curvEnd"))
-        fine = np.linspace(0.0, L, 20 * (n + 1))
-        h = h0 + c0 * fine + (c1 - c0) / (2 * max(L, 1e-12)) * fine ** 2
-        ds = np.diff(fine)
-        X = x0 + np.concatenate([[0.0], np.cumsum(np.cos(h[:-1]) * ds)])
-        Y = y0 + np.concatenate([[0.0], np.cumsum(np.sin(h[:-1]) * ds)])
-        return np.stack([np.interp(ss, fine, X), np.interp(ss, fine, Y)], 1), np.interp(ss, fine, h)
-    raise ValueError(f"unsupported OpenDRIVE geometry <{kind.tag}>")
-
-
-def reference_lines(root: ET.Element, step: float = 0.05) -> dict[str, RefLine]:
-    out = {}
-    for road in root.iter("road"):
-        S, XY, H = [], [], []
-        for g in road.find("planView").findall("geometry"):
-            xy, h = _poly_geometry(g, step)
-            s0, L = float(g.get("s")), float(g.get("length"))
-            S.append(s0 + np.linspace(0.0, L, len(xy)))
-            XY.append(xy)
-            H.append(h)
-        if not S:
-            continue
-        elev = []
-        prof = road.find("elevationProfile")
-        if prof is not None:
-            elev = sorted(tuple(float(e.get(k, 0.0)) for k in ("s", "a", "b", "c", "d"))
-                          for e in prof.findall("elevation"))
-        right, left = [], []
-        lanes = road.find("lanes")
-        sec = lanes.find("laneSection") if lanes is not None else None
-        if sec is not None:
-            for side, dst in (("right", right), ("left", left)):
-                grp = sec.find(side)
-                if grp is not None:
-                    dst.extend(int(ln.get("id")) for ln in grp.findall("lane") if ln.get("type") == "driving")
-        out[road.get("id")] = RefLine(road.get("id"), float(road.get("length")), road.get("junction", "-1"),
-                                      np.concatenate(S), np.concatenate(XY), np.concatenate(H), elev,
-                                      sorted(right), sorted(left))
-    return out
 
 
 # --------------------------------------------------------------------------- placing
@@ -515,16 +384,18 @@ def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], reject
     from old to new."""
     from PIL import Image, ImageDraw
 
-    from .mesh2d import picture_grid, read_mesh, rasterize
+    from twinkit.artefacts import read_textured_mesh
 
-    mesh = read_mesh(mesh_path)
-    xy = mesh.v[:, :2]
+    from .mesh2d import picture_grid, rasterize
+
+    mesh = read_textured_mesh(mesh_path)
+    xy = mesh.vertices[:, :2]
     grid, res = picture_grid(xy, px_per_m, max_px)
-    if mesh.rgb is not None:
-        cols = (mesh.rgb[mesh.f].mean(1) * 0.6).astype(np.uint8)  # darkened: the markers must stand out
+    if mesh.colors is not None:
+        cols = (mesh.colors[mesh.faces].mean(1) * 0.6).astype(np.uint8)  # darkened: the markers must stand out
     else:
-        cols = np.full((len(mesh.f), 3), 80, np.uint8)
-    img = Image.fromarray(rasterize(mesh, grid, colours=cols, mode="RGB"))
+        cols = np.full((len(mesh.faces), 3), 80, np.uint8)
+    img = Image.fromarray(rasterize(mesh.vertices, mesh.faces, grid, colours=cols))
     d = ImageDraw.Draw(img)
     w = max(1, int(round(0.06 / res)))
     r = max(3, int(round(0.35 / res)))
@@ -566,3 +437,50 @@ def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], reject
     d.line([(16, 84), (16 + bar, 84)], fill=(255, 255, 255), width=3)
     d.text((22 + bar, 76), "10 m", fill=(255, 255, 255))
     img.save(out)
+
+
+def carla_position_errors(moved_text: str, placed: list[Placed], source: str) -> dict[str, float]:
+    """Per placed signal id: metres (horizontal, site frame) between where CARLA puts it in ``moved_text``
+    (``twinkit.street.lanes.LaneMap``'s landmarks) and where it was meant to be (``Placed.new_xy``).
+    ``source`` names the map in the error. An OpenDRIVE carla.Map cannot read is an ``InputError``."""
+    from twinkit import InputError
+    from twinkit.street.lanes import LaneMap, OpenDriveError
+
+    try:
+        m = LaneMap(moved_text, "signals", source=source)
+    except OpenDriveError as exc:
+        raise InputError(str(exc)) from None
+    want = {p.id: p.new_xy for p in placed}
+    err = {}
+    for lm in m.landmarks():
+        w = want.get(lm.id)
+        if w is not None:
+            err[lm.id] = round(float(math.hypot(lm.xyz[0] - w[0], lm.xyz[1] - w[1])), 4)
+    return err
+
+
+def signals_report(placed: list[Placed], kept: list[Instance], rejected: list[Instance], notes: list[str],
+                   carla_err: dict[str, float], params: dict) -> tuple[dict, dict]:
+    """signals.json (the placed signals with CARLA's position error, the instances, the notes) and the
+    place_signals step's metrics (counts, the median move of the scanned lights in m)."""
+    lights = [p for p in placed if p.kind == "light"]
+    n_scan = sum(p.source == "scan" for p in lights)
+    doc = {
+        "signals": [dict(p.to_json(), carla_position_error_m=carla_err.get(p.id)) for p in placed],
+        "instances": [i.to_json() for i in kept], "rejected_clusters": [i.to_json() for i in rejected],
+        "notes": notes,
+        "definition": "position: where CARLA 0.9.16 puts the signal (x, y site frame, m); s, t, zOffset in the road's "
+                      "reference-line frame of defined_on_road; road = the road whose lanes it controls (a "
+                      "signalReference there when defined_on_road differs); source scan|netconvert; moved_m = "
+                      "horizontal distance from netconvert's position",
+        "params": params,
+    }
+    moved_m = [p.moved_m for p in lights if p.source == "scan"]
+    metrics = {"scanned_lights": sum(i.kind == "light" for i in kept),
+               "scanned_signs": sum(i.kind == "sign" for i in kept),
+               "pole_head_lights": sum(i.evidence == "pole_head" for i in kept),
+               "rejected_clusters": len(rejected), "light_signals": len(lights), "light_signals_from_scan": n_scan,
+               "light_signals_netconvert": len(lights) - n_scan, "signs_written": sum(p.kind == "sign" for p in placed),
+               "median_moved_m": round(float(np.median(moved_m)), 3) if moved_m else 0.0,
+               "max_carla_position_error_m": max(carla_err.values(), default=0.0)}
+    return doc, metrics

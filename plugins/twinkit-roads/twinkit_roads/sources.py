@@ -220,14 +220,13 @@ def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: 
 
     from twinkit import artefacts as A
 
-    from .mesh2d import from_mesh
     from .scan import (NoRoads, ScanSourceParams, build_network, choose_curbs, cloud_xy, draw_scan_roads,
                        mark_source, point_spacing, read_labels, read_truth, scan_metrics, scan_report)
 
     params = params or ScanSourceParams()
     t0 = time.perf_counter()
-    mesh = from_mesh(A.read_textured_mesh(in_textured_mesh_ply))
-    which, src, labels = read_labels(params.labels, len(mesh.v), in_textured_mesh_ply.name, in_labels_npy,
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    which, src, labels = read_labels(params.labels, len(mesh.vertices), in_textured_mesh_ply.name, in_labels_npy,
                                      in_gt_labels_npy, ctx.log)
     spacing = point_spacing(in_points_meta_json, in_points_ply)
     labels_for_mask, curbs = choose_curbs(labels, spacing, params, src, ctx.log)
@@ -244,7 +243,7 @@ def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: 
     out_opendrive_xodr.write_text(text, encoding="utf-8")
     truth = read_truth(in_roads_truth_json)
     doc = scan_report(net, text, mesh, labels, which, src, info, params, truth)
-    draw_scan_roads(mesh.v, mesh.f, labels, net, text, out_scan_roads_png, truth=truth)
+    draw_scan_roads(mesh.vertices, mesh.faces, labels, net, text, out_scan_roads_png, truth=truth)
     doc["total_s"] = round(time.perf_counter() - t0, 3)
     out_scan_roads_json.write_text(json.dumps(doc, indent=1))
     return scan_metrics(net, doc, which, params, ctx.log)
@@ -262,7 +261,7 @@ def _scan_no_roads(exc, ctx, mesh, labels, which, frame, out_xodr: Path, out_jso
 
     out_xodr.write_text(empty_map(frame.proj_string()), encoding="utf-8")
     why = str(exc)
-    draw_scan_roads(mesh.v, mesh.f, labels, empty_network(), out_xodr.read_text(encoding="utf-8"), out_png,
+    draw_scan_roads(mesh.vertices, mesh.faces, labels, empty_network(), out_xodr.read_text(encoding="utf-8"), out_png,
                     note=f"no roads: {why}")
     doc, metrics = no_roads_report(exc, which)
     doc["total_s"] = metrics["total_s"] = round(time.perf_counter() - t0, 3)

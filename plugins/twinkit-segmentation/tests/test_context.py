@@ -254,7 +254,7 @@ def scene(*parts, ground=(20.0, 20.0)):
 
 
 def test_objects_above_the_ground_split_and_measure_a_post_and_a_wall():
-    from twinkit_segmentation.context import objects_above_ground
+    from twinkit_segmentation.objects import objects_above_ground
 
     post = solid_box([0, 0, 0], [0.2, 0.2, 4.0], top=False)
     wall = solid_box([3, -4, 0], [3.25, 4, 1.9])

@@ -107,6 +107,55 @@ def test_auto_street_from_osm_roads(tmp_path):
     assert np.allclose(cand[:, 1], 1.0, atol=0.05)  # on the road's centre line
 
 
+def _labelled_ply(path, v, f, vlab=None, flab=None):
+    from plyfile import PlyData, PlyElement
+
+    vert = np.empty(len(v), [("x", "f4"), ("y", "f4"), ("z", "f4")] + ([("label", "u1")] if vlab is not None else []))
+    vert["x"], vert["y"], vert["z"] = np.asarray(v).T
+    if vlab is not None:
+        vert["label"] = vlab
+    face = np.empty(len(f), [("vertex_indices", "i4", (3,))] + ([("label", "u1")] if flab is not None else []))
+    face["vertex_indices"] = f
+    if flab is not None:
+        face["label"] = flab
+    PlyData([PlyElement.describe(vert, "vertex"), PlyElement.describe(face, "face")]).write(str(path))
+    return path
+
+
+def test_transfer_gt_labels_rules(tmp_path):
+    """face: the nearest face's label; vertex: its corner's nearest the closest point; the mesh itself under
+    the vertex rule returns its own labels; farther than max_distance_m: 255."""
+    from twinkit_segmentation.params import TransferGtParams
+
+    xs, ys = np.meshgrid(np.arange(5.0), np.arange(5.0))
+    v = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(25)])
+    q = [(i * 5 + j, i * 5 + j + 1, i * 5 + j + 5, i * 5 + j + 6) for i in range(4) for j in range(4)]
+    f = np.array([t for a, b, c, d in q for t in ((a, b, d), (a, d, c))])
+    rng = np.random.default_rng(0)
+    vlab = rng.choice([0, 1, 2, 8], len(v)).astype(np.uint8)
+    flab = np.full(len(f), 13, np.uint8)
+    gt = _labelled_ply(tmp_path / "gt_mesh.ply", v, f, vlab, flab)
+    step = _plugin("step", "transfer_gt_labels")
+
+    def run(mesh, rule, name, truth=gt):
+        out = run_step(step, tmp_path / name, {"in_gt_mesh_ply": truth, "in_textured_mesh_ply": mesh},
+                       TransferGtParams(rule=rule))
+        return np.load(out["gt_labels.npy"])
+
+    same = run(gt, "vertex", "same")
+    assert same.dtype == np.uint8 and same.tolist() == vlab.tolist()
+    assert (run(gt, "face", "same_face") == 13).all()
+    moved = v + [0.1, 0.2, 0.3]
+    moved[0, 2] = 2.0  # farther than max_distance_m (0.5)
+    mesh = _labelled_ply(tmp_path / "textured_mesh.ply", moved, f)
+    got = run(mesh, "vertex", "moved")
+    assert got[0] == 255 and got[1:].tolist() == vlab[1:].tolist()  # nearest corner: the vertex it moved from
+    got = run(mesh, "face", "moved_face")
+    assert got[0] == 255 and (got[1:] == 13).all()
+    with pytest.raises(InputError, match="rule=face"):
+        run(gt, "vertex", "nolab", truth=_labelled_ply(tmp_path / "face_only.ply", v, f, None, flab))
+
+
 @needs_egl
 def test_oracle_chain_end_to_end(scene_files, tmp_path):
     mesh_ply, gt_ply, vlab = scene_files

@@ -158,6 +158,10 @@ class BackprojectParams:
 
 @dataclass
 class TransferGtParams:
+    rule: str = param("face", choices=("face", "vertex"),
+                      help="face: the label of the nearest ground-truth face (per-vertex labels where the faces "
+                           "have none); vertex: that face's corner nearest the closest point, from per-vertex "
+                           "labels (export_demo's stand-in labels.npy).")
     max_distance_m: float = param(0.5, gt=0,
                                   help="Vertices farther than this (m) from any ground-truth face stay unlabelled "
                                        "(255).")

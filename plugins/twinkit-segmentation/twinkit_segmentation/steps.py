@@ -470,25 +470,40 @@ def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, c
 
 # ----------------------------------------------------------------------------- ground truth and evaluation
 
+#: per-vertex label properties a site's ground-truth mesh may carry, first found wins (the demo writes ``label``)
+GT_VERTEX_LABEL_KEYS = ("label", "labels", "class", "class_id", "scalar_label")
+
+
 def transfer_gt_labels(params: TransferGtParams, ctx: StepContext, *, in_gt_mesh_ply: Path,
                        in_textured_mesh_ply: Path, out_gt_labels_npy: Path, out_gt_labels_ply: Path) -> dict:
-    """Ground truth on the reconstructed vertices: the label of the nearest ground-truth face."""
+    """Ground truth on the reconstructed vertices (``params.rule``): the nearest ground-truth face's label, or
+    (``vertex``) its corner's nearest the closest point. A recipe may rename the outputs (export_demo:
+    ``labels.npy``, ``labels.ply``)."""
     import numpy as np
 
     from twinkit.cityscapes import IGNORE
     from twinkit.street.truth import transfer_labels
-    from twinkit_segmentation.segmesh import face_labels, vertex_labels, write_labels_ply
+    from twinkit_segmentation.segmesh import face_labels, write_labels_ply
 
     gt = A.read_gt_mesh(in_gt_mesh_ply)
-    if face_labels(gt) is None and vertex_labels(gt) is None:
-        raise InputError(f"{in_gt_mesh_ply}: no 'label' property on faces or vertices")
+    key = next((k for k in GT_VERTEX_LABEL_KEYS if k in gt.attrs), None)
+    vlab = None if key is None else np.asarray(gt.attrs[key]).astype(np.uint8)
+    flab = face_labels(gt) if params.rule == "face" else None
+    if flab is None and vlab is None:
+        raise InputError(f"{in_gt_mesh_ply}: no label property on " + ("faces or vertices" if params.rule == "face"
+                         else f"vertices (looked for {', '.join(GT_VERTEX_LABEL_KEYS)}); or use rule=face"))
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
-    labels, dist = transfer_labels(gt.vertices, gt.faces, mesh.vertices, face_labels=face_labels(gt),
-                                   vertex_labels=vertex_labels(gt))
+    if (params.rule == "vertex" and len(gt.vertices) == len(mesh.vertices)
+            and np.abs(gt.vertices - mesh.vertices).max() < 1e-4):
+        # the mesh *is* the ground-truth mesh (same vertices): copy, do not guess at coincident vertices
+        labels, dist = vlab.copy(), np.zeros(len(vlab), np.float32)
+    else:
+        labels, dist = transfer_labels(gt.vertices, gt.faces, mesh.vertices, face_labels=flab, vertex_labels=vlab)
     labels[dist > params.max_distance_m] = IGNORE
     A.write_labels(out_gt_labels_npy, labels)
-    write_labels_ply(out_gt_labels_ply, mesh, labels, comment="ground truth transferred from the nearest gt face")
-    return {"vertices": int(len(labels)), "mean_distance_m": float(dist.mean()),
+    how = "nearest gt face" if params.rule == "face" else "nearest corner of the nearest gt face"
+    write_labels_ply(out_gt_labels_ply, mesh, labels, comment=f"ground truth transferred from the {how}")
+    return {"vertices": int(len(labels)), "rule": params.rule, "mean_distance_m": float(dist.mean()),
             "unlabelled": int((labels == IGNORE).sum()),
             "classes": sorted(int(c) for c in np.unique(labels) if c != IGNORE)}
 

@@ -20,15 +20,15 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     and signals. Raises NoRoads when no road holds up."""
     from twinkit.surface.closest import Surface
 
-    net = derive_network(mesh.v, mesh.f, labels_for_mask, p, log, curbs=curbs, rgb=mesh.rgb, points_xy=points_xy)
+    net = derive_network(mesh.vertices, mesh.faces, labels_for_mask, p, log, curbs=curbs, rgb=mesh.colors, points_xy=points_xy)
     net.stats["curbs"] = curbs
     net.stats["point_spacing_m"] = spacing
     derived_m = network_length(net)
     if p.sidewalks and curbs:
-        add_sidewalks(net, mesh.v, mesh.f, labels, p)
-    add_heights_and_signals(net, mesh.v, mesh.f, labels, p)
-    scene = Surface(np.asarray(mesh.v, np.float64), np.asarray(mesh.f)).scene  # one BVH for both checks
-    cut = trim_unsupported(net, mesh.v, mesh.f, p, scene=scene)
+        add_sidewalks(net, mesh.vertices, mesh.faces, labels, p)
+    add_heights_and_signals(net, mesh.vertices, mesh.faces, labels, p)
+    scene = Surface(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces)).scene  # one BVH for both checks
+    cut = trim_unsupported(net, mesh.vertices, mesh.faces, p, scene=scene)
     if cut["cut_m"] or cut["dropped_roads"]:
         log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
                  "scanned ground", cut["cut_m"], cut["dropped_roads"])
@@ -54,7 +54,7 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
 def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, rnd: int, log) -> dict:
     """One lane check of netconvert's map (junctions included) against the scan, and the network's repair:
     narrowed, moved, cut, junctions taken apart. Returns the round's row (``settled``: nothing more to do)."""
-    chk = check_lanes(net, xodr_text, mesh.v, mesh.f, p, scene)
+    chk = check_lanes(net, xodr_text, mesh.vertices, mesh.faces, p, scene)
     row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
            "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
            "roads_off": len(chk["bad_points"])}
@@ -94,7 +94,7 @@ def scan_report(net: Network, text: str, mesh, labels, which: str, src: Path | N
                               "where sidewalk surface lies beyond the curb; junctions by netconvert",
                 "params": {k: getattr(p, k) for k in p.__dataclass_fields__}})
     if labels is not None:
-        doc["lanes_on_road"] = lanes_on_road(text, mesh.v, mesh.f, labels)
+        doc["lanes_on_road"] = lanes_on_road(text, mesh.vertices, mesh.faces, labels)
     if truth:
         from ..align import centreline_rmse
 

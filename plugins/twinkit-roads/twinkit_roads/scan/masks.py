@@ -11,21 +11,21 @@ from .model import ScanSourceParams
 
 
 def rasterize_faces(v, f, fidx, grid) -> np.ndarray:
-    """Faces seen from above. PIL fills the pixels floor(a) .. floor(b) for a polygon from a to b: the mask
-    is centred on the surface and on average half a pixel wider on each side (the widths take it off)."""
-    from ..mesh2d import Mesh, rasterize
+    """Faces seen from above (``mesh2d.rasterize``, scanline edge rule): the mask is centred on the surface and
+    on average half a pixel wider on each side (the widths take it off)."""
+    from ..mesh2d import rasterize
 
-    return rasterize(Mesh(v, f, None, None), grid, fidx) > 0
+    return rasterize(v, f, grid, fidx) > 0
 
 
 def grey_ground(v, f, labels, rgb, p: ScanSourceParams) -> tuple[np.ndarray, str]:
     """Faces of the carriageway where the scan shows no curbs: paved-labelled (road or sidewalk: without a
     kerb the two are one surface, and a 2D model looking down at a street calls much of it sidewalk), facing
     up, grey."""
-    from ..mesh2d import Mesh, face_normals_z
+    from ..mesh2d import face_normals_z
 
     sel = np.flatnonzero(np.isin(labels[f], (ROAD, SIDEWALK)).sum(1) >= 2)
-    sel = sel[face_normals_z(Mesh(v, f, None, None), sel) > 0.9]
+    sel = sel[face_normals_z(v, f, sel) > 0.9]
     how = "road or sidewalk labels, facing up"
     if rgb is not None and p.grey_max_saturation < 1:
         c = rgb[f[sel]].astype(np.float64).mean(1)

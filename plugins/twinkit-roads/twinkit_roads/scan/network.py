@@ -311,9 +311,9 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
         sw = ndimage.binary_closing(sw, np.ones((5, 5), bool))
         src = "sidewalk labels"
     else:  # the raised level: up-facing faces 6-35 cm above the carriageway level, just beyond the curb
-        from ..mesh2d import Mesh, face_normals_z
+        from ..mesh2d import face_normals_z
 
-        nz = face_normals_z(Mesh(v, f, None, None))
+        nz = face_normals_z(v, f)
         up = np.flatnonzero(nz > 0.9)
         zr = level_raster(v, f, net.level_faces, grid)
         cz = v[f[up], 2].mean(1)

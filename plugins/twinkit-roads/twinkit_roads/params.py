@@ -1,0 +1,92 @@
+"""The parameters of the roads plugin's steps (plugin.py re-exports them; the recipe's steps.<name> keys)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List
+
+from twinkit.ranges import param
+
+
+@dataclass
+class OverviewParams:
+    px_per_m: float = param(4.0, gt=0, help="pixels per metre of the overview picture")
+    max_px: int = param(3000, ge=16, help="at most this many pixels across; large networks are drawn coarser")
+
+
+@dataclass
+class AlignParams:
+    fit_scale: bool = param(False, help="also estimate a uniform scale; it is reported, never applied to the OpenDRIVE")
+    search_m: float = param(8.0, ge=0, help="metres: radius of the coarse search for the translation (0: refine only)")
+    yaw_range_deg: float = param(3.0, ge=0, le=180, help="degrees: the coarse search tries yaws within plus or minus this")
+    raster_m: float = param(0.1, gt=0, help="metres: pixel size of the road masks the fit compares")
+    margin_m: float = param(6.0, ge=0, help="metres: how far beyond the network's carriageway edge to look for the mesh's road edge")
+    huber_m: float = param(0.3, gt=0, help="metres: threshold of the robust (Huber) loss of the fit's residuals")
+    curb_tol_m: float = param(0.07, ge=0, help="metres: without road labels the fit uses the ground; a vertex this far above the lowest local level still counts as road")
+    fit_height: bool = param(True, help="shift the OpenDRIVE elevation to the median height of the road surface")
+    model: str = param("middles", choices=("middles", "edges"), help="the residuals: 'middles' of the carriageway, or each of its 'edges' with a free extra width per road")
+    use_labels: bool = param(True, help="fit to the road-labelled surface when labels.npy exists; false: always to the ground (kerbs)")
+    kerbs: bool = param(True, help="after the fit, move the lane edges onto the feet of the kerbs seen in the mesh (a centimetre-scale correction)")
+    kerb_max_shift_m: float = param(0.3, ge=0, help="metres: the kerb correction is refused when it would move the network farther than this")
+    kerb_road_offset_m: float = param(0.15, ge=0, help="metres: then move each road sideways onto its own kerbs, at most this far (0: off)")
+
+
+@dataclass
+class ApplyParams:
+    qa_px_per_m: float = param(20.0, gt=0, help="pixels per metre of the QA picture of the aligned network over the mesh")
+    qa_max_px: int = param(4096, ge=16, help="at most this many pixels across the QA picture")
+
+
+@dataclass
+class SignalParams:
+    """place_signals: finding the scanned instances (link_m .. plate_depth_m: ``instances.find_instances``,
+    CityScapes trainIds 5 pole, 6 light, 7 sign), poles carrying an unlabelled head (pole_heads .. head_clear_m:
+    ``instances.find_pole_heads``), placing them (gate_m ..: ``signals.place_signals``)."""
+    link_m: float = param(0.35, gt=0, help="metres: vertices of one label (pole, light, sign) closer than this belong to one cluster")
+    min_vertices: int = param(12, ge=0, help="clusters with fewer vertices are label noise and are dropped")
+    min_height_m: float = param(1.5, ge=0, help="metres: a light head or a sign plate hangs at least this high above the local ground")
+    max_height_m: float = param(8.0, gt=0, help="metres: ... and at most this high")
+    max_size_m: float = param(2.0, gt=0, help="metres: a cluster wider or taller than this is a mislabelled patch of something else")
+    min_pole_vertices: int = param(3, ge=0, help="pole-labelled vertices below the cluster (within pole_radius_m) that show it hangs on a pole")
+    pole_radius_m: float = param(0.6, gt=0, help="metres: radius around a cluster searched for the pole that carries it")
+    ground_radius_m: float = param(3.0, gt=0, help="metres: the local ground under a signal is the 2nd percentile of the mesh's heights within this radius (street.ground.LocalGround, disc mode)")
+    plate_depth_m: float = param(0.12, ge=0, help="metres: a 'light' cluster thinner than this across is a sign plate (light heads are boxes)")
+    pole_heads: bool = param(True, help="look for poles carrying an unlabelled head: light candidates the labels missed, offered only to netconvert light heads no labelled light paired with")
+    head_min_m: float = param(1.8, ge=0, help="metres: bottom of the head band above the local ground, for heads on poles")
+    head_max_m: float = param(4.5, gt=0, help="metres: top of that head band")
+    head_min_width_m: float = param(0.3, ge=0, help="metres: narrowest extent of the head band; a bare pole or a sign plate is thinner")
+    head_max_width_m: float = param(1.0, gt=0, help="metres: widest extent of the head band")
+    head_clear_m: float = param(0.8, ge=0, help="metres: no vertex at head height from here to 1.5 m off the pole's axis (keeps trees and walls out)")
+    gate_m: float = param(15.0, gt=0, help="metres: a netconvert light group and a scanned light farther apart than this never pair")
+    group_m: float = param(2.0, ge=0, help="metres: netconvert light signals of one road within this distance along s are one head")
+    wrong_side_m: float = param(6.0, ge=0, help="metres: extra pairing cost of a light across the reference line from the lanes of its head")
+    carla_light_shift_m: float = param(0.25, help="metres: CARLA moves lights this far along their heading on import (MapBuilder.cpp); the placement compensates")
+    add_signs: bool = param(True, help="write the scanned traffic signs as OpenDRIVE signals")
+    sign_max_road_m: float = param(12.0, gt=0, help="metres: a sign farther than this from every road's reference line is not written")
+    qa_px_per_m: float = param(20.0, gt=0, help="pixels per metre of the signals' QA picture")
+
+
+def _road_types():
+    from .evidence import ROAD_TYPES
+    return list(ROAD_TYPES)
+
+
+
+@dataclass
+class RoadEvidenceParams:
+    enabled: bool = param(True, help="false: labels.npy passes through unchanged (the site key road_evidence: false does the same)")
+    relabel: bool = param(True, help="false: compare and report only, change no label")
+    road_types: List[str] = param(default_factory=_road_types, free=True, help="OpenDRIVE lane types whose lanes vote road")
+    sidewalk_types: List[str] = param(default_factory=lambda: ["sidewalk"], free=True, help="OpenDRIVE lane types whose lanes vote sidewalk")
+    relabel_classes: List[int] = param(default_factory=lambda: [0, 1, 9], ge=0, le=255, help="the ground classes (CityScapes trainIds) a lane's vote may change")
+    normal_min_z: float = param(0.9, ge=0, le=1, help="a ground vertex has a normal whose up component is at least this (about 25 degrees from up at 0.9)")
+    max_height_m: float = param(0.45, ge=0, help="metres: ... and lies at most this high above the local lowest ground")
+    curb_min_m: float = param(0.06, ge=0, help="metres: the raised (pavement) level starts this far above the local lowest ground; below is the carriageway")
+    curb_max_m: float = param(0.35, ge=0, help="metres: ... and ends this far above it")
+    window_m: float = param(8.0, gt=0, help="metres: the local lowest ground is the minimum over this window of the "
+                                          "0.5 m cells' 5th percentiles of up-facing vertices (street.ground.LocalGround)")
+    max_disagreement: float = param(0.5, ge=0, le=1, help="a lane, or a road, whose surface disagrees with the scan over more than this share casts no vote")
+    max_network_disagreement: float = param(0.10, ge=0, le=1, help="share: when the driving-like lanes of the whole network disagree over more than this, no lane votes (a misaligned or outdated map; see docs/roads.md)")
+    plateau: bool = param(True, help="a raised plateau that an agreeing sidewalk lane lies on becomes sidewalk (its road votes)")
+    raster_m: float = param(0.1, gt=0, help="metres: pixel size of the lane raster")
+    step_m: float = param(0.5, gt=0, help="metres: lanes are sampled this far apart along s")
+    picture_px_per_m: float = param(10.0, gt=0, help="pixels per metre of the evidence picture")
