@@ -34,3 +34,11 @@ class ManualActionPending(TwinkitError):
     """A manual step waits for a file and the run is not interactive."""
 
     exit_code = 3
+
+
+def say_error(msg: str, code: int = 2) -> int:
+    """Print the command's one-line error (``twinkit: error: <msg>``) to stderr; return the exit status ``code``."""
+    import sys
+
+    print(f"twinkit: error: {msg}", file=sys.stderr)
+    return code

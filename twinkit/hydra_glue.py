@@ -157,6 +157,27 @@ def set_run_config(cfg) -> None:
     HydraConfig.instance().set_config(cfg)
 
 
+def plain(node, resolve: bool = True) -> dict:
+    """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one."""
+    from omegaconf import OmegaConf
+
+    out = OmegaConf.to_container(node, resolve=resolve)
+    if not isinstance(out, dict):
+        raise TypeError(f"not a mapping config node: {type(out).__name__}")
+    return out
+
+
+def without_hydra(cfg):
+    """A job's composed config without its ``hydra`` node (a copy when it had one; else ``cfg`` itself)."""
+    from omegaconf import open_dict
+
+    if "hydra" in cfg:
+        cfg = cfg.copy()
+        with open_dict(cfg):
+            del cfg["hydra"]
+    return cfg
+
+
 def composition_error(exc: Exception) -> ConfigError:
     """Hydra/OmegaConf composition errors, folded into one line."""
     import re

@@ -22,7 +22,7 @@ log = logging.getLogger("twinkit.preflight")
 
 def site_input_problems(plan) -> list[str]:
     """Site input files of the planned steps that are missing or unreadable, one line each (the same
-    words as when the step itself meets them: twinkit/engine/keys.py, twinkit/cli.py)."""
+    words as when the step itself meets them: twinkit/engine/keys.py, twinkit/os_errors.py)."""
     out: list[str] = []
     seen: set[Path] = set()
     for ps in plan:

@@ -12,6 +12,8 @@ Modules, by concept:
 - :mod:`twinkit.mesh.topology`: ``components``, ``edge_face_incidence``, ``boundary_loops``,
   ``remove_vertices``, ``bad_faces`` / ``drop_bad_faces`` (duplicate and degenerate faces);
   closing a boundary loop is :mod:`twinkit.street.holes` (``fan_fill`` for holes anywhere on a surface);
+- :mod:`twinkit.mesh.raster`: ``face_raster`` / ``face_mask``, the one top-down raster of a mesh (the face
+  each pixel sees from above, painter's order by a key; edge rules ``centre`` and ``scanline``);
 - :mod:`twinkit.mesh.o3d`: ``to_o3d_mesh`` / ``to_o3d_cloud`` (open3d imported when called).
 
 Only numpy is imported with this package (PLY is read and written with numpy alone); scipy, open3d

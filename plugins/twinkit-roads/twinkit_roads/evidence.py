@@ -275,20 +275,13 @@ def draw_evidence(v: np.ndarray, f: np.ndarray, labels_before: np.ndarray, ev: E
 
     from twinkit.cityscapes import colorize
 
-    from .mesh2d import picture_grid, rasterize
+    from .mesh2d import picture_grid, top_faces
 
     xy = v[:, :2]
     grid, res = picture_grid(xy, px_per_m, max_px)
 
-    # one rasterisation: the top face's index per pixel (24 bits in RGB), then three colourings of it
-    bg = 40 | 40 << 8 | 40 << 16  # rasterize()'s background (40, 40, 40), never used as an id
-    ids = np.arange(len(f))
-    ids = ids + (ids >= bg)
-    idcol = np.stack([ids & 255, (ids >> 8) & 255, (ids >> 16) & 255], 1).astype(np.uint8)
-    top = rasterize(v, f, grid, colours=idcol, mode="RGB").astype(np.int64)
-    top = top[..., 0] | (top[..., 1] << 8) | (top[..., 2] << 16)
-    empty = top == bg
-    top = np.where(top > bg, top - 1, top)
+    top = top_faces(v, f, grid)  # one rasterisation, then three colourings of it
+    empty = top < 0
     top[empty] = 0
 
     def face_rgb(per_vertex_rgb):

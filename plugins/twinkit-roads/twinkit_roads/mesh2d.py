@@ -47,31 +47,30 @@ def picture_grid(xy: np.ndarray, px_per_m: float, max_px: int) -> tuple[Grid, fl
     return Grid.around(xy, res), res
 
 
+def top_faces(v: np.ndarray, f: np.ndarray, grid: Grid, faces: np.ndarray | None = None) -> np.ndarray:
+    """The face each pixel of ``grid`` sees from above, of the triangles ``f`` of vertices ``v`` (site frame):
+    (h, w) int64 positions in ``faces`` (indices into ``f``, all when None), -1 where none. The top surface
+    wins (painter's order by mean height); the scanline edge rule of :func:`twinkit.mesh.raster.face_raster`
+    (the pixels the roads' masks were first drawn with)."""
+    from twinkit.mesh.raster import face_raster
+
+    ff = f if faces is None else f[np.asarray(faces, np.int64)]
+    return face_raster(v, ff, grid.x0, grid.y0, grid.res, (grid.h, grid.w),
+                       order=v[ff, 2].mean(1) if len(ff) else None, rule="scanline")
+
+
 def rasterize(v: np.ndarray, f: np.ndarray, grid: Grid, faces: np.ndarray | None = None,
-              colours: np.ndarray | None = None, mode: str = "L") -> np.ndarray:
-    """Draw the triangles ``f`` of vertices ``v`` (site frame) seen from above, painter's order by height so
-    the top surface wins: the faces ``faces`` (indices into ``f``, all when None), filled with 1 (``mode="L"``,
-    (h, w) uint8, 0 elsewhere) or each with its row of ``colours`` ((k, 3) uint8, ``mode="RGB"``, (h, w, 3)
-    uint8, (40, 40, 40) elsewhere)."""
-    from PIL import Image, ImageDraw
-
-    fidx = np.arange(len(f)) if faces is None else np.asarray(faces)
-    img = Image.new(mode, (grid.w, grid.h), 0 if mode == "L" else (40, 40, 40))
-    if len(fidx) == 0:
-        return np.asarray(img)
-    tri = v[f[fidx]]
-    order = np.argsort(tri[:, :, 2].mean(1), kind="stable")
-    px = grid.to_px(tri[:, :, :2])
-    draw = ImageDraw.Draw(img)
+              colours: np.ndarray | None = None) -> np.ndarray:
+    """The faces ``faces`` of ``f`` seen from above (:func:`top_faces`): (h, w) uint8, 1 where a face is, 0
+    elsewhere; with ``colours`` ((len(faces), 3) 0..255, a row per face) an (h, w, 3) uint8 picture, (40, 40,
+    40) elsewhere."""
+    top = top_faces(v, f, grid, faces)
+    hit = top >= 0
     if colours is None:
-        for i in order:
-            draw.polygon([tuple(q) for q in px[i]], fill=1)
-    else:
-        cols = [tuple(int(c) for c in col) for col in colours]
-        for i in order:
-            draw.polygon([tuple(q) for q in px[i]], fill=cols[i])
-    return np.asarray(img)
-
+        return hit.astype(np.uint8)
+    img = np.full((grid.h, grid.w, 3), 40, np.uint8)
+    img[hit] = np.asarray(colours).astype(np.int64)[top[hit]].astype(np.uint8)
+    return img
 
 def face_normals_z(v: np.ndarray, f: np.ndarray, fidx: np.ndarray | None = None) -> np.ndarray:
     """(k,) float64 z component of the unit normals of the faces ``fidx`` of ``f`` (all when None); 0 for a

@@ -25,7 +25,7 @@ def draw_qa(mesh_path: Path, lines: list[dict], before: list[dict] | None, out: 
         z = mesh.vertices[mesh.faces, 2].mean(1)
         g = np.clip((z - np.percentile(z, 2)) / max(np.ptp(z), 1e-6) * 200 + 40, 0, 255).astype(np.uint8)
         cols = np.stack([g, g, g], 1)
-    img = Image.fromarray(rasterize(mesh.vertices, mesh.faces, grid, colours=cols, mode="RGB"))
+    img = Image.fromarray(rasterize(mesh.vertices, mesh.faces, grid, colours=cols))
     d = ImageDraw.Draw(img)
     w = max(1, int(round(0.08 / res)))
 

@@ -395,7 +395,7 @@ def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], reject
         cols = (mesh.colors[mesh.faces].mean(1) * 0.6).astype(np.uint8)  # darkened: the markers must stand out
     else:
         cols = np.full((len(mesh.faces), 3), 80, np.uint8)
-    img = Image.fromarray(rasterize(mesh.vertices, mesh.faces, grid, colours=cols, mode="RGB"))
+    img = Image.fromarray(rasterize(mesh.vertices, mesh.faces, grid, colours=cols))
     d = ImageDraw.Draw(img)
     w = max(1, int(round(0.06 / res)))
     r = max(3, int(round(0.35 / res)))

@@ -11,8 +11,8 @@ from .model import ScanSourceParams
 
 
 def rasterize_faces(v, f, fidx, grid) -> np.ndarray:
-    """Faces seen from above. PIL fills the pixels floor(a) .. floor(b) for a polygon from a to b: the mask
-    is centred on the surface and on average half a pixel wider on each side (the widths take it off)."""
+    """Faces seen from above (``mesh2d.rasterize``, scanline edge rule): the mask is centred on the surface and
+    on average half a pixel wider on each side (the widths take it off)."""
     from ..mesh2d import rasterize
 
     return rasterize(v, f, grid, fidx) > 0

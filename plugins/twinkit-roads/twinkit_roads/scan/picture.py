@@ -28,7 +28,7 @@ def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_pe
         z = v[f, 2].mean(1)
         g = np.clip((z - np.percentile(z, 2)) / max(float(np.ptp(z)), 1e-6) * 150 + 40, 0, 255).astype(np.uint8)
         cols = np.stack([g, g, g], 1)
-    img = Image.fromarray(rasterize(v, f, grid, colours=cols, mode="RGB"))
+    img = Image.fromarray(rasterize(v, f, grid, colours=cols))
     d = ImageDraw.Draw(img)
     w = max(1, int(round(0.1 / res)))
 
