@@ -74,10 +74,10 @@ def start_driver():
         from selenium.webdriver.chrome.service import Service
     except ImportError:
         return "selenium is not installed"
-    from twinkit.report.viewer import find_node_modules
+    from twinkit.report.viewer import three_bundle
 
-    if find_node_modules() is None:
-        return "three.js is not installed (npm ci)"
+    if three_bundle() is None:
+        return "three.js is not bundled (npm ci && npm run bundle, or scripts/setup.sh)"
     chrome, driver = find_browser()
     if not chrome or not driver:
         return "no Chromium / chromedriver (apt-get install chromium chromium-driver)"
@@ -97,12 +97,15 @@ def render(driver, glb: Path, workdir: Path, texture_only: bool = False, px: int
     """(picture (px, px, 4) uint8, what the loader built: meshes, vertexColors, basic materials)."""
     from PIL import Image
 
-    from twinkit.report.viewer import bundle_three, find_node_modules
+    import shutil
+
+    from twinkit.report.viewer import three_bundle
 
     workdir.mkdir(parents=True, exist_ok=True)
     bundle = workdir / "three-bundle.js"
-    if not bundle.exists():
-        bundle.write_text(bundle_three(find_node_modules()), encoding="utf-8")
+    shipped = three_bundle()
+    if not bundle.exists() and shipped is not None:
+        shutil.copyfile(shipped, bundle)
     b64 = base64.b64encode(Path(glb).read_bytes()).decode("ascii")
     (workdir / "model.js").write_text(f"window.MODEL = {json.dumps(b64)}; window.TEXTURE_ONLY = "
                                       f"{'true' if texture_only else 'false'};\n", encoding="ascii")
