@@ -26,7 +26,7 @@ __all__ = [
     "Artefact", "ArtefactError", "CATALOGUE", "check_output", "lookup",
     "read_points_meta", "write_points_meta", "read_cameras_site", "write_cameras_site",
     "read_demo_cameras", "write_demo_cameras", "read_gcp", "write_gcp", "read_roads_truth", "write_roads_truth",
-    "read_site_info", "write_site_info", "read_labels", "write_labels", "read_points", "write_points",
+    "read_site_info", "write_site_info", "read_labels", "write_labels", "read_class_votes", "write_class_votes", "read_points", "write_points",
     "read_textured_mesh", "write_textured_mesh", "read_clean_mesh", "write_clean_mesh", "read_gt_mesh",
     "write_gt_mesh", "read_textured_obj", "write_textured_obj", "read_opendrive", "write_opendrive", "read_osm",
     "write_osm", "list_photos",
@@ -184,6 +184,30 @@ def write_labels(path: str | Path, labels: np.ndarray) -> None:
             raise ArtefactError(f"{path}: labels must be trainIds 0-255 (255 = unlabelled)")
         arr = arr.astype(np.uint8)
     np.save(path, arr)
+
+
+def read_class_votes(path: str | Path, n_vertices: int | None = None, mesh_name: str = "the mesh") -> np.ndarray:
+    """``geometry_votes.npy`` -> (n, 19) float32 class probabilities per vertex (zero row: no vote); checks
+    the shape and, given ``n_vertices``, that it matches the mesh."""
+    import numpy as np
+
+    path = Path(path)
+    F.ClassVotesNpy.check(path)
+    arr = np.load(path)
+    if n_vertices is not None and len(arr) != n_vertices:
+        raise ArtefactError(f"{path}: {len(arr)} vote rows for {n_vertices} vertices of {mesh_name}; "
+                            f"{F.ClassVotesNpy.FIX}")
+    return arr
+
+
+def write_class_votes(path: str | Path, votes: np.ndarray) -> None:
+    """Write ``geometry_votes.npy`` from (n, 19) class probabilities (cast to float32)."""
+    import numpy as np
+
+    arr = np.asarray(votes, np.float32)
+    if arr.ndim != 2 or arr.shape[1] != 19:
+        raise ArtefactError(f"{path}: class votes must be (n_vertices, 19), got {arr.shape}")
+    np.save(Path(path), arr)
 
 
 def read_points(path: str | Path):

@@ -127,6 +127,29 @@ class LabelsNpy:
 
 
 @dataclass(frozen=True)
+class ClassVotesNpy:
+    """``geometry_votes.npy``: per vertex of ``textured_mesh`` one probability per CityScapes trainId,
+    a 2-D ``float32`` array (n_vertices, 19); an all-zero row: no vote for that vertex."""
+
+    VERSION: ClassVar[int] = 1
+    FILE: ClassVar[str] = "geometry_votes.npy"
+    FIX: ClassVar[str] = "re-run classify_geometry"
+    DTYPE: ClassVar[str] = "float32"
+
+    @classmethod
+    def check(cls, path: Path) -> None:
+        import numpy as np
+
+        try:
+            arr = np.load(path, mmap_mode="r")
+        except Exception as exc:  # noqa: BLE001
+            raise ArtefactError(f"{path}: not a readable .npy vote array ({exc}); {cls.FIX}") from None
+        if arr.ndim != 2 or arr.shape[1] != 19 or arr.dtype != cls.DTYPE:
+            raise ArtefactError(f"{path}: class votes must be a float32 (n_vertices, 19) array, found "
+                                f"{arr.dtype} {arr.shape} ({cls.FILE} schema v{cls.VERSION}); {cls.FIX}")
+
+
+@dataclass(frozen=True)
 class XmlSchema:
     """A UTF-8 XML text whose root element is ``ROOT``."""
 

@@ -1,0 +1,65 @@
+"""Run the 3D classifier on a cloud and carry its class probabilities to mesh vertices."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .features import feature_names, point_features
+from .model import GeometryModel, load_model
+
+
+@dataclass
+class CloudLabels:
+    """The classifier's answer for a cloud: ``base`` (m,) int64 indices of the base points (one per voxel)
+    into the cloud, ``inverse`` (n,) int64 each cloud point's base point, ``proba`` (m, 19) float32 class
+    probabilities of the base points, ``seconds`` per part."""
+
+    base: np.ndarray
+    inverse: np.ndarray
+    proba: np.ndarray
+    seconds: dict
+
+    def point_labels(self) -> np.ndarray:
+        """(n,) uint8 trainId of every cloud point (its base point's most probable class)."""
+        return self.proba.argmax(axis=1).astype(np.uint8)[self.inverse]
+
+
+def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: GeometryModel | None = None,
+                   *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0) -> CloudLabels:
+    """Features (:func:`.features.point_features`) and the MLP's probabilities for ``xyz`` (n, 3) float, site
+    frame, z up, metres; ``intensity`` (n,) or None. ``model``: None = the shipped one."""
+    model = model or load_model()
+    if list(model.feature_names) != feature_names():
+        raise ValueError("the 3D classifier's model was trained on other features than this code computes; "
+                         "retrain it (python -m twinkit_segmentation.geometry.train)")
+    f = point_features(xyz, intensity, base_voxel_m=base_voxel_m, ground_window_m=ground_window_m)
+    t = time.perf_counter()
+    proba = model.proba(f.values)
+    sec = dict(f.seconds, model=round(time.perf_counter() - t, 3))
+    return CloudLabels(base=f.base, inverse=f.inverse, proba=proba, seconds=sec)
+
+
+def votes_at(points: np.ndarray, proba: np.ndarray, targets: np.ndarray, *, radius_m: float = 0.4,
+             neighbours: int = 8, workers: int = 1) -> np.ndarray:
+    """(t, c) float32: per target (mesh vertex, (t, 3) float metres) the mean of the probabilities ``proba``
+    (m, c) of the up to ``neighbours`` nearest ``points`` (m, 3) within ``radius_m``, each weighted by
+    ``1 / (d + 0.05 m)``; a zero row where no point is that near."""
+    from scipy.spatial import cKDTree
+
+    out = np.zeros((len(targets), proba.shape[1]), np.float32)
+    if len(points) == 0 or len(targets) == 0:
+        return out
+    k = max(1, min(int(neighbours), len(points)))
+    d, idx = cKDTree(np.asarray(points, np.float64)).query(np.asarray(targets, np.float64), k=k,
+                                                           distance_upper_bound=radius_m, workers=workers)
+    d, idx = d.reshape(len(targets), k), idx.reshape(len(targets), k)
+    ok = np.isfinite(d)
+    w = np.where(ok, 1.0 / (d + 0.05), 0.0).astype(np.float32)
+    safe = np.where(ok, idx, 0)
+    for j in range(k):
+        out += w[:, j:j + 1] * proba[safe[:, j]]
+    tot = w.sum(axis=1, keepdims=True)
+    np.divide(out, tot, out=out, where=tot > 0)
+    return out

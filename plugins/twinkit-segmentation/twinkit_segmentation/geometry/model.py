@@ -1,0 +1,95 @@
+"""The shipped 3D classifier: a small multi-layer perceptron over :mod:`.features`, run in plain numpy.
+
+The model is two files beside this module: ``geometry_model.npz`` (the layers ``W0, b0, W1, b1, ...``
+(float32), the feature normalisation ``mean``/``std`` (float32, one per feature)) and ``geometry_model.json``
+(the feature names, the classes (trainIds) of the output columns, the training recipe and the validation
+scores it reached). ``python -m twinkit_segmentation.geometry.train`` writes both.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from twinkit.cityscapes import N_CLASSES
+
+MODEL_DIR = Path(__file__).parent
+MODEL_NAME = "geometry_model"
+
+#: the five coarse classes the issue scores: trainIds per group
+COARSE: dict[str, tuple[int, ...]] = {
+    "ground": (0, 1, 9), "facade": (2, 3, 4), "vegetation": (8,), "pole-like": (5, 6, 7),
+    "vehicle": (13, 14, 15, 16, 17, 18),
+}
+
+
+@dataclass
+class GeometryModel:
+    """A loaded MLP: ``layers`` [(W (in, out) float32, b (out,) float32), ...] with ReLU between them,
+    ``mean``/``std`` (k,) the feature normalisation, ``classes`` (c,) trainIds of the outputs,
+    ``feature_names`` the features it expects (in order), ``meta`` the rest of the JSON."""
+
+    layers: list
+    mean: np.ndarray
+    std: np.ndarray
+    classes: np.ndarray
+    feature_names: list
+    meta: dict = field(default_factory=dict)
+
+    def proba(self, values: np.ndarray, chunk: int = 200_000) -> np.ndarray:
+        """(m, k) features -> (m, 19) float32 class probabilities (columns of classes it never predicts: 0)."""
+        out = np.zeros((len(values), N_CLASSES), np.float32)
+        for a in range(0, len(values), chunk):
+            x = (np.asarray(values[a:a + chunk], np.float32) - self.mean) / self.std
+            for i, (w, b) in enumerate(self.layers):
+                x = x @ w + b
+                if i < len(self.layers) - 1:
+                    np.maximum(x, 0, out=x)
+            x -= x.max(axis=1, keepdims=True)
+            np.exp(x, out=x)
+            x /= x.sum(axis=1, keepdims=True)
+            out[a:a + chunk, self.classes] = x
+        return out
+
+
+def save_model(path_stem: Path, layers, mean, std, classes, feature_names, meta: dict) -> tuple[Path, Path]:
+    """Write ``<stem>.npz`` and ``<stem>.json``; returns both paths."""
+    path_stem = Path(path_stem)
+    path_stem.parent.mkdir(parents=True, exist_ok=True)
+    arrays = {"mean": np.asarray(mean, np.float32), "std": np.asarray(std, np.float32)}
+    for i, (w, b) in enumerate(layers):
+        arrays[f"W{i}"] = np.asarray(w, np.float32)
+        arrays[f"b{i}"] = np.asarray(b, np.float32)
+    npz = path_stem.with_suffix(".npz")
+    np.savez_compressed(npz, **arrays)
+    js = path_stem.with_suffix(".json")
+    js.write_text(json.dumps({**meta, "classes": [int(c) for c in classes], "feature_names": list(feature_names)},
+                             indent=1) + "\n")
+    return npz, js
+
+
+def load_model(path_stem: str | Path | None = None) -> GeometryModel:
+    """Load ``<stem>.npz`` + ``<stem>.json`` (default: the model shipped beside this module)."""
+    stem = Path(path_stem) if path_stem else MODEL_DIR / MODEL_NAME
+    stem = stem.with_suffix("")
+    meta = json.loads(stem.with_suffix(".json").read_text())
+    with np.load(stem.with_suffix(".npz")) as z:
+        n = sum(1 for k in z.files if k.startswith("W"))
+        layers = [(z[f"W{i}"], z[f"b{i}"]) for i in range(n)]
+        mean, std = z["mean"], z["std"]
+    return GeometryModel(layers=layers, mean=mean, std=std, classes=np.asarray(meta.pop("classes"), np.int64),
+                         feature_names=meta.pop("feature_names"), meta=meta)
+
+
+def coarse_accuracy(pred: np.ndarray, gt: np.ndarray) -> float:
+    """Percent of the points whose truth is in one of :data:`COARSE`'s groups and whose prediction is in
+    the same group."""
+    lut = np.full(256, -1, np.int64)
+    for k, ids in enumerate(COARSE.values()):
+        lut[list(ids)] = k
+    g = lut[np.asarray(gt, np.int64) & 255]
+    p = lut[np.asarray(pred, np.int64) & 255]
+    ok = g >= 0
+    return 100.0 * float((p[ok] == g[ok]).mean()) if ok.any() else 0.0

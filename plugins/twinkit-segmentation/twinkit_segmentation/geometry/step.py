@@ -1,0 +1,78 @@
+"""The ``classify_geometry`` step: the 3D classifier's class probabilities on the mesh's vertices.
+
+Writes ``geometry_votes.npy`` (float32, vertices x 19: the probabilities carried to each vertex from the
+classified cloud points near it; zero rows where none is near) and ``geometry_labels.ply`` (the mesh in
+the palette colours of the most probable class, for a look).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from twinkit import StepContext
+from twinkit import artefacts as A
+from twinkit.ranges import param
+
+
+@dataclass
+class ClassifyGeometryParams:
+    enabled: bool = param(True, help="Run the 3D classifier; false writes all-zero votes (no 3D source).")
+    base_voxel_m: float = param(0.1, gt=0, le=1.0,
+                                help="Side (m) of the voxels the cloud is thinned to, one point each, before the "
+                                     "features (density normalisation; the shipped model was trained at 0.1).")
+    ground_window_m: float = param(8.0, gt=0,
+                                   help="Window (m) of the local ground's opening: wider than any vehicle roof, so "
+                                        "roofs are not ground.")
+    vote_radius_m: float = param(0.4, gt=0,
+                                 help="A vertex takes the probabilities of the classified points within this "
+                                      "distance (m); farther vertices get a zero row.")
+    vote_neighbours: int = param(8, ge=1, le=64, help="At most this many nearest classified points vote per vertex.")
+    model: str = param("", help="Model stem (path without .npz/.json); empty = the model shipped with the plugin.")
+
+
+def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_points_ply: Path,
+                      in_textured_mesh_ply: Path, out_geometry_votes_npy: Path, out_geometry_labels_ply: Path) -> dict:
+    """Classify the cloud's points from their geometry (and intensity) and carry the probabilities to the
+    mesh's vertices (docs/segmentation.md "3D classifier")."""
+    import numpy as np
+
+    from twinkit.cityscapes import N_CLASSES, PALETTE
+    from twinkit.mesh import write_colored_ply
+    from twinkit_segmentation.geometry.classify import classify_cloud, votes_at
+    from twinkit_segmentation.geometry.model import load_model
+
+    t0 = time.perf_counter()
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    n = len(mesh.vertices)
+    if not params.enabled:
+        A.write_class_votes(out_geometry_votes_npy, np.zeros((n, N_CLASSES), np.float32))
+        write_colored_ply(out_geometry_labels_ply, mesh.vertices, mesh.faces, np.full((n, 3), 128, np.uint8),
+                          comment="twinkit-segmentation: 3D classifier off")
+        return {"enabled": False, "vertices": n}
+    cloud = A.read_points(in_points_ply)
+    inten = cloud.attrs.get("intensity")
+    model = load_model(params.model or None)
+    t_read = time.perf_counter() - t0
+    res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
+                         ground_window_m=params.ground_window_m)
+    t1 = time.perf_counter()
+    votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
+                     neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
+    A.write_class_votes(out_geometry_votes_npy, votes)
+    has = votes.sum(axis=1) > 0
+    lab = np.where(has, votes.argmax(axis=1), 255).astype(np.uint8)
+    cols = np.where(has[:, None], PALETTE[np.minimum(lab, N_CLASSES - 1)], 0).astype(np.uint8)
+    write_colored_ply(out_geometry_labels_ply, mesh.vertices, mesh.faces, cols, labels=lab,
+                      comment="twinkit-segmentation: 3D classifier labels")
+    t_votes = time.perf_counter() - t1
+    hist = np.bincount(lab[has], minlength=N_CLASSES)
+    ctx.log.info("3D classifier: %d points -> %d base points; %.1f%% of %d vertices without a point within %.2f m; "
+                 "timings %s", len(cloud.vertices), len(res.base), 100 * (1 - has.mean()), n, params.vote_radius_m,
+                 res.seconds)
+    return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
+            "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
+            "intensity": inten is not None, "model": model.meta.get("name", params.model or "shipped"),
+            "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
+            "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
+                        "total": round(time.perf_counter() - t0, 3)}}

@@ -1,0 +1,188 @@
+"""Train the 3D classifier on generated captures and write the shipped model (fixed seeds: reproducible).
+
+    python -m twinkit_segmentation.geometry.train --data DIR [--data DIR2 ...] --out STEM [--val REGEX]
+
+Each capture is an ``.npz`` with ``xyz`` (n, 3) float (site frame, z up, metres), ``label`` (n,) uint8
+trainIds (255 = none) and optionally ``intensity`` (n,). Captures whose file stem matches ``--val`` are the
+validation set (scored, never fitted); the rest train. Features are cached per capture under ``--cache``.
+Writes ``STEM.npz`` + ``STEM.json`` (:mod:`.model`), the JSON holding the recipe and the validation scores.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from twinkit.cityscapes import N_CLASSES, NAMES
+
+from .features import feature_names, point_features
+from .model import GeometryModel, coarse_accuracy, save_model
+
+FEATURE_VERSION = 1
+
+
+def capture_features(path: Path, cache: Path | None) -> tuple[np.ndarray, np.ndarray]:
+    """(values (m, k) float32, labels (m,) uint8) of a capture's base points, from the cache when there."""
+    key = hashlib.sha1(f"{path.resolve()}:{path.stat().st_mtime_ns}:{FEATURE_VERSION}:{feature_names()}".encode()
+                       ).hexdigest()[:16]
+    cp = cache / f"{path.stem}_{key}.npz" if cache else None
+    if cp is not None and cp.exists():
+        with np.load(cp) as z:
+            return z["values"], z["label"]
+    with np.load(path) as z:
+        xyz = z["xyz"]
+        label = z["label"].astype(np.uint8)
+        inten = z["intensity"] if "intensity" in z.files else None
+    f = point_features(xyz, inten)
+    values, lab = f.values, label[f.base]
+    if cp is not None:
+        cp.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(cp, values=values, label=lab)
+    return values, lab
+
+
+def _drop_intensity(values: np.ndarray, rows: np.ndarray) -> None:
+    names = feature_names()
+    values[rows, names.index("intensity_rank")] = 0.5
+    values[rows, names.index("has_intensity")] = 0.0
+
+
+def score(model: GeometryModel, captures: list[tuple[str, np.ndarray, np.ndarray]]) -> dict:
+    """IoU per class (percent), mIoU over the classes present, accuracy and coarse accuracy, pooled over
+    ``captures`` [(name, values, labels)], and the mIoU / coarse accuracy of each."""
+    from twinkit_segmentation.metrics import scores
+
+    preds, gts, each = [], [], {}
+    for name, values, lab in captures:
+        pred = model.proba(values).argmax(axis=1).astype(np.uint8)
+        s = scores(pred, lab)
+        each[name] = {"miou": round(s["miou"], 2), "coarse_accuracy": round(coarse_accuracy(pred, lab), 2)}
+        preds.append(pred)
+        gts.append(lab)
+    pred, gt = np.concatenate(preds), np.concatenate(gts)
+    s = scores(pred, gt)
+    return {"miou": round(s["miou"], 2), "accuracy": round(s["accuracy"], 2),
+            "coarse_accuracy": round(coarse_accuracy(pred, gt), 2),
+            "iou": {k: round(v["iou"], 2) for k, v in s["per_class"].items()}, "captures": each}
+
+
+def train(train_caps, *, hidden=(128, 64), epochs=40, per_class=8000, lr=2e-3, weight_decay=1e-4,
+          intensity_dropout=0.5, min_points=200, seed=0, log=print):
+    """Fit the MLP on [(name, values, labels)]; returns (layers, mean, std, classes, recipe dict)."""
+    import torch
+
+    torch.manual_seed(seed)
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(seed)
+    xs, ys = [], []
+    for _, values, lab in train_caps:
+        for c in np.unique(lab):
+            if c >= N_CLASSES:
+                continue
+            idx = np.flatnonzero(lab == c)
+            if len(idx) > per_class:
+                idx = rng.choice(idx, per_class, replace=False)
+            xs.append(values[idx])
+            ys.append(lab[idx])
+    x = np.concatenate(xs).astype(np.float32)
+    y = np.concatenate(ys).astype(np.int64)
+    counts = np.bincount(y, minlength=N_CLASSES)
+    classes = np.flatnonzero(counts >= min_points)
+    keep = np.isin(y, classes)
+    x, y = x[keep], y[keep]
+    remap = np.full(N_CLASSES, -1, np.int64)
+    remap[classes] = np.arange(len(classes))
+    y = remap[y]
+    drop = rng.random(len(x)) < intensity_dropout
+    _drop_intensity(x, drop)
+    mean = x.mean(axis=0)
+    std = x.std(axis=0) + 1e-3
+    xn = torch.from_numpy((x - mean) / std)
+    yt = torch.from_numpy(y)
+    cnt = np.bincount(y, minlength=len(classes)).astype(np.float64)
+    w = cnt ** -0.5
+    w = torch.tensor(w / (w * cnt).sum() * cnt.sum(), dtype=torch.float32)
+    dims = [x.shape[1], *hidden, len(classes)]
+    mods: list = []
+    for i in range(len(dims) - 1):
+        mods.append(torch.nn.Linear(dims[i], dims[i + 1]))
+        if i < len(dims) - 2:
+            mods.append(torch.nn.ReLU())
+    net = torch.nn.Sequential(*mods)
+    opt = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs)
+    lossf = torch.nn.CrossEntropyLoss(weight=w)
+    gen = torch.Generator().manual_seed(seed)
+    log(f"training on {len(x)} points, {len(classes)} classes: "
+        + ", ".join(f"{NAMES[c]} {int(n)}" for c, n in zip(classes, cnt)))
+    for ep in range(epochs):
+        perm = torch.randperm(len(xn), generator=gen)
+        tot = 0.0
+        for a in range(0, len(perm), 1024):
+            b = perm[a:a + 1024]
+            opt.zero_grad()
+            loss = lossf(net(xn[b]), yt[b])
+            loss.backward()
+            opt.step()
+            tot += float(loss) * len(b)
+        sched.step()
+        if ep % 10 == 9 or ep == epochs - 1:
+            log(f"epoch {ep + 1}: loss {tot / len(xn):.4f}")
+    lin = [m for m in net if isinstance(m, torch.nn.Linear)]
+    layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy()) for m in lin]
+    recipe = {"hidden": list(hidden), "epochs": epochs, "per_class_per_capture": per_class, "lr": lr,
+              "weight_decay": weight_decay, "intensity_dropout": intensity_dropout, "min_points": min_points,
+              "seed": seed, "optimizer": "Adam + cosine schedule, batch 1024, class weights count^-0.5",
+              "training_points": int(len(x))}
+    return layers, mean, std, classes, recipe
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m twinkit_segmentation.geometry.train", description=__doc__.split("\n")[0])
+    ap.add_argument("--data", action="append", required=True, help="folder of capture .npz files (repeatable)")
+    ap.add_argument("--out", required=True, help="output stem (STEM.npz, STEM.json)")
+    ap.add_argument("--val", default=r"(^|_)(val|seed2\d)", help="regex on the file stem: validation captures")
+    ap.add_argument("--cache", default=None, help="feature cache folder")
+    ap.add_argument("--epochs", type=int, default=40)
+    ap.add_argument("--hidden", default="128,64")
+    ap.add_argument("--per-class", type=int, default=8000)
+    ap.add_argument("--intensity-dropout", type=float, default=0.5)
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    files = sorted(p for d in a.data for p in Path(d).rglob("*.npz"))
+    if not files:
+        print(f"no .npz captures under {a.data}", file=sys.stderr)
+        return 2
+    cache = Path(a.cache) if a.cache else None
+    val_re = re.compile(a.val)
+    tr, va = [], []
+    t0 = time.perf_counter()
+    for f in files:
+        values, lab = capture_features(f, cache)
+        name = f"{f.parent.name}/{f.stem}"
+        (va if val_re.search(f.stem) else tr).append((name, values, lab))
+        print(f"features {name}: {len(lab)} base points ({time.perf_counter() - t0:.0f} s)", flush=True)
+    if not tr:
+        print("no training capture (every file matched --val)", file=sys.stderr)
+        return 2
+    layers, mean, std, classes, recipe = train(tr, hidden=tuple(int(h) for h in a.hidden.split(",")),
+                                               epochs=a.epochs, per_class=a.per_class,
+                                               intensity_dropout=a.intensity_dropout, seed=a.seed)
+    model = GeometryModel(layers=layers, mean=mean, std=std, classes=classes, feature_names=feature_names())
+    meta = {"recipe": {**recipe, "train_captures": [n for n, _, _ in tr], "val_regex": a.val,
+                       "feature_version": FEATURE_VERSION},
+            "validation": score(model, va) if va else {}, "training": score(model, tr)}
+    npz, js = save_model(Path(a.out), layers, mean, std, classes, feature_names(), meta)
+    print(json.dumps({"validation": {k: v for k, v in meta["validation"].items() if k != "captures"}}, indent=1))
+    print(f"wrote {npz} ({npz.stat().st_size} B), {js}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
