@@ -12,7 +12,8 @@ features measure the surface, not how densely one scanner happened to sample it.
   seen from everywhere fills it to ~0; a sparse far scan line far less); and the roughness
   ``log10 sqrt(l3)`` (metres).
 - **ground**: height above the local ground (:class:`twinkit.street.ground.LocalGround`, an opening wide
-  enough that car and bus roofs are not ground), the point's height above the lowest ground within 1.5 m and
+  enough that car and bus roofs are not ground, over each cell's ``ground_pct``-th percentile of its
+  up-facing points rather than its lowest, which range noise pulls down), the point's height above the lowest ground within 1.5 m and
   5 m (a raised pavement stands above the road beside it) and the rise of the highest ground within 1.5 m.
 - **column**: the highest point above the ground in the point's 0.5 m and 2 m ground cells, and the point's
   share of it (a facade's foot sits under 10 m of wall, a car's under 1.5 m).
@@ -231,7 +232,7 @@ def intensity_rank(intensity: np.ndarray | None, n: int) -> np.ndarray:
 
 
 def point_features(xyz: np.ndarray, intensity: np.ndarray | None = None, *, base_voxel_m: float = 0.1,
-                   ground_window_m: float = 8.0, ground_cell_m: float = 0.5) -> Features:
+                   ground_window_m: float = 8.0, ground_cell_m: float = 0.5, ground_pct: float = 30.0) -> Features:
     """The features of every base point of a cloud (see the module's docstring).
 
     ``xyz`` (n, 3) float, site frame (z up), metres; ``intensity`` (n,) any numeric scale or None.
@@ -256,7 +257,8 @@ def point_features(xyz: np.ndarray, intensity: np.ndarray | None = None, *, base
     sec["shape"] = time.perf_counter() - t
     t = time.perf_counter()
     up = nzs[1] >= 0.85
-    g = LocalGround(p, up, window="opening", window_m=ground_window_m, cell_m=ground_cell_m, if_none_up="all")
+    g = LocalGround(p, up, window="opening", window_m=ground_window_m, cell_m=ground_cell_m, pct=ground_pct,
+                    if_none_up="all")
     h = g.height()
     from scipy.ndimage import grey_dilation, grey_erosion
 

@@ -1,0 +1,124 @@
+"""The 3D classifier: its features, the shipped model, and the classify_geometry step."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from twinkit.cityscapes import BUILDING, ROAD, SIDEWALK
+from twinkit_segmentation.geometry.features import feature_names, point_features, voxel_subsample
+from twinkit_segmentation.geometry.model import load_model
+
+
+def _col(f, name):
+    return f.values[:, feature_names().index(name)]
+
+
+def test_voxel_subsample_keeps_one_point_per_voxel():
+    pts = np.array([[0.01, 0.01, 0.0], [0.05, 0.02, 0.0], [0.35, 0.0, 0.0], [0.36, 0.01, 0.0]])
+    base, inv = voxel_subsample(pts, 0.1)
+    assert len(base) == 2
+    assert np.array_equal(inv[[0, 1]], [inv[0]] * 2) and inv[2] == inv[3] and inv[0] != inv[2]
+
+
+def test_shape_features_of_a_plane_a_line_and_a_scatter():
+    rng = np.random.default_rng(0)
+    g = np.mgrid[-4:4:0.05, -4:4:0.05].reshape(2, -1).T
+    plane = np.column_stack([g, rng.normal(0, 0.002, len(g))])
+    line = np.column_stack([np.zeros(400), np.zeros(400), np.linspace(0.2, 8, 400)]) + [10.0, 0, 0]
+    blob = rng.uniform(-1, 1, (20000, 3)) + [-10.0, 0, 3.0]
+    pts = np.concatenate([plane, line, blob])
+    f = point_features(pts)
+    src = np.repeat([0, 1, 2], [len(plane), len(line), len(blob)])[f.base]
+    centre = np.linalg.norm(pts[f.base][:, :2] - np.array([[0, 0], [10, 0], [-10, 0]])[src], axis=1) < 2.5
+    p, ln, b = (src == 0) & centre, (src == 1) & (pts[f.base][:, 2] > 1) & (pts[f.base][:, 2] < 7), (src == 2) & centre
+    assert np.median(_col(f, "planarity_0.25")[p]) > 0.7 and np.median(_col(f, "normal_z_0.25")[p]) > 0.95
+    assert np.median(_col(f, "linearity_0.25")[ln]) > 0.9 and np.median(_col(f, "line_z_0.25")[ln]) > 0.95
+    assert np.median(_col(f, "scattering_0.25")[b]) > 0.5
+    assert np.median(_col(f, "scattering_0.25")[p]) < 0.05 and np.median(_col(f, "scattering_0.25")[ln]) < 0.05
+    # the plane is the ground; the pole and the blob stand above it
+    assert abs(np.median(f.height[p])) < 0.05
+    assert np.median(_col(f, "height")[ln]) > 2
+
+
+def test_the_shipped_model_reproduces_its_recorded_scores():
+    from twinkit_segmentation.geometry.train import check_scene_scores
+
+    model = load_model()
+    assert model.feature_names == feature_names()
+    rec = model.meta["check_scene"]
+    now = check_scene_scores(model, rec["seed"])
+    assert now["miou"] == pytest.approx(rec["miou"], abs=0.5)
+    assert now["coarse_accuracy"] == pytest.approx(rec["coarse_accuracy"], abs=0.5)
+    assert now["coarse_accuracy"] > 80  # and the record is a working model, not a file of any numbers
+
+
+def _facade_scan(rng, noise=0.02):
+    """A sensor 1.8 m above a road looks at a 30 m x 12 m facade 9 m away: 64 scan lines, 0.2 deg steps."""
+    el = np.radians(np.linspace(2.0, -24.8, 64))
+    az = np.radians(np.arange(-70, 70, 0.2))
+    E, A = np.meshgrid(el, az, indexing="ij")
+    d = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
+    o = np.array([0.0, 0.0, 1.8])
+    t_wall = np.where(d[:, 0] > 1e-6, 9.0 / np.maximum(d[:, 0], 1e-6), np.inf)
+    t_road = np.where(d[:, 2] < -1e-6, -1.8 / np.minimum(d[:, 2], -1e-6), np.inf)
+    hit_wall = (t_wall < t_road) & (np.abs(t_wall * d[:, 1]) < 15) & (o[2] + t_wall * d[:, 2] < 12)
+    t = np.where(hit_wall, t_wall, t_road)
+    ok = np.isfinite(t) & (t < 60)
+    t = t + rng.normal(0, noise, len(t))
+    return (o + d * t[:, None])[ok], np.where(hit_wall, BUILDING, ROAD)[ok]
+
+
+def test_a_colourless_facade_patch_is_building():
+    from twinkit_segmentation.geometry.classify import classify_cloud
+
+    xyz, lab = _facade_scan(np.random.default_rng(1))
+    pred = classify_cloud(xyz).point_labels()
+    wall = lab == BUILDING
+    assert (pred[wall] == BUILDING).mean() > 0.6
+
+
+def test_a_noisy_flat_road_does_not_become_sidewalk():
+    from twinkit_segmentation.geometry.classify import classify_cloud
+
+    xyz, lab = _facade_scan(np.random.default_rng(2), noise=0.03)
+    pred = classify_cloud(xyz).point_labels()
+    road = lab == ROAD
+    assert (pred[road] == ROAD).mean() > 0.6
+    assert (pred[road] == SIDEWALK).mean() < 0.3
+
+
+def test_votes_reach_vertices_near_points_only():
+    from twinkit_segmentation.geometry.classify import votes_at
+
+    pts = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    proba = np.zeros((2, 19), np.float32)
+    proba[0, ROAD] = 1
+    proba[1, BUILDING] = 1
+    v = votes_at(pts, proba, np.array([[0.1, 0, 0], [0.9, 0, 0], [5.0, 0, 0]]), radius_m=0.4)
+    assert v[0].argmax() == ROAD and v[1].argmax() == BUILDING
+    assert not v[2].any()
+    assert np.allclose(v[:2].sum(axis=1), 1)
+
+
+def test_the_step_writes_votes_per_vertex(tmp_path):
+    from twinkit import artefacts as A
+    from twinkit.mesh import Mesh
+    from twinkit.testing import run_plugin
+    from twinkit_segmentation.geometry.scene import street_capture
+    from twinkit_segmentation.synthetic import write_scene
+
+    mesh_ply, _, vlab = write_scene(tmp_path / "scene", step=0.5)
+    cap = street_capture(3, half_length_m=20.0)
+    keep = np.abs(cap["xyz"][:, 1]) < 5  # only the road was scanned: the facades' vertices get no vote
+    A.write_points(tmp_path / "points.ply", Mesh(vertices=cap["xyz"][keep]))
+    out = run_plugin("step", "classify_geometry", tmp_path / "run",
+                     {"in_points_ply": tmp_path / "points.ply", "in_textured_mesh_ply": mesh_ply})
+    n = len(A.read_textured_mesh(mesh_ply).vertices)
+    votes = A.read_class_votes(out["geometry_votes.npy"], n)
+    assert votes.dtype == np.float32 and votes.shape == (n, 19)
+    has = votes.sum(axis=1) > 0
+    assert np.allclose(votes[has].sum(axis=1), 1, atol=1e-4)
+    assert not has[vlab == BUILDING].any()
+    road = has & (vlab == ROAD)
+    assert road.sum() > 100 and (votes[road].argmax(axis=1) == ROAD).mean() > 0.5
+    assert out["geometry_labels.ply"].exists()
