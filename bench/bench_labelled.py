@@ -3,7 +3,7 @@
 
 For each scan: a copy with x, y, z and intensity only (the truth never reaches the pipeline), the
 default recipe's steps up to the labels (recipes/pointcloud_labels.yaml: pointcloud_site without roads
-and exports, road_source=none as for a site without OSM), then the labels moved onto the scan's points
+and exports, as pointcloud_site runs with road_source=none on a site without OSM), then the labels moved onto the scan's points
 by nearest mesh vertex in the run's frame and scored on the points with a class
 (twinkit_segmentation.metrics.score_points): coarse accuracy (twinkit.cityscapes.COARSE), accuracy,
 mean IoU over the classes present, IoU per class, the share of labelled points far from the mesh, and
@@ -69,7 +69,7 @@ def label_free_copy(src: Path, dst: Path) -> Path:
 def run_scan(name: str, cloud: Path, runs_dir: Path) -> tuple[Path, float]:
     """Run the labels' steps of the default recipe on ``cloud`` as site ``name``: (site folder, seconds)."""
     cmd = [sys.executable, "-m", "twinkit", f"recipe={RECIPE}", "site=lille", f"site.name={name}",
-           f"site.inputs.cloud={cloud}", "road_source=none", f"engine.outputs_dir={runs_dir}"]
+           f"site.inputs.cloud={cloud}", f"engine.outputs_dir={runs_dir}"]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     if p.returncode != 0:
@@ -214,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scans", default="", help="comma-separated scan names (file stems); default all")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output folder (copies, runs, tables)")
+    ap.add_argument("--runs", type=Path, default=None, help="where the runs go (default: OUT/runs)")
     ap.add_argument("--only-score", nargs="+", type=Path, metavar="RUN_DIR",
                     help="score these existing runs instead of running the pipeline")
     ap.add_argument("--compare", type=Path, default=None,
@@ -236,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         jobs = []
         for scan in scans:
             cloud = label_free_copy(scan, out / "clouds" / scan.name)
-            run_dir, wall[scan.stem] = run_scan(scan.stem, cloud, out / "runs")
+            run_dir, wall[scan.stem] = run_scan(scan.stem, cloud, (args.runs or out / "runs").resolve())
             jobs.append((scan, run_dir))
     for scan, run_dir in jobs:
         res, point_labels = score_run(run_dir, scan)

@@ -53,11 +53,10 @@ def coarse_of(labels: np.ndarray) -> np.ndarray:
     """trainIds of any shape -> coarse class index (into :data:`COARSE_NAMES`) of the same shape, int8;
     -1 for an id in no coarse class (person, rider, sky, 255, unknown ids)."""
     table = np.full(256, -1, np.int8)
-    for i, ids in enumerate(COARSE.values()):
-        table[list(ids)] = i
+    for i, members in enumerate(COARSE.values()):
+        table[list(members)] = i
     labels = np.asarray(labels)
-    ids = np.where((labels >= 0) & (labels < 256), labels, IGNORE).astype(np.uint8)
-    return table[ids]
+    return table[np.where((labels >= 0) & (labels < 256), labels, IGNORE).astype(np.uint8)]
 
 
 def name_of(train_id: int) -> str:
