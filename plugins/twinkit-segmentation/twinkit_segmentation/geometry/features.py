@@ -13,8 +13,11 @@ features measure the surface, not how densely one scanner happened to sample it.
   ``log10 sqrt(l3)`` (metres).
 - **ground**: height above the local ground (:class:`twinkit.street.ground.LocalGround`, an opening wide
   enough that car and bus roofs are not ground, over each cell's ``ground_pct``-th percentile of its
-  up-facing points rather than its lowest, which range noise pulls down), the point's height above the lowest ground within 1.5 m and
-  5 m (a raised pavement stands above the road beside it) and the rise of the highest ground within 1.5 m.
+  up-facing points rather than its lowest, which range noise pulls down), the point's height above the lowest
+  ground within 1.5 m and 5 m (a raised pavement stands above the road beside it), the rise of the highest
+  ground within 1.5 m, and against curbs (:meth:`LocalGround.steps`, 6-35 cm): the distance to the nearest
+  step's upper edge and the height against it (a pavement ~0, the road beside it ~ -0.12 m), both
+  capped at :data:`CURB_REACH_M` (a curb tells nothing about ground farther away, nor does a scan without one).
 - **column**: the highest point above the ground in the point's 0.5 m and 2 m ground cells, and the point's
   share of it (a facade's foot sits under 10 m of wall, a car's under 1.5 m).
 - **object**: the raised points (> 0.3 m above the ground) joined into connected objects over 0.4 m voxels;
@@ -33,10 +36,12 @@ import numpy as np
 #: voxel sides (m) of the shape features; each looks at a cube of 3 voxels a side.
 SCALES_M: tuple[float, ...] = (0.1, 0.25, 0.6, 1.2)
 SHAPE_NAMES = ("linearity", "planarity", "scattering", "normal_z", "line_z", "spread", "rel_z", "fill", "rough")
-GROUND_NAMES = ("height", "above_low_1m5", "above_low_5m", "ground_rise_1m5")
+GROUND_NAMES = ("height", "above_low_1m5", "above_low_5m", "ground_rise_1m5", "step_dist", "above_step")
 COLUMN_NAMES = ("col_top_0m5", "col_share_0m5", "col_top_2m", "col_share_2m")
 OBJECT_NAMES = ("obj_long", "obj_short", "obj_top", "obj_size", "raised")
 INTENSITY_NAMES = ("intensity_rank", "has_intensity")
+#: metres: farther from a curb step than this, the curb features read "no curb near"
+CURB_REACH_M = 3.0
 
 
 def feature_names() -> list[str]:
@@ -271,6 +276,20 @@ def point_features(xyz: np.ndarray, intensity: np.ndarray | None = None, *, base
     k = max(1, int(round(1.5 / ground_cell_m)))
     high = grey_dilation(g.z, size=(2 * k + 1, 2 * k + 1), mode="nearest")
     feats_g.append(np.clip(high[j, i] - g.z[j, i], 0, 5))
+    # curbs: the upper edges of 6-35 cm steps in the ground's surface; how far each point is from the nearest
+    # one and how high it stands against that step's top (a pavement ~0, the road beside it ~ -0.12 m)
+    from scipy.ndimage import distance_transform_edt
+
+    # (a curb says something within a few metres only: beyond CURB_REACH_M, and in a scan without any step,
+    # both features read "no curb near")
+    step = g.steps(min_step_m=0.06, radius_m=0.5, max_step_m=0.35)
+    dist_m = np.full(len(p), CURB_REACH_M)
+    above = np.zeros(len(p))
+    if step.any():
+        dist, (sj, si) = distance_transform_edt(~step, return_indices=True)
+        dist_m = np.minimum(dist[j, i] * ground_cell_m, CURB_REACH_M)
+        above = np.where(dist_m < CURB_REACH_M, np.clip(p[:, 2] - g.surface[sj[j, i], si[j, i]], -1, 1), 0.0)
+    feats_g += [np.log10(0.25 + dist_m), above]
     sec["ground"] = time.perf_counter() - t
     t = time.perf_counter()
     cols = []

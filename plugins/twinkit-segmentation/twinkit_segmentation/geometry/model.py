@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -17,13 +18,6 @@ from twinkit.cityscapes import N_CLASSES
 
 MODEL_DIR = Path(__file__).parent
 MODEL_NAME = "geometry_model"
-
-#: the five coarse classes the issue scores: trainIds per group
-COARSE: dict[str, tuple[int, ...]] = {
-    "ground": (0, 1, 9), "facade": (2, 3, 4), "vegetation": (8,), "pole-like": (5, 6, 7),
-    "vehicle": (13, 14, 15, 16, 17, 18),
-}
-
 
 @dataclass
 class GeometryModel:
@@ -58,12 +52,12 @@ def save_model(path_stem: Path, layers, mean, std, classes, feature_names, meta:
     """Write ``<stem>.npz`` and ``<stem>.json``; returns both paths."""
     path_stem = Path(path_stem)
     path_stem.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {"mean": np.asarray(mean, np.float32), "std": np.asarray(std, np.float32)}
+    arrays: dict[str, Any] = {"mean": np.asarray(mean, np.float32), "std": np.asarray(std, np.float32)}
     for i, (w, b) in enumerate(layers):
         arrays[f"W{i}"] = np.asarray(w, np.float32)
         arrays[f"b{i}"] = np.asarray(b, np.float32)
     npz = path_stem.with_suffix(".npz")
-    np.savez_compressed(npz, **arrays)
+    np.savez_compressed(npz, **arrays)  # type: ignore[arg-type]
     js = path_stem.with_suffix(".json")
     js.write_text(json.dumps({**meta, "classes": [int(c) for c in classes], "feature_names": list(feature_names)},
                              indent=1) + "\n")
@@ -81,15 +75,3 @@ def load_model(path_stem: str | Path | None = None) -> GeometryModel:
         mean, std = z["mean"], z["std"]
     return GeometryModel(layers=layers, mean=mean, std=std, classes=np.asarray(meta.pop("classes"), np.int64),
                          feature_names=meta.pop("feature_names"), meta=meta)
-
-
-def coarse_accuracy(pred: np.ndarray, gt: np.ndarray) -> float:
-    """Percent of the points whose truth is in one of :data:`COARSE`'s groups and whose prediction is in
-    the same group."""
-    lut = np.full(256, -1, np.int64)
-    for k, ids in enumerate(COARSE.values()):
-        lut[list(ids)] = k
-    g = lut[np.asarray(gt, np.int64) & 255]
-    p = lut[np.asarray(pred, np.int64) & 255]
-    ok = g >= 0
-    return 100.0 * float((p[ok] == g[ok]).mean()) if ok.any() else 0.0

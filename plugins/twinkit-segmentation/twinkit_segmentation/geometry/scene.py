@@ -41,9 +41,10 @@ def street_capture(seed: int = 0, *, half_length_m: float = 25.0, density: float
         for x0 in rng.uniform(-L + 3, L - 8, 2):  # parked cars: sides and roof
             y0 = 3.2 * s
             lo = np.array([x0, y0 - 0.9, 0.25])
-            for (o, u, v) in (((0, 0, 0), (4.5, 0, 0), (0, 0, 1.25)), ((0, 1.8, 0), (4.5, 0, 0), (0, 0, 1.25)),
+            faces: tuple = (((0, 0, 0), (4.5, 0, 0), (0, 0, 1.25)), ((0, 1.8, 0), (4.5, 0, 0), (0, 0, 1.25)),
                               ((0, 0, 0), (0, 1.8, 0), (0, 0, 1.25)), ((4.5, 0, 0), (0, 1.8, 0), (0, 0, 1.25)),
-                              ((0.6, 0, 1.25), (3.2, 0, 0), (0, 1.8, 0))):
+                              ((0.6, 0, 1.25), (3.2, 0, 0), (0, 1.8, 0)))
+            for o, u, v in faces:
                 add(_plane(rng, lo + np.asarray(o), u, v, n_for(6)), CAR)
         for x0 in np.arange(-L + 4, L - 2, 12.0) + rng.uniform(-1, 1):  # lamp posts
             t = rng.random(n_for(2.5))
@@ -60,8 +61,8 @@ def street_capture(seed: int = 0, *, half_length_m: float = 25.0, density: float
     xyz = np.concatenate([p for p, _ in parts])
     lab = np.concatenate([np.full(len(p), c, np.uint8) for p, c in parts])
     # the sensor's view: density falls with range squared, noise along the ray
-    o = np.asarray(sensor, np.float64)
-    d = xyz - o
+    origin = np.asarray(sensor, np.float64)
+    d = xyz - origin
     r = np.linalg.norm(d, axis=1)
     keep = rng.random(len(r)) < np.clip((6.0 / np.maximum(r, 1e-6)) ** 2, 0, 1)
     xyz, lab, d, r = xyz[keep], lab[keep], d[keep], r[keep]

@@ -22,9 +22,9 @@ import numpy as np
 from twinkit.cityscapes import N_CLASSES, NAMES
 
 from .features import feature_names, point_features
-from .model import GeometryModel, coarse_accuracy, save_model
+from .model import GeometryModel, save_model
 
-FEATURE_VERSION = 3
+FEATURE_VERSION = 5
 
 
 def warp_ground(xyz: np.ndarray, seed: int, max_slope: float = 0.06, max_bow_m: float = 0.5) -> np.ndarray:
@@ -73,19 +73,19 @@ def _drop_intensity(values: np.ndarray, rows: np.ndarray) -> None:
 def score(model: GeometryModel, captures: list[tuple[str, np.ndarray, np.ndarray]]) -> dict:
     """IoU per class (percent), mIoU over the classes present, accuracy and coarse accuracy, pooled over
     ``captures`` [(name, values, labels)], and the mIoU / coarse accuracy of each."""
-    from twinkit_segmentation.metrics import scores
+    from twinkit_segmentation.metrics import coarse_accuracy, scores
 
     preds, gts, each = [], [], {}
     for name, values, lab in captures:
         pred = model.proba(values).argmax(axis=1).astype(np.uint8)
         s = scores(pred, lab)
-        each[name] = {"miou": round(s["miou"], 2), "coarse_accuracy": round(coarse_accuracy(pred, lab), 2)}
+        each[name] = {"miou": round(s["miou"], 2), "coarse_accuracy": round(coarse_accuracy(pred, lab)["coarse_accuracy"], 2)}
         preds.append(pred)
         gts.append(lab)
     pred, gt = np.concatenate(preds), np.concatenate(gts)
     s = scores(pred, gt)
     return {"miou": round(s["miou"], 2), "accuracy": round(s["accuracy"], 2),
-            "coarse_accuracy": round(coarse_accuracy(pred, gt), 2),
+            "coarse_accuracy": round(coarse_accuracy(pred, gt)["coarse_accuracy"], 2),
             "iou": {k: round(v["iou"], 2) for k, v in s["per_class"].items()}, "captures": each}
 
 
@@ -135,8 +135,8 @@ def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048
     xn = torch.from_numpy((x - mean) / std)
     yt = torch.from_numpy(y)
     cnt = np.bincount(y, minlength=len(classes)).astype(np.float64)
-    w = cnt ** -0.5
-    w = torch.tensor(w / (w * cnt).sum() * cnt.sum(), dtype=torch.float32)
+    inv = cnt ** -0.5
+    w = torch.tensor(inv / (inv * cnt).sum() * cnt.sum(), dtype=torch.float32)
     dims = [x.shape[1], *hidden, len(classes)]
     mods: list = []
     for i in range(len(dims) - 1):
@@ -184,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--per-class", type=int, default=2500)
     ap.add_argument("--intensity-dropout", type=float, default=0.5)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--ablate", default="", help="comma-separated feature names held at 0 in training and "
+                                                   "validation (an ablation: the model cannot use them)")
     a = ap.parse_args(argv)
     files = sorted(p for d in a.data for p in Path(d).rglob("*.npz"))
     if not files:
@@ -191,10 +193,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     cache = Path(a.cache) if a.cache else None
     val_re = re.compile(a.val)
-    tr, va = [], []
+    tr: list[tuple[str, np.ndarray, np.ndarray]] = []
+    va: list[tuple[str, np.ndarray, np.ndarray]] = []
     t0 = time.perf_counter()
     for f in files:
         values, lab = capture_features(f, cache)
+        for name in filter(None, a.ablate.split(",")):
+            values[:, feature_names().index(name)] = 0.0
         name = f"{f.parent.name}/{f.stem}"
         (va if val_re.search(f.stem) else tr).append((name, values, lab))
         print(f"features {name}: {len(lab)} base points ({time.perf_counter() - t0:.0f} s)", flush=True)
@@ -205,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
                                                epochs=a.epochs, per_class=a.per_class, batch=a.batch,
                                                intensity_dropout=a.intensity_dropout, seed=a.seed)
     model = GeometryModel(layers=layers, mean=mean, std=std, classes=classes, feature_names=feature_names())
-    meta = {"recipe": {**recipe, "train_captures": [n for n, _, _ in tr], "val_regex": a.val,
+    meta = {"recipe": {**recipe, "train_captures": [n for n, _, _ in tr], "val_regex": a.val, "ablated": a.ablate,
                        "feature_version": FEATURE_VERSION},
             "validation": score(model, va) if va else {}, "training": score(model, tr),
             "check_scene": check_scene_scores(model)}
