@@ -390,7 +390,8 @@ CATALOGUE: dict[str, Artefact] = dict([
            writers="photo:dense pointcloud:read_cloud",
            readers="export:drop_test pointcloud:bake_texture pointcloud:clean_mesh "
                    "pointcloud:evaluate_reconstruction pointcloud:reconstructor/poisson roads:road_source/scan "
-                   "segmentation:backproject segmentation:sample_views tiles:merge_tiles tiles:plan_tiles"),
+                   "segmentation:backproject segmentation:classify_geometry segmentation:sample_views tiles:merge_tiles "
+                   "tiles:plan_tiles"),
     _entry("points_meta.json", "JSON", PointsMeta, read_points_meta, write_points_meta,
            writers="photo:dense pointcloud:read_cloud",
            readers="roads:road_source/scan"),
@@ -398,7 +399,7 @@ CATALOGUE: dict[str, Artefact] = dict([
            writers="photo:photo_texture pointcloud:bake_texture",
            readers="photo:photo_texture pointcloud:evaluate_reconstruction roads:align_roads roads:apply_alignment "
                    "roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
-                   "segmentation:import_labels segmentation:photo_views segmentation:render_views "
+                   "segmentation:classify_geometry segmentation:import_labels segmentation:photo_views segmentation:render_views "
                    "segmentation:sample_views segmentation:segmenter/felzenszwalb segmentation:segmenter/vertices "
                    "segmentation:transfer_gt_labels tiles:evaluate_seam_labels"),
     _entry("clean_mesh.ply", "PLY mesh", F.CleanMeshPly, read_clean_mesh, write_clean_mesh,

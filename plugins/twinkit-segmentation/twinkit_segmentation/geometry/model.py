@@ -57,7 +57,7 @@ def save_model(path_stem: Path, layers, mean, std, classes, feature_names, meta:
         arrays[f"W{i}"] = np.asarray(w, np.float32)
         arrays[f"b{i}"] = np.asarray(b, np.float32)
     npz = path_stem.with_suffix(".npz")
-    np.savez_compressed(npz, **arrays)  # type: ignore[arg-type]
+    np.savez_compressed(npz, **arrays)
     js = path_stem.with_suffix(".json")
     js.write_text(json.dumps({**meta, "classes": [int(c) for c in classes], "feature_names": list(feature_names)},
                              indent=1) + "\n")
