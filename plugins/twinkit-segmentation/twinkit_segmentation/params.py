@@ -154,6 +154,16 @@ class BackprojectParams:
     file_class_spacings: float = param(3.0, gt=0,
                                        help="A vertex takes the class of its nearest point within this many point "
                                             "spacings.")
+    cue_gates: bool = param(True,
+                            help="Gate the shape and curb cues by what the capture resolves at each vertex (point "
+                                 'support and noise from points.ply; docs/segmentation.md "Cue gates").')
+    fusion_weights: str = param("", free=True,
+                                help="The views' and the geometry's weights per capture kind (a JSON file written by "
+                                     "python -m twinkit_segmentation.fusion calibrate); empty = the plugin's "
+                                     'shipped fusion_weights.json (docs/segmentation.md "Fusion").')
+    low_confidence: float = param(0.5, ge=0, le=1,
+                                  help="A fused label whose probability is under this is low-confidence (counted, "
+                                       "and shown in confidence.png).")
 
 
 @dataclass
