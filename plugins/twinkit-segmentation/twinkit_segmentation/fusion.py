@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit.cityscapes import IGNORE, N_CLASSES
+from twinkit.cityscapes import N_CLASSES
 
 #: the calibrated weights shipped with the plugin (written by ``calibrate``)
 WEIGHTS_FILE = Path(__file__).with_name("fusion_weights.json")
@@ -118,6 +118,8 @@ def fuse_sources(p_views: np.ndarray, n_views: np.ndarray, p_geom: np.ndarray | 
     logp -= logp.max(axis=1, keepdims=True)
     q = np.exp(logp)
     q /= q.sum(axis=1, keepdims=True)
+    alone = sv & ~sg
+    q[alone] = pv[alone]  # no geometry there: the views' own distribution, exactly
     neither = ~sv & ~sg
     q[neither] = 0.0
     return q, {"geometry": True, "views_only": int((sv & ~sg).sum()), "geometry_only": int((~sv & sg).sum()),
@@ -265,4 +267,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["FusionWeights", "SourceWeights", "calibrate", "capture_kind", "confidence_picture", "confidence_summary",
-           "disagreement", "fuse_sources", "load_weights", "IGNORE"]
+           "disagreement", "fuse_sources", "load_weights"]

@@ -403,8 +403,10 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     labels, conf = decide_distribution(p, unseen)
     base_labels = labels.copy()  # the sources alone
     gates, ginfo = _cue_gates(params, ctx, mesh, cloud)
+    # the views' near-unanimous floor holds where they lead: not where a colourless capture has geometry
+    unshield = None if geom is None or fsum.get("kind") == "coloured" else geom.sum(axis=1) > 0
     labels, conf, edges, cmet, t_ctx = _fuse(params, ctx, mesh, p, votes, labels, conf, fprior, gates,
-                                            shield=geom is None or fsum.get("kind") == "coloured")
+                                            unshield=unshield)
     unlabelled_before = int((labels == IGNORE).sum())
     if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
         labels = propagate(labels, edges if edges is not None else mesh_edges(mesh.faces, len(mesh.vertices)))
@@ -498,7 +500,7 @@ def vote_distribution(params: BackprojectParams, seg, votes):
 
 
 def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, conf, fprior, gates=None,
-          shield: bool = True):
+          unshield=None):
     """The vote scaled by the mesh's geometric cues and the file's classes (``fprior`` (n, 19) or None), or
     Potts smoothing alone: (labels, confidence, mesh edges or None, the fusion's metrics, seconds)."""
     from twinkit.cityscapes import IGNORE
@@ -517,7 +519,9 @@ def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, c
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
         keep = labels == IGNORE
         sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None), None,
-                              params.keep_share, params.keep_votes) if shield else None
+                              params.keep_share, params.keep_votes)
+        if unshield is not None:
+            sure &= ~unshield
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, context_options(params),
                                                cues, min_retained=params.min_retained,
                                                smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
