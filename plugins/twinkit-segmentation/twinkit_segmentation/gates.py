@@ -22,9 +22,9 @@ The gates (each a mechanism, thresholds from the cue's own lengths):
   the ground around it is sampled both ways (``flat_share >= 0.5``) and at least twice within the
   step's reach (``support <= step_radius_m / 4``). The gate acts on the step cells (a curb found where
   the scan resolves one), not on the band beside them, which may lie in a parked car's scan shadow;
-- ``column`` and ``mounted``: a post ``column_width_m`` across is sampled by at least two points
-  (``support <= column_width_m / 4``, support being half the spacing), else one sample's slice
-  has no width to measure and a sparse facade's slices look as thin as a post;
+- ``column`` and ``mounted``: the scan samples finer than a post is wide (spacing <= ``column_width_m``,
+  i.e. ``support <= column_width_m / 2``, support being about half the spacing): where it samples
+  coarser, any sparse facade breaks into fragments as narrow as a post and a thin slice says nothing;
 - ``low``, ``narrow`` and ``slender``: an object's top and width are measured where its surface is
   sampled at spacing ``slice_m`` or finer (``support <= slice_m / 2``).
 
@@ -129,7 +129,7 @@ def cue_gates(quality: dict, opt, curb_sigmas: float = 3.0, min_flat_share: floa
     *step* can be measured (``geometric_context(step_gate=...)`` keeps only such steps): the band beside
     a measured step may itself lie in a scan shadow."""
     sup, noise, flat = quality["support_m"], quality["noise_m"], quality["flat_share"]
-    post = sup <= opt.column_width_m / 4.0
+    post = sup <= opt.column_width_m / 2.0
     shape = sup <= opt.slice_m / 2.0
     step = (curb_sigmas * noise <= opt.min_curb_m) & (flat >= min_flat_share)
     return {"curb": step, "column": post, "mounted": post, "low": shape, "narrow": shape, "slender": shape}
