@@ -482,7 +482,16 @@ def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud):
 
     info = {"used": True, "seconds": round(time.perf_counter() - t, 3),
             "support_m_p50": round(float(np.median(q["support_m"])), 4),
+            "noise_m_p50": round(float(np.median(q["noise_m"])), 4) if np.isfinite(q["noise_m"]).any() else None,
             "passed_share": {c: round(float(g.mean()), 4) for c, g in gates.items()}}
+    off = {c: 1 - v for c, v in info["passed_share"].items() if c in ("curb", "column", "low") and v < 0.9}
+    if off:
+        ctx.log.warning("cue gates: the capture is too sparse or noisy for %s on %s of the mesh (median support "
+                        "%.3f m, noise %s); those cues stay off there, the views and the geometry decide",
+                        "/".join(off), "/".join(f"{100 * v:.0f} %" for v in off.values()), info["support_m_p50"],
+                        f"{info['noise_m_p50']:.4f} m" if info["noise_m_p50"] is not None else "unmeasured")
+    else:
+        ctx.log.info("cue gates: the capture resolves the cues on %s", info["passed_share"])
     return gates, info
 
 
