@@ -391,7 +391,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     if len(seg) != len(mesh.vertices) or len(votes) != len(mesh.vertices):
         raise InputError(f"{in_segments_npy.name} ({len(seg)}), {in_vertex_votes_npy.name} ({len(votes)}) and "
                          f"{in_textured_mesh_ply.name} ({len(mesh.vertices)}) disagree on the vertex count; re-run them")
-    bad = [c for c in params.context_cues if c not in CUES]
+    bad = [c for c in list(params.context_cues) + list(params.cues_with_geometry) if c not in CUES]
     if bad:
         raise InputError(f"backproject: unknown context_cues {bad}; choose from {list(CUES)}")
     p_views, s_total = vote_distribution(params, seg, votes)
@@ -405,8 +405,10 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     gates, ginfo = _cue_gates(params, ctx, mesh, cloud)
     # the views' near-unanimous floor holds where they lead: not where a colourless capture has geometry
     unshield = None if geom is None or fsum.get("kind") == "coloured" else geom.sum(axis=1) > 0
+    cues = list(params.context_cues) if geom is None else [c for c in params.context_cues
+                                                           if c in params.cues_with_geometry]
     labels, conf, edges, cmet, t_ctx = _fuse(params, ctx, mesh, p, votes, labels, conf, fprior, gates,
-                                            unshield=unshield)
+                                            unshield=unshield, cues=cues)
     unlabelled_before = int((labels == IGNORE).sum())
     if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
         labels = propagate(labels, edges if edges is not None else mesh_edges(mesh.faces, len(mesh.vertices)))
@@ -509,7 +511,7 @@ def vote_distribution(params: BackprojectParams, seg, votes):
 
 
 def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, conf, fprior, gates=None,
-          unshield=None):
+          unshield=None, cues=None):
     """The vote scaled by the mesh's geometric cues and the file's classes (``fprior`` (n, 19) or None), or
     Potts smoothing alone: (labels, confidence, mesh edges or None, the fusion's metrics, seconds)."""
     from twinkit.cityscapes import IGNORE
@@ -521,9 +523,10 @@ def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, c
     edges = None
     cmet: dict = {}
     t_ctx = 0.0
-    if (params.context and params.context_cues) or fprior is not None:
+    cues = list(params.context_cues) if cues is None else list(cues)
+    if (params.context and cues) or fprior is not None:
         # the file's classes go through the same fusion as the cues (with no cue when context is off)
-        cues = list(params.context_cues) if params.context else []
+        cues = cues if params.context else []
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
         keep = labels == IGNORE
