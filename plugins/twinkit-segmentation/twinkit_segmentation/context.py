@@ -355,6 +355,10 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     gates = dict(gates or {})
     step_gate = gates.pop("curb", None)
     ctx = geometric_context(vertices, normals, opt, edges, step_gate=step_gate)
+    if "low" in gates:
+        from .gates import reach_gate
+
+        gates["low"] = np.asarray(gates["low"], bool) & reach_gate(vertices, ctx["height"], opt)
     ungated = {c: int(ctx[c].sum()) for c in gates if c in ctx}
     for c, g in gates.items():
         if c in ctx:

@@ -26,7 +26,9 @@ The gates (each a mechanism, thresholds from the cue's own lengths):
   i.e. ``support <= column_width_m / 2``, support being about half the spacing): where it samples
   coarser, any sparse facade breaks into fragments as narrow as a post and a thin slice says nothing;
 - ``low``, ``narrow`` and ``slender``: an object's top and width are measured where its surface is
-  sampled at spacing ``slice_m`` or finer (``support <= slice_m / 2``).
+  sampled at spacing ``slice_m`` or finer (``support <= slice_m / 2``); ``low`` also needs the
+  capture to reach twice ``low_top_m`` up within 10 m (:func:`reach_gate`): a top under 2.5 m is the
+  object's own only where the scan saw higher things around it.
 
 ``support_m`` is pooled over ``support_cell_m`` (about a post's reach), the flat share over
 ``cell_m``; ``capture_quality`` costs one k-nearest query of the mesh's vertices in the cloud.
@@ -133,6 +135,25 @@ def cue_gates(quality: dict, opt, curb_sigmas: float = 3.0, min_flat_share: floa
     shape = sup <= opt.slice_m / 2.0
     step = (curb_sigmas * noise <= opt.min_curb_m) & (flat >= min_flat_share)
     return {"curb": step, "column": post, "mounted": post, "low": shape, "narrow": shape, "slender": shape}
+
+
+def reach_gate(vertices: np.ndarray, height: np.ndarray, opt, radius_m: float = 10.0, cell_m: float = 2.0) -> np.ndarray:
+    """(n,) bool: the capture reaches at least ``2 * opt.low_top_m`` above the ground within ``radius_m``
+    of the vertex (the highest mesh vertex there, ``height`` (n,) above the local ground, metres), so
+    an object whose top is under ``low_top_m`` ends there, not at the scan's upper edge (a spinning
+    sensor looks at most a few degrees up: a facade 15 m away ends 2-3 m up in its scan)."""
+    from scipy.ndimage import maximum_filter
+
+    v = np.asarray(vertices, np.float64)
+    if not len(v):
+        return np.zeros(0, bool)
+    c = np.floor((v[:, :2] - v[:, :2].min(axis=0)) / cell_m).astype(np.int64)
+    top = np.full(tuple(c.max(axis=0) + 1), -np.inf)
+    np.maximum.at(top, (c[:, 0], c[:, 1]), np.asarray(height, np.float64))
+    k = max(1, int(round(radius_m / cell_m)))
+    fp = np.add.outer(np.arange(-k, k + 1) ** 2, np.arange(-k, k + 1) ** 2) <= k * k
+    reach = maximum_filter(top, footprint=fp, mode="constant", cval=-np.inf)[c[:, 0], c[:, 1]]
+    return reach >= 2.0 * opt.low_top_m
 
 
 def gate_summary(ctx_masks: dict, gates: dict) -> dict:
