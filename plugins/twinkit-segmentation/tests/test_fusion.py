@@ -168,3 +168,20 @@ def test_shipped_weights_load_and_say_how_they_were_made():
         k = w.for_kind(kind)
         assert k.views > 0 and k.geometry >= 0 and k.coverage_views > 0
     assert w.recipe, "fusion_weights.json carries its recipe"
+
+
+def test_the_low_cue_needs_a_capture_that_sees_higher():
+    from twinkit_segmentation.context import ContextOptions
+    from twinkit_segmentation.gates import reach_gate
+
+    # a facade cut 2 m up by the sensor's field of view, nothing higher around: its top is the scan's edge
+    x, z = np.meshgrid(np.linspace(0, 40, 161), np.linspace(0, 2.0, 9))
+    wall = np.column_stack([x.ravel(), np.full(x.size, 5.0), z.ravel()])
+    opt = ContextOptions()
+    assert not reach_gate(wall, wall[:, 2], opt).any()
+    # the same wall beside a 6 m lamp post the scan saw whole: a low top there is the object's own
+    post = np.column_stack([np.full(25, 8.0), np.full(25, 3.0), np.linspace(0, 6.0, 25)])
+    both = np.vstack([wall, post])
+    ok = reach_gate(both, both[:, 2], opt)
+    d = np.hypot(both[:, 0] - 8.0, both[:, 1] - 3.0)
+    assert ok[d < 8.0].all() and (d > 13.0).sum() > 100 and not ok[d > 13.0].any()  # (10 m on a 2 m grid)
