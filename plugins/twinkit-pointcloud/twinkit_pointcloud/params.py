@@ -94,7 +94,18 @@ class CleanParams:
     density_quantile: float = param(0.0, ge=0, lt=1,
                                     help="Remove vertices below this quantile of the Poisson density (weakly "
                                          "supported surface); 0 = off.")
-    min_component_faces: int = param(200, ge=0, help="Drop connected components with fewer faces than this.")
+    min_component_faces: int = param(200, ge=0, help="Drop connected components with fewer faces than this ...")
+    min_component_points: int = param(3, ge=0,
+                                      help="... unless at least this many input points stand on them (nearest "
+                                           "vertex within the trim distance): a pole, a trunk or far foliage seen "
+                                           "by a few points stays, a piece around a stray point goes; 0 = drop by "
+                                           'size alone (docs/pointcloud.md "Coverage of sparse scans").')
+    local_trim_factor: float = param(2.0, ge=0,
+                                     help="The distance trim per vertex is at least this x the local point spacing "
+                                          "(radius of the 8 nearest samples, per sample) of its nearest point, so "
+                                          "the surface between the sparse samples of the far range stays; 0 = off "
+                                          "(max_dist_m everywhere).")
+    local_trim_max_m: float = param(0.5, ge=0, help="... never more than this (m).")
     min_component_ratio: float = param(0.0, ge=0, le=1,
                                        help="Also drop components smaller than this fraction of the largest one; 0 "
                                             "= off.")

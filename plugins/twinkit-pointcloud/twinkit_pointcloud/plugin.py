@@ -181,6 +181,8 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                            density_quantile=params.density_quantile,
                            min_component_faces=params.min_component_faces,
                            min_component_ratio=params.min_component_ratio,
+                           min_component_points=params.min_component_points,
+                           local_trim_factor=params.local_trim_factor, local_trim_max_m=params.local_trim_max_m,
                            repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
                            fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
                            fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
