@@ -194,10 +194,12 @@ def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
 
 
 def local_spacing(points: np.ndarray, k: int = 8, tree=None, threads: int = -1) -> np.ndarray:
-    """Per input point, the spacing of the samples around it (m), (p,) float32: the radius holding its ``k``
-    nearest neighbours, scaled to the side of the square each sample covers on a surface
-    (``r_k * sqrt(pi / k)``). A single sweep's spacing grows with the range (the square of the range in
-    area); a scan-line pattern counts both the line's spacing and the gap to the next line."""
+    """Per input point, the point spacing around it on the same scale as the cloud's median nearest-neighbour
+    distance (:mod:`twinkit.surface.density`), (p,) float32 metres: the local density
+    ``rho = k / (pi r_k**2)`` from the radius ``r_k`` holding its ``k`` nearest neighbours, turned into the
+    nearest-neighbour distance a uniform sampling of that density has (``0.5 / sqrt(rho)``). A single sweep's
+    density falls with the square of the range; on scan lines ``r_k`` reaches the next line, so the gap
+    between lines counts, not only the spacing along them."""
     from scipy.spatial import cKDTree
 
     tree = tree if tree is not None else cKDTree(points)
@@ -205,7 +207,7 @@ def local_spacing(points: np.ndarray, k: int = 8, tree=None, threads: int = -1) 
     if k < 1:
         return np.zeros(len(points), np.float32)
     d, _ = tree.query(points, k=k + 1, workers=threads)
-    return (d[:, -1] * np.sqrt(np.pi / k)).astype(np.float32)
+    return (0.5 * d[:, -1] * np.sqrt(np.pi / k)).astype(np.float32)
 
 
 def max_dist_per_vertex(vertices: np.ndarray, points: np.ndarray, opt: CleanOptions, tree) -> np.ndarray | float:
