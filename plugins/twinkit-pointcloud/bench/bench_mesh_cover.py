@@ -11,6 +11,10 @@ farther than 0.2 / 0.5 / 1 m from the final mesh's surface, and where the far on
 already farther than 0.5 m from the dense Poisson mesh (the depth / Poisson), from the mesh after the
 distance trim (the trim), after the small-component removal (clean's components) and after simplify.
 The JSON of every figure goes to ``OUT/mesh_cover.json``. A scan missing from ../shared is skipped.
+
+``--clouds lille ign autzen`` runs the same on the unlabelled real clouds of ``../shared/data/pointclouds``
+(bench_real_scans.py's list; per class by the file's ASPRS classes where it has them), to check that the
+clean-up rules hold on other captures.
 """
 from __future__ import annotations
 
@@ -54,7 +58,23 @@ def far_shares(d: np.ndarray, lab: np.ndarray) -> dict:
     return out
 
 
-def run_scan(name: str, out: Path, overrides: dict, texture: bool) -> dict:
+def cloud_site(name: str) -> tuple[Path, dict]:
+    """(file, site dict) of one of bench_real_scans.py's clouds: the CRS and a base point at its centre."""
+    import sys
+
+    sys.path.insert(0, str(HERE.parent))
+    from bench_real_scans import CLOUDS, DATA as CLOUD_DATA, centre_latlon
+
+    c = CLOUDS[name]
+    f = CLOUD_DATA / c["file"]
+    site: dict = {"name": name}
+    if "crs" in c:
+        lat, lon, alt = centre_latlon(f)
+        site.update(crs=c["crs"], base_point={"lat": lat, "lon": lon, "alt": alt})
+    return f, site
+
+
+def run_scan(name: str, out: Path, overrides: dict, texture: bool, cloud: bool = False) -> dict:
     from twinkit.artefacts import read_points
     from twinkit.mesh import read_ply
     from twinkit.surface.metrics import cloud_to_mesh
@@ -64,8 +84,13 @@ def run_scan(name: str, out: Path, overrides: dict, texture: bool) -> dict:
 
     w = out / name
     w.mkdir(parents=True, exist_ok=True)
-    xyz, lab = strip_labels(DATA / f"{name}.ply", w / f"{name}_xyz.ply")
-    ctx = make_context(w / "work", site={"name": name})
+    if cloud:
+        src, site = cloud_site(name)
+        xyz, lab = None, None
+    else:
+        xyz, lab = strip_labels(DATA / f"{name}.ply", w / f"{name}_xyz.ply")
+        src, site = w / f"{name}_xyz.ply", {"name": name}
+    ctx = make_context(w / "work", site=site)
     wd = ctx.workdir
     t: dict = {}
 
@@ -74,7 +99,7 @@ def run_scan(name: str, out: Path, overrides: dict, texture: bool) -> dict:
         return cls(**kw)
 
     t0 = time.perf_counter()
-    P.read_cloud(prm(P.ReadCloudParams, "read"), ctx, in_cloud=w / f"{name}_xyz.ply", out_points_ply=wd / "points.ply",
+    P.read_cloud(prm(P.ReadCloudParams, "read"), ctx, in_cloud=src, out_points_ply=wd / "points.ply",
                  out_points_meta_json=wd / "points_meta.json")
     t["read_cloud"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -98,7 +123,13 @@ def run_scan(name: str, out: Path, overrides: dict, texture: bool) -> dict:
                        out_textured_mesh_ply=wd / "textured_mesh.ply", in_points_ply=wd / "points.ply")
         t["texture"] = time.perf_counter() - t0
         final = wd / "textured_mesh.ply"
-    pts = read_points(wd / "points.ply").vertices
+    pc = read_points(wd / "points.ply")
+    pts = pc.vertices
+    if lab is None:  # the file's own ASPRS classes (ground 2, vegetation 3-5, building 6) or none
+        cls = pc.attrs.get("classification")
+        asprs = {2: 0, 3: 8, 4: 8, 5: 8, 6: 2}
+        lab = np.array([asprs.get(int(c), 254) for c in cls]) if cls is not None else np.full(len(pts), 254)
+        xyz = pts
     if len(pts) != len(xyz):
         raise SystemExit(f"{name}: read_cloud kept {len(pts)} of {len(xyz)} points; cannot match the labels")
     stages = {"at_poisson": wd / "dense_mesh.ply", "at_clean": wd / "clean_mesh.ply", "final": final}
@@ -123,6 +154,7 @@ def run_scan(name: str, out: Path, overrides: dict, texture: bool) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scans", nargs="*", default=list(SCANS))
+    ap.add_argument("--clouds", nargs="*", default=[], help="lille ign autzen (../shared/data/pointclouds)")
     ap.add_argument("--out", default=str(REPO / "outputs" / "bench_mesh_cover"))
     ap.add_argument("--set", nargs="*", default=[], help="step.param=value (read, poisson, clean, simplify, bake)")
     ap.add_argument("--texture", action="store_true")
@@ -134,11 +166,14 @@ def main() -> None:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     allres = {}
-    for name in a.scans:
-        if not (DATA / f"{name}.ply").exists():
+    for name, is_cloud in [(n, False) for n in a.scans] + [(n, True) for n in a.clouds]:
+        if not is_cloud and not (DATA / f"{name}.ply").exists():
             print(f"{name}: not in {DATA}, skipped")
             continue
-        r = allres[name] = run_scan(name, out, ov, a.texture)
+        if is_cloud and not cloud_site(name)[0].exists():
+            print(f"{name}: not in ../shared/data/pointclouds, skipped")
+            continue
+        r = allres[name] = run_scan(name, out, ov, a.texture, is_cloud)
         print(f"== {name}: depth {r['poisson']['depth']}, trim {r['clean']['max_dist_m']} m, faces "
               f"{r['poisson']['faces']} -> {r['clean']['faces']} -> {r['final']['faces']}; time {r['time_s']}")
         print(f"{'class':10s} {'n':>7s} | far>0.2 far>0.5 far>1 (final) | >0.5 after: poisson clean | nearest-vertex >0.5")

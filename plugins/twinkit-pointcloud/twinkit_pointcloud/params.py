@@ -100,7 +100,7 @@ class CleanParams:
                                            "vertex within the trim distance): a pole, a trunk or far foliage seen "
                                            "by a few points stays, a piece around a stray point goes; 0 = drop by "
                                            'size alone (docs/pointcloud.md "Coverage of sparse scans").')
-    local_trim_factor: float = param(2.0, ge=0,
+    local_trim_factor: float = param(0.0, ge=0,
                                      help="The distance trim per vertex is at least this x the local point spacing "
                                           "at its nearest point (the nearest-neighbour distance of the density of "
                                           "its 8 nearest samples; the same factor as the auto max_dist_m on the "
