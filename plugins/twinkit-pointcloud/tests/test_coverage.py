@@ -146,3 +146,29 @@ def test_evaluate_reports_the_far_share_and_degrades(tmp_path, caplog):
                        in_points_ply=w / "points.ply", out_recon_metrics_json=w / "recon_metrics.json")
     assert r["far_share"] > 0.5
     assert any("farther than 0.5 m" in x["reason"] for x in ctx.degraded_reasons)
+
+
+def test_the_report_shows_the_far_share(tmp_path):
+    import json
+
+    from twinkit_pointcloud.report import sec_recon_metrics
+
+    f = tmp_path / "recon_metrics.json"
+    f.write_text(json.dumps({"cloud_far": {"far_m": 0.5, "share": 0.3, "points": 30,
+                                           "per_class": {"high vegetation": {"points": 50, "share": 0.6}}}}))
+
+    class Ctx:
+        def first(self, pattern):
+            return ({"folder": "07_evaluate"}, f)
+
+        def read_json(self, p):
+            return json.loads(p.read_text())
+
+        def esc(self, x):
+            return str(x)
+
+        def table(self, headers, rows):
+            return "|".join(map(str, headers)) + "\n" + "\n".join("|".join(map(str, r)) for r in rows)
+
+    html = sec_recon_metrics(Ctx())
+    assert "farther than 0.5 m" in html and "30.00 %" in html and "high vegetation|50|60.00 %" in html
