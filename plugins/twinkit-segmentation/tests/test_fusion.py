@@ -11,7 +11,7 @@ from twinkit.testing import plugin_from_module, run_step
 
 import twinkit_segmentation.plugin as P
 from twinkit_segmentation.fusion import (SourceWeights, confidence_summary, disagreement, fuse_sources,
-                                         load_weights)
+                                         load_weights, source_exponents)
 from twinkit_segmentation.synthetic import grid
 
 #: a weights file of the two regimes the calibration finds (views lead on coloured captures, geometry on
@@ -167,7 +167,15 @@ def test_shipped_weights_load_and_say_how_they_were_made():
     for kind in ("coloured", "colourless"):
         k = w.for_kind(kind)
         assert k.views > 0 and k.geometry >= 0 and k.coverage_views > 0
-    assert w.recipe, "fusion_weights.json carries its recipe"
+    assert set(w.recipe) >= {"coloured", "colourless"}, "fusion_weights.json carries the recipe of each kind"
+    # the calibration's finding: at a given coverage the views weigh less against the geometry on a
+    # colourless capture (grey renders) than on a coloured one
+    ratio = {}
+    for kind in ("coloured", "colourless"):
+        k = w.for_kind(kind)
+        a_v, a_g = source_exponents(k, np.array([10.0]), np.array([True]))
+        ratio[kind] = float(a_v[0] / a_g[0])
+    assert ratio["colourless"] < ratio["coloured"]
 
 
 def test_the_low_cue_needs_a_capture_that_sees_higher():

@@ -254,7 +254,7 @@ def main(argv=None) -> int:
     w, info = calibrate(samples)
     cur = load_weights(a.out) if Path(a.out).is_file() else FusionWeights(kinds={})
     cur.kinds[a.kind] = w
-    cur.recipe[a.kind] = {"runs": [Path(r).name for r in a.runs], "note": a.note, "geometry": a.geometry,
+    cur.recipe[a.kind] = {"runs": [str(Path(r)) for r in a.runs], "note": a.note, "geometry": a.geometry,
                           "command": "python -m twinkit_segmentation.fusion calibrate --kind " + a.kind, **info,
                           "seconds": round(time.perf_counter() - t0, 2)}
     Path(a.out).write_text(json.dumps(cur.to_json(), indent=1) + "\n")
