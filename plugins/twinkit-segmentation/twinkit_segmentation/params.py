@@ -154,11 +154,11 @@ class BackprojectParams:
     file_class_spacings: float = param(3.0, gt=0,
                                        help="A vertex takes the class of its nearest point within this many point "
                                             "spacings.")
-    cues_with_geometry: List[str] = param(default_factory=lambda: ["ground", "raised", "high", "curb", "column",
-                                                                   "mounted", "low", "narrow"], free=True,
+    cues_with_geometry: List[str] = param(default_factory=lambda: ["ground", "curb", "mounted"], free=True,
                                           help="Of context_cues, those that still act where geometry_votes.npy is "
-                                               "wired (a 3D classifier already reads the shape); measured in "
-                                               'docs/segmentation.md "Cue gates".')
+                                               "wired: the cues that still added on the generated captures beside the "
+                                               'classifier (docs/segmentation.md "Fusion"); the others read what '
+                                               "the classifier already reads.")
     cue_gates: bool = param(True,
                             help="Gate the shape and curb cues by what the capture resolves at each vertex (point "
                                  'support and noise from points.ply; docs/segmentation.md "Cue gates").')
