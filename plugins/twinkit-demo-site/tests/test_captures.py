@@ -106,3 +106,18 @@ def test_mobile_reuses_the_van_and_cli_writes_npz_and_manifest(tmp_path):
     assert len(z["origin"]) > 50  # one origin per van position
     assert z["sensor"].max() < len(z["origin"])
     assert sum(rec["counts"].values()) == rec["points"] and rec["counts"].get("road", 0) > 0.2 * rec["points"]
+
+
+def test_layout_variety_changes_the_site_and_its_default_is_the_demo():
+    from twinkit_demo_site.layout import Variety, build_scene, random_variety
+    from twinkit_demo_site.textures import build_atlas
+
+    atlas = build_atlas(0)
+    plain = build_scene(30.0, 0, atlas)
+    same = build_scene(30.0, 0, atlas, Variety())
+    assert np.array_equal(plain.mesh.vertices, same.mesh.vertices) and plain.counts == same.counts
+    v = random_variety(np.random.default_rng(1))
+    v.street_trees, v.floors = 1.0, (8, 9)
+    varied = build_scene(30.0, 0, atlas, v)
+    assert varied.counts["trees"] > plain.counts["trees"]
+    assert max(b["max"][2] for b in varied.buildings) > max(b["max"][2] for b in plain.buildings)

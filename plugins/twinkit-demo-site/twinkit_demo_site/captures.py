@@ -15,8 +15,8 @@ grazing incidence and on dark or far surfaces, no colour, an intensity, the sens
 density factor. Beyond the site's edge the ground continues (an "apron": the roads, sidewalks and grass go on
 for the sensor's range) so that far rings land on ground as they do on a real street.
 
-Intensity is a rough model, not a radiometric one: a reflectance per class (near-infrared-like: vegetation
-and signs bright, asphalt dark) varied per capture, modulated by the texture's brightness (markings brighter
+Intensity is a rough model, not a radiometric one: a reflectance per class (near-infrared-like: vegetation,
+grass and signs bright, asphalt darker) varied per capture, modulated by the texture's brightness (markings brighter
 than asphalt), times a cosine-of-incidence term and a range fall-off, times a per-capture gain, plus noise.
 """
 from __future__ import annotations
@@ -37,8 +37,8 @@ KINDS = ("spinning", "tls", "mobile", "aerial")
 MAX_POINTS = 300_000
 
 #: rough near-infrared reflectance per trainId (0..1), the centre of each capture's random draw
-REFLECTANCE = {cs.ROAD: 0.14, cs.SIDEWALK: 0.25, cs.BUILDING: 0.35, cs.WALL: 0.33, cs.FENCE: 0.3, cs.POLE: 0.3,
-               cs.TRAFFIC_LIGHT: 0.22, cs.TRAFFIC_SIGN: 0.8, cs.VEGETATION: 0.5, cs.TERRAIN: 0.42, cs.PERSON: 0.3,
+REFLECTANCE = {cs.ROAD: 0.28, cs.SIDEWALK: 0.32, cs.BUILDING: 0.32, cs.WALL: 0.32, cs.FENCE: 0.3, cs.POLE: 0.3,
+               cs.TRAFFIC_LIGHT: 0.22, cs.TRAFFIC_SIGN: 0.85, cs.VEGETATION: 0.45, cs.TERRAIN: 0.45, cs.PERSON: 0.3,
                cs.CAR: 0.25, cs.MOTORCYCLE: 0.25, cs.BICYCLE: 0.2}
 
 #: HDL-64E-like beam elevations (degrees): an upper block of 32 beams at 1/3 degree, a lower one at 1/2 degree
@@ -48,25 +48,29 @@ HDL64_ELEVATIONS = np.concatenate([np.linspace(2.0, -8.33, 32), np.linspace(-8.8
 @dataclass
 class World:
     """The demo site for one seed, ready to trace: ``scene`` (layout.Scene), ``tracer`` (raycast.Tracer over the
-    site mesh plus the apron), ``n_site_faces`` (faces below this index are the site's), per-face ``lum``
-    (m,) float32 texture brightness 0..1."""
+    site mesh plus the apron), ``n_site_faces`` (faces below this index are the site's), per-face ``mod`` (m,)
+    float32 reflectance modulation from the texture's brightness (about 1 on average per class; road markings
+    ~2x the asphalt)."""
 
     scene: object
     tracer: object
     n_site_faces: int
-    lum: np.ndarray
+    mod: np.ndarray
 
 
-def build_world(seed: int, size: str = "small", apron_m: float = 130.0, threads: int | None = None) -> World:
+def build_world(seed: int, size: str = "small", variety: bool = True, apron_m: float = 130.0,
+                threads: int | None = None) -> World:
     """Build the demo site of ``seed`` and ``size`` (a plugin.PRESETS name) with the ground continued ``apron_m``
-    metres beyond its edge, and its tracer."""
-    from twinkit_demo_site.layout import build_scene
+    metres beyond its edge, and its tracer. ``variety``: the layout's knobs drawn at random from the seed
+    (layout.random_variety: building heights, parked cars, trees, verges, street widths); off = the demo's own site."""
+    from twinkit_demo_site.layout import build_scene, random_variety
     from twinkit_demo_site.plugin import _preset
     from twinkit_demo_site.raycast import Tracer
     from twinkit_demo_site.textures import build_atlas
 
     atlas = build_atlas(seed)
-    scene = build_scene(_preset(size)["half_m"], seed, atlas)
+    v = random_variety(np.random.default_rng([seed, 10])) if variety else None
+    scene = build_scene(_preset(size)["half_m"], seed, atlas, v)
     mesh = _with_apron(scene.mesh, scene.dims, apron_m)
     tracer = Tracer(mesh, atlas, threads=threads)
     n_site = int(len(scene.mesh.faces))
@@ -74,12 +78,16 @@ def build_world(seed: int, size: str = "small", apron_m: float = 130.0, threads:
     bary = np.tile(np.array([[1 / 3, 1 / 3]], np.float32), (len(mesh.faces), 1))
     prim = np.arange(len(mesh.faces))
     lum = tracer.albedo(prim, bary).mean(1).astype(np.float32)
-    lum[n_site:] = np.array([0.25, 0.5, 0.4], np.float32)[_apron_kind(tracer.face_labels[n_site:])]
-    return World(scene=scene, tracer=tracer, n_site_faces=n_site, lum=lum)
-
-
-def _apron_kind(labels: np.ndarray) -> np.ndarray:
-    return np.where(labels == cs.ROAD, 0, np.where(labels == cs.SIDEWALK, 1, 2))
+    lab = tracer.face_labels
+    v = mesh.vertices[mesh.faces]
+    area = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)[:n_site]
+    mean = np.full(256, 0.5)
+    sums = np.bincount(lab[:n_site], weights=area * lum[:n_site], minlength=256)
+    wts = np.bincount(lab[:n_site], weights=area, minlength=256)
+    mean[wts > 0] = sums[wts > 0] / wts[wts > 0]
+    mod = np.clip((0.2 + lum) / (0.2 + mean[lab]), 0.4, 2.5).astype(np.float32)
+    mod[n_site:] = 1.0
+    return World(scene=scene, tracer=tracer, n_site_faces=n_site, mod=mod)
 
 
 def _with_apron(mesh: Mesh, d, apron_m: float) -> Mesh:
@@ -138,7 +146,7 @@ def draw_sensor(rng: np.random.Generator, max_range_m: float) -> Sensor:
         refl[c] = r * float(np.exp(rng.normal(0.0, 0.35)))
     return Sensor(noise_m=float(rng.uniform(0.01, 0.03)), dropout=float(rng.uniform(0.0, 0.08)),
                   cos_min=float(rng.uniform(0.01, 0.04)), snr_thr=float(np.exp(rng.uniform(np.log(3e-4), np.log(3e-3)))),
-                  gain=float(rng.uniform(0.7, 1.6)), range_half_m=float(rng.uniform(40.0, 150.0)),
+                  gain=float(rng.uniform(0.75, 1.4)), range_half_m=float(rng.uniform(40.0, 150.0)),
                   refl=np.clip(refl, 0.02, 1.0), max_range_m=float(max_range_m))
 
 
@@ -158,15 +166,14 @@ def trace(world: World, sensor: Sensor, org: np.ndarray, dirs: np.ndarray, rng: 
     n = tr.face_normals[prim]
     cos = np.abs(n[:, 0] * d[:, 0] + n[:, 1] * d[:, 1] + n[:, 2] * d[:, 2]).astype(np.float32)
     lab = tr.face_labels[prim]
-    lum = world.lum[prim]
-    refl = sensor.refl[lab] * (0.25 + 1.5 * lum ** 1.5)
+    refl = np.minimum(sensor.refl[lab] * world.mod[prim], 1.0)
     strength = refl * cos / np.maximum(t / ref_range_m, 1.0) ** 2
     p_det = 1.0 - np.exp(-strength / sensor.snr_thr)
     ok = (cos >= sensor.cos_min) & (rng.random(len(t)) < p_det) & (rng.random(len(t)) >= sensor.dropout)
     idx, t, prim, d, cos, lab, refl = idx[ok], t[ok], prim[ok], d[ok], cos[ok], lab[ok], refl[ok]
     noise = np.clip(rng.standard_normal(len(t)), -3, 3) * sensor.noise_m
     xyz = org[idx] + d * (t + noise)[:, None]
-    inten = sensor.gain * refl * (0.35 + 0.65 * cos) / (1.0 + (t / sensor.range_half_m) ** 2)
+    inten = sensor.gain * refl * (0.7 + 0.3 * cos) / (1.0 + (t / sensor.range_half_m) ** 2)
     inten = np.clip(inten + rng.normal(0.0, 0.02, len(t)), 0.0, 1.0)
     inten = np.round(inten * 100) / 100  # stored in 0.01 steps, as the SemanticKITTI scans are
     return {"keep": idx, "xyz": xyz, "label": lab.astype(np.uint8), "intensity": inten.astype(np.float32),
@@ -406,12 +413,13 @@ def _take(out: dict, idx: np.ndarray) -> dict:
 
 
 # ----------------------------------------------------------------------------- the API
-_WORLDS: dict[tuple[int, str], World] = {}
+_WORLDS: dict[tuple[int, str, bool], World] = {}
 
 
 def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, size: str = "small",
-                     max_points: int = MAX_POINTS, world: World | None = None) -> dict:
-    """Simulate one capture of the demo site ``seed`` (``size`` a plugin.PRESETS name) of ``kind`` (one of
+                     max_points: int = MAX_POINTS, world: World | None = None, variety: bool = True) -> dict:
+    """Simulate one capture of the demo site ``seed`` (``size`` a plugin.PRESETS name; ``variety``: see
+    :func:`build_world`; ``world``: a prebuilt one, which then replaces these three) of ``kind`` (one of
     :data:`KINDS`), every random draw (pose, sensor, noise) from ``rng_seed``; the same arguments give the same
     capture. ``density`` scales the point count (about linearly, 0.1-10); at most ``max_points`` points are kept
     (a uniform random subsample).
@@ -424,10 +432,10 @@ def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, 
     if kind not in KINDS:
         raise ValueError(f"unknown capture kind {kind!r}; choose one of {', '.join(KINDS)}")
     if world is None:
-        key = (int(seed), size)
+        key = (int(seed), size, bool(variety))
         if key not in _WORLDS:
             _WORLDS.clear()
-            _WORLDS[key] = build_world(seed, size)
+            _WORLDS[key] = build_world(seed, size, variety)
         world = _WORLDS[key]
     rng = np.random.default_rng([int(seed), int(rng_seed), KINDS.index(kind), 44])
     if kind == "spinning":
@@ -480,6 +488,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--density-min", type=float, default=0.3, help="density factors are drawn log-uniform in min..max")
     ap.add_argument("--density-max", type=float, default=3.0)
     ap.add_argument("--max-points", type=int, default=MAX_POINTS)
+    ap.add_argument("--no-variety", action="store_true", help="the demo's own layout (no random layout knobs)")
     a = ap.parse_args(argv)
     kinds = [k for k in a.kinds.split(",") if k]
     a.out.mkdir(parents=True, exist_ok=True)
@@ -494,11 +503,12 @@ def main(argv: list[str] | None = None) -> None:
         t0 = time.perf_counter()
         rs = v * 1000 + s
         dens = float(np.exp(np.random.default_rng([s, v, KINDS.index(k), 7]).uniform(np.log(a.density_min), np.log(a.density_max))))
-        c = simulate_capture(s, k, rs, density=dens, size=a.size, max_points=a.max_points)
+        c = simulate_capture(s, k, rs, density=dens, size=a.size, max_points=a.max_points, variety=not a.no_variety)
         np.savez_compressed(a.out / name, xyz=c["xyz"], label=c["label"], intensity=c["intensity"], origin=c["origin"],
                             sensor=c["sensor"].astype(np.uint32), ring=c["ring"])
         dt = time.perf_counter() - t0
         manifest["captures"].append({"file": name, "seed": s, "kind": k, "variant": v, "rng_seed": rs, "size": a.size,
+                                     "variety": not a.no_variety,
                                      "density": round(dens, 4), "points": int(len(c["label"])), "raw_points": c["raw_points"],
                                      "seconds": round(dt, 2), "counts": class_counts(c["label"]),
                                      "meta": {kk: (round(vv, 5) if isinstance(vv, float) else vv) for kk, vv in c["meta"].items()}})
