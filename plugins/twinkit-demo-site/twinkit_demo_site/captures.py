@@ -32,6 +32,8 @@ import numpy as np
 
 from twinkit import cityscapes as cs
 from twinkit.mesh import Mesh
+from twinkit_demo_site.layout import Scene
+from twinkit_demo_site.raycast import Tracer
 
 KINDS = ("spinning", "tls", "mobile", "aerial")
 MAX_POINTS = 300_000
@@ -52,8 +54,8 @@ class World:
     float32 reflectance modulation from the texture's brightness (about 1 on average per class; road markings
     ~2x the asphalt)."""
 
-    scene: object
-    tracer: object
+    scene: Scene
+    tracer: Tracer
     n_site_faces: int
     mod: np.ndarray
 
@@ -63,18 +65,18 @@ def build_world(seed: int, size: str = "small", variety: bool = True, apron_m: f
     """Build the demo site of ``seed`` and ``size`` (a plugin.PRESETS name) with the ground continued ``apron_m``
     metres beyond its edge, and its tracer. ``variety``: the layout's knobs drawn at random from the seed
     (layout.random_variety: building heights, parked cars, trees, verges, street widths); off = the demo's own site."""
-    from twinkit_demo_site.layout import build_scene, random_variety
+    from twinkit_demo_site.layout import build_scene, random_variety  # noqa: I001
     from twinkit_demo_site.plugin import _preset
-    from twinkit_demo_site.raycast import Tracer
     from twinkit_demo_site.textures import build_atlas
 
     atlas = build_atlas(seed)
-    v = random_variety(np.random.default_rng([seed, 10])) if variety else None
-    scene = build_scene(_preset(size)["half_m"], seed, atlas, v)
+    knobs = random_variety(np.random.default_rng([seed, 10])) if variety else None
+    scene = build_scene(_preset(size)["half_m"], seed, atlas, knobs)
     mesh = _with_apron(scene.mesh, scene.dims, apron_m)
+    assert mesh.faces is not None and scene.mesh.faces is not None
     tracer = Tracer(mesh, atlas, threads=threads)
     n_site = int(len(scene.mesh.faces))
-    # mean texture brightness per face (three corner samples + centre), for the intensity model
+    # texture brightness at each face's centre, for the intensity model
     bary = np.tile(np.array([[1 / 3, 1 / 3]], np.float32), (len(mesh.faces), 1))
     prim = np.arange(len(mesh.faces))
     lum = tracer.albedo(prim, bary).mean(1).astype(np.float32)
@@ -97,7 +99,9 @@ def _with_apron(mesh: Mesh, d, apron_m: float) -> Mesh:
     H, A = d.half_m, d.half_m + apron_m
     xs = np.unique(np.array([-A, -H, -d.bs, -d.rs, d.rs, d.bs, H, A]))
     ys = np.unique(np.array([-A, -H, -d.bm, -d.rm, d.rm, d.bm, H, A]))
-    verts, faces, labels = [], [], []
+    verts: list[list[list[float]]] = []
+    faces: list[list[int]] = []
+    labels: list[int] = []
     for j in range(len(ys) - 1):
         for i in range(len(xs) - 1):
             cx, cy = (xs[i] + xs[i + 1]) / 2, (ys[j] + ys[j + 1]) / 2
@@ -262,7 +266,7 @@ def tls(world: World, rng: np.random.Generator, density: float = 1.0) -> dict:
     d = world.scene.dims
     H = d.half_m
     k = int(rng.integers(2, 6))
-    stations = []
+    stations: list[np.ndarray] = []
     for _ in range(400):
         if len(stations) == k:
             break
