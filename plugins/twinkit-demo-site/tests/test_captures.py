@@ -121,3 +121,14 @@ def test_layout_variety_changes_the_site_and_its_default_is_the_demo():
     varied = build_scene(30.0, 0, atlas, v)
     assert varied.counts["trees"] > plain.counts["trees"]
     assert max(b["max"][2] for b in varied.buildings) > max(b["max"][2] for b in plain.buildings)
+
+
+def test_streets_go_on_beyond_the_site_edge(world):
+    """The apron: ground to the sensor's range and, along the road arms, buildings and trees beyond the edge."""
+    tr = world.tracer
+    H = world.scene.dims.half_m
+    c = tr.mesh.vertices[tr.mesh.faces].mean(1)
+    out = (np.abs(c[:, 0]) > H + 1) | (np.abs(c[:, 1]) > H + 1)
+    labs = set(np.unique(tr.face_labels[out]).tolist())
+    assert {cs.ROAD, cs.SIDEWALK, cs.TERRAIN, cs.BUILDING, cs.VEGETATION} <= labs
+    assert np.abs(tr.mesh.vertices[:, :2]).max() > H + 100

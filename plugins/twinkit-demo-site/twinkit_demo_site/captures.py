@@ -61,9 +61,11 @@ class World:
 
 
 def build_world(seed: int, size: str = "small", variety: bool = True, apron_m: float = 130.0,
-                threads: int | None = None) -> World:
+                apron_objects: bool = True, threads: int | None = None) -> World:
     """Build the demo site of ``seed`` and ``size`` (a plugin.PRESETS name) with the ground continued ``apron_m``
-    metres beyond its edge, and its tracer. ``variety``: the layout's knobs drawn at random from the seed
+    metres beyond its edge, and its tracer. ``apron_objects``: the streets beyond the edge are lined (for 70 m)
+    with buildings, tree groups, street trees and parked cars (:func:`_apron_objects`), so that far ranges see
+    a street, not an empty plain. ``variety``: the layout's knobs drawn at random from the seed
     (layout.random_variety: building heights, parked cars, trees, verges, street widths); off = the demo's own site."""
     from twinkit_demo_site.layout import build_scene, random_variety  # noqa: I001
     from twinkit_demo_site.plugin import _preset
@@ -72,10 +74,14 @@ def build_world(seed: int, size: str = "small", variety: bool = True, apron_m: f
     atlas = build_atlas(seed)
     knobs = random_variety(np.random.default_rng([seed, 10])) if variety else None
     scene = build_scene(_preset(size)["half_m"], seed, atlas, knobs)
-    mesh = _with_apron(scene.mesh, scene.dims, apron_m)
-    assert mesh.faces is not None and scene.mesh.faces is not None
+    site = scene.mesh
+    if apron_objects:
+        site = _merge(site, _apron_objects(atlas, scene.dims, np.random.default_rng([seed, 11]),
+                                           knobs.floors if knobs else (3, 7)))
+    mesh = _with_apron(site, scene.dims, apron_m)
+    assert mesh.faces is not None and site.faces is not None
     tracer = Tracer(mesh, atlas, threads=threads)
-    n_site = int(len(scene.mesh.faces))
+    n_site = int(len(site.faces))
     # texture brightness at each face's centre, for the intensity model
     bary = np.tile(np.array([[1 / 3, 1 / 3]], np.float32), (len(mesh.faces), 1))
     prim = np.arange(len(mesh.faces))
@@ -90,6 +96,68 @@ def build_world(seed: int, size: str = "small", variety: bool = True, apron_m: f
     mod = np.clip((0.2 + lum) / (0.2 + mean[lab]), 0.4, 2.5).astype(np.float32)
     mod[n_site:] = 1.0
     return World(scene=scene, tracer=tracer, n_site_faces=n_site, mod=mod)
+
+
+def _apron_objects(atlas, d, rng: np.random.Generator, floors: tuple[int, int], reach_m: float = 70.0) -> Mesh:
+    """Objects along the four road arms beyond the site edge (out to ``reach_m``): frontage slots of 11-20 m holding
+    a building (``floors`` drawn in [lo, hi)), a group of trees and bushes, or nothing; street trees on the sidewalks
+    and parked cars on the main road's parking strips."""
+    from twinkit_demo_site import objects as ob
+    from twinkit_demo_site.meshbuild import MeshBuilder
+    from twinkit_demo_site.textures import CAR_PAINTS, FACADES
+
+    mb = MeshBuilder(atlas)
+    H, cz = d.half_m, d.curb_m
+    facades, paints = list(FACADES), list(CAR_PAINTS)
+    for axis in (0, 1):  # 0: the main road's arms (along x), 1: the side street's (along y)
+        edge = d.bm if axis == 0 else d.bs  # back of the sidewalk
+        for s_along in (-1, 1):
+            for s_side in (-1, 1):
+                u = H + float(rng.uniform(0.5, 3.0))
+                while u < H + reach_m:
+                    w = float(rng.uniform(11.0, 20.0))
+                    depth = float(rng.uniform(9.0, 14.0))
+                    a0, a1 = sorted((s_along * u, s_along * (u + w)))
+                    b0, b1 = sorted((s_side * edge, s_side * (edge + depth)))
+                    x0, x1, y0, y1 = (a0, a1, b0, b1) if axis == 0 else (b0, b1, a0, a1)
+                    k = rng.random()
+                    if k < 0.55:
+                        street = {("-y" if s_side > 0 else "+y") if axis == 0 else ("-x" if s_side > 0 else "+x")}
+                        ob.building(mb, x0, x1, y0, y1, cz, int(rng.integers(*floors)),
+                                    facades[int(rng.integers(len(facades)))], street)
+                    elif k < 0.85:
+                        for _ in range(int(rng.integers(1, 5))):
+                            ob.tree(mb, rng, rng.uniform(x0 + 2, x1 - 2), rng.uniform(y0 + 2, y1 - 2), cz,
+                                    float(rng.uniform(0.7, 1.3)))
+                        for _ in range(int(rng.integers(0, 4))):
+                            ob.bush(mb, rng, rng.uniform(x0 + 1, x1 - 1), rng.uniform(y0 + 1, y1 - 1), cz)
+                    u += w + float(rng.uniform(1.5, 6.0))
+                # street trees on the sidewalk and (main road) parked cars
+                kerb = d.rm if axis == 0 else d.rs
+                if rng.random() < 0.6:
+                    u = H + float(rng.uniform(2.0, 8.0))
+                    while u < H + reach_m:
+                        c = (s_along * u, s_side * (kerb + 1.5))
+                        ob.tree(mb, rng, *(c if axis == 0 else c[::-1]), cz, float(rng.uniform(0.7, 1.0)))
+                        u += float(rng.uniform(8.0, 14.0))
+                if axis == 0:
+                    u = H + 3.0
+                    park_p = float(rng.uniform(0.2, 0.9))
+                    while u < H + reach_m:
+                        if rng.random() < park_p:
+                            ob.car(mb, rng, s_along * u, s_side * (d.main_traffic + d.park_m / 2), 0.0,
+                                   0.0 if s_side < 0 else math.pi, paints[int(rng.integers(len(paints)))])
+                        u += 6.2
+    return mb.finish()
+
+
+def _merge(a: Mesh, b: Mesh) -> Mesh:
+    """Two meshes with ``uv`` and face ``label`` as one (``a``'s faces first)."""
+    assert a.faces is not None and b.faces is not None
+    return Mesh(vertices=np.concatenate([a.vertices, b.vertices]),
+                faces=np.concatenate([a.faces, b.faces + len(a.vertices)]),
+                attrs={"uv": np.concatenate([np.asarray(a.attrs["uv"], np.float32), np.asarray(b.attrs["uv"], np.float32)])},
+                face_attrs={"label": np.concatenate([a.face_attrs["label"], b.face_attrs["label"]])})
 
 
 def _with_apron(mesh: Mesh, d, apron_m: float) -> Mesh:
