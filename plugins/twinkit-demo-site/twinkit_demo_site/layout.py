@@ -76,7 +76,9 @@ class Variety:
     ``floors``: building floor counts drawn in [lo, hi); ``park_p``: chance that a parking slot holds a car;
     ``tree_scale``: multiplies every tree's size; ``street_trees``: chance of a street tree (in a grass pit) per
     ~11 m of the main road's north and south-west sidewalks and the side streets' sidewalks; ``verge_m``: width (m) of
-    a grass verge between the curb and the sidewalk outside the junction (0 = none); ``lane_m``, ``park_m``,
+    a grass verge between the curb and the sidewalk outside the junction (0 = none); ``setback_m``: front gardens (grass)
+    this deep between the sidewalk and the buildings; ``hedges``: chance of a hedge along each front garden, and of
+    a tree in a deep one; ``lane_m``, ``park_m``,
     ``sidewalk_m``: the street's widths (None = :class:`Dims`' defaults)."""
 
     floors: tuple[int, int] = (3, 7)
@@ -84,6 +86,8 @@ class Variety:
     tree_scale: float = 1.0
     street_trees: float = 0.0
     verge_m: float = 0.0
+    setback_m: float = 0.0
+    hedges: float = 0.0
     lane_m: float | None = None
     park_m: float | None = None
     sidewalk_m: float | None = None
@@ -96,6 +100,8 @@ def random_variety(rng: np.random.Generator) -> Variety:
     verge = float(rng.uniform(0.8, 0.5 * sidewalk)) if rng.random() < 0.35 else 0.0
     return Variety(floors=(lo, lo + int(rng.integers(2, 8))), park_p=float(rng.uniform(0.2, 0.95)),
                    tree_scale=float(rng.uniform(0.7, 1.4)), street_trees=float(rng.uniform(0.0, 1.0)), verge_m=verge,
+                   setback_m=float(rng.uniform(1.5, 7.0)) if rng.random() < 0.6 else 0.0,
+                   hedges=float(rng.uniform(0.3, 1.0)),
                    lane_m=float(rng.uniform(2.9, 3.6)), park_m=float(rng.uniform(1.9, 2.6)), sidewalk_m=sidewalk)
 
 
@@ -341,7 +347,7 @@ class Blocks:
 
 
 def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from, x_to, depth_lo=10.5, depth_hi=13.0,
-         floor_range=(3, 7)):
+         floor_range=(3, 7), setback=0.0):
     """Buildings along the main-road frontage of block (sx, sy) between |x| = x_from..x_to; returns the last's depth."""
     facade_names = list(FACADES)
     x = x_from
@@ -355,7 +361,7 @@ def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from
         depth = float(rng.uniform(depth_lo, depth_hi))
         floors = int(rng.integers(*floor_range))
         xa, xb = sorted((sx * x, sx * (x + w)))
-        ya, yb = sorted((sy * d.bm, sy * (d.bm + depth)))
+        ya, yb = sorted((sy * (d.bm + setback), sy * (d.bm + setback + depth)))
         street = {"-y" if sy > 0 else "+y"}
         if first and abs(x - d.bs) < 1e-6:
             street.add("-x" if sx > 0 else "+x")
@@ -370,7 +376,7 @@ def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from
 
 
 def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y_from, y_to,
-              floor_range=(3, 7)) -> None:
+              floor_range=(3, 7), setback=0.0) -> None:
     """Buildings facing the side street in block (sx, sy) between |y| = y_from..y_to."""
     facade_names = list(FACADES)
     y = y_from
@@ -380,7 +386,7 @@ def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y
             w = y_to - y
         depth = float(rng.uniform(10.5, 13.0))
         floors = int(rng.integers(*floor_range))
-        xa, xb = sorted((sx * d.bs, sx * (d.bs + depth)))
+        xa, xb = sorted((sx * (d.bs + setback), sx * (d.bs + setback + depth)))
         ya, yb = sorted((sy * y, sy * (y + w)))
         b = ob.building(mb, xa, xb, ya, yb, d.curb_m, floors, facade_names[int(rng.integers(len(facade_names)))],
                         {"-x" if sx > 0 else "+x"})
@@ -389,21 +395,21 @@ def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y
         y += w + float(rng.uniform(2.0, 3.5))
 
 
-def _blocks(mb: MeshBuilder, rng, d: Dims, R, fl=(3, 7)) -> Blocks:
+def _blocks(mb: MeshBuilder, rng, d: Dims, R, fl=(3, 7), sb=0.0) -> Blocks:
     """The buildings of the NE, NW and SW blocks (built now), the SW yard's walls and plants and the SE park."""
     H, bm, bs = d.half_m, d.bm, d.bs
     bl = Blocks()
     buildings = bl.buildings
     # NE: a row of buildings from the corner, more along the side street on big sites
-    _row(mb, rng, d, R, buildings, 1, 1, bs, H - 0.5, floor_range=fl)
+    _row(mb, rng, d, R, buildings, 1, 1, bs, H - 0.5, floor_range=fl, setback=sb)
     depth_ne = max(b["max"][1] for b in buildings)
-    _side_row(mb, rng, d, R, buildings, 1, 1, depth_ne + 3.0, H - 0.5, floor_range=fl)
+    _side_row(mb, rng, d, R, buildings, 1, 1, depth_ne + 3.0, H - 0.5, floor_range=fl, setback=sb)
     # NW: row from the corner; behind it buildings (big sites) or a wall along the side street
     n_before = len(buildings)
-    _row(mb, rng, d, R, buildings, -1, 1, bs, H - 0.5, floor_range=fl)
+    _row(mb, rng, d, R, buildings, -1, 1, bs, H - 0.5, floor_range=fl, setback=sb)
     depth_nw = max(b["max"][1] for b in buildings[n_before:])
     if H - 0.5 - (depth_nw + 3.0) >= 10.0:
-        _side_row(mb, rng, d, R, buildings, -1, 1, depth_nw + 3.0, H - 0.5, floor_range=fl)
+        _side_row(mb, rng, d, R, buildings, -1, 1, depth_nw + 3.0, H - 0.5, floor_range=fl, setback=sb)
     elif H - depth_nw > 4.0:
         bl.walls.append((-bs - 0.3, -bs, depth_nw + 2.0, H - 0.3, 2.0))
     # SW: walled yard at the corner, then buildings
@@ -411,8 +417,8 @@ def _blocks(mb: MeshBuilder, rng, d: Dims, R, fl=(3, 7)) -> Blocks:
     wall_end = min(H - 0.3, bm + 18.0)
     bl.walls.append((-bs - 0.25, -bs, -wall_end, -bm, 1.9))
     bl.walls.append((-yard_x, -bs - 0.25, -bm - 0.25, -bm, 1.9))
-    _row(mb, rng, d, R, buildings, -1, -1, yard_x + 1.0, H - 0.5, floor_range=fl)
-    _side_row(mb, rng, d, R, buildings, -1, -1, wall_end + 3.0, H - 0.5, floor_range=fl)
+    _row(mb, rng, d, R, buildings, -1, -1, yard_x + 1.0, H - 0.5, floor_range=fl, setback=sb)
+    _side_row(mb, rng, d, R, buildings, -1, -1, wall_end + 3.0, H - 0.5, floor_range=fl, setback=sb)
     bl.bushes += [(-bs - 2.0, -bm - 2.5), (-bs - 4.5, -bm - 1.6)]
     bl.trees.append((-bs - 4.0, -bm - 5.5, 0.9))
     _park(rng, d, R, bl)
@@ -467,6 +473,26 @@ def _street_trees(rng, d: Dims, m: Marks, R, bl: Blocks, p: float) -> None:
         if rng.random() < p:
             R(("grass", x - 0.7, x + 0.7, y - 0.7, y + 0.7))
             bl.trees.append((x, y, float(rng.uniform(0.7, 1.0))))
+
+
+def _gardens(rng, d: Dims, bl: Blocks, setback: float, p: float) -> None:
+    """Hedges (rows of bushes) along the front gardens of the buildings set ``setback`` metres back from the sidewalk,
+    each with chance ``p``, and a tree in a garden deeper than 4 m with chance ``p`` / 2."""
+    for b in bl.buildings:
+        (x0, y0, _), (x1, y1, _) = b["min"], b["max"]
+        for lo_edge, hi_edge, back, along_x in ((y0, y1, d.bm, True), (x0, x1, d.bs, False)):
+            for sgn, face in ((1, lo_edge), (-1, hi_edge)):
+                if abs(sgn * face - (back + setback)) > 1e-6:
+                    continue  # this side does not face a sidewalk across a garden
+                a0, a1 = (x0, x1) if along_x else (y0, y1)
+                c = sgn * (back + 0.6)
+                if rng.random() < p:
+                    for u in np.arange(a0 + 0.8, a1 - 0.5, 1.3):
+                        bl.bushes.append((u, c) if along_x else (c, u))
+                if setback > 4.0 and rng.random() < p / 2:
+                    m = sgn * (back + setback / 2)
+                    u = float(rng.uniform(a0 + 2, a1 - 2))
+                    bl.trees.append((u, m, float(rng.uniform(0.6, 0.9))) if along_x else (m, u, float(rng.uniform(0.6, 0.9))))
 
 
 def _build_block_things(mb: MeshBuilder, rng, d: Dims, R, bl: Blocks, tree_scale: float = 1.0) -> None:
@@ -646,9 +672,11 @@ def build_scene(half_m: float, seed: int, atlas: Atlas, variety: Variety | None 
     R = rects.append
     _surfaces(d, R, v.verge_m)
     marks = _road_marks(d, R)
-    blocks = _blocks(mb, rng, d, R, v.floors)
+    blocks = _blocks(mb, rng, d, R, v.floors, v.setback_m)
     if v.street_trees > 0:
         _street_trees(np.random.default_rng([seed, 9]), d, marks, R, blocks, v.street_trees)
+    if v.setback_m > 0 and v.hedges > 0:
+        _gardens(np.random.default_rng([seed, 12]), d, blocks, v.setback_m, v.hedges)
     _build_block_things(mb, rng, d, R, blocks, v.tree_scale)
     _street_furniture(mb, d, marks)
     cars = _vehicles(mb, rng, d, marks, v.park_p)
