@@ -574,7 +574,8 @@ def main(argv: list[str] | None = None) -> None:
             continue
         t0 = time.perf_counter()
         rs = v * 1000 + s
-        dens = float(np.exp(np.random.default_rng([s, v, KINDS.index(k), 7]).uniform(np.log(a.density_min), np.log(a.density_max))))
+        dens = round(float(np.exp(np.random.default_rng([s, v, KINDS.index(k), 7]).uniform(
+            np.log(a.density_min), np.log(a.density_max)))), 4)  # as the manifest records it, so that it reproduces
         c = simulate_capture(s, k, rs, density=dens, size=a.size, max_points=a.max_points, variety=not a.no_variety)
         np.savez_compressed(a.out / name, xyz=c["xyz"], label=c["label"], intensity=c["intensity"], origin=c["origin"],
                             sensor=c["sensor"].astype(np.uint32), ring=c["ring"])
