@@ -34,6 +34,31 @@ WIDE_VEHICLES: tuple[int, ...] = (CAR, TRUCK, BUS, TRAIN)
 STREET_FURNITURE: tuple[int, ...] = (POLE, TRAFFIC_LIGHT, TRAFFIC_SIGN)
 
 
+#: the five coarse classes a labelling is first judged on (the labelled-scan benchmark, bench/bench_labelled.py):
+#: ground = road, sidewalk, terrain; facade = building, wall, fence; vegetation; pole-like = pole,
+#: traffic light, traffic sign; vehicle = car, truck, bus, train, motorcycle, bicycle. Person, rider and
+#: sky are in none of them (left out of the coarse score).
+COARSE: dict[str, tuple[int, ...]] = {
+    "ground": GROUND,
+    "facade": (BUILDING, WALL, FENCE),
+    "vegetation": (VEGETATION,),
+    "pole-like": STREET_FURNITURE,
+    "vehicle": (CAR, TRUCK, BUS, TRAIN, MOTORCYCLE, BICYCLE),
+}
+#: coarse class names, in the order of the indices :func:`coarse_of` returns.
+COARSE_NAMES: tuple[str, ...] = tuple(COARSE)
+
+
+def coarse_of(labels: np.ndarray) -> np.ndarray:
+    """trainIds of any shape -> coarse class index (into :data:`COARSE_NAMES`) of the same shape, int8;
+    -1 for an id in no coarse class (person, rider, sky, 255, unknown ids)."""
+    table = np.full(256, -1, np.int8)
+    for i, members in enumerate(COARSE.values()):
+        table[list(members)] = i
+    labels = np.asarray(labels)
+    return table[np.where((labels >= 0) & (labels < 256), labels, IGNORE).astype(np.uint8)]
+
+
 def name_of(train_id: int) -> str:
     """Class name of a trainId; any other value (255, unknown ids) -> the number as text, e.g. ``"255"``."""
     return NAMES[train_id] if 0 <= train_id < N_CLASSES else str(int(train_id))

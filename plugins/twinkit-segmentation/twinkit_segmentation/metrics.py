@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit.cityscapes import IGNORE, N_CLASSES, NAMES
+from twinkit.cityscapes import COARSE_NAMES, IGNORE, N_CLASSES, NAMES, coarse_of
 
 
 def confusion(pred: np.ndarray, gt: np.ndarray, n: int = N_CLASSES) -> np.ndarray:
@@ -57,6 +57,74 @@ def scores(pred: np.ndarray, gt: np.ndarray, classes: list[int] | None = None) -
         "confusion": {"rows_gt_cols_pred": list(NAMES) + ["unlabelled"], "matrix": cm.tolist()},
     }
     return out
+
+
+def coarse_accuracy(pred: np.ndarray, gt: np.ndarray) -> dict:
+    """Accuracy (percent) over the five coarse classes (:data:`twinkit.cityscapes.COARSE`) on the items whose
+    truth is in one of them (person, rider, sky and 255 are left out); a prediction in no coarse class
+    counts as a miss. Also the recall per coarse class. ``pred``, ``gt``: trainIds of the same shape."""
+    cg, cp = coarse_of(gt), coarse_of(pred)
+    keep = cg >= 0
+    hit = (cp == cg) & keep
+    per = {name: (100.0 * float(hit[cg == i].sum() / max((cg == i).sum(), 1)) if (cg == i).any() else None)
+           for i, name in enumerate(COARSE_NAMES)}
+    return {"coarse_accuracy": 100.0 * float(hit.sum() / max(keep.sum(), 1)), "coarse_recall": per,
+            "coarse_points": int(keep.sum())}
+
+
+def score_points(vertices: np.ndarray, vertex_labels: np.ndarray, points: np.ndarray, truth: np.ndarray, *,
+                 faces: np.ndarray | None = None, far_m: tuple[float, ...] = (0.2, 0.5),
+                 upper_bound: bool = True) -> dict:
+    """Score a labelled mesh against hand-labelled points (a real scan's truth), in one frame.
+
+    Each point takes the label of its nearest mesh vertex; counted on the points whose truth is a class
+    (``truth != 255``): per-class IoU/F1 and mean IoU over the classes present in the truth, accuracy
+    (:func:`scores`), accuracy over the five coarse classes (:func:`coarse_accuracy`), and the share of
+    those points farther than each of ``far_m`` from the mesh (from its surface when ``faces`` is given,
+    else from the nearest vertex, an upper bound). ``upper_bound``: also the scores if every vertex took
+    the class of its nearest labelled point (what the nearest-vertex transfer alone allows).
+
+    vertices (n, 3) float, metres; vertex_labels (n,) trainIds (255 = unlabelled, a miss); points (p, 3)
+    float in the vertices' frame; truth (p,) trainIds (255 = ignore); faces (m, 3) int or None.
+    Returns a JSON-ready dict: ``miou``, ``accuracy``, ``coarse_accuracy`` (percent), ``per_class``
+    ({name: {"iou", ...}}), ``confusion`` (as :func:`scores`), ``far_share`` ({"0.5": fraction
+    0-1, ...}), ``n_points`` (labelled points scored) and ``upper_bound`` (the same scores) if asked."""
+    vertices = np.asarray(vertices, np.float64)
+    points = np.asarray(points, np.float64)
+    truth = np.asarray(truth).astype(np.int64)
+    keep = truth != IGNORE
+    pts, gt = points[keep], truth[keep]
+    nearest_vertex, dist = transfer_nearest(vertices, np.arange(len(vertices)), pts)
+    pred = np.asarray(vertex_labels)[nearest_vertex]
+    with_faces = faces is not None and len(faces) > 0
+    if with_faces and len(pts):
+        from twinkit.surface.closest import Surface
+
+        dist = Surface(vertices, np.asarray(faces)).distance(pts).astype(np.float64)
+    out = _point_scores(pred, gt)
+    out["n_points"] = int(keep.sum())
+    out["far_share"] = {f"{m:g}": float((dist > m).mean()) if len(dist) else 0.0 for m in far_m}
+    out["distance_to"] = "surface" if with_faces else "nearest vertex"
+    if upper_bound and len(pts):
+        best, _ = transfer_nearest(pts, gt, vertices)     # each vertex: the class of its nearest labelled point
+        out["upper_bound"] = _point_scores(best[nearest_vertex], gt)
+    return out
+
+
+def transfer_nearest(source_xyz: np.ndarray, source_values: np.ndarray,
+                     query_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each query point takes the value of its nearest source point: ((q,) values, (q,) float distance, m).
+    source_xyz (n, 3), source_values (n,), query_xyz (q, 3), one frame."""
+    from scipy.spatial import cKDTree
+
+    d, idx = cKDTree(np.asarray(source_xyz, np.float64)).query(np.asarray(query_xyz, np.float64), workers=-1)
+    return np.asarray(source_values)[idx], d
+
+
+def _point_scores(pred: np.ndarray, gt: np.ndarray) -> dict:
+    res = scores(pred, gt)
+    res.update(coarse_accuracy(pred, gt))
+    return res
 
 
 def majority_labels(segments: np.ndarray, gt: np.ndarray) -> np.ndarray:
