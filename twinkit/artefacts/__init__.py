@@ -418,6 +418,9 @@ CATALOGUE: dict[str, Artefact] = dict([
            writers="segmentation:transfer_gt_labels",
            readers="roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
                    "segmentation:predict_views tiles:evaluate_seam_labels"),
+    _entry("geometry_votes.npy", "NumPy float32 (n, 19)", F.ClassVotesNpy, read_class_votes, write_class_votes,
+           writers="segmentation:classify_geometry",
+           readers="segmentation:backproject"),
     _entry("gt_mesh.ply", "PLY mesh with label", F.GtMeshPly, read_gt_mesh, write_gt_mesh,
            writers="demo-site:site_generator/demo_intersection",
            readers="pointcloud:evaluate_reconstruction segmentation:transfer_gt_labels"),

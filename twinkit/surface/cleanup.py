@@ -43,6 +43,9 @@ class CleanOptions:
     density_quantile: float = 0.0
     min_component_faces: int = 200
     min_component_ratio: float = 0.0
+    min_component_points: int = 0  # > 0: a component below min_component_faces stays when this many points lie on it
+    local_trim_factor: float = 0.0  # > 0: the distance trim per vertex is at least this x the local point spacing
+    local_trim_max_m: float = 0.5  # ... never more than this (m)
     repair_non_manifold: bool = True
     max_hole_edges: int = 60
     fill_ground_cell_m: float = 0.0
@@ -112,8 +115,31 @@ def two_sided(vertices: np.ndarray, points: np.ndarray, normals: np.ndarray, rea
     return (np.sum(w * u, axis=1) < -0.5 * lw) & (lw <= 2 * reach_m) & (ln[:, 0] > 1e-9)
 
 
-def keep_large_components(mesh: Mesh, min_faces: int, min_ratio: float = 0.0) -> tuple[Mesh, int, int]:
-    """Drop components with fewer faces than ``max(min_faces, min_ratio * largest)``.
+def component_support(mesh: Mesh, face_label: np.ndarray, n: int, points: np.ndarray, within_m: float,
+                      threads: int = -1) -> np.ndarray:
+    """Per component (``face_label``: per-face component ids 0..n-1), how many input ``points`` (p, 3) have
+    their nearest mesh vertex in it, at most ``within_m`` metres away: the samples the piece of surface
+    stands on. (n,) int64."""
+    from scipy.spatial import cKDTree
+
+    assert mesh.faces is not None  # a mesh, not a cloud
+    vlab = np.full(mesh.n_vertices, -1, np.int64)
+    for k in range(3):
+        vlab[mesh.faces[:, k]] = face_label
+    used = np.flatnonzero(vlab >= 0)
+    if len(used) == 0 or len(points) == 0:
+        return np.zeros(n, np.int64)
+    d, i = cKDTree(mesh.vertices[used]).query(points, workers=threads, distance_upper_bound=within_m)
+    ok = np.isfinite(d)
+    return np.bincount(vlab[used[i[ok]]], minlength=n)
+
+
+def keep_large_components(mesh: Mesh, min_faces: int, min_ratio: float = 0.0, *, points: np.ndarray | None = None,
+                          min_points: int = 0, within_m: float = 0.1, threads: int = -1) -> tuple[Mesh, int, int]:
+    """Drop components with fewer faces than ``max(min_faces, min_ratio * largest)``, except (``min_points`` > 0
+    and ``points`` given) those that at least ``min_points`` input points stand on (nearest vertex within
+    ``within_m``, :func:`component_support`): a thin or far object scanned by a few points (a pole, a trunk,
+    foliage at 30 m) makes a small piece of surface that is real; a stray point makes one alone.
     Returns (mesh, components before, components kept)."""
     assert mesh.faces is not None  # a mesh, not a cloud
     n, lab = components(mesh.n_vertices, mesh.faces)
@@ -122,6 +148,8 @@ def keep_large_components(mesh: Mesh, min_faces: int, min_ratio: float = 0.0) ->
     sizes = np.bincount(lab, minlength=n)
     thr = max(int(min_faces), int(min_ratio * sizes.max()))
     keep_c = sizes >= thr
+    if min_points > 0 and points is not None and not keep_c.all():
+        keep_c |= component_support(mesh, lab, n, points, within_m, threads) >= min_points
     if not keep_c.any():  # never empty the mesh by this rule: keep the largest
         keep_c[np.argmax(sizes)] = True
     return compact(mesh, keep_c[lab]), int(n), int(keep_c.sum())
@@ -165,13 +193,43 @@ def close_small_holes(mesh: Mesh, max_edges: int) -> tuple[Mesh, int]:
     return fan_fill(mesh, loops), len(loops)
 
 
+def local_spacing(points: np.ndarray, k: int = 8, tree=None, threads: int = -1) -> np.ndarray:
+    """Per input point, the point spacing around it on the same scale as the cloud's median nearest-neighbour
+    distance (:mod:`twinkit.surface.density`), (p,) float32 metres: the local density
+    ``rho = k / (pi r_k**2)`` from the radius ``r_k`` holding its ``k`` nearest neighbours, turned into the
+    nearest-neighbour distance a uniform sampling of that density has (``0.5 / sqrt(rho)``). A single sweep's
+    density falls with the square of the range; on scan lines ``r_k`` reaches the next line, so the gap
+    between lines counts, not only the spacing along them."""
+    from scipy.spatial import cKDTree
+
+    tree = tree if tree is not None else cKDTree(points)
+    k = int(min(k, len(points) - 1))
+    if k < 1:
+        return np.zeros(len(points), np.float32)
+    d, _ = tree.query(points, k=k + 1, workers=threads)
+    return (0.5 * d[:, -1] * np.sqrt(np.pi / k)).astype(np.float32)
+
+
+def max_dist_per_vertex(vertices: np.ndarray, points: np.ndarray, opt: CleanOptions, tree) -> np.ndarray | float:
+    """The distance trim's threshold: ``opt.max_dist_m``, or (``opt.local_trim_factor`` > 0) per vertex the
+    larger of it and ``local_trim_factor`` x the :func:`local_spacing` of the vertex's nearest point, at
+    most ``opt.local_trim_max_m``: where the samples are sparse (far range) the surface between them lies
+    farther from the nearest one, and the same rule as the global trim (a factor of the spacing) keeps it."""
+    if not (opt.local_trim_factor > 0) or len(vertices) == 0:
+        return opt.max_dist_m
+    sp = local_spacing(points, tree=tree, threads=opt.threads)
+    _, i = tree.query(vertices, workers=opt.threads)
+    cap = max(opt.max_dist_m, opt.local_trim_max_m)
+    return np.clip(opt.local_trim_factor * sp[i], opt.max_dist_m, cap)
+
+
 def trim_mask(vertices: np.ndarray, d: np.ndarray, points: np.ndarray, normals, opt: CleanOptions,
               tree) -> tuple[np.ndarray, int]:
     """The distance trim's decision: which vertices go (``d``: their distance to the points, ``tree``
     a cKDTree of ``points``). Farther than ``max_dist_m`` goes, unless the gap rule keeps it (up to
     ``gap_dist_m`` away, on the points' tangent plane, with points on both sides). Returns the mask
     and how many vertices the gap rule kept."""
-    drop = d > opt.max_dist_m
+    drop = d > max_dist_per_vertex(vertices, points, opt, tree)
     if not (opt.gap_dist_m > opt.max_dist_m and normals is not None and drop.any()):
         return drop, 0
     cand = np.flatnonzero(drop & (d <= opt.gap_dist_m))
@@ -233,15 +291,19 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
                                     "keep": ~drop[lm]}
             drop[lm] = d[lm] > opt.loose_dist_m
         mesh = remove_vertices(mesh, drop)
-        rep["distance_trim"] = {"max_dist_m": opt.max_dist_m, "gap_dist_m": opt.gap_dist_m,
+        rep["distance_trim"] = {"max_dist_m": opt.max_dist_m, "local_trim_factor": opt.local_trim_factor,
+                                "local_trim_max_m": opt.local_trim_max_m, "gap_dist_m": opt.gap_dist_m,
                                 "gap_plane_m": opt.gap_plane_m, "kept_on_plane": kept_gap,
                                 "vertices": mesh.n_vertices, "faces": mesh.n_faces}
     if mesh.n_faces == 0:
         from twinkit import InputError
 
         raise InputError(_nothing_left(points, opt.max_dist_m))
-    mesh, n_before, n_kept = keep_large_components(mesh, opt.min_component_faces, opt.min_component_ratio)
-    rep["components"] = {"before": n_before, "kept": n_kept, "vertices": mesh.n_vertices, "faces": mesh.n_faces}
+    mesh, n_before, n_kept = keep_large_components(mesh, opt.min_component_faces, opt.min_component_ratio,
+                                                   points=points, min_points=opt.min_component_points,
+                                                   within_m=max(opt.max_dist_m, 1e-6), threads=opt.threads)
+    rep["components"] = {"before": n_before, "kept": n_kept, "vertices": mesh.n_vertices, "faces": mesh.n_faces,
+                         "min_points": opt.min_component_points}
     if opt.repair_non_manifold:
         mesh, removed = repair_non_manifold_edges(mesh)
         rep["non_manifold"] = {"faces_removed": removed, "faces": mesh.n_faces}

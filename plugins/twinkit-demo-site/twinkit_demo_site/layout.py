@@ -70,6 +70,42 @@ class Dims:
 
 
 @dataclass
+class Variety:
+    """Layout knobs for training-data variety (simulated captures); the defaults build the demo as it always was.
+
+    ``floors``: building floor counts drawn in [lo, hi); ``park_p``: chance that a parking slot holds a car;
+    ``tree_scale``: multiplies every tree's size; ``street_trees``: chance of a street tree (in a grass pit) per
+    ~11 m of the main road's north and south-west sidewalks and the side streets' sidewalks; ``verge_m``: width (m) of
+    a grass verge between the curb and the sidewalk outside the junction (0 = none); ``setback_m``: front gardens (grass)
+    this deep between the sidewalk and the buildings; ``hedges``: chance of a hedge along each front garden, and of
+    a tree in a deep one; ``lane_m``, ``park_m``,
+    ``sidewalk_m``: the street's widths (None = :class:`Dims`' defaults)."""
+
+    floors: tuple[int, int] = (3, 7)
+    park_p: float = 0.65
+    tree_scale: float = 1.0
+    street_trees: float = 0.0
+    verge_m: float = 0.0
+    setback_m: float = 0.0
+    hedges: float = 0.0
+    lane_m: float | None = None
+    park_m: float | None = None
+    sidewalk_m: float | None = None
+
+
+def random_variety(rng: np.random.Generator) -> Variety:
+    """A random :class:`Variety`: low and high-rise streets, few or many parked cars and trees, verges, widths."""
+    lo = int(rng.integers(1, 4))
+    sidewalk = float(rng.uniform(2.5, 5.0))
+    verge = float(rng.uniform(0.8, 0.5 * sidewalk)) if rng.random() < 0.35 else 0.0
+    return Variety(floors=(lo, lo + int(rng.integers(2, 8))), park_p=float(rng.uniform(0.2, 0.95)),
+                   tree_scale=float(rng.uniform(0.7, 1.4)), street_trees=float(rng.uniform(0.0, 1.0)), verge_m=verge,
+                   setback_m=float(rng.uniform(1.5, 7.0)) if rng.random() < 0.6 else 0.0,
+                   hedges=float(rng.uniform(0.3, 1.0)),
+                   lane_m=float(rng.uniform(2.9, 3.6)), park_m=float(rng.uniform(1.9, 2.6)), sidewalk_m=sidewalk)
+
+
+@dataclass
 class Scene:
     mesh: Mesh
     atlas: Atlas
@@ -213,8 +249,9 @@ class Marks:
     gcp_points: list[dict]  # the zebras' outer stripe corners, {"id", "xyz", "what"}
 
 
-def _surfaces(d: Dims, R) -> None:
-    """Grass everywhere, the two roads' asphalt, the raised sidewalks with their curb strips (painter order)."""
+def _surfaces(d: Dims, R, verge_m: float = 0.0) -> None:
+    """Grass everywhere, the two roads' asphalt, the raised sidewalks with their curb strips, grass verges
+    ``verge_m`` wide between curb and sidewalk outside the junction when asked (painter order)."""
     H, rm, rs, bm, bs = d.half_m, d.rm, d.rs, d.bm, d.bs
     BIG = H + 1
     R(("grass", -BIG, BIG, -BIG, BIG))
@@ -226,6 +263,11 @@ def _surfaces(d: Dims, R) -> None:
     for sx in (-1, 1):
         R(("paving", *sorted((sx * rs, sx * bs)), -BIG, BIG))
         R(("curb", *sorted((sx * rs, sx * (rs + 0.15))), -BIG, BIG))
+    if verge_m > 0:
+        for s in (-1, 1):
+            for t in (-1, 1):
+                R(("grass", *sorted((s * bs, s * BIG)), *sorted((t * (rm + 0.15), t * (rm + 0.15 + verge_m)))))
+                R(("grass", *sorted((t * (rs + 0.15), t * (rs + 0.15 + verge_m))), *sorted((s * bm, s * BIG))))
     R(("asphalt", -BIG, BIG, -rm, rm))  # road wins over the side-street sidewalks
     R(("asphalt", -rs, rs, -BIG, BIG))
 
@@ -304,7 +346,8 @@ class Blocks:
     bushes: list[tuple] = field(default_factory=list)
 
 
-def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from, x_to, depth_lo=10.5, depth_hi=13.0):
+def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from, x_to, depth_lo=10.5, depth_hi=13.0,
+         floor_range=(3, 7), setback=0.0):
     """Buildings along the main-road frontage of block (sx, sy) between |x| = x_from..x_to; returns the last's depth."""
     facade_names = list(FACADES)
     x = x_from
@@ -316,9 +359,9 @@ def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from
             if w < 8.0:
                 break
         depth = float(rng.uniform(depth_lo, depth_hi))
-        floors = int(rng.integers(3, 7))
+        floors = int(rng.integers(*floor_range))
         xa, xb = sorted((sx * x, sx * (x + w)))
-        ya, yb = sorted((sy * d.bm, sy * (d.bm + depth)))
+        ya, yb = sorted((sy * (d.bm + setback), sy * (d.bm + setback + depth)))
         street = {"-y" if sy > 0 else "+y"}
         if first and abs(x - d.bs) < 1e-6:
             street.add("-x" if sx > 0 else "+x")
@@ -332,7 +375,8 @@ def _row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, x_from
     return buildings[-1]["max"][1] if sy > 0 else -buildings[-1]["min"][1]
 
 
-def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y_from, y_to) -> None:
+def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y_from, y_to,
+              floor_range=(3, 7), setback=0.0) -> None:
     """Buildings facing the side street in block (sx, sy) between |y| = y_from..y_to."""
     facade_names = list(FACADES)
     y = y_from
@@ -341,8 +385,8 @@ def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y
         if y_to - y - w < 8.0:
             w = y_to - y
         depth = float(rng.uniform(10.5, 13.0))
-        floors = int(rng.integers(3, 7))
-        xa, xb = sorted((sx * d.bs, sx * (d.bs + depth)))
+        floors = int(rng.integers(*floor_range))
+        xa, xb = sorted((sx * (d.bs + setback), sx * (d.bs + setback + depth)))
         ya, yb = sorted((sy * y, sy * (y + w)))
         b = ob.building(mb, xa, xb, ya, yb, d.curb_m, floors, facade_names[int(rng.integers(len(facade_names)))],
                         {"-x" if sx > 0 else "+x"})
@@ -351,21 +395,21 @@ def _side_row(mb: MeshBuilder, rng, d: Dims, R, buildings: list[dict], sx, sy, y
         y += w + float(rng.uniform(2.0, 3.5))
 
 
-def _blocks(mb: MeshBuilder, rng, d: Dims, R) -> Blocks:
+def _blocks(mb: MeshBuilder, rng, d: Dims, R, fl=(3, 7), sb=0.0) -> Blocks:
     """The buildings of the NE, NW and SW blocks (built now), the SW yard's walls and plants and the SE park."""
     H, bm, bs = d.half_m, d.bm, d.bs
     bl = Blocks()
     buildings = bl.buildings
     # NE: a row of buildings from the corner, more along the side street on big sites
-    _row(mb, rng, d, R, buildings, 1, 1, bs, H - 0.5)
+    _row(mb, rng, d, R, buildings, 1, 1, bs, H - 0.5, floor_range=fl, setback=sb)
     depth_ne = max(b["max"][1] for b in buildings)
-    _side_row(mb, rng, d, R, buildings, 1, 1, depth_ne + 3.0, H - 0.5)
+    _side_row(mb, rng, d, R, buildings, 1, 1, depth_ne + 3.0, H - 0.5, floor_range=fl, setback=sb)
     # NW: row from the corner; behind it buildings (big sites) or a wall along the side street
     n_before = len(buildings)
-    _row(mb, rng, d, R, buildings, -1, 1, bs, H - 0.5)
+    _row(mb, rng, d, R, buildings, -1, 1, bs, H - 0.5, floor_range=fl, setback=sb)
     depth_nw = max(b["max"][1] for b in buildings[n_before:])
     if H - 0.5 - (depth_nw + 3.0) >= 10.0:
-        _side_row(mb, rng, d, R, buildings, -1, 1, depth_nw + 3.0, H - 0.5)
+        _side_row(mb, rng, d, R, buildings, -1, 1, depth_nw + 3.0, H - 0.5, floor_range=fl, setback=sb)
     elif H - depth_nw > 4.0:
         bl.walls.append((-bs - 0.3, -bs, depth_nw + 2.0, H - 0.3, 2.0))
     # SW: walled yard at the corner, then buildings
@@ -373,8 +417,8 @@ def _blocks(mb: MeshBuilder, rng, d: Dims, R) -> Blocks:
     wall_end = min(H - 0.3, bm + 18.0)
     bl.walls.append((-bs - 0.25, -bs, -wall_end, -bm, 1.9))
     bl.walls.append((-yard_x, -bs - 0.25, -bm - 0.25, -bm, 1.9))
-    _row(mb, rng, d, R, buildings, -1, -1, yard_x + 1.0, H - 0.5)
-    _side_row(mb, rng, d, R, buildings, -1, -1, wall_end + 3.0, H - 0.5)
+    _row(mb, rng, d, R, buildings, -1, -1, yard_x + 1.0, H - 0.5, floor_range=fl, setback=sb)
+    _side_row(mb, rng, d, R, buildings, -1, -1, wall_end + 3.0, H - 0.5, floor_range=fl, setback=sb)
     bl.bushes += [(-bs - 2.0, -bm - 2.5), (-bs - 4.5, -bm - 1.6)]
     bl.trees.append((-bs - 4.0, -bm - 5.5, 0.9))
     _park(rng, d, R, bl)
@@ -406,7 +450,52 @@ def _park(rng, d: Dims, R, bl: Blocks) -> None:
         xt += 9.0
 
 
-def _build_block_things(mb: MeshBuilder, rng, d: Dims, R, bl: Blocks) -> None:
+def _street_trees(rng, d: Dims, m: Marks, R, bl: Blocks, p: float) -> None:
+    """Street trees in grass pits (chance ``p`` per ~11 m slot) on the main road's north and south-west sidewalks and
+    along the side streets, clear of the junction's lamps, signs and lights."""
+    H, rm, rs = d.half_m, d.rm, d.rs
+    lamps_n = [10.0 + 14.0 * k for k in range(int(H / 14) + 2)]
+    lamps_s = [17.0 + 14.0 * k for k in range(int(H / 14) + 2)]
+    spots = []
+    for sx, sy, lamps in ((1, 1, lamps_n), (-1, 1, lamps_n), (-1, -1, lamps_s)):
+        x = m.zx1 + 3.5
+        while x < H - 2.5:
+            if min(abs(x - v) for v in lamps) > 2.5 and abs(x - (H - 5.0)) > 2.0:
+                spots.append((sx * x, sy * (rm + 1.5)))
+            x += 11.0
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            y = m.zy1 + 3.5
+            while y < H - 2.5:
+                spots.append((sx * (rs + 1.5), sy * y))
+                y += 11.0
+    for x, y in spots:
+        if rng.random() < p:
+            R(("grass", x - 0.7, x + 0.7, y - 0.7, y + 0.7))
+            bl.trees.append((x, y, float(rng.uniform(0.7, 1.0))))
+
+
+def _gardens(rng, d: Dims, bl: Blocks, setback: float, p: float) -> None:
+    """Hedges (rows of bushes) along the front gardens of the buildings set ``setback`` metres back from the sidewalk,
+    each with chance ``p``, and a tree in a garden deeper than 4 m with chance ``p`` / 2."""
+    for b in bl.buildings:
+        (x0, y0, _), (x1, y1, _) = b["min"], b["max"]
+        for lo_edge, hi_edge, back, along_x in ((y0, y1, d.bm, True), (x0, x1, d.bs, False)):
+            for sgn, face in ((1, lo_edge), (-1, hi_edge)):
+                if abs(sgn * face - (back + setback)) > 1e-6:
+                    continue  # this side does not face a sidewalk across a garden
+                a0, a1 = (x0, x1) if along_x else (y0, y1)
+                c = sgn * (back + 0.6)
+                if rng.random() < p:
+                    for u in np.arange(a0 + 0.8, a1 - 0.5, 1.3):
+                        bl.bushes.append((u, c) if along_x else (c, u))
+                if setback > 4.0 and rng.random() < p / 2:
+                    m = sgn * (back + setback / 2)
+                    u = float(rng.uniform(a0 + 2, a1 - 2))
+                    bl.trees.append((u, m, float(rng.uniform(0.6, 0.9))) if along_x else (m, u, float(rng.uniform(0.6, 0.9))))
+
+
+def _build_block_things(mb: MeshBuilder, rng, d: Dims, R, bl: Blocks, tree_scale: float = 1.0) -> None:
     """Build the walls (their footprint left bare of ground), fences, trees and bushes, in that order."""
     cz = d.curb_m
     for (xa, xb, ya, yb, h) in bl.walls:
@@ -415,7 +504,7 @@ def _build_block_things(mb: MeshBuilder, rng, d: Dims, R, bl: Blocks) -> None:
     for a, b in bl.fences:
         ob.fence(mb, a, b, cz)
     for x, y, sc in bl.trees:
-        ob.tree(mb, rng, x, y, cz, sc)
+        ob.tree(mb, rng, x, y, cz, sc * tree_scale)
     for x, y in bl.bushes:
         ob.bush(mb, rng, x, y, cz)
 
@@ -451,7 +540,7 @@ def _street_furniture(mb: MeshBuilder, d: Dims, m: Marks) -> None:
         ob.sign(mb, H - 5.0, rm + 0.45, cz, (1, 0), "speed")
 
 
-def _vehicles(mb: MeshBuilder, rng, d: Dims, m: Marks) -> list[dict]:
+def _vehicles(mb: MeshBuilder, rng, d: Dims, m: Marks, park_p: float = 0.65) -> list[dict]:
     """Parked cars and a motorcycle, a car at the north arm's stop line, a bicycle; returns the cars' records."""
     H = d.half_m
     paints = list(CAR_PAINTS)
@@ -470,7 +559,7 @@ def _vehicles(mb: MeshBuilder, rng, d: Dims, m: Marks) -> list[dict]:
         if k == moto_slot:
             ob.motorcycle(mb, x, sy * ypark, 0.0, yaw + 0.25)
             continue
-        if rng.random() < 0.65:
+        if rng.random() < park_p:
             cars.append(ob.car(mb, rng, x + rng.uniform(-0.4, 0.4), sy * (ypark + rng.uniform(-0.1, 0.1)), 0.0, yaw,
                                paints[int(rng.integers(len(paints)))]))
     cars.append(ob.car(mb, rng, -d.lane_m / 2, m.sl_y + 0.3 + 0.6 + 2.3, 0.0, -math.pi / 2,
@@ -568,22 +657,29 @@ def _routes(scene: Scene, d: Dims, m: Marks) -> None:
 
 
 # ---------------------------------------------------------------- the whole site
-def build_scene(half_m: float, seed: int, atlas: Atlas) -> Scene:
+def build_scene(half_m: float, seed: int, atlas: Atlas, variety: Variety | None = None) -> Scene:
     """The demo intersection of half size ``half_m`` (metres) for ``seed``: its textured, labelled mesh and truths.
 
-    One generator drives every random choice, in the order below, so a seed gives the same site byte for byte."""
+    One generator drives every random choice, in the order below, so a seed gives the same site byte for byte.
+    ``variety`` (training data only) changes the layout's knobs; None or the default :class:`Variety` builds the demo."""
+    v = variety or Variety()
     rng = np.random.default_rng([seed, 1])
-    d = Dims(half_m=half_m, curb_m=round(float(rng.uniform(0.10, 0.15)), 3))
+    widths = {k: getattr(v, k) for k in ("lane_m", "park_m", "sidewalk_m") if getattr(v, k) is not None}
+    d = Dims(half_m=half_m, curb_m=round(float(rng.uniform(0.10, 0.15)), 3), **widths)
     mb = MeshBuilder(atlas)
     scene = Scene(mesh=None, atlas=atlas, dims=d)  # type: ignore[arg-type]
     rects: list[tuple[str, float, float, float, float]] = []  # painter-ordered ground rectangles
     R = rects.append
-    _surfaces(d, R)
+    _surfaces(d, R, v.verge_m)
     marks = _road_marks(d, R)
-    blocks = _blocks(mb, rng, d, R)
-    _build_block_things(mb, rng, d, R, blocks)
+    blocks = _blocks(mb, rng, d, R, v.floors, v.setback_m)
+    if v.street_trees > 0:
+        _street_trees(np.random.default_rng([seed, 9]), d, marks, R, blocks, v.street_trees)
+    if v.setback_m > 0 and v.hedges > 0:
+        _gardens(np.random.default_rng([seed, 12]), d, blocks, v.setback_m, v.hedges)
+    _build_block_things(mb, rng, d, R, blocks, v.tree_scale)
     _street_furniture(mb, d, marks)
-    cars = _vehicles(mb, rng, d, marks)
+    cars = _vehicles(mb, rng, d, marks, v.park_p)
     _ground(mb, rects, d)
     scene.mesh = mb.finish()
     cz = d.curb_m

@@ -94,7 +94,19 @@ class CleanParams:
     density_quantile: float = param(0.0, ge=0, lt=1,
                                     help="Remove vertices below this quantile of the Poisson density (weakly "
                                          "supported surface); 0 = off.")
-    min_component_faces: int = param(200, ge=0, help="Drop connected components with fewer faces than this.")
+    min_component_faces: int = param(200, ge=0, help="Drop connected components with fewer faces than this ...")
+    min_component_points: int = param(3, ge=0,
+                                      help="... unless at least this many input points stand on them (nearest "
+                                           "vertex within the trim distance): a pole, a trunk or far foliage seen "
+                                           "by a few points stays, a piece around a stray point goes; 0 = drop by "
+                                           'size alone (docs/pointcloud.md "Coverage of sparse scans").')
+    local_trim_factor: float = param(0.0, ge=0,
+                                     help="The distance trim per vertex is at least this x the local point spacing "
+                                          "at its nearest point (the nearest-neighbour distance of the density of "
+                                          "its 8 nearest samples; the same factor as the auto max_dist_m on the "
+                                          "median spacing), so the surface between the sparse samples of the far "
+                                          "range stays; 0 = off (max_dist_m everywhere).")
+    local_trim_max_m: float = param(0.5, ge=0, help="... never more than this (m).")
     min_component_ratio: float = param(0.0, ge=0, le=1,
                                        help="Also drop components smaller than this fraction of the largest one; 0 "
                                             "= off.")
@@ -177,3 +189,10 @@ class EvalParams:
                                   help="Ground truth -> mesh distances are exact up to this distance (m), "
                                        "nearest-vertex distances beyond.")
     image_px: int = param(1024, ge=64, le=16384, help="Size of the evaluation images (px).")
+    far_m: float = param(0.5, gt=0,
+                         help="A cloud point farther than this (m) from the mesh counts as lost (its label cannot "
+                              "reach the twin); the share is reported overall and per class of the file.")
+    far_max_share: float = param(0.25, ge=0, le=1,
+                                 help="The run is marked degraded when more than this share of the points is "
+                                      'farther than far_m from the mesh (docs/pointcloud.md "Coverage of sparse '
+                                      'scans").')

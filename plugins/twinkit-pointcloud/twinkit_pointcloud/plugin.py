@@ -181,6 +181,8 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                            density_quantile=params.density_quantile,
                            min_component_faces=params.min_component_faces,
                            min_component_ratio=params.min_component_ratio,
+                           min_component_points=params.min_component_points,
+                           local_trim_factor=params.local_trim_factor, local_trim_max_m=params.local_trim_max_m,
                            repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
                            fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
                            fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
@@ -398,7 +400,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
     from twinkit.surface.measure import Measure
     from twinkit.surface.metrics import cloud_to_mesh
 
-    from .metrics import (coverage_by_label, distance_near_exact, sample_surface,
+    from .metrics import (coverage_by_label, distance_near_exact, far_from_mesh, sample_surface,
                           sample_surface_by_label, stats, topdown_map)
 
     params = params or EvalParams()
@@ -415,7 +417,18 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
             "cloud_to_mesh_m": stats(c2m),
             "mesh_to_cloud_m": stats(m2c),
             "cloud_within_m": {str(t): float((c2m <= t).mean()) for t in (0.01, 0.02, 0.05, 0.1)},
+            "cloud_far": far_from_mesh(c2m, cloud.attrs.get("classification"), params.far_m),
         }
+        far = res["cloud_far"]
+        ctx.log.info("%.1f %% of the cloud's points are farther than %.2g m from the mesh%s", 100 * far["share"],
+                     far["far_m"], "".join(f"; {k} {100 * v['share']:.1f} %"
+                                           for k, v in (far.get("per_class") or {}).items()))
+        if far["share"] > params.far_max_share:
+            ctx.degraded(f"{100 * far['share']:.1f} % of the cloud's points are farther than {far['far_m']:.2g} m "
+                         f"from the mesh (more than {100 * params.far_max_share:.0f} %): their labels are lost",
+                         "the clean-up removed surface the points support: see clean_report.json; try "
+                         "steps.clean_mesh.min_component_faces=0 or a larger steps.clean_mesh.max_dist_m "
+                         '(docs/pointcloud.md "Coverage of sparse scans")')
         if in_gt_mesh_ply is not None:
             gt = A.read_gt_mesh(in_gt_mesh_ply)
             gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
@@ -452,6 +465,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
         res["time"] = {"seconds": round(meas_now(meas), 3)}
         write_json(out_recon_metrics_json, res)
     return {"cloud_to_mesh_mean_m": res["cloud_to_mesh_m"]["mean"], "cloud_to_mesh_p95_m": res["cloud_to_mesh_m"]["p95"],
+            "far_share": res["cloud_far"]["share"],
             "vertices": mesh.n_vertices, "faces": mesh.n_faces, **meas.as_dict()}
 
 

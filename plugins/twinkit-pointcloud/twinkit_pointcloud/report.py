@@ -71,6 +71,13 @@ def sec_recon_metrics(ctx) -> str:
     if isinstance(within, dict):
         parts.append("<h3>Cloud points within a distance of the mesh</h3>" + ctx.table(
             ["within (m)", "fraction"], [[k, v] for k, v in within.items()]))
+    far = d.get("cloud_far")
+    if isinstance(far, dict) and "share" in far:
+        rows = [["whole cloud", far.get("points", ""), f"{100 * far['share']:.2f} %"]]
+        for k, v in (far.get("per_class") or {}).items():
+            rows.append([k, v.get("points", ""), f"{100 * v.get('share', 0.0):.2f} %"])
+        parts.append(f"<h3>Points farther than {ctx.esc(far.get('far_m', ''))} m from the mesh (labels lost)</h3>"
+                     + ctx.table(["points", "count", "share farther"], rows))
     if isinstance(d.get("counts"), dict):
         parts.append("<h3>Counts</h3>" + ctx.table(["", "count"], [[k, v] for k, v in d["counts"].items()]))
     if scal:

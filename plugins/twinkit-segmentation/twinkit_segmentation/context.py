@@ -178,9 +178,12 @@ def near_unanimous(vertex_votes: np.ndarray, segments: np.ndarray | None, share:
 
 
 def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOptions | None = None,
-                      edges: np.ndarray | None = None) -> dict:
+                      edges: np.ndarray | None = None, step_gate: np.ndarray | None = None) -> dict:
     """Per-vertex cue masks and the heights they come from: ``{"height": h, "ground": bool(n), ...}``.
-    The shape cues need the mesh's ``edges`` (vertex pairs); without them their masks are empty."""
+    The shape cues need the mesh's ``edges`` (vertex pairs); without them their masks are empty.
+    ``step_gate`` (n,) bool: the capture resolves a curb step at the vertex (:func:`gates.cue_gates`);
+    a step cell counts only where most of its vertices say so (a step the scan lines or the noise
+    made is no curb)."""
     from twinkit.street.ground import LocalGround
 
     opt = opt or ContextOptions()
@@ -197,6 +200,14 @@ def geometric_context(vertices: np.ndarray, normals: np.ndarray, opt: ContextOpt
 
     low = g.foot(opt.step_radius_m)
     step = g.steps(opt.min_curb_m, opt.step_radius_m, opt.max_curb_m)
+    out["step_cells_ungated"] = int(step.sum())
+    if step_gate is not None:
+        gj, gi = g.cells(v[:, :2])
+        n_in = np.zeros(step.shape)
+        n_ok = np.zeros(step.shape)
+        np.add.at(n_in, (gj, gi), 1.0)
+        np.add.at(n_ok, (gj, gi), np.asarray(step_gate, np.float64))
+        step &= n_ok >= 0.5 * np.maximum(n_in, 1.0)
     curb = np.zeros(len(v), bool)
     if step.any():
         d, (iy, ix) = distance_transform_edt(~step, return_indices=True)
@@ -316,7 +327,8 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
                       segment_weight: float = 0.0, min_retained: float = 0.2,
                       smooth_beta: float = 0.0, smooth_iters: int = 5,
                       keep: np.ndarray | None = None,
-                      extra_prior: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+                      extra_prior: np.ndarray | None = None,
+                      gates: dict | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """The blended vote ``p`` (n, 19) with the geometric prior: (labels (n,) uint8, 255 where nothing
     voted; confidence; metrics with the vertices each cue touched and changed).
 
@@ -333,12 +345,24 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
 
     ``extra_prior`` (n, 19), e.g. the scan file's own classes (:mod:`twinkit_segmentation.fileclasses`),
     multiplies the geometric prior after step 0: near-unanimous views do not shield a vertex from it.
+    ``gates`` (cue -> (n,) bool, :func:`twinkit_segmentation.gates.cue_gates`): a gated cue acts only
+    where its gate is set (the capture resolves what it reads).
     """
     from twinkit_segmentation.metrics import decide_distribution
 
     opt = opt or ContextOptions()
     cues = tuple(c for c in cues if c in CUES)
-    ctx = geometric_context(vertices, normals, opt, edges)
+    gates = dict(gates or {})
+    step_gate = gates.pop("curb", None)
+    ctx = geometric_context(vertices, normals, opt, edges, step_gate=step_gate)
+    if "low" in gates:
+        from .gates import reach_gate
+
+        gates["low"] = np.asarray(gates["low"], bool) & reach_gate(vertices, ctx["height"], opt)
+    ungated = {c: int(ctx[c].sum()) for c in gates if c in ctx}
+    for c, g in gates.items():
+        if c in ctx:
+            ctx[c] = ctx[c] & np.asarray(g, bool)
     base, _ = decide_distribution(p)
     prior = context_prior(ctx, opt, cues)
     if segments is not None and segment_weight > 0:
@@ -384,7 +408,9 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
     metrics = {"cues": list(cues), "explained_away": int(ea.sum()), "changed": int((lab != base).sum()),
                "smoothed": smoothed,
                "step_cells": ctx["step_cells"], "objects": ctx["objects"],
-               "kept_unanimous": int(shielded.sum())}
+               "kept_unanimous": int(shielded.sum()),
+               "gated_off": {c: n - int(ctx[c].sum()) for c, n in ungated.items()},
+               "step_cells_gated_off": ctx["step_cells_ungated"] - ctx["step_cells"] if step_gate is not None else 0}
     for c in CUES:
         m = ctx[c]
         metrics[f"{c}_vertices"] = int(m.sum())

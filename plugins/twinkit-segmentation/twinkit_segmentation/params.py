@@ -154,6 +154,21 @@ class BackprojectParams:
     file_class_spacings: float = param(3.0, gt=0,
                                        help="A vertex takes the class of its nearest point within this many point "
                                             "spacings.")
+    cues_with_geometry: List[str] = param(default_factory=lambda: ["ground", "curb", "mounted"], free=True,
+                                          help="Of context_cues, those that still act where geometry_votes.npy is "
+                                               "wired: the cues that still added on the generated captures beside the "
+                                               'classifier (docs/segmentation.md "Fusion"); the others read what '
+                                               "the classifier already reads.")
+    cue_gates: bool = param(True,
+                            help="Gate the shape and curb cues by what the capture resolves at each vertex (point "
+                                 'support and noise from points.ply; docs/segmentation.md "Cue gates").')
+    fusion_weights: str = param("", free=True,
+                                help="The views' and the geometry's weights per capture kind (a JSON file written by "
+                                     "python -m twinkit_segmentation.fusion calibrate); empty = the plugin's "
+                                     'shipped fusion_weights.json (docs/segmentation.md "Fusion").')
+    low_confidence: float = param(0.5, ge=0, le=1,
+                                  help="A fused label whose probability is under this is low-confidence (counted, "
+                                       "and shown in confidence.png).")
 
 
 @dataclass

@@ -1,5 +1,6 @@
 """twinkit-segmentation's sections of the run report: sample views next to their 2D predictions (a
-contact sheet, label pictures in CityScapes colours) and the segmentation metrics tables.
+contact sheet, label pictures in CityScapes colours), the segmentation metrics tables and the labels'
+confidence (backproject's confidence.png: where the fused label is unsure, where the sources disagree).
 
 Registered through ``twinkit_register_report_sections`` (plugin.py exposes the hook implementation).
 """
@@ -22,6 +23,7 @@ CONTACT_VERSION = "3"
 def twinkit_register_report_sections(register):
     register("samples", sec_contact, title="Sample views and 2D predictions", order=600)
     register("segmetrics", sec_seg_metrics, title="Segmentation metrics", order=800)
+    register("confidence", sec_confidence, title="Label confidence", order=810)
 
 
 _IMG_EXT = (".png", ".jpg", ".jpeg", ".webp")
@@ -213,3 +215,25 @@ def sec_seg_metrics(ctx) -> str:
             name = f"{s.get('folder')}/{md.name}"
             parts.append(f"<p class=\"dim\">also as text: {ctx.link(ctx.href(md), name)}</p>")
     return "".join(parts)
+
+
+def sec_confidence(ctx) -> str:
+    """backproject's confidence.png (a top view: grey confident, orange low-confidence, red where the views
+    and the geometry also disagree) with the step's counts."""
+    hit = ctx.first("confidence.png")
+    if hit is None:
+        return ""
+    step, f = hit
+    metrics = (step.get("record") or {}).get("metrics") or {}
+    c = metrics.get("confidence") or {}
+    fus = metrics.get("fusion") or {}
+    rows = [["low-confidence vertices", f"{c.get('low_confidence', '?')} ({100 * c.get('low_confidence_share', 0):.1f} %, "
+             f"probability under {c.get('low_confidence_below', '?')})"],
+            ["views and geometry disagree", f"{c.get('sources_disagree', 0)} ({100 * c.get('sources_disagree_share', 0):.1f} %)"]]
+    if fus.get("geometry"):
+        w = fus.get("weights") or {}
+        rows.append(["fusion", f"{fus.get('kind')} capture: views x {w.get('views')}, geometry x {w.get('geometry')}"])
+    src = ctx.add_image(f, "label_confidence.png")
+    cap = (f"{ctx.esc(step.get('folder'))}/confidence.png: top view of the labels; grey confident, orange low-"
+           f"confidence, red low-confidence where the views and the geometry disagree, dark unlabelled")
+    return ctx.table(["", ""], rows, "kv") + "<div class=\"figs\">" + ctx.figure(src, cap) + "</div>"

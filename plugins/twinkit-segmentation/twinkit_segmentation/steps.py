@@ -6,7 +6,7 @@
     photo_views           renders/ as render_views, the capture's photos as the images (+ rendered views)
     predict_views         predictions/ (<view>.png, palette PNG whose pixel values are trainIds),
                           vertex_votes.npy (float32, vertices x 19)
-    backproject           labels.npy (uint8 per vertex, 255 = none), confidence.npy, labels.ply
+    backproject           labels.npy (uint8 per vertex, 255 = none), confidence.npy, labels.ply, confidence.png
     transfer_gt_labels    gt_labels.npy, gt_labels.ply (ground truth on the reconstructed vertices)
     evaluate_segmentation seg_metrics.json, seg_metrics.md
     import_labels         labels.npy from a repainted labels.ply, label_changes.json
@@ -367,15 +367,20 @@ def context_options(params: BackprojectParams):
 
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
                 in_vertex_votes_npy: Path, out_labels_npy: Path, out_confidence_npy: Path,
-                out_labels_ply: Path, in_points_ply: Path | None = None) -> dict:
-    """Votes per segment and class, argmax -> labels.npy (per vertex), confidence.npy, labels.ply (palette).
-    The cloud's own classes (points.ply ``classification``), where it has them, are a prior beside the votes."""
+                out_labels_ply: Path, out_confidence_png: Path, in_points_ply: Path | None = None,
+                in_geometry_votes_npy: Path | None = None) -> dict:
+    """Votes per segment and class, fused with the geometry's class probabilities where a 3D classifier
+    wrote them (geometry_votes.npy, weights per capture kind: :mod:`twinkit_segmentation.fusion`), the
+    cloud's own classes (points.ply ``classification``) and the gated geometric cues as priors; argmax ->
+    labels.npy (per vertex), confidence.npy (the fused winner's probability), labels.ply (palette),
+    confidence.png (a top view of the low-confidence vertices)."""
     import numpy as np
 
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import edges as mesh_edges
     from twinkit_segmentation.context import CUES
     from twinkit_segmentation.fileclasses import vertex_file_classes
+    from twinkit_segmentation.fusion import confidence_picture, confidence_summary, disagreement
     from twinkit_segmentation.metrics import decide_distribution, propagate
     from twinkit_segmentation.segmesh import write_labels_ply
 
@@ -386,14 +391,24 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     if len(seg) != len(mesh.vertices) or len(votes) != len(mesh.vertices):
         raise InputError(f"{in_segments_npy.name} ({len(seg)}), {in_vertex_votes_npy.name} ({len(votes)}) and "
                          f"{in_textured_mesh_ply.name} ({len(mesh.vertices)}) disagree on the vertex count; re-run them")
-    p, s_total = vote_distribution(params, seg, votes)
-    fprior, fvoting, fcodes, finfo = vertex_file_classes(params, ctx, in_points_ply, mesh.vertices)
-    labels, conf = decide_distribution(p, s_total < params.min_votes)
-    base_labels = labels.copy()  # the views alone
-    bad = [c for c in params.context_cues if c not in CUES]
+    bad = [c for c in list(params.context_cues) + list(params.cues_with_geometry) if c not in CUES]
     if bad:
         raise InputError(f"backproject: unknown context_cues {bad}; choose from {list(CUES)}")
-    labels, conf, edges, cmet, t_ctx = _fuse(params, ctx, mesh, p, votes, labels, conf, fprior)
+    p_views, s_total = vote_distribution(params, seg, votes)
+    cloud = A.read_points(in_points_ply) if in_points_ply is not None and Path(in_points_ply).is_file() else None
+    geom = _geometry_votes(in_geometry_votes_npy, len(mesh.vertices))
+    p, fsum = _fuse_sources(params, ctx, p_views, votes, geom, cloud)
+    unseen = (s_total < params.min_votes) if geom is None else (s_total < params.min_votes) & (geom.sum(axis=1) <= 0)
+    fprior, fvoting, fcodes, finfo = vertex_file_classes(params, ctx, in_points_ply, mesh.vertices)
+    labels, conf = decide_distribution(p, unseen)
+    base_labels = labels.copy()  # the sources alone
+    gates, ginfo = _cue_gates(params, ctx, mesh, cloud)
+    # the views' near-unanimous floor holds where they lead: not where a colourless capture has geometry
+    unshield = None if geom is None or fsum.get("kind") == "coloured" else geom.sum(axis=1) > 0
+    cues = list(params.context_cues) if geom is None else [c for c in params.context_cues
+                                                           if c in params.cues_with_geometry]
+    labels, conf, edges, cmet, t_ctx = _fuse(params, ctx, mesh, p, votes, labels, conf, fprior, gates,
+                                            unshield=unshield, cues=cues)
     unlabelled_before = int((labels == IGNORE).sum())
     if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
         labels = propagate(labels, edges if edges is not None else mesh_edges(mesh.faces, len(mesh.vertices)))
@@ -405,13 +420,78 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
                      "%.1f %% of them a class the file rules out, the fused labels %.1f %% (prior factor %g)",
                      finfo["vertices_with_class"], finfo["vertices"], 100 * finfo["against_file_before"],
                      100 * finfo["against_file_after"], params.file_class_factor)
+    disagree = disagreement(p_views, geom)
+    csum = confidence_summary(labels, conf, disagree, params.low_confidence)
+    ctx.log.info("confidence: %d vertices (%.1f %%) under %.2f; the views and the geometry disagree on %d",
+                 csum["low_confidence"], 100 * csum["low_confidence_share"], params.low_confidence,
+                 csum["sources_disagree"])
     A.write_labels(out_labels_npy, labels.astype(np.uint8))
     np.save(out_confidence_npy, conf.astype(np.float32))
     write_labels_ply(out_labels_ply, mesh, labels)
+    confidence_picture(out_confidence_png, mesh.vertices, conf, labels, disagree, params.low_confidence)
     return {"unlabelled_before_fill": unlabelled_before, "unlabelled": int((labels == IGNORE).sum()),
             "mean_confidence": float(conf[conf > 0].mean()) if (conf > 0).any() else 0.0,
-            "context": cmet, "context_seconds": round(t_ctx, 3), "file_classes": finfo,
-            "seconds": round(time.perf_counter() - t0, 3)}
+            "context": cmet, "context_seconds": round(t_ctx, 3), "file_classes": finfo, "fusion": fsum,
+            "confidence": csum, "cue_gates": ginfo, "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _geometry_votes(path: Path | None, n: int):
+    """geometry_votes.npy as (n, 19) float64, or None without one; ArtefactError on a wrong shape."""
+    import numpy as np
+
+    if path is None:
+        return None
+    g = A.read_class_votes(path, n, "textured_mesh.ply")
+    return np.nan_to_num(g.astype(np.float64), nan=0.0).clip(0, None)
+
+
+def _fuse_sources(params: BackprojectParams, ctx: StepContext, p_views, votes, geom, cloud):
+    """The views' distribution fused with the geometry's (:func:`fusion.fuse_sources`) with the weights of
+    the capture's kind: (p (n, 19), the fusion's metrics)."""
+    from twinkit_segmentation.fusion import capture_kind, fuse_sources, load_weights
+    from twinkit_segmentation.metrics import _weighted_votes
+
+    if geom is None:
+        return p_views, {"geometry": False}
+    kind = capture_kind(None if cloud is None else cloud.colors)
+    weights = load_weights(params.fusion_weights or None)
+    w = weights.for_kind(kind)
+    n_views = _weighted_votes(votes, params.ignore_classes).sum(axis=1)
+    p, info = fuse_sources(p_views, n_views, geom, w)
+    info.update({"kind": kind, "weights": vars(w), "weights_recipe": weights.recipe.get(kind, weights.recipe)})
+    ctx.log.info("fusion (%s capture): views x %.2f (coverage %.1f views), geometry x %.2f; %d vertices both, %d "
+                 "views only, %d geometry only", kind, w.views, w.coverage_views, w.geometry, info["both"],
+                 info["views_only"], info["geometry_only"])
+    return p, info
+
+
+def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud):
+    """(cue -> (n,) bool gate, or None; the gates' metrics)."""
+    if not params.cue_gates or cloud is None or not params.context:
+        return None, {"used": False}
+    from twinkit_segmentation.gates import capture_quality, cue_gates
+    from twinkit_segmentation.segmesh import unit_normals
+
+    t = time.perf_counter()
+    opt = context_options(params)
+    q = capture_quality(cloud.vertices, mesh.vertices, unit_normals(mesh)[:, 2] >= opt.up_normal_z,
+                        threads=max(1, int(getattr(ctx, "threads", 1) or 1)))
+    gates = cue_gates(q, opt)
+    import numpy as np
+
+    info = {"used": True, "seconds": round(time.perf_counter() - t, 3),
+            "support_m_p50": round(float(np.median(q["support_m"])), 4),
+            "noise_m_p50": round(float(np.median(q["noise_m"])), 4) if np.isfinite(q["noise_m"]).any() else None,
+            "passed_share": {c: round(float(g.mean()), 4) for c, g in gates.items()}}
+    off = {c: 1 - v for c, v in info["passed_share"].items() if c in ("curb", "column", "low") and v < 0.9}
+    if off:
+        ctx.log.warning("cue gates: the capture is too sparse or noisy for %s on %s of the mesh (median support "
+                        "%.3f m, noise %s); those cues stay off there, the views and the geometry decide",
+                        "/".join(off), "/".join(f"{100 * v:.0f} %" for v in off.values()), info["support_m_p50"],
+                        f"{info['noise_m_p50']:.4f} m" if info["noise_m_p50"] is not None else "unmeasured")
+    else:
+        ctx.log.info("cue gates: the capture resolves the cues on %s", info["passed_share"])
+    return gates, info
 
 
 def vote_distribution(params: BackprojectParams, seg, votes):
@@ -427,7 +507,8 @@ def vote_distribution(params: BackprojectParams, seg, votes):
     return p, p.sum(axis=1)
 
 
-def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, conf, fprior):
+def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, conf, fprior, gates=None,
+          unshield=None, cues=None):
     """The vote scaled by the mesh's geometric cues and the file's classes (``fprior`` (n, 19) or None), or
     Potts smoothing alone: (labels, confidence, mesh edges or None, the fusion's metrics, seconds)."""
     from twinkit.cityscapes import IGNORE
@@ -439,18 +520,21 @@ def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, c
     edges = None
     cmet: dict = {}
     t_ctx = 0.0
-    if (params.context and params.context_cues) or fprior is not None:
+    cues = list(params.context_cues) if cues is None else list(cues)
+    if (params.context and cues) or fprior is not None:
         # the file's classes go through the same fusion as the cues (with no cue when context is off)
-        cues = list(params.context_cues) if params.context else []
+        cues = cues if params.context else []
         t1 = time.perf_counter()
         edges = mesh_edges(mesh.faces, len(mesh.vertices))
         keep = labels == IGNORE
         sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None), None,
                               params.keep_share, params.keep_votes)
+        if unshield is not None:
+            sure &= ~unshield
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, context_options(params),
                                                cues, min_retained=params.min_retained,
                                                smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
-                                               keep=sure, extra_prior=fprior)
+                                               keep=sure, extra_prior=fprior, gates=gates)
         labels[keep] = IGNORE  # too few votes stays too few votes
         t_ctx = time.perf_counter() - t1
         ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, "

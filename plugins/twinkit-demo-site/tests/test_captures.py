@@ -1,0 +1,134 @@
+"""The simulated captures (captures.py): ring structure, labels, density, determinism, the CLI."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from twinkit import cityscapes as cs
+
+SEED = 101
+
+
+@pytest.fixture(scope="module")
+def world():
+    from twinkit_demo_site.captures import build_world
+
+    return build_world(SEED, "small")
+
+
+def _cap(world, kind, rng_seed=1, density=1.0):
+    from twinkit_demo_site.captures import simulate_capture
+
+    return simulate_capture(SEED, kind, rng_seed, density=density, world=world)
+
+
+@pytest.fixture(scope="module")
+def sweep(world):
+    return _cap(world, "spinning")
+
+
+def test_spinning_has_rings_and_falls_off_with_range(sweep):
+    ring, xyz, o = sweep["ring"], sweep["xyz"].astype(np.float64), sweep["origin"][0]
+    per_ring = np.bincount(ring, minlength=64)
+    assert sweep["meta"]["beams"] == 64 and (per_ring[32:] > 500).all()  # every lower beam returns a ring
+    r = np.linalg.norm(xyz - o, axis=1)
+    # each lower beam's ground returns lie at one range (a ring), increasing from the lowest beam upwards
+    ground = np.isin(sweep["label"], cs.GROUND)
+    med = np.array([np.median(r[ground & (ring == b)]) for b in (63, 55, 47)])
+    assert np.all(np.diff(med) > 0.3), med
+    # areal density near the car is far higher than far away
+    rh = np.linalg.norm(xyz[:, :2] - o[:2], axis=1)
+    near = (rh > 4) & (rh < 8)
+    far = (rh > 20) & (rh < 24)
+    dn = near.sum() / (np.pi * (8 ** 2 - 4 ** 2))
+    df = far.sum() / (np.pi * (24 ** 2 - 20 ** 2))
+    assert dn > 8 * df, (dn, df)
+    assert 0 <= sweep["intensity"].min() and sweep["intensity"].max() <= 1
+
+
+def test_labels_match_the_surfaces_hit(world, sweep):
+    from twinkit_demo_site.captures import _ground_at
+
+    xyz = sweep["xyz"].astype(np.float64)
+    # low flat returns under open sky are ground classes, and the ground label under them agrees
+    zg, lab = _ground_at(world, xyz[:, :2], z0=40.0)
+    on_ground = np.abs(xyz[:, 2] - zg) < 0.06
+    share = np.isin(sweep["label"][on_ground], cs.GROUND).mean()
+    assert share > 0.95, share
+    agree = (sweep["label"][on_ground] == lab[on_ground]).mean()
+    assert agree > 0.95, agree
+    # points labelled building or car stand above the road (z = 0) and curb
+    for c, zmin in ((cs.BUILDING, 0.8), (cs.CAR, 0.4)):
+        m = sweep["label"] == c
+        assert m.sum() > 50 and np.median(xyz[m, 2]) > zmin
+
+
+def test_aerial_has_almost_no_facade_points(world, sweep):
+    def facade_share(c):
+        b = c["label"] == cs.BUILDING
+        nz = np.abs(world.tracer.face_normals[world.tracer.closest_faces(c["xyz"][b])][:, 2])
+        return b.sum(), (nz < 0.3).mean()
+
+    c = _cap(world, "aerial")
+    n_b, share = facade_share(c)
+    assert n_b > 500 and share < 0.12, (n_b, share)
+    assert facade_share(sweep)[1] > 0.9  # a street-level sweep sees facades
+    assert np.isin(c["label"], cs.GROUND).mean() > 0.4
+
+
+@pytest.mark.parametrize("kind", ["spinning", "tls", "aerial"])
+def test_density_factor_scales_counts(world, kind):
+    lo = _cap(world, kind, rng_seed=3, density=0.25)["raw_points"]
+    hi = _cap(world, kind, rng_seed=3, density=1.0)["raw_points"]
+    assert 2.5 < hi / lo < 6, (lo, hi)
+
+
+def test_same_seed_same_capture_other_seed_other_pose(world):
+    a = _cap(world, "tls", rng_seed=5, density=0.3)
+    b = _cap(world, "tls", rng_seed=5, density=0.3)
+    c = _cap(world, "tls", rng_seed=6, density=0.3)
+    assert np.array_equal(a["xyz"], b["xyz"]) and np.array_equal(a["label"], b["label"])
+    assert np.array_equal(a["intensity"], b["intensity"])
+    assert not np.array_equal(a["origin"], c["origin"])
+
+
+def test_mobile_reuses_the_van_and_cli_writes_npz_and_manifest(tmp_path):
+    from twinkit_demo_site.captures import main
+
+    main(["--out", str(tmp_path), "--seeds", str(SEED), "--kinds", "mobile", "--size", "small",
+          "--density-min", "0.2", "--density-max", "0.2", "--max-points", "20000"])
+    man = json.loads((tmp_path / "manifest.json").read_text())
+    (rec,) = man["captures"]
+    z = np.load(tmp_path / rec["file"])
+    assert z["xyz"].shape == (rec["points"], 3) and z["xyz"].dtype == np.float32 and rec["points"] <= 20000
+    assert len(z["origin"]) > 50  # one origin per van position
+    assert z["sensor"].max() < len(z["origin"])
+    assert sum(rec["counts"].values()) == rec["points"] and rec["counts"].get("road", 0) > 0.2 * rec["points"]
+
+
+def test_layout_variety_changes_the_site_and_its_default_is_the_demo():
+    from twinkit_demo_site.layout import Variety, build_scene, random_variety
+    from twinkit_demo_site.textures import build_atlas
+
+    atlas = build_atlas(0)
+    plain = build_scene(30.0, 0, atlas)
+    same = build_scene(30.0, 0, atlas, Variety())
+    assert np.array_equal(plain.mesh.vertices, same.mesh.vertices) and plain.counts == same.counts
+    v = random_variety(np.random.default_rng(1))
+    v.street_trees, v.floors = 1.0, (8, 9)
+    varied = build_scene(30.0, 0, atlas, v)
+    assert varied.counts["trees"] > plain.counts["trees"]
+    assert max(b["max"][2] for b in varied.buildings) > max(b["max"][2] for b in plain.buildings)
+
+
+def test_streets_go_on_beyond_the_site_edge(world):
+    """The apron: ground to the sensor's range and, along the road arms, buildings and trees beyond the edge."""
+    tr = world.tracer
+    H = world.scene.dims.half_m
+    c = tr.mesh.vertices[tr.mesh.faces].mean(1)
+    out = (np.abs(c[:, 0]) > H + 1) | (np.abs(c[:, 1]) > H + 1)
+    labs = set(np.unique(tr.face_labels[out]).tolist())
+    assert {cs.ROAD, cs.SIDEWALK, cs.TERRAIN, cs.BUILDING, cs.VEGETATION} <= labs
+    assert np.abs(tr.mesh.vertices[:, :2]).max() > H + 100

@@ -1,0 +1,195 @@
+"""The fusion of views and geometry by capture kind, the confidence it reports, and the cue gates
+(docs/segmentation.md "Fusion", "Cue gates")."""
+import json
+
+import numpy as np
+import pytest
+
+from twinkit.cityscapes import BUILDING, ROAD, SIDEWALK, VEGETATION
+from twinkit.mesh import Mesh, read_mesh, write_ply
+from twinkit.testing import plugin_from_module, run_step
+
+import twinkit_segmentation.plugin as P
+from twinkit_segmentation.fusion import (SourceWeights, confidence_summary, disagreement, fuse_sources,
+                                         load_weights, source_exponents)
+from twinkit_segmentation.synthetic import grid
+
+#: a weights file of the two regimes the calibration finds (views lead on coloured captures, geometry on
+#: colourless ones); the tests check that backproject picks the regime from the capture
+WEIGHTS = {"kinds": {"coloured": {"views": 1.0, "geometry": 0.3, "coverage_views": 2.0},
+                     "colourless": {"views": 0.2, "geometry": 1.0, "coverage_views": 2.0}}, "recipe": {"test": True}}
+
+
+def _backproject(tmp_path, name, inputs, **params):
+    from twinkit_segmentation.steps import BackprojectParams
+
+    return run_step(plugin_from_module(P, "step", "backproject"), tmp_path / name, inputs,
+                    params=BackprojectParams(**params))
+
+
+@pytest.fixture(scope="module")
+def facade_case(scene_files, tmp_path_factory):
+    """The small street; 5 views per vertex voting the truth, except on the buildings, where all say
+    vegetation (a grey facade read as a hedge); the geometry says the truth with 0.7. points.ply twice:
+    with the scene's colours and without any."""
+    tmp = tmp_path_factory.mktemp("fusion")
+    mesh_ply, _, vlab = scene_files
+    m = read_mesh(mesh_ply)
+    v = m.vertices
+    votes = np.zeros((len(v), 19), np.float32)
+    votes[np.arange(len(v)), np.minimum(vlab, 18)] = 5.0
+    facade = vlab == BUILDING
+    votes[facade] = 0.0
+    votes[facade, VEGETATION] = 5.0
+    geom = np.full((len(v), 19), 0.3 / 18, np.float32)
+    geom[np.arange(len(v)), np.minimum(vlab, 18)] = 0.7
+    np.save(tmp / "votes.npy", votes)
+    np.save(tmp / "geometry.npy", geom)
+    np.save(tmp / "segments.npy", np.arange(len(v), dtype=np.int32))
+    pts = v + np.random.default_rng(0).normal(0, 0.01, v.shape)
+    rgb = np.random.default_rng(1).integers(0, 255, (len(v), 3)).astype(np.uint8)
+    write_ply(tmp / "coloured.ply", Mesh(vertices=pts, attrs={"colors": rgb}))
+    write_ply(tmp / "grey.ply", Mesh(vertices=pts))
+    (tmp / "weights.json").write_text(json.dumps(WEIGHTS))
+    inputs = {"in_textured_mesh_ply": mesh_ply, "in_segments_npy": tmp / "segments.npy",
+              "in_vertex_votes_npy": tmp / "votes.npy"}
+    return tmp, inputs, vlab, facade
+
+
+def test_colourless_capture_takes_the_geometry_on_a_facade(facade_case, tmp_path):
+    tmp, inputs, vlab, facade = facade_case
+    w = str(tmp / "weights.json")
+    grey = dict(inputs, in_points_ply=tmp / "grey.ply")
+    alone = np.load(_backproject(tmp_path, "views", grey, fusion_weights=w)["labels.npy"])
+    assert (alone[facade] == VEGETATION).mean() > 0.9  # the views alone: the facade is a hedge
+    out = _backproject(tmp_path, "grey", dict(grey, in_geometry_votes_npy=tmp / "geometry.npy"), fusion_weights=w)
+    labels = np.load(out["labels.npy"])
+    assert (labels[facade] == BUILDING).mean() > 0.9
+    assert (labels[~facade] == vlab[~facade]).mean() > 0.9  # where both agree nothing moves
+    m = json.loads((out["labels.npy"].parent / "step.json").read_text())["metrics"]
+    assert m["fusion"]["kind"] == "colourless" and m["fusion"]["weights"]["views"] == 0.2
+    assert m["confidence"]["sources_disagree"] == int(facade.sum())
+    assert (out["labels.npy"].parent / "confidence.png").stat().st_size > 0
+
+
+def test_coloured_capture_keeps_unanimous_views(facade_case, tmp_path):
+    tmp, inputs, _, facade = facade_case
+    out = _backproject(tmp_path, "col", dict(inputs, in_points_ply=tmp / "coloured.ply",
+                                             in_geometry_votes_npy=tmp / "geometry.npy"),
+                       fusion_weights=str(tmp / "weights.json"))
+    labels = np.load(out["labels.npy"])
+    assert (labels[facade] == VEGETATION).mean() > 0.9  # five unanimous views on a coloured capture lead
+    m = json.loads((out["labels.npy"].parent / "step.json").read_text())["metrics"]
+    assert m["fusion"]["kind"] == "coloured"
+
+
+def test_missing_geometry_rows_fall_back_to_the_views(facade_case, tmp_path):
+    tmp, inputs, vlab, facade = facade_case
+    grey = dict(inputs, in_points_ply=tmp / "grey.ply")
+    w = str(tmp / "weights.json")
+    plain = np.load(_backproject(tmp_path, "plain", grey, fusion_weights=w)["labels.npy"])
+    np.save(tmp / "geometry_zero.npy", np.zeros((len(vlab), 19), np.float32))
+    zero = _backproject(tmp_path, "zero", dict(grey, in_geometry_votes_npy=tmp / "geometry_zero.npy"),
+                        fusion_weights=w)
+    assert np.array_equal(np.load(zero["labels.npy"]), plain)
+    # rows present on half the vertices: the other half keep the views' distribution exactly
+    geom = np.load(tmp / "geometry.npy")
+    gone = np.arange(len(vlab)) % 2 == 0
+    geom[gone] = 0.0
+    pv = np.load(tmp / "votes.npy").astype(np.float64)
+    q, info = fuse_sources(pv, pv.sum(axis=1), geom, SourceWeights(0.2, 1.0, 2.0))
+    assert np.allclose(q[gone], pv[gone] / pv[gone].sum(axis=1, keepdims=True))
+    assert info["views_only"] == int(gone.sum()) and info["both"] == int((~gone).sum())
+    # and where no view saw a vertex, the geometry decides
+    pv[:10] = 0.0
+    q, info = fuse_sources(pv, pv.sum(axis=1), np.load(tmp / "geometry.npy"), SourceWeights(1.0, 0.1, 2.0))
+    assert (q[:10].argmax(axis=1) == np.minimum(vlab[:10], 18)).all() and info["geometry_only"] == 10
+
+
+def test_confidence_and_disagreement_on_a_tiny_case():
+    pv = np.array([[4, 0, 0], [0, 4, 0], [2, 2, 0], [0, 0, 0], [0, 0, 0]], float)
+    pg = np.array([[0.9, 0.1, 0], [0.9, 0.1, 0], [0.5, 0.5, 0], [0, 0.2, 0.8], [0, 0, 0]], float)
+    pad = lambda a: np.pad(a, ((0, 0), (0, 16)))  # noqa: E731
+    q, info = fuse_sources(pad(pv), pv.sum(axis=1), pad(pg), SourceWeights(1.0, 1.0, 2.0))
+    assert info == {"geometry": True, "views_only": 0, "geometry_only": 1, "both": 3, "neither": 1}
+    assert np.allclose(q[:4].sum(axis=1), 1.0) and not q[4].any()
+    assert q[0].argmax() == 0 and q[0].max() > 0.95  # both say class 0: sure
+    assert abs(q[2, 0] - q[2, 1]) < 1e-9  # a tie stays a tie: 0.5
+    d = disagreement(pad(pv), pad(pg))
+    assert d.tolist() == [False, True, False, False, False]  # (row 2: a tie, argmax 0 both)
+    labels = np.array([0, 1, 0, 2, 255], np.uint8)
+    conf = q.max(axis=1)
+    s = confidence_summary(labels, conf, d, 0.6)
+    assert s["sources_disagree"] == 1 and s["low_confidence"] == int(((conf < 0.6) & (labels < 19)).sum()) >= 1
+
+
+def _ring_road(tmp, noise_m=0.01, ring_offset_m=0.06):
+    """A flat road seen by a spinning sensor 1.7 m up: rings every ~0.5-1.5 m (dense along each ring,
+    2 cm), each ring offset in height by up to ``ring_offset_m`` (the beams' calibration), range noise
+    ``noise_m``; the mesh follows the rings (a step at each ring). Views: road, one in three sidewalk."""
+    rng = np.random.default_rng(3)
+    radii = 4.0 * 1.07 ** np.arange(24)
+    radii = radii[radii < 18]
+    off = rng.uniform(-ring_offset_m, ring_offset_m, len(radii))
+    pts = []
+    for r, o in zip(radii, off):
+        a = np.arange(0, 2 * np.pi, 0.02 / r)
+        pts.append(np.column_stack([r * np.cos(a), r * np.sin(a), np.full(len(a), o)]))
+    pts = np.concatenate(pts)
+    pts += rng.normal(0, noise_m, pts.shape)
+    v, f, _ = grid(-12, 12, -12, 12, 0.0, 0.25)
+    rr = np.linalg.norm(v[:, :2], axis=1)
+    v[:, 2] = off[np.abs(rr[:, None] - radii[None]).argmin(axis=1)]
+    write_ply(tmp / "mesh.ply", Mesh(vertices=v, faces=f))
+    write_ply(tmp / "points.ply", Mesh(vertices=pts))
+    votes = np.zeros((len(v), 19), np.float32)
+    votes[:, ROAD] = 2.0
+    votes[:, SIDEWALK] = 1.0
+    np.save(tmp / "votes.npy", votes)
+    np.save(tmp / "segments.npy", np.arange(len(v), dtype=np.int32))
+    return {"in_textured_mesh_ply": tmp / "mesh.ply", "in_segments_npy": tmp / "segments.npy",
+            "in_vertex_votes_npy": tmp / "votes.npy", "in_points_ply": tmp / "points.ply"}
+
+
+def test_a_noisy_flat_road_stays_road_with_the_curb_gated(tmp_path):
+    inputs = _ring_road(tmp_path)
+    ungated = np.load(_backproject(tmp_path, "ungated", inputs, cue_gates=False)["labels.npy"])
+    assert (ungated == SIDEWALK).mean() > 0.05  # the curb cue reads the rings' steps as curbs
+    out = _backproject(tmp_path, "gated", inputs)
+    labels = np.load(out["labels.npy"])
+    assert (labels == SIDEWALK).mean() < 0.01
+    m = json.loads((out["labels.npy"].parent / "step.json").read_text())["metrics"]
+    assert m["context"]["step_cells_gated_off"] > 0 and m["cue_gates"]["used"]
+
+
+def test_shipped_weights_load_and_say_how_they_were_made():
+    w = load_weights()
+    for kind in ("coloured", "colourless"):
+        k = w.for_kind(kind)
+        assert k.views > 0 and k.geometry >= 0 and k.coverage_views > 0
+    assert set(w.recipe) >= {"coloured", "colourless"}, "fusion_weights.json carries the recipe of each kind"
+    # the calibration's finding: at a given coverage the views weigh less against the geometry on a
+    # colourless capture (grey renders) than on a coloured one
+    ratio = {}
+    for kind in ("coloured", "colourless"):
+        k = w.for_kind(kind)
+        a_v, a_g = source_exponents(k, np.array([10.0]), np.array([True]))
+        ratio[kind] = float(a_v[0] / a_g[0])
+    assert ratio["colourless"] < ratio["coloured"]
+
+
+def test_the_low_cue_needs_a_capture_that_sees_higher():
+    from twinkit_segmentation.context import ContextOptions
+    from twinkit_segmentation.gates import reach_gate
+
+    # a facade cut 2 m up by the sensor's field of view, nothing higher around: its top is the scan's edge
+    x, z = np.meshgrid(np.linspace(0, 40, 161), np.linspace(0, 2.0, 9))
+    wall = np.column_stack([x.ravel(), np.full(x.size, 5.0), z.ravel()])
+    opt = ContextOptions()
+    assert not reach_gate(wall, wall[:, 2], opt).any()
+    # the same wall beside a 6 m lamp post the scan saw whole: a low top there is the object's own
+    post = np.column_stack([np.full(25, 8.0), np.full(25, 3.0), np.linspace(0, 6.0, 25)])
+    both = np.vstack([wall, post])
+    ok = reach_gate(both, both[:, 2], opt)
+    d = np.hypot(both[:, 0] - 8.0, both[:, 1] - 3.0)
+    assert ok[d < 8.0].all() and (d > 13.0).sum() > 100 and not ok[d > 13.0].any()  # (10 m on a 2 m grid)
