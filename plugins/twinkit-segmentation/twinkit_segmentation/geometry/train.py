@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ablate", default="", help="comma-separated feature names held at 0 in training and "
                                                    "validation (an ablation: the model cannot use them)")
     a = ap.parse_args(argv)
-    files = sorted(p for d in a.data for p in Path(d).rglob("*.npz"))
+    files = [p for d in a.data for p in sorted(Path(d).rglob("*.npz"))]  # in --data order: the draws depend on it
     if not files:
         print(f"no .npz captures under {a.data}", file=sys.stderr)
         return 2
