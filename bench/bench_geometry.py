@@ -1,0 +1,117 @@
+"""Retrain the 3D classifier from generated captures and re-score it (issue 44; docs/segmentation.md "3D classifier").
+
+    python bench/bench_geometry.py [--data DIR] [--skip-data] [--epochs 15]
+
+1. Makes the training captures where ``DIR`` lacks them (the shipped recipe: scansim's captures of the
+   ``large`` demo site, seeds 100-139 training and 140-147 validation, spinning sweeps in three variants, the other three kinds in one; the
+   demo-made mobile scans and sweeps of ``bench/geometry_data.py``). About 45 minutes on 2 cores the first
+   time; a later run reuses them (each generator skips what it already wrote).
+2. Trains with the shipped model's recipe (its JSON) into ``bench/results/geometry_model.{npz,json}``.
+3. Says whether the retrained arrays equal the shipped ones, and scores both on the generated validation
+   captures (from the training JSON) and on the real hand-labelled scans in ``../shared/data/labelled/``
+   (point level: each point's class from the classifier, no mesh; the labels are never trained on).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "bench" / "results"
+LABELLED = ROOT.parent / "shared" / "data" / "labelled" / "semantickitti"
+SHIPPED = ROOT / "plugins/twinkit-segmentation/twinkit_segmentation/geometry/geometry_model"
+
+
+def _run(args: list[str]) -> None:
+    print("$", " ".join(args), flush=True)
+    subprocess.run([sys.executable, *args], cwd=ROOT, check=True)
+
+
+def make_data(data: Path) -> list[Path]:
+    """The captures the shipped model trains on, generated where missing; the --data folders in order."""
+    sc = data / "scansim"
+    for part, seeds in (("train", "100-139"), ("val", "140-147")):
+        for kinds, variants in (("spinning", "3"), ("tls,mobile,aerial", "1")):
+            _run(["-m", "twinkit_demo_site.captures", "--out", str(sc / part), "--seeds", seeds,
+                  "--kinds", kinds, "--variants", variants, "--size", "large"])
+    if not (data / "demo" / "velo").is_dir():
+        _run(["bench/geometry_data.py", "--out", str(data / "demo")])
+    return [sc / "train", sc / "val", data / "demo" / "demo_mobile", data / "demo" / "velo"]
+
+
+def score_real(model_stem: Path) -> list[dict]:
+    """Point-level scores of one model on each labelled scan (x, y, z, intensity only go in)."""
+    from plyfile import PlyData
+
+    from twinkit_segmentation.geometry.classify import classify_cloud
+    from twinkit_segmentation.geometry.model import load_model
+    from twinkit_segmentation.metrics import score_points
+
+    model = load_model(model_stem)
+    rows = []
+    for ply in sorted(LABELLED.glob("*.ply")):
+        v = PlyData.read(str(ply))["vertex"]
+        xyz = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
+        truth = np.asarray(v["cs_trainid"]).astype(np.uint8)
+        lab = classify_cloud(xyz, np.asarray(v["intensity"], np.float32), model).point_labels()
+        r = score_points(xyz, lab, xyz, truth, upper_bound=False)
+        rows.append({"scan": ply.stem, "coarse": r["coarse_accuracy"], "acc": r["accuracy"], "miou": r["miou"],
+                     **{c: r["per_class"].get(c, {}).get("iou", float("nan"))
+                        for c in ("road", "sidewalk", "building", "vegetation", "terrain", "car", "pole")}})
+    return rows
+
+
+def table(rows: list[dict], title: str) -> str:
+    cols = ["coarse", "acc", "miou", "road", "sidewalk", "building", "vegetation", "terrain", "car", "pole"]
+    out = [f"\n{title}\n", "| scan | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for r in rows:
+        out.append(f"| {r['scan']} | " + " | ".join(f"{r[c]:.1f}" for c in cols) + " |")
+    if rows:
+        out.append("| mean | " + " | ".join(f"{np.nanmean([r[c] for r in rows]):.1f}" for c in cols) + " |")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default=str(RESULTS / "geometry_data"), help="folder of the generated captures")
+    ap.add_argument("--skip-data", action="store_true", help="use --data as it is (folders train, val, demo_mobile, "
+                                                             "velo under it), generate nothing")
+    a = ap.parse_args(argv)
+    data = Path(a.data)
+    t0 = time.perf_counter()
+    folders = ([data / "scansim" / "train", data / "scansim" / "val", data / "demo" / "demo_mobile",
+                data / "demo" / "velo"] if a.skip_data else make_data(data))
+    t_data = time.perf_counter() - t0
+    recipe = json.loads(SHIPPED.with_suffix(".json").read_text())["recipe"]
+    out = RESULTS / "geometry_model"
+    args = ["-m", "twinkit_segmentation.geometry.train", "--out", str(out), "--cache", str(data / "cache"),
+            "--per-class", str(recipe["per_class_per_capture"]), "--epochs", str(recipe["epochs"]),
+            "--hidden", ",".join(map(str, recipe["hidden"])), "--val", recipe["val_regex"], "--seed", str(recipe["seed"])]
+    for f in folders:
+        args += ["--data", str(f)]
+    t1 = time.perf_counter()
+    _run(args)
+    t_train = time.perf_counter() - t1
+    a_new, a_old = np.load(out.with_suffix(".npz")), np.load(SHIPPED.with_suffix(".npz"))
+    same = set(a_new.files) == set(a_old.files) and all(
+        a_new[k].shape == a_old[k].shape and np.array_equal(a_new[k], a_old[k]) for k in a_new.files)
+    print(f"\ndata {t_data:.0f} s, training {t_train:.0f} s; retrained arrays equal the shipped ones: {same}")
+    for stem, name in ((SHIPPED, "shipped"), (out, "retrained")):
+        val = json.loads(stem.with_suffix(".json").read_text()).get("validation", {})
+        print(f"{name}: generated validation mIoU {val.get('miou', float('nan')):.1f}, "
+              f"coarse {val.get('coarse_accuracy', float('nan')):.1f}")
+        if LABELLED.is_dir():
+            print(table(score_real(stem), f"{name} model on the real labelled scans (points, %)"))
+    if not LABELLED.is_dir():
+        print(f"(no {LABELLED}: real scans not scored)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
