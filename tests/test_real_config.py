@@ -75,8 +75,8 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
     ws = out / "demo"
     for f in ("01_site/cloud.e57", "02_read_cloud/points.ply", "03_reconstruct/dense_mesh.ply",
               "06_texture/textured_mesh.obj", "06_texture/textured_mesh.png", "07_evaluate/recon_metrics.json",
-              "13_backproject/labels.npy", "14_evaluate_segmentation/seg_metrics.json",
-              "18_apply_alignment/aligned.xodr", "19_place_signals/aligned.xodr", "19_place_signals/signals.json",
+              "*_backproject/labels.npy", "*_evaluate_segmentation/seg_metrics.json",
+              "*_apply_alignment/aligned.xodr", "*_place_signals/aligned.xodr", "*_place_signals/signals.json",
               "*_road_evidence/labels.npy", "*_road_evidence/road_evidence.json",
               "*_fbx/twin.fbx", "*_usd/twin.usd", "*_gltf/twin.glb"):  # later steps: numbers shift as steps are added
         assert list(ws.glob(f)), f
@@ -89,7 +89,7 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
     assert {e["step"] for e in manifest["degraded"]} <= {"drop_test"}, manifest["degraded"]
     assert manifest["status"] == ("degraded" if p.returncode == 4 else "ok")
     assert (run / "report" / "report.html").is_file()
-    seg = json.loads((ws / "14_evaluate_segmentation" / "seg_metrics.json").read_text())["scores"]
+    seg = json.loads(next(ws.glob("*_evaluate_segmentation/seg_metrics.json")).read_text())["scores"]
     if model == "oracle":  # exact labels through the views: proves rendering and back-projection end to end
         assert seg["miou"] > 60, seg["miou"]
     assert any(i["path"].endswith("cloud.e57") for i in manifest["outputs"])
