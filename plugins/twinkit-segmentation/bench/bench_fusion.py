@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     from twinkit_segmentation.metrics import (_weighted_votes, blend_distribution, decide_distribution, propagate,
                                               scores)
     from twinkit_segmentation.segmesh import unit_normals
-    from twinkit_segmentation.steps import BackprojectParams, context_options
+    from twinkit_segmentation.backproject_parts import BackprojectParams, context_options
 
     bp = BackprojectParams()
     opt = context_options(bp)

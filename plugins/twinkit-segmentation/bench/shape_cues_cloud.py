@@ -37,7 +37,7 @@ def main(argv=None) -> int:
 
     from twinkit.mesh import read_mesh
     from twinkit_segmentation.context import CUES, geometric_context
-    from twinkit_segmentation.steps import BackprojectParams, context_options
+    from twinkit_segmentation.backproject_parts import BackprojectParams, context_options
 
     m = read_mesh(a.cloud)
     v = np.asarray(m.vertices, np.float64)

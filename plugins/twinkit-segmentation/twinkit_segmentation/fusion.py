@@ -2,7 +2,7 @@
 
 Per vertex, each source gives a class distribution over the 19 trainIds:
 
-- the views (``vertex_votes.npy`` blended per segment, :func:`steps.vote_distribution`), with a
+- the views (``vertex_votes.npy`` blended per segment, :func:`backproject_parts.vote_distribution`), with a
   coverage: how many views saw the vertex;
 - the geometry (``geometry_votes.npy`` (n, 19) float32 from a 3D classifier, rows of zeros where it
   has no support: no point near the vertex);
@@ -218,7 +218,7 @@ def run_sample(run: Path, geometry: str, params=None) -> dict:
     blends it), the geometry votes file named ``geometry`` (found in the run's step folders) and
     gt_labels.npy."""
     from twinkit_segmentation.params import BackprojectParams
-    from twinkit_segmentation.steps import vote_distribution
+    from twinkit_segmentation.backproject_parts import vote_distribution
 
     run = Path(run)
 

@@ -1,0 +1,141 @@
+"""The backproject step's parts: the views' distribution, the geometry votes, the cue gates and the fusion with
+the 3D context, each reading what the step read and returning arrays and metrics (docs/segmentation.md
+"Fusion", "Cue gates"). :func:`steps.backproject` reads the files, calls these, writes the labels."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from twinkit import StepContext
+from twinkit import artefacts as A
+
+from .params import BackprojectParams
+
+def context_options(params: BackprojectParams):
+    """The :class:`ContextOptions` of ``backproject``'s params (the bench fuses with the same)."""
+    from twinkit_segmentation.context import ContextOptions
+
+    return ContextOptions(ground_window_m=params.ground_window_m, max_curb_m=params.max_curb_m,
+                          min_object_m=params.min_object_m, max_vehicle_m=params.max_vehicle_m,
+                          min_curb_m=params.min_curb_m, band_width_m=params.band_width_m,
+                          ground_factor=params.context_factor, raised_factor=params.context_factor,
+                          high_factor=params.context_factor, curb_factor=params.curb_factor,
+                          curb_face=params.curb_face, band_default=params.band_default,
+                          shape_factor=params.context_factor)
+
+
+def _geometry_votes(path: Path | None, n: int):
+    """geometry_votes.npy as (n, 19) float64, or None without one; ArtefactError on a wrong shape."""
+    import numpy as np
+
+    if path is None:
+        return None
+    g = A.read_class_votes(path, n, "textured_mesh.ply")
+    return np.nan_to_num(g.astype(np.float64), nan=0.0).clip(0, None)
+
+
+def _fuse_sources(params: BackprojectParams, ctx: StepContext, p_views, votes, geom, cloud):
+    """The views' distribution fused with the geometry's (:func:`fusion.fuse_sources`) with the weights of
+    the capture's kind: (p (n, 19), the fusion's metrics)."""
+    from twinkit_segmentation.fusion import capture_kind, fuse_sources, load_weights
+    from twinkit_segmentation.metrics import _weighted_votes
+
+    if geom is None:
+        return p_views, {"geometry": False}
+    kind = capture_kind(None if cloud is None else cloud.colors)
+    weights = load_weights(params.fusion_weights or None)
+    w = weights.for_kind(kind)
+    n_views = _weighted_votes(votes, params.ignore_classes).sum(axis=1)
+    p, info = fuse_sources(p_views, n_views, geom, w)
+    info.update({"kind": kind, "weights": vars(w), "weights_recipe": weights.recipe.get(kind, weights.recipe)})
+    ctx.log.info("fusion (%s capture): views x %.2f (coverage %.1f views), geometry x %.2f; %d vertices both, %d "
+                 "views only, %d geometry only", kind, w.views, w.coverage_views, w.geometry, info["both"],
+                 info["views_only"], info["geometry_only"])
+    return p, info
+
+
+def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud):
+    """(cue -> (n,) bool gate, or None; the gates' metrics)."""
+    if not params.cue_gates or cloud is None or not params.context:
+        return None, {"used": False}
+    from twinkit_segmentation.gates import capture_quality, cue_gates
+    from twinkit_segmentation.segmesh import unit_normals
+
+    t = time.perf_counter()
+    opt = context_options(params)
+    q = capture_quality(cloud.vertices, mesh.vertices, unit_normals(mesh)[:, 2] >= opt.up_normal_z,
+                        threads=max(1, int(getattr(ctx, "threads", 1) or 1)))
+    gates = cue_gates(q, opt)
+    import numpy as np
+
+    info = {"used": True, "seconds": round(time.perf_counter() - t, 3),
+            "support_m_p50": round(float(np.median(q["support_m"])), 4),
+            "noise_m_p50": round(float(np.median(q["noise_m"])), 4) if np.isfinite(q["noise_m"]).any() else None,
+            "passed_share": {c: round(float(g.mean()), 4) for c, g in gates.items()}}
+    off = {c: 1 - v for c, v in info["passed_share"].items() if c in ("curb", "column", "low") and v < 0.9}
+    if off:
+        ctx.log.warning("cue gates: the capture is too sparse or noisy for %s on %s of the mesh (median support "
+                        "%.3f m, noise %s); those cues stay off there, the views and the geometry decide",
+                        "/".join(off), "/".join(f"{100 * v:.0f} %" for v in off.values()), info["support_m_p50"],
+                        f"{info['noise_m_p50']:.4f} m" if info["noise_m_p50"] is not None else "unmeasured")
+    else:
+        ctx.log.info("cue gates: the capture resolves the cues on %s", info["passed_share"])
+    return gates, info
+
+
+def vote_distribution(params: BackprojectParams, seg, votes):
+    """(p (n, 19) float64 class distribution per vertex, its total votes (n,)): the vertex's own weighted
+    votes, blended with its segment's (``seg`` (n,) int) when ``params.use_segments``. ``votes``: (n, 19)
+    float64 votes per vertex and trainId."""
+    from twinkit_segmentation.metrics import _weighted_votes, blend_distribution
+
+    if params.use_segments:
+        return blend_distribution(seg, votes, params.segment_weight, params.ignore_classes,
+                                  params.class_weights or None)
+    p = _weighted_votes(votes, params.ignore_classes, params.class_weights or None)
+    return p, p.sum(axis=1)
+
+
+def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, conf, fprior, gates=None,
+          unshield=None, cues=None):
+    """The vote scaled by the mesh's geometric cues and the file's classes (``fprior`` (n, 19) or None), or
+    Potts smoothing alone: (labels, confidence, mesh edges or None, the fusion's metrics, seconds)."""
+    from twinkit.cityscapes import IGNORE
+    from twinkit.mesh import edges as mesh_edges
+    from twinkit_segmentation.context import fuse_with_context, near_unanimous, potts_smooth
+    from twinkit_segmentation.metrics import _weighted_votes
+    from twinkit_segmentation.segmesh import unit_normals
+
+    edges = None
+    cmet: dict = {}
+    t_ctx = 0.0
+    cues = list(params.context_cues) if cues is None else list(cues)
+    if (params.context and cues) or fprior is not None:
+        # the file's classes go through the same fusion as the cues (with no cue when context is off)
+        cues = cues if params.context else []
+        t1 = time.perf_counter()
+        edges = mesh_edges(mesh.faces, len(mesh.vertices))
+        keep = labels == IGNORE
+        sure = near_unanimous(_weighted_votes(votes, params.ignore_classes, params.class_weights or None), None,
+                              params.keep_share, params.keep_votes)
+        if unshield is not None:
+            sure &= ~unshield
+        labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, context_options(params),
+                                               cues, min_retained=params.min_retained,
+                                               smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,
+                                               keep=sure, extra_prior=fprior, gates=gates)
+        labels[keep] = IGNORE  # too few votes stays too few votes
+        t_ctx = time.perf_counter() - t1
+        ctx.log.info("3D context (%s): %d vertices changed (%s), %d votes explained away, %d smoothed, "
+                     "%d objects above the ground, %d near-unanimous vertices kept against a cue, %.2f s",
+                     "+".join(cmet["cues"]), cmet["changed"],
+                     ", ".join(f"{c} {cmet[c + '_changed']}" for c in cmet["cues"]), cmet["explained_away"],
+                     cmet["smoothed"], cmet["objects"], cmet["kept_unanimous"], t_ctx)
+    elif params.smooth_beta > 0:
+        t1 = time.perf_counter()
+        edges = mesh_edges(mesh.faces, len(mesh.vertices))
+        labels, n_s = potts_smooth(labels, p, edges, params.smooth_beta, params.smooth_iters)
+        cmet = {"smoothed": n_s}
+        t_ctx = time.perf_counter() - t1
+        ctx.log.info("Potts smoothing: %d vertices changed, %.2f s", n_s, t_ctx)
+    return labels, conf, edges, cmet, t_ctx
