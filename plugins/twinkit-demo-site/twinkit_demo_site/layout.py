@@ -8,12 +8,11 @@ Layout (right-hand traffic, as in Finland):
   side; sidewalks 3.5 m, raised by the curb height (10-15 cm).
 - side street along y: 2 lanes; the north arm is one-way southbound, the south
   arm two-way. Zebra crossings on all four arms, stop lines before them.
-- four blocks: NE and NW rows of buildings (NW with a wall), SW a walled yard
-  and a building, SE a fenced park with trees and bushes. Street lamps,
-  traffic lights on the four corners, traffic signs, street trees, parked cars,
-  a motorcycle and a bicycle.
+- four blocks: NE and NW rows of buildings (NW with a wall), SW a walled yard and a building, SE a fenced
+  park with trees and bushes. Street lamps, traffic lights on the four corners, traffic signs, street trees,
+  parked cars, a motorcycle and a bicycle.
 
-The objects themselves (buildings, fences, plants, street furniture, vehicles) are built by objects.py.
+The objects themselves are built by objects.py; the road truth and OSM extract by street_truth.py.
 """
 from __future__ import annotations
 
@@ -27,7 +26,9 @@ from twinkit.mesh import Mesh
 from twinkit_demo_site import objects as ob
 from twinkit_demo_site.meshbuild import MAX_ASPECT, MeshBuilder
 from twinkit_demo_site.objects import LABELS, L  # noqa: F401  (LABELS: the site's classes, imported from here too)
+from twinkit_demo_site.street_truth import osm_extract, roads_truth
 from twinkit_demo_site.textures import CAR_PAINTS, FACADES, Atlas
+from twinkit_demo_site.variety import Variety, random_variety  # noqa: F401  (random_variety: imported from here too)
 
 GROUND_KINDS = {  # kind -> (material, label, raised)
     "asphalt": ("asphalt", cityscapes.ROAD, False),
@@ -67,42 +68,6 @@ class Dims:
     @property
     def bs(self) -> float:
         return self.rs + self.sidewalk_m
-
-
-@dataclass
-class Variety:
-    """Layout knobs for training-data variety (simulated captures); the defaults build the demo as it always was.
-
-    ``floors``: building floor counts drawn in [lo, hi); ``park_p``: chance that a parking slot holds a car;
-    ``tree_scale``: multiplies every tree's size; ``street_trees``: chance of a street tree (in a grass pit) per
-    ~11 m of the main road's north and south-west sidewalks and the side streets' sidewalks; ``verge_m``: width (m) of
-    a grass verge between the curb and the sidewalk outside the junction (0 = none); ``setback_m``: front gardens (grass)
-    this deep between the sidewalk and the buildings; ``hedges``: chance of a hedge along each front garden, and of
-    a tree in a deep one; ``lane_m``, ``park_m``,
-    ``sidewalk_m``: the street's widths (None = :class:`Dims`' defaults)."""
-
-    floors: tuple[int, int] = (3, 7)
-    park_p: float = 0.65
-    tree_scale: float = 1.0
-    street_trees: float = 0.0
-    verge_m: float = 0.0
-    setback_m: float = 0.0
-    hedges: float = 0.0
-    lane_m: float | None = None
-    park_m: float | None = None
-    sidewalk_m: float | None = None
-
-
-def random_variety(rng: np.random.Generator) -> Variety:
-    """A random :class:`Variety`: low and high-rise streets, few or many parked cars and trees, verges, widths."""
-    lo = int(rng.integers(1, 4))
-    sidewalk = float(rng.uniform(2.5, 5.0))
-    verge = float(rng.uniform(0.8, 0.5 * sidewalk)) if rng.random() < 0.35 else 0.0
-    return Variety(floors=(lo, lo + int(rng.integers(2, 8))), park_p=float(rng.uniform(0.2, 0.95)),
-                   tree_scale=float(rng.uniform(0.7, 1.4)), street_trees=float(rng.uniform(0.0, 1.0)), verge_m=verge,
-                   setback_m=float(rng.uniform(1.5, 7.0)) if rng.random() < 0.6 else 0.0,
-                   hedges=float(rng.uniform(0.3, 1.0)),
-                   lane_m=float(rng.uniform(2.9, 3.6)), park_m=float(rng.uniform(1.9, 2.6)), sidewalk_m=sidewalk)
 
 
 @dataclass
@@ -569,66 +534,6 @@ def _vehicles(mb: MeshBuilder, rng, d: Dims, m: Marks, park_p: float = 0.65) -> 
 
 
 # ---------------------------------------------------------------- truth and routes
-def _roads_truth(d: Dims, m: Marks) -> dict:
-    """roads_truth.json: the roads, junction, lanes (driving direction) and crossings in the site frame."""
-    H, rm, rs = d.half_m, d.rm, d.rs
-    zx0, zx1, zy0, zy1 = m.zx0, m.zx1, m.zy0, m.zy1
-    lane_lines = []
-    for yl, dirn in ((-d.lane_m * 1.5, 1), (-d.lane_m * 0.5, 1), (d.lane_m * 0.5, -1), (d.lane_m * 1.5, -1)):
-        xs_line = [-H, H] if dirn > 0 else [H, -H]
-        lane_lines.append({"road": "main", "direction": "east" if dirn > 0 else "west",
-                           "points": [[xs_line[0], yl, 0.0], [xs_line[1], yl, 0.0]]})
-    for xl_ in (-d.lane_m / 2, d.lane_m / 2):
-        lane_lines.append({"road": "side_north", "direction": "south", "points": [[xl_, H, 0.0], [xl_, rm, 0.0]]})
-    lane_lines.append({"road": "side_south", "direction": "south", "points": [[-d.lane_m / 2, -rm, 0.0], [-d.lane_m / 2, -H, 0.0]]})
-    lane_lines.append({"road": "side_south", "direction": "north", "points": [[d.lane_m / 2, -H, 0.0], [d.lane_m / 2, -rm, 0.0]]})
-    return {
-        "frame": "site local (metres, x east, y north, z up; origin = base point)",
-        "roads": [
-            {"name": "main", "centerline": [[-H, 0.0, 0.0], [H, 0.0, 0.0]], "width_m": 2 * rm,
-             "lanes": 4, "oneway": False, "parking_strip_m": d.park_m,
-             "polygon": [[-H, -rm], [H, -rm], [H, rm], [-H, rm]]},
-            {"name": "side_north", "centerline": [[0.0, H, 0.0], [0.0, rm, 0.0]], "width_m": 2 * rs, "lanes": 2, "oneway": True,
-             "polygon": [[-rs, rm], [rs, rm], [rs, H], [-rs, H]]},
-            {"name": "side_south", "centerline": [[0.0, -rm, 0.0], [0.0, -H, 0.0]], "width_m": 2 * rs, "lanes": 2, "oneway": False,
-             "polygon": [[-rs, -H], [rs, -H], [rs, -rm], [-rs, -rm]]},
-        ],
-        "junction": {"polygon": [[-rs, -rm], [rs, -rm], [rs, rm], [-rs, rm]], "traffic_signals": True},
-        "lanes": lane_lines,
-        "crossings": [
-            {"road": "main", "polygon": [[zx0, -rm], [zx1, -rm], [zx1, rm], [zx0, rm]]},
-            {"road": "main", "polygon": [[-zx1, -rm], [-zx0, -rm], [-zx0, rm], [-zx1, rm]]},
-            {"road": "side_north", "polygon": [[-rs, zy0], [rs, zy0], [rs, zy1], [-rs, zy1]]},
-            {"road": "side_south", "polygon": [[-rs, -zy1], [rs, -zy1], [rs, -zy0], [-rs, -zy0]]},
-        ],
-        "sidewalk_width_m": d.sidewalk_m,
-        "curb_height_m": d.curb_m,
-    }
-
-
-def _osm(d: Dims, m: Marks) -> dict:
-    """The OpenStreetMap view of the junction in the true site frame: nodes id -> (x, y, tags), ways."""
-    H = d.half_m
-    zxm, zym = (m.zx0 + m.zx1) / 2, (m.zy0 + m.zy1) / 2
-    return {
-        "nodes": {  # id -> (x, y, tags)
-            1: (-H, 0.0, {}), 2: (-zxm, 0.0, {"highway": "crossing", "crossing": "zebra", "crossing:markings": "zebra"}),
-            3: (0.0, 0.0, {"highway": "traffic_signals"}),
-            4: (zxm, 0.0, {"highway": "crossing", "crossing": "zebra", "crossing:markings": "zebra"}), 5: (H, 0.0, {}),
-            6: (0.0, H, {}), 7: (0.0, zym, {"highway": "crossing", "crossing": "zebra", "crossing:markings": "zebra"}),
-            8: (0.0, -zym, {"highway": "crossing", "crossing": "zebra", "crossing:markings": "zebra"}), 9: (0.0, -H, {}),
-        },
-        "ways": [
-            (101, [1, 2, 3, 4, 5], {"highway": "secondary", "name": "Demokatu", "lanes": "4", "oneway": "no",
-                                    "sidewalk": "both", "parking:both": "lane", "maxspeed": "40", "surface": "asphalt"}),
-            (102, [6, 7, 3], {"highway": "residential", "name": "Testikuja", "lanes": "2", "oneway": "yes",
-                              "sidewalk": "both", "maxspeed": "30", "surface": "asphalt"}),
-            (103, [3, 8, 9], {"highway": "residential", "name": "Testikuja", "lanes": "2", "oneway": "no",
-                              "lanes:forward": "1", "lanes:backward": "1", "sidewalk": "both", "maxspeed": "30", "surface": "asphalt"}),
-        ],
-    }
-
-
 def _routes(scene: Scene, d: Dims, m: Marks) -> None:
     """The scanner car's passes, the photo walks and the pedestrian crossing during the first pass."""
     H, rm, rs, bm, bs = d.half_m, d.rm, d.rs, d.bm, d.bs
@@ -685,8 +590,8 @@ def build_scene(half_m: float, seed: int, atlas: Atlas, variety: Variety | None 
     cz = d.curb_m
     scene.buildings = blocks.buildings
     scene.solids = blocks.buildings + [{"min": [w[0], w[2], cz], "max": [w[1], w[3], cz + w[4]]} for w in blocks.walls]
-    scene.roads_truth = _roads_truth(d, marks)
-    scene.osm = _osm(d, marks)
+    scene.roads_truth = roads_truth(d, marks)
+    scene.osm = osm_extract(d, marks)
     _routes(scene, d, marks)
     scene.gcp_points = marks.gcp_points
     scene.counts = {"buildings": len(blocks.buildings), "cars": len(cars), "trees": len(blocks.trees),
