@@ -322,6 +322,25 @@ def fill_allowed(labels: np.ndarray, missing: np.ndarray, allowed: np.ndarray, e
     return lab, miss
 
 
+def gated_context(vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray, opt: ContextOptions,
+                  gates: dict | None) -> tuple[dict, dict, np.ndarray | None]:
+    """:func:`geometric_context` with each cue kept only where its gate (cue -> (n,) bool) is set; the curb's
+    gate acts on the curb steps, ``low``'s also needs the scan's reach. Returns (context, the cues' vertex
+    counts before gating, the curb step gate or None)."""
+    gates = dict(gates or {})
+    step_gate = gates.pop("curb", None)
+    ctx = geometric_context(vertices, normals, opt, edges, step_gate=step_gate)
+    if "low" in gates:
+        from .gates import reach_gate
+
+        gates["low"] = np.asarray(gates["low"], bool) & reach_gate(vertices, ctx["height"], opt)
+    ungated = {c: int(ctx[c].sum()) for c in gates if c in ctx}
+    for c, g in gates.items():
+        if c in ctx:
+            ctx[c] = ctx[c] & np.asarray(g, bool)
+    return ctx, ungated, step_gate
+
+
 def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray,
                       opt: ContextOptions | None = None, cues=DEFAULT_CUES, segments: np.ndarray | None = None,
                       segment_weight: float = 0.0, min_retained: float = 0.2,
@@ -352,17 +371,7 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
 
     opt = opt or ContextOptions()
     cues = tuple(c for c in cues if c in CUES)
-    gates = dict(gates or {})
-    step_gate = gates.pop("curb", None)
-    ctx = geometric_context(vertices, normals, opt, edges, step_gate=step_gate)
-    if "low" in gates:
-        from .gates import reach_gate
-
-        gates["low"] = np.asarray(gates["low"], bool) & reach_gate(vertices, ctx["height"], opt)
-    ungated = {c: int(ctx[c].sum()) for c in gates if c in ctx}
-    for c, g in gates.items():
-        if c in ctx:
-            ctx[c] = ctx[c] & np.asarray(g, bool)
+    ctx, ungated, step_gate = gated_context(vertices, normals, edges, opt, gates)
     base, _ = decide_distribution(p)
     prior = context_prior(ctx, opt, cues)
     if segments is not None and segment_weight > 0:
@@ -406,16 +415,20 @@ def fuse_with_context(p: np.ndarray, vertices: np.ndarray, normals: np.ndarray, 
         unary[ea] = allowed[ea]
         lab, smoothed = potts_smooth(lab, unary, edges, smooth_beta, smooth_iters, fixed=kept)
     metrics = {"cues": list(cues), "explained_away": int(ea.sum()), "changed": int((lab != base).sum()),
-               "smoothed": smoothed,
-               "step_cells": ctx["step_cells"], "objects": ctx["objects"],
-               "kept_unanimous": int(shielded.sum()),
-               "gated_off": {c: n - int(ctx[c].sum()) for c, n in ungated.items()},
-               "step_cells_gated_off": ctx["step_cells_ungated"] - ctx["step_cells"] if step_gate is not None else 0}
+               "smoothed": smoothed, "kept_unanimous": int(shielded.sum())}
+    return lab, conf, {**metrics, **_cue_metrics(ctx, cues, lab != base, ungated, step_gate is not None)}
+
+
+def _cue_metrics(ctx: dict, cues, changed: np.ndarray, ungated: dict, step_gated: bool) -> dict:
+    """Per cue: the vertices it marks and those whose label the fusion changed there; what the gates took off."""
+    out = {"step_cells": ctx["step_cells"], "objects": ctx["objects"],
+           "gated_off": {c: n - int(ctx[c].sum()) for c, n in ungated.items()},
+           "step_cells_gated_off": ctx["step_cells_ungated"] - ctx["step_cells"] if step_gated else 0}
     for c in CUES:
         m = ctx[c]
-        metrics[f"{c}_vertices"] = int(m.sum())
-        metrics[f"{c}_changed"] = int((m & (lab != base)).sum()) if c in cues else 0
-    return lab, conf, metrics
+        out[f"{c}_vertices"] = int(m.sum())
+        out[f"{c}_changed"] = int((m & changed).sum()) if c in cues else 0
+    return out
 
 
 def potts_smooth(labels: np.ndarray, unary: np.ndarray, edges: np.ndarray, beta: float = 1.0,
