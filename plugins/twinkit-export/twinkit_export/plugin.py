@@ -27,6 +27,18 @@ class SplitParams:
     max_texture_px: int = param(8192, ge=0, le=65536,
                                 help="A larger texture atlas is downscaled to this size (px; 8192 is Unreal's "
                                      "default limit); 0 = keep the size.")
+    sidewalk_cleanup: bool = param(True, help="Join or dissolve the sidewalk fragments so each block's sidewalk is one "
+                                              "connected surface for CARLA's navmesh (sidewalks.py); false: the "
+                                              "labels as they come.")
+    sidewalk_join_gap_m: float = param(1.5, ge=0, help="Longest walkable path (m) over road-level ground of the "
+                                                       "pavement that joins a sidewalk fragment to its surface.")
+    sidewalk_keep_m2: float = param(20.0, ge=0, help="A sidewalk surface at least this large (m^2) is kept when it "
+                                                     "cannot be joined; smaller fragments are dissolved into the "
+                                                     "class around them.")
+    sidewalk_max_slope: float = param(0.35, gt=0, help="Steepest mesh edge (rise over run) a joining path may follow.")
+    sidewalk_max_rise_m: float = param(0.05, ge=0, help="A joining path rises and falls at most this much (m), and the "
+                                                        "fragment lies within this of the pavement it joins: a kerb "
+                                                        "(6 cm and more) is never crossed.")
 
 
 @dataclass
@@ -158,6 +170,17 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
     if labels.dtype.kind not in "ui" or labels.min() < 0 or labels.max() > 255:
         raise InputError(f"{Path(in_labels_npy).name}: labels must be integers 0-255 (trainIds, 255 = unlabelled)")
     t_read = time.perf_counter() - t0
+    sidewalk = {}
+    if params.sidewalk_cleanup:
+        from .sidewalks import connect_sidewalks
+
+        sw = connect_sidewalks(mesh.vertices, mesh.faces, labels, join_gap_m=params.sidewalk_join_gap_m,
+                               keep_m2=params.sidewalk_keep_m2, max_slope=params.sidewalk_max_slope,
+                               max_rise_m=params.sidewalk_max_rise_m)
+        labels, sidewalk = sw.labels, sw.stats()
+        ctx.log.info("sidewalk: %d surfaces -> %d (%d fragments joined, %d dissolved: %.1f m^2; %d vertices "
+                     "relabelled)", sw.components_before, sw.components_after, sw.joined, sw.dissolved,
+                     sw.dissolved_m2, sw.relabelled_vertices)
     res = split_mesh(mesh, labels.astype(np.uint8))
     out = Path(out_class_meshes_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -195,14 +218,15 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
                         "carla_tag": ci.carla_tag, "carla_auto_tag": ci.auto_tag, "carla_folder": ci.carla_folder,
                         "color": list(ci.color)})
     manifest = {"source": Path(in_textured_mesh_obj).name, "texture": tex_name, **tex_info,
-                "frame": "site local: metres, x east, y north, z up", "stats": res.stats, "classes": classes}
+                "frame": "site local: metres, x east, y north, z up", "stats": {**res.stats, **sidewalk},
+                "classes": classes}
     (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     ctx.log.info("split %d vertices / %d faces into %d classes (%d border copies)", res.stats["source_vertices"],
                  res.stats["source_faces"], len(classes), res.stats["border_copies"])
     ctx.log.info("dropped before the split: %d degenerate faces, %d duplicate faces (%d of them back-to-back)",
                  res.stats["degenerate_faces_dropped"], res.stats["duplicate_faces_dropped"],
                  res.stats["back_to_back_faces_dropped"])
-    return {**res.stats, "read_s": round(t_read, 2), "total_s": round(time.perf_counter() - t0, 2),
+    return {**res.stats, **sidewalk, "read_s": round(t_read, 2), "total_s": round(time.perf_counter() - t0, 2),
             "per_class": {c["name"]: {"vertices": c["vertices"], "own": c["own_vertices"], "faces": c["faces"]}
                           for c in classes}}
 

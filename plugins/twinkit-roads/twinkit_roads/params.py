@@ -90,3 +90,15 @@ class RoadEvidenceParams:
     raster_m: float = param(0.1, gt=0, help="metres: pixel size of the lane raster")
     step_m: float = param(0.5, gt=0, help="metres: lanes are sampled this far apart along s")
     picture_px_per_m: float = param(10.0, gt=0, help="pixels per metre of the evidence picture")
+
+
+@dataclass
+class ParkingParams:
+    enabled: bool = param(True, help="false: aligned.xodr passes through unchanged (no parking lane is added)")
+    osm_tags: bool = param(True, help="an OSM parking:<side> / parking:both (or parking:lane:*) tag on the road's way asks for a parking lane")
+    scanned_vehicles: bool = param(True, help="a scanned vehicle standing between the outermost driving lane and the kerb asks for a parking lane")
+    default_width_m: float = param(2.2, gt=0, le=6, help="metres: width of a parking lane where the scan shows no kerb beside the driving lane")
+    min_width_m: float = param(1.6, gt=0, help="metres: a kerb nearer than this to the driving lane leaves no room for a parking lane")
+    max_width_m: float = param(3.2, gt=0, help="metres: a kerb farther than this is not read as the parking strip's (a wider strip gets default_width_m)")
+    min_kerb_samples: int = param(5, ge=1, help="kerb profiles (one per step_m along the lane) that must see the kerb before its distance is used")
+    step_m: float = param(1.0, gt=0, help="metres: lane samples along s for the kerb profiles and the vehicles")

@@ -8,6 +8,7 @@ Steps (recipes/roads_demo.yaml):
   roads_overview  top view of the network (recipe roads)   -> roads_overview.png
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
+  parking_lanes   parking lanes where OSM or the scan has them -> aligned.xodr (again), parking.json
   place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
   road_evidence   the lanes vote for road / sidewalk        -> labels.npy (again), road_evidence.json, .png
 """
@@ -24,7 +25,8 @@ from twinkit.geo.xodr import from_scan as from_scan_tag
 
 from . import __version__
 from .convert import ConvertParams
-from .params import AlignParams, ApplyParams, OverviewParams, RoadEvidenceParams, SignalParams  # noqa: F401 (re-exported)
+from .params import (AlignParams, ApplyParams, OverviewParams, ParkingParams, RoadEvidenceParams,  # noqa: F401 (re-exported)
+                     SignalParams)
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
                       scan_source, site_radius)
@@ -249,6 +251,46 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
     return metrics
 
 
+def parking_lanes(params: ParkingParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
+                  in_labels_npy: Path, out_aligned_xodr: Path, out_parking_json: Path,
+                  in_osm_osm: Path | None = None) -> dict:
+    """Parking lanes between the outermost driving lane and the sidewalk lane where OSM or the scan shows
+    parked cars (parking.py), so the sidewalk lanes lie on the sidewalk."""
+    import numpy as np
+
+    from twinkit.cityscapes import WIDE_VEHICLES
+
+    from .parking import add_parking, osm_parking
+    from .scan import is_empty_map
+
+    params = params or ParkingParams()
+    text = A.read_opendrive(in_aligned_xodr)
+    if not params.enabled or is_empty_map(text):
+        A.write_opendrive(out_aligned_xodr, text)
+        why = "switched off" if not params.enabled else "no roads in the map"
+        out_parking_json.write_text(json.dumps({"enabled": bool(params.enabled), "note": why, "sides": []}, indent=1))
+        ctx.log.info("parking lanes: %s; aligned.xodr unchanged", why)
+        return {"parking_lanes": 0}
+    mesh = A.read_textured_mesh(in_textured_mesh_ply)
+    labels = A.read_labels(in_labels_npy, len(mesh.vertices), in_textured_mesh_ply.name)
+    osm = osm_parking(in_osm_osm) if params.osm_tags else {}
+    res = add_parking(text, mesh.vertices, mesh.faces, labels if params.scanned_vehicles else np.full_like(labels, 255),
+                      osm_sides=osm, vehicle_ids=WIDE_VEHICLES, default_width_m=params.default_width_m,
+                      min_width_m=params.min_width_m, max_width_m=params.max_width_m,
+                      min_kerb_samples=params.min_kerb_samples, step_m=params.step_m)
+    A.write_opendrive(out_aligned_xodr, res.text)
+    doc = {"enabled": True, "parking_lanes": res.inserted, "sides": [s.doc() for s in res.sides],
+           "params": {k: getattr(params, k) for k in params.__dataclass_fields__}}
+    out_parking_json.write_text(json.dumps(doc, indent=1))
+    for s in res.sides:
+        ctx.log.info("parking lanes: road %d %s: %s", s.road, s.side,
+                     f"{s.width_m:.2f} m ({s.why})" if s.width_m > 0 else s.why)
+    if (osm or params.scanned_vehicles) and res.inserted == 0:
+        ctx.log.warning("parking lanes: none added (no OSM parking tag on the roads and no scanned vehicle beside "
+                        "them): the sidewalk lanes stay where netconvert put them")
+    return {"parking_lanes": res.inserted, "parked_vehicles_seen": sum(s.vehicles for s in res.sides)}
+
+
 def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
                   in_labels_npy: Path, out_aligned_xodr: Path, out_signals_json: Path,
                   out_signals_png: Path) -> dict:
@@ -388,6 +430,8 @@ def twinkit_register_steps(register):
              description="fit the road network to the mesh's road surface (yaw, translation); alignment.json")
     register("apply_alignment", apply_alignment, params=ApplyParams, version=VERSION,
              description="move the OpenDRIVE by alignment.json; top-down QA picture")
+    register("parking_lanes", parking_lanes, params=ParkingParams, version=VERSION,
+             description="OpenDRIVE parking lanes where OSM or the scan shows parked cars; aligned.xodr, parking.json")
     register("place_signals", place_signals, params=SignalParams, version=VERSION,
              description="OpenDRIVE signals at the scanned traffic lights and signs; signals.json, signals.png")
     register("road_evidence", road_evidence, params=RoadEvidenceParams, version=VERSION,
