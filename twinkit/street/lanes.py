@@ -253,3 +253,21 @@ class LaneMap:
             out.append(Landmark(str(lm.id), str(lm.type), int(lm.road_id), float(lm.s),
                                 np.array([loc.x, -loc.y, loc.z], float)))
         return out
+
+    def lane_at(self, xyz, lane_type: str = "Any") -> list[tuple[LaneKey, str] | None]:
+        """For each site-frame point of ``xyz`` (k, 3) (or (k, 2): z = 0), the lane CARLA finds there:
+        ``Map::GetWaypoint`` (``carla.Map.get_waypoint(loc, project_to_road=False, lane_type=...)``), which
+        answers only within half the lane's width of its centre. ``lane_type``: a ``carla.LaneType`` name
+        (``Sidewalk``, ``Driving``, ``Parking``, ``Any``). Each answer is ((road, section, lane), CARLA's
+        lane-type name) or None."""
+        import carla
+
+        want = getattr(carla.LaneType, lane_type)
+        pts = np.asarray(xyz, float).reshape(len(xyz), -1)
+        if pts.shape[1] == 2:
+            pts = np.column_stack([pts, np.zeros(len(pts))])
+        out: list[tuple[LaneKey, str] | None] = []
+        for x, y, z in to_carla(pts).tolist():
+            w = self._map.get_waypoint(carla.Location(x, y, z), project_to_road=False, lane_type=want)
+            out.append(None if w is None else ((w.road_id, w.section_id, w.lane_id), str(w.lane_type)))
+        return out

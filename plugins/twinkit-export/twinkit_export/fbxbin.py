@@ -168,3 +168,42 @@ def summarize(path: Path) -> FbxSummary:
     meshes = [FbxModel(name, geoms.get(model_geom.get(mid), 0), props, model_mats.get(mid, []))
               for mid, (name, props) in models.items()]
     return FbxSummary(version, meshes, sorted(set(mats.values())), textures)
+
+
+def mesh_geometry(path: Path, names: tuple[str, ...] | None = None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{model name: (vertices (n, 3) float64 as stored (no node transform applied), triangles (m, 3) int64)}
+    of the mesh models of a binary FBX (``names``: only these). Polygons are fanned into triangles."""
+    _, nodes = read_tree(path)
+    top = {n.name: n for n in nodes}
+    objects, conns = top.get("Objects"), top.get("Connections")
+    if objects is None:
+        raise FbxReadError(f"{path}: no Objects section")
+    geoms, models = {}, {}
+    for o in objects.children:
+        if o.name == "Geometry" and len(o.props) > 2 and o.props[2] == "Mesh":
+            geoms[o.props[0]] = o
+        elif o.name == "Model" and len(o.props) > 2 and o.props[2] == "Mesh":
+            models[o.props[0]] = _object_name(o.props[1])
+    out = {}
+    for c in (conns.all("C") if conns is not None else []):
+        if len(c.props) < 3 or c.props[0] != "OO" or c.props[1] not in geoms or c.props[2] not in models:
+            continue
+        name = models[c.props[2]]
+        if names is not None and name not in names:
+            continue
+        g = geoms[c.props[1]]
+        vn, pn = g.child("Vertices"), g.child("PolygonVertexIndex")
+        if vn is None or pn is None:
+            continue
+        v = array_values(vn.props[0]).astype(np.float64).reshape(-1, 3)
+        pvi = array_values(pn.props[0]).astype(np.int64)
+        ends = np.flatnonzero(pvi < 0)
+        idx = np.where(pvi < 0, ~pvi, pvi)
+        tris = []
+        start = 0
+        for e in ends.tolist():
+            poly = idx[start:e + 1]
+            tris.extend((poly[0], poly[k], poly[k + 1]) for k in range(1, len(poly) - 1))
+            start = e + 1
+        out[name] = (v, np.asarray(tris, np.int64).reshape(-1, 3))
+    return out
