@@ -276,3 +276,29 @@ def test_navmesh_names_are_exact():
     assert cc.NAV_AREAS["Road_Sidewalk"] == "sidewalk"
     assert cc.NAV_AREAS.get("Road_Sidewalk_1", "block") == "block"
     assert cc.NAV_AREAS["Road_Road"] == "road"
+
+
+# ----------------------------------------------------------------------------- walkers and parked cars
+
+def test_parked_car_on_a_sidewalk_lane_is_reported(package, tmp_path):
+    """Map.cpp Map::GetWaypoint (lane type Sidewalk): the synthetic street's map has a sidewalk lane right of
+    its road (conftest.straight_xodr, y0 5 m: the lane from 1.5 to -0.5 m north); a car there is reported,
+    one on the pavement beyond it is not. contract_sidewalks.py"""
+    root = _copy(package, tmp_path)
+    assert cc.check_package(root, "TeststreetTwin", expect_decals=False).ok
+    pkg_xodr = (root / "Import" / "TeststreetTwin" / "Teststreet.xodr").read_text()
+    from twinkit.street.lanes import LaneMap, to_carla
+
+    lm = LaneMap(pkg_xodr)
+    side = lm.lanes(1.0)
+    sw = side.xyz[side.is_type("sidewalk")][len(side) // 4]  # a sidewalk-lane centre, package frame
+    on = to_carla(sw)
+    actors = [{"id": 0, "name": "Car_000", "class": "car", "blueprint": None,
+               "transform": {"x": float(on[0]), "y": float(on[1]), "z": 0.2, "pitch": 0.0, "yaw": 0.0, "roll": 0.0}}]
+    (root / "actors.json").write_text(json.dumps({"actors": actors}))
+    (root / "spawn_actors.py").write_text("# spawns nothing\n")
+    rep = cc.check_package(root, "TeststreetTwin", expect_decals=False)
+    assert _rules(rep) == {"parked_on_sidewalk"}, [str(v) for v in rep.violations]
+    actors[0]["transform"]["y"] = float(on[1]) + 30.0  # 30 m south of the road: off every lane
+    (root / "actors.json").write_text(json.dumps({"actors": actors}))
+    assert cc.check_package(root, "TeststreetTwin", expect_decals=False).ok

@@ -6,8 +6,8 @@ other node blocks), then Recast (``Util/DockerUtils/dist/build.sh``). A walker i
 navmesh point (``LibCarla/source/carla/nav/Navigation.cpp``, ``GetRandomLocation``) and routed over the
 navmesh (``Navigation::GetAgentRoute``, ``dtNavMeshQuery::findPath``), so a sidewalk piece apart from its
 block's pavement is an island its walkers never leave. Rule: within each block (a region the OpenDRIVE's
-carriageway lanes enclose) the ``Road_Sidewalk`` faces form one connected surface, and no piece lies on
-the carriageway apart from every block's surface.
+carriageway lanes enclose) the ``Road_Sidewalk`` faces form one connected surface, and no small piece
+(under 5 m^2) lies on the carriageway apart from every block's surface.
 
 ``parked_on_sidewalk``: a parked vehicle of ``actors.json`` (a wide vehicle: car, truck, bus, train) must not
 stand on an OpenDRIVE sidewalk lane: ``Map::GetWaypoint`` (``LibCarla/source/carla/road/Map.cpp``) with the
@@ -124,9 +124,12 @@ def carriageway_blocks(xodr_text: str, lo: np.ndarray, hi: np.ndarray, cell_m: f
     return blocks.astype(np.int32), int(n)
 
 
-def sidewalk_blocks(vertices: np.ndarray, faces: np.ndarray, xodr_text: str, cell_m: float = 0.2) -> BlockReport:
+def sidewalk_blocks(vertices: np.ndarray, faces: np.ndarray, xodr_text: str, cell_m: float = 0.2,
+                    stray_max_m2: float = 5.0) -> BlockReport:
     """The ``Road_Sidewalk`` surface (``vertices`` (n, 3), ``faces`` (m, 3), the OpenDRIVE's frame) per block:
-    each connected piece goes to the block that holds most of its area (block 0, the carriageway: stray)."""
+    each connected piece goes to the block that holds most of its area; a piece mostly on the carriageway
+    (block 0) smaller than ``stray_max_m2`` is stray (a larger one is a surface of its own: a refuge island,
+    a median; it joins the blocks through crosswalks)."""
     from .sidewalks import face_areas
 
     rep = BlockReport()
@@ -144,7 +147,11 @@ def sidewalk_blocks(vertices: np.ndarray, faces: np.ndarray, xodr_text: str, cel
         sel = comp == p
         votes = np.bincount(blk[sel], weights=area[sel])
         b, a = int(np.argmax(votes)), float(area[sel].sum())
-        (rep.stray if b == 0 else rep.blocks.setdefault(b, [])).append(a)
+        if b == 0:
+            if a < stray_max_m2:
+                rep.stray.append(a)
+            continue
+        rep.blocks.setdefault(b, []).append(a)
     for a in rep.blocks.values():
         a.sort(reverse=True)
     return rep

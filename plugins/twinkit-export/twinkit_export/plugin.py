@@ -148,6 +148,21 @@ def _camel(name: str) -> str:
 
 # ----------------------------------------------------------------------------- steps
 
+def _clean_sidewalks(params: SplitParams, mesh, labels, log):
+    """(labels, stats): the sidewalk fragments joined or dissolved (sidewalks.py), or the labels as they come."""
+    if not params.sidewalk_cleanup:
+        return labels, {}
+    from .sidewalks import connect_sidewalks
+
+    sw = connect_sidewalks(mesh.vertices, mesh.faces, labels, join_gap_m=params.sidewalk_join_gap_m,
+                           keep_m2=params.sidewalk_keep_m2, max_slope=params.sidewalk_max_slope,
+                           max_rise_m=params.sidewalk_max_rise_m)
+    log.info("sidewalk: %d surfaces -> %d (%d fragments joined, %d dissolved: %.1f m^2; %d vertices relabelled)",
+             sw.components_before, sw.components_after, sw.joined, sw.dissolved, sw.dissolved_m2,
+             sw.relabelled_vertices)
+    return sw.labels, sw.stats()
+
+
 def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path, in_textured_mesh_obj: Path,
                   out_class_meshes_dir: Path) -> dict:
     """One PLY per class (palette colours, class_id, source_index, face UVs) + classes.json + the texture."""
@@ -170,17 +185,7 @@ def split_classes(params: SplitParams, ctx: StepContext, *, in_labels_npy: Path,
     if labels.dtype.kind not in "ui" or labels.min() < 0 or labels.max() > 255:
         raise InputError(f"{Path(in_labels_npy).name}: labels must be integers 0-255 (trainIds, 255 = unlabelled)")
     t_read = time.perf_counter() - t0
-    sidewalk = {}
-    if params.sidewalk_cleanup:
-        from .sidewalks import connect_sidewalks
-
-        sw = connect_sidewalks(mesh.vertices, mesh.faces, labels, join_gap_m=params.sidewalk_join_gap_m,
-                               keep_m2=params.sidewalk_keep_m2, max_slope=params.sidewalk_max_slope,
-                               max_rise_m=params.sidewalk_max_rise_m)
-        labels, sidewalk = sw.labels, sw.stats()
-        ctx.log.info("sidewalk: %d surfaces -> %d (%d fragments joined, %d dissolved: %.1f m^2; %d vertices "
-                     "relabelled)", sw.components_before, sw.components_after, sw.joined, sw.dissolved,
-                     sw.dissolved_m2, sw.relabelled_vertices)
+    labels, sidewalk = _clean_sidewalks(params, mesh, labels, ctx.log)
     res = split_mesh(mesh, labels.astype(np.uint8))
     out = Path(out_class_meshes_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -111,16 +111,18 @@ def _dissolve_to(labels: np.ndarray, faces: np.ndarray, verts: np.ndarray) -> in
 
 def _same_level(vertices: np.ndarray, path: np.ndarray, fragment: np.ndarray, surface: np.ndarray,
                 max_rise_m: float, radius_m: float = 1.0) -> bool:
-    """Whether a joining path keeps to one level: it rises and falls at most ``max_rise_m``, and the
+    """Whether a joining path keeps to one level: it rises and falls at most ``max_rise_m``, its inner vertices
+    lie within that of the fragment's median height (not along a kerb's foot), and the
     fragment's median height and the upper quartile of the heights of the ``surface`` vertices within
     ``radius_m`` of where the path arrives (the pavement's top) differ by at most that: a surface whose edge
     runs down a kerb face reaches the carriageway at its foot, the pavement beside it is a kerb higher."""
     z = vertices[:, 2]
-    if np.ptp(z[path]) > max_rise_m:
+    level = float(np.median(z[fragment]))
+    if np.ptp(z[path]) > max_rise_m or np.abs(z[path[1:-1]] - level).max(initial=0.0) > max_rise_m:
         return False
     end = vertices[path[0], :2]
     near = surface[np.hypot(*(vertices[surface, :2] - end).T) <= radius_m]
-    return abs(float(np.percentile(z[near], 75)) - float(np.median(z[fragment]))) <= max_rise_m if len(near) else True
+    return abs(float(np.percentile(z[near], 75)) - level) <= max_rise_m if len(near) else True
 
 
 def _join(graph, sources: np.ndarray, targets: np.ndarray, join_gap_m: float) -> np.ndarray | None:
