@@ -127,3 +127,24 @@ def test_osm_tags_ask_for_parking(tmp_path):
     assert {(s.road, s.osm) for s in res.sides if s.width_m > 0} == {(1, "lane"), (3, "lane")}
     none = P.add_parking(netconvert_like(), v, f, lab, osm_sides={}, vehicle_ids=WIDE_VEHICLES)
     assert none.inserted == 0 and none.text == netconvert_like()
+
+
+def test_step_writes_xodr_and_report(tmp_path):
+    import json
+
+    from twinkit.mesh import write_colored_ply
+    from twinkit.testing import plugin_from_module, run_step
+
+    import twinkit_roads.plugin as roads
+
+    v, f, lab = street_mesh()
+    write_colored_ply(tmp_path / "textured_mesh.ply", v, f, np.full((len(v), 3), 128, np.uint8))
+    np.save(tmp_path / "labels.npy", lab)
+    (tmp_path / "aligned.xodr").write_text(netconvert_like())
+    out = run_step(plugin_from_module(roads, "step", "parking_lanes"), tmp_path / "run",
+                   {"in_aligned_xodr": tmp_path / "aligned.xodr", "in_textured_mesh_ply": tmp_path / "textured_mesh.ply",
+                    "in_labels_npy": tmp_path / "labels.npy"})
+    assert set(out) == {"aligned.xodr", "parking.json"}
+    doc = json.loads(out["parking.json"].read_text())
+    assert doc["parking_lanes"] == 2 and {s["road"] for s in doc["sides"] if s["width_m"]} == {1, 3}
+    assert LaneMap(out["aligned.xodr"].read_text()).lane_at([_strip_point(-30)], "Sidewalk") == [None]
