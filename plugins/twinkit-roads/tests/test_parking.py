@@ -148,3 +148,21 @@ def test_step_writes_xodr_and_report(tmp_path):
     doc = json.loads(out["parking.json"].read_text())
     assert doc["parking_lanes"] == 2 and {s["road"] for s in doc["sides"] if s["width_m"]} == {1, 3}
     assert LaneMap(out["aligned.xodr"].read_text()).lane_at([_strip_point(-30)], "Sidewalk") == [None]
+
+
+def test_no_parking_lane_where_the_kerb_is_at_the_driving_edge():
+    """OSM asks for parking, but the scan's kerb stands at the driving lane's edge: no room for a lane."""
+    xs = np.arange(-45, 45.01, 0.1)
+    ys = np.arange(-14, 0.01, 0.1)
+    gx, gy = np.meshgrid(xs, ys)
+    kerb = -2 * LANE_M
+    gz = np.where(gy < kerb, 0.12, 0.0)
+    lab = np.where(gy < kerb, SIDEWALK, ROAD).astype(np.uint8).ravel()
+    ny, nx = gx.shape
+    i = np.arange(nx * ny).reshape(ny, nx)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    f = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    v = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
+    res = P.add_parking(netconvert_like(), v, f, lab, osm_sides={101: {"left": "lane", "right": "lane"}},
+                        vehicle_ids=WIDE_VEHICLES)
+    assert res.inserted == 0 and all("no room" in s.why for s in res.sides), [s.why for s in res.sides]

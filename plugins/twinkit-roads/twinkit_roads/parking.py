@@ -15,7 +15,8 @@ it (the sidewalk lane), on each side of a road (outside junctions) where
 The lane is as wide as the strip the scan shows: the median distance from the driving lane's outer edge
 to the kerb's foot (:func:`twinkit_roads.kerbs.kerb_feet` on profiles cast outward from that edge, with
 the vehicles taken out of the mesh so a car's flank is not read as a kerb); ``default_width_m`` where no
-kerb is seen. Lane ids outward of the new lane move out by one; every reference to them (lane links of
+kerb is seen; no lane where the kerb stands at the driving lane's edge itself (kerb_feet's own profiles
+there see it: cars parked half on the kerb, no strip). Lane ids outward of the new lane move out by one; every reference to them (lane links of
 neighbouring roads, junction ``laneLink`` s, signal ``validity``) follows.
 
 What CARLA does with it (carla-simulator/carla, ``LibCarla/source/carla/road/Map.cpp``):
@@ -252,6 +253,12 @@ def plan_parking(xodr_text: str, vertices: np.ndarray, faces: np.ndarray, labels
         d = strip_kerb(pts, nrm, vertices, still)
         ok = np.isfinite(d) & (d >= min_width_m - 0.3) & (d <= max_width_m + 0.3)
         kerb = float(np.median(d[ok])) if ok.sum() >= min_kerb_samples else float("nan")
+        if not np.isfinite(kerb):  # no strip's kerb: is the kerb at the driving lane's edge itself?
+            from .kerbs import kerb_feet
+
+            at_edge = kerb_feet(pts, nrm, vertices, still)
+            if np.isfinite(at_edge).sum() >= min_kerb_samples:
+                kerb = float(np.nanmedian(at_edge))
         reach = kerb if np.isfinite(kerb) else default_width_m
         n_cars = 0
         if len(cars):
