@@ -228,13 +228,17 @@ def check_import_placement(rep, root: Path, package: str, desc: dict, script: Pa
     return res
 
 
-def placement_summary(root: Path, package: str) -> dict | None:
-    """The import-placement emulation's summary for a written package (metrics, bench)."""
+def placement_summary(root: Path, package: str, rep=None) -> dict | None:
+    """The import-placement emulation's summary for a written package (metrics, bench); ``rep``: the
+    package's contract report when at hand (else it is made). None for a package without a map."""
     from .carla_contract import check_package
 
     root = Path(root)
     imp = root if root.name == "Import" else root / "Import"
     desc = json.loads((imp / package / f"{package}.json").read_text())
-    rep = check_package(root, package)
-    res = check_import_placement(rep, imp.parent, package, desc)
-    return res.summary() if res else None
+    maps = [m for m in desc.get("maps", []) if isinstance(m, dict) and "name" in m]
+    if not maps:
+        return None
+    rep = rep if rep is not None else check_package(root, package)
+    return emulate_placement(rep, imp.parent, package, str(maps[0]["name"]), list(desc.get("props", [])),
+                             imp.parent / "place_in_map.py").summary()
