@@ -129,7 +129,8 @@ def _lifted(root: Path) -> set[str]:
         data = json.loads(path.read_text()) if path.is_file() else {}
     except ValueError:
         return set()
-    return {a.get("scanned_prop_name") for a in data.get("actors", []) if isinstance(a, dict)} - {None}
+    return {str(a["scanned_prop_name"]) for a in data.get("actors", []) if isinstance(a, dict)
+            and a.get("scanned_prop_name")}
 
 
 def after_import(rep, package: str, map_name: str, props: list[dict]):

@@ -96,6 +96,8 @@ class StaticMeshActor(Actor):
         super().__init__()
         self._props = {"static_mesh_component": StaticMeshComponent(mesh)}
         self.static_mesh_component = self._props["static_mesh_component"]
+        self._location: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass
@@ -216,8 +218,7 @@ def make_module(state: EditorState) -> types.ModuleType:
     def _saved(a: StaticMeshActor) -> SavedActor:
         comp = a.static_mesh_component
         mesh = comp.get_editor_property("static_mesh")
-        return SavedActor(a.get_actor_label(), mesh.get_path_name() if mesh else "",
-                          getattr(a, "_location", (0.0, 0.0, 0.0)), getattr(a, "_rotation", (0.0, 0.0, 0.0)),
+        return SavedActor(a.get_actor_label(), mesh.get_path_name() if mesh else "", a._location, a._rotation,
                           repr(comp.get_editor_property("mobility")))
 
     mod = types.ModuleType("unreal")
