@@ -59,7 +59,9 @@ class BodySetup(_Props):
         self._props = {"collision_trace_flag": CollisionTraceFlag.CTF_USE_DEFAULT}
 
 
-class StaticMesh(_Props):
+class StaticMeshAsset(_Props):
+    """``unreal.StaticMesh``."""
+
     def __init__(self, path: str):
         self._path = path
         self._props = {"body_setup": BodySetup()}
@@ -72,7 +74,7 @@ class StaticMesh(_Props):
 
 
 class StaticMeshComponent(_Props):
-    def __init__(self, mesh: StaticMesh | None):
+    def __init__(self, mesh: StaticMeshAsset | None):
         self._props = {"static_mesh": mesh, "mobility": ComponentMobility.MOVABLE}
 
     def set_mobility(self, mobility) -> None:
@@ -92,7 +94,7 @@ class Actor(_Props):
 
 
 class StaticMeshActor(Actor):
-    def __init__(self, mesh: StaticMesh | None):
+    def __init__(self, mesh: StaticMeshAsset | None):
         super().__init__()
         self._props = {"static_mesh_component": StaticMeshComponent(mesh)}
         self.static_mesh_component = self._props["static_mesh_component"]
@@ -144,86 +146,92 @@ class EditorState:
         return full if full in self.meshes else None
 
 
-def make_module(state: EditorState) -> types.ModuleType:
-    """A module object named ``unreal`` whose editor libraries act on ``state``."""
-    loaded: dict[str, StaticMesh] = {}
-    level: dict = {"path": None, "actors": []}
+class _Assets:
+    """``unreal.EditorAssetLibrary`` over an EditorState."""
 
-    def _mesh(path: str) -> StaticMesh | None:
-        obj = state.object_path(path)
+    def __init__(self, state: EditorState):
+        self.state = state
+        self.loaded: dict[str, StaticMeshAsset] = {}
+
+    def mesh(self, path: str) -> StaticMeshAsset | None:
+        obj = self.state.object_path(path)
         if obj is None:
             return None
-        if obj not in loaded:
-            loaded[obj] = StaticMesh(obj)
-            flag = getattr(CollisionTraceFlag, state.meshes[obj], CollisionTraceFlag.CTF_USE_DEFAULT)
-            loaded[obj].get_editor_property("body_setup").set_editor_property("collision_trace_flag", flag)
-        return loaded[obj]
+        if obj not in self.loaded:
+            self.loaded[obj] = StaticMeshAsset(obj)
+            flag = getattr(CollisionTraceFlag, self.state.meshes[obj], CollisionTraceFlag.CTF_USE_DEFAULT)
+            self.loaded[obj].get_editor_property("body_setup").set_editor_property("collision_trace_flag", flag)
+        return self.loaded[obj]
 
-    class EditorAssetLibrary:
-        @staticmethod
-        def load_asset(path: str):
-            state.calls.append(("load_asset", path))
-            return _mesh(path)
+    def load_asset(self, path: str):
+        self.state.calls.append(("load_asset", path))
+        return self.mesh(path)
 
-        @staticmethod
-        def does_asset_exist(path: str) -> bool:
-            return state.object_path(path) is not None
+    def does_asset_exist(self, path: str) -> bool:
+        return self.state.object_path(path) is not None
 
-        @staticmethod
-        def save_loaded_asset(asset, only_if_is_dirty: bool = True) -> bool:
-            state.calls.append(("save_loaded_asset", asset.get_path_name()))
-            state.meshes[asset.get_path_name()] = repr(
-                asset.get_editor_property("body_setup").get_editor_property("collision_trace_flag"))
-            return True
+    def save_loaded_asset(self, asset, only_if_is_dirty: bool = True) -> bool:
+        self.state.calls.append(("save_loaded_asset", asset.get_path_name()))
+        self.state.meshes[asset.get_path_name()] = repr(
+            asset.get_editor_property("body_setup").get_editor_property("collision_trace_flag"))
+        return True
 
-    class EditorLevelLibrary:
-        @staticmethod
-        def load_level(path: str) -> bool:
-            state.calls.append(("load_level", path))
-            if path not in state.levels:
-                return False
-            level["path"] = path
-            level["actors"] = []
-            for a in state.levels[path]:
-                act = StaticMeshActor(_mesh(a.mesh))
-                act.set_actor_label(a.label)
-                act.static_mesh_component.set_mobility(getattr(ComponentMobility, a.mobility))
-                level["actors"].append(act)
-            return True
 
-        @staticmethod
-        def get_all_level_actors() -> list:
-            return list(level["actors"])
+class _Levels:
+    """``unreal.EditorLevelLibrary`` over an EditorState: one open level, saved on request."""
 
-        @staticmethod
-        def spawn_actor_from_object(obj, location, rotation=None):
-            state.calls.append(("spawn_actor_from_object", obj.get_path_name() if obj else None))
-            if level["path"] is None or not isinstance(obj, StaticMesh):
-                return None
-            act = StaticMeshActor(obj)
-            act._location = (location.x, location.y, location.z)
-            r = rotation or Rotator()
-            act._rotation = (r.roll, r.pitch, r.yaw)
-            level["actors"].append(act)
-            return act
+    def __init__(self, state: EditorState, assets: _Assets):
+        self.state, self.assets = state, assets
+        self.path: str | None = None
+        self.actors: list[StaticMeshActor] = []
 
-        @staticmethod
-        def save_current_level() -> bool:
-            state.calls.append(("save_current_level", level["path"]))
-            if level["path"] is None:
-                return False
-            state.levels[level["path"]] = [_saved(a) for a in level["actors"]]
-            return True
+    def load_level(self, path: str) -> bool:
+        self.state.calls.append(("load_level", path))
+        if path not in self.state.levels:
+            return False
+        self.path, self.actors = path, []
+        for a in self.state.levels[path]:
+            act = StaticMeshActor(self.assets.mesh(a.mesh))
+            act.set_actor_label(a.label)
+            act.static_mesh_component.set_mobility(getattr(ComponentMobility, a.mobility))
+            act._location, act._rotation = a.location, a.rotation
+            self.actors.append(act)
+        return True
 
-    def _saved(a: StaticMeshActor) -> SavedActor:
-        comp = a.static_mesh_component
-        mesh = comp.get_editor_property("static_mesh")
-        return SavedActor(a.get_actor_label(), mesh.get_path_name() if mesh else "", a._location, a._rotation,
-                          repr(comp.get_editor_property("mobility")))
+    def get_all_level_actors(self) -> list:
+        return list(self.actors)
 
+    def spawn_actor_from_object(self, obj, location, rotation=None):
+        self.state.calls.append(("spawn_actor_from_object", obj.get_path_name() if obj else None))
+        if self.path is None or not isinstance(obj, StaticMeshAsset):
+            return None
+        act = StaticMeshActor(obj)
+        r = rotation or Rotator()
+        act._location, act._rotation = (location.x, location.y, location.z), (r.roll, r.pitch, r.yaw)
+        self.actors.append(act)
+        return act
+
+    def save_current_level(self) -> bool:
+        self.state.calls.append(("save_current_level", self.path))
+        if self.path is None:
+            return False
+        self.state.levels[self.path] = [_saved(a) for a in self.actors]
+        return True
+
+
+def _saved(a: StaticMeshActor) -> SavedActor:
+    comp = a.static_mesh_component
+    mesh = comp.get_editor_property("static_mesh")
+    return SavedActor(a.get_actor_label(), mesh.get_path_name() if mesh else "", a._location, a._rotation,
+                      repr(comp.get_editor_property("mobility")))
+
+
+def make_module(state: EditorState) -> types.ModuleType:
+    """A module object named ``unreal`` whose editor libraries act on ``state``."""
+    assets = _Assets(state)
     mod = types.ModuleType("unreal")
-    for name, obj in {"EditorAssetLibrary": EditorAssetLibrary, "EditorLevelLibrary": EditorLevelLibrary,
-                      "StaticMesh": StaticMesh, "StaticMeshActor": StaticMeshActor, "Actor": Actor,
+    for name, obj in {"EditorAssetLibrary": assets, "EditorLevelLibrary": _Levels(state, assets),
+                      "StaticMesh": StaticMeshAsset, "StaticMeshActor": StaticMeshActor, "Actor": Actor,
                       "StaticMeshComponent": StaticMeshComponent, "BodySetup": BodySetup, "Vector": Vector,
                       "Rotator": Rotator, "CollisionTraceFlag": CollisionTraceFlag,
                       "ComponentMobility": ComponentMobility}.items():
