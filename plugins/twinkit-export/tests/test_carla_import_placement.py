@@ -164,6 +164,8 @@ def test_package_places_the_whole_street_and_fails_without_its_script(package, t
     s = placement_summary(package, "TeststreetTwin")
     assert s["placed_share"] == 1.0 and s["placed_share_import_only"] < 1.0 and not s["error"]
     assert all(v["tags"] == [k] for k, v in s["by_class"].items())
+    carla = pytest.importorskip("carla")  # the tags are carla.CityObjectLabel names of carla 0.9.16
+    assert all(hasattr(carla.CityObjectLabel, k) for k in s["by_class"])
     # the package as it was before (no editor script): buildings not placed
     root = Path(shutil.copytree(package, tmp_path / "before"))
     (root / PLACE_SCRIPT).unlink()
