@@ -257,7 +257,9 @@ SPAWN_SCRIPT = '''#!/usr/bin/env python3
 
 Made by twinkit. `make import` imports the props of the package (into Static/<Tag>/, which gives
 them their semantic tag) but never places them in a map; this script does, at the map origin,
-where the meshes' coordinates put every object in its scanned place.
+where the meshes' coordinates put every object in its scanned place, for as long as the world
+runs (reload_world drops them). place_in_map.py (CARLA's editor) puts them into the map level
+itself instead; after it, this script would place them twice.
 
     python spawn_props.py [--host localhost] [--port 2000] [--skip car truck ...] [--list]
 """
