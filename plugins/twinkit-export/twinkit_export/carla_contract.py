@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .contract_sidewalks import RULES as SIDEWALK_RULES, check_sidewalks
+from .contract_import import check_import_placement
 
 CARLA = "carla-simulator/carla"
 SRC_IMPORT = "Util/BuildTools/Import.py"
@@ -141,6 +142,11 @@ RULES: dict[str, tuple[str, str]] = {
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
     "sidewalk_blocks": SIDEWALK_RULES["sidewalk_blocks"],  # contract_sidewalks.py
     "parked_on_sidewalk": SIDEWALK_RULES["parked_on_sidewalk"],
+    "import_placement": ("after make import (and the package's editor script place_in_map.py) every static mesh is in "
+                         "the saved map level once, tagged by the folder of its mesh path, with complex-as-simple "
+                         "collision; the import alone places only Maps/<Map> and Static/{Road,RoadLine,Terrain,"
+                         "SideWalk}/<Map> (contract_import)", "Util/BuildTools/Import.py; " + SRC_PREPARE + "; "
+                         + SRC_TAGGER),
 }
 
 
@@ -458,6 +464,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     _check_actors(rep, root if root.name != "Import" else root.parent)
     # walkers and parked cars (contract_sidewalks.py): sidewalk per block, parked vehicles off sidewalk lanes
     check_sidewalks(rep, root if root.name != "Import" else root.parent, pkg, maps)
+    check_import_placement(rep, root if root.name != "Import" else root.parent, package, desc)
     # decals --------------------------------------------------------------------------------------
     _check_decals(rep, imp, map_names, expect_decals)
     # semantics: every class ends in its tag -----------------------------------------------------------
