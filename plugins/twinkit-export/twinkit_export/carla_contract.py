@@ -31,8 +31,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .contract_sidewalks import RULES as SIDEWALK_RULES, check_sidewalks
 from .contract_import import check_import_placement
+from .contract_sidewalks import RULES as SIDEWALK_RULES, check_sidewalks
 
 CARLA = "carla-simulator/carla"
 SRC_IMPORT = "Util/BuildTools/Import.py"
