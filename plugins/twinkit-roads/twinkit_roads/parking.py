@@ -13,7 +13,7 @@ it (the sidewalk lane), on each side of a road (outside junctions) where
   the outer edge of the outermost driving lane, within the strip.
 
 The lane is as wide as the strip the scan shows: the median distance from the driving lane's outer edge
-to the kerb's foot (:func:`twinkit_roads.kerbs.kerb_feet` on profiles cast outward from that edge, with
+to the kerb's foot, plus ``kerb_top_m`` over the kerb's face to its top (:func:`twinkit_roads.kerbs.kerb_feet` on profiles cast outward from that edge, with
 the vehicles taken out of the mesh so a car's flank is not read as a kerb); ``default_width_m`` where no
 kerb is seen; no lane where the kerb stands at the driving lane's edge itself (kerb_feet's own profiles
 there see it: cars parked half on the kerb, no strip). Lane ids outward of the new lane move out by one; every reference to them (lane links of
@@ -234,12 +234,13 @@ def _follow_remap(root: ET.Element, remap: dict[tuple[int, int], int]) -> None:
 def plan_parking(xodr_text: str, vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, *,
                  osm_sides: dict[int, dict[str, str]], vehicle_ids, default_width_m: float = 2.2,
                  min_width_m: float = 1.6, max_width_m: float = 3.2, min_kerb_samples: int = 5,
-                 step_m: float = 1.0) -> list[SideParking]:
+                 kerb_top_m: float = 0.2, step_m: float = 1.0) -> list[SideParking]:
     """The evidence and the parking width for each side of each road outside junctions (see the module).
 
     vertices (n, 3) / faces (m, 3) / labels (n,) trainIds: the labelled mesh (site frame, metres);
     osm_sides: :func:`osm_parking`; vehicle_ids: the trainIds of vehicles (the cars' clusters, and the
-    faces taken out of the mesh before the kerb profiles)."""
+    faces taken out of the mesh before the kerb profiles); kerb_top_m: the lane runs this far past the kerb's
+    foot, over its face and rounded edge, so the sidewalk lane starts on the pavement's top."""
     parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
     roads = {int(r.get("id")): r for r in ET.fromstring(xodr_text, parser=parser).iter("road")}
     veh = np.isin(labels, np.asarray(vehicle_ids))
@@ -273,7 +274,7 @@ def plan_parking(xodr_text: str, vertices: np.ndarray, faces: np.ndarray, labels
         elif np.isfinite(kerb) and not (min_width_m <= kerb <= max_width_m):
             sp.why = f"the kerb is {kerb:.2f} m from the driving lane: no room for a parking lane"
         else:
-            sp.width_m = kerb if np.isfinite(kerb) else default_width_m
+            sp.width_m = kerb + kerb_top_m if np.isfinite(kerb) else default_width_m
             sp.why = ("kerb seen" if np.isfinite(kerb) else "no kerb seen: default width") + \
                 f"; {'OSM ' + osm if osm else ''}{' and ' if osm and n_cars else ''}" + \
                 (f"{n_cars} scanned vehicle(s)" if n_cars else "")

@@ -277,7 +277,7 @@ def parking_lanes(params: ParkingParams, ctx, *, in_aligned_xodr: Path, in_textu
     res = add_parking(text, mesh.vertices, mesh.faces, labels if params.scanned_vehicles else np.full_like(labels, 255),
                       osm_sides=osm, vehicle_ids=WIDE_VEHICLES, default_width_m=params.default_width_m,
                       min_width_m=params.min_width_m, max_width_m=params.max_width_m,
-                      min_kerb_samples=params.min_kerb_samples, step_m=params.step_m)
+                      min_kerb_samples=params.min_kerb_samples, kerb_top_m=params.kerb_top_m, step_m=params.step_m)
     A.write_opendrive(out_aligned_xodr, res.text)
     doc = {"enabled": True, "parking_lanes": res.inserted, "sides": [s.doc() for s in res.sides],
            "params": {k: getattr(params, k) for k in params.__dataclass_fields__}}
