@@ -100,6 +100,6 @@ class ParkingParams:
     default_width_m: float = param(2.2, gt=0, le=6, help="metres: width of a parking lane where the scan shows no kerb beside the driving lane")
     min_width_m: float = param(1.6, gt=0, help="metres: a kerb nearer than this to the driving lane leaves no room for a parking lane")
     max_width_m: float = param(3.2, gt=0, help="metres: a kerb farther than this is not read as the parking strip's (a wider strip gets default_width_m)")
-    kerb_top_m: float = param(0.2, ge=0, le=1, help="metres: the lane runs this far past the kerb's foot (its face and rounded edge), so the sidewalk lane starts on the pavement's top")
+    kerb_top_m: float = param(0.0, ge=0, le=1, help="metres: the lane runs this far past the kerb's foot, over its face (0: the sidewalk lane holds the kerb, as OpenDRIVE draws it; the drop test checks sidewalk lanes with a kerb's height band, parking lanes at the road's height)")
     min_kerb_samples: int = param(5, ge=1, help="kerb profiles (one per step_m along the lane) that must see the kerb before its distance is used")
     step_m: float = param(1.0, gt=0, help="metres: lane samples along s for the kerb profiles and the vehicles")

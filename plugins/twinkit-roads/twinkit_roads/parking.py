@@ -234,7 +234,7 @@ def _follow_remap(root: ET.Element, remap: dict[tuple[int, int], int]) -> None:
 def plan_parking(xodr_text: str, vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, *,
                  osm_sides: dict[int, dict[str, str]], vehicle_ids, default_width_m: float = 2.2,
                  min_width_m: float = 1.6, max_width_m: float = 3.2, min_kerb_samples: int = 5,
-                 kerb_top_m: float = 0.2, step_m: float = 1.0) -> list[SideParking]:
+                 kerb_top_m: float = 0.0, step_m: float = 1.0) -> list[SideParking]:
     """The evidence and the parking width for each side of each road outside junctions (see the module).
 
     vertices (n, 3) / faces (m, 3) / labels (n,) trainIds: the labelled mesh (site frame, metres);
