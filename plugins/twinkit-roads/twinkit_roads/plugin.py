@@ -255,6 +255,8 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     """Move netconvert's traffic lights onto the scanned ones (instances.py), add the scanned signs (signals.py)."""
     from .align import lane_lines
     from .instances import scanned_instances
+    from twinkit.street.lights import light_plan
+
     from .signals import carla_position_errors, draw_signals, place_signals as place, signals_report
 
     params = params or SignalParams()
@@ -269,7 +271,9 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     try:
         moved, placed, notes = place(text, kept, gate_m=params.gate_m, group_m=params.group_m,
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,
-                                     sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m)
+                                     sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m,
+                                     one_head=params.one_head, lights_on_ground=params.lights_on_ground,
+                                     phase_plan=params.phase_plan, colors=mesh.colors)
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
     # what CARLA makes of each signal, against where we meant it to be
@@ -281,10 +285,14 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     for n in notes:
         ctx.log.warning("%s", n)
     doc, metrics = signals_report(placed, kept, rejected, notes, carla_err,
-                                  {k: getattr(params, k) for k in params.__dataclass_fields__})
+                                  {k: getattr(params, k) for k in params.__dataclass_fields__}, light_plan(moved))
     out_signals_json.write_text(json.dumps(doc, indent=1))
     draw_signals(in_textured_mesh_ply, lane_lines(moved, 1.0, junctions=True), kept, rejected, placed,
                  out_signals_png, params.qa_px_per_m)
+    ctx.log.info("CARLA's light plan (emulated): %d junction(s) with lights, %d light group(s) at the busiest, "
+                 "%d pair(s) of crossing approaches green together; signs typed for CARLA %d, generic %d",
+                 metrics["signalised_junctions"], metrics["max_light_groups_per_junction"],
+                 metrics["conflicting_greens"], metrics["signs_typed"], metrics["signs_generic"])
     ctx.log.info("%d scanned lights (%d of them poles carrying an unlabelled head), %d signs (%d clusters "
                  "rejected); %d of %d light signals from the scan, %d kept from netconvert; %d signs written",
                  metrics["scanned_lights"], metrics["pole_head_lights"], metrics["scanned_signs"],
