@@ -31,6 +31,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .contract_signals import RULES as SIGNAL_RULES
+from .contract_signals import check_signals
+
 CARLA = "carla-simulator/carla"
 SRC_IMPORT = "Util/BuildTools/Import.py"
 SRC_MOVE = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/MoveAssetsCommandlet.cpp (SSTags.h)"
@@ -137,6 +140,7 @@ RULES: dict[str, tuple[str, str]] = {
                "spawns them (nothing in the import spawns actors)", f"{SRC_IMPORT}; {SRC_TWINKIT}"),
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
+    **SIGNAL_RULES,
 }
 
 
@@ -454,6 +458,8 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     _check_actors(rep, root if root.name != "Import" else root.parent)
     # decals --------------------------------------------------------------------------------------
     _check_decals(rep, imp, map_names, expect_decals)
+    # signals: light groups, the cycle, heights, sign types (contract_signals.py) ---------------------
+    check_signals(rep, [pkg / f"{n}.xodr" for n in map_names])
     # semantics: every class ends in its tag -----------------------------------------------------------
     share = rep.wrong_terrain_share()
     if share > 0:
