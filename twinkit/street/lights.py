@@ -96,19 +96,20 @@ class Wiring:
 
     def __init__(self, xodr_text: str):
         root = ET.fromstring(xodr_text)
-        self.roads = {r.get("id"): r for r in root.findall("road")}
+        self.roads = {r.get("id", ""): r for r in root.findall("road")}
         self.road_junction = {k: r.get("junction", "-1") for k, r in self.roads.items()}
         self.signals: dict[str, tuple[str, ET.Element]] = {}
         self.controls: dict[str, list[tuple[str, list[int], str]]] = {}  # signal -> (road, lanes, orientation)
         for rid, road in self.roads.items():
             for sig in road.findall("signals/signal"):
-                self.signals[sig.get("id")] = (rid, sig)
-                self.controls.setdefault(sig.get("id"), []).append((rid, _lanes(sig), sig.get("orientation", "+")))
+                sid = sig.get("id", "")
+                self.signals[sid] = (rid, sig)
+                self.controls.setdefault(sid, []).append((rid, _lanes(sig), sig.get("orientation", "+")))
             for ref in road.findall("signals/signalReference"):
-                self.controls.setdefault(ref.get("id"), []).append((rid, _lanes(ref), ref.get("orientation", "+")))
-        self.controllers = {c.get("id"): [x.get("signalId") for x in c.findall("control")]
+                self.controls.setdefault(ref.get("id", ""), []).append((rid, _lanes(ref), ref.get("orientation", "+")))
+        self.controllers = {c.get("id", ""): [x.get("signalId", "") for x in c.findall("control")]
                             for c in root.findall("controller")}
-        self.junction_controllers = {j.get("id"): [c.get("id") for c in j.findall("controller")]
+        self.junction_controllers = {j.get("id", ""): [c.get("id", "") for c in j.findall("controller")]
                                      for j in root.findall("junction")}
         self._heads = {k: _end_heading(r) for k, r in self.roads.items()}
 

@@ -96,6 +96,7 @@ def test_osm_kinds_and_types():
     assert osm_kind({"highway": "stop"}) == "stop" and osm_kind({"highway": "give_way"}) == "yield"
     assert osm_kind({"traffic_sign": "DE:206"}) == "stop" and osm_kind({"traffic_sign": "FI:C32[40]"}) == "speed"
     assert osm_kind({"traffic_sign": "FI:B5"}) == "yield" and osm_kind({"amenity": "bench"}) is None
+    assert osm_kind({"traffic_sign": "FI:206"}) is None  # a code means what its country says
     assert signal_type("stop", None) == ("206", "-1", None) and signal_type("yield", None) == ("205", "-1", None)
     assert signal_type("speed", 40.0) == ("274", "40", "40") and signal_type("speed", None)[0] == "-1"
     road = ET.fromstring('<road><lanes><laneSection><right><lane><speed sOffset="0" max="11.11"/></lane></right>'
@@ -124,3 +125,27 @@ def test_scanned_stop_plate_is_typed_206_on_the_ground_today_it_was_minus_one():
     new, placed, _ = place_signals(text, [inst], colors=speed)
     sig = next(s for s in ET.fromstring(new).iter("signal") if s.get("id") == "scan_sign_0")
     assert sig.get("type") == "274" and sig.get("value") == sig.get("subtype") == "30"
+
+
+def test_red_plate_facing_a_one_way_streets_wrong_way_is_no_entry_not_stop():
+    # the demo's no-entry sign: east kerb of the one-way side street north of the junction
+    inst = Instance("sign", np.array([3.7, 9.06, 2.55]), np.array([0.6, 0.05, 0.6]), 100, 2.5, 10, 7, id=0,
+                    members=np.arange(100))
+    _, placed, _ = place_signals(netconvert_junction(), [inst], colors=plate([((200, 20, 20), 85),
+                                                                             ((240, 240, 240), 15)]))
+    sign = next(p for p in placed if p.kind == "sign")
+    assert sign.type == "-1" and "no-entry" in sign.note
+
+
+def test_typed_plate_without_its_pole_is_kept():
+    from twinkit_roads.signtypes import typed_plates
+    red = plate([((200, 20, 20), 85), ((240, 240, 240), 15)])
+    grey = plate([((128, 128, 128), 100)])
+    a = Instance("sign", np.zeros(3), np.ones(3), 100, 2.5, 0, 7, rejected="0 pole vertices under it < 3",
+                 members=np.arange(100))
+    b = Instance("sign", np.zeros(3), np.ones(3), 100, 2.5, 0, 7, rejected="0 pole vertices under it < 3",
+                 members=np.arange(100))
+    c = Instance("sign", np.zeros(3), np.ones(3), 5, 2.5, 0, 7, rejected="5 vertices < 12; 0 pole vertices under it < 3",
+                 members=np.arange(100))
+    assert typed_plates([a], red) == [a] and a.evidence == "plate_look" and a.rejected == ""
+    assert typed_plates([b], grey) == [] and typed_plates([c], red) == []

@@ -258,6 +258,7 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     from twinkit.street.lights import light_plan
 
     from .signals import carla_position_errors, draw_signals, place_signals as place, signals_report
+    from .signtypes import typed_plates
 
     params = params or SignalParams()
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
@@ -268,6 +269,10 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                          "labels.npy)")
     text = A.read_opendrive(in_aligned_xodr)
     kept, rejected = scanned_instances(mesh.vertices, labels, params)
+    plates = typed_plates(rejected, mesh.colors)  # stop / yield / speed plates whose thin pole the mesh lost
+    for i, inst in enumerate(plates):
+        inst.id = len(kept) + i
+    kept, rejected = kept + plates, [r for r in rejected if not any(r is p for p in plates)]
     try:
         moved, placed, notes = place(text, kept, gate_m=params.gate_m, group_m=params.group_m,
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,

@@ -337,7 +337,8 @@ def _sign_kind(inst: Instance, colors, osm_signs, osm_match_m: float) -> tuple[s
             return k, f"OSM sign node {dist:.1f} m away"
     if colors is not None and inst.members is not None:
         kind, why = plate_look(colors[inst.members])
-        return kind, "the plate's look: " + why
+        pole = "; no pole found under it" if inst.evidence == "plate_look" else ""
+        return kind, "the plate's look: " + why + pole
     return None, "no OSM sign near and no texture to read"
 
 
@@ -362,13 +363,17 @@ def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Insta
         s = min(max(s, 0.0), ref.length)
         # right-hand traffic: a sign right of the reference line faces the lanes driving +s
         orient, lanes = ("+", ref.lanes_right) if t < 0 else ("-", ref.lanes_left)
-        if not lanes:
+        wrong_way = not lanes  # no lane drives towards it on its side: it faces a one-way street's wrong way
+        if wrong_way:
             orient, lanes = ("-", ref.lanes_left) if t < 0 else ("+", ref.lanes_right)
         road_el = next(r for r in root.iter("road") if r.get("id") == ref.road)
         sg = _signals_el(road_el)
         sid = f"scan_sign_{n}"
         n += 1
         kind, why = _sign_kind(inst, colors, osm_signs, osm_match_m)
+        if kind == "stop" and wrong_way and not why.startswith("OSM"):
+            # a red plate facing the wrong way of a one-way street is its no-entry sign, not a stop
+            kind, why = None, why + "; it faces the wrong way of a one-way street: a no-entry sign"
         typ, sub, val = signal_type(kind, road_speed_kmh(road_el) if kind == "speed" else None)
         # a typed sign is a CARLA blueprint standing on the ground; a generic one stays a plate at its height
         zoff = 0.0 if typ != UNKNOWN_SIGN_TYPE else float(inst.centre[2]) - ref.z(s)

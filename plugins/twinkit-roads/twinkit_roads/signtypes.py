@@ -27,11 +27,12 @@ import numpy as np
 CARLA_SIGN_TYPES = {"stop": ("206", "-1"), "yield": ("205", "-1"), "speed": ("274", "")}
 GENERIC = "-1"
 
-# traffic_sign=* values (national codes: DE, FI, ... and the plain words) -> kind
-_OSM_SIGN = {"stop": "stop", "give_way": "yield", "yield": "yield", "maxspeed": "speed",
-             "206": "stop", "205": "yield", "274": "speed",          # DE:..., the Vienna-convention numbers
-             "b5": "yield", "b6": "stop", "c32": "speed", "361": "speed",  # FI:B5 / B6 / C32 (Finland)
-             "r1-1": "stop", "r1-2": "yield", "r2-1": "speed"}      # US MUTCD
+# traffic_sign=* values -> kind: the plain words, and national codes with their country (DE: the Vienna-convention
+# numbers; FI: the 2020 numbers and the older letters; US: MUTCD)
+_OSM_WORDS = {"stop": "stop", "give_way": "yield", "yield": "yield", "maxspeed": "speed"}
+_OSM_CODES = {"DE:206": "stop", "DE:205": "yield", "DE:274": "speed", "FI:232": "stop", "FI:231": "yield",
+              "FI:361": "speed", "FI:B6": "stop", "FI:B5": "yield", "FI:C32": "speed", "US:R1-1": "stop",
+              "US:R1-2": "yield", "US:R2-1": "speed"}
 
 
 def osm_kind(tags: dict) -> str | None:
@@ -42,9 +43,10 @@ def osm_kind(tags: dict) -> str | None:
     if hw == "give_way":
         return "yield"
     for part in str(tags.get("traffic_sign", "")).replace(";", ",").split(","):
-        code = part.split(":")[-1].strip().lower().split("[")[0]
-        if code in _OSM_SIGN:
-            return _OSM_SIGN[code]
+        code = part.strip().split("[")[0]
+        kind = _OSM_CODES.get(code.upper()) or _OSM_WORDS.get(code.lower())
+        if kind:
+            return kind
     return None
 
 
@@ -109,3 +111,20 @@ def signal_type(kind: str | None, speed_kmh: float | None) -> tuple[str, str, st
         v = f"{int(round(speed_kmh))}"
         return "274", v, v
     return GENERIC, "-1", None
+
+
+def typed_plates(rejected: list, colors: np.ndarray | None) -> list:
+    """Sign clusters refused only for the pole under them (thin poles are often lost by the reconstruction)
+    whose plate shows a stop, give-way or speed-limit look: kept, ``evidence = "plate_look"``. ``rejected``:
+    ``instances.Instance`` list; ``colors``: (n, 3) uint8 of the mesh's vertices. Returns the kept ones."""
+    out = []
+    if colors is None:
+        return out
+    for inst in rejected:
+        reasons = [r for r in inst.rejected.split("; ") if r]
+        if inst.kind != "sign" or inst.members is None or len(reasons) != 1 or "pole vertices" not in reasons[0]:
+            continue
+        if plate_look(colors[inst.members])[0] in ("stop", "yield", "speed"):
+            inst.rejected, inst.evidence = "", "plate_look"
+            out.append(inst)
+    return out
