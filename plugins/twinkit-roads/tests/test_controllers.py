@@ -149,3 +149,13 @@ def test_typed_plate_without_its_pole_is_kept():
                  members=np.arange(100))
     assert typed_plates([a], red) == [a] and a.evidence == "plate_look" and a.rejected == ""
     assert typed_plates([b], grey) == [] and typed_plates([c], red) == []
+
+
+def test_one_plate_split_into_two_clusters_is_one_sign():
+    yellow_red = plate([((200, 20, 20), 50), ((230, 200, 40), 50)])
+    a = Instance("sign", np.array([-3.75, -15.69, 2.7]), np.array([0.6, 0.05, 0.6]), 100, 2.7, 10, 7, id=0,
+                 members=np.arange(100))
+    b = Instance("sign", np.array([-3.56, -15.67, 2.7]), np.array([0.6, 0.05, 0.6]), 100, 2.7, 10, 7, id=1,
+                 members=np.arange(100))
+    _, placed, log = place_signals(netconvert_junction(), [a, b], colors=yellow_red)
+    assert [p.type for p in placed if p.kind == "sign"] == ["205"] and any("same plate" in ln for ln in log)

@@ -344,7 +344,7 @@ def _sign_kind(inst: Instance, colors, osm_signs, osm_match_m: float) -> tuple[s
 
 def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Instance], log: list[str], *,
                sign_max_road_m: float, reach_m: float, colors=None, osm_signs=None,
-               osm_match_m: float = 5.0) -> list[Placed]:
+               osm_match_m: float = 5.0, dedupe_m: float = 0.6) -> list[Placed]:
     """Add a signal per scanned sign on the road whose frame holds it, typed for CARLA where its kind is known
     (stop 206, yield 205, speed limit 274 with its value; ``signtypes``), else generic (-1); their records."""
     outside = {k: r for k, r in refs.items() if r.junction == "-1" and (r.lanes_right or r.lanes_left)}
@@ -368,13 +368,19 @@ def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Insta
             orient, lanes = ("-", ref.lanes_left) if t < 0 else ("+", ref.lanes_right)
         road_el = next(r for r in root.iter("road") if r.get("id") == ref.road)
         sg = _signals_el(road_el)
-        sid = f"scan_sign_{n}"
-        n += 1
         kind, why = _sign_kind(inst, colors, osm_signs, osm_match_m)
         if kind == "stop" and wrong_way and not why.startswith("OSM"):
             # a red plate facing the wrong way of a one-way street is its no-entry sign, not a stop
             kind, why = None, why + "; it faces the wrong way of a one-way street: a no-entry sign"
         typ, sub, val = signal_type(kind, road_speed_kmh(road_el) if kind == "speed" else None)
+        twin = next((p for p in placed if p.type == typ != UNKNOWN_SIGN_TYPE and p.instance_position and
+                     math.dist(p.instance_position[:2], inst.centre[:2]) <= dedupe_m), None)
+        if twin is not None:  # one plate split into two clusters: one CARLA sign
+            log.append(f"scanned sign {inst.id}: a {kind} plate {math.dist(twin.instance_position[:2], inst.centre[:2]):.2f} m "
+                       f"from {twin.id} of the same type: the same plate, not written again")
+            continue
+        sid = f"scan_sign_{n}"
+        n += 1
         # a typed sign is a CARLA blueprint standing on the ground; a generic one stays a plate at its height
         zoff = 0.0 if typ != UNKNOWN_SIGN_TYPE else float(inst.centre[2]) - ref.z(s)
         attrs = {"id": sid, "name": SCAN_NAME, "s": _f(s), "t": _f(t), "zOffset": f"{zoff:.3f}",
