@@ -159,3 +159,17 @@ def test_one_plate_split_into_two_clusters_is_one_sign():
                  members=np.arange(100))
     _, placed, log = place_signals(netconvert_junction(), [a, b], colors=yellow_red)
     assert [p.type for p in placed if p.kind == "sign"] == ["205"] and any("same plate" in ln for ln in log)
+
+
+@pytest.mark.parametrize("town", ["Town10HD.xodr", "Town01.xodr"])
+def test_carla_towns_keep_their_plan_and_their_signs_stand_on_the_ground(town):
+    path = ROOT.parent / "shared" / "data" / "opendrive" / town
+    if not path.is_file():
+        pytest.skip(f"{path} not present")
+    text = path.read_text()
+    out, _, log = place_signals(text, [])
+    before, after = light_plan(text), light_plan(out)
+    assert out.count("<controller ") == text.count("<controller ")  # CARLA's own wiring stays
+    assert [lt["controller"] for lt in after["lights"]] == [lt["controller"] for lt in before["lights"]]
+    assert all(abs(float(s.get("zOffset"))) <= 1.0 for s in ET.fromstring(out).iter("signal")
+               if s.get("type") in ("205", "206", "274"))

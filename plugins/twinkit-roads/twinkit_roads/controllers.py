@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 
-from twinkit.street.lights import LIGHT_TYPES, Wiring, crossing
+from twinkit.street.lights import LIGHT_TYPES, Wiring, crossing, light_plan
 
 #: the signal type of a plain three-light head (SignalType.cpp: IsTrafficLight)
 HEAD_TYPE = "1000001"
@@ -107,37 +107,48 @@ def phase_plan(heads: dict[str, float], plan: str = "shape", cross_deg: tuple[fl
 
 def wire_junctions(root: ET.Element, plan: str = "shape", cross_deg: tuple[float, float] = (30.0, 150.0)
                    ) -> tuple[dict, list[str]]:
-    """Replace the map's controllers (in place in ``root``) by one per phase of each junction, named from it.
+    """Give every junction whose lights CARLA would not run as one conflict-free group (``light_plan``) one
+    controller per phase, named from the junction (in place in ``root``); junctions that already run right
+    (CARLA's own maps) and their controllers stay as they are.
 
     Lights with no junction ahead keep no controller (CARLA runs each alone). Returns a summary
     (per junction: approaches, phases as lists of signal ids, controller ids) and log lines.
     """
-    w = Wiring(ET.tostring(root, encoding="unicode"))
+    text = ET.tostring(root, encoding="unicode")
+    w = Wiring(text)
+    good = {j for j, v in light_plan(text, cross_deg)["junctions"].items() if v["groups"] == 1 and not v["conflicts"]}
+    keep_ctrl = {c for j in good for c in w.junction_controllers.get(j, [])}
     per: dict[str, dict[str, float]] = {}
     log: list[str] = []
     for sid, (road, el) in w.signals.items():
-        if el.get("type") not in LIGHT_TYPES:
+        if el.get("type") not in LIGHT_TYPES or any(sid in w.controllers.get(c, []) for c in keep_ctrl):
             continue
         ap = w.approach(sid)
         if ap.junction is None or ap.heading is None:
             log.append(f"traffic light {sid} on road {road}: no junction ahead of its lanes, left without a "
                        "controller (CARLA runs it alone)")
             continue
-        per.setdefault(ap.junction, {})[sid] = ap.heading
+        if ap.junction not in good:
+            per.setdefault(ap.junction, {})[sid] = ap.heading
     for c in root.findall("controller"):
-        root.remove(c)
+        if c.get("id") not in keep_ctrl:
+            root.remove(c)
     for j in root.findall("junction"):
         for c in j.findall("controller"):
-            j.remove(c)
+            if c.get("id") not in keep_ctrl:
+                j.remove(c)
     kids = list(root)
     at = next((i for i, e in enumerate(kids) if e.tag == "junction"), len(kids))
     junctions = {j.get("id"): j for j in root.findall("junction")}
     summary: dict = {}
     n = 0
+    taken = {c.get("id") for c in root.findall("controller")}
     for jid in sorted(per, key=lambda x: (len(x), x)):
         phases = phase_plan(per[jid], plan, cross_deg)
         ids = []
         for k, sids in enumerate(phases):
+            while f"{1000 + n}" in taken:
+                n += 1
             cid = f"{1000 + n}"
             n += 1
             ctl = ET.Element("controller", {"id": cid, "name": f"junction{jid}_phase{k}", "sequence": str(k)})

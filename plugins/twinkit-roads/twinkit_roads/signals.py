@@ -33,7 +33,7 @@ import numpy as np
 from .controllers import merge_heads, wire_junctions
 from .instances import Instance
 from .reflines import RefLine, reference_lines
-from .signtypes import plate_look, road_speed_kmh, signal_type
+from .signtypes import ground_typed_signs, plate_look, road_speed_kmh, signal_type
 
 # SignalType::IsTrafficLight (LibCarla/source/carla/road/SignalType.cpp, carla 0.9.16)
 CARLA_LIGHT_TYPES = {"1000001", "1000002", "1000009", "1000010", "1000011", "1000007", "1000014", "1000015",
@@ -302,7 +302,8 @@ def _place_lights(root: ET.Element, refs: dict[str, RefLine], instances: list[In
     for gi, g in enumerate(groups):
         inst = pairs.get(gi)
         merged: list[str] = []
-        if one_head and len(g) > 1:
+        if one_head and len(g) > 1 and np.ptp([float(lights[i][1].get("s")) for i in g]) < 0.01:
+            # netconvert's pattern: a head's signals all at the road's end, one per lane and arrow
             keep, merged = merge_heads(lights[g[0]][0].find("signals"), [lights[i][1] for i in g])
             g = [i for i in g if lights[i][1] is keep]
         for i in g:
@@ -436,6 +437,7 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     if add_signs:
         placed += _add_signs(root, refs, instances, log, sign_max_road_m=sign_max_road_m, reach_m=reach_m,
                              colors=colors, osm_signs=osm_signs)
+    log += ground_typed_signs(root)
     for sg in root.iter("signals"):  # tidy the blocks we edited (4-space indent, as netconvert writes)
         ET.indent(sg, space="    ", level=2)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -128,3 +128,18 @@ def typed_plates(rejected: list, colors: np.ndarray | None) -> list:
             inst.rejected, inst.evidence = "", "plate_look"
             out.append(inst)
     return out
+
+
+def ground_typed_signs(root, max_z_offset_m: float = 1.0) -> list[str]:
+    """Stand the map's stop, yield and speed-limit signals on the ground (zOffset 0, in place in ``root``, an
+    OpenDRIVE element tree): CARLA spawns a whole sign blueprint at road elevation + zOffset
+    (``ATrafficLightManager::SpawnSignals``), so a zOffset at the plate's height (RoadRunner writes one) floats
+    the pole. Returns a log line per signal changed."""
+    out = []
+    for sig in root.iter("signal"):
+        z = float(sig.get("zOffset", 0.0))
+        if sig.get("type") in ("205", "206", "274") and abs(z) > max_z_offset_m:
+            sig.set("zOffset", "0.000")
+            out.append(f"sign {sig.get('id')} (type {sig.get('type')}): zOffset {z:.2f} m -> 0, CARLA spawns its "
+                       "blueprint pole at that height")
+    return out
