@@ -153,12 +153,20 @@ def sec_signals(ctx) -> str:
         d = ctx.read_json(f)
         if not isinstance(d, dict):
             continue
-        rows = [[x.get("id"), x.get("kind"), x.get("road"), x.get("defined_on_road"), x.get("source"),
-                 f"{x.get('moved_m', 0):.2f}", x.get("instance") if x.get("instance") is not None else "",
-                 x.get("note", "")] for x in d.get("signals", [])]
+        rows = [[x.get("id"), x.get("kind"), x.get("type", ""), x.get("road"), x.get("defined_on_road"),
+                 x.get("source"), f"{x.get('moved_m', 0):.2f}",
+                 x.get("instance") if x.get("instance") is not None else "", x.get("note", "")]
+                for x in d.get("signals", [])]
         parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3>" + ctx.table(
-            ["signal", "kind", "controls road", "defined on road", "source", "moved m", "scanned instance", "note"],
-            rows))
+            ["signal", "kind", "type", "controls road", "defined on road", "source", "moved m", "scanned instance",
+             "note"], rows))
+        plan = (d.get("light_plan") or {}).get("junctions") or {}
+        if plan:
+            parts.append("<p>Junction signal plans as CARLA 0.9.16 runs them (twinkit.street.lights):</p>" + ctx.table(
+                ["junction", "lights", "approaches", "light groups", "phases (controllers)",
+                 "crossing approaches green together"],
+                [[j, v.get("lights"), v.get("approaches"), v.get("groups"), v.get("controllers"),
+                  len(v.get("conflicts", []))] for j, v in plan.items()]))
         parts.append(_step_picture(ctx, s, f.parent / "signals.png", "Scanned lights (orange) and signs (blue); "
                                    "netconvert's signals (red) and where they are now (green)"))
     return "".join(parts)
