@@ -173,3 +173,16 @@ def test_carla_towns_keep_their_plan_and_their_signs_stand_on_the_ground(town):
     assert [lt["controller"] for lt in after["lights"]] == [lt["controller"] for lt in before["lights"]]
     assert all(abs(float(s.get("zOffset"))) <= 1.0 for s in ET.fromstring(out).iter("signal")
                if s.get("type") in ("205", "206", "274"))
+
+
+def test_user_phase_plan_by_compass_points():
+    from twinkit_roads.controllers import compass_from
+    import math
+    assert compass_from(-math.pi / 2) == "N" and compass_from(0.0) == "W"  # heading south: comes from the north
+    text = netconvert_junction()
+    new, _, log = place_signals(text, [], phases={"default": [["N", "S"], ["E", "W"]]})
+    j = light_plan(new)["junctions"]["1"]
+    assert j["controllers"] == 2 and j["conflicts"] == [] and not log
+    new, _, log = place_signals(text, [], phases={"1": [["N", "E"]]})  # a crossing pair, as the user asked
+    j = light_plan(new)["junctions"]["1"]
+    assert j["controllers"] == 3 and len(j["conflicts"]) == 1 and any("crossing" in ln for ln in log)

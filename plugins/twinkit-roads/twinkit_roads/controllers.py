@@ -74,14 +74,41 @@ def _approaches(heads: dict[str, float], tol_deg: float = 25.0) -> list[list[str
     return [ids for _, ids in out]
 
 
+COMPASS = ("E", "NE", "N", "NW", "W", "SW", "S", "SE")
+
+
+def compass_from(heading: float) -> str:
+    """The compass point traffic with this entry heading (rad, x east, y north) comes from: E, NE, ... SE."""
+    a = math.degrees(heading + math.pi) % 360.0
+    return COMPASS[int(round(a / 45.0)) % 8]
+
+
+def _user_phases(heads: dict[str, float], apps: list[list[str]], spec: list) -> list[list[str]]:
+    """Phases from a user plan: lists of compass points traffic comes from (``[["N", "S"], ["E", "W"]]``);
+    an approach takes the first phase naming its point; approaches named by none run alone."""
+    phases: list[list[str]] = [[] for _ in spec]
+    alone = []
+    for a in apps:
+        h = math.atan2(sum(math.sin(heads[s]) for s in a), sum(math.cos(heads[s]) for s in a))
+        k = next((i for i, ph in enumerate(spec) if compass_from(h) in [str(x).upper() for x in ph]), None)
+        if k is None:
+            alone.append(a)
+        else:
+            phases[k] += a
+    return [p for p in phases if p] + alone
+
+
 def phase_plan(heads: dict[str, float], plan: str = "shape", cross_deg: tuple[float, float] = (30.0, 150.0),
-               opposite_deg: float = 30.0) -> list[list[str]]:
+               opposite_deg: float = 30.0, user: list | None = None) -> list[list[str]]:
     """Signal ids per phase for one junction from their approach headings (rad).
 
+    ``user``: a plan as lists of compass points traffic comes from (``_user_phases``), used as given.
     ``approach``: one phase per approach. ``shape``: approaches whose headings are opposite (within
     ``opposite_deg`` of 180 degrees) and cross no other member share a phase; the rest run alone.
     """
     apps = _approaches(heads)
+    if user:
+        return _user_phases(heads, apps, user)
     if plan == "approach":
         return apps
     if plan != "shape":
@@ -105,13 +132,15 @@ def phase_plan(heads: dict[str, float], plan: str = "shape", cross_deg: tuple[fl
     return phases
 
 
-def wire_junctions(root: ET.Element, plan: str = "shape", cross_deg: tuple[float, float] = (30.0, 150.0)
-                   ) -> tuple[dict, list[str]]:
+def wire_junctions(root: ET.Element, plan: str = "shape", cross_deg: tuple[float, float] = (30.0, 150.0),
+                   user: dict | None = None) -> tuple[dict, list[str]]:
     """Give every junction whose lights CARLA would not run as one conflict-free group (``light_plan``) one
     controller per phase, named from the junction (in place in ``root``); junctions that already run right
     (CARLA's own maps) and their controllers stay as they are.
 
-    Lights with no junction ahead keep no controller (CARLA runs each alone). Returns a summary
+    ``user``: phase plans by junction id or ``"default"`` (``phase_plan``'s ``user``); a phase holding crossing
+    approaches is kept as given and logged. Lights with no junction ahead keep no controller (CARLA runs each
+    alone). Returns a summary
     (per junction: approaches, phases as lists of signal ids, controller ids) and log lines.
     """
     text = ET.tostring(root, encoding="unicode")
@@ -144,7 +173,11 @@ def wire_junctions(root: ET.Element, plan: str = "shape", cross_deg: tuple[float
     n = 0
     taken = {c.get("id") for c in root.findall("controller")}
     for jid in sorted(per, key=lambda x: (len(x), x)):
-        phases = phase_plan(per[jid], plan, cross_deg)
+        spec = (user or {}).get(jid) or (user or {}).get("default")
+        phases = phase_plan(per[jid], plan, cross_deg, user=spec)
+        for ph in phases:
+            if any(crossing(per[jid][a], per[jid][b], cross_deg) for a in ph for b in ph if a < b):
+                log.append(f"junction {jid}: the given phase {sorted(ph)} lets crossing approaches go together")
         ids = []
         for k, sids in enumerate(phases):
             while f"{1000 + n}" in taken:

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List
+from typing import Dict, List
 
 from twinkit.ranges import param
 
@@ -63,6 +63,7 @@ class SignalParams:
     one_head: bool = param(True, help="netconvert's signals of one head (one per lane and turn arrow) become one signal whose validity covers their lanes; false: kept stacked")
     lights_on_ground: bool = param(True, help="traffic lights get zOffset 0: CARLA's light blueprint is a whole pole standing on the road's elevation; false: zOffset = the scanned head's height")
     phase_plan: str = param("shape", choices=("shape", "approach", "netconvert"), help="junction signal plan (one OpenDRIVE controller per phase, named from its junction): shape = opposite approaches share a phase, approach = each approach alone, netconvert = leave netconvert's controller (CARLA then runs every light alone)")
+    phases: Dict[str, List[List[str]]] = param(default_factory=dict, free=True, help="a junction signal plan to use instead of phase_plan: junction id (or 'default') -> phases, each a list of the compass points traffic comes from, e.g. {default: [[N, S], [E, W]]}; approaches named by no phase run alone")
     add_signs: bool = param(True, help="write the scanned traffic signs as OpenDRIVE signals")
     sign_max_road_m: float = param(12.0, gt=0, help="metres: a sign farther than this from every road's reference line is not written")
     qa_px_per_m: float = param(20.0, gt=0, help="pixels per metre of the signals' QA picture")

@@ -278,7 +278,7 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,
                                      sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m,
                                      one_head=params.one_head, lights_on_ground=params.lights_on_ground,
-                                     phase_plan=params.phase_plan, colors=mesh.colors)
+                                     phase_plan=params.phase_plan, phases=dict(params.phases), colors=mesh.colors)
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
     # what CARLA makes of each signal, against where we meant it to be

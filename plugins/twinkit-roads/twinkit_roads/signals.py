@@ -405,7 +405,7 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
                   carla_light_shift_m: float = 0.25, add_signs: bool = True,
                   sign_max_road_m: float = 12.0, reach_m: float = 0.05, wrong_side_m: float = 6.0,
                   one_head: bool = True, lights_on_ground: bool = True, phase_plan: str = "shape",
-                  osm_signs: list | None = None, colors: np.ndarray | None = None
+                  osm_signs: list | None = None, colors: np.ndarray | None = None, phases: dict | None = None
                   ) -> tuple[str, list[Placed], list[str]]:
     """Move netconvert's light groups onto the scanned lights; add the scanned signs.
 
@@ -421,7 +421,8 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     stay. Unpaired groups keep netconvert's guess. ``one_head``: a group becomes one signal (type 1000001,
     its validity the group's lanes); ``lights_on_ground``: zOffset 0 (CARLA's light blueprint is a whole
     pole); ``phase_plan`` (``shape`` | ``approach`` | ``netconvert``: left as written): one controller per
-    phase of each junction, named from the junction (``controllers.wire_junctions``). Signs: see
+    phase of each junction, named from the junction (``controllers.wire_junctions``; ``phases``: a user plan by
+    junction id or "default", lists of compass points traffic comes from). Signs: see
     ``_add_signs``; ``osm_signs``: OSM's sign nodes as (x, y, kind), site frame (``signtypes.osm_kind``);
     ``colors``: (n, 3) uint8 RGB of the mesh's vertices (``Instance.members`` index them) for the plate's look.
     """
@@ -432,7 +433,7 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     placed = _place_lights(root, refs, instances, log, gate_m=gate_m, group_m=group_m, shift_m=carla_light_shift_m,
                            reach_m=reach_m, wrong_side_m=wrong_side_m, one_head=one_head, ground=lights_on_ground)
     if phase_plan != "netconvert":
-        _, wlog = wire_junctions(root, phase_plan)
+        _, wlog = wire_junctions(root, phase_plan, user=phases)
         log += wlog
     if add_signs:
         placed += _add_signs(root, refs, instances, log, sign_max_road_m=sign_max_road_m, reach_m=reach_m,
