@@ -186,3 +186,17 @@ def test_user_phase_plan_by_compass_points():
     new, _, log = place_signals(text, [], phases={"1": [["N", "E"]]})  # a crossing pair, as the user asked
     j = light_plan(new)["junctions"]["1"]
     assert j["controllers"] == 3 and len(j["conflicts"]) == 1 and any("crossing" in ln for ln in log)
+
+
+def test_osm_sign_nodes_in_the_aligned_frame(tmp_path):
+    from twinkit_roads.signtypes import osm_sign_nodes
+    (tmp_path / "a.osm").write_text(
+        '<?xml version="1.0"?><osm version="0.6">'
+        '<node id="1" lat="60.0" lon="25.0"><tag k="highway" v="stop"/></node>'
+        '<node id="2" lat="60.0" lon="25.001"><tag k="traffic_sign" v="FI:361[40]"/></node>'
+        '<node id="3" lat="60.0" lon="25.002"><tag k="amenity" v="bench"/></node></osm>')
+    # a toy site frame: 1e-3 degrees = 100 m; the alignment turns 90 degrees and shifts 1 m in x
+    nodes = osm_sign_nodes(tmp_path / "a.osm", lambda ll: (ll - [25.0, 60.0]) * 1e5,
+                           {"yaw_deg": 90.0, "tx_m": 1.0, "ty_m": 0.0})
+    assert [k for _, _, k in nodes] == ["stop", "speed"]
+    assert nodes[1][0] == pytest.approx(1.0) and nodes[1][1] == pytest.approx(100.0)

@@ -251,14 +251,16 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
 
 def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
                   in_labels_npy: Path, out_aligned_xodr: Path, out_signals_json: Path,
-                  out_signals_png: Path) -> dict:
-    """Move netconvert's traffic lights onto the scanned ones (instances.py), add the scanned signs (signals.py)."""
+                  out_signals_png: Path, in_osm_osm: Path | None = None,
+                  in_alignment_json: Path | None = None) -> dict:
+    """Move netconvert's traffic lights onto the scanned ones (instances.py), one controller per junction phase
+    (controllers.py), add the scanned signs typed from OSM's sign nodes or their look (signals.py, signtypes.py)."""
     from .align import lane_lines
     from .instances import scanned_instances
     from twinkit.street.lights import light_plan
 
     from .signals import carla_position_errors, draw_signals, place_signals as place, signals_report
-    from .signtypes import typed_plates
+    from .signtypes import osm_sign_nodes, typed_plates
 
     params = params or SignalParams()
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
@@ -269,6 +271,13 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                          "labels.npy)")
     text = A.read_opendrive(in_aligned_xodr)
     kept, rejected = scanned_instances(mesh.vertices, labels, params)
+    osm_signs = None
+    if in_osm_osm is not None:
+        from twinkit.geo import SiteFrame
+
+        align = json.loads(in_alignment_json.read_text()) if in_alignment_json is not None else None
+        osm_signs = osm_sign_nodes(in_osm_osm, SiteFrame.from_site(ctx.site).lonlat_to_local, align)
+        ctx.log.info("%d OSM sign node(s) (stop, give way, speed limit) to type the scanned plates", len(osm_signs))
     plates = typed_plates(rejected, mesh.colors)  # stop / yield / speed plates whose thin pole the mesh lost
     for i, inst in enumerate(plates):
         inst.id = len(kept) + i
@@ -278,7 +287,8 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,
                                      sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m,
                                      one_head=params.one_head, lights_on_ground=params.lights_on_ground,
-                                     phase_plan=params.phase_plan, phases=dict(params.phases), colors=mesh.colors)
+                                     phase_plan=params.phase_plan, phases=dict(params.phases), colors=mesh.colors,
+                                     osm_signs=osm_signs)
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
     # what CARLA makes of each signal, against where we meant it to be

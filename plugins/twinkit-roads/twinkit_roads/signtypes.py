@@ -143,3 +143,21 @@ def ground_typed_signs(root, max_z_offset_m: float = 1.0) -> list[str]:
             out.append(f"sign {sig.get('id')} (type {sig.get('type')}): zOffset {z:.2f} m -> 0, CARLA spawns its "
                        "blueprint pole at that height")
     return out
+
+
+def osm_sign_nodes(osm_path, lonlat_to_local, alignment: dict | None = None) -> list[tuple[float, float, str]]:
+    """OSM's sign nodes (``osm_kind``) as (x, y, kind) in the frame of the aligned OpenDRIVE: ``lonlat_to_local``
+    ((n, 2) lon, lat -> (n, 2) site metres, ``SiteFrame.lonlat_to_local``), then ``alignment.json``'s similarity
+    (aligned_xy = Rz(yaw_deg) @ xy + [tx_m, ty_m]), which moved the OSM network onto the scan."""
+    from .osmio import read_osm
+
+    nodes = [(lo, la, osm_kind(t)) for lo, la, t in read_osm(osm_path).nodes.values()]
+    nodes = [n for n in nodes if n[2]]
+    if not nodes:
+        return []
+    xy = np.asarray(lonlat_to_local(np.array([[lo, la] for lo, la, _ in nodes], float)), float).reshape(-1, 2)
+    if alignment:
+        a = math.radians(float(alignment.get("yaw_deg", 0.0)))
+        R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        xy = xy @ R.T + [float(alignment.get("tx_m", 0.0)), float(alignment.get("ty_m", 0.0))]
+    return [(float(x), float(y), k) for (x, y), (_, _, k) in zip(xy, nodes)]
