@@ -115,9 +115,9 @@ def test_scanned_stop_plate_is_typed_206_on_the_ground_today_it_was_minus_one():
     assert [p.type for p in placed_old if p.kind == "sign"] == ["-1"]
     new, placed, _ = place_signals(text, [inst], colors=colors)
     sign = next(p for p in placed if p.kind == "sign")
-    assert sign.type == "206" and sign.z_offset == 0.0 and "look" in sign.note
+    assert sign.type == "206" and abs(sign.z_offset) < 0.1 and "look" in sign.note
     sig = next(s for s in ET.fromstring(new).iter("signal") if s.get("id") == sign.id)
-    assert sig.get("type") == "206" and sig.get("zOffset") == "0.000"
+    assert sig.get("type") == "206" and abs(float(sig.get("zOffset"))) < 0.1  # the ground under the plate
     # an OSM stop node beats the look; a speed plate takes the road's OSM maxspeed
     _, placed, _ = place_signals(text, [inst], colors=colors, osm_signs=[(3.5, -15.5, "yield")])
     assert next(p for p in placed if p.kind == "sign").type == "205"

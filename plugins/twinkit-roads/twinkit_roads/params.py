@@ -61,7 +61,7 @@ class SignalParams:
     wrong_side_m: float = param(6.0, ge=0, help="metres: extra pairing cost of a light across the reference line from the lanes of its head")
     carla_light_shift_m: float = param(0.25, help="metres: CARLA moves lights this far along their heading on import (MapBuilder.cpp); the placement compensates")
     one_head: bool = param(True, help="netconvert's signals of one head (one per lane and turn arrow) become one signal whose validity covers their lanes; false: kept stacked")
-    lights_on_ground: bool = param(True, help="traffic lights get zOffset 0: CARLA's light blueprint is a whole pole standing on the road's elevation; false: zOffset = the scanned head's height")
+    lights_on_ground: bool = param(True, help="traffic lights stand on the scanned ground under their head (zOffset = that ground above the road; 0 for netconvert's unpaired guesses): CARLA's light blueprint is a whole pole; false: zOffset = the scanned head's height")
     phase_plan: str = param("shape", choices=("shape", "approach", "netconvert"), help="junction signal plan (one OpenDRIVE controller per phase, named from its junction): shape = opposite approaches share a phase, approach = each approach alone, netconvert = leave netconvert's controller (CARLA then runs every light alone)")
     phases: Dict[str, List[List[str]]] = param(default_factory=dict, free=True, help="a junction signal plan to use instead of phase_plan: junction id (or 'default') -> phases, each a list of the compass points traffic comes from, e.g. {default: [[N, S], [E, W]]}; approaches named by no phase run alone")
     add_signs: bool = param(True, help="write the scanned traffic signs as OpenDRIVE signals")

@@ -269,8 +269,9 @@ def _move_light(root: ET.Element, refs: dict[str, RefLine], road: ET.Element, si
             rec.host_road = host.road
             rec.note = (f"scanned light {over:.2f} m beyond road {ref.road}'s end: signal defined on road "
                         f"{host.road}, referenced from road {ref.road} with its lanes (signalReference)")
-    # the pole stands on the ground: CARLA's light blueprint carries its heads at their own height
-    zoff = 0.0 if ground else float(inst.centre[2]) - host.z(s_w)
+    # the pole stands on the scanned ground under the head (kerb, sidewalk): CARLA's light blueprint carries its
+    # heads at their own height
+    zoff = float(inst.centre[2]) - host.z(s_w) - (inst.height_m if ground else 0.0)
     sig.set("name", SCAN_NAME)
     sig.set("s", _f(s_w))
     sig.set("t", _f(t_w))
@@ -292,8 +293,9 @@ def _place_lights(root: ET.Element, refs: dict[str, RefLine], instances: list[In
                   one_head: bool = True, ground: bool = True) -> list[Placed]:
     """Move netconvert's light groups onto the scanned lights (in place in ``root``); one record per signal.
 
-    ``one_head``: a group's signals become one signal (``controllers.merge_heads``); ``ground``: lights get
-    zOffset 0 (the pole's foot on the road's elevation)."""
+    ``one_head``: a group's signals become one signal (``controllers.merge_heads``); ``ground``: a light's
+    zOffset puts the pole's foot on the scanned ground under its head (``Instance.height_m`` below the head;
+    netconvert's unpaired guesses: 0, the road's elevation)."""
     lights, groups = _light_groups(root, refs, group_m, shift_m)
     scan_lights = [inst for inst in instances if inst.kind == "light"]
     pairs = _pair_groups(lights, groups, refs, scan_lights, gate_m, wrong_side_m)
@@ -383,7 +385,7 @@ def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Insta
         sid = f"scan_sign_{n}"
         n += 1
         # a typed sign is a CARLA blueprint standing on the ground; a generic one stays a plate at its height
-        zoff = 0.0 if typ != UNKNOWN_SIGN_TYPE else float(inst.centre[2]) - ref.z(s)
+        zoff = float(inst.centre[2]) - ref.z(s) - (inst.height_m if typ != UNKNOWN_SIGN_TYPE else 0.0)
         attrs = {"id": sid, "name": SCAN_NAME, "s": _f(s), "t": _f(t), "zOffset": f"{zoff:.3f}",
                  "orientation": orient, "dynamic": "no", "country": "OpenDRIVE", "type": typ, "subtype": sub,
                  "height": f"{float(inst.size[2]):.3f}", "width": f"{float(inst.size[0]):.3f}"}
@@ -419,8 +421,8 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     (s, t, zOffset = head centre above the road), or, past the road's end, in the frame of the road
     that holds it, with a signalReference left on its own road; its id, lanes (validity) and orientation
     stay. Unpaired groups keep netconvert's guess. ``one_head``: a group becomes one signal (type 1000001,
-    its validity the group's lanes); ``lights_on_ground``: zOffset 0 (CARLA's light blueprint is a whole
-    pole); ``phase_plan`` (``shape`` | ``approach`` | ``netconvert``: left as written): one controller per
+    its validity the group's lanes); ``lights_on_ground``: zOffset = the scanned ground under the head
+    (CARLA's light blueprint is a whole pole); ``phase_plan`` (``shape`` | ``approach`` | ``netconvert``: left as written): one controller per
     phase of each junction, named from the junction (``controllers.wire_junctions``; ``phases``: a user plan by
     junction id or "default", lists of compass points traffic comes from). Signs: see
     ``_add_signs``; ``osm_signs``: OSM's sign nodes as (x, y, kind), site frame (``signtypes.osm_kind``);
