@@ -28,10 +28,10 @@ CARLA_SIGN_TYPES = {"stop": ("206", "-1"), "yield": ("205", "-1"), "speed": ("27
 GENERIC = "-1"
 
 # traffic_sign=* values -> kind: the plain words, and national codes with their country (DE: the Vienna-convention
-# numbers; FI: the 2020 numbers and the older letters; US: MUTCD)
+# numbers; FI: the 2020 numbers (363: a speed-limit zone) and the older letters; US: MUTCD)
 _OSM_WORDS = {"stop": "stop", "give_way": "yield", "yield": "yield", "maxspeed": "speed"}
 _OSM_CODES = {"DE:206": "stop", "DE:205": "yield", "DE:274": "speed", "FI:232": "stop", "FI:231": "yield",
-              "FI:361": "speed", "FI:B6": "stop", "FI:B5": "yield", "FI:C32": "speed", "US:R1-1": "stop",
+              "FI:361": "speed", "FI:363": "speed", "FI:B6": "stop", "FI:B5": "yield", "FI:C32": "speed", "US:R1-1": "stop",
               "US:R1-2": "yield", "US:R2-1": "speed"}
 
 
