@@ -200,13 +200,23 @@ def bench_osm(osm: Path, tmp: Path, centre: tuple[float, float], half_m: float =
     proj = f"+proj=tmerc +lat_0={lat} +lon_0={lon} +k=1 +x_0=0 +y_0=0 +ellps=GRS80 +units=m +no_defs"
     run_netconvert(tmp / "crop.osm", tmp / "crop.xodr", proj, ConvertParams())
     before = (tmp / "crop.xodr").read_text()
-    after, _, log = place_signals(before, [])
+    from pyproj import Transformer
+
+    from twinkit_roads.signtypes import osm_sign_nodes
+
+    tr = Transformer.from_crs("EPSG:4326", proj, always_xy=True)
+    nodes = osm_sign_nodes(tmp / "crop.osm", lambda ll: np.stack(tr.transform(ll[:, 0], ll[:, 1]), 1))
+    after, placed, log = place_signals(before, [], osm_signs=nodes)
+    kinds = [k for _, _, k in nodes]
     print(f"\n### {osm.name}: {2 * half_m:.0f} m box at ({lat:.5f}, {lon:.5f}), "
           f"{data.count()['traffic_signals']} OSM traffic_signals nodes\n")
     print(PLAN_HEAD)
     print(plan_row("netconvert (before)", before))
-    print(plan_row("place_signals, no scan (after)", after))
-    for ln in log:
+    print(plan_row("place_signals, no scan, OSM sign nodes (after)", after))
+    print(f"\nOSM sign nodes in the crop: {kinds.count('stop')} stop, {kinds.count('yield')} give way, "
+          f"{kinds.count('speed')} speed limit; written from OSM alone: "
+          f"{sum(p.source == 'osm' for p in placed)}")
+    for ln in log[:12]:
         print(f"- {ln}")
 
 

@@ -200,3 +200,18 @@ def test_osm_sign_nodes_in_the_aligned_frame(tmp_path):
                            {"yaw_deg": 90.0, "tx_m": 1.0, "ty_m": 0.0})
     assert [k for _, _, k in nodes] == ["stop", "speed"]
     assert nodes[1][0] == pytest.approx(1.0) and nodes[1][1] == pytest.approx(100.0)
+
+
+def test_osm_stop_node_without_a_plate_is_written_on_its_approach():
+    from twinkit_roads.reflines import reference_lines
+    text = netconvert_junction()
+    ref = reference_lines(ET.fromstring(text))["52"]  # Testikuja from the south, into junction 1
+    x, y = ref.point(ref.length - 5.0, 0.0)
+    far = ref.point(1.0, 0.0)  # a speed-limit node: never written from OSM alone (no plate, no value)
+    new, placed, log = place_signals(text, [], osm_signs=[(x, y, "stop"), (x + 500, y, "yield"), (far[0], far[1], "speed")])
+    osm = [p for p in placed if p.source == "osm"]
+    assert [(p.id, p.type, p.road, p.orientation) for p in osm] == [("osm_stop_0", "206", "52", "+")]
+    assert any("no approach" in ln for ln in log)  # the node far off the network
+    from twinkit.street.lanes import LaneMap
+    lm = next(m for m in LaneMap(new, "t").landmarks() if m.id == "osm_stop_0")
+    assert lm.type == "206"

@@ -32,6 +32,7 @@ import numpy as np
 
 from .controllers import merge_heads, wire_junctions
 from .instances import Instance
+from .osmsigns import add_osm_signs
 from .reflines import RefLine, reference_lines
 from .signtypes import ground_typed_signs, plate_look, road_speed_kmh, signal_type
 
@@ -330,14 +331,14 @@ def _place_lights(root: ET.Element, refs: dict[str, RefLine], instances: list[In
     return placed
 
 
-def _sign_kind(inst: Instance, colors, osm_signs, osm_match_m: float) -> tuple[str | None, str]:
-    """A scanned sign's kind and where it comes from: the nearest OSM sign node within ``osm_match_m``, else
-    the plate's look (``signtypes``)."""
+def _sign_kind(inst: Instance, colors, osm_signs, osm_match_m: float, used: set[int]) -> tuple[str | None, str]:
+    """A scanned sign's kind and where it comes from: the nearest OSM sign node within ``osm_match_m`` (its index
+    added to ``used``), else the plate's look (``signtypes``)."""
     if osm_signs:
-        d = [(math.hypot(x - inst.centre[0], y - inst.centre[1]), k) for x, y, k in osm_signs]
-        dist, k = min(d)
+        dist, i = min((math.hypot(x - inst.centre[0], y - inst.centre[1]), i) for i, (x, y, _) in enumerate(osm_signs))
         if dist <= osm_match_m:
-            return k, f"OSM sign node {dist:.1f} m away"
+            used.add(i)
+            return osm_signs[i][2], f"OSM sign node {dist:.1f} m away"
     if colors is not None and inst.members is not None:
         kind, why = plate_look(colors[inst.members])
         pole = "; no pole found under it" if inst.evidence == "plate_look" else ""
@@ -353,6 +354,7 @@ def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Insta
     outside = {k: r for k, r in refs.items() if r.junction == "-1" and (r.lanes_right or r.lanes_left)}
     drivable = {k: r for k, r in refs.items() if r.lanes_right or r.lanes_left}
     placed: list[Placed] = []
+    used: set[int] = set()
     n = 0
     for inst in (i for i in instances if i.kind == "sign"):
         # the road whose frame holds the sign (CARLA clamps s): outside junctions first
@@ -371,7 +373,7 @@ def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Insta
             orient, lanes = ("-", ref.lanes_left) if t < 0 else ("+", ref.lanes_right)
         road_el = next(r for r in root.iter("road") if r.get("id") == ref.road)
         sg = _signals_el(road_el)
-        kind, why = _sign_kind(inst, colors, osm_signs, osm_match_m)
+        kind, why = _sign_kind(inst, colors, osm_signs, osm_match_m, used)
         if kind == "stop" and wrong_way and not why.startswith("OSM"):
             # a red plate facing the wrong way of a one-way street is its no-entry sign, not a stop
             kind, why = None, why + "; it faces the wrong way of a one-way street: a no-entry sign"
@@ -400,7 +402,7 @@ def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Insta
                              typ, sub, None, [float(v) for v in xy],
                              (f"{kind} ({why})" if typ != UNKNOWN_SIGN_TYPE else
                               f"generic (-1): {kind or 'kind not known'} ({why})")))
-    return placed
+    return placed + add_osm_signs(root, refs, osm_signs, used, log)
 
 
 def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 15.0, group_m: float = 2.0,
