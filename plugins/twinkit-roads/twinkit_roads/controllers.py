@@ -136,7 +136,7 @@ def wire_junctions(root: ET.Element, plan: str = "shape", cross_deg: tuple[float
                    user: dict | None = None) -> tuple[dict, list[str]]:
     """Give every junction whose lights CARLA would not run as one conflict-free group (``light_plan``) one
     controller per phase, named from the junction (in place in ``root``); junctions that already run right
-    (CARLA's own maps) and their controllers stay as they are.
+    (CARLA's own maps) and their controllers stay as they are, unless ``user`` names them.
 
     ``user``: phase plans by junction id or ``"default"`` (``phase_plan``'s ``user``); a phase holding crossing
     approaches is kept as given and logged. Lights with no junction ahead keep no controller (CARLA runs each
@@ -145,7 +145,8 @@ def wire_junctions(root: ET.Element, plan: str = "shape", cross_deg: tuple[float
     """
     text = ET.tostring(root, encoding="unicode")
     w = Wiring(text)
-    good = {j for j, v in light_plan(text, cross_deg)["junctions"].items() if v["groups"] == 1 and not v["conflicts"]}
+    good = {j for j, v in light_plan(text, cross_deg)["junctions"].items() if v["groups"] == 1 and not v["conflicts"]
+            and not (user and (j in user or "default" in user))}  # a plan the user gives is always applied
     keep_ctrl = {c for j in good for c in w.junction_controllers.get(j, [])}
     per: dict[str, dict[str, float]] = {}
     log: list[str] = []
