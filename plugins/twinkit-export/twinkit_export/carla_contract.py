@@ -31,6 +31,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .contract_actors import ACTORS_GEOMETRY_RULE, check_actor_geometry
+
 CARLA = "carla-simulator/carla"
 SRC_IMPORT = "Util/BuildTools/Import.py"
 SRC_MOVE = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/MoveAssetsCommandlet.cpp (SSTags.h)"
@@ -137,6 +139,7 @@ RULES: dict[str, tuple[str, str]] = {
                "spawns them (nothing in the import spawns actors)", f"{SRC_IMPORT}; {SRC_TWINKIT}"),
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
+    "actors_geometry": ACTORS_GEOMETRY_RULE,
 }
 
 
@@ -452,6 +455,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         _check_placement(rep, prop_names, Path(spawn_script) if spawn_script else root / "spawn_props.py")
     # actors (twinkit's lifted movable objects): a transform and a spawn script ---------------------
     _check_actors(rep, root if root.name != "Import" else root.parent)
+    check_actor_geometry(rep, root if root.name != "Import" else root.parent)
     # decals --------------------------------------------------------------------------------------
     _check_decals(rep, imp, map_names, expect_decals)
     # semantics: every class ends in its tag -----------------------------------------------------------

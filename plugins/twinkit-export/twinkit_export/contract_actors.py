@@ -31,17 +31,18 @@ import numpy as np
 SRC_SPAWN = ("Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Actor/Factory/VehicleActorFactory.cpp, WalkerActorFactory.cpp "
              "(SpawnActor: UWorld::SpawnActor returns null -> EActorSpawnResultStatus::Collision); "
              "Actor/ActorSpawnResult.cpp (StatusToString)")
-#: the rule's entry for carla_contract.RULES
-RULE = ("actors_geometry", ("an actor spawns only where its collision overlaps no blocking geometry (else 'Spawn "
-                            "failed because of collision at spawn position') and falls when nothing is under it: no "
-                            "lifted actor's box holds static geometry, and every actor's scanned mesh stands on the "
-                            "static surface under it", SRC_SPAWN))
+#: the rule's id and its entry in carla_contract.RULES
+RULE_ID = "actors_geometry"
+ACTORS_GEOMETRY_RULE = ("an actor spawns only where its collision overlaps no blocking geometry (else 'Spawn failed "
+                        "because of collision at spawn position') and falls when nothing is under it: no lifted "
+                        "actor's box holds static geometry, and every actor's scanned mesh stands on the static "
+                        "surface under it", SRC_SPAWN)
 
 SAMPLE_M = 0.05
 INSIDE_SHRINK_M = 0.1
 INSIDE_ABOVE_GROUND_M = 0.3
 INSIDE_MIN_POINTS = 20
-FLOAT_GAP_M = 0.5
+FLOAT_GAP_M = 0.3
 GROUND_MARGIN_M = 0.3
 
 
@@ -181,4 +182,4 @@ def check_actor_geometry(rep, root: Path) -> None:
         else:
             static += [(f"{fbx.stem}:{n}", v, f) for n, v, f in meshes]
     for msg in actor_geometry_problems(actor_boxes(actors, matrix), static, scanned):
-        rep.add(RULE[0], msg)
+        rep.add(RULE_ID, msg)
