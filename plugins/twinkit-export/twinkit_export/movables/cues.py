@@ -44,13 +44,14 @@ def object_cues(vid: np.ndarray, ov: np.ndarray, h: np.ndarray, votes: np.ndarra
 
 def why_not_by_cues(cues: dict, opt: LiftOptions, class_id: int, width: float) -> str | None:
     """Why an object of class ``class_id`` (after :func:`.kinds.refine_class`), ``width`` m wide, that fits its
-    class by labels and shape is still not lifted (None: it is): ``"too_thin"``, ``"floating"`` (no ground
-    contact) or ``"static_to_geometry"`` (the 3D classifier calls it static)."""
+    class by labels and shape is still not lifted (None: it is): every cue it fails, joined by ``+``:
+    ``too_thin``, ``floating`` (no ground contact), ``static_to_geometry`` (the 3D classifier calls it static)."""
+    failed = []
     if width < CLASS_MIN_WIDTH.get(int(class_id), 0.0):
-        return "too_thin"
+        failed.append("too_thin")
     if cues["ground_gap_m"] > opt.ground_contact_m:
-        return "floating"
+        failed.append("floating")
     share = cues.get("geometry_movable_share")
     if share is not None and cues.get("geometry_voted", 0) >= opt.min_geometry_votes and share < opt.min_geometry_share:
-        return "static_to_geometry"
-    return None
+        failed.append("static_to_geometry")
+    return "+".join(failed) or None
