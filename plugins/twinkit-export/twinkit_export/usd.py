@@ -26,7 +26,7 @@ base point, frame description, grid convergence and scale at the base point, ``s
 The stage is in the frame its georeference declares. /Site carries NVIDIA Omniverse's geospatial
 ``OmniWGS84ReferencePositionAPI`` (``omni:geospatial:wgs84:reference:referencePosition`` = (lat,
 lon, height), ``...:tangentPlane`` = ENU) and /Site/CesiumGeoreference Cesium's origin; both read the
-stage's world coordinates as east-north-up metres at that point. Every mesh prim keeps its points in the
+stage's world coordinates as east-north-up metres at that point. Every class mesh prim (and /Site/Movables) keeps its points in the
 site frame (grid east / grid north, grid metres: the same numbers as the FBX, GLB and ``source_index``)
 and has one transform op, the similarity :func:`twinkit.geo.enu.site_to_enu` fits (rotation by the grid
 convergence, 1.79 deg on the demo; scale 1/k), so world positions are ENU: 150 m from the base point the
