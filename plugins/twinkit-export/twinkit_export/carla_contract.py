@@ -31,6 +31,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .contract_ground import RULE as GROUND_RULE, check_lanes_over_ground
+
 CARLA = "carla-simulator/carla"
 SRC_IMPORT = "Util/BuildTools/Import.py"
 SRC_MOVE = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/MoveAssetsCommandlet.cpp (SSTags.h)"
@@ -137,6 +139,7 @@ RULES: dict[str, tuple[str, str]] = {
                "spawns them (nothing in the import spawns actors)", f"{SRC_IMPORT}; {SRC_TWINKIT}"),
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
+    "lanes_over_ground": GROUND_RULE,
 }
 
 
@@ -446,6 +449,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         rep.add("json", f"{desc_path.name}: no map ('maps' is empty) and no README.md saying why")
 
     map_names = _check_maps(rep, desc_path, pkg, maps, class_tags)
+    check_lanes_over_ground(rep, pkg, maps)  # the lanes over the map's mesh (contract_ground.py)
     prop_names = _check_props(rep, desc_path, pkg, props, class_tags)
     # placement: nothing in the import places props ------------------------------------------------
     if prop_names:

@@ -210,16 +210,22 @@ def trim_to_ground(text: str, vertices: np.ndarray, faces: np.ndarray, p: TrimPa
             root = backup
             roads = {r.get("id"): r for r in root.findall("road")}
     if not any(e.trim_m > 0 for e in ends):
-        return text, _report(ends, ground, ground, notes)
+        return text, _report(ends, samples, ground, samples, ground, notes)
     out = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
-    return out, _report(ends, ground, ground_of(LaneMap(out, source=source).lanes(p.step_m).xyz), notes)
+    after = LaneMap(out, source=source).lanes(p.step_m)
+    return out, _report(ends, samples, ground, after, ground_of(after.xyz), notes)
 
 
 def _parse(text: str) -> ET.Element:
     return ET.fromstring(text.encode(), parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
 
 
-def _report(ends: list[MapEnd], before: np.ndarray, after: np.ndarray, notes: list[str]) -> dict:
+def _report(ends: list[MapEnd], s0, g0: np.ndarray, s1, g1: np.ndarray, notes: list[str]) -> dict:
+    """The trim's report: the ends, and the lane samples off the ground before and after (driving lanes and all)."""
+    d0, d1 = s0.is_type(*DRIVING), s1.is_type(*DRIVING)
     return {"ends": [e.doc() for e in ends], "cut_ends": sum(1 for e in ends if e.trim_m > 0),
-            "samples_off_ground_before": int((~before).sum()), "samples_off_ground_after": int((~after).sum()),
-            "samples_before": int(len(before)), "samples_after": int(len(after)), "notes": notes}
+            "max_trim_m": round(max((e.trim_m for e in ends), default=0.0), 3),
+            "driving_off_ground_before": int((~g0 & d0).sum()), "driving_off_ground_after": int((~g1 & d1).sum()),
+            "driving_samples_before": int(d0.sum()), "driving_samples_after": int(d1.sum()),
+            "samples_off_ground_before": int((~g0).sum()), "samples_off_ground_after": int((~g1).sum()),
+            "samples_before": int(len(g0)), "samples_after": int(len(g1)), "notes": notes}
