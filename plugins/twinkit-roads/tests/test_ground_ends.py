@@ -32,7 +32,7 @@ def _apply(demo_site, xodr, tmp_path, name, **params):
 
 @pytest.fixture(scope="module")
 def demo_maps(demo_site, tmp_path_factory):
-    """(aligned map as before this change, the same map trimmed to the ground, the apply step's metrics, mesh)."""
+    """(aligned map as before this change, the same map trimmed to the ground, the trim's report, mesh)."""
     from twinkit.mesh import read_ply
 
     tmp = tmp_path_factory.mktemp("ground_ends")
@@ -40,9 +40,11 @@ def demo_maps(demo_site, tmp_path_factory):
                     {"in_osm_osm": demo_site["roads.osm"]}, roads.ConvertParams(), site=DEMO_SITE)
     before = _apply(demo_site, conv["roads.xodr"], tmp, "before", trim_to_ground=False)
     after = _apply(demo_site, conv["roads.xodr"], tmp, "after")
-    metrics = json.loads((tmp / "after" / "step.json").read_text()).get("metrics", {})
-    return (before["aligned.xodr"].read_text(), after["aligned.xodr"].read_text(), metrics,
-            read_ply(demo_site["gt_mesh.ply"]))
+    mesh = read_ply(demo_site["gt_mesh.ply"])
+    text = before["aligned.xodr"].read_text()
+    again, report = trim_to_ground(text, mesh.vertices, mesh.faces)
+    assert again == after["aligned.xodr"].read_text()  # what the step wrote
+    return text, again, report, mesh
 
 
 def _off(text, mesh):
@@ -68,15 +70,15 @@ def _graph(text):
 def test_demo_map_ends_are_cut_back_onto_the_ground(demo_maps):
     """Today netconvert's turnarounds at the demo's three dead ends run past the mesh; after the trim no driving
     waypoint leaves it, and the network is the same graph."""
-    before, after, metrics, mesh = demo_maps
+    before, after, report, mesh = demo_maps
     ends = map_ends(ET.fromstring(before))
     assert sum(1 for e in ends if e.turnarounds) == 3  # west, east and south dead ends
     off0, off1 = _off(before, mesh), _off(after, mesh)
     assert off0.off.sum() >= 10 and any(r in {int(t) for e in ends for t in e.turnarounds}
                                          for r in off0.road[off0.off])
     assert off1.off.sum() == 0, off1.summary()["off_ground_at"]
-    assert metrics["trimmed_ends"] >= 3 and 0 < metrics["trim_max_m"] < 3.0
-    assert metrics["driving_off_ground_after"] == 0 < metrics["driving_off_ground_before"]
+    assert report["cut_ends"] >= 3 and 0 < report["max_trim_m"] < 3.0
+    assert report["driving_off_ground_after"] == 0 < report["driving_off_ground_before"]
     assert _graph(after) == _graph(before)
     # the traffic manager's end: the dead end still turns its vehicles round (LocalizationStage.cpp removes a
     # vehicle whose lane has no next waypoint), now on the ground

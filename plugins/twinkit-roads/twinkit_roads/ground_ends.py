@@ -100,9 +100,9 @@ def _reach(samples, ground: np.ndarray, road: ET.Element, side: str, max_trim_m:
     s = np.round(samples.s[k], 3)
     dist = length - s if side == "end" else s
     off = {float(d) for d in np.unique(dist[~ground[k]])}
-    for d in np.unique(dist):  # nearest first
+    for i, d in enumerate(np.unique(dist)):  # nearest first
         if float(d) not in off:
-            return float(d)  # the first cross-section on the ground (0: the end's own)
+            return float(d) if i else 0.0  # the first cross-section on the ground; 0: the end's own
         if d > max_trim_m:
             break
     return float(max_trim_m) + 1.0  # off the ground as far as a cut may reach
