@@ -84,10 +84,9 @@ def test_demo_map_ends_are_cut_back_onto_the_ground(demo_maps):
     # vehicle whose lane has no next waypoint), now on the ground
     m = carla.Map("t", after)
     for e in (e for e in ends if e.turnarounds):
-        rid, side = e.ends[0]
+        rid = next(r for r, side in e.ends if side == "end")  # the road into the dead end (its lane -1)
         road = next(r for r in ET.fromstring(after).findall("road") if r.get("id") == rid)
-        s_end = float(road.get("length")) - 0.5 if side == "end" else 0.5
-        nxt = m.get_waypoint_xodr(int(rid), -1, s_end).next(2.0)
+        nxt = m.get_waypoint_xodr(int(rid), -1, float(road.get("length")) - 0.5).next(2.0)
         assert nxt and {w.road_id for w in nxt} <= {int(t) for t in e.turnarounds}
 
 
