@@ -9,7 +9,8 @@ past the scanned ground, so CARLA's traffic manager turns its vehicles around ov
 
 - a *free end*: a road end without a link (a one-way street entering the map);
 - a *dead end*: a junction touching at most two ordinary road ends, every connecting road of which goes from
-  one of them to another (netconvert's turnaround).
+  one of them to another and turns back on itself (netconvert's turnaround; a junction without connecting roads
+  too).
 
 and, for each end whose lanes leave the ground (:func:`twinkit.street.lane_ground.on_ground`, every lane reached
 from a driving lane, sampled every ``step_m``), cuts its roads back by the distance from the end to the farthest
@@ -25,6 +26,7 @@ are reported and left.
 from __future__ import annotations
 
 import copy
+import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
@@ -76,16 +78,26 @@ def map_ends(root: ET.Element) -> list[MapEnd]:
         jid = j.get("id")
         ends = at_junction.get(jid, [])
         conn = [r for r in roads.values() if r.get("junction") == jid]
-        if not conn or len({e[0] for e in ends}) > 2:
+        if not ends or len({e[0] for e in ends}) > 2:
             continue
         touched = set()
         for c in conn:
             for side, el in _links(c).items():
                 if el is not None and el.get("elementType") == "road":
                     touched.add(el.get("elementId"))
-        if touched <= {e[0] for e in ends}:
+        if touched <= {e[0] for e in ends} and _same_side([(roads[r], side) for r, side in ends]):
             out.append(MapEnd(sorted(ends), sorted(r.get("id") for r in conn), jid))
     return out
+
+
+def _same_side(ends: list[tuple[ET.Element, str]]) -> bool:
+    """The road ends all come into their junction from one side (the directions into it within 30 degrees of
+    each other): a dead end, not a junction that joins two roads one after the other."""
+    into = []
+    for road, side in ends:
+        h = road_pose(road, float(road.get("length")) if side == "end" else 0.0)[2]
+        into.append(h if side == "end" else h + math.pi)
+    return all(abs(math.remainder(h - into[0], 2 * math.pi)) < math.radians(30) for h in into)
 
 
 def _reach(samples, ground: np.ndarray, road: ET.Element, side: str, max_trim_m: float) -> float:
