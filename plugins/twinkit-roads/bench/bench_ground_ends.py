@@ -115,7 +115,7 @@ def main(argv=None) -> int:
     runs = args.run or [r for r in RUNS if r.is_dir()]
     if not runs:
         print("no run found: give --run outputs/demo (a finished recipe=pointcloud_site site=demo run)")
-        return 1
+        return 0
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for i, run in enumerate(runs):
