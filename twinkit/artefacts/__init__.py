@@ -398,7 +398,7 @@ CATALOGUE: dict[str, Artefact] = dict([
     _entry("textured_mesh.ply", "PLY mesh", F.TexturedMeshPly, read_textured_mesh, write_textured_mesh,
            writers="photo:photo_texture pointcloud:bake_texture",
            readers="photo:photo_texture pointcloud:evaluate_reconstruction roads:align_roads roads:apply_alignment "
-                   "roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
+                   "roads:place_crosswalks roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
                    "segmentation:classify_geometry segmentation:import_labels segmentation:photo_views segmentation:render_views "
                    "segmentation:sample_views segmentation:segmenter/felzenszwalb segmentation:segmenter/vertices "
                    "segmentation:transfer_gt_labels tiles:evaluate_seam_labels"),
@@ -411,8 +411,8 @@ CATALOGUE: dict[str, Artefact] = dict([
     _entry("labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
            writers="export:lift_movables roads:road_evidence segmentation:backproject "
                    "segmentation:import_labels segmentation:transfer_gt_labels",
-           readers="export:lift_movables export:split_classes roads:align_roads roads:place_signals "
-                   "roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
+           readers="export:lift_movables export:split_classes roads:align_roads roads:place_crosswalks "
+                   "roads:place_signals roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
                    "segmentation:import_labels tiles:evaluate_seam_labels"),
     _entry("gt_labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
            writers="segmentation:transfer_gt_labels",
@@ -425,8 +425,9 @@ CATALOGUE: dict[str, Artefact] = dict([
            writers="demo-site:site_generator/demo_intersection",
            readers="pointcloud:evaluate_reconstruction segmentation:transfer_gt_labels"),
     _entry("aligned.xodr", "OpenDRIVE XML", F.OpenDrive, read_opendrive, write_opendrive,
-           writers="roads:apply_alignment roads:place_signals",
-           readers="export:drop_test export:exporter/carla_package roads:place_signals roads:road_evidence"),
+           writers="roads:apply_alignment roads:place_crosswalks roads:place_signals",
+           readers="export:drop_test export:exporter/carla_package roads:place_crosswalks roads:place_signals "
+                   "roads:road_evidence"),
     _entry("roads.osm", "OSM XML", F.OsmXml, read_osm, write_osm,
            writers="demo-site:site_generator/demo_intersection",
            readers="roads:road_source/file segmentation:photo_views segmentation:sample_views"),

@@ -253,3 +253,25 @@ class LaneMap:
             out.append(Landmark(str(lm.id), str(lm.type), int(lm.road_id), float(lm.s),
                                 np.array([loc.x, -loc.y, loc.z], float)))
         return out
+
+    def crosswalks(self) -> list[np.ndarray]:
+        """The crosswalks CARLA reports (``get_crosswalks``: Map::GetAllCrosswalkZones in
+        LibCarla/source/carla/road/Map.cpp, one closed outline per OpenDRIVE crosswalk object, its points
+        one after another): a list of (k, 3) float64 site-frame outlines, each without its closing point."""
+        try:
+            zones = self._map.get_crosswalks()
+        except Exception as exc:  # noqa: BLE001 - CARLA asserts, e.g. RuntimeError("s <= road->GetLength()")
+            raise OpenDriveError(self.source, f"carla.Map cannot place its crosswalks ({type(exc).__name__}: {exc}); "
+                                 "check each crosswalk object's s lies on its road") from None
+        pts = [np.array([p.x, -p.y, p.z], float) for p in zones]
+        out: list[np.ndarray] = []
+        cur: list[np.ndarray] = []
+        for p in pts:
+            if len(cur) > 1 and np.allclose(p, cur[0], atol=1e-4):
+                out.append(np.array(cur))
+                cur = []
+            else:
+                cur.append(p)
+        if cur:
+            out.append(np.array(cur))
+        return out
