@@ -141,13 +141,16 @@ def test_osm_crossing_nodes_and_ways():
 
     d = OsmData()
     d.nodes = {1: (0.0, 0.0, {"highway": "crossing", "crossing": "zebra"}), 2: (1.0, 1.0, {}),
-               3: (1.0, 5.0, {}), 4: (1.0, 3.0, {"highway": "crossing"}), 5: (7.0, 7.0, {"highway": "traffic_signals"})}
-    d.ways = {10: ([2, 4, 3], {"highway": "footway", "footway": "crossing"})}
+               3: (1.0, 5.0, {}), 4: (1.0, 3.0, {"highway": "crossing"}), 5: (7.0, 7.0, {"highway": "traffic_signals"}),
+               6: (-3.0, 0.0, {}), 7: (-1.0, 0.0, {}), 8: (9.0, 9.0, {"highway": "crossing"})}
+    d.ways = {10: ([2, 4, 3], {"highway": "footway", "footway": "crossing"}),
+              11: ([6, 7, 1], {"highway": "residential"})}
     got = osm_crossings(d, lambda ll: np.asarray(ll, float))
     by = {c.osm: c for c in got}
-    assert set(by) == {"node/1", "way/10"}  # node 4 lies on the way: one crossing
+    assert set(by) == {"node/1", "node/8", "way/10"}  # node 4 lies on the way: one crossing
     assert np.allclose(by["way/10"].xy, [1.0, 3.0]) and np.allclose(by["way/10"].axis, [0.0, 1.0])
-    assert by["node/1"].axis is None
+    assert np.allclose(np.abs(by["node/1"].axis), [0.0, 1.0])  # across the residential way (along x) at its end
+    assert by["node/8"].axis is None  # on no road way: across the nearest lane later
 
 
 def test_step_writes_the_crosswalks_carla_reports(tmp_path):

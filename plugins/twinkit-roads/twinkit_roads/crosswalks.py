@@ -28,7 +28,8 @@ ID_BASE = 880000
 @dataclass
 class OsmCrossing:
     """A crossing OSM gives: ``xy`` (2,) site frame (after the road alignment); ``axis`` (2,) unit walking
-    direction for a ``footway=crossing`` way, None for a ``highway=crossing`` node (across its road)."""
+    direction: along a ``footway=crossing`` way, across the road way through a ``highway=crossing`` node
+    (None when no road way holds it: then across the nearest lane)."""
 
     osm: str
     xy: np.ndarray
@@ -77,8 +78,31 @@ def osm_crossings(data, to_site) -> list[OsmCrossing]:
         out.append(OsmCrossing(f"way/{wid}", (xy[0] + xy[-1]) / 2, d / np.linalg.norm(d), dict(tags)))
     for nid, (lon, lat, tags) in data.nodes.items():
         if tags.get("highway") == "crossing" and nid not in on_ways:
-            out.append(OsmCrossing(f"node/{nid}", to_site(np.array([[lon, lat]], float))[0], None, dict(tags)))
+            xy = to_site(np.array([[lon, lat]], float))[0]
+            out.append(OsmCrossing(f"node/{nid}", xy, _across_road(data, nid, xy, to_site), dict(tags)))
     return out
+
+
+_NOT_ROADS = ("footway", "path", "cycleway", "steps", "pedestrian", "crossing", "bridleway", "corridor")
+
+
+def _across_road(data, nid: int, xy: np.ndarray, to_site) -> np.ndarray | None:
+    """The walking direction at a crossing node: across the first road way (highway=*, not a footway) through
+    it, from the way's neighbouring nodes; None when no road way holds the node."""
+    for refs, tags in data.ways.values():
+        if "highway" not in tags or tags["highway"] in _NOT_ROADS or nid not in refs:
+            continue
+        k = refs.index(nid)
+        nb = [r for r in (refs[k - 1] if k > 0 else None, refs[k + 1] if k + 1 < len(refs) else None)
+              if r is not None and r in data.nodes]
+        if not nb:
+            continue
+        p = to_site(np.array([data.nodes[r][:2] for r in nb], float))
+        d = (p[-1] - p[0]) if len(p) == 2 else (p[0] - xy) * (1 if refs.index(nb[0]) > k else -1)
+        n = float(np.linalg.norm(d))
+        if n > 1e-6:
+            return np.array([-d[1], d[0]]) / n
+    return None
 
 
 @dataclass
@@ -337,7 +361,7 @@ def run_crosswalks(params, text: str, site, mesh_ply, labels_npy, osm_path, alig
     for n in notes:
         log.warning("crosswalks: %s", n)
     painted = sum(1 for c in osm if "zebra" in (c.tags.get("crossing"), c.tags.get("crossing:markings")))
-    if painted > sum(1 for c in crosswalks if c.source == "osm+scan"):
+    if params.from_scan and painted > sum(1 for c in crosswalks if c.source == "osm+scan"):
         log.warning("crosswalks: OSM tags %d zebras, the scan shows paint at %d of them (occluded, worn, or the "
                     "colours too dark?)", painted, sum(1 for c in crosswalks if c.source == "osm+scan"))
     if len(carla) != sum(r["written"] for r in records):
