@@ -49,12 +49,12 @@ def navmesh_crosswalks(xodr_text: str) -> NavCrosswalks:
     equal to its first one (exact float comparison, as the script does); its faces are the fan
     (first, j - 1, j) over the points before that. An outline that never closes runs the script past the end
     of the list (IndexError)."""
-    import carla
+    from twinkit.street.lanes import LaneMap, OpenDriveError
 
     try:
-        pts = [(p.x, p.y, p.z) for p in carla.Map("t", xodr_text).get_crosswalks()]
-    except Exception as exc:  # noqa: BLE001 - CARLA's asserts arrive as RuntimeError
-        return NavCrosswalks([], 0, f"carla.Map cannot read the crosswalks ({type(exc).__name__}: {exc})")
+        pts = [tuple(p) for p in LaneMap(xodr_text, "t").crosswalk_points().tolist()]
+    except OpenDriveError as exc:
+        return NavCrosswalks([], 0, str(exc))
     outlines, tri, i = [], 0, 0
     while i < len(pts):
         a, cur = i, []

@@ -175,3 +175,25 @@ def test_step_writes_the_crosswalks_carla_reports(tmp_path):
     assert doc["metrics"]["crosswalks"] == 1 and doc["metrics"]["carla_crosswalks"] == 1
     assert doc["crosswalks"][0]["source"] == "scan"
     assert len(lane_map(out["aligned.xodr"].read_text()).crosswalks()) == 1
+
+
+def test_real_helsinki_osm_crossings():
+    from conftest import need_shared
+
+    from twinkit_roads.osmio import read_osm
+
+    d = read_osm(need_shared("helsinki_center.osm.pbf"))
+    lon0, lat0 = 24.94, 60.17  # a rough local frame is enough to count and orient
+
+    def to_site(ll):
+        ll = np.asarray(ll, float)
+        return np.stack([(ll[:, 0] - lon0) * 55_500.0, (ll[:, 1] - lat0) * 111_200.0], 1)
+
+    got = osm_crossings(d, to_site)
+    ways = [c for c in got if c.osm.startswith("way/")]
+    nodes = [c for c in got if c.osm.startswith("node/")]
+    crossing_nodes = sum(1 for _, _, t in d.nodes.values() if t.get("highway") == "crossing")
+    # 620 crossing nodes and 184 footway=crossing ways in the extract: the ways with two nodes or more inside
+    # it, and the nodes that lie on none of them (the others are their way's crossing, not a second one)
+    assert (crossing_nodes, len(ways), len(nodes)) == (620, 179, 308)
+    assert sum(c.axis is not None for c in got) / len(got) > 0.75  # a walking direction from OSM alone
