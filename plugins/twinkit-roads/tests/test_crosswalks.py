@@ -197,3 +197,31 @@ def test_real_helsinki_osm_crossings():
     # it, and the nodes that lie on none of them (the others are their way's crossing, not a second one)
     assert (crossing_nodes, len(ways), len(nodes)) == (620, 179, 308)
     assert sum(c.axis is not None for c in got) / len(got) > 0.75  # a walking direction from OSM alone
+
+
+def test_report_section_lists_the_crosswalks(tmp_path):
+    import json
+
+    from twinkit_roads.report import sec_crosswalks
+
+    f = tmp_path / "29_place_crosswalks" / "crosswalks.json"
+    f.parent.mkdir()
+    f.write_text(json.dumps({"enabled": True, "metrics": {"osm_crossings": 1, "zebras": 1, "carla_crosswalks": 1},
+                             "crosswalks": [{"id": "880000", "source": "osm+scan", "osm": "node/2", "centre": [1.0, 2.0],
+                                             "zebra": {"bars": 9}, "road": "5", "s": 3.0, "note": ""}]}))
+
+    class Ctx:
+        def find(self, name):
+            return [({"folder": f.parent.name}, f)]
+
+        def read_json(self, p):
+            return json.loads(p.read_text())
+
+        def esc(self, t):
+            return str(t)
+
+        def table(self, head, rows, cls=""):
+            return "|".join(head) + "".join("|".join(str(c) for c in r) for r in rows)
+
+    html = sec_crosswalks(Ctx())
+    assert "carla.Map reports 1 crosswalks" in html and "node/2" in html and "osm+scan" in html
