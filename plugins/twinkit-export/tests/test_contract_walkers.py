@@ -84,3 +84,16 @@ def test_corner_road_outline_is_read_as_nothing(tmp_path):
     rep = ContractReport("DemoTwin")
     assert check_crosswalks(rep, pkg, [{"name": "Demo", "xodr": "./Demo.xodr"}]) == {"Demo": 0}
     assert any("without cornerLocal" in m for m in rule_messages(rep))
+
+
+def test_carlas_own_town10_passes():
+    from pathlib import Path
+
+    import pytest
+
+    f = (Path(__file__).parent / "../../../../shared/data/opendrive/Town10HD.xodr").resolve()
+    if not f.is_file():
+        pytest.skip(f"shared sample data absent: {f}")
+    nav = navmesh_crosswalks(f.read_text())
+    # CARLA's own map: 16 crosswalk objects, each a closed quadrilateral, a fan of 2 triangles
+    assert nav.error == "" and len(nav.outlines) == 16 and nav.triangles == 32
