@@ -353,6 +353,8 @@ def run_crosswalks(params, text: str, site, mesh_ply, labels_npy, osm_path, alig
             log.warning("crosswalks: %d labels for %d vertices: zebras looked for on all flat ground",
                         len(labels), len(mesh.vertices))
             labels = None
+        if mesh.colors is None:
+            log.warning("crosswalks: %s has no vertex colours: no painted zebra can be seen, OSM only", mesh_ply)
         zebras = find_zebras(mesh.vertices, mesh.faces, mesh.colors, labels, params.raster_m, params.min_bars)
     crosswalks, notes = merge(osm, zebras, Carriageway.of(LaneMap(text)), match_m=params.match_m,
                               width_m=params.width_m)
