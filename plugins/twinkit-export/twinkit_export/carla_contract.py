@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import contract_walkers as _walkers
+from .contract_import import check_import_placement
 
 CARLA = "carla-simulator/carla"
 SRC_IMPORT = "Util/BuildTools/Import.py"
@@ -140,6 +141,11 @@ RULES: dict[str, tuple[str, str]] = {
     "crosswalks": _walkers.RULE[1],
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
+    "import_placement": ("after make import (and the package's editor script place_in_map.py) every static mesh is in "
+                         "the saved map level once, tagged by the folder of its mesh path, with complex-as-simple "
+                         "collision; the import alone places only Maps/<Map> and Static/{Road,RoadLine,Terrain,"
+                         "SideWalk}/<Map> (contract_import)", "Util/BuildTools/Import.py; " + SRC_PREPARE + "; "
+                         + SRC_TAGGER),
 }
 
 
@@ -461,6 +467,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         _check_placement(rep, prop_names, Path(spawn_script) if spawn_script else root / "spawn_props.py")
     # actors (twinkit's lifted movable objects): a transform and a spawn script ---------------------
     _check_actors(rep, root if root.name != "Import" else root.parent)
+    check_import_placement(rep, root if root.name != "Import" else root.parent, package, desc)
     # decals --------------------------------------------------------------------------------------
     _check_decals(rep, imp, map_names, expect_decals)
     # semantics: every class ends in its tag -----------------------------------------------------------

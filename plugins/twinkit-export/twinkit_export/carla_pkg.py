@@ -12,7 +12,9 @@ Package layout (what ``make import`` reads; the rules are in ``carla_contract``)
     Import/<Package>/<Map>.xodr       the aligned OpenDRIVE (site frame)
     Import/<Package>/README.md
     Import/roadpainter_decals.json    RoadPainter configuration for the map (no decals by default)
-    spawn_props.py                    places the props in the running map (the import never places props)
+    place_in_map.py                   Unreal editor script: the static props into the map level (run once
+                                      after ``make import``, which never places props; ``carla_place``)
+    spawn_props.py                    places the props in a running map instead (gone on reload_world)
     spawn_points.json                 beside Import/, not in it: Import.py treats *every* .json file
                                       under Import/ as a package description
 """
@@ -23,6 +25,7 @@ import math
 import re
 from pathlib import Path
 
+from .carla_place import PLACE_COMMAND, PLACE_SCRIPT, write_place_script
 from .classes import CARLA_NAME_KEYS, ClassInfo
 
 
@@ -149,7 +152,8 @@ Files: `{package}.json` (the package description `make import` reads), `{map}.fb
 geometry: {map_classes}), one FBX per other class (`{map}_<Class>.fbx`, imported as props),
 `{texture}` (the texture every FBX references by relative path), `{map}.xodr` (the road network,
 same local frame as the meshes). Beside this folder: `../roadpainter_decals.json` (road decals for
-`{map}`: {decals}). Beside `Import/`: `spawn_props.py` (places the props in the map) and
+`{map}`: {decals}). Beside `Import/`: `place_in_map.py` (an editor script that puts the props
+into the map level), `spawn_props.py` (spawns them in a running simulator instead) and
 `spawn_points.json` ({n_spawn} spawn points on driving lanes for scripts; CARLA also makes its own
 spawners from the OpenDRIVE during import). JSON files other than the package's and the decals
 file must stay outside `Import/`: `make import` reads every `.json` there as a package.
@@ -162,28 +166,37 @@ file must stay outside `Import/`: `make import` reads every `.json` there as a p
 2. From the CARLA root: `make import ARGS="--package={package}"`. The package JSON names the map
    and the props; `--package` only tells `Import.py` where to copy `roadpainter_decals.json`
    (`Content/{package}/Config/`), where RoadPainter finds it.
-3. `make launch` (or `make package ARGS="--packages={package}"`), open `Content/{package}/Maps/{map}`.
-4. With the simulator running the map: `python spawn_props.py` (beside `Import/`; `--help` for
-   host, port and classes to leave out). It spawns each prop at the map origin, where it belongs.
+3. Put the buildings, walls, poles, vegetation ... into the map level: copy `place_in_map.py`
+   (beside `Import/`) to the CARLA root and, from there, run it with CARLA's editor:
+
+       {place_command}
+
+   (or, in the editor: File > Execute Python Script). It places each static prop at the origin,
+   where its coordinates put it, with its own triangles as collision, and saves the level
+   `Content/{package}/Maps/{map}/{map}`: the whole street is part of the map, tagged by class,
+   and stays through `reload_world`. Running it again adds nothing.
+4. `make launch` (or `make package ARGS="--packages={package}"`), open `Content/{package}/Maps/{map}`.
+   Without step 3: with the simulator running the map, `python spawn_props.py` (beside `Import/`;
+   `--help`) spawns the props as actors at the map origin; they are gone after `reload_world`.
 
 ## Semantic tags: what is automatic
 
 - Map geometry ({map_classes}) is moved by name by CARLA's MoveAssets commandlet to the folder that
   carries its tag and is placed in the map by the import.
 - Every other class is a prop: `make import` imports it into `Static/<Tag>/<prop>/`, so CARLA's
-  Tagger gives it its class's tag, and registers it as blueprint `static.prop.<prop>`. The import
-  does not place props in a map (nothing in CARLA's import does); `spawn_props.py` does, at run
-  time. To make them part of the map itself, drag the prop assets into the level at the origin
-  (0, 0, 0) in the editor and save it.
+  Tagger gives it its class's tag, and registers it as blueprint `static.prop.<prop>`. Nothing in
+  CARLA's import places props in a map (`PrepareAssetsForCooking` spawns only `Maps/<Map>` and
+  `Static/{{Road,RoadLine,Terrain,SideWalk}}/<Map>`, and `MoveAssets` has no other destination);
+  `place_in_map.py` (step 3) does, into the saved level.
 - Traffic lights and signs are named `TrafficLamp` / `TrafficPlate` in this package: CARLA skips
   every mesh whose name contains "light" or "sign"; their tag still comes from the folder.
 
 {table}
 {movables}
 Props are imported with CARLA's import settings: Unreal generates simple collision for them,
-which for a whole-site class mesh is coarser than the mesh; `make package` switches them to
-complex collision (PrepareAssetsForCooking). The pedestrian navmesh is built from `{map}.fbx`
-alone (props are not obstacles in it).
+which for a whole-site class mesh is coarser than the mesh; `place_in_map.py` switches each to
+its own triangles (complex as simple, as `PrepareAssetsForCooking` does for the map meshes). The
+pedestrian navmesh is built from `{map}.fbx` alone (props are not obstacles in it).
 
 ## Frames
 
@@ -244,7 +257,9 @@ SPAWN_SCRIPT = '''#!/usr/bin/env python3
 
 Made by twinkit. `make import` imports the props of the package (into Static/<Tag>/, which gives
 them their semantic tag) but never places them in a map; this script does, at the map origin,
-where the meshes' coordinates put every object in its scanned place.
+where the meshes' coordinates put every object in its scanned place, for as long as the world
+runs (reload_world drops them). place_in_map.py (CARLA's editor) puts them into the map level
+itself instead; after it, this script would place them twice.
 
     python spawn_props.py [--host localhost] [--port 2000] [--skip car truck ...] [--list]
 """
@@ -364,7 +379,8 @@ def _class_table(present: list[dict], props: list[dict], map_names: dict, class_
         if ci.train_id in [p["class_id"] for p in props if not p.get("scanned")]:
             p = next(p for p in props if p["class_id"] == ci.train_id and not p.get("scanned"))
             rows.append(f"| {ci.name} | prop `{p['name']}` (`static.prop.{p['name'].lower()}`) | "
-                        f"`Static/{p['tag']}/{p['name']}` | {p['label']} | `spawn_props.py` |")
+                        f"`Static/{p['tag']}/{p['name']}` | {p['label']} | "
+                        f"{'`place_in_map.py` (editor, saved in the level)' if map_names else '`spawn_props.py`'} |")
         else:
             node = map_names[Path(class_dir) / c["file"]]
             rows.append(f"| {ci.name} | `{map_name}.fbx` node `{node}` | "
@@ -422,6 +438,8 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
     (folder / "Import" / DECALS_FILE).write_text(json.dumps(
         {"decals": [decals_entry(map_name, decals)] if has_map else []}, indent=2) + "\n")
     _write_spawn_files(folder, package, map_name, has_map, props, spawn)
+    if has_map:
+        write_place_script(folder, package, map_name, props)
     rows = _class_table(present, props, map_names, class_dir, map_name)
     geo = ", ".join(f"{k} {v}" for k, v in georef.items() if k in ("crs", "lat", "lon", "alt"))
     (pkg / "README.md").write_text((README if has_map else README_NO_MAP).format(
@@ -430,6 +448,7 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
         decals="none, `decals=true` for CARLA's default random decals" if not decals else "CARLA's default counts",
         movables=MOVABLES_README.format(n=len([p for p in props if p.get("scanned")]))
         if any(p.get("scanned") for p in props) else "",
+        place_command=PLACE_COMMAND.format(script=PLACE_SCRIPT),
         table="\n".join(rows), frames=(frames or _site_frames)(f"({geo})" if geo else ""), carla_version=carla_version))
     return pkg, {"map_meshes": list(map_names.values()), "props": [p["name"] for p in props],
                  "prop_tags": {p["name"]: p["label"] for p in props}}
