@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from . import files as F
-from .schemas import (ArtefactError, CamerasSite, DemoCameras, GroundControl, JsonSchema, PointsMeta, RoadsTruth,
-                      SiteInfo)
+from .schemas import (ArtefactError, CamerasSite, Crosswalks, DemoCameras, GroundControl, JsonSchema, PointsMeta,
+                      RoadsTruth, SiteInfo)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -26,11 +26,13 @@ __all__ = [
     "Artefact", "ArtefactError", "CATALOGUE", "check_output", "lookup",
     "read_points_meta", "write_points_meta", "read_cameras_site", "write_cameras_site",
     "read_demo_cameras", "write_demo_cameras", "read_gcp", "write_gcp", "read_roads_truth", "write_roads_truth",
+    "read_crosswalks", "write_crosswalks",
     "read_site_info", "write_site_info", "read_labels", "write_labels", "read_class_votes", "write_class_votes", "read_points", "write_points",
     "read_textured_mesh", "write_textured_mesh", "read_clean_mesh", "write_clean_mesh", "read_gt_mesh",
     "write_gt_mesh", "read_textured_obj", "write_textured_obj", "read_opendrive", "write_opendrive", "read_osm",
     "write_osm", "list_photos",
     "write_photo", "PointsMeta", "CamerasSite", "DemoCameras", "GroundControl", "RoadsTruth", "SiteInfo",
+    "Crosswalks",
 ]
 
 
@@ -137,6 +139,16 @@ def read_roads_truth(path: str | Path) -> RoadsTruth:
 def write_roads_truth(path: str | Path, doc: RoadsTruth | dict) -> None:
     """Write ``roads_truth.json`` (validated first)."""
     _write_json_doc(RoadsTruth, path, doc)
+
+
+def read_crosswalks(path: str | Path) -> Crosswalks:
+    """``crosswalks.json`` -> :class:`Crosswalks`."""
+    return _read_json_doc(Crosswalks, path)
+
+
+def write_crosswalks(path: str | Path, doc: Crosswalks | dict) -> None:
+    """Write ``crosswalks.json`` (validated first)."""
+    _write_json_doc(Crosswalks, path, doc)
 
 
 def read_site_info(path: str | Path) -> SiteInfo:
@@ -434,6 +446,9 @@ CATALOGUE: dict[str, Artefact] = dict([
     _entry("roads_truth.json", "JSON", RoadsTruth, read_roads_truth, write_roads_truth,
            writers="demo-site:site_generator/demo_intersection",
            readers="roads:apply_alignment roads:road_source/scan"),
+    _entry("crosswalks.json", "JSON", Crosswalks, read_crosswalks, write_crosswalks,
+           writers="roads:place_crosswalks",
+           readers="export:exporter/carla_package"),
     _entry("site.json", "JSON", SiteInfo, read_site_info, write_site_info,
            writers="demo-site:site_generator/demo_intersection",
            readers="export:exporter/carla_package export:exporter/fbx export:exporter/gltf export:exporter/usd"),

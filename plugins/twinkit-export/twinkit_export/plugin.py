@@ -366,12 +366,11 @@ def _checked_summary(out: Path, package: str, expect_decals, expect_crosswalks: 
 
 def _expected_crosswalks(path: Path | None) -> int | None:
     """The crosswalk count place_crosswalks wrote (crosswalks.json ``metrics.crosswalks``), None without it."""
+    from twinkit.artefacts import read_crosswalks
+
     if path is None or not Path(path).is_file():
         return None
-    try:
-        return int(json.loads(Path(path).read_text())["metrics"]["crosswalks"])
-    except (ValueError, KeyError, TypeError):
-        raise InputError(f"{path}: unreadable crosswalks.json (metrics.crosswalks); run place_crosswalks again") from None
+    return int(read_crosswalks(path).metrics["crosswalks"])
 
 
 def _package_metrics(summ: dict, placed: dict, actors: list, out: Path) -> dict:

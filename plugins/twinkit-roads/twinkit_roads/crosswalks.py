@@ -342,7 +342,7 @@ def run_crosswalks(params, text: str, site, mesh_ply, labels_npy, osm_path, alig
     from .zebras import find_zebras
 
     if not params.enabled:
-        return {"enabled": False, "metrics": {"crosswalks": 0}}, text
+        return {"enabled": False, "metrics": {"crosswalks": 0}, "crosswalks": []}, text
     osm = osm_crossings(read_osm(osm_path), _to_site(site, alignment_json)) \
         if params.from_osm and osm_path is not None else []
     zebras: list[Zebra] = []

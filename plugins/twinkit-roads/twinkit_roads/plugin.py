@@ -306,7 +306,7 @@ def place_crosswalks(params: CrosswalkParams, ctx, *, in_aligned_xodr: Path, in_
     doc, moved = run_crosswalks(params, text, ctx.site, in_textured_mesh_ply, in_labels_npy, in_osm_osm,
                                 in_alignment_json, ctx.log)
     A.write_opendrive(out_aligned_xodr, moved)
-    out_crosswalks_json.write_text(json.dumps(doc, indent=1))
+    A.write_crosswalks(out_crosswalks_json, doc)
     return doc["metrics"]
 
 
