@@ -17,6 +17,10 @@ import numpy as np
 from .mesh2d import Grid
 
 
+#: metres: the top view is looked at in tiles this wide, each with a rim this wide around it
+TILE_M, MARGIN_M = 80.0, 16.0
+
+
 @dataclass
 class Zebra:
     """A painted zebra: ``centre`` (2,) site-frame xy; ``axis`` (2,) unit walking direction (across the bars,
@@ -191,7 +195,20 @@ def find_zebras(v: np.ndarray, f: np.ndarray, colors: np.ndarray | None, labels:
         up &= on
     if not up.any():
         return []
-    xy = v[f[up]].reshape(-1, 3)[:, :2]
-    grid = Grid.around(xy, raster_m, pad=1.0)
-    mask = white_raster(v, f, colors, grid, up)
-    return zebras_in_mask(mask, grid, min_bars=min_bars)
+    cen = v[f, :2].mean(1)
+    lo, hi = cen[up].min(0), cen[up].max(0)
+    out: list[Zebra] = []
+    # tiles of TILE_M with a MARGIN_M rim (a zebra whose centre lies in a tile's core is found whole there):
+    # a large site's top view would not fit in memory at 5 cm
+    for x0 in np.arange(lo[0], hi[0] + 1e-9, TILE_M):
+        for y0 in np.arange(lo[1], hi[1] + 1e-9, TILE_M):
+            core = (x0, y0, x0 + TILE_M, y0 + TILE_M)
+            sel = up & (cen[:, 0] >= x0 - MARGIN_M) & (cen[:, 0] < core[2] + MARGIN_M) & \
+                (cen[:, 1] >= y0 - MARGIN_M) & (cen[:, 1] < core[3] + MARGIN_M)
+            if not sel.any():
+                continue
+            grid = Grid.around(cen[sel], raster_m, pad=1.0)
+            for z in zebras_in_mask(white_raster(v, f, colors, grid, sel), grid, min_bars=min_bars):
+                if core[0] <= z.centre[0] < core[2] and core[1] <= z.centre[1] < core[3]:
+                    out.append(z)
+    return out
