@@ -225,3 +225,16 @@ def test_report_section_lists_the_crosswalks(tmp_path):
 
     html = sec_crosswalks(Ctx())
     assert "carla.Map reports 1 crosswalks" in html and "node/2" in html and "osm+scan" in html
+
+
+def test_zebra_without_osm_needs_five_bars_across_its_road():
+    from twinkit_roads.zebras import Zebra
+
+    cw = Carriageway.of(lane_map(XODR))
+    few = Zebra(np.array([25.0, -1.5]), np.array([0.0, 1.0]), 2.5, 3.0, 3)  # 3 bars: a misread, unless OSM says
+    along = Zebra(np.array([25.0, -1.5]), np.array([1.0, 0.0]), 6.0, 3.0, 6)  # walking along the lanes
+    cws, notes = merge([], [few, along], cw)
+    assert cws == [] and len(notes) == 2
+    assert "3 bars" in notes[0] and "along the lane" in notes[1]
+    cws, notes = merge([OsmCrossing("node/1", np.array([25.0, 0.0]))], [few], cw)  # confirmed by OSM
+    assert [c.source for c in cws] == ["osm+scan"] and notes == []

@@ -115,6 +115,7 @@ class Carriageway:
     tangent: np.ndarray
     halfw: np.ndarray
     road: np.ndarray
+    junction: np.ndarray | None = None  # (n,) bool: the sample lies on a junction's lane
 
     @classmethod
     def of(cls, lane_map, step_m: float = 0.5) -> "Carriageway":
@@ -124,13 +125,16 @@ class Carriageway:
         keep = ~ls.is_type("sidewalk")
         ls = ls.take(keep)
         h = np.radians(ls.heading_deg)
-        return cls(ls.xyz[:, :2], np.stack([np.cos(h), np.sin(h)], 1), ls.width / 2, ls.road)
+        return cls(ls.xyz[:, :2], np.stack([np.cos(h), np.sin(h)], 1), ls.width / 2, ls.road, ls.in_junction)
 
-    def direction_at(self, xy: np.ndarray, reach_m: float = 12.0) -> np.ndarray | None:
-        """The road's direction (unit, sign free) at the lane sample nearest ``xy``; None beyond ``reach_m``."""
-        if not len(self.xy):
+    def direction_at(self, xy: np.ndarray, reach_m: float = 12.0, outside_junctions: bool = False
+                     ) -> np.ndarray | None:
+        """The road's direction (unit, sign free) at the lane sample nearest ``xy`` (with ``outside_junctions``:
+        of the lanes outside junctions, whose turning lanes run every way); None beyond ``reach_m``."""
+        keep = ~self.junction if outside_junctions and self.junction is not None else np.ones(len(self.xy), bool)
+        if not keep.any():
             return None
-        d = np.linalg.norm(self.xy - xy, axis=1)
+        d = np.where(keep, np.linalg.norm(self.xy - xy, axis=1), np.inf)
         i = int(np.argmin(d))
         return self.tangent[i] if d[i] <= reach_m else None
 
@@ -206,11 +210,23 @@ def _match_cost(c: OsmCrossing, z: Zebra, match_m: float, reach_m: float) -> flo
     return off
 
 
+def _alone_why(z: Zebra, cw: Carriageway, min_bars_alone: int) -> str:
+    """Why a zebra without OSM is not believed ('' when it is): too few bars, or walking along the lane it
+    lies on (bars across the traffic: a misread of other paint)."""
+    if z.bars < min_bars_alone:
+        return f"{z.bars} bars, fewer than the {min_bars_alone} a zebra without OSM needs"
+    d = cw.direction_at(np.asarray(z.centre, float), reach_m=4.0, outside_junctions=True)
+    if d is not None and abs(float(np.dot(d, z.axis))) > math.cos(math.radians(30)):
+        return "its walking direction runs along the lane it lies on"
+    return ""
+
+
 def merge(osm: list[OsmCrossing], zebras: list[Zebra], cw: Carriageway, *, match_m: float = 4.0,
-          reach_m: float = 15.0, width_m: float = 3.0) -> tuple[list[Crosswalk], list[str]]:
+          reach_m: float = 15.0, width_m: float = 3.0, min_bars_alone: int = 5) -> tuple[list[Crosswalk], list[str]]:
     """Match OSM crossings to zebras (nearest first, each used once) and build the crosswalks: a matched pair
     takes the zebra's place and extent (stretched kerb to kerb), an OSM crossing without paint gets
-    ``width_m`` across its carriageway, a zebra without OSM counts on its own. Returns (crosswalks, notes)."""
+    ``width_m`` across its carriageway, a zebra without OSM counts on its own when :func:`_alone_why` has no
+    objection. Returns (crosswalks, notes)."""
     pairs = []
     for i, c in enumerate(osm):
         for j, z in enumerate(zebras):
@@ -238,6 +254,11 @@ def merge(osm: list[OsmCrossing], zebras: list[Zebra], cw: Carriageway, *, match
         out.append(Crosswalk(poly, "osm", c.osm, None, "no paint seen in the scan"))
     for j, z in enumerate(zebras):
         if j not in used_z:
+            why = _alone_why(z, cw, min_bars_alone)
+            if why:
+                notes.append(f"painted stripes at ({z.centre[0]:.1f}, {z.centre[1]:.1f}) without an OSM crossing "
+                             f"not written: {why}")
+                continue
             poly, note = _zebra_box(z, cw, max(band, z.width_m / 2))
             out.append(Crosswalk(poly, "scan", None, z, note or "painted, not in OSM"))
     return out, notes
@@ -357,7 +378,7 @@ def run_crosswalks(params, text: str, site, mesh_ply, labels_npy, osm_path, alig
             log.warning("crosswalks: %s has no vertex colours: no painted zebra can be seen, OSM only", mesh_ply)
         zebras = find_zebras(mesh.vertices, mesh.faces, mesh.colors, labels, params.raster_m, params.min_bars)
     crosswalks, notes = merge(osm, zebras, Carriageway.of(LaneMap(text)), match_m=params.match_m,
-                              width_m=params.width_m)
+                              width_m=params.width_m, min_bars_alone=params.min_bars_alone)
     moved, records = write_crosswalks(text, crosswalks)
     carla = LaneMap(moved, "crosswalks").crosswalks()
     for n in notes:

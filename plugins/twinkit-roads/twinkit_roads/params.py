@@ -99,5 +99,6 @@ class CrosswalkParams:
     from_scan: bool = param(True, help="look for painted zebras on the scanned ground (vertex colours seen from above)")
     raster_m: float = param(0.05, gt=0, le=0.25, help="metres: pixel size of the top view the zebras are looked for in")
     min_bars: int = param(3, ge=2, help="a zebra has at least this many white bars side by side")
+    min_bars_alone: int = param(5, ge=2, help="a zebra that no OSM crossing confirms needs at least this many bars")
     match_m: float = param(4.0, ge=0, help="metres: an OSM crossing this close to a zebra's walking line is that zebra")
     width_m: float = param(3.0, gt=0, help="metres: the width (along the road) of a crosswalk OSM gives without paint in the scan")
