@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import contract_walkers as _walkers
+from .contract_ground import RULE as GROUND_RULE, check_lanes_over_ground
 from .contract_import import check_import_placement
 
 CARLA = "carla-simulator/carla"
@@ -141,6 +142,7 @@ RULES: dict[str, tuple[str, str]] = {
     "crosswalks": _walkers.RULE[1],
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
+    "lanes_over_ground": GROUND_RULE,
     "import_placement": ("after make import (and the package's editor script place_in_map.py) every static mesh is in "
                          "the saved map level once, tagged by the folder of its mesh path, with complex-as-simple "
                          "collision; the import alone places only Maps/<Map> and Static/{Road,RoadLine,Terrain,"
@@ -461,6 +463,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
 
     map_names = _check_maps(rep, desc_path, pkg, maps, class_tags)
     rep.crosswalks = _walkers.check_crosswalks(rep, pkg, maps, expect_crosswalks)
+    check_lanes_over_ground(rep, pkg, maps)  # the lanes over the map's mesh (contract_ground.py)
     prop_names = _check_props(rep, desc_path, pkg, props, class_tags)
     # placement: nothing in the import places props ------------------------------------------------
     if prop_names:

@@ -231,8 +231,9 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
                          "(and dz_m; lane_offsets_m: road id -> metres)") from None
     text = in_roads_xodr.read_text(encoding="utf-8")
     moved = set_lane_offsets(transform_xodr(text, yaw, tx, ty, dz), offsets)
+    moved, trim = trim_ends(moved, params, in_textured_mesh_ply, out_aligned_xodr.name, ctx.log)
     A.write_opendrive(out_aligned_xodr, moved)
-    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets)}
+    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets), **trim}
     truth = None
     if in_roads_truth_json is not None:
         tj = A.read_roads_truth(in_roads_truth_json)
@@ -249,6 +250,37 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
     draw_qa(in_textured_mesh_ply, lane_lines(moved, 1.0, junctions=True), lane_lines(text, 1.0, junctions=True),
             out_roads_qa_png, params.qa_px_per_m, params.qa_max_px, truth=truth)
     return metrics
+
+
+def trim_ends(text: str, params: ApplyParams, mesh_ply: Path, name: str, log) -> tuple[str, dict]:
+    """The aligned map with its ends cut back onto the mesh (``ground_ends.trim_to_ground``) and the step's
+    metrics of it; the map unchanged when ``trim_to_ground`` is off or it has no road."""
+    from .ground_ends import TrimParams, trim_to_ground
+
+    if not params.trim_to_ground or "<road " not in text:
+        return text, {"trim_to_ground": False}
+    mesh = A.read_textured_mesh(mesh_ply)
+    tp = TrimParams(step_m=params.trim_step_m, band_m=params.trim_band_m, margin_m=params.trim_margin_m,
+                    max_trim_m=params.trim_max_m, min_left_m=params.trim_min_left_m)
+    out, rep = trim_to_ground(text, mesh.vertices, mesh.faces, tp, source=name)
+    for e in rep["ends"]:
+        if e.get("note"):
+            log.warning("map end %s (junction %s): %s", ", ".join(e["ends"]), e["junction"], e["note"])
+    for n in rep["notes"]:
+        log.warning("trim to the ground: %s", n)
+    log.info("trim to the ground: %d of %d map ends cut back (at most %.2f m); driving-lane samples off the ground "
+             "%d -> %d of %d, every lane %d -> %d", rep["cut_ends"], len(rep["ends"]), rep["max_trim_m"],
+             rep["driving_off_ground_before"], rep["driving_off_ground_after"], rep["driving_samples_after"],
+             rep["samples_off_ground_before"], rep["samples_off_ground_after"])
+    if rep["driving_off_ground_after"]:
+        log.warning("trim to the ground: %d driving-lane samples (every %.2f m) still have no ground beneath "
+                    "(see the notes above and docs/roads.md 'Roads on the ground')", rep["driving_off_ground_after"],
+                    tp.step_m)
+    return out, {"trim_to_ground": True, "trimmed_ends": rep["cut_ends"], "trim_max_m": rep["max_trim_m"],
+                 "driving_off_ground_before": rep["driving_off_ground_before"],
+                 "driving_off_ground_after": rep["driving_off_ground_after"],
+                 "lane_samples_off_ground_before": rep["samples_off_ground_before"],
+                 "lane_samples_off_ground_after": rep["samples_off_ground_after"]}
 
 
 def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
