@@ -101,3 +101,15 @@ class RoadEvidenceParams:
     raster_m: float = param(0.1, gt=0, help="metres: pixel size of the lane raster")
     step_m: float = param(0.5, gt=0, help="metres: lanes are sampled this far apart along s")
     picture_px_per_m: float = param(10.0, gt=0, help="pixels per metre of the evidence picture")
+
+
+@dataclass
+class CrosswalkParams:
+    enabled: bool = param(True, help="false: aligned.xodr passes through without crosswalk objects")
+    from_osm: bool = param(True, help="use OSM's crossings (highway=crossing nodes, footway=crossing ways)")
+    from_scan: bool = param(True, help="look for painted zebras on the scanned ground (vertex colours seen from above)")
+    raster_m: float = param(0.05, gt=0, le=0.25, help="metres: pixel size of the top view the zebras are looked for in")
+    min_bars: int = param(3, ge=2, help="a zebra has at least this many white bars side by side")
+    min_bars_alone: int = param(5, ge=2, help="a zebra that no OSM crossing confirms needs at least this many bars")
+    match_m: float = param(4.0, ge=0, help="metres: an OSM crossing this close to a zebra's walking line is that zebra")
+    width_m: float = param(3.0, gt=0, help="metres: the width (along the road) of a crosswalk OSM gives without paint in the scan")

@@ -9,6 +9,7 @@ Steps (recipes/roads_demo.yaml):
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
   place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
+  place_crosswalks OSM crossings + the scan's zebras        -> aligned.xodr (again), crosswalks.json
   road_evidence   the lanes vote for road / sidewalk        -> labels.npy (again), road_evidence.json, .png
 """
 from __future__ import annotations
@@ -24,7 +25,8 @@ from twinkit.geo.xodr import from_scan as from_scan_tag
 
 from . import __version__
 from .convert import ConvertParams
-from .params import AlignParams, ApplyParams, OverviewParams, RoadEvidenceParams, SignalParams  # noqa: F401 (re-exported)
+from .params import (AlignParams, ApplyParams, CrosswalkParams, OverviewParams, RoadEvidenceParams,  # noqa: F401 (re-exported)
+                     SignalParams)
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
                       scan_source, site_radius)
@@ -325,6 +327,21 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     return metrics
 
 
+def place_crosswalks(params: CrosswalkParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
+                     out_aligned_xodr: Path, out_crosswalks_json: Path, in_labels_npy: Path | None = None,
+                     in_osm_osm: Path | None = None, in_alignment_json: Path | None = None) -> dict:
+    """OpenDRIVE crosswalk objects from OSM's crossings and the scan's painted zebras (crosswalks.py)."""
+    from .crosswalks import run_crosswalks
+
+    params = params or CrosswalkParams()
+    text = A.read_opendrive(in_aligned_xodr)
+    doc, moved = run_crosswalks(params, text, ctx.site, in_textured_mesh_ply, in_labels_npy, in_osm_osm,
+                                in_alignment_json, ctx.log)
+    A.write_opendrive(out_aligned_xodr, moved)
+    A.write_crosswalks(out_crosswalks_json, doc)
+    return doc["metrics"]
+
+
 def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
                   in_labels_npy: Path, out_labels_npy: Path, out_road_evidence_json: Path,
                   out_road_evidence_png: Path, in_gt_labels_npy: Path | None = None) -> dict:
@@ -422,6 +439,9 @@ def twinkit_register_steps(register):
              description="move the OpenDRIVE by alignment.json; top-down QA picture")
     register("place_signals", place_signals, params=SignalParams, version=VERSION,
              description="OpenDRIVE signals at the scanned traffic lights and signs; signals.json, signals.png")
+    register("place_crosswalks", place_crosswalks, params=CrosswalkParams, version=VERSION,
+             description="OpenDRIVE crosswalk objects from OSM crossings and the scan's painted zebras (as CARLA's "
+                         "get_crosswalks reports them); crosswalks.json")
     register("road_evidence", road_evidence, params=RoadEvidenceParams, version=VERSION,
              description="the aligned lanes vote road / sidewalk on ground-level surface; labels.npy, "
                          "road_evidence.json, road_evidence.png (disagreements reported)")
