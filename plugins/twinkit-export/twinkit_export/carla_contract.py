@@ -31,6 +31,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import contract_walkers as _walkers
+from .contract_actors import ACTORS_GEOMETRY_RULE, check_actor_geometry
+from .contract_ground import RULE as GROUND_RULE, check_lanes_over_ground
 from .contract_import import check_import_placement
 from .contract_signals import RULES as SIGNAL_RULES
 from .contract_signals import check_signals
@@ -139,8 +142,11 @@ RULES: dict[str, tuple[str, str]] = {
     "actors": ("the lifted movable objects: actors.json beside Import/ (every .json under Import/ is read as a "
                "package) with a vehicle.*/walker.* blueprint and a carla.Transform each, and spawn_actors.py that "
                "spawns them (nothing in the import spawns actors)", f"{SRC_IMPORT}; {SRC_TWINKIT}"),
+    "crosswalks": _walkers.RULE[1],
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
+    "actors_geometry": ACTORS_GEOMETRY_RULE,
+    "lanes_over_ground": GROUND_RULE,
     "import_placement": ("after make import (and the package's editor script place_in_map.py) every static mesh is in "
                          "the saved map level once, tagged by the folder of its mesh path, with complex-as-simple "
                          "collision; the import alone places only Maps/<Map> and Static/{Road,RoadLine,Terrain,"
@@ -187,6 +193,7 @@ class ContractReport:
     violations: list[Violation] = field(default_factory=list)
     meshes: list[MeshFate] = field(default_factory=list)
     decals: bool | None = None  # True when the package's decals configuration paints decals on its map
+    crosswalks: dict = field(default_factory=dict)  # map name -> crosswalks the navmesh gets (contract_walkers)
 
     @property
     def ok(self) -> bool:
@@ -219,6 +226,7 @@ class ContractReport:
             "dropped_assets": [m.asset for m in self.meshes if m.dropped],
             "walkable_faces": sum(m.faces for m in self.meshes if m.nav_area == "sidewalk"),
             "decals": self.decals,
+            "crosswalks": self.crosswalks,
             "meshes": [{"asset": m.asset, "kind": m.kind, "folder": m.folder, "tag": m.tag, "faces": m.faces,
                         "placed": m.placed, "dropped": m.dropped, "intended_tag": m.intended_tag}
                        for m in self.meshes],
@@ -415,12 +423,15 @@ def _check_placement(rep: ContractReport, prop_names: list[str], script: Path) -
 
 
 def check_package(root: Path, package: str | None = None, *, class_tags: dict[int, str] | None = None,
-                  expect_decals: bool | None = None, spawn_script: Path | None = None) -> ContractReport:
+                  expect_decals: bool | None = None, spawn_script: Path | None = None,
+                  expect_crosswalks: int | None = None) -> ContractReport:
     """Apply CARLA's import rules to ``root/Import/<package>/`` (``root`` may also be the Import folder).
 
     class_tags: trainId -> intended carla.CityObjectLabel name (from the FBX objects' ``class_id``);
     default: twinkit's class table. expect_decals: the decals setting the package must carry (None:
     only report it). spawn_script: the file that must place every prop (default ``root/spawn_props.py``).
+    expect_crosswalks: how many crossings the scan and OSM show (place_crosswalks' crosswalks.json; None:
+    only count what the navmesh gets).
     """
     root = Path(root)
     imp = root if root.name == "Import" else root / "Import"
@@ -456,12 +467,15 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         rep.add("json", f"{desc_path.name}: no map ('maps' is empty) and no README.md saying why")
 
     map_names = _check_maps(rep, desc_path, pkg, maps, class_tags)
+    rep.crosswalks = _walkers.check_crosswalks(rep, pkg, maps, expect_crosswalks)
+    check_lanes_over_ground(rep, pkg, maps)  # the lanes over the map's mesh (contract_ground.py)
     prop_names = _check_props(rep, desc_path, pkg, props, class_tags)
     # placement: nothing in the import places props ------------------------------------------------
     if prop_names:
         _check_placement(rep, prop_names, Path(spawn_script) if spawn_script else root / "spawn_props.py")
     # actors (twinkit's lifted movable objects): a transform and a spawn script ---------------------
     _check_actors(rep, root if root.name != "Import" else root.parent)
+    check_actor_geometry(rep, root if root.name != "Import" else root.parent)
     check_import_placement(rep, root if root.name != "Import" else root.parent, package, desc)
     # decals --------------------------------------------------------------------------------------
     _check_decals(rep, imp, map_names, expect_decals)

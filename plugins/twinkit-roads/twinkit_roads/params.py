@@ -34,6 +34,17 @@ class AlignParams:
 class ApplyParams:
     qa_px_per_m: float = param(20.0, gt=0, help="pixels per metre of the QA picture of the aligned network over the mesh")
     qa_max_px: int = param(4096, ge=16, help="at most this many pixels across the QA picture")
+    trim_to_ground: bool = param(True, help="cut the map's ends (road ends without a link, netconvert's dead-end "
+                                 "turnarounds) back until their lanes lie on the mesh (ground_ends.py, docs/roads.md "
+                                 "'Roads on the ground'); false: the aligned map as it is")
+    trim_step_m: float = param(0.25, gt=0, help="metres: lane samples along the roads for the trim, and the step by "
+                               "which a turnaround's cut grows")
+    trim_band_m: float = param(0.5, gt=0, help="metres: a lane sample has ground beneath when the mesh crosses its "
+                               "vertical within this of the lane's height")
+    trim_margin_m: float = param(0.5, ge=0, help="metres: cut this much farther in than the first cross-section on "
+                                 "the ground")
+    trim_max_m: float = param(10.0, ge=0, help="metres: an end is never cut back farther than this (reported instead)")
+    trim_min_left_m: float = param(2.0, ge=0, help="metres: a road is not cut shorter than this (reported instead)")
 
 
 @dataclass
@@ -94,3 +105,15 @@ class RoadEvidenceParams:
     raster_m: float = param(0.1, gt=0, help="metres: pixel size of the lane raster")
     step_m: float = param(0.5, gt=0, help="metres: lanes are sampled this far apart along s")
     picture_px_per_m: float = param(10.0, gt=0, help="pixels per metre of the evidence picture")
+
+
+@dataclass
+class CrosswalkParams:
+    enabled: bool = param(True, help="false: aligned.xodr passes through without crosswalk objects")
+    from_osm: bool = param(True, help="use OSM's crossings (highway=crossing nodes, footway=crossing ways)")
+    from_scan: bool = param(True, help="look for painted zebras on the scanned ground (vertex colours seen from above)")
+    raster_m: float = param(0.05, gt=0, le=0.25, help="metres: pixel size of the top view the zebras are looked for in")
+    min_bars: int = param(3, ge=2, help="a zebra has at least this many white bars side by side")
+    min_bars_alone: int = param(5, ge=2, help="a zebra that no OSM crossing confirms needs at least this many bars")
+    match_m: float = param(4.0, ge=0, help="metres: an OSM crossing this close to a zebra's walking line is that zebra")
+    width_m: float = param(3.0, gt=0, help="metres: the width (along the road) of a crosswalk OSM gives without paint in the scan")

@@ -9,6 +9,7 @@ Steps (recipes/roads_demo.yaml):
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
   place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
+  place_crosswalks OSM crossings + the scan's zebras        -> aligned.xodr (again), crosswalks.json
   road_evidence   the lanes vote for road / sidewalk        -> labels.npy (again), road_evidence.json, .png
 """
 from __future__ import annotations
@@ -24,7 +25,8 @@ from twinkit.geo.xodr import from_scan as from_scan_tag
 
 from . import __version__
 from .convert import ConvertParams
-from .params import AlignParams, ApplyParams, OverviewParams, RoadEvidenceParams, SignalParams  # noqa: F401 (re-exported)
+from .params import (AlignParams, ApplyParams, CrosswalkParams, OverviewParams, RoadEvidenceParams,  # noqa: F401 (re-exported)
+                     SignalParams)
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
                       scan_source, site_radius)
@@ -229,8 +231,9 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
                          "(and dz_m; lane_offsets_m: road id -> metres)") from None
     text = in_roads_xodr.read_text(encoding="utf-8")
     moved = set_lane_offsets(transform_xodr(text, yaw, tx, ty, dz), offsets)
+    moved, trim = trim_ends(moved, params, in_textured_mesh_ply, out_aligned_xodr.name, ctx.log)
     A.write_opendrive(out_aligned_xodr, moved)
-    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets)}
+    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets), **trim}
     truth = None
     if in_roads_truth_json is not None:
         tj = A.read_roads_truth(in_roads_truth_json)
@@ -247,6 +250,37 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
     draw_qa(in_textured_mesh_ply, lane_lines(moved, 1.0, junctions=True), lane_lines(text, 1.0, junctions=True),
             out_roads_qa_png, params.qa_px_per_m, params.qa_max_px, truth=truth)
     return metrics
+
+
+def trim_ends(text: str, params: ApplyParams, mesh_ply: Path, name: str, log) -> tuple[str, dict]:
+    """The aligned map with its ends cut back onto the mesh (``ground_ends.trim_to_ground``) and the step's
+    metrics of it; the map unchanged when ``trim_to_ground`` is off or it has no road."""
+    from .ground_ends import TrimParams, trim_to_ground
+
+    if not params.trim_to_ground or "<road " not in text:
+        return text, {"trim_to_ground": False}
+    mesh = A.read_textured_mesh(mesh_ply)
+    tp = TrimParams(step_m=params.trim_step_m, band_m=params.trim_band_m, margin_m=params.trim_margin_m,
+                    max_trim_m=params.trim_max_m, min_left_m=params.trim_min_left_m)
+    out, rep = trim_to_ground(text, mesh.vertices, mesh.faces, tp, source=name)
+    for e in rep["ends"]:
+        if e.get("note"):
+            log.warning("map end %s (junction %s): %s", ", ".join(e["ends"]), e["junction"], e["note"])
+    for n in rep["notes"]:
+        log.warning("trim to the ground: %s", n)
+    log.info("trim to the ground: %d of %d map ends cut back (at most %.2f m); driving-lane samples off the ground "
+             "%d -> %d of %d, every lane %d -> %d", rep["cut_ends"], len(rep["ends"]), rep["max_trim_m"],
+             rep["driving_off_ground_before"], rep["driving_off_ground_after"], rep["driving_samples_after"],
+             rep["samples_off_ground_before"], rep["samples_off_ground_after"])
+    if rep["driving_off_ground_after"]:
+        log.warning("trim to the ground: %d driving-lane samples (every %.2f m) still have no ground beneath "
+                    "(see the notes above and docs/roads.md 'Roads on the ground')", rep["driving_off_ground_after"],
+                    tp.step_m)
+    return out, {"trim_to_ground": True, "trimmed_ends": rep["cut_ends"], "trim_max_m": rep["max_trim_m"],
+                 "driving_off_ground_before": rep["driving_off_ground_before"],
+                 "driving_off_ground_after": rep["driving_off_ground_after"],
+                 "lane_samples_off_ground_before": rep["samples_off_ground_before"],
+                 "lane_samples_off_ground_after": rep["samples_off_ground_after"]}
 
 
 def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
@@ -314,6 +348,21 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                  len(rejected), metrics["light_signals_from_scan"], metrics["light_signals"],
                  metrics["light_signals_netconvert"], metrics["signs_written"])
     return metrics
+
+
+def place_crosswalks(params: CrosswalkParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
+                     out_aligned_xodr: Path, out_crosswalks_json: Path, in_labels_npy: Path | None = None,
+                     in_osm_osm: Path | None = None, in_alignment_json: Path | None = None) -> dict:
+    """OpenDRIVE crosswalk objects from OSM's crossings and the scan's painted zebras (crosswalks.py)."""
+    from .crosswalks import run_crosswalks
+
+    params = params or CrosswalkParams()
+    text = A.read_opendrive(in_aligned_xodr)
+    doc, moved = run_crosswalks(params, text, ctx.site, in_textured_mesh_ply, in_labels_npy, in_osm_osm,
+                                in_alignment_json, ctx.log)
+    A.write_opendrive(out_aligned_xodr, moved)
+    A.write_crosswalks(out_crosswalks_json, doc)
+    return doc["metrics"]
 
 
 def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
@@ -413,6 +462,9 @@ def twinkit_register_steps(register):
              description="move the OpenDRIVE by alignment.json; top-down QA picture")
     register("place_signals", place_signals, params=SignalParams, version=VERSION,
              description="OpenDRIVE signals at the scanned traffic lights and signs; signals.json, signals.png")
+    register("place_crosswalks", place_crosswalks, params=CrosswalkParams, version=VERSION,
+             description="OpenDRIVE crosswalk objects from OSM crossings and the scan's painted zebras (as CARLA's "
+                         "get_crosswalks reports them); crosswalks.json")
     register("road_evidence", road_evidence, params=RoadEvidenceParams, version=VERSION,
              description="the aligned lanes vote road / sidewalk on ground-level surface; labels.npy, "
                          "road_evidence.json, road_evidence.png (disagreements reported)")
