@@ -33,7 +33,10 @@ from pathlib import Path
 
 from . import contract_walkers as _walkers
 from .contract_actors import ACTORS_GEOMETRY_RULE, check_actor_geometry
-from .contract_ground import RULE as GROUND_RULE, check_lanes_over_ground
+from .contract_decals import (  # noqa: F401 (re-exported: carla_pkg and the tests read them here)
+    DECAL_DEFAULT_COUNTS, DECAL_FIELDS, DECAL_NAMES, DECALS_FILE, check_decals, decals_entry)
+from .contract_ground import RULE as GROUND_RULE
+from .contract_ground import check_lanes_over_ground
 from .contract_import import check_import_placement
 from .contract_signals import RULES as SIGNAL_RULES
 from .contract_signals import check_signals
@@ -49,8 +52,6 @@ SRC_DECALS = ("Util/BuildTools/Import.py (generate_decals_file) + Unreal/CarlaUE
               "Util/RoadPainterWrapper.cpp (ReadConfigFile)")
 SRC_MATERIALS = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/LoadAssetMaterialsCommandlet.cpp"
 SRC_TWINKIT = "twinkit (not a CARLA rule)"
-
-DECALS_FILE = "roadpainter_decals.json"
 
 # -- MoveAssetsCommandlet.cpp: substrings tested in this order (FString::Contains, case-insensitive by default)
 MOVE_ROUTES: tuple[tuple[tuple[str, ...], str], ...] = (
@@ -87,29 +88,6 @@ PROP_SIZES = ("Tiny", "Small", "Medium", "Big", "Huge")
 # -- FBX2OBJ.cpp SetMaterials: exact node names (its StartsWith compares whole names) -> navmesh area
 NAV_AREAS = {"Road_Road": "road", "Road_Marking": "road", "Road_Curb": "road", "Road_Gutter": "road",
              "Road_Sidewalk": "sidewalk", "Road_Crosswalk": "crosswalk", "Road_Grass": "grass"}
-
-# -- RoadPainterWrapper.cpp ReadConfigFile: fields read for the entry whose map_name is the map
-DECAL_FIELDS = ("map_name", "decal_scale", "fixed_decal_offset", "decal_min_scale", "decal_max_scale",
-                "decal_random_yaw", "random_offset")
-DECAL_VECTOR_FIELDS = ("decal_scale", "fixed_decal_offset")
-# the decal names LoadAssetMaterialsCommandlet.cpp knows (DecalNamesMap), and the counts Import.py's
-# generate_decals_file writes when no roadpainter_decals.json exists
-DECAL_NAMES = tuple(
-    [f"dirt{i}" for i in range(1, 6)] + [f"drip{i}" for i in range(1, 4)] + [f"roadline{i}" for i in range(1, 6)]
-    + [f"tiremark{i}" for i in range(1, 4)] + [f"tarsnake{i}" for i in range(1, 12)]
-    + [f"cracksbig{i}" for i in range(1, 9)] + [f"crack{i}" for i in range(1, 9)]
-    + [f"manhole{i}" for i in range(1, 4)] + [f"mud{i}" for i in range(1, 6)]
-    + [f"oilsplat{i}" for i in range(1, 6)] + ["gum", "grate"])
-DECAL_DEFAULT_COUNTS = {
-    "drip1": 10, "drip3": 10, "dirt1": 10, "dirt3": 10, "dirt4": 10, "dirt5": 10, "roadline1": 20, "roadline5": 20,
-    "tiremark1": 20, "tiremark3": 20, "tarsnake1": 10, "tarsnake3": 20, "tarsnake4": 10, "tarsnake5": 20,
-    "tarsnake11": 20, "cracksbig1": 10, "cracksbig3": 10, "cracksbig5": 10, "cracksbig8": 10, "mud1": 10, "mud5": 10,
-    "oilsplat1": 20, "oilsplat2": 20, "oilsplat3": 20, "oilsplat4": 20, "oilsplat5": 20, "gum": 30, "crack1": 10,
-    "crack3": 10, "crack4": 10, "crack5": 10, "crack8": 10}
-DECAL_DEFAULT_PARAMS = {"decal_scale": {"x_axis": 1.0, "y_axis": 1.0, "z_axis": 1.0},
-                        "fixed_decal_offset": {"x_axis": 15.0, "y_axis": 15.0, "z_axis": 0.0},
-                        "decal_min_scale": 0.3, "decal_max_scale": 0.7, "decal_random_yaw": 360.0,
-                        "random_offset": 50.0}
 
 #: every rule: id -> (what CARLA does, source file)
 RULES: dict[str, tuple[str, str]] = {
@@ -289,19 +267,6 @@ def name_problems(name: str, *, what: str = "name") -> list[str]:
     return probs
 
 
-def decals_entry(map_name: str, enabled: bool) -> dict:
-    """One ``decals`` entry of roadpainter_decals.json for ``map_name``: CARLA's default counts or none.
-
-    With ``enabled`` false the entry names no decal at all (RoadPainter then has no decal material
-    to spawn) but keeps every parameter field, which RoadPainterWrapper reads unconditionally.
-    """
-    entry: dict = {"map_name": map_name}
-    if enabled:
-        entry.update(DECAL_DEFAULT_COUNTS)
-    entry.update(json.loads(json.dumps(DECAL_DEFAULT_PARAMS)))
-    return entry
-
-
 # ----------------------------------------------------------------------------- the package check
 
 def _json(path: Path, rep: ContractReport, rule: str):
@@ -478,7 +443,7 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     check_actor_geometry(rep, root if root.name != "Import" else root.parent)
     check_import_placement(rep, root if root.name != "Import" else root.parent, package, desc)
     # decals --------------------------------------------------------------------------------------
-    _check_decals(rep, imp, map_names, expect_decals)
+    check_decals(rep, imp, map_names, expect_decals)
     # signals: light groups, the cycle, heights, sign types (contract_signals.py) ---------------------
     check_signals(rep, [pkg / f"{n}.xodr" for n in map_names])
     # semantics: every class ends in its tag -----------------------------------------------------------
@@ -559,47 +524,3 @@ def _check_textures(rep: ContractReport, fbx: Path, fs, pkg: Path) -> None:
         rel = t.get("RelativeFilename")
         if rel and not (fbx.parent / rel).is_file() and not (pkg / Path(rel).name).is_file():
             rep.add("texture_paths", f"{fbx.name}: texture {rel!r} is not in the package")
-
-
-def _check_decals(rep: ContractReport, imp: Path, map_names: list[str], expect: bool | None) -> None:
-    files = sorted(imp.rglob(DECALS_FILE))
-    top = imp / DECALS_FILE
-    if not files:
-        rep.decals = True
-        if expect is not True:
-            rep.add("decals", f"no {DECALS_FILE} under {imp.name}/: make import would generate one that paints random "
-                              f"decals (dirt, cracks, tyre marks, road lines) on {', '.join(map_names) or 'the map'}")
-        return
-    if top not in files:
-        rep.add("decals", f"{DECALS_FILE} must lie directly in Import/ (Import.py copies only Import/{DECALS_FILE} "
-                          f"into the package's Content/<Package>/Config)")
-        return
-    data = _json(top, rep, "decals")
-    entries = data.get("decals") if isinstance(data, dict) else None
-    if not isinstance(entries, list):
-        rep.add("decals", f"{DECALS_FILE}: needs a 'decals' list")
-        return
-    painted = False
-    for name in map_names:
-        ent = [e for e in entries if isinstance(e, dict) and e.get("map_name") == name]
-        if not ent:
-            rep.add("decals", f"{DECALS_FILE}: no entry with map_name {name!r}")
-            continue
-        e = ent[0]
-        missing = [f for f in DECAL_FIELDS if f not in e]
-        missing += [f"{f}.{a}" for f in DECAL_VECTOR_FIELDS if isinstance(e.get(f), dict)
-                    for a in ("x_axis", "y_axis", "z_axis") if a not in e[f]]
-        if missing:
-            rep.add("decals", f"{DECALS_FILE}: entry {name!r} lacks {', '.join(missing)} (RoadPainter reads them all)")
-        for k in DECAL_NAMES:
-            if k in e:
-                try:
-                    n = float(e[k])
-                except (TypeError, ValueError):
-                    rep.add("decals", f"{DECALS_FILE}: entry {name!r}: {k} = {e[k]!r} is not a number")
-                    continue
-                painted = painted or n > 0
-    rep.decals = painted
-    if expect is not None and painted != expect:
-        rep.add("decals", f"{DECALS_FILE}: decals are {'on' if painted else 'off'} for {', '.join(map_names)}, "
-                          f"expected {'on' if expect else 'off'}")
