@@ -82,6 +82,30 @@ def crosswalk_row(run: Path) -> dict:
             "crosswalk_err_max_m": round(max(found), 3) if found else None}
 
 
+def signals_row(run: Path) -> dict:
+    """CARLA's emulated light plan of the run's map (twinkit.street.lights) and its signals against the
+    ground-truth traffic lights (the roads bench's ``gt_instances``)."""
+    import xml.etree.ElementTree as ET
+
+    from twinkit.street.lights import light_plan
+    from twinkit_roads.signals import CARLA_LIGHT_TYPES
+
+    sig = _bench_module("plugins/twinkit-roads/bench/bench_signals.py", "bench_signals")
+    text = site_xodr(run).read_text()
+    js = light_plan(text)["junctions"]
+    sigs = list(ET.fromstring(text).iter("signal"))
+    lights = [x for x in sigs if x.get("type") in CARLA_LIGHT_TYPES]
+    signs = [x for x in sigs if x.get("type") not in CARLA_LIGHT_TYPES]
+    truth = sig.gt_instances(run / "01_site" / "gt_mesh.ply", 6)
+    pts = sig.landmark_xy(text, True)
+    return {"signalised_junctions": len(js), "groups_max": max((v["groups"] for v in js.values()), default=0),
+            "conflicting_pairs": sum(len(v["conflicts"]) for v in js.values()), "light_signals": len(lights),
+            "true_lights_within_1m": f"{sum(sig.nearest(p, pts) <= 1.0 for p in truth)} / {len(truth)}",
+            "light_zoffset_max_m": round(max((abs(float(x.get("zOffset", 0.0))) for x in lights), default=0.0), 2),
+            "signs_typed": sum(x.get("type") in ("206", "205", "274") for x in signs),
+            "signs_generic": sum(x.get("type") == "-1" for x in signs)}
+
+
 def usd_error(run: Path, radius_m: float = 150.0) -> float:
     """Largest horizontal error (m) of points ``radius_m`` from the base point, taken through each mesh prim's
     world transform and read as ENU at the stage's reference position, against their true lon/lat."""
@@ -150,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for name, run in runs:
         row = {"run": name}
+        row.update(signals_row(run))
         row.update(crosswalk_row(run))
         row.update(actors_row(run))
         row["usd_err_150m_m"] = round(usd_error(run), 4)
@@ -158,7 +183,12 @@ def main(argv: list[str] | None = None) -> int:
         row.update(pkg)
         rows.append(row)
     print("## The twin in CARLA (issue 45 targets)\n")
-    cols = [("crosswalks CARLA reports", "crosswalks"), ("zebras with one within 1 m", "zebras_found"),
+    cols = [("signalised junctions", "signalised_junctions"), ("light groups per junction (max)", "groups_max"),
+            ("crossing approaches green together (pairs)", "conflicting_pairs"), ("light signals", "light_signals"),
+            ("true lights with a head within 1 m", "true_lights_within_1m"),
+            ("max light zOffset (m)", "light_zoffset_max_m"), ("signs typed stop/yield/speed", "signs_typed"),
+            ("signs left with type -1", "signs_generic"),
+            ("crosswalks CARLA reports", "crosswalks"), ("zebras with one within 1 m", "zebras_found"),
             ("zebras", "zebras"), ("static faces placed in the level", "placed_share"),
             ("lane waypoints (carla.Map, 1 m) without ground", "waypoints_off_ground"),
             ("lifted actors", "lifted"), ("lifted, wrong truth class", "wrong_class"),
