@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from . import files as F
-from .schemas import (ArtefactError, CamerasSite, DemoCameras, GroundControl, JsonSchema, PointsMeta, RoadsTruth,
-                      SiteInfo)
+from .schemas import (ArtefactError, CamerasSite, Crosswalks, DemoCameras, GroundControl, JsonSchema, PointsMeta,
+                      RoadsTruth, SiteInfo)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -26,11 +26,13 @@ __all__ = [
     "Artefact", "ArtefactError", "CATALOGUE", "check_output", "lookup",
     "read_points_meta", "write_points_meta", "read_cameras_site", "write_cameras_site",
     "read_demo_cameras", "write_demo_cameras", "read_gcp", "write_gcp", "read_roads_truth", "write_roads_truth",
+    "read_crosswalks", "write_crosswalks",
     "read_site_info", "write_site_info", "read_labels", "write_labels", "read_class_votes", "write_class_votes", "read_points", "write_points",
     "read_textured_mesh", "write_textured_mesh", "read_clean_mesh", "write_clean_mesh", "read_gt_mesh",
     "write_gt_mesh", "read_textured_obj", "write_textured_obj", "read_opendrive", "write_opendrive", "read_osm",
     "write_osm", "list_photos",
     "write_photo", "PointsMeta", "CamerasSite", "DemoCameras", "GroundControl", "RoadsTruth", "SiteInfo",
+    "Crosswalks",
 ]
 
 
@@ -137,6 +139,16 @@ def read_roads_truth(path: str | Path) -> RoadsTruth:
 def write_roads_truth(path: str | Path, doc: RoadsTruth | dict) -> None:
     """Write ``roads_truth.json`` (validated first)."""
     _write_json_doc(RoadsTruth, path, doc)
+
+
+def read_crosswalks(path: str | Path) -> Crosswalks:
+    """``crosswalks.json`` -> :class:`Crosswalks`."""
+    return _read_json_doc(Crosswalks, path)
+
+
+def write_crosswalks(path: str | Path, doc: Crosswalks | dict) -> None:
+    """Write ``crosswalks.json`` (validated first)."""
+    _write_json_doc(Crosswalks, path, doc)
 
 
 def read_site_info(path: str | Path) -> SiteInfo:
@@ -398,7 +410,7 @@ CATALOGUE: dict[str, Artefact] = dict([
     _entry("textured_mesh.ply", "PLY mesh", F.TexturedMeshPly, read_textured_mesh, write_textured_mesh,
            writers="photo:photo_texture pointcloud:bake_texture",
            readers="photo:photo_texture pointcloud:evaluate_reconstruction roads:align_roads roads:apply_alignment "
-                   "roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
+                   "roads:place_crosswalks roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
                    "segmentation:classify_geometry segmentation:import_labels segmentation:photo_views segmentation:render_views "
                    "segmentation:sample_views segmentation:segmenter/felzenszwalb segmentation:segmenter/vertices "
                    "segmentation:transfer_gt_labels tiles:evaluate_seam_labels"),
@@ -411,8 +423,8 @@ CATALOGUE: dict[str, Artefact] = dict([
     _entry("labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
            writers="export:lift_movables roads:road_evidence segmentation:backproject "
                    "segmentation:import_labels segmentation:transfer_gt_labels",
-           readers="export:lift_movables export:split_classes roads:align_roads roads:place_signals "
-                   "roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
+           readers="export:lift_movables export:split_classes roads:align_roads roads:place_crosswalks "
+                   "roads:place_signals roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
                    "segmentation:import_labels tiles:evaluate_seam_labels"),
     _entry("gt_labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
            writers="segmentation:transfer_gt_labels",
@@ -425,14 +437,18 @@ CATALOGUE: dict[str, Artefact] = dict([
            writers="demo-site:site_generator/demo_intersection",
            readers="pointcloud:evaluate_reconstruction segmentation:transfer_gt_labels"),
     _entry("aligned.xodr", "OpenDRIVE XML", F.OpenDrive, read_opendrive, write_opendrive,
-           writers="roads:apply_alignment roads:place_signals",
-           readers="export:drop_test export:exporter/carla_package roads:place_signals roads:road_evidence"),
+           writers="roads:apply_alignment roads:place_crosswalks roads:place_signals",
+           readers="export:drop_test export:exporter/carla_package roads:place_crosswalks roads:place_signals "
+                   "roads:road_evidence"),
     _entry("roads.osm", "OSM XML", F.OsmXml, read_osm, write_osm,
            writers="demo-site:site_generator/demo_intersection",
            readers="roads:road_source/file segmentation:photo_views segmentation:sample_views"),
     _entry("roads_truth.json", "JSON", RoadsTruth, read_roads_truth, write_roads_truth,
            writers="demo-site:site_generator/demo_intersection",
            readers="roads:apply_alignment roads:road_source/scan"),
+    _entry("crosswalks.json", "JSON", Crosswalks, read_crosswalks, write_crosswalks,
+           writers="roads:place_crosswalks",
+           readers="export:exporter/carla_package"),
     _entry("site.json", "JSON", SiteInfo, read_site_info, write_site_info,
            writers="demo-site:site_generator/demo_intersection",
            readers="export:exporter/carla_package export:exporter/fbx export:exporter/gltf export:exporter/usd"),

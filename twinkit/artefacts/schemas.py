@@ -215,6 +215,27 @@ class RoadsTruth(JsonSchema):
 
 
 @dataclass
+class Crosswalks(JsonSchema):
+    """``crosswalks.json`` (roads' place_crosswalks): ``metrics`` (``crosswalks``: how many crossings the scan
+    and OSM show, ``carla_crosswalks``: how many carla.Map reports), ``crosswalks`` (each with ``source``
+    and its site-frame ``polygon``), ``enabled``."""
+
+    FILE: ClassVar[str] = "crosswalks.json"
+    FIX: ClassVar[str] = "re-run the place_crosswalks step (twinkit-roads)"
+    INDENT: ClassVar[int] = 1
+    KINDS: ClassVar[dict[str, str]] = {"enabled": "bool", "metrics": "dict", "crosswalks": "list"}
+    ITEMS: ClassVar[dict[str, tuple[str, ...]]] = {"crosswalks": ("source", "polygon")}
+
+    enabled: bool = True
+    metrics: dict = field(default_factory=dict)
+    crosswalks: list = field(default_factory=list)
+
+    def _check(self, path: Any) -> None:
+        if not isinstance(self.metrics.get("crosswalks"), int):
+            raise self._fail(path, "metrics.crosswalks should be an int")
+
+
+@dataclass
 class SiteInfo(JsonSchema):
     """``site.json``: the site's georeference (``crs``, ``base_point`` lat/lon/alt, optional
     ``base_point_projected`` x/y/z) and what the demo site holds."""

@@ -271,3 +271,31 @@ class LaneMap:
             w = self._map.get_waypoint(carla.Location(x, y, z), project_to_road=False, lane_type=want)
             out.append(None if w is None else ((w.road_id, w.section_id, w.lane_id), str(w.lane_type)))
         return out
+
+    def crosswalk_points(self) -> np.ndarray:
+        """(n, 3) float64: ``get_crosswalks()``'s points as CARLA gives them (its frame: y = -north), one
+        outline after another, each closed by its first point where the OpenDRIVE closes it
+        (Map::GetAllCrosswalkZones in LibCarla/source/carla/road/Map.cpp; ``get_xodr_crosswalks.py``
+        reads this list). A crosswalk CARLA cannot place raises :class:`OpenDriveError`."""
+        try:
+            zones = self._map.get_crosswalks()
+        except Exception as exc:  # noqa: BLE001 - CARLA asserts, e.g. RuntimeError("s <= road->GetLength()")
+            raise OpenDriveError(self.source, f"carla.Map cannot place its crosswalks ({type(exc).__name__}: {exc}); "
+                                 "check each crosswalk object's s lies on its road") from None
+        return np.array([[p.x, p.y, p.z] for p in zones], float).reshape(-1, 3)
+
+    def crosswalks(self) -> list[np.ndarray]:
+        """The crosswalks CARLA reports (:meth:`crosswalk_points` split at each outline's closing point): a
+        list of (k, 3) float64 site-frame outlines, each without its closing point."""
+        pts = self.crosswalk_points() * np.array([1.0, -1.0, 1.0])
+        out: list[np.ndarray] = []
+        cur: list[np.ndarray] = []
+        for p in pts:
+            if len(cur) > 1 and np.allclose(p, cur[0], atol=1e-4):
+                out.append(np.array(cur))
+                cur = []
+            else:
+                cur.append(p)
+        if cur:
+            out.append(np.array(cur))
+        return out

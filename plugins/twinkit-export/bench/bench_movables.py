@@ -9,7 +9,8 @@
    lifted objects put back (what lift: false gives), and, with --main, another run's class meshes.
    Also: waypoints with no static surface within 0.3 m of the lane (no road under them).
 2. Objects found vs ground truth: the ground-truth mesh's movable classes (01_site/gt_mesh.ply, vertices
-   of one class within 2 m are one object: the demo labels wheels and frame) and site.json's car count, matched by centre (<= 1.5 m).
+   of one class within 2 m are one object: the demo labels wheels and frame) and site.json's car count, matched by centre (<= 1.5 m);
+   and the actors whose truth class (the majority ground-truth label of their vertices) is not theirs.
 3. Open border near the objects before / after, faces lifted, loops filled (the step's report).
 """
 from __future__ import annotations
@@ -84,6 +85,24 @@ def gt_objects(out: Path) -> list[tuple[int, np.ndarray]]:
     return res
 
 
+def truth_class_mismatch(out: Path, mov_dir: Path, actors: list[dict]) -> list[str]:
+    """The actors whose truth class (the majority ground-truth label of their mesh's source vertices, gt_labels
+    step) is not their class: ``["Person_010(255)", ...]``; [] without ground truth."""
+    from twinkit_export.classmesh import read_class_ply
+
+    lab_p = next(iter(sorted(out.glob("[0-9][0-9]_gt_labels/gt_labels.npy"))), None)
+    if lab_p is None:
+        return []
+    lab = np.load(lab_p)
+    wrong = []
+    for a in actors:
+        src = np.asarray(read_class_ply(mov_dir / a["file"]).mesh.attrs["source_index"])
+        u, k = np.unique(lab[src[src < len(lab)]], return_counts=True)
+        if len(u) and int(u[np.argmax(k)]) != int(a["class_id"]):
+            wrong.append(f"{a['name']}({int(u[np.argmax(k)])})")
+    return wrong
+
+
 def main() -> int:
     from twinkit_export.classmesh import read_class_ply
     from twinkit_export.split import load_class_set
@@ -138,11 +157,12 @@ def main() -> int:
                 used.add(j)
                 match += 1
                 cls_ok += int(found[j][0] == c)
+        wrong = truth_class_mismatch(out, mov_dir, acts.get("actors", []))
         print("| ground-truth objects (site.json cars) | found | matched (<= 1.5 m) | matched with the right class | "
-              "false objects |")
-        print("|---:|---:|---:|---:|---:|")
+              "false objects | actors whose truth class is not theirs |")
+        print("|---:|---:|---:|---:|---:|---:|")
         print(f"| {len(gt)} ({sj.get('counts', {}).get('cars', '?')}) | {len(found)} | {match} | {cls_ok} | "
-              f"{len(found) - len(used)} |")
+              f"{len(found) - len(used)} | {len(wrong)} {' '.join(wrong)} |")
     rep = acts.get("report", {})
     print("\n## The lift\n")
     print("| faces lifted | loops filled | fill faces | open border near objects before (m) | after (m) | "

@@ -42,7 +42,7 @@ def measure(run: Path) -> dict:
     pkg = next(p for p in (root / "Import").iterdir() if p.is_dir())
     desc = json.loads((pkg / f"{pkg.name}.json").read_text())["maps"][0]
     xodr = (pkg / desc["xodr"]).read_text(encoding="utf-8")
-    geo = fbxbin.mesh_geometry(pkg / desc["source"])
+    geo = {n: (v, f) for n, v, f in fbxbin.mesh_arrays(pkg / desc["source"])}
     blocks = cs.sidewalk_blocks(*geo["Road_Sidewalk"], xodr) if "Road_Sidewalk" in geo else cs.BlockReport()
     actors = json.loads((root / "actors.json").read_text()).get("actors", []) if (root / "actors.json").is_file() \
         else []

@@ -50,8 +50,8 @@ def fbx_out(class_dir, tmp_path_factory):
     return out["twin.fbx"]
 
 
-def straight_xodr(length_m: float = 100.0, y0: float = 5.0, width_m: float = 3.5) -> str:
-    """One straight road along +x at y = y0 (site frame) with one driving lane each side."""
+def straight_xodr(length_m: float = 100.0, y0: float = 5.0, width_m: float = 3.5, x0: float = 0.0) -> str:
+    """One straight road along +x from (x0, y0) (site frame) with one driving lane each side."""
     return f"""<?xml version="1.0" standalone="yes"?>
 <OpenDRIVE>
   <header revMajor="1" revMinor="4" name="straight" version="1.00" north="0" south="0" east="0" west="0">
@@ -60,7 +60,7 @@ def straight_xodr(length_m: float = 100.0, y0: float = 5.0, width_m: float = 3.5
   <road name="main" length="{length_m}" id="1" junction="-1">
     <link/>
     <planView>
-      <geometry s="0" x="0" y="{y0}" hdg="0" length="{length_m}"><line/></geometry>
+      <geometry s="0" x="{x0}" y="{y0}" hdg="0" length="{length_m}"><line/></geometry>
     </planView>
     <elevationProfile><elevation s="0" a="0" b="0" c="0" d="0"/></elevationProfile>
     <lateralProfile/>
@@ -84,7 +84,7 @@ def straight_xodr(length_m: float = 100.0, y0: float = 5.0, width_m: float = 3.5
 @pytest.fixture(scope="session")
 def xodr_file(tmp_path_factory):
     p = tmp_path_factory.mktemp("roads") / "aligned.xodr"
-    p.write_text(straight_xodr())
+    p.write_text(straight_xodr(length_m=36.0, x0=-18.0))  # on the synthetic street's ground (40 m x 30 m)
     return p
 
 

@@ -302,3 +302,44 @@ def test_parked_car_on_a_sidewalk_lane_is_reported(package, tmp_path):
     actors[0]["transform"]["y"] = float(on[1]) + 30.0  # 30 m south of the road: off every lane
     (root / "actors.json").write_text(json.dumps({"actors": actors}))
     assert cc.check_package(root, "TeststreetTwin", expect_decals=False).ok
+
+
+# ----------------------------------------------------------------------------- lanes over the ground
+
+def _lengthen(xodr: Path, to_m: float) -> None:
+    """The package's one straight road made ``to_m`` long (its geometry with it)."""
+    import re
+
+    text = xodr.read_text()
+    text = re.sub(r'length="36(\.0*)?"', f'length="{to_m}"', text)
+    assert f'length="{to_m}"' in text
+    xodr.write_text(text)
+
+
+def test_lane_past_the_mesh_fails_lanes_over_ground(package, tmp_path):
+    """trafficmanager/InMemoryMap.cpp SetUp + LocalizationStage.cpp Update: vehicles follow every waypoint of a
+    lane to its end. The synthetic street's road (36 m, on the 40 m mesh) passes; made 40 m long it runs 2 m past
+    the mesh's edge (as netconvert's turnarounds at the demo's map ends did), and fails."""
+    rep = cc.check_package(package, "TeststreetTwin", expect_decals=False)
+    assert "lanes_over_ground" not in _rules(rep)
+    root = _copy(package, tmp_path)
+    _lengthen(root / "Import" / "TeststreetTwin" / "Teststreet.xodr", 40.0)
+    rep = cc.check_package(root, "TeststreetTwin", expect_decals=False)
+    msgs = [str(v) for v in rep.violations if v.rule == "lanes_over_ground"]
+    assert len(msgs) == 1 and "run past the edge of Teststreet.fbx" in msgs[0]
+    assert "InMemoryMap.cpp" in msgs[0] and "LocalizationStage.cpp" in msgs[0]
+    n = int(msgs[0].split(":")[1].split()[0])
+    assert 2 <= n <= 8  # two lanes, 1-3 waypoints each past x = 20 m (the road's last 2 m)
+
+
+def test_map_larger_than_the_scan_is_not_past_the_edge(package, tmp_path):
+    """A road that runs on far beyond the mesh (a map larger than the scan: road_source=opendrive of a town) is
+    counted as beyond the scan, not a lane past the mesh's edge."""
+    from twinkit_export.contract_ground import check_lanes_over_ground
+
+    root = _copy(package, tmp_path)
+    _lengthen(root / "Import" / "TeststreetTwin" / "Teststreet.xodr", 200.0)
+    rep = cc.ContractReport("TeststreetTwin")
+    _, desc = _desc(root)
+    (res,) = check_lanes_over_ground(rep, root / "Import" / "TeststreetTwin", desc["maps"])
+    assert rep.ok and res["past_edge"] == 0 and res["beyond_scan"] > 300

@@ -81,7 +81,7 @@ def test_spawn_points_on_driving_lanes_and_frames(tmp_path, fake_fbx, class_dir,
     assert fr["rotation_deg"] == pytest.approx(1.7928, abs=1e-3) and fr["scale"] == 1.0
     # straight road along +x at y = 5 m (site frame), lanes 3.5 m wide, sidewalk not used
     assert {p["lane_id"] for p in pts} == {-1, 1}
-    assert len(pts) == 2 * 5  # s = 0, 20, 40, 60, 80 on each lane
+    assert len(pts) == 2 * 2  # s = 0, 20 on each lane of the 36 m road
     for p in pts:
         site, c = p["site"], p["carla"]
         # right lane (-1) centre at y = 5 - 1.75, left lane (+1) at y = 5 + 1.75, in the site frame

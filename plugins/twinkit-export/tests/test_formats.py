@@ -154,7 +154,7 @@ def test_usd_round_trip(usd_out, class_dir):
 def test_usd_colliders_on_static_classes_only(usd_out, class_dir):
     """Isaac Sim / PhysX collide with prims that have PhysicsCollisionAPI; a static triangle mesh needs
     MeshCollisionAPI with approximation "none" (the mesh itself). Movable classes get none."""
-    from pxr import Usd, UsdPhysics
+    from pxr import Usd, UsdGeom, UsdPhysics
 
     cs = load_class_set(class_dir)
     stage = Usd.Stage.Open(str(usd_out))
@@ -177,7 +177,9 @@ def test_usd_colliders_on_static_classes_only(usd_out, class_dir):
     write_usd(cs.meshes, None, bare, {}, colliders=False, old_semantics=False, geo_schemas=False)
     st2 = Usd.Stage.Open(str(bare))
     assert not any(p.HasAPI(UsdPhysics.CollisionAPI) for p in st2.Traverse())
-    assert not st2.GetPrimAtPath("/CesiumGeoreference")
+    assert not st2.GetPrimAtPath("/Site/CesiumGeoreference") and not st2.GetPrimAtPath("/CesiumGeoreference")
+    # no ENU declared: the stage is the site frame, no transform on the meshes
+    assert not any(UsdGeom.Xformable(p).GetOrderedXformOps() for p in st2.Traverse() if p.IsA(UsdGeom.Mesh))
 
 
 def _authored_api_schemas(prim) -> list[str]:
@@ -209,15 +211,60 @@ def test_usd_georeference_for_omniverse_and_cesium(usd_out):
     lat, lon, h = site.GetAttribute("omni:geospatial:wgs84:reference:referencePosition").Get()  # lat first
     assert (lat, lon, h) == pytest.approx((60.16945, 24.93365, 12.0))
     assert site.GetAttribute("omni:geospatial:wgs84:reference:tangentPlane").Get() == "ENU"
-    cg = stage.GetPrimAtPath("/CesiumGeoreference")
+    # the Cesium georeference lives inside the default prim (a reference to the file keeps it)
+    assert not stage.GetPrimAtPath("/CesiumGeoreference").IsValid()
+    cg = stage.GetPrimAtPath("/Site/CesiumGeoreference")
     assert cg.GetTypeName() == "CesiumGeoreferencePrim"
     assert cg.GetAttribute("cesium:georeferenceOrigin:latitude").Get() == pytest.approx(60.16945)
     assert cg.GetAttribute("cesium:georeferenceOrigin:longitude").Get() == pytest.approx(24.93365)
     assert cg.GetAttribute("cesium:georeferenceOrigin:height").Get() == pytest.approx(12.0)
+    # the height is marked as what it is: EPSG:3067 is 2D, so the base point's own height, not ellipsoidal
+    for p in (site, cg):
+        assert p.GetAttribute("twinkit:heightKind").Get() == "undeclared"
+        assert "not converted" in p.GetAttribute("twinkit:heightReference").Get()
     geo = stage.GetRootLayer().customLayerData["twinkit:georeference"]
-    # the exact CRS stays, and what an ENU consumer misses is stated: TM35FIN's grid convergence at 24.93 E
+    # the exact CRS stays; TM35FIN's grid convergence at 24.93 E is what the stage's transforms take out
     assert geo["crs"] == "EPSG:3067" and geo["grid_convergence_deg"] == pytest.approx(-1.79, abs=0.01)
-    assert "not converted" in geo["height_reference"]  # a 2D CRS: the height is the site's own
+    assert geo["height_kind"] == "undeclared" and geo["site_to_enu"]["rotation_deg"] == pytest.approx(1.79, abs=0.01)
+
+
+def test_usd_georeference_survives_a_reference(usd_out, tmp_path):
+    """A scene that references the twin (its default prim) under /World/Twin keeps both georeferences."""
+    from pxr import Usd
+
+    stage = Usd.Stage.CreateInMemory()
+    stage.DefinePrim("/World/Twin").GetReferences().AddReference(str(usd_out))
+    twin = stage.GetPrimAtPath("/World/Twin")
+    assert twin.GetAttribute("omni:geospatial:wgs84:reference:tangentPlane").Get() == "ENU"
+    cg = stage.GetPrimAtPath("/World/Twin/CesiumGeoreference")
+    assert cg.IsValid() and cg.GetAttribute("cesium:georeferenceOrigin:latitude").Get() == pytest.approx(60.16945)
+
+
+def test_usd_stage_read_as_enu_lands_on_the_site_crs(usd_out):
+    """The geospatial schemas' reading rule (the stage's world coordinates are ENU metres at the reference
+    position: ECEF of the reference + the ENU axes, pyproj) on points 150 m from the base point, taken through
+    each mesh prim's world transform, against their true lon/lat from the site frame (TM35FIN): within 5 cm.
+    Without the site -> ENU transform the grid convergence (1.79 deg) puts them 4.7 m off."""
+    from pyproj import Geod
+    from pxr import Usd, UsdGeom
+
+    from twinkit.geo import SiteFrame
+    from twinkit.geo.enu import enu_to_lonlat
+
+    stage = Usd.Stage.Open(str(usd_out))
+    site = stage.GetDefaultPrim()
+    lat, lon, h = site.GetAttribute("omni:geospatial:wgs84:reference:referencePosition").Get()
+    a = np.linspace(0, 2 * np.pi, 36, endpoint=False)
+    pts = np.c_[150 * np.cos(a), 150 * np.sin(a), np.zeros_like(a)]
+    truth = SiteFrame.from_site(SITE).local_to_lonlat(pts[:, :2])
+    meshes = [p for p in site.GetChildren() if p.IsA(UsdGeom.Mesh)]
+    assert meshes
+    for prim in meshes:
+        m = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
+        world = np.c_[pts, np.ones(len(pts))] @ m  # USD: row vectors
+        got = enu_to_lonlat(world[:, :3], lat, lon, h)
+        err = np.abs(Geod(ellps="WGS84").inv(got[:, 0], got[:, 1], truth[:, 0], truth[:, 1])[2])
+        assert err.max() <= 0.05, (prim.GetName(), err.max())
 
 
 # ----------------------------------------------------------------------------- glTF

@@ -194,12 +194,19 @@ def test_usd_movables_prims_without_collider(lifted, class_dir, tmp_path):
 
 
 @pytest.mark.skipif(not HAS_BPY, reason="bpy (Blender as a module) is not installed")
-def test_carla_package_with_actors_passes_contract(lifted, class_dir, fbx_out, xodr_file, tmp_path):
+def test_carla_package_with_actors_passes_contract(lifted, xodr_file, tmp_path):
+    """The package of the lifted scene (its static mesh split and exported, its car an actor) passes every rule,
+    the actors_geometry rule included: the car's box holds no static geometry and stands on the filled road."""
     from twinkit_export.carla_contract import check_package
 
+    split = run_step(plugin("step", "split_classes"), tmp_path / "split",
+                     {"in_labels_npy": lifted["labels.npy"], "in_textured_mesh_obj": lifted["textured_mesh.obj"]},
+                     site=SITE)
+    fbx = run_step(plugin("exporter", "fbx"), tmp_path / "fbx", {"in_class_meshes_dir": split["class_meshes"]},
+                   site=SITE)
     out = run_step(plugin("exporter", "carla_package"), tmp_path,
-                   {"in_twin_fbx": fbx_out, "in_class_meshes_dir": class_dir, "in_aligned_xodr": xodr_file,
-                    "in_movables_dir": lifted["movables"]}, site=SITE)
+                   {"in_twin_fbx": fbx["twin.fbx"], "in_class_meshes_dir": split["class_meshes"],
+                    "in_aligned_xodr": xodr_file, "in_movables_dir": lifted["movables"]}, site=SITE)
     root = out["carla_import"]
     pkg = root / "Import" / "TeststreetTwin"
     desc = json.loads((pkg / "TeststreetTwin.json").read_text())

@@ -31,8 +31,16 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import contract_walkers as _walkers
+from .contract_actors import ACTORS_GEOMETRY_RULE, check_actor_geometry
+from .contract_decals import (  # noqa: F401 (re-exported: carla_pkg and the tests read them here)
+    DECAL_DEFAULT_COUNTS, DECAL_FIELDS, DECAL_NAMES, DECALS_FILE, check_decals, decals_entry)
+from .contract_ground import RULE as GROUND_RULE
+from .contract_ground import check_lanes_over_ground
 from .contract_import import check_import_placement
 from .contract_sidewalks import RULES as SIDEWALK_RULES, check_sidewalks
+from .contract_signals import RULES as SIGNAL_RULES
+from .contract_signals import check_signals
 
 CARLA = "carla-simulator/carla"
 SRC_IMPORT = "Util/BuildTools/Import.py"
@@ -45,8 +53,6 @@ SRC_DECALS = ("Util/BuildTools/Import.py (generate_decals_file) + Unreal/CarlaUE
               "Util/RoadPainterWrapper.cpp (ReadConfigFile)")
 SRC_MATERIALS = "Unreal/CarlaUE4/Plugins/Carla/Source/Carla/Commandlet/LoadAssetMaterialsCommandlet.cpp"
 SRC_TWINKIT = "twinkit (not a CARLA rule)"
-
-DECALS_FILE = "roadpainter_decals.json"
 
 # -- MoveAssetsCommandlet.cpp: substrings tested in this order (FString::Contains, case-insensitive by default)
 MOVE_ROUTES: tuple[tuple[tuple[str, ...], str], ...] = (
@@ -84,29 +90,6 @@ PROP_SIZES = ("Tiny", "Small", "Medium", "Big", "Huge")
 NAV_AREAS = {"Road_Road": "road", "Road_Marking": "road", "Road_Curb": "road", "Road_Gutter": "road",
              "Road_Sidewalk": "sidewalk", "Road_Crosswalk": "crosswalk", "Road_Grass": "grass"}
 
-# -- RoadPainterWrapper.cpp ReadConfigFile: fields read for the entry whose map_name is the map
-DECAL_FIELDS = ("map_name", "decal_scale", "fixed_decal_offset", "decal_min_scale", "decal_max_scale",
-                "decal_random_yaw", "random_offset")
-DECAL_VECTOR_FIELDS = ("decal_scale", "fixed_decal_offset")
-# the decal names LoadAssetMaterialsCommandlet.cpp knows (DecalNamesMap), and the counts Import.py's
-# generate_decals_file writes when no roadpainter_decals.json exists
-DECAL_NAMES = tuple(
-    [f"dirt{i}" for i in range(1, 6)] + [f"drip{i}" for i in range(1, 4)] + [f"roadline{i}" for i in range(1, 6)]
-    + [f"tiremark{i}" for i in range(1, 4)] + [f"tarsnake{i}" for i in range(1, 12)]
-    + [f"cracksbig{i}" for i in range(1, 9)] + [f"crack{i}" for i in range(1, 9)]
-    + [f"manhole{i}" for i in range(1, 4)] + [f"mud{i}" for i in range(1, 6)]
-    + [f"oilsplat{i}" for i in range(1, 6)] + ["gum", "grate"])
-DECAL_DEFAULT_COUNTS = {
-    "drip1": 10, "drip3": 10, "dirt1": 10, "dirt3": 10, "dirt4": 10, "dirt5": 10, "roadline1": 20, "roadline5": 20,
-    "tiremark1": 20, "tiremark3": 20, "tarsnake1": 10, "tarsnake3": 20, "tarsnake4": 10, "tarsnake5": 20,
-    "tarsnake11": 20, "cracksbig1": 10, "cracksbig3": 10, "cracksbig5": 10, "cracksbig8": 10, "mud1": 10, "mud5": 10,
-    "oilsplat1": 20, "oilsplat2": 20, "oilsplat3": 20, "oilsplat4": 20, "oilsplat5": 20, "gum": 30, "crack1": 10,
-    "crack3": 10, "crack4": 10, "crack5": 10, "crack8": 10}
-DECAL_DEFAULT_PARAMS = {"decal_scale": {"x_axis": 1.0, "y_axis": 1.0, "z_axis": 1.0},
-                        "fixed_decal_offset": {"x_axis": 15.0, "y_axis": 15.0, "z_axis": 0.0},
-                        "decal_min_scale": 0.3, "decal_max_scale": 0.7, "decal_random_yaw": 360.0,
-                        "random_offset": 50.0}
-
 #: every rule: id -> (what CARLA does, source file)
 RULES: dict[str, tuple[str, str]] = {
     "layout": ("every *.json under Import/ except roadpainter_decals.json is a package description named after "
@@ -138,15 +121,19 @@ RULES: dict[str, tuple[str, str]] = {
     "actors": ("the lifted movable objects: actors.json beside Import/ (every .json under Import/ is read as a "
                "package) with a vehicle.*/walker.* blueprint and a carla.Transform each, and spawn_actors.py that "
                "spawns them (nothing in the import spawns actors)", f"{SRC_IMPORT}; {SRC_TWINKIT}"),
+    "crosswalks": _walkers.RULE[1],
     "semantics": ("every mesh ends in the CARLA tag of its class; 0 % of static faces tagged Terrain unless their "
                   "class is terrain", f"{SRC_MOVE}; {SRC_TAGGER}; {SRC_TWINKIT}"),
     "sidewalk_blocks": SIDEWALK_RULES["sidewalk_blocks"],  # contract_sidewalks.py
     "parked_on_sidewalk": SIDEWALK_RULES["parked_on_sidewalk"],
+    "actors_geometry": ACTORS_GEOMETRY_RULE,
+    "lanes_over_ground": GROUND_RULE,
     "import_placement": ("after make import (and the package's editor script place_in_map.py) every static mesh is in "
                          "the saved map level once, tagged by the folder of its mesh path, with complex-as-simple "
                          "collision; the import alone places only Maps/<Map> and Static/{Road,RoadLine,Terrain,"
                          "SideWalk}/<Map> (contract_import)", "Util/BuildTools/Import.py; " + SRC_PREPARE + "; "
                          + SRC_TAGGER),
+    **SIGNAL_RULES,
 }
 
 
@@ -187,6 +174,7 @@ class ContractReport:
     violations: list[Violation] = field(default_factory=list)
     meshes: list[MeshFate] = field(default_factory=list)
     decals: bool | None = None  # True when the package's decals configuration paints decals on its map
+    crosswalks: dict = field(default_factory=dict)  # map name -> crosswalks the navmesh gets (contract_walkers)
 
     @property
     def ok(self) -> bool:
@@ -219,6 +207,7 @@ class ContractReport:
             "dropped_assets": [m.asset for m in self.meshes if m.dropped],
             "walkable_faces": sum(m.faces for m in self.meshes if m.nav_area == "sidewalk"),
             "decals": self.decals,
+            "crosswalks": self.crosswalks,
             "meshes": [{"asset": m.asset, "kind": m.kind, "folder": m.folder, "tag": m.tag, "faces": m.faces,
                         "placed": m.placed, "dropped": m.dropped, "intended_tag": m.intended_tag}
                        for m in self.meshes],
@@ -279,19 +268,6 @@ def name_problems(name: str, *, what: str = "name") -> list[str]:
     if TILE_MARK.lower() in name.lower():
         probs.append(f"{what} {name!r} contains {TILE_MARK!r}: CARLA would treat the map as tiles of a large map")
     return probs
-
-
-def decals_entry(map_name: str, enabled: bool) -> dict:
-    """One ``decals`` entry of roadpainter_decals.json for ``map_name``: CARLA's default counts or none.
-
-    With ``enabled`` false the entry names no decal at all (RoadPainter then has no decal material
-    to spawn) but keeps every parameter field, which RoadPainterWrapper reads unconditionally.
-    """
-    entry: dict = {"map_name": map_name}
-    if enabled:
-        entry.update(DECAL_DEFAULT_COUNTS)
-    entry.update(json.loads(json.dumps(DECAL_DEFAULT_PARAMS)))
-    return entry
 
 
 # ----------------------------------------------------------------------------- the package check
@@ -415,12 +391,15 @@ def _check_placement(rep: ContractReport, prop_names: list[str], script: Path) -
 
 
 def check_package(root: Path, package: str | None = None, *, class_tags: dict[int, str] | None = None,
-                  expect_decals: bool | None = None, spawn_script: Path | None = None) -> ContractReport:
+                  expect_decals: bool | None = None, spawn_script: Path | None = None,
+                  expect_crosswalks: int | None = None) -> ContractReport:
     """Apply CARLA's import rules to ``root/Import/<package>/`` (``root`` may also be the Import folder).
 
     class_tags: trainId -> intended carla.CityObjectLabel name (from the FBX objects' ``class_id``);
     default: twinkit's class table. expect_decals: the decals setting the package must carry (None:
     only report it). spawn_script: the file that must place every prop (default ``root/spawn_props.py``).
+    expect_crosswalks: how many crossings the scan and OSM show (place_crosswalks' crosswalks.json; None:
+    only count what the navmesh gets).
     """
     root = Path(root)
     imp = root if root.name == "Import" else root / "Import"
@@ -456,6 +435,8 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
         rep.add("json", f"{desc_path.name}: no map ('maps' is empty) and no README.md saying why")
 
     map_names = _check_maps(rep, desc_path, pkg, maps, class_tags)
+    rep.crosswalks = _walkers.check_crosswalks(rep, pkg, maps, expect_crosswalks)
+    check_lanes_over_ground(rep, pkg, maps)  # the lanes over the map's mesh (contract_ground.py)
     prop_names = _check_props(rep, desc_path, pkg, props, class_tags)
     # placement: nothing in the import places props ------------------------------------------------
     if prop_names:
@@ -464,9 +445,12 @@ def check_package(root: Path, package: str | None = None, *, class_tags: dict[in
     _check_actors(rep, root if root.name != "Import" else root.parent)
     # walkers and parked cars (contract_sidewalks.py): sidewalk per block, parked vehicles off sidewalk lanes
     check_sidewalks(rep, root if root.name != "Import" else root.parent, pkg, maps)
+    check_actor_geometry(rep, root if root.name != "Import" else root.parent)
     check_import_placement(rep, root if root.name != "Import" else root.parent, package, desc)
     # decals --------------------------------------------------------------------------------------
-    _check_decals(rep, imp, map_names, expect_decals)
+    check_decals(rep, imp, map_names, expect_decals)
+    # signals: light groups, the cycle, heights, sign types (contract_signals.py) ---------------------
+    check_signals(rep, [pkg / f"{n}.xodr" for n in map_names])
     # semantics: every class ends in its tag -----------------------------------------------------------
     share = rep.wrong_terrain_share()
     if share > 0:
@@ -545,47 +529,3 @@ def _check_textures(rep: ContractReport, fbx: Path, fs, pkg: Path) -> None:
         rel = t.get("RelativeFilename")
         if rel and not (fbx.parent / rel).is_file() and not (pkg / Path(rel).name).is_file():
             rep.add("texture_paths", f"{fbx.name}: texture {rel!r} is not in the package")
-
-
-def _check_decals(rep: ContractReport, imp: Path, map_names: list[str], expect: bool | None) -> None:
-    files = sorted(imp.rglob(DECALS_FILE))
-    top = imp / DECALS_FILE
-    if not files:
-        rep.decals = True
-        if expect is not True:
-            rep.add("decals", f"no {DECALS_FILE} under {imp.name}/: make import would generate one that paints random "
-                              f"decals (dirt, cracks, tyre marks, road lines) on {', '.join(map_names) or 'the map'}")
-        return
-    if top not in files:
-        rep.add("decals", f"{DECALS_FILE} must lie directly in Import/ (Import.py copies only Import/{DECALS_FILE} "
-                          f"into the package's Content/<Package>/Config)")
-        return
-    data = _json(top, rep, "decals")
-    entries = data.get("decals") if isinstance(data, dict) else None
-    if not isinstance(entries, list):
-        rep.add("decals", f"{DECALS_FILE}: needs a 'decals' list")
-        return
-    painted = False
-    for name in map_names:
-        ent = [e for e in entries if isinstance(e, dict) and e.get("map_name") == name]
-        if not ent:
-            rep.add("decals", f"{DECALS_FILE}: no entry with map_name {name!r}")
-            continue
-        e = ent[0]
-        missing = [f for f in DECAL_FIELDS if f not in e]
-        missing += [f"{f}.{a}" for f in DECAL_VECTOR_FIELDS if isinstance(e.get(f), dict)
-                    for a in ("x_axis", "y_axis", "z_axis") if a not in e[f]]
-        if missing:
-            rep.add("decals", f"{DECALS_FILE}: entry {name!r} lacks {', '.join(missing)} (RoadPainter reads them all)")
-        for k in DECAL_NAMES:
-            if k in e:
-                try:
-                    n = float(e[k])
-                except (TypeError, ValueError):
-                    rep.add("decals", f"{DECALS_FILE}: entry {name!r}: {k} = {e[k]!r} is not a number")
-                    continue
-                painted = painted or n > 0
-    rep.decals = painted
-    if expect is not None and painted != expect:
-        rep.add("decals", f"{DECALS_FILE}: decals are {'on' if painted else 'off'} for {', '.join(map_names)}, "
-                          f"expected {'on' if expect else 'off'}")

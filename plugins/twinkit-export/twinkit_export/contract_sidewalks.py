@@ -224,7 +224,7 @@ def check_sidewalks(rep, root: Path, pkg: Path, maps: list) -> None:
             continue
         xodr = (pkg / str(m["xodr"])).read_text(encoding="utf-8")
         try:
-            geo = fbxbin.mesh_geometry(pkg / str(m["source"]), ("Road_Sidewalk",))
+            geo = {n: (v, f) for n, v, f in fbxbin.mesh_arrays(pkg / str(m["source"])) if n == "Road_Sidewalk"}
         except (fbxbin.FbxReadError, ValueError):
             continue  # the json rule reports an unreadable FBX
         if "Road_Sidewalk" in geo:

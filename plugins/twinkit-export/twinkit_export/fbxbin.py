@@ -170,40 +170,78 @@ def summarize(path: Path) -> FbxSummary:
     return FbxSummary(version, meshes, sorted(set(mats.values())), textures)
 
 
-def mesh_geometry(path: Path, names: tuple[str, ...] | None = None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{model name: (vertices (n, 3) float64 as stored (no node transform applied), triangles (m, 3) int64)}
-    of the mesh models of a binary FBX (``names``: only these). Polygons are fanned into triangles."""
+def _unit_scale(top: dict) -> float:
+    """Metres per file unit: GlobalSettings' UnitScaleFactor is centimetres per unit (1 when absent)."""
+    gs = top.get("GlobalSettings")
+    p70 = gs.child("Properties70") if gs is not None else None
+    for p in (p70.all("P") if p70 is not None else []):
+        if p.props and p.props[0] == "UnitScaleFactor" and len(p.props) >= 5:
+            return float(p.props[4]) / 100.0
+    return 0.01
+
+
+def _model_transform(model: Node) -> tuple[np.ndarray, np.ndarray]:
+    """(scale (3,), translation (3,)) of a model's Lcl Scaling / Lcl Translation; ValueError for a rotation."""
+    scale, shift = np.ones(3), np.zeros(3)
+    p70 = model.child("Properties70")
+    for p in (p70.all("P") if p70 is not None else []):
+        if not p.props or len(p.props) < 7:
+            continue
+        v = np.array([float(x) for x in p.props[4:7]])
+        if p.props[0] == "Lcl Scaling":
+            scale = v
+        elif p.props[0] == "Lcl Translation":
+            shift = v
+        elif p.props[0] == "Lcl Rotation" and np.abs(v).max() > 1e-9:
+            raise FbxReadError(f"model {_object_name(model.props[1])!r} is rotated (Lcl Rotation {v.tolist()}); "
+                               "only baked vertices are read")
+    return scale, shift
+
+
+def mesh_arrays(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(model name, vertices (n, 3) float64 in metres, triangles (m, 3) int64) of every mesh model of a binary
+    FBX: vertices with the model's scale and translation and the file's unit applied (a rotated model is an
+    :class:`FbxReadError`); polygons split into triangle fans. The file's own axes (twinkit writes Z up, the
+    frame of the package's OpenDRIVE)."""
     _, nodes = read_tree(path)
     top = {n.name: n for n in nodes}
-    objects, conns = top.get("Objects"), top.get("Connections")
+    objects = top.get("Objects")
     if objects is None:
         raise FbxReadError(f"{path}: no Objects section")
+    unit = _unit_scale(top)
     geoms, models = {}, {}
     for o in objects.children:
+        oid = o.props[0] if o.props else None
         if o.name == "Geometry" and len(o.props) > 2 and o.props[2] == "Mesh":
-            geoms[o.props[0]] = o
+            geoms[oid] = o
         elif o.name == "Model" and len(o.props) > 2 and o.props[2] == "Mesh":
-            models[o.props[0]] = _object_name(o.props[1])
-    out = {}
+            models[oid] = o
+    conns = top.get("Connections")
+    out = []
     for c in (conns.all("C") if conns is not None else []):
-        if len(c.props) < 3 or c.props[0] != "OO" or c.props[1] not in geoms or c.props[2] not in models:
-            continue
-        name = models[c.props[2]]
-        if names is not None and name not in names:
-            continue
-        g = geoms[c.props[1]]
-        vn, pn = g.child("Vertices"), g.child("PolygonVertexIndex")
-        if vn is None or pn is None:
-            continue
-        v = array_values(vn.props[0]).astype(np.float64).reshape(-1, 3)
-        pvi = array_values(pn.props[0]).astype(np.int64)
-        ends = np.flatnonzero(pvi < 0)
-        idx = np.where(pvi < 0, ~pvi, pvi)
-        tris = []
-        start = 0
-        for e in ends.tolist():
-            poly = idx[start:e + 1]
-            tris.extend((poly[0], poly[k], poly[k + 1]) for k in range(1, len(poly) - 1))
-            start = e + 1
-        out[name] = (v, np.asarray(tris, np.int64).reshape(-1, 3))
+        if len(c.props) >= 3 and c.props[0] == "OO" and c.props[1] in geoms and c.props[2] in models:
+            g, m = geoms[c.props[1]], models[c.props[2]]
+            vn, pn = g.child("Vertices"), g.child("PolygonVertexIndex")
+            if vn is None or pn is None:
+                continue
+            scale, shift = _model_transform(m)
+            v = array_values(vn.props[0]).astype(np.float64).reshape(-1, 3) * scale + shift
+            out.append((_object_name(m.props[1]), v * unit, _fans(array_values(pn.props[0]).astype(np.int64))))
     return out
+
+
+def _fans(pvi: np.ndarray) -> np.ndarray:
+    """Triangles (m, 3) from FBX polygon vertex indices (a polygon's last index is stored as ``-index - 1``)."""
+    ends = np.flatnonzero(pvi < 0)
+    idx = np.where(pvi < 0, -pvi - 1, pvi)
+    tris = []
+    start = 0
+    for e in ends:
+        poly = idx[start:e + 1]
+        if len(poly) == 3:
+            tris.append(poly[None, :])
+        elif len(poly) > 3:
+            k = np.arange(1, len(poly) - 1)
+            tris.append(np.c_[np.full(len(k), poly[0]), poly[k], poly[k + 1]])
+        start = e + 1
+    return np.vstack(tris) if tris else np.zeros((0, 3), np.int64)

@@ -54,11 +54,18 @@ class LiftParams:
     ground_hole_max_m: float = param(8.0, ge=0, help="every other hole of the ground up to this wide is closed "
                                                      "on the ground (the clean step's fill_ground_max_gap_m: a "
                                                      "wider gap is unscanned and stays open); 0 = off")
+    ground_contact_m: float = param(0.25, ge=0, help="an object is lifted only when it reaches this close to the "
+                                                     "ground (feet, tyres); else it floats and stays static")
+    min_geometry_share: float = param(0.5, ge=0, le=1, help="... and when at least this share of its vertices the "
+                                                            "3D classifier voted on are movable to it; 0 = off")
 
 
 def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: Path, in_textured_mesh_obj: Path,
-                       out_textured_mesh_obj: Path, out_labels_npy: Path, out_movables_dir: Path) -> dict:
-    """Cut vehicles, riders and pedestrians out of the static mesh; one PLY + actor entry per object."""
+                       out_textured_mesh_obj: Path, out_labels_npy: Path, out_movables_dir: Path,
+                       in_geometry_votes_npy: Path | None = None) -> dict:
+    """Cut vehicles, riders and pedestrians out of the static mesh; one PLY + actor entry per object. An object
+    must look like its class by its labels, its shape, its ground contact and the 3D classifier's votes
+    (``geometry_votes.npy`` of ``classify_geometry``, when the recipe has it): :mod:`.movables.cues`."""
     import numpy as np
 
     from twinkit import artefacts as A
@@ -83,7 +90,13 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
         return {"lifted": False, "instances": 0}
     opt = LiftOptions(**{k: getattr(params, k) for k in (f.name for f in dataclasses.fields(LiftOptions))
                          if hasattr(params, k)})
-    res = lift_movables(mesh, labels, opt, ctx.log)
+    votes = None
+    if in_geometry_votes_npy is not None and Path(in_geometry_votes_npy).exists():
+        votes = A.read_class_votes(in_geometry_votes_npy, mesh.n_vertices, Path(in_textured_mesh_obj).name)
+    else:
+        ctx.log.warning("lift_movables: no geometry_votes.npy (no classify_geometry step): objects are judged by the "
+                        "labels, their shape and their ground contact only")
+    res = lift_movables(mesh, labels, opt, ctx.log, votes)
     out = res.mesh
     tc = out.corner_uv if out.corner_uv is not None else np.zeros((out.n_faces, 3, 2), np.float32)
     A.write_textured_obj(out_obj, out.vertices, out.faces, tc, tex_name or "", normals=out.normals)

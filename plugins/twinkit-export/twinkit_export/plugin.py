@@ -380,17 +380,26 @@ def _write_package(out: Path, params: CarlaPackageParams, ctx: StepContext, **kw
         raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
 
 
-def _checked_summary(out: Path, package: str, expect_decals) -> dict:
+def _checked_summary(out: Path, package: str, expect_decals, expect_crosswalks: int | None = None) -> dict:
     """CARLA's import rules, read from its source (carla_contract): the package's summary, or a RuntimeError."""
     from .carla_contract import check_package
 
     from .contract_import import placement_summary
 
-    rep = check_package(out, package, expect_decals=expect_decals)
+    rep = check_package(out, package, expect_decals=expect_decals, expect_crosswalks=expect_crosswalks)
     if not rep.ok:
         raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
                            + "\n  ".join(str(v) for v in rep.violations))
     return {**rep.summary(), "level_placement": placement_summary(out, package, rep)}
+
+
+def _expected_crosswalks(path: Path | None) -> int | None:
+    """The crosswalk count place_crosswalks wrote (crosswalks.json ``metrics.crosswalks``), None without it."""
+    from twinkit.artefacts import read_crosswalks
+
+    if path is None or not Path(path).is_file():
+        return None
+    return int(read_crosswalks(path).metrics["crosswalks"])
 
 
 def _package_metrics(summ: dict, placed: dict, actors: list, out: Path) -> dict:
@@ -398,6 +407,7 @@ def _package_metrics(summ: dict, placed: dict, actors: list, out: Path) -> dict:
     return {"map_meshes": placed["map_meshes"], "props": placed["props"], "faces_by_tag": summ["faces_by_tag"],
             "wrong_terrain_share": summ["wrong_terrain_share"], "dropped_assets": summ["dropped_assets"],
             "walkable_faces": summ["walkable_faces"], "decals": summ["decals"], "actors": len(actors),
+            "crosswalks": sum(summ.get("crosswalks", {}).values()),
             "level_placement": summ.get("level_placement"),
             "actor_blueprints": sorted({a["blueprint"] for a in actors if a["blueprint"]}),
             "package_bytes": _size(out)}
@@ -406,9 +416,10 @@ def _package_metrics(summ: dict, placed: dict, actors: list, out: Path) -> dict:
 def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path,
                          in_class_meshes_dir: Path, out_carla_import_dir: Path, out_spawn_points_json: Path,
                          in_aligned_xodr: Path | None = None, in_site_json: Path | None = None,
-                         in_movables_dir: Path | None = None) -> dict:
+                         in_movables_dir: Path | None = None, in_crosswalks_json: Path | None = None) -> dict:
     """carla_import/Import/<Package>/: <Package>.json, <Map>.fbx (+ texture), <Map>.xodr, README; spawn points;
-    the lifted movable objects as actors (actors.json, spawn_actors.py) and scanned props."""
+    the lifted movable objects as actors (actors.json, spawn_actors.py) and scanned props. ``crosswalks.json``
+    (roads' place_crosswalks): how many crossings the package's navmesh must get."""
     from twinkit.artefacts import read_opendrive
 
     from .carla_actors import carla_actors, scanned_props, write_actor_files
@@ -453,7 +464,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
     lane_map((pkg / f"{map_name}.xodr").read_text(), map_name)
-    summ = _checked_summary(out, package, params.decals)
+    summ = _checked_summary(out, package, params.decals, _expected_crosswalks(in_crosswalks_json))
     pl = summ["level_placement"]
     ctx.log.info("carla_package: %.1f %% of the static faces end in the map level after make import and %s "
                  "(make import alone: %.1f %%)", 100 * pl["placed_share"], pl["script"],

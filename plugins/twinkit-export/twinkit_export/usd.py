@@ -14,30 +14,33 @@ Layout::
                                    semantic:Semantics:params:semanticData = "road"
                                  + static classes: PhysicsCollisionAPI, PhysicsMeshCollisionAPI
                                    (physics:approximation = "none": the triangle mesh itself)
-    /CesiumGeoreference        CesiumGeoreferencePrim (Cesium for Omniverse): cesium:georeferenceOrigin:
-                               latitude / longitude / height of the base point
+      /Site/CesiumGeoreference CesiumGeoreferencePrim (Cesium for Omniverse): cesium:georeferenceOrigin:
+                               latitude / longitude / height of the base point (inside the default prim:
+                               a reference to the file keeps it)
 
 Stage metadata: upAxis Z, metersPerUnit 1; the site georeference is the root layer's
 ``customLayerData["twinkit:georeference"]`` (crs, lat/lon/alt of the base point, projected
-base point, frame description, grid convergence and scale at the base point). Coordinates are
-the site frame (metres, x grid east, y grid north, z up).
+base point, frame description, grid convergence and scale at the base point, ``stage_frame``,
+``site_to_enu``, ``height_kind``).
 
-Georeference read by consumers: /Site carries NVIDIA Omniverse's geospatial
+The stage is in the frame its georeference declares. /Site carries NVIDIA Omniverse's geospatial
 ``OmniWGS84ReferencePositionAPI`` (``omni:geospatial:wgs84:reference:referencePosition`` = (lat,
-lon, height), ``...:tangentPlane`` = ENU), and /CesiumGeoreference Cesium's origin. Both take
-the stage as an east-north-up frame at the base point, with the height above the WGS84
-ellipsoid. Two differences from the exact site frame are recorded, not hidden: the site frame's
-y axis is *grid* north, which differs from true north by the grid convergence at the base point
-(``grid_convergence_deg``: 1.8 deg on the demo, TM35FIN; a point 150 m away lands 4.7 m off in
-an ENU consumer), and the height is ellipsoidal only when the site CRS is compound with a geoid
-grid at hand; otherwise the base point's own height is written and ``height_reference`` says so.
-The exact CRS stays in the layer data for tools that honour it.
+lon, height), ``...:tangentPlane`` = ENU) and /Site/CesiumGeoreference Cesium's origin; both read the
+stage's world coordinates as east-north-up metres at that point. Every class mesh prim (and /Site/Movables) keeps its points in the
+site frame (grid east / grid north, grid metres: the same numbers as the FBX, GLB and ``source_index``)
+and has one transform op, the similarity :func:`twinkit.geo.enu.site_to_enu` fits (rotation by the grid
+convergence, 1.79 deg on the demo; scale 1/k), so world positions are ENU: 150 m from the base point the
+schemas' reading lands within 0.03 mm of the site CRS's own lon/lat (4.7 m without the transform). The
+height is written as the schemas expect it (above the WGS84 ellipsoid) where the site CRS is compound and
+PROJ has its geoid grid; otherwise it is the base point's own height and ``twinkit:heightKind``
+(``orthometric`` / ``undeclared``) and ``twinkit:heightReference`` on both prims say so.
 
 Colliders: every class except the movable ones (person, rider, car, truck, bus, train,
 motorcycle, bicycle: they move or get lifted out of the static map), sky and unlabelled.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -61,29 +64,35 @@ NO_COLLIDER = frozenset({10, 11, 12, 13, 14, 15, 16, 17, 18, 255})
 #: the older Isaac Sim semantics schema (isaacsim/omni "Semantics" module; Isaac Sim before 5.0 reads it)
 OLD_SEMANTICS_INSTANCE = "Semantics"
 OMNI_GEO = "omni:geospatial:wgs84:reference:"
-CESIUM_GEOREFERENCE_PATH = "/CesiumGeoreference"
+CESIUM_GEOREFERENCE_NAME = "CesiumGeoreference"
+#: the site frame -> ENU similarity is fitted over this radius about the base point (m)
+ENU_RADIUS_M = 150.0
+STAGE_FRAME = ("east-north-up at the base point (lat, lon, enu_height_m): every mesh prim's points are in the site "
+               "frame and its transform op (site_to_enu) puts them in ENU; world positions are ENU metres")
 
 
 def geo_anchor(georef: dict) -> dict:
-    """What an ENU consumer needs beyond ``georef``: the base point's height above the WGS84 ellipsoid
-    (when the site CRS is compound and PROJ has the geoid grid) and the grid convergence / point scale
-    of the site CRS at the base point. Keys: ``height_m``, ``height_reference``, ``grid_convergence_deg``
-    (angle from true north to grid north, positive clockwise), ``point_scale_factor``."""
-    out: dict = {"height_m": float(georef.get("alt", 0.0)),
-                 "height_reference": "the site's base point height as given (not converted to WGS84 ellipsoidal)"}
-    if "lat" not in georef or "lon" not in georef or not georef.get("crs"):
-        return out
-    try:
-        from twinkit.geo.frame import SiteFrame
+    """The base point's height for a consumer that wants it above the WGS84 ellipsoid, and what that height is.
 
-        frame = SiteFrame.from_site({"name": "usd", "crs": georef["crs"],
-                                     "base_point": {"lat": georef["lat"], "lon": georef["lon"],
-                                                    "alt": georef.get("alt", 0.0)}})
-    except Exception:
+    Keys: ``height_m``; ``height_kind``: ``"ellipsoidal"`` (converted: the site CRS is compound and PROJ has
+    its geoid grid), ``"orthometric"`` (the CRS declares a vertical datum, e.g. N2000, but the geoid grid is
+    missing: the height is above the geoid, not the ellipsoid) or ``"undeclared"`` (a 2D CRS: the survey's own
+    height, unconverted); ``height_reference`` (the same in words, with the datum); with a georeferenced
+    site also ``grid_convergence_deg`` (angle from true north to grid north, positive clockwise) and
+    ``point_scale_factor`` of the site CRS at the base point."""
+    out: dict = {"height_m": float(georef.get("alt", 0.0)), "height_kind": "undeclared",
+                 "height_reference": "the site's base point height as given (not converted to WGS84 ellipsoidal)"}
+    frame = _site_frame(georef)
+    if frame is None:
         return out
+    datum = frame.vertical_datum
+    if not datum.startswith("undeclared"):
+        out.update(height_kind="orthometric",
+                   height_reference=f"height in {datum}, not converted to WGS84 ellipsoidal (no geoid grid at hand)")
     try:
         out["height_m"] = float(frame.ellipsoidal_heights(np.zeros((1, 3)))[0])
-        out["height_reference"] = "WGS84 ellipsoidal height (from the site CRS's vertical datum)"
+        out.update(height_kind="ellipsoidal",
+                   height_reference=f"WGS84 ellipsoidal height (converted from {datum})")
     except Exception:
         pass
     try:
@@ -97,27 +106,77 @@ def geo_anchor(georef: dict) -> dict:
     return out
 
 
-def _georeference(stage, root, georef: dict, geo_schemas: bool) -> None:
-    """The georeference on the stage: layer custom data, and (``geo_schemas``, with lat/lon) the
-    Omniverse WGS84 reference position on the root prim and a Cesium georeference prim."""
+def _site_frame(georef: dict):
+    """The :class:`twinkit.geo.SiteFrame` of an export's georeference block, or None without lat/lon/crs."""
+    if "lat" not in georef or "lon" not in georef or not georef.get("crs"):
+        return None
+    try:
+        from twinkit.geo.frame import SiteFrame
+
+        return SiteFrame.from_site({"name": "usd", "crs": georef["crs"],
+                                    "base_point": {"lat": georef["lat"], "lon": georef["lon"],
+                                                   "alt": georef.get("alt", 0.0)}})
+    except Exception:
+        return None
+
+
+def enu_frame(georef: dict, anchor: dict):
+    """The :class:`twinkit.geo.enu.EnuFrame` the stage is written in (site frame -> east-north-up at the base
+    point, fitted over ``ENU_RADIUS_M``), or None when the georeference has no site CRS (the stage stays in
+    the site frame and declares no ENU reference)."""
+    frame = _site_frame(georef)
+    if frame is None:
+        return None
+    from twinkit.geo.enu import site_to_enu
+
+    return site_to_enu(frame, anchor["height_m"], ENU_RADIUS_M)
+
+
+def _georeference(stage, root, georef: dict, geo_schemas: bool):
+    """The georeference on the stage: layer custom data, and (``geo_schemas``, with a site CRS) the Omniverse
+    WGS84 reference position on the default prim and a Cesium georeference prim inside it, both east-north-up
+    at the base point with the height marked ellipsoidal / orthometric / undeclared. Returns the
+    :class:`EnuFrame` the meshes must be put in by their transform (None: the stage is the site frame)."""
     from pxr import Gf, Sdf
 
     layer = stage.GetRootLayer()
     anchor = geo_anchor(georef) if geo_schemas else {}
-    layer.customLayerData = {"twinkit:georeference": {**{k: v for k, v in georef.items()},
-                                                      **{k: v for k, v in anchor.items() if k != "height_m"}}}
-    if geo_schemas and "lat" in georef and "lon" in georef:
-        # NVIDIA Omniverse geospatial: the reference position of everything below /Site (ENU tangent plane)
-        rp = root.GetPrim()
-        rp.AddAppliedSchema("OmniWGS84ReferencePositionAPI")
-        rp.CreateAttribute(OMNI_GEO + "referencePosition", Sdf.ValueTypeNames.Double3, custom=False).Set(
-            Gf.Vec3d(float(georef["lat"]), float(georef["lon"]), anchor["height_m"]))
-        rp.CreateAttribute(OMNI_GEO + "tangentPlane", Sdf.ValueTypeNames.Token, custom=False,
-                           variability=Sdf.VariabilityUniform).Set("ENU")
-        # Cesium for Omniverse: the stage's georeference origin (a typed prim at its usual path)
-        cg = stage.DefinePrim(CESIUM_GEOREFERENCE_PATH, "CesiumGeoreferencePrim")
-        for k, v in (("latitude", georef["lat"]), ("longitude", georef["lon"]), ("height", anchor["height_m"])):
-            cg.CreateAttribute(f"cesium:georeferenceOrigin:{k}", Sdf.ValueTypeNames.Double, custom=False).Set(float(v))
+    enu = enu_frame(georef, anchor) if geo_schemas else None
+    data = {**georef, **{k: v for k, v in anchor.items() if k != "height_m"}}
+    if enu is None:
+        data["stage_frame"] = "the site frame (see frame): no ENU reference declared"
+    else:
+        data.update(stage_frame=STAGE_FRAME, enu_height_m=enu.height_m,
+                    site_to_enu={"rotation_deg": math.degrees(enu.rotation_rad), "scale": enu.scale,
+                                 "residual_m": enu.residual_m, "radius_m": enu.radius_m})
+    layer.customLayerData = {"twinkit:georeference": data}
+    if enu is None:
+        return None
+    # NVIDIA Omniverse geospatial: the reference position of everything below /Site (ENU tangent plane)
+    rp = root.GetPrim()
+    rp.AddAppliedSchema("OmniWGS84ReferencePositionAPI")
+    rp.CreateAttribute(OMNI_GEO + "referencePosition", Sdf.ValueTypeNames.Double3, custom=False).Set(
+        Gf.Vec3d(float(georef["lat"]), float(georef["lon"]), enu.height_m))
+    rp.CreateAttribute(OMNI_GEO + "tangentPlane", Sdf.ValueTypeNames.Token, custom=False,
+                       variability=Sdf.VariabilityUniform).Set("ENU")
+    # Cesium for Omniverse: the stage's georeference origin, inside the default prim so a reference keeps it
+    cg = stage.DefinePrim(root.GetPath().AppendChild(CESIUM_GEOREFERENCE_NAME), "CesiumGeoreferencePrim")
+    for k, v in (("latitude", georef["lat"]), ("longitude", georef["lon"]), ("height", enu.height_m)):
+        cg.CreateAttribute(f"cesium:georeferenceOrigin:{k}", Sdf.ValueTypeNames.Double, custom=False).Set(float(v))
+    for p in (rp, cg):
+        p.CreateAttribute("twinkit:heightKind", Sdf.ValueTypeNames.Token, custom=True).Set(anchor["height_kind"])
+        p.CreateAttribute("twinkit:heightReference", Sdf.ValueTypeNames.String, custom=True).Set(
+            anchor["height_reference"])
+    return enu
+
+
+def _place(xformable, enu) -> None:
+    """The site frame -> ENU similarity as the prim's one transform op (points stay in the site frame)."""
+    if enu is None:
+        return
+    from pxr import Gf
+
+    xformable.AddTransformOp().Set(Gf.Matrix4d(enu.matrix().T.tolist()))  # USD: row vectors, p' = p M
 
 
 def _material(stage, root_name: str, texture_name: str | None):
@@ -226,14 +285,16 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
     stage.SetDefaultPrim(root.GetPrim())
     Usd.ModelAPI(root.GetPrim()).SetKind("component")
     layer = stage.GetRootLayer()
-    _georeference(stage, root, georef, geo_schemas)
+    enu = _georeference(stage, root, georef, geo_schemas)
     layer.documentation = "twinkit digital twin: one Mesh per CityScapes class (site frame, metres, z up)"
     mat = _material(stage, root_name, texture_name)
 
     stats = {}
     mov_parent = None
     if movables:
-        mov_parent = UsdGeom.Xform.Define(stage, root.GetPath().AppendChild("Movables")).GetPath()
+        mov_xf = UsdGeom.Xform.Define(stage, root.GetPath().AppendChild("Movables"))
+        _place(mov_xf, enu)
+        mov_parent = mov_xf.GetPath()
     for cm, parent in [(m, root.GetPath()) for m in meshes] + [(m, mov_parent) for m in movables]:
         if cm.mesh.n_faces == 0:
             continue
@@ -241,6 +302,8 @@ def write_usd(meshes, texture_name: str | None, out: Path, georef: dict, *, root
         mesh = UsdGeom.Mesh.Define(stage, parent.AppendChild(_prim_name(cm.name)))
         prim = mesh.GetPrim()
         _mesh_geometry(mesh, cm)
+        if not movable:
+            _place(mesh, enu)
         _semantics(prim, cm, semantics_taxonomy, old_semantics)
         collider = colliders and int(cm.class_id) not in NO_COLLIDER and not movable
         if collider:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import xml.etree.ElementTree as ET
 import logging
 import sys
 import tempfile
@@ -117,7 +118,6 @@ def bench_run(run: Path, tmp: Path) -> None:
           + " | ".join(f"{int(np.sum(np.asarray(dist[n]) <= 1.0))} / {len(gt_l)}" for n in names) + " |")
     print()
     # pairing: on the demo each light serves the approach whose right kerb it stands on (layout.py)
-    import xml.etree.ElementTree as ET
 
     from twinkit_roads.reflines import reference_lines
 
@@ -150,11 +150,83 @@ def bench_run(run: Path, tmp: Path) -> None:
               f"{sum(i['kind'] == 'sign' for i in doc['instances'])} | {len(doc['rejected_clusters'])} | "
               f"{sum(s['source'] == 'scan' for s in lt)} / {sum(s['source'] == 'netconvert' for s in lt)} | "
               f"{len(sg)} | {ok_signs} / {len(sg)} | {err:.3f} |")
+    print("\nJunction signal plan as CARLA 0.9.16 runs it (twinkit.street.lights) and the signs' types:\n")
+    print(PLAN_HEAD)
+    for n, (t, _) in variants.items():
+        print(plan_row(n, t, gt_l))
+    typed = [(s["id"], s["type"], s["note"]) for s in (variants.get("predicted labels (default)", ("", None))[1] or
+                                                       {"signals": []})["signals"] if s["kind"] == "sign"]
+    for sid, typ, note in typed:
+        print(f"- {sid}: type {typ}: {note}")
+
+
+def plan_row(name: str, text: str, gt_l: list | None = None) -> str:
+    """One Markdown row: CARLA's emulated light plan (twinkit.street.lights) and the signals of a map."""
+    from twinkit.street.lights import light_plan
+
+    plan = light_plan(text)
+    js = plan["junctions"]
+    sigs = list(ET.fromstring(text).iter("signal"))
+    lights = [x for x in sigs if x.get("type") in CARLA_LIGHT_TYPES]
+    signs = [x for x in sigs if x.get("type") not in CARLA_LIGHT_TYPES]
+    near = "-"
+    if gt_l:
+        pts = landmark_xy(text, True)
+        d = [nearest(p, pts) for p in gt_l]
+        near = f"{sum(v <= 1.0 for v in d)} / {len(gt_l)}"
+    z = [abs(float(x.get("zOffset", 0.0))) for x in lights]
+    return (f"| {name} | {len(js)} | {max((v['groups'] for v in js.values()), default=0)} | "
+            f"{sum(len(v['conflicts']) for v in js.values())} | {len(lights)} | {near} | "
+            f"{max(z, default=0.0):.2f} | {sum(x.get('type') in ('206', '205', '274') for x in signs)} | "
+            f"{sum(x.get('type') == '-1' for x in signs)} |")
+
+
+PLAN_HEAD = ("| map | signalised junctions | light groups per junction (max) | crossing approaches green together "
+             "(pairs) | light signals | true lights with a head within 1 m | max abs light zOffset m | signs typed "
+             "206/205/274 | signs type -1 |\n|---|---|---|---|---|---|---|---|---|")
+
+
+def bench_osm(osm: Path, tmp: Path, centre: tuple[float, float], half_m: float = 150.0) -> None:
+    """netconvert a real OSM crop (CARLA's importer options, convert.py) and write its signal plan."""
+    from twinkit_roads.convert import ConvertParams, run_netconvert
+    from twinkit_roads.osmio import crop, read_osm, write_osm_xml
+    from twinkit_roads.signals import place_signals
+
+    lon, lat = centre
+    dlat, dlon = half_m / 110540.0, half_m / (111320.0 * np.cos(np.radians(lat)))
+    box = (lat - dlat, lon - dlon, lat + dlat, lon + dlon)
+    data = crop(read_osm(osm), box)
+    write_osm_xml(data, tmp / "crop.osm", box)
+    proj = f"+proj=tmerc +lat_0={lat} +lon_0={lon} +k=1 +x_0=0 +y_0=0 +ellps=GRS80 +units=m +no_defs"
+    run_netconvert(tmp / "crop.osm", tmp / "crop.xodr", proj, ConvertParams())
+    before = (tmp / "crop.xodr").read_text()
+    from pyproj import Transformer
+
+    from twinkit_roads.signtypes import osm_sign_nodes
+
+    tr = Transformer.from_crs("EPSG:4326", proj, always_xy=True)
+    nodes = osm_sign_nodes(tmp / "crop.osm", lambda ll: np.stack(tr.transform(ll[:, 0], ll[:, 1]), 1))
+    after, placed, log = place_signals(before, [], osm_signs=nodes)
+    kinds = [k for _, _, k in nodes]
+    print(f"\n### {osm.name}: {2 * half_m:.0f} m box at ({lat:.5f}, {lon:.5f}), "
+          f"{data.count()['traffic_signals']} OSM traffic_signals nodes\n")
+    print(PLAN_HEAD)
+    print(plan_row("netconvert (before)", before))
+    print(plan_row("place_signals, no scan, OSM sign nodes (after)", after))
+    print(f"\nOSM sign nodes in the crop: {kinds.count('stop')} stop, {kinds.count('yield')} give way, "
+          f"{kinds.count('speed')} speed limit; written from OSM alone: "
+          f"{sum(p.source == 'osm' for p in placed)}")
+    for ln in log[:12]:
+        print(f"- {ln}")
 
 
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--run", action="append", type=Path, help="a finished pointcloud_site demo run folder")
+    ap.add_argument("--osm", type=Path, default=ROOT.parent / "shared" / "data" / "osm" / "helsinki_center.osm.pbf",
+                    help="a real OSM extract for the junction-plan table (skipped when absent)")
+    ap.add_argument("--osm-centre", type=float, nargs=2, default=(24.93795, 60.17006), metavar=("LON", "LAT"),
+                    help="centre of the 300 m crop (default: the densest traffic signals of helsinki_center)")
     a = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)
     runs = [r.resolve() for r in a.run] if a.run else RUNS
@@ -169,6 +241,8 @@ def main() -> int:
                 continue
             found = True
             bench_run(run, Path(td))
+        if a.osm.is_file():
+            bench_osm(a.osm, Path(td), tuple(a.osm_centre))
     return 0 if found else 0
 
 

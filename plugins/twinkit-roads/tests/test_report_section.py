@@ -52,4 +52,4 @@ def test_the_sections_are_registered():
     reg = load_registry(extra=[("roads", plugin)], entry_points=False)
     assert [(s.name, s.title, s.order) for s in reg.report_sections] == [
         ("roads", "Road network", 500.0), ("alignment", "Alignment", 900.0), ("signals", "Signals", 910.0),
-        ("road_evidence", "Road network as evidence for the labels", 920.0)]
+        ("crosswalks", "Crosswalks", 915.0), ("road_evidence", "Road network as evidence for the labels", 920.0)]

@@ -106,13 +106,19 @@ def test_light_lands_on_scanned_head_with_road_lanes_and_orientation_kept():
     # the light head is at x 40.2, y -8 (left of the road is +y): s ~ 40.2 - 0.25 (CARLA's shift), t = -8
     assert float(sig.get("s")) == pytest.approx(40.2 - 0.25, abs=0.05)
     assert float(sig.get("t")) == pytest.approx(-8.0, abs=0.05)
-    assert float(sig.get("zOffset")) == pytest.approx(2.9, abs=0.1)
+    assert float(sig.get("zOffset")) == pytest.approx(0.0, abs=0.05)  # the pole on the ground under the head
+    assert sig.get("name") == "twinkit_scan_STATIC"  # MapBuilder::CheckSignalsOnRoads leaves it on the scan
     lms, m = carla_landmarks(text)
     loc = lms["3_0"].transform.location
     assert math.hypot(loc.x - 40.2, -loc.y - (-8.0)) < 0.05  # CARLA is left-handed: y flipped
-    assert loc.z == pytest.approx(2.9, abs=0.1)
+    assert loc.z == pytest.approx(0.0, abs=0.05)
     assert lms["3_0"].road_id == 1
-    assert text.count('<control signalId="3_0"') == 1  # still in its controller
+    # no junction ahead of its lanes: netconvert's controller is gone and no junction names one
+    assert '<control signalId="3_0"' not in text
+    # the head at its scanned height when asked
+    text, _, _ = place_signals(xodr(), kept, lights_on_ground=False)
+    sig = ET.fromstring(text).find(".//road[@id='1']/signals/signal[@id='3_0']")
+    assert float(sig.get("zOffset")) == pytest.approx(2.9, abs=0.1)
 
 
 def test_no_scanned_light_keeps_netconvert_and_says_so():
@@ -123,7 +129,7 @@ def test_no_scanned_light_keeps_netconvert_and_says_so():
     rec = next(p for p in placed if p.id == "3_0")
     assert rec.source == "netconvert" and rec.moved_m == 0.0 and "netconvert" in rec.note
     sig = ET.fromstring(text).find(".//signal[@id='3_0']")
-    assert float(sig.get("s")) == 50.0 and float(sig.get("t")) == -1.625 and sig.get("zOffset") == "5"
+    assert float(sig.get("s")) == 50.0 and float(sig.get("t")) == -1.625 and sig.get("zOffset") == "0.000"
 
 
 def test_light_beyond_the_gate_is_not_paired():
@@ -202,7 +208,8 @@ def test_step_writes_xodr_json_png_and_checks_carla(tmp_path):
     doc = json.loads(out["signals.json"].read_text())
     by = {s["id"]: s for s in doc["signals"]}
     assert by["3_0"]["source"] == "scan" and by["3_0"]["carla_position_error_m"] < 0.05
-    assert by["3_0"]["zOffset"] == pytest.approx(2.9, abs=0.1)  # above the road, not above the site origin
+    assert by["3_0"]["zOffset"] == pytest.approx(0.0, abs=0.05)  # on the ground (at 12 m), not at the site origin
+    assert doc["light_plan"]["lights"][0]["zOffset"] == pytest.approx(0.0, abs=0.05)
     signs = [s for s in doc["signals"] if s["kind"] == "sign"]
     assert len(signs) == 1 and signs[0]["orientation"] == "-"  # left of the road: faces the -s lanes
     carla_landmarks(out["aligned.xodr"].read_text())

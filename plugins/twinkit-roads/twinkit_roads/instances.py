@@ -31,6 +31,7 @@ class Instance:
     id: int = -1
     rejected: str = ""
     evidence: str = "label"  # "label": a cluster of its label; "pole_head": a pole carrying a head, unlabelled
+    members: np.ndarray | None = None  # indices of its vertices in the mesh (label clusters)
 
     def to_json(self) -> dict:
         return {"id": self.id, "kind": self.kind, "label": self.label,
@@ -103,7 +104,7 @@ def find_instances(V: np.ndarray, labels: np.ndarray, *, link_m: float = 0.35, m
             k = kind
             if kind == "light" and len(P) >= min_vertices and ext[0] < plate_depth_m:
                 k = "sign"
-            inst = Instance(k, c, size, int(len(P)), float(c[2] - ground), n_pole, lab)
+            inst = Instance(k, c, size, int(len(P)), float(c[2] - ground), n_pole, lab, members=idx[comp])
             why = []
             if len(P) < min_vertices:
                 why.append(f"{len(P)} vertices < {min_vertices}")

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List
+from typing import Dict, List
 
 from twinkit.ranges import param
 
@@ -34,6 +34,17 @@ class AlignParams:
 class ApplyParams:
     qa_px_per_m: float = param(20.0, gt=0, help="pixels per metre of the QA picture of the aligned network over the mesh")
     qa_max_px: int = param(4096, ge=16, help="at most this many pixels across the QA picture")
+    trim_to_ground: bool = param(True, help="cut the map's ends (road ends without a link, netconvert's dead-end "
+                                 "turnarounds) back until their lanes lie on the mesh (ground_ends.py, docs/roads.md "
+                                 "'Roads on the ground'); false: the aligned map as it is")
+    trim_step_m: float = param(0.25, gt=0, help="metres: lane samples along the roads for the trim, and the step by "
+                               "which a turnaround's cut grows")
+    trim_band_m: float = param(0.5, gt=0, help="metres: a lane sample has ground beneath when the mesh crosses its "
+                               "vertical within this of the lane's height")
+    trim_margin_m: float = param(0.5, ge=0, help="metres: cut this much farther in than the first cross-section on "
+                                 "the ground")
+    trim_max_m: float = param(10.0, ge=0, help="metres: an end is never cut back farther than this (reported instead)")
+    trim_min_left_m: float = param(2.0, ge=0, help="metres: a road is not cut shorter than this (reported instead)")
 
 
 @dataclass
@@ -60,6 +71,10 @@ class SignalParams:
     group_m: float = param(2.0, ge=0, help="metres: netconvert light signals of one road within this distance along s are one head")
     wrong_side_m: float = param(6.0, ge=0, help="metres: extra pairing cost of a light across the reference line from the lanes of its head")
     carla_light_shift_m: float = param(0.25, help="metres: CARLA moves lights this far along their heading on import (MapBuilder.cpp); the placement compensates")
+    one_head: bool = param(True, help="netconvert's signals of one head (one per lane and turn arrow) become one signal whose validity covers their lanes; false: kept stacked")
+    lights_on_ground: bool = param(True, help="traffic lights stand on the scanned ground under their head (zOffset = that ground above the road; 0 for netconvert's unpaired guesses): CARLA's light blueprint is a whole pole; false: zOffset = the scanned head's height")
+    phase_plan: str = param("shape", choices=("shape", "approach", "netconvert"), help="junction signal plan (one OpenDRIVE controller per phase, named from its junction): shape = opposite approaches share a phase, approach = each approach alone, netconvert = leave netconvert's controller (CARLA then runs every light alone)")
+    phases: Dict[str, List[List[str]]] = param(default_factory=dict, free=True, help="a junction signal plan to use instead of phase_plan: junction id (or 'default') -> phases, each a list of the compass points traffic comes from, e.g. {default: [[N, S], [E, W]]}; approaches named by no phase run alone")
     add_signs: bool = param(True, help="write the scanned traffic signs as OpenDRIVE signals")
     sign_max_road_m: float = param(12.0, gt=0, help="metres: a sign farther than this from every road's reference line is not written")
     qa_px_per_m: float = param(20.0, gt=0, help="pixels per metre of the signals' QA picture")
@@ -103,3 +118,13 @@ class ParkingParams:
     kerb_top_m: float = param(0.0, ge=0, le=1, help="metres: the lane runs this far past the kerb's foot, over its face (0: the sidewalk lane holds the kerb, as OpenDRIVE draws it; the drop test checks sidewalk lanes with a kerb's height band, parking lanes at the road's height)")
     min_kerb_samples: int = param(5, ge=1, help="kerb profiles (one per step_m along the lane) that must see the kerb before its distance is used")
     step_m: float = param(1.0, gt=0, help="metres: lane samples along s for the kerb profiles and the vehicles")
+
+class CrosswalkParams:
+    enabled: bool = param(True, help="false: aligned.xodr passes through without crosswalk objects")
+    from_osm: bool = param(True, help="use OSM's crossings (highway=crossing nodes, footway=crossing ways)")
+    from_scan: bool = param(True, help="look for painted zebras on the scanned ground (vertex colours seen from above)")
+    raster_m: float = param(0.05, gt=0, le=0.25, help="metres: pixel size of the top view the zebras are looked for in")
+    min_bars: int = param(3, ge=2, help="a zebra has at least this many white bars side by side")
+    min_bars_alone: int = param(5, ge=2, help="a zebra that no OSM crossing confirms needs at least this many bars")
+    match_m: float = param(4.0, ge=0, help="metres: an OSM crossing this close to a zebra's walking line is that zebra")
+    width_m: float = param(3.0, gt=0, help="metres: the width (along the road) of a crosswalk OSM gives without paint in the scan")

@@ -10,6 +10,7 @@ Steps (recipes/roads_demo.yaml):
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
   parking_lanes   parking lanes where OSM or the scan has them -> aligned.xodr (again), parking.json
   place_signals   signals at the scanned lights and signs   -> aligned.xodr (again), signals.json, signals.png
+  place_crosswalks OSM crossings + the scan's zebras        -> aligned.xodr (again), crosswalks.json
   road_evidence   the lanes vote for road / sidewalk        -> labels.npy (again), road_evidence.json, .png
 """
 from __future__ import annotations
@@ -25,8 +26,8 @@ from twinkit.geo.xodr import from_scan as from_scan_tag
 
 from . import __version__
 from .convert import ConvertParams
-from .params import (AlignParams, ApplyParams, OverviewParams, ParkingParams, RoadEvidenceParams,  # noqa: F401 (re-exported)
-                     SignalParams)
+from .params import (AlignParams, ApplyParams, CrosswalkParams, OverviewParams, ParkingParams,  # noqa: F401 (re-exported)
+                     RoadEvidenceParams, SignalParams)
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
                       scan_source, site_radius)
@@ -231,8 +232,9 @@ def apply_alignment(params: ApplyParams, ctx, *, in_roads_xodr: Path, in_alignme
                          "(and dz_m; lane_offsets_m: road id -> metres)") from None
     text = in_roads_xodr.read_text(encoding="utf-8")
     moved = set_lane_offsets(transform_xodr(text, yaw, tx, ty, dz), offsets)
+    moved, trim = trim_ends(moved, params, in_textured_mesh_ply, out_aligned_xodr.name, ctx.log)
     A.write_opendrive(out_aligned_xodr, moved)
-    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets)}
+    metrics = {"yaw_deg": a["yaw_deg"], "tx_m": tx, "ty_m": ty, "dz_m": dz, "roads_offset": len(offsets), **trim}
     truth = None
     if in_roads_truth_json is not None:
         tj = A.read_roads_truth(in_roads_truth_json)
@@ -289,15 +291,49 @@ def parking_lanes(params: ParkingParams, ctx, *, in_aligned_xodr: Path, in_textu
         ctx.log.warning("parking lanes: none added (no OSM parking tag on the roads and no scanned vehicle beside "
                         "them): the sidewalk lanes stay where netconvert put them")
     return {"parking_lanes": res.inserted, "parked_vehicles_seen": sum(s.vehicles for s in res.sides)}
+def trim_ends(text: str, params: ApplyParams, mesh_ply: Path, name: str, log) -> tuple[str, dict]:
+    """The aligned map with its ends cut back onto the mesh (``ground_ends.trim_to_ground``) and the step's
+    metrics of it; the map unchanged when ``trim_to_ground`` is off or it has no road."""
+    from .ground_ends import TrimParams, trim_to_ground
+
+    if not params.trim_to_ground or "<road " not in text:
+        return text, {"trim_to_ground": False}
+    mesh = A.read_textured_mesh(mesh_ply)
+    tp = TrimParams(step_m=params.trim_step_m, band_m=params.trim_band_m, margin_m=params.trim_margin_m,
+                    max_trim_m=params.trim_max_m, min_left_m=params.trim_min_left_m)
+    out, rep = trim_to_ground(text, mesh.vertices, mesh.faces, tp, source=name)
+    for e in rep["ends"]:
+        if e.get("note"):
+            log.warning("map end %s (junction %s): %s", ", ".join(e["ends"]), e["junction"], e["note"])
+    for n in rep["notes"]:
+        log.warning("trim to the ground: %s", n)
+    log.info("trim to the ground: %d of %d map ends cut back (at most %.2f m); driving-lane samples off the ground "
+             "%d -> %d of %d, every lane %d -> %d", rep["cut_ends"], len(rep["ends"]), rep["max_trim_m"],
+             rep["driving_off_ground_before"], rep["driving_off_ground_after"], rep["driving_samples_after"],
+             rep["samples_off_ground_before"], rep["samples_off_ground_after"])
+    if rep["driving_off_ground_after"]:
+        log.warning("trim to the ground: %d driving-lane samples (every %.2f m) still have no ground beneath "
+                    "(see the notes above and docs/roads.md 'Roads on the ground')", rep["driving_off_ground_after"],
+                    tp.step_m)
+    return out, {"trim_to_ground": True, "trimmed_ends": rep["cut_ends"], "trim_max_m": rep["max_trim_m"],
+                 "driving_off_ground_before": rep["driving_off_ground_before"],
+                 "driving_off_ground_after": rep["driving_off_ground_after"],
+                 "lane_samples_off_ground_before": rep["samples_off_ground_before"],
+                 "lane_samples_off_ground_after": rep["samples_off_ground_after"]}
 
 
 def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
                   in_labels_npy: Path, out_aligned_xodr: Path, out_signals_json: Path,
-                  out_signals_png: Path) -> dict:
-    """Move netconvert's traffic lights onto the scanned ones (instances.py), add the scanned signs (signals.py)."""
+                  out_signals_png: Path, in_osm_osm: Path | None = None,
+                  in_alignment_json: Path | None = None) -> dict:
+    """Move netconvert's traffic lights onto the scanned ones (instances.py), one controller per junction phase
+    (controllers.py), add the scanned signs typed from OSM's sign nodes or their look (signals.py, signtypes.py)."""
     from .align import lane_lines
     from .instances import scanned_instances
+    from twinkit.street.lights import light_plan
+
     from .signals import carla_position_errors, draw_signals, place_signals as place, signals_report
+    from .signtypes import osm_sign_nodes, typed_plates
 
     params = params or SignalParams()
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
@@ -308,10 +344,24 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
                          "labels.npy)")
     text = A.read_opendrive(in_aligned_xodr)
     kept, rejected = scanned_instances(mesh.vertices, labels, params)
+    osm_signs = None
+    if in_osm_osm is not None:
+        from twinkit.geo import SiteFrame
+
+        align = json.loads(in_alignment_json.read_text()) if in_alignment_json is not None else None
+        osm_signs = osm_sign_nodes(in_osm_osm, SiteFrame.from_site(ctx.site).lonlat_to_local, align)
+        ctx.log.info("%d OSM sign node(s) (stop, give way, speed limit) to type the scanned plates", len(osm_signs))
+    plates = typed_plates(rejected, mesh.colors)  # stop / yield / speed plates whose thin pole the mesh lost
+    for i, inst in enumerate(plates):
+        inst.id = len(kept) + i
+    kept, rejected = kept + plates, [r for r in rejected if not any(r is p for p in plates)]
     try:
         moved, placed, notes = place(text, kept, gate_m=params.gate_m, group_m=params.group_m,
                                      carla_light_shift_m=params.carla_light_shift_m, add_signs=params.add_signs,
-                                     sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m)
+                                     sign_max_road_m=params.sign_max_road_m, wrong_side_m=params.wrong_side_m,
+                                     one_head=params.one_head, lights_on_ground=params.lights_on_ground,
+                                     phase_plan=params.phase_plan, phases=dict(params.phases), colors=mesh.colors,
+                                     osm_signs=osm_signs)
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
     # what CARLA makes of each signal, against where we meant it to be
@@ -323,16 +373,35 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     for n in notes:
         ctx.log.warning("%s", n)
     doc, metrics = signals_report(placed, kept, rejected, notes, carla_err,
-                                  {k: getattr(params, k) for k in params.__dataclass_fields__})
+                                  {k: getattr(params, k) for k in params.__dataclass_fields__}, light_plan(moved))
     out_signals_json.write_text(json.dumps(doc, indent=1))
     draw_signals(in_textured_mesh_ply, lane_lines(moved, 1.0, junctions=True), kept, rejected, placed,
                  out_signals_png, params.qa_px_per_m)
+    ctx.log.info("CARLA's light plan (emulated): %d junction(s) with lights, %d light group(s) at the busiest, "
+                 "%d pair(s) of crossing approaches green together; signs typed for CARLA %d, generic %d",
+                 metrics["signalised_junctions"], metrics["max_light_groups_per_junction"],
+                 metrics["conflicting_greens"], metrics["signs_typed"], metrics["signs_generic"])
     ctx.log.info("%d scanned lights (%d of them poles carrying an unlabelled head), %d signs (%d clusters "
                  "rejected); %d of %d light signals from the scan, %d kept from netconvert; %d signs written",
                  metrics["scanned_lights"], metrics["pole_head_lights"], metrics["scanned_signs"],
                  len(rejected), metrics["light_signals_from_scan"], metrics["light_signals"],
                  metrics["light_signals_netconvert"], metrics["signs_written"])
     return metrics
+
+
+def place_crosswalks(params: CrosswalkParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
+                     out_aligned_xodr: Path, out_crosswalks_json: Path, in_labels_npy: Path | None = None,
+                     in_osm_osm: Path | None = None, in_alignment_json: Path | None = None) -> dict:
+    """OpenDRIVE crosswalk objects from OSM's crossings and the scan's painted zebras (crosswalks.py)."""
+    from .crosswalks import run_crosswalks
+
+    params = params or CrosswalkParams()
+    text = A.read_opendrive(in_aligned_xodr)
+    doc, moved = run_crosswalks(params, text, ctx.site, in_textured_mesh_ply, in_labels_npy, in_osm_osm,
+                                in_alignment_json, ctx.log)
+    A.write_opendrive(out_aligned_xodr, moved)
+    A.write_crosswalks(out_crosswalks_json, doc)
+    return doc["metrics"]
 
 
 def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
@@ -434,6 +503,9 @@ def twinkit_register_steps(register):
              description="OpenDRIVE parking lanes where OSM or the scan shows parked cars; aligned.xodr, parking.json")
     register("place_signals", place_signals, params=SignalParams, version=VERSION,
              description="OpenDRIVE signals at the scanned traffic lights and signs; signals.json, signals.png")
+    register("place_crosswalks", place_crosswalks, params=CrosswalkParams, version=VERSION,
+             description="OpenDRIVE crosswalk objects from OSM crossings and the scan's painted zebras (as CARLA's "
+                         "get_crosswalks reports them); crosswalks.json")
     register("road_evidence", road_evidence, params=RoadEvidenceParams, version=VERSION,
              description="the aligned lanes vote road / sidewalk on ground-level surface; labels.npy, "
                          "road_evidence.json, road_evidence.png (disagreements reported)")

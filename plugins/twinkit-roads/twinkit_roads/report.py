@@ -15,6 +15,7 @@ def twinkit_register_report_sections(register):
     register("roads", sec_roads, title="Road network", order=500)
     register("alignment", sec_alignment, title="Alignment", order=900)
     register("signals", sec_signals, title="Signals", order=910)
+    register("crosswalks", sec_crosswalks, title="Crosswalks", order=915)
     register("road_evidence", sec_road_evidence, title="Road network as evidence for the labels", order=920)
 
 
@@ -153,14 +154,40 @@ def sec_signals(ctx) -> str:
         d = ctx.read_json(f)
         if not isinstance(d, dict):
             continue
-        rows = [[x.get("id"), x.get("kind"), x.get("road"), x.get("defined_on_road"), x.get("source"),
-                 f"{x.get('moved_m', 0):.2f}", x.get("instance") if x.get("instance") is not None else "",
-                 x.get("note", "")] for x in d.get("signals", [])]
+        rows = [[x.get("id"), x.get("kind"), x.get("type", ""), x.get("road"), x.get("defined_on_road"),
+                 x.get("source"), f"{x.get('moved_m', 0):.2f}",
+                 x.get("instance") if x.get("instance") is not None else "", x.get("note", "")]
+                for x in d.get("signals", [])]
         parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3>" + ctx.table(
-            ["signal", "kind", "controls road", "defined on road", "source", "moved m", "scanned instance", "note"],
-            rows))
+            ["signal", "kind", "type", "controls road", "defined on road", "source", "moved m", "scanned instance",
+             "note"], rows))
+        plan = (d.get("light_plan") or {}).get("junctions") or {}
+        if plan:
+            parts.append("<p>Junction signal plans as CARLA 0.9.16 runs them (twinkit.street.lights):</p>" + ctx.table(
+                ["junction", "lights", "approaches", "light groups", "phases (controllers)",
+                 "crossing approaches green together"],
+                [[j, v.get("lights"), v.get("approaches"), v.get("groups"), v.get("controllers"),
+                  len(v.get("conflicts", []))] for j, v in plan.items()]))
         parts.append(_step_picture(ctx, s, f.parent / "signals.png", "Scanned lights (orange) and signs (blue); "
                                    "netconvert's signals (red) and where they are now (green)"))
+    return "".join(parts)
+
+
+def sec_crosswalks(ctx) -> str:
+    """place_crosswalks: each crosswalk, where it came from, where CARLA reads it."""
+    parts = []
+    for s, f in ctx.find("crosswalks.json")[:1]:
+        d = ctx.read_json(f)
+        if not isinstance(d, dict) or not d.get("enabled", True):
+            continue
+        m = d.get("metrics", {})
+        rows = [[x.get("id", ""), x.get("source"), x.get("osm") or "", ", ".join(f"{v:.2f}" for v in x.get("centre", [])),
+                 (x.get("zebra") or {}).get("bars", ""), x.get("road", ""), x.get("s", ""), x.get("note", "")]
+                for x in d.get("crosswalks", [])]
+        parts.append(f"<h3>{ctx.esc(s.get('folder'))}/{ctx.esc(f.name)}</h3><p>{m.get('osm_crossings', 0)} OSM "
+                     f"crossings, {m.get('zebras', 0)} painted zebras in the scan; carla.Map reports "
+                     f"{m.get('carla_crosswalks', 0)} crosswalks</p>")
+        parts.append(ctx.table(["object", "source", "OSM", "centre (x, y) m", "bars", "road", "s m", "note"], rows))
     return "".join(parts)
 
 

@@ -16,6 +16,11 @@ How CARLA reads a signal (carla 0.9.16, LibCarla/source/carla/road/MapBuilder.cp
 
 So a signal written at (s, t) lands where we intend only if s, t are measured in that road's
 reference-line frame and, for lights, the 0.25 m shift is taken off first (``carla_light_shift_m``).
+
+``MapBuilder::CheckSignalsOnRoads`` then pushes every signal closer (3D) than 0.7 lane widths to the nearest
+driving lane's centre outwards in steps of 0.2 lane widths, unless its name contains "STATIC". A pole on
+the ground at the kerb is that close, so the signals placed on the scan are named ``SCAN_NAME``: the scan
+says where the pole stands.
 """
 from __future__ import annotations
 
@@ -25,13 +30,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .controllers import merge_heads, wire_junctions
 from .instances import Instance
+from .osmsigns import add_osm_signs
 from .reflines import RefLine, reference_lines
+from .signtypes import ground_typed_signs, plate_look, road_speed_kmh, signal_type
 
 # SignalType::IsTrafficLight (LibCarla/source/carla/road/SignalType.cpp, carla 0.9.16)
 CARLA_LIGHT_TYPES = {"1000001", "1000002", "1000009", "1000010", "1000011", "1000007", "1000014", "1000015",
                      "1000016", "1000017", "1000018", "1000019", "1000013", "1000020", "1000008", "1000012",
                      "F", "W", "A"}
+#: the name of the signals placed on the scan ("STATIC": CheckSignalsOnRoads leaves them where they are)
+SCAN_NAME = "twinkit_scan_STATIC"
 UNKNOWN_SIGN_TYPE = "-1"  # OpenDRIVE: "-1" = no type; CARLA keeps it as a landmark and spawns no sign actor
 
 
@@ -230,7 +240,7 @@ def _light_record(road: ET.Element, sig: ET.Element, xy: np.ndarray) -> Placed:
 
 
 def _move_light(root: ET.Element, refs: dict[str, RefLine], road: ET.Element, sig: ET.Element, xy: np.ndarray,
-                inst: Instance, rec: Placed, shift_m: float, reach_m: float) -> None:
+                inst: Instance, rec: Placed, shift_m: float, reach_m: float, ground: bool = True) -> None:
     """Rewrite ``sig`` (s, t, zOffset; its road if need be) so that CARLA puts it on ``inst``; fill ``rec``."""
     ref = refs[road.get("id")]
     s, t, over = ref.project(inst.centre[:2])
@@ -260,7 +270,10 @@ def _move_light(root: ET.Element, refs: dict[str, RefLine], road: ET.Element, si
             rec.host_road = host.road
             rec.note = (f"scanned light {over:.2f} m beyond road {ref.road}'s end: signal defined on road "
                         f"{host.road}, referenced from road {ref.road} with its lanes (signalReference)")
-    zoff = float(inst.centre[2]) - host.z(s_w)
+    # the pole stands on the scanned ground under the head (kerb, sidewalk): CARLA's light blueprint carries its
+    # heads at their own height
+    zoff = float(inst.centre[2]) - host.z(s_w) - (inst.height_m if ground else 0.0)
+    sig.set("name", SCAN_NAME)
     sig.set("s", _f(s_w))
     sig.set("t", _f(t_w))
     sig.set("zOffset", f"{zoff:.3f}")
@@ -277,9 +290,13 @@ def _move_light(root: ET.Element, refs: dict[str, RefLine], road: ET.Element, si
 
 
 def _place_lights(root: ET.Element, refs: dict[str, RefLine], instances: list[Instance], log: list[str], *,
-                  gate_m: float, group_m: float, shift_m: float, reach_m: float, wrong_side_m: float
-                  ) -> list[Placed]:
-    """Move netconvert's light groups onto the scanned lights (in place in ``root``); one record per signal."""
+                  gate_m: float, group_m: float, shift_m: float, reach_m: float, wrong_side_m: float,
+                  one_head: bool = True, ground: bool = True) -> list[Placed]:
+    """Move netconvert's light groups onto the scanned lights (in place in ``root``); one record per signal.
+
+    ``one_head``: a group's signals become one signal (``controllers.merge_heads``); ``ground``: a light's
+    zOffset puts the pole's foot on the scanned ground under its head (``Instance.height_m`` below the head;
+    netconvert's unpaired guesses: 0, the road's elevation)."""
     lights, groups = _light_groups(root, refs, group_m, shift_m)
     scan_lights = [inst for inst in instances if inst.kind == "light"]
     pairs = _pair_groups(lights, groups, refs, scan_lights, gate_m, wrong_side_m)
@@ -287,14 +304,25 @@ def _place_lights(root: ET.Element, refs: dict[str, RefLine], instances: list[In
     used = set()
     for gi, g in enumerate(groups):
         inst = pairs.get(gi)
+        merged: list[str] = []
+        if one_head and len(g) > 1 and np.ptp([float(lights[i][1].get("s")) for i in g]) < 0.01:
+            # netconvert's pattern: a head's signals all at the road's end, one per lane and arrow
+            keep, merged = merge_heads(lights[g[0]][0].find("signals"), [lights[i][1] for i in g])
+            g = [i for i in g if lights[i][1] is keep]
         for i in g:
             road, sig, xy = lights[i]
             rec = _light_record(road, sig, xy)
             if inst is None:
                 rec.note = "no scanned traffic light within the gate: netconvert's guess kept"
+                if ground:
+                    sig.set("zOffset", "0.000")
+                    rec.z_offset = 0.0
             else:
                 used.add(inst.id)
-                _move_light(root, refs, road, sig, xy, inst, rec, shift_m, reach_m)
+                _move_light(root, refs, road, sig, xy, inst, rec, shift_m, reach_m, ground)
+            if merged:
+                rec.note = ((rec.note + "; ") if rec.note else "") + \
+                    f"one head for netconvert's signals {', '.join([sig.get('id')] + merged)} (their lanes in its validity)"
             placed.append(rec)
     for inst in scan_lights:
         if inst.id not in used and inst.evidence == "label":
@@ -303,12 +331,30 @@ def _place_lights(root: ET.Element, refs: dict[str, RefLine], instances: list[In
     return placed
 
 
+def _sign_kind(inst: Instance, colors, osm_signs, osm_match_m: float, used: set[int]) -> tuple[str | None, str]:
+    """A scanned sign's kind and where it comes from: the nearest OSM sign node within ``osm_match_m`` (its index
+    added to ``used``), else the plate's look (``signtypes``)."""
+    if osm_signs:
+        dist, i = min((math.hypot(x - inst.centre[0], y - inst.centre[1]), i) for i, (x, y, _) in enumerate(osm_signs))
+        if dist <= osm_match_m:
+            used.add(i)
+            return osm_signs[i][2], f"OSM sign node {dist:.1f} m away"
+    if colors is not None and inst.members is not None:
+        kind, why = plate_look(colors[inst.members])
+        pole = "; no pole found under it" if inst.evidence == "plate_look" else ""
+        return kind, "the plate's look: " + why + pole
+    return None, "no OSM sign near and no texture to read"
+
+
 def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Instance], log: list[str], *,
-               sign_max_road_m: float, reach_m: float) -> list[Placed]:
-    """Add a generic (type -1) signal per scanned sign on the road whose frame holds it; their records."""
+               sign_max_road_m: float, reach_m: float, colors=None, osm_signs=None,
+               osm_match_m: float = 5.0, dedupe_m: float = 0.6) -> list[Placed]:
+    """Add a signal per scanned sign on the road whose frame holds it, typed for CARLA where its kind is known
+    (stop 206, yield 205, speed limit 274 with its value; ``signtypes``), else generic (-1); their records."""
     outside = {k: r for k, r in refs.items() if r.junction == "-1" and (r.lanes_right or r.lanes_left)}
     drivable = {k: r for k, r in refs.items() if r.lanes_right or r.lanes_left}
     placed: list[Placed] = []
+    used: set[int] = set()
     n = 0
     for inst in (i for i in instances if i.kind == "sign"):
         # the road whose frame holds the sign (CARLA clamps s): outside junctions first
@@ -322,30 +368,48 @@ def _add_signs(root: ET.Element, refs: dict[str, RefLine], instances: list[Insta
         s = min(max(s, 0.0), ref.length)
         # right-hand traffic: a sign right of the reference line faces the lanes driving +s
         orient, lanes = ("+", ref.lanes_right) if t < 0 else ("-", ref.lanes_left)
-        if not lanes:
+        wrong_way = not lanes  # no lane drives towards it on its side: it faces a one-way street's wrong way
+        if wrong_way:
             orient, lanes = ("-", ref.lanes_left) if t < 0 else ("+", ref.lanes_right)
         road_el = next(r for r in root.iter("road") if r.get("id") == ref.road)
         sg = _signals_el(road_el)
+        kind, why = _sign_kind(inst, colors, osm_signs, osm_match_m, used)
+        if kind == "stop" and wrong_way and not why.startswith("OSM"):
+            # a red plate facing the wrong way of a one-way street is its no-entry sign, not a stop
+            kind, why = None, why + "; it faces the wrong way of a one-way street: a no-entry sign"
+        typ, sub, val = signal_type(kind, road_speed_kmh(road_el) if kind == "speed" else None)
+        twin = next((p for p in placed if p.type == typ != UNKNOWN_SIGN_TYPE and p.instance_position and
+                     math.dist(p.instance_position[:2], inst.centre[:2]) <= dedupe_m), None)
+        if twin is not None:  # one plate split into two clusters: one CARLA sign
+            log.append(f"scanned sign {inst.id}: a {kind} plate {math.dist(twin.instance_position[:2], inst.centre[:2]):.2f} m "
+                       f"from {twin.id} of the same type: the same plate, not written again")
+            continue
         sid = f"scan_sign_{n}"
         n += 1
-        zoff = float(inst.centre[2]) - ref.z(s)
-        el = ET.SubElement(sg, "signal", {
-            "id": sid, "name": "twinkit_scan", "s": _f(s), "t": _f(t), "zOffset": f"{zoff:.3f}",
-            "orientation": orient, "dynamic": "no", "country": "OpenDRIVE", "type": UNKNOWN_SIGN_TYPE,
-            "subtype": "-1", "height": f"{float(inst.size[2]):.3f}", "width": f"{float(inst.size[0]):.3f}"})
+        # a typed sign is a CARLA blueprint standing on the ground; a generic one stays a plate at its height
+        zoff = float(inst.centre[2]) - ref.z(s) - (inst.height_m if typ != UNKNOWN_SIGN_TYPE else 0.0)
+        attrs = {"id": sid, "name": SCAN_NAME, "s": _f(s), "t": _f(t), "zOffset": f"{zoff:.3f}",
+                 "orientation": orient, "dynamic": "no", "country": "OpenDRIVE", "type": typ, "subtype": sub,
+                 "height": f"{float(inst.size[2]):.3f}", "width": f"{float(inst.size[0]):.3f}"}
+        if val is not None:
+            attrs.update({"value": val, "unit": "km/h"})
+        el = ET.SubElement(sg, "signal", attrs)
         if lanes:
             ET.SubElement(el, "validity", {"fromLane": str(min(lanes)), "toLane": str(max(lanes))})
         xy = ref.point(s, t)
         placed.append(Placed(sid, "sign", ref.road, s, t, zoff, orient, "scan", 0.0, inst.id,
                              [round(float(v), 3) for v in inst.centre], [round(float(v), 3) for v in inst.size],
-                             UNKNOWN_SIGN_TYPE, "-1", None, [float(v) for v in xy],
-                             "type not told from the scan: generic (-1)"))
-    return placed
+                             typ, sub, None, [float(v) for v in xy],
+                             (f"{kind} ({why})" if typ != UNKNOWN_SIGN_TYPE else
+                              f"generic (-1): {kind or 'kind not known'} ({why})")))
+    return placed + add_osm_signs(root, refs, osm_signs, used, log)
 
 
 def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 15.0, group_m: float = 2.0,
                   carla_light_shift_m: float = 0.25, add_signs: bool = True,
-                  sign_max_road_m: float = 12.0, reach_m: float = 0.05, wrong_side_m: float = 6.0
+                  sign_max_road_m: float = 12.0, reach_m: float = 0.05, wrong_side_m: float = 6.0,
+                  one_head: bool = True, lights_on_ground: bool = True, phase_plan: str = "shape",
+                  osm_signs: list | None = None, colors: np.ndarray | None = None, phases: dict | None = None
                   ) -> tuple[str, list[Placed], list[str]]:
     """Move netconvert's light groups onto the scanned lights; add the scanned signs.
 
@@ -357,17 +421,28 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
     (lights stand at their lanes' kerb; overhead or far-side lights still pair when nothing else fits).
     Each signal of a paired group gets the light's position in its own road's reference-line frame
     (s, t, zOffset = head centre above the road), or, past the road's end, in the frame of the road
-    that holds it, with a signalReference left on its own road; its id, lanes (validity), type,
-    controller and orientation stay. Unpaired groups keep netconvert's guess.
+    that holds it, with a signalReference left on its own road; its id, lanes (validity) and orientation
+    stay. Unpaired groups keep netconvert's guess. ``one_head``: a group becomes one signal (type 1000001,
+    its validity the group's lanes); ``lights_on_ground``: zOffset = the scanned ground under the head
+    (CARLA's light blueprint is a whole pole); ``phase_plan`` (``shape`` | ``approach`` | ``netconvert``: left as written): one controller per
+    phase of each junction, named from the junction (``controllers.wire_junctions``; ``phases``: a user plan by
+    junction id or "default", lists of compass points traffic comes from). Signs: see
+    ``_add_signs``; ``osm_signs``: OSM's sign nodes as (x, y, kind), site frame (``signtypes.osm_kind``);
+    ``colors``: (n, 3) uint8 RGB of the mesh's vertices (``Instance.members`` index them) for the plate's look.
     """
     parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
     root = ET.fromstring(xodr_text, parser=parser)
     refs = reference_lines(root)
     log: list[str] = []
     placed = _place_lights(root, refs, instances, log, gate_m=gate_m, group_m=group_m, shift_m=carla_light_shift_m,
-                           reach_m=reach_m, wrong_side_m=wrong_side_m)
+                           reach_m=reach_m, wrong_side_m=wrong_side_m, one_head=one_head, ground=lights_on_ground)
+    if phase_plan != "netconvert":
+        _, wlog = wire_junctions(root, phase_plan, user=phases)
+        log += wlog
     if add_signs:
-        placed += _add_signs(root, refs, instances, log, sign_max_road_m=sign_max_road_m, reach_m=reach_m)
+        placed += _add_signs(root, refs, instances, log, sign_max_road_m=sign_max_road_m, reach_m=reach_m,
+                             colors=colors, osm_signs=osm_signs)
+    log += ground_typed_signs(root)
     for sg in root.iter("signals"):  # tidy the blocks we edited (4-space indent, as netconvert writes)
         ET.indent(sg, space="    ", level=2)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
@@ -460,9 +535,10 @@ def carla_position_errors(moved_text: str, placed: list[Placed], source: str) ->
 
 
 def signals_report(placed: list[Placed], kept: list[Instance], rejected: list[Instance], notes: list[str],
-                   carla_err: dict[str, float], params: dict) -> tuple[dict, dict]:
-    """signals.json (the placed signals with CARLA's position error, the instances, the notes) and the
-    place_signals step's metrics (counts, the median move of the scanned lights in m)."""
+                   carla_err: dict[str, float], params: dict, plan: dict | None = None) -> tuple[dict, dict]:
+    """signals.json (the placed signals with CARLA's position error, the instances, the notes, CARLA's light
+    plan as ``twinkit.street.lights.light_plan`` emulates it) and the place_signals step's metrics (counts,
+    the median move of the scanned lights in m, groups per junction, conflicting greens, typed signs)."""
     lights = [p for p in placed if p.kind == "light"]
     n_scan = sum(p.source == "scan" for p in lights)
     doc = {
@@ -474,6 +550,7 @@ def signals_report(placed: list[Placed], kept: list[Instance], rejected: list[In
                       "signalReference there when defined_on_road differs); source scan|netconvert; moved_m = "
                       "horizontal distance from netconvert's position",
         "params": params,
+        "light_plan": plan,
     }
     moved_m = [p.moved_m for p in lights if p.source == "scan"]
     metrics = {"scanned_lights": sum(i.kind == "light" for i in kept),
@@ -483,4 +560,11 @@ def signals_report(placed: list[Placed], kept: list[Instance], rejected: list[In
                "light_signals_netconvert": len(lights) - n_scan, "signs_written": sum(p.kind == "sign" for p in placed),
                "median_moved_m": round(float(np.median(moved_m)), 3) if moved_m else 0.0,
                "max_carla_position_error_m": max(carla_err.values(), default=0.0)}
+    js = (plan or {}).get("junctions", {})
+    signs = [p for p in placed if p.kind == "sign"]
+    metrics.update({"signalised_junctions": len(js),
+                    "max_light_groups_per_junction": max((v["groups"] for v in js.values()), default=0),
+                    "conflicting_greens": sum(len(v["conflicts"]) for v in js.values()),
+                    "signs_typed": sum(p.type != UNKNOWN_SIGN_TYPE for p in signs),
+                    "signs_generic": sum(p.type == UNKNOWN_SIGN_TYPE for p in signs)})
     return doc, metrics

@@ -24,7 +24,9 @@ the class alone does not make an object; 3D cues decide (all in the site frame, 
    the first or the last test; a building wall labelled car fails the size test. The class is the
    votes' first that the shape fits; a cluster with a vehicle's width and walls that fits no voted
    class is a car or truck by size (``choose_class``), and one longer than a car is first cut where its
-   height dips (cars parked bumper to bumper, ``split_along``).
+   height dips (cars parked bumper to bumper, ``split_along``). Labels and shape are not enough: the object
+   must also have a body (its class's minimum width), stand on the ground and, where the recipe has the 3D
+   classifier, be movable to its votes (:mod:`.cues`); else it stays static.
 4. **Faces of an instance**: grown over the mesh from the cluster's faces through faces whose
    corners all lie above ``cut_height_m``, inside the cluster's oriented footprint widened by
    ``margin_m`` and below its top + ``margin_m``, whatever their label (wheels and windows are
@@ -43,7 +45,7 @@ the class alone does not make an object; 3D cues decide (all in the site frame, 
    clusters) take the label of the nearest non-movable vertex (a ground class when the vertex is
    at ground height), so the static map carries no movable class.
 
-Where each stage lives: :func:`.lift.ground_under` (1, the street library's ``LocalGround``), :mod:`.kinds` and :mod:`.detect` (2-4), :mod:`.fill` (5),
+Where each stage lives: :func:`.lift.ground_under` (1, the street library's ``LocalGround``), :mod:`.kinds`, :mod:`.detect` and :mod:`.cues` (2-4), :mod:`.fill` (5),
 :func:`.lift.relabel_left` (6), :mod:`.lift` (the order of the stages), :mod:`.actors` (the CARLA
 blueprint, ``actors.json`` and one PLY per object), :mod:`.options` (every threshold).
 """

@@ -72,7 +72,7 @@ def actor_json(inst, file: str) -> dict:
                     "size": [round(float(x), 3) for x in inst.size],
                     "yaw_deg": round(float(inst.yaw_deg), 2)},
             "ground_z": round(float(inst.ground_z), 3), "faces": int(len(inst.faces)), "vertices": inst.vertices,
-            "label_share": round(float(inst.label_share), 3), "class_by": inst.class_by,
+            "label_share": round(float(inst.label_share), 3), "class_by": inst.class_by, "cues": inst.cues,
             "blueprint": suggest_blueprint(inst.class_id, inst.size)}
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from twinkit.street.ground import LocalGround
 
+from .cues import object_cues, why_not_by_cues
 from .kinds import CLASS_LIMITS, MOVABLE, NAMES, choose_class, refine_class
 from .options import LiftOptions
 
@@ -30,6 +31,7 @@ class Instance:
     vertices: int = 0
     class_by: str = "labels"  # "labels": the votes' class fits its shape; "size": the votes named a class the
     #                            shape rules out, and the shape is a vehicle's (see choose_class)
+    cues: dict | None = None  # what else says it is an object (.cues.object_cues)
 
     @property
     def name(self) -> str:
@@ -116,10 +118,12 @@ def split_along(xy: np.ndarray, h: np.ndarray, yaw_deg: float, min_piece_m: floa
     return [b <= k, b > k]
 
 def find_instances(v: np.ndarray, f: np.ndarray, h: np.ndarray, normals: np.ndarray, labels: np.ndarray,
-                   grid: LocalGround, opt: LiftOptions, rep: dict) -> tuple[list[Instance], np.ndarray]:
+                   grid: LocalGround, opt: LiftOptions, rep: dict,
+                   votes: np.ndarray | None = None) -> tuple[list[Instance], np.ndarray]:
     """The objects: movable-labelled vertices ``h`` > ``min_height_m`` above the ground, clustered in 3D
     (``cluster_gap_m``), each cluster judged by its shape (:func:`choose_class`, cut in two where it is too
-    long, :func:`split_along`) and grown over the mesh (:func:`grow_faces`). ``v`` (n, 3), ``f`` (m, 3),
+    long, :func:`split_along`), grown over the mesh (:func:`grow_faces`) and kept only when its other cues
+    agree (:mod:`.cues`: ground contact, the geometry ``votes`` (n, 19) or None). ``v`` (n, 3), ``f`` (m, 3),
     ``normals`` (n, 3), ``labels`` (n,) uint8. Returns (instances, per face the id of its instance or -1);
     adds ``candidate_vertices``, ``clusters_rejected`` and ``clusters_rejected_at`` to ``rep``."""
     from scipy.sparse import coo_matrix
@@ -157,21 +161,26 @@ def find_instances(v: np.ndarray, f: np.ndarray, h: np.ndarray, normals: np.ndar
                     continue
                 cid, why, class_by = choose_class(cls_counts, len(vid), top, length, width, vert_share, opt,
                                                   split_tried=True)
+            mine, cues = None, None
+            if not why:
+                seed_f = np.unique(order[np.concatenate([np.arange(starts[i], starts[i + 1]) for i in vid])] // 3)
+                mine = grow_faces(v, f, h, seed_f, face_owner, (centre, length, width, yaw), top, opt)
+                if mine is None:
+                    why = "no_faces"
+                else:
+                    cues = object_cues(vid, np.unique(f[mine]), h, votes)
+                    why = why_not_by_cues(cues, opt, refine_class(cid, cls_counts, length, width), width)
             if why:
                 rejected[why] = rejected.get(why, 0) + 1
                 if len(rejected_at) < 40 and len(vid) >= CLASS_LIMITS[cid][3]:
                     rejected_at.append({"class": NAMES[cid], "why": why, "vertices": int(len(vid)),
                                         "x": round(float(centre[0]), 2), "y": round(float(centre[1]), 2),
                                         "length_m": round(float(length), 2), "width_m": round(float(width), 2),
-                                        "top_m": round(top, 2), "wall_share": round(vert_share, 2)})
-                continue
-            seed_f = np.unique(order[np.concatenate([np.arange(starts[i], starts[i + 1]) for i in vid])] // 3)
-            mine = grow_faces(v, f, h, seed_f, face_owner, (centre, length, width, yaw), top, opt)
-            if mine is None:
-                rejected["no_faces"] = rejected.get("no_faces", 0) + 1
+                                        "top_m": round(top, 2), "wall_share": round(vert_share, 2), **(cues or {})})
                 continue
             face_owner[mine] = len(instances)
             instances.append(_instance(len(instances), v, f, h, vid, mine, grid, cid, cls_counts, class_by, opt))
+            instances[-1].cues = cues
     rep["clusters_rejected"] = rejected
     rep["clusters_rejected_at"] = rejected_at
     return instances, face_owner

@@ -23,6 +23,11 @@ CLASS_LIMITS = {
     cs.MOTORCYCLE: (0.5, 2.0, 3.0, 20),
     cs.BICYCLE: (0.5, 1.9, 2.5, 20),
 }
+#: per class: the narrowest footprint (m, the oriented box's width) a scan of one leaves: a person seen from any
+#: side is a body's depth (~0.2 m) or more; a car or bus shows a side and its roof. A thinner "object" is a sheet:
+#: a ghost of a passer-by, a fence, a hedge's face
+CLASS_MIN_WIDTH = {cs.PERSON: 0.2, cs.RIDER: 0.2, cs.CAR: 1.2, cs.TRUCK: 1.5, cs.BUS: 2.0,
+                   cs.TRAIN: 2.0, cs.MOTORCYCLE: 0.2, cs.BICYCLE: 0.1}
 #: actor names per class: "Person", "Car", ...
 NAMES = {c: cs.NAMES[c].title() for c in MOVABLE}
 

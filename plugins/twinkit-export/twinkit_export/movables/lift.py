@@ -32,9 +32,10 @@ class LiftResult:
     report: dict = field(default_factory=dict)
 
 
-def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None, log=None) -> LiftResult:
-    """Cut the movable objects out of ``mesh`` (per-vertex ``labels``, CityScapes trainIds); see the package
-    doc for the stages."""
+def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None, log=None,
+                  votes: np.ndarray | None = None) -> LiftResult:
+    """Cut the movable objects out of ``mesh`` (per-vertex ``labels``, CityScapes trainIds; ``votes``: the 3D
+    classifier's (n, 19) class probabilities per vertex, or None); see the package doc for the stages."""
     opt = opt or LiftOptions()
     labels = np.asarray(labels).astype(np.uint8)
     v = np.array(mesh.vertices, float)  # a copy: the objects' feet are lowered onto the ground below
@@ -44,8 +45,8 @@ def lift_movables(mesh: Mesh, labels: np.ndarray, opt: LiftOptions | None = None
     h = v[:, 2] - grid.at(v[:, :2])
     mov = np.isin(labels, MOVABLE)
     rep: dict = {"movable_vertices": int(mov.sum()), "candidate_vertices": int((mov & (h > opt.min_height_m)).sum()),
-                 "ground_cells": int(grid.has_z.sum())}
-    instances, face_owner = find_instances(v, f, h, normals, labels, grid, opt, rep)
+                 "ground_cells": int(grid.has_z.sum()), "geometry_votes": votes is not None}
+    instances, face_owner = find_instances(v, f, h, normals, labels, grid, opt, rep, votes)
     if instances:
         claim_debris(v, f, h, face_owner, instances, opt, rep)
     removed = face_owner >= 0

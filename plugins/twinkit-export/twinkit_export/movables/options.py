@@ -46,3 +46,10 @@ class LiftOptions:
                                              "(a kerb) go with it; 0 = off")
     ground_hole_max_m: float = param(8.0, ge=0, help="any other hole of the ground up to this wide is closed at "
                                                      "the ground's height (wider is an unscanned area); 0 = off")
+    ground_contact_m: float = param(0.25, ge=0, help="an object is lifted only when its faces reach this close to "
+                                                     "the ground (feet, tyres); higher: it floats (a tree's crown, a "
+                                                     "ghost), it stays static")
+    min_geometry_share: float = param(0.5, ge=0, le=1, help="... and when at least this share of its voted vertices "
+                                                            "are movable to the 3D classifier (geometry_votes.npy); "
+                                                            "0 = off")
+    min_geometry_votes: int = param(20, ge=0, help="... judged only on at least this many voted vertices")
