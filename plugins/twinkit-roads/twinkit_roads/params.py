@@ -119,6 +119,8 @@ class ParkingParams:
     min_kerb_samples: int = param(5, ge=1, help="kerb profiles (one per step_m along the lane) that must see the kerb before its distance is used")
     step_m: float = param(1.0, gt=0, help="metres: lane samples along s for the kerb profiles and the vehicles")
 
+
+@dataclass
 class CrosswalkParams:
     enabled: bool = param(True, help="false: aligned.xodr passes through without crosswalk objects")
     from_osm: bool = param(True, help="use OSM's crossings (highway=crossing nodes, footway=crossing ways)")
