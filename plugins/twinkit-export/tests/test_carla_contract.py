@@ -344,3 +344,34 @@ def test_map_larger_than_the_scan_is_not_past_the_edge(package, tmp_path):
     _, desc = _desc(root)
     (res,) = check_lanes_over_ground(rep, root / "Import" / "TeststreetTwin", desc["maps"])
     assert rep.ok and res["past_edge"] == 0 and res["beyond_scan"] > 300
+
+
+def test_behaviour_rules_degrade_the_step_and_import_rules_fail_it(monkeypatch, tmp_path):
+    """A package CARLA imports but in which the twin misbehaves (e.g. a sidewalk cut in two on a real scan) is
+    written and the step is DEGRADED; a package that breaks the import itself fails the step."""
+    import twinkit_export.carla_contract as ccm
+    import twinkit_export.contract_import as ci
+    from twinkit_export.plugin import _checked_summary
+
+    class Ctx:
+        def __init__(self):
+            self.reasons = []
+
+        def degraded(self, reason, hint=None):
+            self.reasons.append(reason)
+
+    def report(rules):
+        rep = ccm.ContractReport("Pkg")
+        for r in rules:
+            rep.add(r, f"a {r} problem")
+        return rep
+
+    monkeypatch.setattr(ci, "placement_summary", lambda *a, **k: {})
+    monkeypatch.setattr(ccm, "check_package", lambda *a, **k: report(["sidewalk_blocks", "conflicting_greens"]))
+    ctx = Ctx()
+    summ = _checked_summary(tmp_path, "Pkg", None, None, ctx)
+    assert not summ["ok"] and len(ctx.reasons) == 2 and "sidewalk_blocks" in ctx.reasons[0]
+    monkeypatch.setattr(ccm, "check_package", lambda *a, **k: report(["sidewalk_blocks", "names_dropped"]))
+    with pytest.raises(RuntimeError, match="names_dropped"):
+        _checked_summary(tmp_path, "Pkg", None, None, Ctx())
+    assert ccm.BEHAVIOUR_RULES <= set(ccm.RULES)

@@ -380,16 +380,21 @@ def _write_package(out: Path, params: CarlaPackageParams, ctx: StepContext, **kw
         raise InputError(str(exc)) if "needs Blender" in str(exc) else exc
 
 
-def _checked_summary(out: Path, package: str, expect_decals, expect_crosswalks: int | None = None) -> dict:
-    """CARLA's import rules, read from its source (carla_contract): the package's summary, or a RuntimeError."""
+def _checked_summary(out: Path, package: str, expect_decals, expect_crosswalks: int | None = None,
+                     ctx: StepContext | None = None) -> dict:
+    """CARLA's import rules, read from its source (carla_contract): the package's summary, or a RuntimeError when
+    a rule of the import breaks; the behaviour rules' violations (``BEHAVIOUR_RULES``) mark the step DEGRADED."""
     from .carla_contract import check_package
-
     from .contract_import import placement_summary
 
     rep = check_package(out, package, expect_decals=expect_decals, expect_crosswalks=expect_crosswalks)
-    if not rep.ok:
+    if rep.errors:
         raise RuntimeError("carla_package: the package breaks CARLA's import rules:\n  "
-                           + "\n  ".join(str(v) for v in rep.violations))
+                           + "\n  ".join(str(v) for v in rep.errors))
+    for v in rep.behaviour:
+        if ctx is not None:
+            ctx.degraded(f"in CARLA the twin would not behave like the street: {v}",
+                         "the package is written; docs/export.md lists what each rule checks and how to fix it")
     return {**rep.summary(), "level_placement": placement_summary(out, package, rep)}
 
 
@@ -464,7 +469,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
     lane_map((pkg / f"{map_name}.xodr").read_text(), map_name)
-    summ = _checked_summary(out, package, params.decals, _expected_crosswalks(in_crosswalks_json))
+    summ = _checked_summary(out, package, params.decals, _expected_crosswalks(in_crosswalks_json), ctx)
     pl = summ["level_placement"]
     ctx.log.info("carla_package: %.1f %% of the static faces end in the map level after make import and %s "
                  "(make import alone: %.1f %%)", 100 * pl["placed_share"], pl["script"],
@@ -509,7 +514,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
     if in_movables_dir is not None:
         write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data, has_map=False)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
-    summ = _checked_summary(out, package, None)
+    summ = _checked_summary(out, package, None, ctx=ctx)
     ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "
                     "class meshes are props (no spawn points, no drivable lanes; %s/README.md)", package,
                     len(placed["props"]), package)
