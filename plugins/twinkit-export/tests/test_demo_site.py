@@ -130,7 +130,10 @@ def test_fbx_and_carla_package_demo(demo_site, demo_split, tmp_path):
     from twinkit_export.carla_contract import check_package
 
     rep = check_package(out["carla_import"], "DemoTwin", expect_decals=False)
-    assert rep.ok, [str(v) for v in rep.violations]
+    assert not rep.errors, [str(v) for v in rep.errors]
+    # fabriksgatan is a real street laid over the demo mesh, not the demo's own roads: its lanes run off the mesh
+    # and its blocks are not the demo's, which the behaviour rules report (the step is DEGRADED, the package written)
+    assert {v.rule for v in rep.behaviour} <= {"lanes_over_ground", "sidewalk_blocks"}, [str(v) for v in rep.behaviour]
     assert {m.class_id: m.faces for m in rep.meshes} == {c["class_id"]: c["faces"] for c in man["classes"]}
     assert rep.wrong_terrain_share() == 0.0 and not any(m.dropped for m in rep.meshes)
     # the package's FBX files are made in the CARLA frame (a pure rotation on the demo: test_carla_frame.py)

@@ -94,3 +94,24 @@ def test_parked_rule_reads_carla_waypoints():
     bike = {"name": "Bicycle_002", "class": "bicycle", "transform": {"x": 12.0, "y": -0.5, "z": 0.2, "yaw": 0.0}}
     hits = cs.parked_on_sidewalk([car, off, bike], xodr)  # CARLA frame: y = -north, so y -0.5 is 0.5 m north
     assert [h["name"] for h in hits] == ["Car_000"] and hits[0]["lane"] == -2
+
+
+def test_unwelded_parts_are_one_surface():
+    """A modelled mesh whose parts keep their own vertices (the demo's ground-truth mesh: each part a shell of its
+    own) is one surface where the parts meet: nothing is dissolved into the road."""
+    verts, faces, n = [], [], 0
+    for t in range(10):  # a pavement of ten 2 x 2 m tiles side by side, none sharing a vertex with the next
+        v, f, _, _ = grid(5, 5, 0.5)
+        v[:, 0] += 10.0 + 2.0 * t
+        verts.append(v)
+        faces.append(f + n)
+        n += len(v)
+    road, rf, _, _ = grid(41, 5, 0.5)  # the road beside it, its own shell too
+    road[:, 1] += 2.0
+    V, F = np.vstack(verts + [road]), np.vstack(faces + [rf + n])
+    L = np.r_[np.full(n, SIDEWALK), np.full(len(road), ROAD)].astype(np.uint8)
+    fc, _ = face_classes(F, L)
+    assert len(sidewalk_components(V, F, fc)[2]) == 10  # by shared vertices alone: ten pieces of 4 m^2
+    res = connect_sidewalks(V, F, L, keep_m2=5.0)
+    assert res.components_before == 1 and res.components_after == 1 and res.dissolved == 0
+    assert (res.labels == L).all()

@@ -61,10 +61,23 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
 
 
+def coincident_pairs(vertices: np.ndarray, tol_m: float = 1e-4) -> np.ndarray:
+    """(k, 2) int64 pairs of distinct vertices at the same place (within ``tol_m``): the seams of a mesh whose
+    parts are not welded (a modelled mesh keeps each part's vertices with its own class), which join the
+    parts as shared vertices would."""
+    key = np.round(np.asarray(vertices, np.float64) / tol_m).astype(np.int64)
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    order = np.argsort(inv, kind="stable")
+    same = inv[order][1:] == inv[order][:-1]
+    return np.c_[order[:-1][same], order[1:][same]].astype(np.int64)
+
+
 def sidewalk_components(vertices: np.ndarray, faces: np.ndarray, face_class: np.ndarray,
-                        cls: int = SIDEWALK) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Components of the faces of class ``cls`` that share a vertex: (face index (k,), component of each of
-    those faces (k,), area of each component (c,) m^2, largest first: component 0 is the largest)."""
+                        cls: int = SIDEWALK, seams: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Components of the faces of class ``cls`` that share a vertex (or two vertices at one place, ``seams``:
+    :func:`coincident_pairs`): (face index (k,), component of each of those faces (k,), area of each
+    component (c,) m^2, largest first: component 0 is the largest)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -72,7 +85,7 @@ def sidewalk_components(vertices: np.ndarray, faces: np.ndarray, face_class: np.
     if len(fi) == 0:
         return fi, np.zeros(0, np.int64), np.zeros(0)
     f = faces[fi]
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], np.zeros((0, 2), np.int64) if seams is None else seams])
     n = len(vertices)
     g = coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
     _, lab = connected_components(g, directed=False)
@@ -85,25 +98,28 @@ def sidewalk_components(vertices: np.ndarray, faces: np.ndarray, face_class: np.
 
 
 def _walk_graph(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, max_slope: float,
-                walk_classes: tuple[int, ...]):
-    """Sparse (n, n) graph of the mesh edges a walker may follow: both ends of a walkable class, slope
-    (|dz| / horizontal length) at most ``max_slope``; weights the 3D lengths."""
+                walk_classes: tuple[int, ...], seams: np.ndarray):
+    """Sparse (n, n) graph of the mesh edges (and ``seams``, two vertices at one place) a walker may follow:
+    both ends of a walkable class, slope (|dz| / horizontal length) at most ``max_slope``; weights the 3D
+    lengths."""
     from scipy.sparse import coo_matrix
 
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]], seams])
     e = np.unique(np.sort(e, axis=1), axis=0)
     d = vertices[e[:, 1]] - vertices[e[:, 0]]
     horiz = np.hypot(d[:, 0], d[:, 1])
     ok = np.isin(labels[e[:, 0]], walk_classes) & np.isin(labels[e[:, 1]], walk_classes)
-    ok &= np.abs(d[:, 2]) <= max_slope * np.maximum(horiz, 1e-9)
+    ok &= np.abs(d[:, 2]) <= max_slope * np.maximum(horiz, 1e-9) + 1e-9
     e, w = e[ok], np.maximum(np.linalg.norm(d[ok], axis=1), 1e-6)
     n = len(vertices)
     return coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
 
 
-def _dissolve_to(labels: np.ndarray, faces: np.ndarray, verts: np.ndarray) -> int:
-    """The class most of the non-sidewalk vertices sharing a face with ``verts`` carry (road when none)."""
-    touch = faces[np.isin(faces, verts).any(axis=1)].ravel()
+def _dissolve_to(labels: np.ndarray, faces: np.ndarray, verts: np.ndarray, seams: np.ndarray) -> int:
+    """The class most of the non-sidewalk vertices sharing a face with ``verts`` (or with a vertex at the same
+    place, ``seams``) carry (road when none)."""
+    near = np.r_[verts, seams[np.isin(seams[:, 0], verts), 1], seams[np.isin(seams[:, 1], verts), 0]]
+    touch = faces[np.isin(faces, near).any(axis=1)].ravel()
     around = labels[np.setdiff1d(touch, verts)]
     around = around[(around != SIDEWALK) & (around != IGNORE)]
     return int(np.bincount(around).argmax()) if len(around) else ROAD
@@ -158,14 +174,15 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
     faces = np.asarray(faces, np.int64)
     lab = np.asarray(labels).astype(np.uint8).copy()
     walk = (ROAD, SIDEWALK, IGNORE)
+    seams = coincident_pairs(vertices)
     fc, _ = face_classes(faces, lab)
-    _, _, area0 = sidewalk_components(vertices, faces, fc)
+    _, _, area0 = sidewalk_components(vertices, faces, fc, seams=seams)
     res = SidewalkCleanup(lab, len(area0), len(area0))
     for _ in range(rounds):
-        fi, comp, area = sidewalk_components(vertices, faces, fc)
+        fi, comp, area = sidewalk_components(vertices, faces, fc, seams=seams)
         if len(area) <= 1:
             break
-        graph = _walk_graph(vertices, faces, lab, max_slope, walk)
+        graph = _walk_graph(vertices, faces, lab, max_slope, walk, seams)
         verts = [np.unique(faces[fi[comp == c]]) for c in range(len(area))]
         anchors = max(1, int(np.count_nonzero(area >= keep_m2)))  # the surfaces a fragment may join
         changed = 0
@@ -182,7 +199,7 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
                 changed += 1
             elif area[c] < keep_m2:
                 own = verts[c][lab[verts[c]] == SIDEWALK]
-                lab[own] = _dissolve_to(lab, faces, own)
+                lab[own] = _dissolve_to(lab, faces, own, seams)
                 res.dissolved += 1
                 res.dissolved_m2 += float(area[c])
                 res.relabelled_vertices += len(own)
@@ -190,7 +207,7 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
         fc, _ = face_classes(faces, lab)
         if not changed:
             break
-    _, _, area = sidewalk_components(vertices, faces, fc)
+    _, _, area = sidewalk_components(vertices, faces, fc, seams=seams)
     res.components_after, res.areas_after_m2 = len(area), [float(a) for a in area]
     res.labels = lab
     return res
