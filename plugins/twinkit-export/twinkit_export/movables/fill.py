@@ -220,8 +220,7 @@ def covered(pts: np.ndarray, tri_xy: np.ndarray) -> np.ndarray:
 
 def ground_gaps(v: np.ndarray, f: np.ndarray, grid: LocalGround, cell_m: float, max_extent_m: float) -> list:
     """Small places where a vertical ray at the ground finds no surface within 0.5 m of the ground (a wheel
-    or a foot would drop in) with surface all round them, at most ``max_extent_m`` across one way and four
-    times that along the other (a crack along a kerb's face): the remains of a hole whose border is no
+    or a foot would drop in) with surface all round them: the remains of a hole whose border is no
     simple loop (it runs up an object's foot, or crosses itself seen from above). Each as a box
     (``center``, ``size``, ``yaw_deg`` 0) for :func:`patch_footprints`."""
     from types import SimpleNamespace
@@ -247,9 +246,9 @@ def ground_gaps(v: np.ndarray, f: np.ndarray, grid: LocalGround, cell_m: float, 
     for k, sl in enumerate(ndi.find_objects(lab), start=1):
         if sl is None:
             continue
-        ext = sorted(((sl[0].stop - sl[0].start) * cell_m, (sl[1].stop - sl[1].start) * cell_m))
-        if ext[0] > max_extent_m or ext[1] > 4 * max_extent_m:
-            continue  # wider than a crack, or a long gap: a hole of its own (close_ground_holes' business)
+        ext = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) * cell_m
+        if ext > max_extent_m:
+            continue
         if sl[0].start == 0 or sl[1].start == 0 or sl[0].stop == lab.shape[0] or sl[1].stop == lab.shape[1]:
             continue  # touches the mesh's box: the site's edge, not enclosed
         win = (slice(sl[0].start - 1, sl[0].stop + 1), slice(sl[1].start - 1, sl[1].stop + 1))

@@ -36,9 +36,8 @@ class LiftOptions:
                                                "ground's height (0: spanned at the ring's heights)")
     flatten_feet_m: float = param(0.5, ge=0, help="the hole's border inside the footprint, up to this high, is "
                                                   "lowered onto the ground (0: kept)")
-    gap_max_m: float = param(1.0, ge=0, help="spots a ray at the ground falls through, surface all round, "
-                                             "narrower than this (m; a crack along a kerb up to 4 times as "
-                                             "long) get a patch; 0 = off")
+    gap_max_m: float = param(1.0, ge=0, help="smaller spots a ray at the ground falls through, surface all "
+                                             "round, get a patch; 0 = off")
     gap_cell_m: float = param(0.05, gt=0, help="... found and patched on this grid")
     small_loop_m: float = param(1.0, ge=0, help="a loop of open border this short at an object's foot is closed "
                                                 "even when it is no hole seen from above (a fold of the cut-off "
