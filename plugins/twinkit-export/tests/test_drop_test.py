@@ -110,3 +110,17 @@ def test_lane_edge_over_the_kerb_is_told_apart_and_does_not_fail_the_ground(tmp_
     assert drv["kerb_line"] == drv["rays"] - drv["hits"] > 100  # every miss is on the kerb line
     assert drv["hit_pct_off_kerb_line"] == 100.0 and drv["ground_ok"] is True
     assert "degraded" not in _metrics(out)
+
+
+def test_a_long_narrow_slit_is_not_a_hole_a_wheel_drops_into(tmp_path):
+    """A slit 0.6 m long and 0.1 m wide (a crack along a kerb's face) is measured by its width: not a hole a tyre
+    or a shoe drops into; the 30 cm square hole above still is."""
+    v, f = _street()
+    cen = v[f].mean(axis=1)
+    f = f[~((np.abs(cen[:, 0] - 20.0) < 0.3) & (np.abs(cen[:, 1] - 3.0) < 0.05))]
+    rep, out = _run(tmp_path, v, f, "slit")
+    drv = rep["lanes"]["driving"]
+    assert drv["fall_through"] > 0  # the rays over the slit fall through ...
+    top = max(drv["fall_through_clusters"], key=lambda h: h["extent_m"])
+    assert top["extent_m"] >= 0.4 and top["width_m"] <= 0.1  # ... along 0.5 m, across one ray
+    assert drv["widest_hole_m"] <= 0.25 and drv["ok"] is True and "degraded" not in _metrics(out)

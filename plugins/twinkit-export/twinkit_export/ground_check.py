@@ -43,9 +43,9 @@ class DropTestParams:
                                 "ground fill's limit), m.")
     fall_m: float = param(0.5, gt=0, help="A missed ray with no surface this close to the lane falls through (a "
                           "hole); otherwise it is off height, m.")
-    max_hole_m: float = param(0.25, ge=0, help="Any hole wider than this (falling rays' extent + one spacing) fails "
-                              "the lane whatever the share: it swallows a tyre's contact patch (about 0.2 m) or a "
-                              "shoe, m.")
+    max_hole_m: float = param(0.25, ge=0, help="Any hole wider than this (the falling rays' extent across their main "
+                              "direction + one spacing: a slit's width, not its length) fails the lane whatever the "
+                              "share: it swallows a tyre's contact patch (about 0.2 m) or a shoe, m.")
     local_window_m: float = param(0.5, ge=0, help="The surface's continuity: a ray holds when the surface under it "
                                   "lies within tol_m of its mean height over this window (a crack, a step, a bump "
                                   "fail; a camber does not); 0: off (the lane height alone decides), m.")
@@ -76,7 +76,9 @@ def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
 
 
 def _clusters(xy: np.ndarray, gap_m: float) -> list[dict]:
-    """Misses grouped by proximity: centre, count, extent."""
+    """Misses grouped by proximity: centre, count, extent (the longest side of their box) and width (their extent
+    across their main direction: a slit along a kerb is long and narrow; a wheel or a foot drops into a hole as
+    wide as itself, not as long)."""
     if len(xy) == 0:
         return []
     from scipy.sparse import coo_matrix
@@ -90,8 +92,13 @@ def _clusters(xy: np.ndarray, gap_m: float) -> list[dict]:
     out = []
     for c in range(n):
         p = xy[lab == c]
+        width = 0.0
+        if len(p) > 2:
+            q = p - p.mean(axis=0)
+            width = float(np.ptp(q @ np.linalg.svd(q, full_matrices=False)[2][1]))
         out.append({"x": round(float(p[:, 0].mean()), 2), "y": round(float(p[:, 1].mean()), 2), "rays": int(len(p)),
-                    "extent_m": round(float(np.ptp(p, axis=0).max()) if len(p) > 1 else 0.0, 2)})
+                    "extent_m": round(float(np.ptp(p, axis=0).max()) if len(p) > 1 else 0.0, 2),
+                    "width_m": round(width, 2)})
     return sorted(out, key=lambda d: -d["rays"])
 
 
@@ -166,7 +173,7 @@ def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene,
         falls[~hit] = ~drop_test(mesh.vertices, mesh.faces, r[~hit], params.fall_m, scene=scene)
     kerb = kerb_line(r, hit, falls, mesh, scene, params)
     holes = _clusters(r[falls, :2], 3 * params.spacing_m)
-    widest = max((h["extent_m"] + params.spacing_m for h in holes), default=0.0)
+    widest = max((h["width_m"] + params.spacing_m for h in holes), default=0.0)
     ok = (pct is None or pct >= need) and widest <= params.max_hole_m
     nk = n - int(kerb.sum())
     pct_ground = round(100.0 * float(hit.sum()) / nk, 3) if nk else None
@@ -218,11 +225,12 @@ def kerb_line(r: np.ndarray, hit: np.ndarray, falls: np.ndarray, mesh, scene, pa
 def log_lane(log, kind: str, lane: dict, holes: list, params: DropTestParams, png_name: str) -> None:
     """Log one lane type's result: a hole too wide, a share below its target, or the share."""
     n, pct, need = lane["rays"], lane["hit_pct"], lane["target_pct"]
-    widest = max((h["extent_m"] + params.spacing_m for h in holes), default=0.0)
+    widest = max((h["width_m"] + params.spacing_m for h in holes), default=0.0)
     if n and widest > params.max_hole_m:
-        wh = max(holes, key=lambda h: h["extent_m"])
-        log.warning("drop test: a hole %.2f m wide at (%.1f, %.1f) under a %s lane (more than %.2f m: a wheel or "
-                    "a foot drops in)", widest, wh["x"], wh["y"], kind, params.max_hole_m)
+        wh = max(holes, key=lambda h: h["width_m"])
+        log.warning("drop test: a hole %.2f m wide (%.2f m long) at (%.1f, %.1f) under a %s lane (more than %.2f m: "
+                    "a wheel or a foot drops in)", widest, wh["extent_m"] + params.spacing_m, wh["x"], wh["y"], kind,
+                    params.max_hole_m)
     if n and not lane["ok"] and pct < need:
         log.warning("drop test: %.2f %% of %d rays over %s lanes find the ground (target %.1f %%; %.3f %% "
                     "fall through, %.3f %% meet a kerb beside the lane's height (the lane's edge over the "
