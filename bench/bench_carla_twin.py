@@ -142,6 +142,22 @@ def actors_row(run: Path) -> dict:
     return {"lifted": len(acts), "truth_objects": len(gt), "wrong_class": len(wrong), "truth_not_lifted": missed}
 
 
+def sidewalk_row(root: Path, pkg: Path, m: dict) -> dict:
+    """The map FBX's Road_Sidewalk per block and the parked vehicles on OpenDRIVE sidewalk lanes
+    (``contract_sidewalks``, in the package's frame)."""
+    from twinkit_export import fbxbin
+    from twinkit_export.contract_sidewalks import parked_on_sidewalk, sidewalk_blocks
+
+    xodr = (pkg / m["xodr"]).read_text()
+    geo = {n: (v, f) for n, v, f in fbxbin.mesh_arrays(pkg / m["source"]) if n == "Road_Sidewalk"}
+    br = sidewalk_blocks(*geo["Road_Sidewalk"], xodr).summary() if "Road_Sidewalk" in geo else {}
+    actors = json.loads((root / "actors.json").read_text()).get("actors", []) if (root / "actors.json").is_file() \
+        else []
+    return {"sidewalk_blocks": f"{br.get('blocks_with_sidewalk', 0) - br.get('blocks_split', 0)} / "
+                               f"{br.get('blocks_with_sidewalk', 0)}",
+            "sidewalk_stray": br.get("stray_pieces"), "parked_on_sidewalk": len(parked_on_sidewalk(actors, xodr))}
+
+
 def package_row(run: Path) -> dict:
     from twinkit_export.carla_contract import check_package
     from twinkit_export.contract_ground import lanes_over_map_ground, map_ground
@@ -156,8 +172,9 @@ def package_row(run: Path) -> dict:
     ground = map_ground(pkg_json.parent / m["source"])
     lanes = lanes_over_map_ground(pkg_json.parent / m["xodr"], ground, 1.0)
     place = placement_summary(root, package, rep) or {}
+    walk = sidewalk_row(root, pkg_json.parent, m)
     rules = sorted({v.rule for v in rep.violations})
-    return {"placed_share": place.get("placed_share"), "waypoints_off_ground": int(lanes.off.sum()),
+    return {**walk, "placed_share": place.get("placed_share"), "waypoints_off_ground": int(lanes.off.sum()),
             "waypoints": int(len(lanes.off)), "violations": len(rep.violations), "rules": ", ".join(rules) or "-",
             "report": rep}
 
@@ -189,7 +206,10 @@ def main(argv: list[str] | None = None) -> int:
             ("max light zOffset (m)", "light_zoffset_max_m"), ("signs typed stop/yield/speed", "signs_typed"),
             ("signs left with type -1", "signs_generic"),
             ("crosswalks CARLA reports", "crosswalks"), ("zebras with one within 1 m", "zebras_found"),
-            ("zebras", "zebras"), ("static faces placed in the level", "placed_share"),
+            ("zebras", "zebras"), ("blocks whose sidewalk is one surface", "sidewalk_blocks"),
+            ("sidewalk pieces on the carriageway", "sidewalk_stray"),
+            ("parked vehicles on OpenDRIVE sidewalk lanes", "parked_on_sidewalk"),
+            ("static faces placed in the level", "placed_share"),
             ("lane waypoints (carla.Map, 1 m) without ground", "waypoints_off_ground"),
             ("lifted actors", "lifted"), ("lifted, wrong truth class", "wrong_class"),
             ("truth objects not lifted", "truth_not_lifted"), ("USD error at 150 m (m)", "usd_err_150m_m"),
