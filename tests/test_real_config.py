@@ -69,8 +69,9 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
     out = tmp_path / "outputs"
     fast = [*FAST, f"image_model={model}"] + (["image_model.input_long_side_px=512"] if model != "oracle" else [])
     p = twinkit("recipe=pointcloud_site", "site=demo", f"engine.outputs_dir={out}", *fast, cwd=tmp_path)
-    # the coarse settings give a depth-8 mesh whose road is not at the lanes' height: the drop test may call
-    # the result degraded (exit 4); nothing else may
+    # the coarse settings give a depth-8 mesh whose road is not at the lanes' height and whose sidewalk is in
+    # pieces: the drop test and the CARLA package's behaviour rules may call the result degraded (exit 4);
+    # nothing else may
     assert p.returncode in (0, 4), p.stderr[-3000:]
     ws = out / "demo"
     for f in ("01_site/cloud.e57", "02_read_cloud/points.ply", "03_reconstruct/dense_mesh.ply",
@@ -86,7 +87,9 @@ def test_demo_site_end_to_end_then_reused(model, tmp_path):
     run = sorted((ws / "runs").iterdir())[-1]
     manifest = json.loads((run / "manifest.json").read_text())
     assert [s["status"] for s in manifest["steps"]] == ["ran"] * STEPS
-    assert {e["step"] for e in manifest["degraded"]} <= {"drop_test"}, manifest["degraded"]
+    assert {e["step"] for e in manifest["degraded"]} <= {"drop_test", "carla"}, manifest["degraded"]
+    assert all(e["reason"].startswith("in CARLA the twin would not behave like the street")
+               for e in manifest["degraded"] if e["step"] == "carla"), manifest["degraded"]
     assert manifest["status"] == ("degraded" if p.returncode == 4 else "ok")
     assert (run / "report" / "report.html").is_file()
     seg = json.loads(next(ws.glob("*_evaluate_segmentation/seg_metrics.json")).read_text())["scores"]

@@ -410,7 +410,7 @@ CATALOGUE: dict[str, Artefact] = dict([
     _entry("textured_mesh.ply", "PLY mesh", F.TexturedMeshPly, read_textured_mesh, write_textured_mesh,
            writers="photo:photo_texture pointcloud:bake_texture",
            readers="photo:photo_texture pointcloud:evaluate_reconstruction roads:align_roads roads:apply_alignment "
-                   "roads:place_crosswalks roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
+                   "roads:parking_lanes roads:place_crosswalks roads:place_signals roads:road_evidence roads:road_source/scan segmentation:backproject "
                    "segmentation:classify_geometry segmentation:import_labels segmentation:photo_views segmentation:render_views "
                    "segmentation:sample_views segmentation:segmenter/felzenszwalb segmentation:segmenter/vertices "
                    "segmentation:transfer_gt_labels tiles:evaluate_seam_labels"),
@@ -423,8 +423,8 @@ CATALOGUE: dict[str, Artefact] = dict([
     _entry("labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
            writers="export:lift_movables roads:road_evidence segmentation:backproject "
                    "segmentation:import_labels segmentation:transfer_gt_labels",
-           readers="export:lift_movables export:split_classes roads:align_roads roads:place_crosswalks "
-                   "roads:place_signals roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
+           readers="export:lift_movables export:split_classes roads:align_roads roads:parking_lanes "
+                   "roads:place_crosswalks roads:place_signals roads:road_evidence roads:road_source/scan segmentation:evaluate_segmentation "
                    "segmentation:import_labels tiles:evaluate_seam_labels"),
     _entry("gt_labels.npy", "NumPy uint8 (n,)", F.LabelsNpy, read_labels, write_labels,
            writers="segmentation:transfer_gt_labels",
@@ -432,13 +432,14 @@ CATALOGUE: dict[str, Artefact] = dict([
                    "segmentation:predict_views tiles:evaluate_seam_labels"),
     _entry("geometry_votes.npy", "NumPy float32 (n, 19)", F.ClassVotesNpy, read_class_votes, write_class_votes,
            writers="segmentation:classify_geometry",
-           readers="segmentation:backproject"),
+           readers="export:lift_movables segmentation:backproject"),
     _entry("gt_mesh.ply", "PLY mesh with label", F.GtMeshPly, read_gt_mesh, write_gt_mesh,
            writers="demo-site:site_generator/demo_intersection",
            readers="pointcloud:evaluate_reconstruction segmentation:transfer_gt_labels"),
     _entry("aligned.xodr", "OpenDRIVE XML", F.OpenDrive, read_opendrive, write_opendrive,
-           writers="roads:apply_alignment roads:place_crosswalks roads:place_signals",
-           readers="export:drop_test export:exporter/carla_package roads:place_crosswalks roads:place_signals "
+           writers="roads:apply_alignment roads:parking_lanes roads:place_crosswalks roads:place_signals",
+           readers="export:drop_test export:exporter/carla_package roads:parking_lanes roads:place_crosswalks "
+                   "roads:place_signals "
                    "roads:road_evidence"),
     _entry("roads.osm", "OSM XML", F.OsmXml, read_osm, write_osm,
            writers="demo-site:site_generator/demo_intersection",
