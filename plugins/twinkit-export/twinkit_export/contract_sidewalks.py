@@ -66,19 +66,14 @@ class BlockReport:
                 "per_block_m2": {str(b): [round(x, 2) for x in a[:6]] for b, a in sorted(self.blocks.items())}}
 
 
-def _welded(vertices: np.ndarray, faces: np.ndarray, tol_m: float = 1e-3) -> np.ndarray:
-    """``faces`` over vertices merged by position (an FBX splits vertices at UV and normal seams)."""
-    key = np.round(vertices / tol_m).astype(np.int64)
-    _, inv = np.unique(key, axis=0, return_inverse=True)
-    return inv.reshape(-1)[faces]
-
-
 def components(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
     """(component of each face (m,), count): faces sharing a vertex position are connected."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    f = _welded(vertices, faces)
+    from .sidewalks import place_index
+
+    f = place_index(vertices, 1e-3)[faces]  # an FBX splits vertices at UV and normal seams
     n = int(f.max()) + 1 if len(f) else 0
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
     g = coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))

@@ -61,13 +61,19 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
 
 
+def place_index(vertices: np.ndarray, tol_m: float) -> np.ndarray:
+    """(n,) int64: one index per place, shared by the vertices within ``tol_m`` of it (positions rounded to
+    ``tol_m``): ``place_index(v, tol)[faces]`` are the faces over welded vertices (an FBX splits vertices at UV
+    and normal seams; a modelled mesh keeps each part's own vertices)."""
+    key = np.round(np.asarray(vertices, np.float64) / tol_m).astype(np.int64)
+    return np.unique(key, axis=0, return_inverse=True)[1].reshape(-1)
+
+
 def coincident_pairs(vertices: np.ndarray, tol_m: float = 1e-4) -> np.ndarray:
     """(k, 2) int64 pairs of distinct vertices at the same place (within ``tol_m``): the seams of a mesh whose
     parts are not welded (a modelled mesh keeps each part's vertices with its own class), which join the
     parts as shared vertices would."""
-    key = np.round(np.asarray(vertices, np.float64) / tol_m).astype(np.int64)
-    _, inv = np.unique(key, axis=0, return_inverse=True)
-    inv = inv.ravel()
+    inv = place_index(vertices, tol_m)
     order = np.argsort(inv, kind="stable")
     same = inv[order][1:] == inv[order][:-1]
     return np.c_[order[:-1][same], order[1:][same]].astype(np.int64)
