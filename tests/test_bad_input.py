@@ -235,3 +235,26 @@ def test_bad_input(project, case, exit_code, message):
         assert len(manifests) == 1, f"{case}: no manifest"
         m = json.loads(manifests[0].read_text())
         assert m["status"] == "failed" and message in m["error"]
+
+
+def _faults() -> list[tuple[str, str]]:
+    """(case, test reference) of each row of docs/engine.md's 'Faults' table."""
+    section = DOC.read_text().split("## Faults", 1)[1].split("\n## ", 1)[0]
+    rows = []
+    for line in section.splitlines():
+        m = re.match(r"^\|\s*`([\w-]+)`\s*\|.*\|\s*`?([\w/.-]+\.py::\w+)`?\s*\|\s*$", line)
+        if m:
+            rows.append((m.group(1), m.group(2)))
+        elif re.match(r"^\|\s*`", line):
+            raise AssertionError(f"docs/engine.md Faults row without a test reference in its last column: {line}")
+    return rows
+
+
+def test_the_faults_table_names_real_tests():
+    rows = _faults()
+    ids = [case for case, _ in rows]
+    assert len(ids) == len(set(ids)), "a fault is listed twice in docs/engine.md"
+    assert not set(ids) & {r[0] for r in ROWS}, "a case is both a bad input and a fault"
+    for case, ref in rows:
+        path, name = ref.split("::")
+        assert (ROOT / path).exists() and f"def {name}(" in (ROOT / path).read_text(), f"{case}: {ref} does not exist"
