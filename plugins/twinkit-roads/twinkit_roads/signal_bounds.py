@@ -29,10 +29,11 @@ def clamp_to_roads(root: ET.Element, placed: list) -> list[str]:
             continue
         rid = road.get("id")
         for el in road.iter():
-            if el.tag not in ("signal", "signalReference") or el.get("s") is None:
+            raw = el.get("s")
+            if el.tag not in ("signal", "signalReference") or raw is None:
                 continue
             try:
-                s = float(el.get("s"))
+                s = float(raw)
             except ValueError:
                 continue
             on = min(max(s, 0.0), length)
