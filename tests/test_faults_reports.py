@@ -125,3 +125,25 @@ def test_the_report_offers_the_model_for_download_from_file_url(glb_project, bro
         "fetch(a.href).then(r => r.arrayBuffer()).then(b => done([a.download, b.byteLength,"
         " String.fromCharCode.apply(null, new Uint8Array(b.slice(0, 4)))])).catch(e => done(String(e)));")
     assert got == ["model.glb", (p.ws / "01_model" / "twin.glb").stat().st_size, "glTF"], got
+
+
+def test_a_steps_picture_is_on_disk_once_however_many_reports_show_it(tmp_path):
+    from twinkit.report.context import SectionContext
+    from twinkit.report.render import TopDown
+    from twinkit.report.run import RunView
+
+    ws = tmp_path / "site"
+    (ws / "01_step").mkdir(parents=True)
+    pic = ws / "01_step" / "qa.png"
+    pic.write_bytes(b"\x89PNG" + bytes(range(256)) * 400)
+    names = []
+    for run in ("r1", "r2"):
+        view = RunView(ws / "runs" / run, {"steps": [], "workspace": str(ws)}, None)
+        out = ws / "runs" / run / "report"
+        ctx = SectionContext(view, out, TopDown(view, out))
+        names.append(out / ctx.add_image(pic))
+    a, b = names
+    assert a.read_bytes() == b.read_bytes() == pic.read_bytes()
+    assert a.stat().st_ino == b.stat().st_ino != pic.stat().st_ino  # one copy, never the step folder's file
+    pic.write_bytes(b"edited")  # an edit in the step folder leaves the reports as they were
+    assert a.read_bytes() != b"edited"
