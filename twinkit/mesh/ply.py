@@ -248,7 +248,7 @@ def _read_ply_general(path: Path, fmt: str, offset: int, elements: list[list], c
     (read past and left out). Polygons are fan-triangulated by :func:`_mesh_from_arrays`."""
     data = path.read_bytes()[offset:]
     found: dict[str, np.ndarray] = {}
-    vprops = next((e[2] for e in elements if e[0] == "vertex"), [])
+    vprops: list = next((e[2] for e in elements if e[0] == "vertex"), [])
     if fmt == "ascii":
         tokens = data.split()
         pos = 0
