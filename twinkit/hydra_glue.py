@@ -134,9 +134,11 @@ def open_site_inputs(args: list[str]) -> list[str]:
 
 
 def _quoted_if_needed(arg: str) -> str:
-    """``key=value`` with ``value`` single-quoted when it holds non-ASCII letters and only parses so."""
+    """``key=value`` with ``value`` single-quoted when it holds non-ASCII letters and only parses so (a sweep,
+    ``a,b`` or ``choice(...)``, is left to Hydra: quoted it would be one value)."""
     key, sep, value = arg.partition("=")
-    if arg.startswith("-") or not sep or value.isascii() or value[:1] in ("'", '"') or _parsed((arg,)):
+    if (arg.startswith("-") or not sep or value.isascii() or value[:1] in ("'", '"')
+            or any(c in value for c in ",()[]{}") or _parsed((arg,))):
         return arg
     quoted = f"{key}='" + value.replace("'", "\\'") + "'"
     return quoted if _parsed((quoted,)) else arg
