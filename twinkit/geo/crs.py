@@ -310,9 +310,12 @@ def _into_metres(xyz: np.ndarray, src, site_crs, name: str, info: FrameInfo):
         info.notes.append(f"reprojected from {short_crs(src.to_wkt())} to {short_crs(site_crs.to_wkt())}")
         return site_crs
     if src.is_geographic:
+        mx, my = (float(v) for v in np.nanmedian(xyz[:, :2], axis=0)) if len(xyz) else (0.0, 0.0)
+        code, zone = utm_epsg(my, mx) if abs(my) <= 90 else (32631, "zone 31N")
         raise InputError(
-            f"{name}: coordinates are geographic (degrees, {src.name}) and the site has no projected CRS; "
-            f"set site.crs to a projected CRS (e.g. the local UTM zone)")
+            f"{name}: coordinates are geographic (degrees, {src.name}) and site.crs "
+            f"({site_crs.name if site_crs is not None else 'not set'}) is not a projected CRS in metres; set "
+            f"site.crs to one (here e.g. EPSG:{code}, WGS 84 / UTM {zone}): the cloud is reprojected into it")
     xyz[:, :2] *= fxy
     xyz[:, 2] *= fz
     info.unit_factor_xy, info.unit_factor_z = fxy, fz

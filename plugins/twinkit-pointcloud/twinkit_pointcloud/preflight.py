@@ -173,7 +173,7 @@ def read_cloud_preflight(site, params, inputs) -> list[str]:
 
 def _robust_bounds(path: Path):
     """``(lo, hi, n_far, n)``: the box of the central 99.8 % of the points in each axis (file coordinates)
-    and how many points lie far outside it (more than its size and 100 m); None for a format read here only from its header (E57, ASCII PLY)."""
+    and how many points lie far outside it (more than its size and 100 m); None when the points cannot be read."""
     ext = path.suffix.lower()
     try:
         if ext in (".las", ".laz"):
@@ -181,10 +181,14 @@ def _robust_bounds(path: Path):
 
             las = laspy.read(str(path))
             xyz = np.c_[np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)]
-        elif ext == ".ply" and _ply_bounds(path) is not None:
+        elif ext == ".ply":
             from twinkit.mesh import read_ply
 
             xyz = read_ply(path).vertices
+        elif ext == ".e57":
+            from .readers import read_e57
+
+            xyz = read_e57(path).xyz
         else:
             return None
     except Exception:  # noqa: BLE001 -- read_cloud's reader names the fault
