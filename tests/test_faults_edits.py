@@ -131,3 +131,72 @@ def test_a_switch_killed_on_the_way_out_is_finished_by_the_next_run(project):
     r = project.run("site=t", "recipe=chain")
     assert r.rc == 0 and (project.ws / "03_scale" / "scaled.txt").read_text() == "42\n", r.text
     assert not list((project.ws / ".cache" / "edits").glob("parked-*"))
+
+
+def _path_project(project):
+    project.recipe("named", ["{id: read_named, uses: step/read_named}", "{id: predict, uses: step/predict}"],
+                   extra="defaults:\n  - /image_model: toy_model\n  - _self_\n")
+    return project.env(TWINKIT_PLUGIN_MODULES="tests.support.engine_plugins,tests.support.path_plugins")
+
+
+@pytest.mark.parametrize("weights", ["file", "folder"])
+def test_a_file_a_parameter_names_is_in_the_key(project, weights):
+    env = _path_project(project)
+    roads = project.tmp / "map.osm"
+    roads.write_text("1\n")
+    w = project.tmp / "weights"
+    if weights == "folder":
+        w.mkdir()
+        (w / "a.bin").write_text("2\n")
+    else:
+        w.write_text("2\n")
+    args = ("site=t", "recipe=named", f"steps.read_named.path={roads}", f"image_model.weights_path={w}")
+
+    def run(*extra):
+        project.reset_counts()
+        res = project.run(*args, *extra, env=env)
+        assert res.rc == 0, res.text
+        return res
+
+    run()
+    roads.write_text("3\n")  # the map's content changes, its name does not
+    st = project.run("status", *args, env=env)
+    assert st.rc == 0 and "file changed: path" in st.out, st.text
+    r = run()
+    assert project.status_of(r, "01_read_named") == "ran" and project.status_of(r, "02_predict") == "reused", r.text
+    assert (project.ws / "01_read_named" / "named.txt").read_text() == "3\n"
+    (w / "a.bin" if weights == "folder" else w).write_text("4\n")  # so do the weights
+    st = project.run("status", *args, env=env)
+    assert st.rc == 0 and "file changed: image_model.weights_path" in st.out, st.text
+    r = run()
+    assert project.status_of(r, "02_predict") == "ran" and project.counts() == {"predict": 1}, r.text
+    assert (project.ws / "02_predict" / "predicted.txt").read_text() == "4\n"
+    os.utime(roads)  # touched, same content: reused
+    os.utime(w / "a.bin" if weights == "folder" else w)
+    r = run()
+    assert project.counts() == {}, r.text
+    assert project.status_of(r, "01_read_named") == "reused" and project.status_of(r, "02_predict") == "reused"
+    roads.write_text("1\n")  # back to the first content: its stored result comes back
+    r = run()
+    assert project.status_of(r, "01_read_named") == "cached" and project.counts() == {}, r.text
+
+
+def test_a_missing_file_a_parameter_names_is_still_the_steps_error(project):
+    env = _path_project(project)
+    r = project.run("site=t", "recipe=named", f"steps.read_named.path={project.tmp / 'nope.osm'}",
+                    f"image_model.weights_path={project.tmp}", env=env)
+    assert r.rc == 2 and "nope.osm does not exist; set steps.read_named.path" in r.err, r.text
+
+
+def test_the_parameters_that_name_input_files_are_declared_as_paths():
+    from twinkit.ranges import path_fields
+    from twinkit_efficientvit.efficientvit import EfficientViTParams
+    from twinkit_efficientvit.hf import HFParams
+    from twinkit_efficientvit.tflite import DeepLabTFLiteParams
+    from twinkit_roads.sources import FileSourceParams, OpenDriveSourceParams
+
+    assert path_fields(FileSourceParams) == {"path": ()}
+    assert path_fields(OpenDriveSourceParams) == {"path": ()}
+    assert path_fields(EfficientViTParams) == {"weights_path": ()}
+    assert path_fields(DeepLabTFLiteParams) == {"weights_path": ()}
+    assert path_fields(HFParams) == {"model": ()}
