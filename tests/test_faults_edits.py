@@ -24,6 +24,9 @@ def test_an_edit_set_aside_comes_back_with_its_setting(project):
     assert r.rc == 0, r.text
     assert (project.ws / "02_double" / "double.txt").read_text() == "4\n"
     assert "set aside" in r.text
+    st = project.run("status", "site=t", "recipe=chain")
+    assert "02_double" in st.out and "would re-apply hand-edited double.txt" in st.out, st.text
+    assert "03_scale" in st.out and "cached" in st.out.splitlines()[-1], st.text
     project.reset_counts()
     r = project.run("site=t", "recipe=chain")  # the value set back: the edit comes back with its result
     assert r.rc == 0, r.text

@@ -129,8 +129,10 @@ def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: fl
     if free and not unbounded:
         raise TypeError("free=True takes no range, choices or pattern")
     meta: dict[str, Any] = {HELP: help}
-    if path:
-        meta[PATH] = () if path is True else tuple(path)
+    if path is True:
+        meta[PATH] = ()
+    elif path:
+        meta[PATH] = tuple(path)
     if free or unbounded and isinstance(default, (bool, str)):
         # a flag, a free string or a free value: nothing to range-check, only the help to carry
         if default_factory is not dataclasses.MISSING:

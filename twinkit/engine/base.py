@@ -68,6 +68,8 @@ class EngineBase:
 
         def _reapply_edit(self, folder: Path, dest: Path, note: dict) -> list[str]: ...  # edits
 
+        def _pending_edits(self, folder: Path, key: str) -> list[tuple[Path, dict]]: ...  # edits
+
         def _store_valid(self, key: str) -> dict | None: ...  # store
 
         def _materialize(self, folder: Path, entries: list[tuple[str, Path]], record: dict) -> None: ...  # workspace

@@ -70,8 +70,11 @@ class StatusMixin(EngineBase):
                 if stored is not None and "site_fields" not in stored:
                     stored = None
                 if stored is not None:
-                    rows.append((ps.folder, "cached", "result stored for this key"))
-                    hashes = stored["artefacts"]
+                    row, hashes = self._status_cached(ps, folder, key, stored)
+                    rows.append(row)
+                    if hashes is None:
+                        dirty = True
+                        continue
                 else:
                     rows.append((ps.folder, "would run", "forced by rerun" if forced else self._why(rec, desc)))
                     dirty = True
@@ -80,3 +83,18 @@ class StatusMixin(EngineBase):
             self.outcomes.append(StepOutcome(ps.id, ps.folder, ps.label, "status", "", key, 0, outputs, hashes))
         self.hashes.close()
         return rows
+
+    def _status_cached(self, ps, folder, key: str, stored: dict) -> tuple[tuple[str, str, str], dict | None]:
+        """The row of a step whose result is stored, and the hashes later steps would see (None when they cannot
+        be told without running): an edit set aside on that result would be re-applied over it."""
+        pending = self._pending_edits(folder, key)
+        if not pending:
+            return (ps.folder, "cached", "result stored for this key"), stored["artefacts"]
+        dest, note = pending[0]
+        files = sorted(note.get("files", {}))
+        row = (ps.folder, "edited", f"would re-apply hand-edited {', '.join(files)} from {dest}")
+        if ps.foreach is not None:
+            return row, None
+        return row, {f: artefact_hash(dest / f, self.hashes) if f in files else h
+                     for f, h in stored["artefacts"].items()}
+
