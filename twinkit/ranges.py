@@ -21,6 +21,7 @@ an ordinary field. The values are checked when the config is composed, before an
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import typing
 from dataclasses import dataclass
@@ -153,20 +154,26 @@ def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: fl
     return dataclasses.field(default=default, metadata=meta)
 
 
-def path_fields(cls: type | None, prefix: str = "") -> dict[str, tuple[str, ...]]:
+def path_fields(cls: type | None) -> dict[str, tuple[str, ...]]:
     """The fields of ``cls`` (nested dataclasses walked, names dotted) declared with ``param(path=...)``: name ->
     the suffixes of a stem's files (empty for a plain file or folder)."""
     if cls is None or not dataclasses.is_dataclass(cls):
         return {}
+    return dict(_path_fields(cls, ""))
+
+
+@functools.lru_cache(maxsize=None)
+def _path_fields(cls: type, prefix: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """path_fields, remembered per class (looked up for every step of every run)."""
     hints = typing.get_type_hints(cls)
-    out: dict[str, tuple[str, ...]] = {}
+    out: list[tuple[str, tuple[str, ...]]] = []
     for f in dataclasses.fields(cls):
         sub = _nested(hints.get(f.name, Any))
         if sub is not None:
-            out.update(path_fields(sub, f"{prefix}{f.name}."))
+            out += _path_fields(sub, f"{prefix}{f.name}.")
         elif f.metadata and PATH in f.metadata:
-            out[prefix + f.name] = f.metadata[PATH]
-    return out
+            out.append((prefix + f.name, f.metadata[PATH]))
+    return tuple(out)
 
 
 def help_of(f: dataclasses.Field) -> str:

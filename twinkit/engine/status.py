@@ -70,11 +70,12 @@ class StatusMixin(EngineBase):
                 if stored is not None and "site_fields" not in stored:
                     stored = None
                 if stored is not None:
-                    row, hashes = self._status_cached(ps, folder, key, stored)
+                    row, seen = self._status_cached(ps, folder, key, stored)
                     rows.append(row)
-                    if hashes is None:
+                    if seen is None:
                         dirty = True
                         continue
+                    hashes = seen
                 else:
                     rows.append((ps.folder, "would run", "forced by rerun" if forced else self._why(rec, desc)))
                     dirty = True
