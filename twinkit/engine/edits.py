@@ -131,6 +131,4 @@ class EditsMixin(EngineBase):
             (folder / rel).unlink(missing_ok=True)
             shutil.copy2(dest / rel, folder / rel)
         write_json_atomic(dest / NOTE, dict(note, state="reapplied"))
-        log.warning("  %s: hand-edited %s re-applied from %s (made on this same result)", folder.name,
-                    ", ".join(files), dest)
         return files
