@@ -110,6 +110,8 @@ def test_a_recipe_switch_killed_between_its_moves_loses_no_edit(project, moves):
     assert project.run("site=t", "recipe=other").rc == 0  # chain parked, its edit with it
     # back to chain, killed after `moves` folder moves (other's 2 parked, then chain's 3 back)
     assert _killed_switch(project, "chain", moves) == -9
+    st = project.run("status", "site=t", "recipe=chain")
+    assert st.rc == 0 and ".twinkit.switch.json" in st.out and "unfinished" in st.out, st.text
     r = project.run("site=t", "recipe=chain")
     assert r.rc == 0, r.text
     assert (project.ws / "01_make" / "data.txt").read_text() == "7\n", r.text

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from twinkit.engine.base import EngineBase
 from twinkit.engine.records import read_record
+from twinkit.errors import InputError
 from twinkit.jsonio import write_json as write_json_atomic
 
 log = logging.getLogger("twinkit")
@@ -96,18 +97,24 @@ def finish_switch(workspace: Path) -> None:
     during it stopped: a move whose source is gone or whose target exists is done. Then the marker names the
     new recipe and the journal goes."""
     journal = workspace / JOURNAL
-    plan = json.loads(journal.read_text())
-    for src, dst in plan["moves"]:
+    try:
+        plan = json.loads(journal.read_text())
+        moves, recipe = [(str(s), str(d)) for s, d in plan["moves"]], str(plan["recipe"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{journal}: unreadable ({type(exc).__name__}); it lists the folder moves of a recipe "
+                         f"switch a killed run left half done: move the numbered folders where they belong "
+                         f"(docs/engine.md, 'Where things go') and remove it") from None
+    for src, dst in moves:
         s, d = workspace / src, workspace / dst
         if os.path.lexists(s) and not os.path.lexists(d):
             d.parent.mkdir(parents=True, exist_ok=True)
             os.replace(s, d)
         elif os.path.lexists(s):
             log.warning("  %s was not moved to %s, which exists already; both are kept", s, d)
-    back = workspace / "recipes" / _safe(plan["recipe"])
+    back = workspace / "recipes" / _safe(recipe)
     if back.is_dir() and not any(back.iterdir()):
         back.rmdir()
-    _write_marker(workspace, plan["recipe"])
+    _write_marker(workspace, recipe)
     journal.unlink()
 
 

@@ -3,7 +3,7 @@ writing nothing."""
 from __future__ import annotations
 
 from twinkit.engine.base import EngineBase
-from twinkit.engine.recipes import parked_folder
+from twinkit.engine.recipes import JOURNAL, parked_folder
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.errors import TwinkitError
 from twinkit.hashing import HashCache, artefact_hash
@@ -19,6 +19,9 @@ class StatusMixin(EngineBase):
         dirty = False
         self.hashes.close()
         self.hashes = HashCache(self.hashes.db_path, read_only=True)  # a dry run writes nothing, not even hashes
+        if (self.site_root / JOURNAL).is_file():  # folders may be half-way between two recipes
+            rows.append((JOURNAL, "unfinished", "a recipe switch was stopped among its folder moves; the next run "
+                                                "finishes them first"))
         if self.workspace.resolve() == self.site_root.resolve():  # another recipe's folders may be at the top
             self.workspace = parked_folder(self.workspace, str((self.cfg.get("recipe") or {}).get("name") or ""))
         for ps in self.plan:
