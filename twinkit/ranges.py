@@ -289,6 +289,8 @@ def describe_params(cls: type | None, prefix: str = "") -> list[ParamInfo]:
         else:
             default = "required"
         check = check_of(f)
-        out.append(ParamInfo(prefix + f.name, _type_text(tp), check.describe() if check is not None else "-",
-                             default, help_of(f)))
+        shown = check.describe() if check is not None else "-"
+        if f.metadata and PATH in f.metadata:
+            shown = "a file or folder (its content is in the key)" if shown == "-" else shown
+        out.append(ParamInfo(prefix + f.name, _type_text(tp), shown, default, help_of(f)))
     return out
