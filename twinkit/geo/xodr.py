@@ -350,3 +350,71 @@ def from_scan(text: str) -> bool:
 def has_no_roads(text: str) -> bool:
     """The OpenDRIVE text is road_source=scan's map of a scan that holds no road."""
     return _has_user_data(text, "twinkit_roads", "none")
+
+
+# --------------------------------------------------------------------------- where a network came from
+
+#: the kinds :func:`source_kind` tells apart, with the words a message uses for each
+SOURCE_NAMES = {
+    "osm": "an OpenStreetMap extract (road_source=file / overpass / osm_api)",
+    "opendrive": "an OpenDRIVE file (road_source=opendrive)",
+    "scan": "the scan itself (road_source=scan)",
+    "none": "no road network",
+}
+
+#: what to check, per source, when a network does not fit the scan: ``misfit`` (its lanes are not on the
+#: scanned carriageway), ``no_overlap`` (the fit finds no road surface under it) and ``no_map`` (no map came
+#: out: the CARLA package is props only)
+SOURCE_HINTS = {
+    "osm": {"misfit": "a wrong or outdated OSM, or a failed alignment? check the OSM extract and alignment.json",
+            "no_overlap": "check the georeference (site.crs, site.base_point) and the OSM extract, or raise "
+                          "steps.align_roads.search_m",
+            "no_map": "give an OSM extract that holds the site's roads (site.inputs.osm)"},
+    "opendrive": {"misfit": "a wrong geoReference or offset of the OpenDRIVE file (see reprojection.json), or a "
+                            "failed alignment? check the file's geoReference and alignment.json",
+                  "no_overlap": "check the OpenDRIVE file's geoReference and offset (reprojection.json), or raise "
+                                "steps.align_roads.search_m",
+                  "no_map": "give an OpenDRIVE file that holds the site's roads (site.inputs.xodr)"},
+    "scan": {"misfit": "the scan's road labels or road class coverage are poor, or the scan is too sparse there "
+                       "(see scan_roads.png); check the segmentation's labels, or give an OSM extract "
+                       "(site.inputs.osm road_source=file)",
+             "no_overlap": "the network was derived from this scan and needs no alignment: it is kept in place",
+             "no_map": "the scan's road labels held no carriageway that held up (see scan_roads.png); check the "
+                       "segmentation's road labels or the scan's density there, or give an OSM extract "
+                       "(site.inputs.osm road_source=file)"},
+    "none": {"misfit": "", "no_overlap": "",
+             "no_map": "give an OSM extract (site.inputs.osm) or an OpenDRIVE file (road_source=opendrive) for a map"},
+}
+
+OPENDRIVE_TAG = '<userData code="twinkit_road_source" value="opendrive"/>'
+
+
+def source_kind(text: str | None) -> str:
+    """Where an OpenDRIVE map came from: 'scan' (road_source=scan, also its map without roads), 'opendrive'
+    (road_source=opendrive, tagged by :func:`tag_source`), 'osm' (netconvert of an OSM extract: no tag) or
+    'none' (``text`` None: no map)."""
+    if text is None:
+        return "none"
+    if from_scan(text):
+        return "scan"
+    if _has_user_data(text, "twinkit_road_source", "opendrive"):
+        return "opendrive"
+    return "osm"
+
+
+def source_hint(kind: str, concern: str) -> str:
+    """The fix that fits ``concern`` (a key of :data:`SOURCE_HINTS`) for a network of source ``kind``."""
+    return SOURCE_HINTS.get(kind, SOURCE_HINTS["osm"])[concern]
+
+
+def tag_source(text: str, tag: str) -> str:
+    """``text`` with ``tag`` (a ``<userData .../>`` of this section) in its header, once."""
+    if tag in text[:4000]:
+        return text
+    i = text.find("<header")
+    j = text.find(">", i)
+    if i < 0 or j < 0:
+        return text
+    if text[j - 1] == "/":  # <header .../>
+        return text[:j - 1] + ">" + tag + "</header>" + text[j + 1:]
+    return text[:j + 1] + "\n        " + tag + text[j + 1:]

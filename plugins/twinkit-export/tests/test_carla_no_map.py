@@ -59,5 +59,11 @@ def test_a_map_the_scan_found_no_roads_for_is_packaged_as_no_map(tmp_path, class
     root = out["carla_import"]
     desc = json.loads((root / "Import" / "TeststreetTwin" / "TeststreetTwin.json").read_text())
     assert desc["maps"] == [] and desc["props"]
-    assert json.loads((root / "spawn_points.json").read_text())["count"] == 0
+    spawn = json.loads((root / "spawn_points.json").read_text())
+    assert spawn["count"] == 0
     assert check_package(root, "TeststreetTwin").ok
+    # the note, the README and the step's metrics name the scan as the source, not road_source=none (issue 46)
+    readme = (root / "Import" / "TeststreetTwin" / "README.md").read_text()
+    for text in (spawn["note"], readme):
+        assert "road_source=scan" in text and "road_source=none" not in text, text
+    assert "scan_roads.png" in spawn["note"]

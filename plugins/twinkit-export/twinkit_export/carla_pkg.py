@@ -203,13 +203,26 @@ pedestrian navmesh is built from `{map}.fbx` alone (props are not obstacles in i
 {frames}
 """
 
-NO_MAP_NOTE = ("no road network (road_source=none): the package has no map and no OpenDRIVE, so no spawn points; "
-               "the twin's meshes are props (README.md)")
+#: why a package has no map, per road source (twinkit.geo.xodr.source_kind): 'none' chosen, or the scan kept none
+NO_MAP_WHY = {"none": "no road network (road_source=none)",
+              "scan": "no road network: road_source=scan kept no road from the scan (see scan_roads.png)"}
+
+
+def no_map_note(kind: str = "none") -> str:
+    """The note of a package without a map (spawn_points.json, the step's metrics): why, per road source, and
+    the fix that fits it."""
+    from twinkit.geo.xodr import source_hint
+
+    return (f"{NO_MAP_WHY.get(kind, NO_MAP_WHY['none'])}: the package has no map and no OpenDRIVE, so no spawn "
+            f"points; the twin's meshes are props (README.md); {source_hint(kind, 'no_map')}")
+
+
+NO_MAP_NOTE = no_map_note("none")
 
 README_NO_MAP = """# CARLA import package `{package}`: props only, no map
 
 Made by twinkit (`carla_package` exporter) for CARLA {carla_version} built from source, from a twin
-made **without a road network** (`road_source=none`, no OpenStreetMap or OpenDRIVE input).
+made **without a road network**: {why}.
 
 **There is no map and no OpenDRIVE (`.xodr`) in this package.** CARLA's `make import` needs an
 OpenDRIVE file beside each map's FBX (`Import.py` builds the pedestrian navmesh and the traffic
@@ -353,7 +366,7 @@ def _map_and_props(present: list[dict], class_dir: Path, map_name: str, has_map:
 
 
 def _write_spawn_files(folder: Path, package: str, map_name: str, has_map: bool, props: list[dict],
-                       spawn: list[dict]) -> None:
+                       spawn: list[dict], note: str = NO_MAP_NOTE) -> None:
     """``spawn_props.py`` (every prop's blueprint) and ``spawn_points.json`` in ``folder``."""
     spawn_list = [{"blueprint": f"static.prop.{p['name'].lower()}", "class": p["class"], "tag": p["label"],
                    "faces": p["faces"], **({"scanned": 1} if p.get("scanned") else {})} for p in props]
@@ -365,7 +378,7 @@ def _write_spawn_files(folder: Path, package: str, map_name: str, has_map: bool,
         {"map": map_name if has_map else None, "count": len(spawn),
          "frames": {"carla": "carla.Transform arguments: metres, degrees, Unreal left-handed (y = -north)",
                     "site": "site frame: x east, y north, z up; heading counter-clockwise from east"},
-         "spawn_points": spawn, **({} if has_map else {"note": NO_MAP_NOTE})}, indent=1) + "\n")
+         "spawn_points": spawn, **({} if has_map else {"note": note})}, indent=1) + "\n")
 
 
 def _class_table(present: list[dict], props: list[dict], map_names: dict, class_dir: Path, map_name: str) -> list[str]:
@@ -397,7 +410,8 @@ def _class_table(present: list[dict], props: list[dict], map_names: dict, class_
 def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path, classes: list[dict],
                   texture: Path | None, xodr_text: str | None, spawn: list[dict], use_carla_materials: bool, georef: dict,
                   decals: bool = False, python: str = "", log_path: Path | None = None,
-                  carla_version: str = "0.9.16", frames=None, scanned: list[dict] | None = None) -> tuple[Path, dict]:
+                  carla_version: str = "0.9.16", frames=None, scanned: list[dict] | None = None,
+                  no_map_source: str = "none") -> tuple[Path, dict]:
     """Write ``folder/Import/<package>/...``, ``Import/roadpainter_decals.json``, ``spawn_props.py``.
 
     ``classes``: the class-mesh manifest entries (``class_id``, ``file``, ``faces``). Returns the
@@ -405,8 +419,9 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
     package's frame already. ``frames(georef_text) -> str``: the README's frame section (default: the
     site frame). ``scanned``: the lifted movable objects as extra props (``carla_actors.scanned_props``:
     name, ply, class_id, faces, mesh), registered like the others but spawned only on request.
-    ``xodr_text=None`` (no road network, ``road_source=none``): no map at all, every class is a prop
-    (``README_NO_MAP`` says why: CARLA's import needs an OpenDRIVE beside a map's FBX).
+    ``xodr_text=None`` (no road network: ``road_source=none``, or ``no_map_source='scan'`` when the scan kept no
+    road): no map at all, every class is a prop (``README_NO_MAP`` says why: CARLA's import needs an OpenDRIVE
+    beside a map's FBX).
     """
     import shutil
 
@@ -437,7 +452,7 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
     # no map: an empty decals list (without the file, Import.py would write one with random decals)
     (folder / "Import" / DECALS_FILE).write_text(json.dumps(
         {"decals": [decals_entry(map_name, decals)] if has_map else []}, indent=2) + "\n")
-    _write_spawn_files(folder, package, map_name, has_map, props, spawn)
+    _write_spawn_files(folder, package, map_name, has_map, props, spawn, no_map_note(no_map_source))
     if has_map:
         write_place_script(folder, package, map_name, props)
     rows = _class_table(present, props, map_names, class_dir, map_name)
@@ -449,6 +464,8 @@ def write_package(folder: Path, *, package: str, map_name: str, class_dir: Path,
         movables=MOVABLES_README.format(n=len([p for p in props if p.get("scanned")]))
         if any(p.get("scanned") for p in props) else "",
         place_command=PLACE_COMMAND.format(script=PLACE_SCRIPT),
+        why={"scan": "`road_source=scan` kept no road from the scan (see `scan_roads.png`)"}.get(
+            no_map_source, "`road_source=none`, no OpenStreetMap or OpenDRIVE input"),
         table="\n".join(rows), frames=(frames or _site_frames)(f"({geo})" if geo else ""), carla_version=carla_version))
     return pkg, {"map_meshes": list(map_names.values()), "props": [p["name"] for p in props],
                  "prop_tags": {p["name"]: p["label"] for p in props}}

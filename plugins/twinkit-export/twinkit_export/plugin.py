@@ -434,14 +434,14 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
 
     params = params or CarlaPackageParams()
     t0 = time.perf_counter()
+    no_map_source = "none"
     if in_aligned_xodr is not None and _no_roads_map(Path(in_aligned_xodr)):
-        ctx.log.warning("carla_package: %s holds no roads (road_source=scan found none in the scan): the package "
-                        "has no map, as with road_source=none", Path(in_aligned_xodr).name)
-        in_aligned_xodr = None
+        no_map_source, in_aligned_xodr = "scan", None  # road_source=scan kept no road: said below
     if in_aligned_xodr is None:
         return _carla_props_only(params, ctx, in_twin_fbx=in_twin_fbx, in_class_meshes_dir=in_class_meshes_dir,
                                  out_carla_import_dir=out_carla_import_dir, out_spawn_points_json=out_spawn_points_json,
-                                 in_site_json=in_site_json, in_movables_dir=in_movables_dir, t0=t0)
+                                 in_site_json=in_site_json, in_movables_dir=in_movables_dir, t0=t0,
+                                 source=no_map_source)
     xodr = Path(in_aligned_xodr)
     text = read_opendrive(xodr)
     # the package is written in CARLA's frame (true north at the base point): carla_frame.py
@@ -484,14 +484,15 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
 
 def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_fbx: Path, in_class_meshes_dir: Path,
                       out_carla_import_dir: Path, out_spawn_points_json: Path, in_site_json: Path | None,
-                      in_movables_dir: Path | None, t0: float) -> dict:
-    """The package of a twin without a road network (``road_source=none``): no map, every class a prop.
+                      in_movables_dir: Path | None, t0: float, source: str = "none") -> dict:
+    """The package of a twin without a road network (``road_source=none``, or ``source`` 'scan': the scan kept no
+    road): no map, every class a prop.
 
     CARLA's import needs an OpenDRIVE beside a map's FBX (Import.py copies it, builds the navmesh and
     the traffic manager's binary from it; a map entry without one fails), so a map is not written;
     the README and ``spawn_points.json`` say so, and so does the log."""
     from .carla_actors import carla_actors, scanned_props, write_actor_files
-    from .carla_pkg import NO_MAP_NOTE
+    from .carla_pkg import NO_MAP_WHY, no_map_note
     from .movables.actors import load_actors
 
     map_name, package = _package_names(params, ctx)
@@ -508,17 +509,17 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
               f"mirrors y on import.")
     pkg, placed = _write_package(out, params, ctx, package=package, map_name=map_name, class_dir=Path(cs.folder),
                                  classes=cs.manifest["classes"], texture=tex, xodr_text=None, spawn=[],
-                                 georef=georef, frames=lambda g: frames, scanned=scanned)
+                                 georef=georef, frames=lambda g: frames, scanned=scanned, no_map_source=source)
     shutil.rmtree(work, ignore_errors=True)
     actors = carla_actors(mov_data.get("actors", []), None, map_name)
     if in_movables_dir is not None:
         write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data, has_map=False)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     summ = _checked_summary(out, package, None, ctx=ctx)
-    ctx.log.warning("no road network (road_source=none): the CARLA package %s has no map and no OpenDRIVE; its %d "
-                    "class meshes are props (no spawn points, no drivable lanes; %s/README.md)", package,
+    ctx.log.warning("%s: the CARLA package %s has no map and no OpenDRIVE; its %d class meshes are props (no spawn "
+                    "points, no drivable lanes; %s/README.md)", NO_MAP_WHY.get(source, NO_MAP_WHY["none"]), package,
                     len(placed["props"]), package)
-    return {"package": package, "map": None, "opendrive": False, "note": NO_MAP_NOTE, "spawn_points": 0,
+    return {"package": package, "map": None, "opendrive": False, "note": no_map_note(source), "spawn_points": 0,
             "topology_edges": 0, **_package_metrics(summ, {**placed, "map_meshes": []}, actors, out), "frame": "site",
             "seconds": round(time.perf_counter() - t0, 2)}
 

@@ -20,6 +20,10 @@ from twinkit import InputError
 from .mesh2d import Grid
 
 
+class NoOverlap(InputError):
+    """The fit found too few road cross-sections on the mesh's road surface (the fix depends on the source)."""
+
+
 @dataclass
 class Sections:
     c: np.ndarray  # (n, 2) carriageway centres, site frame
@@ -309,8 +313,8 @@ def fit(sec: Sections, mask: np.ndarray, grid: Grid, *, fit_scale: bool = False,
     for it in range(1, iterations + 1):
         off, ok, wid = _sections_found(sec, tf, mask, grid, margin_m, width_tol_m)
         if ok.sum() < 6:
-            raise InputError(f"only {int(ok.sum())} road cross-sections found the road surface in the mesh; the network "
-                             "and the mesh do not overlap (check the georeference, or raise align search_m)")
+            raise NoOverlap(f"only {int(ok.sum())} road cross-sections found the road surface in the mesh; the network "
+                            "and the mesh do not overlap")
         M, rhs, r, k, groups = _design(sec, tf, ok, off, wid, about, grid, model, fit_scale, extra)
         w = _weights(r, it, huber_m)
         x, degenerate = _solve_weighted(M, rhs, w, k)
@@ -432,21 +436,27 @@ def no_roads_alignment() -> dict:
             "no_roads": True, "definition": DEFINITION, "note": "no roads in the map: nothing to align"}
 
 
-def fit_or_keep(sec: Sections, mask: np.ndarray, grid: Grid, *, from_scan: bool, log, search_m: float,
+def fit_or_keep(sec: Sections, mask: np.ndarray, grid: Grid, *, source: str, log, search_m: float,
                 **fit_kw) -> FitResult:
-    """``fit`` of the sections to the road mask; a network drawn from this very mesh (``from_scan``) is not
-    searched for and keeps the identity unless a rigid move fits better, and when the fit finds no road
-    surface at all it is kept in place (``kept_identity``, residuals NaN) instead of failing the run.
+    """``fit`` of the sections to the road mask; a network drawn from this very mesh (``source`` 'scan', see
+    twinkit.geo.xodr.source_kind) is not searched for and keeps the identity unless a rigid move fits better,
+    and when the fit finds no road surface at all it is kept in place (``kept_identity``, residuals NaN) instead
+    of failing the run. A network of another source that finds no road surface fails with the fix that fits its
+    source (``source_hint(source, "no_overlap")``).
 
     A network from the scan is already where the mesh's roads are: a fit against a cruder road surface (the
     ground level, which takes ramped sidewalks too) can only move it off; and that the cruder surface does not
     find it is no reason to stop the run (paths drawn on paved-looking ground the ground test does not take)."""
+    from twinkit.geo.xodr import source_hint
+
+    from_scan = source == "scan"
     try:
         return fit(sec, mask, grid, search_m=0.0 if from_scan else search_m, keep_identity=from_scan, **fit_kw)
-    except InputError as exc:
+    except NoOverlap as exc:
         if not from_scan:
-            raise
-        log.warning("alignment: the scan's own network is kept in place; its residual is not measured (%s)", exc)
+            raise InputError(f"{exc} ({source_hint(source, 'no_overlap')})") from None
+        log.warning("alignment: %s; the scan's own network needs no alignment and is kept in place (its residual "
+                    "is not measured)", exc)
         nan = float("nan")
         return FitResult(Transform2D(about=tuple(sec.c.mean(0)) if len(sec.c) else (0.0, 0.0)), nan, nan,
                          len(sec.c), 0, 0, False, kept_identity=True)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from twinkit import InputError, hookimpl
 from twinkit import artefacts as A
+from twinkit.geo.xodr import SOURCE_NAMES, source_hint, source_kind
 from twinkit.geo.xodr import from_scan as from_scan_tag
 
 from . import __version__
@@ -190,8 +191,9 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
     sec = sample_sections(xodr_text, 1.0)
     # a network drawn from this very mesh (road_source=scan) is kept where it was drawn: the fit is measured,
     # not applied, and the kerb refinement is not run (the scan's lanes keep curb_clearance_m from the edges)
-    from_scan = from_scan_tag(xodr_text)
-    res = fit_or_keep(sec, road_mask(mesh.vertices, mesh.faces, fidx, grid), grid, from_scan=from_scan, log=ctx.log,
+    source = source_kind(xodr_text)
+    from_scan = source == "scan"
+    res = fit_or_keep(sec, road_mask(mesh.vertices, mesh.faces, fidx, grid), grid, source=source, log=ctx.log,
                       search_m=params.search_m, fit_scale=params.fit_scale, yaw_range_deg=params.yaw_range_deg,
                       huber_m=params.huber_m, margin_m=params.margin_m, model=params.model)
     kerb, offsets = None, {}
@@ -204,8 +206,9 @@ def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_me
         ctx.log.info("alignment: the network was derived from this scan (road_source=scan): kept in place")
     elif res.kept_identity:
         ctx.log.info("alignment: no rigid move fits the road surface better than the network as it is: kept in place")
-    if res.degenerate:
-        ctx.log.warning("alignment poorly constrained (parallel roads only?): check alignment.json")
+    if res.degenerate and not from_scan:  # the scan's own network is not moved: nothing to constrain
+        ctx.log.warning("alignment of the network from %s poorly constrained (parallel roads only?): check "
+                        "alignment.json", SOURCE_NAMES[source])
     out_alignment_json.write_text(json.dumps(doc, indent=1))
     ctx.log.info("alignment: yaw %.3f deg, t (%.3f, %.3f) m, dz %.3f m; residual %.3f m (was %.3f) from %s",
                  doc["yaw_deg"], doc["tx_m"], doc["ty_m"], dz, res.rmse_after, res.rmse_before, how)
@@ -465,10 +468,11 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                  doc["changed_area_m2"], doc["transitions"], doc["disagreement_geometry_m2"],
                  100 * doc["disagreement_fraction"], len(doc["vetoed_lanes"]))
     if ev.network_vetoed:
-        ctx.log.warning("the network's driving lanes disagree with the scan's ground over %.0f %% of their surface "
-                        "(more than max_network_disagreement %.0f %%): a wrong or outdated OSM, or a failed alignment? "
-                        "No label changed; see road_evidence.png", 100 * ev.network_disagreement,
-                        100 * params.max_network_disagreement)
+        kind = source_kind(text)
+        ctx.log.warning("the driving lanes of the network from %s disagree with the scan's ground over %.0f %% of "
+                        "their surface (more than max_network_disagreement %.0f %%): %s. No label changed; see "
+                        "road_evidence.png", SOURCE_NAMES[kind], 100 * ev.network_disagreement,
+                        100 * params.max_network_disagreement, source_hint(kind, "misfit"))
     return metrics
 
 

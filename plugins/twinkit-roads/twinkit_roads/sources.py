@@ -194,6 +194,8 @@ def opendrive_source(params, ctx, *, out_opendrive_xodr: Path, out_reprojection_
                      in_xodr: Path | None = None) -> dict:
     """An existing OpenDRIVE map (``road_source.path``, else the site input ``xodr``) moved from its
     ``<geoReference>`` into the site frame (reproject.py); ``osm_to_opendrive`` then checks it."""
+    from twinkit.geo.xodr import OPENDRIVE_TAG, tag_source
+
     from .reproject import to_site_frame, write_report
 
     src = Path(params.path).expanduser() if params.path else in_xodr
@@ -202,7 +204,8 @@ def opendrive_source(params, ctx, *, out_opendrive_xodr: Path, out_reprojection_
                          "road_source.path=/path/to/map.xodr")
     frame = SiteFrame.from_site(ctx.site)
     text, rep = to_site_frame(Path(src), frame, params, ctx.log)
-    out_opendrive_xodr.write_text(text, encoding="utf-8")
+    # tagged, so that later steps name the file, not OSM, when the network does not fit (source_kind)
+    out_opendrive_xodr.write_text(tag_source(text, OPENDRIVE_TAG), encoding="utf-8")
     write_report(rep, out_reprojection_json)
     return {"source": str(src), "residual_max_m": round(rep["residual_max_m"], 6),
             "scale": rep["similarity"]["scale"], "rotation_deg": rep["similarity"]["rotation_deg"],

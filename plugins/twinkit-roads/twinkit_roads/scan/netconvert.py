@@ -89,17 +89,9 @@ def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=
 
 def mark_source(xodr_text: str) -> str:
     """Tag the header so later steps (and people) know the map came from the scan."""
-    from twinkit.geo.xodr import SCAN_TAG as tag, from_scan
+    from twinkit.geo.xodr import SCAN_TAG, from_scan, tag_source
 
-    if from_scan(xodr_text):
-        return xodr_text
-    i = xodr_text.find("<header")
-    j = xodr_text.find(">", i)
-    if i < 0 or j < 0:
-        return xodr_text
-    if xodr_text[j - 1] == "/":  # <header .../>
-        return xodr_text[:j - 1] + ">" + tag + "</header>" + xodr_text[j + 1:]
-    return xodr_text[:j + 1] + "\n        " + tag + xodr_text[j + 1:]
+    return xodr_text if from_scan(xodr_text) else tag_source(xodr_text, SCAN_TAG)
 
 
 def empty_map(proj: str) -> str:
