@@ -201,6 +201,17 @@ def _unknown_crs(p: Project) -> list[str]:
     return ["site=g", "recipe=chain"]
 
 
+def _no_georeference(site: str):
+    """A cloud in a local frame on a site without ``site.crs`` / ``site.base_point`` and the default roads (no
+    OSM: from the scan), which need a georeference (ran 11 steps, then "site has no georeference")."""
+    def setup(p: Project) -> list[str]:
+        p.site("n", f"name: t\n{site}")
+        p.recipe("roads", MESH[1:] + ["{id: texture, uses: step/bake_texture}", "{id: fetch_roads, uses: road_source}"],
+                 extra="defaults:\n  - /reconstructor: poisson\n  - /road_source: file\n  - _self_\n")
+        return ["site=n", "recipe=roads", f"site.inputs.cloud={_street(p.tmp, 'street.ply')}"]
+    return setup
+
+
 SETUPS = {
     "depth-30": _param("reconstructor.depth=30"),
     "depth-0": _param("reconstructor.depth=0"),
@@ -234,6 +245,8 @@ SETUPS = {
     "cloud-empty-las": lambda p: _cloud_case(p, _empty_las),
     "site-crs-geographic": _geographic_site,
     "site-crs-unknown": _unknown_crs,
+    "site-no-georeference-roads": _no_georeference(""),
+    "site-no-crs-suggests-its-utm-zone": _no_georeference("base_point: {lat: 1.2903, lon: 103.8519, alt: 10}\n"),
 }
 
 CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative", "target-faces-0", "max-dist-negative",

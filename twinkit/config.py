@@ -135,12 +135,13 @@ def _check_site(site: dict, site_file: str | None = None) -> None:
     where = site_file or f"the site file of site '{name}' (conf/site/<site>.yaml)"
     if site.get("crs"):
         from twinkit.geo.crs import parse_crs
+        from twinkit.geo.frame import crs_example
 
         try:
             parse_crs(str(site["crs"]))
         except Exception as exc:  # noqa: BLE001 - pyproj's CRSError: an unknown code or unparsable text
             raise ConfigError(f"{where}: site.crs {site['crs']} is not a known CRS ({str(exc).splitlines()[0][:160]}); "
-                              f"give an existing EPSG code in metres, e.g. EPSG:3067, or a PROJ string") from None
+                              f"give an existing EPSG code in metres{crs_example(site)} or a PROJ string") from None
     bp = site.get("base_point")
     if bp is None:
         return

@@ -59,14 +59,14 @@ class SiteFrame:
         if not crs_in or not bp:
             missing = [k for k, v in (("crs", crs_in), ("base_point", bp)) if not v]
             raise InputError(
-                f"site '{name}' has no georeference (missing {', '.join(missing)}): set site.crs (e.g. EPSG:3067) and "
+                f"site '{name}' has no georeference (missing {', '.join(missing)}): set site.crs{crs_example(s)} and "
                 f"site.base_point ({{lat, lon, alt}} or projected {{x, y, z}}) in conf/site/{name}.yaml"
             )
         try:
             crs = parse_crs(str(crs_in))
         except CRSError as exc:
             raise InputError(f"site '{name}': unknown CRS '{crs_in}' ({str(exc).splitlines()[0]}); "
-                             "give an EPSG code such as EPSG:3067 or a PROJ string") from None
+                             f"give an EPSG code{crs_example(s)} or a PROJ string") from None
         bp = dict(bp)
         horiz = horizontal(crs)
         ll = base_point_lonlat(bp, horiz)
@@ -256,6 +256,40 @@ class SiteFrame:
                 "base_point_projected": {"x": self.easting, "y": self.northing, "z": self._z_projected()},
                 "vertical_datum": self.vertical_datum,
                 "frame": "local = (projected - base_point_projected) * unit_m, z = height - alt; x east, y north, z up"}
+
+
+def crs_example(site: Mapping[str, Any] | None) -> str:
+    """A CRS that fits the site's place, as ``" (e.g. EPSG:32648, WGS 84 / UTM zone 48N at the base point)"``,
+    when the base point gives a latitude and longitude; ``""`` when no place is known (no CRS is suggested
+    then: one far from the site would be wrong)."""
+    from twinkit.geo.crs import utm_epsg
+
+    bp = site_dict(site).get("base_point")
+    try:
+        lat, lon = float(bp["lat"]), float(bp["lon"])  # type: ignore[index]
+    except (TypeError, KeyError, ValueError):
+        return ""
+    if not (-80.0 <= lat <= 84.0 and -180.0 <= lon <= 180.0):
+        return ""  # outside UTM's range (polar) or the globe: no suggestion
+    code, zone = utm_epsg(lat, lon)
+    return f" (e.g. EPSG:{code}, WGS 84 / UTM {zone} at the base point)"
+
+
+def georeference_problem(site: Mapping[str, Any] | None, needs: str, instead: str) -> str | None:
+    """One line naming the site keys to set when the site has no georeference (``site.crs``, ``site.base_point``)
+    and ``needs`` (e.g. "roads from the scan (road_source=scan)") will need one, with ``instead`` (the way to do
+    without, e.g. "or road_source=none for a twin without roads"); None when both keys are set (whether they
+    are valid is checked where the config is read)."""
+    s = site_dict(site)
+    missing = [f"site.{k}" for k in ("crs", "base_point") if not s.get(k)]
+    if not missing:
+        return None
+    name = s.get("name", "?")
+    todo = ([f"site.crs{crs_example(s)}"] if "site.crs" in missing else []) + (
+        ["site.base_point ({lat, lon, alt} or projected {x, y, z})"] if "site.base_point" in missing else [])
+    return (f"{' and '.join(missing)}: not set (site '{name}' has no georeference), and {needs} will need "
+            f"{'them' if len(missing) > 1 else 'it'}; set {' and '.join(todo)} in conf/site/{name}.yaml or on the "
+            f"command line, {instead}")
 
 
 def check_bbox(south: float, west: float, north: float, east: float) -> tuple[float, float, float, float]:

@@ -543,5 +543,7 @@ def twinkit_register_exporters(register):
     register("fbx", export_fbx, params=FbxParams, description="FBX via Blender (bpy): CARLA names, metres, Z up")
     register("usd", export_usd, params=UsdParams, description="USD via usd-core: prims per class, semantics, geo")
     register("gltf", export_gltf, params=GltfParams, description="GLB for browsers: photo texture; segmentation as attribute and variant")
-    register("carla_package", export_carla_package, params=CarlaPackageParams,
+    from .preflight import carla_package_preflight
+
+    register("carla_package", export_carla_package, params=CarlaPackageParams, preflight=carla_package_preflight,
              description="CARLA 0.9.16 import package with OpenDRIVE and spawn points")

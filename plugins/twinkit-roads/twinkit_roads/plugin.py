@@ -478,7 +478,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
 
 @hookimpl
 def twinkit_register_road_sources(register):
-    from .preflight import file_preflight, osm_api_preflight, overpass_preflight
+    from .preflight import file_preflight, opendrive_preflight, osm_api_preflight, overpass_preflight, scan_preflight
 
     # the default road source; without an OSM file that covers the site it gives way to the scan (issue 28)
     register("file", file_source, params=FileSourceParams, version=VERSION, preflight=file_preflight,
@@ -491,10 +491,10 @@ def twinkit_register_road_sources(register):
              description="Overpass API query for highways by box around the base point (cached)")
     from .scan import ScanSourceParams
 
-    register("scan", scan_source, params=ScanSourceParams, version=VERSION,
+    register("scan", scan_source, params=ScanSourceParams, version=VERSION, preflight=scan_preflight,
              description="roads derived from the scan itself (no OSM): the labelled road surface, curbs and "
                          "sidewalks of the textured mesh -> lanes -> OpenDRIVE (scan_roads.json, scan_roads.png)")
-    register("opendrive", opendrive_source, params=OpenDriveSourceParams, version=VERSION,
+    register("opendrive", opendrive_source, params=OpenDriveSourceParams, version=VERSION, preflight=opendrive_preflight,
              description="an existing OpenDRIVE map (site.inputs.xodr or road_source.path) moved from its "
                          "geoReference into the site frame")
 

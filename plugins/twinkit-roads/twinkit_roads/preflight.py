@@ -16,6 +16,27 @@ CONNECT_TIMEOUT_S = 3.0
 NO_ROADS_HINT = "or road_source=none for a twin without roads"
 
 
+def georeference_preflight(name: str, needs: str):
+    """The preflight of a road source that places its network by the site's georeference: refuses a site
+    without ``site.crs`` / ``site.base_point`` before the first step (was: after the meshing and the
+    segmentation, when the source itself met it)."""
+    def check(site, params, inputs) -> list[str]:
+        from twinkit.geo.frame import georeference_problem
+
+        problem = georeference_problem(site, f"road_source={name} ({needs})", NO_ROADS_HINT)
+        return [problem] if problem else []
+
+    check.__doc__ = f"road_source={name}: the site has a georeference."
+    return check
+
+
+scan_preflight = georeference_preflight("scan", "roads derived from the scan, written in the site's geoReference")
+opendrive_preflight = georeference_preflight("opendrive", "the OpenDRIVE file moved from its geoReference into "
+                                                          "the site frame")
+_osm_georeference = georeference_preflight("file", "an OSM extract projected into the site frame, or without one "
+                                                            "the roads derived from the scan")
+
+
 def osm_file_bbox(path: Path) -> tuple[float, float, float, float] | None:
     """(south, west, north, east) of an OSM file: the header's box, else its nodes' box (files up to
     SCAN_MAX_BYTES); None when unknown."""
@@ -47,8 +68,12 @@ def _site_box(site, radius_m: float):
 
 
 def file_preflight(site, params, inputs) -> list[str]:
-    """``road_source=file``: an OSM file is given, exists and covers the site's box."""
+    """``road_source=file``: the site has a georeference, an OSM file is given, exists and covers the site's box."""
     from .sources import site_radius
+
+    no_georef = _osm_georeference(site, params, inputs)
+    if no_georef:
+        return no_georef
 
     if params.path:
         src = Path(params.path).expanduser()
@@ -121,7 +146,12 @@ def _download_preflight(name: str, url: str, method: str, request: dict, params)
 
 
 def overpass_preflight(site, params, inputs) -> list[str]:
+    """``road_source=overpass``: the site has a georeference; a cached answer or a server that answers."""
     from .sources import OVERPASS_URL, _bbox, overpass_query
+
+    no_georef = georeference_preflight("overpass", "a download by box around the base point")(site, params, inputs)
+    if no_georef:
+        return no_georef
 
     url = params.url or OVERPASS_URL
     return _download_preflight("overpass", url, "POST",
@@ -129,7 +159,12 @@ def overpass_preflight(site, params, inputs) -> list[str]:
 
 
 def osm_api_preflight(site, params, inputs) -> list[str]:
+    """``road_source=osm_api``: the site has a georeference; a cached answer or a server that answers."""
     from .sources import OSM_API_URL, _bbox
+
+    no_georef = georeference_preflight("osm_api", "a download by box around the base point")(site, params, inputs)
+    if no_georef:
+        return no_georef
 
     s, w, n, e = _bbox(params, site)
     url = params.url or OSM_API_URL
