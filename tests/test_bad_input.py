@@ -251,7 +251,8 @@ SETUPS = {
 
 CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative", "target-faces-0", "max-dist-negative",
                 "backend-unknown", "recipe-param-out-of-range", "lat-not-a-number", "lat-out-of-range",
-                "base-point-outside-crs-area", "site-crs-unknown",
+                "base-point-outside-crs-area", "site-crs-unknown", "site-no-georeference-roads",
+                "site-no-crs-suggests-its-utm-zone",
                 "recipe-callbacks", "recipe-callbacks-multirun", "site-target", "local-launcher"}
 
 

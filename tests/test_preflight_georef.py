@@ -23,6 +23,7 @@ def test_a_site_without_georeference_is_refused_before_the_first_step(project):
     err = [ln for ln in r.err.splitlines() if ln.startswith("twinkit: error:")]
     assert len(err) == 1 and "site.crs and site.base_point" in err[0] and "road_source=none" in err[0], r.err
     assert "EPSG:" not in err[0]  # no place known: no CRS suggested
+    assert err[0].count("site.crs and site.base_point: not set") == 1  # file and its fallback scan: said once
     assert not [d for d in project.ws.iterdir() if d.name[:2].isdigit()], "a step ran"
     assert took < 60, took
 
@@ -51,7 +52,7 @@ def test_every_road_source_needs_a_georeference():
                         ("overpass", overpass_preflight), ("osm_api", osm_api_preflight)):
         found = check(SINGAPORE, None, {})
         assert len(found) == 1 and found[0].startswith("site.crs: not set"), (name, found)
-        assert f"road_source={name}" in found[0] and "road_source=none" in found[0] and "EPSG:32648" in found[0]
+        assert "the road network" in found[0] and "road_source=none" in found[0] and "EPSG:32648" in found[0]
     assert scan_preflight({**SINGAPORE, "crs": "EPSG:32648"}, None, {}) == []
 
 
@@ -64,3 +65,15 @@ def test_the_carla_package_needs_a_georeference():
     assert "the CARLA package (frame=carla" in found[0] and "{frame: site}" in found[0]
     assert carla_package_preflight({"name": "t"}, CarlaPackageParams(frame="site"), {}) == []
     assert carla_package_preflight({**SINGAPORE, "crs": "EPSG:32648"}, CarlaPackageParams(), {}) == []
+
+
+def test_an_empty_osm_input_and_no_georeference_name_both_fixes(project):
+    """A site whose OSM is left empty ('???') and without a georeference: the default road_source=file cannot
+    serve it, nor its fallback scan; was only "needs input 'osm'", and the georeference came after the work."""
+    argv = SETUPS["site-no-georeference-roads"](project)
+    project.site("n", "name: t\ninputs:\n  osm: ???\n")
+    r = project.run(*argv, env=project.env(TWINKIT_PLUGINS="builtins,pointcloud,roads"))
+    assert r.rc == 2, r.text[-2000:]
+    err = [ln for ln in r.err.splitlines() if ln.startswith("twinkit: error:")]
+    assert len(err) == 1 and "needs input 'osm'" in err[0] and "nor its fallback road_source=scan" in err[0], r.err
+    assert "site.crs and site.base_point: not set" in err[0] and "road_source=none" in err[0]

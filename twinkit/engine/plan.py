@@ -336,9 +336,15 @@ def _fallback_if_needed(plugin: Plugin, kind: str, name: str, spec: StepSpec, no
             alt = st.registry.get(kind, str(plugin.fallback))
         except TwinkitError as exc:
             raise ConfigError(f"{where}: {why}, and its fallback: {exc}") from None
-        # a fallback that cannot serve the site either: the chosen plugin stays, with its own error
-        if _cannot_serve(alt, spec, {}, st.produced, st.site, st.site_inputs, st.site_name, where, st.base_dir):
-            alt = None
+        # a fallback that cannot serve the site either: one error naming both fixes (the same problem once),
+        # before the first step (was: the chosen plugin's own error only, e.g. "needs input 'osm'" when the
+        # scan in its place would have needed a georeference too)
+        alt_why = _cannot_serve(alt, spec, {}, st.produced, st.site, st.site_inputs, st.site_name, where, st.base_dir)
+        if alt_why:
+            if alt_why == why:
+                raise ConfigError(f"{where}: {why}")
+            raise ConfigError(f"{where}: {kind}={name} cannot serve this site ({why}), nor its fallback "
+                              f"{kind}={alt.name} ({alt_why})")
     if alt is None:
         return plugin
     # the site inputs the replaced plugin read: left empty ('???') they stop nothing, and

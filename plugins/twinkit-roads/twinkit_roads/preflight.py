@@ -16,25 +16,19 @@ CONNECT_TIMEOUT_S = 3.0
 NO_ROADS_HINT = "or road_source=none for a twin without roads"
 
 
-def georeference_preflight(name: str, needs: str):
-    """The preflight of a road source that places its network by the site's georeference: refuses a site
-    without ``site.crs`` / ``site.base_point`` before the first step (was: after the meshing and the
-    segmentation, when the source itself met it)."""
-    def check(site, params, inputs) -> list[str]:
-        from twinkit.geo.frame import georeference_problem
+def georeference_preflight(site, params, inputs) -> list[str]:
+    """Every road source places its network by the site's georeference: a site without ``site.crs`` /
+    ``site.base_point`` is refused before the first step (was: after the meshing and the segmentation, when
+    the source met it). The same line for every source, so that the default ``file`` and its fallback
+    ``scan`` give it once."""
+    from twinkit.geo.frame import georeference_problem
 
-        problem = georeference_problem(site, f"road_source={name} ({needs})", NO_ROADS_HINT)
-        return [problem] if problem else []
-
-    check.__doc__ = f"road_source={name}: the site has a georeference."
-    return check
+    problem = georeference_problem(site, "the road network (every road_source places it by the georeference)",
+                                   NO_ROADS_HINT)
+    return [problem] if problem else []
 
 
-scan_preflight = georeference_preflight("scan", "roads derived from the scan, written in the site's geoReference")
-opendrive_preflight = georeference_preflight("opendrive", "the OpenDRIVE file moved from its geoReference into "
-                                                          "the site frame")
-_osm_georeference = georeference_preflight("file", "an OSM extract projected into the site frame, or without one "
-                                                            "the roads derived from the scan")
+scan_preflight = opendrive_preflight = georeference_preflight
 
 
 def osm_file_bbox(path: Path) -> tuple[float, float, float, float] | None:
@@ -71,7 +65,7 @@ def file_preflight(site, params, inputs) -> list[str]:
     """``road_source=file``: the site has a georeference, an OSM file is given, exists and covers the site's box."""
     from .sources import site_radius
 
-    no_georef = _osm_georeference(site, params, inputs)
+    no_georef = georeference_preflight(site, params, inputs)
     if no_georef:
         return no_georef
 
@@ -149,7 +143,7 @@ def overpass_preflight(site, params, inputs) -> list[str]:
     """``road_source=overpass``: the site has a georeference; a cached answer or a server that answers."""
     from .sources import OVERPASS_URL, _bbox, overpass_query
 
-    no_georef = georeference_preflight("overpass", "a download by box around the base point")(site, params, inputs)
+    no_georef = georeference_preflight(site, params, inputs)
     if no_georef:
         return no_georef
 
@@ -162,7 +156,7 @@ def osm_api_preflight(site, params, inputs) -> list[str]:
     """``road_source=osm_api``: the site has a georeference; a cached answer or a server that answers."""
     from .sources import OSM_API_URL, _bbox
 
-    no_georef = georeference_preflight("osm_api", "a download by box around the base point")(site, params, inputs)
+    no_georef = georeference_preflight(site, params, inputs)
     if no_georef:
         return no_georef
 
