@@ -174,6 +174,7 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
 
     from twinkit.config import check_config
     from twinkit.hydra_glue import compose, parse_overrides, plain, sweep_jobs
+    from twinkit.manifest import env_secrets
     from twinkit.plugins import get_registry
 
     jobs = sweep_jobs(conf_dir, overrides)
@@ -181,6 +182,7 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
         return  # Hydra reports it in its own words
     registry = get_registry()
     composed: dict[tuple, dict] = {}  # one composition per set of group choices; plain values are laid over it
+    secrets: dict[str, str] = {}
     for job in jobs:
         job = [o for o in job if not o.lstrip("+~").startswith("hydra")]
         try:
@@ -195,11 +197,12 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
             cfg = compose(conf_dir, list(rest) + [f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}"
                                                   for k, v in values.items()])
             composed[rest] = plain(cfg)
+            secrets.update(env_secrets(plain(cfg, resolve=False)))
             container = composed[rest]
         else:
             container = _with_values(composed[rest], values)
         try:
-            check_config(container, registry)
+            check_config(container, registry, secrets=secrets)
         except ConfigError as exc:
             raise ConfigError(f"{exc} (sweep job {' '.join(job)})") from None
 
@@ -224,7 +227,10 @@ def _run_single(conf_dir: Path, overrides: list[str]) -> int:
     """One run, composed once with Hydra's compose API (Hydra's own entry composes twice)."""
     from twinkit.hydra_glue import compose, set_run_config
 
+    from twinkit.config import check_composed_site_name
+
     cfg = compose(conf_dir, overrides, hydra_config=True)
+    check_composed_site_name(cfg)  # the run folder is made under the site's name
     set_run_config(cfg)
     run_dir = Path(cfg.hydra.run.dir)
     _check_writable([f"engine.outputs_dir={cfg.engine.outputs_dir}"])  # wherever the composed config puts it
@@ -254,6 +260,13 @@ def _main(argv: list[str]) -> int:
         return _run_hydra(argv)
     except TwinkitError as exc:
         return say_error(str(exc), exc.exit_code)
+    except Exception as exc:  # a Hydra/OmegaConf config error met outside composition: the same one line
+        from twinkit.hydra_glue import as_config_error
+
+        err = as_config_error(exc)
+        if err is None:
+            raise
+        return say_error(str(err), err.exit_code)
     except KeyboardInterrupt as exc:
         from twinkit.signals import Terminated
 

@@ -17,7 +17,7 @@ def _compose(overrides: list[str]):
     use_libyaml()
     conf_dir = find_config_dir()
     overrides = open_site_inputs(overrides)
-    check_configs_are_data(conf_dir)
+    check_configs_are_data(conf_dir, overrides)
     check_choices(overrides, conf_dir)
     register_configs(get_registry())
     cfg = compose(conf_dir, overrides)
@@ -26,8 +26,9 @@ def _compose(overrides: list[str]):
     container = plain(cfg)
     container[GIVEN_KEY] = given_params(container, overrides)
     from twinkit.config import check_config
+    from twinkit.manifest import env_secrets
 
-    check_config(container, get_registry())
+    check_config(container, get_registry(), secrets=env_secrets(plain(cfg, resolve=False)))
     return conf_dir, container
 
 

@@ -158,10 +158,15 @@ def set_run_config(cfg) -> None:
 
 
 def plain(node, resolve: bool = True) -> dict:
-    """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one."""
+    """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one. A value
+    that does not resolve (an unset ``${oc.env:VAR}``, a missing ``${key}``) is a one-line ConfigError."""
     from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
 
-    out = OmegaConf.to_container(node, resolve=resolve)
+    try:
+        out = OmegaConf.to_container(node, resolve=resolve)
+    except OmegaConfBaseException as exc:
+        raise composition_error(exc) from None
     if not isinstance(out, dict):
         raise TypeError(f"not a mapping config node: {type(out).__name__}")
     return out
@@ -179,9 +184,19 @@ def without_hydra(cfg):
 
 
 def composition_error(exc: Exception) -> ConfigError:
-    """Hydra/OmegaConf composition errors, folded into one line."""
+    """Hydra/OmegaConf composition errors, folded into one line (an unset ``${oc.env:VAR}`` named with its key)."""
     import re
 
+    env = re.search(r"Environment variable '([^']+)' not found", str(exc))
+    if env:
+        key = getattr(exc, "full_key", None) or "the config"
+        return ConfigError(f"{key}: the environment variable {env.group(1)} is not set (the config reads it with "
+                           f"${{oc.env:{env.group(1)}}}); set it (export {env.group(1)}=...) or give {key} a value")
+    from omegaconf.errors import InterpolationResolutionError
+
+    if isinstance(exc, InterpolationResolutionError) and getattr(exc, "full_key", None):
+        return ConfigError(f"{exc.full_key}: {str(exc).splitlines()[0].rstrip('.')}; fix the ${{...}} reference "
+                           f"in its config file (twinkit --cfg job shows the composed config)")
     # Hydra's MissingConfigException lists the options in its message: say it as twinkit says an unknown plugin
     m = re.search(r"Could not find '([\w/]+)/([^']+)'\s*\nAvailable options in '[^']+':\s*\n(.*?)\nConfig search path",
                   str(exc), re.S)
@@ -199,6 +214,12 @@ def composition_error(exc: Exception) -> ConfigError:
             if t and not t.startswith(("full_key", "object_type", "reference_type", "To append", "Set the environment")):
                 lines.append(t.rstrip("."))
     return ConfigError(". ".join(dict.fromkeys(lines)))
+
+
+def as_config_error(exc: BaseException) -> ConfigError | None:
+    """A Hydra or OmegaConf configuration error (one raised outside :func:`compose`, e.g. reading a value of
+    the composed config) as the one-line ConfigError a composition error gives; None for any other error."""
+    return composition_error(exc) if isinstance(exc, Exception) and _is_composition_error(exc) else None
 
 
 def _is_composition_error(exc: BaseException) -> bool:

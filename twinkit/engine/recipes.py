@@ -15,6 +15,7 @@ from pathlib import Path
 
 from twinkit.engine.base import EngineBase
 from twinkit.engine.records import read_record
+from twinkit.jsonio import write_text
 
 log = logging.getLogger("twinkit")
 
@@ -99,4 +100,4 @@ class RecipesMixin(EngineBase):
                 pass
             if restored:
                 log.info("recipe '%s' folders (%d) moved back from %s", name, restored, back)
-        (self.workspace / MARKER).write_text(name + "\n")
+        write_text(self.workspace / MARKER, name + "\n")  # a link there is replaced, not followed
