@@ -59,7 +59,9 @@ def _job(cfg) -> int:
         return _job_body(cfg)
     except TwinkitError as exc:
         if is_multirun():
-            raise job_error(f"twinkit: error: {exc}", exc.exit_code) from None
+            from twinkit.manifest import redact
+
+            raise job_error(f"twinkit: error: {redact(str(exc))}", exc.exit_code) from None
         _STATE["error"] = exc
         return exc.exit_code
     except KeyboardInterrupt as exc:

@@ -74,13 +74,14 @@ def _prepare(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
     from twinkit.config import find_config_dir
     from twinkit.engine import GIVEN_KEY, given_params
     from twinkit.hydra_glue import plain, without_hydra
-    from twinkit.manifest import env_secrets
+    from twinkit.manifest import env_secrets, remember_secrets
     from twinkit.plugins import get_registry
 
     conf = Path(conf_dir or find_config_dir())
     cfg = without_hydra(cfg)
     container = plain(cfg)
     secrets = env_secrets(plain(cfg, resolve=False))
+    remember_secrets(secrets)  # the log, the step records, the store and the plugins redact them too
     container[GIVEN_KEY] = given_params(container, overrides)
     site = container.get("site") or {}
     engine_cfg = container["engine"]
@@ -249,11 +250,14 @@ def _job_threads(concurrent_jobs: int) -> int | None:
 
 
 def _setup_logging(run_log: Path | None) -> None:
+    from twinkit.manifest import RedactingFilter
+
     root = logging.getLogger("twinkit")
     root.setLevel(logging.DEBUG)
     for h in list(root.handlers):
         root.removeHandler(h)
     console = logging.StreamHandler(sys.stderr)
+    console.addFilter(RedactingFilter())
     console.setLevel(logging.INFO)
     console.setFormatter(logging.Formatter("%(message)s"))
     root.addHandler(console)
@@ -262,6 +266,7 @@ def _setup_logging(run_log: Path | None) -> None:
         fh = logging.FileHandler(run_log)
         fh.setLevel(logging.DEBUG)
         fh.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+        fh.addFilter(RedactingFilter())
         root.addHandler(fh)
     root.propagate = False
     logging.raiseExceptions = False  # a full disk under run.log must not print logging's own tracebacks

@@ -120,7 +120,7 @@ class WorkspaceMixin(EngineBase):
             "inputs": {k: (str(v) if not isinstance(v, list) else [str(x) for x in v]) for k, v in in_paths.items()},
             "files": stored.get("files", {}),
             "artefacts": stored.get("artefacts", {}),
-            "metrics": stored.get("metrics", {}),
+            "metrics": self._redacted(stored.get("metrics", {})),
             "duration_s": stored.get("duration_s"),
             "peak_rss_mb": stored.get("peak_rss_mb"),
             "status": status,
