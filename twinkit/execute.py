@@ -176,7 +176,9 @@ def _finish(run: _Run, status: str, error: str | None) -> str:
     manifest = run.manifest(status, error)
     failed = _failed_step(engine, status, error)
     if failed is not None:
-        manifest["failed_step"] = failed
+        from twinkit.manifest import redact
+
+        manifest["failed_step"] = redact(failed, run.secrets)
     engine.hashes.close()
     try:
         write_manifest(run_dir / "manifest.json", manifest)
