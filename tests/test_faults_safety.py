@@ -69,6 +69,8 @@ def test_a_token_in_the_server_url_never_reaches_a_file_or_the_terminal(project,
     # a failure names the server in its one line, the manifest and run.log: the token is not in any
     (project.conf / "recipe" / "osm.yaml").write_text(
         (project.conf / "recipe" / "osm.yaml").read_text().replace("/api/interpreter", "/missing"))
+    s = project.run("status", "site=o", "recipe=osm", env=env)  # its reason names the changed URL
+    assert s.rc == 0 and hidden in s.out and TOKEN not in s.text, s.text
     r = project.run("site=o", "recipe=osm", env=env)
     assert r.rc == 2 and "refused the request" in r.err and hidden in r.err, r.text
     assert TOKEN not in r.text, r.text

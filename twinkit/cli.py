@@ -122,6 +122,7 @@ def _run_hydra(argv: list[str]) -> int:
         return _run_single(conf_dir, overrides)
     if "-m" in argv or "--multirun" in argv:
         _precheck_sweep(conf_dir, overrides)
+    _check_given_site_name(overrides)  # Hydra's app makes the run folder under it before a job can check
     _STATE.pop("error", None)
     from twinkit.signals import forward_to_children
 
@@ -139,6 +140,16 @@ def _run_hydra(argv: list[str]) -> int:
     if "-m" in argv or "--multirun" in argv:
         return _sweep_exit_code()
     return 0
+
+
+def _check_given_site_name(overrides: list[str]) -> None:
+    """A ``site.name`` given on the command line is a plain name (twinkit.config.check_site_name)."""
+    from twinkit.config import check_site_name
+    from twinkit.hydra_glue import override_value
+
+    name = override_value(overrides, "site.name")
+    if name is not None and "${" not in name:
+        check_site_name(name)
 
 
 def _sweep_exit_code() -> int:

@@ -170,7 +170,7 @@ def check_site_name(name: Any, secrets: dict[str, str] | None = None) -> None:
                               "folder name that would show it; give the site a plain name in its site file")
     if not isinstance(name, str) or not _PLAIN_NAME.match(name) or name in (".", ".."):
         raise ConfigError(f"site.name={name!r} is not a plain name: it becomes the folder <engine.outputs_dir>/<name>; "
-                          "use letters, digits, '-', '_' and '.' only (no '/', not '.' or '..') in the site file")
+                          "use letters, digits, '-', '_' and '.' only (no '/', not '.' or '..')")
 
 
 def check_composed_site_name(cfg) -> None:

@@ -99,12 +99,9 @@ class WorkspaceMixin(EngineBase):
 
     def _redacted(self, obj):
         """``obj`` with the values read through ``${oc.env:...}`` replaced (twinkit.manifest.redact)."""
-        secrets = getattr(self, "secrets", None)
-        if not secrets:
-            return obj
         from twinkit.manifest import redact
 
-        return redact(obj, secrets)
+        return redact(obj, getattr(self, "secrets", None) or None)  # None: those the process knows
 
     def _workspace_record(self, ps, key, desc, stored, status, why, in_paths) -> dict:
         desc = self._redacted(desc)
