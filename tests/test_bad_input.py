@@ -236,6 +236,7 @@ SETUPS = {
     "site-name-parent": _site_name("../escaped"),
     "site-name-absolute": _site_name("TMP/elsewhere"),
     "site-name-from-env": _site_name("${oc.env:TWINKIT_CONFIG_DIR}"),
+    "env-value-in-error": _cli("site=t", "recipe=chain", "steps.make.value=${oc.env:TWINKIT_CONFIG_DIR}"),
 }
 
 CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative", "target-faces-0", "max-dist-negative",
@@ -244,7 +245,7 @@ CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative"
                 "recipe-callbacks", "recipe-callbacks-multirun", "site-target", "local-launcher",
                 "env-unset", "status-env-unset", "gc-env-unset", "status-interpolation-missing", "config-path-callbacks",
                 "cli-callbacks", "cli-callbacks-multirun", "cli-launcher", "cli-target", "cli-env-set",
-                "site-name-parent", "site-name-absolute", "site-name-from-env"}
+                "site-name-parent", "site-name-absolute", "site-name-from-env", "env-value-in-error"}
 
 
 def test_the_table_and_the_cases_match():

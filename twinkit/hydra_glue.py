@@ -143,11 +143,15 @@ def compose(conf_dir: Path, overrides: list[str], hydra_config: bool = False):
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    from twinkit.manifest import env_secrets, remember_secrets
+
     try:
         with initialize_config_dir(config_dir=str(conf_dir), version_base=VERSION_BASE, job_name=JOB_NAME):
-            return hydra_compose(config_name=CONFIG_NAME, overrides=list(overrides), return_hydra_config=hydra_config)
+            cfg = hydra_compose(config_name=CONFIG_NAME, overrides=list(overrides), return_hydra_config=hydra_config)
     except (HydraException, OmegaConfBaseException) as exc:
         raise composition_error(exc) from None
+    remember_secrets(env_secrets(plain(cfg, resolve=False)))  # no message from here on shows them
+    return cfg
 
 
 def set_run_config(cfg) -> None:

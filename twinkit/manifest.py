@@ -257,9 +257,11 @@ SECRET_VARS_ENV = "TWINKIT_SECRET_VARS"
 
 
 def remember_secrets(secrets: dict[str, str]) -> None:
-    """Make the run's secrets (:func:`env_secrets`) known to :func:`redact` everywhere in this process and in the
-    processes it starts (steps, fan-out workers): only the variables' names are stored, in the environment."""
-    os.environ[SECRET_VARS_ENV] = ",".join(sorted(set(secrets.values())))
+    """Make the config's secrets (:func:`env_secrets`) known to :func:`redact` everywhere in this process and in
+    the processes it starts (steps, fan-out workers), with those known before: only the variables' names are
+    stored, in the environment."""
+    names = set(secrets.values()) | {v for v in os.environ.get(SECRET_VARS_ENV, "").split(",") if v}
+    os.environ[SECRET_VARS_ENV] = ",".join(sorted(names))
 
 
 def known_secrets() -> dict[str, str]:
