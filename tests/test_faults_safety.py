@@ -106,3 +106,20 @@ def test_the_code_opt_in_runs_a_command_line_callback_and_is_recorded(project):
     assert r.rc == 0, r.text
     m = json.loads(next(project.ws.glob("runs/*/manifest.json")).read_text())
     assert m["code_allowed"] is False
+
+
+@pytest.mark.parametrize("override,refused", [
+    ("hydra.launcher.n_jobs=2", None), ("hydra.sweep.dir=/tmp/s", None), ("hydra.run.dir=/tmp/r", None),
+    ("hydra.job.chdir=false", None), ("hydra.sweeper.params.a=1,2", None),
+    ("engine.outputs_dir=/tmp/test_target_faces_0/out", None), ("site.name=_target_", None),
+    ("+hydra.callbacks.x._target_=os.system", "_target_"), ("+site.h={'_target_': os.getcwd}", "_target_"),
+    ("hydra/launcher=basic", "hydra/launcher"), ("~hydra/callbacks", "hydra/callbacks"),
+    ("hydra.launcher={n_jobs: 2}", "'hydra.launcher'"), ("hydra.searchpath=[file:///x]", "hydra.searchpath"),
+    ("hydra.job_logging.root.level=INFO", "hydra.job_logging"),
+])
+def test_what_a_command_line_may_set_under_hydra(override, refused):
+    """The project's own uses (docs, tests: n_jobs, sweep and run folders, chdir, sweep params) stay allowed."""
+    from twinkit.config import override_problem
+
+    why = override_problem(override)
+    assert (why is None) if refused is None else (why is not None and refused in why), why

@@ -323,6 +323,9 @@ _DIR_OPTIONS = {"--config-dir": "--config-dir", "-cd": "--config-dir", "--config
                 "-cp": "--config-path"}
 
 
+_TARGET_KEY = re.compile(r"(^|[{,\s])['\"]?_target_['\"]?\s*:")  # a '_target_' key inside a dict value
+
+
 def code_allowed() -> bool:
     """Whether ``TWINKIT_ALLOW_CODE=1`` lets the command line name code for Hydra to run (recorded in the manifest)."""
     return os.environ.get(ALLOW_CODE_ENV, "") == "1"
@@ -378,8 +381,9 @@ def override_problem(override: str) -> str | None:
     group (launcher, callbacks, logging), or a ``hydra.`` key other than where outputs go, a sweep's values
     and the launcher's settings (``hydra.run.dir``, ``hydra.sweep.dir``, ``hydra.job.chdir``,
     ``hydra.launcher.n_jobs``...)."""
-    key = override.split("=", 1)[0].lstrip("+~").split("@", 1)[0].strip()
-    if "_target_" in override:
+    key, _, value = override.partition("=")
+    key = key.lstrip("+~").split("@", 1)[0].strip()
+    if "_target_" in key.split(".") or _TARGET_KEY.search(value):
         return "it names '_target_', a Python object for Hydra to call"
     if key == "hydra" or key.startswith("hydra/"):
         return f"it chooses the Hydra config group '{key}' (launcher, callbacks or logging)"
