@@ -185,6 +185,18 @@ def _cli(*extra: str):
     return setup
 
 
+def _rerun_pickle(p: Project) -> list[str]:
+    """``--experimental-rerun`` with a pickle that runs a command when loaded (Hydra unpickles it)."""
+    import pickle
+
+    class Touch:
+        def __reduce__(self):
+            return subprocess.call, (["touch", str(p.tmp / "callback-ran")],)
+
+    (p.tmp / "config.pickle").write_bytes(pickle.dumps(Touch()))
+    return ["--experimental-rerun", str(p.tmp / "config.pickle")]
+
+
 def _site_name(name: str):
     def setup(p: Project) -> list[str]:
         p.site("n", f"name: {name.replace('TMP', str(p.tmp))}\n")
@@ -281,6 +293,7 @@ SETUPS = {
     "site-name-parent": _site_name("../escaped"),
     "site-name-absolute": _site_name("TMP/elsewhere"),
     "site-name-from-env": _site_name("${oc.env:TWINKIT_CONFIG_DIR}"),
+    "cli-experimental-rerun": _rerun_pickle,
     "env-value-in-error": _cli("site=t", "recipe=chain", "steps.make.value=${oc.env:TWINKIT_CONFIG_DIR}"),
 }
 
@@ -290,7 +303,8 @@ CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative"
                 "recipe-callbacks", "recipe-callbacks-multirun", "site-target", "local-launcher",
                 "env-unset", "status-env-unset", "gc-env-unset", "status-interpolation-missing", "config-path-callbacks",
                 "cli-callbacks", "cli-callbacks-multirun", "cli-launcher", "cli-target", "cli-env-set",
-                "site-name-parent", "site-name-absolute", "site-name-from-env", "env-value-in-error"}
+                "site-name-parent", "site-name-absolute", "site-name-from-env", "env-value-in-error",
+                "cli-experimental-rerun"}
 
 
 def test_the_table_and_the_cases_match():

@@ -358,6 +358,10 @@ def check_configs_are_data(conf_dir: Path, argv: list[str] | None = None) -> Non
             raise ConfigError(f"{path}: refused, {why}; remove it (only {conf_dir / 'config.yaml'} configures Hydra)")
     if code_allowed():
         return
+    rerun = next((a for a in argv if a.split("=", 1)[0] == "--experimental-rerun"), None)
+    if rerun:
+        raise ConfigError(f"command line: {rerun}: refused, it makes Hydra load a pickled config, and a pickle can "
+                          f"run code; run with overrides instead (or set {ALLOW_CODE_ENV}=1)")
     for path, group in _config_files(None, _option_dirs(argv)):
         why = _safe_problem(path, group)
         if why:
