@@ -29,6 +29,10 @@ class EngineConfig:
                                               help="How long (s) an interactive run waits at a manual step for its "
                                                    "file; null = no limit.")
     report: bool = param(True, help="Write the run report (report.html) at the end of the run.")
+    keep_reports: int = param(3, ge=0,
+                              help="Reports of the newest runs kept (runs/<time>/report/); older runs keep their "
+                                   "manifest and log, their report is removed at the end of a run and by "
+                                   "twinkit gc. 0 = keep every report.")
     degraded_exit_code: int = param(4, ge=0, le=125,
                                     help="Exit status of a run that finished with a degraded result (docs/engine.md "
                                          '"Degraded results"); 0 = exit 0 as for a clean run.')
