@@ -52,7 +52,28 @@ _STATE: dict = {}
 
 
 def _job(cfg) -> int:
-    """One Hydra job. A TwinkitError becomes a one-line message and an exit code, not a traceback."""
+    """One Hydra job; a sweep's job runs in a child of the pool's worker and dies with the sweep
+    (twinkit/sweeps.py)."""
+    from twinkit.hydra_glue import is_multirun
+
+    if not is_multirun():
+        return _job_here(cfg)
+    from twinkit.hydra_glue import job_state
+    from twinkit.sweeps import run_job
+
+    job = job_state()
+    if _STATE.get("interrupted"):
+        log.info("twinkit: job %s not started: the sweep was interrupted", job.num)
+        return _STATE["interrupted"]
+    code = run_job(_job_here, cfg, job.output_dir, f"job{job.num} ({' '.join(job.overrides)})")
+    if code in (130, 143):
+        _STATE["interrupted"] = code  # later jobs of this worker are skipped
+    return code
+
+
+def _job_here(cfg) -> int:
+    """One Hydra job in this process. A TwinkitError becomes a one-line message and an exit code, not a
+    traceback."""
     from twinkit.hydra_glue import is_multirun, job_error
 
     try:
@@ -84,9 +105,6 @@ def _job_body(cfg) -> int:
 
     job = job_state()
     jobs = 1
-    if job.multirun and _STATE.get("interrupted"):
-        log.info("twinkit: job %s not started: the sweep was interrupted", job.num)
-        return _STATE["interrupted"]
     if job.multirun:
         from twinkit.executors import use_standard_start_method
 
@@ -122,13 +140,18 @@ def _run_hydra(argv: list[str]) -> int:
         _precheck_sweep(conf_dir, overrides)
     _STATE.pop("error", None)
     from twinkit.signals import forward_to_children
+    from twinkit.sweeps import mark_sweep
 
+    mark_sweep()  # the sweep's workers die with this process
     with forward_to_children() as signalled:  # jobs stop like single runs, with their manifests
         try:
             run_app(conf_dir, argv, _job)
         except BaseException:
             if "exc" in signalled:
                 raise signalled["exc"] from None
+            from twinkit.sweeps import summary_after_failure
+
+            summary_after_failure()  # a failed job's sweep gets its summary too
             raise
     if "exc" in signalled:
         raise signalled["exc"]

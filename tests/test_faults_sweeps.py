@@ -1,0 +1,95 @@
+"""Sweeps (``twinkit -m``) meeting faults (issue 47, case 13): the sweep killed, one job's process killed, a
+memory budget across the jobs. Real processes and real signals, through the real ``twinkit`` command, with
+the small stand-in steps of tests/support/engine_plugins.py."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+
+import pytest
+
+
+def _wait_for(pred, timeout=60.0, what="condition"):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        v = pred()
+        if v:
+            return v
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def _session(sid: int) -> list[int]:
+    """The live (not zombie) processes of session ``sid``: the sweep and everything it started."""
+    out = []
+    for name in os.listdir("/proc"):
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[3]) == sid and fields[0] != "Z":
+            out.append(int(name))
+    return out
+
+
+def _started(project) -> list[int]:
+    """Pids of the stand-in steps that sleep now (their ``started`` file)."""
+    pids = []
+    for f in (project.ws / ".cache" / "steps" / ".tmp").glob("*/started"):
+        try:
+            pids.append(int(f.read_text()))
+        except (OSError, ValueError):
+            continue
+    return pids
+
+
+def _parent(pid: int) -> int:
+    with open(f"/proc/{pid}/stat") as f:
+        return int(f.read().rsplit(")", 1)[1].split()[1])
+
+
+def _manifests(project) -> list[dict]:
+    return [json.loads(m.read_text()) for m in sorted((project.ws / "sweeps").glob("*/job*/manifest.json"))]
+
+
+def test_killing_a_sweep_kills_its_job_workers(project):
+    p = project.popen("-m", "site=t", "recipe=chain", "steps.make.value=1,2", env=project.env(TWINKIT_TEST_SLEEP="60"))
+    try:
+        _wait_for(lambda: len(_started(project)) == 2, what="both jobs' steps to start")
+        assert len(_session(p.pid)) > 3  # the sweep, its pool's workers, the jobs, their steps
+        os.kill(p.pid, signal.SIGKILL)  # the sweep's own process only, not its process group
+        p.wait(timeout=30)
+        _wait_for(lambda: not _session(p.pid), timeout=15, what="the sweep's workers to die with it")
+    finally:
+        if _session(p.pid):
+            os.killpg(p.pid, signal.SIGKILL)
+        p.communicate()
+
+
+def test_a_killed_job_worker_fails_its_job_and_the_others_finish(project):
+    p = project.popen("-m", "site=t", "recipe=chain", "steps.make.value=1,2", env=project.env(TWINKIT_TEST_SLEEP="4"))
+    try:
+        steps = _wait_for(lambda: len(_started(project)) == 2 and _started(project), what="both jobs' steps to start")
+        victim = _parent(steps[0])  # the process running that job (the out-of-memory killer's choice)
+        os.kill(victim, signal.SIGKILL)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+    assert p.returncode == 1, err
+    assert "Traceback" not in err, err
+    lines = [line for line in err.splitlines() if line.startswith("twinkit: error:")]
+    assert len(lines) == 1 and "killed (SIGKILL, out of memory?)" in lines[0], err
+    statuses = sorted(m["status"] for m in _manifests(project))
+    assert statuses == ["failed", "ok"], statuses
+    failed = next(m for m in _manifests(project) if m["status"] == "failed")
+    assert failed["error"] == "the worker running this job was killed (SIGKILL, out of memory?)"
+    assert "sweep summary" in out + err
+    summary = next((project.ws / "sweeps").glob("*/report/sweep.html"))
+    assert "failed" in summary.read_text()
