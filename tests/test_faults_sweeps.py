@@ -93,3 +93,44 @@ def test_a_killed_job_worker_fails_its_job_and_the_others_finish(project):
     assert "sweep summary" in out + err
     summary = next((project.ws / "sweeps").glob("*/report/sweep.html"))
     assert "failed" in summary.read_text()
+
+
+def _recorded_peak_gb(project) -> float:
+    """The largest peak the chain's steps recorded in the run before (tens of MB, for the stand-in steps)."""
+    peaks = [json.loads(f.read_text())["peak_rss_mb"] for f in project.ws.glob("0*/step.json")]
+    assert len(peaks) == 3 and all(peaks), peaks
+    return max(peaks) / 1024
+
+
+def _times(project) -> list[tuple[str, str]]:
+    return sorted((m["started"], m["finished"]) for m in _manifests(project))
+
+
+def test_the_sweep_memory_budget_runs_fewer_jobs_at_once(project):
+    assert project.run("site=t", "recipe=chain").rc == 0  # the steps' peaks are recorded
+    budget = 1.5 * _recorded_peak_gb(project)  # one job fits, two do not
+    r = project.run("-m", "site=t", "recipe=chain", "steps.make.value=2,3", f"engine.sweep_memory_gb={budget:.4f}",
+                    env=project.env(TWINKIT_TEST_SLEEP="2"))
+    assert r.rc == 0, r.text
+    assert "1 job(s) at a time, not 2" in r.err, r.err
+    first, second = _times(project)
+    assert second[0] >= first[1], (first, second)  # the second job started after the first had finished
+
+
+def test_a_sweep_memory_budget_below_one_job_is_refused(project):
+    assert project.run("site=t", "recipe=chain").rc == 0
+    budget = 0.5 * _recorded_peak_gb(project)
+    r = project.run("-m", "site=t", "recipe=chain", "steps.make.value=2,3", f"engine.sweep_memory_gb={budget:.4f}")
+    assert r.rc == 2, r.text
+    lines = r.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("twinkit: error: engine.sweep_memory_gb: a job of this sweep needs"), r.err
+    assert not (project.ws / "sweeps").exists()
+
+
+def test_without_a_budget_the_jobs_run_together(project):
+    assert project.run("site=t", "recipe=chain").rc == 0
+    r = project.run("-m", "site=t", "recipe=chain", "steps.make.value=2,3", env=project.env(TWINKIT_TEST_SLEEP="4"))
+    assert r.rc == 0, r.text
+    assert "at a time" not in r.err
+    first, second = _times(project)
+    assert second[0] < first[1], (first, second)

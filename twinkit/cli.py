@@ -137,7 +137,7 @@ def _run_hydra(argv: list[str]) -> int:
     if not any(a.startswith("-") for a in argv):
         return _run_single(conf_dir, overrides)
     if "-m" in argv or "--multirun" in argv:
-        _precheck_sweep(conf_dir, overrides)
+        argv = argv + _precheck_sweep(conf_dir, overrides)
     _STATE.pop("error", None)
     from twinkit.signals import forward_to_children
     from twinkit.sweeps import mark_sweep
@@ -186,8 +186,9 @@ def _sweep_exit_code() -> int:
     return worst
 
 
-def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
-    """Every job of a sweep composed and its values checked (twinkit.config.check_config) before any job starts.
+def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> list[str]:
+    """Every job of a sweep composed and its values checked (twinkit.config.check_config) before any job starts;
+    the overrides that keep the jobs within the sweep's memory budget (twinkit/sweeps.py).
 
     So ``-m reconstructor.depth=11,30`` fails with exit 2 before the first job runs a step, as a single
     run does. The jobs are the ones Hydra's basic sweeper makes: the sweep file's
@@ -201,9 +202,10 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
 
     jobs = sweep_jobs(conf_dir, overrides)
     if jobs is None:
-        return  # Hydra reports it in its own words
+        return []  # Hydra reports it in its own words
     registry = get_registry()
     composed: dict[tuple, dict] = {}  # one composition per set of group choices; plain values are laid over it
+    containers = []
     for job in jobs:
         job = [o for o in job if not o.lstrip("+~").startswith("hydra")]
         try:
@@ -225,6 +227,29 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
             check_config(container, registry)
         except ConfigError as exc:
             raise ConfigError(f"{exc} (sweep job {' '.join(job)})") from None
+        containers.append(container)
+    return _memory_budget(conf_dir, jobs[0], containers)
+
+
+def _memory_budget(conf_dir: Path, first_job: list[str], containers: list[dict]) -> list[str]:
+    """``hydra.launcher.n_jobs=<k>`` when the sweep's memory budget allows fewer jobs at once than asked
+    (``first_job``: the first job's overrides)."""
+    from twinkit.hydra_glue import compose, override_value
+    from twinkit.sweeps import memory_plan
+    from twinkit.threads import cores
+
+    value = override_value(first_job, "hydra.launcher.n_jobs")
+    if value is None:
+        value = compose(conf_dir, first_job, hydra_config=True).hydra.launcher.n_jobs
+    try:
+        n_jobs = int(value)
+    except (TypeError, ValueError):
+        return []  # Hydra reports it
+    at_once, why = memory_plan(containers, min(len(containers), cores() if n_jobs <= 0 else n_jobs))
+    if not why:
+        return []
+    print(why, file=sys.stderr)
+    return [f"hydra.launcher.n_jobs={at_once}"]
 
 
 def _with_values(container: dict, values: dict) -> dict:

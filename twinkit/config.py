@@ -29,6 +29,10 @@ class EngineConfig:
                                               help="How long (s) an interactive run waits at a manual step for its "
                                                    "file; null = no limit.")
     report: bool = param(True, help="Write the run report (report.html) at the end of the run.")
+    sweep_memory_gb: float = param(0.0, ge=0,
+                                   help="Memory (GB) a sweep's jobs may use together: fewer jobs run at once when "
+                                        "their earlier peaks say they need more; 0 = the memory available when the "
+                                        "sweep starts.")
     degraded_exit_code: int = param(4, ge=0, le=125,
                                     help="Exit status of a run that finished with a degraded result (docs/engine.md "
                                          '"Degraded results"); 0 = exit 0 as for a clean run.')

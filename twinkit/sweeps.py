@@ -104,3 +104,94 @@ def summary_after_failure() -> None:
     sweep, SweepSummaryCallback.started = SweepSummaryCallback.started, None
     if sweep is not None and sweep.is_dir():
         SweepSummaryCallback.write(sweep)
+
+
+# --------------------------------------------------------------------------- the sweep's memory budget
+
+
+def _available_gb() -> float | None:
+    """This machine's available memory (``MemAvailable``), GB; None where unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) / 2**20
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _step_records(workspace: Path, step_id: str) -> list[Path]:
+    """The step records (``step.json``) earlier runs and sweep jobs of this site left for step ``step_id``."""
+    found = list(workspace.glob(f"[0-9]*_{step_id}/step.json"))
+    sweeps = sorted(workspace.glob("sweeps/*"))[-20:]  # the latest sweeps are enough
+    for sweep in sweeps:
+        found += list(sweep.glob(f"job*/[0-9]*_{step_id}/step.json"))
+    return found
+
+
+def _record_peak_mb(path: Path, workers: int) -> float:
+    """What a step recorded in ``path`` held at its peak, MB: its process, or its ``workers`` largest
+    fan-out items at once."""
+    try:
+        rec = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return 0.0
+    if not isinstance(rec, dict):
+        return 0.0
+    peak = float(rec.get("peak_rss_mb") or 0)
+    items = (rec.get("metrics") or {}).get("per_item") if isinstance(rec.get("metrics"), dict) else None
+    if isinstance(items, list):
+        peaks = sorted((float(i.get("peak_rss_mb") or 0) for i in items if isinstance(i, dict)), reverse=True)
+        peak = max(peak, sum(peaks[:max(1, workers)]))
+    return peak
+
+
+def job_estimate_gb(config: dict) -> tuple[float, str]:
+    """A job's memory, GB, as its recipe's steps peaked in earlier runs of its site (the largest; the steps
+    of a job run one after another), and the step that peaked; (0, "") when none has run yet."""
+    engine = config.get("engine") or {}
+    workspace = Path(str(engine.get("outputs_dir", "outputs"))) / str((config.get("site") or {}).get("name", ""))
+    workers = int((config.get("executor") or {}).get("workers") or 1)
+    best, which = 0.0, ""
+    for step in (config.get("recipe") or {}).get("steps") or []:
+        sid = step.get("id") if isinstance(step, dict) else None
+        if not sid:
+            continue
+        for rec in _step_records(workspace, str(sid)):
+            peak = _record_peak_mb(rec, workers)
+            if peak > best:
+                best, which = peak, str(sid)
+    return best / 1024, which
+
+
+def memory_plan(configs: list[dict], n_jobs: int) -> tuple[int, str]:
+    """How many of a sweep's jobs may run at once under ``engine.sweep_memory_gb`` (0: the memory this
+    machine has available now), and a line that says why when fewer than ``n_jobs``. Raises ConfigError
+    when one job alone needs more than a budget that was set."""
+    from twinkit.errors import ConfigError
+
+    if not configs:
+        return n_jobs, ""
+    budget = float((configs[0].get("engine") or {}).get("sweep_memory_gb") or 0)
+    chosen = budget > 0
+    if not chosen:
+        budget = _available_gb() or 0
+    estimates = sorted((job_estimate_gb(c) for c in configs), reverse=True)
+    if budget <= 0 or estimates[0][0] <= 0:
+        return n_jobs, ""  # nothing known: the jobs run as asked
+    top, step = estimates[0]
+    setting = f"engine.sweep_memory_gb={budget:g}" if chosen else f"the {budget:.1f} GB available"
+    if chosen and top > budget:
+        raise ConfigError(f"engine.sweep_memory_gb: a job of this sweep needs about {top:.2f} GB (step '{step}' "
+                          f"peaked at that in an earlier run of the site) and the sweep's budget is {budget:g} GB; "
+                          f"raise engine.sweep_memory_gb, or run the jobs one by one without -m")
+    at_once, total = 0, 0.0
+    for gb, _ in estimates[:max(1, n_jobs)]:
+        if at_once and total + gb > budget:
+            break
+        at_once, total = at_once + 1, total + gb
+    if at_once >= n_jobs:
+        return n_jobs, ""
+    return at_once, (f"twinkit: sweep: {at_once} job(s) at a time, not {n_jobs}: a job needs about {top:.2f} GB "
+                     f"(step '{step}' in an earlier run) and the sweep may use {setting}")
