@@ -8,7 +8,6 @@ import os
 import signal
 import time
 
-import pytest
 
 
 def _wait_for(pred, timeout=60.0, what="condition"):
