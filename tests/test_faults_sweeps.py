@@ -133,3 +133,40 @@ def test_without_a_budget_the_jobs_run_together(project):
     assert "at a time" not in r.err
     first, second = _times(project)
     assert second[0] < first[1], (first, second)
+
+
+def test_memory_plan_counts_a_fan_out_steps_workers_and_knows_nothing_without_records(tmp_path):
+    from twinkit.sweeps import memory_plan
+
+    ws = tmp_path / "out" / "s"
+    (ws / "01_tiles").mkdir(parents=True)
+    items = [{"peak_rss_mb": mb} for mb in (300, 500, 400)]
+    (ws / "01_tiles" / "step.json").write_text(json.dumps({"peak_rss_mb": 200, "metrics": {"per_item": items}}))
+
+    def job(workers):
+        return {"engine": {"outputs_dir": str(tmp_path / "out"), "sweep_memory_gb": 2.0}, "site": {"name": "s"},
+                "executor": {"workers": workers}, "recipe": {"steps": [{"id": "tiles"}]}}
+
+    assert memory_plan([job(1)] * 4, lambda: 4)[0] == 4  # 0.5 GB a job: four fit in 2 GB
+    at_once, why = memory_plan([job(2)] * 4, lambda: 4)  # two items at once: 0.88 GB a job
+    assert at_once == 2 and "step 'tiles'" in why, why
+    other = job(2) | {"site": {"name": "never-ran"}}
+    assert memory_plan([other] * 4, lambda: 4) == (0, "")  # no record: the jobs run as asked
+
+
+def test_a_killed_pool_worker_ends_the_sweep_with_one_line_and_failed_manifests(project):
+    p = project.popen("-m", "site=t", "recipe=chain", "steps.make.value=1,2", env=project.env(TWINKIT_TEST_SLEEP="30"))
+    try:
+        steps = _wait_for(lambda: len(_started(project)) == 2 and _started(project), what="both jobs' steps to start")
+        os.kill(_parent(_parent(steps[0])), signal.SIGKILL)  # the pool's worker itself, not the job's process
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+    assert p.returncode == 1, err
+    assert "Traceback" not in err, err
+    lines = [line for line in err.splitlines() if line.startswith("twinkit: error:")]
+    assert len(lines) == 1 and "pool of workers broke" in lines[0], err
+    assert [m["status"] for m in _manifests(project)] == ["failed", "failed"]
+    _wait_for(lambda: not _session(p.pid), timeout=15, what="the jobs to die with their pool")

@@ -238,14 +238,17 @@ def _memory_budget(conf_dir: Path, first_job: list[str], containers: list[dict])
     from twinkit.sweeps import memory_plan
     from twinkit.threads import cores
 
-    value = override_value(first_job, "hydra.launcher.n_jobs")
-    if value is None:
-        value = compose(conf_dir, first_job, hydra_config=True).hydra.launcher.n_jobs
-    try:
-        n_jobs = int(value)
-    except (TypeError, ValueError):
-        return []  # Hydra reports it
-    at_once, why = memory_plan(containers, min(len(containers), cores() if n_jobs <= 0 else n_jobs))
+    def asked() -> int:
+        value = override_value(first_job, "hydra.launcher.n_jobs")
+        if value is None:
+            value = compose(conf_dir, first_job, hydra_config=True).hydra.launcher.n_jobs
+        try:
+            n_jobs = int(value)
+        except (TypeError, ValueError):
+            return len(containers)  # Hydra reports it
+        return min(len(containers), cores() if n_jobs <= 0 else n_jobs)
+
+    at_once, why = memory_plan(containers, asked)
     if not why:
         return []
     print(why, file=sys.stderr)

@@ -58,8 +58,9 @@ def run_job(job: Callable[[Any], int], cfg, output_dir: Path, label: str) -> int
     except NativeCrash as exc:
         reason = lost_reason(exc.signal)
         mark_lost(output_dir / "manifest.json", reason)
-        raise job_error(f"twinkit: error: sweep {label} failed: {reason}; the other jobs go on "
-                        f"(its manifest: {output_dir / 'manifest.json'})", 1) from None
+        raise job_error(f"twinkit: error: {output_dir / 'manifest.json'}: sweep {label} failed: {reason}; the "
+                        f"other jobs ran on; run it again with fewer jobs at once (engine.sweep_memory_gb, "
+                        f"hydra.launcher.n_jobs)", 1) from None
 
 
 def lost_reason(sig: int) -> str:
@@ -102,8 +103,25 @@ def summary_after_failure() -> None:
     except ImportError:
         return
     sweep, SweepSummaryCallback.started = SweepSummaryCallback.started, None
-    if sweep is not None and sweep.is_dir():
-        SweepSummaryCallback.write(sweep)
+    if sweep is None or not sweep.is_dir():
+        return
+    for manifest in sorted(sweep.glob("job*/manifest.json")):  # jobs the broken pool took down with it
+        mark_lost(manifest, BROKEN_POOL)
+    SweepSummaryCallback.write(sweep)
+
+
+BROKEN_POOL = ("the sweep's pool of workers broke (one of its processes was killed: out of memory?), and it "
+               "stopped the jobs it was running")
+
+
+def broken_pool(exc: BaseException) -> str:
+    """The one-line error for a sweep whose pool broke (a pool worker itself killed), else ""."""
+    from concurrent.futures import BrokenExecutor
+
+    if not isinstance(exc, BrokenExecutor):
+        return ""
+    return (f"twinkit: error: hydra.launcher: {BROKEN_POOL}; their manifests say failed; run the sweep again "
+            f"with fewer jobs at once (engine.sweep_memory_gb, hydra.launcher.n_jobs)")
 
 
 # --------------------------------------------------------------------------- the sweep's memory budget
@@ -165,27 +183,29 @@ def job_estimate_gb(config: dict) -> tuple[float, str]:
     return best / 1024, which
 
 
-def memory_plan(configs: list[dict], n_jobs: int) -> tuple[int, str]:
+def memory_plan(configs: list[dict], asked: Callable[[], int]) -> tuple[int, str]:
     """How many of a sweep's jobs may run at once under ``engine.sweep_memory_gb`` (0: the memory this
-    machine has available now), and a line that says why when fewer than ``n_jobs``. Raises ConfigError
-    when one job alone needs more than a budget that was set."""
+    machine has available now), and a line that says why when fewer than ``asked()`` (the launcher's
+    jobs at once, read only when needed). Raises ConfigError when one job alone needs more than a budget
+    that was set; (0, "") when nothing is known of the jobs' memory."""
     from twinkit.errors import ConfigError
 
     if not configs:
-        return n_jobs, ""
+        return 0, ""
     budget = float((configs[0].get("engine") or {}).get("sweep_memory_gb") or 0)
     chosen = budget > 0
     if not chosen:
         budget = _available_gb() or 0
     estimates = sorted((job_estimate_gb(c) for c in configs), reverse=True)
     if budget <= 0 or estimates[0][0] <= 0:
-        return n_jobs, ""  # nothing known: the jobs run as asked
+        return 0, ""  # nothing known: the jobs run as asked
     top, step = estimates[0]
     setting = f"engine.sweep_memory_gb={budget:g}" if chosen else f"the {budget:.1f} GB available"
     if chosen and top > budget:
         raise ConfigError(f"engine.sweep_memory_gb: a job of this sweep needs about {top:.2f} GB (step '{step}' "
                           f"peaked at that in an earlier run of the site) and the sweep's budget is {budget:g} GB; "
                           f"raise engine.sweep_memory_gb, or run the jobs one by one without -m")
+    n_jobs = asked()
     at_once, total = 0, 0.0
     for gb, _ in estimates[:max(1, n_jobs)]:
         if at_once and total + gb > budget:
