@@ -158,7 +158,10 @@ def test_a_killed_pool_worker_ends_the_sweep_with_one_line_and_failed_manifests(
     p = project.popen("-m", "site=t", "recipe=chain", "steps.make.value=1,2", env=project.env(TWINKIT_TEST_SLEEP="30"))
     try:
         steps = _wait_for(lambda: len(_started(project)) == 2 and _started(project), what="both jobs' steps to start")
-        os.kill(_parent(_parent(steps[0])), signal.SIGKILL)  # the pool's worker itself, not the job's process
+        worker = steps[0]
+        while _parent(worker) != p.pid:  # up to the pool's worker itself (the sweep's child)
+            worker = _parent(worker)
+        os.kill(worker, signal.SIGKILL)
         out, err = p.communicate(timeout=120)
     finally:
         if p.poll() is None:
