@@ -71,7 +71,7 @@ def test_killing_a_sweep_kills_its_job_workers(project):
 
 
 def test_a_killed_job_worker_fails_its_job_and_the_others_finish(project):
-    p = project.popen("-m", "site=t", "recipe=chain", "steps.make.value=1,2", env=project.env(TWINKIT_TEST_SLEEP="4"))
+    p = project.popen("-m", "site=t", "recipe=chain", "steps.make.value=1,2", env=project.env(TWINKIT_TEST_SLEEP="8"))
     try:
         steps = _wait_for(lambda: len(_started(project)) == 2 and _started(project), what="both jobs' steps to start")
         victim = _parent(steps[0])  # the process running that job (the out-of-memory killer's choice)
@@ -128,7 +128,7 @@ def test_a_sweep_memory_budget_below_one_job_is_refused(project):
 
 def test_without_a_budget_the_jobs_run_together(project):
     assert project.run("site=t", "recipe=chain").rc == 0
-    r = project.run("-m", "site=t", "recipe=chain", "steps.make.value=2,3", env=project.env(TWINKIT_TEST_SLEEP="4"))
+    r = project.run("-m", "site=t", "recipe=chain", "steps.make.value=2,3", env=project.env(TWINKIT_TEST_SLEEP="6"))
     assert r.rc == 0, r.text
     assert "at a time" not in r.err
     first, second = _times(project)
