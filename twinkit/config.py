@@ -129,7 +129,18 @@ def check_choices(overrides: list[str], conf_dir: Path) -> None:
 
 
 def _check_site(site: dict, site_file: str | None = None) -> None:
-    """The site's georeference fields are numbers in range (a typo fails now, not in a late step)."""
+    """The site's georeference fields are numbers in range and its CRS exists (a typo fails now, not in a
+    late step)."""
+    name = site.get("name", "?")
+    where = site_file or f"the site file of site '{name}' (conf/site/<site>.yaml)"
+    if site.get("crs"):
+        from twinkit.geo.crs import parse_crs
+
+        try:
+            parse_crs(str(site["crs"]))
+        except Exception as exc:  # noqa: BLE001 - pyproj's CRSError: an unknown code or unparsable text
+            raise ConfigError(f"{where}: site.crs {site['crs']} is not a known CRS ({str(exc).splitlines()[0][:160]}); "
+                              f"give an existing EPSG code in metres, e.g. EPSG:3067, or a PROJ string") from None
     bp = site.get("base_point")
     if bp is None:
         return
@@ -151,8 +162,6 @@ def _check_site(site: dict, site_file: str | None = None) -> None:
         from twinkit.errors import InputError
         from twinkit.geo.crs import check_base_point_area
 
-        name = site.get("name", "?")
-        where = site_file or f"the site file of site '{name}' (conf/site/<site>.yaml)"
         try:
             check_base_point_area(site, where)
         except InputError as exc:

@@ -127,9 +127,21 @@ def open_site_inputs(args: list[str]) -> list[str]:
 
     Site inputs are open-ended (a recipe may want photos, a GCP file, an OSM extract...), so a
     plain override adds or replaces the key (Hydra's ``++``); every other key stays strict, so a
-    misspelled ``site.sede=3`` still fails at composition.
+    misspelled ``site.sede=3`` still fails at composition. A value with letters outside ASCII
+    (``site.inputs.cloud=straße.ply``), which Hydra's grammar refuses unquoted, is quoted for it.
     """
-    return [("++" + a) if a.startswith("site.inputs.") and "=" in a else a for a in args]
+    return [_quoted_if_needed(("++" + a) if a.startswith("site.inputs.") and "=" in a else a) for a in args]
+
+
+def _quoted_if_needed(arg: str) -> str:
+    """``key=value`` with ``value`` single-quoted when it holds non-ASCII letters and only parses so (a sweep,
+    ``a,b`` or ``choice(...)``, is left to Hydra: quoted it would be one value)."""
+    key, sep, value = arg.partition("=")
+    if (arg.startswith("-") or not sep or value.isascii() or value[:1] in ("'", '"')
+            or any(c in value for c in ",()[]{}") or _parsed((arg,))):
+        return arg
+    quoted = f"{key}='" + value.replace("'", "\\'") + "'"
+    return quoted if _parsed((quoted,)) else arg
 
 
 # --------------------------------------------------------------------------- composing
