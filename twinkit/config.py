@@ -29,6 +29,10 @@ class EngineConfig:
                                               help="How long (s) an interactive run waits at a manual step for its "
                                                    "file; null = no limit.")
     report: bool = param(True, help="Write the run report (report.html) at the end of the run.")
+    keep_reports: int = param(3, ge=0,
+                              help="Reports of the newest runs kept (runs/<time>/report/); older runs keep their "
+                                   "manifest and log, their report is removed at the end of a run and by "
+                                   "twinkit gc. 0 = keep every report.")
     sweep_memory_gb: float = param(0.0, ge=0,
                                    help="Memory (GB) a sweep's jobs may use together: fewer jobs run at once when "
                                         "their earlier peaks say they need more; 0 = the memory available when the "
