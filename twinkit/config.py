@@ -33,6 +33,10 @@ class EngineConfig:
                               help="Reports of the newest runs kept (runs/<time>/report/); older runs keep their "
                                    "manifest and log, their report is removed at the end of a run and by "
                                    "twinkit gc. 0 = keep every report.")
+    sweep_memory_gb: float = param(0.0, ge=0,
+                                   help="Memory (GB) a sweep's jobs may use together: fewer jobs run at once when "
+                                        "their earlier peaks say they need more; 0 = the memory available when the "
+                                        "sweep starts.")
     degraded_exit_code: int = param(4, ge=0, le=125,
                                     help="Exit status of a run that finished with a degraded result (docs/engine.md "
                                          '"Degraded results"); 0 = exit 0 as for a clean run.')

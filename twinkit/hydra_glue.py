@@ -305,6 +305,11 @@ def run_app(conf_dir: Path, argv: list[str], job: Callable[[Any], Any]) -> None:
             raise SystemExit(code) from None
         if _is_composition_error(exc):
             raise composition_error(exc) from None
+        from twinkit.sweeps import broken_pool
+
+        if broken_pool(exc):  # a pool worker itself was killed: one line, not loky's traceback
+            print(broken_pool(exc), file=sys.stderr)
+            raise SystemExit(1) from None
         traceback.print_exception(exc)
         raise SystemExit(1) from None
     finally:
