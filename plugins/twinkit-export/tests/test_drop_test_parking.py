@@ -70,3 +70,22 @@ def test_step_reports_parking_with_its_own_target(tmp_path):
     metrics = json.loads((out["drop_test.json"].parent / "step.json").read_text())["metrics"]
     assert metrics["parking_rays"] == park["rays"] and metrics["parking_hit_pct"] == park["hit_pct"]
     assert "degraded" not in metrics
+
+
+def test_parking_lane_edge_over_the_kerb_is_judged_off_the_kerb_line():
+    """The kerb stands 10 cm inside the parking lane (its outer edge over the kerb's foot, as the parking step
+    draws it): the outer row of rays meets the kerb. A parking lane is judged off the kerb line (a parked car's
+    tyres stand off the kerb), so it holds; the same misses on a driving lane fail it (test_drop_test.py)."""
+    from twinkit.surface.closest import Surface
+    from twinkit_export.ground_check import DropTestParams, check_lane, lane_rays
+
+    v, f = _ground()
+    v[:, 2] = np.where(v[:, 1] < KERB_Y + 0.1, 0.12, 0.0)
+    rays = lane_rays(_map(), 0.1)["parking"]
+    mesh = Mesh(v, f)
+    lane, holes, _ = check_lane("parking", rays, 99.5, mesh, Surface(v, f).scene, DropTestParams())
+    assert lane["hit_pct"] < 99.0 and lane["kerb_line"] == lane["rays"] - lane["hits"]
+    assert lane["target_on"] == "hit_pct_off_kerb_line" and lane["hit_pct_off_kerb_line"] == 100.0
+    assert lane["ok"] is True and lane["ground_ok"] is True and not holes
+    drv, _, _ = check_lane("driving", rays, 99.9, mesh, Surface(v, f).scene, DropTestParams())
+    assert drv["ok"] is False and drv["target_on"] == "hit_pct"
