@@ -168,8 +168,10 @@ def drop_row(run: Path) -> dict:
         lanes = json.loads((d / "drop_test.json").read_text()).get("lanes", {})
         for kind in ("driving", "parking", "sidewalk"):
             lane = lanes.get(kind)
+            judged = lane.get("target_on", "hit_pct") if lane else "hit_pct"
+            off_kerb = f", {lane[judged]} % off the kerb line" if lane and judged != "hit_pct" else ""
             row[f"drop_{kind}"] = "-" if not lane else \
-                f"{lane['hit_pct']} % ({lane['target_pct']}); hole {lane['widest_hole_m']} m"
+                f"{lane['hit_pct']} %{off_kerb} (target {lane['target_pct']}); hole {lane['widest_hole_m']} m"
     manifests = sorted((run / "runs").glob("*/manifest.json"))
     if manifests:
         m = json.loads(manifests[-1].read_text())
