@@ -161,6 +161,46 @@ def _bad_osm(p: Project) -> list[str]:
     return ["site=o", "recipe=osm", f"site.inputs.osm={p.tmp / 'area.osm'}"]
 
 
+def _street(tmp: Path, name: str, n: int = 400, z=None) -> Path:
+    """A 30 x 12 m street-sized ASCII PLY of ``n`` points (``z``: every height, or random 0..3 m)."""
+    rnd = random.Random(3)
+    pts = [(rnd.uniform(0, 30), rnd.uniform(0, 12), rnd.uniform(0, 3) if z is None else z) for _ in range(n)]
+    return _ply(tmp / name, pts, [(0, 0, 1)] * n)
+
+
+def _undercounted(tmp: Path) -> Path:
+    """A PLY whose header declares 50 vertices; the file holds 400 (was read in part, exit 0)."""
+    path = _street(tmp, "part.ply")
+    path.write_text(path.read_text().replace("element vertex 400", "element vertex 50"))
+    return path
+
+
+def _empty_las(tmp: Path) -> Path:
+    import laspy
+    from pyproj import CRS
+
+    h = laspy.LasHeader(point_format=3, version="1.2")
+    h.add_crs(CRS("EPSG:3067"))
+    h.offsets, h.scales = [385000.0, 6672000.0, 0.0], [0.01, 0.01, 0.01]
+    laspy.LasData(h).write(str(tmp / "empty.las"))
+    return tmp / "empty.las"
+
+
+def _geographic_site(p: Project) -> list[str]:
+    """site.crs EPSG:4326 and a cloud whose x, y are degrees (was "not a street", the street being 0.0003 m)."""
+    p.site("c", "name: t\ncrs: EPSG:4326\nbase_point: {lat: 60.16945, lon: 24.93365, alt: 0}\n")
+    p.recipe("mesh", MESH[1:4], extra=POISSON)
+    rnd = random.Random(4)
+    pts = [(24.93365 + rnd.uniform(0, 5e-4), 60.16945 + rnd.uniform(0, 2e-4), rnd.uniform(0, 3)) for _ in range(300)]
+    return ["site=c", "recipe=mesh", f"site.inputs.cloud={_ply(p.tmp / 'deg.ply', pts)}"]
+
+
+def _unknown_crs(p: Project) -> list[str]:
+    """A CRS code that does not exist (failed in the first step that used it, exit 1)."""
+    p.site("g", "name: t\ncrs: EPSG:99999\nbase_point: {lat: 60.16945, lon: 24.93365, alt: 0}\n")
+    return ["site=g", "recipe=chain"]
+
+
 SETUPS = {
     "depth-30": _param("reconstructor.depth=30"),
     "depth-0": _param("reconstructor.depth=0"),
@@ -189,11 +229,16 @@ SETUPS = {
     "cloud-too-sparse": lambda p: _cloud_case(p, _sparse),
     "cloud-not-a-street": lambda p: _cloud_case(p, _small),
     "osm-corrupt": _bad_osm,
+    "cloud-more-points-than-declared": lambda p: _cloud_case(p, _undercounted),
+    "cloud-flat": lambda p: _cloud_case(p, lambda t: _street(t, "plan.ply", z=0.0)),
+    "cloud-empty-las": lambda p: _cloud_case(p, _empty_las),
+    "site-crs-geographic": _geographic_site,
+    "site-crs-unknown": _unknown_crs,
 }
 
 CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative", "target-faces-0", "max-dist-negative",
                 "backend-unknown", "recipe-param-out-of-range", "lat-not-a-number", "lat-out-of-range",
-                "base-point-outside-crs-area",
+                "base-point-outside-crs-area", "site-crs-unknown",
                 "recipe-callbacks", "recipe-callbacks-multirun", "site-target", "local-launcher"}
 
 

@@ -133,15 +133,21 @@ def cmd_gc(args: list[str]) -> int:
     site_root = Path(cfg["engine"]["outputs_dir"]) / cfg["site"]["name"]
     from twinkit.engine.locks import gc_locks
 
+    from twinkit.report.keep import Collected, tidy_reports
+
+    keep = int(cfg["engine"].get("keep_reports", 3))
+    reports = Collected()
     if not site_root.is_dir():
         doomed: list[Path] = []
         size, forgotten = 0, 0
     else:
         with gc_locks(site_root):
             doomed, size = collect_garbage(site_root, dry_run=dry)
+            reports = tidy_reports(site_root, keep, dry_run=dry)
             forgotten = 0 if dry else prune_hash_cache(site_root)
     verb = "would remove" if dry else "removed"
     print(f"{verb} {len(doomed)} stored result(s), {size / 2**20:.1f} MiB, from {site_root / '.cache' / 'steps'}")
+    print(f"{reports.summary(dry)} (engine.keep_reports={keep})")
     if not dry:
         print(f"forgot {forgotten} remembered file hash(es) of files that are gone")
     return 0

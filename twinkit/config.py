@@ -29,6 +29,14 @@ class EngineConfig:
                                               help="How long (s) an interactive run waits at a manual step for its "
                                                    "file; null = no limit.")
     report: bool = param(True, help="Write the run report (report.html) at the end of the run.")
+    keep_reports: int = param(3, ge=0,
+                              help="Reports of the newest runs kept (runs/<time>/report/); older runs keep their "
+                                   "manifest and log, their report is removed at the end of a run and by "
+                                   "twinkit gc. 0 = keep every report.")
+    sweep_memory_gb: float = param(0.0, ge=0,
+                                   help="Memory (GB) a sweep's jobs may use together: fewer jobs run at once when "
+                                        "their earlier peaks say they need more; 0 = the memory available when the "
+                                        "sweep starts.")
     degraded_exit_code: int = param(4, ge=0, le=125,
                                     help="Exit status of a run that finished with a degraded result (docs/engine.md "
                                          '"Degraded results"); 0 = exit 0 as for a clean run.')
@@ -125,7 +133,18 @@ def check_choices(overrides: list[str], conf_dir: Path) -> None:
 
 
 def _check_site(site: dict, site_file: str | None = None) -> None:
-    """The site's georeference fields are numbers in range (a typo fails now, not in a late step)."""
+    """The site's georeference fields are numbers in range and its CRS exists (a typo fails now, not in a
+    late step)."""
+    name = site.get("name", "?")
+    where = site_file or f"the site file of site '{name}' (conf/site/<site>.yaml)"
+    if site.get("crs"):
+        from twinkit.geo.crs import parse_crs
+
+        try:
+            parse_crs(str(site["crs"]))
+        except Exception as exc:  # noqa: BLE001 - pyproj's CRSError: an unknown code or unparsable text
+            raise ConfigError(f"{where}: site.crs {site['crs']} is not a known CRS ({str(exc).splitlines()[0][:160]}); "
+                              f"give an existing EPSG code in metres, e.g. EPSG:3067, or a PROJ string") from None
     bp = site.get("base_point")
     if bp is None:
         return
@@ -147,8 +166,6 @@ def _check_site(site: dict, site_file: str | None = None) -> None:
         from twinkit.errors import InputError
         from twinkit.geo.crs import check_base_point_area
 
-        name = site.get("name", "?")
-        where = site_file or f"the site file of site '{name}' (conf/site/<site>.yaml)"
         try:
             check_base_point_area(site, where)
         except InputError as exc:

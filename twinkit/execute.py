@@ -189,6 +189,8 @@ def _finish(run: _Run, status: str, error: str | None) -> str:
             _write_report(run_dir, manifest, engine)
     elif failed is not None and engine_cfg.get("report", True):
         _write_report(run_dir, manifest, engine)  # a failed run's report: what ran, and the step that failed
+    if run.workspace == run.site_root:  # a single run (a sweep's jobs keep theirs, see docs/engine.md)
+        _tidy_reports(run)
     return status
 
 
@@ -289,3 +291,12 @@ def _write_report(run_dir: Path, manifest: dict, engine) -> None:
     path = write_report(run_dir, manifest, engine)
     if path is not None:
         log.info("twinkit: report file://%s", path.resolve())
+
+
+def _tidy_reports(run: _Run) -> None:
+    """Older runs' reports beyond ``engine.keep_reports``, killed reports' leftovers, unused cached pictures."""
+    try:
+        from twinkit.report.keep import tidy_after_run
+    except ImportError:
+        return
+    tidy_after_run(run.site_root, int(run.engine_cfg.get("keep_reports", 3)), run.run_dir)

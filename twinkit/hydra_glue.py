@@ -127,9 +127,21 @@ def open_site_inputs(args: list[str]) -> list[str]:
 
     Site inputs are open-ended (a recipe may want photos, a GCP file, an OSM extract...), so a
     plain override adds or replaces the key (Hydra's ``++``); every other key stays strict, so a
-    misspelled ``site.sede=3`` still fails at composition.
+    misspelled ``site.sede=3`` still fails at composition. A value with letters outside ASCII
+    (``site.inputs.cloud=straße.ply``), which Hydra's grammar refuses unquoted, is quoted for it.
     """
-    return [("++" + a) if a.startswith("site.inputs.") and "=" in a else a for a in args]
+    return [_quoted_if_needed(("++" + a) if a.startswith("site.inputs.") and "=" in a else a) for a in args]
+
+
+def _quoted_if_needed(arg: str) -> str:
+    """``key=value`` with ``value`` single-quoted when it holds non-ASCII letters and only parses so (a sweep,
+    ``a,b`` or ``choice(...)``, is left to Hydra: quoted it would be one value)."""
+    key, sep, value = arg.partition("=")
+    if (arg.startswith("-") or not sep or value.isascii() or value[:1] in ("'", '"')
+            or any(c in value for c in ",()[]{}") or _parsed((arg,))):
+        return arg
+    quoted = f"{key}='" + value.replace("'", "\\'") + "'"
+    return quoted if _parsed((quoted,)) else arg
 
 
 # --------------------------------------------------------------------------- composing
@@ -268,6 +280,11 @@ def run_app(conf_dir: Path, argv: list[str], job: Callable[[Any], Any]) -> None:
             raise SystemExit(code) from None
         if _is_composition_error(exc):
             raise composition_error(exc) from None
+        from twinkit.sweeps import broken_pool
+
+        if broken_pool(exc):  # a pool worker itself was killed: one line, not loky's traceback
+            print(broken_pool(exc), file=sys.stderr)
+            raise SystemExit(1) from None
         traceback.print_exception(exc)
         raise SystemExit(1) from None
     finally:

@@ -2,17 +2,25 @@
 from __future__ import annotations
 
 import errno
+import re
 import shutil
 from pathlib import Path
 
 from twinkit.errors import InputError, StepError, TwinkitError
 
 
+#: numpy's words for a short write (``ndarray.tofile``, ``np.save``): the bytes did not all reach the file
+_SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
+
+
 def os_error_in(exc: BaseException | None) -> OSError | None:
-    """The OSError behind an exception (its cause or context chain), if any."""
+    """The OSError behind an exception (its cause or context chain), if any. A short write without an errno
+    (numpy's ``369223 requested and 302636 written``) is a full disk (ENOSPC), as ``write(2)`` says then."""
     seen = 0
     while exc is not None and seen < 10:
         if isinstance(exc, OSError):
+            if exc.errno is None and _SHORT_WRITE.search(str(exc)):
+                return OSError(errno.ENOSPC, "No space left on device", getattr(exc, "filename", None))
             return exc
         if "database or disk is full" in str(exc):  # sqlite3.OperationalError
             return OSError(errno.ENOSPC, "No space left on device")
@@ -52,6 +60,7 @@ def explaining_os_errors(run, where: Path):
         kind = InputError if os_exc.errno in (errno.EACCES, errno.EPERM) else type(exc)
         raise kind(f"{head} failed: {os_text(os_exc, where)}") from exc.__cause__
     except OSError as exc:  # outside a step: hashing an input, the store, the hash cache
+        exc = os_error_in(exc) or exc
         if exc.errno in (errno.ENOSPC, errno.EDQUOT):
             raise StepError(os_text(exc, where)) from exc
         raise InputError(os_text(exc, where)) from exc

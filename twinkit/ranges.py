@@ -21,6 +21,7 @@ an ordinary field. The values are checked when the config is composed, before an
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import typing
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ from twinkit.errors import ConfigError
 
 META = "twinkit_check"
 HELP = "twinkit_help"
+PATH = "twinkit_path"
 
 
 def _num(x: float) -> str:
@@ -107,7 +109,7 @@ class Pattern:
 def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: float | None = None,
           le: float | None = None, lt: float | None = None, also: tuple = (), choices: tuple | None = None,
           pattern: str | None = None, words: str = "", default_factory: Any = dataclasses.MISSING,
-          help: str = "", free: bool = False) -> Any:
+          help: str = "", free: bool = False, path: bool | tuple[str, ...] = False) -> Any:
     """A dataclass field with its valid values: ``ge``/``gt``/``le``/``lt`` for numbers, ``choices`` for the rest.
 
     ``pattern`` (a regular expression the whole string must match, ``words`` saying it for the error)
@@ -116,18 +118,27 @@ def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: fl
     still counts as declared ("any number"): say so on purpose, for signed offsets and angles; a flag or a
     free string without choices carries only its ``help``, and so does a field marked ``free=True``
     (a list of strings, a mapping, an optional string, a nested group of options: any value of its type).
-    For a list the check applies to each element. ``help`` is the one-paragraph description
+    For a list the check applies to each element. ``path=True`` declares a string that names an input file or
+    folder (a map, a model's weights): the step's cache key covers that file's content, not only its name
+    (docs/engine.md, "When a step runs"); ``path=(".npz", ".json")``: the value with each of these suffixes in
+    place of its own names a file (a model's stem).
+    ``help`` is the one-paragraph description
     ``twinkit plugins <kind>/<name>`` prints (what the value does, its unit, when to change it);
     measurements and their history belong in the docs, not here.
     """
     unbounded = all(b is None for b in (ge, gt, le, lt, choices, pattern)) and not also
     if free and not unbounded:
         raise TypeError("free=True takes no range, choices or pattern")
+    meta: dict[str, Any] = {HELP: help}
+    if path is True:
+        meta[PATH] = ()
+    elif path:
+        meta[PATH] = tuple(path)
     if free or unbounded and isinstance(default, (bool, str)):
         # a flag, a free string or a free value: nothing to range-check, only the help to carry
         if default_factory is not dataclasses.MISSING:
-            return dataclasses.field(default_factory=default_factory, metadata={HELP: help})
-        return dataclasses.field(default=default, metadata={HELP: help})
+            return dataclasses.field(default_factory=default_factory, metadata=meta)
+        return dataclasses.field(default=default, metadata=meta)
     if pattern is not None:
         check: Range | Choices | Pattern = Pattern(pattern, words)
     elif choices is not None:
@@ -137,9 +148,32 @@ def param(default: Any = dataclasses.MISSING, *, ge: float | None = None, gt: fl
             raise TypeError("give one lower bound (ge or gt) and one upper bound (le or lt)")
         check = Range(lo=gt if gt is not None else ge, hi=lt if lt is not None else le,
                       lo_open=gt is not None, hi_open=lt is not None, also=tuple(also))
+    meta[META] = check
     if default_factory is not dataclasses.MISSING:
-        return dataclasses.field(default_factory=default_factory, metadata={META: check, HELP: help})
-    return dataclasses.field(default=default, metadata={META: check, HELP: help})
+        return dataclasses.field(default_factory=default_factory, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def path_fields(cls: type | None) -> dict[str, tuple[str, ...]]:
+    """The fields of ``cls`` (nested dataclasses walked, names dotted) declared with ``param(path=...)``: name ->
+    the suffixes of a stem's files (empty for a plain file or folder)."""
+    if cls is None or not dataclasses.is_dataclass(cls):
+        return {}
+    return dict(_path_fields(cls, ""))
+
+
+@functools.lru_cache(maxsize=None)
+def _path_fields(cls: type, prefix: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """path_fields, remembered per class (looked up for every step of every run)."""
+    hints = typing.get_type_hints(cls)
+    out: list[tuple[str, tuple[str, ...]]] = []
+    for f in dataclasses.fields(cls):
+        sub = _nested(hints.get(f.name, Any))
+        if sub is not None:
+            out += _path_fields(sub, f"{prefix}{f.name}.")
+        elif f.metadata and PATH in f.metadata:
+            out.append((prefix + f.name, f.metadata[PATH]))
+    return tuple(out)
 
 
 def help_of(f: dataclasses.Field) -> str:
@@ -255,6 +289,8 @@ def describe_params(cls: type | None, prefix: str = "") -> list[ParamInfo]:
         else:
             default = "required"
         check = check_of(f)
-        out.append(ParamInfo(prefix + f.name, _type_text(tp), check.describe() if check is not None else "-",
-                             default, help_of(f)))
+        shown = check.describe() if check is not None else "-"
+        if f.metadata and PATH in f.metadata:
+            shown = "a file or folder (its content is in the key)" if shown == "-" else shown
+        out.append(ParamInfo(prefix + f.name, _type_text(tp), shown, default, help_of(f)))
     return out

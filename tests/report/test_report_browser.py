@@ -160,7 +160,7 @@ def test_exported_glb_with_texture_and_segmentation_colours(browser, tmp_path, a
                                            "duration_s": 0.1, "plugin": "step/export_glb", "metrics": {}}],
                 "workspace": str(ws)}
     page = R.write_report(run, manifest, None)
-    assert page is not None and (page.parent / "viewer" / "model.glb").is_file()
+    assert page is not None and (page.parent / "viewer" / "model.glb.js").is_file()
     st = open_report(browser, page)
     assert st.get("ready") and st.get("seg") is True, st
     tex = canvas_pixels(browser, artifacts / f"glb_texture{seg_attr}.png")

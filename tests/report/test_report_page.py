@@ -104,7 +104,7 @@ def test_page_is_offline_and_every_local_reference_exists(demo_run):
         assert not s.startswith("/"), s
     # the pictures and the 3D view live in the report folder itself
     folder = page.parent
-    for name in ("img/ortho.png", "viewer/model.glb", "viewer/model.glb.js", "viewer/viewer.js", "report.css"):
+    for name in ("img/ortho.png", "viewer/model.glb.js", "viewer/viewer.js", "report.css"):
         assert (folder / name).is_file(), name
 
 
@@ -141,8 +141,7 @@ def test_provenance(demo_run):
 
 
 def test_no_segmentation_yet_means_no_segmentation_toggle_data(demo_run):
-    glb = demo_run.report.parent / "viewer" / "model.glb"
-    gltf = read_glb_json(glb)
+    gltf = read_glb_json(demo_run.report.parent / "viewer" / "model.glb.js")
     attrs = gltf["meshes"][0]["primitives"][0]["attributes"]
     assert "COLOR_0" in attrs and "_CLASS_COLOR" not in attrs  # texture colours only
     assert not (demo_run.report.parent / "img" / "ortho_seg.png").exists()
@@ -219,7 +218,7 @@ def test_segmentation_orthophoto_uses_the_cityscapes_palette(future_run):
 
 
 def test_viewer_model_carries_both_colourings(future_run):
-    gltf = read_glb_json(future_run.report.parent / "viewer" / "model.glb")
+    gltf = read_glb_json(future_run.report.parent / "viewer" / "model.glb.js")
     attrs = gltf["meshes"][0]["primitives"][0]["attributes"]
     # COLOR_0 = texture colours (what every viewer draws), _CLASS_COLOR = segmentation (darkens nothing)
     assert {"POSITION", "COLOR_0", "_CLASS_COLOR"} <= set(attrs) and "_TEXCOLOR" not in attrs
@@ -228,7 +227,10 @@ def test_viewer_model_carries_both_colourings(future_run):
 # --------------------------------------------------------------------------- pieces
 
 def read_glb_json(path: Path) -> dict:
-    data = path.read_bytes()
+    """The JSON chunk of a GLB, or of the GLB a report's model script carries (``model.glb.js``)."""
+    from twinkit.report.viewer import read_glb_js
+
+    data = read_glb_js(path) if path.name.endswith(".js") else path.read_bytes()
     magic, version, total = struct.unpack_from("<4sII", data)
     assert magic == b"glTF" and version == 2 and total == len(data)
     n, kind = struct.unpack_from("<I4s", data, 12)

@@ -60,7 +60,15 @@ class EngineBase:
 
         def _check_workspace(self, folder: Path, rec: dict) -> tuple[str, list[str]]: ...  # edits
 
-        def _keep_edits(self, folder: Path, rec: dict | None, why: str) -> Path | None: ...  # edits
+        def _keep_edits(self, folder: Path, rec: dict | None, why: str,
+                        forced: bool = False) -> Path | None: ...  # edits
+
+        def _edit_to_restore(self, ps: PlannedStep, folder: Path, key: str, files: dict,
+                             forced: bool) -> tuple[Path, dict] | None: ...  # edits
+
+        def _reapply_edit(self, folder: Path, dest: Path, note: dict) -> list[str]: ...  # edits
+
+        def _pending_edits(self, folder: Path, key: str) -> list[tuple[Path, dict]]: ...  # edits
 
         def _store_valid(self, key: str) -> dict | None: ...  # store
 

@@ -88,7 +88,8 @@ class FanoutMixin(EngineBase):
                                                         "duration_s": round(duration, 3), "site_fields": read},
                                         status, why, in_paths)
         record["item_keys"] = keys
-        self._keep_edits(folder, rec, "forced re-run" if forced else f"its step re-runs ({why})")
+        self._keep_edits(folder, rec, "forced re-run" if forced else f"its step re-runs ({why})", forced)
+        edit = self._edit_to_restore(ps, folder, key, record["files"], forced)
         try:
             self._materialize(folder, [(f"{i:03d}", self.store / k) for i, k in enumerate(keys)], record)
         except DamagedStore as exc:
@@ -103,6 +104,12 @@ class FanoutMixin(EngineBase):
                                         desc0=desc0, index=index, fields=fields)
             finally:
                 self._fanout_retry = False
+        if edit is not None:  # the result an edit was made on is back: so is the edit
+            files = self._reapply_edit(folder, *edit)
+            kept = self._fanout_kept(ps, folder, key, record, len(items))
+            if kept is not None:
+                kept.why = f"re-applied hand-edited {', '.join(files)} from {edit[0]}; later steps re-run"
+                return kept
         outputs = {p.filename: [folder / f"{i:03d}" / p.filename for i in range(len(items))] for p in ps.outputs}
         return StepOutcome(ps.id, ps.folder, ps.label, status, why + f" ({n_computed}/{len(items)} items computed)",
                            key, duration, outputs, artefacts, metrics)

@@ -12,8 +12,33 @@ from typing import Any
 from twinkit.engine.base import EngineBase
 from twinkit.engine.plan import PlannedStep
 from twinkit.engine.store import site_fields, with_site
-from twinkit.errors import InputError
+from twinkit.errors import InputError, TwinkitError
 from twinkit.hashing import artefact_hash
+from twinkit.ranges import path_fields
+
+
+def _file_content(path: Path, suffixes: tuple[str, ...], cache) -> Any:
+    """The content hash of a file or folder a parameter names (None when it is not there: the step's own check
+    says so); for a stem, one per suffix."""
+    if suffixes:
+        return {sfx: _file_content(path.with_suffix(sfx), (), cache) for sfx in suffixes}
+    if path.is_dir():
+        return artefact_hash(path, cache)
+    return cache.hash(path) if path.is_file() else None
+
+
+def named_files(cls: type | None, values: Any, cache, prefix: str = "") -> dict[str, Any]:
+    """``<prefix><field>`` -> content hash of the file or folder named by each non-empty parameter of ``cls``
+    declared ``param(path=...)`` (twinkit.ranges.path_fields); relative names from the working directory, as the
+    plugins open them."""
+    out: dict[str, Any] = {}
+    for name, suffixes in path_fields(cls).items():
+        value: Any = values
+        for part in name.split("."):
+            value = value.get(part) if isinstance(value, dict) else None
+        if isinstance(value, str) and value.strip():
+            out[prefix + name] = _file_content(Path(value).expanduser(), suffixes, cache)
+    return out
 
 
 def missing_input(path: Path, step_id: str) -> str:
@@ -58,13 +83,30 @@ class KeysMixin(EngineBase):
         else:
             plugin = {"kind": ps.plugin.kind, "name": ps.plugin.name, "version": ps.plugin.version,
                       "code": ps.plugin.code_hash()}
-        return {
+        desc = {
             "plugin": plugin,
             "params": ps.params_dict,
             "components": ps.components,
             "inputs": input_hashes,
             "outputs": [o.filename for o in ps.outputs],
         }
+        files = self._param_files(ps)
+        if files:  # only then: the keys of steps whose parameters name no file stay as they were
+            desc["files"] = files
+        return desc
+
+    def _param_files(self, ps: PlannedStep) -> dict[str, Any]:
+        """The content hashes of the files the step's parameters, and its components' (``image_model``), name
+        (``param(path=...)``): a changed map or weights file re-runs the step as a changed input does."""
+        files = named_files(ps.plugin.params if ps.plugin else None, ps.params_dict, self.hashes)
+        for kind, node in (ps.components or {}).items():
+            if isinstance(node, dict) and node.get("plugin"):
+                try:
+                    plugin = self.registry.get(kind, node["plugin"])
+                except TwinkitError:
+                    continue  # an unknown component fails where it is built, with its own message
+                files.update(named_files(plugin.params, node, self.hashes, f"{kind}."))
+        return files
 
     def _keyed(self, descriptor: dict) -> tuple[str, dict, str, list[str]]:
         """(key, descriptor with the site fields the step reads, the descriptor's own key, those fields)."""
@@ -99,6 +141,10 @@ class KeysMixin(EngineBase):
             reasons.append("input changed: " + ", ".join(changed))
         if o.get("components") != new["components"]:
             reasons.append("component config changed")
+        files = [k for k in sorted(set(o.get("files") or {}) | set(new.get("files") or {}))
+                 if (o.get("files") or {}).get(k) != (new.get("files") or {}).get(k)]
+        if files:
+            reasons.append("file changed: " + ", ".join(files))
         old_site, new_site = o.get("site") or {}, new.get("site") or {}
         for k in sorted(set(old_site) & set(new_site)):
             if old_site[k] != new_site[k]:

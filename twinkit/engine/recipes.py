@@ -3,7 +3,9 @@
 ``outputs/<site>/NN_*`` shows the folders of the recipe that ran last there (``.twinkit.recipe`` names it).
 When another recipe runs, those folders move, whole and as they are (hand edits included), to
 ``outputs/<site>/recipes/<recipe>/``, and the new recipe's own parked folders, if it ran there before, move
-back. Moving is one ``rename`` per folder: nothing is copied, recomputed or lost."""
+back. Moving is one ``rename`` per folder: nothing is copied, recomputed or lost. The moves are written to a
+journal (``.twinkit.switch.json``) before the first, and a run killed among them is finished by the next run
+before it does anything else."""
 from __future__ import annotations
 
 import datetime as _dt
@@ -15,10 +17,13 @@ from pathlib import Path
 
 from twinkit.engine.base import EngineBase
 from twinkit.engine.records import read_record
+from twinkit.errors import InputError
+from twinkit.jsonio import write_json as write_json_atomic
 
 log = logging.getLogger("twinkit")
 
 MARKER = ".twinkit.recipe"
+JOURNAL = ".twinkit.switch.json"  # a recipe switch's folder moves, written before the first, removed after the last
 _NUMBERED = re.compile(r"^\d{2,}_\w+$")
 
 
@@ -61,42 +66,90 @@ def parked_folder(workspace: Path, recipe: str) -> Path:
     return workspace / "recipes" / _safe(recipe)
 
 
+def _write_marker(workspace: Path, name: str) -> None:
+    """``.twinkit.recipe`` written whole or not at all (a half-written marker would hide the recipe)."""
+    tmp = workspace / f"{MARKER}.tmp-{os.getpid()}"
+    tmp.write_text(name + "\n")
+    os.replace(tmp, workspace / MARKER)
+
+
+def switch_moves(workspace: Path, here: str | None, name: str, edits_dir: Path) -> list[tuple[str, str]]:
+    """The folder moves (``src``, ``dst``, relative to ``workspace``) that put recipe ``name``'s folders at the
+    top: the folders of recipe ``here`` parked (an older park of it set aside first, never overwritten), then
+    ``name``'s parked folders moved back where no folder stays."""
+    moves: list[tuple[str, str]] = []
+    staying = {f.name for f in numbered_folders(workspace)}
+    if here is not None and here != name and staying:
+        dest = workspace / "recipes" / _safe(here)
+        if numbered_folders(dest):
+            aside = edits_dir / f"parked-{_safe(here)}-{_dt.datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
+            moves.append((os.path.relpath(dest, workspace), os.path.relpath(aside, workspace)))
+        moves += [(f.name, os.path.relpath(dest / f.name, workspace)) for f in numbered_folders(workspace)]
+        staying = set()
+    back = workspace / "recipes" / _safe(name)
+    if here != name:
+        moves += [(os.path.relpath(f, workspace), f.name) for f in numbered_folders(back) if f.name not in staying]
+    return moves
+
+
+def finish_switch(workspace: Path) -> None:
+    """Carry out the recipe switch journalled in ``workspace`` (:data:`JOURNAL`), from wherever a run killed
+    during it stopped: a move whose source is gone or whose target exists is done. Then the marker names the
+    new recipe and the journal goes."""
+    journal = workspace / JOURNAL
+    try:
+        plan = json.loads(journal.read_text())
+        moves, recipe = [(str(s), str(d)) for s, d in plan["moves"]], str(plan["recipe"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{journal}: unreadable ({type(exc).__name__}); it lists the folder moves of a recipe "
+                         f"switch a killed run left half done: move the numbered folders where they belong "
+                         f"(docs/engine.md, 'Where things go') and remove it") from None
+    for src, dst in moves:
+        s, d = workspace / src, workspace / dst
+        if os.path.lexists(s) and not os.path.lexists(d):
+            d.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(s, d)
+        elif os.path.lexists(s):
+            log.warning("  %s was not moved to %s, which exists already; both are kept", s, d)
+    back = workspace / "recipes" / _safe(recipe)
+    if back.is_dir() and not any(back.iterdir()):
+        back.rmdir()
+    _write_marker(workspace, recipe)
+    journal.unlink()
+
+
 class RecipesMixin(EngineBase):
     """Part of :class:`~twinkit.engine.runner.Engine` (``self.workspace``, ``self.site_root``,
     ``self.edits_dir``, ``self.cfg``)."""
 
     def _switch_recipe(self) -> None:
+        """Put this run's recipe's folders at the top of the site's folder, parking those of the recipe that ran
+        there last. The moves are journalled first (:data:`JOURNAL`), so a run killed half-way leaves no mix of
+        two recipes taken as one: the next run finishes them before anything else."""
         if self.workspace.resolve() != self.site_root.resolve():
             return  # a sweep job's folder holds one recipe
         name = str((self.cfg.get("recipe") or {}).get("name") or "")
         if not name:
             return
+        if (self.workspace / JOURNAL).is_file():
+            log.warning("finishing the recipe switch a killed run left half done (%s)", self.workspace / JOURNAL)
+            finish_switch(self.workspace)
         here = recipe_here(self.workspace)
-        if here is not None and here != name:
-            folders = numbered_folders(self.workspace)
-            if folders:
-                dest = self.workspace / "recipes" / _safe(here)
-                if numbered_folders(dest):  # an older park of the same recipe: kept, never overwritten
-                    aside = self.edits_dir / f"parked-{_safe(here)}-{_dt.datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
-                    aside.parent.mkdir(parents=True, exist_ok=True)
-                    os.replace(dest, aside)
-                    log.warning("  an older copy of recipe '%s' folders moved to %s", here, aside)
-                dest.mkdir(parents=True, exist_ok=True)
-                for f in folders:
-                    os.replace(f, dest / f.name)
-                log.info("recipe '%s' folders (%d) moved to %s; recipe '%s' runs here now", here, len(folders),
-                         dest, name)
-        back = self.workspace / "recipes" / _safe(name)
-        if here != name and back.is_dir():
-            restored = 0
-            for f in numbered_folders(back):
-                if not (self.workspace / f.name).exists():
-                    os.replace(f, self.workspace / f.name)
-                    restored += 1
-            try:
-                back.rmdir()
-            except OSError:
-                pass
-            if restored:
-                log.info("recipe '%s' folders (%d) moved back from %s", name, restored, back)
-        (self.workspace / MARKER).write_text(name + "\n")
+        moves = switch_moves(self.workspace, here, name, self.edits_dir)
+        if not moves:
+            if here != name:
+                _write_marker(self.workspace, name)
+            return
+        write_json_atomic(self.workspace / JOURNAL, {"recipe": name, "from": here, "moves": moves})
+        finish_switch(self.workspace)
+        parked = [d for s, d in moves if d.startswith(os.path.relpath(self.edits_dir, self.workspace))]
+        if parked:
+            log.warning("  an older copy of recipe '%s' folders moved to %s", here, self.workspace / parked[0])
+        n_out = sum(1 for s, d in moves if "/" not in s)
+        n_back = sum(1 for s, d in moves if "/" not in d)
+        if n_out:
+            log.info("recipe '%s' folders (%d) moved to %s; recipe '%s' runs here now", here, n_out,
+                     self.workspace / "recipes" / _safe(str(here)), name)
+        if n_back:
+            log.info("recipe '%s' folders (%d) moved back from %s", name, n_back,
+                     self.workspace / "recipes" / _safe(name))

@@ -172,7 +172,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             why = "forced by rerun"
         else:
             why = self._why(rec, desc)
-        self._keep_edits(folder, rec, "forced re-run" if forced else f"its step re-runs ({why})")
+        self._keep_edits(folder, rec, "forced re-run" if forced else f"its step re-runs ({why})", forced)
 
         index_key = key
         for attempt in (1, 2):
@@ -196,6 +196,7 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
                 if stored.get("key", key) != key:  # it read a site field it had not read before
                     key, desc = stored["key"], with_site(desc0, self.cfg.get("site"), stored["site_fields"])[1]
             record = self._workspace_record(ps, key, desc, stored, status, why, in_paths)
+            edit = self._edit_to_restore(ps, folder, key, record["files"], forced)  # stops on one made elsewhere
             try:
                 self._materialize(folder, [("", self.store / key)], record)
                 break
@@ -206,6 +207,12 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
                 log.warning("  stored result %s/%s differs from its record; computing it again", key, exc.rel)
                 shutil.rmtree(self.store / key, ignore_errors=True)
         assert stored is not None  # the loop above ends with a stored result or raises
+        if edit is not None:  # the result an edit was made on is back: so is the edit
+            files = self._reapply_edit(folder, *edit)
+            outputs, hashes = self._outputs_of(folder, ps, stored, current=True)
+            return StepOutcome(ps.id, ps.folder, ps.label, "edited", f"re-applied hand-edited {', '.join(files)} "
+                               f"from {edit[0]}; later steps re-run", key, 0.0, outputs, hashes,
+                               stored.get("metrics", {}), stored.get("peak_rss_mb"))
         outputs, hashes = self._outputs_of(folder, ps, stored, current=False)
         return StepOutcome(ps.id, ps.folder, ps.label, status, why, key,
                            stored.get("duration_s", 0.0) if status == "ran" else 0.0, outputs, hashes,

@@ -3,7 +3,7 @@ writing nothing."""
 from __future__ import annotations
 
 from twinkit.engine.base import EngineBase
-from twinkit.engine.recipes import parked_folder
+from twinkit.engine.recipes import JOURNAL, parked_folder
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.errors import TwinkitError
 from twinkit.hashing import HashCache, artefact_hash
@@ -19,6 +19,9 @@ class StatusMixin(EngineBase):
         dirty = False
         self.hashes.close()
         self.hashes = HashCache(self.hashes.db_path, read_only=True)  # a dry run writes nothing, not even hashes
+        if (self.site_root / JOURNAL).is_file():  # folders may be half-way between two recipes
+            rows.append((JOURNAL, "unfinished", "a recipe switch was stopped among its folder moves; the next run "
+                                                "finishes them first"))
         if self.workspace.resolve() == self.site_root.resolve():  # another recipe's folders may be at the top
             self.workspace = parked_folder(self.workspace, str((self.cfg.get("recipe") or {}).get("name") or ""))
         for ps in self.plan:
@@ -70,8 +73,12 @@ class StatusMixin(EngineBase):
                 if stored is not None and "site_fields" not in stored:
                     stored = None
                 if stored is not None:
-                    rows.append((ps.folder, "cached", "result stored for this key"))
-                    hashes = stored["artefacts"]
+                    row, seen = self._status_cached(ps, folder, key, stored)
+                    rows.append(row)
+                    if seen is None:
+                        dirty = True
+                        continue
+                    hashes = seen
                 else:
                     rows.append((ps.folder, "would run", "forced by rerun" if forced else self._why(rec, desc)))
                     dirty = True
@@ -80,3 +87,18 @@ class StatusMixin(EngineBase):
             self.outcomes.append(StepOutcome(ps.id, ps.folder, ps.label, "status", "", key, 0, outputs, hashes))
         self.hashes.close()
         return rows
+
+    def _status_cached(self, ps, folder, key: str, stored: dict) -> tuple[tuple[str, str, str], dict | None]:
+        """The row of a step whose result is stored, and the hashes later steps would see (None when they cannot
+        be told without running): an edit set aside on that result would be re-applied over it."""
+        pending = self._pending_edits(folder, key)
+        if not pending:
+            return (ps.folder, "cached", "result stored for this key"), stored["artefacts"]
+        dest, note = pending[0]
+        files = sorted(note.get("files", {}))
+        row = (ps.folder, "edited", f"would re-apply hand-edited {', '.join(files)} from {dest}")
+        if ps.foreach is not None:
+            return row, None
+        return row, {f: artefact_hash(dest / f, self.hashes) if f in files else h
+                     for f, h in stored["artefacts"].items()}
+

@@ -262,10 +262,30 @@ def to_site_frame(xyz: np.ndarray, file_crs, site: Mapping[str, Any], name: str,
     if projected:
         _shift_to_origin(xyz, base_point_in(target, site), info)
     else:
+        _refuse_degrees(xyz, site_crs, site, name)
         info.notes.append("local coordinates (no CRS, small values): used as they are")
     _check_on_site(xyz, site, info, name, max_offset_m=max_offset_m, bounds_margin_m=bounds_margin_m,
                    min_inside_fraction=min_inside_fraction)
     return xyz, info
+
+
+def _refuse_degrees(xyz: np.ndarray, site_crs, site: Mapping[str, Any], name: str) -> None:
+    """InputError when a cloud without a CRS of its own has x, y in degrees near the base point of a site whose
+    CRS is geographic (EPSG:4326): read as metres such a street is a few millimetres wide ("not a street")."""
+    from twinkit import InputError
+
+    if site_crs is None or not horizontal(site_crs).is_geographic or not len(xyz):
+        return
+    mx, my = (float(v) for v in np.nanmedian(xyz[:, :2], axis=0))
+    ll = base_point_lonlat(site.get("base_point") or {}, horizontal(site_crs))
+    lon, lat = ll if ll is not None else (mx, my)
+    span = float(np.nanmax(np.ptp(xyz[:, :2], axis=0)))
+    if not (abs(mx - lon) < 1.0 and abs(my - lat) < 1.0 and abs(my) <= 90.0 and span < 1.0):
+        return
+    code, zone = utm_epsg(my, mx)
+    raise InputError(f"{name}: site.crs {site.get('crs')} is geographic (degrees), and the cloud's x, y are degrees "
+                     f"too (around lon {mx:.6f}, lat {my:.6f}); twinkit needs a projected CRS in metres: reproject "
+                     f"the cloud into one (here e.g. EPSG:{code}, WGS 84 / UTM {zone}) and set site.crs to it")
 
 
 def _into_metres(xyz: np.ndarray, src, site_crs, name: str, info: FrameInfo):
@@ -290,9 +310,12 @@ def _into_metres(xyz: np.ndarray, src, site_crs, name: str, info: FrameInfo):
         info.notes.append(f"reprojected from {short_crs(src.to_wkt())} to {short_crs(site_crs.to_wkt())}")
         return site_crs
     if src.is_geographic:
+        mx, my = (float(v) for v in np.nanmedian(xyz[:, :2], axis=0)) if len(xyz) else (0.0, 0.0)
+        code, zone = utm_epsg(my, mx) if abs(my) <= 90 else (32631, "zone 31N")
         raise InputError(
-            f"{name}: coordinates are geographic (degrees, {src.name}) and the site has no projected CRS; "
-            f"set site.crs to a projected CRS (e.g. the local UTM zone)")
+            f"{name}: coordinates are geographic (degrees, {src.name}) and site.crs "
+            f"({site_crs.name if site_crs is not None else 'not set'}) is not a projected CRS in metres; set "
+            f"site.crs to one (here e.g. EPSG:{code}, WGS 84 / UTM {zone}): the cloud is reprojected into it")
     xyz[:, :2] *= fxy
     xyz[:, 2] *= fz
     info.unit_factor_xy, info.unit_factor_z = fxy, fz
@@ -322,7 +345,8 @@ def _shift_to_origin(xyz: np.ndarray, base, info: FrameInfo) -> None:
 def _check_on_site(xyz: np.ndarray, site: Mapping[str, Any], info: FrameInfo, name: str, *, max_offset_m: float,
                    bounds_margin_m: float, min_inside_fraction: float) -> None:
     """InputError when the site-frame cloud cannot belong to the site: too few points inside the site's
-    ``bounds_m`` (+ margin), or, without bounds, its centre too far from the base point (a wrong CRS)."""
+    ``bounds_m`` (+ margin), or, without bounds, its centre (the median point) too far from the base point
+    (a wrong CRS)."""
     from twinkit import InputError
 
     site_crs_s = site.get("crs")
@@ -341,7 +365,8 @@ def _check_on_site(xyz: np.ndarray, site: Mapping[str, Any], info: FrameInfo, na
                 f"so it is probably in the wrong CRS for this site (file CRS: {short_crs(info.source_crs)}, "
                 f"site CRS: {site_crs_s}); reproject it or fix site.crs / site.base_point")
     elif len(pts) and info.shift_source == "base_point":
-        centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        sample = pts[:: max(1, len(pts) // 1_000_000)]
+        centre = np.median(sample, axis=0)  # a few far points (a junk 0, 0, 0) do not move it; read_cloud drops them
         d = float(np.linalg.norm(centre[:2]))
         if d > max_offset_m:
             raise InputError(

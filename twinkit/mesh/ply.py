@@ -31,7 +31,6 @@ _SCALAR_DTYPES = {
 }
 
 
-
 def _ply_scalar(arr):
     """PLY has no 64-bit integers or booleans: narrow them to int32 / uint32 / uint8."""
     if arr.dtype == np.int64:
@@ -42,11 +41,17 @@ def _ply_scalar(arr):
         return arr.astype(np.uint8)
     return arr
 
+def _comment(text: str) -> str:
+    """A header comment line: ASCII as the format wants (other letters as ``\\xdf`` escapes: ``straße.ply``
+    from a file name), one line (a newline as ``\\n``)."""
+    return "comment " + str(text).encode("ascii", "backslashreplace").decode().replace("\n", "\\n").replace("\r", "\\r")
+
+
 def _write_ply_ascii(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4") -> None:
     """Write ``mesh`` as ASCII PLY: the header :func:`write_ply` writes, one row per line, values as
     ``%.18g`` (every float32/float64 reads back exactly)."""
     cols = _vertex_columns(mesh, xyz_dtype)
-    head = ["ply", "format ascii 1.0"] + [f"comment {c}" for c in mesh.comments]
+    head = ["ply", "format ascii 1.0"] + [_comment(c) for c in mesh.comments]
     head.append(f"element vertex {mesh.n_vertices}")
     head += [f"property {_PLY_NAMES[t]} {c}" for c, t, _ in cols]
     fcols: list[np.ndarray] = []
@@ -221,25 +226,48 @@ def _read_ascii_element(tokens: list[bytes], pos: int, count: int, props: list[l
     return _object_rows(rows, props, "="), pos
 
 
-def _read_ply_general(path: Path, fmt: str, offset: int, elements: list[list], comments: list[str]) -> Mesh:
+class PlyExtraData(ValueError):
+    """More data follows a PLY's last element than its header declares (``read_ply(..., exact=True)``)."""
+
+    def __init__(self, declared: int, extra_rows: int):
+        super().__init__(f"the header declares {declared} vertices but the file holds more (about {extra_rows} "
+                         f"more rows after them)")
+        self.declared, self.extra_rows = declared, extra_rows
+
+
+def _check_exact(elements: list[list], left: int, row: int) -> None:
+    """Raise :class:`PlyExtraData` when ``left`` bytes (ASCII: values) after the last element make a vertex row."""
+    if row > 0 and left >= row:
+        nv = next((e[1] for e in elements if e[0] == "vertex"), 0)
+        raise PlyExtraData(nv, left // row)
+
+
+def _read_ply_general(path: Path, fmt: str, offset: int, elements: list[list], comments: list[str],
+                      exact: bool = False) -> Mesh:
     """Any PLY the fast path does not take: ASCII, polygons, lists of varying length, other elements
     (read past and left out). Polygons are fan-triangulated by :func:`_mesh_from_arrays`."""
     data = path.read_bytes()[offset:]
     found: dict[str, np.ndarray] = {}
+    vprops: list = next((e[2] for e in elements if e[0] == "vertex"), [])
     if fmt == "ascii":
         tokens = data.split()
         pos = 0
         for name, count, props in elements:
             found[name], pos = _read_ascii_element(tokens, pos, count, props)
+        left, row = len(tokens) - pos, len(vprops)
     elif fmt in ("binary_little_endian", "binary_big_endian"):
         end = "<" if fmt == "binary_little_endian" else ">"
         buf, pos = memoryview(data), 0
         for name, count, props in elements:
             found[name], pos = _read_binary_element(buf, pos, count, props, end)
+        fixed = all(p[0] != "list" for p in vprops)
+        left, row = len(buf) - pos, (_element_dtype(vprops, end).itemsize if fixed and vprops else 1)
     else:
         raise ValueError(f"unknown PLY format {fmt!r}")
     if "vertex" not in found:
         raise ValueError("no vertex element")
+    if exact:
+        _check_exact(elements, left, row)
     return _mesh_from_arrays(found["vertex"], found.get("face"), comments)
 
 
@@ -360,7 +388,7 @@ def write_ply(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool
         return _write_ply_ascii(path, mesh, xyz_dtype=xyz_dtype)
     cols = _vertex_columns(mesh, xyz_dtype)
     vdt = np.dtype([(c, "<" + t) for c, t, _ in cols])
-    head = ["ply", "format binary_little_endian 1.0"] + [f"comment {c}" for c in mesh.comments]
+    head = ["ply", "format binary_little_endian 1.0"] + [_comment(c) for c in mesh.comments]
     head.append(f"element vertex {mesh.n_vertices}")
     head += [f"property {_PLY_NAMES[t]} {c}" for c, t, _ in cols]
     face = None
@@ -400,11 +428,13 @@ def write_ply(path: Path | str, mesh: Mesh, *, xyz_dtype: str = "f4", text: bool
             face.tofile(fh)
 
 
-def read_ply(path: Path | str) -> Mesh:
+def read_ply(path: Path | str, *, exact: bool = False) -> Mesh:
     """Read a PLY (cloud or triangle mesh) into a :class:`Mesh`; float64 vertices.
 
     Binary files (either byte order) whose faces are all triangles are parsed directly with numpy;
-    anything else goes through the general reader (polygons are fan-triangulated)."""
+    anything else goes through the general reader (polygons are fan-triangulated). ``exact``: raise
+    :class:`PlyExtraData` when at least one more vertex row's worth of data follows the last element
+    (a header that declares fewer vertices than the file holds), instead of leaving the rest unread."""
     path = Path(path)
     lines, offset = _ply_header(path)
     fmt, elements, comments = _ply_elements(lines)
@@ -414,7 +444,7 @@ def read_ply(path: Path | str) -> Mesh:
               and all(p[0] != "list" for p in elements[0][2])
               and all(n == "face" for n in names[1:]) and len(names) <= 2)
     if not simple or end is None:
-        return _read_ply_general(path, fmt, offset, elements, comments)
+        return _read_ply_general(path, fmt, offset, elements, comments, exact)
     vdt = np.dtype([(p[1], end + _PLY_TYPES[p[0]]) for p in elements[0][2]])
     nv = elements[0][1]
     size = path.stat().st_size
@@ -422,13 +452,15 @@ def read_ply(path: Path | str) -> Mesh:
     if len(elements) == 2:
         face_dtype = _face_dtype(path, offset + vdt.itemsize * nv, elements[1][2], end)
         if face_dtype is None:
-            return _read_ply_general(path, fmt, offset, elements, comments)
+            return _read_ply_general(path, fmt, offset, elements, comments, exact)
         fdt = face_dtype
         nf = elements[1][1]
         if offset + vdt.itemsize * nv + fdt.itemsize * nf != size:
-            return _read_ply_general(path, fmt, offset, elements, comments)  # polygons or variable lists
+            return _read_ply_general(path, fmt, offset, elements, comments, exact)  # polygons or variable lists
     elif offset + vdt.itemsize * nv > size:
         raise ValueError(f"truncated PLY: {nv} vertices declared, file too short")
+    elif exact:
+        _check_exact(elements, size - offset - vdt.itemsize * nv, vdt.itemsize)
     with open(path, "rb") as fh:
         fh.seek(offset)
         v = np.fromfile(fh, dtype=vdt, count=nv)
@@ -437,10 +469,10 @@ def read_ply(path: Path | str) -> Mesh:
             fnames = fdt.names or ()
             key = "vertex_indices" if "vertex_indices" in fnames else "vertex_index"
             if key not in fnames or face_arr[key].shape[1:] != (3,):
-                return _read_ply_general(path, fmt, offset, elements, comments)
+                return _read_ply_general(path, fmt, offset, elements, comments, exact)
             for n in fnames:
                 if n.endswith("_n") and n[:-2] in fnames and not np.all(face_arr[n] == fdt[n[:-2]].shape[0]):
-                    return _read_ply_general(path, fmt, offset, elements, comments)
+                    return _read_ply_general(path, fmt, offset, elements, comments, exact)
     if len(v) < nv:
         raise ValueError(f"truncated PLY: {nv} vertices declared, {len(v)} present")
     if face_arr is not None:

@@ -37,7 +37,7 @@ from typing import Any
 from twinkit.report import html as _html
 from twinkit.report import page as _page
 from twinkit.report.render import TopDown, render_topdown
-from twinkit.report.run import RunView, copy_into, file_key, flatten, read_json, rel, touch
+from twinkit.report.run import RunView, cached_copy, file_key, flatten, link_or_copy, read_json, rel, touch
 
 log = logging.getLogger("twinkit.report")
 
@@ -153,9 +153,11 @@ class SectionContext:
         return rel(target, self.run.report_dir)
 
     def add_image(self, src: Path, name: str | None = None) -> str:
-        """Link (or copy) a picture into the report's ``img/`` and return its address in the page."""
-        name = name or Path(src).name
-        copy_into(Path(src), self.out / "img" / name)
+        """Put a copy of a picture into the report's ``img/`` (a hard link to its copy in the report cache,
+        :func:`~twinkit.report.run.cached_copy`) and return its address in the page."""
+        name, src = name or Path(src).name, Path(src)
+        cache = self.run.cache_dir
+        link_or_copy(src if src.parent == cache else cached_copy(src, cache), self.out / "img" / name)
         return f"img/{name}"
 
     def ortho(self) -> dict | None:

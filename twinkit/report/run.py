@@ -46,13 +46,25 @@ def link_or_copy(src: Path, dst: Path) -> None:
         shutil.copy2(src, dst)
 
 
-def copy_into(src: Path, dst: Path) -> None:
-    """A copy, never a hard link: a report's pictures must not share an inode with a step folder a person
-    may edit (the engine's rule, docs/engine.md "Edits stay where they were made")."""
+def cached_copy(src: Path, cache: Path) -> Path:
+    """A copy of ``src`` in the report cache, named by its content (made once; reports hard-link it), so a
+    picture of a step folder is on disk once however many reports show it, and never shares an inode with
+    the step folder."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(src, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    dst = Path(cache) / f"pic-{h.hexdigest()[:24]}{Path(src).suffix.lower()}"
+    if dst.is_file():
+        touch(dst)
+        return dst
     dst.parent.mkdir(parents=True, exist_ok=True)
-    if dst.exists() or dst.is_symlink():
-        dst.unlink()
-    shutil.copyfile(src, dst)
+    tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
+    shutil.copyfile(src, tmp)
+    tmp.replace(dst)
+    return dst
 
 
 def write_text(path: Path, text: str) -> None:

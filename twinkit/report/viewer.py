@@ -1,6 +1,6 @@
 """The 3D view: three.js as one classic script (pages opened from ``file://`` may not import ES modules),
-bundled by esbuild at set-up and shipped in ``twinkit/report_assets``; the model as a script; and the
-section that shows them."""
+bundled by esbuild at set-up and shipped in ``twinkit/report_assets``; the model as a script (one file,
+kept once in the report cache by content); and the section that shows them."""
 from __future__ import annotations
 
 import hashlib
@@ -15,7 +15,7 @@ from twinkit.mesh.glb import decimate, write_colored_glb
 from twinkit.report.html import esc, link
 from twinkit.report.page import ASSETS, palette, size
 from twinkit.report.render import RENDER_VERSION, TopDown, labels_for, mesh_for_ortho
-from twinkit.report.run import RunView, copy_into, link_or_copy, rel, touch
+from twinkit.report.run import RunView, link_or_copy, rel, touch
 
 log = logging.getLogger("twinkit.report")
 
@@ -51,71 +51,101 @@ def vendor_three(dest: Path) -> bool:
     return True
 
 
+GLB_JS_HEAD, GLB_JS_TAIL = b'window.TWINKIT_GLB = "', b'";\n'
+
+
 def write_glb_js(glb: Path, js: Path) -> None:
     """The GLB as a classic script (``window.TWINKIT_GLB``, base64): pages opened from file:// may not
-    fetch() their neighbours, but they may load scripts."""
+    fetch() their neighbours (Chromium refuses), but they may load scripts."""
     import base64
 
-    b64 = base64.b64encode(glb.read_bytes()).decode("ascii")
+    b64 = base64.b64encode(glb.read_bytes())
     tmp = js.with_name(js.name + f".{os.getpid()}.tmp")
-    tmp.write_text(f'window.TWINKIT_GLB = "{b64}";\n', encoding="ascii")
+    tmp.write_bytes(GLB_JS_HEAD + b64 + GLB_JS_TAIL)
     tmp.replace(js)
 
 
+def read_glb_js(js: Path) -> bytes:
+    """The GLB a model script (:func:`write_glb_js`) carries."""
+    import base64
 
-def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
-    """The 3D view: the latest ``*.glb`` of the run, else a light GLB written from the pictured mesh."""
-    vdir = out / "viewer"
-    glbs = [(s, f) for s, f in run.find("*.glb") if not f.name.startswith("gt_")]
-    source = None
+    data = js.read_bytes()
+    if not (data.startswith(GLB_JS_HEAD) and data.endswith(GLB_JS_TAIL)):
+        raise ValueError(f"{js}: not a model script")
+    return base64.b64decode(data[len(GLB_JS_HEAD):-len(GLB_JS_TAIL)])
+
+
+def glb_js_size(js: Path) -> int:
+    """Bytes of the GLB a model script carries, without decoding it."""
+    n = js.stat().st_size - len(GLB_JS_HEAD) - len(GLB_JS_TAIL)
+    with open(js, "rb") as f:
+        f.seek(max(0, js.stat().st_size - len(GLB_JS_TAIL) - 2))
+        pad = f.read(2).count(b"=")
+    return n // 4 * 3 - pad
+
+
+def _key(*parts: object) -> str:
+    return hashlib.sha256("|".join(str(p) for p in parts).encode()).hexdigest()[:20]
+
+
+def model_script(run: RunView, pics: TopDown) -> tuple[Path | None, str, str]:
+    """The 3D view's model as a script in the report cache, keyed by content, so that runs that show the
+    same model share one file (hard-linked into each report): (script or None, where it comes from, note).
+
+    The model is the latest ``*.glb`` of the run, else a light GLB written from the pictured mesh."""
     cache = run.cache_dir
+    cache.mkdir(parents=True, exist_ok=True)
+    glbs = [(s, f) for s, f in run.find("*.glb") if not f.name.startswith("gt_")]
     note = ""
     if glbs and glbs[0][1].stat().st_size > MAX_GLB_BYTES:
         s, f = glbs[0]
         note = (f" {esc(s.get('folder'))}/{esc(f.name)} ({size(f.stat().st_size)}) is too heavy for the page; "
-                f"{link(rel(f, out), 'download it')}.")
+                f"{link(rel(f, pics.out), 'download it')}.")
         glbs = []
     if glbs:
         s, f = glbs[0]
-        copy_into(f, vdir / "model.glb")
-        source = f"{s.get('folder')}/{f.name}"
-    else:
-        hit = mesh_for_ortho(run)
-        if hit is None:
-            return f"<p>{note}</p>" if note else ""
-        s, f = hit
-        nverts = ply_vertex_count(f)
-        lab = labels_for(run, nverts, f)
-        tag = hashlib.sha256(f"{RENDER_VERSION}|glb|{VIEWER_MAX_FACES}|{run.key_of(s, f)}|"
-                             f"{lab[1] if lab else ''}".encode()).hexdigest()[:20]
-        cached = cache / f"view-{tag}.glb"
-        if not cached.is_file():
-            t = time.perf_counter()
-            mesh = pics._mesh()
-            if mesh is None or mesh.faces is None or not len(mesh.faces):
-                return ""
-            labels = lab[0] if lab else mesh.attrs.get("label")
-            xyz, faces, near = decimate(mesh.vertices, mesh.faces, VIEWER_MAX_FACES)
-            cols = mesh.colors[near] if mesh.colors is not None else None
-            seg = palette()[labels[near]] if labels is not None else None
-            write_colored_glb(cached, xyz, faces, cols, seg)
-            pics.timings["glb_s"] = round(time.perf_counter() - t, 3)
-        else:
-            touch(cached)
-        link_or_copy(cached, vdir / "model.glb")
-        source = f"{s.get('folder')}/{f.name} (decimated to at most {VIEWER_MAX_FACES:,} faces for the page)"
+        js = cache / f"model-{_key(RENDER_VERSION, 'run-glb', run.key_of(s, f))}.glb.js"
+        if not js.is_file():
+            write_glb_js(f, js)
+        touch(js)
+        return js, f"{s.get('folder')}/{f.name}", note
+    hit = mesh_for_ortho(run)
+    if hit is None:
+        return None, "", note
+    s, f = hit
+    lab = labels_for(run, ply_vertex_count(f), f)
+    js = cache / f"view-{_key(RENDER_VERSION, 'glb', VIEWER_MAX_FACES, run.key_of(s, f), lab[1] if lab else '')}.glb.js"
+    if not js.is_file():
+        t = time.perf_counter()
+        mesh = pics._mesh()
+        if mesh is None or mesh.faces is None or not len(mesh.faces):
+            return None, "", note
+        labels = lab[0] if lab else mesh.attrs.get("label")
+        xyz, faces, near = decimate(mesh.vertices, mesh.faces, VIEWER_MAX_FACES)
+        cols = mesh.colors[near] if mesh.colors is not None else None
+        seg = palette()[labels[near]] if labels is not None else None
+        glb = cache / f".{js.stem}.{os.getpid()}.glb"
+        try:
+            write_colored_glb(glb, xyz, faces, cols, seg)
+            write_glb_js(glb, js)
+        finally:
+            glb.unlink(missing_ok=True)
+        pics.timings["glb_s"] = round(time.perf_counter() - t, 3)
+    touch(js)
+    return js, f"{s.get('folder')}/{f.name} (decimated to at most {VIEWER_MAX_FACES:,} faces for the page)", note
+
+
+def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
+    """The 3D view: the model as one script (``viewer/model.glb.js``, a hard link into the report cache;
+    the page offers it for download as ``model.glb``), three.js and the viewer."""
+    js, source, note = model_script(run, pics)
+    if js is None:
+        return f"<p>{note}</p>" if note else ""
+    vdir = out / "viewer"
     if not vendor_three(vdir):
         return ("<p class=\"warn\">The 3D view needs three.js, which is not bundled: run <code>npm ci &amp;&amp; "
-                "npm run bundle</code> (or scripts/setup.sh) in the twinkit repository and run again. "
-                f"The model is here: {link('viewer/model.glb')}</p>")
-    glb_stat = (vdir / "model.glb").stat()
-    cache.mkdir(parents=True, exist_ok=True)
-    js_cached = cache / f"model-{glb_stat.st_ino}-{glb_stat.st_size}-{glb_stat.st_mtime_ns}.glb.js"
-    if not js_cached.is_file():
-        write_glb_js(vdir / "model.glb", js_cached)
-    else:
-        touch(js_cached)
-    link_or_copy(js_cached, vdir / "model.glb.js")
+                "npm run bundle</code> (or scripts/setup.sh) in the twinkit repository and run again.</p>")
+    link_or_copy(js, vdir / "model.glb.js")
     shutil.copyfile(ASSETS / VIEWER_FILE, vdir / VIEWER_FILE)
     return (
         "<div id=\"viewer\" class=\"viewer\"><canvas id=\"viewer-canvas\"></canvas>"
@@ -124,8 +154,8 @@ def sec_viewer(run: RunView, out: Path, pics: TopDown) -> str:
         "<label><input type=\"radio\" name=\"colours\" id=\"mode-segmentation\" value=\"segmentation\"> segmentation"
         "</label><button id=\"view-reset\" type=\"button\">reset view</button>"
         "<span id=\"viewer-status\">loading…</span></div></div>"
-        f"<p class=\"dim\">From {esc(source)}: {link('viewer/model.glb', 'model.glb')} "
-        f"({size((vdir / 'model.glb').stat().st_size)}).{note} Drag to orbit, right-drag to pan, wheel to zoom.</p>"
+        f"<p class=\"dim\">From {esc(source)}: <a id=\"viewer-download\" download=\"model.glb\">model.glb</a> "
+        f"({size(glb_js_size(js))}).{note} Drag to orbit, right-drag to pan, wheel to zoom.</p>"
         "<script src=\"viewer/three-bundle.js\"></script><script src=\"viewer/model.glb.js\"></script>"
         "<script src=\"viewer/viewer.js\"></script>"
     )

@@ -1,6 +1,7 @@
 /* twinkit run report: the interactive 3D view.
  * Needs three-bundle.js (window.TWINKIT_THREE: three.js, GLTFLoader, OrbitControls) and model.glb.js
- * (window.TWINKIT_GLB: the GLB, base64), both classic scripts so the page works from file://.
+ * (window.TWINKIT_GLB: the GLB, base64), both classic scripts so the page works from file://. The link
+ * #viewer-download gets the decoded GLB (a blob), so the report holds the model once.
  * Colour modes: "texture" shows the material's texture, else the COLOR_0 vertex colours;
  * "segmentation" shows the _CLASS_COLOR attribute (twinkit's GLBs carry the segmentation colours there,
  * where they darken nothing in other viewers) with simple lighting. GLBs written before that convention
@@ -119,6 +120,10 @@
   say('loading the model…');
   var buffer;
   try { buffer = decode(window.TWINKIT_GLB); } catch (e) { fail('3D view: the model is not valid base64'); return; }
+  var download = document.getElementById('viewer-download');
+  if (download && window.Blob && window.URL) {
+    download.href = URL.createObjectURL(new Blob([buffer], { type: 'model/gltf-binary' }));
+  }
   new T.GLTFLoader().parse(buffer, '', function (gltf) {
     var nverts = 0, ntris = 0;
     gltf.scene.traverse(function (o) {

@@ -28,7 +28,7 @@ OFFICIAL = f"model id {HF_REPO}, file {WEIGHTS_FILE} ({WEIGHTS_URL})"
 class EfficientViTParams:
     """Parameters of image model ``efficientvit_b0``."""
 
-    weights_path: str = param("",
+    weights_path: str = param("", path=True,
                               help="Checkpoint file, or a folder holding it; empty = search $TWINKIT_MODELS_DIR, "
                                    "../shared/models (from the working directory, then the repository root) and the "
                                    "download cache.")

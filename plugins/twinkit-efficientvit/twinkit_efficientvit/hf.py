@@ -36,7 +36,7 @@ UNIVERSAL_TYPES = ("mask2former", "maskformer")
 class HFParams:
     """Parameters of image model ``hf_segformer``."""
 
-    model: str = param("nvidia/segformer-b0-finetuned-cityscapes-1024-1024",
+    model: str = param("nvidia/segformer-b0-finetuned-cityscapes-1024-1024", path=True,
                        help="Hugging Face Hub model id, or a local folder (save_pretrained output).")
     revision: str = param("main", help="Hub revision (branch, tag or commit); ignored for a local folder.")
     local_files_only: bool = param(False,

@@ -31,7 +31,7 @@ SIZE = 513
 class DeepLabTFLiteParams:
     """Parameters of image model ``deeplab_edgetpu_tflite``."""
 
-    weights_path: str = param("",
+    weights_path: str = param("", path=True,
                               help="The .tflite model file, or a folder holding it; empty = search the default "
                                    "model folders, as for efficientvit_b0 (no automatic download).")
     weights_sha256: str = param("",

@@ -45,6 +45,30 @@ def list_images(folder: Path) -> list[Path]:
     return files
 
 
+def drop_identical(files: list[Path], log=None) -> list[Path]:
+    """``files`` without the byte-identical copies (same size and SHA-256) of an earlier one, each dropped one
+    named with the one it repeats in a warning: a copy adds no view, and two images at one pose would make
+    structure from motion match a photo with itself (docs/photo.md)."""
+    import hashlib
+
+    by_size: dict[int, list[Path]] = {}
+    for f in files:
+        by_size.setdefault(f.stat().st_size, []).append(f)
+    seen: dict[str, Path] = {}
+    dropped: set[Path] = set()
+    for group in (g for g in by_size.values() if len(g) > 1):
+        for f in group:
+            h = hashlib.sha256(f.read_bytes()).hexdigest()
+            if h in seen:
+                dropped.add(f)
+                if log is not None:
+                    log.warning("%s: byte-identical to %s, dropped (a copy adds no view; remove it from the "
+                                "photo folder)", f.name, seen[h].name)
+            else:
+                seen[h] = f
+    return [f for f in files if f not in dropped]
+
+
 def _rational(v) -> float:
     if isinstance(v, tuple) and len(v) == 2:
         return float(v[0]) / float(v[1]) if v[1] else 0.0

@@ -43,9 +43,9 @@ def _frame(ctx):
 
 
 def _photo_infos(folder: Path, log):
-    from .images import list_images, read_info
+    from .images import drop_identical, list_images, read_info
 
-    infos = [read_info(p) for p in list_images(folder)]
+    infos = [read_info(p) for p in drop_identical(list_images(folder), log)]
     for i in infos:
         for note in i.notes:
             log.debug("%s: %s", i.name, note)

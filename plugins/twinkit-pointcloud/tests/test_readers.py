@@ -280,11 +280,13 @@ def test_truncated_e57(tmp_path, ctx):
 
 
 def test_e57_several_scans_merged_with_poses(tmp_path, ctx):
-    # two scans of the same plane z = 0, each in its scanner's frame; scanners at 1.5 m height
+    # two scans of the same gently waved ground z = 0.01 sin(x) (a flat cloud is refused), each in its
+    # scanner's frame; scanners at 1.5 m height
     rng = np.random.default_rng(1)
-    world = np.c_[rng.uniform(-4, 4, 3000), rng.uniform(-4, 4, 3000), np.zeros(3000)]
     scans = []
     for tr, yaw in (([0.0, 0.0, 1.5], 0.0), ([3.0, 1.0, 1.5], np.pi / 2)):
+        world = np.c_[rng.uniform(-4, 4, 3000), rng.uniform(-4, 4, 3000), np.zeros(3000)]
+        world[:, 2] = 0.01 * np.sin(world[:, 0])
         R = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
         local = (world - np.asarray(tr)) @ R  # world = R @ local + tr
         q = np.array([np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
@@ -293,7 +295,7 @@ def test_e57_several_scans_merged_with_poses(tmp_path, ctx):
     _write_e57(src, scans)
     res, m, meta = _read(ctx, src, P.ReadCloudParams(min_street_extent_m=0))  # an 8 m plane
     assert m.n_vertices == 6000
-    assert np.abs(m.vertices[:, 2]).max() < 1e-3  # both scans land on the plane z = 0
+    assert np.abs(m.vertices[:, 2] - 0.01 * np.sin(m.vertices[:, 0])).max() < 1e-3  # both scans land on the ground
     assert np.allclose(meta["scanner_positions_m"], [[0, 0, 1.5], [3, 1, 1.5]], atol=1e-6)
     assert meta["fields"]["normals_orientation"] == "scanner"
     assert (m.normals[:, 2] > 0.99).all()  # towards the scanners above the plane

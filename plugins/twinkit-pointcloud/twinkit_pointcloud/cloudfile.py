@@ -41,7 +41,9 @@ def cloud_meta(in_cloud: Path, raw, cloud, n_read: int, pts: np.ndarray, normals
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     return {
         "source": {"file": in_cloud.name, "format": raw.format, "fields": raw.source_fields},
-        "counts": {"read": n_read, "dropped_invalid": cloud.dropped_invalid, "written": int(len(pts))},
+        "counts": {"read": n_read, "dropped_invalid": cloud.dropped_invalid,
+                   "duplicates_removed": cloud.dropped_duplicates, "dropped_far": cloud.dropped_far,
+                   "written": int(len(pts))},
         "fields": {"normals": normals_source, "normals_orientation": orientation, "normals_check": normals_check,
                    "colors": raw.colors is not None, "intensity": raw.intensity is not None,
                    "classification": raw.classification is not None, "scanner": raw.scanner is not None,
@@ -58,9 +60,9 @@ def cloud_meta(in_cloud: Path, raw, cloud, n_read: int, pts: np.ndarray, normals
 
 def read_metrics(pts: np.ndarray, raw, cloud, normals_source: str | None, normals_check: dict | None,
                  cloud_frame: dict | None, dens: dict, measured: dict) -> dict:
-    """read_cloud's metrics: points, normals' source, colours, shift (m), spacing (m), capture, the
-    measure's figures, the file normals' check and the cloud frame (without its matrix) when there."""
-    out = {"points": int(len(pts)), "normals": normals_source, "colors": raw.colors is not None,
+    """read_cloud's metrics: points, duplicates removed, normals' source, colours, shift (m), spacing (m)
+    (measured without the duplicates), capture, the measure's figures, the file normals' check and the cloud frame (without its matrix) when there."""
+    out = {"points": int(len(pts)), "duplicates_removed": cloud.dropped_duplicates, "normals": normals_source, "colors": raw.colors is not None,
            "shift_m": cloud.frame.shift, "spacing_m": dens["spacing_m"], "capture": dens["capture"], **measured}
     if normals_check is not None:
         out["normals_flipped"] = normals_check["flipped"]

@@ -70,7 +70,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     from .localframe import apply_cloud_frame
     from .normals import cloud_normals
     from .readers import read_any, validate_and_frame
-    from .street import not_a_street
+    from .street import flat_capture, not_a_street
 
     params = params or ReadCloudParams()
     in_cloud = Path(in_cloud)
@@ -87,7 +87,9 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
             ctx.log.info("%s: colours dropped (use_colors=false)", in_cloud.name)
             raw.colors = None
         pts = cloud.points
-        refusal = not_a_street(in_cloud.name, pts.max(axis=0) - pts.min(axis=0), params.min_street_extent_m)
+        size = pts.max(axis=0) - pts.min(axis=0)
+        refusal = flat_capture(in_cloud.name, size, pts) or not_a_street(in_cloud.name, size,
+                                                                          params.min_street_extent_m)
         if refusal:
             raise InputError(refusal)
         normals, n_source, orientation, n_check = cloud_normals(pts, raw, params, in_cloud.name, ctx.log)

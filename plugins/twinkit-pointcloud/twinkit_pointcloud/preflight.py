@@ -25,6 +25,8 @@ def _las_bounds(path: Path):
 
     with laspy.open(str(path)) as f:
         h = f.header
+        if not h.point_count:
+            return None  # an empty file's header box is 0, 0, 0 (thousands of km off): read_cloud says it is empty
         crs = None
         try:
             c = h.parse_crs()
@@ -66,8 +68,8 @@ def _ply_bounds(path: Path):
         return None
     end = "<" if fmt == "binary_little_endian" else ">"
     dt = np.dtype([(p, end + _PLY_TYPES[t]) for p, t in props])
-    if n == 0:
-        return None
+    if n == 0 or path.stat().st_size - offset >= (n + 1) * dt.itemsize:
+        return None  # empty, or more rows than declared: read_cloud's reader says so
     a = np.memmap(path, dtype=dt, mode="r", offset=offset, shape=(n,))
     xyz = [np.asarray(a[c], np.float64) for c in "xyz"]
     ok = np.isfinite(xyz[0]) & np.isfinite(xyz[1]) & np.isfinite(xyz[2])
@@ -138,10 +140,8 @@ def _box_distance(lo, hi) -> float:
 
 
 def read_cloud_preflight(site, params, inputs) -> list[str]:
-    """The cloud (a site input) exists, its header is readable, and the base point lies near its box."""
-    from twinkit import InputError
-    from twinkit.geo import to_site_frame
-
+    """The cloud (a site input) exists, its header is readable, and the base point lies near its box (the box
+    of the central 99.8 % of the points when the header's box, outliers included, would refuse it)."""
     path = inputs.get("in_cloud")
     if path is None:
         return []  # written by an earlier step (the demo's generator): read_cloud checks it
@@ -155,7 +155,59 @@ def read_cloud_preflight(site, params, inputs) -> list[str]:
     if b is None:
         log.info("%s: no bounds in the header; the base point is checked when read_cloud runs", path.name)
         return []
-    lo, hi, crs = b
+    problems = _box_problems(path, *b, site, params)
+    if not problems:
+        return []
+    robust = _robust_bounds(path)  # a few far points (a junk point at 0, 0, 0) must not refuse the whole cloud
+    if robust is None:
+        return problems
+    lo, hi, n_out, n = robust
+    again = _box_problems(path, lo, hi, b[2], site, params)
+    if not again:
+        log.warning("%s: %d of %d points lie far outside the rest (the header's box spans %s .. %s, the central "
+                    "99.8 %% of the points %s .. %s); read_cloud drops those far from the base point", path.name,
+                    n_out, n, np.round(b[0], 1).tolist(), np.round(b[1], 1).tolist(), np.round(lo, 1).tolist(),
+                    np.round(hi, 1).tolist())
+    return again
+
+
+def _robust_bounds(path: Path):
+    """``(lo, hi, n_far, n)``: the box of the central 99.8 % of the points in each axis (file coordinates)
+    and how many points lie far outside it (more than its size and 100 m); None when the points cannot be read."""
+    ext = path.suffix.lower()
+    try:
+        if ext in (".las", ".laz"):
+            import laspy
+
+            las = laspy.read(str(path))
+            xyz = np.c_[np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)]
+        elif ext == ".ply":
+            from twinkit.mesh import read_ply
+
+            xyz = read_ply(path).vertices
+        elif ext == ".e57":
+            from .readers import read_e57
+
+            xyz = read_e57(path).xyz
+        else:
+            return None
+    except Exception:  # noqa: BLE001 -- read_cloud's reader names the fault
+        return None
+    xyz = xyz[np.isfinite(xyz).all(axis=1)]
+    if len(xyz) < 10:
+        return None
+    lo, hi = np.percentile(xyz, 0.1, axis=0), np.percentile(xyz, 99.9, axis=0)
+    wide = np.maximum(hi - lo, 100.0)  # "far": beyond the central box's own size (and 100 m) from it
+    n_out = int((~np.all((xyz >= lo - wide) & (xyz <= hi + wide), axis=1)).sum())
+    return lo, hi, n_out, len(xyz)
+
+
+def _box_problems(path: Path, lo, hi, crs, site, params) -> list[str]:
+    """The problems of the cloud's box ``lo``, ``hi`` (file coordinates, CRS ``crs``) for the site: wrong CRS,
+    flat, not a street, base point far outside."""
+    from twinkit import InputError
+    from twinkit.geo import to_site_frame
+
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     from .localframe import apply_points, cloud_frame_matrix
 
@@ -187,9 +239,10 @@ def read_cloud_preflight(site, params, inputs) -> list[str]:
         pass
     size = lhi - llo
     log.info("%s: box %.0f x %.0f x %.0f m, %s", path.name, size[0], size[1], size[2], where)
-    from .street import MIN_STREET_EXTENT_M, not_a_street
+    from .street import MIN_STREET_EXTENT_M, flat_capture, not_a_street
 
-    refusal = not_a_street(path.name, size, float(getattr(params, "min_street_extent_m", MIN_STREET_EXTENT_M)))
+    refusal = flat_capture(path.name, size) or not_a_street(
+        path.name, size, float(getattr(params, "min_street_extent_m", MIN_STREET_EXTENT_M)))
     if refusal:
         return [refusal]
     limit = float(getattr(params, "max_base_point_offset_m", 0.0) or 0.0)

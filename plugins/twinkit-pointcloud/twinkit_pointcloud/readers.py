@@ -358,11 +358,17 @@ def read_las(path: Path) -> RawCloud:
 # ----------------------------------------------------------------------------- PLY
 
 def read_ply_cloud(path: Path) -> RawCloud:
+    """A PLY cloud (any vertex properties); refused when its header declares fewer vertices than it holds."""
     from twinkit.mesh import read_ply
+    from twinkit.mesh.ply import PlyExtraData
 
     path = Path(path)
     try:
-        m = read_ply(path)
+        m = read_ply(path, exact=True)
+    except PlyExtraData as exc:
+        raise _input_error(f"{path.name}: the header declares {exc.declared} vertices, but the file holds more "
+                           f"(about {exc.extra_rows} more after them), so part of the cloud would be left out; fix "
+                           f"the count in the header's 'element vertex' line or export the file again") from None
     except Exception as exc:
         raise _input_error(f"{path.name}: not a readable PLY file ({type(exc).__name__}: {exc}); "
                            f"the file is corrupt or truncated - export it again") from exc
@@ -447,6 +453,8 @@ class Cloud:
     points: np.ndarray
     frame: Any
     dropped_invalid: int = 0
+    dropped_duplicates: int = 0
+    dropped_far: int = 0  # outliers more than max_offset_km from the base point
 
 
 def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: int = 10,
@@ -456,7 +464,8 @@ def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: in
 
     name = raw.path.name
     if raw.n == 0:
-        raise _input_error(f"{name}: the cloud is empty (0 points); check the export or the filter that produced it")
+        raise _input_error(f"{name}: the cloud is empty (the file holds no points); check the export or the "
+                           f"filter that produced it")
     finite = np.isfinite(raw.xyz).all(axis=1)
     n_bad = int((~finite).sum())
     if n_bad:
@@ -469,16 +478,66 @@ def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: in
         if log is not None:
             log.warning("%s: dropped %d of %d points with NaN or infinite coordinates", name, n_bad, raw.n)
         raw = raw.take(finite)
-    if raw.n < min_points:
-        raise _input_error(f"{name}: too few points ({raw.n}; at least {min_points} are needed for a surface); "
-                           f"use a denser or larger capture")
     ext = raw.xyz.max(axis=0) - raw.xyz.min(axis=0)
-    if float(ext.max()) <= 1e-9 * max(1.0, float(np.abs(raw.xyz).max())):
+    if raw.n >= 2 and float(ext.max()) <= 1e-9 * max(1.0, float(np.abs(raw.xyz).max())):
         raise _input_error(f"{name}: all {raw.n} points are identical ({raw.xyz[0].tolist()}); "
                            f"the capture is degenerate - check the export")
+    dup = duplicate_rows(raw.xyz)
+    n_dup = 0 if dup is None else int(dup.sum())
+    if n_dup:
+        if log is not None:
+            log.warning("%s: removed %d duplicate points of %d (the same x, y, z as an earlier point; %.1f %%); "
+                        "the point spacing is measured without them", name, n_dup, raw.n, 100.0 * n_dup / raw.n)
+        raw = raw.take(~dup)
+    if raw.n < min_points:
+        raise _input_error(f"{name}: too few points ({raw.n}"
+                           + (f" after removing {n_dup} duplicates" if n_dup else "")
+                           + f"; at least {min_points} are needed for a surface); use a denser or larger capture")
     local, info = to_site_frame(raw.xyz, raw.crs, site, name, **frame_kw)
+    far = _far_points(local, info, frame_kw.get("max_offset_m", 20000.0))
+    if far is not None:
+        i = int(np.flatnonzero(far)[np.argmax(np.hypot(*local[far, :2].T))])
+        if log is not None:
+            log.warning("%s: dropped %d of %d points more than %g km from the base point (outliers; the farthest "
+                        "%.1f km away, at file coordinates %s); the rest of the cloud is around the base point",
+                        name, int(far.sum()), raw.n, frame_kw.get("max_offset_m", 20000.0) / 1000.0,
+                        float(np.hypot(*local[i, :2])) / 1000.0, np.round(raw.xyz[i], 2).tolist())
+        raw, local = raw.take(~far), local[~far]
+    n_far = 0 if far is None else int(far.sum())
     if raw.scanner_positions is not None and len(raw.scanner_positions):
         from twinkit.geo import apply_frame
 
         raw.scanner_positions = apply_frame(raw.scanner_positions, raw.crs, site, info)
-    return Cloud(raw=raw, points=local, frame=info, dropped_invalid=n_bad)
+    return Cloud(raw=raw, points=local, frame=info, dropped_invalid=n_bad, dropped_duplicates=n_dup,
+                 dropped_far=n_far)
+
+
+def _far_points(local: np.ndarray, info, max_offset_m: float) -> np.ndarray | None:
+    """A mask of the points more than ``max_offset_m`` from the base point when the cloud as a whole is near
+    it (its median point passed :func:`twinkit.geo.to_site_frame`); None when there are none."""
+    if info.shift_source != "base_point" or not max_offset_m or max_offset_m <= 0:
+        return None
+    far = np.hypot(local[:, 0], local[:, 1]) > max_offset_m
+    return far if far.any() and not far.all() else None
+
+
+def duplicate_rows(xyz: np.ndarray) -> np.ndarray | None:
+    """A mask of the points that repeat an earlier point exactly (the same x, y, z), or None when no point
+    does. One 64-bit hash per point sorted (about 1 s per 10 million points), equal hashes then compared
+    value by value, so the first of each group of duplicates is kept."""
+    a = np.ascontiguousarray(xyz, dtype=np.float64) + 0.0  # -0.0 -> 0.0: equal values, equal bits
+    b = a.view(np.uint64).reshape(-1, 3)
+    with np.errstate(over="ignore"):
+        h = (b[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (b[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) \
+            ^ (b[:, 2] * np.uint64(0x165667B19E3779F9))
+    hs = np.sort(h)
+    if not (hs[1:] == hs[:-1]).any():
+        return None
+    order = np.argsort(h, kind="stable")
+    ho = h[order]
+    same = (ho[1:] == ho[:-1]) & (a[order[1:]] == a[order[:-1]]).all(axis=1)
+    if not same.any():
+        return None
+    dup = np.zeros(len(a), bool)
+    dup[order[1:][same]] = True
+    return dup

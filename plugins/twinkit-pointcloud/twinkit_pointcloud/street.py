@@ -26,3 +26,37 @@ def not_a_street(name: str, size, min_extent_m: float) -> str | None:
             f"This looks like an object or indoor scan; twinkit builds street twins from street captures. "
             f"If it is a street in the wrong units, set site.crs or site.cloud_frame; to go on anyway, "
             f"steps.read_cloud.min_street_extent_m=0")
+
+
+#: a capture thinner than this (metres) across its flattest direction is flat: a 2D capture, not a street
+FLAT_M = 1e-3
+
+
+def flat_capture(name: str, size, points=None) -> str | None:
+    """A one-line refusal when the capture is flat (2D): its box ``size`` (x, y, z metres) is thinner than
+    :data:`FLAT_M` on an axis (all z equal: a ground plan, a single slice; all x or y equal: a profile), or,
+    given ``points`` (n, 3), they lie in one tilted plane (the smallest principal spread, on a fixed sample
+    of at most 200,000 points). None for a 3D capture. Meshing a flat cloud builds no street (no kerbs, no
+    walls); no setting turns this check off."""
+    import numpy as np
+
+    size = np.asarray(size, dtype=np.float64)
+    thin = [i for i in range(3) if size[i] < FLAT_M]
+    how = None
+    if thin:
+        ax = "xyz"[thin[-1]]
+        what = ("height (all z equal: a ground plan or a horizontal slice)" if ax == "z" else
+                f"{ax} (all {ax} equal: a single vertical profile)")
+        how = f"it spans {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m, only {size[thin[-1]]:.4f} m in {what}"
+    elif points is not None and len(points) >= 3:
+        pts = np.asarray(points, dtype=np.float64)
+        if len(pts) > 200_000:
+            pts = pts[np.random.default_rng(0).choice(len(pts), 200_000, replace=False)]
+        q = pts - pts.mean(axis=0)
+        thickness = float(np.sqrt(max(np.linalg.eigvalsh(q.T @ q / len(q))[0], 0.0)))
+        if thickness < FLAT_M:
+            how = f"all its points lie in one plane (spread {thickness:.5f} m across it)"
+    if how is None:
+        return None
+    return (f"{name}: the cloud is flat (2D): {how}; a street twin needs a 3D capture with heights - "
+            f"export the cloud with its z values (or check site.cloud_frame)")

@@ -401,7 +401,13 @@ def place_signals(params: SignalParams, ctx, *, in_aligned_xodr: Path, in_textur
     except (ValueError, KeyError, AttributeError) as exc:
         raise InputError(f"{in_aligned_xodr}: cannot read its roads and signals ({exc})") from None
     # what CARLA makes of each signal, against where we meant it to be
-    carla_err = carla_position_errors(moved, placed, f"{in_aligned_xodr.name} with the scanned signals")
+    try:
+        carla_err = carla_position_errors(moved, placed, f"{in_aligned_xodr.name} with the scanned signals")
+    except InputError as exc:
+        edited = (f"if you edited {in_alignment_json} by hand, undo that edit or re-run align_roads "
+                  "(rerun=[align_roads])") if in_alignment_json is not None else "re-run the road steps before it"
+        raise InputError(f"{in_aligned_xodr}: the map with the scanned signals placed on it does not parse in "
+                         f"carla.Map ({getattr(exc, 'why', exc)}); {edited}, or report it with this file") from None
     A.write_opendrive(out_aligned_xodr, moved)
     for p in placed:
         if p.source == "netconvert":

@@ -33,6 +33,7 @@ import numpy as np
 from .controllers import merge_heads, wire_junctions
 from .instances import Instance
 from .osmsigns import add_osm_signs
+from .signal_bounds import clamp_to_roads
 from .reflines import RefLine, reference_lines
 from .signtypes import ground_typed_signs, plate_look, road_speed_kmh, signal_type
 
@@ -443,6 +444,7 @@ def place_signals(xodr_text: str, instances: list[Instance], *, gate_m: float = 
         placed += _add_signs(root, refs, instances, log, sign_max_road_m=sign_max_road_m, reach_m=reach_m,
                              colors=colors, osm_signs=osm_signs)
     log += ground_typed_signs(root)
+    log += clamp_to_roads(root, placed)  # carla.Map refuses s < 0 (signal_bounds.py)
     for sg in root.iter("signals"):  # tidy the blocks we edited (4-space indent, as netconvert writes)
         ET.indent(sg, space="    ", level=2)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
@@ -517,14 +519,11 @@ def draw_signals(mesh_path, lines: list[dict], instances: list[Instance], reject
 def carla_position_errors(moved_text: str, placed: list[Placed], source: str) -> dict[str, float]:
     """Per placed signal id: metres (horizontal, site frame) between where CARLA puts it in ``moved_text``
     (``twinkit.street.lanes.LaneMap``'s landmarks) and where it was meant to be (``Placed.new_xy``).
-    ``source`` names the map in the error. An OpenDRIVE carla.Map cannot read is an ``InputError``."""
-    from twinkit import InputError
-    from twinkit.street.lanes import LaneMap, OpenDriveError
+    ``source`` names the map in the error. An OpenDRIVE carla.Map cannot read is an ``OpenDriveError`` (an
+    ``InputError``; its ``why`` says what carla.Map refused)."""
+    from twinkit.street.lanes import LaneMap
 
-    try:
-        m = LaneMap(moved_text, "signals", source=source)
-    except OpenDriveError as exc:
-        raise InputError(str(exc)) from None
+    m = LaneMap(moved_text, "signals", source=source)
     want = {p.id: p.new_xy for p in placed}
     err = {}
     for lm in m.landmarks():

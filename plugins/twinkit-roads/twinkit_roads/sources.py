@@ -19,7 +19,7 @@ from .osmio import OsmData, crop, looks_like_osm_xml, read_osm, write_osm_xml
 
 @dataclass
 class FileSourceParams:
-    path: str = param("",
+    path: str = param("", path=True,
                       help="A local .osm, .osm.bz2 or .osm.pbf file; empty = the step's input (site.inputs.osm, or "
                            "a generated roads.osm).")
     crop_radius_m: float = param(-1.0,
@@ -33,7 +33,7 @@ class FileSourceParams:
 
 @dataclass
 class OpenDriveSourceParams:
-    path: str = param("", help="The .xodr file; empty = the site's input (site.inputs.xodr=/path/map.xodr).")
+    path: str = param("", path=True, help="The .xodr file; empty = the site's input (site.inputs.xodr=/path/map.xodr).")
     georeference: str = param("",
                               help="The map's frame when it has no (or a wrong) <geoReference>: a PROJ string or an "
                                    "EPSG code; \"site\" = already in the site frame; empty = the map's own "

@@ -162,7 +162,7 @@ class BackprojectParams:
     cue_gates: bool = param(True,
                             help="Gate the shape and curb cues by what the capture resolves at each vertex (point "
                                  'support and noise from points.ply; docs/segmentation.md "Cue gates").')
-    fusion_weights: str = param("", free=True,
+    fusion_weights: str = param("", free=True, path=True,
                                 help="The views' and the geometry's weights per capture kind (a JSON file written by "
                                      "python -m twinkit_segmentation.fusion calibrate); empty = the plugin's "
                                      'shipped fusion_weights.json (docs/segmentation.md "Fusion").')

@@ -196,7 +196,7 @@ class RandomSampler:
 # ----------------------------------------------------------------------------- street points (file)
 @dataclass
 class StreetPointsParams(CameraParams):
-    points_file: str = param("",
+    points_file: str = param("", path=True,
                              help='A CloudCompare point list ("x y z" per line) of camera positions; empty = the '
                                   "step's street_points.txt.")
     heights_m: List[float] = param(default_factory=lambda: [1.5, 3.0, 4.5], gt=0,

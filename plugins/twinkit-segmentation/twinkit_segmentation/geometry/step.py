@@ -28,7 +28,7 @@ class ClassifyGeometryParams:
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
     vote_neighbours: int = param(8, ge=1, le=64, help="At most this many nearest classified points vote per vertex.")
-    model: str = param("", help="Model stem (path without .npz/.json); empty = the model shipped with the plugin.")
+    model: str = param("", path=(".npz", ".json"), help="Model stem (path without .npz/.json); empty = the model shipped with the plugin.")
 
 
 def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_points_ply: Path,
