@@ -16,7 +16,9 @@ OpenDRIVE in the site frame, actors.json, twin.usd) against the demo's ground tr
 - lane waypoints (every 1 m) without the map's ground beneath (``contract_ground``);
 - lifted actors whose ground-truth class is not theirs, and true objects not lifted;
 - the USD georeference error at 150 m, read the way the geospatial schemas read it (ENU at the reference);
-- the package checker's violations.
+- the package checker's violations;
+- the drop test (``NN_drop_test/drop_test.json``): per lane kind (driving, parking, sidewalk) the share of rays
+  that find the ground and the widest hole, and the run's status (its last manifest: ok, or degraded and why).
 """
 from __future__ import annotations
 
@@ -158,6 +160,26 @@ def sidewalk_row(root: Path, pkg: Path, m: dict) -> dict:
             "sidewalk_stray": br.get("stray_pieces"), "parked_on_sidewalk": len(parked_on_sidewalk(actors, xodr))}
 
 
+def drop_row(run: Path) -> dict:
+    """The drop test's share of rays on the ground and widest hole per lane kind, and the last run's status."""
+    row: dict = {}
+    d = _step(run, "drop_test")
+    if d is not None and (d / "drop_test.json").is_file():
+        lanes = json.loads((d / "drop_test.json").read_text()).get("lanes", {})
+        for kind in ("driving", "parking", "sidewalk"):
+            lane = lanes.get(kind)
+            judged = lane.get("target_on", "hit_pct") if lane else "hit_pct"
+            off_kerb = f", {lane[judged]} % off the kerb line" if lane and judged != "hit_pct" else ""
+            row[f"drop_{kind}"] = "-" if not lane else \
+                f"{lane['hit_pct']} %{off_kerb} (target {lane['target_pct']}); hole {lane['widest_hole_m']} m"
+    manifests = sorted((run / "runs").glob("*/manifest.json"))
+    if manifests:
+        m = json.loads(manifests[-1].read_text())
+        row["status"] = m.get("status")
+        row["degraded_by"] = "; ".join(sorted({e.get("step", "?") for e in m.get("degraded") or []})) or "-"
+    return row
+
+
 def package_row(run: Path) -> dict:
     from twinkit_export.carla_contract import check_package
     from twinkit_export.contract_ground import lanes_over_map_ground, map_ground
@@ -194,6 +216,7 @@ def main(argv: list[str] | None = None) -> int:
         row.update(signals_row(run))
         row.update(crosswalk_row(run))
         row.update(actors_row(run))
+        row.update(drop_row(run))
         row["usd_err_150m_m"] = round(usd_error(run), 4)
         pkg = package_row(run)
         pkg.pop("report")
@@ -213,7 +236,10 @@ def main(argv: list[str] | None = None) -> int:
             ("lane waypoints (carla.Map, 1 m) without ground", "waypoints_off_ground"),
             ("lifted actors", "lifted"), ("lifted, wrong truth class", "wrong_class"),
             ("truth objects not lifted", "truth_not_lifted"), ("USD error at 150 m (m)", "usd_err_150m_m"),
-            ("checker violations", "violations"), ("rules violated", "rules")]
+            ("checker violations", "violations"), ("rules violated", "rules"),
+            ("drop test, driving lanes: share (target); widest hole", "drop_driving"),
+            ("drop test, parking lanes", "drop_parking"), ("drop test, sidewalk lanes", "drop_sidewalk"),
+            ("run status", "status"), ("degraded by", "degraded_by")]
     print("| measure | " + " | ".join(r["run"] for r in rows) + " |")
     print("|---|" + "---:|" * len(rows))
     for label, key in cols:

@@ -161,6 +161,49 @@ def _bad_osm(p: Project) -> list[str]:
     return ["site=o", "recipe=osm", f"site.inputs.osm={p.tmp / 'area.osm'}"]
 
 
+def _env_unset(command: str = "", key: str = "${oc.env:TWINKIT_TEST_UNSET_VAR}"):
+    """A site file reading an environment variable that is not set (or a missing key), through ``command``."""
+    def setup(p: Project) -> list[str]:
+        p.site("e", f"name: t\ntoken: {key}\n")
+        return ([command] if command else []) + ["site=e", "recipe=chain"]
+    return setup
+
+
+def _config_path(p: Project) -> list[str]:
+    """``--config-path`` to a copy of the config folder whose root config adds a callback (what a shared folder
+    could hold)."""
+    other = p.tmp / "other"
+    shutil.copytree(p.conf, other)
+    with (other / "config.yaml").open("a") as f:
+        f.write(f"    x:\n      _target_: subprocess.call\n      _args_: [[touch, {p.tmp / 'callback-ran'}]]\n")
+    return ["--config-path", str(other), "site=t", "recipe=chain"]
+
+
+def _cli(*extra: str):
+    def setup(p: Project) -> list[str]:
+        return [a.replace("MARKER", str(p.tmp / "callback-ran")) for a in extra]
+    return setup
+
+
+def _rerun_pickle(p: Project) -> list[str]:
+    """``--experimental-rerun`` with a pickle that runs a command when loaded (Hydra unpickles it)."""
+    import pickle
+
+    class Touch:
+        def __reduce__(self):
+            return subprocess.call, (["touch", str(p.tmp / "callback-ran")],)
+
+    (p.tmp / "config.pickle").write_bytes(pickle.dumps(Touch()))
+    return ["--experimental-rerun", str(p.tmp / "config.pickle")]
+
+
+def _site_name(name: str):
+    def setup(p: Project) -> list[str]:
+        p.site("n", f"name: {name.replace('TMP', str(p.tmp))}\n")
+        return ["site=n", "recipe=chain"]
+    return setup
+
+
 def _street(tmp: Path, name: str, n: int = 400, z=None) -> Path:
     """A 30 x 12 m street-sized ASCII PLY of ``n`` points (``z``: every height, or random 0..3 m)."""
     rnd = random.Random(3)
@@ -247,13 +290,35 @@ SETUPS = {
     "site-crs-unknown": _unknown_crs,
     "site-no-georeference-roads": _no_georeference(""),
     "site-no-crs-suggests-its-utm-zone": _no_georeference("base_point: {lat: 1.2903, lon: 103.8519, alt: 10}\n"),
+    "env-unset": _env_unset(),
+    "status-env-unset": _env_unset("status"),
+    "gc-env-unset": _env_unset("gc"),
+    "status-interpolation-missing": _env_unset("status", "${site.nope}"),
+    "config-path-callbacks": _config_path,
+    "cli-callbacks": _cli("site=t", "recipe=chain", "+hydra.callbacks.x._target_=subprocess.call",
+                          "+hydra.callbacks.x._args_=[[touch,MARKER]]"),
+    "cli-callbacks-multirun": _cli("-m", "site=t", "recipe=chain", "steps.make.value=1,2",
+                                   "+hydra.callbacks.x._target_=subprocess.call",
+                                   "+hydra.callbacks.x._args_=[[touch,MARKER]]"),
+    "cli-launcher": _cli("-m", "site=t", "recipe=chain", "steps.make.value=1,2", "hydra/launcher=basic"),
+    "cli-target": _cli("site=t", "recipe=chain", "+site.hook={_target_: os.getcwd}"),
+    "cli-env-set": _cli("site=t", "recipe=chain", "hydra.job.env_set.LD_PRELOAD=/tmp/x.so"),
+    "site-name-parent": _site_name("../escaped"),
+    "site-name-absolute": _site_name("TMP/elsewhere"),
+    "site-name-from-env": _site_name("${oc.env:TWINKIT_CONFIG_DIR}"),
+    "cli-experimental-rerun": _rerun_pickle,
+    "env-value-in-error": _cli("site=t", "recipe=chain", "steps.make.value=${oc.env:TWINKIT_CONFIG_DIR}"),
 }
 
 CONFIG_CASES = {"depth-30", "depth-0", "depth-negative", "target-faces-negative", "target-faces-0", "max-dist-negative",
                 "backend-unknown", "recipe-param-out-of-range", "lat-not-a-number", "lat-out-of-range",
                 "base-point-outside-crs-area", "site-crs-unknown", "site-no-georeference-roads",
                 "site-no-crs-suggests-its-utm-zone",
-                "recipe-callbacks", "recipe-callbacks-multirun", "site-target", "local-launcher"}
+                "recipe-callbacks", "recipe-callbacks-multirun", "site-target", "local-launcher",
+                "env-unset", "status-env-unset", "gc-env-unset", "status-interpolation-missing", "config-path-callbacks",
+                "cli-callbacks", "cli-callbacks-multirun", "cli-launcher", "cli-target", "cli-env-set",
+                "site-name-parent", "site-name-absolute", "site-name-from-env", "env-value-in-error",
+                "cli-experimental-rerun"}
 
 
 def test_the_table_and_the_cases_match():

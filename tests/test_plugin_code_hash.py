@@ -106,3 +106,51 @@ def test_a_plugins_report_sections_are_not_part_of_its_code_hash(tmp_path, monke
     finally:
         for name in [n for n in sys.modules if n.startswith("hashrep_pkg")]:
             del sys.modules[name]
+
+
+LIVE = '''
+from pathlib import Path
+from twinkit import hookimpl
+from .helper import VALUE
+
+
+def first(params, ctx, *, out_first_txt: Path) -> None:
+    """Stands for a person editing the plugin's source while the run goes on."""
+    helper = Path(__file__).with_name("helper.py")
+    helper.write_text("VALUE = 2\\n")
+    import os, time
+    later = time.time() + 5
+    os.utime(helper, (later, later))
+    out_first_txt.write_text("1\\n")
+
+
+def second(params, ctx, *, in_first_txt: Path, out_second_txt: Path) -> None:
+    out_second_txt.write_text(f"{VALUE}\\n")
+
+
+@hookimpl
+def twinkit_register_steps(register):
+    register("first", first)
+    register("second", second)
+'''
+
+
+def test_a_source_edited_during_a_run_is_not_recorded_as_the_code_that_ran(project):
+    """The code hash a step records is the one read when the run started (its modules loaded then): the step
+    that ran the old code after the edit re-runs next time instead of being reused as if it ran the new."""
+    pkg = project.tmp / "livecode_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "helper.py").write_text("VALUE = 1\n")
+    (pkg / "steps.py").write_text(LIVE)
+    project.recipe("live", ["{id: first, uses: step/first}", "{id: second, uses: step/second}"])
+    env = project.env(TWINKIT_PLUGIN_MODULES="livecode_pkg.steps")
+    env["PYTHONPATH"] = f"{project.tmp}{os.pathsep}{env['PYTHONPATH']}"
+    r = project.run("site=t", "recipe=live", env=env)
+    assert r.rc == 0, r.text
+    assert (project.ws / "02_second" / "second.txt").read_text() == "1\n"  # the code loaded at the start ran
+    # nothing changed since: the next run loads the edited helper, so 'second' must run again
+    r = project.run("site=t", "recipe=live", env=env)
+    assert r.rc == 0, r.text
+    assert project.status_of(r, "02_second") == "ran", r.text
+    assert (project.ws / "02_second" / "second.txt").read_text() == "2\n"

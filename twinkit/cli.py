@@ -52,14 +52,37 @@ _STATE: dict = {}
 
 
 def _job(cfg) -> int:
-    """One Hydra job. A TwinkitError becomes a one-line message and an exit code, not a traceback."""
+    """One Hydra job; a sweep's job runs in a child of the pool's worker and dies with the sweep
+    (twinkit/sweeps.py)."""
+    from twinkit.hydra_glue import is_multirun
+
+    if not is_multirun():
+        return _job_here(cfg)
+    from twinkit.hydra_glue import job_state
+    from twinkit.sweeps import run_job
+
+    job = job_state()
+    if _STATE.get("interrupted"):
+        log.info("twinkit: job %s not started: the sweep was interrupted", job.num)
+        return _STATE["interrupted"]
+    code = run_job(_job_here, cfg, job.output_dir, f"job{job.num} ({' '.join(job.overrides)})")
+    if code in (130, 143):
+        _STATE["interrupted"] = code  # later jobs of this worker are skipped
+    return code
+
+
+def _job_here(cfg) -> int:
+    """One Hydra job in this process. A TwinkitError becomes a one-line message and an exit code, not a
+    traceback."""
     from twinkit.hydra_glue import is_multirun, job_error
 
     try:
         return _job_body(cfg)
     except TwinkitError as exc:
         if is_multirun():
-            raise job_error(f"twinkit: error: {exc}", exc.exit_code) from None
+            from twinkit.manifest import redact
+
+            raise job_error(f"twinkit: error: {redact(str(exc))}", exc.exit_code) from None
         _STATE["error"] = exc
         return exc.exit_code
     except KeyboardInterrupt as exc:
@@ -84,9 +107,6 @@ def _job_body(cfg) -> int:
 
     job = job_state()
     jobs = 1
-    if job.multirun and _STATE.get("interrupted"):
-        log.info("twinkit: job %s not started: the sweep was interrupted", job.num)
-        return _STATE["interrupted"]
     if job.multirun:
         from twinkit.executors import use_standard_start_method
 
@@ -119,16 +139,22 @@ def _run_hydra(argv: list[str]) -> int:
     if not any(a.startswith("-") for a in argv):
         return _run_single(conf_dir, overrides)
     if "-m" in argv or "--multirun" in argv:
-        _precheck_sweep(conf_dir, overrides)
+        argv = argv + _precheck_sweep(conf_dir, overrides)
+    _check_given_site_name(overrides)  # Hydra's app makes the run folder under it before a job can check
     _STATE.pop("error", None)
     from twinkit.signals import forward_to_children
+    from twinkit.sweeps import mark_sweep
 
+    mark_sweep()  # the sweep's workers die with this process
     with forward_to_children() as signalled:  # jobs stop like single runs, with their manifests
         try:
             run_app(conf_dir, argv, _job)
         except BaseException:
             if "exc" in signalled:
                 raise signalled["exc"] from None
+            from twinkit.sweeps import summary_after_failure
+
+            summary_after_failure()  # a failed job's sweep gets its summary too
             raise
     if "exc" in signalled:
         raise signalled["exc"]
@@ -137,6 +163,16 @@ def _run_hydra(argv: list[str]) -> int:
     if "-m" in argv or "--multirun" in argv:
         return _sweep_exit_code()
     return 0
+
+
+def _check_given_site_name(overrides: list[str]) -> None:
+    """A ``site.name`` given on the command line is a plain name (twinkit.config.check_site_name)."""
+    from twinkit.config import check_site_name
+    from twinkit.hydra_glue import override_value
+
+    name = override_value(overrides, "site.name")
+    if name is not None and "${" not in name:
+        check_site_name(name)
 
 
 def _sweep_exit_code() -> int:
@@ -163,8 +199,9 @@ def _sweep_exit_code() -> int:
     return worst
 
 
-def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
-    """Every job of a sweep composed and its values checked (twinkit.config.check_config) before any job starts.
+def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> list[str]:
+    """Every job of a sweep composed and its values checked (twinkit.config.check_config) before any job starts;
+    the overrides that keep the jobs within the sweep's memory budget (twinkit/sweeps.py).
 
     So ``-m reconstructor.depth=11,30`` fails with exit 2 before the first job runs a step, as a single
     run does. The jobs are the ones Hydra's basic sweeper makes: the sweep file's
@@ -174,13 +211,16 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
 
     from twinkit.config import check_config
     from twinkit.hydra_glue import compose, parse_overrides, plain, sweep_jobs
+    from twinkit.manifest import env_secrets
     from twinkit.plugins import get_registry
 
     jobs = sweep_jobs(conf_dir, overrides)
     if jobs is None:
-        return  # Hydra reports it in its own words
+        return []  # Hydra reports it in its own words
     registry = get_registry()
     composed: dict[tuple, dict] = {}  # one composition per set of group choices; plain values are laid over it
+    secrets: dict[str, str] = {}
+    containers = []
     for job in jobs:
         job = [o for o in job if not o.lstrip("+~").startswith("hydra")]
         try:
@@ -195,13 +235,40 @@ def _precheck_sweep(conf_dir: Path, overrides: list[str]) -> None:
             cfg = compose(conf_dir, list(rest) + [f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}"
                                                   for k, v in values.items()])
             composed[rest] = plain(cfg)
+            secrets.update(env_secrets(plain(cfg, resolve=False)))
             container = composed[rest]
         else:
             container = _with_values(composed[rest], values)
         try:
-            check_config(container, registry)
+            check_config(container, registry, secrets=secrets)
         except ConfigError as exc:
             raise ConfigError(f"{exc} (sweep job {' '.join(job)})") from None
+        containers.append(container)
+    return _memory_budget(conf_dir, jobs[0], containers)
+
+
+def _memory_budget(conf_dir: Path, first_job: list[str], containers: list[dict]) -> list[str]:
+    """``hydra.launcher.n_jobs=<k>`` when the sweep's memory budget allows fewer jobs at once than asked
+    (``first_job``: the first job's overrides)."""
+    from twinkit.hydra_glue import compose, override_value
+    from twinkit.sweeps import memory_plan
+    from twinkit.threads import cores
+
+    def asked() -> int:
+        value = override_value(first_job, "hydra.launcher.n_jobs")
+        if value is None:
+            value = compose(conf_dir, first_job, hydra_config=True).hydra.launcher.n_jobs
+        try:
+            n_jobs = int(value)
+        except (TypeError, ValueError):
+            return len(containers)  # Hydra reports it
+        return min(len(containers), cores() if n_jobs <= 0 else n_jobs)
+
+    at_once, why = memory_plan(containers, asked)
+    if not why:
+        return []
+    print(why, file=sys.stderr)
+    return [f"hydra.launcher.n_jobs={at_once}"]
 
 
 def _with_values(container: dict, values: dict) -> dict:
@@ -224,7 +291,10 @@ def _run_single(conf_dir: Path, overrides: list[str]) -> int:
     """One run, composed once with Hydra's compose API (Hydra's own entry composes twice)."""
     from twinkit.hydra_glue import compose, set_run_config
 
+    from twinkit.config import check_composed_site_name
+
     cfg = compose(conf_dir, overrides, hydra_config=True)
+    check_composed_site_name(cfg)  # the run folder is made under the site's name
     set_run_config(cfg)
     run_dir = Path(cfg.hydra.run.dir)
     _check_writable([f"engine.outputs_dir={cfg.engine.outputs_dir}"])  # wherever the composed config puts it
@@ -254,6 +324,13 @@ def _main(argv: list[str]) -> int:
         return _run_hydra(argv)
     except TwinkitError as exc:
         return say_error(str(exc), exc.exit_code)
+    except Exception as exc:  # a Hydra/OmegaConf config error met outside composition: the same one line
+        from twinkit.hydra_glue import as_config_error
+
+        err = as_config_error(exc)
+        if err is None:
+            raise
+        return say_error(str(err), err.exit_code)
     except KeyboardInterrupt as exc:
         from twinkit.signals import Terminated
 

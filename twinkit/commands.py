@@ -17,7 +17,7 @@ def _compose(overrides: list[str]):
     use_libyaml()
     conf_dir = find_config_dir()
     overrides = open_site_inputs(overrides)
-    check_configs_are_data(conf_dir)
+    check_configs_are_data(conf_dir, overrides)
     check_choices(overrides, conf_dir)
     register_configs(get_registry())
     cfg = compose(conf_dir, overrides)
@@ -26,8 +26,11 @@ def _compose(overrides: list[str]):
     container = plain(cfg)
     container[GIVEN_KEY] = given_params(container, overrides)
     from twinkit.config import check_config
+    from twinkit.manifest import env_secrets, remember_secrets
 
-    check_config(container, get_registry())
+    secrets = env_secrets(plain(cfg, resolve=False))
+    check_config(container, get_registry(), secrets=secrets)
+    remember_secrets(secrets)  # what the command prints is redacted (twinkit.manifest.redact)
     return conf_dir, container
 
 
@@ -41,18 +44,23 @@ def cmd_status(args: list[str]) -> int:
     engine = Engine(cfg, get_registry(), workspace=site_root, site_root=site_root, rerun=cfg.get("rerun"),
                     config_root=conf_dir.parent)
     rows = engine.status()
-    print(f"recipe '{cfg['recipe'].get('name')}' on site '{site['name']}' in {site_root}")
+    from twinkit.manifest import redact
+
+    def say(line: str) -> None:  # a changed value in a reason may be a secret
+        print(redact(line))
+
+    say(f"recipe '{cfg['recipe'].get('name')}' on site '{site['name']}' in {site_root}")
     for sid, reason in engine.skipped:
-        print(f"  {'-- ' + sid:<24} {'skipped':<12} {reason}")
+        say(f"  {'-- ' + sid:<24} {'skipped':<12} {reason}")
     red = sys.stdout.isatty() and not os.environ.get("NO_COLOR")
     degraded = 0
     for folder, decision, why in rows:
         if decision == "DEGRADED":
             degraded += 1
             decision = f"\033[1;31m{decision:<12}\033[0m" if red else f"{decision:<12}"
-        print(f"  {folder:<24} {decision:<12} {why}")
+        say(f"  {folder:<24} {decision:<12} {why}")
     if degraded:
-        print(f"{degraded} step result(s) are DEGRADED: far below what they should be (reasons above)")
+        say(f"{degraded} step result(s) are DEGRADED: far below what they should be (reasons above)")
     return 0
 
 

@@ -33,6 +33,10 @@ class EngineConfig:
                               help="Reports of the newest runs kept (runs/<time>/report/); older runs keep their "
                                    "manifest and log, their report is removed at the end of a run and by "
                                    "twinkit gc. 0 = keep every report.")
+    sweep_memory_gb: float = param(0.0, ge=0,
+                                   help="Memory (GB) a sweep's jobs may use together: fewer jobs run at once when "
+                                        "their earlier peaks say they need more; 0 = the memory available when the "
+                                        "sweep starts.")
     degraded_exit_code: int = param(4, ge=0, le=125,
                                     help="Exit status of a run that finished with a degraded result (docs/engine.md "
                                          '"Degraded results"); 0 = exit 0 as for a clean run.')
@@ -169,8 +173,45 @@ def _check_site(site: dict, site_file: str | None = None) -> None:
             raise ConfigError(str(exc)) from None
 
 
-def check_config(cfg: dict, registry: Registry, site_file: str | None = None) -> None:
-    """Every parameter in the composed config inside its declared range (twinkit.ranges); the site's base point.
+_PLAIN_NAME = re.compile(r"^[\w.-]+$")
+
+
+def check_site_name(name: Any, secrets: dict[str, str] | None = None) -> None:
+    """``site.name`` becomes the folder ``<engine.outputs_dir>/<name>``: it must be a plain name (letters,
+    digits, ``-``, ``_``, ``.``; not ``.`` or ``..``), and not a value read through ``${oc.env:...}``
+    (``secrets``: twinkit.manifest.env_secrets), which a folder name would show."""
+    if name is None or name == "":
+        raise ConfigError("site.name: the site config has no 'name'; give the site a name in its site file")
+    for value, var in (secrets or {}).items():
+        if value == str(name) or (len(value) >= 4 and value in str(name)):
+            raise ConfigError(f"site.name: its value comes from ${{oc.env:{var}}}, and the site's name becomes a "
+                              "folder name that would show it; give the site a plain name in its site file")
+    if not isinstance(name, str) or not _PLAIN_NAME.match(name) or name in (".", ".."):
+        raise ConfigError(f"site.name={name!r} is not a plain name: it becomes the folder <engine.outputs_dir>/<name>; "
+                          "use letters, digits, '-', '_' and '.' only (no '/', not '.' or '..')")
+
+
+def check_composed_site_name(cfg) -> None:
+    """:func:`check_site_name` on a composed config (a DictConfig), before anything is written under the name."""
+    from omegaconf import OmegaConf
+
+    from twinkit.hydra_glue import as_config_error, plain
+    from twinkit.manifest import env_secrets
+
+    try:
+        name = OmegaConf.select(cfg, "site.name")
+    except Exception as exc:  # noqa: BLE001 -- an unset ${oc.env:VAR}: the one-line configuration error
+        err = as_config_error(exc)
+        if err is None:
+            raise
+        raise err from None
+    check_site_name(name, env_secrets(plain(cfg, resolve=False)))
+
+
+def check_config(cfg: dict, registry: Registry, site_file: str | None = None,
+                 secrets: dict[str, str] | None = None) -> None:
+    """Every parameter in the composed config inside its declared range (twinkit.ranges); the site's base point
+    and name (:func:`check_site_name`, with the config's ``secrets``).
 
     Runs before any step: ``reconstructor.depth=30`` fails here with exit 2 naming the key and the range.
     """
@@ -193,6 +234,7 @@ def check_config(cfg: dict, registry: Registry, site_file: str | None = None) ->
         gen = registry.plugins.get("site_generator", {}).get(str(site.get("generator")))
         if gen is not None:
             check_values(gen.params, site, "site", gen.qualname)
+        check_site_name(site.get("name"), secrets)
         _check_site(site, site_file)
 
 
@@ -203,11 +245,12 @@ _HEADER = re.compile(r"^#\s*@package\s+(\S+)", re.M)
 _HYDRA_ALLOWED = ("hydra.sweeper.params",)
 
 
-def _config_files(conf_dir: Path, extra_dirs: list[Path]) -> list[tuple[Path, str]]:
-    """Every YAML file Hydra could load besides the root config, with its group (``site``, ``recipe``, ...)."""
+def _config_files(conf_dir: Path | None, extra_dirs: list[Path]) -> list[tuple[Path, str]]:
+    """Every YAML file Hydra could load besides the root config (``conf_dir/config.yaml``), with its group
+    (``site``, ``recipe``, ...)."""
     out = []
     for base in [conf_dir, *extra_dirs]:
-        if not base.is_dir():
+        if base is None or not base.is_dir():
             continue
         for folder, _dirs, files in os.walk(base, followlinks=True):
             rel = Path(folder).relative_to(base)
@@ -289,25 +332,88 @@ def config_file_problem(path: Path, group: str) -> str | None:
     return None
 
 
+#: the opt-in (``TWINKIT_ALLOW_CODE=1``) that lets the command line make Hydra run code; a run records it
+ALLOW_CODE_ENV = "TWINKIT_ALLOW_CODE"
+# what a command-line override may set under hydra: where outputs go, a sweep's values, the launcher's settings
+_CLI_HYDRA_ALLOWED = ("hydra.run.", "hydra.sweep.", "hydra.sweeper.params", "hydra.job.chdir", "hydra.job.name",
+                      "hydra.launcher.", "hydra.verbose", "hydra.output_subdir", "hydra.mode")
+_DIR_OPTIONS = {"--config-dir": "--config-dir", "-cd": "--config-dir", "--config-path": "--config-path",
+                "-cp": "--config-path"}
+
+
+_TARGET_KEY = re.compile(r"(^|[{,\s])['\"]?_target_['\"]?\s*:")  # a '_target_' key inside a dict value
+
+
+def code_allowed() -> bool:
+    """Whether ``TWINKIT_ALLOW_CODE=1`` lets the command line name code for Hydra to run (recorded in the manifest)."""
+    return os.environ.get(ALLOW_CODE_ENV, "") == "1"
+
+
 def check_configs_are_data(conf_dir: Path, argv: list[str] | None = None) -> None:
-    """Refuse (exit 2, naming the file) a recipe, site, sweep or local file that could make Hydra run code.
+    """Refuse (exit 2, naming the file or the override) a config file or a command line that could make Hydra run
+    code.
 
     Only the root ``config.yaml`` may set Hydra callbacks and the launcher; any other file that sets
     ``_target_``, ``hydra.callbacks``, ``hydra.launcher`` (anything under ``hydra`` but a sweep's
     ``hydra.sweeper.params``) or picks a ``hydra/...`` group is refused before Hydra reads it. The
-    folders of ``--config-dir``/``-cd`` are checked too.
+    folders of ``--config-dir``/``-cd`` and ``--config-path``/``-cp`` are checked too (``config.yaml`` there
+    included: it would replace the root config), and so are the command line's overrides
+    (:func:`override_problem`); ``TWINKIT_ALLOW_CODE=1`` lifts the checks of what the command line gives.
     """
     argv = list(argv or [])
-    extra = []
-    for i, a in enumerate(argv):
-        if a in ("--config-dir", "-cd") and i + 1 < len(argv):
-            extra.append(Path(argv[i + 1]))
-        elif a.startswith("--config-dir="):
-            extra.append(Path(a.split("=", 1)[1]))
-    for path, group in _config_files(conf_dir, extra):
+    for path, group in _config_files(conf_dir, []):
         why = _safe_problem(path, group)
         if why:
             raise ConfigError(f"{path}: refused, {why}; remove it (only {conf_dir / 'config.yaml'} configures Hydra)")
+    if code_allowed():
+        return
+    rerun = next((a for a in argv if a.split("=", 1)[0] == "--experimental-rerun"), None)
+    if rerun:
+        raise ConfigError(f"command line: {rerun}: refused, it makes Hydra load a pickled config, and a pickle can "
+                          f"run code; run with overrides instead (or set {ALLOW_CODE_ENV}=1)")
+    for path, group in _config_files(None, _option_dirs(argv)):
+        why = _safe_problem(path, group)
+        if why:
+            raise ConfigError(f"{path}: refused, {why}; a folder given with --config-dir or --config-path is data "
+                              f"(another root config: TWINKIT_CONFIG_DIR=<its folder>; or set {ALLOW_CODE_ENV}=1)")
+    for a in argv:
+        why = None if a.startswith("-") else override_problem(a)
+        if why:
+            raise ConfigError(f"command line: {a}: refused, {why}; a command line is data like a config file (set "
+                              f"{ALLOW_CODE_ENV}=1 to allow it; the run's manifest records that)")
+
+
+def _option_dirs(argv: list[str]) -> list[Path]:
+    """The folders ``--config-dir`` and ``--config-path`` name (a ``pkg://`` source cannot be read: refused)."""
+    out = []
+    for i, a in enumerate(argv):
+        opt, _, value = a.partition("=")
+        if opt not in _DIR_OPTIONS or (not value and i + 1 >= len(argv)):
+            continue
+        value = value or argv[i + 1]
+        if value.startswith("pkg://"):
+            raise ConfigError(f"{_DIR_OPTIONS[opt]} {value}: refused, a package's configs cannot be checked for "
+                              f"code; give a folder (or set {ALLOW_CODE_ENV}=1)")
+        out.append(Path(value.removeprefix("file://")).resolve())
+    return out
+
+
+def override_problem(override: str) -> str | None:
+    """Why a command-line override could make Hydra run code, or None: a ``_target_`` anywhere, a ``hydra/...``
+    group (launcher, callbacks, logging), or a ``hydra.`` key other than where outputs go, a sweep's values
+    and the launcher's settings (``hydra.run.dir``, ``hydra.sweep.dir``, ``hydra.job.chdir``,
+    ``hydra.launcher.n_jobs``...)."""
+    key, _, value = override.partition("=")
+    key = key.lstrip("+~").split("@", 1)[0].strip()
+    if "_target_" in key.split(".") or _TARGET_KEY.search(value):
+        return "it names '_target_', a Python object for Hydra to call"
+    if key == "hydra" or key.startswith("hydra/"):
+        return f"it chooses the Hydra config group '{key}' (launcher, callbacks or logging)"
+    if key.startswith("hydra.") and not any(key.startswith(a) if a.endswith(".") else key == a or key.startswith(a + ".")
+                                            for a in _CLI_HYDRA_ALLOWED):
+        return f"it sets '{key}'; the command line may set only {', '.join(a + '*' if a.endswith('.') else a for a in _CLI_HYDRA_ALLOWED)} " \
+               "under hydra"
+    return None
 
 
 def _safe_problem(path: Path, group: str) -> str | None:

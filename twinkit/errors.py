@@ -40,5 +40,7 @@ def say_error(msg: str, code: int = 2) -> int:
     """Print the command's one-line error (``twinkit: error: <msg>``) to stderr; return the exit status ``code``."""
     import sys
 
-    print(f"twinkit: error: {msg}", file=sys.stderr)
+    from twinkit.manifest import redact
+
+    print(f"twinkit: error: {redact(msg)}", file=sys.stderr)  # a value read through ${oc.env:...} never shown
     return code

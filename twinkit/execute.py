@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from twinkit.errors import ConfigError, StepError, TwinkitError
+from twinkit.errors import StepError, TwinkitError
 from twinkit.os_errors import explaining_os_errors, os_text
 from twinkit.quality import DEGRADED_EXIT
 
@@ -21,6 +21,9 @@ def execute(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurrent
     """Plan -> run -> manifest (-> report) for one composed config; the run's exit status (0, or the degraded
     one). ``conf_dir``: the config folder (found when None); ``argv``: the command line the manifest records
     (``sys.argv`` when None)."""
+    from twinkit.config import check_composed_site_name
+
+    check_composed_site_name(cfg)  # before run.log is written under a folder the name makes
     _setup_logging(run_dir / "run.log")
     _crash_log(run_dir / "run.log")
     run = _prepare(cfg, run_dir, multirun, overrides, concurrent_jobs, conf_dir, argv)
@@ -48,6 +51,7 @@ class _Run:
 
     def manifest(self, status: str, error: str | None) -> dict:
         """The run's manifest as it stands now, with ``${oc.env:...}`` values redacted."""
+        from twinkit.config import code_allowed
         from twinkit.manifest import build_manifest, redact
 
         manifest = build_manifest(
@@ -57,6 +61,7 @@ class _Run:
             finished=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             duration_s=time.perf_counter() - self.t0,
         )
+        manifest["code_allowed"] = code_allowed()  # TWINKIT_ALLOW_CODE=1: the command line could name code to run
         # ${oc.env:...} values stay out of the manifest and the report; the file lists keep their real
         # paths (twinkit verify reads them)
         return {k: (v if k in ("inputs", "outputs", "workspace") else redact(v, self.secrets))
@@ -69,17 +74,16 @@ def _prepare(cfg, run_dir: Path, multirun: bool, overrides: list[str], concurren
     from twinkit.config import find_config_dir
     from twinkit.engine import GIVEN_KEY, given_params
     from twinkit.hydra_glue import plain, without_hydra
-    from twinkit.manifest import env_secrets
+    from twinkit.manifest import env_secrets, remember_secrets
     from twinkit.plugins import get_registry
 
     conf = Path(conf_dir or find_config_dir())
     cfg = without_hydra(cfg)
     container = plain(cfg)
     secrets = env_secrets(plain(cfg, resolve=False))
+    remember_secrets(secrets)  # the log, the step records, the store and the plugins redact them too
     container[GIVEN_KEY] = given_params(container, overrides)
     site = container.get("site") or {}
-    if not site.get("name"):
-        raise ConfigError("the site config has no 'name'")
     engine_cfg = container["engine"]
     site_root = Path(engine_cfg["outputs_dir"]) / site["name"]
     run = _Run(run_dir=run_dir, overrides=overrides, argv=argv if argv is not None else sys.argv,
@@ -105,7 +109,7 @@ def _check(run: _Run, conf_dir: Path, overrides: list[str]) -> None:
     except Exception:  # noqa: BLE001 - only for the message
         chosen_site = None
     check_config(run.container, run.registry,
-                 site_file=str(conf_dir / "site" / f"{chosen_site}.yaml") if chosen_site else None)
+                 site_file=str(conf_dir / "site" / f"{chosen_site}.yaml") if chosen_site else None, secrets=run.secrets)
 
 
 def _engine(run: _Run, concurrent_jobs: int):
@@ -172,7 +176,9 @@ def _finish(run: _Run, status: str, error: str | None) -> str:
     manifest = run.manifest(status, error)
     failed = _failed_step(engine, status, error)
     if failed is not None:
-        manifest["failed_step"] = failed
+        from twinkit.manifest import redact
+
+        manifest["failed_step"] = redact(failed, run.secrets)
     engine.hashes.close()
     try:
         write_manifest(run_dir / "manifest.json", manifest)
@@ -248,11 +254,14 @@ def _job_threads(concurrent_jobs: int) -> int | None:
 
 
 def _setup_logging(run_log: Path | None) -> None:
+    from twinkit.manifest import RedactingFilter
+
     root = logging.getLogger("twinkit")
     root.setLevel(logging.DEBUG)
     for h in list(root.handlers):
         root.removeHandler(h)
     console = logging.StreamHandler(sys.stderr)
+    console.addFilter(RedactingFilter())
     console.setLevel(logging.INFO)
     console.setFormatter(logging.Formatter("%(message)s"))
     root.addHandler(console)
@@ -261,6 +270,7 @@ def _setup_logging(run_log: Path | None) -> None:
         fh = logging.FileHandler(run_log)
         fh.setLevel(logging.DEBUG)
         fh.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+        fh.addFilter(RedactingFilter())
         root.addHandler(fh)
     root.propagate = False
     logging.raiseExceptions = False  # a full disk under run.log must not print logging's own tracebacks

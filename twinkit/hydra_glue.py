@@ -155,11 +155,15 @@ def compose(conf_dir: Path, overrides: list[str], hydra_config: bool = False):
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    from twinkit.manifest import env_secrets, remember_secrets
+
     try:
         with initialize_config_dir(config_dir=str(conf_dir), version_base=VERSION_BASE, job_name=JOB_NAME):
-            return hydra_compose(config_name=CONFIG_NAME, overrides=list(overrides), return_hydra_config=hydra_config)
+            cfg = hydra_compose(config_name=CONFIG_NAME, overrides=list(overrides), return_hydra_config=hydra_config)
     except (HydraException, OmegaConfBaseException) as exc:
         raise composition_error(exc) from None
+    remember_secrets(env_secrets(plain(cfg, resolve=False)))  # no message from here on shows them
+    return cfg
 
 
 def set_run_config(cfg) -> None:
@@ -170,10 +174,15 @@ def set_run_config(cfg) -> None:
 
 
 def plain(node, resolve: bool = True) -> dict:
-    """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one."""
+    """A mapping config node (DictConfig) as a plain dict (OmegaConf.to_container), typed as one. A value
+    that does not resolve (an unset ``${oc.env:VAR}``, a missing ``${key}``) is a one-line ConfigError."""
     from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
 
-    out = OmegaConf.to_container(node, resolve=resolve)
+    try:
+        out = OmegaConf.to_container(node, resolve=resolve)
+    except OmegaConfBaseException as exc:
+        raise composition_error(exc) from None
     if not isinstance(out, dict):
         raise TypeError(f"not a mapping config node: {type(out).__name__}")
     return out
@@ -191,9 +200,19 @@ def without_hydra(cfg):
 
 
 def composition_error(exc: Exception) -> ConfigError:
-    """Hydra/OmegaConf composition errors, folded into one line."""
+    """Hydra/OmegaConf composition errors, folded into one line (an unset ``${oc.env:VAR}`` named with its key)."""
     import re
 
+    env = re.search(r"Environment variable '([^']+)' not found", str(exc))
+    if env:
+        key = getattr(exc, "full_key", None) or "the config"
+        return ConfigError(f"{key}: the environment variable {env.group(1)} is not set (the config reads it with "
+                           f"${{oc.env:{env.group(1)}}}); set it (export {env.group(1)}=...) or give {key} a value")
+    from omegaconf.errors import InterpolationResolutionError
+
+    if isinstance(exc, InterpolationResolutionError) and getattr(exc, "full_key", None):
+        return ConfigError(f"{exc.full_key}: {str(exc).splitlines()[0].rstrip('.')}; fix the ${{...}} reference "
+                           f"in its config file (twinkit --cfg job shows the composed config)")
     # Hydra's MissingConfigException lists the options in its message: say it as twinkit says an unknown plugin
     m = re.search(r"Could not find '([\w/]+)/([^']+)'\s*\nAvailable options in '[^']+':\s*\n(.*?)\nConfig search path",
                   str(exc), re.S)
@@ -211,6 +230,12 @@ def composition_error(exc: Exception) -> ConfigError:
             if t and not t.startswith(("full_key", "object_type", "reference_type", "To append", "Set the environment")):
                 lines.append(t.rstrip("."))
     return ConfigError(". ".join(dict.fromkeys(lines)))
+
+
+def as_config_error(exc: BaseException) -> ConfigError | None:
+    """A Hydra or OmegaConf configuration error (one raised outside :func:`compose`, e.g. reading a value of
+    the composed config) as the one-line ConfigError a composition error gives; None for any other error."""
+    return composition_error(exc) if isinstance(exc, Exception) and _is_composition_error(exc) else None
 
 
 def _is_composition_error(exc: BaseException) -> bool:
@@ -280,6 +305,11 @@ def run_app(conf_dir: Path, argv: list[str], job: Callable[[Any], Any]) -> None:
             raise SystemExit(code) from None
         if _is_composition_error(exc):
             raise composition_error(exc) from None
+        from twinkit.sweeps import broken_pool
+
+        if broken_pool(exc):  # a pool worker itself was killed: one line, not loky's traceback
+            print(broken_pool(exc), file=sys.stderr)
+            raise SystemExit(1) from None
         traceback.print_exception(exc)
         raise SystemExit(1) from None
     finally:

@@ -28,3 +28,13 @@ def write_json(path: str | os.PathLike, data: Any, indent: int = 2) -> None:
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     tmp.write_text(json.dumps(data, indent=indent, sort_keys=True, default=json_default) + "\n")
     os.replace(tmp, path)
+
+
+def write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: a temporary file, then a rename over ``path``. A symbolic link at
+    ``path`` is replaced by the file, never followed, so its target is left as it was."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.unlink(missing_ok=True)
+    tmp.write_text(text)
+    os.replace(tmp, path)

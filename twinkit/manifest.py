@@ -252,8 +252,31 @@ def env_secrets(raw: Any) -> dict[str, str]:
     return found
 
 
-def redact(obj: Any, secrets: dict[str, str]) -> Any:
-    """A copy of ``obj`` with each secret value replaced by ``<from env VAR>`` (inside strings too)."""
+#: names (never values) of the variables the run's config reads through ``${oc.env:...}``, for its processes
+SECRET_VARS_ENV = "TWINKIT_SECRET_VARS"
+
+
+def remember_secrets(secrets: dict[str, str]) -> None:
+    """Make the config's secrets (:func:`env_secrets`) known to :func:`redact` everywhere in this process and in
+    the processes it starts (steps, fan-out workers), with those known before: only the variables' names are
+    stored, in the environment."""
+    names = set(secrets.values()) | {v for v in os.environ.get(SECRET_VARS_ENV, "").split(",") if v}
+    os.environ[SECRET_VARS_ENV] = ",".join(sorted(names))
+
+
+def known_secrets() -> dict[str, str]:
+    """``{value: VAR}`` of the secrets :func:`remember_secrets` made known (empty when none)."""
+    names = os.environ.get(SECRET_VARS_ENV, "")
+    return {os.environ[v]: v for v in names.split(",") if v and os.environ.get(v)}
+
+
+def redact(obj: Any, secrets: dict[str, str] | None = None) -> Any:
+    """A copy of ``obj`` with each secret value replaced by ``<from env VAR>`` (inside strings too).
+
+    ``secrets``: the run's (:func:`env_secrets`); None = those made known (:func:`known_secrets`). The one
+    redaction of twinkit: the manifest, the step records and the store's, the log and the terminal (a filter on
+    the log handlers, the error line), and a plugin's own files (the roads' HTTP cache)."""
+    secrets = known_secrets() if secrets is None else secrets
     if not secrets:
         return obj
     if isinstance(obj, dict):
@@ -268,3 +291,17 @@ def redact(obj: Any, secrets: dict[str, str]) -> Any:
                 obj = obj.replace(value, f"<from env {var}>")
         return obj
     return obj
+
+
+class RedactingFilter:
+    """A ``logging`` filter that writes every record with the secrets redacted (:func:`redact`): run.log and the
+    terminal never show a value read through ``${oc.env:...}``."""
+
+    def filter(self, record) -> bool:
+        if not known_secrets():
+            return True
+        text = record.getMessage()
+        clean = redact(text)
+        if clean != text:
+            record.msg, record.args = clean, None
+        return True

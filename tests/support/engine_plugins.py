@@ -35,7 +35,7 @@ def make(params: MakeParams, ctx, *, out_data_txt: Path) -> dict:
     _count("make")
     sleep = params.sleep_s or float(os.environ.get("TWINKIT_TEST_SLEEP", "0"))
     if sleep:
-        Path(ctx.workdir, "started").write_text("x")
+        Path(ctx.workdir, "started").write_text(f"{os.getpid()}\n")
         time.sleep(sleep)
     if params.fail:
         raise RuntimeError("boom on purpose")

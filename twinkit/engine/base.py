@@ -37,6 +37,7 @@ class EngineBase:
     skipped: list[tuple[str, str]]
     fallbacks: list[tuple[str, str]]
     plan: list[PlannedStep]
+    code_hashes: dict[str, str]  # plugin qualname -> code hash, read when the plan was made
     outcomes: list[StepOutcome]
     current_step: str | None
     secrets: dict[str, str]  # set by the command line after construction; absent otherwise

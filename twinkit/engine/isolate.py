@@ -30,7 +30,9 @@ log = logging.getLogger("twinkit")
 
 
 class NativeCrash(RuntimeError):
-    """The process running a step died from a signal."""
+    """The process running a step died from a signal (``.signal``: its number)."""
+
+    signal: int = 0
 
 
 def isolation_enabled() -> bool:
@@ -93,22 +95,54 @@ def _child(fn: Callable[..., Any], kwargs: dict, w: int, parent: int, threads: i
 
 
 def run_in_child(fn: Callable[..., Any], kwargs: dict, *, threads: int | None = None,
-                 cleanup: Callable[[int], None] | None = None) -> Any:
+                 cleanup: Callable[[int], None] | None = None, pass_signals: bool = False) -> Any:
     """``fn(**kwargs)`` in a forked child; its result, or its exception raised here.
 
     ``threads`` caps the child's native thread pools; ``cleanup(child_pid)`` runs after the child was
-    killed (interrupt) or crashed, to remove what it left behind."""
+    killed (interrupt) or crashed, to remove what it left behind. ``pass_signals``: a Ctrl-C or SIGTERM of
+    this process is passed on to the child, which stops by itself (a sweep's job: it writes its manifest),
+    instead of being stopped within the grace period (main thread only)."""
     if not isolation_enabled():
         return fn(**kwargs)
     for h in logging.getLogger("twinkit").handlers:
         h.flush()
     r, w = os.pipe()
     parent = os.getpid()
-    pid = os.fork()
-    if pid == 0:  # pragma: no cover - the child leaves through os._exit
-        os.close(r)
-        _child(fn, kwargs, w, parent, threads)
-    os.close(w)
+    child: list[int] = []
+    with _passing_signals(child, enabled=pass_signals):
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover - the child leaves through os._exit
+            os.close(r)
+            _child(fn, kwargs, w, parent, threads)
+        child.append(pid)
+        os.close(w)
+        chunks, status = _collect(r, pid, cleanup)
+    if os.WIFSIGNALED(status):
+        if cleanup is not None:
+            cleanup(pid)
+        sig = os.WTERMSIG(status)
+        what = {int(signal.SIGKILL): "killed (SIGKILL: out of memory, or killed by hand)"}.get(sig, f"crashed with {_signal_name(sig)}")
+        crash = NativeCrash(f"the process running it {what}, in native code; the Python stack of the crash, "
+                            f"where known, is in the run log")
+        crash.signal = sig
+        raise crash
+    try:
+        kind, value = pickle.loads(b"".join(chunks))
+    except Exception:
+        raise NativeCrash(f"the process running it exited with code {os.WEXITSTATUS(status)} "
+                          f"without a result") from None
+    if kind == "ok":
+        return value
+    if kind == "interrupted":
+        raise KeyboardInterrupt
+    if kind == "error":
+        raise value
+    name, text = value
+    raise type(name, (RuntimeError,), {})(text)
+
+
+def _collect(r: int, pid: int, cleanup: Callable[[int], None] | None) -> tuple[list[bytes], int]:
+    """The child's result bytes from pipe ``r`` and its exit status."""
     chunks = []
     try:
         with os.fdopen(r, "rb") as f:
@@ -123,26 +157,30 @@ def run_in_child(fn: Callable[..., Any], kwargs: dict, *, threads: int | None = 
         if cleanup is not None:
             cleanup(pid)
         raise
-    if os.WIFSIGNALED(status):
-        if cleanup is not None:
-            cleanup(pid)
-        sig = os.WTERMSIG(status)
-        what = {int(signal.SIGKILL): "killed (SIGKILL: out of memory, or killed by hand)"}.get(sig, f"crashed with {_signal_name(sig)}")
-        raise NativeCrash(f"the process running it {what}, in native code; the Python stack of the crash, "
-                          f"where known, is in the run log")
+    return chunks, status
+
+
+@contextlib.contextmanager
+def _passing_signals(child: list[int], enabled: bool):
+    """While the block runs, SIGINT and SIGTERM of this process go to the child whose pid is in ``child``
+    (set before the fork: the child replaces the handlers with its own at once)."""
+    import threading
+
+    if not enabled or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        for pid in child:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signum)
+
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        kind, value = pickle.loads(b"".join(chunks))
-    except Exception:
-        raise NativeCrash(f"the process running it exited with code {os.WEXITSTATUS(status)} "
-                          f"without a result") from None
-    if kind == "ok":
-        return value
-    if kind == "interrupted":
-        raise KeyboardInterrupt
-    if kind == "error":
-        raise value
-    name, text = value
-    raise type(name, (RuntimeError,), {})(text)
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 def _stop(pid: int) -> None:

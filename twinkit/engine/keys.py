@@ -82,7 +82,7 @@ class KeysMixin(EngineBase):
             plugin = {"kind": "manual", "instructions": (ps.spec.manual or {}).get("instructions")}
         else:
             plugin = {"kind": ps.plugin.kind, "name": ps.plugin.name, "version": ps.plugin.version,
-                      "code": ps.plugin.code_hash()}
+                      "code": self._code_hash(ps)}
         desc = {
             "plugin": plugin,
             "params": ps.params_dict,
@@ -94,6 +94,14 @@ class KeysMixin(EngineBase):
         if files:  # only then: the keys of steps whose parameters name no file stay as they were
             desc["files"] = files
         return desc
+
+    def _code_hash(self, ps: PlannedStep) -> str:
+        """The step's plugin's code hash as it was when the plan was made (``self.code_hashes``)."""
+        assert ps.plugin is not None
+        pinned = getattr(self, "code_hashes", {})
+        if ps.plugin.qualname not in pinned:
+            pinned[ps.plugin.qualname] = ps.plugin.code_hash()
+        return pinned[ps.plugin.qualname]
 
     def _param_files(self, ps: PlannedStep) -> dict[str, Any]:
         """The content hashes of the files the step's parameters, and its components' (``image_model``), name

@@ -22,6 +22,15 @@ from typing import Iterator
 from twinkit.engine.base import EngineBase
 from twinkit.engine.records import _now
 from twinkit.errors import InputError, LockedError
+from twinkit.jsonio import write_text
+
+
+def _not_a_link(path: Path) -> Path:
+    """``path``, after removing a symbolic link there (twinkit never makes one; opening a lock file through it
+    would truncate the link's target)."""
+    if path.is_symlink():
+        path.unlink()
+    return path
 
 
 def unwritable(folder: Path) -> str | None:
@@ -92,7 +101,7 @@ def gc_locks(site_root: Path) -> Iterator[None]:
     from filelock import FileLock, Timeout
 
     site_root = Path(site_root)
-    lock = FileLock(str(site_root / ".twinkit.lock"))
+    lock = FileLock(str(_not_a_link(site_root / ".twinkit.lock")))
     try:
         lock.acquire(timeout=0)
     except Timeout:
@@ -127,7 +136,7 @@ class LockMixin(EngineBase):
                 raise InputError(f"cannot write to {d} ({problem}); choose a writable folder with engine.outputs_dir=<dir>")
         from filelock import FileLock, Timeout
 
-        lock = FileLock(str(self.workspace / ".twinkit.lock"))
+        lock = FileLock(str(_not_a_link(self.workspace / ".twinkit.lock")))
         try:
             lock.acquire(timeout=0)
         except Timeout:
@@ -136,7 +145,7 @@ class LockMixin(EngineBase):
                 f"another twinkit run is using {self.workspace} ({holder}); wait for it to finish, "
                 f"or use another engine.outputs_dir"
             ) from None
-        (self.workspace / ".twinkit.owner").write_text(f"pid {os.getpid()} since {_now()}\n")
+        write_text(self.workspace / ".twinkit.owner", f"pid {os.getpid()} since {_now()}\n")  # a link replaced, not followed
         self._lock = lock
         self._store_lock = StoreLock(self.site_root)
         try:

@@ -19,6 +19,7 @@ from twinkit.engine.base import EngineBase
 from twinkit.engine.records import read_record
 from twinkit.errors import InputError
 from twinkit.jsonio import write_json as write_json_atomic
+from twinkit.jsonio import write_text
 
 log = logging.getLogger("twinkit")
 
@@ -67,10 +68,9 @@ def parked_folder(workspace: Path, recipe: str) -> Path:
 
 
 def _write_marker(workspace: Path, name: str) -> None:
-    """``.twinkit.recipe`` written whole or not at all (a half-written marker would hide the recipe)."""
-    tmp = workspace / f"{MARKER}.tmp-{os.getpid()}"
-    tmp.write_text(name + "\n")
-    os.replace(tmp, workspace / MARKER)
+    """``.twinkit.recipe`` written whole or not at all (a half-written marker would hide the recipe); a link there
+    is replaced, never followed (twinkit.jsonio.write_text)."""
+    write_text(workspace / MARKER, name + "\n")
 
 
 def switch_moves(workspace: Path, here: str | None, name: str, edits_dir: Path) -> list[tuple[str, str]]:

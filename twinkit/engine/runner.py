@@ -70,6 +70,9 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
         self.skipped: list[tuple[str, str]] = []
         self.fallbacks: list[tuple[str, str]] = []  # (step id, why its plugin was replaced by its fallback)
         self.plan = build_plan(cfg, registry, config_root, skipped=self.skipped, fallbacks=self.fallbacks)
+        # each plugin's code hash read once, now, as its modules were loaded: a source file edited while
+        # the run goes on must not be recorded as the code that produced this run's results
+        self.code_hashes = {ps.plugin.qualname: ps.plugin.code_hash() for ps in self.plan if ps.plugin is not None}
         known = {s.id for s in self.plan} | {s.folder for s in self.plan}
         bad = self.rerun - known
         if bad:

@@ -30,6 +30,7 @@ from twinkit.engine.records import RECORD, RECORD_SCHEMA, _now, read_record
 from twinkit.errors import StepError
 from twinkit.hashing import HashCache, artefact_hash, list_files
 from twinkit.jsonio import write_json as write_json_atomic
+from twinkit.manifest import redact
 from twinkit.quality import with_degraded
 from twinkit.signature import Port
 
@@ -213,7 +214,7 @@ def _record_of(tmp: Path, key: str, used: list[str], duration: float, mem, metri
         "peak_rss_mb": round(mem.peak / 2**20, 1) if mem.peak else None,
         # what the process held before the step began (a pooled worker keeps memory from earlier items)
         "start_rss_mb": round(mem.start / 2**20, 1) if mem.start else None,
-        "metrics": metrics if isinstance(metrics, dict) else {},
+        "metrics": redact(metrics) if isinstance(metrics, dict) else {},  # no ${oc.env:...} value on disk
         "files": files,
         "artefacts": {p.filename: artefact_hash(tmp / p.filename, cache) for p in outputs},
         "computed_at": _now(),

@@ -99,12 +99,9 @@ class WorkspaceMixin(EngineBase):
 
     def _redacted(self, obj):
         """``obj`` with the values read through ``${oc.env:...}`` replaced (twinkit.manifest.redact)."""
-        secrets = getattr(self, "secrets", None)
-        if not secrets:
-            return obj
         from twinkit.manifest import redact
 
-        return redact(obj, secrets)
+        return redact(obj, getattr(self, "secrets", None) or None)  # None: those the process knows
 
     def _workspace_record(self, ps, key, desc, stored, status, why, in_paths) -> dict:
         desc = self._redacted(desc)
@@ -120,7 +117,7 @@ class WorkspaceMixin(EngineBase):
             "inputs": {k: (str(v) if not isinstance(v, list) else [str(x) for x in v]) for k, v in in_paths.items()},
             "files": stored.get("files", {}),
             "artefacts": stored.get("artefacts", {}),
-            "metrics": stored.get("metrics", {}),
+            "metrics": self._redacted(stored.get("metrics", {})),
             "duration_s": stored.get("duration_s"),
             "peak_rss_mb": stored.get("peak_rss_mb"),
             "status": status,

@@ -189,9 +189,17 @@ class SweepSummaryCallback(_HydraCallback):
 
     _done: set = set()
     last_sweep: Path | None = None
+    started: Path | None = None  # the sweep running now: its summary is written when a job failed too
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        SweepSummaryCallback.started = Path(str(config.hydra.sweep.dir)).resolve()
 
     def on_multirun_end(self, config, **kwargs) -> None:
-        sweep = Path(str(config.hydra.sweep.dir)).resolve()
+        self.write(Path(str(config.hydra.sweep.dir)).resolve())
+
+    @staticmethod
+    def write(sweep: Path) -> None:
+        """The summary of ``sweep``, written and said once."""
         SweepSummaryCallback.last_sweep = sweep  # the CLI reads its jobs' statuses for the exit status
         if sweep in SweepSummaryCallback._done:  # Hydra may call a callback twice; write and say it once
             return

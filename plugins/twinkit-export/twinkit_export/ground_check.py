@@ -1,7 +1,7 @@
 """The ``drop_test`` step: does the static mesh hold up a car and a walker everywhere the map sends them?
 
-The way a simulator sees the ground: vertical rays on a grid (``spacing_m``, 10 cm) over every driving
-and sidewalk lane of the OpenDRIVE map (:class:`twinkit.street.lanes.LaneMap`: carla.Map, offline), inside
+The way a simulator sees the ground: vertical rays on a grid (``spacing_m``, 10 cm) over every driving,
+parking and sidewalk lane of the OpenDRIVE map (:class:`twinkit.street.lanes.LaneMap`: carla.Map, offline), inside
 the scanned site (the cloud's footprint, :class:`twinkit.surface.watertight.Footprint`). A ray passes when
 the static mesh (after ``lift_movables``: what CARLA gets as its map) crosses it within ``tol_m`` of the
 lane's height. A lane's height is the map's road elevation plus the lane's own ``<height>`` records, if
@@ -9,10 +9,16 @@ any; a sidewalk lane without one (netconvert writes none) is expected at the hei
 the road, up to ``curb_max_m`` above the road (a kerb), and passes when the mesh is within ``tol_m`` of
 any height in that band.
 
-Writes ``drop_test.json`` (per lane type: rays, hits, the share, the misses grouped in clusters with
+Three kinds of lane, each with its own target: **driving** (what CARLA drives on: ``Map.cpp``
+``ForEachDrivableLaneImpl`` walks driving, bidirectional and ramp lanes), **parking** (cars stand there and
+CARLA never drives there; its outer edge runs along the kerb), **sidewalk**. A lane of no width (a lane
+narrowed away at a map end, ``twinkit_roads.ground_ends.trim_outer_lanes``) carries nothing and gets no ray.
+
+Writes ``drop_test.json`` (per lane kind: rays, hits, the share, the misses grouped in clusters with
 their positions) and ``drop_test.png`` (misses in orange over the mesh seen from above, with the open
-border at ground level). A share below ``min_driving_pct`` / ``min_sidewalk_pct`` is logged as a
-warning and marked ``"ok": false`` in the metrics and the report.
+border at ground level). A share below ``min_driving_pct`` / ``min_parking_pct`` / ``min_sidewalk_pct`` is
+logged as a warning and marked ``"ok": false`` in the metrics and the report; a hole wider than
+``max_hole_m`` under any kind fails its ground (a degraded run).
 """
 from __future__ import annotations
 
@@ -37,6 +43,8 @@ class DropTestParams:
     min_driving_pct: float = param(99.9, ge=0, le=100, help="Below this share of hits on driving lanes: a warning "
                                    "and ok = false, %.")
     min_sidewalk_pct: float = param(99.5, ge=0, le=100, help="The same on sidewalk lanes, %.")
+    min_parking_pct: float = param(99.5, ge=0, le=100, help="The same on parking lanes (cars stand there, CARLA "
+                                   "drives none of them; their outer edge runs along the kerb), %.")
     footprint_margin_m: float = param(1.0, ge=0, help="Rays this close to the scan's edge are not counted (the "
                                       "site ends there), m.")
     fill_limit_m: float = param(8.0, ge=0, help="Unscanned gaps narrower than this count as inside the site (the "
@@ -51,20 +59,26 @@ class DropTestParams:
                                   "fail; a camber does not); 0: off (the lane height alone decides), m.")
 
 
-DRIVING = ("driving", "bidirectional", "parking", "stop", "entry", "exit", "onramp", "offramp")
+DRIVING = ("driving", "bidirectional", "stop", "entry", "exit", "onramp", "offramp")
+PARKING = ("parking",)
 SIDEWALK = ("sidewalk",)
+#: the lane kinds the drop test measures apart, each with its lane types
+KINDS = {"driving": DRIVING, "parking": PARKING, "sidewalk": SIDEWALK}
 
 
 def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
-    """Ray positions over the lanes, site frame: {"driving": (k, 3), "sidewalk": (k, 3)} (x, y, lane z).
+    """Ray positions over the lanes, site frame: {kind: (k, 3)} (x, y, lane z) for each kind of :data:`KINDS`.
 
     Every lane every ``spacing_m`` (:meth:`LaneMap.lanes`: the driving lanes and the lanes reached sideways
-    from them); across a lane, rays every ``spacing_m`` from border to border (half a step in from each)."""
+    from them); across a lane, rays every ``spacing_m`` from border to border (half a step in from each); a
+    lane of no width gets none."""
     from twinkit.street.lanes import LaneMap
 
     lanes = LaneMap(xodr_text, "drop_test").lanes(spacing_m)
-    out: dict[str, list] = {"driving": [], "sidewalk": []}
-    kinds = np.where(lanes.is_type(*DRIVING), "driving", np.where(lanes.is_type(*SIDEWALK), "sidewalk", ""))
+    out: dict[str, list] = {k: [] for k in KINDS}
+    kinds = np.full(len(lanes), "", dtype=object)
+    for k, types in KINDS.items():
+        kinds[lanes.is_type(*types) & (lanes.width > 1e-6)] = k
     nrm = lanes.normal
     for i in np.flatnonzero(kinds != ""):
         h = float(lanes.width[i]) / 2
@@ -174,9 +188,13 @@ def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene,
     kerb = kerb_line(r, hit, falls, mesh, scene, params)
     holes = _clusters(r[falls, :2], 3 * params.spacing_m)
     widest = max((h["width_m"] + params.spacing_m for h in holes), default=0.0)
-    ok = (pct is None or pct >= need) and widest <= params.max_hole_m
     nk = n - int(kerb.sum())
     pct_ground = round(100.0 * float(hit.sum()) / nk, 3) if nk else None
+    # a parking lane's outer edge runs over the kerb's foot by design (its tyres stand off the kerb): its share
+    # against the target is counted off the kerb line; driving and sidewalk lanes count every ray
+    measured = "hit_pct_off_kerb_line" if kind == "parking" and pct_ground is not None else "hit_pct"
+    share = pct_ground if measured == "hit_pct_off_kerb_line" else pct
+    ok = (share is None or share >= need) and widest <= params.max_hole_m
     # the surface's continuity (the ground a wheel rolls on, whatever the lane's one height says)
     pct_cont = None
     if n and params.local_window_m > 0:
@@ -184,7 +202,7 @@ def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene,
                           params.tol_m)
         pct_cont = round(100.0 * float((cont | hit).mean()), 3)
     best = max([x for x in (pct_ground, pct_cont) if x is not None], default=None)
-    lane = {"rays": n, "hits": int(hit.sum()), "hit_pct": pct, "target_pct": need, "ok": ok,
+    lane = {"rays": n, "hits": int(hit.sum()), "hit_pct": pct, "target_pct": need, "target_on": measured, "ok": ok,
             "kerb_line": int(kerb.sum()),
             "kerb_line_pct": round(100.0 * float(kerb.mean()), 3) if n else None,
             "hit_pct_off_kerb_line": pct_ground,
@@ -231,7 +249,7 @@ def log_lane(log, kind: str, lane: dict, holes: list, params: DropTestParams, pn
         log.warning("drop test: a hole %.2f m wide (%.2f m long) at (%.1f, %.1f) under a %s lane (more than %.2f m: "
                     "a wheel or a foot drops in)", widest, wh["extent_m"] + params.spacing_m, wh["x"], wh["y"], kind,
                     params.max_hole_m)
-    if n and not lane["ok"] and pct < need:
+    if n and not lane["ok"] and lane[lane["target_on"]] < need:
         log.warning("drop test: %.2f %% of %d rays over %s lanes find the ground (target %.1f %%; %.3f %% "
                     "fall through, %.3f %% meet a kerb beside the lane's height (the lane's edge over the "
                     "kerb), the others the surface at another height); largest gap at (%.1f, %.1f), see %s",
@@ -239,6 +257,8 @@ def log_lane(log, kind: str, lane: dict, holes: list, params: DropTestParams, pn
                     lane["miss_clusters"][0]["x"], lane["miss_clusters"][0]["y"], png_name)
     elif n:
         log.info("drop test: %.2f %% of %d rays over %s lanes find the ground", pct, n, kind)
+    elif kind == "parking":
+        log.info("drop test: no parking lane of the map lies inside the scanned site")
     else:
         log.warning("drop test: no %s lane of the map lies inside the scanned site", kind)
 
@@ -304,7 +324,7 @@ def border_over_lanes(vertices: np.ndarray, ein: np.ndarray, drv: np.ndarray, sp
 
 def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh_obj: Path, in_aligned_xodr: Path,
                    in_points_ply: Path, out_drop_test_json: Path, out_drop_test_png: Path) -> dict:
-    """Vertical rays on a 10 cm grid over every driving and sidewalk lane: share that finds the ground."""
+    """Vertical rays on a 10 cm grid over every driving, parking and sidewalk lane: share that finds the ground."""
     from twinkit import artefacts as A
     from twinkit.geo.xodr import from_scan
     from twinkit.jsonio import write_json
@@ -325,7 +345,8 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     scene = Surface(mesh.vertices, mesh.faces).scene  # one BVH for every set of rays below
     res: dict = {"spacing_m": params.spacing_m, "tol_m": params.tol_m, "lanes": {}}
     png, misses = Path(out_drop_test_png).name, []
-    for kind, need in (("driving", params.min_driving_pct), ("sidewalk", params.min_sidewalk_pct)):
+    for kind, need in (("driving", params.min_driving_pct), ("parking", params.min_parking_pct),
+                       ("sidewalk", params.min_sidewalk_pct)):
         r = rays[kind][fp.inside(rays[kind])] if len(rays[kind]) else rays[kind]
         res["lanes"][kind], holes, miss = check_lane(kind, r, need, mesh, scene, params)
         misses.append(miss)
@@ -339,14 +360,16 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     res["open_border_at_ground_level"] = border
     drv = rays["driving"][fp.inside(rays["driving"])] if len(rays["driving"]) else rays["driving"]
     res.update(border_over_lanes(mesh.vertices, edges["inside"], drv, params.spacing_m))
-    d, s = res["lanes"]["driving"], res["lanes"]["sidewalk"]
+    d, pk, s = res["lanes"]["driving"], res["lanes"]["parking"], res["lanes"]["sidewalk"]
     draw_border(out_drop_test_png, mesh.vertices, mesh.faces, edges, ground_face=gv[mesh.faces].all(axis=1),
                 misses=np.vstack(misses) if misses else None,
-                title=f"drop test: driving {d['hit_pct']} %, sidewalk {s['hit_pct']} % of rays hit; misses orange, "
-                      f"open border red")
+                title=f"drop test: driving {d['hit_pct']} %, parking {pk['hit_pct']} %, sidewalk {s['hit_pct']} % of "
+                      f"rays hit; misses orange, open border red")
     res["seconds"] = round(time.perf_counter() - t0, 2)
     write_json(out_drop_test_json, res)
     return {"ok": res["ok"], "driving_hit_pct": d["hit_pct"], "sidewalk_hit_pct": s["hit_pct"],
+            "parking_hit_pct": pk["hit_pct"], "parking_rays": pk["rays"], "parking_widest_hole_m": pk["widest_hole_m"],
+            "sidewalk_widest_hole_m": s["widest_hole_m"], "driving_widest_hole_m": d["widest_hole_m"],
             "driving_fall_through_pct": d["fall_through_pct"], "sidewalk_fall_through_pct": s["fall_through_pct"],
             "driving_kerb_line_pct": d["kerb_line_pct"], "driving_hit_pct_off_kerb_line": d["hit_pct_off_kerb_line"],
             "driving_continuous_pct": d["continuous_pct"], "sidewalk_continuous_pct": s["continuous_pct"],

@@ -535,7 +535,7 @@ def twinkit_register_steps(register):
     from .ground_check import DropTestParams, drop_test_step
 
     register("drop_test", drop_test_step, params=DropTestParams,
-             description="vertical rays over every driving and sidewalk lane: does the static mesh hold them up")
+             description="vertical rays over every driving, parking and sidewalk lane: does the static mesh hold them up")
 
 
 @hookimpl

@@ -22,6 +22,17 @@ would remove the vehicle: ``LocalizationStage::Update`` in CARLA's ``LibCarla/so
 LocalizationStage.cpp``, ``marked_for_removal`` when ``GetNextWaypoint()`` is empty), now on the scanned ground.
 Ends linked to a real junction are never cut; lanes off the ground there, or farther in than ``max_trim_m``,
 are reported and left.
+
+:func:`trim_outer_lanes` does the same for the lanes outside a road end's outermost driving lane (sidewalk,
+parking, shoulder, ...), once those lie where they will stay (after the parking lanes): at each map end, walking
+from the outermost lane inwards, a lane whose ground ends before the road's end (a cross-section of it, rays every
+``across_m`` from border to border, with a ray off the ground: :func:`twinkit.street.lane_ground.on_ground`) gets
+no width from the road's end to ``margin_m`` past its first cross-section on the ground
+(:func:`twinkit_roads.xodr_cut.narrow_lanes`: a new lane section there, the lane's width 0 in the part at the
+end); an inner lane only as far as the lane outside it, and the walk stops at the first lane that keeps its
+ground at the end. A dead end's turnaround roads lose, the same way outermost first, their outer lanes that
+leave the ground anywhere. Only the map's ends: a sidewalk is never narrowed inside the map or at a real
+junction, so each block keeps one sidewalk.
 """
 from __future__ import annotations
 
@@ -32,7 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .xodr_cut import CutError, cut_road, elevation_at, move_road, road_pose
+from .xodr_cut import CutError, cut_road, elevation_at, move_road, narrow_lanes, road_pose
 
 #: the lane types of a turnaround that must lie on the ground (CARLA's drivable lanes; netconvert's sidewalk
 #: around a U-turn sweeps a sidewalk's width farther out and would cost metres of road: reported, not cut for)
@@ -145,6 +156,7 @@ class TrimParams:
     margin_m: float = 0.5
     max_trim_m: float = 10.0
     min_left_m: float = 2.0
+    across_m: float = 0.1
 
 
 def plan_end(end: MapEnd, roads: dict[str, ET.Element], samples, ground: np.ndarray, on_ground, p: TrimParams) -> None:
@@ -241,3 +253,130 @@ def _report(ends: list[MapEnd], s0, g0: np.ndarray, s1, g1: np.ndarray, notes: l
             "driving_samples_before": int(d0.sum()), "driving_samples_after": int(d1.sum()),
             "samples_off_ground_before": int((~g0).sum()), "samples_off_ground_after": int((~g1).sum()),
             "samples_before": int(len(g0)), "samples_after": int(len(g1)), "notes": notes}
+
+
+# ------------------------------------------------------------------------------------------------ outer lanes
+
+def _cross_ground(samples, which: np.ndarray, ground_of, across_m: float) -> np.ndarray:
+    """(n,) bool: each of the ``which`` samples' lane cross-sections has ground under every ray across it (rays
+    every ``across_m`` from border to border, half a step in from each; ``ground_of`` the ground test of
+    (k, 3) points); True for the other samples."""
+    idx = np.flatnonzero(which)
+    ok = np.ones(len(samples), bool)
+    if not len(idx):
+        return ok
+    w = samples.width[idx]
+    n = np.maximum(1, np.ceil(w / across_m - 1e-9).astype(np.int64))
+    owner = np.repeat(np.arange(len(idx)), n)
+    j = np.arange(len(owner)) - np.repeat(np.cumsum(n) - n, n)
+    off = (j + 0.5) * (w[owner] / n[owner]) - w[owner] / 2
+    pts = samples.xyz[idx][owner].copy()
+    pts[:, :2] += off[:, None] * samples.normal[idx][owner]
+    sub = np.ones(len(idx), bool)
+    np.logical_and.at(sub, owner, ground_of(pts))
+    ok[idx] = sub
+    return ok
+
+
+def _outer_lanes(road: ET.Element, side: str | None) -> list[list[tuple[int, str]]]:
+    """Per side of the road (right, left): its lanes outward of the outermost driving lane, outermost first, as
+    (id, type), in the lane section at the road's ``side`` end ("start" | "end"; None: every section's lanes)."""
+    secs = road.find("lanes").findall("laneSection")
+    pick = secs if side is None else [secs[0] if side == "start" else secs[-1]]
+    drive = {t.lower() for t in DRIVING}
+    out: list[list[tuple[int, str]]] = []
+    for grp in ("right", "left"):
+        row: list[tuple[int, str]] = []
+        for sec in pick:
+            el = sec.find(grp)
+            for ln in sorted(el.findall("lane") if el is not None else [], key=lambda e: -abs(int(e.get("id")))):
+                if ln.get("type", "").lower() in drive:
+                    break
+                if (int(ln.get("id")), ln.get("type", "")) not in row:
+                    row.append((int(ln.get("id")), ln.get("type", "")))
+        out.append(sorted(row, key=lambda t: -abs(t[0])))
+    return out
+
+
+def _plan_outer(rid: str, side: str, road: ET.Element, samples, ok: np.ndarray, p: TrimParams,
+                notes: list[str]) -> dict[int, float]:
+    """{lane id: metres from the road's ``side`` end to give no width} for the outer lanes of one road end."""
+    length = float(road.get("length"))
+    cuts: dict[int, float] = {}
+    for row in _outer_lanes(road, side):
+        limit = length
+        for lid, kind in row:
+            k = (samples.road == int(rid)) & (samples.lane == lid)
+            reach = _reach(samples.take(k), ok[k], road, side, p.max_trim_m)
+            if reach == 0.0:
+                break
+            if reach > p.max_trim_m:
+                notes.append(f"road {rid} {side}: {kind} lane {lid} has no ground for more than {p.max_trim_m} m "
+                             "(max_trim_m): left as it is")
+                break
+            if reach + p.margin_m > limit + 1e-9:
+                notes.append(f"road {rid} {side}: {kind} lane {lid} leaves the ground {reach:.2f} m in, farther "
+                             f"than the lane outside it is narrowed ({limit:.2f} m): narrowed as far as that")
+            cuts[lid] = limit = min(reach + p.margin_m, limit)
+    return cuts
+
+
+def _off_outer(road: ET.Element, samples, ok: np.ndarray) -> list[tuple[int, str]]:
+    """The outer lanes of a (turnaround) road that leave the ground anywhere, outermost first per side, up to
+    the first that keeps it."""
+    out = []
+    for row in _outer_lanes(road, None):
+        for lid, kind in row:
+            k = (samples.road == int(road.get("id"))) & (samples.lane == lid)
+            if not k.any() or ok[k].all():
+                break
+            out.append((lid, kind))
+    return out
+
+
+def trim_outer_lanes(text: str, vertices: np.ndarray, faces: np.ndarray, p: TrimParams | None = None,
+                     source: str = "aligned.xodr") -> tuple[str, dict]:
+    """``text`` (OpenDRIVE, the mesh's frame) with the outer lanes (sidewalk, parking, ...) of its map ends given
+    no width where their ground ends before the road's end (see the module doc), and the report: every lane
+    narrowed, notes, and the outer lanes' cross-sections off the ground before and after (lanes of width 0 left
+    out)."""
+    from twinkit.street.lane_ground import on_ground
+    from twinkit.street.lanes import LaneMap
+    from twinkit.surface.closest import Surface
+
+    p = p or TrimParams()
+    scene = Surface(vertices, faces).scene
+
+    def cross_ok(smp):
+        return _cross_ground(smp, ~smp.is_type(*DRIVING) & (smp.width > 1e-6),
+                             lambda xyz: on_ground(xyz, vertices, faces, p.band_m, scene=scene), p.across_m)
+
+    samples = LaneMap(text, source=source).lanes(p.step_m)
+    ok = cross_ok(samples)
+    root = _parse(text)
+    roads = {r.get("id"): r for r in root.findall("road")}
+    narrowed: list[dict] = []
+    notes: list[str] = []
+    for end in map_ends(root):
+        for rid, side in end.ends:
+            cuts = _plan_outer(rid, side, roads[rid], samples, ok, p, notes)
+            types = dict(t for row in _outer_lanes(roads[rid], side) for t in row)
+            narrowed += [{"road": rid, "end": side, "lane": lid, "type": types[lid], "metres": round(d, 3)}
+                         for lid, d in cuts.items()]
+            if cuts:
+                narrow_lanes(roads[rid], side, cuts)
+        for c in end.turnarounds:
+            off = _off_outer(roads[c], samples, ok)
+            length = float(roads[c].get("length"))
+            narrowed += [{"road": c, "end": "turnaround", "lane": lid, "type": kind, "metres": round(length, 3)}
+                         for lid, kind in off]
+            if off:
+                narrow_lanes(roads[c], "start", {lid: length for lid, _ in off})
+    out = text if not narrowed else '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    after = LaneMap(out, source=source).lanes(p.step_m) if narrowed else samples
+    ok1 = cross_ok(after) if narrowed else ok
+    outer0 = ~samples.is_type(*DRIVING) & (samples.width > 1e-6)
+    outer1 = ~after.is_type(*DRIVING) & (after.width > 1e-6)
+    return out, {"narrowed": narrowed, "notes": notes, "outer_off_ground_before": int((~ok & outer0).sum()),
+                 "outer_off_ground_after": int((~ok1 & outer1).sum()), "outer_samples_before": int(outer0.sum()),
+                 "outer_samples_after": int(outer1.sum())}

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError
+from twinkit.manifest import redact
 
 DEFAULT_USER_AGENT = "twinkit-roads/0.1 (+https://github.com/twinkit; digital twins for driving simulation)"
 RETRY_STATUS = {408, 429, 500, 502, 503, 504}
@@ -62,7 +63,10 @@ class CachedHttp:
         self.deadline_s = float(deadline_s)
 
     def _key(self, method: str, url: str, params: dict | None, data: dict | None) -> str:
-        blob = json.dumps([method, url, sorted((params or {}).items()), sorted((data or {}).items())])
+        """The cache file name of a request: a hash of it with any ``${oc.env:...}`` value (a token in the URL)
+        replaced by the variable's name, so nothing on disk derives from a secret (twinkit.manifest.redact)."""
+        items = [[list(kv) for kv in sorted((d or {}).items())] for d in (params, data)]  # lists: redact sees in
+        blob = json.dumps(redact([method, url, *items]))
         return hashlib.sha256(blob.encode()).hexdigest()
 
     def cached(self, method: str, url: str, *, params: dict | None = None, data: dict | None = None) -> Path | None:
@@ -103,8 +107,8 @@ class CachedHttp:
                     tmp = body_path.with_suffix(f".tmp{os.getpid()}")
                     tmp.write_bytes(body)
                     os.replace(tmp, body_path)
-                    meta_path.write_text(json.dumps({"url": url, "method": method, "params": params, "data": data,
-                                                     "time": time.time(), "bytes": len(body)}, indent=1))
+                    meta = {"url": url, "method": method, "params": params, "data": data}
+                    meta_path.write_text(json.dumps({**redact(meta), "time": time.time(), "bytes": len(body)}, indent=1))
                     return HttpResult(body, False, attempt, url)
                 snippet = body[:300].decode("utf-8", "replace").strip().replace("\n", " ")
                 last = f"HTTP {status}: {snippet}"

@@ -109,7 +109,7 @@ class RoadEvidenceParams:
 
 @dataclass
 class ParkingParams:
-    enabled: bool = param(True, help="false: aligned.xodr passes through unchanged (no parking lane is added)")
+    enabled: bool = param(True, help="false: no parking lane is added (the outer lanes are still narrowed to the ground: outer_lanes_to_ground)")
     osm_tags: bool = param(True, help="an OSM parking:<side> / parking:both (or parking:lane:*) tag on the road's way asks for a parking lane")
     scanned_vehicles: bool = param(True, help="a scanned vehicle standing between the outermost driving lane and the kerb asks for a parking lane")
     default_width_m: float = param(2.2, gt=0, le=6, help="metres: width of a parking lane where the scan shows no kerb beside the driving lane")
@@ -118,6 +118,8 @@ class ParkingParams:
     kerb_top_m: float = param(0.0, ge=0, le=1, help="metres: the lane runs this far past the kerb's foot, over its face (0: the sidewalk lane holds the kerb, as OpenDRIVE draws it; the drop test checks sidewalk lanes with a kerb's height band, parking lanes at the road's height)")
     min_kerb_samples: int = param(5, ge=1, help="kerb profiles (one per step_m along the lane) that must see the kerb before its distance is used")
     step_m: float = param(1.0, gt=0, help="metres: lane samples along s for the kerb profiles and the vehicles")
+    outer_lanes_to_ground: bool = param(True, help="at the map's ends, give the lanes outside the driving lanes (sidewalk, parking) no width where their scanned ground ends before the road's end (ground_ends.trim_outer_lanes, docs/roads.md 'Roads on the ground'); false: the lanes as they are")
+    outer_margin_m: float = param(0.5, ge=0, help="metres: an outer lane gets no width this much farther in than its first cross-section on the ground")
 
 
 @dataclass

@@ -260,7 +260,8 @@ def parking_lanes(params: ParkingParams, ctx, *, in_aligned_xodr: Path, in_textu
                   in_labels_npy: Path, out_aligned_xodr: Path, out_parking_json: Path,
                   in_osm_osm: Path | None = None) -> dict:
     """Parking lanes between the outermost driving lane and the sidewalk lane where OSM or the scan shows
-    parked cars (parking.py), so the sidewalk lanes lie on the sidewalk."""
+    parked cars (parking.py), so the sidewalk lanes lie on the sidewalk; then the outer lanes of the map's ends
+    narrowed to the scanned ground (``ground_ends.trim_outer_lanes``)."""
     import numpy as np
 
     from twinkit.cityscapes import WIDE_VEHICLES
@@ -270,30 +271,65 @@ def parking_lanes(params: ParkingParams, ctx, *, in_aligned_xodr: Path, in_textu
 
     params = params or ParkingParams()
     text = A.read_opendrive(in_aligned_xodr)
-    if not params.enabled or is_empty_map(text):
+    if is_empty_map(text):
         A.write_opendrive(out_aligned_xodr, text)
-        why = "switched off" if not params.enabled else "no roads in the map"
-        out_parking_json.write_text(json.dumps({"enabled": bool(params.enabled), "note": why, "sides": []}, indent=1))
-        ctx.log.info("parking lanes: %s; aligned.xodr unchanged", why)
+        out_parking_json.write_text(json.dumps({"enabled": bool(params.enabled), "note": "no roads in the map",
+                                                "sides": []}, indent=1))
+        ctx.log.info("parking lanes: no roads in the map; aligned.xodr unchanged")
         return {"parking_lanes": 0}
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
-    labels = A.read_labels(in_labels_npy, len(mesh.vertices), in_textured_mesh_ply.name)
-    osm = osm_parking(in_osm_osm) if params.osm_tags else {}
-    res = add_parking(text, mesh.vertices, mesh.faces, labels if params.scanned_vehicles else np.full_like(labels, 255),
-                      osm_sides=osm, vehicle_ids=WIDE_VEHICLES, default_width_m=params.default_width_m,
-                      min_width_m=params.min_width_m, max_width_m=params.max_width_m,
-                      min_kerb_samples=params.min_kerb_samples, kerb_top_m=params.kerb_top_m, step_m=params.step_m)
-    A.write_opendrive(out_aligned_xodr, res.text)
-    doc = {"enabled": True, "parking_lanes": res.inserted, "sides": [s.doc() for s in res.sides],
-           "params": {k: getattr(params, k) for k in params.__dataclass_fields__}}
+    doc: dict = {"enabled": bool(params.enabled), "parking_lanes": 0, "sides": [],
+                 "params": {k: getattr(params, k) for k in params.__dataclass_fields__}}
+    seen = 0
+    if params.enabled:
+        labels = A.read_labels(in_labels_npy, len(mesh.vertices), in_textured_mesh_ply.name)
+        osm = osm_parking(in_osm_osm) if params.osm_tags else {}
+        res = add_parking(text, mesh.vertices, mesh.faces,
+                          labels if params.scanned_vehicles else np.full_like(labels, 255), osm_sides=osm,
+                          vehicle_ids=WIDE_VEHICLES, default_width_m=params.default_width_m,
+                          min_width_m=params.min_width_m, max_width_m=params.max_width_m,
+                          min_kerb_samples=params.min_kerb_samples, kerb_top_m=params.kerb_top_m, step_m=params.step_m)
+        text, seen = res.text, sum(s.vehicles for s in res.sides)
+        doc.update(parking_lanes=res.inserted, sides=[s.doc() for s in res.sides])
+        for s in res.sides:
+            ctx.log.info("parking lanes: road %d %s: %s", s.road, s.side,
+                         f"{s.width_m:.2f} m ({s.why})" if s.width_m > 0 else s.why)
+        if (osm or params.scanned_vehicles) and res.inserted == 0:
+            ctx.log.warning("parking lanes: none added (no OSM parking tag on the roads and no scanned vehicle beside "
+                            "them): the sidewalk lanes stay where netconvert put them")
+    else:
+        doc["note"] = "switched off"
+        ctx.log.info("parking lanes: switched off")
+    text, outer = outer_lanes_to_ground(text, params, mesh, out_aligned_xodr.name, ctx.log)
+    doc["outer_lanes"] = outer
+    A.write_opendrive(out_aligned_xodr, text)
     out_parking_json.write_text(json.dumps(doc, indent=1))
-    for s in res.sides:
-        ctx.log.info("parking lanes: road %d %s: %s", s.road, s.side,
-                     f"{s.width_m:.2f} m ({s.why})" if s.width_m > 0 else s.why)
-    if (osm or params.scanned_vehicles) and res.inserted == 0:
-        ctx.log.warning("parking lanes: none added (no OSM parking tag on the roads and no scanned vehicle beside "
-                        "them): the sidewalk lanes stay where netconvert put them")
-    return {"parking_lanes": res.inserted, "parked_vehicles_seen": sum(s.vehicles for s in res.sides)}
+    return {"parking_lanes": doc["parking_lanes"], "parked_vehicles_seen": seen,
+            "outer_lanes_narrowed": len(outer.get("narrowed", [])),
+            "outer_off_ground_before": outer.get("outer_off_ground_before"),
+            "outer_off_ground_after": outer.get("outer_off_ground_after")}
+
+
+def outer_lanes_to_ground(text: str, params: ParkingParams, mesh, name: str, log) -> tuple[str, dict]:
+    """The map with the outer lanes (sidewalk, parking, ...) of its ends narrowed to the mesh
+    (``ground_ends.trim_outer_lanes``) and the report of it; unchanged when ``outer_lanes_to_ground`` is off."""
+    from .ground_ends import TrimParams, trim_outer_lanes
+
+    if not params.outer_lanes_to_ground:
+        return text, {"enabled": False}
+    out, rep = trim_outer_lanes(text, mesh.vertices, mesh.faces, TrimParams(margin_m=params.outer_margin_m),
+                                source=name)
+    for n in rep["notes"]:
+        log.warning("outer lanes to the ground: %s", n)
+    for c in rep["narrowed"]:
+        log.info("outer lanes to the ground: road %s %s: %s lane %d without width over %.2f m", c["road"], c["end"],
+                 c["type"], c["lane"], c["metres"])
+    log.info("outer lanes to the ground: %d lanes narrowed at the map's ends; outer-lane cross-sections (every "
+             "0.25 m) off the ground %d -> %d", len(rep["narrowed"]), rep["outer_off_ground_before"],
+             rep["outer_off_ground_after"])
+    return out, {"enabled": True, **rep}
+
+
 def trim_ends(text: str, params: ApplyParams, mesh_ply: Path, name: str, log) -> tuple[str, dict]:
     """The aligned map with its ends cut back onto the mesh (``ground_ends.trim_to_ground``) and the step's
     metrics of it; the map unchanged when ``trim_to_ground`` is off or it has no road."""

@@ -7,11 +7,18 @@ re-expanded about their new start); signals and objects move with s and those be
 the nearest end (returned, so that the caller can say so). Plan-view geometries: ``line``, ``arc`` and
 ``paramPoly3`` are cut anywhere; a ``spiral`` or ``poly3`` only at its own end (:class:`CutError` otherwise).
 
+:func:`narrow_lanes` gives single lanes of a road no width near one of its ends, the rest of the road as it was:
+the lane section at each place a lane ends is split in two (:func:`split_section`: every lane record kept as it
+was on each side, the lanes of the two parts linked by their ids) and the lane's width in the part towards the
+end set to 0 (:func:`zero_lane`). The lane keeps its id in every section, so junction lane links into it still
+hold (CARLA reads a lane of width 0 like any other; it carries nothing).
+
 :func:`move_road` applies a rigid motion (a rotation about a point, then a translation) to a road's plan view:
 the turnaround of a dead end follows the end of its road.
 """
 from __future__ import annotations
 
+import copy
 import math
 import xml.etree.ElementTree as ET
 
@@ -268,3 +275,79 @@ def elevation_at(road: ET.Element, s: float) -> float:
     a, b, c, d = _poly(r)
     u = s - _f(r, "s")
     return a + b * u + c * u * u + d * u ** 3
+
+
+# ------------------------------------------------------------------------------------------------ lane sections
+
+def _link_to_self(lane: ET.Element, which: str) -> None:
+    """Point the lane's ``which`` link (predecessor | successor) at its own id (the lane of the same id in the
+    neighbouring section of the road)."""
+    link = lane.find("link")
+    if link is None:
+        link = ET.Element("link")
+        lane.insert(0, link)
+    for el in link.findall(which):
+        link.remove(el)
+    el = ET.Element(which, {"id": lane.get("id")})
+    if which == "predecessor":
+        link.insert(0, el)
+    else:
+        link.append(el)
+
+
+def split_section(road: ET.Element, s: float) -> bool:
+    """Split the lane section of ``road`` that holds ``s`` (metres along the road) in two at ``s``, in place:
+    each lane record keeps its value at every s (polynomials re-expanded in the second part), and the lanes of the
+    first part lead to those of the same id in the second. False (nothing done) when ``s`` lies within 1 mm of a
+    section's start or of the road's ends."""
+    lanes = road.find("lanes")
+    secs = lanes.findall("laneSection")
+    pos = [_f(x, "s") for x in secs]
+    length = _f(road, "length")
+    if s <= 1e-3 or s >= length - 1e-3 or any(abs(p - s) < 1e-3 for p in pos):
+        return False
+    i = max(j for j, p in enumerate(pos) if p <= s)
+    first = secs[i]
+    second = copy.deepcopy(first)
+    a, hi = s - pos[i], (pos[i + 1] if i + 1 < len(pos) else length) - pos[i]
+    for part, lo, up, which in ((first, 0.0, a, "successor"), (second, a, hi, "predecessor")):
+        for lane in part.iter("lane"):
+            for tag, poly in LANE_RECORDS.items():
+                _cut_records(lane, tag, "sOffset", lo, up, poly)
+            if lane.get("id") != "0":
+                _link_to_self(lane, which)
+    second.set("s", _fmt(s))
+    lanes.insert(list(lanes).index(first) + 1, second)
+    return True
+
+
+def zero_lane(section: ET.Element, lane_id: int) -> bool:
+    """Give lane ``lane_id`` of ``section`` no width (one width record of 0; its borders dropped), in place;
+    False when the section has no such lane."""
+    lane = next((ln for ln in section.iter("lane") if ln.get("id") == str(int(lane_id))), None)
+    if lane is None:
+        return False
+    for tag in ("width", "border"):
+        for el in lane.findall(tag):
+            lane.remove(el)
+    at = 1 if lane.find("link") is not None and list(lane)[0].tag == "link" else 0
+    lane.insert(at, ET.Element("width", {"sOffset": _fmt(0.0), "a": _fmt(0.0), "b": _fmt(0.0), "c": _fmt(0.0),
+                                         "d": _fmt(0.0)}))
+    return True
+
+
+def narrow_lanes(road: ET.Element, side: str, cuts: dict[int, float]) -> None:
+    """Give each lane ``id -> d`` of ``cuts`` no width over the ``d`` metres next to the road's ``side`` end
+    ("start" | "end"), in place: the lane sections split where a lane's width ends (:func:`split_section`),
+    the lane zeroed in every section within its ``d`` (:func:`zero_lane`); ``d`` at or past the road's length
+    zeroes the lane along the whole road."""
+    length = _f(road, "length")
+    for d in sorted(set(cuts.values())):
+        split_section(road, d if side == "start" else length - d)
+    secs = road.find("lanes").findall("laneSection")
+    starts = [_f(x, "s") for x in secs]
+    for sec, a, b in zip(secs, starts, starts[1:] + [length]):
+        for lid, d in cuts.items():
+            lo, hi = (0.0, d) if side == "start" else (length - d, length)
+            if a >= lo - 1e-3 and b <= hi + 1e-3:
+                zero_lane(sec, lid)
