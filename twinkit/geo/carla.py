@@ -132,12 +132,18 @@ class CarlaFrame:
     residual_m: float = 0.0
     carla_error_max_m: float = 0.0
     carla_error_mean_m: float = 0.0
+    where: str = ""
 
     # ------------------------------------------------------------------ the PROJ string
     def geo_reference(self) -> str:
         """The OpenDRIVE geoReference: exact for pyproj, and the +lat_0 / +lon_0 CARLA reads."""
         return (f"+proj=tmerc +lat_0={self.lat!r} +lon_0={self.lon!r} +k={self.k!r} +x_0=0 +y_0=0 "
                 f"+ellps={self.ellps} +units=m +no_defs")
+
+    @property
+    def measured(self) -> str:
+        """Where :attr:`carla_error_max_m` and :attr:`residual_m` were measured, in words."""
+        return self.where or f"within {self.radius_m:g} m of the base point"
 
     # ------------------------------------------------------------------ the similarity
     @property
@@ -189,7 +195,7 @@ class CarlaFrame:
         return {"geo_reference": self.geo_reference(), "rotation_deg": math.degrees(self.rotation_rad),
                 "scale": self.scale, "k": self.k, "mode": self.mode, "radius_m": self.radius_m,
                 "similarity_residual_m": self.residual_m, "carla_error_max_m": self.carla_error_max_m,
-                "carla_error_mean_m": self.carla_error_mean_m,
+                "carla_error_mean_m": self.carla_error_mean_m, "measured": self.measured,
                 "frame": "package = scale * Rz(rotation) * site (x east, y north, z up, origin at the base point); "
                          "CARLA Location = (x, -y, z)"}
 
@@ -201,12 +207,12 @@ class _ErrorField:
     are projected once and each k costs only CARLA's formula and a geodesic distance.
     """
 
-    def __init__(self, lat: float, lon: float, ellps: str, radius_m: float):
+    def __init__(self, lat: float, lon: float, ellps: str, radius_m: float, u: np.ndarray | None = None):
         from pyproj import Transformer
 
         self.lat, self.lon = lat, lon
-        self.u = _disc(radius_m)
-        tm = f"+proj=tmerc +lat_0={lat!r} +lon_0={lon!r} +k=1 +x_0=0 +y_0=0 +ellps={ellps} +units=m +no_defs"
+        self.u = _disc(radius_m) if u is None else np.asarray(u, float).reshape(-1, 2)
+        tm = _tm1(lat, lon, ellps)
         lon_t, lat_t = Transformer.from_crs(tm, "EPSG:4326", always_xy=True).transform(self.u[:, 0], self.u[:, 1])
         self.truth = np.stack([np.asarray(lon_t, float), np.asarray(lat_t, float)], 1)
 
@@ -222,24 +228,41 @@ def carla_error(lat: float, lon: float, k: float, ellps: str, radius_m: float) -
     return _ErrorField(lat, lon, ellps, radius_m)(k)
 
 
-def _fit(site: "SiteFrame", radius_m: float, ellps: str) -> tuple[complex, float]:
+def _tm1(lat: float, lon: float, ellps: str) -> str:
+    """The k=1 transverse Mercator centred on (lat, lon)."""
+    return f"+proj=tmerc +lat_0={lat!r} +lon_0={lon!r} +k=1 +x_0=0 +y_0=0 +ellps={ellps} +units=m +no_defs"
+
+
+def _fit(site: "SiteFrame", xy: np.ndarray, ellps: str) -> tuple[complex, np.ndarray]:
     """Least-squares similarity (no translation: both frames have the base point at 0) from the site frame
-    to the k=1 transverse Mercator at the base point; returns (a, residual) with package = a * site (complex)."""
+    to the k=1 transverse Mercator at the base point, over the site-frame points ``xy``; returns (a, w) with
+    package = a * site (complex) and w the points' (n, 2) k=1 transverse Mercator coordinates."""
     from pyproj import Transformer
 
-    xy = _disc(radius_m)
     ll = site.local_to_lonlat(xy)
-    tm = f"+proj=tmerc +lat_0={site.lat!r} +lon_0={site.lon!r} +k=1 +x_0=0 +y_0=0 +ellps={ellps} +units=m +no_defs"
-    x, y = Transformer.from_crs("EPSG:4326", tm, always_xy=True).transform(ll[:, 0], ll[:, 1])
+    x, y = Transformer.from_crs("EPSG:4326", _tm1(site.lat, site.lon, ellps), always_xy=True).transform(ll[:, 0], ll[:, 1])
     z = xy[:, 0] + 1j * xy[:, 1]
     w = np.asarray(x) + 1j * np.asarray(y)
-    a = complex(np.sum(np.conj(z) * w) / np.sum(np.abs(z) ** 2))
-    return a, float(np.max(np.abs(a * z - w)))
+    a = complex(np.sum(np.conj(z) * w) / max(float(np.sum(np.abs(z) ** 2)), 1e-12))
+    return a, np.stack([w.real, w.imag], 1)
+
+
+def where_text(points: np.ndarray) -> str:
+    """Where ``points`` (site-frame x, y) lie, in words: how many, how far from the base point, their box."""
+    p = np.asarray(points, float).reshape(-1, 2)
+    d = np.hypot(p[:, 0], p[:, 1])
+    lo, hi = p.min(0), p.max(0)
+    return (f"at {len(p)} points of the twin, {d.min():.0f}-{d.max():.0f} m from the base point (site box x "
+            f"{lo[0]:.0f}..{hi[0]:.0f}, y {lo[1]:.0f}..{hi[1]:.0f} m)")
 
 
 def carla_frame(site: "SiteFrame", radius_m: float = 150.0, tolerance_m: float = 0.5,
-                scale: str = "auto") -> CarlaFrame:
+                scale: str = "auto", points=None) -> CarlaFrame:
     """The CARLA package frame of ``site``.
+
+    points: site-frame x, y where the twin is (its meshes, its map); the similarity is fitted, and CARLA's error
+    measured and balanced, at these points (:attr:`CarlaFrame.measured` says so). Without them, over the disc of
+    ``radius_m`` about the base point.
 
     scale: ``site`` keeps the site frame's metric (pure rotation); ``true`` makes package metres true
     metres at the base point; ``minimax`` minimises CARLA's formula error over the disc of ``radius_m``;
@@ -253,11 +276,14 @@ def carla_frame(site: "SiteFrame", radius_m: float = 150.0, tolerance_m: float =
     if not radius_m > 0:
         raise InputError(f"carla frame: radius_m must be positive, got {radius_m}")
     ellps = _ellps(site)
-    a, _ = _fit(site, radius_m, ellps)
+    xy = _disc(radius_m) if points is None else np.asarray(points, float)[..., :2].reshape(-1, 2)
+    if not len(xy):
+        raise InputError("carla frame: no points of the twin to measure CARLA's geolocation at")
+    a, w = _fit(site, xy, ellps)
     c = abs(a)  # true metres per site metre near the base point (1 / the CRS's point scale)
     rot = math.atan2(a.imag, a.real)
 
-    field = _ErrorField(site.lat, site.lon, ellps, radius_m)
+    field = _ErrorField(site.lat, site.lon, ellps, radius_m, u=None if points is None else w)
     target = tolerance_m * (1.0 - AUTO_MARGIN)
 
     def err(k: float) -> float:
@@ -296,8 +322,63 @@ def carla_frame(site: "SiteFrame", radius_m: float = 150.0, tolerance_m: float =
                 k = b_
     emax, emean = field(k)
     f = CarlaFrame(rotation_rad=rot, scale=1.0 if k == k_site else k * c, k=k, lat=site.lat, lon=site.lon, ellps=ellps,
-                   radius_m=float(radius_m), mode=scale, carla_error_max_m=emax, carla_error_mean_m=emean)
-    # residual of the similarity against the exact geoReference, over the disc
-    xy = _disc(radius_m) / max(f.scale, 1e-12)
+                   radius_m=float(radius_m), mode=scale, carla_error_max_m=emax, carla_error_mean_m=emean,
+                   where="" if points is None else where_text(xy))
+    # residual of the similarity against the exact geoReference, at the same points
+    if points is None:
+        xy = xy / max(f.scale, 1e-12)
     d = _geod_m(site.local_to_lonlat(xy), f.package_to_lonlat(f.site_to_package(xy)))
     return CarlaFrame(**{**f.__dict__, "residual_m": float(d.max())})
+
+
+def carla_xodr(text: str, frame: CarlaFrame, name: str) -> str:
+    """The OpenDRIVE ``text`` (site frame) moved into ``frame``: the one CARLA geolocates (its geoReference the
+    frame's exact PROJ string; the site-frame string kept in a header ``userData``). Used by the CARLA package and
+    by ``recipe=roads``'s ``roads_carla.xodr``."""
+    from twinkit.errors import InputError
+    from twinkit.geo.xodr import XodrFrameError, transform_xodr
+
+    try:
+        return transform_xodr(text, frame.rotation_rad, frame.scale, frame.geo_reference(), name=name)
+    except XodrFrameError as exc:
+        raise InputError(str(exc)) from None
+
+
+def wheel_error(carla_text: str, frame: CarlaFrame, site: "SiteFrame", site_xy) -> dict:
+    """CARLA's geolocation of the map ``carla_text`` (in ``frame``) measured with the ``carla`` wheel
+    (``carla.Map(...).transform_to_geolocation``) at the site-frame points ``site_xy``, against their exact
+    position (the site frame's geoReference): max / mean metres, on north-positive y (see the module's note)."""
+    import carla
+
+    xy = np.asarray(site_xy, float)[..., :2].reshape(-1, 2)
+    m = carla.Map("twinkit_geolocation", carla_text)
+    pkg = frame.site_to_package(xy)
+    got = []
+    for x, y in pkg:
+        g = m.transform_to_geolocation(carla.Location(float(x), float(y), 0.0))
+        got.append((g.longitude, g.latitude))
+    d = _geod_m(site.local_to_lonlat(xy), np.array(got, float).reshape(-1, 2))
+    return {"carla_error_max_m": float(d.max()), "carla_error_mean_m": float(d.mean()), "points": int(len(xy)),
+            "measured": where_text(xy).replace("of the twin", "of the map"), "tool": "carla wheel " + _wheel_version()}
+
+
+def _wheel_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("carla")
+    except Exception:  # noqa: BLE001 (a version label only)
+        return "?"
+
+
+def landed_text(site: "SiteFrame", xy) -> str:
+    """Where site-frame points ``xy`` (a map's roads) lie on the Earth, in words: their middle's latitude and
+    longitude and its ellipsoidal distance from the base point (for a message about a map far from the site)."""
+    p = np.asarray(xy, float)[..., :2].reshape(-1, 2)
+    mid = np.median(p, 0).reshape(1, 2)
+    ll = site.local_to_lonlat(mid)
+    d = float(_geod_m(ll, np.array([[site.lon, site.lat]]))[0])
+    lon, lat = float(ll[0, 0]), float(ll[0, 1])
+    far = f"{d / 1000:,.1f} km" if d >= 1000 else f"{d:.0f} m"
+    return (f"{abs(lat):.2f} {'N' if lat >= 0 else 'S'}, {abs(lon):.2f} {'E' if lon >= 0 else 'W'}, "
+            f"{far} from the base point ({site.lat:.5f}, {site.lon:.5f})")

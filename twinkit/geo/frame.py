@@ -233,12 +233,13 @@ class SiteFrame:
         return (f"+proj=tmerc +lat_0={self.lat!r} +lon_0={self.lon!r} +k=1 +x_0=0 +y_0=0 "
                 "+ellps=GRS80 +units=m +no_defs")
 
-    def carla_frame(self, radius_m: float = 150.0, tolerance_m: float = 0.5, scale: str = "auto"):
+    def carla_frame(self, radius_m: float = 150.0, tolerance_m: float = 0.5, scale: str = "auto", points=None):
         """The frame of the CARLA package (:func:`twinkit.geo.carla.carla_frame`): true north at the base point,
-        an exact PROJ string whose +lat_0/+lon_0 CARLA reads, CARLA's geolocation within ``tolerance_m``."""
+        an exact PROJ string whose +lat_0/+lon_0 CARLA reads, CARLA's geolocation within ``tolerance_m`` (at the
+        twin's ``points`` when given, else within ``radius_m`` of the base point)."""
         from twinkit.geo.carla import carla_frame
 
-        return carla_frame(self, radius_m=radius_m, tolerance_m=tolerance_m, scale=scale)
+        return carla_frame(self, radius_m=radius_m, tolerance_m=tolerance_m, scale=scale, points=points)
 
     def _z_projected(self) -> float:
         """The base point's height in the CRS's own vertical unit (what ``base_point.z`` means; metres: ``alt``)."""

@@ -28,8 +28,10 @@ import numpy as np
 FRAME_MODES = ("carla", "site")
 
 
-def package_frame(site, mode: str, scale: str, radius_m: float, tolerance_m: float, log=None):
-    """The :class:`twinkit.geo.carla.CarlaFrame` of the package, or None for ``mode == "site"``."""
+def package_frame(site, mode: str, scale: str, radius_m: float, tolerance_m: float, log=None, points=None):
+    """The :class:`twinkit.geo.carla.CarlaFrame` of the package, or None for ``mode == "site"``. ``points``
+    (site-frame x, y of the twin: :func:`twin_points`): where CARLA's geolocation is balanced and measured (else
+    within ``radius_m`` of the base point)."""
     from twinkit import InputError
     from twinkit.geo import SiteFrame
 
@@ -42,30 +44,38 @@ def package_frame(site, mode: str, scale: str, radius_m: float, tolerance_m: flo
     except InputError as exc:
         raise InputError(f"carla_package: {exc} (or set the exporter's frame=site to write the package in the "
                          f"site frame, with CARLA's geolocation wrong)") from None
-    f = sf.carla_frame(radius_m=radius_m, tolerance_m=tolerance_m, scale=scale)
+    points = points if points is not None and len(points) else None
+    f = sf.carla_frame(radius_m=radius_m, tolerance_m=tolerance_m, scale=scale, points=points)
     if log is not None:
         log.info("CARLA frame: rotation %+.4f deg, scale %.6f, k %.6f; CARLA's geolocation within %.3f m "
-                 "(mean %.3f m) up to %g m from the base point", math.degrees(f.rotation_rad), f.scale, f.k,
-                 f.carla_error_max_m, f.carla_error_mean_m, radius_m)
+                 "(mean %.3f m) %s", math.degrees(f.rotation_rad), f.scale, f.k,
+                 f.carla_error_max_m, f.carla_error_mean_m, f.measured)
         if f.carla_error_max_m > tolerance_m:
-            log.warning("CARLA's spherical geolocation cannot meet %.2f m within %g m of this base point "
-                        "(best %.3f m, frame_scale=%s); see docs/georeferencing.md", tolerance_m, radius_m,
-                        f.carla_error_max_m, scale)
+            log.warning("CARLA's spherical geolocation cannot meet %.2f m %s (best %.3f m, frame_scale=%s); see "
+                        "docs/georeferencing.md", tolerance_m, f.measured, f.carla_error_max_m, scale)
     return f
+
+
+def twin_points(class_set, xodr_text: str | None = None, most: int = 20000) -> np.ndarray:
+    """(n, 2) site-frame x, y where the twin is: the vertices of its class meshes (evenly thinned to at most
+    ``most``) and the plan-view geometry starts of its OpenDRIVE."""
+    import re
+
+    parts = [np.asarray(cm.mesh.vertices, float)[:, :2] for cm in class_set.meshes if len(cm.mesh.vertices)]
+    if xodr_text:
+        parts.append(np.array([(float(a), float(b)) for a, b in re.findall(
+            r'<geometry [^>]*?x="([-0-9.eE+]+)" y="([-0-9.eE+]+)"', xodr_text)], float).reshape(-1, 2))
+    pts = np.concatenate(parts) if parts else np.zeros((0, 2))
+    if len(pts) > most:
+        pts = pts[np.linspace(0, len(pts) - 1, most).astype(int)]
+    return pts
 
 
 def package_xodr(text: str, frame, name: str) -> str:
     """The OpenDRIVE of the package (``text`` unchanged when ``frame`` is None)."""
-    from twinkit import InputError
+    from twinkit.geo.carla import carla_xodr
 
-    from .xodr_frame import XodrFrameError, transform_xodr
-
-    if frame is None:
-        return text
-    try:
-        return transform_xodr(text, frame.rotation_rad, frame.scale, frame.geo_reference(), name=name)
-    except XodrFrameError as exc:
-        raise InputError(str(exc)) from None
+    return text if frame is None else carla_xodr(text, frame, name)
 
 
 def package_class_dir(frame, class_set, texture: Path | None, work: Path) -> Path:
@@ -135,8 +145,7 @@ def readme_frames(frame, georef_text: str) -> str:
         f"The OpenDRIVE geoReference is the exact PROJ string of this frame, "
         f"`{frame.geo_reference()}` (pyproj and other tools read it as it is); its `+lat_0`/`+lon_0` are what "
         f"CARLA 0.9.16 reads. CARLA's spherical formula is within {frame.carla_error_max_m:.2f} m "
-        f"(mean {frame.carla_error_mean_m:.2f} m) of the exact position within {frame.radius_m:g} m of the "
-        f"base point, on north-positive y. CARLA 0.9.16 itself feeds Unreal's y (= -north) to it, so its "
+        f"(mean {frame.carla_error_mean_m:.2f} m) of the exact position {frame.measured}, on north-positive y. CARLA 0.9.16 itself feeds Unreal's y (= -north) to it, so its "
         f"GNSS latitudes move south as you drive north; `twinkit.geo.carla.CarlaFrame.gnss_to_lonlat` (or: "
         f"negate y of `geolocation_to_transform`, then apply the geoReference) gives the exact position. "
         f"Unreal mirrors y on import of mesh and roads alike, so they stay aligned.")

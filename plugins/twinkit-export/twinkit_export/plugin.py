@@ -103,11 +103,12 @@ class CarlaPackageParams:
                              help="Scale of the carla frame: auto, site (rotation only), true (true metres) or "
                                   "minimax (see docs/georeferencing.md).")
     geolocation_radius_m: float = param(150.0, gt=0,
-                                        help="CARLA's geolocation is held within geolocation_tolerance_m up to this "
-                                             "distance (m) from the base point.")
+                                        help="Only for a twin without points: CARLA's geolocation is then held "
+                                             "within geolocation_tolerance_m up to this distance (m) from the base "
+                                             "point (else at the twin's own points).")
     geolocation_tolerance_m: float = param(0.5, gt=0,
-                                           help="The error (m) CARLA's geolocation may have within "
-                                                "geolocation_radius_m; a warning when the frame cannot meet it.")
+                                           help="The error (m) CARLA's geolocation may have where the twin is (its "
+                                                "meshes and map); a warning when the frame cannot meet it.")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -428,7 +429,7 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
     from twinkit.artefacts import read_opendrive
 
     from .carla_actors import carla_actors, scanned_props, write_actor_files
-    from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, write_frame_json
+    from .carla_frame import package_class_dir, package_frame, package_xodr, readme_frames, twin_points, write_frame_json
     from .carla_pkg import lane_map, xodr_georeference
     from .movables.actors import load_actors
 
@@ -444,13 +445,15 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
                                  source=no_map_source)
     xodr = Path(in_aligned_xodr)
     text = read_opendrive(xodr)
-    # the package is written in CARLA's frame (true north at the base point): carla_frame.py
+    cs = _load_set(in_class_meshes_dir)
+    # the package is written in CARLA's frame (true north at the base point), its geolocation measured where the
+    # twin is: carla_frame.py
     frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
-                          params.geolocation_radius_m, params.geolocation_tolerance_m, ctx.log)
+                          params.geolocation_radius_m, params.geolocation_tolerance_m, ctx.log,
+                          points=twin_points(cs, text) if params.frame == "carla" else None)
     site_geo, text = xodr_georeference(text), package_xodr(text, frame, xodr.name)
     map_name, package = _package_names(params, ctx)
     lanes, spawn = _map_spawn(text, xodr.name, map_name, frame, params)
-    cs = _load_set(in_class_meshes_dir)
     tex = _texture(in_twin_fbx, cs)
     georef = _georef(ctx, in_site_json)
     out = Path(out_carla_import_dir)

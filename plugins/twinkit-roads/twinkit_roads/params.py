@@ -132,3 +132,12 @@ class CrosswalkParams:
     min_bars_alone: int = param(5, ge=2, help="a zebra that no OSM crossing confirms needs at least this many bars")
     match_m: float = param(4.0, ge=0, help="metres: an OSM crossing this close to a zebra's walking line is that zebra")
     width_m: float = param(3.0, gt=0, help="metres: the width (along the road) of a crosswalk OSM gives without paint in the scan")
+
+
+@dataclass
+class CarlaMapParams:
+    frame_scale: str = param("auto", choices=("auto", "site", "true", "minimax"),
+                             help="scale of the CARLA frame, as the CARLA package's frame_scale (docs/georeferencing.md)")
+    tolerance_m: float = param(0.5, gt=0, help="metres: the error CARLA's geolocation may have at the map's lane "
+                                               "centres (the CARLA package's geolocation_tolerance_m); a warning beyond")
+    step_m: float = param(5.0, gt=0, help="metres between the lane-centre points CARLA's geolocation is measured at")

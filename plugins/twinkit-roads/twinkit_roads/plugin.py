@@ -6,6 +6,7 @@ Steps (recipes/roads_demo.yaml):
                   road_source=scan (the labelled mesh)      -> opendrive.xodr, scan_roads.json, scan_roads.png
   osm_to_opendrive                                          -> roads.xodr, roads_check.json
   roads_overview  top view of the network (recipe roads)   -> roads_overview.png
+  carla_roads     the map in CARLA's frame (recipe roads)   -> roads_carla.xodr, carla_geolocation.json
   align_roads     fit the network to the mesh's road surface -> alignment.json  (edit it to override)
   apply_alignment move the OpenDRIVE, draw the QA picture    -> aligned.xodr, roads_qa.png
   parking_lanes   parking lanes where OSM or the scan has them -> aligned.xodr (again), parking.json
@@ -27,8 +28,8 @@ from twinkit.geo.xodr import from_scan as from_scan_tag
 
 from . import __version__
 from .convert import ConvertParams
-from .params import (AlignParams, ApplyParams, CrosswalkParams, OverviewParams, ParkingParams,  # noqa: F401 (re-exported)
-                     RoadEvidenceParams, SignalParams)
+from .params import (AlignParams, ApplyParams, CarlaMapParams, CrosswalkParams, OverviewParams,  # noqa: F401 (re-exported)
+                     ParkingParams, RoadEvidenceParams, SignalParams)
 from .report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 from .sources import (DownloadParams, FileSourceParams, OpenDriveSourceParams, file_source, opendrive_source, osm_api_source, overpass_source,
                       scan_source, site_radius)
@@ -131,11 +132,8 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
               "carla": chk, "check_s": round(check_s, 3), "conversion_s": round(total, 3)}
     out_roads_check_json.write_text(json.dumps(report, indent=1))
     if not ok:
-        what = (f"the OpenDRIVE map ({in_opendrive_xodr.name}) does not cover the site: check site.base_point and the "
-                "map's geoReference" if in_opendrive_xodr is not None else "the OSM data do not cover the site")
-        raise InputError(f"{out_roads_xodr.name}: carla.Map found {chk['topology_segments']} topology segments and "
-                         f"{chk['waypoints_inside']} waypoints inside the site box {bounds} (need "
-                         f"{params.min_waypoints_inside}); {what}")
+        raise InputError(_not_covered(out_roads_xodr.name, in_opendrive_xodr, text, frame, chk, bounds,
+                                      params.min_waypoints_inside))
     ctx.log.info("%d roads, %d junctions, %d traffic lights; carla.Map: %d waypoints (%d inside the site); "
                  "netconvert %.2f s, check %.2f s, total %.2f s", counts["roads"], counts["junctions"],
                  counts["traffic_lights"], chk["waypoints"], chk["waypoints_inside"], info["netconvert_s"], check_s,
@@ -143,6 +141,21 @@ def osm_to_opendrive(params: ConvertParams, ctx, *, out_roads_xodr: Path, out_ro
     return {"roads": counts["roads"], "junctions": counts["junctions"], "traffic_lights": counts["traffic_lights"],
             "waypoints": chk["waypoints"], "waypoints_inside": chk["waypoints_inside"],
             "conversion_s": round(total, 3), "netconvert_s": info["netconvert_s"], "check_s": round(check_s, 3)}
+
+
+def _not_covered(name: str, in_opendrive_xodr: Path | None, text: str, frame, chk: dict, bounds, need: int) -> str:
+    """The message of a map that does not cover the site: what carla.Map found, and where the map's roads landed."""
+    import re
+
+    from twinkit.geo.carla import landed_text
+
+    xy = [(float(a), float(b)) for a, b in re.findall(r'<geometry [^>]*?x="([-0-9.eE+]+)" y="([-0-9.eE+]+)"', text)]
+    where = f" (its roads landed at {landed_text(frame, xy)})" if xy else ""
+    what = (f"the OpenDRIVE map ({in_opendrive_xodr.name}) does not cover the site{where}: check site.base_point and "
+            "the map's geoReference (its +x_0/+y_0 and +lat_0/+lon_0)" if in_opendrive_xodr is not None
+            else f"the OSM data do not cover the site{where}")
+    return (f"{name}: carla.Map found {chk['topology_segments']} topology segments and {chk['waypoints_inside']} "
+            f"waypoints inside the site box {bounds} (need {need}); {what}")
 
 
 def roads_overview(params: OverviewParams, ctx, *, in_roads_xodr: Path, out_roads_overview_png: Path,
@@ -166,6 +179,21 @@ def roads_overview(params: OverviewParams, ctx, *, in_roads_xodr: Path, out_road
     ctx.log.info("roads_overview.png: %d lane segments (%s), %d x %d px", info["lane_segments"],
                  ", ".join(f"{k} {v}" for k, v in info["lane_types"].items()), *info["px"])
     return {"lane_segments": info["lane_segments"], "m_per_px": info["m_per_px"]}
+
+
+def carla_roads(params: CarlaMapParams, ctx, *, in_roads_xodr: Path, out_roads_carla_xodr: Path,
+                out_carla_geolocation_json: Path) -> dict:
+    """roads.xodr (site frame) -> roads_carla.xodr in the CARLA package's frame, the one CARLA geolocates; CARLA's
+    geolocation error measured with the carla wheel at the map's lane centres (carla_geolocation.json)."""
+    from .carla_map import carla_map, write_doc
+
+    params = params or CarlaMapParams()
+    text, doc = carla_map(in_roads_xodr.read_text(encoding="utf-8"), ctx.site, params, in_roads_xodr.name, ctx.log)
+    out_roads_carla_xodr.write_text(text, encoding="utf-8")
+    write_doc(doc, out_carla_geolocation_json)
+    w = doc["wheel"]
+    return {"carla_error_max_m": round(w["carla_error_max_m"], 4), "carla_error_mean_m": round(w["carla_error_mean_m"], 4),
+            "points": w["points"], "scale": doc["frame"]["scale"], "rotation_deg": doc["frame"]["rotation_deg"]}
 
 
 def align_roads(params: AlignParams, ctx, *, in_roads_xodr: Path, in_textured_mesh_ply: Path,
@@ -541,6 +569,9 @@ def twinkit_register_steps(register):
              description="OSM -> OpenDRIVE with netconvert in the site frame; checked with carla.Map")
     register("roads_overview", roads_overview, params=OverviewParams, version=VERSION,
              description="top view of the road network without a mesh (lanes by type); roads_overview.png")
+    register("carla_roads", carla_roads, params=CarlaMapParams, version=VERSION,
+             description="the map in the CARLA package's frame, the one CARLA geolocates (roads_carla.xodr); CARLA's "
+                         "geolocation measured with the carla wheel at its lane centres (carla_geolocation.json)")
     register("align_roads", align_roads, params=AlignParams, version=VERSION,
              description="fit the road network to the mesh's road surface (yaw, translation); alignment.json")
     register("apply_alignment", apply_alignment, params=ApplyParams, version=VERSION,
