@@ -61,9 +61,19 @@ def test_the_roads_recipe_writes_a_map_carla_geolocates(tmp_path):
     assert "points of the map" in doc["wheel"]["measured"] and "from the base point" in doc["wheel"]["measured"]
 
 
-def test_the_roads_recipe_runs_the_carla_frame_step():
-    text = (FIXTURES / "../../../../recipes/roads.yaml").resolve().read_text()
-    assert re.search(r"uses: step/carla_roads", text)
+def test_the_roads_recipe_runs_the_carla_frame_step(tmp_path):
+    """recipe=roads through the CLI: roads_carla.xodr beside roads.xodr, and the log says where it was measured."""
+    from test_roads_recipe import outputs, run
+
+    site = ("name: roadsite\ncrs: EPSG:3067\nbase_point: {lat: 60.16945, lon: 24.93365, alt: 0.0}\n"
+            f"inputs:\n  osm: {FIXTURES / 'tiny_roads.osm'}\n")
+    p = run(tmp_path, site)
+    assert p.returncode == 0, p.stderr[-2000:]
+    out = outputs(tmp_path)
+    assert {"roads.xodr", "roads_carla.xodr", "carla_geolocation.json"} <= set(out)
+    assert json.loads(out["carla_geolocation.json"].read_text())["wheel"]["carla_error_max_m"] <= 0.5
+    assert re.search(r"CARLA's geolocation within 0\.\d+ m \(mean [0-9.]+ m\) at \d+ points of the map, \d+-\d+ m "
+                     r"from the base point", p.stderr + p.stdout), (p.stderr + p.stdout)[-2000:]
 
 
 def test_a_map_far_from_the_site_says_where_it_landed(tmp_path):
