@@ -346,18 +346,13 @@ def carla_xodr(text: str, frame: CarlaFrame, name: str) -> str:
 
 def wheel_error(carla_text: str, frame: CarlaFrame, site: "SiteFrame", site_xy) -> dict:
     """CARLA's geolocation of the map ``carla_text`` (in ``frame``) measured with the ``carla`` wheel
-    (``carla.Map(...).transform_to_geolocation``) at the site-frame points ``site_xy``, against their exact
+    (``transform_to_geolocation`` of :class:`twinkit.street.lanes.LaneMap`) at the site-frame points ``site_xy``, against their exact
     position (the site frame's geoReference): max / mean metres, on north-positive y (see the module's note)."""
-    import carla
+    from twinkit.street.lanes import LaneMap
 
     xy = np.asarray(site_xy, float)[..., :2].reshape(-1, 2)
-    m = carla.Map("twinkit_geolocation", carla_text)
-    pkg = frame.site_to_package(xy)
-    got = []
-    for x, y in pkg:
-        g = m.transform_to_geolocation(carla.Location(float(x), float(y), 0.0))
-        got.append((g.longitude, g.latitude))
-    d = _geod_m(site.local_to_lonlat(xy), np.array(got, float).reshape(-1, 2))
+    got = LaneMap(carla_text, "twinkit_geolocation").geolocation(frame.site_to_package(xy))
+    d = _geod_m(site.local_to_lonlat(xy), got)
     return {"carla_error_max_m": float(d.max()), "carla_error_mean_m": float(d.mean()), "points": int(len(xy)),
             "measured": where_text(xy).replace("of the twin", "of the map"), "tool": "carla wheel " + _wheel_version()}
 

@@ -272,6 +272,17 @@ class LaneMap:
             out.append(None if w is None else ((w.road_id, w.section_id, w.lane_id), str(w.lane_type)))
         return out
 
+    def geolocation(self, locations) -> np.ndarray:
+        """(n, 2) lon, lat: ``transform_to_geolocation`` at (n, 2|3) CARLA locations taken as given (x, y[, z]:
+        CARLA's own y, not mirrored here; pass north-positive y to get CARLA's formula on north-positive y)."""
+        import carla
+
+        p = np.asarray(locations, float)
+        p = np.c_[p.reshape(len(p), -1)[:, :2], p.reshape(len(p), -1)[:, 2] if p.ndim > 1 and p.shape[-1] > 2
+                  else np.zeros(len(p))]
+        out = [self._map.transform_to_geolocation(carla.Location(float(x), float(y), float(z))) for x, y, z in p]
+        return np.array([(g.longitude, g.latitude) for g in out], float).reshape(-1, 2)
+
     def crosswalk_points(self) -> np.ndarray:
         """(n, 3) float64: ``get_crosswalks()``'s points as CARLA gives them (its frame: y = -north), one
         outline after another, each closed by its first point where the OpenDRIVE closes it
