@@ -33,6 +33,9 @@ def test_a_step_dropped_from_the_plan_moves_out_and_comes_back_reused(project):
     st = project.run("status", "site=t", "recipe=chain")
     assert st.rc == 0 and "03_scale" not in st.out, st.text
     assert "1 folder(s) of steps not in this plan are kept in" in st.out, st.text
+    first = sorted(project.ws.glob("runs/*/manifest.json"))[0]
+    v = project.run("verify", str(first))  # the older run's files are found where they were moved
+    assert v.rc == 0, v.text
     project.recipe("chain", FULL)  # back in the plan: the folder comes back as it was, nothing computed
     project.reset_counts()
     r = project.run("site=t", "recipe=chain")
@@ -68,3 +71,18 @@ def test_an_edited_stale_folder_keeps_its_edit(project):
     assert r.rc == 0, r.text
     assert edited.read_text() == "99\n" and note.read_text() == "mine\n", r.text
     assert project.status_of(r, "03_scale") == "edited", r.text
+
+
+def test_a_stale_folder_of_the_same_name_is_set_aside_never_overwritten(tmp_path):
+    from twinkit.engine.recipes import JOURNAL, _journalled, stale_moves
+
+    ws, edits = tmp_path / "t", tmp_path / "t" / ".cache" / "edits"
+    (ws / "03_scale").mkdir(parents=True)
+    (ws / "03_scale" / "new.txt").write_text("new\n")
+    (ws / "stale" / "chain" / "03_scale").mkdir(parents=True)
+    (ws / "stale" / "chain" / "03_scale" / "old.txt").write_text("old\n")
+    (ws / "01_make").mkdir()
+    _journalled(ws, "chain", "chain", stale_moves(ws, "chain", {"01_make"}, edits))
+    assert (ws / "stale" / "chain" / "03_scale" / "new.txt").read_text() == "new\n"
+    assert [p.read_text() for p in edits.glob("stale-chain-03_scale-*/old.txt")] == ["old\n"]
+    assert (ws / "01_make").is_dir() and not (ws / JOURNAL).exists()
