@@ -86,3 +86,25 @@ def test_a_stale_folder_of_the_same_name_is_set_aside_never_overwritten(tmp_path
     assert (ws / "stale" / "chain" / "03_scale" / "new.txt").read_text() == "new\n"
     assert [p.read_text() for p in edits.glob("stale-chain-03_scale-*/old.txt")] == ["old\n"]
     assert (ws / "01_make").is_dir() and not (ws / JOURNAL).exists()
+
+
+def test_road_source_none_moves_the_road_steps_folders_out_and_back(project):
+    project.recipe("twin", ["{id: make, uses: step/make}", "{id: fetch, uses: road_source}",
+                            "{id: convert, uses: step/convert_roads, optional: true}",
+                            "{id: align, uses: step/align_net, optional: true}",
+                            "{id: double, uses: step/double}", "{id: export, uses: step/export_all}"],
+                   extra="defaults:\n  - /road_source: toy\n  - _self_\n")
+    assert project.run("site=t", "recipe=twin").rc == 0
+    full = _top(project)
+    r = project.run("site=t", "recipe=twin", "road_source=none")
+    assert r.rc == 0, r.text
+    assert _top(project) == ["01_make", "02_double", "03_export"], r.text
+    assert (project.ws / "03_export" / "export.txt").read_text() == "no roads\n"
+    assert sorted(d.name for d in (project.ws / "stale" / "twin").iterdir()) == full[1:], r.text
+    st = project.run("status", "site=t", "recipe=twin", "road_source=none")
+    assert "06_export" not in st.out and "5 folder(s) of steps not in this plan" in st.out, st.text
+    project.reset_counts()
+    r = project.run("site=t", "recipe=twin")  # the roads back: their folders come back, nothing computed
+    assert r.rc == 0 and _top(project) == full, r.text
+    assert (project.ws / "06_export" / "export.txt").read_text() == "roads\n" and project.counts() == {}, r.text
+    assert sorted(d.name for d in (project.ws / "stale" / "twin").iterdir()) == ["02_double", "03_export"]
