@@ -132,7 +132,7 @@ class CleanParams:
                                   help="The run is marked degraded when the ground fill makes more than this share "
                                        "of the clean mesh's area: the twin is then mostly invented ground, the "
                                        'capture too sparse for a street (docs/pointcloud.md "Sparse and partial '
-                                       'captures": 3-21 % on the real clouds and the demo, 74 % on a sparse sweep).')
+                                       'captures": 3-25 % on the real clouds and the demo, 74 % on sparse sweeps).')
 
 
 @dataclass

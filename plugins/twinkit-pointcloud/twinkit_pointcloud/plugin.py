@@ -202,7 +202,9 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
             rep["open_border"] = border
         rep["auto"] = auto
         removed = _removed_most(rep, params.max_trim_share, ctx)
-        fill = _mostly_fill(rep, mesh, auto, params.max_fill_share, ctx)
+        # a trim that removed most faces already says why the fill took their place: one cause, one reason
+        trimmed = removed is not None and removed > params.max_trim_share
+        fill = _mostly_fill(rep, mesh, auto, 1.0 if trimmed else params.max_fill_share, ctx)
         rep["time"] = {"seconds": round(meas_now(meas), 3)}
         write_json(out_clean_report_json, rep)
     out = {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "max_dist_m": opt.max_dist_m,
@@ -252,7 +254,8 @@ def _removed_most(rep: dict, max_share: float, ctx) -> float | None:
 
 def _mostly_fill(rep: dict, mesh, auto: dict, max_share: float, ctx) -> float | None:
     """The ground fill's share of the clean mesh's area (written to ``rep["ground_fill"]["area_share"]``); more
-    than ``max_share``: degraded, with the figures (the twin is mostly invented ground: a sparse capture)."""
+    than ``max_share`` (1 = never): degraded, with the figures (the twin is mostly invented ground: a sparse
+    capture)."""
     from twinkit.mesh import face_areas
 
     gf = rep.get("ground_fill")
