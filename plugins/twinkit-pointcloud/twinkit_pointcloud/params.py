@@ -128,6 +128,11 @@ class CleanParams:
     max_trim_share: float = param(0.9, gt=0, le=1,
                                   help="The run is marked degraded when the distance trim removes more than this "
                                        "share of the faces.")
+    max_fill_share: float = param(0.5, gt=0, le=1,
+                                  help="The run is marked degraded when the ground fill makes more than this share "
+                                       "of the clean mesh's area: the twin is then mostly invented ground, the "
+                                       'capture too sparse for a street (docs/pointcloud.md "Sparse and partial '
+                                       'captures": 3-25 % on the real clouds and the demo, 74 % on sparse sweeps).')
 
 
 @dataclass

@@ -202,11 +202,14 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
             rep["open_border"] = border
         rep["auto"] = auto
         removed = _removed_most(rep, params.max_trim_share, ctx)
+        # a trim that removed most faces already says why the fill took their place: one cause, one reason
+        trimmed = removed is not None and removed > params.max_trim_share
+        fill = _mostly_fill(rep, mesh, auto, 1.0 if trimmed else params.max_fill_share, ctx)
         rep["time"] = {"seconds": round(meas_now(meas), 3)}
         write_json(out_clean_report_json, rep)
     out = {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "max_dist_m": opt.max_dist_m,
            "fill_ground_cell_m": opt.fill_ground_cell_m, "capture": auto.get("capture"),
-           "trim_removed_share": removed,
+           "trim_removed_share": removed, "fill_share": fill,
            "dist_mean_m": rep["output"]["dist_to_cloud_m"]["mean"], **meas.as_dict()}
     if border is not None:
         out["open_border_inside_m"] = border["inside_m"]
@@ -247,6 +250,30 @@ def _removed_most(rep: dict, max_share: float, ctx) -> float | None:
                      "the trim distance is probably below the cloud's point spacing: leave "
                      "steps.clean_mesh.max_dist_m at -1 (auto) or set it to 2-3 x the spacing (clean_report.json)")
     return round(share, 4)
+
+
+def _mostly_fill(rep: dict, mesh, auto: dict, max_share: float, ctx) -> float | None:
+    """The ground fill's share of the clean mesh's area (written to ``rep["ground_fill"]["area_share"]``); more
+    than ``max_share`` (1 = never): degraded, with the figures (the twin is mostly invented ground: a sparse
+    capture)."""
+    from twinkit.mesh import face_areas
+
+    gf = rep.get("ground_fill")
+    if not gf or not gf.get("area_m2") or not mesh.n_faces:
+        return None
+    total = float(face_areas(mesh.vertices, mesh.faces).sum())
+    share = round(min(1.0, gf["area_m2"] / total), 4) if total > 0 else 1.0
+    gf["area_share"] = share
+    ctx.log.info("ground fill: %.1f %% of the mesh's %.0f m^2", 100 * share, total)
+    if share > max_share:
+        spacing = auto.get("spacing_m")
+        ctx.degraded(f"the ground fill makes {100 * share:.0f} % of the mesh's surface ({gf['area_m2']:,.0f} of "
+                     f"{total:,.0f} m^2, more than {100 * max_share:.0f} %): the capture is too sparse for a street "
+                     "twin" + (f" (median point spacing {spacing:.2g} m)" if spacing == spacing and spacing else ""),
+                     "scan the street more densely (several sweeps or a mobile scan); what the twin shows beyond "
+                     "the scanned points is invented ground (clean_report.json ground_fill, docs/pointcloud.md "
+                     '"Sparse and partial captures")')
+    return share
 
 
 def _ground_border_report(mesh, cloud, fill_limit_m: float, png: Path, log) -> dict | None:
