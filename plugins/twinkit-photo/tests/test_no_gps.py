@@ -14,7 +14,6 @@ import pytest
 from twinkit.testing import make_context, plugin_from_module, run_step
 
 import twinkit_photo.plugin as photo
-from twinkit_photo.georef import Transform
 
 PKG = Path(photo.__file__).parent
 REPO = PKG.parents[2]

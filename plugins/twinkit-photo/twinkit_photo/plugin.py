@@ -268,8 +268,10 @@ def _dense_colmap(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_georef
 # ----------------------------------------------------------------------------- texture from the photos
 
 def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path, in_photos_dir: Path,
-                  in_cameras_site_json: Path, out_textured_mesh_obj: Path, out_textured_mesh_ply: Path) -> dict:
-    """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel."""
+                  in_cameras_site_json: Path, out_textured_mesh_obj: Path, out_textured_mesh_ply: Path,
+                  in_roi_json: Path | None = None) -> dict:
+    """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel.
+    Photos reach as far as ``max_dist_m`` or the region of interest's depth limit, whichever is farther."""
     from twinkit.artefacts import read_cameras_site, write_textured_mesh, write_textured_obj
     from twinkit.surface.texture import write_png
 
@@ -281,8 +283,11 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     views = photo_views(read_cameras_site(in_cameras_site_json).cameras, in_photos_dir)
     if not views:
         raise InputError(f"{in_cameras_site_json}: no cameras")
+    max_dist = params.max_dist_m
+    if in_roi_json is not None:  # the depth the dense step kept (raised where the photos' subject is far)
+        max_dist = max(max_dist, float(read_json(in_roi_json, "region of interest").get("max_depth_m") or 0.0))
     img, info = project_texture(mesh.vertices, mesh.faces, uv, base, views, max_views=params.max_views,
-                                min_cos=params.min_cos, max_dist_m=params.max_dist_m, sharpness=params.sharpness,
+                                min_cos=params.min_cos, max_dist_m=max_dist, sharpness=params.sharpness,
                                 consistency_views=params.consistency_views,
                                 consistency_levels=params.consistency_levels,
                                 threads=_threads(ctx), progress=ctx.progress)
@@ -293,6 +298,7 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     mesh.comments = [f"TextureFile {out_png.name}"]
     write_textured_mesh(out_textured_mesh_ply, mesh)
     info["seconds"] = round(time.perf_counter() - t0, 3)
+    info["max_dist"] = max_dist
     _missing_photos_gate(ctx, params, views, info)
     ctx.log.info("photo texture: %.1f %% of the texels from %d photos (%.1f %% of the faces seen; %d photo views of "
                  "faces left out as inconsistent with the others: occluders the mesh lacks), %.1f s",
@@ -313,7 +319,7 @@ def _missing_photos_gate(ctx, params: PhotoTextureParams, views, info: dict) -> 
     if info["photos_missing_mesh_ratio"] > params.degraded_above_missing_ratio:
         ctx.degraded(f"{len(missing)} of {len(views)} photos miss the mesh ({', '.join(missing[:6])}"
                      f"{' ...' if len(missing) > 6 else ''}): the region of interest or the dense step lost what "
-                     f"they show, or they stand over steps.photo_texture.max_dist_m ({params.max_dist_m:g}) from it",
+                     f"they show, or they stand over {info.get('max_dist', params.max_dist_m):g} from it",
                      "check the roi step's box and depth limit (roi.json), or raise steps.roi.max_depth_m and "
                      "steps.photo_texture.max_dist_m")
 
