@@ -59,6 +59,9 @@ def cmd_status(args: list[str]) -> int:
             degraded += 1
             decision = f"\033[1;31m{decision:<12}\033[0m" if red else f"{decision:<12}"
         say(f"  {folder:<24} {decision:<12} {why}")
+    note = engine.stale_note()
+    if note:
+        say(note)
     if degraded:
         say(f"{degraded} step result(s) are DEGRADED: far below what they should be (reasons above)")
     return 0

@@ -205,8 +205,8 @@ def verify_manifest(path: Path) -> list[str]:
 
 def _parked(path: Path, recipe: str) -> Path:
     """Where a numbered folder's file of ``recipe`` is now: in place, or parked in
-    ``<site>/recipes/<recipe>/NN_step/...`` while another recipe's folders are at the top of the site
-    (twinkit/engine/recipes.py)."""
+    ``<site>/recipes/<recipe>/NN_step/...`` while another recipe's folders are at the top of the site, or
+    in ``<site>/stale/<recipe>/NN_step/...`` once a later plan did not have the step (twinkit/engine/recipes.py)."""
     import re
 
     parts = path.parts
@@ -219,6 +219,9 @@ def _parked(path: Path, recipe: str) -> Path:
             if owner in (None, recipe) and path.is_file():
                 return path
             safe = re.sub(r"[^\w.-]", "_", recipe) or "_"
+            stale = Path(*parts[:i], "stale", safe, *parts[i:])
+            if stale.is_file():  # a step the plan of a later run did not have
+                return stale
             parked = Path(*parts[:i], "recipes", safe, *parts[i:])
             return parked if parked.is_file() or owner not in (None, recipe) else path
     return path

@@ -13,9 +13,9 @@ from twinkit.hashing import HashCache
 
 
 def recorded_folders(site_root: Path) -> list[Path]:
-    """Every numbered step folder of the site, of its sweep jobs and of its parked recipes (any number of
-    digits: ``07_texture``, ``112_export``)."""
-    roots = [site_root, *site_root.glob("sweeps/*/*"), *site_root.glob("recipes/*")]
+    """Every numbered step folder of the site, of its sweep jobs, of its parked recipes and its stale folders
+    (any number of digits: ``07_texture``, ``112_export``)."""
+    roots = [site_root, *site_root.glob("sweeps/*/*"), *site_root.glob("recipes/*"), *site_root.glob("stale/*")]
     return [d for r in roots for d in numbered_folders(r) if (d / RECORD).is_file()]
 
 

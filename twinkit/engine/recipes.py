@@ -5,7 +5,11 @@ When another recipe runs, those folders move, whole and as they are (hand edits 
 ``outputs/<site>/recipes/<recipe>/``, and the new recipe's own parked folders, if it ran there before, move
 back. Moving is one ``rename`` per folder: nothing is copied, recomputed or lost. The moves are written to a
 journal (``.twinkit.switch.json``) before the first, and a run killed among them is finished by the next run
-before it does anything else."""
+before it does anything else.
+
+Folders of steps that this run's plan does not have (a step dropped, renamed or renumbered, a road source set to
+``none``) move the same way, journalled by the same file, to ``outputs/<site>/stale/<recipe>/``; they come back
+when the plan has them again."""
 from __future__ import annotations
 
 import datetime as _dt
@@ -25,6 +29,7 @@ log = logging.getLogger("twinkit")
 
 MARKER = ".twinkit.recipe"
 JOURNAL = ".twinkit.switch.json"  # a recipe switch's folder moves, written before the first, removed after the last
+STALE = "stale"  # <site>/stale/<recipe>/NN_*: folders of steps the plan of the recipe's last run did not have
 _NUMBERED = re.compile(r"^\d{2,}_\w+$")
 
 
@@ -92,6 +97,35 @@ def switch_moves(workspace: Path, here: str | None, name: str, edits_dir: Path) 
     return moves
 
 
+def stale_folder(workspace: Path, recipe: str) -> Path:
+    """Where the folders of ``recipe``'s steps that its current plan does not have are kept."""
+    return workspace / STALE / _safe(recipe)
+
+
+def stale_moves(workspace: Path, recipe: str, plan: set[str], edits_dir: Path) -> list[tuple[str, str]]:
+    """The folder moves (``src``, ``dst``, relative to ``workspace``) that take the numbered folders not in
+    ``plan`` (folder names) out of the top of ``workspace`` into :func:`stale_folder` (an older one of the same
+    name set aside into ``edits_dir`` first, never overwritten), and bring back those of ``plan`` kept there."""
+    park = stale_folder(workspace, recipe)
+    moves: list[tuple[str, str]] = []
+    for f in numbered_folders(workspace):
+        if f.name in plan:
+            continue
+        if os.path.lexists(park / f.name):
+            aside = edits_dir / f"stale-{_safe(recipe)}-{f.name}-{_dt.datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
+            moves.append((os.path.relpath(park / f.name, workspace), os.path.relpath(aside, workspace)))
+        moves.append((f.name, os.path.relpath(park / f.name, workspace)))
+    moves += [(os.path.relpath(f, workspace), f.name) for f in numbered_folders(park)
+              if f.name in plan and not os.path.lexists(workspace / f.name)]
+    return moves
+
+
+def _journalled(workspace: Path, here: str | None, name: str, moves: list[tuple[str, str]]) -> None:
+    """Make ``moves`` as one journalled switch (:data:`JOURNAL`, :func:`finish_switch`)."""
+    write_json_atomic(workspace / JOURNAL, {"recipe": name, "from": here, "moves": moves})
+    finish_switch(workspace)
+
+
 def finish_switch(workspace: Path) -> None:
     """Carry out the recipe switch journalled in ``workspace`` (:data:`JOURNAL`), from wherever a run killed
     during it stopped: a move whose source is gone or whose target exists is done. Then the marker names the
@@ -111,9 +145,11 @@ def finish_switch(workspace: Path) -> None:
             os.replace(s, d)
         elif os.path.lexists(s):
             log.warning("  %s was not moved to %s, which exists already; both are kept", s, d)
-    back = workspace / "recipes" / _safe(recipe)
-    if back.is_dir() and not any(back.iterdir()):
-        back.rmdir()
+    for d in {(workspace / s).parent for s, _ in moves}:  # a park the moves emptied
+        if d.parent in (workspace / "recipes", workspace / STALE) and d.is_dir() and not any(d.iterdir()):
+            d.rmdir()
+    if (workspace / STALE).is_dir() and not any((workspace / STALE).iterdir()):
+        (workspace / STALE).rmdir()
     _write_marker(workspace, recipe)
     journal.unlink()
 
@@ -139,9 +175,9 @@ class RecipesMixin(EngineBase):
         if not moves:
             if here != name:
                 _write_marker(self.workspace, name)
+            self._move_stale(name)
             return
-        write_json_atomic(self.workspace / JOURNAL, {"recipe": name, "from": here, "moves": moves})
-        finish_switch(self.workspace)
+        _journalled(self.workspace, here, name, moves)
         parked = [d for s, d in moves if d.startswith(os.path.relpath(self.edits_dir, self.workspace))]
         if parked:
             log.warning("  an older copy of recipe '%s' folders moved to %s", here, self.workspace / parked[0])
@@ -153,3 +189,20 @@ class RecipesMixin(EngineBase):
         if n_back:
             log.info("recipe '%s' folders (%d) moved back from %s", name, n_back,
                      self.workspace / "recipes" / _safe(name))
+        self._move_stale(name)
+
+    def _move_stale(self, name: str) -> None:
+        """Take the folders of steps this plan does not have out of the top (to :func:`stale_folder`) and bring
+        back those it has again, journalled like a recipe switch."""
+        moves = stale_moves(self.workspace, name, {ps.folder for ps in self.plan}, self.edits_dir)
+        if not moves:
+            return
+        _journalled(self.workspace, name, name, moves)
+        park = os.path.relpath(stale_folder(self.workspace, name), self.workspace)
+        out = [s for s, d in moves if "/" not in s]
+        back = [d for s, d in moves if "/" not in d]
+        if out:
+            log.info("folders of steps not in this plan (%s) moved to %s", ", ".join(out), self.workspace / park)
+        if back:
+            log.info("folders of steps back in this plan (%s) moved back from %s", ", ".join(back),
+                     self.workspace / park)

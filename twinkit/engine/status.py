@@ -3,7 +3,7 @@ writing nothing."""
 from __future__ import annotations
 
 from twinkit.engine.base import EngineBase
-from twinkit.engine.recipes import JOURNAL, parked_folder
+from twinkit.engine.recipes import JOURNAL, numbered_folders, parked_folder, stale_folder
 from twinkit.engine.records import StepOutcome, read_record
 from twinkit.errors import TwinkitError
 from twinkit.hashing import HashCache, artefact_hash
@@ -87,6 +87,23 @@ class StatusMixin(EngineBase):
             self.outcomes.append(StepOutcome(ps.id, ps.folder, ps.label, "status", "", key, 0, outputs, hashes))
         self.hashes.close()
         return rows
+
+    def stale_note(self) -> str | None:
+        """One line on the folders of steps this plan does not have: how many a run would move out of the top of
+        the site and how many are kept in :func:`~twinkit.engine.recipes.stale_folder` (None when there are none)."""
+        name = str((self.cfg.get("recipe") or {}).get("name") or "")
+        if not name or self.workspace.resolve() != self.site_root.resolve():
+            return None
+        plan = {ps.folder for ps in self.plan}
+        park = stale_folder(self.site_root, name)
+        top = [f.name for f in numbered_folders(self.site_root) if f.name not in plan]
+        kept = [f.name for f in numbered_folders(park) if f.name not in plan]
+        if not top and not kept:
+            return None
+        parts = [f"{len(kept)} folder(s) of steps not in this plan are kept in {park}"] if kept else []
+        if top:
+            parts.append(f"the next run moves {len(top)} there from the top ({', '.join(top)})")
+        return "; ".join(parts) + " (they come back when the plan has them again)"
 
     def _status_cached(self, ps, folder, key: str, stored: dict) -> tuple[tuple[str, str, str], dict | None]:
         """The row of a step whose result is stored, and the hashes later steps would see (None when they cannot
