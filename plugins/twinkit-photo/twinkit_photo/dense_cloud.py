@@ -29,14 +29,14 @@ def choose_backend(backend: str, has_model: bool) -> str:
 
         cuda = bool(getattr(pycolmap, "has_cuda", False))
         if backend == "patchmatch" and not cuda:
-            raise InputError("dense.backend=patchmatch needs pycolmap built with CUDA (this one has none); "
-                             "use dense.backend=cpu")
+            raise InputError("steps.dense.backend=patchmatch needs pycolmap built with CUDA (this one has none); "
+                             "use steps.dense.backend=cpu")
         backend = "patchmatch" if cuda else "cpu"
     if backend not in ("cpu", "patchmatch"):
         raise InputError(f"dense: unknown backend '{backend}' (auto, cpu or patchmatch)")
     if backend == "patchmatch" and not has_model:
-        raise InputError("dense.backend=patchmatch needs the sfm step's model (sfm/) and the georeference step's "
-                         "georef.json; run the image_site recipe, or use dense.backend=cpu")
+        raise InputError("steps.dense.backend=patchmatch needs the sfm step's model (sfm/) and the georeference step's "
+                         "georef.json; run the image_site recipe, or use steps.dense.backend=cpu")
     return backend
 
 

@@ -245,11 +245,11 @@ def level(centres: np.ndarray, R_wc: np.ndarray, sparse: np.ndarray, log=None, *
     if up_model is not None and len(up_model) == 3:
         u = np.asarray(up_model, float)
         if np.linalg.norm(u) <= 0:
-            raise InputError("georeference.up_model must be a non-zero vector (x, y, z in the SfM model frame)")
+            raise InputError("steps.georeference.up_model must be a non-zero vector (x, y, z in the SfM model frame)")
         up, up_from = u / np.linalg.norm(u), "user"
     if not photos_agree and up_from == "camera_horizon" and log is not None:
         log.warning("georeference: the photos' up axes disagree (spread %.0f degrees, %d of %d consistent) and no "
-                    "ground plane has enough support: the levelling is uncertain; give georeference.up_model",
+                    "ground plane has enough support: the levelling is uncertain; give steps.georeference.up_model",
                     hinfo["spread_deg"], hinfo["used"], hinfo["photos"])
     info["up_from"] = up_from
     info["up_model"] = up.tolist()

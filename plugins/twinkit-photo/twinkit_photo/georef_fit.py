@@ -49,18 +49,18 @@ def known_distance(params) -> float | None:
     """Check the user's frame parameters (up vector, known distance); the known distance's length in model
     units, or None."""
     if params.up_model and len(params.up_model) != 3:
-        raise InputError(f"georeference.up_model has {len(params.up_model)} numbers; give 3 (x, y, z in the SfM "
+        raise InputError(f"steps.georeference.up_model has {len(params.up_model)} numbers; give 3 (x, y, z in the SfM "
                          f"model frame, e.g. read off sfm/sparse_model.ply) or none")
     if not (params.distance_points_model or params.distance_m):
         return None
     if len(params.distance_points_model) != 6 or params.distance_m <= 0:
-        raise InputError("georeference: a known distance needs distance_points_model (6 numbers: two points "
-                         "x1, y1, z1, x2, y2, z2 in the SfM model frame) and distance_m > 0 (their distance in "
-                         "metres)")
+        raise InputError("steps.georeference: a known distance needs steps.georeference.distance_points_model "
+                         "(6 numbers: two points x1, y1, z1, x2, y2, z2 in the SfM model frame) and "
+                         "steps.georeference.distance_m > 0 (their distance in metres)")
     pa, pb = np.asarray(params.distance_points_model, float).reshape(2, 3)
     known = float(np.linalg.norm(pa - pb))
     if known <= 0:
-        raise InputError("georeference.distance_points_model: the two points are the same point")
+        raise InputError("steps.georeference.distance_points_model: the two points are the same point")
     return known
 
 
@@ -108,7 +108,7 @@ def choose_method(params, m: SfmModel, gcp_rows: list, n_gcps: int, gcp_json: Pa
                                   "points": n_gcps, "usable": len(gcp_rows)}
         method = _auto_method(params, m, gcp_rows, gps_ok, frame, log, info)
     if len(params.transform_model_to_site) not in (0, 16):
-        raise InputError(f"georeference.transform_model_to_site has {len(params.transform_model_to_site)} numbers; "
+        raise InputError(f"steps.georeference.transform_model_to_site has {len(params.transform_model_to_site)} numbers; "
                          f"give 16 (a 4x4 similarity, row by row) or none")
     if params.transform_model_to_site:
         method = "transform"
@@ -177,13 +177,14 @@ def fit_gps(params, m: SfmModel, frame, sfm_dir: Path, photos_dir, log, info: di
 
     if frame is None:
         gps_ok = m.with_gps()
-        raise InputError("georeference.method=gps needs the site's crs and base_point (conf/site/<site>.yaml)"
+        raise InputError("steps.georeference.method=gps needs the site's crs and base_point (conf/site/<site>.yaml)"
                          + (f"; {suggest_site(m.doc, gps_ok)}" if gps_ok else ""))
     R_lvl, info["level"] = level_model(params, m, photos_dir, log)
     gps_names = m.with_gps()
     if len(gps_names) < 3:
         raise InputError(f"{sfm_dir}: only {len(gps_names)} registered photos carry EXIF GPS; need 3 for "
-                         f"method=gps (give a GCP file with site.inputs.gcp, or georeference.method=none)")
+                         f"steps.georeference.method=gps (give a GCP file with site.inputs.gcp, or "
+                         f"steps.georeference.method=none)")
     ll = np.array([m.doc["exif_gps"][n] for n in gps_names], dtype=float)
     xy = frame.lonlat_to_local(ll[:, [1, 0]])
     z = np.where(np.isfinite(ll[:, 2]), ll[:, 2] - frame.alt, 0.0)
@@ -211,22 +212,22 @@ def fit_none(params, m: SfmModel, known: float | None, photos_dir, log, info: di
         scale = params.distance_m / known
         info["scale_from"] = "known distance"
     elif params.scale != 1.0:
-        info["scale_from"] = "georeference.scale"
+        info["scale_from"] = "steps.georeference.scale"
     return Transform(scale, R_lvl, -scale * R_lvl @ m.C.mean(0))
 
 
 def user_transform(m16) -> Transform:
-    """georeference.transform_model_to_site (16 numbers, a 4x4 similarity row by row) as a Transform."""
+    """steps.georeference.transform_model_to_site (16 numbers, a 4x4 similarity row by row) as a Transform."""
     M = np.asarray(m16, float).reshape(4, 4)
     A = M[:3, :3]
     det = float(np.linalg.det(A))
     if not np.allclose(M[3], [0, 0, 0, 1], atol=1e-9) or det <= 0:
-        raise InputError("georeference.transform_model_to_site: not a similarity (last row must be 0 0 0 1 and the "
+        raise InputError("steps.georeference.transform_model_to_site: not a similarity (last row must be 0 0 0 1 and the "
                          "3x3 part a rotation times a positive scale)")
     s = det ** (1.0 / 3.0)
     R = A / s
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-3):
-        raise InputError("georeference.transform_model_to_site: the 3x3 part is not a rotation times one scale "
+        raise InputError("steps.georeference.transform_model_to_site: the 3x3 part is not a rotation times one scale "
                          "(shear or unequal scales); give a similarity")
     U, _, Vt = np.linalg.svd(R)
     return Transform(s, U @ Vt, M[:3, 3].copy())
@@ -265,7 +266,8 @@ def describe_scale(method: str, params, T: Transform, known: float | None, log, 
     if not scaled:
         log.warning("georeference: the site frame is in model units, not metres (no GPS with a site CRS, no "
                     "GCPs, no known distance): later steps' thresholds in metres do not mean metres; give "
-                    "georeference.distance_points_model + distance_m, or georeference.scale")
+                    "steps.georeference.distance_points_model + steps.georeference.distance_m, or "
+                    "steps.georeference.scale")
     return scaled
 
 

@@ -151,3 +151,6 @@ class PhotoTextureParams:
                                         "whose colour disagrees with the consensus (0 = off)")
     consistency_levels: float = param(45.0, gt=0, help="photo-consistency check: RGB distance (0-255) from the "
                                                        "consensus that counts as disagreeing")
+    degraded_above_missing_ratio: float = param(0.5, ge=0, le=1,
+                                                help="more photos than this share that texture no face of the "
+                                                     "mesh: the run ends degraded")

@@ -113,7 +113,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     known = G.known_distance(params)
     gcps = read_gcp_file(in_gcp_json, frame) if in_gcp_json is not None and params.method in ("auto", "gcp") else []
     if params.method == "gcp" and in_gcp_json is None:
-        raise InputError("georeference.method=gcp needs a ground-control-point file: set site.inputs.gcp=<file.json>")
+        raise InputError("steps.georeference.method=gcp needs a ground-control-point file: set site.inputs.gcp=<file.json>")
     gcp_rows = G.usable_gcps(m.rows, gcps, params.min_gcp_views)
     info: dict = {}
     method = G.choose_method(params, m, gcp_rows, len(gcps), in_gcp_json, frame, ctx.log, info)
@@ -144,27 +144,34 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
     from twinkit.artefacts import read_cameras_site
     from twinkit.mesh import read_ply
 
-    from .roi import ground_plane, roi_box, roi_doc
+    from .roi import ground_plane, roi_box, roi_doc, subject_depth
 
     params = params or RoiParams()
     cdoc = read_cameras_site(in_cameras_site_json)
     cams = cdoc.cameras
     scaled = bool(cdoc.extra.get("scaled", True))
+    unit = "m" if scaled else "model units"
     if not scaled:
         # the margins, the ground threshold and max_depth_m below are metres; this frame is not
         ctx.degraded("the site frame is unscaled (no GPS with a site CRS, no GCPs, no known distance): the region "
                      "of interest, the dense step and the mesh apply thresholds in metres to model units",
-                     "give steps.georeference.distance_points_model=[..6 numbers..] and distance_m, or "
-                     "steps.georeference.scale, or a site CRS for the photos' GPS")
+                     "give steps.georeference.scale=<metres per model unit>, or "
+                     "steps.georeference.distance_points_model=[x1,y1,z1,x2,y2,z2] with "
+                     "steps.georeference.distance_m=<metres>, or site.crs and site.base_point for the photos' GPS")
     C = np.array([c["center"] for c in cams], float)
     pts = read_ply(in_sparse_site_ply).vertices
     ground = ground_plane(C, pts, params.ground_threshold_m)
-    box = roi_box(C, pts, ground["z_m"], params)
-    doc = roi_doc(C, pts, box, ground, params.max_depth_m, scaled)
+    depth, depth_why = subject_depth(C, pts, params.max_depth_m)
+    if depth != params.max_depth_m:
+        ctx.log.warning("roi: the photos look farther than steps.roi.max_depth_m (%g %s): the depth limit is %.1f "
+                        "%s (%s)", params.max_depth_m, unit, depth, unit, depth_why)
+    box = roi_box(C, pts, ground["z_m"], params, depth)
+    doc = roi_doc(C, pts, box, ground, depth, scaled, depth_why)
     write_json(out_roi_json, doc)
-    ctx.log.info("roi: box %s .. %s, ground z %.2f m (%s)", np.round(box["min"], 1), np.round(box["max"], 1),
-                 ground["z_m"], ground["source"])
-    return {"ground_z_m": ground["z_m"], "sparse_inside_ratio": doc["sparse_inside_ratio"], "scaled": scaled}
+    ctx.log.info("roi: box %s .. %s, ground z %.2f %s (%s), depth limit %.1f %s", np.round(box["min"], 1),
+                 np.round(box["max"], 1), ground["z_m"], unit, ground["source"], depth, unit)
+    return {"ground_z_m": ground["z_m"], "sparse_inside_ratio": doc["sparse_inside_ratio"], "scaled": scaled,
+            "max_depth": depth}
 
 
 # ----------------------------------------------------------------------------- dense
@@ -226,8 +233,8 @@ def _dense_cpu(params: DenseParams, ctx, cams, roi_doc, bmin, bmax, max_depth, i
         f"{params.cpu_method} + fusion", "depth maps" if params.cpu_method == "sweep" else "patchmatch planes",
         dense_info=info, times={"seconds": round(time.perf_counter() - t0, 3), "depth_maps_s": round(t_sweep, 3),
                                 "fusion_s": round(t_fuse, 3)})
-    ctx.log.info("dense: %d depth maps, %d fused points, %d after the region of interest and %.3f m voxels",
-                 n_maps, n_fused, written, params.voxel_m)
+    ctx.log.info("dense: %d depth maps, %d fused points, %d after the region of interest and %.3f %s voxels",
+                 n_maps, n_fused, written, params.voxel_m, "m" if roi_doc.get("scaled", True) else "model-unit")
     DC.dense_gate(ctx.degraded, written, n_maps, params, "cpu")
     return {"points": written, "points_per_photo": round(written / max(n_maps, 1), 1), "depth_maps": n_maps,
             "fused": n_fused, "depth_maps_s": round(t_sweep, 3), "fusion_s": round(t_fuse, 3)}
@@ -261,8 +268,10 @@ def _dense_colmap(params: DenseParams, ctx, in_photos_dir, in_sfm_dir, in_georef
 # ----------------------------------------------------------------------------- texture from the photos
 
 def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path, in_photos_dir: Path,
-                  in_cameras_site_json: Path, out_textured_mesh_obj: Path, out_textured_mesh_ply: Path) -> dict:
-    """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel."""
+                  in_cameras_site_json: Path, out_textured_mesh_obj: Path, out_textured_mesh_ply: Path,
+                  in_roi_json: Path | None = None) -> dict:
+    """Replace the baked texture (colours from the dense cloud) by the photos, projected and blended per texel.
+    Photos reach as far as ``max_dist_m`` or the region of interest's depth limit, whichever is farther."""
     from twinkit.artefacts import read_cameras_site, write_textured_mesh, write_textured_obj
     from twinkit.surface.texture import write_png
 
@@ -274,8 +283,11 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     views = photo_views(read_cameras_site(in_cameras_site_json).cameras, in_photos_dir)
     if not views:
         raise InputError(f"{in_cameras_site_json}: no cameras")
+    max_dist = params.max_dist_m
+    if in_roi_json is not None:  # the depth the dense step kept (raised where the photos' subject is far)
+        max_dist = max(max_dist, float(read_json(in_roi_json, "region of interest").get("max_depth_m") or 0.0))
     img, info = project_texture(mesh.vertices, mesh.faces, uv, base, views, max_views=params.max_views,
-                                min_cos=params.min_cos, max_dist_m=params.max_dist_m, sharpness=params.sharpness,
+                                min_cos=params.min_cos, max_dist_m=max_dist, sharpness=params.sharpness,
                                 consistency_views=params.consistency_views,
                                 consistency_levels=params.consistency_levels,
                                 threads=_threads(ctx), progress=ctx.progress)
@@ -286,12 +298,30 @@ def photo_texture(params: PhotoTextureParams, ctx, *, in_textured_mesh_ply: Path
     mesh.comments = [f"TextureFile {out_png.name}"]
     write_textured_mesh(out_textured_mesh_ply, mesh)
     info["seconds"] = round(time.perf_counter() - t0, 3)
+    info["max_dist"] = max_dist
+    _missing_photos_gate(ctx, params, views, info)
     ctx.log.info("photo texture: %.1f %% of the texels from %d photos (%.1f %% of the faces seen; %d photo views of "
                  "faces left out as inconsistent with the others: occluders the mesh lacks), %.1f s",
                  100 * info["texels_from_photos_ratio"], len(views), 100 * info["faces_seen_ratio"],
                  info["views_rejected_inconsistent"], info["seconds"])
     info.pop("best_view_faces", None)
     return info
+
+
+def _missing_photos_gate(ctx, params: PhotoTextureParams, views, info: dict) -> None:
+    """The photos that are the best view of no face of the mesh (too far, or the mesh lacks what they show):
+    counted in ``info``; over ``degraded_above_missing_ratio`` of the photos, the run ends degraded."""
+    missing = sorted(v.name for v in views if not info["best_view_faces"].get(v.name))
+    info["photos_missing_mesh"] = len(missing)
+    info["photos_missing_mesh_ratio"] = round(len(missing) / max(len(views), 1), 4)
+    ctx.log.info("photo texture: %d of %d photos see the mesh (%d miss it: %s)", len(views) - len(missing),
+                 len(views), len(missing), ", ".join(missing[:6]) + (" ..." if len(missing) > 6 else ""))
+    if info["photos_missing_mesh_ratio"] > params.degraded_above_missing_ratio:
+        ctx.degraded(f"{len(missing)} of {len(views)} photos miss the mesh ({', '.join(missing[:6])}"
+                     f"{' ...' if len(missing) > 6 else ''}): the region of interest or the dense step lost what "
+                     f"they show, or they stand over {info.get('max_dist', params.max_dist_m):g} from it",
+                     "check the roi step's box and depth limit (roi.json), or raise steps.roi.max_depth_m and "
+                     "steps.photo_texture.max_dist_m")
 
 
 # ----------------------------------------------------------------------------- registration

@@ -31,10 +31,27 @@ def ground_plane(C: np.ndarray, pts: np.ndarray, threshold_m: float) -> dict:
     return ground
 
 
-def roi_box(C: np.ndarray, pts: np.ndarray, ground_z: float, params) -> dict:
+def subject_depth(C: np.ndarray, pts: np.ndarray, max_depth_m: float) -> tuple[float, str]:
+    """The depth limit of the region of interest and the dense step: ``max_depth_m``, unless the photos' subject
+    is far (half the sparse points lie over half of it from their nearest camera: a façade photographed from
+    across a square; Sceaux scaled to metres has its median point 42 m away), then raised to the distance within
+    which 98 % of the sparse points lie (the box's percentile). Returns (limit, why); 0 stays 0 (no limit)."""
+    if max_depth_m <= 0 or len(pts) < 50:
+        return max_depth_m, "steps.roi.max_depth_m"
+    from scipy.spatial import cKDTree
+
+    q50, q98 = (float(v) for v in np.quantile(cKDTree(C).query(pts)[0], [0.5, 0.98]))
+    if q50 <= max_depth_m / 2 or q98 <= max_depth_m:
+        return max_depth_m, "steps.roi.max_depth_m"
+    return q98, (f"raised from steps.roi.max_depth_m {max_depth_m:g}: the median sparse point is {q50:.1f} from "
+                 f"its nearest camera, 98 % lie within {q98:.1f}")
+
+
+def roi_box(C: np.ndarray, pts: np.ndarray, ground_z: float, params, max_depth: float | None = None) -> dict:
     """{"min": [x, y, z], "max": [x, y, z]}: the cameras' extent plus ``margin_m``, grown to what the photos
-    look at (2nd-98th percentile of the sparse points within ``max_depth_m`` of a camera), from
-    ``below_ground_m`` under the ground to at least ``above_ground_m`` over it."""
+    look at (2nd-98th percentile of the sparse points within ``max_depth`` (default ``max_depth_m``) of a
+    camera), from ``below_ground_m`` under the ground to at least ``above_ground_m`` over it."""
+    depth = params.max_depth_m if max_depth is None else max_depth
     lo = C[:, :2].min(0) - params.margin_m
     hi = C[:, :2].max(0) + params.margin_m
     zlo, zhi = ground_z - params.below_ground_m, ground_z + params.above_ground_m
@@ -42,9 +59,9 @@ def roi_box(C: np.ndarray, pts: np.ndarray, ground_z: float, params) -> dict:
         from scipy.spatial import cKDTree
 
         seen = pts
-        if params.max_depth_m > 0:
+        if depth > 0:
             dist, _ = cKDTree(C).query(pts)
-            seen = pts[dist <= params.max_depth_m]
+            seen = pts[dist <= depth]
         if len(seen) >= 50:
             q0, q1 = np.quantile(seen, [0.02, 0.98], axis=0)
             lo, hi = np.minimum(lo, q0[:2]), np.maximum(hi, q1[:2])
@@ -52,12 +69,14 @@ def roi_box(C: np.ndarray, pts: np.ndarray, ground_z: float, params) -> dict:
     return {"min": [float(lo[0]), float(lo[1]), zlo], "max": [float(hi[0]), float(hi[1]), zhi]}
 
 
-def roi_doc(C: np.ndarray, pts: np.ndarray, box: dict, ground: dict, max_depth_m: float, scaled: bool) -> dict:
-    """roi.json: the box, the ground, the dense step's depth limit, and how much of the sparse cloud is inside."""
+def roi_doc(C: np.ndarray, pts: np.ndarray, box: dict, ground: dict, max_depth_m: float, scaled: bool,
+            depth_why: str = "steps.roi.max_depth_m") -> dict:
+    """roi.json: the box, the ground, the dense step's depth limit (and where it came from), the frame's units
+    and how much of the sparse cloud is inside."""
     inside = np.all((pts >= box["min"]) & (pts <= box["max"]), axis=1).mean() if len(pts) else 0.0
     return {"_comment": "Edit this file to change what the dense step keeps (the thesis's manual step 3.8.2): "
-                        "box min/max in site metres, ground z, max_depth_m. The next run keeps your edit and "
+                        "box min/max, ground z and max_depth_m in the site frame's units (see units). The next run keeps your edit and "
                         "re-runs only the steps after it.",
-            "box": box, "ground": ground, "max_depth_m": max_depth_m, "scaled": scaled,
+            "box": box, "ground": ground, "max_depth_m": max_depth_m, "max_depth_from": depth_why, "scaled": scaled,
             "units": "metres" if scaled else "model units (unscaled)",
-            "cameras_xy_extent_m": np.ptp(C[:, :2], 0).tolist(), "sparse_inside_ratio": float(inside)}
+            "cameras_xy_extent": np.ptp(C[:, :2], 0).tolist(), "sparse_inside_ratio": float(inside)}

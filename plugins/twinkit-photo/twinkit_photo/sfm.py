@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import shutil
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -109,7 +110,7 @@ def run_sfm(image_dir: Path, names: list[str], work: Path, opt: SfmOptions, *, h
     timings["mapping"] = round(time.perf_counter() - t0, 3)
     if best is None:
         raise InputError(f"{image_dir}: structure from motion registered no photos ({counts['verified_pairs']} "
-                         f"matched pairs); take more overlapping photos or try sfm.matching=exhaustive")
+                         f"matched pairs); take more overlapping photos or try steps.sfm.matching=exhaustive")
     registered = sorted(best.images[i].name for i in best.reg_image_ids())
     return SfmResult(best, n, registered, attempts, timings, matching)
 
@@ -307,9 +308,31 @@ def run_sfm_in_temp(folder: Path, names: list[str], opt: SfmOptions, *, has_gps:
 
     work = Path(tempfile.mkdtemp(prefix="twinkit_sfm_"))
     try:
-        return run_sfm(folder, names, work, opt, has_gps=has_gps, log=log)
+        with colmap_log_into(log, work):
+            return run_sfm(folder, names, work, opt, has_gps=has_gps, log=log)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+@contextmanager
+def colmap_log_into(log, folder: Path):
+    """COLMAP's own log (glog: a line per photo, pair and bundle adjustment) goes to ``log`` at debug level
+    (run.log) instead of the console; its errors still reach the console. The console gets one line."""
+    import pycolmap
+
+    glog = pycolmap.logging
+    also = glog.alsologtostderr
+    glog.alsologtostderr = False
+    glog.set_log_destination(glog.INFO, str(Path(folder) / "colmap."))
+    try:
+        yield
+    finally:
+        glog.set_log_destination(glog.INFO, "")  # closes (and flushes) the file
+        glog.alsologtostderr = also
+        lines = [ln for f in sorted(Path(folder).glob("colmap.*")) for ln in f.read_text(errors="replace").splitlines()]
+        for ln in lines:
+            log.debug("colmap: %s", ln)
+        log.info("sfm: COLMAP's log (%d lines) is in the run log", len(lines))
 
 
 def check_registration(names: list[str], registered: list[str], min_ratio: float, degraded_ratio: float,
@@ -322,9 +345,9 @@ def check_registration(names: list[str], registered: list[str], min_ratio: float
     listed = f"{', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}"
     if ratio < min_ratio:
         raise InputError(f"{folder}: structure from motion registered only {n_reg} of {len(names)} photos "
-                         f"({100 * ratio:.0f} % < sfm.min_registered_ratio {100 * min_ratio:.0f} %); "
+                         f"({100 * ratio:.0f} % < steps.sfm.min_registered_ratio {100 * min_ratio:.0f} %); "
                          f"unregistered: {listed}. Take more "
-                         f"overlapping photos, try sfm.matching=exhaustive or sequential, or lower the ratio")
+                         f"overlapping photos, try steps.sfm.matching=exhaustive or sequential, or lower the ratio")
     if ratio < degraded_ratio:
         degraded(f"structure from motion registered only {n_reg} of {len(names)} photos; unregistered: {listed}",
                  "take more overlapping photos, or try steps.sfm.matching=exhaustive")
