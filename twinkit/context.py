@@ -33,6 +33,35 @@ class StepContext:
     _component_factory: Callable[[str, str | None], Any] | None = None
     _executor_factory: Callable[[], Any] | None = None
     _degraded: list = field(default_factory=list)
+    _gates: list = field(default_factory=list)
+    _notes: list = field(default_factory=list)
+
+    def gate(self, name: str, value: float | None, threshold: float, op: str = ">=", unit: str = "",
+             why: str = "", hint: str | None = None, reason: str | None = None) -> bool:
+        """Declare one quality gate of this step's result: the figure ``value`` must be ``op`` (``>=``, ``>``,
+        ``<=``, ``<``) ``threshold``; True when it passes (a figure of None, nothing to measure, passes).
+
+        ``name`` names the figure ("continuity driving"), ``unit`` its unit ("%", "m"), ``why`` what the
+        threshold protects ("a wheel drops into a hole"). Every gate is stored in the step's metrics under
+        ``gates`` and logged, passed or not; one that fails calls :meth:`degraded` with ``reason`` (default: the
+        figure against its threshold and ``why``) and ``hint`` (the setting to try).
+        """
+        from twinkit.quality import gate_entry, gate_text
+
+        entry = gate_entry(name, value, threshold, op, unit, why)
+        self._gates.append(entry)
+        if entry["ok"]:
+            self.log.debug("gate %s", gate_text(entry))  # the step's progress line prints every gate
+        else:
+            self.degraded(f"{reason} (gate {gate_text(entry)})" if reason else
+                          gate_text(entry) + (f": {why}" if why else ""), hint)
+        return bool(entry["ok"])
+
+    def note(self, text: str) -> None:
+        """A fact about the twin the run's status names beside "ok" or "degraded" ("no road network")."""
+        if text not in self._notes:
+            self._notes.append(str(text))
+        self.log.debug("note: %s", text)
 
     def degraded(self, reason: str, hint: str | None = None) -> None:
         """Say that this step's result is degenerate (far less than it should be): the run ends "degraded".

@@ -189,7 +189,10 @@ def _finish(run: _Run, status: str, error: str | None) -> str:
                             f"{os_text(exc, run_dir)}") from None
     if status == "ok":
         status = manifest["status"]  # "degraded" when a step said its result is far below what it should be
-        log.info("twinkit: done in %.1f s; manifest %s", time.perf_counter() - run.t0, run_dir / "manifest.json")
+        from twinkit.quality import run_status_text
+
+        log.info("twinkit: done in %.1f s (%s); manifest %s", time.perf_counter() - run.t0, run_status_text(manifest),
+                 run_dir / "manifest.json")
         _say_degraded(manifest.get("degraded") or [], engine_cfg)
         if engine_cfg.get("report", True):
             _write_report(run_dir, manifest, engine)
@@ -229,11 +232,14 @@ def _say_degraded(entries: list[dict], engine_cfg: dict) -> None:
 def _format_outcome(oc, i: int, n: int) -> str:
     dur = f"{oc.duration_s:7.1f} s" if oc.status in ("ran",) or oc.duration_s >= 0.05 else " " * 9
     mem = f"  peak {oc.peak_rss_mb:.0f} MB" if oc.status == "ran" and oc.peak_rss_mb else ""
-    from twinkit.quality import degraded_of
+    from twinkit.quality import degraded_of, gate_text, gates_of
 
     bad = degraded_of(oc.metrics)
     flag = f"  DEGRADED ({len(bad)}: {bad[0]['reason']}{' ...' if len(bad) > 1 else ''})" if bad else ""
-    return f"[{i}/{n}] {oc.folder:<24} {oc.status:<7} {dur}  {oc.why}{mem}{flag}"
+    gates = gates_of(oc.metrics)
+    figures = ("  gates: " + "; ".join(gate_text(g) + (f" [item {g['item']}]" if "item" in g else "") for g in gates)
+               if gates else "")
+    return f"[{i}/{n}] {oc.folder:<24} {oc.status:<7} {dur}  {oc.why}{mem}{figures}{flag}"
 
 
 def _interactive(setting: str) -> bool:

@@ -141,7 +141,7 @@ def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site:
         {"kind": p.kind, "name": p.name, "version": p.version, "distribution": p.distribution, "module": p.module}
         for p in registry.all()
     ]
-    from twinkit.quality import run_degraded
+    from twinkit.quality import notes_of, run_degraded, run_gates
 
     degraded = run_degraded(steps)
     if status == "ok" and degraded:
@@ -150,6 +150,8 @@ def build_manifest(*, argv: list[str], overrides: list[str], config: dict, site:
         "schema_version": SCHEMA_VERSION,
         "status": status,
         "degraded": degraded,
+        "gates": run_gates(steps),  # every quality gate's figure, passed or failed
+        "notes": notes_of(steps),  # facts on the twin the status names ("no road network")
         "error": error,
         "argv": argv,
         "overrides": overrides,

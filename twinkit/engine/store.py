@@ -31,7 +31,7 @@ from twinkit.errors import StepError
 from twinkit.hashing import HashCache, artefact_hash, list_files
 from twinkit.jsonio import write_json as write_json_atomic
 from twinkit.manifest import redact
-from twinkit.quality import with_degraded
+from twinkit.quality import with_degraded, with_gates
 from twinkit.signature import Port
 
 log = logging.getLogger("twinkit")
@@ -181,14 +181,19 @@ def _run_into(tmp: Path, run: Callable, params: Any, ctx_kwargs: dict, inputs: d
     if wants_item:
         kwargs["item"] = item
     t0 = time.perf_counter()
+    warned = _Warnings()
+    ctx.log.addHandler(warned)
     try:
         with _PeakRSS() as mem:
             metrics = run(params, ctx, **kwargs)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        ctx.log.removeHandler(warned)
     duration = time.perf_counter() - t0
     metrics = with_degraded(metrics if isinstance(metrics, dict) else {}, ctx._degraded)
+    metrics = with_gates(with_gates(with_gates(metrics, ctx._gates), warned.texts, "warnings"), ctx._notes, "notes")
     missing = [p.filename for p in outputs if not (tmp / p.filename).exists()]
     wrong = [p.filename for p in outputs if (tmp / p.filename).exists() and p.is_dir != (tmp / p.filename).is_dir()]
     if missing or wrong:
@@ -197,6 +202,21 @@ def _run_into(tmp: Path, run: Callable, params: Any, ctx_kwargs: dict, inputs: d
         raise StepError(f"step '{ctx.step_id}' {what}; nothing from this attempt was kept")
     _check_catalogued(outputs, tmp, ctx.step_id)
     return metrics, duration, mem
+
+
+class _Warnings(logging.Handler):
+    """The WARNING lines a step logs while it runs, kept with its result (``metrics["warnings"]``) so the report
+    lists them for a cached step too."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.texts: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.texts.append(record.getMessage())
+        except Exception:  # noqa: BLE001 - a bad format string must not fail the step
+            self.texts.append(str(record.msg))
 
 
 def _record_of(tmp: Path, key: str, used: list[str], duration: float, mem, metrics, outputs: tuple[Port, ...],

@@ -107,7 +107,9 @@ def build_report(run_dir: Path, manifest: dict, engine=None) -> Path:
     cfg = manifest.get("config") or {}
     title = f"twinkit report: {(manifest.get('site') or {}).get('name', '?')} · " \
             f"{(cfg.get('recipe') or {}).get('name', '?')}"
-    sub = (f"{status_badge(str(manifest.get('status', '?')))} run {esc(Path(run_dir).name)} · "
+    notes = [str(n) for n in manifest.get("notes") or []]  # facts on the twin beside the status ("no road network")
+    sub = (f"{status_badge(str(manifest.get('status', '?')))}{''.join(' · ' + esc(n) for n in notes)} "
+           f"run {esc(Path(run_dir).name)} · "
            f"{esc(manifest.get('finished', ''))}")
     if manifest.get("degraded"):
         page.banner = degraded_banner(manifest["degraded"])

@@ -7,7 +7,7 @@ from the plugin that makes the files it shows, through the hook ``twinkit_regist
 
 Orders of the sections in the page (a plugin section takes a number between them)::
 
-    summary 100  timeline 200  view3d 300  pictures 400  roads 500  samples 600  recon 700
+    summary 100  gates 150  warnings 160  timeline 200  view3d 300  pictures 400  roads 500  samples 600  recon 700
     segmetrics 800  alignment 900  provenance 1000  files 1100
 
 Several parts may share one section id (each plugin adds its own pictures to "pictures"): the page
@@ -21,8 +21,9 @@ import json
 from pathlib import Path
 
 from twinkit.plugins import ReportSection
-from twinkit.quality import degraded_of
+from twinkit.quality import degraded_of, run_status_text
 from twinkit.report.context import SectionContext
+from twinkit.report.gates import gates_section, warnings_section
 from twinkit.report.html import attr, esc, link
 from twinkit.report.page import figure, fmt, legend, size, status_badge, table
 from twinkit.report.run import RunView, flatten, rel
@@ -43,7 +44,7 @@ def _summary(run: RunView, out: Path) -> str:
     for s in run.steps:
         counts[s.get("status", "?")] = counts.get(s.get("status", "?"), 0) + 1
     rows = [
-        ["status", m.get("status", "?")], ["recipe", recipe], ["site", site.get("name", "?")],
+        ["status", run_status_text(m)], ["recipe", recipe], ["site", site.get("name", "?")],
         ["started", m.get("started", "?")], ["finished", m.get("finished", "?")],
         ["duration", f"{m.get('duration_s', 0):.1f} s"],
         ["steps", ", ".join(f"{v} {k}" for k, v in counts.items())],
@@ -172,6 +173,8 @@ def core_sections() -> list[ReportSection]:
 
     return [
         mk("summary", "Run", 100, lambda ctx: _summary(ctx.run, ctx.report_dir)),
+        mk("gates", "Quality gates", 150, lambda ctx: gates_section(ctx.run)),
+        mk("warnings", "Warnings", 160, lambda ctx: warnings_section(ctx.run)),
         mk("timeline", "Step timeline", 200, lambda ctx: _timeline(ctx.run)),
         mk("view3d", "3D view", 300, lambda ctx: sec_viewer(ctx.run, ctx.out, ctx.topdown)),
         mk("pictures", "Pictures", 400, _orthophotos),
