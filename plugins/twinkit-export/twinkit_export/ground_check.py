@@ -352,8 +352,18 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
         misses.append(miss)
         log_lane(ctx.log, kind, res["lanes"][kind], holes, params, png)
     res["ok"] = bool(all(lane["ok"] for lane in res["lanes"].values()))
-    for what, hint in degraded_lanes(res, params, png, scan_lanes):
-        ctx.degraded(what, hint)
+    failed = degraded_lanes(res, params, png, scan_lanes)
+    for kind, lane in res["lanes"].items():
+        if not lane["rays"]:
+            continue
+        what, hint = next(((w, h) for w, h in failed if f" over {kind} lanes:" in w), (None, None))
+        # the figure that decides: the share off the kerb line or the surface's continuity, whichever holds more
+        ground = max((x for x in (lane["hit_pct_off_kerb_line"], lane["continuous_pct"]) if x is not None),
+                     default=None)
+        ctx.gate(f"ground {kind}", ground, lane["target_pct"], ">=", "%", why="rays that find the ground (off the "
+                 "kerb line) or a continuous surface: a car or a walker stands there", hint=hint, reason=what)
+        ctx.gate(f"widest hole {kind}", lane["widest_hole_m"], params.max_hole_m, "<=", "m",
+                 why="a wider hole swallows a tyre's contact patch or a shoe", hint=hint, reason=what)
     gv = at_ground_level(mesh.vertices, cloud.vertices, cloud.normals)
     border = ground_border(mesh.vertices, mesh.faces, fp, gv)
     edges = border.pop("_edges")

@@ -519,6 +519,7 @@ def _carla_props_only(params: CarlaPackageParams, ctx: StepContext, *, in_twin_f
         write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data, has_map=False)
     shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     summ = _checked_summary(out, package, None, ctx=ctx)
+    ctx.note("no road network")  # the run's status says it beside "ok" (docs/engine.md "Quality gates")
     ctx.log.warning("%s: the CARLA package %s has no map and no OpenDRIVE; its %d class meshes are props (no spawn "
                     "points, no drivable lanes; %s/README.md)", NO_MAP_WHY.get(source, NO_MAP_WHY["none"]), package,
                     len(placed["props"]), package)

@@ -316,12 +316,14 @@ def _missing_photos_gate(ctx, params: PhotoTextureParams, views, info: dict) -> 
     info["photos_missing_mesh_ratio"] = round(len(missing) / max(len(views), 1), 4)
     ctx.log.info("photo texture: %d of %d photos see the mesh (%d miss it: %s)", len(views) - len(missing),
                  len(views), len(missing), ", ".join(missing[:6]) + (" ..." if len(missing) > 6 else ""))
-    if info["photos_missing_mesh_ratio"] > params.degraded_above_missing_ratio:
-        ctx.degraded(f"{len(missing)} of {len(views)} photos miss the mesh ({', '.join(missing[:6])}"
-                     f"{' ...' if len(missing) > 6 else ''}): the region of interest or the dense step lost what "
-                     f"they show, or they stand over {info.get('max_dist', params.max_dist_m):g} from it",
-                     "check the roi step's box and depth limit (roi.json), or raise steps.roi.max_depth_m and "
-                     "steps.photo_texture.max_dist_m")
+    ctx.gate("photos missing the mesh", 100 * info["photos_missing_mesh_ratio"],
+             100 * params.degraded_above_missing_ratio, "<=", "%", why="a photo that textures no face shows what the "
+             "mesh lost",
+             reason=f"{len(missing)} of {len(views)} photos miss the mesh ({', '.join(missing[:6])}"
+                    f"{' ...' if len(missing) > 6 else ''}): the region of interest or the dense step lost what "
+                    f"they show, or they stand over {info.get('max_dist', params.max_dist_m):g} from it",
+             hint="check the roi step's box and depth limit (roi.json), or raise steps.roi.max_depth_m and "
+                  "steps.photo_texture.max_dist_m")
 
 
 # ----------------------------------------------------------------------------- registration

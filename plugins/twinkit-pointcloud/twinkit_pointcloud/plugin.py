@@ -243,12 +243,13 @@ def _removed_most(rep: dict, max_share: float, ctx) -> float | None:
     if not trim or not n_in:
         return None
     share = 1.0 - trim["faces"] / n_in
-    if share > max_share:
-        fill = (rep.get("ground_fill") or {}).get("faces_added")
-        ctx.degraded(f"the distance trim ({trim['max_dist_m']:.3g} m) removed {100 * share:.1f} % of the "
-                     f"{n_in:,} faces ({trim['faces']:,} left)" + (f"; the ground fill added {fill:,}" if fill else ""),
-                     "the trim distance is probably below the cloud's point spacing: leave "
-                     "steps.clean_mesh.max_dist_m at -1 (auto) or set it to 2-3 x the spacing (clean_report.json)")
+    fill = (rep.get("ground_fill") or {}).get("faces_added")
+    ctx.gate("faces removed by the trim", 100 * share, 100 * max_share, "<=", "%",
+             why="a trim that removes most of the mesh was set below the cloud's spacing",
+             reason=f"the distance trim ({trim['max_dist_m']:.3g} m) removed {100 * share:.1f} % of the "
+                    f"{n_in:,} faces ({trim['faces']:,} left)" + (f"; the ground fill added {fill:,}" if fill else ""),
+             hint="the trim distance is probably below the cloud's point spacing: leave "
+                  "steps.clean_mesh.max_dist_m at -1 (auto) or set it to 2-3 x the spacing (clean_report.json)")
     return round(share, 4)
 
 
@@ -265,14 +266,15 @@ def _mostly_fill(rep: dict, mesh, auto: dict, max_share: float, ctx) -> float | 
     share = round(min(1.0, gf["area_m2"] / total), 4) if total > 0 else 1.0
     gf["area_share"] = share
     ctx.log.info("ground fill: %.1f %% of the mesh's %.0f m^2", 100 * share, total)
-    if share > max_share:
-        spacing = auto.get("spacing_m")
-        ctx.degraded(f"the ground fill makes {100 * share:.0f} % of the mesh's surface ({gf['area_m2']:,.0f} of "
-                     f"{total:,.0f} m^2, more than {100 * max_share:.0f} %): the capture is too sparse for a street "
-                     "twin" + (f" (median point spacing {spacing:.2g} m)" if spacing == spacing and spacing else ""),
-                     "scan the street more densely (several sweeps or a mobile scan); what the twin shows beyond "
-                     "the scanned points is invented ground (clean_report.json ground_fill, docs/pointcloud.md "
-                     '"Sparse and partial captures")')
+    spacing = auto.get("spacing_m")
+    ctx.gate("ground fill share", 100 * share, 100 * max_share, "<=", "%",
+             why="a mesh mostly made of fill is invented ground: a capture too sparse for a street twin",
+             reason=f"the ground fill makes {100 * share:.0f} % of the mesh's surface ({gf['area_m2']:,.0f} of "
+                    f"{total:,.0f} m^2, more than {100 * max_share:.0f} %): the capture is too sparse for a street "
+                    "twin" + (f" (median point spacing {spacing:.2g} m)" if spacing == spacing and spacing else ""),
+             hint="scan the street more densely (several sweeps or a mobile scan); what the twin shows beyond "
+                  "the scanned points is invented ground (clean_report.json ground_fill, docs/pointcloud.md "
+                  '"Sparse and partial captures")')
     return share
 
 
@@ -452,12 +454,13 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
         ctx.log.info("%.1f %% of the cloud's points are farther than %.2g m from the mesh%s", 100 * far["share"],
                      far["far_m"], "".join(f"; {k} {100 * v['share']:.1f} %"
                                            for k, v in (far.get("per_class") or {}).items()))
-        if far["share"] > params.far_max_share:
-            ctx.degraded(f"{100 * far['share']:.1f} % of the cloud's points are farther than {far['far_m']:.2g} m "
-                         f"from the mesh (more than {100 * params.far_max_share:.0f} %): their labels are lost",
-                         "the clean-up removed surface the points support: see clean_report.json; try "
-                         "steps.clean_mesh.min_component_faces=0 or a larger steps.clean_mesh.max_dist_m "
-                         '(docs/pointcloud.md "Coverage of sparse scans")')
+        ctx.gate(f"points farther than {far['far_m']:.2g} m", 100 * far["share"], 100 * params.far_max_share, "<=",
+                 "%", why="points far from the mesh lose their labels",
+                 reason=f"{100 * far['share']:.1f} % of the cloud's points are farther than {far['far_m']:.2g} m "
+                        f"from the mesh (more than {100 * params.far_max_share:.0f} %): their labels are lost",
+                 hint="the clean-up removed surface the points support: see clean_report.json; try "
+                      "steps.clean_mesh.min_component_faces=0 or a larger steps.clean_mesh.max_dist_m "
+                      '(docs/pointcloud.md "Coverage of sparse scans")')
         if in_gt_mesh_ply is not None:
             gt = A.read_gt_mesh(in_gt_mesh_ply)
             gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
