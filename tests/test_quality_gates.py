@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from twinkit.quality import DEGRADED_EXIT, gate_entry, gate_text
+from twinkit.quality import DEGRADED_EXIT
 from twinkit.testing import make_context
 
 
@@ -25,6 +25,8 @@ def _gauge_project(project):
 
 
 def test_gate_records_the_figure_passed_or_failed(tmp_path):
+    from twinkit.quality import gate_entry, gate_text
+
     ctx = make_context(tmp_path, step_id="drop")
     assert ctx.gate("continuity driving", 99.95, 99.9, ">=", "%") is True
     assert ctx.degraded_reasons == []
@@ -62,20 +64,26 @@ def test_a_passing_and_a_failing_gate_are_both_shown(project):
     assert "cover 40 % (>= 30 %) ok" in r2.text
 
 
-def test_the_report_lists_every_warning_and_names_no_road_network(project):
+def test_the_report_lists_a_warning_that_is_not_degraded(project):
     env = _gauge_project(project)
-    r = project.run("site=t", "recipe=gauged", "steps.gauge.warn=true", "steps.gauge.no_roads=true", "steps.gauge.need=30",
-                    env=env)
+    r = project.run("site=t", "recipe=gauged", "steps.gauge.warn=true", "steps.gauge.gates=false", env=env)
     assert r.rc == 0, r.text
     html = (_last_run(project) / "report" / "report.html").read_text()
+    assert 'id="warnings"' in html, "no Warnings section"
     warned = html.split('id="warnings"')[1].split("</section>")[0]
-    assert "the kerb is 7 cm lower than expected" in warned
-    m = json.loads((_last_run(project) / "manifest.json").read_text())
-    assert m["status"] == "ok" and m["notes"] == ["no road network"]
-    assert "ok · no road network" in html
-    # a cached step keeps its warnings and its note
-    r2 = project.run("site=t", "recipe=gauged", "steps.gauge.warn=true", "steps.gauge.no_roads=true", "steps.gauge.need=30",
-                    env=env)
+    assert "02_gauge" in warned and "the kerb is 7 cm lower than expected" in warned
+    # a cached step keeps its warnings (they are stored with its result)
+    r2 = project.run("site=t", "recipe=gauged", "steps.gauge.warn=true", "steps.gauge.gates=false", env=env)
     assert r2.rc == 0 and project.status_of(r2, "02_gauge") in ("reused", "cached")
     html2 = (_last_run(project) / "report" / "report.html").read_text()
-    assert "the kerb is 7 cm lower than expected" in html2 and "no road network" in html2
+    assert "the kerb is 7 cm lower than expected" in html2.split('id="warnings"')[1]
+
+
+def test_the_status_names_no_road_network(project):
+    env = _gauge_project(project)
+    r = project.run("site=t", "recipe=gauged", "steps.gauge.no_roads=true", "steps.gauge.need=30", env=env)
+    assert r.rc == 0, r.text
+    m = json.loads((_last_run(project) / "manifest.json").read_text())
+    assert m["status"] == "ok" and m["notes"] == ["no road network"]
+    html = (_last_run(project) / "report" / "report.html").read_text()
+    assert "ok · no road network" in html and "(ok · no road network)" in r.text
