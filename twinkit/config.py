@@ -39,7 +39,7 @@ class EngineConfig:
                                         "sweep starts.")
     degraded_exit_code: int = param(4, ge=0, le=125,
                                     help="Exit status of a run that finished with a degraded result (docs/engine.md "
-                                         '"Degraded results"); 0 = exit 0 as for a clean run.')
+                                         '"Quality gates"); 0 = exit 0 as for a clean run.')
 
 
 def find_config_dir() -> Path:
