@@ -46,7 +46,7 @@ def gate_text(g: dict) -> str:
     return f"{g['name']} {value}{unit} ({g['op']} {g['threshold']:.4g}{unit}) {'ok' if g.get('ok') else 'FAILED'}"
 
 
-def with_gates(metrics: dict, gates: Iterable[dict], key: str = "gates") -> dict:
+def with_gates(metrics: dict, gates: Iterable[Any], key: str = "gates") -> dict:
     """``metrics`` with the records under ``key`` (``gates``, ``warnings`` or ``notes``) added after its own."""
     extra = list(gates)
     if not extra:

@@ -119,10 +119,11 @@ def test_a_section_registered_twice_or_badly_fails_at_load():
 
 
 def test_every_stage_section_comes_from_a_plugin():
-    """The core owns the layout, the run summary, timeline, 3D view, orthophotos, provenance and files."""
+    """The core owns the layout, the run summary, quality gates, warnings, timeline, 3D view, orthophotos,
+    provenance and files."""
     parts = R.report_sections()
     core = {p.name for p in parts if p.distribution == "twinkit"}
-    assert core == {"summary", "timeline", "view3d", "pictures", "provenance", "files"}
+    assert core == {"summary", "gates", "warnings", "timeline", "view3d", "pictures", "provenance", "files"}
     owners = {(p.name, p.distribution) for p in parts if p.distribution != "twinkit"}
     assert owners >= {("roads", "twinkit-roads"), ("alignment", "twinkit-roads"),
                       ("samples", "twinkit-segmentation"), ("segmetrics", "twinkit-segmentation"),

@@ -32,7 +32,7 @@ def gates_section(run: RunView) -> str:
 def log_warnings(run_log: Path) -> list[tuple[str, str]]:
     """(logger, message) of each WARNING line of ``run_log`` not logged by a step (a step's own are kept in its
     result's metrics)."""
-    out = []
+    out: list[tuple[str, str]] = []
     try:
         lines = run_log.read_text(encoding="utf-8", errors="replace").splitlines()
     except OSError:
