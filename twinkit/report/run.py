@@ -23,18 +23,13 @@ def read_json(p: Path, limit: int = 4_000_000) -> Any:
 
 
 def frame_unit(steps: list[dict]) -> str:
-    """The unit of the site frame's lengths, for the report's labels: "model units" where the latest site frame
-    record (``cameras_site.json``, written by a photo run's georeference) says the frame is unscaled, else
-    "m". ``steps`` are the report's steps (each with its ``dir``), in run order."""
-    from twinkit.artefacts import ArtefactError, read_cameras_site
-
+    """The unit of the site frame's lengths, for the report's labels: "model units" where the latest step that
+    says whether the frame is scaled (its metric ``scaled``: a photo run's georeference and roi) says it is
+    not, else "m". ``steps`` are the report's steps (manifest entries with ``metrics``), in run order."""
     for s in reversed(steps):
-        p = Path(s["dir"]) / "cameras_site.json"
-        if p.is_file():
-            try:
-                return "model units" if read_cameras_site(p).extra.get("scaled", True) is False else "m"
-            except (ArtefactError, OSError, ValueError):
-                return "m"
+        scaled = (s.get("metrics") or {}).get("scaled")
+        if isinstance(scaled, bool):
+            return "m" if scaled else "model units"
     return "m"
 
 

@@ -85,20 +85,16 @@ def test_no_ground_under_the_cameras_leaves_model_units(tmp_path):
 
 
 def test_the_core_report_says_model_units_for_an_unscaled_frame(tmp_path):
-    """The core report's unit helper reads the site frame record (cameras_site.json): "model units" for an
-    unscaled photo run, "m" otherwise (main: the core sections and the point-cloud section print "m")."""
+    """The core report's unit helper reads the steps' ``scaled`` metric (the georeference step's, from its
+    georef.json): "model units" for an unscaled photo run, "m" otherwise (main: the core sections and the
+    point-cloud section print "m")."""
     from twinkit.report.run import frame_unit
 
-    def run_with(scaled: bool | None) -> list[dict]:
-        d = tmp_path / f"run_{scaled}" / "02_georeference"
-        d.mkdir(parents=True)
-        if scaled is not None:
-            (d / "cameras_site.json").write_text(json.dumps({"cameras": [], "scaled": scaled}))
-        return [{"dir": d, "files": sorted(d.iterdir())}]
-
-    assert frame_unit(run_with(False)) == "model units"
-    assert frame_unit(run_with(True)) == "m"
-    assert frame_unit(run_with(None)) == "m"
+    g, _, _, _ = _georeference(tmp_path, eye_height_m=0.0)
+    unscaled = [{"metrics": {"method": g["method"], "scaled": g["scaled"]}}, {"metrics": {"faces": 10}}]
+    assert frame_unit(unscaled) == "model units"
+    assert frame_unit([{"metrics": {"scaled": True, "scale_from": "eye height"}}]) == "m"
+    assert frame_unit([{"metrics": {"faces": 10}}, {}]) == "m"
 
 
 def test_the_point_cloud_and_core_sections_print_the_frame_unit(tmp_path):

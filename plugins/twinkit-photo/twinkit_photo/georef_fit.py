@@ -349,10 +349,11 @@ def describe_scale(method: str, params, T: Transform, known: float | None, log, 
     if "level" in info and "final_vs_camera_horizon" in info["level"]:
         info["level_vs_camera_horizon_deg"] = info["level"]["final_vs_camera_horizon"]["total_deg"]
     if not scaled:
+        why_not = (info.get("eye_height") or {}).get("why_not")
         log.warning("georeference: the site frame is in model units, not metres (no GPS with a site CRS, no "
-                    "GCPs, no known distance): later steps' thresholds in metres do not mean metres; give "
+                    "GCPs, no known distance%s): later steps' thresholds in metres do not mean metres; give "
                     "steps.georeference.distance_points_model + steps.georeference.distance_m, or "
-                    "steps.georeference.scale")
+                    "steps.georeference.scale", f", no eye-height estimate: {why_not}" if why_not else "")
     return scaled
 
 
