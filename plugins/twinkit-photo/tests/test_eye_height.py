@@ -116,3 +116,12 @@ def test_the_point_cloud_and_core_sections_print_the_frame_unit(tmp_path):
     ortho = {"bounds": (0, 0, 30.0, 20.0), "texture": "img/o.png", "segmentation": None, "mesh": Path("m.ply")}
     ctx2 = SimpleNamespace(ortho=lambda: ortho, length_unit=lambda: "model units")
     assert "30.0 × 20.0 model units" in _orthophotos(ctx2)  # type: ignore[arg-type]
+
+
+def test_the_photo_section_marks_an_estimated_scale(tmp_path):
+    from test_report_section import _ctx, _step
+    from twinkit_photo.report import sec_photos
+
+    _georeference(tmp_path)
+    html = sec_photos(_ctx([_step("georeference", tmp_path / "g", ["georef.json"])]))
+    assert "Scale estimated" in html and "nominal eye height of 1.6 m" in html and "eye height" in html
