@@ -97,22 +97,13 @@ def test_the_core_report_says_model_units_for_an_unscaled_frame(tmp_path):
     assert frame_unit([{"metrics": {"faces": 10}}, {}]) == "m"
 
 
-def test_the_point_cloud_and_core_sections_print_the_frame_unit(tmp_path):
-    """The reconstruction metrics and the orthophoto's extent of an unscaled photo run say "model units"."""
+def test_the_core_orthophoto_section_prints_the_frame_unit():
+    """The orthophoto's extent of an unscaled photo run says "model units" (the point-cloud plugin's own
+    section: plugins/twinkit-pointcloud/tests/test_report_section.py)."""
     from types import SimpleNamespace
 
     from twinkit.report.sections import _orthophotos
-    from twinkit_pointcloud.report import sec_recon_metrics
 
-    f = tmp_path / "recon_metrics.json"
-    f.write_text(json.dumps({"cloud_to_mesh": {"mean": 0.01, "p95": 0.03}, "cloud_within_m": {"0.05": 0.9},
-                             "cloud_far": {"share": 0.1, "far_m": 0.5, "points": 10}}))
-    ctx = SimpleNamespace(esc=str, length_unit=lambda: "model units", first=lambda pattern: ({"folder": "10_e"}, f),
-                          read_json=lambda p: json.loads(Path(p).read_text()),
-                          table=lambda head, rows, *a: "<table>" + " | ".join(map(str, head)) + "</table>")
-    html = sec_recon_metrics(ctx)
-    assert "distance (model units)" in html and "within (model units)" in html
-    assert "0.5 model units from the mesh" in html and "(m)" not in html
     ortho = {"bounds": (0, 0, 30.0, 20.0), "texture": "img/o.png", "segmentation": None, "mesh": Path("m.ply")}
     ctx2 = SimpleNamespace(ortho=lambda: ortho, length_unit=lambda: "model units")
     assert "30.0 × 20.0 model units" in _orthophotos(ctx2)  # type: ignore[arg-type]
