@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .checks import check_lanes, cut_arms, detach_junctions, narrow_arms, nudge_arms, trim_unsupported
-from .measures import describe, lanes_on_road, network_length
+from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
 from .netconvert import netconvert_plain, write_plain
 from .network import add_heights_and_signals, add_sidewalks, derive_network
@@ -24,6 +24,7 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     net.stats["curbs"] = curbs
     net.stats["point_spacing_m"] = spacing
     derived_m = network_length(net)
+    record_stage(net, "derived")
     if p.sidewalks and curbs:
         add_sidewalks(net, mesh.vertices, mesh.faces, labels, p)
     add_heights_and_signals(net, mesh.vertices, mesh.faces, labels, p)
@@ -32,6 +33,7 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     if cut["cut_m"] or cut["dropped_roads"]:
         log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
                  "scanned ground", cut["cut_m"], cut["dropped_roads"])
+    record_stage(net, "trim_unsupported")
     work = out_xodr.parent / "scan_plain"
     rounds = []
     for rnd in range(p.lane_check_rounds + 1):
@@ -41,6 +43,7 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
             break
         row = check_round(net, out_xodr.read_text(encoding="utf-8"), mesh, p, scene, rnd, log)
         rounds.append(row)
+        record_stage(net, f"lane_check {rnd + 1}")
         if row.get("settled"):
             row.pop("settled")
             break
