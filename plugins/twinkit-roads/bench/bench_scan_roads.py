@@ -109,6 +109,7 @@ def coverage_rows(run: Path, tmp: Path, tol: float) -> tuple[str, float, list[di
     street covered (m, share) and what the stage dropped (m of street)."""
     from twinkit.artefacts import read_textured_mesh
     from twinkit_roads.scan import covered, read_truth, street_axis
+    from twinkit_roads.scan.geometry import resample
     from twinkit_roads.scan.measures import directions
 
     mesh_p = one(run, "*_texture/textured_mesh.ply")
@@ -125,11 +126,13 @@ def coverage_rows(run: Path, tmp: Path, tol: float) -> tuple[str, float, list[di
     doc = json.loads(doc_p.read_text())
     mesh = read_textured_mesh(mesh_p)
     if truth_p is not None:
-        lines = [_resample(ln, 0.25) for ln in read_truth(truth_p) or []]
+        lines = [resample(ln, 0.25) for ln in read_truth(truth_p) or []]
         ref, step = np.concatenate(lines), 0.25
         dirs = np.concatenate([directions(ln, 1.0) for ln in lines])
         inside = _inside(ref, np.asarray(mesh.vertices)[:, :2])
         ref, dirs, what = ref[inside], dirs[inside], "roads_truth lane centres"
+    elif labels_p is None:
+        sys.exit(f"{run}: no roads_truth.json and no labels.npy: nothing says where the street is")
     else:
         (ref, dirs), step = street_axis(mesh.vertices, mesh.faces, np.load(labels_p)), 0.25
         what = "road-labelled ground"
@@ -149,13 +152,6 @@ def coverage_rows(run: Path, tmp: Path, tol: float) -> tuple[str, float, list[di
         rows.append({"stage": f"no roads: {doc['no_roads']}", "roads": 0, "length_m": 0.0, "covered_m": 0.0,
                      "share": 0.0, "dropped_m": prev})
     return what, street_m, rows
-
-
-def _resample(xy: np.ndarray, step: float) -> np.ndarray:
-    seg = np.hypot(*np.diff(xy, axis=0).T)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    t = np.arange(0.0, s[-1], step)
-    return np.stack([np.interp(t, s, xy[:, 0]), np.interp(t, s, xy[:, 1])], -1)
 
 
 def _inside(pts: np.ndarray, xy: np.ndarray, cell: float = 2.0) -> np.ndarray:

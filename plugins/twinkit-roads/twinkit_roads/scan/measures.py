@@ -64,16 +64,19 @@ def record_stage(net: Network, stage: str) -> None:
         "arms": [{"width_m": round(float(a.width_m), 2), "axis": np.round(a.xy, 2).tolist()} for a in net.arms]})
 
 
-def street_axis(v, f, labels, res: float = 0.25, min_half_m: float = 1.5,
-                min_area_m2: float = 20.0) -> tuple[np.ndarray, np.ndarray]:
-    """Points every ``res`` metre (about) along the middle of the road-labelled ground seen from above: the
-    skeleton of the road-labelled faces (gaps closed, holes filled, pieces under ``min_area_m2`` left out) where
-    the road is at least ``2 * min_half_m`` wide (so the skeleton's spurs into the corners do not count). (k, 2)
-    site-frame x, y; each point stands for about ``res`` metres of street."""
+def street_axis(v, f, labels, res: float = 0.25, min_half_m: float = 1.5, min_area_m2: float = 20.0,
+                spur_m: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``res`` metre along the middle of the road-labelled ground seen from above: the skeleton of
+    the road-labelled faces (gaps closed, holes filled, pieces under ``min_area_m2`` left out) without its spurs
+    (a branch with a free end, shorter than the road's half width there plus ``spur_m``: a corner of the
+    labels, once; the scan source's own pruning, repeated until stable, eats real street ends of ragged labels),
+    where the road is at least ``2 * min_half_m`` wide. Returns (k, 2)
+    site-frame x, y (each point stands for ``res`` metres of street) and (k, 2) unit directions along it."""
     from scipy import ndimage
 
     from ..mesh2d import Grid
-    from .skeleton import thin
+    from .geometry import resample
+    from .network import _degrees, _skeleton_edges
 
     grid = Grid.around(v[:, :2], res)
     road = rasterize_faces(v, f, np.flatnonzero((labels[f] == ROAD).sum(1) >= 2), grid)
@@ -82,10 +85,22 @@ def street_axis(v, f, labels, res: float = 0.25, min_half_m: float = 1.5,
     if n:
         area = ndimage.sum(road, lab, np.arange(1, n + 1)) * res ** 2
         road = np.isin(lab, 1 + np.flatnonzero(area >= min_area_m2))
-    dist = ndimage.distance_transform_edt(road) * res
-    rc = np.argwhere(thin(road) & (dist >= min_half_m))
-    pts = np.stack([grid.x0 + (rc[:, 1] + 0.5) * res, grid.y0 - (rc[:, 0] + 0.5) * res], -1)
-    return pts, directions(pts, 1.5)
+    node_xy, edges, _ = _skeleton_edges(road, grid)
+    pts, dirs = [], []
+    deg = _degrees(edges, len(node_xy))
+    for a, b, xy, hw in edges:
+        length = np.hypot(*np.diff(xy, axis=0).T).sum() if len(xy) > 1 else 0.0
+        spur = (deg[a] == 1) != (deg[b] == 1) and max(deg[a], deg[b]) > 2 and length < float(hw.max()) + spur_m
+        if spur or length < res:
+            continue
+        q = resample(xy, res)
+        wide = np.interp(np.linspace(0, 1, len(q)), np.linspace(0, 1, len(hw)), hw) >= min_half_m
+        if len(q) >= 2 and wide.any():
+            pts.append(q[wide])
+            dirs.append(directions(q, 1.5)[wide])
+    if not pts:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    return np.concatenate(pts), np.concatenate(dirs)
 
 
 def directions(pts: np.ndarray, radius_m: float) -> np.ndarray:
