@@ -165,8 +165,8 @@ def print_coverage(runs: list[Path], base: Path, tol: float) -> None:
     print(f"| run | street (reference) m | stage | roads | axis length m | street covered m (tol {tol} m) | share | "
           "dropped by this stage m |")
     print("|---|---|---|---|---|---|---|---|")
-    for run in runs:
-        what, street_m, rows = coverage_rows(run.resolve(), base, tol)
+    for i, run in enumerate(runs):
+        what, street_m, rows = coverage_rows(run.resolve(), base / f"run{i}", tol)
         for r in rows:
             drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
             print(f"| {run} | {street_m:.1f} ({what}) | {r['stage']} | {r['roads']} | {r['length_m']:.1f} | "

@@ -29,8 +29,8 @@ What a person does by hand in RoadRunner from lidar, as a road source (``road_so
 from __future__ import annotations
 
 from .build import build_network, check_round, no_roads_report, scan_metrics, scan_report
-from .checks import (check_lanes, cut_arms, detach_junctions, lane_heights, narrow_arms, nudge_arms, steps_across,
-                     trim_unsupported)
+from .checks import (check_lanes, cut_arms, detach_junctions, lane_heights, narrow_arms, nudge_arms, parked_faces,
+                     steps_across, trim_unsupported)
 from .geometry import lane_layout
 from .inputs import choose_curbs, cloud_xy, point_spacing, read_labels, read_truth
 from .masks import carriageway_mask, measured
@@ -45,6 +45,6 @@ __all__ = ["Arm", "Network", "NoRoads", "ScanSourceParams", "WALK_MAX_M", "add_h
            "build_network", "carriageway_mask", "check_lanes", "check_round", "choose_curbs", "cloud_xy", "covered",
            "cut_arms", "derive_network", "describe", "detach_junctions", "draw_scan_roads", "empty_map",
            "empty_network", "is_empty_map", "lane_heights", "lane_layout", "lanes_on_road", "mark_source",
-           "measured", "narrow_arms", "netconvert_plain", "network_length", "no_roads_report", "nudge_arms",
+           "measured", "narrow_arms", "netconvert_plain", "network_length", "no_roads_report", "nudge_arms", "parked_faces",
            "point_spacing", "read_labels", "read_truth", "record_stage", "scan_metrics", "scan_report", "skeleton_graph",
            "steps_across", "street_axis", "thin", "trim_unsupported", "write_plain"]
