@@ -15,6 +15,7 @@ The context offers, all read-only except the report folder:
   plugins of the distribution that registered the section), ``ctx.outputs(step)`` (the step's declared
   outputs by name, from ``step.json``), ``ctx.find(pattern, steps=None)`` and ``ctx.first(pattern)``
   (files by glob, latest step first), ``ctx.read_json(path)``;
+- the unit of lengths: ``ctx.length_unit()`` ("m", or "model units" for an unscaled photo run);
 - HTML helpers: ``ctx.esc``, ``ctx.attr``, ``ctx.url``, ``ctx.link`` (the only way a value from the run goes
   into the page: :mod:`twinkit.report.html`), ``ctx.table``, ``ctx.figure``, ``ctx.legend``, ``ctx.fmt``,
   ``ctx.size``, ``ctx.CITYSCAPES``, ``ctx.palette()``, ``ctx.flatten`` (nested dict -> ``{'a.b': v}``) (see
@@ -37,7 +38,7 @@ from typing import Any
 from twinkit.report import html as _html
 from twinkit.report import page as _page
 from twinkit.report.render import TopDown, render_topdown
-from twinkit.report.run import RunView, cached_copy, file_key, flatten, link_or_copy, read_json, rel, touch
+from twinkit.report.run import RunView, cached_copy, file_key, flatten, frame_unit, link_or_copy, read_json, rel, touch
 
 log = logging.getLogger("twinkit.report")
 
@@ -139,6 +140,11 @@ class SectionContext:
     def first(self, pattern: str, steps: list[dict] | None = None) -> tuple[dict, Path] | None:
         hits = self.find(pattern, steps)
         return hits[0] if hits else None
+
+    def length_unit(self) -> str:
+        """The unit to print after a length: "m", or "model units" for an unscaled photo run
+        (:func:`~twinkit.report.run.frame_unit`)."""
+        return frame_unit(self.run.steps)
 
     def key_of(self, step: dict, p: Path) -> str:
         return self.run.key_of(step, p)

@@ -22,6 +22,17 @@ def read_json(p: Path, limit: int = 4_000_000) -> Any:
         return None
 
 
+def frame_unit(steps: list[dict]) -> str:
+    """The unit of the site frame's lengths, for the report's labels: "model units" where the latest step that
+    says whether the frame is scaled (its metric ``scaled``: a photo run's georeference and roi) says it is
+    not, else "m". ``steps`` are the report's steps (manifest entries with ``metrics``), in run order."""
+    for s in reversed(steps):
+        scaled = (s.get("metrics") or {}).get("scaled")
+        if isinstance(scaled, bool):
+            return "m" if scaled else "model units"
+    return "m"
+
+
 def flatten(d: Any, prefix: str = "") -> dict[str, Any]:
     """Nested dicts -> {"a.b.c": scalar}; lists of scalars stay as values."""
     out: dict[str, Any] = {}

@@ -156,7 +156,8 @@ def _orthophotos(ctx: SectionContext) -> str:
     o = ctx.ortho()
     if o:
         b = o["bounds"]
-        ext = f" <span class=\"dim\">{b[2] - b[0]:.1f} × {b[3] - b[1]:.1f} m, north up, from {esc(o['mesh'].name)}</span>"
+        ext = (f" <span class=\"dim\">{b[2] - b[0]:.1f} × {b[3] - b[1]:.1f} {esc(ctx.length_unit())}, north up, "
+               f"from {esc(o['mesh'].name)}</span>")
         figs.append(figure(o["texture"], "Top-down orthophoto of the textured mesh", ext))
         if o["segmentation"]:
             src = f" <span class=\"dim\">from {esc(o.get('labels'))}</span>" if o.get("labels") else ""

@@ -118,7 +118,8 @@ def _far_facade_model(tmp_path, unit_m: float) -> Path:
 def _roi(tmp_path, scale: float) -> tuple[dict, list[str]]:
     sfm_dir = _far_facade_model(tmp_path, unit_m=5.0)
     g = run_step(plugin_from_module(photo, "step", "georeference"), tmp_path / "g", {"in_sfm_dir": sfm_dir},
-                 photo.GeorefParams(method="none", scale=scale, vertical_lines=False), site={"name": "t"})
+                 photo.GeorefParams(method="none", scale=scale, vertical_lines=False, eye_height_m=0.0),
+                 site={"name": "t"})
     r = run_step(plugin_from_module(photo, "step", "roi"), tmp_path / "r",
                  {"in_cameras_site_json": g["cameras_site.json"], "in_sparse_site_ply": g["sparse_site.ply"]},
                  photo.RoiParams())

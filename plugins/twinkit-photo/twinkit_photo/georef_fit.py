@@ -126,10 +126,22 @@ def _auto_method(params, m: SfmModel, gcp_rows: list, gps_ok: list[str], frame, 
         info["gps_unused"] = {"photos_with_gps": len(gps_ok), "why": "the site has no crs or base_point",
                               "suggestion": suggest_site(m.doc, gps_ok)}
     else:
-        log.warning("georeference: no usable GCPs and fewer than 3 registered photos with EXIF GPS: "
-                    "the model is only levelled and centred (scale %.3f); give site.inputs.gcp for a "
-                    "metric, georeferenced result", params.scale)
+        log.warning("georeference: no usable GCPs and fewer than 3 registered photos with EXIF GPS: the model is "
+                    "levelled and centred, %s; give site.inputs.gcp for a georeferenced result", scale_words(params))
     return "none"
+
+
+def scale_words(params) -> str:
+    """What method none does about the scale, as the log says it: the known distance, the given scale, the
+    nominal eye height, or nothing (model units)."""
+    if params.distance_points_model or params.distance_m:
+        return f"scaled by the known distance (steps.georeference.distance_m={params.distance_m:g})"
+    if params.scale != 1.0:
+        return f"scaled by steps.georeference.scale={params.scale:g} (metres per model unit)"
+    if params.eye_height_m > 0:
+        return (f"its scale estimated from a nominal eye height (steps.georeference.eye_height_m="
+                f"{params.eye_height_m:g})")
+    return "unscaled (model units; steps.georeference.eye_height_m=0)"
 
 
 # --------------------------------------------------------------------------- compute: the fits
@@ -205,7 +217,8 @@ def fit_gps(params, m: SfmModel, frame, sfm_dir: Path, photos_dir, log, info: di
 
 
 def fit_none(params, m: SfmModel, known: float | None, photos_dir, log, info: dict) -> Transform:
-    """Level and centre on the mean camera; the scale from the known distance, else ``params.scale``."""
+    """Level and centre on the mean camera; the scale from the known distance, else ``params.scale``, else
+    estimated from the nominal eye height (:func:`eye_height_scale`), else none (model units)."""
     R_lvl, info["level"] = level_model(params, m, photos_dir, log)
     scale = float(params.scale)
     if known is not None:
@@ -213,7 +226,64 @@ def fit_none(params, m: SfmModel, known: float | None, photos_dir, log, info: di
         info["scale_from"] = "known distance"
     elif params.scale != 1.0:
         info["scale_from"] = "steps.georeference.scale"
+    elif params.eye_height_m > 0:
+        est = eye_height_scale(m.C @ R_lvl.T, np.asarray(m.sparse["xyz"], float).reshape(-1, 3) @ R_lvl.T,
+                               params.eye_height_m)
+        info["eye_height"] = est
+        if est.get("scale"):
+            scale = est["scale"]
+            info["scale_from"] = "eye height"
+        else:
+            log.warning("georeference: the scale cannot be estimated from the eye height: %s", est["why_not"])
     return Transform(scale, R_lvl, -scale * R_lvl @ m.C.mean(0))
+
+
+#: how far a scale from the nominal eye height may be off: people hold a camera 1.3-1.9 m high, and the ground
+#: under them is a plane fitted to sparse points (docs/photo.md, "A nominal eye height")
+EYE_HEIGHT_UNCERTAINTY = 0.2
+#: the ground the photographer stands on is near level (a street's slope and camber stay under 10 degrees)
+EYE_HEIGHT_MAX_TILT_DEG = 10.0
+
+
+def eye_height_note(eye_height_m: float) -> str:
+    """How an estimated scale is marked everywhere (log, georef.json, cameras_site.json, roi.json, report)."""
+    return (f"scale estimated from a nominal eye height of {eye_height_m:g} m: "
+            f"±{100 * EYE_HEIGHT_UNCERTAINTY:.0f} %")
+
+
+def eye_height_scale(C: np.ndarray, pts: np.ndarray, eye_height_m: float) -> dict:
+    """The scale (metres per model unit) that puts the cameras ``eye_height_m`` over the ground. ``C`` (n, 3)
+    and ``pts`` (N, 3) in the levelled model frame (z up). The ground is the roi step's plane
+    (:func:`~twinkit_photo.roi.ground_plane`, its default 10 cm inlier distance), fitted in a frame brought near metres by a
+    first guess (the median point below the cameras), then refined twice; the cameras' median height over it
+    gives the scale. A plane tilted over ``EYE_HEIGHT_MAX_TILT_DEG`` (a bank) gives none. Returns {"scale", "nominal_m", "camera_height_model", "camera_height_iqr_model",
+    "ground_inliers", "ground_tilt_deg"}, or {"nominal_m", "why_not"} when no ground is found."""
+    from .roi import ground_plane
+
+    out: dict[str, Any] = {"nominal_m": float(eye_height_m)}
+    below = pts[pts[:, 2] < np.median(C[:, 2])] if len(pts) else pts
+    guess = float(np.median(C[:, 2]) - np.median(below[:, 2])) if len(below) >= 50 else 0.0
+    if guess <= 0:
+        return {**out, "why_not": f"{len(below)} sparse points below the cameras (50 needed)"}
+    s = eye_height_m / guess
+    for _ in range(3):
+        g = ground_plane(C * s, pts * s, 0.10)
+        if not g["source"].startswith("RANSAC"):
+            return {**out, "why_not": "no ground plane under the cameras"}
+        if g["tilt_deg"] > EYE_HEIGHT_MAX_TILT_DEG:  # a bank or a ramp, not the ground people stand on
+            return {**out, "why_not": f"the plane under the cameras is tilted {g['tilt_deg']:.0f} degrees (over "
+                                      f"{EYE_HEIGHT_MAX_TILT_DEG:g}: not the ground they stand on)"}
+        n = np.asarray(g["normal"], float)
+        p0 = np.r_[(C[:, :2] * s).mean(0), g["z_m"]]
+        h = (C * s - p0) @ n
+        if np.median(h) <= 0:
+            return {**out, "why_not": "the ground plane found is not under the cameras"}
+        h_model = h / s
+        s *= eye_height_m / float(np.median(h))
+    q1, q3 = np.quantile(h_model, [0.25, 0.75])
+    return {**out, "scale": float(s), "camera_height_model": float(eye_height_m / s),
+            "camera_height_iqr_model": [float(q1), float(q3)], "ground_inliers": g.get("inliers"),
+            "ground_tilt_deg": g.get("tilt_deg"), "uncertainty": EYE_HEIGHT_UNCERTAINTY}
 
 
 def user_transform(m16) -> Transform:
@@ -251,12 +321,27 @@ def fit(method: str, params, m: SfmModel, *, gcp_rows: list, gcp_json, known: fl
 
 # --------------------------------------------------------------------------- after the fit
 
-def describe_scale(method: str, params, T: Transform, known: float | None, log, info: dict) -> bool:
+def describe_scale(method: str, params, T: Transform, known: float | None, log, info: dict,
+                   degraded=None) -> bool:
     """Whether the site frame is in metres; that, the known distance's check and the levelling's angle to
-    the photos' horizon go into ``info``. An unscaled frame is logged as a warning."""
+    the photos' horizon go into ``info``. An unscaled frame is logged as a warning; a scale estimated from
+    the eye height is marked in ``info["units"]`` and makes the run degraded (``degraded(reason, hint)``)."""
     scaled = method in ("gcp", "gps", "transform") or "scale_from" in info
     info["scaled"] = scaled
     info["units"] = "metres" if scaled else "model units (unscaled: no GPS, GCPs, known distance or scale)"
+    if info.get("scale_from") == "eye height":
+        note = eye_height_note(params.eye_height_m)
+        info["units"] = f"metres ({note})"
+        fix = ("give steps.georeference.distance_points_model=[x1,y1,z1,x2,y2,z2] with "
+               "steps.georeference.distance_m=<metres>, or steps.georeference.scale=<metres per model unit>, or "
+               "site.crs and site.base_point for the photos' GPS")
+        why = (f"no GPS, GCPs, known distance or scale: {note} (the cameras stand "
+               f"{info['eye_height']['camera_height_model']:.3g} model units over the sparse ground, "
+               f"{T.scale:.3g} m per model unit); a guess, not a georeference")
+        if degraded is not None:
+            degraded(why, fix)
+        else:
+            log.warning("georeference: %s; %s", why, fix)
     if known is not None:
         got = float(T.scale * known)
         info["known_distance"] = {"given_m": params.distance_m, "in_site_frame_m": round(got, 4),
@@ -264,10 +349,11 @@ def describe_scale(method: str, params, T: Transform, known: float | None, log, 
     if "level" in info and "final_vs_camera_horizon" in info["level"]:
         info["level_vs_camera_horizon_deg"] = info["level"]["final_vs_camera_horizon"]["total_deg"]
     if not scaled:
+        why_not = (info.get("eye_height") or {}).get("why_not")
         log.warning("georeference: the site frame is in model units, not metres (no GPS with a site CRS, no "
-                    "GCPs, no known distance): later steps' thresholds in metres do not mean metres; give "
+                    "GCPs, no known distance%s): later steps' thresholds in metres do not mean metres; give "
                     "steps.georeference.distance_points_model + steps.georeference.distance_m, or "
-                    "steps.georeference.scale")
+                    "steps.georeference.scale", f", no eye-height estimate: {why_not}" if why_not else "")
     return scaled
 
 
@@ -315,7 +401,7 @@ def flag_outliers(method: str, params, m: SfmModel, T: Transform, log, degraded,
     """:func:`outlier_cameras` for the fitted model, logged (the run degraded past a fifth of the photos);
     info gets "outlier_cameras" and, per photo, where the model puts the camera and its GPS fix."""
     outliers = outlier_cameras(m.names, T.apply(m.C), info.get("gps", {}).get("residual_m", {}), params,
-                               metric=method != "none")
+                               metric=bool(info.get("scaled", method != "none")))
     if outliers:
         log.warning("georeference: %d outlier camera(s) left out of the later steps: %s", len(outliers),
                     "; ".join(f"{n} ({why})" for n, why in outliers.items()))
@@ -371,12 +457,16 @@ def truth_check(m: SfmModel, cams_out: list[dict], truth: dict, method: str, log
             "camera_centre_error_after_best_similarity_m": {"mean": float(eb.mean()), "max": float(eb.max())}}
 
 
-def cameras_site_doc(method: str, scaled: bool, cams_out: list[dict]) -> dict:
-    """cameras_site.json: the site-frame cameras, their frame, units and camera convention."""
+def cameras_site_doc(method: str, scaled: bool, cams_out: list[dict], info: dict | None = None) -> dict:
+    """cameras_site.json: the site-frame cameras, their frame, units (marked where the scale is estimated,
+    ``info["scale_from"]``) and camera convention."""
+    units = "metres" if scaled else "model units"
+    if (info or {}).get("scale_from") == "eye height":
+        units = info["units"]  # type: ignore[index]
     return {
         "frame": ("site local (metres, x east, y north, z up)" if method in ("gcp", "gps", "transform") else
-                  "levelled model frame (z up, " + ("metres)" if scaled else "model units: unscaled)")),
-        "scaled": scaled, "units": "metres" if scaled else "model units",
+                  "levelled model frame (z up, " + ((units + ")") if scaled else "model units: unscaled)")),
+        "scaled": scaled, "units": units, "scale_from": (info or {}).get("scale_from"),
         "convention": "OpenCV pinhole: X_world = R_world_from_camera @ X_cam + center; K at full photo size",
         "cameras": cams_out}
 
@@ -384,7 +474,7 @@ def cameras_site_doc(method: str, scaled: bool, cams_out: list[dict]) -> dict:
 def step_summary(report: dict, T: Transform, n_outliers: int) -> dict:
     """What the georeference step returns (the run's summary): method, scale, outliers, levelling, truth."""
     out = {"method": report["method"], "scale": float(T.scale), "outlier_cameras": n_outliers,
-           "scaled": report["scaled"]}
+           "scaled": report["scaled"], "scale_from": report.get("scale_from")}
     if "level_vs_camera_horizon_deg" in report:
         out["level_vs_camera_horizon_deg"] = report["level_vs_camera_horizon_deg"]
         out["up_from"] = report["level"]["up_from"]

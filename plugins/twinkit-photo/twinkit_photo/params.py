@@ -52,6 +52,11 @@ class GeorefParams:
                              help="ground: put the sparse ground plane at ground_z_m instead of the GPS height")
     ground_z_m: float = param(0.0, help="height_from=ground: the ground's height in the site frame, metres")
     scale: float = param(1.0, gt=0, help="method none: metres per model unit")
+    eye_height_m: float = param(1.6, ge=0, le=10,
+                                help="method none without a scale or known distance: the photos were taken this "
+                                     "high above the ground, metres; the scale is estimated from the cameras' "
+                                     "height over the sparse ground plane, marked as an estimate, and the run "
+                                     "stays degraded (0 = no estimate: model units)")
     min_gcp_views: int = param(2, ge=1, help="a ground-control point needs this many registered photos to be used")
     gcp_outlier_m: float = param(0.05, gt=0, help="a GCP whose residual exceeds this (and 3x the median), metres, "
                                                   "is left out of the fit")

@@ -119,7 +119,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     method = G.choose_method(params, m, gcp_rows, len(gcps), in_gcp_json, frame, ctx.log, info)
     T, gps_site = G.fit(method, params, m, gcp_rows=gcp_rows, gcp_json=in_gcp_json, known=known, frame=frame,
                         sfm_dir=sfm_dir, photos_dir=in_photos_dir, log=ctx.log, info=info)
-    scaled = G.describe_scale(method, params, T, known, ctx.log, info)
+    scaled = G.describe_scale(method, params, T, known, ctx.log, info, ctx.degraded)
     T, xyz = G.ground_height(params, T, m.sparse["xyz"], info)
     outliers = G.flag_outliers(method, params, m, T, ctx.log, ctx.degraded, info)
     info["photos"] = G.photos_table(m, T, gps_site, outliers, info)
@@ -127,7 +127,7 @@ def georeference(params: GeorefParams, ctx, *, in_sfm_dir: Path, out_cameras_sit
     report = {"method": method, "transform": T.to_json(), **info, "cameras": len(cams_out)}
     if in_cameras_json is not None:
         report.update(G.truth_check(m, cams_out, read_json(in_cameras_json, "camera truth"), method, ctx.log))
-    write_cameras_site(out_cameras_site_json, G.cameras_site_doc(method, scaled, cams_out))
+    write_cameras_site(out_cameras_site_json, G.cameras_site_doc(method, scaled, cams_out, info))
     write_cloud(out_sparse_site_ply, xyz, m.sparse["rgb"], comments=[f"twinkit-photo georeference ({method})"])
     np.savez_compressed(Path(out_sparse_site_ply).with_suffix(".npz"), vis_image=m.sparse["vis_image"],
                         vis_point=m.sparse["vis_point"])
@@ -166,7 +166,7 @@ def roi(params: RoiParams, ctx, *, in_cameras_site_json: Path, in_sparse_site_pl
         ctx.log.warning("roi: the photos look farther than steps.roi.max_depth_m (%g %s): the depth limit is %.1f "
                         "%s (%s)", params.max_depth_m, unit, depth, unit, depth_why)
     box = roi_box(C, pts, ground["z_m"], params, depth)
-    doc = roi_doc(C, pts, box, ground, depth, scaled, depth_why)
+    doc = roi_doc(C, pts, box, ground, depth, scaled, depth_why, cdoc.extra.get("units"))
     write_json(out_roi_json, doc)
     ctx.log.info("roi: box %s .. %s, ground z %.2f %s (%s), depth limit %.1f %s", np.round(box["min"], 1),
                  np.round(box["max"], 1), ground["z_m"], unit, ground["source"], depth, unit)

@@ -101,6 +101,10 @@ def sec_photos(ctx) -> str:
         warn = "" if g.get("scaled", True) else (
             "<p class=\"degraded\"><b>Unscaled:</b> no GPS with a site CRS, no GCPs and no known distance: the site frame "
             "is in model units, and every length in this report is in those units, not metres.</p>")
+        if g.get("scale_from") == "eye height":
+            warn = (f"<p class=\"degraded\"><b>Scale estimated:</b> {ctx.esc(g.get('units'))}. A guess from the "
+                    f"cameras' height over the sparse ground, not a georeference: every length in this report "
+                    f"carries that error.</p>")
         parts.append("<h3>Georeference</h3>" + warn + ctx.table(["", "value"], _georef_rows(g)))
         photos = g.get("photos") or {}
         if photos:
@@ -132,6 +136,7 @@ def _georef_rows(g: dict) -> list[list]:
     lvl = g.get("level") or {}
     rows = [["method", g.get("method")], ["units", g.get("units", "metres")],
             ["scale (site units per model unit)", (g.get("transform") or {}).get("scale")],
+            ["scale from", g.get("scale_from") or "the fit"],
             ["up from", lvl.get("up_from")],
             ["final vertical vs. the photos' horizon (deg)", g.get("level_vs_camera_horizon_deg")]]
     hz = lvl.get("camera_horizon") or {}

@@ -70,13 +70,14 @@ def roi_box(C: np.ndarray, pts: np.ndarray, ground_z: float, params, max_depth: 
 
 
 def roi_doc(C: np.ndarray, pts: np.ndarray, box: dict, ground: dict, max_depth_m: float, scaled: bool,
-            depth_why: str = "steps.roi.max_depth_m") -> dict:
+            depth_why: str = "steps.roi.max_depth_m", units: str | None = None) -> dict:
     """roi.json: the box, the ground, the dense step's depth limit (and where it came from), the frame's units
-    and how much of the sparse cloud is inside."""
+    (``units``: cameras_site.json's, which say when the scale is estimated) and how much of the sparse cloud
+    is inside."""
     inside = np.all((pts >= box["min"]) & (pts <= box["max"]), axis=1).mean() if len(pts) else 0.0
     return {"_comment": "Edit this file to change what the dense step keeps (the thesis's manual step 3.8.2): "
                         "box min/max, ground z and max_depth_m in the site frame's units (see units). The next run keeps your edit and "
                         "re-runs only the steps after it.",
             "box": box, "ground": ground, "max_depth_m": max_depth_m, "max_depth_from": depth_why, "scaled": scaled,
-            "units": "metres" if scaled else "model units (unscaled)",
+            "units": (units or "metres") if scaled else "model units (unscaled)",
             "cameras_xy_extent": np.ptp(C[:, :2], 0).tolist(), "sparse_inside_ratio": float(inside)}

@@ -45,7 +45,7 @@ def _stats_table(ctx, title: str, d: dict) -> str:
             rows.append([k] + [v.get(c, "") for c in cols])
     if not rows:
         return ""
-    return f"<h3>{ctx.esc(title)}</h3>" + ctx.table(["distance (m)"] + cols, rows)
+    return f"<h3>{ctx.esc(title)}</h3>" + ctx.table([f"distance ({ctx.length_unit()})"] + cols, rows)
 
 
 _STAT_KEYS = {"min", "max", "mean", "median", "p5", "p50", "p90", "p95", "p99", "rms", "std", "count"}
@@ -70,13 +70,13 @@ def sec_recon_metrics(ctx) -> str:
     within = d.get("cloud_within_m")
     if isinstance(within, dict):
         parts.append("<h3>Cloud points within a distance of the mesh</h3>" + ctx.table(
-            ["within (m)", "fraction"], [[k, v] for k, v in within.items()]))
+            [f"within ({ctx.length_unit()})", "fraction"], [[k, v] for k, v in within.items()]))
     far = d.get("cloud_far")
     if isinstance(far, dict) and "share" in far:
         rows = [["whole cloud", far.get("points", ""), f"{100 * far['share']:.2f} %"]]
         for k, v in (far.get("per_class") or {}).items():
             rows.append([k, v.get("points", ""), f"{100 * v.get('share', 0.0):.2f} %"])
-        parts.append(f"<h3>Points farther than {ctx.esc(far.get('far_m', ''))} m from the mesh (labels lost)</h3>"
+        parts.append(f"<h3>Points farther than {ctx.esc(far.get('far_m', ''))} {ctx.esc(ctx.length_unit())} from the mesh (labels lost)</h3>"
                      + ctx.table(["points", "count", "share farther"], rows))
     if isinstance(d.get("counts"), dict):
         parts.append("<h3>Counts</h3>" + ctx.table(["", "count"], [[k, v] for k, v in d["counts"].items()]))
