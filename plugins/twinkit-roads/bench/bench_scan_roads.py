@@ -12,6 +12,16 @@ inside the truth's ends) to the nearest true centre line; lanes on road: share o
 area (outside junctions) on road-labelled surface of the ground-truth labels (and of the labels used).
 When the run itself used road_source=scan, its apply_alignment numbers (after align_roads' curb fit)
 are printed too.
+
+    .venv/bin/python plugins/twinkit-roads/bench/bench_scan_roads.py --coverage --run RUN [--run ...]
+
+Coverage mode, any finished run (a real cloud's too): how much of the street inside the capture the network
+from the scan covers, and which check dropped how much. The street: the true lane centre lines
+(roads_truth.json, the demo) or the middle of the road-labelled ground (the skeleton of the run's own labels'
+road faces where the road is at least 3 m wide; ``scan.street_axis``). Covered: a street point within half the
+carriageway plus ``--tol`` of a road's axis. The run's scan_roads.json (road_source=scan) gives the final
+network and, per stage (derived, trim_unsupported, each lane_check round), the roads kept; a run without it
+gets the scan source run here (predicted labels, default parameters).
 """
 from __future__ import annotations
 
@@ -94,14 +104,89 @@ def pipeline_numbers(run: Path) -> dict | None:
     return {k: m.get(k) for k in ("centreline_rmse_before_m", "centreline_rmse_after_m", "tx_m", "ty_m", "yaw_deg")}
 
 
+def coverage_rows(run: Path, tmp: Path, tol: float) -> tuple[str, float, list[dict]]:
+    """The street's reference, its length (m) and one row per stage of the scan network: roads, axis length,
+    street covered (m, share) and what the stage dropped (m of street)."""
+    from twinkit.artefacts import read_textured_mesh
+    from twinkit_roads.scan import covered, read_truth, street_axis
+    from twinkit_roads.scan.geometry import resample
+    from twinkit_roads.scan.measures import directions
+
+    mesh_p = one(run, "*_texture/textured_mesh.ply")
+    labels_p = one(run, "*_backproject/labels.npy")
+    truth_p = one(run, "01_site/roads_truth.json")
+    doc_p = one(run, "*_fetch_roads/scan_roads.json")
+    if mesh_p is None:
+        sys.exit(f"{run}: no textured_mesh.ply (a finished pointcloud_site run is needed)")
+    if doc_p is None or "stages" not in json.loads(doc_p.read_text()):
+        inputs = {"in_textured_mesh_ply": mesh_p, **({"in_labels_npy": labels_p} if labels_p else {}),
+                  **({"in_roads_truth_json": truth_p} if truth_p else {})}
+        out = run_plugin("road_source", "scan", tmp / run.name, inputs, site=_site(run))
+        doc_p = out["scan_roads.json"]
+    doc = json.loads(doc_p.read_text())
+    mesh = read_textured_mesh(mesh_p)
+    if truth_p is not None:
+        lines = [resample(ln, 0.25) for ln in read_truth(truth_p) or []]
+        ref, step = np.concatenate(lines), 0.25
+        dirs = np.concatenate([directions(ln, 1.0) for ln in lines])
+        inside = _inside(ref, np.asarray(mesh.vertices)[:, :2])
+        ref, dirs, what = ref[inside], dirs[inside], "roads_truth lane centres"
+    elif labels_p is None:
+        sys.exit(f"{run}: no roads_truth.json and no labels.npy: nothing says where the street is")
+    else:
+        (ref, dirs), step = street_axis(mesh.vertices, mesh.faces, np.load(labels_p)), 0.25
+        what = "road-labelled ground"
+    street_m = len(ref) * step
+    stages = list(doc.get("stages", []))
+    stages.append({"stage": "final", "roads": len(doc["roads"]),
+                   "length_m": round(sum(r["length_m"] for r in doc["roads"]), 1),
+                   "arms": [{"axis": r["axis"], "width_m": r["carriageway_m"]} for r in doc["roads"]]})
+    rows, prev = [], None
+    for st in stages:
+        cov = covered(ref, dirs, st["arms"], tol)
+        m = float(cov.sum() * step)
+        rows.append({"stage": st["stage"], "roads": st["roads"], "length_m": st["length_m"], "covered_m": m,
+                     "share": m / street_m if street_m else 0.0, "dropped_m": (prev - m) if prev is not None else None})
+        prev = m
+    if doc.get("no_roads"):
+        rows.append({"stage": f"no roads: {doc['no_roads']}", "roads": 0, "length_m": 0.0, "covered_m": 0.0,
+                     "share": 0.0, "dropped_m": prev})
+    return what, street_m, rows
+
+
+def _inside(pts: np.ndarray, xy: np.ndarray, cell: float = 2.0) -> np.ndarray:
+    """Points over the capture: a 2 m cell holding mesh vertices."""
+    lo = xy.min(0)
+    occ = {tuple(c) for c in np.floor((xy - lo) / cell).astype(int)}
+    return np.array([tuple(c) in occ for c in np.floor((pts - lo) / cell).astype(int)], bool)
+
+
+def print_coverage(runs: list[Path], base: Path, tol: float) -> None:
+    print(f"| run | street (reference) m | stage | roads | axis length m | street covered m (tol {tol} m) | share | "
+          "dropped by this stage m |")
+    print("|---|---|---|---|---|---|---|---|")
+    for i, run in enumerate(runs):
+        what, street_m, rows = coverage_rows(run.resolve(), base / f"run{i}", tol)
+        for r in rows:
+            drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
+            print(f"| {run} | {street_m:.1f} ({what}) | {r['stage']} | {r['roads']} | {r['length_m']:.1f} | "
+                  f"{r['covered_m']:.1f} | {100 * r['share']:.0f} % | {drop} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--run", action="append", type=Path, help="a finished demo run folder (default outputs/demo)")
     ap.add_argument("--labels", default="gt,predicted,none,gt:nocurbs,predicted:nocurbs",
                     help="label sources to compare (comma separated; ':nocurbs': the labels alone, use_curbs=false)")
     ap.add_argument("--keep", type=Path, help="keep the outputs (pictures) in this folder")
+    ap.add_argument("--coverage", action="store_true", help="street coverage per check instead (any run)")
+    ap.add_argument("--tol", type=float, default=1.0, help="coverage: metres beyond half the carriageway")
     a = ap.parse_args()
     runs = a.run or [ROOT / "outputs" / "demo"]
+    if a.coverage:
+        with tempfile.TemporaryDirectory() as d:
+            print_coverage(runs, a.keep or Path(d), a.tol)
+        return
     sources = [s.strip() for s in a.labels.split(",") if s.strip()]
     with tempfile.TemporaryDirectory() as d:
         base = a.keep or Path(d)

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import check_lanes, cut_arms, detach_junctions, narrow_arms, nudge_arms, trim_unsupported
-from .measures import describe, lanes_on_road, network_length
+from .checks import check_lanes, cut_arms, detach_junctions, narrow_arms, nudge_arms, parked_faces, trim_unsupported
+from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
 from .netconvert import netconvert_plain, write_plain
 from .network import add_heights_and_signals, add_sidewalks, derive_network
@@ -24,6 +24,7 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     net.stats["curbs"] = curbs
     net.stats["point_spacing_m"] = spacing
     derived_m = network_length(net)
+    record_stage(net, "derived")
     if p.sidewalks and curbs:
         add_sidewalks(net, mesh.vertices, mesh.faces, labels, p)
     add_heights_and_signals(net, mesh.vertices, mesh.faces, labels, p)
@@ -32,15 +33,18 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     if cut["cut_m"] or cut["dropped_roads"]:
         log.info("road_source=scan: %.1f m of road ends cut back and %d roads dropped where their lanes left the "
                  "scanned ground", cut["cut_m"], cut["dropped_roads"])
+    record_stage(net, "trim_unsupported")
     work = out_xodr.parent / "scan_plain"
     rounds = []
+    parked = parked_faces(np.asarray(mesh.faces), labels, curbs)
     for rnd in range(p.lane_check_rounds + 1):
         nod, edg = write_plain(net, p, proj, work)
         info = netconvert_plain(nod, edg, out_xodr, p, log)
         if rnd == p.lane_check_rounds:
             break
-        row = check_round(net, out_xodr.read_text(encoding="utf-8"), mesh, p, scene, rnd, log)
+        row = check_round(net, out_xodr.read_text(encoding="utf-8"), mesh, p, scene, rnd, log, parked)
         rounds.append(row)
+        record_stage(net, f"lane_check {rnd + 1}")
         if row.get("settled"):
             row.pop("settled")
             break
@@ -51,10 +55,12 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     return net, info
 
 
-def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, rnd: int, log) -> dict:
+def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, rnd: int, log,
+                parked: np.ndarray | None = None) -> dict:
     """One lane check of netconvert's map (junctions included) against the scan, and the network's repair:
-    narrowed, moved, cut, junctions taken apart. Returns the round's row (``settled``: nothing more to do)."""
-    chk = check_lanes(net, xodr_text, mesh.vertices, mesh.faces, p, scene)
+    narrowed, moved, cut, junctions taken apart (``parked``: faces of parked vehicles, ``check_lanes``).
+    Returns the round's row (``settled``: nothing more to do)."""
+    chk = check_lanes(net, xodr_text, mesh.vertices, mesh.faces, p, scene, parked=parked)
     row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
            "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
            "roads_off": len(chk["bad_points"])}

@@ -106,7 +106,7 @@ def cut_arms(net: Network, bad: dict[int, np.ndarray], p: ScanSourceParams, keep
 
 def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.0, above_m: float = 1.0,
                  below_m: float = 3.0, covered_m: float = 15.0, scene=None, step_m: float = 0.0,
-                 edge_in_m: float = 0.05, clear_m: float = 0.0) -> dict:
+                 edge_in_m: float = 0.05, clear_m: float = 0.0, parked: np.ndarray | None = None) -> dict:
     """Do the driving lanes carla.Map reads from the OpenDRIVE lie on the scanned surface at their heights?
     Samples every ``spacing_m`` along each driving lane, 7 across it (the outermost ``edge_in_m`` inside its
     borders). A sample is **on** when the surface
@@ -117,7 +117,9 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     between it and the lane's middle steps by more than ``step_m`` from one sample to the next (the lane's
     edge over a low wall or a yard above the street: within ``tol_m``, yet no road). With ``clear_m`` > 0, a
     sample with any surface over it less than ``clear_m`` above the lane is off too, ground or not (a hedge,
-    a wall's top, a low roof: a car drives into it). Returns the samples' x, y, whether on and
+    a wall's top, a low roof: a car drives into it). ``parked`` (per face, bool): faces of parked vehicles;
+    a sample whose top or overhead surface is one is judged by the ground alone (no step, clearance or
+    buried test: the car is taken out later, not a wall). Returns the samples' x, y, whether on and
     off, and the junction (its OpenDRIVE name, netconvert's node id) of those inside one ('' elsewhere)."""
     import open3d as o3d
 
@@ -137,31 +139,30 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     if scene is None:
         scene = Surface(np.asarray(v, np.float64), np.asarray(f)).scene
 
-    def down(z0):  # distance to the first surface under z0 (inf: none)
+    def cast(z0, dz):  # distance to the first surface under (dz -1) or over (dz 1) z0 (inf: none); is it parked
         q = np.zeros((len(r), 6), np.float32)
         q[:, :2] = r[:, :2]
         q[:, 2] = z0
-        q[:, 5] = -1.0
-        return scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
+        q[:, 5] = dz
+        hit = scene.cast_rays(o3d.core.Tensor(q))
+        t, pid = hit["t_hit"].numpy(), hit["primitive_ids"].numpy()
+        car = np.zeros(len(r), bool) if parked is None else np.isfinite(t) & parked[np.minimum(pid, len(parked) - 1)]
+        return t, car
 
-    t_mid = down(r[:, 2] + tol_m)
+    t_mid = cast(r[:, 2] + tol_m, -1.0)[0]
     on = t_mid <= 2 * tol_m
     below = t_mid <= tol_m + below_m
-    t_top = down(r[:, 2] + above_m)  # the top surface, from above_m over the lane
-    above = t_top <= above_m - tol_m
-    q = np.zeros((len(r), 6), np.float32)  # a roof over a lane with no ground under it: the lane runs into a house
-    q[:, :2] = r[:, :2]
-    q[:, 2] = r[:, 2] + tol_m
-    q[:, 5] = 1.0
-    t_up = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy()
-    covered = t_up <= covered_m
+    t_top, car_top = cast(r[:, 2] + above_m, -1.0)  # the top surface, from above_m over the lane
+    above = (t_top <= above_m - tol_m) & ~car_top
+    t_up, car_up = cast(r[:, 2] + tol_m, 1.0)  # a roof over a lane with no ground under it: it runs into a house
+    covered = (t_up <= covered_m) & ~car_up
     off = ~on & (below | above | covered)
     if clear_m > 0:
-        low = t_up <= clear_m - tol_m
+        low = (t_up <= clear_m - tol_m) & ~car_up
         off |= low
         on &= ~low
     if step_m > 0:
-        top = np.where(t_top <= above_m + below_m, r[:, 2] + above_m - t_top, np.nan)
+        top = np.where((t_top <= above_m + below_m) & ~car_top, r[:, 2] + above_m - t_top, np.nan)
         stepped = steps_across(top, len(across), step_m)
         off |= stepped
         on &= ~stepped
@@ -175,6 +176,17 @@ def _junction_names(xodr_text: str) -> dict[int, str]:
     names = {int(i): nm for nm, i in re.findall(r'<junction\s+name="([^"]*)"\s+id="(-?\d+)"', xodr_text)}
     names.update({int(i): nm for i, nm in re.findall(r'<junction\s+id="(-?\d+)"\s+name="([^"]*)"', xodr_text)})
     return names
+
+
+def parked_faces(f, labels, curbs: bool) -> np.ndarray | None:
+    """Faces of parked vehicles (2 or more vertices labelled car, truck, bus, train, motorcycle or bicycle), for
+    the lane check; None without labels or from the air (``curbs`` false: a car is a low lump without walls there,
+    which lift_movables rarely takes out, so it stays an obstacle)."""
+    from twinkit.cityscapes import COARSE
+
+    if labels is None or not curbs:
+        return None
+    return np.isin(labels[f], COARSE["vehicle"]).sum(axis=1) >= 2
 
 
 def steps_across(top: np.ndarray, k: int, step_m: float) -> np.ndarray:
@@ -193,14 +205,17 @@ def steps_across(top: np.ndarray, k: int, step_m: float) -> np.ndarray:
     return out.ravel()
 
 
-def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=None) -> dict:
+def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=None,
+                parked: np.ndarray | None = None) -> dict:
     """The map netconvert built from the derived network, against the scan (``lane_heights``): per road,
     the shape points whose driving lanes are off the surface on more than ``1 - min_lane_support`` of their
     samples; per junction, the same share over its connecting lanes. Returns ``{"bad_points": {arm index:
-    bool array}, "bad_junctions": {node id: share on}, "on_share": share of all samples on}``."""
+    bool array}, "bad_junctions": {node id: share on}, "on_share": share of all samples on}``. ``parked``: the
+    faces of parked vehicles (``parked_faces``), judged by the ground under them."""
     from scipy.spatial import cKDTree
 
-    lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene, step_m=p.lane_step_m, clear_m=p.lane_clear_m)
+    lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene, step_m=p.lane_step_m, clear_m=p.lane_clear_m,
+                      parked=parked)
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
     res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "nudge": {}, "samples": int(len(on)),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}

@@ -54,3 +54,86 @@ def lanes_on_road(xodr_text: str, v, f, labels, step_m: float = 0.5, raster_m: f
     cshare = float(np.mean(grid.sample(road.astype(np.uint8), cen) > 0)) if len(cen) else 0.0
     return {"lane_area_m2": round(float(inl.sum() * raster_m ** 2), 1), "on_road_share": round(share, 4),
             "centre_on_road_share": round(cshare, 4)}
+
+
+def record_stage(net: Network, stage: str) -> None:
+    """Keep the network's roads as they are after ``stage`` (scan_roads.json ``stages``: the length each check
+    kept, and the axes with their carriageway width, from which a benchmark measures what each check dropped)."""
+    net.stats.setdefault("stages", []).append({
+        "stage": stage, "roads": len(net.arms), "length_m": round(network_length(net), 1),
+        "arms": [{"width_m": round(float(a.width_m), 2), "axis": np.round(a.xy, 2).tolist()} for a in net.arms]})
+
+
+def street_axis(v, f, labels, res: float = 0.25, min_half_m: float = 1.5, min_area_m2: float = 20.0,
+                spur_m: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``res`` metre along the middle of the road-labelled ground seen from above: the skeleton of
+    the road-labelled faces (gaps closed, holes filled, pieces under ``min_area_m2`` left out) without its spurs
+    (a branch with a free end, shorter than the road's half width there plus ``spur_m``: a corner of the
+    labels, once; the scan source's own pruning, repeated until stable, eats real street ends of ragged labels),
+    where the road is at least ``2 * min_half_m`` wide. Returns (k, 2)
+    site-frame x, y (each point stands for ``res`` metres of street) and (k, 2) unit directions along it."""
+    from scipy import ndimage
+
+    from ..mesh2d import Grid
+    from .geometry import resample
+    from .network import _degrees, _skeleton_edges
+
+    grid = Grid.around(v[:, :2], res)
+    road = rasterize_faces(v, f, np.flatnonzero((labels[f] == ROAD).sum(1) >= 2), grid)
+    road = ndimage.binary_fill_holes(ndimage.binary_closing(road, np.ones((5, 5), bool)))
+    lab, n = ndimage.label(road)
+    if n:
+        area = ndimage.sum(road, lab, np.arange(1, n + 1)) * res ** 2
+        road = np.isin(lab, 1 + np.flatnonzero(area >= min_area_m2))
+    node_xy, edges, _ = _skeleton_edges(road, grid)
+    pts, dirs = [], []
+    deg = _degrees(edges, len(node_xy))
+    for a, b, xy, hw in edges:
+        length = np.hypot(*np.diff(xy, axis=0).T).sum() if len(xy) > 1 else 0.0
+        spur = (deg[a] == 1) != (deg[b] == 1) and max(deg[a], deg[b]) > 2 and length < float(hw.max()) + spur_m
+        if spur or length < res:
+            continue
+        q = resample(xy, res)
+        wide = np.interp(np.linspace(0, 1, len(q)), np.linspace(0, 1, len(hw)), hw) >= min_half_m
+        if len(q) >= 2 and wide.any():
+            pts.append(q[wide])
+            dirs.append(directions(q, 1.5)[wide])
+    if not pts:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    return np.concatenate(pts), np.concatenate(dirs)
+
+
+def directions(pts: np.ndarray, radius_m: float) -> np.ndarray:
+    """(k, 2) unit direction of a line of points at each point: the main axis of its neighbours within
+    ``radius_m``."""
+    from scipy.spatial import cKDTree
+
+    out = np.tile([1.0, 0.0], (len(pts), 1))
+    tree = cKDTree(pts)
+    for i, nb in enumerate(tree.query_ball_point(pts, radius_m)):
+        q = pts[nb] - pts[nb].mean(0)
+        if len(nb) >= 3:
+            out[i] = np.linalg.eigh(q.T @ q)[1][:, -1]
+    return out
+
+
+def covered(points: np.ndarray, dirs: np.ndarray, arms: list[dict], tol_m: float,
+            max_angle_deg: float = 30.0) -> np.ndarray:
+    """Which of ``points`` ((k, 2), running along ``dirs``) lie on a road of ``arms`` (``{"axis": [[x, y], ...],
+    "width_m": w}``, as in scan_roads.json ``stages``): within half the carriageway plus ``tol_m`` of its axis,
+    running the same way (within ``max_angle_deg``: a road across the street, or one wider than the street,
+    does not cover it)."""
+    out = np.zeros(len(points), bool)
+    cos = np.cos(np.radians(max_angle_deg))
+    for a in arms:
+        xy = np.asarray(a["axis"], float)
+        if len(xy) < 2 or not len(points):
+            continue
+        p0, d = xy[:-1], np.diff(xy, axis=0)
+        dd = np.maximum((d ** 2).sum(1), 1e-12)
+        t = np.clip(((points[:, None, :] - p0[None]) * d[None]).sum(-1) / dd[None], 0.0, 1.0)
+        dist = np.hypot(*(p0[None] + t[..., None] * d[None] - points[:, None, :]).transpose(2, 0, 1))
+        j = dist.argmin(1)
+        along = np.abs((d[j] / np.sqrt(dd[j])[:, None] * dirs).sum(1)) >= cos
+        out |= (dist[np.arange(len(points)), j] <= a["width_m"] / 2 + tol_m) & along
+    return out
