@@ -167,6 +167,9 @@ def test_the_report_shows_the_far_share(tmp_path):
         def esc(self, x):
             return str(x)
 
+        def length_unit(self):
+            return "m"
+
         def table(self, headers, rows):
             return "|".join(map(str, headers)) + "\n" + "\n".join("|".join(map(str, r)) for r in rows)
 
