@@ -2,19 +2,13 @@
 reads the file its ``path`` names, and an image model whose ``weights_path`` a step reads."""
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 from twinkit import InputError, hookimpl
 from twinkit.ranges import param
 
-
-def _count(name: str) -> None:
-    path = os.environ.get("TWINKIT_TEST_COUNTER")
-    if path:
-        with open(path, "a") as f:
-            f.write(name + "\n")
+from tests.support.engine_plugins import _count
 
 
 @dataclass
