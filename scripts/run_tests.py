@@ -4,60 +4,153 @@ First ``ruff check .`` (the rules in pyproject.toml's [tool.ruff]) and ``mypy`` 
 [tool.mypy] says), each a session of its own that fails the run like a failed test session, its output shown.
 The framework's tests (tests/, examples/) run from the repository root; each plugin's tests run from
 the plugin's folder, as a third-party package's would (they may import their own conftest helpers).
-Extra arguments go to every pytest session. Exit status is non-zero if any session failed.
+
+Sessions run side by side, ``--jobs N`` at a time (default: the machine's cores; ``--jobs 1`` runs them
+one after the other; the ``TWINKIT_TEST_JOBS`` variable sets the default). The checks start first, then
+the test sessions longest first (by :data:`TYPICAL_S`), so the long ones do not finish last. Each
+session's output is captured and printed whole when it ends, with its time. The other arguments go to
+every pytest session. Exit status is non-zero if any session failed: a check that failed, a pytest
+session whose status is not 0 or 5 (no tests collected), or the core session with no tests.
 """
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 COUNT = re.compile(r"(\d+) (passed|failed|skipped|errors?|xfailed|xpassed|deselected)")
 CHECKS = [("ruff", ["-m", "ruff", "check", "."]), ("mypy", ["-m", "mypy"])]  # configured in pyproject.toml
+CORE = "twinkit"
+JOBS_ENV = "TWINKIT_TEST_JOBS"
+#: seconds each test session took in CI (2 cores, one session at a time); orders the sessions, longest
+#: first. A session not listed counts as :data:`UNKNOWN_S`.
+TYPICAL_S = {CORE: 730, "plugins/twinkit-photo": 280, "plugins/twinkit-demo-site": 235,
+             "plugins/twinkit-export": 212, "plugins/twinkit-tiles": 211, "plugins/twinkit-roads": 179,
+             "plugins/twinkit-efficientvit": 38, "plugins/twinkit-pointcloud": 38,
+             "plugins/twinkit-segmentation": 21}
+UNKNOWN_S = 60
 
 
-def run_checks() -> list[str]:
-    """Run the static checks from the repository root; the names of those that failed."""
-    failed = []
-    for name, args in CHECKS:
-        print(f"\n===== {name} =====", flush=True)
-        p = subprocess.run([PY, *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        sys.stdout.write(p.stdout)
+@dataclass
+class Session:
+    """One command run from ``cwd``; ``rc``, ``out`` and ``seconds`` are filled when it has run."""
+
+    name: str
+    cwd: Path
+    argv: list[str]
+    pytest: bool = True
+    rc: int | None = None
+    out: str = ""
+    seconds: float = 0.0
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def failed(self) -> bool:
+        """Whether this session fails the run (see the module docstring)."""
+        if not self.pytest:
+            return self.rc != 0
+        return self.rc not in (0, 5) or (self.rc == 5 and self.name == CORE)
+
+
+def check_sessions() -> list[Session]:
+    """The static checks (:data:`CHECKS`), each a session run from the repository root."""
+    return [Session(name, ROOT, [PY, *args], pytest=False) for name, args in CHECKS]
+
+
+def pytest_sessions(extra: list[str]) -> list[Session]:
+    """The pytest sessions: the core's tests and examples, then each plugin's tests from its folder."""
+    dirs = [ROOT] + [d.parent for d in sorted(ROOT.glob("plugins/*/tests")) if d.is_dir()]
+    out = []
+    for cwd in dirs:
+        name = CORE if cwd == ROOT else cwd.relative_to(ROOT).as_posix()
+        args = ["tests", "examples"] if cwd == ROOT else ["tests"]
+        out.append(Session(name, cwd, [PY, "-m", "pytest", *args, "-p", "no:cacheprovider", *extra]))
+    return out
+
+
+def ordered(checks: list[Session], tests: list[Session]) -> list[Session]:
+    """The order sessions start in: the checks as given, then the tests longest first (stable for ties)."""
+    return checks + sorted(tests, key=lambda s: -TYPICAL_S.get(s.name, UNKNOWN_S))
+
+
+def summary_counts(out: str) -> dict[str, int]:
+    """The counts on pytest's last summary line (``errors`` for ``error``/``errors``); empty if none."""
+    lines = [l for l in out.splitlines() if COUNT.search(l) and (" in " in l or "no tests ran" in l)]
+    counts: dict[str, int] = {}
+    for n, kind in COUNT.findall(lines[-1] if lines else ""):
+        kind = "errors" if kind.startswith("error") else kind
+        counts[kind] = counts.get(kind, 0) + int(n)
+    return counts
+
+
+def _run(s: Session, lock: threading.Lock) -> Session:
+    """Run one session, capturing its output, then print it whole under ``lock``."""
+    t0 = time.perf_counter()
+    p = subprocess.run(s.argv, cwd=s.cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    s.rc, s.out, s.seconds = p.returncode, p.stdout, time.perf_counter() - t0
+    s.counts = summary_counts(s.out) if s.pytest else {}
+    with lock:
+        sys.stdout.write(f"\n===== {s.name} ({s.seconds:.0f} s) =====\n{s.out}")
         sys.stdout.flush()
-        if p.returncode != 0:
-            failed.append(name)
-    return failed
+    return s
+
+
+def run_sessions(sessions: list[Session], jobs: int) -> list[Session]:
+    """Run ``sessions`` in their order, ``jobs`` at a time; each is printed when it ends."""
+    lock = threading.Lock()
+    pool = ThreadPoolExecutor(max_workers=max(1, jobs))
+    try:
+        return list(pool.map(lambda s: _run(s, lock), sessions))
+    finally:  # on Ctrl-C the running sessions stop with it; the waiting ones never start
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def parse_jobs(argv: list[str]) -> tuple[int, list[str]]:
+    """Take ``--jobs N`` / ``--jobs=N`` out of ``argv``: (jobs, the rest). Default: $TWINKIT_TEST_JOBS, else cores."""
+    default = os.environ.get(JOBS_ENV) or str(os.cpu_count() or 1)
+    jobs, rest, i = default, [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a == "--jobs" and i + 1 < len(argv):
+            jobs, i = argv[i + 1], i + 2
+            continue
+        if a.startswith("--jobs="):
+            jobs = a.split("=", 1)[1]
+        else:
+            rest.append(a)
+        i += 1
+    return max(1, int(jobs)), rest
+
+
+def report(sessions: list[Session], minutes: float) -> int:
+    """Print each session's status and time, then the totals; the exit status (1 if any session failed)."""
+    print("\nsession                         rc      s")
+    for s in sessions:
+        print(f"{s.name:<30} {s.rc:>3} {s.seconds:>6.0f}{'  FAILED' if s.failed() else ''}")
+    failed = [s.name for s in sessions if s.failed()]
+    totals: dict[str, int] = {}
+    for s in sessions:
+        for kind, n in s.counts.items():
+            totals[kind] = totals.get(kind, 0) + n
+    print(f"\nsessions: {len(sessions)} in {minutes:.1f} min; failed: {', '.join(failed) or 'none'}")
+    print(f"total: {totals.get('passed', 0)} passed, {totals.get('failed', 0) + totals.get('errors', 0)} failed, "
+          f"{totals.get('skipped', 0)} skipped")
+    return 1 if failed else 0
 
 
 def main() -> int:
-    extra = sys.argv[1:]
-    sessions = [(ROOT, ["tests", "examples"])]
-    sessions += [(d.parent, ["tests"]) for d in sorted(ROOT.glob("plugins/*/tests")) if d.is_dir()]
-    totals: dict[str, int] = {}
+    jobs, extra = parse_jobs(sys.argv[1:])
     t0 = time.perf_counter()
-    failed_sessions = run_checks()
-    for cwd, args in sessions:
-        name = cwd.relative_to(ROOT).as_posix() if cwd != ROOT else "twinkit"
-        print(f"\n===== {name} =====", flush=True)
-        p = subprocess.run([PY, "-m", "pytest", *args, "-p", "no:cacheprovider", *extra], cwd=cwd,
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        sys.stdout.write(p.stdout)
-        sys.stdout.flush()
-        summary = [l for l in p.stdout.splitlines() if COUNT.search(l) and (" in " in l or "no tests ran" in l)]
-        for n, kind in COUNT.findall(summary[-1] if summary else ""):
-            kind = "errors" if kind.startswith("error") else kind
-            totals[kind] = totals.get(kind, 0) + int(n)
-        if p.returncode not in (0, 5) or (p.returncode == 5 and name == "twinkit"):
-            failed_sessions.append(name)
-    minutes = (time.perf_counter() - t0) / 60
-    print(f"\nsessions: {len(CHECKS) + len(sessions)} in {minutes:.1f} min; failed: {', '.join(failed_sessions) or 'none'}")
-    print(f"total: {totals.get('passed', 0)} passed, {totals.get('failed', 0) + totals.get('errors', 0)} failed, "
-          f"{totals.get('skipped', 0)} skipped")
-    return 1 if failed_sessions else 0
+    print(f"{len(CHECKS)} checks and the test sessions, {jobs} at a time", flush=True)
+    sessions = run_sessions(ordered(check_sessions(), pytest_sessions(extra)), jobs)
+    return report(sessions, (time.perf_counter() - t0) / 60)
 
 
 if __name__ == "__main__":
