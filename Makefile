@@ -1,6 +1,7 @@
 # twinkit: two commands on a fresh machine.
 #   make demo    set up, then run the main job on the built-in demo site
-#   make test    set up, then run every test
+#   make test    set up, then run every test (the sessions side by side, one per core;
+#                TWINKIT_TEST_JOBS=1 make test, or PYTEST_ARGS="--jobs 1", runs them one at a time)
 #   make bench   set up, then run the benchmarks (prints tables, writes bench/results/)
 PY      := .venv/bin/python
 STAMP   := .venv/.twinkit-setup
