@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .features import feature_names, point_features
+from .features import block_mean, feature_names, point_features
 from .model import GeometryModel, load_model
 
 
@@ -27,9 +27,11 @@ class CloudLabels:
 
 
 def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: GeometryModel | None = None,
-                   *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0) -> CloudLabels:
+                   *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0, smooth_m: float = 0.25) -> CloudLabels:
     """Features (:func:`.features.point_features`) and the MLP's probabilities for ``xyz`` (n, 3) float, site
-    frame, z up, metres; ``intensity`` (n,) or None. ``model``: None = the shipped one."""
+    frame, z up, metres; ``intensity`` (n,) or None. ``model``: None = the shipped one. ``smooth_m``: each
+    base point's probabilities become the normalised geometric mean of those of the base points in the
+    3 x 3 x 3 voxels of this side around it (:func:`smooth_proba`); 0 = each point alone."""
     model = model or load_model()
     if list(model.feature_names) != feature_names():
         raise ValueError("the 3D classifier's model was trained on other features than this code computes; "
@@ -38,7 +40,26 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
     t = time.perf_counter()
     proba = model.proba(f.values)
     sec = dict(f.seconds, model=round(time.perf_counter() - t, 3))
+    if smooth_m > 0:
+        t = time.perf_counter()
+        proba = smooth_proba(xyz[f.base], proba, smooth_m)
+        sec["smooth"] = round(time.perf_counter() - t, 3)
     return CloudLabels(base=f.base, inverse=f.inverse, proba=proba, seconds=sec)
+
+
+def smooth_proba(points: np.ndarray, proba: np.ndarray, side_m: float, floor: float = 1e-4) -> np.ndarray:
+    """(m, c) float32: per point, the normalised geometric mean of ``proba`` (m, c) over the ``points`` (m, 3)
+    in the 3 x 3 x 3 voxels of side ``side_m`` (m) around its own (:func:`.features.block_mean` of the log
+    probabilities, each floored at ``floor``). Single points' shape features are noisy on a real scan; their
+    neighbours on the same surface mostly share the class. Columns that were all zero stay zero."""
+    used = proba.max(axis=0) > 0
+    lp = block_mean(points, np.log(np.maximum(proba[:, used], floor)), side_m)
+    lp -= lp.max(axis=1, keepdims=True)
+    q = np.exp(lp)
+    q /= q.sum(axis=1, keepdims=True)
+    out = np.zeros_like(proba, dtype=np.float32)
+    out[:, used] = q
+    return out
 
 
 def votes_at(points: np.ndarray, proba: np.ndarray, targets: np.ndarray, *, radius_m: float = 0.4,

@@ -24,6 +24,10 @@ class ClassifyGeometryParams:
     ground_window_m: float = param(8.0, gt=0,
                                    help="Window (m) of the local ground's opening: wider than any vehicle roof, so "
                                         "roofs are not ground.")
+    smooth_m: float = param(0.25, ge=0, le=2.0,
+                            help="Side (m) of the voxels over whose 3 x 3 x 3 block each classified point's class "
+                                 "probabilities are averaged (geometric mean); 0 = each point alone. Measured on "
+                                 "the real labelled sweeps in docs/segmentation.md (\"3D classifier\").")
     vote_radius_m: float = param(0.4, gt=0,
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
@@ -55,7 +59,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     model = load_model(params.model or None)
     t_read = time.perf_counter() - t0
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
-                         ground_window_m=params.ground_window_m)
+                         ground_window_m=params.ground_window_m, smooth_m=params.smooth_m)
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
                      neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
