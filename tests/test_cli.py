@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
 import sys
 
@@ -138,9 +139,13 @@ def test_misspelled_hook_fails_loudly(project):
 
 def test_example_plugin_installed_and_selected_from_the_command_line(project, tmp_path):
     target = tmp_path / "site-packages"
+    # built from a copy: pip's build/ and egg-info would otherwise stay in examples/, where the next session's
+    # entry-point scan finds the plugin (its tests put that folder on sys.path)
+    src = shutil.copytree(ROOT / "examples" / "twinkit-example-plugin", tmp_path / "example-src",
+                          ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
     pip = subprocess.run(
         [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation", "--target",
-         str(target), str(ROOT / "examples" / "twinkit-example-plugin")],
+         str(target), str(src)],
         # --no-deps: its dependencies (twinkit[mesh], numpy) are those of this environment; pip would pull twinkit from PyPI
         capture_output=True, text=True, timeout=300)
     assert pip.returncode == 0, pip.stderr
