@@ -122,3 +122,53 @@ def test_the_step_writes_votes_per_vertex(tmp_path):
     road = has & (vlab == ROAD)
     assert road.sum() > 100 and (votes[road].argmax(axis=1) == ROAD).mean() > 0.5
     assert out["geometry_labels.ply"].exists()
+
+
+def test_smoothing_turns_a_stray_point_to_its_surface_class():
+    from twinkit_segmentation.geometry.classify import smooth_proba
+    from twinkit_segmentation.geometry.features import block_mean
+
+    g = np.arange(0, 2.0, 0.1)
+    xx, yy = np.meshgrid(g, g)
+    pts = np.column_stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)])
+    proba = np.zeros((len(pts), 19), np.float32)
+    proba[:, ROAD], proba[:, SIDEWALK] = 0.7, 0.3
+    stray = len(pts) // 2 + 10
+    proba[stray, ROAD], proba[stray, SIDEWALK] = 0.2, 0.8
+    far = np.array([[50.0, 50.0, 0.0]])  # alone in its block: keeps its own answer
+    pts2 = np.vstack([pts, far])
+    proba2 = np.vstack([proba, np.eye(19, dtype=np.float32)[[BUILDING]]])
+    out = smooth_proba(pts2, proba2, 0.25)
+    assert out[stray].argmax() == ROAD and proba2[stray].argmax() == SIDEWALK
+    assert out[-1].argmax() == BUILDING
+    assert np.allclose(out.sum(axis=1), 1, atol=1e-5)
+    assert not out[:, 5].any()  # a class no point had stays at zero
+    # the block mean is a plain mean over the 3 x 3 x 3 voxels around each point
+    m = block_mean(np.array([[0.0, 0, 0], [0.3, 0, 0], [0.9, 0, 0]]), np.array([[1.0], [3.0], [5.0]]), 0.25)
+    assert np.allclose(m.ravel(), [2.0, 2.0, 5.0])
+
+
+def test_the_training_warp_makes_grass_bumpy_and_keeps_walls_vertical():
+    from twinkit.cityscapes import TERRAIN
+    from twinkit_segmentation.geometry.train import warp_ground
+
+    g = np.arange(0, 20.0, 0.25)
+    xx, yy = np.meshgrid(g, g)
+    ground = np.column_stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)])
+    wall = np.column_stack([np.full(20, 5.0), np.full(20, 5.0), np.linspace(0, 6, 20)])
+    xyz = np.vstack([ground, wall])
+    label = np.r_[np.where(xx.ravel() < 10, TERRAIN, ROAD), np.full(20, BUILDING)].astype(np.uint8)
+    flat = warp_ground(xyz, 7, max_slope=0, max_bow_m=0, label=label, max_relief_m=0, max_rough_m=0)
+    assert np.allclose(flat, xyz)
+
+    def plane_residual(p):
+        a = np.column_stack([p[:, 0], p[:, 1], np.ones(len(p))])
+        return np.std(p[:, 2] - a @ np.linalg.lstsq(a, p[:, 2], rcond=None)[0])
+
+    w = warp_ground(xyz, 7, max_slope=0, max_bow_m=0, label=label, max_relief_m=0, max_rough_m=0.05)
+    n = len(ground)
+    terr = np.flatnonzero(label[:n] == TERRAIN)
+    road = np.flatnonzero(label[:n] == ROAD)
+    assert plane_residual(w[terr[:200]]) > 0.005 and np.allclose(w[road], xyz[road])
+    w = warp_ground(xyz, 7, label=label)
+    assert np.ptp(w[n:, 2] - xyz[n:, 2]) < 1e-9  # the wall moved as one: still vertical
