@@ -154,3 +154,26 @@ def test_a_source_edited_during_a_run_is_not_recorded_as_the_code_that_ran(proje
     assert r.rc == 0, r.text
     assert project.status_of(r, "02_second") == "ran", r.text
     assert (project.ws / "02_second" / "second.txt").read_text() == "2\n"
+
+
+def test_a_model_file_shipped_in_the_package_is_in_the_code_hash(tmp_path, monkeypatch):
+    pkg = tmp_path / "hashdata_pkg"
+    (pkg / "model").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "steps.py").write_text("def run(params, ctx):\n    return 1\n")
+    (pkg / "model" / "weights.json").write_text('{"a": 1}')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    mod = importlib.import_module("hashdata_pkg.steps")
+    try:
+        p = Plugin(kind="step", name="hashdata", run=mod.run, params=None, version="0")
+        before = p.code_hash()
+        (pkg / "model" / "weights.json").write_text('{"a": 2}')  # retrained: the steps that read it re-run
+        later = time.time() + 5
+        os.utime(pkg / "model" / "weights.json", (later, later))
+        after = p.code_hash()
+        assert after != before
+        (pkg / "README.txt").write_text("notes")  # not a data file the code reads
+        assert p.code_hash() == after
+    finally:
+        for name in [n for n in sys.modules if n.startswith("hashdata_pkg")]:
+            del sys.modules[name]

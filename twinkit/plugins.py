@@ -90,6 +90,10 @@ def _shared_names(text: str) -> set[str]:
     return found & set(SHARED_LIBRARY)
 
 
+#: suffixes of the data files inside a plugin's package that its code hash covers (models, weights, tables)
+DATA_SUFFIXES = frozenset({".json", ".npz", ".npy", ".onnx", ".pt", ".pth", ".tflite", ".yaml", ".yml", ".csv"})
+
+
 def shared_sources(files: list[Path]) -> list[Path]:
     """The shared-library files that ``files`` use, followed through the library's own imports; sorted."""
     seen: set[str] = set()
@@ -144,6 +148,8 @@ class Plugin:
         source file when ``run`` lives in a plain module; plus the modules of the core's shared library
         (:data:`SHARED_LIBRARY`) that this code imports, directly or through each other, so a change in
         the shared clean-up, mesh I/O or site frame re-runs the steps that use it, and only those.
+        The data files the package ships beside its code (:data:`DATA_SUFFIXES`: a trained model, calibrated
+        weights) count as code: a retrained model re-runs the steps that use it.
         A plugin's report sections (its ``report.py`` module or ``report/`` package) only show results,
         so editing them re-runs nothing."""
         try:
@@ -152,9 +158,11 @@ class Plugin:
             roots = list(getattr(top, "__path__", []) or [])
             own = [f for f in sorted(Path(roots[0]).rglob("*.py")) if not _report_only(f, Path(roots[0]))] \
                 if roots else [src]
+            data = [f for f in sorted(Path(roots[0]).rglob("*")) if f.suffix in DATA_SUFFIXES and f.is_file()
+                    and "__pycache__" not in f.parts] if roots else []
             base = Path(roots[0]) if roots else src.parent
             h = hashlib.sha256()
-            for f in own:
+            for f in sorted(own + data):
                 h.update(f.relative_to(base).as_posix().encode() + b"\0")
                 h.update(_file_digest(str(f), f.stat().st_mtime_ns).encode())
             for f in shared_sources(own):
