@@ -172,3 +172,26 @@ def test_the_training_warp_makes_grass_bumpy_and_keeps_walls_vertical():
     assert plane_residual(w[terr[:200]]) > 0.005 and np.allclose(w[road], xyz[road])
     w = warp_ground(xyz, 7, label=label)
     assert np.ptp(w[n:, 2] - xyz[n:, 2]) < 1e-9  # the wall moved as one: still vertical
+
+
+def test_the_step_smooths_a_colourless_capture_and_not_a_coloured_one(tmp_path):
+    from twinkit import artefacts as A
+    from twinkit.mesh import Mesh
+    from twinkit.testing import run_plugin
+    from twinkit_segmentation.geometry.scene import street_capture
+    from twinkit_segmentation.synthetic import write_scene
+
+    mesh_ply, _, _ = write_scene(tmp_path / "scene", step=0.5)
+    cap = street_capture(3, half_length_m=12.0)
+    rng = np.random.default_rng(0)
+    votes = {}
+    for kind, colors in (("colourless", None), ("coloured", rng.integers(0, 255, (len(cap["xyz"]), 3), np.uint8))):
+        A.write_points(tmp_path / f"{kind}.ply", Mesh(vertices=cap["xyz"], attrs={} if colors is None else {"colors": colors}))
+        for smooth in (0.25, 0.0):
+            out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_{smooth}",
+                             {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
+                             smooth_m=smooth)
+            votes[kind, smooth] = np.load(out["geometry_votes.npy"])
+    assert not np.allclose(votes["colourless", 0.25], votes["colourless", 0.0])
+    assert np.array_equal(votes["coloured", 0.25], votes["coloured", 0.0])
+    assert np.array_equal(votes["coloured", 0.0], votes["colourless", 0.0])  # the colours themselves change nothing

@@ -26,8 +26,13 @@ class ClassifyGeometryParams:
                                         "roofs are not ground.")
     smooth_m: float = param(0.25, ge=0, le=2.0,
                             help="Side (m) of the voxels over whose 3 x 3 x 3 block each classified point's class "
-                                 "probabilities are averaged (geometric mean); 0 = each point alone. Measured on "
-                                 "the real labelled sweeps in docs/segmentation.md (\"3D classifier\").")
+                                 "probabilities are averaged (geometric mean) on a colourless capture, where the "
+                                 "geometry leads; 0 = each point alone. Measured on the real labelled sweeps in "
+                                 "docs/segmentation.md (\"3D classifier\").")
+    smooth_coloured: bool = param(False,
+                                  help="Smooth a coloured capture's probabilities too. Off: there the views and "
+                                       "backproject's segments and Potts smoothing already pool neighbours, and "
+                                       "smoothing twice cost demo seed 3 1.5 mIoU.")
     vote_radius_m: float = param(0.4, gt=0,
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
@@ -54,12 +59,16 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
         write_colored_ply(out_geometry_labels_ply, mesh.vertices, mesh.faces, np.full((n, 3), 128, np.uint8),
                           comment="twinkit-segmentation: 3D classifier off")
         return {"enabled": False, "vertices": n}
+    from twinkit_segmentation.fusion import capture_kind
+
     cloud = A.read_points(in_points_ply)
     inten = cloud.attrs.get("intensity")
+    kind = capture_kind(cloud.colors)
+    smooth_m = params.smooth_m if (kind == "colourless" or params.smooth_coloured) else 0.0
     model = load_model(params.model or None)
     t_read = time.perf_counter() - t0
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
-                         ground_window_m=params.ground_window_m, smooth_m=params.smooth_m)
+                         ground_window_m=params.ground_window_m, smooth_m=smooth_m)
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
                      neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
@@ -76,7 +85,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
                  res.seconds)
     return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
             "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
-            "intensity": inten is not None, "model": model.meta.get("name", params.model or "shipped"),
+            "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "model": model.meta.get("name", params.model or "shipped"),
             "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
             "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
                         "total": round(time.perf_counter() - t0, 3)}}

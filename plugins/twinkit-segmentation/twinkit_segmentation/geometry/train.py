@@ -24,7 +24,7 @@ from twinkit.cityscapes import N_CLASSES, NAMES
 from .features import feature_names, point_features
 from .model import GeometryModel, save_model
 
-FEATURE_VERSION = 6
+FEATURE_VERSION = 7
 
 
 def _waves(xy: np.ndarray, rng: np.random.Generator, n: int, wavelength_m: tuple[float, float],
@@ -43,8 +43,9 @@ def warp_ground(xyz: np.ndarray, seed: int, max_slope: float = 0.06, max_bow_m: 
     """``xyz`` (n, 3) with the ground made as uneven as real streets are: a shear ``z += slope . (x, y)``
     (slope up to ``max_slope`` in a random direction), a bowl or dome rising ``max_bow_m`` at most over
     40 m, a relief of street-scale waves (4-20 m: crowned carriageways, gutters, banks; standard deviation
-    drawn up to ``max_relief_m``) and, where ``label`` (n,) says terrain, a bumpy surface (0.7-3 m waves,
-    up to ``max_rough_m``). Every term is a function of (x, y) alone, so vertical things stay vertical. The
+    drawn up to ``max_relief_m``) and, in half the captures, where ``label`` (n,) says terrain, a bumpy
+    surface (0.7-3 m waves, up to ``max_rough_m``): grass is bumpy on a verge and flat on a lawn, and a model
+    that sees only bumpy grass calls every flat lawn pavement. Every term is a function of (x, y) alone, so vertical things stay vertical. The
     generated sites are flat at the metre scale; real ones are not: on the real Velodyne sweeps the local
     ground's opening sits 2-9 cm below a road and 12-22 cm below grass, against under 1 cm on a generated
     sweep, and grass departs 3.7 cm from its 2 m plane against 0.8 (docs/segmentation.md "3D classifier")."""
@@ -59,7 +60,7 @@ def warp_ground(xyz: np.ndarray, seed: int, max_slope: float = 0.06, max_bow_m: 
     rel = np.random.default_rng([seed, 92])
     if max_relief_m > 0:
         p[:, 2] += _waves(d, rel, 6, (4.0, 20.0), rel.uniform(0, max_relief_m))
-    if max_rough_m > 0 and label is not None:
+    if max_rough_m > 0 and label is not None and rel.random() < 0.5:
         from twinkit.cityscapes import TERRAIN
 
         t = np.asarray(label) == TERRAIN
