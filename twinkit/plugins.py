@@ -156,10 +156,9 @@ class Plugin:
             src = Path(inspect.getsourcefile(self.run) or "")
             top = sys.modules.get(getattr(self.run, "__module__", "").split(".")[0])
             roots = list(getattr(top, "__path__", []) or [])
-            own = [f for f in sorted(Path(roots[0]).rglob("*.py")) if not _report_only(f, Path(roots[0]))] \
-                if roots else [src]
-            data = [f for f in sorted(Path(roots[0]).rglob("*")) if f.suffix in DATA_SUFFIXES and f.is_file()
-                    and "__pycache__" not in f.parts] if roots else []
+            files = sorted(f for f in Path(roots[0]).rglob("*") if "__pycache__" not in f.parts) if roots else []
+            own = [f for f in files if f.suffix == ".py" and not _report_only(f, Path(roots[0]))] if roots else [src]
+            data = [f for f in files if f.suffix in DATA_SUFFIXES and f.is_file()]
             base = Path(roots[0]) if roots else src.parent
             h = hashlib.sha256()
             for f in sorted(own + data):

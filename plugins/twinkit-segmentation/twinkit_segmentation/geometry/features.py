@@ -80,6 +80,23 @@ def voxel_subsample(xyz: np.ndarray, voxel_m: float) -> tuple[np.ndarray, np.nda
     return first.astype(np.int64), inverse.reshape(-1).astype(np.int64)
 
 
+def _neighbour_voxels(uk: np.ndarray, vijk: np.ndarray):
+    """For each of the 27 offsets ``off`` (3,) of the 3 x 3 x 3 block: ``(off, hit, pos)``, where ``hit`` (v,)
+    bool marks the voxels (sorted keys ``uk``, integer coordinates ``vijk`` (v, 3)) whose neighbour at ``off``
+    holds points and ``pos`` the index of that neighbour in ``uk`` for each hit. Offsets without any hit
+    are skipped."""
+    nv = len(uk)
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dz in (-1, 0, 1):
+                off = np.array([dx, dy, dz])
+                nk = _keys(vijk + off)
+                pos = np.minimum(np.searchsorted(uk, nk), nv - 1)
+                hit = uk[pos] == nk
+                if hit.any():
+                    yield off, hit, pos[hit]
+
+
 def _block_moments(p: np.ndarray, s: float):
     """Per point, the count, mean and covariance of the points in the 3 x 3 x 3 voxels of side ``s`` around
     its own. ``p`` (m, 3) float64 (centred). Returns (count (m,), mean (m, 3), cov (m, 3, 3))."""
@@ -98,30 +115,21 @@ def _block_moments(p: np.ndarray, s: float):
     vijk = np.empty((nv, 3), np.int64)
     vijk[inv] = ijk
     acc = np.zeros((nv, 10))
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dz in (-1, 0, 1):
-                off = np.array([dx, dy, dz])
-                nk = _keys(vijk + off)
-                pos = np.searchsorted(uk, nk)
-                pos = np.minimum(pos, nv - 1)
-                hit = uk[pos] == nk
-                if not hit.any():
-                    continue
-                src = vs[pos[hit]]
-                # shift the neighbour's sums from its corner to this voxel's corner: q' = q + off * s
-                d = off * s
-                n = src[:, 0]
-                sx, sy, sz = src[:, 1], src[:, 2], src[:, 3]
-                shifted = np.stack([
-                    n, sx + d[0] * n, sy + d[1] * n, sz + d[2] * n,
-                    src[:, 4] + 2 * d[0] * sx + d[0] * d[0] * n,
-                    src[:, 5] + d[0] * sy + d[1] * sx + d[0] * d[1] * n,
-                    src[:, 6] + d[0] * sz + d[2] * sx + d[0] * d[2] * n,
-                    src[:, 7] + 2 * d[1] * sy + d[1] * d[1] * n,
-                    src[:, 8] + d[1] * sz + d[2] * sy + d[1] * d[2] * n,
-                    src[:, 9] + 2 * d[2] * sz + d[2] * d[2] * n], axis=1)
-                acc[hit] += shifted
+    for off, hit, pos in _neighbour_voxels(uk, vijk):
+        src = vs[pos]
+        # shift the neighbour's sums from its corner to this voxel's corner: q' = q + off * s
+        d = off * s
+        n = src[:, 0]
+        sx, sy, sz = src[:, 1], src[:, 2], src[:, 3]
+        shifted = np.stack([
+            n, sx + d[0] * n, sy + d[1] * n, sz + d[2] * n,
+            src[:, 4] + 2 * d[0] * sx + d[0] * d[0] * n,
+            src[:, 5] + d[0] * sy + d[1] * sx + d[0] * d[1] * n,
+            src[:, 6] + d[0] * sz + d[2] * sx + d[0] * d[2] * n,
+            src[:, 7] + 2 * d[1] * sy + d[1] * d[1] * n,
+            src[:, 8] + d[1] * sz + d[2] * sy + d[1] * d[2] * n,
+            src[:, 9] + 2 * d[2] * sz + d[2] * d[2] * n], axis=1)
+        acc[hit] += shifted
     n = acc[:, 0]
     mean = acc[:, 1:4] / n[:, None]
     exx = acc[:, [4, 5, 6, 5, 7, 8, 6, 8, 9]].reshape(-1, 3, 3) / n[:, None, None]
@@ -151,12 +159,9 @@ def block_mean(p: np.ndarray, values: np.ndarray, s: float) -> np.ndarray:
     vijk[inv] = ijk
     acc = np.zeros_like(sums)
     n = np.zeros(nv)
-    for off in np.array(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1])).reshape(3, -1).T:
-        nk = _keys(vijk + off)
-        pos = np.minimum(np.searchsorted(uk, nk), nv - 1)
-        hit = uk[pos] == nk
-        acc[hit] += sums[pos[hit]]
-        n[hit] += cnt[pos[hit]]
+    for _, hit, pos in _neighbour_voxels(uk, vijk):
+        acc[hit] += sums[pos]
+        n[hit] += cnt[pos]
     return (acc / n[:, None])[inv]
 
 

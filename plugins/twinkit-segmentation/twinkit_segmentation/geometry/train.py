@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit.cityscapes import N_CLASSES, NAMES
+from twinkit.cityscapes import N_CLASSES, NAMES, TERRAIN
 
 from .features import feature_names, point_features
 from .model import GeometryModel, save_model
@@ -61,8 +61,6 @@ def warp_ground(xyz: np.ndarray, seed: int, max_slope: float = 0.06, max_bow_m: 
     if max_relief_m > 0:
         p[:, 2] += _waves(d, rel, 6, (4.0, 20.0), rel.uniform(0, max_relief_m))
     if max_rough_m > 0 and label is not None and rel.random() < 0.5:
-        from twinkit.cityscapes import TERRAIN
-
         t = np.asarray(label) == TERRAIN
         if t.any():
             p[t, 2] += _waves(d[t], rel, 8, (0.7, 3.0), rel.uniform(0.01, max_rough_m))
