@@ -14,8 +14,9 @@ Table 2 (if the lund_street photos exist): sanity on all 29 photos at 1024x768, 
 share of the bottom-centre that is road and of the top rows that is sky/building/vegetation,
 and the pixel agreement of each model with ``efficientvit_b0``.
 
-Models: ``efficientvit_b0`` (default, and with ``optimize=false`` to show the effect of
-BatchNorm folding + channels-last), ``deeplab_edgetpu_tflite`` if ``ai-edge-litert`` is
+Models: ``efficientvit_b0`` (default: ONNX Runtime where installed), ``efficientvit_b0_torch`` (``runtime=torch``)
+and ``efficientvit_b0_plain`` (torch with ``optimize=false``, to show the effect of BatchNorm folding +
+channels-last), ``deeplab_edgetpu_tflite`` if ``ai-edge-litert`` is
 installed (fixed 513x513 input; a "batch" is a loop of single invokes), and
 ``hf_segformer`` only when ``--hf-model`` names a local folder or a reachable model id.
 """
@@ -79,7 +80,8 @@ def build(model: str, threads: int, batch: int, hf_model: str):
     if model.startswith("efficientvit_b0"):
         from twinkit_efficientvit.efficientvit import EfficientViTParams, build_efficientvit
 
-        return build_efficientvit(EfficientViTParams(threads=threads, batch_size=batch, device="cpu",
+        runtime = "torch" if model.endswith(("_torch", "_plain")) else "auto"
+        return build_efficientvit(EfficientViTParams(threads=threads, batch_size=batch, device="cpu", runtime=runtime,
                                                      input_long_side_px=1024, optimize=not model.endswith("plain")))
     if model == "deeplab_edgetpu_tflite":
         from twinkit_efficientvit.tflite import DeepLabTFLiteParams, build_deeplab_tflite
@@ -142,7 +144,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--batches", default="1,4")
-    ap.add_argument("--models", default="efficientvit_b0,efficientvit_b0_plain,deeplab_edgetpu_tflite")
+    ap.add_argument("--models", default="efficientvit_b0,efficientvit_b0_torch,efficientvit_b0_plain,deeplab_edgetpu_tflite")
     ap.add_argument("--hf-model", default="", help="also benchmark hf_segformer with this model id/folder")
     ap.add_argument("--no-sanity", action="store_true")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)

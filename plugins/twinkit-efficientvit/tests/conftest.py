@@ -42,6 +42,21 @@ def load_lund(size=(1024, 768)) -> tuple[list[str], np.ndarray]:
     return [f.name for f in files], np.stack(images)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def onnx_cache(tmp_path_factory) -> Path:
+    """The download cache (where the ONNX export goes) in a folder of this test session, not ~/.cache."""
+    import os
+
+    folder = tmp_path_factory.mktemp("cache")
+    old = os.environ.get("XDG_CACHE_HOME")
+    os.environ["XDG_CACHE_HOME"] = str(folder)
+    yield folder / "twinkit" / "models"
+    if old is None:
+        os.environ.pop("XDG_CACHE_HOME", None)
+    else:
+        os.environ["XDG_CACHE_HOME"] = old
+
+
 @pytest.fixture(scope="session")
 def evit_weights() -> Path:
     return need(EVIT_FILE)

@@ -1,6 +1,8 @@
 """Image model ``efficientvit_b0``: EfficientViT-Seg-B0 trained on CityScapes (MIT Han Lab weights)."""
 from __future__ import annotations
 
+import logging
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +25,8 @@ HF_REPO = "han-cai/efficientvit-seg"
 WEIGHTS_URL = f"https://huggingface.co/{HF_REPO}/resolve/main/{WEIGHTS_FILE}"
 OFFICIAL = f"model id {HF_REPO}, file {WEIGHTS_FILE} ({WEIGHTS_URL})"
 
+log = logging.getLogger(__name__)
+
 
 @dataclass
 class EfficientViTParams:
@@ -37,7 +41,13 @@ class EfficientViTParams:
                                      "weights_path is empty, no check for a given path.")
     download_if_missing: bool = param(False,
                                       help="Fetch the official checkpoint (needs internet) when no copy is found.")
-    threads: int = param(0, ge=0, help="torch CPU threads during inference; 0 = torch's default.")
+    threads: int = param(0, ge=0, help="CPU threads during inference; 0 = the step's thread budget (the engine's "
+                                       "share of the cores), else torch's default.")
+    runtime: str = param("auto", choices=("auto", "onnxruntime", "torch"),
+                         help="What runs the network: auto (ONNX Runtime on CPU when onnxruntime and onnx are "
+                              "installed, else torch), onnxruntime (exported from the torch model at first use, "
+                              "cached beside the weights) or torch. The labels agree to well under 0.1 % of "
+                              "pixels.")
     batch_size: int = param(0, ge=0, le=1024,
                             help="Images per forward pass; 0 = automatic (1 on CPU, 8 on CUDA). Larger batches need "
                                  "more memory.")
@@ -108,12 +118,44 @@ class EfficientViTModel:
         self.batch_size = params.batch_size if params.batch_size > 0 else (8 if self.device.type == "cuda" else 1)
         self._mean = torch.tensor(IMAGENET_MEAN, device=self.device).view(1, 3, 1, 1) * 255.0
         self._std = torch.tensor(IMAGENET_STD, device=self.device).view(1, 3, 1, 1) * 255.0
+        self.onnx = self._onnx_net(params)
+        self.runtime = "onnxruntime" if self.onnx is not None else "torch"
+
+    def _onnx_net(self, params: EfficientViTParams):
+        """The ONNX Runtime network, or None where torch runs it (runtime=torch, a GPU, auto without onnxruntime)."""
+        from twinkit_efficientvit import onnx_net
+
+        if params.runtime == "torch" or (params.runtime == "auto" and (self.device.type != "cpu"
+                                                                        or not onnx_net.available())):
+            return None
+        if params.runtime == "onnxruntime" and not onnx_net.available():
+            raise InputError("image_model.runtime=onnxruntime needs the onnxruntime and onnx packages "
+                             "(pip install onnxruntime onnx); or set image_model.runtime=torch")
+        from twinkit_efficientvit.weights import sha256_of
+
+        try:
+            return onnx_net.OnnxNet(self.net, self.weights_path, sha256_of(self.weights_path), self.params.optimize,
+                                    self.threads())
+        except Exception as exc:  # export or check failed: torch gives the same labels, only slower
+            if params.runtime == "onnxruntime":
+                raise InputError(f"image_model.runtime=onnxruntime: {str(exc)[:300]}; set image_model.runtime=torch"
+                                 ) from exc
+            log.warning("ONNX Runtime not used (%s); the network runs on torch", str(exc)[:300])
+            return None
+
+    def threads(self) -> int:
+        """CPU threads for inference: ``params.threads``, else the step's budget (``TWINKIT_THREADS``), else 0
+        (the library's default)."""
+        from twinkit.threads import BUDGET_ENV
+
+        return self.params.threads or int(os.environ.get(BUDGET_ENV) or 0)
 
     def __repr__(self) -> str:
-        return f"EfficientViTModel(weights={self.weights_path}, device={self.device}, params={self.params})"
+        return (f"EfficientViTModel(weights={self.weights_path}, device={self.device}, runtime={self.runtime}, "
+                f"params={self.params})")
 
-    def _logits(self, batch: np.ndarray):
-        """``(b, h, w, 3)`` uint8 -> logits ``(b, 19, h, w)`` float32 (torch), at input resolution."""
+    def _network_input(self, batch: np.ndarray):
+        """``(b, h, w, 3)`` uint8 -> the normalised network input ``(b, 3, nh, nw)`` float32 (torch)."""
         import torch
         import torch.nn.functional as F
 
@@ -124,34 +166,50 @@ class EfficientViTModel:
         nh, nw = network_size(h, w, self.params.input_long_side_px, self.params.size_multiple_px)
         if (nh, nw) != (h, w):
             x = F.interpolate(x, size=(nh, nw), mode="bilinear", align_corners=False, antialias=nh < h or nw < w)
-        x = ((x - self._mean) / self._std).contiguous(memory_format=self._memory_format)
-        logits = self.net(x)
+        return (x - self._mean) / self._std
+
+    def _run_net(self, x):
+        """Normalised input -> stride-8 logits (torch), on ONNX Runtime or torch."""
+        import torch
+
+        if self.onnx is not None:
+            return torch.from_numpy(self.onnx(x.numpy()))
+        return self.net(x.contiguous(memory_format=self._memory_format))
+
+    def _low_logits(self, batch: np.ndarray):
+        """``(b, h, w, 3)`` uint8 -> logits ``(b, 19, nh/8, nw/8)`` float32 (torch), mirror-averaged with flip_tta."""
+        x = self._network_input(batch)
+        logits = self._run_net(x)
         if self.params.flip_tta:  # mirror image: the network is not exactly mirror-symmetric
-            logits = 0.5 * (logits + self.net(x.flip(-1)).flip(-1))
-        logits = logits.contiguous(memory_format=torch.channels_last)  # channels-last: faster upsample/argmax
-        return F.interpolate(logits, size=(h, w), mode="bilinear", align_corners=False)
+            logits = 0.5 * (logits + self._run_net(x.flip(-1).contiguous()).flip(-1))
+        return logits
 
     def predict(self, images) -> np.ndarray:
         """``images (b, h, w, 3) uint8 RGB -> (b, h, w) uint8`` CityScapes trainIds."""
         import torch
 
+        from twinkit_efficientvit.upsample import upsample_argmax
+
         batch = as_batch(images)
         out = np.empty(batch.shape[:3], dtype=np.uint8)
-        with torch_threads(self.params.threads), torch.inference_mode():
+        with torch_threads(self.threads()), torch.inference_mode():
             for sl in chunks(len(batch), self.batch_size):
-                out[sl] = self._logits(batch[sl]).argmax(1).to(torch.uint8).cpu().numpy()
+                out[sl] = upsample_argmax(self._low_logits(batch[sl]), batch.shape[1:3]).cpu().numpy()
         return out
 
     def predict_proba(self, images) -> np.ndarray:
         """``images (b, h, w, 3) uint8 RGB -> (b, 19, h, w) float16`` softmax probabilities."""
         import torch
+        import torch.nn.functional as F
 
         batch = as_batch(images)
         b, h, w, _ = batch.shape
         out = np.empty((b, len(self.classes), h, w), dtype=np.float16)
-        with torch_threads(self.params.threads), torch.inference_mode():
+        with torch_threads(self.threads()), torch.inference_mode():
             for sl in chunks(b, self.batch_size):
-                out[sl] = self._logits(batch[sl]).softmax(1).to(torch.float16).cpu().numpy()
+                logits = self._low_logits(batch[sl]).contiguous(memory_format=torch.channels_last)
+                up = F.interpolate(logits, size=(h, w), mode="bilinear", align_corners=False)
+                out[sl] = up.softmax(1).to(torch.float16).cpu().numpy()
         return out
 
 
