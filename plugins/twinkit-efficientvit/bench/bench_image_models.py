@@ -1,6 +1,7 @@
 """Benchmark the image models side by side; prints Markdown tables.
 
     .venv/bin/python plugins/twinkit-efficientvit/bench/bench_image_models.py [--repeats 5]
+    .venv/bin/python plugins/twinkit-efficientvit/bench/bench_image_models.py --agreement [--views outputs/demo/11_render_views/renders]
 
 Table 1: seconds per 1024x512 frame (median and best over repeats of one ``predict`` call
 on a batch, divided by the batch size; also process CPU seconds per frame, which other
@@ -139,6 +140,42 @@ def sanity(models: list[str], hf_model: str) -> list[tuple]:
     return rows
 
 
+def _image_sets(views_dir: str, max_views: int) -> list[tuple[str, np.ndarray]]:
+    """Reference images for the runtime agreement: lund_street (1024x768), berlin_gcp (long side 1024, as the
+    model resizes it) and, with ``views_dir``, a renders/ folder's views (its index.json's kept views)."""
+    from PIL import Image
+
+    sets = []
+    frames, real = load_frames(29, lund_size=(1024, 768))
+    if real:
+        sets.append(("lund_street photos, 1024x768", frames))
+    berlin = sorted((LUND.parent / "berlin_gcp" / "images").glob("*.jpg"))
+    if berlin:
+        ims = [Image.open(f).convert("RGB") for f in berlin]
+        ims = [im.resize((1024, round(im.size[1] * 1024 / im.size[0])), Image.BILINEAR) for im in ims]
+        sets += [(f"berlin_gcp {f.name}, {im.size[0]}x{im.size[1]}", np.asarray(im)[None]) for f, im in zip(berlin, ims)]
+    if views_dir:
+        kept = json.loads((Path(views_dir) / "index.json").read_text())["kept"]
+        kept = kept[:: max(1, len(kept) // max_views)][:max_views]
+        views = np.stack([np.asarray(Image.open(Path(views_dir) / f"{v['id']}.png").convert("RGB")) for v in kept])
+        sets.append((f"{len(views)} views of {views_dir}, {views.shape[2]}x{views.shape[1]}", views))
+    return sets
+
+
+def agreement(views_dir: str, max_views: int) -> list[tuple[str, int, float, int]]:
+    """(image set, images, share of pixels whose label differs ONNX Runtime vs torch, worst image's count)."""
+    from twinkit_efficientvit.efficientvit import EfficientViTParams, build_efficientvit
+
+    kw = dict(threads=1, batch_size=1, device="cpu")
+    ort_model = build_efficientvit(EfficientViTParams(runtime="onnxruntime", **kw))
+    torch_model = build_efficientvit(EfficientViTParams(runtime="torch", **kw))
+    rows = []
+    for name, images in _image_sets(views_dir, max_views):
+        differ = np.stack([(ort_model.predict(im[None]) != torch_model.predict(im[None]))[0] for im in images])
+        rows.append((name, len(images), float(differ.mean()), int(differ.sum(axis=(1, 2)).max())))
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
@@ -147,6 +184,10 @@ def main(argv=None) -> int:
     ap.add_argument("--models", default="efficientvit_b0,efficientvit_b0_torch,efficientvit_b0_plain,deeplab_edgetpu_tflite")
     ap.add_argument("--hf-model", default="", help="also benchmark hf_segformer with this model id/folder")
     ap.add_argument("--no-sanity", action="store_true")
+    ap.add_argument("--agreement", action="store_true",
+                    help="only the label agreement ONNX Runtime vs torch on the reference images")
+    ap.add_argument("--views", default="", help="with --agreement: also a renders/ folder's views")
+    ap.add_argument("--max-views", type=int, default=400, help="with --views: at most this many, spread evenly")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--model", default="", help=argparse.SUPPRESS)
     ap.add_argument("--batch", type=int, default=1, help=argparse.SUPPRESS)
@@ -157,6 +198,13 @@ def main(argv=None) -> int:
         worker(args)
         return 0
 
+    if args.agreement:
+        print("\n### Labels, ONNX Runtime against torch (share of pixels whose argmax differs; limit 0.1 %)\n")
+        print("| images | count | pixels differing | most in one image |")
+        print("|---|---:|---:|---:|")
+        for name, count, share, worst in agreement(args.views, args.max_views):
+            print(f"| {name} | {count} | {100 * share:.4f} % | {worst} |")
+        return 0
     models = [m for m in args.models.split(",") if m]
     if "deeplab_edgetpu_tflite" in models:
         from twinkit_efficientvit.tflite import litert_available
