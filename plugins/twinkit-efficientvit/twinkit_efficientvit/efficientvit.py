@@ -143,6 +143,12 @@ class EfficientViTModel:
             log.warning("ONNX Runtime not used (%s); the network runs on torch", str(exc)[:300])
             return None
 
+    def _torch_threads(self) -> int:
+        """torch's threads in predict: all of :meth:`threads` where torch runs the network; one where ONNX
+        Runtime does (torch then only normalises and labels, 15 ms per view, which a second spin-waiting
+        thread made 100 ms of CPU on the shared machine)."""
+        return 1 if self.onnx is not None else self.threads()
+
     def threads(self) -> int:
         """CPU threads for inference: ``params.threads``, else the step's budget (``TWINKIT_THREADS``), else 0
         (the library's default)."""
@@ -192,7 +198,7 @@ class EfficientViTModel:
 
         batch = as_batch(images)
         out = np.empty(batch.shape[:3], dtype=np.uint8)
-        with torch_threads(self.threads()), torch.inference_mode():
+        with torch_threads(self._torch_threads()), torch.inference_mode():
             for sl in chunks(len(batch), self.batch_size):
                 out[sl] = upsample_argmax(self._low_logits(batch[sl]), batch.shape[1:3]).cpu().numpy()
         return out
@@ -205,7 +211,7 @@ class EfficientViTModel:
         batch = as_batch(images)
         b, h, w, _ = batch.shape
         out = np.empty((b, len(self.classes), h, w), dtype=np.float16)
-        with torch_threads(self.threads()), torch.inference_mode():
+        with torch_threads(self._torch_threads()), torch.inference_mode():
             for sl in chunks(b, self.batch_size):
                 logits = self._low_logits(batch[sl]).contiguous(memory_format=torch.channels_last)
                 up = F.interpolate(logits, size=(h, w), mode="bilinear", align_corners=False)
