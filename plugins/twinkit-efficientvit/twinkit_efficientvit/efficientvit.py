@@ -45,8 +45,8 @@ class EfficientViTParams:
                                        "share of the cores), else torch's default.")
     runtime: str = param("auto", choices=("auto", "onnxruntime", "torch"),
                          help="What runs the network: auto (ONNX Runtime on CPU when onnxruntime and onnx are "
-                              "installed, else torch), onnxruntime (exported from the torch model at first use, "
-                              "cached beside the weights) or torch. The labels agree to well under 0.1 % of "
+                              "installed, else torch), onnxruntime (exported from the torch model at first use "
+                              "into ~/.cache/twinkit/models) or torch. The labels agree to well under 0.1 % of "
                               "pixels.")
     batch_size: int = param(0, ge=0, le=1024,
                             help="Images per forward pass; 0 = automatic (1 on CPU, 8 on CUDA). Larger batches need "
