@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import os
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,7 @@ class StepContext:
     _notes: list = field(default_factory=list)
     _substeps: dict = field(default_factory=dict)
     _substep_stack: list = field(default_factory=list)
+    _t0: float = field(default_factory=time.perf_counter)
 
     def gate(self, name: str, value: float | None, threshold: float, op: str = ">=", unit: str = "",
              why: str = "", hint: str | None = None, reason: str | None = None) -> bool:
@@ -94,16 +96,18 @@ class StepContext:
         full = "/".join([*self._substep_stack, str(name)])
         self._substep_stack.append(str(name))
         m = Measure()
+        start = time.perf_counter() - self._t0
         try:
             with m:
                 yield
         finally:
             self._substep_stack.pop()
-            self._substeps[full] = add_substep(self._substeps.get(full), m.as_dict())
+            self._substeps[full] = add_substep(self._substeps.get(full), {**m.as_dict(), "start_s": round(start, 3)})
 
     @property
     def substeps(self) -> dict[str, dict]:
-        """The substeps measured so far: name -> ``{"seconds", "peak_rss_mb", "delta_peak_mb"[, "calls"]}``."""
+        """The substeps measured so far: name -> ``{"seconds", "peak_rss_mb", "delta_peak_mb", "start_s"[, "calls"]}``
+        (``start_s``: when its first call began, seconds after the step's context was made)."""
         return {k: dict(v) for k, v in self._substeps.items()}
 
     @property
@@ -137,13 +141,15 @@ class StepContext:
 
 
 def add_substep(old: dict | None, new: dict) -> dict:
-    """One substep's record after another call of the same name: seconds summed, peaks the highest, calls counted."""
+    """Two records of one substep name added up (a second call, or a fan-out step's items): seconds summed, peaks
+    the highest, calls counted."""
     if not old:
         return dict(new)
     return {"seconds": round(old.get("seconds", 0.0) + new.get("seconds", 0.0), 3),
             "peak_rss_mb": max(old.get("peak_rss_mb", 0.0), new.get("peak_rss_mb", 0.0)),
             "delta_peak_mb": max(old.get("delta_peak_mb", 0.0), new.get("delta_peak_mb", 0.0)),
-            "calls": int(old.get("calls", 1)) + 1}
+            "start_s": min(old.get("start_s", 0.0), new.get("start_s", 0.0)),
+            "calls": int(old.get("calls", 1)) + int(new.get("calls", 1))}
 
 
 def with_substeps(metrics: dict, substeps: Mapping[str, dict]) -> dict:
