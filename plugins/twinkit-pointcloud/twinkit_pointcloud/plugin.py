@@ -444,9 +444,8 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
 
     params = params or EvalParams()
     with Measure() as meas, _Outputs(out_recon_metrics_json):
-        with ctx.substep("read"):
-            mesh = A.read_textured_mesh(in_textured_mesh_ply)
-            cloud = A.read_points(in_points_ply)
+        mesh = A.read_textured_mesh(in_textured_mesh_ply)
+        cloud = A.read_points(in_points_ply)
         from scipy.spatial import cKDTree
 
         with ctx.substep("cloud_to_mesh"):
@@ -471,8 +470,8 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
                  hint="the clean-up removed surface the points support: see clean_report.json; try "
                       "steps.clean_mesh.min_component_faces=0 or a larger steps.clean_mesh.max_dist_m "
                       '(docs/pointcloud.md "Coverage of sparse scans")')
-        if in_gt_mesh_ply is not None:
-            with ctx.substep("gt_distances"):
+        with ctx.substep("ground_truth"):
+            if in_gt_mesh_ply is not None:
                 gt = A.read_gt_mesh(in_gt_mesh_ply)
                 gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
                 acc = gsurf.distance(mesh.vertices)
@@ -486,7 +485,6 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
                              "completeness_gt_to_mesh_m": stats(comp),
                              "chamfer_m": float(acc.mean() + comp.mean()) / 2.0,
                              "gt_covered_within_5cm": float((comp <= 0.05).mean())}
-            with ctx.substep("gt_per_class"):
                 glab = gt.face_attrs.get("label")
                 if glab is not None and len(glab) == gt.n_faces:
                     s2, l2, areas = sample_surface_by_label(gt.vertices, gt.faces, np.asarray(glab), params.gt_samples,
@@ -501,10 +499,9 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
                     acc_lab = np.asarray(glab)[gsurf.closest(mesh.vertices)[0]]
                     res["gt"]["accuracy_by_class_mean_m"] = {
                         cityscapes.name_of(int(c)): float(acc[acc_lab == c].mean()) for c in np.unique(acc_lab)}
-        with ctx.substep("map"):
-            vmax = params.colormap_max_m or float(np.quantile(c2m, 0.95)) or 0.01
-            png = Path(out_recon_metrics_json).with_suffix(".png")
-            topdown_map(cloud.vertices, c2m, png, vmax, size_px=params.image_px, title="cloud -> mesh distance")
+        vmax = params.colormap_max_m or float(np.quantile(c2m, 0.95)) or 0.01
+        png = Path(out_recon_metrics_json).with_suffix(".png")
+        topdown_map(cloud.vertices, c2m, png, vmax, size_px=params.image_px, title="cloud -> mesh distance")
         res["colormap_png"] = png.name
         res["colormap_max_m"] = vmax
         res["time"] = {"seconds": round(meas_now(meas), 3)}
