@@ -122,7 +122,8 @@ def profile_delta(old: dict, new: dict, min_s: float = 0.0) -> str:
         if sa is not None and sb is not None and abs(sb - sa) < min_s:
             continue
         change = f"{sb - sa:+8.1f} {_pct(sa, sb):>7}" if sa is not None and sb is not None else "-"
-        peak = f"{_mb(ra and ra.get('peak_rss_mb')) or '-'}->{_mb(rb and rb.get('peak_rss_mb')) or '-'}"
+        pa, pb = (_mb(r and r.get("peak_rss_mb")) or "-" for r in (ra, rb))
+        peak = "" if pa == pb == "-" else f"{pa} -> {pb}"
         lines.append(f"{k[0] if not k[1] else '':<24} {k[1]:<22} {_num(sa):>9} {_num(sb):>9} {change:>16} {peak:>13}")
     ta, tb = float(old.get("total_s") or 0), float(new.get("total_s") or 0)
     lines.append(f"{'total':<24} {'':<22} {ta:9.1f} {tb:9.1f} {f'{tb - ta:+8.1f} {_pct(ta, tb):>7}':>16}")
