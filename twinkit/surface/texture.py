@@ -208,7 +208,7 @@ def write_png(path: Path, img: np.ndarray, compress_level: int = 1, threads: int
     data[0, 0] = 0  # None: no row above
     data[0, 1:] = rows[0]
     np.subtract(rows[1:], rows[:-1], out=data[1:, 1:])
-    raw = memoryview(data.reshape(-1))
+    raw = data.reshape(-1).data  # a memoryview: slices without copies
     n = max(1, min(int(threads), h))
     cuts = [len(raw) * i // n for i in range(n + 1)]
 
