@@ -17,7 +17,7 @@ Modules (import the one you need; each imports its heavy library only inside its
   (``put_texels``), gap filling (``fill_empty_texels``) and ``write_png``;
 - :mod:`twinkit.surface.compiled`: loops compiled by numba when it is installed (``compiled``), each
   with numpy code that gives the same numbers;
-- :mod:`twinkit.surface.measure`: wall time and peak memory of a block (``Measure``, ``StepTimer``).
+- :mod:`twinkit.surface.measure`: wall time and peak memory of a block (``Measure``; a step times its parts with ``ctx.substep``).
 
 Meshes are :class:`twinkit.mesh.Mesh` (metres, site frame). Heavy dependencies come with the
 ``twinkit[mesh]`` extra (scipy, open3d, fast-simplification, Pillow, numba).
