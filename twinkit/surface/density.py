@@ -121,7 +121,7 @@ def texture_size(area_m2: float, texel_m: float, lo: int = 1024, hi: int = 8192)
     return int(min(hi, max(lo, px)))
 
 
-#: texels never finer than this (a street model seen from a car; the demo's 8192 px on 3,754 m²)
+#: texels never finer than this (a street model seen from a car)
 MIN_TEXEL_M = 0.01
 
 
