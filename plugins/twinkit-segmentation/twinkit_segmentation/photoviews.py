@@ -205,7 +205,7 @@ def photo_view_set(mesh, cams: list, photos_dir, cameras_json, long_side_px: int
 
     from twinkit import InputError
 
-    from .render import Renderer
+    from .render import Renderer, write_vertex_map
 
     kept: list = []
     dropped: list = []
@@ -248,7 +248,7 @@ def photo_view_set(mesh, cams: list, photos_dir, cameras_json, long_side_px: int
                 continue
             n_undistorted += int(undist)
             Image.fromarray(img).save(out_dir / f"{vid}.png", compress_level=1)
-            np.savez_compressed(out_dir / f"{vid}_vertex.npz", vertex=vertex)
+            write_vertex_map(out_dir / f"{vid}_vertex.npz", vertex)
             kept.append({"id": vid, "sampler": "photo", "image": cam.image, "width": w, "height": h,
                          "K": K.round(4).tolist(), "R_world_from_camera": cam.R_wc.tolist(),
                          "center": cam.center.tolist(), "undistorted": bool(undist),
