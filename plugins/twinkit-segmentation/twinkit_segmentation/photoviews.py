@@ -236,8 +236,8 @@ def photo_view_set(mesh, cams: list, photos_dir, cameras_json, long_side_px: int
             if (w, h) not in renderers:  # the vertex map only: no texture needed
                 renderers[(w, h)] = Renderer(mesh.vertices, mesh.faces, None, None, w, h)
             t1 = time.perf_counter()
-            _, vertex = renderers[(w, h)].render(view_matrix_opencv(cam.R_wc, cam.center),
-                                                 projection_from_K(K, w, h))
+            vertex = renderers[(w, h)].vertex_map(view_matrix_opencv(cam.R_wc, cam.center),
+                                                     projection_from_K(K, w, h))
             t_render += time.perf_counter() - t1
             if valid is not None:
                 vertex[~valid] = -1  # no photo pixel there after undistortion
