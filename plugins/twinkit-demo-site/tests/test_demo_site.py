@@ -15,7 +15,9 @@ REQUIRED_CLASSES = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 17, 18}
 
 
 def _all_files(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+    """Every file the generator wrote (not the engine's record of the run, step.json, which has its times)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != "step.json"}
 
 
 # ------------------------------------------------------------------ plugin contract
