@@ -22,6 +22,7 @@ from twinkit.testing import BENCH_ENV  # noqa: E402
 CHECKS = [
     (".", "tests/test_real_config.py::test_demo_site_end_to_end_then_reused[efficientvit_b0]"),
     ("plugins/twinkit-photo", "tests/test_demo_photos.py::test_demo_photos_register_and_georeference_within_5cm"),
+    ("plugins/twinkit-tiles", "tests/test_demo_site.py::test_tiled_segment_recipe_on_small_demo_site"),
 ]
 
 
