@@ -24,7 +24,14 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) scripts/run_tests.py $(PYTEST_ARGS)
 
-bench: $(STAMP)
+# the benchmarks' baselines, not twinkit's dependencies: pymeshlab (the thesis's mesh route that
+# bench_pointcloud.py races) and xatlas (the UV unwrapper compared with the built-in charts)
+BENCH_STAMP := .venv/.twinkit-bench-setup
+$(BENCH_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet --disable-pip-version-check "pymeshlab>=2023.12" "xatlas>=0.0.9"
+	@touch $@
+
+bench: $(BENCH_STAMP)
 	$(PY) bench/run_all.py
 
 clean:

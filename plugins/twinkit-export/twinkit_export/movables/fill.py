@@ -275,7 +275,11 @@ def patch_footprints(v, f, lab, tc, grid: LocalGround, instances, opt: LiftOptio
     nv = len(v)
     out_v, out_f, out_lab, out_tc = [], [], [], []
     fxy = v[f][:, :, :2]
-    fz = v[f][:, :, 2].mean(axis=1)
+    fcen = fxy.mean(axis=1)
+    low = np.nonzero(v[f][:, :, 2].mean(axis=1) - grid.at(fcen) < 0.5)[0]  # ground-level surfaces only
+    # faces near a box are looked up around its centre: a face's vertices lie within `reach` of its centre
+    reach = float(np.linalg.norm(fxy[low] - fcen[low, None], axis=2).max()) if len(low) else 0.0
+    low_tree = cKDTree(fcen[low]) if len(low) else None
     bv = np.unique(border_edges(f))
     for inst in instances:
         cen, length, width, yaw = inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg
@@ -286,8 +290,11 @@ def patch_footprints(v, f, lab, tc, grid: LocalGround, instances, opt: LiftOptio
         vs = np.arange(-(width / 2 + m), width / 2 + m + 1e-9, c)
         gu, gv = np.meshgrid(us, vs)
         pts = cen + gu.ravel()[:, None] * ax_u + gv.ravel()[:, None] * ax_v
-        near = in_box(fxy.reshape(-1, 2), cen, length, width, yaw, m + 1.0).reshape(-1, 3).any(axis=1)
-        near &= fz - grid.at(fxy.mean(axis=1)) < 0.5  # ground-level surfaces only
+        near = np.zeros(len(f), bool)
+        if low_tree is not None:
+            cand = low[np.sort(np.asarray(low_tree.query_ball_point(
+                cen, float(np.hypot(length / 2 + m + 1.0, width / 2 + m + 1.0)) + reach + 1e-6), np.int64))]
+            near[cand[in_box(fxy[cand].reshape(-1, 2), cen, length, width, yaw, m + 1.0).reshape(-1, 3).any(axis=1)]] = True
         tri_xy = fxy[near]
         unc = ~covered(pts, tri_xy)
         bnear = bv[in_box(v[bv, :2], cen, length, width, yaw, m + c)]
