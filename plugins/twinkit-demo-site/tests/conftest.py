@@ -1,5 +1,5 @@
 """Session fixtures: the small demo site is generated once (shared with the other sessions of a ``make test``
-run, twinkit.testing.shared_plugin_run), and a second time, here, for the determinism test."""
+run, twinkit.testing.shared_plugin_run); a sparser one twice, here, for the determinism test."""
 from __future__ import annotations
 
 import json
@@ -30,11 +30,15 @@ def demo(tmp_path_factory):
                                                  site=dict(SITE), size="small", seed=0))
 
 
+#: a sparser scan and fewer photos of the same site: cheap to make twice in a session (the determinism test)
+SPARSE = {"size": "small", "seed": 0, "density_scale": 0.1, "photo_count": 3}
+
+
 @pytest.fixture(scope="session")
-def demo_again(tmp_path_factory):
-    """The same site generated again, in this session."""
-    return _folder_and_metrics(run_plugin("site_generator", "demo_intersection", tmp_path_factory.mktemp("demo_b"),
-                                          site=dict(SITE), size="small", seed=0))
+def sparse_twice(tmp_path_factory):
+    """The site with :data:`SPARSE`'s parameters generated twice here, each into a fresh folder."""
+    return [_folder_and_metrics(run_plugin("site_generator", "demo_intersection", tmp_path_factory.mktemp(f"sparse_{k}"),
+                                           site=dict(SITE), **SPARSE)) for k in "ab"]
 
 
 @pytest.fixture(scope="session")
