@@ -8,6 +8,7 @@
     twinkit plugins <kind>/<name>                              a plugin's parameters: type, range, default, help
     twinkit verify <manifest.json | run folder>                check a run's manifest against the files on disk
     twinkit gc [--dry-run] [site=<name>] [engine.outputs_dir=..] delete stored results no step folder refers to
+    twinkit profile <run folder> [<earlier run | profile .json>] seconds and peak MB per step and substep
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from twinkit.quality import DEGRADED_EXIT
 
 log = logging.getLogger("twinkit")
 
-SUBCOMMANDS = tuple(COMMANDS)  # status, plugins, verify, gc: twinkit/commands.py
+SUBCOMMANDS = tuple(COMMANDS)  # status, plugins, verify, gc, profile: twinkit/commands.py
 
 EXIT_OK, EXIT_STEP_FAILED = 0, 1
 

@@ -1,4 +1,4 @@
-"""The subcommands ``twinkit status``, ``twinkit plugins``, ``twinkit verify`` and ``twinkit gc``."""
+"""The subcommands ``twinkit status``, ``twinkit plugins``, ``twinkit verify``, ``twinkit gc`` and ``twinkit profile``."""
 from __future__ import annotations
 
 import os
@@ -164,4 +164,11 @@ def cmd_gc(args: list[str]) -> int:
     return 0
 
 
-COMMANDS = {"status": cmd_status, "plugins": cmd_plugins, "verify": cmd_verify, "gc": cmd_gc}
+def cmd_profile(args: list[str]) -> int:
+    """Where a finished run spent its time and memory, per step and substep (``twinkit.profile``)."""
+    from twinkit.profile import print_profile
+
+    return print_profile(args)
+
+
+COMMANDS = {"status": cmd_status, "plugins": cmd_plugins, "verify": cmd_verify, "gc": cmd_gc, "profile": cmd_profile}

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import logging
 import os
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, TypeVar
@@ -35,6 +37,9 @@ class StepContext:
     _degraded: list = field(default_factory=list)
     _gates: list = field(default_factory=list)
     _notes: list = field(default_factory=list)
+    _substeps: dict = field(default_factory=dict)
+    _substep_stack: list = field(default_factory=list)
+    _t0: float = field(default_factory=time.perf_counter)
 
     def gate(self, name: str, value: float | None, threshold: float, op: str = ">=", unit: str = "",
              why: str = "", hint: str | None = None, reason: str | None = None) -> bool:
@@ -77,6 +82,34 @@ class StepContext:
         self._degraded.append(entry)
         self.log.warning("DEGRADED: %s%s", reason, f" ({hint})" if hint else "")
 
+    @contextmanager
+    def substep(self, name: str) -> Iterator[None]:
+        """Time one part of the step: ``with ctx.substep("poisson"): ...``. The engine stores each part's wall
+        seconds and peak resident memory (MB, and above the memory at its start) in the step's metrics under
+        ``substeps`` (step.json, the manifest); the report's timeline and ``twinkit profile`` show them.
+
+        A name used twice adds up (seconds summed, peaks the highest, ``calls`` counted); a substep inside another
+        is named ``outer/inner``. Time outside every substep is shown as the step's ``(other)``.
+        """
+        from twinkit.surface.measure import Measure
+
+        full = "/".join([*self._substep_stack, str(name)])
+        self._substep_stack.append(str(name))
+        m = Measure()
+        start = time.perf_counter() - self._t0
+        try:
+            with m:
+                yield
+        finally:
+            self._substep_stack.pop()
+            self._substeps[full] = add_substep(self._substeps.get(full), {**m.as_dict(), "start_s": round(start, 3)})
+
+    @property
+    def substeps(self) -> dict[str, dict]:
+        """The substeps measured so far: name -> ``{"seconds", "peak_rss_mb", "delta_peak_mb", "start_s"[, "calls"]}``
+        (``start_s``: when its first call began, seconds after the step's context was made)."""
+        return {k: dict(v) for k, v in self._substeps.items()}
+
     @property
     def degraded_reasons(self) -> list[dict]:
         """What ``degraded`` was told so far (tests read it)."""
@@ -105,3 +138,23 @@ class StepContext:
         else:
             ex = self._executor_factory()
         return list(ex.map(fn, items))
+
+
+def add_substep(old: dict | None, new: dict) -> dict:
+    """Two records of one substep name added up (a second call, or a fan-out step's items): seconds summed, peaks
+    the highest, calls counted."""
+    if not old:
+        return dict(new)
+    return {"seconds": round(old.get("seconds", 0.0) + new.get("seconds", 0.0), 3),
+            "peak_rss_mb": max(old.get("peak_rss_mb", 0.0), new.get("peak_rss_mb", 0.0)),
+            "delta_peak_mb": max(old.get("delta_peak_mb", 0.0), new.get("delta_peak_mb", 0.0)),
+            "start_s": min(old.get("start_s", 0.0), new.get("start_s", 0.0)),
+            "calls": int(old.get("calls", 1)) + int(new.get("calls", 1))}
+
+
+def with_substeps(metrics: dict, substeps: Mapping[str, dict]) -> dict:
+    """``metrics`` with the substeps a step measured through :meth:`StepContext.substep` under ``substeps``
+    (beside any the step returned there itself)."""
+    if not substeps:
+        return metrics
+    return {**metrics, "substeps": {**(metrics.get("substeps") or {}), **substeps}}

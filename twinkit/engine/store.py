@@ -23,7 +23,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
-from twinkit.context import StepContext
+from twinkit.context import StepContext, with_substeps
 from twinkit.engine.base import EngineBase
 from twinkit.engine.memory import _PeakRSS
 from twinkit.engine.records import RECORD, RECORD_SCHEMA, _now, read_record
@@ -192,7 +192,7 @@ def _run_into(tmp: Path, run: Callable, params: Any, ctx_kwargs: dict, inputs: d
     finally:
         ctx.log.removeHandler(warned)
     duration = time.perf_counter() - t0
-    metrics = with_degraded(metrics if isinstance(metrics, dict) else {}, ctx._degraded)
+    metrics = with_degraded(with_substeps(metrics if isinstance(metrics, dict) else {}, ctx._substeps), ctx._degraded)
     metrics = with_gates(with_gates(with_gates(metrics, ctx._gates), warned.texts, "warnings"), ctx._notes, "notes")
     missing = [p.filename for p in outputs if not (tmp / p.filename).exists()]
     wrong = [p.filename for p in outputs if (tmp / p.filename).exists() and p.is_dir != (tmp / p.filename).is_dir()]

@@ -64,8 +64,9 @@ def _timeline(run: RunView) -> str:
     rows = []
     for i, s in enumerate(run.steps, 1):
         d = float(s.get("duration_s") or 0)
-        bar = (f"<div{attr('class', 'bar st-' + str(s.get('status')))} style=\"width:{max(0.5, 100 * d / total):.1f}%\""
-               f" title=\"{d:.1f} s\"></div>")
+        parts = _parts(s, d)
+        bar = (f"<div{attr('class', 'bar st-' + str(s.get('status')) + (' split' if parts else ''))} "
+               f"style=\"width:{max(0.5, 100 * d / total):.1f}%\" title=\"{d:.1f} s\">{_segments(parts, d)}</div>")
         rows.append("<tr>" + "".join([
             f"<td class=\"num\">{i}</td>",
             f"<td>{link('#step-' + str(s.get('folder')), s.get('folder'))}</td>",
@@ -76,12 +77,47 @@ def _timeline(run: RunView) -> str:
             f"<td class=\"num\">{d:.1f} s</td>",
             f"<td class=\"num\">{esc(fmt(s.get('peak_rss_mb')) if s.get('peak_rss_mb') else '')}</td>",
             f"<td class=\"barcell\">{bar}</td>",
-        ]) + "</tr>")
+        ]) + "</tr>" + _substep_row(parts, d))
     head = "".join(f"<th>{h}</th>" for h in ("#", "folder", "plugin", "status", "why", "time", "peak MB", ""))
     key = ("<p class=\"legend\">ran: computed now · cached: linked from an earlier result · reused: "
               "unchanged in place · edited: a hand edit was kept · manual: a file you provided · degraded: the step "
-              "said its result is far below what it should be (reasons at the top)</p>")
+              "said its result is far below what it should be (reasons at the top) · a bar in parts: the step's "
+              "substeps (hover for each; the table under the step lists them; twinkit profile prints them)</p>")
     return f"<table class=\"timeline\"><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>{key}"
+
+
+def _parts(step: dict, seconds: float) -> list[tuple[str, dict]]:
+    """The substeps of a step that ran now (twinkit.profile), for its bar; none for a cached or reused one."""
+    from twinkit.profile import merged_substeps, substep_parts
+
+    if step.get("status") != "ran" or seconds <= 0:
+        return []
+    return substep_parts(seconds, merged_substeps(step.get("metrics")))
+
+
+def _segments(parts: list[tuple[str, dict]], seconds: float) -> str:
+    """The parts of a step's bar, one per top-level substep, each titled with its name, seconds and peak."""
+    out = []
+    for name, rec in parts:
+        if "/" in name:
+            continue
+        sec = float(rec.get("seconds") or 0)
+        peak = f", peak {float(rec['peak_rss_mb']):.0f} MB" if rec.get("peak_rss_mb") else ""
+        out.append(f"<span style=\"width:{100 * sec / seconds:.1f}%\"{attr('title', f'{name}: {sec:.1f} s{peak}')}>"
+                   "</span>")
+    return "".join(out)
+
+
+def _substep_row(parts: list[tuple[str, dict]], seconds: float) -> str:
+    """A folded row under a step with substeps: name, seconds, share of the step, peak MB, calls."""
+    if not parts:
+        return ""
+    rows = [[name, round(float(rec.get("seconds") or 0), 2), f"{100 * float(rec.get('seconds') or 0) / seconds:.0f} %",
+             round(float(rec["peak_rss_mb"])) if rec.get("peak_rss_mb") else "", rec.get("calls") or ""]
+            for name, rec in parts]
+    inner = table(["substep", "seconds", "share", "peak MB", "calls"], rows, "small")
+    return (f"<tr class=\"substeps\"><td></td><td colspan=\"7\"><details><summary>{len(parts)} parts</summary>"
+            f"{inner}</details></td></tr>")
 
 
 def _provenance(run: RunView, out: Path) -> str:

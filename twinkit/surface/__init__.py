@@ -14,7 +14,7 @@ Modules (import the one you need; each imports its heavy library only inside its
 - :mod:`twinkit.surface.metrics`: ``cloud_to_mesh`` distances;
 - :mod:`twinkit.surface.texture`: texture-atlas rasterising (``rasterize``), gap filling
   (``fill_empty_texels``) and ``write_png``;
-- :mod:`twinkit.surface.measure`: wall time and peak memory of a block (``Measure``, ``StepTimer``).
+- :mod:`twinkit.surface.measure`: wall time and peak memory of a block (``Measure``; a step times its parts with ``ctx.substep``).
 
 Meshes are :class:`twinkit.mesh.Mesh` (metres, site frame). Heavy dependencies come with the
 ``twinkit[mesh]`` extra (scipy, open3d, fast-simplification, Pillow).

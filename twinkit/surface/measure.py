@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import threading
 import time
-from contextlib import contextmanager
-from typing import Iterator
 
 
 def _rss_bytes() -> int:
@@ -60,17 +58,3 @@ class Measure:
     def as_dict(self) -> dict:
         return {"seconds": round(self.seconds, 3), "peak_rss_mb": round(self.peak_rss_mb, 1),
                 "delta_peak_mb": round(self.delta_peak_mb, 1)}
-
-
-class StepTimer:
-    """Collects named sub-step measurements: ``with t("poisson"): ...``; ``t.table`` is a dict."""
-
-    def __init__(self) -> None:
-        self.table: dict[str, dict] = {}
-
-    @contextmanager
-    def __call__(self, name: str) -> Iterator[Measure]:
-        m = Measure()
-        with m:
-            yield m
-        self.table[name] = m.as_dict()

@@ -35,6 +35,7 @@ def run(preset: str, folder: Path, seed: int) -> dict:
     t = time.perf_counter()
     m = generate_demo_site(DemoSiteParams(size=preset, seed=seed), ctx, **kw)
     m["seconds"] = time.perf_counter() - t
+    m["timings_s"] = {k: v["seconds"] for k, v in ctx.substeps.items()}
     m["sizes"] = {
         "mesh (obj+mtl+png)": sum(_size(folder / f) for f in ("gt_mesh.obj", "gt_mesh.mtl", "gt_mesh.png")),
         "mesh ply": _size(folder / "gt_mesh.ply"),

@@ -5,7 +5,6 @@ Heavy libraries (open3d, laspy, pye57, PIL, pyproj) are imported inside the step
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -115,48 +114,40 @@ def generate_demo_site(params: DemoSiteParams, ctx: StepContext, *,
 
     pre = _preset(params.size)
     seed = int(params.seed)
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-
-    def lap(name):
-        nonlocal t0
-        t = time.perf_counter()
-        timings[name] = round(t - t0, 3)
-        t0 = t
-
     geo = site_frame(ctx.site)
     ctx.log.info("demo site '%s' seed %d at lat %.6f lon %.6f (%s)", params.size, seed, geo.lat, geo.lon, geo.crs)
 
-    atlas = build_atlas(seed)
-    scene = build_scene(pre["half_m"], seed, atlas)
-    mesh = scene.mesh
-    lap("scene")
-    writers.write_obj(out_gt_mesh_obj, mesh, atlas)
-    A.write_gt_mesh(out_gt_mesh_ply, writers.gt_ply_mesh(mesh, atlas))
-    lap("mesh_files")
+    with ctx.substep("scene"):
+        atlas = build_atlas(seed)
+        scene = build_scene(pre["half_m"], seed, atlas)
+        mesh = scene.mesh
+    with ctx.substep("mesh_files"):
+        writers.write_obj(out_gt_mesh_obj, mesh, atlas)
+        A.write_gt_mesh(out_gt_mesh_ply, writers.gt_ply_mesh(mesh, atlas))
 
-    tracer = Tracer(mesh, atlas, threads=ctx.threads, weathering=params.weathering, seed=seed)
-    cloud, traj, settings = _scan_cloud(scene, tracer, params, pre, seed, ctx)
-    lap("scan")
-    _write_cloud_files(cloud, traj, settings, geo, (seed, params.size), out_cloud_ply=out_cloud_ply,
-                       out_cloud_las=out_cloud_las, out_cloud_e57=out_cloud_e57, out_scanners_json=out_scanners_json)
-    lap("cloud_files")
+    with ctx.substep("tracer"):
+        tracer = Tracer(mesh, atlas, threads=ctx.threads, weathering=params.weathering, seed=seed)
+    with ctx.substep("scan"):
+        cloud, traj, settings = _scan_cloud(scene, tracer, params, pre, seed, ctx)
+    with ctx.substep("cloud_files"):
+        _write_cloud_files(cloud, traj, settings, geo, (seed, params.size), out_cloud_ply=out_cloud_ply,
+                           out_cloud_las=out_cloud_las, out_cloud_e57=out_cloud_e57, out_scanners_json=out_scanners_json)
 
-    n_photos = _photos(scene, tracer, params, pre, seed, geo, ctx, out_photos_dir=out_photos_dir,
-                       out_cameras_json=out_cameras_json, out_gcp_json=out_gcp_json)
-    lap("photos")
+    with ctx.substep("photos"):
+        n_photos = _photos(scene, tracer, params, pre, seed, geo, ctx, out_photos_dir=out_photos_dir,
+                           out_cameras_json=out_cameras_json, out_gcp_json=out_gcp_json)
 
-    tf = _osm_transform(params, seed)
-    _write_roads(scene, tf, geo, out_roads_osm=out_roads_osm, out_roads_truth_json=out_roads_truth_json)
-    lap("roads")
+    with ctx.substep("roads"):
+        tf = _osm_transform(params, seed)
+        _write_roads(scene, tf, geo, out_roads_osm=out_roads_osm, out_roads_truth_json=out_roads_truth_json)
 
-    site = _site_json(scene, params, geo, tf, cloud, traj, n_photos)
-    A.write_site_info(out_site_json, site)
-    lap("site_json")
+    with ctx.substep("site_json"):
+        site = _site_json(scene, params, geo, tf, cloud, traj, n_photos)
+        A.write_site_info(out_site_json, site)
     n_points = site["counts"]["points"]
-    ctx.log.info("demo site: %d faces, %d points, %d photos; timings %s", len(mesh.faces), n_points, n_photos, timings)
+    ctx.log.info("demo site: %d faces, %d points, %d photos", len(mesh.faces), n_points, n_photos)
     return {"points": n_points, "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
-            "photos": n_photos, "ghost_points": site["counts"]["ghost_points"], "timings_s": timings}
+            "photos": n_photos, "ghost_points": site["counts"]["ghost_points"]}
 
 
 def _preset(size: str) -> dict:

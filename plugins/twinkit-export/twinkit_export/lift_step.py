@@ -76,7 +76,8 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
 
     params = params or LiftParams()
     t0 = time.perf_counter()
-    mesh, labels = _read_inputs(Path(in_textured_mesh_obj), Path(in_labels_npy))
+    with ctx.substep("read"):
+        mesh, labels = _read_inputs(Path(in_textured_mesh_obj), Path(in_labels_npy))
     out_obj, mov_dir = Path(out_textured_mesh_obj), Path(out_movables_dir)
     mov_dir.mkdir(parents=True, exist_ok=True)
     tex_name = None
@@ -96,19 +97,22 @@ def lift_movables_step(params: LiftParams, ctx: StepContext, *, in_labels_npy: P
     else:
         ctx.log.warning("lift_movables: no geometry_votes.npy (no classify_geometry step): objects are judged by the "
                         "labels, their shape and their ground contact only")
-    res = lift_movables(mesh, labels, opt, ctx.log, votes)
-    out = res.mesh
-    tc = out.corner_uv if out.corner_uv is not None else np.zeros((out.n_faces, 3, 2), np.float32)
-    A.write_textured_obj(out_obj, out.vertices, out.faces, tc, tex_name or "", normals=out.normals)
-    A.write_labels(out_labels_npy, res.labels.astype(np.uint8))
-    mtex = None
-    if tex_name:
-        mtex = "texture" + Path(tex_name).suffix
-        shutil.copyfile(out_obj.parent / tex_name, mov_dir / mtex)
-    actors = write_actors(mov_dir, res, mtex, ctx.log)
-    rep = {**res.report,
-           "open_border_near_objects_before_m": round(open_border_near(mesh.faces, mesh.vertices, res.instances), 3),
-           "open_border_near_objects_after_m": round(open_border_near(out.faces, out.vertices, res.instances), 3)}
+    with ctx.substep("lift"):
+        res = lift_movables(mesh, labels, opt, ctx.log, votes)
+    with ctx.substep("write"):
+        out = res.mesh
+        tc = out.corner_uv if out.corner_uv is not None else np.zeros((out.n_faces, 3, 2), np.float32)
+        A.write_textured_obj(out_obj, out.vertices, out.faces, tc, tex_name or "", normals=out.normals)
+        A.write_labels(out_labels_npy, res.labels.astype(np.uint8))
+        mtex = None
+        if tex_name:
+            mtex = "texture" + Path(tex_name).suffix
+            shutil.copyfile(out_obj.parent / tex_name, mov_dir / mtex)
+        actors = write_actors(mov_dir, res, mtex, ctx.log)
+    with ctx.substep("open_border"):
+        rep = {**res.report,
+               "open_border_near_objects_before_m": round(open_border_near(mesh.faces, mesh.vertices, res.instances), 3),
+               "open_border_near_objects_after_m": round(open_border_near(out.faces, out.vertices, res.instances), 3)}
     write_json(mov_dir / ACTORS, {"lifted": True, "frame": FRAME, "texture": mtex, "source": Path(in_textured_mesh_obj).name,
                                   "report": rep, "actors": actors})
     return {"lifted": True, **rep, "static_faces": out.n_faces, "seconds": round(time.perf_counter() - t0, 2)}

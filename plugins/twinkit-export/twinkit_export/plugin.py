@@ -444,35 +444,40 @@ def export_carla_package(params: CarlaPackageParams, ctx: StepContext, *, in_twi
                                  in_site_json=in_site_json, in_movables_dir=in_movables_dir, t0=t0,
                                  source=no_map_source)
     xodr = Path(in_aligned_xodr)
-    text = read_opendrive(xodr)
-    cs = _load_set(in_class_meshes_dir)
+    with ctx.substep("read"):
+        text = read_opendrive(xodr)
+        cs = _load_set(in_class_meshes_dir)
     # the package is written in CARLA's frame (true north at the base point), its geolocation measured where the
     # twin is: carla_frame.py
-    frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
-                          params.geolocation_radius_m, params.geolocation_tolerance_m, ctx.log,
-                          points=twin_points(cs, text) if params.frame == "carla" else None)
-    site_geo, text = xodr_georeference(text), package_xodr(text, frame, xodr.name)
-    map_name, package = _package_names(params, ctx)
-    lanes, spawn = _map_spawn(text, xodr.name, map_name, frame, params)
-    tex = _texture(in_twin_fbx, cs)
-    georef = _georef(ctx, in_site_json)
-    out = Path(out_carla_import_dir)
-    work = Path(ctx.workdir) / "carla_frame_meshes"
-    class_dir = package_class_dir(frame, cs, tex, work)
-    mov_data, movables = load_actors(in_movables_dir)
-    scanned = scanned_props(movables, map_name, frame, work / "scanned", tex.name if tex else None)
-    pkg, placed = _write_package(out, params, ctx, package=package, map_name=map_name, class_dir=class_dir,
-                                 classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
-                                 georef=georef, frames=lambda g: readme_frames(frame, g), scanned=scanned)
-    shutil.rmtree(work, ignore_errors=True)
-    write_frame_json(out / "carla_frame.json", frame, site_geo)
-    actors = carla_actors(mov_data.get("actors", []), frame, map_name)
-    if in_movables_dir is not None:
-        write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data)
-    shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
+    with ctx.substep("frame"):
+        frame = package_frame(getattr(ctx, "site", None), params.frame, params.frame_scale,
+                              params.geolocation_radius_m, params.geolocation_tolerance_m, ctx.log,
+                              points=twin_points(cs, text) if params.frame == "carla" else None)
+        site_geo, text = xodr_georeference(text), package_xodr(text, frame, xodr.name)
+        map_name, package = _package_names(params, ctx)
+        lanes, spawn = _map_spawn(text, xodr.name, map_name, frame, params)
+    with ctx.substep("meshes"):
+        tex = _texture(in_twin_fbx, cs)
+        georef = _georef(ctx, in_site_json)
+        out = Path(out_carla_import_dir)
+        work = Path(ctx.workdir) / "carla_frame_meshes"
+        class_dir = package_class_dir(frame, cs, tex, work)
+        mov_data, movables = load_actors(in_movables_dir)
+        scanned = scanned_props(movables, map_name, frame, work / "scanned", tex.name if tex else None)
+    with ctx.substep("write"):
+        pkg, placed = _write_package(out, params, ctx, package=package, map_name=map_name, class_dir=class_dir,
+                                     classes=cs.manifest["classes"], texture=tex, xodr_text=text, spawn=spawn,
+                                     georef=georef, frames=lambda g: readme_frames(frame, g), scanned=scanned)
+        shutil.rmtree(work, ignore_errors=True)
+        write_frame_json(out / "carla_frame.json", frame, site_geo)
+        actors = carla_actors(mov_data.get("actors", []), frame, map_name)
+        if in_movables_dir is not None:
+            write_actor_files(out, actors, map_name=map_name, package=package, source=mov_data)
+        shutil.copyfile(out / "spawn_points.json", out_spawn_points_json)
     # the package must hold what `make import` needs, and its OpenDRIVE must parse
-    lane_map((pkg / f"{map_name}.xodr").read_text(), map_name)
-    summ = _checked_summary(out, package, params.decals, _expected_crosswalks(in_crosswalks_json), ctx)
+    with ctx.substep("check"):
+        lane_map((pkg / f"{map_name}.xodr").read_text(), map_name)
+        summ = _checked_summary(out, package, params.decals, _expected_crosswalks(in_crosswalks_json), ctx)
     pl = summ["level_placement"]
     ctx.log.info("carla_package: %.1f %% of the static faces end in the map level after make import and %s "
                  "(make import alone: %.1f %%)", 100 * pl["placed_share"], pl["script"],

@@ -126,42 +126,47 @@ def poisson(params: PoissonParams, ctx, *, in_points_ply: Path, out_dense_mesh_p
 
     params = params or PoissonParams()
     with Measure() as meas, _Outputs(out_dense_mesh_ply):
-        cloud = A.read_points(in_points_ply)
-        pts = cloud.vertices
+        with ctx.substep("read"):
+            cloud = A.read_points(in_points_ply)
+            pts = cloud.vertices
         if len(pts) < 10:
             raise InputError(f"{Path(in_points_ply).name}: too few points ({len(pts)}) for a surface")
-        normals = cloud.normals
-        if normals is None or not np.isfinite(normals).all() or (np.linalg.norm(normals, axis=1) < 0.5).mean() > 0.5:
-            ctx.log.info("points have no usable normals: estimating them")
-            normals = estimate_normals(pts, k=params.normals_k)
-            normals, _ = orient_normals(pts, normals, params.normals_orientation)
-        if params.voxel_m > 0:
-            depth = depth_for_voxel(pts, params.voxel_m, params.scale)
-        elif params.depth < 0:
-            from twinkit.surface import density
+        with ctx.substep("normals"):
+            normals = cloud.normals
+            if normals is None or not np.isfinite(normals).all() or (np.linalg.norm(normals, axis=1) < 0.5).mean() > 0.5:
+                ctx.log.info("points have no usable normals: estimating them")
+                normals = estimate_normals(pts, k=params.normals_k)
+                normals, _ = orient_normals(pts, normals, params.normals_orientation)
+        with ctx.substep("depth"):
+            if params.voxel_m > 0:
+                depth = depth_for_voxel(pts, params.voxel_m, params.scale)
+            elif params.depth < 0:
+                from twinkit.surface import density
 
-            dm = density.measure(pts)
-            depth = density.poisson_depth(dm, params.scale)
-            ctx.log.info("poisson: %s; depth %d (auto)", density.describe(dm), depth)
-        else:
-            depth = int(params.depth)
-        voxel = voxel_for_depth(pts, depth, params.scale)
-        ctx.log.info("screened Poisson (%s) depth %d (voxel %.4f m) on %d points",
-                     params.backend, depth, voxel, len(pts))
-        kw = dict(depth=depth, scale=params.scale, point_weight=params.point_weight,
-                  samples_per_node=params.samples_per_node)
-        if params.backend == "open3d":
-            mesh = poisson_open3d(pts, normals, cloud.colors, linear_fit=params.linear_fit,
-                                  threads=params.threads or _threads(ctx), **kw)
-        elif params.backend == "pymeshlab":
-            mesh = poisson_pymeshlab(pts, normals, cloud.colors, threads=params.threads or _threads(ctx), **kw)
-        else:
-            raise InputError(f"poisson: unknown backend '{params.backend}' (open3d or pymeshlab)")
-        if mesh.n_faces == 0:
-            raise InputError(f"{Path(in_points_ply).name}: Poisson produced no surface (depth {depth}); "
-                             f"check the normals or lower the depth")
-        mesh.comments = [f"twinkit-pointcloud poisson depth {depth} voxel_m {voxel:.5f}"]
-        write_ply(out_dense_mesh_ply, mesh)
+                dm = density.measure(pts)
+                depth = density.poisson_depth(dm, params.scale)
+                ctx.log.info("poisson: %s; depth %d (auto)", density.describe(dm), depth)
+            else:
+                depth = int(params.depth)
+            voxel = voxel_for_depth(pts, depth, params.scale)
+            ctx.log.info("screened Poisson (%s) depth %d (voxel %.4f m) on %d points",
+                         params.backend, depth, voxel, len(pts))
+        with ctx.substep("poisson"):
+            kw = dict(depth=depth, scale=params.scale, point_weight=params.point_weight,
+                      samples_per_node=params.samples_per_node)
+            if params.backend == "open3d":
+                mesh = poisson_open3d(pts, normals, cloud.colors, linear_fit=params.linear_fit,
+                                      threads=params.threads or _threads(ctx), **kw)
+            elif params.backend == "pymeshlab":
+                mesh = poisson_pymeshlab(pts, normals, cloud.colors, threads=params.threads or _threads(ctx), **kw)
+            else:
+                raise InputError(f"poisson: unknown backend '{params.backend}' (open3d or pymeshlab)")
+            if mesh.n_faces == 0:
+                raise InputError(f"{Path(in_points_ply).name}: Poisson produced no surface (depth {depth}); "
+                                 f"check the normals or lower the depth")
+        with ctx.substep("write"):
+            mesh.comments = [f"twinkit-pointcloud poisson depth {depth} voxel_m {voxel:.5f}"]
+            write_ply(out_dense_mesh_ply, mesh)
     return {"depth": depth, "voxel_m": voxel, "vertices": mesh.n_vertices, "faces": mesh.n_faces, **meas.as_dict()}
 
 
@@ -176,30 +181,34 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
 
     params = params or CleanParams()
     with Measure() as meas, _Outputs(out_clean_mesh_ply, out_clean_report_json):
-        dense = _read_mesh_input(in_dense_mesh_ply, "dense mesh")
-        cloud = A.read_points(in_points_ply)
-        auto = _clean_auto(params, cloud, ctx.log)
-        opt = CleanOptions(max_dist_m=auto["max_dist_m"], gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
-                           density_quantile=params.density_quantile,
-                           min_component_faces=params.min_component_faces,
-                           min_component_ratio=params.min_component_ratio,
-                           min_component_points=params.min_component_points,
-                           local_trim_factor=params.local_trim_factor, local_trim_max_m=params.local_trim_max_m,
-                           repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
-                           fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
-                           fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
-        mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
-        mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
-        A.write_clean_mesh(out_clean_mesh_ply, mesh)
-        d = mesh.attrs["dist_to_cloud_m"]
-        vmax = params.colormap_max_m or opt.max_dist_m or float(np.quantile(d, 0.99))
-        topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
-                    title="clean mesh: vertex -> nearest point distance")
-        rep["colormap_png"] = Path(out_clean_report_json).with_suffix(".png").name
-        border = _ground_border_report(mesh, cloud, params.fill_ground_max_gap_m,
-                                       Path(out_clean_report_json).with_name("open_border.png"), ctx.log)
-        if border is not None:
-            rep["open_border"] = border
+        with ctx.substep("read"):
+            dense = _read_mesh_input(in_dense_mesh_ply, "dense mesh")
+            cloud = A.read_points(in_points_ply)
+            auto = _clean_auto(params, cloud, ctx.log)
+        with ctx.substep("clean"):
+            opt = CleanOptions(max_dist_m=auto["max_dist_m"], gap_dist_m=params.gap_dist_m, gap_plane_m=params.gap_plane_m,
+                               density_quantile=params.density_quantile,
+                               min_component_faces=params.min_component_faces,
+                               min_component_ratio=params.min_component_ratio,
+                               min_component_points=params.min_component_points,
+                               local_trim_factor=params.local_trim_factor, local_trim_max_m=params.local_trim_max_m,
+                               repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
+                               fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
+                               fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
+            mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
+        with ctx.substep("write"):
+            mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
+            A.write_clean_mesh(out_clean_mesh_ply, mesh)
+        with ctx.substep("maps"):
+            d = mesh.attrs["dist_to_cloud_m"]
+            vmax = params.colormap_max_m or opt.max_dist_m or float(np.quantile(d, 0.99))
+            topdown_map(mesh.vertices, d, Path(out_clean_report_json).with_suffix(".png"), vmax,
+                        title="clean mesh: vertex -> nearest point distance")
+            rep["colormap_png"] = Path(out_clean_report_json).with_suffix(".png").name
+            border = _ground_border_report(mesh, cloud, params.fill_ground_max_gap_m,
+                                           Path(out_clean_report_json).with_name("open_border.png"), ctx.log)
+            if border is not None:
+                rep["open_border"] = border
         rep["auto"] = auto
         removed = _removed_most(rep, params.max_trim_share, ctx)
         # a trim that removed most faces already says why the fill took their place: one cause, one reason
@@ -326,7 +335,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     import numpy as np
     from twinkit import InputError
 
-    from twinkit.surface.measure import Measure, StepTimer
+    from twinkit.surface.measure import Measure
     from twinkit.surface.simplify import resample_attributes
     from twinkit.surface.texture import write_png
 
@@ -338,7 +347,6 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     if size != -1 and (size < 256 or size > 16384 or size & (size - 1)):
         raise InputError(f"bake_texture: texture_px={size} must be a power of two from 256 to 16384 "
                          f"(4096, 8192 or 16384 for a site)")
-    timer = StepTimer()
     out_obj = Path(out_textured_mesh_obj)
     png = out_obj.with_suffix(".png")
     with Measure() as meas, _Outputs(out_textured_mesh_obj, out_textured_mesh_ply):
@@ -353,7 +361,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
             size = auto_size = density.texture_size(area, texel)
             ctx.log.info("bake: %.0f m^2 of surface, texel %.1f mm (a quarter of the dense mesh's median edge, >= 1 cm): "
                          "texture %d px (auto)", area, 1000 * texel, size)
-        with timer("uv"):
+        with ctx.substep("uv"):
             if params.uv_method == "charts":
                 uv, uinfo = chart_uv(mesh.vertices, mesh.faces, size, pad_px=params.pad_px)
             elif params.uv_method == "xatlas":
@@ -364,11 +372,11 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
         colourless = None
         if colors is None:
             colors, colourless = _colourless(params.colourless, dense, in_points_ply, ctx)
-        with timer("bake"):
+        with ctx.substep("bake"):
             img, binfo = bake_colors(mesh.vertices, mesh.faces, uv, size, dense.vertices, dense.faces, colors,
                                      threads=_threads(ctx),
                                      progress=lambda it: ctx.progress(it, desc="bake texture"))
-        with timer("write"):
+        with ctx.substep("write"):
             write_png(png, img)
             if colors is not None:
                 dense.attrs["colors"] = colors
@@ -384,7 +392,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     return {"texture_px": size, "texture_px_auto": auto_size is not None, "uv_method": params.uv_method,
             "neutral_texture": colors is None or colourless == "grey", "colourless": colourless,
             "vertices": mesh.n_vertices, "faces": mesh.n_faces, **{f"uv_{k}": v for k, v in uinfo.items()},
-            **binfo, "substeps": timer.table, **meas.as_dict()}
+            **binfo, **meas.as_dict()}
 
 
 def _colourless(mode: str, dense, in_points_ply, ctx):
@@ -440,9 +448,10 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
         cloud = A.read_points(in_points_ply)
         from scipy.spatial import cKDTree
 
-        c2m = cloud_to_mesh(cloud.vertices, mesh.vertices, mesh.faces, _threads(ctx))
-        ctree = cKDTree(cloud.vertices)
-        m2c, _ = ctree.query(mesh.vertices, workers=_threads(ctx))
+        with ctx.substep("cloud_to_mesh"):
+            c2m = cloud_to_mesh(cloud.vertices, mesh.vertices, mesh.faces, _threads(ctx))
+            ctree = cKDTree(cloud.vertices)
+            m2c, _ = ctree.query(mesh.vertices, workers=_threads(ctx))
         res: dict[str, Any] = {
             "counts": {"points": cloud.n_vertices, "vertices": mesh.n_vertices, "faces": mesh.n_faces},
             "cloud_to_mesh_m": stats(c2m),
@@ -461,34 +470,35 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
                  hint="the clean-up removed surface the points support: see clean_report.json; try "
                       "steps.clean_mesh.min_component_faces=0 or a larger steps.clean_mesh.max_dist_m "
                       '(docs/pointcloud.md "Coverage of sparse scans")')
-        if in_gt_mesh_ply is not None:
-            gt = A.read_gt_mesh(in_gt_mesh_ply)
-            gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
-            acc = gsurf.distance(mesh.vertices)
-            samples = sample_surface(gt.vertices, gt.faces, params.gt_samples)
-            msurf = Surface(mesh.vertices, mesh.faces, _threads(ctx))
-            vtree = cKDTree(mesh.vertices)
-            comp = distance_near_exact(msurf, mesh.vertices, samples, params.exact_within_m, _threads(ctx), vtree)
-            # area-weighted accuracy: comparable between a dense and a decimated mesh (per-vertex is not)
-            acc_area = gsurf.distance(sample_surface(mesh.vertices, mesh.faces, min(params.gt_samples, 500_000), seed=2))
-            res["gt"] = {"accuracy_mesh_to_gt_m": stats(acc), "accuracy_area_weighted_m": stats(acc_area),
-                         "completeness_gt_to_mesh_m": stats(comp),
-                         "chamfer_m": float(acc.mean() + comp.mean()) / 2.0,
-                         "gt_covered_within_5cm": float((comp <= 0.05).mean())}
-            glab = gt.face_attrs.get("label")
-            if glab is not None and len(glab) == gt.n_faces:
-                s2, l2, areas = sample_surface_by_label(gt.vertices, gt.faces, np.asarray(glab), params.gt_samples,
-                                                        params.gt_min_samples_per_class, seed=1)
-                d_mesh = distance_near_exact(msurf, mesh.vertices, s2, params.exact_within_m, _threads(ctx), vtree)
-                # bounded: a kd-tree query for a sample metres from every point (an unseen roof) is slow
-                d_cloud, _ = ctree.query(s2, workers=_threads(ctx), distance_upper_bound=2 * params.observed_m)
-                res["gt"]["per_class"] = coverage_by_label(d_mesh, l2, areas, within_m=params.coverage_within_m,
-                                                           dist_to_cloud=d_cloud, observed_m=params.observed_m)
-                res["gt"]["per_class_settings"] = {"covered_within_m": params.coverage_within_m,
-                                                   "observed_m": params.observed_m}
-                acc_lab = np.asarray(glab)[gsurf.closest(mesh.vertices)[0]]
-                res["gt"]["accuracy_by_class_mean_m"] = {
-                    cityscapes.name_of(int(c)): float(acc[acc_lab == c].mean()) for c in np.unique(acc_lab)}
+        with ctx.substep("ground_truth"):
+            if in_gt_mesh_ply is not None:
+                gt = A.read_gt_mesh(in_gt_mesh_ply)
+                gsurf = Surface(gt.vertices, gt.faces, _threads(ctx))
+                acc = gsurf.distance(mesh.vertices)
+                samples = sample_surface(gt.vertices, gt.faces, params.gt_samples)
+                msurf = Surface(mesh.vertices, mesh.faces, _threads(ctx))
+                vtree = cKDTree(mesh.vertices)
+                comp = distance_near_exact(msurf, mesh.vertices, samples, params.exact_within_m, _threads(ctx), vtree)
+                # area-weighted accuracy: comparable between a dense and a decimated mesh (per-vertex is not)
+                acc_area = gsurf.distance(sample_surface(mesh.vertices, mesh.faces, min(params.gt_samples, 500_000), seed=2))
+                res["gt"] = {"accuracy_mesh_to_gt_m": stats(acc), "accuracy_area_weighted_m": stats(acc_area),
+                             "completeness_gt_to_mesh_m": stats(comp),
+                             "chamfer_m": float(acc.mean() + comp.mean()) / 2.0,
+                             "gt_covered_within_5cm": float((comp <= 0.05).mean())}
+                glab = gt.face_attrs.get("label")
+                if glab is not None and len(glab) == gt.n_faces:
+                    s2, l2, areas = sample_surface_by_label(gt.vertices, gt.faces, np.asarray(glab), params.gt_samples,
+                                                            params.gt_min_samples_per_class, seed=1)
+                    d_mesh = distance_near_exact(msurf, mesh.vertices, s2, params.exact_within_m, _threads(ctx), vtree)
+                    # bounded: a kd-tree query for a sample metres from every point (an unseen roof) is slow
+                    d_cloud, _ = ctree.query(s2, workers=_threads(ctx), distance_upper_bound=2 * params.observed_m)
+                    res["gt"]["per_class"] = coverage_by_label(d_mesh, l2, areas, within_m=params.coverage_within_m,
+                                                               dist_to_cloud=d_cloud, observed_m=params.observed_m)
+                    res["gt"]["per_class_settings"] = {"covered_within_m": params.coverage_within_m,
+                                                       "observed_m": params.observed_m}
+                    acc_lab = np.asarray(glab)[gsurf.closest(mesh.vertices)[0]]
+                    res["gt"]["accuracy_by_class_mean_m"] = {
+                        cityscapes.name_of(int(c)): float(acc[acc_lab == c].mean()) for c in np.unique(acc_lab)}
         vmax = params.colormap_max_m or float(np.quantile(c2m, 0.95)) or 0.01
         png = Path(out_recon_metrics_json).with_suffix(".png")
         topdown_map(cloud.vertices, c2m, png, vmax, size_px=params.image_px, title="cloud -> mesh distance")

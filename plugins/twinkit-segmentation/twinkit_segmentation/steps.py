@@ -135,18 +135,20 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     """Render every view unlit with a sky background; per pixel the nearest vertex (<view>_vertex.npz)."""
     from twinkit_segmentation.render import load_texture, per_sampler, render_view_set, view_signal
 
-    try:
-        views = json.loads(Path(in_views_json).read_text())["views"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
-    mesh = A.read_textured_mesh(in_textured_mesh_ply)
-    tex = load_texture(mesh.texture) if mesh.texture is not None else None
-    if tex is None:
-        ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
+    with ctx.substep("read"):
+        try:
+            views = json.loads(Path(in_views_json).read_text())["views"]
+        except (OSError, ValueError, KeyError) as exc:
+            raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
+        mesh = A.read_textured_mesh(in_textured_mesh_ply)
+        tex = load_texture(mesh.texture) if mesh.texture is not None else None
+        if tex is None:
+            ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
     out_renders_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    kept, dropped, t_render, hole_px = render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction,
-                                                        ctx, params.fill_holes, params.max_hole_px)
+    with ctx.substep("render"):
+        kept, dropped, t_render, hole_px = render_view_set(mesh, tex, views, out_renders_dir, params.max_empty_fraction,
+                                                            ctx, params.fill_holes, params.max_hole_px)
     index = {"n_vertices": int(len(mesh.vertices)), "kept": kept, "dropped": dropped,
              "max_empty_fraction": params.max_empty_fraction, "fill_holes": params.fill_holes}
     (out_renders_dir / "index.json").write_text(json.dumps(index, indent=1))
@@ -157,7 +159,8 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
     if not kept:
         raise InputError(f"{in_views_json}: every view is more than {100 * params.max_empty_fraction:.0f} % empty; "
                          f"check the sampler's positions (views.json) against the mesh")
-    signal = view_signal(kept, params.min_signal_std, params.max_blank_share, ctx)
+    with ctx.substep("signal"):
+        signal = view_signal(kept, params.min_signal_std, params.max_blank_share, ctx)
     return {"views": len(views), "kept": len(kept), **signal, "dropped_empty": len(dropped), "kept_per_sampler": per_sampler(kept),
             "hole_fraction": round(hole_share, 4), "seconds": round(time.perf_counter() - t0, 3), "render_seconds": round(t_render, 3),
             "seconds_per_view": round(t_render / max(len(views), 1), 4)}
@@ -277,7 +280,8 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     except (OSError, ValueError) as exc:
         raise InputError(f"{index_path}: missing or unreadable ({exc}); re-run render_views") from None
     n = int(index["n_vertices"])
-    model = ctx.component("image_model")
+    with ctx.substep("load_model"):
+        model = ctx.component("image_model")
     if getattr(model, "needs_ground_truth", False):
         if in_gt_labels_npy is None:
             raise InputError("image_model=oracle needs gt_labels.npy: add the transfer_gt_labels step before predict_views")
@@ -291,15 +295,17 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     t0 = time.perf_counter()
     batches = _size_batches(kept, max(1, int(params.batch_views)), Path(in_renders_dir))
     for batch in ctx.progress(batches, total=len(batches), desc="predict"):
-        images = np.stack([np.asarray(Image.open(Path(in_renders_dir) / f"{v['id']}.png").convert("RGB")) for v in batch])
-        vmaps = np.stack([np.load(Path(in_renders_dir) / f"{v['id']}_vertex.npz")["vertex"] for v in batch])
+        with ctx.substep("io"):
+            images = np.stack([np.asarray(Image.open(Path(in_renders_dir) / f"{v['id']}.png").convert("RGB")) for v in batch])
+            vmaps = np.stack([np.load(Path(in_renders_dir) / f"{v['id']}_vertex.npz")["vertex"] for v in batch])
         t1 = time.perf_counter()
-        kw = {"vertex_maps": vmaps} if getattr(model, "needs_vertex_map", False) else {}
-        if params.soft_votes:
-            proba = np.asarray(model.predict_proba(images, **kw), dtype=np.float32)
-            labels = proba.argmax(axis=1).astype(np.uint8)
-        else:
-            labels = np.asarray(model.predict(images, **kw), dtype=np.uint8)
+        with ctx.substep("model"):
+            kw = {"vertex_maps": vmaps} if getattr(model, "needs_vertex_map", False) else {}
+            if params.soft_votes:
+                proba = np.asarray(model.predict_proba(images, **kw), dtype=np.float32)
+                labels = proba.argmax(axis=1).astype(np.uint8)
+            else:
+                labels = np.asarray(model.predict(images, **kw), dtype=np.uint8)
         t_model += time.perf_counter() - t1
         for j, v in enumerate(batch):
             vm = vmaps[j].reshape(-1)
@@ -320,11 +326,12 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
                 im = Image.fromarray(labels[j], mode="P")
                 im.putpalette(pal.tolist())
                 im.save(out_predictions_dir / f"{v['id']}.png")
-    np.save(out_vertex_votes_npy, votes.astype(np.float32))
-    (out_predictions_dir / "index.json").write_text(json.dumps(
-        {"model": (ctx.config.get("image_model") or {}).get("plugin", "?") if ctx.config else "?",
-         "views": [v["id"] for v in kept], "soft_votes": params.soft_votes,
-         "vote_per_view": params.vote_per_view}, indent=1))
+    with ctx.substep("write"):
+        np.save(out_vertex_votes_npy, votes.astype(np.float32))
+        (out_predictions_dir / "index.json").write_text(json.dumps(
+            {"model": (ctx.config.get("image_model") or {}).get("plugin", "?") if ctx.config else "?",
+             "views": [v["id"] for v in kept], "soft_votes": params.soft_votes,
+             "vote_per_view": params.vote_per_view}, indent=1))
     seen = float((votes.sum(axis=1) > 0).mean())
     return {"views": len(kept), "model_seconds": round(t_model, 3), "seconds": round(time.perf_counter() - t0, 3),
             "seconds_per_view": round(t_model / max(len(kept), 1), 4), "vertices_seen": round(seen, 4)}
