@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import ROOT
+from twinkit.testing import bench_check
 
 SITES = sorted(p.stem for p in (ROOT / "conf" / "site").glob("*.yaml"))
 RECIPES = sorted(p.stem for p in (ROOT / "recipes").glob("*.yaml"))
@@ -62,8 +63,9 @@ WEIGHTS = ROOT.parent / "shared" / "models" / "efficientvit_seg_b0_cityscapes.pt
 @pytest.mark.slow
 @pytest.mark.parametrize("model", [
     "oracle",  # ground truth through the renderer: the whole chain, no data needed
-    pytest.param("efficientvit_b0", marks=pytest.mark.skipif(
-        not WEIGHTS.exists(), reason=f"needs {WEIGHTS} (real CityScapes weights, not on this machine)")),
+    # the real model through the same chain: make bench (the model's own tests are in twinkit-efficientvit)
+    pytest.param("efficientvit_b0", marks=[bench_check(), pytest.mark.skipif(
+        not WEIGHTS.exists(), reason=f"needs {WEIGHTS} (real CityScapes weights, not on this machine)")]),
 ])
 def test_demo_site_end_to_end_then_reused(model, tmp_path):
     out = tmp_path / "outputs"

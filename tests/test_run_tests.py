@@ -54,9 +54,23 @@ def test_every_plugin_with_tests_is_a_session_from_its_own_folder():
     sessions = mod.pytest_sessions(["-q"])
     assert sessions[0].name == mod.CORE and sessions[0].cwd == ROOT
     assert "examples" in sessions[0].argv and sessions[0].argv[-1] == "-q"
-    plugins = {s.name for s in sessions[1:]}
+    plugins = {s.name for s in sessions[2:]}
     assert plugins == {p.parent.relative_to(ROOT).as_posix() for p in ROOT.glob("plugins/*/tests")}
-    assert set(mod.TYPICAL_S) <= plugins | {mod.CORE}, "TYPICAL_S names a session that no longer exists"
+    names = plugins | {mod.CORE, mod.CORE_SPLIT_NAME}
+    assert set(mod.TYPICAL_S) <= names, "TYPICAL_S names a session that no longer exists"
+    assert names <= set(mod.TYPICAL_S), "a session without a typical time in TYPICAL_S"
+
+
+def test_the_core_is_two_sessions_that_together_run_every_core_test():
+    """The split paths run in their own session from the root, and the core session leaves out just those."""
+    mod = _run_tests_module()
+    core, demo_runs = mod.pytest_sessions([])[:2]
+    assert demo_runs.name == mod.CORE_SPLIT_NAME and demo_runs.cwd == ROOT and mod.CORE_SPLIT
+    for path in mod.CORE_SPLIT:
+        assert (ROOT / path).exists(), path
+        assert path in demo_runs.argv and f"--ignore={path}" in core.argv
+    assert "tests" not in demo_runs.argv and {"tests", "examples"} <= set(core.argv)
+    assert _fake(mod, mod.CORE_SPLIT_NAME, rc=5).failed()  # no tests there is a failure too
 
 
 def test_jobs_come_from_the_command_line_else_the_environment_else_the_cores(monkeypatch):
@@ -110,3 +124,25 @@ def test_sessions_run_side_by_side_and_each_output_is_printed_whole(tmp_path, ca
     for n in "ab":
         block = out[out.index(f"===== {n} ("):]
         assert block.split("\n")[1:3] == [f"{n} start", f"{n} end"], out
+
+
+def test_the_sessions_share_a_fresh_fixture_folder_removed_at_the_end(monkeypatch):
+    from twinkit.testing import CACHE_ENV
+
+    mod = _run_tests_module()
+    monkeypatch.delenv(CACHE_ENV, raising=False)
+    with mod.shared_cache() as folder:
+        assert os.environ[CACHE_ENV] == str(folder) and folder.is_dir() and not any(folder.iterdir())
+        (folder / "site").mkdir()
+        (folder / "site" / "cloud.ply").write_text("x")
+        (folder / "site" / "cloud.ply").chmod(0o444)  # shared results are read-only
+    assert CACHE_ENV not in os.environ and not folder.exists()
+
+
+def test_a_fixture_folder_given_in_the_environment_is_used_and_kept(monkeypatch, tmp_path):
+    from twinkit.testing import CACHE_ENV
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))
+    with _run_tests_module().shared_cache() as folder:
+        assert folder == tmp_path
+    assert os.environ[CACHE_ENV] == str(tmp_path) and tmp_path.is_dir()

@@ -5,13 +5,20 @@
 ``run_step`` runs one step-like plugin through the same code path as the engine
 (temporary folder, declared outputs checked, atomic move) without a recipe.
 ``run_plugin`` does the same for an installed plugin named by kind and name (the registry),
-so a package never imports another plugin's modules to use it.
+so a package never imports another plugin's modules to use it. ``shared_plugin_run`` runs one
+expensive fixture (the small demo site) once for every test session of a ``make test`` run;
+``bench_check`` marks a slow end-to-end test that ``make bench`` runs instead of ``make test``.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import fcntl
+import hashlib
 import inspect
+import json
 import logging
+import os
 from pathlib import Path
 from typing import Any
 
@@ -103,6 +110,56 @@ def run_plugin(kind: str, name: str, workdir: Path, inputs: dict[str, Path] | No
     if overrides:
         params = dataclasses.replace(params if params is not None else plugin.default_params(), **overrides)
     return run_step(plugin, workdir, inputs, params, site=site, config=config)
+
+
+#: the folder, shared by every test session of one ``make test`` run, where :func:`shared_plugin_run` keeps
+#: its results (scripts/run_tests.py makes a fresh one for each run and removes it at the end)
+CACHE_ENV = "TWINKIT_TEST_CACHE"
+
+
+def shared_plugin_run(kind: str, name: str, workdir: Path, *, site: dict | None = None,
+                      **overrides: Any) -> dict[str, Path]:
+    """:func:`run_plugin` of a plugin without inputs (a site generator), computed once per test run.
+
+    With ``$TWINKIT_TEST_CACHE`` set (``make test`` sets it), the result lives in
+    ``$TWINKIT_TEST_CACHE/<kind>-<name>-<key>/result``, the key covering the plugin's version and code, its
+    parameters and ``site``: the first caller (of any session) computes it under a file lock, the others
+    wait for it and get the same files, made read-only (a test must not write into them). Without the
+    variable it is :func:`run_plugin` into ``workdir``. Returns {artefact file name: path}.
+    """
+    root = os.environ.get(CACHE_ENV)
+    if not root:
+        return run_plugin(kind, name, workdir, site=site, **overrides)
+    from twinkit.signature import parse_signature
+
+    plugin = installed_plugin(kind, name)
+    params = dataclasses.replace(plugin.default_params(), **overrides) if overrides else plugin.default_params()
+    text = json.dumps([plugin.qualname, plugin.version, plugin.code_hash(), dataclasses.asdict(params) if params
+                       else None, site], sort_keys=True, default=str)
+    folder = Path(root) / f"{kind}-{name}-{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+    done = folder / "done.json"
+    Path(root).mkdir(parents=True, exist_ok=True)
+    with open(f"{folder}.lock", "w") as lock, contextlib.ExitStack() as stack:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        stack.callback(fcntl.flock, lock, fcntl.LOCK_UN)
+        if not done.exists():
+            run_plugin(kind, name, folder, site=site, params=params)
+            for f in (folder / "result").rglob("*"):
+                if f.is_file():
+                    f.chmod(f.stat().st_mode & ~0o222)
+            done.write_text(text)
+    return {p.filename: folder / "result" / p.filename for p in parse_signature(plugin.run).outputs}
+
+
+#: set by ``make bench`` (bench/bench_slow_tests.py) for the slow end-to-end tests it runs
+BENCH_ENV = "TWINKIT_BENCH_CHECKS"
+
+
+def bench_check() -> pytest.MarkDecorator:
+    """Marks a slow end-to-end test that ``make bench`` runs (bench/bench_slow_tests.py lists it) and
+    ``make test`` skips, saying where it runs; a fast test of the same behaviour stays in the suite."""
+    return pytest.mark.skipif(not os.environ.get(BENCH_ENV),
+                              reason="slow end-to-end check: make bench runs it (bench/bench_slow_tests.py)")
 
 
 @pytest.fixture

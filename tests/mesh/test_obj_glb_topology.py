@@ -42,6 +42,16 @@ def test_obj_round_trip(tmp_path):
     assert q.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and q.corner_uv is None
 
 
+def test_unique_uv_rows_as_numpy():
+    from twinkit.mesh.obj import _unique_rows
+
+    rng = np.random.default_rng(1)
+    a = np.round(rng.integers(0, 6, (500, 2)) / 5 + rng.choice([0, 1e-7], (500, 2)), 7)
+    ref, inv = np.unique(a, axis=0, return_inverse=True)
+    got, ginv = _unique_rows(a)
+    assert np.array_equal(got, ref) and np.array_equal(ginv, inv.ravel()) and np.array_equal(got[ginv], a)
+
+
 def test_colored_glb_layout(tmp_path):
     m = grid_mesh(5)
     seg = np.zeros((m.n_vertices, 3), np.uint8)

@@ -53,3 +53,71 @@ def test_poisson_depth_and_voxel():
     p = np.array([[0, 0, 0], [10, 1, 1]], float)
     d = depth_for_voxel(p, 0.05)
     assert voxel_for_depth(p, d) <= 0.05 < voxel_for_depth(p, d - 1)
+
+
+def _numpy_only(monkeypatch):
+    import twinkit.surface.compiled as C
+
+    monkeypatch.setattr(C, "ENABLED", False)
+
+
+def test_compiled_and_numpy_atlas_code_agree(monkeypatch):
+    """The compiled loops give the numpy code's numbers bit for bit (rasterize, barycentric mix, closest, texel
+    writes), for float64 and float32 UVs."""
+    from twinkit.surface.closest import Surface, barycentric_mix
+    from twinkit.surface.texture import put_texels, rasterize
+
+    rng = np.random.default_rng(0)
+    uv = rng.random((300, 3, 2))
+    m = grid_mesh(21)
+    s = Surface(m.vertices, m.faces)
+    q = rng.random((5000, 3)) * [1, 1, 0.2]
+    cols = rng.integers(0, 256, (m.n_vertices, 3)).astype(np.uint8)
+
+    def run():
+        out = [np.concatenate(parts) for parts in zip(*rasterize(uv, 64, max_candidates=500))]
+        out += [np.concatenate(parts) for parts in zip(*rasterize(uv.astype(np.float32), 64))]
+        fid, bary, dist = s.closest(q)
+        out += [fid, bary, dist, barycentric_mix(m.vertices, m.faces, fid, bary, np.float64)]
+        colv = s.interpolate(cols, fid, bary) * 1.01 - 1  # some values outside 0..255
+        img, filled = np.zeros((70, 70, 3), np.uint8), np.zeros((70, 70), bool)
+        put_texels(img, filled, rng.integers(0, 70, len(q)), rng.integers(0, 70, len(q)), colv)
+        return out + [colv, img, filled]
+
+    rng = np.random.default_rng(1)
+    fast = run()
+    _numpy_only(monkeypatch)
+    rng = np.random.default_rng(1)
+    slow = run()
+    assert len(fast[0]) > 1000
+    for a, b in zip(fast, slow):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def test_fill_in_threads_same_as_one():
+    from twinkit.surface.texture import fill_empty_texels
+
+    rng = np.random.default_rng(2)
+    img = rng.integers(0, 256, (50, 50, 3)).astype(np.uint8)
+    filled = rng.random((50, 50)) < 0.05
+    filled[:20, :20] = False  # a tile (with its halo) without any filled texel: grey
+    a, b = img.copy(), img.copy()
+    fill_empty_texels(a, filled, tile=16, halo=3)
+    fill_empty_texels(b, filled, tile=16, halo=3, threads=3)
+    assert np.array_equal(a, b) and np.array_equal(a[filled], img[filled])
+    assert (a[2, 2] == 128).all()
+
+
+def test_write_png_reads_back(tmp_path):
+    from PIL import Image
+
+    from twinkit.surface.texture import write_png
+
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, (37, 53, 3)).astype(np.uint8)
+    for threads in (1, 4):
+        write_png(tmp_path / "a.png", img, threads=threads)
+        assert np.array_equal(np.asarray(Image.open(tmp_path / "a.png")), img)
+    grey = img[..., 0]
+    write_png(tmp_path / "g.png", grey)  # not RGB: through Pillow
+    assert np.array_equal(np.asarray(Image.open(tmp_path / "g.png")), grey)

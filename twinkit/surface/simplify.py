@@ -54,14 +54,15 @@ def _drop_degenerate(mesh: Mesh) -> Mesh:
     return compact(mesh, ok)
 
 
-def resample_attributes(simple: Mesh, dense: Mesh, threads: int = 0, names=("colors",)) -> Mesh:
-    """Copy per-vertex attributes from ``dense`` to ``simple`` at the closest dense surface point."""
+def resample_attributes(simple: Mesh, dense: Mesh, threads: int = 0, names=("colors",), surface=None) -> Mesh:
+    """Copy per-vertex attributes from ``dense`` to ``simple`` at the closest dense surface point
+    (``surface``: ``dense``'s :class:`~twinkit.surface.closest.Surface` when the caller has one)."""
     assert simple.faces is not None  # a mesh, not a cloud
     assert dense.faces is not None  # a mesh, not a cloud
     from twinkit.mesh import vertex_normals
     from .closest import Surface
 
-    surf = Surface(dense.vertices, dense.faces, threads)
+    surf = surface if surface is not None else Surface(dense.vertices, dense.faces, threads)
     fid, bary, dist = surf.closest(simple.vertices)
     simple.attrs["dist_to_dense_m"] = dist
     for name in names:

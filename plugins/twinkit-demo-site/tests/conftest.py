@@ -1,4 +1,5 @@
-"""Session fixtures: the small demo site is generated once (and a second time for the determinism test)."""
+"""Session fixtures: the small demo site is generated once (shared with the other sessions of a ``make test``
+run, twinkit.testing.shared_plugin_run); a sparser one twice, here, for the determinism test."""
 from __future__ import annotations
 
 import json
@@ -6,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from twinkit.testing import make_context
+from twinkit.testing import run_plugin, shared_plugin_run
 
 SITE = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}}
 
@@ -17,23 +18,27 @@ def out_kwargs(folder: Path) -> dict[str, Path]:
     return output_paths(folder)
 
 
-def generate(folder: Path, **params):
-    from twinkit_demo_site.plugin import DemoSiteParams, generate_demo_site
-
-    ctx = make_context(folder, site=dict(SITE), step_id="demo_site")
-    metrics = generate_demo_site(DemoSiteParams(**params), ctx, **out_kwargs(folder))
-    return folder, metrics
+def _folder_and_metrics(out: dict[str, Path]) -> tuple[Path, dict]:
+    folder = out["site.json"].parent
+    return folder, json.loads((folder / "step.json").read_text())["metrics"]
 
 
 @pytest.fixture(scope="session")
 def demo(tmp_path_factory):
-    """(folder, metrics) of the small preset, seed 0."""
-    return generate(tmp_path_factory.mktemp("demo_a"), size="small", seed=0)
+    """(folder, metrics) of the small preset, seed 0 (read-only files)."""
+    return _folder_and_metrics(shared_plugin_run("site_generator", "demo_intersection", tmp_path_factory.mktemp("demo_a"),
+                                                 site=dict(SITE), size="small", seed=0))
+
+
+#: a sparser scan and fewer photos of the same site: cheap to make twice in a session (the determinism test)
+SPARSE = {"size": "small", "seed": 0, "density_scale": 0.1, "photo_count": 3}
 
 
 @pytest.fixture(scope="session")
-def demo_again(tmp_path_factory):
-    return generate(tmp_path_factory.mktemp("demo_b"), size="small", seed=0)
+def sparse_twice(tmp_path_factory):
+    """The site with :data:`SPARSE`'s parameters generated twice here, each into a fresh folder."""
+    return [_folder_and_metrics(run_plugin("site_generator", "demo_intersection", tmp_path_factory.mktemp(f"sparse_{k}"),
+                                           site=dict(SITE), **SPARSE)) for k in "ab"]
 
 
 @pytest.fixture(scope="session")

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twinkit.testing import need_plugin, run_plugin, run_step
+from twinkit.testing import need_plugin, run_step, shared_plugin_run
 
 from twinkit_export.classes import BY_ID
 
@@ -33,8 +33,9 @@ def demo_site(tmp_path_factory):
     if given and (Path(given) / "gt_mesh.obj").exists():
         return Path(given)
     need_plugin("site_generator", "demo_intersection")  # the twinkit-demo-site package
-    out = run_plugin("site_generator", "demo_intersection", tmp_path_factory.mktemp("demo_site"),
-                     site=dict(DEMO_SITE), size="small", seed=0, photo_count=0)
+    # the preset's photos too: the same site as the other sessions' (made once per make test run)
+    out = shared_plugin_run("site_generator", "demo_intersection", tmp_path_factory.mktemp("demo_site"),
+                            site=dict(DEMO_SITE), size="small", seed=0)
     return out["site.json"].parent
 
 

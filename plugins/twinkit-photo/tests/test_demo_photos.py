@@ -1,7 +1,9 @@
 """The demo site's photos end to end through sfm and georeference: every photo registers, and the GCP route
 puts every camera centre within 5 cm of the truth (issue target). Then the dense step's GPU route
 (COLMAP patch-match) with everything real but the CUDA call: a stand-in writes the depth and normal maps
-that patch-match would, in COLMAP's format, from the true surface. About three minutes on two cores."""
+that patch-match would, in COLMAP's format, from the true surface. About four minutes on two cores: make bench
+runs it (bench/bench_slow_tests.py), make test skips it. The fast tests of the same steps: the GCP route on a
+synthetic model (test_steps.py), the dense step on a walked street (test_patchmatch.py)."""
 from __future__ import annotations
 
 import json
@@ -9,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinkit.testing import need_plugin, plugin_from_module, run_plugin, run_step
+from twinkit.testing import bench_check, need_plugin, plugin_from_module, run_step, shared_plugin_run
 
 import twinkit_photo.plugin as photo
 
@@ -19,7 +21,7 @@ SITE = {"name": "demo", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon
 def _demo_site(folder):
     """The small demo site (the twinkit-demo-site package's generator, through the registry); its folder."""
     need_plugin("site_generator", "demo_intersection")
-    out = run_plugin("site_generator", "demo_intersection", folder, site=dict(SITE), size="small", seed=0)
+    out = shared_plugin_run("site_generator", "demo_intersection", folder, site=dict(SITE), size="small", seed=0)
     return out["site.json"].parent
 
 
@@ -66,6 +68,7 @@ def _patch_match_stand_in(gt_mesh_ply):
     return run
 
 
+@bench_check()
 def test_demo_photos_register_and_georeference_within_5cm(tmp_path, monkeypatch):
     site = _demo_site(tmp_path / "site")
     s = run_step(plugin_from_module(photo, "step", "sfm"), tmp_path / "sfm",

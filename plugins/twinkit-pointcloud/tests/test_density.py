@@ -85,7 +85,8 @@ def test_measure_spacing_and_capture():
 def test_settings_follow_the_density():
     assert density.poisson_depth({"spacing_m": 0.03, "extent_m": [70, 70, 10]}) == 11  # the demo's
     assert density.poisson_depth({"spacing_m": 0.3, "extent_m": [24, 24, 6]}) == 7
-    assert density.texture_size(3754.0, 0.016) == 8192  # the demo: 64 mm median dense edge / 4
+    assert density.texture_size(3754.0, 0.016) == 4096  # the demo: 64 mm median dense edge / 4 -> 4,944 px
+    assert density.texture_size(3754.0, 0.011) == 8192  # 7,191 px: nearer 8192 on a log scale
     assert density.texture_size(300.0, 0.1) == 1024
 
 

@@ -163,7 +163,10 @@ class BakeParams:
     texture_px: int = param(-1, ge=256, le=16384, also=(-1,),
                             help="Side of the texture atlas in texels: a power of two from 256 (4096, 8192 or 16384 "
                                  "usually). -1 = auto: texels of a quarter of the dense mesh's median edge (>= 1 "
-                                 "cm) over the simplified mesh's area, 1024..8192.")
+                                 "cm) over the simplified mesh's area, the nearest power of two, 1024..8192. The "
+                                 "colours live on the dense mesh's vertices: finer texels only interpolate them "
+                                 "(the demo: 4096; 8192 was 0.2 colour levels closer to the vertex colours, no "
+                                 "closer to the truth, same mIoU, 4x the bake).")
     uv_method: str = param("charts", choices=("charts", "xatlas"),
                            help="UV unwrapping: charts (built in) or xatlas (an optional dependency, slower).")
     pad_px: int = param(2, ge=0, le=64, help="Gutter around each chart in the atlas, in texels.")

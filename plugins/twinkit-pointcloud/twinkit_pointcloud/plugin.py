@@ -335,6 +335,7 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
     import numpy as np
     from twinkit import InputError
 
+    from twinkit.surface.closest import Surface
     from twinkit.surface.measure import Measure
     from twinkit.surface.simplify import resample_attributes
     from twinkit.surface.texture import write_png
@@ -372,15 +373,17 @@ def bake_texture(params: BakeParams, ctx, *, in_mesh_ply: Path, in_clean_mesh_pl
         colourless = None
         if colors is None:
             colors, colourless = _colourless(params.colourless, dense, in_points_ply, ctx)
+        threads = _threads(ctx)
         with ctx.substep("bake"):
+            surf = Surface(dense.vertices, dense.faces, threads) if colors is not None else None
             img, binfo = bake_colors(mesh.vertices, mesh.faces, uv, size, dense.vertices, dense.faces, colors,
-                                     threads=_threads(ctx),
+                                     threads=threads, surface=surf,
                                      progress=lambda it: ctx.progress(it, desc="bake texture"))
         with ctx.substep("write"):
-            write_png(png, img)
+            write_png(png, img, threads=threads)
             if colors is not None:
                 dense.attrs["colors"] = colors
-                mesh = resample_attributes(mesh, dense, _threads(ctx))
+                mesh = resample_attributes(mesh, dense, threads, surface=surf)
                 mesh.attrs.pop("dist_to_dense_m", None)
             else:
                 mesh.attrs["colors"] = np.full((mesh.n_vertices, 3), 128, np.uint8)

@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit.surface.texture import NEUTRAL_GREY, fill_empty_texels, rasterize
+from twinkit.surface.texture import NEUTRAL_GREY, fill_empty_texels, put_texels, rasterize
 
 
 def bake_colors(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size_px: int,
                 dense_vertices: np.ndarray | None, dense_faces: np.ndarray | None, dense_colors: np.ndarray | None,
-                threads: int = 0, progress=None) -> tuple[np.ndarray, dict]:
-    """Return (image (size, size, 3) uint8, info). Without dense colours the texture is neutral grey."""
+                threads: int = 0, progress=None, surface=None) -> tuple[np.ndarray, dict]:
+    """Return (image (size, size, 3) uint8, info). Without dense colours the texture is neutral grey.
+    ``threads``: the closest-point queries' and the gap fill's threads (0: all cores for the queries);
+    ``surface``: the dense mesh's :class:`~twinkit.surface.closest.Surface` when the caller has one."""
+    from twinkit.surface.closest import barycentric_mix
+
     img = np.zeros((size_px, size_px, 3), np.uint8)
     filled = np.zeros((size_px, size_px), bool)
     info: dict = {"texels_baked": 0}
@@ -24,7 +28,8 @@ def bake_colors(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size_px
     if dense_colors is not None:
         from twinkit.surface.closest import Surface
 
-        surf = Surface(dense_vertices, dense_faces, threads)
+        surf = surface if surface is not None else Surface(dense_vertices, dense_faces, threads)
+        dense_colors = np.asarray(dense_colors).astype(np.float32, copy=False)
     dist_sum = 0.0
     chunks = rasterize(uv, size_px)
     if progress is not None:
@@ -32,22 +37,18 @@ def bake_colors(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size_px
     for fid, bary, row, col in chunks:
         if len(fid) == 0:
             continue
-        tri = faces[fid]
-        pos = np.zeros((len(fid), 3))
-        for i in range(3):
-            pos += bary[:, i:i + 1] * vertices[tri[:, i]]
         if surf is not None:
+            pos = barycentric_mix(vertices, faces, fid, bary, np.float64)
             dfid, dbary, dist = surf.closest(pos)
-            colv = surf.interpolate(dense_colors, dfid, dbary)
-            img[row, col] = np.clip(np.rint(colv), 0, 255).astype(np.uint8)
+            put_texels(img, filled, row, col, surf.interpolate(dense_colors, dfid, dbary))
             dist_sum += float(dist.sum())
         else:
             img[row, col] = NEUTRAL_GREY
-        filled[row, col] = True
+            filled[row, col] = True
         info["texels_baked"] += int(len(fid))
     covered = int(filled.sum())
     info["coverage"] = covered / size_px ** 2
     if surf is not None and info["texels_baked"]:
         info["mean_transfer_distance_m"] = dist_sum / info["texels_baked"]
-    fill_empty_texels(img, filled)
+    fill_empty_texels(img, filled, threads=max(1, threads))
     return img, info

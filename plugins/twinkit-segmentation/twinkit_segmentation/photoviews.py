@@ -205,7 +205,7 @@ def photo_view_set(mesh, cams: list, photos_dir, cameras_json, long_side_px: int
 
     from twinkit import InputError
 
-    from .render import Renderer
+    from .render import Renderer, write_vertex_map
 
     kept: list = []
     dropped: list = []
@@ -236,8 +236,8 @@ def photo_view_set(mesh, cams: list, photos_dir, cameras_json, long_side_px: int
             if (w, h) not in renderers:  # the vertex map only: no texture needed
                 renderers[(w, h)] = Renderer(mesh.vertices, mesh.faces, None, None, w, h)
             t1 = time.perf_counter()
-            _, vertex = renderers[(w, h)].render(view_matrix_opencv(cam.R_wc, cam.center),
-                                                 projection_from_K(K, w, h))
+            vertex = renderers[(w, h)].vertex_map(view_matrix_opencv(cam.R_wc, cam.center),
+                                                     projection_from_K(K, w, h))
             t_render += time.perf_counter() - t1
             if valid is not None:
                 vertex[~valid] = -1  # no photo pixel there after undistortion
@@ -248,7 +248,7 @@ def photo_view_set(mesh, cams: list, photos_dir, cameras_json, long_side_px: int
                 continue
             n_undistorted += int(undist)
             Image.fromarray(img).save(out_dir / f"{vid}.png", compress_level=1)
-            np.savez_compressed(out_dir / f"{vid}_vertex.npz", vertex=vertex)
+            write_vertex_map(out_dir / f"{vid}_vertex.npz", vertex)
             kept.append({"id": vid, "sampler": "photo", "image": cam.image, "width": w, "height": h,
                          "K": K.round(4).tolist(), "R_world_from_camera": cam.R_wc.tolist(),
                          "center": cam.center.tolist(), "undistorted": bool(undist),

@@ -2,7 +2,9 @@
 it quick), coarse voxel, 2 x 2 tiles: the merge must leave (almost) no open seam edges and stay close
 to the ground truth, and the labels of the merged mesh (oracle model, small views) must not change at
 the seams more than inside the tiles. Stricter crack-free checks are on the synthetic block
-(test_seams.py); the detection of labels that break at a seam is in test_seam_labels.py."""
+(test_seams.py); the detection of labels that break at a seam is in test_seam_labels.py; the tiled recipe
+end to end on the synthetic block in test_recipe.py. This whole-site run is make bench's
+(bench/bench_slow_tests.py); make test skips it."""
 from __future__ import annotations
 
 import json
@@ -10,9 +12,12 @@ import os
 import subprocess
 import sys
 
+from twinkit.testing import bench_check
+
 from conftest import REPO
 
 
+@bench_check()
 def test_tiled_segment_recipe_on_small_demo_site(tmp_path):
     out = tmp_path / "outputs"
     cmd = [sys.executable, "-m", "twinkit", "recipe=tiled_segment", "site=demo", "+site.photo_count=1",
