@@ -7,7 +7,7 @@ from twinkit_segmentation import viewholes
 from twinkit_segmentation.synthetic import egl_available, street_scene
 
 needs_egl = pytest.mark.skipif(not egl_available(), reason="no headless EGL (Mesa) for moderngl")
-needs_numba = pytest.mark.skipif(viewholes._sq_dist_compiled is None, reason="numba not installed")
+needs_numba = pytest.mark.skipif(viewholes._sq_dist_compiled() is None, reason="numba not installed")
 
 
 def _masks(seed, n=40):
@@ -27,7 +27,7 @@ def _masks(seed, n=40):
 @pytest.mark.parametrize("gap", [0.0, 1.0, 1.5, 2.0, np.sqrt(8.0), 4.7, 16.0])
 def test_compiled_hole_mask_is_scipys(gap):
     for hit, below in _masks(int(gap * 10)):
-        grown = viewholes._sq_dist_compiled(np.ascontiguousarray(hit)) <= viewholes._within(gap)
+        grown = viewholes._sq_dist_compiled()(np.ascontiguousarray(hit)) <= viewholes._within(gap)
         if grown.all() or hit.all() or not hit.any():
             continue  # scipy's phantom pixel (module docstring); tested below
         a = viewholes.ground_holes(hit, below, gap, method="scipy")
@@ -42,9 +42,9 @@ def test_squared_distances_are_exact():
     for hit, _ in _masks(5):
         if not hit.any():
             continue
-        d2 = viewholes._sq_dist_compiled(np.ascontiguousarray(hit))
+        d2 = viewholes._sq_dist_compiled()(np.ascontiguousarray(hit))
         assert np.array_equal(d2, np.rint(distance_transform_edt(~hit) ** 2).astype(np.int64))
-    none = viewholes._sq_dist_compiled(np.zeros((5, 7), bool))
+    none = viewholes._sq_dist_compiled()(np.zeros((5, 7), bool))
     assert (none == 5 * 5 + 7 * 7 + 1).all()
 
 
