@@ -132,3 +132,33 @@ def test_streets_go_on_beyond_the_site_edge(world):
     labs = set(np.unique(tr.face_labels[out]).tolist())
     assert {cs.ROAD, cs.SIDEWALK, cs.TERRAIN, cs.BUILDING, cs.VEGETATION} <= labs
     assert np.abs(tr.mesh.vertices[:, :2]).max() > H + 100
+
+
+def test_surface_depth_puts_returns_inside_foliage_and_behind_window_panes():
+    from twinkit_demo_site.captures import Sensor, surface_depth
+
+    s = Sensor(noise_m=0.0, dropout=0.0, cos_min=0.0, snr_thr=1e-3, gain=1.0, range_half_m=100.0,
+               refl=np.full(256, 0.3, np.float32), max_range_m=100.0, foliage_m=0.3, glass=0.5, relief_m=0.01,
+               window_period_m=3.0)
+    rng = np.random.default_rng(0)
+    # a facade in the plane x = 5 (normal -x), 30 m long and 9 m high, hit head-on
+    u, z = np.meshgrid(np.arange(0, 30, 0.05), np.arange(0.2, 9, 0.05))
+    hit = np.column_stack([np.full(u.size, 5.0), u.ravel(), z.ravel()])
+    nrm = np.tile([-1.0, 0.0, 0.0], (len(hit), 1))
+    d = surface_depth(s, hit, nrm, np.full(len(hit), cs.BUILDING, np.uint8), np.ones(len(hit)), rng)
+    deep = d > 0.079  # the relief stays within 3 cm; a window's frame is 8-25 cm deep, a room 0.2-2.5 m
+    assert 0.15 < deep.mean() < 0.3  # windows cover about a fifth of a facade
+    assert 0.3 < (d > 0.26).mean() / deep.mean() < 0.7  # half from the rooms behind the panes (glass 0.5)
+    assert np.abs(d[d < 0.079]).max() <= 0.031  # the wall between windows: relief only (3 sigma)
+    # windows repeat along the facade with the bay's period (the row of points through a window band)
+    zs = np.unique(hit[:, 2])
+    row = hit[:, 2] == zs[np.argmax([deep[hit[:, 2] == v].mean() for v in zs])]
+    on = np.convolve(deep[row].astype(float), np.ones(5) / 5, mode="same") > 0.5
+    starts = np.flatnonzero(np.diff(on.astype(int)) == 1)
+    assert len(starts) >= 8 and np.allclose(np.diff(hit[row][starts, 1]), 3.0, atol=0.2)
+    # foliage: into the crown, never out of it; the road and a roof stay where they are
+    veg = surface_depth(s, hit[:5000], nrm[:5000], np.full(5000, cs.VEGETATION, np.uint8), np.ones(5000), rng)
+    assert veg.min() >= 0 and 0.2 < veg.mean() < 0.35 and veg.max() <= 1.2
+    up = np.tile([0.0, 0.0, 1.0], (100, 1))
+    for c in (cs.ROAD, cs.BUILDING):
+        assert not surface_depth(s, hit[:100], up, np.full(100, c, np.uint8), np.ones(100), rng).any()

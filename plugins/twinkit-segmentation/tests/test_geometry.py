@@ -174,7 +174,7 @@ def test_the_training_warp_makes_grass_bumpy_and_keeps_walls_vertical():
     assert np.ptp(w[n:, 2] - xyz[n:, 2]) < 1e-9  # the wall moved as one: still vertical
 
 
-def test_the_step_smooths_a_colourless_capture_and_not_a_coloured_one(tmp_path):
+def test_the_step_smooths_and_corrects_the_prior_on_a_colourless_capture_and_not_a_coloured_one(tmp_path):
     from twinkit import artefacts as A
     from twinkit.mesh import Mesh
     from twinkit.testing import run_plugin
@@ -194,4 +194,37 @@ def test_the_step_smooths_a_colourless_capture_and_not_a_coloured_one(tmp_path):
             votes[kind, smooth] = np.load(out["geometry_votes.npy"])
     assert not np.allclose(votes["colourless", 0.25], votes["colourless", 0.0])
     assert np.array_equal(votes["coloured", 0.25], votes["coloured", 0.0])
-    assert np.array_equal(votes["coloured", 0.0], votes["colourless", 0.0])  # the colours themselves change nothing
+    # the colourless capture's probabilities carry the model's class-prior correction, the coloured one's not ...
+    assert load_model().logit_shift is not None and load_model().logit_shift.any()
+    assert not np.allclose(votes["coloured", 0.0], votes["colourless", 0.0])
+    # ... unless asked for; the colours themselves change nothing
+    out = run_plugin("step", "classify_geometry", tmp_path / "coloured_prior",
+                     {"in_points_ply": tmp_path / "coloured.ply", "in_textured_mesh_ply": mesh_ply},
+                     smooth_m=0.0, prior_coloured=True)
+    assert np.array_equal(np.load(out["geometry_votes.npy"]), votes["colourless", 0.0])
+
+
+def test_the_prior_correction_gives_an_ambiguous_shape_to_the_common_class():
+    from twinkit.cityscapes import WALL
+    from twinkit_segmentation.geometry.model import GeometryModel
+    from twinkit_segmentation.geometry.train import prior_shift
+
+    # one feature; the net answers building for x > 0.5, wall for x < -0.5 and 50/50 near 0 (the ambiguous shape)
+    model = GeometryModel(layers=[(np.array([[4.0, -4.0]], np.float32), np.zeros(2, np.float32))],
+                          mean=np.zeros(1, np.float32), std=np.ones(1, np.float32),
+                          classes=np.array([BUILDING, WALL]), feature_names=["x"])
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.uniform(-0.1, 1.0, 900), rng.uniform(-1.0, 0.1, 100)].astype(np.float32)[:, None]
+    lab = np.r_[np.full(900, BUILDING), np.full(100, WALL)].astype(np.uint8)
+    caps = [("a", x, lab)]
+    amb = np.array([[0.02]], np.float32)
+    assert model.proba(-amb).argmax() == WALL
+    rec = prior_shift(model, caps, [0.5, 0.5], caps, log=lambda *_: None)
+    # buildings are nine times as common as walls as captures come, though the loss saw them equally often
+    assert rec["natural_share"]["building"] == pytest.approx(0.9) and rec["alpha"] > 0
+    assert model.proba(-amb).argmax() == BUILDING
+    assert model.proba(np.array([[-0.8]], np.float32)).argmax() == WALL  # a clear wall stays a wall
+    assert rec["validation_miou_by_alpha"][str(rec["alpha"])] >= rec["validation_miou_by_alpha"]["0.0"]
+    # no validation captures: no correction
+    assert prior_shift(model, caps, [0.5, 0.5], [], log=lambda *_: None)["alpha"] == 0.0
+    assert not model.logit_shift.any()

@@ -27,18 +27,20 @@ class CloudLabels:
 
 
 def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: GeometryModel | None = None,
-                   *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0, smooth_m: float = 0.25) -> CloudLabels:
+                   *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0, smooth_m: float = 0.25,
+                   prior: bool = True) -> CloudLabels:
     """Features (:func:`.features.point_features`) and the MLP's probabilities for ``xyz`` (n, 3) float, site
     frame, z up, metres; ``intensity`` (n,) or None. ``model``: None = the shipped one. ``smooth_m``: each
     base point's probabilities become the normalised geometric mean of those of the base points in the
-    3 x 3 x 3 voxels of this side around it (:func:`smooth_proba`); 0 = each point alone."""
+    3 x 3 x 3 voxels of this side around it (:func:`smooth_proba`); 0 = each point alone. ``prior``: apply the
+    model's class-prior correction (:attr:`.model.GeometryModel.logit_shift`)."""
     model = model or load_model()
     if list(model.feature_names) != feature_names():
         raise ValueError("the 3D classifier's model was trained on other features than this code computes; "
                          "retrain it (python -m twinkit_segmentation.geometry.train)")
     f = point_features(xyz, intensity, base_voxel_m=base_voxel_m, ground_window_m=ground_window_m)
     t = time.perf_counter()
-    proba = model.proba(f.values)
+    proba = model.proba(f.values, prior=prior)
     sec = dict(f.seconds, model=round(time.perf_counter() - t, 3))
     if smooth_m > 0:
         t = time.perf_counter()

@@ -23,7 +23,9 @@ MODEL_NAME = "geometry_model"
 class GeometryModel:
     """A loaded MLP: ``layers`` [(W (in, out) float32, b (out,) float32), ...] with ReLU between them,
     ``mean``/``std`` (k,) the feature normalisation, ``classes`` (c,) trainIds of the outputs,
-    ``feature_names`` the features it expects (in order), ``meta`` the rest of the JSON."""
+    ``feature_names`` the features it expects (in order), ``meta`` the rest of the JSON, ``logit_shift`` (c,)
+float32 added to the outputs before the softmax (the class-prior correction :func:`.train.prior_shift` chose;
+zeros for a model without one)."""
 
     layers: list
     mean: np.ndarray
@@ -31,9 +33,11 @@ class GeometryModel:
     classes: np.ndarray
     feature_names: list
     meta: dict = field(default_factory=dict)
+    logit_shift: np.ndarray | None = None
 
-    def proba(self, values: np.ndarray, chunk: int = 200_000) -> np.ndarray:
-        """(m, k) features -> (m, 19) float32 class probabilities (columns of classes it never predicts: 0)."""
+    def proba(self, values: np.ndarray, chunk: int = 200_000, prior: bool = True) -> np.ndarray:
+        """(m, k) features -> (m, 19) float32 class probabilities (columns of classes it never predicts: 0);
+        ``prior`` False leaves out :attr:`logit_shift` (the class balance the network was trained with)."""
         out = np.zeros((len(values), N_CLASSES), np.float32)
         for a in range(0, len(values), chunk):
             x = (np.asarray(values[a:a + chunk], np.float32) - self.mean) / self.std
@@ -41,6 +45,8 @@ class GeometryModel:
                 x = x @ w + b
                 if i < len(self.layers) - 1:
                     np.maximum(x, 0, out=x)
+            if prior and self.logit_shift is not None:
+                x += self.logit_shift
             x -= x.max(axis=1, keepdims=True)
             np.exp(x, out=x)
             x /= x.sum(axis=1, keepdims=True)
@@ -73,5 +79,7 @@ def load_model(path_stem: str | Path | None = None) -> GeometryModel:
         n = sum(1 for k in z.files if k.startswith("W"))
         layers = [(z[f"W{i}"], z[f"b{i}"]) for i in range(n)]
         mean, std = z["mean"], z["std"]
+    shift = meta.get("prior", {}).get("logit_shift")
     return GeometryModel(layers=layers, mean=mean, std=std, classes=np.asarray(meta.pop("classes"), np.int64),
-                         feature_names=meta.pop("feature_names"), meta=meta)
+                         feature_names=meta.pop("feature_names"), meta=meta,
+                         logit_shift=None if shift is None else np.asarray(shift, np.float32))

@@ -33,6 +33,12 @@ class ClassifyGeometryParams:
                                   help="Smooth a coloured capture's probabilities too. Off: there the views and "
                                        "backproject's segments and Potts smoothing already pool neighbours, and "
                                        "smoothing twice cost demo seed 3 1.5 mIoU.")
+    prior_coloured: bool = param(False,
+                                 help="Apply the model's class-prior correction (the class shares of streets as "
+                                      "captured, not the balanced ones it was trained on) on a coloured capture too. "
+                                      "Off: there the views lead on the rare classes (signs, lights, bicycles) and "
+                                      "the correction, which is for the geometry deciding alone, cost demo seeds 3 "
+                                      "and 7 2-5 mIoU (docs/segmentation.md \"3D classifier\").")
     vote_radius_m: float = param(0.4, gt=0,
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
@@ -65,10 +71,11 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     inten = cloud.attrs.get("intensity")
     kind = capture_kind(cloud.colors)
     smooth_m = params.smooth_m if (kind == "colourless" or params.smooth_coloured) else 0.0
+    prior = kind == "colourless" or params.prior_coloured
     model = load_model(params.model or None)
     t_read = time.perf_counter() - t0
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
-                         ground_window_m=params.ground_window_m, smooth_m=smooth_m)
+                         ground_window_m=params.ground_window_m, smooth_m=smooth_m, prior=prior)
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
                      neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
@@ -85,7 +92,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
                  res.seconds)
     return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
             "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
-            "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "model": model.meta.get("name", params.model or "shipped"),
+            "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "prior": prior, "model": model.meta.get("name", params.model or "shipped"),
             "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
             "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
                         "total": round(time.perf_counter() - t0, 3)}}

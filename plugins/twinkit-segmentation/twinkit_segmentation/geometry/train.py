@@ -193,8 +193,36 @@ def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048
     recipe = {"hidden": list(hidden), "epochs": epochs, "per_class_per_capture": per_class, "lr": lr,
               "weight_decay": weight_decay, "intensity_dropout": intensity_dropout, "min_points": min_points,
               "seed": seed, "batch": batch, "optimizer": "Adam + cosine schedule, class weights count^-0.5",
-              "training_points": int(len(x))}
+              "training_points": int(len(x)), "trained_prior": (np.sqrt(cnt) / np.sqrt(cnt).sum()).round(6).tolist()}
     return layers, mean, std, classes, recipe
+
+
+#: the prior corrections tried (a fraction of the full log-prior ratio), the one with the best validation mIoU kept
+PRIOR_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+def prior_shift(model: GeometryModel, train_caps, trained_prior, val_caps, log=print) -> dict:
+    """The class-prior correction of a model trained on class-balanced samples: the log ratio of each class's
+    share among all the training captures' base points (as a capture comes) to its share in what the loss saw
+    (``trained_prior``, per output class: the per-class draws weighted by the class weights), times the
+    alpha of :data:`PRIOR_ALPHAS` with the best mIoU on ``val_caps`` (0 without them). Balanced training lets
+    rare classes (wall, fence, sign) win wherever the shape is ambiguous; on the real sweeps a facade seen
+    below the sensor's upper beam is as high as a wall. Sets ``model.logit_shift``; returns the JSON record."""
+    natural = np.zeros(len(model.classes))
+    for _, _, lab in train_caps:
+        natural += np.bincount(lab[lab < N_CLASSES], minlength=N_CLASSES)[model.classes]
+    natural = np.maximum(natural, 1.0) / max(natural.sum(), 1.0)
+    ratio = np.log(natural) - np.log(np.asarray(trained_prior, np.float64))
+    by_alpha = {}
+    for a in PRIOR_ALPHAS if val_caps else (0.0,):
+        model.logit_shift = (a * ratio).astype(np.float32)
+        by_alpha[a] = score(model, val_caps)["miou"] if val_caps else 0.0
+        log(f"prior correction alpha {a}: validation mIoU {by_alpha[a]}")
+    best = max(by_alpha, key=lambda a: (by_alpha[a], -a))
+    model.logit_shift = (best * ratio).astype(np.float32)
+    return {"alpha": best, "logit_shift": [round(float(v), 5) for v in model.logit_shift],
+            "natural_share": {NAMES[c]: round(float(v), 5) for c, v in zip(model.classes, natural)},
+            "validation_miou_by_alpha": {str(a): m for a, m in by_alpha.items()}}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -235,8 +263,9 @@ def main(argv: list[str] | None = None) -> int:
                                                epochs=a.epochs, per_class=a.per_class, batch=a.batch,
                                                intensity_dropout=a.intensity_dropout, seed=a.seed)
     model = GeometryModel(layers=layers, mean=mean, std=std, classes=classes, feature_names=feature_names())
+    prior = prior_shift(model, tr, recipe.pop("trained_prior"), va)
     meta = {"recipe": {**recipe, "train_captures": [n for n, _, _ in tr], "val_regex": a.val, "ablated": a.ablate,
-                       "feature_version": FEATURE_VERSION},
+                       "feature_version": FEATURE_VERSION}, "prior": prior,
             "validation": score(model, va) if va else {}, "training": score(model, tr),
             "check_scene": check_scene_scores(model)}
     npz, js = save_model(Path(a.out), layers, mean, std, classes, feature_names(), meta)
