@@ -162,3 +162,13 @@ def test_surface_depth_puts_returns_inside_foliage_and_behind_window_panes():
     up = np.tile([0.0, 0.0, 1.0], (100, 1))
     for c in (cs.ROAD, cs.BUILDING):
         assert not surface_depth(s, hit[:100], up, np.full(100, c, np.uint8), np.ones(100), rng).any()
+
+
+def test_surfaces_are_opt_in_and_keep_the_pose(world):
+    from twinkit_demo_site.captures import simulate_capture
+
+    a = simulate_capture(SEED, "spinning", 2, density=0.3, world=world)
+    b = simulate_capture(SEED, "spinning", 2, density=0.3, world=world, surfaces=True)
+    assert a["meta"]["foliage_m"] == 0 and a["meta"]["glass"] == 0  # the shipped model's data: clean skins
+    assert b["meta"]["foliage_m"] >= 0.1 and np.array_equal(a["origin"], b["origin"])
+    assert len(a["xyz"]) != len(b["xyz"]) or not np.array_equal(a["xyz"], b["xyz"])

@@ -12,9 +12,10 @@ the face its ray hit. Kinds:
 
 Realism, drawn per capture from ``rng_seed``: range noise (1-3 cm sigma), random dropout, returns lost at
 grazing incidence and on dark or far surfaces, no colour, an intensity, the sensor pose within the site, and a
-density factor. The site's surfaces are cleaner than real ones, so returns are moved along their ray where the
-real surface is not where the mesh is (:func:`surface_depth`): into foliage, behind window panes, into window
-recesses and over facade relief. Beyond the site's edge the ground continues (an "apron": the roads, sidewalks and grass go on
+density factor. With ``surfaces`` (``--surfaces``; off by default, measured and not adopted: docs/segmentation.md
+"Real surfaces and real class shares") returns are also moved along their ray where a real surface is not where
+the mesh is (:func:`surface_depth`): into foliage, behind window panes, into window recesses and over facade
+relief. Beyond the site's edge the ground continues (an "apron": the roads, sidewalks and grass go on
 for the sensor's range) so that far rings land on ground as they do on a real street.
 
 Intensity is a rough model, not a radiometric one: a reflectance per class (near-infrared-like: vegetation,
@@ -211,23 +212,27 @@ class Sensor:
     range_half_m: float
     refl: np.ndarray
     max_range_m: float
+    surfaces: bool = False
     foliage_m: float = 0.0
     glass: float = 0.0
     relief_m: float = 0.0
     window_period_m: float = 3.0
 
 
-def draw_sensor(rng: np.random.Generator, max_range_m: float) -> Sensor:
-    """Random realism settings for one capture (see :class:`Sensor`)."""
+def draw_sensor(rng: np.random.Generator, max_range_m: float, surfaces: bool = False) -> Sensor:
+    """Random realism settings for one capture (see :class:`Sensor`); ``surfaces`` draws those of
+    :func:`surface_depth` too (after the others: without it the random stream is what it always was)."""
     refl = np.full(256, 0.3, np.float32)
     for c, r in REFLECTANCE.items():
         refl[c] = r * float(np.exp(rng.normal(0.0, 0.35)))
-    return Sensor(noise_m=float(rng.uniform(0.01, 0.03)), dropout=float(rng.uniform(0.0, 0.08)),
-                  cos_min=float(rng.uniform(0.01, 0.04)), snr_thr=float(np.exp(rng.uniform(np.log(3e-4), np.log(3e-3)))),
-                  gain=float(rng.uniform(0.75, 1.4)), range_half_m=float(rng.uniform(40.0, 150.0)),
-                  refl=np.clip(refl, 0.02, 1.0), max_range_m=float(max_range_m),
-                  foliage_m=float(rng.uniform(0.1, 0.6)), glass=float(rng.uniform(0.0, 0.3)),
-                  relief_m=float(rng.uniform(0.0, 0.03)), window_period_m=float(rng.uniform(2.4, 3.6)))
+    s = Sensor(noise_m=float(rng.uniform(0.01, 0.03)), dropout=float(rng.uniform(0.0, 0.08)),
+               cos_min=float(rng.uniform(0.01, 0.04)), snr_thr=float(np.exp(rng.uniform(np.log(3e-4), np.log(3e-3)))),
+               gain=float(rng.uniform(0.75, 1.4)), range_half_m=float(rng.uniform(40.0, 150.0)),
+               refl=np.clip(refl, 0.02, 1.0), max_range_m=float(max_range_m))
+    if surfaces:
+        s.surfaces, s.foliage_m, s.glass = True, float(rng.uniform(0.1, 0.6)), float(rng.uniform(0.0, 0.3))
+        s.relief_m, s.window_period_m = float(rng.uniform(0.0, 0.03)), float(rng.uniform(2.4, 3.6))
+    return s
 
 
 def _hash01(x: np.ndarray) -> np.ndarray:
@@ -297,7 +302,8 @@ def trace(world: World, sensor: Sensor, org: np.ndarray, dirs: np.ndarray, rng: 
     ok = (cos >= sensor.cos_min) & (rng.random(len(t)) < p_det) & (rng.random(len(t)) >= sensor.dropout)
     idx, t, prim, d, cos, lab, refl = idx[ok], t[ok], prim[ok], d[ok], cos[ok], lab[ok], refl[ok]
     noise = np.clip(rng.standard_normal(len(t)), -3, 3) * sensor.noise_m
-    noise += surface_depth(sensor, org[idx] + d * t[:, None], tr.face_normals[prim], lab, cos, rng)
+    if sensor.surfaces:
+        noise += surface_depth(sensor, org[idx] + d * t[:, None], tr.face_normals[prim], lab, cos, rng)
     xyz = org[idx] + d * (t + noise)[:, None]
     inten = sensor.gain * refl * (0.7 + 0.3 * cos) / (1.0 + (t / sensor.range_half_m) ** 2)
     inten = np.clip(inten + rng.normal(0.0, 0.02, len(t)), 0.0, 1.0)
@@ -333,7 +339,7 @@ def _clear(world: World, p: np.ndarray, radius: float) -> bool:
 
 
 # ----------------------------------------------------------------------------- the kinds
-def spinning(world: World, rng: np.random.Generator, density: float = 1.0) -> dict:
+def spinning(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
     """One 360-degree sweep of an HDL-64E-like sensor on a car standing in a lane at a random place.
 
     ``density`` scales the ray count: the beam count follows ``64 * sqrt(density)`` (16 to 128 beams over the
@@ -358,7 +364,7 @@ def spinning(world: World, rng: np.random.Generator, density: float = 1.0) -> di
         if _clear(world, np.array([xy[0], xy[1], zg[0] + 0.8]), 2.6) and _clear(world, o, 1.5):
             break
     R = _rot(yaw + rng.normal(0, 0.05), math.radians(rng.normal(0, 0.7)), math.radians(rng.normal(0, 0.7)))
-    sensor = draw_sensor(rng, rng.uniform(80.0, 120.0))
+    sensor = draw_sensor(rng, rng.uniform(80.0, 120.0), surfaces)
     step0 = float(rng.uniform(0.08, 0.17))
     n_beams = int(np.clip(round(64 * math.sqrt(density)), 16, 128))
     elev = np.interp(np.linspace(0, 63, n_beams), np.arange(64), HDL64_ELEVATIONS)
@@ -382,7 +388,7 @@ def spinning(world: World, rng: np.random.Generator, density: float = 1.0) -> di
     return out
 
 
-def tls(world: World, rng: np.random.Generator, density: float = 1.0) -> dict:
+def tls(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
     """Two to five terrestrial tripod stations (1.5-1.8 m) on sidewalks and corners, each a panorama from -60 to +90
     degrees elevation; the angular step gives ``0.12 m / sqrt(density)`` point spacing at 10 m."""
     d = world.scene.dims
@@ -409,7 +415,7 @@ def tls(world: World, rng: np.random.Generator, density: float = 1.0) -> dict:
         if not _clear(world, np.array([o[0], o[1], zg[0] + 0.5]), 0.5):
             continue
         stations.append(o)
-    sensor = draw_sensor(rng, rng.uniform(120.0, 250.0))
+    sensor = draw_sensor(rng, rng.uniform(120.0, 250.0), surfaces)
     yaws = rng.uniform(0, 2 * math.pi, len(stations))
     step = math.atan(0.12 / math.sqrt(density) / 10.0)
     az = np.arange(0, 2 * math.pi, step)
@@ -428,7 +434,7 @@ def tls(world: World, rng: np.random.Generator, density: float = 1.0) -> dict:
     return out
 
 
-def mobile(world: World, rng: np.random.Generator, density: float = 1.0) -> dict:
+def mobile(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
     """The demo's push-broom van (:mod:`twinkit_demo_site.scanner`) over its first pass and a random subset of the
     others, at the small preset's sampling times ``density`` (profile spacing / sqrt, rays per profile x sqrt);
     the van's own points, re-noised and re-detected with this capture's sensor model, intensity recomputed.
@@ -440,7 +446,7 @@ def mobile(world: World, rng: np.random.Generator, density: float = 1.0) -> dict
 
     pre = PRESETS["small"]  # the small preset's sampling on every size (the large one's is ~100x the rays)
     f = math.sqrt(max(density, 1e-3))
-    sensor = draw_sensor(rng, rng.uniform(60.0, 100.0))
+    sensor = draw_sensor(rng, rng.uniform(60.0, 100.0), surfaces)
     st = ScanSettings(profile_spacing_m=pre["profile_spacing_m"] / f, rays_per_profile=int(round(pre["rays_per_profile"] * f)),
                       scanner_height_m=float(rng.uniform(1.9, 2.6)), noise_mm=0.0, max_range_m=sensor.max_range_m,
                       shadows=False)
@@ -467,7 +473,7 @@ def mobile(world: World, rng: np.random.Generator, density: float = 1.0) -> dict
     return out
 
 
-def aerial(world: World, rng: np.random.Generator, density: float = 1.0) -> dict:
+def aerial(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
     """Airborne laser strips over the site: altitude 300-900 m, zigzag mirror swath +-20 degrees, 5-50 points/m^2
     on the ground times ``density`` (as many as 500 on a dense draw), a random heading; a share of the rays that
     hit vegetation also gives a return from below the canopy; returns at incidence cosines below 0.12-0.3 are lost
@@ -481,7 +487,7 @@ def aerial(world: World, rng: np.random.Generator, density: float = 1.0) -> dict
     sp = 1.0 / math.sqrt(rho)
     heading = rng.uniform(0, 2 * math.pi)
     R = _rot(heading)
-    sensor = draw_sensor(rng, alt * 1.3)
+    sensor = draw_sensor(rng, alt * 1.3, surfaces)
     sensor.cos_min = float(rng.uniform(0.12, 0.3))  # facades seen edge-on from above give few returns
     under = float(rng.uniform(0.2, 0.5))
     L = math.sqrt(2) * H + 5.0
@@ -544,7 +550,8 @@ _WORLDS: dict[tuple[int, str, bool], World] = {}
 
 
 def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, size: str = "small",
-                     max_points: int = MAX_POINTS, world: World | None = None, variety: bool = True) -> dict:
+                     max_points: int = MAX_POINTS, world: World | None = None, variety: bool = True,
+                     surfaces: bool = False) -> dict:
     """Simulate one capture of the demo site ``seed`` (``size`` a plugin.PRESETS name; ``variety``: see
     :func:`build_world`; ``world``: a prebuilt one, which then replaces these three) of ``kind`` (one of
     :data:`KINDS`), every random draw (pose, sensor, noise) from ``rng_seed``; the same arguments give the same
@@ -566,13 +573,13 @@ def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, 
         world = _WORLDS[key]
     rng = np.random.default_rng([int(seed), int(rng_seed), KINDS.index(kind), 44])
     if kind == "spinning":
-        out = spinning(world, rng, density)
+        out = spinning(world, rng, density, surfaces)
     elif kind == "tls":
-        out = tls(world, rng, density)
+        out = tls(world, rng, density, surfaces)
     elif kind == "mobile":
-        out = mobile(world, rng, density)
+        out = mobile(world, rng, density, surfaces)
     else:
-        out = aerial(world, rng, density)
+        out = aerial(world, rng, density, surfaces)
     n = len(out["label"])
     idx = np.arange(n)
     if n > max_points:
@@ -616,6 +623,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--density-max", type=float, default=3.0)
     ap.add_argument("--max-points", type=int, default=MAX_POINTS)
     ap.add_argument("--no-variety", action="store_true", help="the demo's own layout (no random layout knobs)")
+    ap.add_argument("--surfaces", action="store_true", help="move returns into foliage, behind window panes and over "
+                                                            "facade relief (surface_depth; off: the shipped model's data)")
     a = ap.parse_args(argv)
     kinds = [k for k in a.kinds.split(",") if k]
     a.out.mkdir(parents=True, exist_ok=True)
@@ -631,7 +640,8 @@ def main(argv: list[str] | None = None) -> None:
         rs = v * 1000 + s
         dens = round(float(np.exp(np.random.default_rng([s, v, KINDS.index(k), 7]).uniform(
             np.log(a.density_min), np.log(a.density_max)))), 4)  # as the manifest records it, so that it reproduces
-        c = simulate_capture(s, k, rs, density=dens, size=a.size, max_points=a.max_points, variety=not a.no_variety)
+        c = simulate_capture(s, k, rs, density=dens, size=a.size, max_points=a.max_points, variety=not a.no_variety,
+                                 surfaces=a.surfaces)
         np.savez_compressed(a.out / name, xyz=c["xyz"], label=c["label"], intensity=c["intensity"], origin=c["origin"],
                             sensor=c["sensor"].astype(np.uint32), ring=c["ring"])
         dt = time.perf_counter() - t0

@@ -178,12 +178,20 @@ def test_the_step_smooths_and_corrects_the_prior_on_a_colourless_capture_and_not
     from twinkit import artefacts as A
     from twinkit.mesh import Mesh
     from twinkit.testing import run_plugin
+    from twinkit_segmentation.geometry.model import save_model
     from twinkit_segmentation.geometry.scene import street_capture
     from twinkit_segmentation.synthetic import write_scene
 
     mesh_ply, _, _ = write_scene(tmp_path / "scene", step=0.5)
     cap = street_capture(3, half_length_m=12.0)
     rng = np.random.default_rng(0)
+    # the shipped model with a class-prior correction (building favoured), as train --prior-alphas writes one
+    m = load_model()
+    shift = np.where(m.classes == BUILDING, 3.0, 0.0)
+    stem = tmp_path / "shifted"
+    save_model(stem, m.layers, m.mean, m.std, m.classes, m.feature_names,
+               {**m.meta, "prior": {"alpha": 1.0, "logit_shift": shift.tolist()}})
+    assert np.array_equal(load_model(stem).logit_shift, shift.astype(np.float32))
     votes = {}
     for kind, colors in (("colourless", None), ("coloured", rng.integers(0, 255, (len(cap["xyz"]), 3), np.uint8))):
         A.write_points(tmp_path / f"{kind}.ply", Mesh(vertices=cap["xyz"], attrs={} if colors is None else {"colors": colors}))
@@ -194,14 +202,20 @@ def test_the_step_smooths_and_corrects_the_prior_on_a_colourless_capture_and_not
             votes[kind, smooth] = np.load(out["geometry_votes.npy"])
     assert not np.allclose(votes["colourless", 0.25], votes["colourless", 0.0])
     assert np.array_equal(votes["coloured", 0.25], votes["coloured", 0.0])
-    # the colourless capture's probabilities carry the model's class-prior correction, the coloured one's not ...
-    assert load_model().logit_shift is not None and load_model().logit_shift.any()
-    assert not np.allclose(votes["coloured", 0.0], votes["colourless", 0.0])
-    # ... unless asked for; the colours themselves change nothing
-    out = run_plugin("step", "classify_geometry", tmp_path / "coloured_prior",
-                     {"in_points_ply": tmp_path / "coloured.ply", "in_textured_mesh_ply": mesh_ply},
-                     smooth_m=0.0, prior_coloured=True)
-    assert np.array_equal(np.load(out["geometry_votes.npy"]), votes["colourless", 0.0])
+    assert np.array_equal(votes["coloured", 0.0], votes["colourless", 0.0])  # the colours themselves change nothing
+    # the correction acts on the colourless capture only, unless asked for on a coloured one
+    for kind, extra in (("colourless", {}), ("coloured", {}), ("coloured", {"prior_coloured": True})):
+        out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_shift_{len(extra)}",
+                         {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
+                         smooth_m=0.0, model=str(stem), **extra)
+        v = np.load(out["geometry_votes.npy"])
+        has = v.sum(axis=1) > 0
+        base = votes[kind, 0.0]
+        if kind == "coloured" and not extra:
+            assert np.array_equal(v, base)
+        else:
+            assert v[has, BUILDING].sum() > 1.05 * base[has, BUILDING].sum()
+            assert (v[has].argmax(axis=1) == BUILDING).sum() > (base[has].argmax(axis=1) == BUILDING).sum()
 
 
 def test_the_prior_correction_gives_an_ambiguous_shape_to_the_common_class():
@@ -225,6 +239,8 @@ def test_the_prior_correction_gives_an_ambiguous_shape_to_the_common_class():
     assert model.proba(-amb).argmax() == BUILDING
     assert model.proba(np.array([[-0.8]], np.float32)).argmax() == WALL  # a clear wall stays a wall
     assert rec["validation_miou_by_alpha"][str(rec["alpha"])] >= rec["validation_miou_by_alpha"]["0.0"]
-    # no validation captures: no correction
+    # no validation captures, or only alpha 0 tried (train's default): no correction
     assert prior_shift(model, caps, [0.5, 0.5], [], log=lambda *_: None)["alpha"] == 0.0
     assert not model.logit_shift.any()
+    assert prior_shift(model, caps, [0.5, 0.5], caps, alphas=(0.0,))["logit_shift"] is None and model.logit_shift is None
+    assert model.proba(-amb).argmax() == WALL

@@ -197,15 +197,18 @@ def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048
     return layers, mean, std, classes, recipe
 
 
-#: the prior corrections tried (a fraction of the full log-prior ratio), the one with the best validation mIoU kept
+#: the prior corrections ``--prior-alphas`` can try (fractions of the full log-prior ratio); the default tries
+#: none: measured and not adopted (docs/segmentation.md "Real surfaces and real class shares")
 PRIOR_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
-def prior_shift(model: GeometryModel, train_caps, trained_prior, val_caps, log=print) -> dict:
+def prior_shift(model: GeometryModel, train_caps, trained_prior, val_caps, log=print,
+                alphas: tuple = PRIOR_ALPHAS) -> dict:
     """The class-prior correction of a model trained on class-balanced samples: the log ratio of each class's
     share among all the training captures' base points (as a capture comes) to its share in what the loss saw
     (``trained_prior``, per output class: the per-class draws weighted by the class weights), times the
-    alpha of :data:`PRIOR_ALPHAS` with the best mIoU on ``val_caps`` (0 without them). Balanced training lets
+    alpha of ``alphas`` with the best mIoU on ``val_caps`` (0 without them; alphas (0,): no correction,
+    ``model.logit_shift`` None). Balanced training lets
     rare classes (wall, fence, sign) win wherever the shape is ambiguous; on the real sweeps a facade seen
     below the sensor's upper beam is as high as a wall. Sets ``model.logit_shift``; returns the JSON record."""
     natural = np.zeros(len(model.classes))
@@ -213,8 +216,12 @@ def prior_shift(model: GeometryModel, train_caps, trained_prior, val_caps, log=p
         natural += np.bincount(lab[lab < N_CLASSES], minlength=N_CLASSES)[model.classes]
     natural = np.maximum(natural, 1.0) / max(natural.sum(), 1.0)
     ratio = np.log(natural) - np.log(np.asarray(trained_prior, np.float64))
+    if not any(alphas):
+        model.logit_shift = None
+        return {"alpha": 0.0, "logit_shift": None,
+                "natural_share": {NAMES[c]: round(float(v), 5) for c, v in zip(model.classes, natural)}}
     by_alpha = {}
-    for a in PRIOR_ALPHAS if val_caps else (0.0,):
+    for a in alphas if val_caps else (0.0,):
         model.logit_shift = (a * ratio).astype(np.float32)
         by_alpha[a] = score(model, val_caps)["miou"] if val_caps else 0.0
         log(f"prior correction alpha {a}: validation mIoU {by_alpha[a]}")
@@ -237,6 +244,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--per-class", type=int, default=2500)
     ap.add_argument("--intensity-dropout", type=float, default=0.5)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--prior-alphas", default="0",
+                    help="comma-separated class-prior corrections to try (fractions of the log ratio of the classes' "
+                         "natural to trained shares, e.g. 0,0.25,0.5,0.75,1); the best on the validation captures is "
+                         "kept. Default 0: none (train.prior_shift)")
     ap.add_argument("--ablate", default="", help="comma-separated feature names held at 0 in training and "
                                                    "validation (an ablation: the model cannot use them)")
     a = ap.parse_args(argv)
@@ -263,7 +274,8 @@ def main(argv: list[str] | None = None) -> int:
                                                epochs=a.epochs, per_class=a.per_class, batch=a.batch,
                                                intensity_dropout=a.intensity_dropout, seed=a.seed)
     model = GeometryModel(layers=layers, mean=mean, std=std, classes=classes, feature_names=feature_names())
-    prior = prior_shift(model, tr, recipe.pop("trained_prior"), va)
+    prior = prior_shift(model, tr, recipe.pop("trained_prior"), va,
+                        alphas=tuple(float(x) for x in a.prior_alphas.split(",")))
     meta = {"recipe": {**recipe, "train_captures": [n for n, _, _ in tr], "val_regex": a.val, "ablated": a.ablate,
                        "feature_version": FEATURE_VERSION}, "prior": prior,
             "validation": score(model, va) if va else {}, "training": score(model, tr),
