@@ -24,8 +24,8 @@ class GeometryModel:
     """A loaded MLP: ``layers`` [(W (in, out) float32, b (out,) float32), ...] with ReLU between them,
     ``mean``/``std`` (k,) the feature normalisation, ``classes`` (c,) trainIds of the outputs,
     ``feature_names`` the features it expects (in order), ``meta`` the rest of the JSON, ``logit_shift`` (c,)
-float32 added to the outputs before the softmax (the class-prior correction :func:`.train.prior_shift` chose;
-zeros for a model without one)."""
+    float32 added to the outputs before the softmax (the class-prior correction :func:`.train.prior_shift` chose;
+    None for a model without one)."""
 
     layers: list
     mean: np.ndarray
