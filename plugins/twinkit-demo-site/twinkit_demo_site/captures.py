@@ -37,6 +37,7 @@ from twinkit import cityscapes as cs
 from twinkit.mesh import Mesh
 from twinkit_demo_site.layout import Scene
 from twinkit_demo_site.raycast import Tracer
+from twinkit_demo_site.weathering import _hash01 as lattice_hash
 
 KINDS = ("spinning", "tls", "mobile", "aerial")
 MAX_POINTS = 300_000
@@ -235,11 +236,6 @@ def draw_sensor(rng: np.random.Generator, max_range_m: float, surfaces: bool = F
     return s
 
 
-def _hash01(x: np.ndarray) -> np.ndarray:
-    """A repeatable pseudo-random number in [0, 1) per value of ``x`` (float array)."""
-    return np.modf(np.abs(np.sin(x * 12.9898 + 78.233)) * 43758.5453)[0]
-
-
 def surface_depth(sensor: Sensor, hit: np.ndarray, normal: np.ndarray, label: np.ndarray, cos: np.ndarray,
                   rng: np.random.Generator) -> np.ndarray:
     """(n,) metres to add to each return's range where the real surface is not the mesh's: ``hit`` (n, 3) the
@@ -249,8 +245,8 @@ def surface_depth(sensor: Sensor, hit: np.ndarray, normal: np.ndarray, label: np
     - Vegetation: a crown or hedge is a volume of leaves, not a skin; a return comes from an exponential depth
       of mean ``sensor.foliage_m`` (at most 4x that) inside it.
     - Building facades (near-vertical building faces): a grid of windows (``window_period_m`` wide bays, one
-      1.2-1.4 m window per bay on 3 m floors, the grid's phase per facade plane); a return on a window comes
-      from inside the room behind the pane (0.2-2.5 m farther) with chance ``sensor.glass``, else from the
+      1.3 x 1.4 m window per bay on 3 m floors, the grid's phase per facade plane); a return on a window comes
+      from inside the room behind the pane (0.2-1.5 m farther) with chance ``sensor.glass``, else from the
       recessed frame (8-25 cm along the normal); elsewhere a relief of ``sensor.relief_m`` (sills, pipes,
       render) along the normal. Walls get the relief too.
     Real single sweeps show both: at 0.25 m the scattering of a real facade is ten times a clean plane's, and of
@@ -266,10 +262,12 @@ def surface_depth(sensor: Sensor, hit: np.ndarray, normal: np.ndarray, label: np
         i = np.flatnonzero(fac)
         nxy = normal[i, :2] / np.maximum(np.linalg.norm(normal[i, :2], axis=1, keepdims=True), 1e-9)
         u = hit[i, 0] * -nxy[:, 1] + hit[i, 1] * nxy[:, 0]
-        plane = np.round(hit[i, 0] * nxy[:, 0] + hit[i, 1] * nxy[:, 1], 0) + 31.0 * np.round(nxy[:, 0], 1)
+        # a facade plane: its offset (m) and direction (tenths), hashed into the grid's phases
+        off = np.round(hit[i, 0] * nxy[:, 0] + hit[i, 1] * nxy[:, 1]).astype(np.int64)
+        nx, ny = np.round(nxy[:, 0] * 10).astype(np.int64), np.round(nxy[:, 1] * 10).astype(np.int64)
         per = sensor.window_period_m
-        fu = np.mod(u / per + _hash01(plane), 1.0)
-        fz = np.mod(hit[i, 2] + 3.0 * _hash01(plane + 0.5), 3.0)
+        fu = np.mod(u / per + 0.5 * (lattice_hash(off, nx, ny, 44) + 1.0), 1.0)
+        fz = np.mod(hit[i, 2] + 1.5 * (lattice_hash(off, nx, ny, 45) + 1.0), 3.0)
         win = (label[i] == cs.BUILDING) & (np.abs(fu - 0.5) * per < 0.65) & (fz > 0.9) & (fz < 2.3)
         relief = np.clip(rng.normal(0.0, 1.0, len(i)), -3, 3) * sensor.relief_m
         inside = win & (rng.random(len(i)) < sensor.glass)
