@@ -135,7 +135,7 @@ def test_streets_go_on_beyond_the_site_edge(world):
 
 
 def test_surface_depth_puts_returns_inside_foliage_and_behind_window_panes():
-    from twinkit_demo_site.captures import Sensor, surface_depth
+    from twinkit_demo_site.sensor import Sensor, surface_depth
 
     s = Sensor(noise_m=0.0, dropout=0.0, cos_min=0.0, snr_thr=1e-3, gain=1.0, range_half_m=100.0,
                refl=np.full(256, 0.3, np.float32), max_range_m=100.0, foliage_m=0.3, glass=0.5, relief_m=0.01,
