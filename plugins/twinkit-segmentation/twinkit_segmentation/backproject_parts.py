@@ -54,11 +54,14 @@ def _fuse_sources(params: BackprojectParams, ctx: StepContext, p_views, votes, g
     return p, info
 
 
-def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud):
-    """(cue -> (n,) bool gate, or None; the gates' metrics)."""
+def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=None):
+    """(cue -> (n,) bool gate, or None; the gates' metrics). ``geom`` (n, 19) or None: the 3D classifier's
+    votes, which gate the furniture cues (``furniture_geometry_share``)."""
     if not params.cue_gates or cloud is None or not params.context:
         return None, {"used": False}
-    from twinkit_segmentation.gates import capture_quality, cue_gates
+    import numpy as np
+
+    from twinkit_segmentation.gates import FURNITURE_CUES, capture_quality, cue_gates, geometry_gate
     from twinkit_segmentation.segmesh import unit_normals
 
     t = time.perf_counter()
@@ -66,12 +69,16 @@ def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud):
     q = capture_quality(cloud.vertices, mesh.vertices, unit_normals(mesh)[:, 2] >= opt.up_normal_z,
                         threads=max(1, int(getattr(ctx, "threads", 1) or 1)))
     gates = cue_gates(q, opt)
-    import numpy as np
-
-    info = {"used": True, "seconds": round(time.perf_counter() - t, 3),
-            "support_m_p50": round(float(np.median(q["support_m"])), 4),
-            "noise_m_p50": round(float(np.median(q["noise_m"])), 4) if np.isfinite(q["noise_m"]).any() else None,
-            "passed_share": {c: round(float(g.mean()), 4) for c, g in gates.items()}}
+    info = {"used": True}
+    if geom is not None and params.furniture_geometry_share > 0:
+        said = geometry_gate(geom, params.furniture_geometry_share)
+        info["furniture_by_geometry_share"] = round(float(said.mean()), 4)
+        for c in FURNITURE_CUES:
+            gates[c] = gates[c] & said
+    info.update({"seconds": round(time.perf_counter() - t, 3),
+                 "support_m_p50": round(float(np.median(q["support_m"])), 4),
+                 "noise_m_p50": round(float(np.median(q["noise_m"])), 4) if np.isfinite(q["noise_m"]).any() else None,
+                 "passed_share": {c: round(float(g.mean()), 4) for c, g in gates.items()}})
     off = {c: 1 - v for c, v in info["passed_share"].items() if c in ("curb", "column", "low") and v < 0.9}
     if off:
         ctx.log.warning("cue gates: the capture is too sparse or noisy for %s on %s of the mesh (median support "

@@ -14,7 +14,11 @@ The views and the geometry are combined as a weighted sum of log-probabilities,
     cov(n) = 1 - exp(-n / n0),
 
 with ``a_v``, ``a_g`` and ``n0`` per capture kind (``coloured``: the cloud has colours, the views
-see photos-like textures; ``colourless``: grey renders of the geometry). A vertex no view saw takes
+see photos-like textures; ``colourless``: grey renders of the geometry). Where a kind has a views'
+reliability ``R`` (19 x 19, ``R[k, c]`` = how often a vertex the views call ``k`` is truly ``c``,
+counted on generated truth), ``p_views`` is first read through it (``p_views @ R``): a grey render of
+a sparse tree crown that the 2D model calls building then speaks for building *or* vegetation, as
+often as each was the truth. A vertex no view saw takes
 the geometry alone; a vertex the geometry does not reach keeps the views alone, with the weight 1 the
 cues and the file's prior were tuned with. The weights are fitted by :func:`calibrate` (log-loss
 against generated ground truth, ``python -m twinkit_segmentation.fusion calibrate``) and shipped as
@@ -43,10 +47,18 @@ EPS = 1e-3
 @dataclass
 class SourceWeights:
     """The weights of one capture kind: ``views`` (a_v), ``geometry`` (a_g), ``coverage_views`` (n0,
-    views for 63 % of the views' weight)."""
+    views for 63 % of the views' weight) and ``view_reliability`` (None, or 19 rows of 19: row ``k`` the
+    true classes' shares where the views said ``k``; rows sum to 1)."""
     views: float = 1.0
     geometry: float = 1.0
     coverage_views: float = 2.0
+    view_reliability: list | None = None
+
+    def read_views(self, pv: np.ndarray) -> np.ndarray:
+        """The views' distribution (n, 19) read through ``view_reliability`` (unchanged without one)."""
+        if self.view_reliability is None:
+            return pv
+        return pv @ np.asarray(self.view_reliability, np.float64)
 
 
 @dataclass
@@ -59,7 +71,8 @@ class FusionWeights:
         return self.kinds.get(kind, self.kinds.get("coloured", SourceWeights()))
 
     def to_json(self) -> dict:
-        return {"kinds": {k: vars(w) for k, w in self.kinds.items()}, "recipe": self.recipe}
+        return {"kinds": {k: {a: b for a, b in vars(w).items() if b is not None} for k, w in self.kinds.items()},
+                "recipe": self.recipe}
 
 
 def load_weights(path: Path | str | None = None) -> FusionWeights:
@@ -69,8 +82,18 @@ def load_weights(path: Path | str | None = None) -> FusionWeights:
     if not p.is_file():
         return FusionWeights(recipe={"note": f"{p.name} missing: uncalibrated defaults"})
     d = json.loads(p.read_text())
-    kinds = {k: SourceWeights(**{a: float(b) for a, b in v.items()}) for k, v in d.get("kinds", {}).items()}
+    kinds = {k: SourceWeights(**{a: (b if a == "view_reliability" else float(b)) for a, b in v.items()})
+             for k, v in d.get("kinds", {}).items()}
     return FusionWeights(kinds=kinds or {k: SourceWeights() for k in KINDS}, recipe=d.get("recipe", {}))
+
+
+def dump_weights(w: FusionWeights) -> str:
+    """``w`` as JSON text, one line per row of a reliability matrix."""
+    import re
+
+    text = json.dumps(w.to_json(), indent=1)
+    return re.sub(r"\[\s+([-0-9.e,\s]+?)\s+\]", lambda m: "[" + ", ".join(m.group(1).replace(",", " ").split()) + "]",
+                  text)
 
 
 def capture_kind(colors: np.ndarray | None) -> str:
@@ -114,7 +137,7 @@ def fuse_sources(p_views: np.ndarray, n_views: np.ndarray, p_geom: np.ndarray | 
     pg, sg = normalise(p_geom)
     a_v, a_g = source_exponents(w, np.where(sv, n_views, 0.0), sg)
     a_v = np.where(sv, a_v, 0.0)
-    logp = a_v[:, None] * np.log(pv + EPS) + a_g[:, None] * np.log(pg + EPS)
+    logp = a_v[:, None] * np.log(w.read_views(pv) + EPS) + a_g[:, None] * np.log(pg + EPS)
     logp -= logp.max(axis=1, keepdims=True)
     q = np.exp(logp)
     q /= q.sum(axis=1, keepdims=True)
@@ -180,11 +203,24 @@ def _loss(theta: np.ndarray, lv: np.ndarray, nv: np.ndarray, lg: np.ndarray, sg:
     return float(np.mean(lse - logit[np.arange(len(gt)), gt]))
 
 
-def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0) -> tuple[SourceWeights, dict]:
+def view_reliability(pv: np.ndarray, gt: np.ndarray, prior: float) -> np.ndarray:
+    """``R`` (19, 19): row ``k`` the shares of the true classes over the vertices the views call ``k``
+    (soft counts: each vertex counts its views' probability of ``k``), with ``prior`` vertices of the
+    identity added to every row, so a class the calibration rarely saw keeps the views' word."""
+    counts = np.zeros((N_CLASSES, N_CLASSES))
+    np.add.at(counts.T, gt, pv)          # counts[k, c] += pv[i, k] where gt[i] == c
+    counts += prior * np.eye(N_CLASSES)
+    return counts / counts.sum(axis=1, keepdims=True)
+
+
+def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0,
+              reliability_prior: float | None = None) -> tuple[SourceWeights, dict]:
     """Fit ``views``, ``geometry`` and ``coverage_views`` of one capture kind by minimising the mean
     log-loss of the fused distribution against the ground truth, over vertices both sources speak on.
     ``samples``: dicts with ``p_views`` (n, 19), ``n_views`` (n,), ``p_geom`` (n, 19) and ``gt`` (n,)
-    uint8 (255 ignored). Returns (weights, fit info: vertices, log-loss before (all 1) and after)."""
+    uint8 (255 ignored). ``reliability_prior`` (vertices of identity per row): also count the views'
+    reliability (:func:`view_reliability`) on the same vertices, first. Returns (weights, fit info:
+    vertices, log-loss before (all 1) and after)."""
     from scipy.optimize import minimize
 
     rng = np.random.default_rng(seed)
@@ -197,20 +233,27 @@ def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0) -> 
         idx = np.nonzero(ok)[0]
         if len(idx) > max_vertices // max(len(samples), 1):
             idx = rng.choice(idx, max_vertices // max(len(samples), 1), replace=False)
-        lv.append(np.log(pv[idx] + EPS))
+        lv.append(pv[idx])
         lg.append(np.log(pg[idx] + EPS))
         nv.append(np.asarray(s["n_views"], np.float64)[idx])
         gt.append(g[idx].astype(np.int64))
-    LV, LG, NV, GT = np.concatenate(lv), np.concatenate(lg), np.concatenate(nv), np.concatenate(gt)
+    PV, LG, NV, GT = np.concatenate(lv), np.concatenate(lg), np.concatenate(nv), np.concatenate(gt)
+    R = view_reliability(PV, GT, reliability_prior) if reliability_prior is not None else None
+    LV = np.log((PV if R is None else PV @ R) + EPS)
     SG = np.ones(len(GT))
     args = (LV, NV, LG, SG, GT)
     theta0 = np.log([1.0, 1.0, 2.0])
     before = _loss(theta0, *args)
-    res = minimize(_loss, theta0, args=args, method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-5,
-                                                                             "maxiter": 400})
+    # the coverage scale has flat stretches: started at a few views and at many, the better fit kept
+    res = min((minimize(_loss, np.log([1.0, 1.0, n0]), args=args, method="Nelder-Mead",
+                        options={"xatol": 1e-3, "fatol": 1e-5, "maxiter": 400}) for n0 in (2.0, 20.0, 100.0)),
+              key=lambda r: r.fun)
     a_v, a_g, n0 = (float(x) for x in np.exp(res.x))
-    return (SourceWeights(views=round(a_v, 4), geometry=round(a_g, 4), coverage_views=round(n0, 4)),
-            {"vertices": int(len(GT)), "logloss_uncalibrated": round(before, 4), "logloss": round(float(res.fun), 4)})
+    rel = None if R is None else [[round(float(x), 4) for x in row] for row in R]
+    return (SourceWeights(views=round(a_v, 4), geometry=round(a_g, 4), coverage_views=round(n0, 4),
+                          view_reliability=rel),
+            {"vertices": int(len(GT)), "logloss_uncalibrated": round(before, 4), "logloss": round(float(res.fun), 4),
+             "reliability_prior": reliability_prior})
 
 
 def run_sample(run: Path, geometry: str, params=None) -> dict:
@@ -248,17 +291,20 @@ def main(argv=None) -> int:
     c.add_argument("--geometry", default="geometry_votes.npy", help="the geometry votes' file name in the runs")
     c.add_argument("--out", default=str(WEIGHTS_FILE), help="weights file to update (its other kinds are kept)")
     c.add_argument("--note", default="", help="what the runs are (seed, size, capture), kept in the recipe")
+    c.add_argument("--reliability-prior", type=float, default=None,
+                   help="also count the views' reliability matrix (docs/segmentation.md \"Fusion\"), with this "
+                        "many vertices of the identity per row; omitted: no matrix (the views' word as it is)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     samples = [run_sample(Path(r), a.geometry) for r in a.runs]
-    w, info = calibrate(samples)
+    w, info = calibrate(samples, reliability_prior=a.reliability_prior)
     cur = load_weights(a.out) if Path(a.out).is_file() else FusionWeights(kinds={})
     cur.kinds[a.kind] = w
     cur.recipe[a.kind] = {"runs": [str(Path(r)) for r in a.runs], "note": a.note, "geometry": a.geometry,
                           "command": "python -m twinkit_segmentation.fusion calibrate --kind " + a.kind, **info,
                           "seconds": round(time.perf_counter() - t0, 2)}
-    Path(a.out).write_text(json.dumps(cur.to_json(), indent=1) + "\n")
-    print(json.dumps({a.kind: vars(w), **info}, indent=1))
+    Path(a.out).write_text(dump_weights(cur) + "\n")
+    print(json.dumps({a.kind: {k: v for k, v in vars(w).items() if k != "view_reliability"}, **info}, indent=1))
     return 0
 
 

@@ -44,6 +44,8 @@ import numpy as np
 from twinkit.ranges import param
 
 GATED = ("curb", "column", "mounted", "low", "narrow", "slender")
+#: the cues that favour pole, light and sign, gated by the 3D classifier's word (:func:`geometry_gate`)
+FURNITURE_CUES = ("column", "mounted")
 
 
 @dataclass
@@ -135,6 +137,18 @@ def cue_gates(quality: dict, opt, curb_sigmas: float = 3.0, min_flat_share: floa
     shape = sup <= opt.slice_m / 2.0
     step = (curb_sigmas * noise <= opt.min_curb_m) & (flat >= min_flat_share)
     return {"curb": step, "column": post, "mounted": post, "low": shape, "narrow": shape, "slender": shape}
+
+
+def geometry_gate(p_geom: np.ndarray, min_share: float) -> np.ndarray:
+    """(n,) bool: the 3D classifier (``p_geom`` (n, 19) votes, zero rows where it has no support) leaves
+    street furniture open at the vertex (pole, light and sign together at least ``min_share`` of its
+    votes), or does not speak there."""
+    from twinkit.cityscapes import STREET_FURNITURE
+
+    g = np.asarray(p_geom, np.float64)
+    tot = g.sum(axis=1)
+    share = g[:, list(STREET_FURNITURE)].sum(axis=1) / np.maximum(tot, 1e-12)
+    return (tot <= 0) | (share >= min_share)
 
 
 def reach_gate(vertices: np.ndarray, height: np.ndarray, opt, radius_m: float = 10.0, cell_m: float = 2.0) -> np.ndarray:

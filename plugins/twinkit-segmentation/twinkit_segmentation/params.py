@@ -162,6 +162,12 @@ class BackprojectParams:
     cue_gates: bool = param(True,
                             help="Gate the shape and curb cues by what the capture resolves at each vertex (point "
                                  'support and noise from points.ply; docs/segmentation.md "Cue gates").')
+    furniture_geometry_share: float = param(0.1, ge=0, le=1,
+                                            help="Where the 3D classifier speaks, the furniture cues (column, "
+                                                 "mounted) act only where it gives pole, light and sign together at "
+                                                 "least this share: a crown's fragment floating free in a sparse "
+                                                 "scan is foliage to its multi-scale features (docs/segmentation.md "
+                                                 '"Cue gates"); 0 = off.')
     fusion_weights: str = param("", free=True, path=True,
                                 help="The views' and the geometry's weights per capture kind (a JSON file written by "
                                      "python -m twinkit_segmentation.fusion calibrate); empty = the plugin's "

@@ -395,7 +395,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     fprior, fvoting, fcodes, finfo = vertex_file_classes(params, ctx, in_points_ply, mesh.vertices)
     labels, conf = decide_distribution(p, unseen)
     base_labels = labels.copy()  # the sources alone
-    gates, ginfo = _cue_gates(params, ctx, mesh, cloud)
+    gates, ginfo = _cue_gates(params, ctx, mesh, cloud, geom)
     # the views' near-unanimous floor holds where they lead: not where a colourless capture has geometry
     unshield = None if geom is None or fsum.get("kind") == "coloured" else geom.sum(axis=1) > 0
     cues = list(params.context_cues) if geom is None else [c for c in params.context_cues
