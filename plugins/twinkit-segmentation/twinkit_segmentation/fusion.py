@@ -224,7 +224,7 @@ def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0,
     from scipy.optimize import minimize
 
     rng = np.random.default_rng(seed)
-    lv, nv, lg, gt = [], [], [], []
+    pvs, nv, lg, gt = [], [], [], []
     for s in samples:
         pv, sv = normalise(s["p_views"])
         pg, sg = normalise(s["p_geom"])
@@ -233,11 +233,11 @@ def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0,
         idx = np.nonzero(ok)[0]
         if len(idx) > max_vertices // max(len(samples), 1):
             idx = rng.choice(idx, max_vertices // max(len(samples), 1), replace=False)
-        lv.append(pv[idx])
+        pvs.append(pv[idx])
         lg.append(np.log(pg[idx] + EPS))
         nv.append(np.asarray(s["n_views"], np.float64)[idx])
         gt.append(g[idx].astype(np.int64))
-    PV, LG, NV, GT = np.concatenate(lv), np.concatenate(lg), np.concatenate(nv), np.concatenate(gt)
+    PV, LG, NV, GT = np.concatenate(pvs), np.concatenate(lg), np.concatenate(nv), np.concatenate(gt)
     R = view_reliability(PV, GT, reliability_prior) if reliability_prior is not None else None
     LV = np.log((PV if R is None else PV @ R) + EPS)
     SG = np.ones(len(GT))

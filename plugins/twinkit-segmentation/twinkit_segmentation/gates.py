@@ -145,10 +145,10 @@ def geometry_gate(p_geom: np.ndarray, min_share: float) -> np.ndarray:
     votes), or does not speak there."""
     from twinkit.cityscapes import STREET_FURNITURE
 
-    g = np.asarray(p_geom, np.float64)
-    tot = g.sum(axis=1)
-    share = g[:, list(STREET_FURNITURE)].sum(axis=1) / np.maximum(tot, 1e-12)
-    return (tot <= 0) | (share >= min_share)
+    from .fusion import normalise
+
+    p, speaks = normalise(p_geom)
+    return ~speaks | (p[:, list(STREET_FURNITURE)].sum(axis=1) >= min_share)
 
 
 def reach_gate(vertices: np.ndarray, height: np.ndarray, opt, radius_m: float = 10.0, cell_m: float = 2.0) -> np.ndarray:
