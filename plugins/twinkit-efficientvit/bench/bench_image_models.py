@@ -15,7 +15,8 @@ Table 2 (if the lund_street photos exist): sanity on all 29 photos at 1024x768, 
 share of the bottom-centre that is road and of the top rows that is sky/building/vegetation,
 and the pixel agreement of each model with ``efficientvit_b0``.
 
-Models: ``efficientvit_b0`` (default: ONNX Runtime where installed), ``efficientvit_b0_torch`` (``runtime=torch``)
+Models: ``efficientvit_b0`` (default: OpenVINO where installed), ``efficientvit_b0_onnxruntime``
+(``runtime=onnxruntime``), ``efficientvit_b0_torch`` (``runtime=torch``)
 and ``efficientvit_b0_plain`` (torch with ``optimize=false``, to show the effect of BatchNorm folding +
 channels-last), ``deeplab_edgetpu_tflite`` if ``ai-edge-litert`` is
 installed (fixed 513x513 input; a "batch" is a loop of single invokes), and
@@ -81,7 +82,8 @@ def build(model: str, threads: int, batch: int, hf_model: str):
     if model.startswith("efficientvit_b0"):
         from twinkit_efficientvit.efficientvit import EfficientViTParams, build_efficientvit
 
-        runtime = "torch" if model.endswith(("_torch", "_plain")) else "auto"
+        runtime = ("torch" if model.endswith(("_torch", "_plain")) else
+                   "onnxruntime" if model.endswith("_onnxruntime") else "auto")
         return build_efficientvit(EfficientViTParams(threads=threads, batch_size=batch, device="cpu", runtime=runtime,
                                                      input_long_side_px=1024, optimize=not model.endswith("plain")))
     if model == "deeplab_edgetpu_tflite":
@@ -162,17 +164,22 @@ def _image_sets(views_dir: str, max_views: int) -> list[tuple[str, np.ndarray]]:
     return sets
 
 
-def agreement(views_dir: str, max_views: int) -> list[tuple[str, int, float, int]]:
-    """(image set, images, share of pixels whose label differs ONNX Runtime vs torch, worst image's count)."""
+def agreement(views_dir: str, max_views: int) -> list[tuple[str, str, int, float, int]]:
+    """(runtime, image set, images, share of pixels whose label differs from torch's, worst image's count) for each
+    installed runtime of the exported network (OpenVINO, ONNX Runtime)."""
+    from twinkit_efficientvit import onnx_net
     from twinkit_efficientvit.efficientvit import EfficientViTParams, build_efficientvit
 
     kw = dict(threads=1, batch_size=1, device="cpu")
-    ort_model = build_efficientvit(EfficientViTParams(runtime="onnxruntime", **kw))
     torch_model = build_efficientvit(EfficientViTParams(runtime="torch", **kw))
+    sets = _image_sets(views_dir, max_views)
+    refs = [np.stack([torch_model.predict(im[None])[0] for im in images]) for _, images in sets]
     rows = []
-    for name, images in _image_sets(views_dir, max_views):
-        differ = np.stack([(ort_model.predict(im[None]) != torch_model.predict(im[None]))[0] for im in images])
-        rows.append((name, len(images), float(differ.mean()), int(differ.sum(axis=(1, 2)).max())))
+    for backend in [b for b in onnx_net.BACKENDS if onnx_net.available(b)]:
+        model = build_efficientvit(EfficientViTParams(runtime=backend, **kw))
+        for (name, images), ref in zip(sets, refs):
+            differ = np.stack([model.predict(im[None])[0] for im in images]) != ref
+            rows.append((backend, name, len(images), float(differ.mean()), int(differ.sum(axis=(1, 2)).max())))
     return rows
 
 
@@ -181,11 +188,13 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--batches", default="1,4")
-    ap.add_argument("--models", default="efficientvit_b0,efficientvit_b0_torch,efficientvit_b0_plain,deeplab_edgetpu_tflite")
+    ap.add_argument("--models", default="efficientvit_b0,efficientvit_b0_onnxruntime,efficientvit_b0_torch,"
+                                        "efficientvit_b0_plain,deeplab_edgetpu_tflite")
     ap.add_argument("--hf-model", default="", help="also benchmark hf_segformer with this model id/folder")
     ap.add_argument("--no-sanity", action="store_true")
     ap.add_argument("--agreement", action="store_true",
-                    help="only the label agreement ONNX Runtime vs torch on the reference images")
+                    help="only the label agreement of each exported runtime (OpenVINO, ONNX Runtime) vs torch on "
+                         "the reference images")
     ap.add_argument("--views", default="", help="with --agreement: also a renders/ folder's views")
     ap.add_argument("--max-views", type=int, default=400, help="with --views: at most this many, spread evenly")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
@@ -199,11 +208,11 @@ def main(argv=None) -> int:
         return 0
 
     if args.agreement:
-        print("\n### Labels, ONNX Runtime against torch (share of pixels whose argmax differs; limit 0.1 %)\n")
-        print("| images | count | pixels differing | most in one image |")
-        print("|---|---:|---:|---:|")
-        for name, count, share, worst in agreement(args.views, args.max_views):
-            print(f"| {name} | {count} | {100 * share:.4f} % | {worst} |")
+        print("\n### Labels, each runtime against torch (share of pixels whose argmax differs; limit 0.1 %)\n")
+        print("| runtime | images | count | pixels differing | most in one image |")
+        print("|---|---|---:|---:|---:|")
+        for backend, name, count, share, worst in agreement(args.views, args.max_views):
+            print(f"| {backend} | {name} | {count} | {100 * share:.4f} % | {worst} |")
         return 0
     models = [m for m in args.models.split(",") if m]
     if "deeplab_edgetpu_tflite" in models:

@@ -43,11 +43,11 @@ class EfficientViTParams:
                                       help="Fetch the official checkpoint (needs internet) when no copy is found.")
     threads: int = param(0, ge=0, help="CPU threads during inference; 0 = the step's thread budget (the engine's "
                                        "share of the cores), else torch's default.")
-    runtime: str = param("auto", choices=("auto", "onnxruntime", "torch"),
-                         help="What runs the network: auto (ONNX Runtime on CPU when onnxruntime and onnx are "
-                              "installed, else torch), onnxruntime (exported from the torch model at first use "
-                              "into ~/.cache/twinkit/models) or torch. The labels agree to well under 0.1 % of "
-                              "pixels.")
+    runtime: str = param("auto", choices=("auto", "openvino", "onnxruntime", "torch"),
+                         help="What runs the network: auto (on CPU OpenVINO when openvino and onnx are installed, "
+                              "else ONNX Runtime when onnxruntime and onnx are, else torch), openvino or onnxruntime "
+                              "(both run the ONNX file exported from the torch model at first use into "
+                              "~/.cache/twinkit/models) or torch. The labels agree to well under 0.1 % of pixels.")
     batch_size: int = param(0, ge=0, le=1024,
                             help="Images per forward pass; 0 = automatic (1 on CPU, 8 on CUDA). Larger batches need "
                                  "more memory.")
@@ -119,33 +119,39 @@ class EfficientViTModel:
         self._mean = torch.tensor(IMAGENET_MEAN, device=self.device).view(1, 3, 1, 1) * 255.0
         self._std = torch.tensor(IMAGENET_STD, device=self.device).view(1, 3, 1, 1) * 255.0
         self.onnx = self._onnx_net(params)
-        self.runtime = "onnxruntime" if self.onnx is not None else "torch"
+        self.runtime = self.onnx.backend if self.onnx is not None else "torch"
 
     def _onnx_net(self, params: EfficientViTParams):
-        """The ONNX Runtime network, or None where torch runs it (runtime=torch, a GPU, auto without onnxruntime)."""
+        """The exported network on OpenVINO or ONNX Runtime, or None where torch runs it (runtime=torch, a GPU,
+        auto with neither installed)."""
         from twinkit_efficientvit import onnx_net
 
-        if params.runtime == "torch" or (params.runtime == "auto" and (self.device.type != "cpu"
-                                                                        or not onnx_net.available())):
+        if params.runtime == "torch" or (params.runtime == "auto" and self.device.type != "cpu"):
             return None
-        if params.runtime == "onnxruntime" and not onnx_net.available():
-            raise InputError("image_model.runtime=onnxruntime needs the onnxruntime and onnx packages "
-                             "(pip install onnxruntime onnx); or set image_model.runtime=torch")
+        if params.runtime == "auto":
+            backend = next((b for b in ("openvino", "onnxruntime") if onnx_net.available(b)), None)
+            if backend is None:
+                return None
+        else:
+            backend = params.runtime
+            if not onnx_net.available(backend):
+                raise InputError(f"image_model.runtime={backend} needs the {backend} and onnx packages "
+                                 f"(pip install {backend} onnx); or set image_model.runtime=torch")
         from twinkit_efficientvit.weights import sha256_of
 
         try:
             return onnx_net.OnnxNet(self.net, self.weights_path, sha256_of(self.weights_path), self.params.optimize,
-                                    self.threads())
+                                    self.threads(), backend)
         except Exception as exc:  # export or check failed: torch gives the same labels, only slower
-            if params.runtime == "onnxruntime":
-                raise InputError(f"image_model.runtime=onnxruntime: {str(exc)[:300]}; set image_model.runtime=torch"
+            if params.runtime != "auto":
+                raise InputError(f"image_model.runtime={backend}: {str(exc)[:300]}; set image_model.runtime=torch"
                                  ) from exc
-            log.warning("ONNX Runtime not used (%s); the network runs on torch", str(exc)[:300])
+            log.warning("%s not used (%s); the network runs on torch", backend, str(exc)[:300])
             return None
 
     def _torch_threads(self) -> int:
-        """torch's threads in predict: all of :meth:`threads` where torch runs the network; one where ONNX
-        Runtime does (torch then only normalises and labels, 15 ms per view, which a second spin-waiting
+        """torch's threads in predict: all of :meth:`threads` where torch runs the network; one where OpenVINO or
+        ONNX Runtime does (torch then only normalises and labels, 15 ms per view, which a second spin-waiting
         thread made 100 ms of CPU on the shared machine)."""
         return 1 if self.onnx is not None else self.threads()
 
@@ -175,7 +181,7 @@ class EfficientViTModel:
         return (x - self._mean) / self._std
 
     def _run_net(self, x):
-        """Normalised input -> stride-8 logits (torch), on ONNX Runtime or torch."""
+        """Normalised input -> stride-8 logits (torch), on OpenVINO, ONNX Runtime or torch."""
         import torch
 
         if self.onnx is not None:

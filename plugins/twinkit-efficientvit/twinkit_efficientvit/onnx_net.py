@@ -1,4 +1,5 @@
-"""EfficientViT-Seg-B0's network run by ONNX Runtime (``runtime=onnxruntime``, the default on CPU when installed).
+"""EfficientViT-Seg-B0's network exported to ONNX and run by OpenVINO (``runtime=openvino``, the default on CPU when
+installed) or ONNX Runtime (``runtime=onnxruntime``, the default when OpenVINO is not).
 
 The ONNX file is exported from this package's torch model at first use (torch's TorchScript exporter,
 batch, height and width dynamic) into the download cache (``$XDG_CACHE_HOME/twinkit/models``, by default
@@ -10,8 +11,11 @@ runs exporting at the same time never read half a file.
 
 Each session is checked once against the torch network on a small fixed image (:func:`check_against`):
 a file that does not reproduce the torch logits is exported again, and if the fresh export fails the
-check too the model runs on torch (with a warning). The labels of the two runtimes agree on real
+check too the model runs on torch (with a warning). The labels of the runtimes agree on real
 images to well under 0.1 % of pixels (docs/image-models.md "Runtimes").
+
+OpenVINO compiles the file for the CPU in float32 (``INFERENCE_PRECISION_HINT``): on a CPU with bfloat16 units
+(AMX, AVX-512 BF16) its default is bfloat16, which moved 17 % of the labels of a noise image.
 """
 from __future__ import annotations
 
@@ -34,9 +38,13 @@ EXPORT_VERSION = 1
 CHECK_ATOL = 5e-3
 
 
-def available() -> bool:
-    """Whether ONNX Runtime and the ONNX package (which torch's exporter needs) are installed."""
-    return all(importlib.util.find_spec(m) is not None for m in ("onnxruntime", "onnx"))
+#: what runs an exported file, and the module each needs beside ``onnx`` (torch's exporter)
+BACKENDS = {"openvino": "openvino", "onnxruntime": "onnxruntime"}
+
+
+def available(backend: str = "onnxruntime") -> bool:
+    """Whether ``backend`` (openvino or onnxruntime) and the ONNX package (which torch's exporter needs) are installed."""
+    return all(importlib.util.find_spec(m) is not None for m in (BACKENDS[backend], "onnx"))
 
 
 def export_key(weights_sha256: str, fused: bool) -> str:
@@ -81,36 +89,61 @@ def export(net, path: Path) -> None:
             os.unlink(tmp)
 
 
-def session(path: Path, threads: int):
-    """An ONNX Runtime CPU session of ``path`` with ``threads`` intra-op threads (0: one per core), no spin-waiting (on a
-    shared machine a spinning pool burns the cores other work needs: measured 2x the CPU time under load)."""
-    import onnxruntime as ort
+class Session:
+    """An exported file compiled by ``backend`` for the CPU with ``threads`` threads (0: one per core):
+    ``session.run(x) -> logits`` (numpy float32).
 
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = max(0, int(threads))
-    so.inter_op_num_threads = 1
-    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    so.log_severity_level = 3
-    return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+    ONNX Runtime runs without spin-waiting (on a shared machine a spinning pool burns the cores other work
+    needs: measured 2x the CPU time under load); OpenVINO in float32, tuned for one image at a time."""
+
+    def __init__(self, path: Path, threads: int, backend: str = "onnxruntime"):
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r} (one of {', '.join(BACKENDS)})")
+        self.backend, threads = backend, max(0, int(threads))
+        if backend == "openvino":
+            import openvino as ov
+
+            config = {"INFERENCE_PRECISION_HINT": "f32", "PERFORMANCE_HINT": "LATENCY"}
+            if threads:
+                config["INFERENCE_NUM_THREADS"] = threads
+            core = ov.Core()
+            self._request = core.compile_model(core.read_model(str(path)), "CPU", config).create_infer_request()
+            return
+        import onnxruntime as ort
+
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = threads
+        so.inter_op_num_threads = 1
+        so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        so.log_severity_level = 3
+        self._sess = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+
+    def run(self, x: np.ndarray) -> np.ndarray:
+        x = np.ascontiguousarray(x, dtype=np.float32)
+        if self.backend == "openvino":
+            return np.array(self._request.infer({0: x})[0], dtype=np.float32, copy=True)
+        return self._sess.run(None, {"image": x})[0]
 
 
-def check_against(net, sess) -> float:
+def check_against(net, sess: Session) -> float:
     """Largest |logit difference| of ``sess`` and the torch ``net`` on a fixed 96x160 image (normalised noise)."""
     import torch
 
     x = torch.randn(1, 3, 96, 160, generator=torch.Generator().manual_seed(0))
     with torch.inference_mode():
         ref = net(x.contiguous(memory_format=torch.channels_last)).float().numpy()
-    got = sess.run(None, {"image": x.numpy()})[0]
+    got = sess.run(x.numpy())
     return float(np.abs(ref - got).max()) if got.shape == ref.shape else float("inf")
 
 
 class OnnxNet:
-    """The torch network ``net`` exported once and run by ONNX Runtime: ``net_onnx(x) -> logits`` (numpy)."""
+    """The torch network ``net`` exported once and run by ``backend`` (openvino or onnxruntime):
+    ``net_onnx(x) -> logits`` (numpy)."""
 
-    def __init__(self, net, weights_path: Path, weights_sha256: str, fused: bool, threads: int):
-        self.threads = max(0, int(threads))
+    def __init__(self, net, weights_path: Path, weights_sha256: str, fused: bool, threads: int,
+                 backend: str = "onnxruntime"):
+        self.threads, self.backend = max(0, int(threads)), backend
         name = f"{Path(weights_path).stem}.{export_key(weights_sha256, fused)}.onnx"
         folders = cache_folders(Path(weights_path))
         found = next((d / name for d in folders if (d / name).is_file()), None)
@@ -129,7 +162,7 @@ class OnnxNet:
 
     def _checked(self, net, path: Path):
         try:
-            sess = session(path, self.threads)
+            sess = Session(path, self.threads, self.backend)
         except Exception as exc:  # a damaged or foreign file: export again
             log.warning("could not load %s (%s); exporting again", path, str(exc)[:200])
             return None
@@ -141,4 +174,4 @@ class OnnxNet:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """``x (b, 3, h, w)`` float32 normalised -> logits ``(b, 19, h/8, w/8)`` float32."""
-        return self.sess.run(None, {"image": np.ascontiguousarray(x, dtype=np.float32)})[0]
+        return self.sess.run(x)
