@@ -22,6 +22,18 @@ road faces where the road is at least 3 m wide; ``scan.street_axis``). Covered: 
 carriageway plus ``--tol`` of a road's axis. The run's scan_roads.json (road_source=scan) gives the final
 network and, per stage (derived, trim_unsupported, each lane_check round), the roads kept; a run without it
 gets the scan source run here (predicted labels, default parameters).
+
+    .venv/bin/python plugins/twinkit-roads/bench/bench_scan_roads.py --coverage --run RUN --truth-cloud SCAN.ply
+    .venv/bin/python plugins/twinkit-roads/bench/bench_scan_roads.py --labelled [bench/results/labelled]
+
+With hand labels: the street is drawn from a labelled cloud's own classes (a PLY with x, y, z and
+``cs_trainid``, as ../shared/data/labelled/semantickitti/), moved onto the mesh (each vertex takes its nearest
+labelled point's class within ``--truth-max-m``, 0.5 m; farther vertices none), not from the run's predicted
+labels, which on colourless and aerial clouds are what is being judged. ``--labelled`` does this for every run
+``bench/bench_labelled.py`` left in its output folder (``<folder>/runs/<scan>``, the labels' steps only: the
+scan source runs here on its mesh and predicted labels), and adds a what-if row per scan: the hand labels
+given to the scan source as its labels (what the derivation does with perfect labels). Without arguments
+(``make bench``) the demo table is followed by this one when bench_labelled's runs and ../shared exist.
 """
 from __future__ import annotations
 
@@ -37,6 +49,8 @@ import numpy as np
 from twinkit.testing import run_plugin
 
 ROOT = Path(__file__).resolve().parents[3]
+LABELLED = ROOT.parent / "shared" / "data" / "labelled" / "semantickitti"
+LABELLED_RUNS = ROOT / "bench" / "results" / "labelled"
 
 
 def one(folder: Path, pattern: str) -> Path | None:
@@ -104,9 +118,33 @@ def pipeline_numbers(run: Path) -> dict | None:
     return {k: m.get(k) for k in ("centreline_rmse_before_m", "centreline_rmse_after_m", "tx_m", "ty_m", "yaw_deg")}
 
 
-def coverage_rows(run: Path, tmp: Path, tol: float) -> tuple[str, float, list[dict]]:
+def truth_vertex_labels(vertices: np.ndarray, cloud_ply: Path, points_meta: Path | None, max_m: float) -> np.ndarray:
+    """(n,) uint8 CityScapes trainIds of a mesh's vertices from a hand-labelled cloud (``cs_trainid``): each vertex
+    takes its nearest labelled point's class within ``max_m``, 255 (none) beyond. The cloud's points are moved
+    into the run's frame by the shift read_cloud recorded (``points_meta.json`` ``frame.shift_m``)."""
+    from plyfile import PlyData
+
+    from twinkit_segmentation.metrics import transfer_nearest
+
+    pv = PlyData.read(str(cloud_ply))["vertex"].data
+    if "cs_trainid" not in pv.dtype.names:
+        sys.exit(f"{cloud_ply}: no cs_trainid field (a hand-labelled cloud is needed)")
+    xyz = np.stack([pv["x"], pv["y"], pv["z"]], axis=1).astype(np.float64)
+    if points_meta is not None and points_meta.is_file():
+        xyz -= np.asarray((json.loads(points_meta.read_text()).get("frame") or {}).get("shift_m") or [0, 0, 0], float)
+    cls = np.asarray(pv["cs_trainid"], np.uint8)
+    keep = cls != 255
+    out, d = transfer_nearest(xyz[keep], cls[keep], np.asarray(vertices, np.float64))
+    out = out.astype(np.uint8)
+    out[d > max_m] = 255
+    return out
+
+
+def coverage_rows(run: Path, tmp: Path, tol: float, truth_labels: np.ndarray | None = None,
+                  mask_labels: np.ndarray | None = None) -> tuple[str, float, list[dict]]:
     """The street's reference, its length (m) and one row per stage of the scan network: roads, axis length,
-    street covered (m, share) and what the stage dropped (m of street)."""
+    street covered (m, share) and what the stage dropped (m of street). ``truth_labels`` (per vertex): the street
+    from these hand labels; ``mask_labels`` (per vertex): the scan source runs here with these as its labels."""
     from twinkit.artefacts import read_textured_mesh
     from twinkit_roads.scan import covered, read_truth, street_axis
     from twinkit_roads.scan.geometry import resample
@@ -118,14 +156,26 @@ def coverage_rows(run: Path, tmp: Path, tol: float) -> tuple[str, float, list[di
     doc_p = one(run, "*_fetch_roads/scan_roads.json")
     if mesh_p is None:
         sys.exit(f"{run}: no textured_mesh.ply (a finished pointcloud_site run is needed)")
+    if mask_labels is not None:
+        tmp.mkdir(parents=True, exist_ok=True)
+        labels_p = tmp / "mask_labels.npy"
+        np.save(labels_p, np.asarray(mask_labels, np.uint8))
+        doc_p = None
     if doc_p is None or "stages" not in json.loads(doc_p.read_text()):
         inputs = {"in_textured_mesh_ply": mesh_p, **({"in_labels_npy": labels_p} if labels_p else {}),
                   **({"in_roads_truth_json": truth_p} if truth_p else {})}
+        for name, pattern in (("in_points_meta_json", "*_read_cloud/points_meta.json"),
+                              ("in_points_ply", "*_read_cloud/points.ply")):
+            if one(run, pattern) is not None:  # as the pipeline gives them: the point spacing, the measured ground
+                inputs[name] = one(run, pattern)
         out = run_plugin("road_source", "scan", tmp / run.name, inputs, site=_site(run))
         doc_p = out["scan_roads.json"]
     doc = json.loads(doc_p.read_text())
     mesh = read_textured_mesh(mesh_p)
-    if truth_p is not None:
+    if truth_labels is not None:
+        (ref, dirs), step = street_axis(mesh.vertices, mesh.faces, truth_labels), 0.25
+        what = "hand-labelled road"
+    elif truth_p is not None:
         lines = [resample(ln, 0.25) for ln in read_truth(truth_p) or []]
         ref, step = np.concatenate(lines), 0.25
         dirs = np.concatenate([directions(ln, 1.0) for ln in lines])
@@ -161,16 +211,66 @@ def _inside(pts: np.ndarray, xy: np.ndarray, cell: float = 2.0) -> np.ndarray:
     return np.array([tuple(c) in occ for c in np.floor((pts - lo) / cell).astype(int)], bool)
 
 
-def print_coverage(runs: list[Path], base: Path, tol: float) -> None:
+def print_coverage(runs: list[Path], base: Path, tol: float, truth_cloud: Path | None = None,
+                   truth_max_m: float = 0.5) -> None:
     print(f"| run | street (reference) m | stage | roads | axis length m | street covered m (tol {tol} m) | share | "
           "dropped by this stage m |")
     print("|---|---|---|---|---|---|---|---|")
     for i, run in enumerate(runs):
-        what, street_m, rows = coverage_rows(run.resolve(), base / f"run{i}", tol)
-        for r in rows:
-            drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
-            print(f"| {run} | {street_m:.1f} ({what}) | {r['stage']} | {r['roads']} | {r['length_m']:.1f} | "
-                  f"{r['covered_m']:.1f} | {100 * r['share']:.0f} % | {drop} |")
+        truth = None
+        if truth_cloud is not None:
+            from twinkit.artefacts import read_textured_mesh
+
+            mesh = read_textured_mesh(one(run.resolve(), "*_texture/textured_mesh.ply"))
+            truth = truth_vertex_labels(mesh.vertices, truth_cloud, one(run.resolve(), "*_read_cloud/points_meta.json"),
+                                        truth_max_m)
+        what, street_m, rows = coverage_rows(run.resolve(), base / f"run{i}", tol, truth_labels=truth)
+        _print_rows(str(run), what, street_m, rows)
+
+
+def _print_rows(name: str, what: str, street_m: float, rows: list[dict]) -> None:
+    for r in rows:
+        drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
+        print(f"| {name} | {street_m:.1f} ({what}) | {r['stage']} | {r['roads']} | {r['length_m']:.1f} | "
+              f"{r['covered_m']:.1f} | {100 * r['share']:.0f} % | {drop} |")
+
+
+def labelled_coverage(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> list[dict]:
+    """Per run that bench_labelled left in ``out`` (``runs/<scan>``, its scan in ../shared/data/labelled): the
+    final coverage of the street drawn from the hand labels, with the predicted labels (as the pipeline runs)
+    and with the hand labels given to the scan source (what-if). Prints the per-stage table; returns the rows."""
+    from twinkit.artefacts import read_textured_mesh
+
+    summary = []
+    print(f"| scan | street (hand-labelled road) m | labels given to the scan source | stage | roads | "
+          f"axis length m | street covered m (tol {tol} m) | share | dropped by this stage m |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for run in sorted(p for p in (out / "runs").glob("*") if p.is_dir()):
+        scan = LABELLED / f"{run.name}.ply"
+        if not scan.is_file() or one(run, "*_texture/textured_mesh.ply") is None:
+            continue
+        mesh = read_textured_mesh(one(run, "*_texture/textured_mesh.ply"))
+        truth = truth_vertex_labels(mesh.vertices, scan, one(run, "*_read_cloud/points_meta.json"), truth_max_m)
+        row = {"scan": run.name}
+        for given, mask in (("predicted", None), ("hand labels (what-if)", truth)):
+            _, street_m, rows = coverage_rows(run, base / run.name / given.split()[0], tol, truth_labels=truth,
+                                              mask_labels=mask)
+            for r in rows:
+                drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
+                print(f"| {run.name} | {street_m:.1f} | {given} | {r['stage']} | {r['roads']} | {r['length_m']:.1f} | "
+                      f"{r['covered_m']:.1f} | {100 * r['share']:.0f} % | {drop} |")
+            final = next(r for r in rows if r["stage"] == "final")
+            row.update({"street_m": street_m, given: final["share"]})
+        summary.append(row)
+    if summary:
+        print("\n| scan | street m | covered, predicted labels | covered, hand labels (what-if) |")
+        print("|---|---:|---:|---:|")
+        for r in summary:
+            print(f"| {r['scan']} | {r['street_m']:.1f} | {100 * r['predicted']:.0f} % | "
+                  f"{100 * r['hand labels (what-if)']:.0f} % |")
+        print(f"| **mean** | | **{100 * np.mean([r['predicted'] for r in summary]):.0f} %** | "
+              f"{100 * np.mean([r['hand labels (what-if)'] for r in summary]):.0f} % |")
+    return summary
 
 
 def main() -> None:
@@ -181,11 +281,21 @@ def main() -> None:
     ap.add_argument("--keep", type=Path, help="keep the outputs (pictures) in this folder")
     ap.add_argument("--coverage", action="store_true", help="street coverage per check instead (any run)")
     ap.add_argument("--tol", type=float, default=1.0, help="coverage: metres beyond half the carriageway")
+    ap.add_argument("--truth-cloud", type=Path, help="coverage: the street from this hand-labelled cloud (cs_trainid)")
+    ap.add_argument("--truth-max-m", type=float, default=0.5,
+                    help="hand labels reach the vertices within this distance of a labelled point (m)")
+    ap.add_argument("--labelled", nargs="?", const=LABELLED_RUNS, type=Path,
+                    help="coverage against the hand labels on bench_labelled's runs in this folder")
     a = ap.parse_args()
     runs = a.run or [ROOT / "outputs" / "demo"]
+    if a.labelled is not None:
+        with tempfile.TemporaryDirectory() as d:
+            if not labelled_coverage(a.labelled, a.keep or Path(d), a.tol, a.truth_max_m):
+                sys.exit(f"no bench_labelled runs with their scans in {a.labelled}/runs (run bench/bench_labelled.py)")
+        return
     if a.coverage:
         with tempfile.TemporaryDirectory() as d:
-            print_coverage(runs, a.keep or Path(d), a.tol)
+            print_coverage(runs, a.keep or Path(d), a.tol, a.truth_cloud, a.truth_max_m)
         return
     sources = [s.strip() for s in a.labels.split(",") if s.strip()]
     with tempfile.TemporaryDirectory() as d:
@@ -207,6 +317,10 @@ def main() -> None:
                 print(f"\n{run.name}: the run's own apply_alignment (road_source=scan, after align_roads): "
                       f"RMSE {pn['centreline_rmse_before_m']} m before, {pn['centreline_rmse_after_m']} m after the "
                       f"curb fit (t = {pn['tx_m']}, {pn['ty_m']} m, yaw {pn['yaw_deg']} deg)\n")
+    if a.run is None and LABELLED.is_dir() and (LABELLED_RUNS / "runs").is_dir():
+        print("\n### Coverage of the hand-labelled street on the real SemanticKITTI sweeps (bench_labelled's runs)\n")
+        with tempfile.TemporaryDirectory() as d:
+            labelled_coverage(LABELLED_RUNS, a.keep or Path(d), a.tol, a.truth_max_m)
 
 
 if __name__ == "__main__":

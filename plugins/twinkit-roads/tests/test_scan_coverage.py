@@ -43,3 +43,48 @@ def test_record_stage_keeps_each_checks_roads():
     assert [s["stage"] for s in st] == ["derived", "trim_unsupported"]
     assert [s["length_m"] for s in st] == [20.0, 15.0]
     assert st[1]["arms"][0]["width_m"] == 7.0
+
+
+def _bench():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "bench_scan_roads.py"
+    spec = importlib.util.spec_from_file_location("bench_scan_roads", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_hand_labels_reach_the_mesh_in_the_runs_frame_and_only_near_a_labelled_point(tmp_path):
+    """bench_scan_roads --truth-cloud / --labelled: each vertex takes the class of its nearest labelled point of the
+    hand-labelled cloud, moved by read_cloud's shift, within the distance; unlabelled points (255) give nothing;
+    and the street drawn from those labels is the labelled road's, not the predicted one's."""
+    import json
+
+    from plyfile import PlyData, PlyElement
+
+    v, f, lab, _ = cross_mesh(half_m=30.0)
+    shift = np.array([1000.0, -500.0, 20.0])
+    pts = np.asarray(v, np.float64) + shift  # the cloud in its own frame: the run's frame plus the shift
+    cls = np.where(lab == 0, 0, 1).astype(np.uint8)  # road / sidewalk
+    cls[::7] = 255  # unlabelled points: never the truth
+    rec = np.empty(len(pts), dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("cs_trainid", "u1")])
+    rec["x"], rec["y"], rec["z"], rec["cs_trainid"] = pts[:, 0], pts[:, 1], pts[:, 2], cls
+    ply = tmp_path / "scan.ply"
+    PlyData([PlyElement.describe(rec, "vertex")]).write(str(ply))
+    meta = tmp_path / "points_meta.json"
+    meta.write_text(json.dumps({"frame": {"shift_m": shift.tolist()}}))
+    B = _bench()
+    got = B.truth_vertex_labels(v, ply, meta, 0.5)
+    labelled = cls != 255
+    assert (got[labelled] == cls[labelled]).mean() > 0.99
+    assert set(np.unique(got)) <= {0, 1}  # an unlabelled point is never a vertex's truth
+    # without the shift every vertex is kilometres from the cloud: nothing is labelled
+    meta.write_text(json.dumps({"frame": {}}))
+    assert (B.truth_vertex_labels(v, ply, meta, 0.5) == 255).all()
+    # the street from the hand labels is the road's length, whatever a prediction says
+    pred = np.full(len(v), 1, np.uint8)  # a prediction with no road at all
+    assert len(street_axis(v, f, pred)[0]) == 0
+    meta.write_text(json.dumps({"frame": {"shift_m": shift.tolist()}}))
+    assert 0.25 * len(street_axis(v, f, B.truth_vertex_labels(v, ply, meta, 0.5))[0]) > 0.85 * (60 + 42.6)
