@@ -519,3 +519,39 @@ def test_the_ground_under_a_car_is_the_road():
     assert np.abs(g.at(v[car, :2]) - road).max() < 0.03
     assert not g.has_z[g.cells(v[car][len(v[car]) // 2, None, :2])].any()  # under the roof: filled, not seen
     assert np.abs(g.height(v[car]) - CAR_H).max() < 0.05
+
+
+def test_a_pole_beside_a_car_stays_whole_and_out_of_the_cars_box():
+    """A street light 0.4 m beside a car, its lower 1.5 m labelled car (the views see the two as one): the growth
+    of the car's faces stops where the pole runs on above the car, so the pole stays whole in the static mesh
+    and the car's box keeps the car's width (on the default-size demo the car took the pole's foot, its box grew
+    0.6 m wider and the pole left standing hung inside it: CARLA would refuse to spawn the car)."""
+    from twinkit.mesh import Mesh
+    from twinkit_export.movables import lift_movables
+
+    v, f, uv, lab, car = scene(step_m=0.1)
+    v = v.copy()
+    v[:, 2] = np.where(car, CAR_H, 0.0)
+    a = math.radians(CAR_YAW)
+    ay = np.array([-math.sin(a), math.cos(a)])
+    foot = CAR_C - ay * (CAR_W / 2 + 0.4)
+    i0 = int(np.argmin(np.linalg.norm(v[:, :2] - foot, axis=1)))
+    base = [i0, i0 + 1, i0 + 2]  # two grid edges along +x: a 0.2 m wide pole, joined to the road
+    rows, faces = [base], []
+    for z, cls in ((0.5, 13), (1.0, 13), (1.5, 13), (3.0, 5), (6.0, 5)):
+        rows.append(list(range(len(v), len(v) + 3)))
+        v = np.vstack([v, np.c_[v[base, :2], np.full(3, z)]])
+        lab = np.concatenate([lab, np.full(3, cls, lab.dtype)])
+    lab[base] = 13
+    for lo, hi in zip(rows[:-1], rows[1:]):
+        for j in range(2):
+            faces += [[lo[j], lo[j + 1], hi[j + 1]], [lo[j], hi[j + 1], hi[j]]]
+    res = lift_movables(Mesh(v, np.vstack([f, faces])), lab)
+    assert len(res.instances) == 1
+    inst = res.instances[0]
+    assert inst.size[1] < CAR_W + 0.25, inst.size  # the car's width, not the car and the pole
+    assert inst.size[2] < CAR_H + 0.2, inst.size
+    out = res.mesh.vertices
+    at_pole = np.linalg.norm(out[:, :2] - v[i0 + 1, :2], axis=1) < 0.15
+    for z in (0.5, 1.0, 1.5, 3.0, 6.0):  # every band of the pole is still there, from the road up
+        assert (np.abs(out[at_pole, 2] - z) < 1e-6).sum() == 3, z
