@@ -146,3 +146,22 @@ def test_write_obj_per_vertex_uvs_groups_and_the_mtl(tmp_path):
     assert (tmp_path / "a.mtl").read_text() == "newmtl atlas\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd a.png\n"
     back = read_obj(tmp_path / "a.obj")
     assert np.array_equal(back.faces, f) and np.abs(back.vertices - v).max() < 1e-5
+
+
+def test_edge_face_incidence_compiled_equals_numpy(monkeypatch):
+    """The compiled bucket count gives numpy's unique edges, ids and counts exactly, on a mesh with open borders,
+    a non-manifold edge (three faces), shuffled faces and unused vertex ids."""
+    import twinkit.surface.compiled as C
+    from twinkit.mesh import edge_face_incidence
+
+    m = grid_mesh(n=12)
+    f = np.asarray(m.faces, np.int64)
+    rng = np.random.default_rng(0)
+    f = np.vstack([f[rng.permutation(len(f))], [[0, 13, 200]]]) + 3  # a third face on edge (3, 16); ids 0-2 unused
+    got = edge_face_incidence(f)
+    monkeypatch.setattr(C, "ENABLED", False)
+    ref = edge_face_incidence(f)
+    assert C.compiled(lambda x: x) is None  # the reference really is numpy's
+    for a, b in zip(got, ref):
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
+    assert got[2].max() == 3 and (got[0][:, 0] < got[0][:, 1]).all()

@@ -113,3 +113,19 @@ def test_span_fans_a_star_shaped_loop_and_ear_clips_another():
     assert len(new) == 0 and len(faces) == 4
     assert (face_normals(ell, faces)[:, 2] > 0).all()
     assert holes.span(ell, lp[::-1]) is None  # no hole seen from above
+
+
+def test_new_faces_that_break_the_surface_are_found():
+    """stitch's check of its new faces: one running an edge the same way as an old face (overlapping or flipped),
+    one making an edge of three faces, and one that only closes a gap cleanly."""
+    import numpy as np
+
+    from twinkit.street.holes import _bad_new_faces
+
+    old = np.array([[0, 1, 2], [0, 2, 3]])  # a square, its diagonal 0-2 shared
+    new = np.array([[1, 4, 2],   # edge 1-2 run 2 -> 1, against the 1 -> 2 of the old face: a clean join
+                    [0, 1, 5],   # runs 0 -> 1 as face 0 does: overlapping
+                    [2, 0, 6]])  # a third face on the diagonal 0-2
+    bad = _bad_new_faces(np.vstack([old, new]), len(old))
+    assert bad.tolist() == [False, True, True]
+    assert not _bad_new_faces(old, len(old)).any() and len(_bad_new_faces(old, len(old))) == 0

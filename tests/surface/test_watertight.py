@@ -153,3 +153,27 @@ def test_hole_under_a_lifted_object_is_closed_on_the_ground():
     # the fan of before spans the hole at the border's heights: the same lane misses along the raised side
     ff, centre = fan(v, loops[0])
     assert not drop_test(np.vstack([v, centre]), np.vstack([m.faces, ff]), lane).all()
+
+
+def test_border_picture_splats_the_highest_surface_over_each_pixel():
+    """draw_border's compiled splat paints each pixel with its highest point within one pixel (3 x 3), ground light
+    and the rest dark, in one pass: a roof point over a ground point wins wherever their splats overlap, and a
+    point outside the picture paints nothing."""
+    from twinkit.surface.compiled import compiled
+    from twinkit.surface.watertight import _splat_highest
+
+    splat = compiled(_splat_highest)
+    if splat is None:
+        import pytest
+
+        pytest.skip("numba is not installed: draw_border runs its numpy splats")
+    arr = np.full((6, 8, 3), 255, np.uint8)
+    q = np.array([[2, 2], [3, 2], [7, 5], [20, 20]])
+    z = np.array([0.0, 3.0, 0.0, 9.0])
+    ground = np.array([True, False, True, False])
+    light, dark = np.array([222, 222, 222], np.uint8), np.array([170, 170, 180], np.uint8)
+    splat(arr, q, z, ground, light, dark)
+    assert (arr[2, 2] == dark).all() and (arr[1, 4] == dark).all()  # the roof's splat covers the ground's
+    assert (arr[2, 1] == light).all()  # only the ground point reaches here
+    assert (arr[5, 7] == light).all() and (arr[4, 6] == light).all()  # a corner point's splat, clipped
+    assert (arr[0, 0] == 255).all() and (arr[5, 0] == 255).all()  # nothing there

@@ -356,15 +356,17 @@ def _border_from_above(v: np.ndarray, border: np.ndarray) -> tuple[np.ndarray, n
 def _bad_new_faces(faces: np.ndarray, n_old: int) -> np.ndarray:
     """Among ``faces[n_old:]``, those that break the surface: a directed edge already used by another face
     (overlapping or flipped) or an edge shared by more than two faces."""
+    from twinkit.mesh.topology import edge_face_incidence
+
     n = len(faces)
-    m = int(faces.max()) + 1
     he = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1).reshape(-1, 2).astype(np.int64)
     fid = np.repeat(np.arange(n), 3)
-    dkey = he[:, 0] * m + he[:, 1]
-    ukey = np.minimum(he[:, 0], he[:, 1]) * m + np.maximum(he[:, 0], he[:, 1])
-    _, dinv, dcnt = np.unique(dkey, return_inverse=True, return_counts=True)
-    _, uinv, ucnt = np.unique(ukey, return_inverse=True, return_counts=True)
-    bad_he = (dcnt[dinv] > 1) | (ucnt[uinv] > 2)
+    _, uinv, ucnt = edge_face_incidence(faces)
+    uinv = uinv.ravel()
+    # a directed half-edge is its undirected edge and which way it runs along it
+    dkey = 2 * uinv + (he[:, 0] < he[:, 1])
+    dcnt = np.bincount(dkey, minlength=2 * len(ucnt))
+    bad_he = (dcnt[dkey] > 1) | (ucnt[uinv] > 2)
     bad = np.zeros(n, bool)
     bad[fid[bad_he]] = True
     bad[:n_old] = False

@@ -167,6 +167,8 @@ def draw_border(path: Path, vertices: np.ndarray, faces: np.ndarray, edges: dict
     thick), on the site's edge blue; ``misses`` (k, 2) points drawn orange (drop-test rays that fell through)."""
     from PIL import Image, ImageDraw
 
+    from twinkit.surface.compiled import compiled
+
     v = vertices
     lo, hi = v[:, :2].min(axis=0) - 1.0, v[:, :2].max(axis=0) + 1.0
     s = min(px_per_m, max_px / max(float((hi - lo).max()), 1e-6))
@@ -184,14 +186,19 @@ def draw_border(path: Path, vertices: np.ndarray, faces: np.ndarray, edges: dict
     vg[faces[gf].ravel()] = True
     pts = np.vstack([cen, v])
     col = np.r_[gf, vg]
-    order = np.argsort(pts[:, 2])
-    q = np.floor(px(pts[order, :2])).astype(np.int64)
-    ok = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
     arr = np.asarray(img).copy()
-    shade = np.where(col[order][ok, None], np.array([222, 222, 222]), np.array([170, 170, 180]))
-    for dx in (-1, 0, 1):  # 3 x 3 splats: no speckle where triangles are larger than a pixel
-        for dy in (-1, 0, 1):
-            arr[np.clip(q[ok, 1] + dy, 0, h - 1), np.clip(q[ok, 0] + dx, 0, w - 1)] = shade
+    splat = compiled(_splat_highest)
+    if splat is not None:
+        q = np.floor(px(pts[:, :2])).astype(np.int64)
+        splat(arr, q, pts[:, 2], col, np.array([222, 222, 222], np.uint8), np.array([170, 170, 180], np.uint8))
+    else:
+        order = np.argsort(pts[:, 2])
+        q = np.floor(px(pts[order, :2])).astype(np.int64)
+        ok = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
+        shade = np.where(col[order][ok, None], np.array([222, 222, 222]), np.array([170, 170, 180]))
+        for dx in (-1, 0, 1):  # 3 x 3 splats: no speckle where triangles are larger than a pixel
+            for dy in (-1, 0, 1):
+                arr[np.clip(q[ok, 1] + dy, 0, h - 1), np.clip(q[ok, 0] + dx, 0, w - 1)] = shade
     img = Image.fromarray(arr.astype(np.uint8))
     d = ImageDraw.Draw(img)
     lw = max(2, int(round(s * 0.15)))
@@ -207,6 +214,33 @@ def draw_border(path: Path, vertices: np.ndarray, faces: np.ndarray, edges: dict
         d.text((5, 3), title, fill=(0, 0, 0))
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     img.save(path)
+
+
+def _splat_highest(arr, q, z, ground, light, dark):
+    """Each point (pixel ``q`` (n, 2) x, y; height ``z``) painted over the 3 x 3 pixels around it, the highest point
+    over a pixel winning (``draw_border``'s splats, in one pass instead of a sort by height): ``light`` where it is
+    ground, else ``dark``. ``arr`` (h, w, 3) uint8, in place."""
+    h, w = arr.shape[0], arr.shape[1]
+    top = np.full((h, w), -np.inf)
+    who = np.full((h, w), -1, np.int64)
+    for i in range(q.shape[0]):
+        x, y = q[i, 0], q[i, 1]
+        if x < 0 or x >= w or y < 0 or y >= h:
+            continue
+        for dy in range(-1, 2):
+            for dx in range(-1, 2):
+                yy = min(max(y + dy, 0), h - 1)
+                xx = min(max(x + dx, 0), w - 1)
+                if z[i] >= top[yy, xx]:
+                    top[yy, xx] = z[i]
+                    who[yy, xx] = i
+    for yy in range(h):
+        for xx in range(w):
+            i = who[yy, xx]
+            if i >= 0:
+                c = light if ground[i] else dark
+                for k in range(3):
+                    arr[yy, xx, k] = c[k]
 
 
 def ground_border_report(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, normals: np.ndarray,
