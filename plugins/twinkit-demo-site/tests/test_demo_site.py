@@ -464,3 +464,30 @@ def test_site_json_georeference(site):
     assert site["bounds_local"]["min"][:2] == [-30.0, -30.0]
     assert REQUIRED_CLASSES <= set(site["labels_present"])
     assert {"dx_m", "dy_m", "rotation_deg"} <= set(site["osm_transform"])
+
+
+def test_photos_rendered_two_at_a_time_are_the_same_files(tmp_path):
+    """render_photos with threads=2 renders photos side by side but writes them, and draws their GPS noise, in
+    order: the JPEGs, label PNGs and cameras are those of one thread."""
+    import hashlib
+
+    from twinkit_demo_site.layout import build_scene
+    from twinkit_demo_site.photos import render_photos, walk_poses
+    from twinkit_demo_site.plugin import site_frame
+    from twinkit_demo_site.raycast import Tracer
+    from twinkit_demo_site.textures import build_atlas
+
+    atlas = build_atlas(0)
+    scene = build_scene(30.0, 0, atlas)
+    tracer = Tracer(scene.mesh, atlas, threads=2, weathering=0.6, seed=0)
+    poses = walk_poses(scene.walk_path, 5, np.random.default_rng(4))
+    geo = site_frame({})
+    docs, files = [], []
+    for threads in (1, 2):
+        out = tmp_path / f"t{threads}"
+        docs.append(render_photos(tracer, poses, out, geo, np.random.default_rng(6), width=96, height=64,
+                                  focal_px=80.0, gps_noise_m=2.0, supersample=2, threads=threads))
+        files.append({p.relative_to(out).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+                      for p in sorted(out.rglob("*")) if p.is_file()})
+    assert docs[0] == docs[1]
+    assert files[0] == files[1] and len(files[0]) == 10  # 5 JPEGs and 5 label PNGs
