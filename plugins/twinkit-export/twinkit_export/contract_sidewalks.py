@@ -125,7 +125,7 @@ def sidewalk_blocks(vertices: np.ndarray, faces: np.ndarray, xodr_text: str, cel
     each connected piece goes to the block that holds most of its area; a piece mostly on the carriageway
     (block 0) smaller than ``stray_max_m2`` is stray (a larger one is a surface of its own: a refuge island,
     a median; it joins the blocks through crosswalks)."""
-    from .sidewalks import face_areas
+    from twinkit.mesh.core import face_areas
 
     rep = BlockReport()
     if len(faces) == 0:

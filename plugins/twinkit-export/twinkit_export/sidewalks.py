@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from twinkit.cityscapes import IGNORE, ROAD, SIDEWALK
+from twinkit.mesh.core import face_areas
 
 
 @dataclass
@@ -53,12 +54,6 @@ class SidewalkCleanup:
                 "sidewalk_fragments_dissolved": self.dissolved, "sidewalk_dissolved_m2": round(self.dissolved_m2, 3),
                 "sidewalk_relabelled_vertices": self.relabelled_vertices,
                 "sidewalk_component_areas_m2": [round(a, 2) for a in self.areas_after_m2[:12]]}
-
-
-def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(m,) float64 area (m^2) of each face."""
-    t = vertices[faces]
-    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
 
 
 def place_index(vertices: np.ndarray, tol_m: float) -> np.ndarray:
