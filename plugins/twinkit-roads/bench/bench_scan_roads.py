@@ -123,8 +123,7 @@ def truth_vertex_labels(vertices: np.ndarray, cloud_ply: Path, points_meta: Path
     takes its nearest labelled point's class within ``max_m``, 255 (none) beyond. The cloud's points are moved
     into the run's frame by the shift read_cloud recorded (``points_meta.json`` ``frame.shift_m``)."""
     from plyfile import PlyData
-
-    from twinkit_segmentation.metrics import transfer_nearest
+    from scipy.spatial import cKDTree
 
     pv = PlyData.read(str(cloud_ply))["vertex"].data
     if "cs_trainid" not in pv.dtype.names:
@@ -134,8 +133,8 @@ def truth_vertex_labels(vertices: np.ndarray, cloud_ply: Path, points_meta: Path
         xyz -= np.asarray((json.loads(points_meta.read_text()).get("frame") or {}).get("shift_m") or [0, 0, 0], float)
     cls = np.asarray(pv["cs_trainid"], np.uint8)
     keep = cls != 255
-    out, d = transfer_nearest(xyz[keep], cls[keep], np.asarray(vertices, np.float64))
-    out = out.astype(np.uint8)
+    d, idx = cKDTree(xyz[keep]).query(np.asarray(vertices, np.float64), workers=-1)
+    out = cls[keep][idx].astype(np.uint8)
     out[d > max_m] = 255
     return out
 
