@@ -229,9 +229,14 @@ def print_coverage(runs: list[Path], base: Path, tol: float, truth_cloud: Path |
 
 def _print_rows(name: str, what: str, street_m: float, rows: list[dict]) -> None:
     for r in rows:
-        drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
-        print(f"| {name} | {street_m:.1f} ({what}) | {r['stage']} | {r['roads']} | {r['length_m']:.1f} | "
-              f"{r['covered_m']:.1f} | {100 * r['share']:.0f} % | {drop} |")
+        print(f"| {name} | {street_m:.1f} ({what}) | {_stage_cells(r)} |")
+
+
+def _stage_cells(r: dict) -> str:
+    """A stage row's cells: stage, roads, axis length, street covered, share, dropped."""
+    drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
+    return (f"{r['stage']} | {r['roads']} | {r['length_m']:.1f} | {r['covered_m']:.1f} | {100 * r['share']:.0f} % | "
+            f"{drop}")
 
 
 def labelled_coverage(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> list[dict]:
@@ -255,9 +260,7 @@ def labelled_coverage(out: Path, base: Path, tol: float, truth_max_m: float = 0.
             _, street_m, rows = coverage_rows(run, base / run.name / given.split()[0], tol, truth_labels=truth,
                                               mask_labels=mask)
             for r in rows:
-                drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
-                print(f"| {run.name} | {street_m:.1f} | {given} | {r['stage']} | {r['roads']} | {r['length_m']:.1f} | "
-                      f"{r['covered_m']:.1f} | {100 * r['share']:.0f} % | {drop} |")
+                print(f"| {run.name} | {street_m:.1f} | {given} | {_stage_cells(r)} |")
             final = next(r for r in rows if r["stage"] == "final")
             row.update({"street_m": street_m, given: final["share"]})
         summary.append(row)

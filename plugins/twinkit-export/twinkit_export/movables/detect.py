@@ -227,9 +227,8 @@ def columns_through(v: np.ndarray, f: np.ndarray, h: np.ndarray, grown: np.ndarr
     a car, whose foot the growth took (the growth stops at the object's top, not at the pole). Where a grown
     face shares a vertex with a face the growth could not take that reaches above ``limit`` (the object's top
     + margin), the growth ran up the tall thing; the grown faces within ``COLUMN_M`` of those shared vertices,
-    seen from above, are its foot (a pole's faces lie under its cut ring). (k,) bool per grown face. The demo
-    at the default size: a car 0.5 m from a street light took the pole's lower 1.5 m, its box grew 0.6 m
-    wider and the pole left standing floated inside it."""
+    seen from above, are its foot (a pole's faces lie under its cut ring). (k,) bool per grown face
+    (docs/export.md, step 3 of the lift)."""
     from scipy.spatial import cKDTree
 
     above = ~allowed_f & (h[f].max(axis=1) > limit)
