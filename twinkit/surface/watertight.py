@@ -187,15 +187,15 @@ def draw_border(path: Path, vertices: np.ndarray, faces: np.ndarray, edges: dict
     pts = np.vstack([cen, v])
     col = np.r_[gf, vg]
     arr = np.asarray(img).copy()
+    light, dark = np.array([222, 222, 222], np.uint8), np.array([170, 170, 180], np.uint8)  # ground, the rest
     splat = compiled(_splat_highest)
     if splat is not None:
-        q = np.floor(px(pts[:, :2])).astype(np.int64)
-        splat(arr, q, pts[:, 2], col, np.array([222, 222, 222], np.uint8), np.array([170, 170, 180], np.uint8))
+        splat(arr, np.floor(px(pts[:, :2])).astype(np.int64), pts[:, 2], col, light, dark)
     else:
         order = np.argsort(pts[:, 2])
         q = np.floor(px(pts[order, :2])).astype(np.int64)
         ok = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
-        shade = np.where(col[order][ok, None], np.array([222, 222, 222]), np.array([170, 170, 180]))
+        shade = np.where(col[order][ok, None], light, dark)
         for dx in (-1, 0, 1):  # 3 x 3 splats: no speckle where triangles are larger than a pixel
             for dy in (-1, 0, 1):
                 arr[np.clip(q[ok, 1] + dy, 0, h - 1), np.clip(q[ok, 0] + dx, 0, w - 1)] = shade

@@ -214,7 +214,7 @@ def _photos(scene, tracer, params: DemoSiteParams, pre: dict, seed: int, geo, ct
     cams = render_photos(tracer, poses, out_photos_dir, geo, np.random.default_rng([seed, 6]),
                          width=params.photo_width_px, height=params.photo_height_px, focal_px=params.focal_px,
                          gps_noise_m=params.gps_noise_m, supersample=params.photo_supersample,
-                         shadows=params.shadows, progress=ctx.progress, threads=max(1, int(getattr(ctx, "threads", 1) or 1)))
+                         shadows=params.shadows, progress=ctx.progress, threads=ctx.threads or 1)
     A.write_demo_cameras(out_cameras_json, cams)
     A.write_gcp(out_gcp_json, gcp_observations(
         tracer, cams, scene.gcp_points, np.random.default_rng([seed, 8]),

@@ -38,13 +38,13 @@ EXPORT_VERSION = 1
 CHECK_ATOL = 5e-3
 
 
-#: what runs an exported file, and the module each needs beside ``onnx`` (torch's exporter)
-BACKENDS = {"openvino": "openvino", "onnxruntime": "onnxruntime"}
+#: what runs an exported file (each is also the module it needs, beside ``onnx`` for torch's exporter)
+BACKENDS = ("openvino", "onnxruntime")
 
 
 def available(backend: str = "onnxruntime") -> bool:
     """Whether ``backend`` (openvino or onnxruntime) and the ONNX package (which torch's exporter needs) are installed."""
-    return all(importlib.util.find_spec(m) is not None for m in (BACKENDS[backend], "onnx"))
+    return backend in BACKENDS and all(importlib.util.find_spec(m) is not None for m in (backend, "onnx"))
 
 
 def export_key(weights_sha256: str, fused: bool) -> str:

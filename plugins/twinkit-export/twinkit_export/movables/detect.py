@@ -202,19 +202,17 @@ def grow_faces(v: np.ndarray, f: np.ndarray, h: np.ndarray, seed_f: np.ndarray, 
     sel = np.nonzero(allowed_f)[0]
     if len(sel) == 0 or len(seed_f) == 0:
         return None
-    _, comp = components(len(v), f[sel])
-    keep_comp = np.unique(comp[np.isin(sel, seed_f)])
-    grown = sel[np.isin(comp, keep_comp)]
+
+    def reached(sel):  # the faces of ``sel`` connected to a seed face
+        _, comp = components(len(v), f[sel])
+        return sel[np.isin(comp, np.unique(comp[np.isin(sel, seed_f)]))]
+
+    grown = reached(sel)
     column = columns_through(v, f, h, grown, allowed_f, top + opt.margin_m)
     if not column.any():
         return grown
-    # the object without the columns: what its seeds still reach
-    sel = grown[~column]
-    if len(sel) == 0:
-        return None
-    _, comp = components(len(v), f[sel])
-    keep_comp = np.unique(comp[np.isin(sel, seed_f)])
-    return sel[np.isin(comp, keep_comp)] if len(keep_comp) else None
+    grown = reached(grown[~column]) if (~column).any() else grown[:0]  # the object without the columns
+    return grown if len(grown) else None
 
 
 #: a grown face this close (m, seen from above) to where the growth ran into something taller stays static
