@@ -186,6 +186,12 @@ def test_xml_and_photos_round_trip(tmp_path):
     A.write_photo(tmp_path / "photos", "a.png", b"\x89PNG")
     assert A.list_photos(tmp_path / "photos") == [tmp_path / "photos" / "a.png", p]
     CATALOGUE["photos"].check(tmp_path / "photos")
+    # a folder left empty on purpose says why, and passes; it lists no photo
+    A.write_no_photos(tmp_path / "none", "the recipe reads no photos")
+    CATALOGUE["photos"].check(tmp_path / "none")
+    assert A.list_photos(tmp_path / "none") == []
+    assert A.why_no_photos(tmp_path / "none") == "the recipe reads no photos"
+    assert A.why_no_photos(tmp_path / "photos") is None
 
 
 def test_every_entry_is_complete():

@@ -475,3 +475,23 @@ def test_a_recipe_step_renames_its_outputs(project):
                            "{id: double, uses: step/double, outputs: {out_double_txt: twice.json}}"])
     r = project.run("site=t", "recipe=bad")
     assert r.rc != 0 and "keep its kind" in r.text, r.text
+
+
+def test_a_recipe_asks_a_generated_site_for_what_it_reads(project):
+    """``recipe.site_params`` reach the site generator (the point-cloud recipes ask the demo for no photos);
+    keys it does not know are ignored, and a site field typed on the command line beats the recipe."""
+    project.site("g", "name: t\ngenerator: toy_site\npoints: 5\nphotos: true\n")
+    project.recipe("cloudonly", ["{id: double, uses: step/double}"])
+    text = (project.conf / "recipe" / "cloudonly.yaml").read_text()
+    (project.conf / "recipe" / "cloudonly.yaml").write_text(
+        text.replace("  name: cloudonly\n", "  name: cloudonly\n  site_params: {photos: false, colour: red}\n"))
+    r = project.run("site=g", "recipe=cloudonly")
+    assert r.rc == 0, r.text
+    assert (project.ws / "01_site" / "data.txt").read_text() == "5\n"  # the site's own field still counts
+    assert (project.ws / "01_site" / "photos.txt").read_text() == ""  # the recipe's ask beats the site's default
+    assert (project.ws / "02_double" / "double.txt").read_text() == "10\n"
+    # the same recipe without the ask renders them; on the command line the user's word wins
+    r = project.run("site=g", "recipe=cloudonly", "site.photos=true")
+    assert r.rc == 0, r.text
+    assert (project.ws / "01_site" / "photos.txt").read_text() == "photos\n"
+    assert project.counts() == {"toy_site": 2, "double": 1}  # the cloud did not change: double is reused

@@ -213,6 +213,24 @@ def toy_scan_roads(params, ctx, *, in_data_txt: Path, out_xodr_txt: Path) -> Non
     out_xodr_txt.write_text("scan " + Path(in_data_txt).read_text())
 
 
+@dataclass
+class ToySiteParams:
+    points: int = 3
+    photos: bool = True
+
+
+def toy_site(params: ToySiteParams, ctx, *, out_data_txt: Path, out_photos_txt: Path) -> None:
+    """A site generator (like the demo's): a number, and 'photos' only when asked for."""
+    _count("toy_site")
+    out_data_txt.write_text(f"{params.points}\n")
+    out_photos_txt.write_text("photos\n" if params.photos else "")
+
+
+@hookimpl
+def twinkit_register_site_generators(register):
+    register("toy_site", toy_site, params=ToySiteParams)
+
+
 @hookimpl
 def twinkit_register_road_sources(register):
     register("toy", toy_roads, preflight=toy_roads_preflight)

@@ -349,6 +349,19 @@ def list_photos(folder: str | Path) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in F.PHOTO_EXTS)
 
 
+def write_no_photos(folder: str | Path, why: str) -> None:
+    """A ``photos/`` folder left empty on purpose, saying ``why`` in its ``NO_PHOTOS.txt``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / F.PhotosDir.NONE_FILE).write_text(why.rstrip() + "\n")
+
+
+def why_no_photos(folder: str | Path) -> str | None:
+    """Why a ``photos/`` folder was left empty on purpose (its ``NO_PHOTOS.txt``), None when it does not say."""
+    why = Path(folder) / F.PhotosDir.NONE_FILE
+    return why.read_text().strip() if why.is_file() else None
+
+
 def write_photo(folder: str | Path, name: str, data: bytes) -> Path:
     """Put one encoded photo (``data``: the JPEG/PNG bytes) into a ``photos/`` folder; returns its path."""
     folder = Path(folder)

@@ -195,16 +195,20 @@ PHOTO_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
 @dataclass(frozen=True)
 class PhotosDir:
     """``photos/``: a folder of photos (JPEG, PNG or TIFF) at its top level; the demo site adds
-    ``labels/`` (trainId PNGs of the same names) beside them."""
+    ``labels/`` (trainId PNGs of the same names) beside them. A folder left empty on purpose (a generated
+    site whose recipe reads no photo) says why in ``NO_PHOTOS.txt``."""
 
     VERSION: ClassVar[int] = 1
     FILE: ClassVar[str] = "photos"
     FIX: ClassVar[str] = "put the photos (JPEG/PNG) in the folder"
+    NONE_FILE: ClassVar[str] = "NO_PHOTOS.txt"
 
     @classmethod
     def check(cls, path: Path) -> None:
         if not Path(path).is_dir():
             raise ArtefactError(f"{path}: not a folder ({cls.FILE} schema v{cls.VERSION}); {cls.FIX}")
+        if (Path(path) / cls.NONE_FILE).is_file():
+            return
         if not any(p.suffix.lower() in PHOTO_EXTS for p in Path(path).iterdir()):
             raise ArtefactError(f"{path}: holds no photo ({', '.join(PHOTO_EXTS)}); {cls.FIX}")
 

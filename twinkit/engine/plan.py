@@ -127,6 +127,11 @@ def given_params(cfg: dict, overrides: list[str]) -> dict:
             node = (cfg.get("steps") or {}).get(parts[1]) or {}
             if parts[2] in node:
                 out.setdefault("steps", {}).setdefault(parts[1], {})[parts[2]] = node[parts[2]]
+        elif parts[0] == "site" and len(parts) == 2:
+            # a site field typed on the command line beats the recipe's ``site_params`` (a generator's params)
+            node = cfg.get("site") or {}
+            if parts[1] in node:
+                out.setdefault("site", {})[parts[1]] = node[parts[1]]
         elif parts[0] in STEP_KINDS and parts[0] not in ("step", "site_generator") and len(parts) == 1:
             # '<kind>=<name>': a plugin chosen on the command line (no fallback replaces it, Plugin.fallback)
             out.setdefault(CHOSEN, {})[parts[0]] = ov.split("=", 1)[1].strip()
@@ -229,7 +234,10 @@ def _recipe_specs(cfg: dict) -> tuple[str, list[StepSpec]]:
     specs: list[StepSpec] = []
     gen = site.get("generator")
     if gen:
-        specs.append(StepSpec(id="site", uses=f"site_generator/{gen}", description="generate the site's inputs"))
+        # ``site_params``: what the recipe needs of a generated site (pointcloud_site: no photo walk); the
+        # generator takes the fields it knows (``_param_layers``)
+        specs.append(StepSpec(id="site", uses=f"site_generator/{gen}", description="generate the site's inputs",
+                              params=dict(recipe.get("site_params") or {})))
     specs += [_spec_from(r, rname, i) for i, r in enumerate(raw_steps)]
     ids = [s.id for s in specs]
     dup = {i for i in ids if ids.count(i) > 1}
@@ -364,8 +372,9 @@ def _param_layers(kind: str, name: str, plugin: Plugin, node: dict, spec: StepSp
     layers: list[dict] = []
     if kind == "site_generator":
         fields = [f.name for f in dataclasses.fields(plugin.params)] if plugin.params else []
-        layers.append({k: st.site[k] for k in fields if k in st.site})
-    elif kind == "step":
+        given_site = st.given.get("site") or {}
+        return [{k: layer[k] for k in fields if k in layer} for layer in (st.site, spec.params, given_site)]
+    if kind == "step":
         layers.append(dict((st.cfg.get("steps") or {}).get(name) or {}))
     elif node.get("plugin") == name:
         layers.append(node)
@@ -373,7 +382,7 @@ def _param_layers(kind: str, name: str, plugin: Plugin, node: dict, spec: StepSp
     # what the user typed on the command line beats the recipe's fixed params
     if kind == "step":
         layers.append(dict((st.given.get("steps") or {}).get(name) or {}))
-    elif kind != "site_generator" and node.get("plugin") == name:
+    elif node.get("plugin") == name:
         layers.append(dict(st.given.get(kind) or {}))
     return layers
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from twinkit.cityscapes import PERSON
+from twinkit.testing import run_plugin
 
 REQUIRED_CLASSES = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 17, 18}
 
@@ -58,6 +59,24 @@ def test_same_seed_gives_byte_identical_files(sparse_twice):
     assert metrics["photos"] == 3 and len(a) >= 11 + 2 * metrics["photos"]
     differing = [k for k in a if a[k] != b[k]]
     assert not differing, f"files differ between two runs with the same seed: {differing}"
+
+
+def test_no_photo_walk_leaves_the_scan_and_roads_as_they_were(sparse_twice, tmp_path):
+    """photos=false (what the point-cloud recipes ask for): no photo, empty cameras and GCPs, every other
+    file byte-identical to the run with photos."""
+    from conftest import SITE, SPARSE, _folder_and_metrics
+
+    folder, metrics = _folder_and_metrics(run_plugin("site_generator", "demo_intersection", tmp_path, site=dict(SITE),
+                                                     **{**SPARSE, "photos": False}))
+    with_photos = _all_files(sparse_twice[0][0])
+    without = _all_files(folder)
+    assert metrics["photos"] == 0 and [p.name for p in (folder / "photos").iterdir()] == ["NO_PHOTOS.txt"]
+    assert json.loads((folder / "cameras.json").read_text())["cameras"] == []
+    assert json.loads((folder / "gcp.json").read_text())["points"] == []
+    same = [k for k in without if not k.startswith("photos") and k not in ("cameras.json", "gcp.json", "site.json",
+                                                                            "step.json")]
+    assert len(same) >= 8 and all(without[k] == with_photos[k] for k in same), \
+        [k for k in same if without[k] != with_photos[k]]
 
 
 def test_other_seed_gives_another_site():

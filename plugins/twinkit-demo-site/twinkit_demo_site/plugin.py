@@ -30,6 +30,10 @@ class DemoSiteParams:
                       help="Preset of the generated intersection (PRESETS): small, default or large; it sets the "
                            "site's size, the scanner's point density and the photo count.")
     seed: int = param(0, ge=0, help="Random seed: the same seed and size give the same site, scan and photos.")
+    photos: bool = param(True,
+                         help="Render the photo walk (photos/, cameras.json, gcp.json). Recipes that read no photo "
+                              "ask for none (recipe.site_params: the point-cloud recipes), which leaves those "
+                              "files empty and saves most of the site step; +site.photos=true insists.")
     photo_count: int = param(0, ge=0, le=10000, help="Number of photos to render; 0 = the preset's count.")
     photo_width_px: int = param(1024, ge=16, le=16384, help="Width of each rendered photo (px).")
     photo_height_px: int = param(768, ge=16, le=16384, help="Height of each rendered photo (px).")
@@ -208,6 +212,13 @@ def _photos(scene, tracer, params: DemoSiteParams, pre: dict, seed: int, geo, ct
     from twinkit import artefacts as A
     from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
 
+    if not params.photos:
+        A.write_no_photos(out_photos_dir, "No photo walk: the recipe reads no photos (recipe.site_params: photos "
+                                          "false). Run recipe=image_site, or add site.photos=true, for the photos.")
+        A.write_demo_cameras(out_cameras_json, {"cameras": []})
+        A.write_gcp(out_gcp_json, {"points": []})
+        ctx.log.info("demo site: no photo walk (photos=false: the recipe reads no photos)")
+        return 0
     n_photos = params.photo_count or pre["photos"]
     path = scene.walk_path if params.size == "small" else np.concatenate([scene.walk_path, scene.walk_extra])
     poses = walk_poses(path, n_photos, np.random.default_rng([seed, 4]))

@@ -49,7 +49,7 @@ GROUND_MARGIN_M = 0.3
 def fbx_meshes(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """(geometry name, vertices (n, 3) float64, triangles (m, 3) int64) of every mesh of a binary FBX, as stored
     (twinkit's FBX files carry metres in the package frame, z up, no node transform)."""
-    from .fbxbin import _object_name, array_values, read_tree
+    from .fbxbin import _fans, _object_name, array_values, read_tree
 
     _, nodes = read_tree(Path(path))
     objects = next((n for n in nodes if n.name == "Objects"), None)
@@ -61,14 +61,7 @@ def fbx_meshes(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
         if vn is None or pn is None:
             continue
         v = array_values(vn.props[0]).astype(float).reshape(-1, 3)
-        idx = array_values(pn.props[0]).astype(np.int64)
-        tris, poly = [], []
-        for i in idx.tolist():  # a negative index ends a polygon (stored as -(i + 1)); fans for polygons
-            poly.append(i if i >= 0 else -i - 1)
-            if i < 0:
-                tris += [(poly[0], poly[k], poly[k + 1]) for k in range(1, len(poly) - 1)]
-                poly = []
-        out.append((_object_name(o.props[1]), v, np.asarray(tris, np.int64).reshape(-1, 3)))
+        out.append((_object_name(o.props[1]), v, _fans(array_values(pn.props[0]))))
     return out
 
 

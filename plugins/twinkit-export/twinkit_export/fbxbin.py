@@ -232,16 +232,11 @@ def mesh_arrays(path: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
 
 def _fans(pvi: np.ndarray) -> np.ndarray:
     """Triangles (m, 3) from FBX polygon vertex indices (a polygon's last index is stored as ``-index - 1``)."""
+    pvi = np.asarray(pvi, np.int64)
     ends = np.flatnonzero(pvi < 0)
     idx = np.where(pvi < 0, -pvi - 1, pvi)
-    tris = []
-    start = 0
-    for e in ends:
-        poly = idx[start:e + 1]
-        if len(poly) == 3:
-            tris.append(poly[None, :])
-        elif len(poly) > 3:
-            k = np.arange(1, len(poly) - 1)
-            tris.append(np.c_[np.full(len(k), poly[0]), poly[k], poly[k + 1]])
-        start = e + 1
-    return np.vstack(tris) if tris else np.zeros((0, 3), np.int64)
+    starts = np.r_[0, ends[:-1] + 1][:len(ends)].astype(np.int64)
+    ntri = np.maximum(ends - starts - 1, 0)  # a polygon of L corners gives L - 2 triangles (fan from its first)
+    first = np.repeat(starts, ntri)
+    k = np.arange(int(ntri.sum())) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
+    return np.c_[idx[first], idx[first + k], idx[first + k + 1]].reshape(-1, 3)

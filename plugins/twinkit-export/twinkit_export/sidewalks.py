@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from twinkit.cityscapes import IGNORE, ROAD, SIDEWALK
-from twinkit.mesh.core import face_areas
+from twinkit.mesh.core import edges, face_areas
 
 
 @dataclass
@@ -105,22 +105,36 @@ def _walk_graph(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, max
     lengths."""
     from scipy.sparse import coo_matrix
 
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]], seams])
-    e = np.unique(np.sort(e, axis=1), axis=0)
+    n = len(vertices)
+    e = edges(np.r_[faces, np.c_[seams, seams[:, 1]]], n)  # a seam as the triangle (a, b, b): its one edge
     d = vertices[e[:, 1]] - vertices[e[:, 0]]
     horiz = np.hypot(d[:, 0], d[:, 1])
     ok = np.isin(labels[e[:, 0]], walk_classes) & np.isin(labels[e[:, 1]], walk_classes)
     ok &= np.abs(d[:, 2]) <= max_slope * np.maximum(horiz, 1e-9) + 1e-9
     e, w = e[ok], np.maximum(np.linalg.norm(d[ok], axis=1), 1e-6)
-    n = len(vertices)
     return coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
 
 
-def _dissolve_to(labels: np.ndarray, faces: np.ndarray, verts: np.ndarray, seams: np.ndarray) -> int:
+def _vertex_faces(faces: np.ndarray, n: int):
+    """Sparse (n, m) incidence: row v holds the faces that use vertex v."""
+    from scipy.sparse import csr_matrix
+
+    m = len(faces)
+    return csr_matrix((np.ones(3 * m, np.int8), (faces.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m))
+
+
+def _component_vertices(faces: np.ndarray, fi: np.ndarray, comp: np.ndarray, n: int) -> list[np.ndarray]:
+    """Per component ``c`` the sorted vertices of its faces ``fi[comp == c]``."""
+    key = np.unique(comp[:, None].astype(np.int64) * n + faces[fi])
+    c, v = key // n, key % n
+    return np.split(v, np.searchsorted(c, np.arange(1, int(comp.max(initial=-1)) + 1)))
+
+
+def _dissolve_to(labels: np.ndarray, faces: np.ndarray, verts: np.ndarray, seams: np.ndarray, vf) -> int:
     """The class most of the non-sidewalk vertices sharing a face with ``verts`` (or with a vertex at the same
-    place, ``seams``) carry (road when none)."""
+    place, ``seams``) carry (road when none); ``vf`` the faces of each vertex (:func:`_vertex_faces`)."""
     near = np.r_[verts, seams[np.isin(seams[:, 0], verts), 1], seams[np.isin(seams[:, 1], verts), 0]]
-    touch = faces[np.isin(faces, near).any(axis=1)].ravel()
+    touch = faces[np.unique(vf[near].indices)].ravel()
     around = labels[np.setdiff1d(touch, verts)]
     around = around[(around != SIDEWALK) & (around != IGNORE)]
     return int(np.bincount(around).argmax()) if len(around) else ROAD
@@ -179,12 +193,13 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
     fc, _ = face_classes(faces, lab)
     _, _, area0 = sidewalk_components(vertices, faces, fc, seams=seams)
     res = SidewalkCleanup(lab, len(area0), len(area0))
+    vf = _vertex_faces(faces, len(vertices))
     for _ in range(rounds):
         fi, comp, area = sidewalk_components(vertices, faces, fc, seams=seams)
         if len(area) <= 1:
             break
         graph = _walk_graph(vertices, faces, lab, max_slope, walk, seams)
-        verts = [np.unique(faces[fi[comp == c]]) for c in range(len(area))]
+        verts = _component_vertices(faces, fi, comp, len(vertices))
         anchors = max(1, int(np.count_nonzero(area >= keep_m2)))  # the surfaces a fragment may join
         changed = 0
         for c in range(len(area) - 1, 0, -1):
@@ -200,7 +215,7 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
                 changed += 1
             elif area[c] < keep_m2:
                 own = verts[c][lab[verts[c]] == SIDEWALK]
-                lab[own] = _dissolve_to(lab, faces, own, seams)
+                lab[own] = _dissolve_to(lab, faces, own, seams, vf)
                 res.dissolved += 1
                 res.dissolved_m2 += float(area[c])
                 res.relabelled_vertices += len(own)

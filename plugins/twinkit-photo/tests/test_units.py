@@ -65,6 +65,11 @@ def test_empty_or_missing_folder(tmp_path):
         list_images(tmp_path)
     with pytest.raises(InputError, match="not a folder"):
         list_images(tmp_path / "nope")
+    from twinkit import artefacts as A
+
+    A.write_no_photos(tmp_path / "none", "No photo walk: add site.photos=true.")
+    with pytest.raises(InputError, match="no photos .*add site.photos=true"):
+        list_images(tmp_path / "none")
 
 
 def _rand_rot(rng):

@@ -40,8 +40,10 @@ def list_images(folder: Path) -> list[Path]:
         raise InputError(f"{folder}: not a folder of photos; set site.inputs.photos to a folder of JPG/PNG files")
     files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
+        from twinkit import artefacts as A
+
         raise InputError(f"{folder}: no photos (.jpg, .jpeg, .png, .tif) in this folder; "
-                         f"point site.inputs.photos at the folder that holds them")
+                         + (A.why_no_photos(folder) or "point site.inputs.photos at the folder that holds them"))
     return files
 
 

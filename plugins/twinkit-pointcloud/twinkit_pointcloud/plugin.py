@@ -443,7 +443,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
     from twinkit.surface.metrics import cloud_to_mesh
 
     from .metrics import (coverage_by_label, distance_near_exact, far_from_mesh, sample_surface,
-                          sample_surface_by_label, stats, topdown_map)
+                          sample_surface_by_label, stats, topdown_map, vertex_tree)
 
     params = params or EvalParams()
     with Measure() as meas, _Outputs(out_recon_metrics_json):
@@ -480,7 +480,7 @@ def evaluate(params: EvalParams, ctx, *, in_textured_mesh_ply: Path, in_points_p
                 acc = gsurf.distance(mesh.vertices)
                 samples = sample_surface(gt.vertices, gt.faces, params.gt_samples)
                 msurf = Surface(mesh.vertices, mesh.faces, _threads(ctx))
-                vtree = cKDTree(mesh.vertices)
+                vtree = vertex_tree(mesh.vertices)
                 comp = distance_near_exact(msurf, mesh.vertices, samples, params.exact_within_m, _threads(ctx), vtree)
                 # area-weighted accuracy: comparable between a dense and a decimated mesh (per-vertex is not)
                 acc_area = gsurf.distance(sample_surface(mesh.vertices, mesh.faces, min(params.gt_samples, 500_000), seed=2))
