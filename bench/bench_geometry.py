@@ -1,6 +1,7 @@
 """Retrain the 3D classifier from generated captures and re-score it (issue 44; docs/segmentation.md "3D classifier").
 
     python bench/bench_geometry.py [--data DIR] [--skip-data] [--epochs 15]
+    python bench/bench_geometry.py --score-only [--turns 1,2,4,6]   # the shipped model on the real scans only
 
 1. Makes the training captures where ``DIR`` lacks them (the shipped recipe: scansim's captures of the
    ``large`` demo site, seeds 100-139 training and 140-147 validation, spinning sweeps in three variants, the other three kinds in one; the
@@ -9,7 +10,8 @@
 2. Trains with the shipped model's recipe (its JSON) into ``bench/results/geometry_model.{npz,json}``.
 3. Says whether the retrained arrays equal the shipped ones, and scores both on the generated validation
    captures (from the training JSON) and on the real hand-labelled scans in ``../shared/data/labelled/``
-   (point level: each point's class from the classifier, no mesh; the labels are never trained on).
+   (point level: each point's class from the classifier, no mesh; the labels are never trained on), with
+   one pass and with the step's default turned passes (``classify_cloud(turns=...)``).
 """
 from __future__ import annotations
 
@@ -45,8 +47,9 @@ def make_data(data: Path) -> list[Path]:
     return [sc / "train", sc / "val", data / "demo" / "demo_mobile", data / "demo" / "velo"]
 
 
-def score_real(model_stem: Path) -> list[dict]:
-    """Point-level scores of one model on each labelled scan (x, y, z, intensity only go in)."""
+def score_real(model_stem: Path, turns: int = 1) -> list[dict]:
+    """Point-level scores of one model on each labelled scan (x, y, z, intensity only go in; ``turns``
+    passes turned about the vertical, :func:`classify_cloud`)."""
     from plyfile import PlyData
 
     from twinkit_segmentation.geometry.classify import classify_cloud
@@ -59,7 +62,7 @@ def score_real(model_stem: Path) -> list[dict]:
         v = PlyData.read(str(ply))["vertex"]
         xyz = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
         truth = np.asarray(v["cs_trainid"]).astype(np.uint8)
-        lab = classify_cloud(xyz, np.asarray(v["intensity"], np.float32), model).point_labels()
+        lab = classify_cloud(xyz, np.asarray(v["intensity"], np.float32), model, turns=turns).point_labels()
         r = score_points(xyz, lab, xyz, truth, upper_bound=False)
         rows.append({"scan": ply.stem, "coarse": r["coarse_accuracy"], "acc": r["accuracy"], "miou": r["miou"],
                      **{c: r["per_class"].get(c, {}).get("iou", float("nan"))
@@ -82,7 +85,15 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default=str(RESULTS / "geometry_data"), help="folder of the generated captures")
     ap.add_argument("--skip-data", action="store_true", help="use --data as it is (folders train, val, demo_mobile, "
                                                              "velo under it), generate nothing")
+    ap.add_argument("--score-only", action="store_true", help="score the shipped model on the real scans, train "
+                                                               "nothing")
+    ap.add_argument("--turns", default="1,4", help="turned passes to score with (comma-separated)")
     a = ap.parse_args(argv)
+    turns = [int(t) for t in a.turns.split(",")]
+    if a.score_only:
+        for t in turns:
+            print(table(score_real(SHIPPED, t), f"shipped model, {t} pass(es), on the real labelled scans (points, %)"))
+        return 0
     data = Path(a.data)
     t0 = time.perf_counter()
     folders = ([data / "scansim" / "train", data / "scansim" / "val", data / "demo" / "demo_mobile",
@@ -107,7 +118,8 @@ def main(argv=None) -> int:
         print(f"{name}: generated validation mIoU {val.get('miou', float('nan')):.1f}, "
               f"coarse {val.get('coarse_accuracy', float('nan')):.1f}")
         if LABELLED.is_dir():
-            print(table(score_real(stem), f"{name} model on the real labelled scans (points, %)"))
+            for t in turns:
+                print(table(score_real(stem, t), f"{name} model, {t} pass(es), on the real labelled scans (points, %)"))
     if not LABELLED.is_dir():
         print(f"(no {LABELLED}: real scans not scored)")
     return 0

@@ -174,7 +174,7 @@ def test_the_training_warp_makes_grass_bumpy_and_keeps_walls_vertical():
     assert np.ptp(w[n:, 2] - xyz[n:, 2]) < 1e-9  # the wall moved as one: still vertical
 
 
-def test_the_step_smooths_and_corrects_the_prior_on_a_colourless_capture_and_not_a_coloured_one(tmp_path):
+def test_the_step_smooths_turns_and_corrects_the_prior_on_a_colourless_capture_and_not_a_coloured_one(tmp_path):
     from twinkit import artefacts as A
     from twinkit.mesh import Mesh
     from twinkit.testing import run_plugin
@@ -198,16 +198,26 @@ def test_the_step_smooths_and_corrects_the_prior_on_a_colourless_capture_and_not
         for smooth in (0.25, 0.0):
             out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_{smooth}",
                              {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
-                             smooth_m=smooth)
+                             smooth_m=smooth, turns=1)
             votes[kind, smooth] = np.load(out["geometry_votes.npy"])
     assert not np.allclose(votes["colourless", 0.25], votes["colourless", 0.0])
     assert np.array_equal(votes["coloured", 0.25], votes["coloured", 0.0])
     assert np.array_equal(votes["coloured", 0.0], votes["colourless", 0.0])  # the colours themselves change nothing
+    # the turned passes (default 4) act on the colourless capture only, unless asked for on a coloured one
+    turned = {}
+    for kind, extra in (("colourless", {}), ("coloured", {}), ("coloured", {"turns_coloured": True})):
+        out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_turned_{len(extra)}",
+                         {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
+                         smooth_m=0.0, **extra)
+        turned[kind, len(extra)] = np.load(out["geometry_votes.npy"])
+    assert not np.allclose(turned["colourless", 0], votes["colourless", 0.0])
+    assert np.array_equal(turned["coloured", 0], votes["coloured", 0.0])
+    assert np.array_equal(turned["coloured", 1], turned["colourless", 0])
     # the correction acts on the colourless capture only, unless asked for on a coloured one
     for kind, extra in (("colourless", {}), ("coloured", {}), ("coloured", {"prior_coloured": True})):
         out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_shift_{len(extra)}",
                          {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
-                         smooth_m=0.0, model=str(stem), **extra)
+                         smooth_m=0.0, turns=1, model=str(stem), **extra)
         v = np.load(out["geometry_votes.npy"])
         has = v.sum(axis=1) > 0
         base = votes[kind, 0.0]
@@ -244,3 +254,23 @@ def test_the_prior_correction_gives_an_ambiguous_shape_to_the_common_class():
     assert not model.logit_shift.any()
     assert prior_shift(model, caps, [0.5, 0.5], caps, alphas=(0.0,))["logit_shift"] is None and model.logit_shift is None
     assert model.proba(-amb).argmax() == WALL
+
+
+def test_turned_passes_make_the_labels_less_dependent_on_the_grid():
+    """The features' voxel grids are square to the axes: turning the cloud moves where they cut its surfaces.
+    With 4 turned passes averaged, a cloud and its copy turned by 30 degrees get more nearly the same labels
+    than with one pass, and the labels stay right."""
+    from twinkit_segmentation.geometry.classify import classify_cloud
+    from twinkit_segmentation.geometry.scene import street_capture
+
+    cap = street_capture(5, half_length_m=12.0, density=0.3, noise_m=0.03)
+    xyz = cap["xyz"]
+    a = np.radians(30.0)
+    turned = xyz @ np.array([[np.cos(a), np.sin(a), 0], [-np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    agree, right = {}, {}
+    for turns in (1, 4):
+        p0 = classify_cloud(xyz, turns=turns).point_labels()
+        p1 = classify_cloud(turned, turns=turns).point_labels()
+        agree[turns], right[turns] = (p0 == p1).mean(), (p0 == cap["label"]).mean()
+    assert agree[4] > agree[1] + 0.05, agree  # measured 0.83 -> 0.94 (seed 6: 0.89 -> 0.96)
+    assert right[4] > right[1], right  # 0.74 -> 0.78

@@ -28,25 +28,45 @@ class CloudLabels:
 
 def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: GeometryModel | None = None,
                    *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0, smooth_m: float = 0.25,
-                   prior: bool = True) -> CloudLabels:
+                   prior: bool = True, turns: int = 4) -> CloudLabels:
     """Features (:func:`.features.point_features`) and the MLP's probabilities for ``xyz`` (n, 3) float, site
     frame, z up, metres; ``intensity`` (n,) or None. ``model``: None = the shipped one. ``smooth_m``: each
     base point's probabilities become the normalised geometric mean of those of the base points in the
     3 x 3 x 3 voxels of this side around it (:func:`smooth_proba`); 0 = each point alone. ``prior``: apply the
-    model's class-prior correction (:attr:`.model.GeometryModel.logit_shift`)."""
+    model's class-prior correction (:attr:`.model.GeometryModel.logit_shift`). ``turns``: the cloud is
+    classified this many times, turned about the vertical by 90 / ``turns`` degrees each time (the voxel
+    grids of the features are square to the axes, and how a grid cuts a surface is noise), and each base
+    point of the first pass takes the normalised geometric mean of its point's probabilities in every pass."""
     model = model or load_model()
     if list(model.feature_names) != feature_names():
         raise ValueError("the 3D classifier's model was trained on other features than this code computes; "
                          "retrain it (python -m twinkit_segmentation.geometry.train)")
-    f = point_features(xyz, intensity, base_voxel_m=base_voxel_m, ground_window_m=ground_window_m)
-    t = time.perf_counter()
-    proba = model.proba(f.values, prior=prior)
-    sec = dict(f.seconds, model=round(time.perf_counter() - t, 3))
-    if smooth_m > 0:
+    xyz = np.asarray(xyz, np.float64)
+    centre = xyz.mean(axis=0) if len(xyz) else np.zeros(3)
+    first, logp, sec = None, None, {}
+    for k in range(max(1, int(turns))):
+        a = np.radians(90.0 * k / max(1, int(turns)))
+        pts = xyz if k == 0 else (xyz - centre) @ np.array([[np.cos(a), np.sin(a), 0.0],
+                                                            [-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]) + centre
+        f = point_features(pts, intensity, base_voxel_m=base_voxel_m, ground_window_m=ground_window_m)
         t = time.perf_counter()
-        proba = smooth_proba(xyz[f.base], proba, smooth_m)
-        sec["smooth"] = round(time.perf_counter() - t, 3)
-    return CloudLabels(base=f.base, inverse=f.inverse, proba=proba, seconds=sec)
+        proba = model.proba(f.values, prior=prior)
+        part = dict(f.seconds, model=round(time.perf_counter() - t, 3))
+        if smooth_m > 0:
+            t = time.perf_counter()
+            proba = smooth_proba(pts[f.base], proba, smooth_m)
+            part["smooth"] = round(time.perf_counter() - t, 3)
+        sec = {key: round(sec.get(key, 0.0) + v, 3) for key, v in part.items()}
+        if first is None:
+            first, logp = f, np.log(np.maximum(proba, 1e-4))
+            used = proba.max(axis=0) > 0
+        else:
+            logp += np.log(np.maximum(proba[f.inverse[first.base]], 1e-4))
+    if turns > 1:
+        logp -= logp.max(axis=1, keepdims=True)
+        q = np.exp(logp) * used
+        proba = (q / np.maximum(q.sum(axis=1, keepdims=True), 1e-30)).astype(np.float32)
+    return CloudLabels(base=first.base, inverse=first.inverse, proba=proba, seconds=sec)
 
 
 def smooth_proba(points: np.ndarray, proba: np.ndarray, side_m: float, floor: float = 1e-4) -> np.ndarray:
