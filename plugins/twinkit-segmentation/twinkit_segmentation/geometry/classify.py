@@ -63,6 +63,7 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
         else:
             logp += np.log(np.maximum(proba[f.inverse[first.base]], 1e-4))
     if turns > 1:
+        logp /= max(1, int(turns))  # the mean of the logarithms: a geometric mean, as sharp as one pass
         logp -= logp.max(axis=1, keepdims=True)
         q = np.exp(logp) * used
         proba = (q / np.maximum(q.sum(axis=1, keepdims=True), 1e-30)).astype(np.float32)

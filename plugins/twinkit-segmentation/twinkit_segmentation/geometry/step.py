@@ -47,8 +47,9 @@ class ClassifyGeometryParams:
                             "captures only, unless turns_coloured.")
     turns_coloured: bool = param(False,
                                  help="Turn a coloured capture's passes too. Off: there the views lead, and the "
-                                      "turned passes cost demo seeds 0 / 3 / 7 1.9 / 3.5 / 1.5 mIoU (signs, kerbs "
-                                      "and grass verges; the coloured fusion weights were fitted to one pass).")
+                                      "turned passes cost demo seeds 0 / 3 / 7 0.3 / 1.5 / 0.0 mIoU (seed 3's signs "
+                                      "61 -> 49: a sign is a few voxels, and one pass's answer for it fused better "
+                                      "with the views).")
     vote_radius_m: float = param(0.4, gt=0,
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
