@@ -165,3 +165,13 @@ def test_edge_face_incidence_compiled_equals_numpy(monkeypatch):
     for a, b in zip(got, ref):
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
     assert got[2].max() == 3 and (got[0][:, 0] < got[0][:, 1]).all()
+
+
+def test_vertex_faces_lists_the_faces_around_each_vertex():
+    from twinkit.mesh.topology import vertex_faces
+
+    faces = np.array([[0, 1, 2], [0, 2, 3], [3, 4, 5]])
+    vf = vertex_faces(faces, 7)
+    assert vf.shape == (7, 3)
+    assert sorted(vf[0].indices) == [0, 1] and sorted(vf[3].indices) == [1, 2] and len(vf[6].indices) == 0
+    assert sorted(np.unique(vf[[1, 4]].indices)) == [0, 2]

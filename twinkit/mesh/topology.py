@@ -1,4 +1,4 @@
-"""Topology of triangle meshes: connected components, edge incidence, boundary loops, hole fans.
+"""Topology of triangle meshes: connected components, vertex and edge incidence, boundary loops, hole fans.
 
 All functions take (m, 3) int face arrays or a :class:`~twinkit.mesh.core.Mesh`; vertex ids are
 indices into ``Mesh.vertices``.
@@ -29,6 +29,16 @@ def components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarray]:
     g = coo_matrix((np.ones(len(i), bool), (i, j)), shape=(n_vertices, n_vertices))
     n, lab = connected_components(g, directed=False)
     return n, lab[faces[:, 0]]
+
+
+def vertex_faces(faces: np.ndarray, n_vertices: int):
+    """Sparse (n_vertices, m) incidence, CSR: row ``v`` holds the faces that use vertex ``v``
+    (``vertex_faces(f, n)[vs].indices``: the faces around the vertices ``vs``)."""
+    from scipy.sparse import csr_matrix
+
+    m = len(faces)
+    return csr_matrix((np.ones(3 * m, np.int8), (np.asarray(faces).ravel(), np.repeat(np.arange(m), 3))),
+                      shape=(n_vertices, m))
 
 
 def edge_face_incidence(faces: np.ndarray):

@@ -33,6 +33,7 @@ import numpy as np
 
 from twinkit.cityscapes import IGNORE, ROAD, SIDEWALK
 from twinkit.mesh.core import edges, face_areas
+from twinkit.mesh.topology import vertex_faces
 
 
 @dataclass
@@ -115,14 +116,6 @@ def _walk_graph(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, max
     return coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
 
 
-def _vertex_faces(faces: np.ndarray, n: int):
-    """Sparse (n, m) incidence: row v holds the faces that use vertex v."""
-    from scipy.sparse import csr_matrix
-
-    m = len(faces)
-    return csr_matrix((np.ones(3 * m, np.int8), (faces.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m))
-
-
 def _component_vertices(faces: np.ndarray, fi: np.ndarray, comp: np.ndarray, n: int) -> list[np.ndarray]:
     """Per component ``c`` the sorted vertices of its faces ``fi[comp == c]``."""
     key = np.unique(comp[:, None].astype(np.int64) * n + faces[fi])
@@ -132,7 +125,7 @@ def _component_vertices(faces: np.ndarray, fi: np.ndarray, comp: np.ndarray, n: 
 
 def _dissolve_to(labels: np.ndarray, faces: np.ndarray, verts: np.ndarray, seams: np.ndarray, vf) -> int:
     """The class most of the non-sidewalk vertices sharing a face with ``verts`` (or with a vertex at the same
-    place, ``seams``) carry (road when none); ``vf`` the faces of each vertex (:func:`_vertex_faces`)."""
+    place, ``seams``) carry (road when none); ``vf`` the faces of each vertex (``twinkit.mesh.topology.vertex_faces``)."""
     near = np.r_[verts, seams[np.isin(seams[:, 0], verts), 1], seams[np.isin(seams[:, 1], verts), 0]]
     touch = faces[np.unique(vf[near].indices)].ravel()
     around = labels[np.setdiff1d(touch, verts)]
@@ -193,7 +186,7 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
     fc, _ = face_classes(faces, lab)
     _, _, area0 = sidewalk_components(vertices, faces, fc, seams=seams)
     res = SidewalkCleanup(lab, len(area0), len(area0))
-    vf = _vertex_faces(faces, len(vertices))
+    vf = vertex_faces(faces, len(vertices))
     for _ in range(rounds):
         fi, comp, area = sidewalk_components(vertices, faces, fc, seams=seams)
         if len(area) <= 1:

@@ -42,12 +42,10 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
         raise ValueError("the 3D classifier's model was trained on other features than this code computes; "
                          "retrain it (python -m twinkit_segmentation.geometry.train)")
     xyz = np.asarray(xyz, np.float64)
-    centre = xyz.mean(axis=0) if len(xyz) else np.zeros(3)
+    n_turns = max(1, int(turns))
     first, logp, sec = None, None, {}
-    for k in range(max(1, int(turns))):
-        a = np.radians(90.0 * k / max(1, int(turns)))
-        pts = xyz if k == 0 else (xyz - centre) @ np.array([[np.cos(a), np.sin(a), 0.0],
-                                                            [-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]) + centre
+    for k in range(n_turns):
+        pts = turned(xyz, 90.0 * k / n_turns)
         f = point_features(pts, intensity, base_voxel_m=base_voxel_m, ground_window_m=ground_window_m)
         t = time.perf_counter()
         proba = model.proba(f.values, prior=prior)
@@ -57,17 +55,28 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
             proba = smooth_proba(pts[f.base], proba, smooth_m)
             part["smooth"] = round(time.perf_counter() - t, 3)
         sec = {key: round(sec.get(key, 0.0) + v, 3) for key, v in part.items()}
-        if first is None:
-            first, logp = f, np.log(np.maximum(proba, 1e-4))
-            used = proba.max(axis=0) > 0
+        if first is None:  # the first pass's base points carry the answer
+            first, first_proba = f, proba
+            logp = np.log(np.maximum(proba, 1e-4))
         else:
             logp += np.log(np.maximum(proba[f.inverse[first.base]], 1e-4))
-    if turns > 1:
-        logp /= max(1, int(turns))  # the mean of the logarithms: a geometric mean, as sharp as one pass
-        logp -= logp.max(axis=1, keepdims=True)
-        q = np.exp(logp) * used
-        proba = (q / np.maximum(q.sum(axis=1, keepdims=True), 1e-30)).astype(np.float32)
+    if n_turns == 1:
+        return CloudLabels(base=first.base, inverse=first.inverse, proba=first_proba, seconds=sec)
+    logp /= n_turns  # the mean of the logarithms: a geometric mean, as sharp as one pass
+    q = np.exp(logp - logp.max(axis=1, keepdims=True)) * (first_proba.max(axis=0) > 0)  # unused classes stay 0
+    proba = (q / np.maximum(q.sum(axis=1, keepdims=True), 1e-30)).astype(np.float32)
     return CloudLabels(base=first.base, inverse=first.inverse, proba=proba, seconds=sec)
+
+
+def turned(xyz: np.ndarray, degrees: float) -> np.ndarray:
+    """``xyz`` (n, 3) turned about the vertical through its centroid by ``degrees`` (counter-clockwise);
+    ``xyz`` itself for 0."""
+    if degrees == 0 or len(xyz) == 0:
+        return xyz
+    a = np.radians(degrees)
+    c, s = np.cos(a), np.sin(a)
+    centre = xyz.mean(axis=0)
+    return (xyz - centre) @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + centre
 
 
 def smooth_proba(points: np.ndarray, proba: np.ndarray, side_m: float, floor: float = 1e-4) -> np.ndarray:
