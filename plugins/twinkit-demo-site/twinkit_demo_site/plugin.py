@@ -213,11 +213,12 @@ def _photos(scene, tracer, params: DemoSiteParams, pre: dict, seed: int, geo, ct
     from twinkit_demo_site.photos import gcp_observations, render_photos, walk_poses
 
     if not params.photos:
-        A.write_no_photos(out_photos_dir, "No photo walk: the recipe reads no photos (recipe.site_params: photos "
-                                          "false). Run recipe=image_site, or add site.photos=true, for the photos.")
+        A.write_no_photos(out_photos_dir, "No photo walk: the demo site was generated with photos=false (what the "
+                                          "point-cloud recipes ask for, recipe.site_params). For the photos: "
+                                          "site.photos=true, or recipe=image_site without site.photos=false.")
         A.write_demo_cameras(out_cameras_json, {"cameras": []})
         A.write_gcp(out_gcp_json, {"points": []})
-        ctx.log.info("demo site: no photo walk (photos=false: the recipe reads no photos)")
+        ctx.log.info("demo site: no photo walk (photos=false)")
         return 0
     n_photos = params.photo_count or pre["photos"]
     path = scene.walk_path if params.size == "small" else np.concatenate([scene.walk_path, scene.walk_extra])
