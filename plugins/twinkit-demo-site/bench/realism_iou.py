@@ -31,14 +31,18 @@ def main() -> None:
     ap.add_argument("--previews", type=Path, default=None, help="write photo | truth | prediction strips here")
     a = ap.parse_args()
     site = a.site
-    if site is None:
-        import sys
+    if site is None:  # the small preset, seed 0, with its photo walk
+        from twinkit.testing import run_plugin
 
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-        from conftest import generate  # the tests' helper: small preset, seed 0
-
-        site, _ = generate(Path(tempfile.mkdtemp(prefix="twinkit-realism-")), size="small", seed=0)
+        out = run_plugin("site_generator", "demo_intersection", Path(tempfile.mkdtemp(prefix="twinkit-realism-")),
+                         site={"name": "demo", "crs": "EPSG:3067",
+                               "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}},
+                         size="small", seed=0)
+        site = out["site.json"].parent
     cams = json.loads((site / "cameras.json").read_text())["cameras"]
+    if not cams:
+        raise SystemExit(f"{site}: no photo walk (the point-cloud recipes generate the demo with photos=false); "
+                         "give --site a folder generated with photos (recipe=image_site's 01_site), or no --site")
     idx = np.linspace(0, len(cams) - 1, min(a.count, len(cams))).round().astype(int)
     from twinkit.plugins import build_component  # the registry: image_model/efficientvit_b0, default params
 
