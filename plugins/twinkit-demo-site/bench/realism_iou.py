@@ -31,13 +31,14 @@ def main() -> None:
     ap.add_argument("--previews", type=Path, default=None, help="write photo | truth | prediction strips here")
     a = ap.parse_args()
     site = a.site
-    if site is None:  # the small preset, seed 0, with its photo walk
+    if site is None:  # the small preset, seed 0, with its photo walk, in the demo site's frame (conf/site/demo.yaml)
+        import yaml
+
         from twinkit.testing import run_plugin
 
+        conf = yaml.safe_load((Path(__file__).resolve().parents[3] / "conf" / "site" / "demo.yaml").read_text())
         out = run_plugin("site_generator", "demo_intersection", Path(tempfile.mkdtemp(prefix="twinkit-realism-")),
-                         site={"name": "demo", "crs": "EPSG:3067",
-                               "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 12.0}},
-                         size="small", seed=0)
+                         site={k: conf[k] for k in ("name", "crs", "base_point")}, size="small", seed=0)
         site = out["site.json"].parent
     cams = json.loads((site / "cameras.json").read_text())["cameras"]
     if not cams:
