@@ -1,7 +1,7 @@
 """Retrain the 3D classifier from generated captures and re-score it (issue 44; docs/segmentation.md "3D classifier").
 
     python bench/bench_geometry.py [--data DIR] [--skip-data] [--epochs 15]
-    python bench/bench_geometry.py --score-only [--turns 1,2,4,6]   # the shipped model on the real scans only
+    python bench/bench_geometry.py --score-only [--turns 1,2,4,6] [--ground 0,0.995]   # the shipped model on the real scans only
 
 1. Makes the training captures where ``DIR`` lacks them (the shipped recipe: scansim's captures of the
    ``large`` demo site, seeds 100-139 training and 140-147 validation, spinning sweeps in three variants, the other three kinds in one; the
@@ -11,7 +11,8 @@
 3. Says whether the retrained arrays equal the shipped ones, and scores both on the generated validation
    captures (from the training JSON) and on the real hand-labelled scans in ``../shared/data/labelled/``
    (point level: each point's class from the classifier, no mesh; the labels are never trained on), with
-   one pass and with the step's default turned passes (``classify_cloud(turns=...)``).
+   one pass and with the step's default turned passes (``classify_cloud(turns=...)``), each without and with
+   the ground diffusion (``ground_alpha``, the step's default).
 """
 from __future__ import annotations
 
@@ -47,9 +48,9 @@ def make_data(data: Path) -> list[Path]:
     return [sc / "train", sc / "val", data / "demo" / "demo_mobile", data / "demo" / "velo"]
 
 
-def score_real(model_stem: Path, turns: int = 1) -> list[dict]:
+def score_real(model_stem: Path, turns: int = 1, ground_alpha: float = 0.0) -> list[dict]:
     """Point-level scores of one model on each labelled scan (x, y, z, intensity only go in; ``turns``
-    passes turned about the vertical, :func:`classify_cloud`)."""
+    passes turned about the vertical and the ground diffusion's ``ground_alpha``, :func:`classify_cloud`)."""
     from plyfile import PlyData
 
     from twinkit_segmentation.geometry.classify import classify_cloud
@@ -62,7 +63,8 @@ def score_real(model_stem: Path, turns: int = 1) -> list[dict]:
         v = PlyData.read(str(ply))["vertex"]
         xyz = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
         truth = np.asarray(v["cs_trainid"]).astype(np.uint8)
-        lab = classify_cloud(xyz, np.asarray(v["intensity"], np.float32), model, turns=turns).point_labels()
+        lab = classify_cloud(xyz, np.asarray(v["intensity"], np.float32), model, turns=turns,
+                             ground_alpha=ground_alpha).point_labels()
         r = score_points(xyz, lab, xyz, truth, upper_bound=False)
         rows.append({"scan": ply.stem, "coarse": r["coarse_accuracy"], "acc": r["accuracy"], "miou": r["miou"],
                      **{c: r["per_class"].get(c, {}).get("iou", float("nan"))
@@ -88,11 +90,25 @@ def main(argv=None) -> int:
     ap.add_argument("--score-only", action="store_true", help="score the shipped model on the real scans, train "
                                                                "nothing")
     ap.add_argument("--turns", default="1,4", help="turned passes to score with (comma-separated)")
+    ap.add_argument("--ground", default=None, help="ground diffusion alphas to score with (comma-separated; "
+                                                   "default: 0 and the classify_geometry step's default)")
     a = ap.parse_args(argv)
     turns = [int(t) for t in a.turns.split(",")]
+    if a.ground is None:
+        from twinkit_segmentation.geometry.step import ClassifyGeometryParams
+
+        grounds = [0.0, ClassifyGeometryParams().ground_alpha]
+    else:
+        grounds = [float(g) for g in a.ground.split(",")]
+    settings = [(t, g) for t in turns for g in grounds]
+
+    def title(name, t, g):
+        return (f"{name} model, {t} pass(es), " + (f"ground diffusion {g:g}" if g else "no ground diffusion")
+                + ", on the real labelled scans (points, %)")
+
     if a.score_only:
-        for t in turns:
-            print(table(score_real(SHIPPED, t), f"shipped model, {t} pass(es), on the real labelled scans (points, %)"))
+        for t, g in settings:
+            print(table(score_real(SHIPPED, t, g), title("shipped", t, g)))
         return 0
     data = Path(a.data)
     t0 = time.perf_counter()
@@ -104,6 +120,8 @@ def main(argv=None) -> int:
     args = ["-m", "twinkit_segmentation.geometry.train", "--out", str(out), "--cache", str(data / "cache"),
             "--per-class", str(recipe["per_class_per_capture"]), "--epochs", str(recipe["epochs"]),
             "--hidden", ",".join(map(str, recipe["hidden"])), "--val", recipe["val_regex"], "--seed", str(recipe["seed"])]
+    if recipe.get("turned"):
+        args.append("--turn")
     for f in folders:
         args += ["--data", str(f)]
     t1 = time.perf_counter()
@@ -118,8 +136,8 @@ def main(argv=None) -> int:
         print(f"{name}: generated validation mIoU {val.get('miou', float('nan')):.1f}, "
               f"coarse {val.get('coarse_accuracy', float('nan')):.1f}")
         if LABELLED.is_dir():
-            for t in turns:
-                print(table(score_real(stem, t), f"{name} model, {t} pass(es), on the real labelled scans (points, %)"))
+            for t, g in settings:
+                print(table(score_real(stem, t, g), title(name, t, g)))
     if not LABELLED.is_dir():
         print(f"(no {LABELLED}: real scans not scored)")
     return 0

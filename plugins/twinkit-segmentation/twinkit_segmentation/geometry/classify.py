@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from twinkit.cityscapes import ROAD, SIDEWALK, TERRAIN
+
 from .features import block_mean, feature_names, point_features
 from .model import GeometryModel, load_model
 
@@ -14,12 +16,14 @@ from .model import GeometryModel, load_model
 class CloudLabels:
     """The classifier's answer for a cloud: ``base`` (m,) int64 indices of the base points (one per voxel)
     into the cloud, ``inverse`` (n,) int64 each cloud point's base point, ``proba`` (m, 19) float32 class
-    probabilities of the base points, ``seconds`` per part."""
+    probabilities of the base points, ``seconds`` per part, ``ground`` what :func:`diffuse_ground` found (None
+    when it did not run)."""
 
     base: np.ndarray
     inverse: np.ndarray
     proba: np.ndarray
     seconds: dict
+    ground: dict | None = None
 
     def point_labels(self) -> np.ndarray:
         """(n,) uint8 trainId of every cloud point (its base point's most probable class)."""
@@ -28,7 +32,7 @@ class CloudLabels:
 
 def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: GeometryModel | None = None,
                    *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0, smooth_m: float = 0.25,
-                   prior: bool = True, turns: int = 4) -> CloudLabels:
+                   prior: bool = True, turns: int = 4, ground_alpha: float = 0.0) -> CloudLabels:
     """Features (:func:`.features.point_features`) and the MLP's probabilities for ``xyz`` (n, 3) float, site
     frame, z up, metres; ``intensity`` (n,) or None. ``model``: None = the shipped one. ``smooth_m``: each
     base point's probabilities become the normalised geometric mean of those of the base points in the
@@ -36,7 +40,9 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
     model's class-prior correction (:attr:`.model.GeometryModel.logit_shift`). ``turns``: the cloud is
     classified this many times, turned about the vertical by 90 / ``turns`` degrees each time (the voxel
     grids of the features are square to the axes, and how a grid cuts a surface is noise), and each base
-    point of the first pass takes the normalised geometric mean of its point's probabilities in every pass."""
+    point of the first pass takes the normalised geometric mean of its point's probabilities in every pass.
+    ``ground_alpha``: > 0 spreads the ground classes' probabilities along the smooth ground
+    (:func:`diffuse_ground` with this ``alpha``); 0 = not."""
     model = model or load_model()
     if list(model.feature_names) != feature_names():
         raise ValueError("the 3D classifier's model was trained on other features than this code computes; "
@@ -61,11 +67,82 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
         else:
             logp += np.log(np.maximum(proba[f.inverse[first.base]], 1e-4))
     if n_turns == 1:
-        return CloudLabels(base=first.base, inverse=first.inverse, proba=first_proba, seconds=sec)
-    logp /= n_turns  # the mean of the logarithms: a geometric mean, as sharp as one pass
-    q = np.exp(logp - logp.max(axis=1, keepdims=True)) * (first_proba.max(axis=0) > 0)  # unused classes stay 0
-    proba = (q / np.maximum(q.sum(axis=1, keepdims=True), 1e-30)).astype(np.float32)
-    return CloudLabels(base=first.base, inverse=first.inverse, proba=proba, seconds=sec)
+        proba = first_proba
+    else:
+        logp /= n_turns  # the mean of the logarithms: a geometric mean, as sharp as one pass
+        q = np.exp(logp - logp.max(axis=1, keepdims=True)) * (first_proba.max(axis=0) > 0)  # unused classes stay 0
+        proba = (q / np.maximum(q.sum(axis=1, keepdims=True), 1e-30)).astype(np.float32)
+    if ground_alpha > 0:
+        t = time.perf_counter()
+        proba, ground = diffuse_ground(xyz[first.base], proba, alpha=ground_alpha)
+        sec["ground_diffusion"] = round(time.perf_counter() - t, 3)
+    else:
+        ground = None
+    return CloudLabels(base=first.base, inverse=first.inverse, proba=proba, seconds=sec, ground=ground)
+
+
+def diffuse_ground(points: np.ndarray, proba: np.ndarray, *, radius_m: float = 0.35, noise_k: float = 2.0,
+                   slope: float = 0.03, alpha: float = 0.995,
+                   groups: tuple[tuple[int, ...], ...] = ((ROAD,), (SIDEWALK, TERRAIN))) -> tuple[np.ndarray, dict]:
+    """Spread the carriageway's and the raised ground's probabilities along the smooth ground, not across kerbs.
+
+    ``points`` (m, 3) float metres, z up (base points, one per voxel); ``proba`` (m, c) their class
+    probabilities. The points whose most probable class is in ``groups`` are joined to those within
+    ``radius_m``; a pair's conductance is ``exp(-e^2 / 2 sigma^2)`` with ``e`` its height difference beyond
+    ``slope`` times its horizontal distance and ``sigma`` = ``noise_k`` times the capture's own ground noise
+    (the median height difference of pairs under 0.15 m apart), so a 10-15 cm kerb cuts the ground apart on
+    a clean scan and a noisy one does not fall into pieces. Per group, the log of its probability ``l``
+    becomes the solution of ``(D - alpha W) l = (1 - alpha) D l0`` (W the conductances, D their row sums):
+    each point's own evidence mixed with its connected neighbours' out to a few metres (``alpha`` -> 1
+    reaches farther). A kerb-bounded stretch of pavement that the single points half call road then mostly
+    reads as one. The default groups are the road and the raised ground (pavement and grass together): a kerb
+    parts the carriageway from what lies beside it, while pavement and a verge often meet flush, and spreading
+    across that edge lets the larger eat the smaller. Each point keeps its total ground probability and, inside
+    a group, its own split between the group's classes. Returns the new (m, c) float32 probabilities and
+    ``{"points", "pairs", "noise_m"}`` (``noise_m`` None and the input returned when there are too few ground
+    pairs to measure)."""
+    from scipy.sparse import coo_matrix, diags
+    from scipy.sparse.linalg import cg
+    from scipy.spatial import cKDTree
+
+    members = [np.asarray(g, np.int64) for g in groups]
+    gi = np.flatnonzero(np.isin(proba.argmax(axis=1), np.concatenate(members)))
+    info = {"points": int(len(gi)), "pairs": 0, "noise_m": None}
+    if len(gi) < 50:
+        return proba, info
+    p = np.asarray(points, np.float64)[gi]
+    pairs = cKDTree(p).query_pairs(radius_m, output_type="ndarray")
+    if len(pairs) < 50:
+        return proba, info
+    dxy = np.linalg.norm(p[pairs[:, 0], :2] - p[pairs[:, 1], :2], axis=1)
+    dz = np.abs(p[pairs[:, 0], 2] - p[pairs[:, 1], 2])
+    near = dxy < 0.15
+    if near.sum() < 50:
+        return proba, info
+    noise = max(float(np.median(dz[near])), 1e-3)
+    w = np.exp(-0.5 * (np.maximum(dz - slope * dxy, 0.0) / (noise_k * noise)) ** 2)
+    n = len(gi)
+    rows, cols = np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]]
+    W = coo_matrix((np.r_[w, w], (rows, cols)), shape=(n, n)).tocsr()
+    deg = np.asarray(W.sum(axis=1)).ravel() + 1e-6
+    A = (diags(deg) - alpha * W).tocsr()
+    precond = diags(1.0 / deg)
+    pg = proba[gi].astype(np.float64)
+    mass = np.stack([pg[:, m].sum(axis=1) for m in members], axis=1)  # (n, groups)
+    l0 = np.log(np.maximum(mass, 1e-4))
+    l0 -= l0[:, -1:]  # the system is linear and the split depends on differences only: one solve fewer
+    lg = np.zeros_like(l0)
+    for j in range(len(members) - 1):
+        lg[:, j], _ = cg(A, (1 - alpha) * deg * l0[:, j], x0=l0[:, j], rtol=1e-4, M=precond)
+    q = np.exp(lg - lg.max(axis=1, keepdims=True))
+    q *= mass.sum(axis=1, keepdims=True) / q.sum(axis=1, keepdims=True)  # each point's ground total kept
+    out = np.array(proba, np.float32, copy=True)
+    for j, m in enumerate(members):
+        split = pg[:, m] / np.maximum(mass[:, j:j + 1], 1e-12)
+        split[mass[:, j] <= 1e-12] = 1.0 / len(m)
+        out[np.ix_(gi, m)] = (q[:, j:j + 1] * split).astype(np.float32)
+    info.update(pairs=int(len(pairs)), noise_m=round(noise, 4))
+    return out, info
 
 
 def turned(xyz: np.ndarray, degrees: float) -> np.ndarray:

@@ -50,6 +50,17 @@ class ClassifyGeometryParams:
                                       "turned passes cost demo seeds 0 / 3 / 7 0.3 / 1.5 / 0.0 mIoU (seed 3's signs "
                                       "61 -> 49: a sign is a few voxels, and one pass's answer for it fused better "
                                       "with the views).")
+    ground_alpha: float = param(0.995, ge=0, lt=1,
+                                help="Spread the road / sidewalk / terrain probabilities along the smooth ground, "
+                                     "not across kerbs (its noise measured on the capture itself): how far, as "
+                                     "the share each point takes from its neighbours (0.995: a few metres on a "
+                                     "0.1 m grid; 0 = off). Colourless captures only, unless ground_coloured. "
+                                     "Chosen on generated sweeps, measured on the real labelled sweeps in "
+                                     "docs/segmentation.md (\"Ground diffusion\").")
+    ground_coloured: bool = param(False,
+                                  help="Spread a coloured capture's ground probabilities too. Off: there the views "
+                                       "tell road from pavement by their look, and backproject's Potts smoothing "
+                                       "already pools them.")
     vote_radius_m: float = param(0.4, gt=0,
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
@@ -84,11 +95,12 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     smooth_m = params.smooth_m if (kind == "colourless" or params.smooth_coloured) else 0.0
     prior = kind == "colourless" or params.prior_coloured
     turns = params.turns if (kind == "colourless" or params.turns_coloured) else 1
+    ground_alpha = params.ground_alpha if (kind == "colourless" or params.ground_coloured) else 0.0
     model = load_model(params.model or None)
     t_read = time.perf_counter() - t0
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
                          ground_window_m=params.ground_window_m, smooth_m=smooth_m, prior=prior,
-                         turns=turns)
+                         turns=turns, ground_alpha=ground_alpha)
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
                      neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
@@ -100,12 +112,16 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
                       comment="twinkit-segmentation: 3D classifier labels")
     t_votes = time.perf_counter() - t1
     hist = np.bincount(lab[has], minlength=N_CLASSES)
+    if res.ground is not None and res.ground["noise_m"] is None:
+        ctx.log.warning("3D classifier: ground diffusion skipped: %d ground points, too few near pairs to measure "
+                        "the ground's noise", res.ground["points"])
     ctx.log.info("3D classifier: %d points -> %d base points; %.1f%% of %d vertices without a point within %.2f m; "
                  "timings %s", len(cloud.vertices), len(res.base), 100 * (1 - has.mean()), n, params.vote_radius_m,
                  res.seconds)
     return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
             "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
-            "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "prior": prior, "turns": turns, "model": model.meta.get("name", params.model or "shipped"),
+            "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "prior": prior, "turns": turns,
+            "ground_alpha": ground_alpha, "ground_diffusion": res.ground, "model": model.meta.get("name", params.model or "shipped"),
             "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
             "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
                         "total": round(time.perf_counter() - t0, 3)}}

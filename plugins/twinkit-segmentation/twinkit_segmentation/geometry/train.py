@@ -67,10 +67,13 @@ def warp_ground(xyz: np.ndarray, seed: int, max_slope: float = 0.06, max_bow_m: 
     return p
 
 
-def capture_features(path: Path, cache: Path | None) -> tuple[np.ndarray, np.ndarray]:
+def capture_features(path: Path, cache: Path | None, turn: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(values (m, k) float32, labels (m,) uint8) of a capture's base points (its ground warped by
-    :func:`warp_ground`, seeded by the file name), from the cache when there."""
-    key = hashlib.sha1(f"{path.resolve()}:{path.stat().st_mtime_ns}:{FEATURE_VERSION}:{feature_names()}".encode()
+    :func:`warp_ground`, seeded by the file name), from the cache when there. ``turn``: the capture is first
+    turned about the vertical by an angle drawn from its file name (0-90 degrees): the generated streets run
+    along the axes, the features' voxel grids are square to them, and a real street runs any way."""
+    tag = ":turned" if turn else ""
+    key = hashlib.sha1(f"{path.resolve()}:{path.stat().st_mtime_ns}:{FEATURE_VERSION}:{feature_names()}{tag}".encode()
                        ).hexdigest()[:16]
     cp = cache / f"{path.stem}_{key}.npz" if cache else None
     if cp is not None and cp.exists():
@@ -81,7 +84,12 @@ def capture_features(path: Path, cache: Path | None) -> tuple[np.ndarray, np.nda
         label = z["label"].astype(np.uint8)
         inten = z["intensity"] if "intensity" in z.files else None
     seed = int(hashlib.sha1(path.stem.encode()).hexdigest()[:8], 16)
-    f = point_features(warp_ground(xyz, seed, label=label), inten)
+    pts = warp_ground(xyz, seed, label=label)
+    if turn:
+        from .classify import turned
+
+        pts = turned(pts, float(np.random.default_rng([seed, 93]).uniform(0.0, 90.0)))
+    f = point_features(pts, inten)
     values, lab = f.values, label[f.base]
     if cp is not None:
         cp.parent.mkdir(parents=True, exist_ok=True)
@@ -248,6 +256,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma-separated class-prior corrections to try (fractions of the log ratio of the classes' "
                          "natural to trained shares, e.g. 0,0.25,0.5,0.75,1); the best on the validation captures is "
                          "kept. Default 0: none (train.prior_shift)")
+    ap.add_argument("--turn", action="store_true",
+                    help="turn each capture about the vertical by an angle drawn from its name before its features "
+                         "(the generated streets run along the axes; capture_features)")
     ap.add_argument("--ablate", default="", help="comma-separated feature names held at 0 in training and "
                                                    "validation (an ablation: the model cannot use them)")
     a = ap.parse_args(argv)
@@ -261,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     va: list[tuple[str, np.ndarray, np.ndarray]] = []
     t0 = time.perf_counter()
     for f in files:
-        values, lab = capture_features(f, cache)
+        values, lab = capture_features(f, cache, turn=a.turn)
         for name in filter(None, a.ablate.split(",")):
             values[:, feature_names().index(name)] = 0.0
         name = f"{f.parent.name}/{f.stem}"
@@ -277,6 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     prior = prior_shift(model, tr, recipe.pop("trained_prior"), va,
                         alphas=tuple(float(x) for x in a.prior_alphas.split(",")))
     meta = {"recipe": {**recipe, "train_captures": [n for n, _, _ in tr], "val_regex": a.val, "ablated": a.ablate,
+                       "turned": bool(a.turn),
                        "feature_version": FEATURE_VERSION}, "prior": prior,
             "validation": score(model, va) if va else {}, "training": score(model, tr),
             "check_scene": check_scene_scores(model)}
