@@ -174,6 +174,27 @@ def test_the_training_warp_makes_grass_bumpy_and_keeps_walls_vertical():
     assert np.ptp(w[n:, 2] - xyz[n:, 2]) < 1e-9  # the wall moved as one: still vertical
 
 
+def test_training_can_turn_each_capture_by_an_angle_drawn_from_its_name(tmp_path):
+    """``train --turn``: a capture's features come from the capture turned about the vertical by an angle its
+    file name draws, the same each time (cached apart from the unturned ones); the features change and the
+    labels stay with their points."""
+    from twinkit_segmentation.geometry.scene import street_capture
+    from twinkit_segmentation.geometry.train import capture_features
+
+    cap = street_capture(2, half_length_m=10.0, density=0.3)
+    path = tmp_path / "seed0001_spinning_v0.npz"
+    np.savez(path, xyz=cap["xyz"], label=cap["label"])
+    plain, lab0 = capture_features(path, tmp_path / "cache")
+    turned, lab1 = capture_features(path, tmp_path / "cache", turn=True)
+    again, _ = capture_features(path, None, turn=True)
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == 2
+    np.testing.assert_array_equal(turned, again)
+    assert turned.shape != plain.shape or not np.allclose(turned, plain)
+    # one base point per 0.1 m voxel either way: the turn moves where the grid cuts, not the classes' shares
+    for c in (ROAD, SIDEWALK, BUILDING):
+        assert abs((lab1 == c).mean() - (lab0 == c).mean()) < 0.03
+
+
 def test_the_step_smooths_turns_spreads_and_corrects_the_prior_on_a_colourless_capture_and_not_a_coloured_one(tmp_path):
     from twinkit import artefacts as A
     from twinkit.mesh import Mesh
