@@ -213,33 +213,31 @@ def test_the_step_smooths_turns_spreads_and_corrects_the_prior_on_a_colourless_c
     save_model(stem, m.layers, m.mean, m.std, m.classes, m.feature_names,
                {**m.meta, "prior": {"alpha": 1.0, "logit_shift": shift.tolist()}})
     assert np.array_equal(load_model(stem).logit_shift, shift.astype(np.float32))
+
+    def run(kind, tag, **params):
+        """The step's votes on the colourless or coloured copy of the capture, with these parameters."""
+        out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_{tag}",
+                         {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply}, **params)
+        return np.load(out["geometry_votes.npy"])
+
     votes = {}
     for kind, colors in (("colourless", None), ("coloured", rng.integers(0, 255, (len(cap["xyz"]), 3), np.uint8))):
         A.write_points(tmp_path / f"{kind}.ply", Mesh(vertices=cap["xyz"], attrs={} if colors is None else {"colors": colors}))
         for smooth in (0.25, 0.0):
-            out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_{smooth}",
-                             {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
-                             smooth_m=smooth, turns=1, ground_alpha=0.0)
-            votes[kind, smooth] = np.load(out["geometry_votes.npy"])
+            votes[kind, smooth] = run(kind, smooth, smooth_m=smooth, turns=1, ground_alpha=0.0)
     assert not np.allclose(votes["colourless", 0.25], votes["colourless", 0.0])
     assert np.array_equal(votes["coloured", 0.25], votes["coloured", 0.0])
     assert np.array_equal(votes["coloured", 0.0], votes["colourless", 0.0])  # the colours themselves change nothing
     # the turned passes (default 4) act on the colourless capture only, unless asked for on a coloured one
     turned = {}
     for kind, extra in (("colourless", {}), ("coloured", {}), ("coloured", {"turns_coloured": True})):
-        out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_turned_{len(extra)}",
-                         {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
-                         smooth_m=0.0, ground_alpha=0.0, **extra)
-        turned[kind, len(extra)] = np.load(out["geometry_votes.npy"])
+        turned[kind, len(extra)] = run(kind, f"turned_{len(extra)}", smooth_m=0.0, ground_alpha=0.0, **extra)
     assert not np.allclose(turned["colourless", 0], votes["colourless", 0.0])
     assert np.array_equal(turned["coloured", 0], votes["coloured", 0.0])
     assert np.array_equal(turned["coloured", 1], turned["colourless", 0])
     # the correction acts on the colourless capture only, unless asked for on a coloured one
     for kind, extra in (("colourless", {}), ("coloured", {}), ("coloured", {"prior_coloured": True})):
-        out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_shift_{len(extra)}",
-                         {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
-                         smooth_m=0.0, turns=1, ground_alpha=0.0, model=str(stem), **extra)
-        v = np.load(out["geometry_votes.npy"])
+        v = run(kind, f"shift_{len(extra)}", smooth_m=0.0, turns=1, ground_alpha=0.0, model=str(stem), **extra)
         has = v.sum(axis=1) > 0
         base = votes[kind, 0.0]
         if kind == "coloured" and not extra:
@@ -250,10 +248,7 @@ def test_the_step_smooths_turns_spreads_and_corrects_the_prior_on_a_colourless_c
     # the ground diffusion (default on) acts on the colourless capture only, unless asked for on a coloured one
     spread = {}
     for kind, extra in (("colourless", {}), ("coloured", {}), ("coloured", {"ground_coloured": True})):
-        out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_ground_{len(extra)}",
-                         {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply},
-                         smooth_m=0.0, turns=1, **extra)
-        spread[kind, len(extra)] = np.load(out["geometry_votes.npy"])
+        spread[kind, len(extra)] = run(kind, f"ground_{len(extra)}", smooth_m=0.0, turns=1, **extra)
     assert not np.allclose(spread["colourless", 0], votes["colourless", 0.0])
     assert np.array_equal(spread["coloured", 0], votes["coloured", 0.0])
     assert np.array_equal(spread["coloured", 1], spread["colourless", 0])
