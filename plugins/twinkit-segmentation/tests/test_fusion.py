@@ -210,6 +210,36 @@ def test_the_views_reliability_lets_the_geometry_name_what_the_views_confuse():
     assert info1["logloss"] < info0["logloss"]
 
 
+def test_the_balanced_calibration_weighs_the_views_by_what_they_do_for_every_class():
+    """mIoU counts every class alike; the plain log-loss lets the frequent class decide. Views that help
+    only on the frequent class get their weight from the plain loss, and lose it when the rare
+    classes they blur count as much."""
+    from twinkit.cityscapes import POLE, ROAD
+    from twinkit_segmentation.fusion import calibrate, class_balance
+
+    rng = np.random.default_rng(1)
+    n = 6000
+    gt = np.where(np.arange(n) < int(0.9 * n), ROAD, np.where(np.arange(n) % 2, POLE, VEGETATION)).astype(np.uint8)
+    # the views: right about the road, and call every pole and crown road too (grey renders of thin things)
+    pv = np.full((n, 19), 0.02 / 18)
+    pv[:, ROAD] = 0.98
+    # the geometry: right on 70 % of every class, unsure (0.6)
+    right = rng.random(n) < 0.7
+    other = np.where(gt == ROAD, VEGETATION, ROAD)
+    pg = np.full((n, 19), 0.4 / 18)
+    pg[np.arange(n), np.where(right, gt, other)] = 0.6
+    sample = {"p_views": pv, "n_views": np.full(n, 20.0), "p_geom": pg, "gt": gt}
+    w_plain, info_plain = calibrate([sample])
+    w_bal, info_bal = calibrate([sample], loss="balanced")
+    assert info_bal["loss"] == "balanced" and info_plain["loss"] == "plain"
+    assert info_plain["views_weight_at_10_views"] > 0.3            # road is 90 % of the vertices
+    assert info_bal["views_weight_at_10_views"] < 0.25 * info_plain["views_weight_at_10_views"]
+    cb = class_balance(gt.astype(np.int64))
+    assert np.isclose(cb.sum(), 1.0) and np.isclose(cb[gt == POLE].sum(), cb[gt == ROAD].sum())
+    with pytest.raises(ValueError, match="balanced"):
+        calibrate([sample], loss="mean")
+
+
 def test_the_furniture_cues_need_the_classifier_to_leave_furniture_open(tmp_path):
     from twinkit.cityscapes import POLE, TRAFFIC_SIGN
     from twinkit_segmentation.backproject_parts import _cue_gates

@@ -47,10 +47,12 @@ def _fuse_sources(params: BackprojectParams, ctx: StepContext, p_views, votes, g
     w = weights.for_kind(kind)
     n_views = _weighted_votes(votes, params.ignore_classes).sum(axis=1)
     p, info = fuse_sources(p_views, n_views, geom, w)
-    info.update({"kind": kind, "weights": vars(w), "weights_recipe": weights.recipe.get(kind, weights.recipe)})
-    ctx.log.info("fusion (%s capture): views x %.2f (coverage %.1f views), geometry x %.2f; %d vertices both, %d "
-                 "views only, %d geometry only", kind, w.views, w.coverage_views, w.geometry, info["both"],
-                 info["views_only"], info["geometry_only"])
+    at10 = float(w.views_at(10.0))
+    info.update({"kind": kind, "weights": vars(w), "views_weight_at_10_views": round(at10, 4),
+                 "weights_recipe": weights.recipe.get(kind, weights.recipe)})
+    ctx.log.info("fusion (%s capture): views x %.2f at 10 views (x %.2f, coverage %.1f views), geometry x %.2f; %d "
+                 "vertices both, %d views only, %d geometry only", kind, at10, w.views, w.coverage_views, w.geometry,
+                 info["both"], info["views_only"], info["geometry_only"])
     return p, info
 
 

@@ -54,6 +54,11 @@ class SourceWeights:
     coverage_views: float = 2.0
     view_reliability: list | None = None
 
+    def views_at(self, n_views):
+        """The views' exponent (as ``n_views``: a number or an array) at a vertex ``n_views`` views saw, the
+        geometry speaking there too."""
+        return self.views * (1.0 - np.exp(-np.asarray(n_views, np.float64) / max(self.coverage_views, 1e-6)))
+
     def read_views(self, pv: np.ndarray) -> np.ndarray:
         """The views' distribution (n, 19) read through ``view_reliability`` (unchanged without one)."""
         if self.view_reliability is None:
@@ -119,8 +124,7 @@ def source_exponents(w: SourceWeights, n_views: np.ndarray, geom_support: np.nda
     """(views' exponent (n,), geometry's exponent (n,)) for a vertex seen by ``n_views`` (n,) views with
     geometry support ``geom_support`` (n,) bool. Without geometry support the views keep exponent 1
     (the plain vote the cues were tuned with)."""
-    cov = 1.0 - np.exp(-np.asarray(n_views, np.float64) / max(w.coverage_views, 1e-6))
-    a_v = np.where(geom_support, w.views * cov, 1.0)
+    a_v = np.where(geom_support, w.views_at(np.asarray(n_views, np.float64)), 1.0)
     a_g = np.where(geom_support, w.geometry, 0.0)
     return a_v, a_g
 
@@ -194,13 +198,28 @@ def confidence_picture(path: Path, vertices: np.ndarray, conf: np.ndarray, label
 
 # ----------------------------------------------------------------------------- calibration
 
-def _loss(theta: np.ndarray, lv: np.ndarray, nv: np.ndarray, lg: np.ndarray, sg: np.ndarray, gt: np.ndarray) -> float:
-    a_v, a_g, n0 = np.exp(theta)
+#: the fit's log-weights stay within +-LOG_BOUND (a coverage scale of e^12 views is "the views never count")
+LOG_BOUND = 12.0
+#: the calibration's losses: ``plain`` (every vertex alike) and ``balanced`` (every true class alike, as mIoU counts)
+LOSSES = ("plain", "balanced")
+
+
+def class_balance(gt: np.ndarray) -> np.ndarray:
+    """Per vertex weights (n,) that give every true class of ``gt`` (n,) the same total, summing to 1."""
+    cnt = np.bincount(gt, minlength=N_CLASSES).astype(np.float64)
+    w = 1.0 / cnt[gt]
+    return w / w.sum()
+
+
+def _loss(theta: np.ndarray, lv: np.ndarray, nv: np.ndarray, lg: np.ndarray, sg: np.ndarray, gt: np.ndarray,
+          weight: np.ndarray | None = None) -> float:
+    a_v, a_g, n0 = np.exp(np.clip(theta, -LOG_BOUND, LOG_BOUND))
     cov = 1.0 - np.exp(-nv / n0)
     logit = (a_v * cov)[:, None] * lv + (a_g * sg)[:, None] * lg
     logit -= logit.max(axis=1, keepdims=True)
     lse = np.log(np.exp(logit).sum(axis=1))
-    return float(np.mean(lse - logit[np.arange(len(gt)), gt]))
+    per = lse - logit[np.arange(len(gt)), gt]
+    return float(np.mean(per) if weight is None else per @ weight)
 
 
 def view_reliability(pv: np.ndarray, gt: np.ndarray, prior: float) -> np.ndarray:
@@ -214,13 +233,14 @@ def view_reliability(pv: np.ndarray, gt: np.ndarray, prior: float) -> np.ndarray
 
 
 def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0,
-              reliability_prior: float | None = None) -> tuple[SourceWeights, dict]:
+              reliability_prior: float | None = None, loss: str = "plain") -> tuple[SourceWeights, dict]:
     """Fit ``views``, ``geometry`` and ``coverage_views`` of one capture kind by minimising the mean
     log-loss of the fused distribution against the ground truth, over vertices both sources speak on.
     ``samples``: dicts with ``p_views`` (n, 19), ``n_views`` (n,), ``p_geom`` (n, 19) and ``gt`` (n,)
     uint8 (255 ignored). ``reliability_prior`` (vertices of identity per row): also count the views'
-    reliability (:func:`view_reliability`) on the same vertices, first. Returns (weights, fit info:
-    vertices, log-loss before (all 1) and after)."""
+    reliability (:func:`view_reliability`) on the same vertices, first. ``loss``: ``plain`` (the mean
+    over the vertices) or ``balanced`` (each true class weighs alike: :func:`class_balance`). Returns
+    (weights, fit info: vertices, log-loss before (all 1) and after, the views' weight at 10 views)."""
     from scipy.optimize import minimize
 
     rng = np.random.default_rng(seed)
@@ -240,20 +260,22 @@ def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0,
     PV, LG, NV, GT = np.concatenate(pvs), np.concatenate(lg), np.concatenate(nv), np.concatenate(gt)
     R = view_reliability(PV, GT, reliability_prior) if reliability_prior is not None else None
     LV = np.log((PV if R is None else PV @ R) + EPS)
+    if loss not in LOSSES:
+        raise ValueError(f"calibrate: loss {loss!r}; choose from {LOSSES}")
     SG = np.ones(len(GT))
-    args = (LV, NV, LG, SG, GT)
+    args = (LV, NV, LG, SG, GT, class_balance(GT) if loss == "balanced" else None)
     theta0 = np.log([1.0, 1.0, 2.0])
     before = _loss(theta0, *args)
     # the coverage scale has flat stretches: started at a few views and at many, the better fit kept
     res = min((minimize(_loss, np.log([1.0, 1.0, n0]), args=args, method="Nelder-Mead",
                         options={"xatol": 1e-3, "fatol": 1e-5, "maxiter": 400}) for n0 in (2.0, 20.0, 100.0)),
               key=lambda r: r.fun)
-    a_v, a_g, n0 = (float(x) for x in np.exp(res.x))
+    a_v, a_g, n0 = (float(x) for x in np.exp(np.clip(res.x, -LOG_BOUND, LOG_BOUND)))
     rel = None if R is None else [[round(float(x), 4) for x in row] for row in R]
-    return (SourceWeights(views=round(a_v, 4), geometry=round(a_g, 4), coverage_views=round(n0, 4),
-                          view_reliability=rel),
-            {"vertices": int(len(GT)), "logloss_uncalibrated": round(before, 4), "logloss": round(float(res.fun), 4),
-             "reliability_prior": reliability_prior})
+    w = SourceWeights(views=round(a_v, 4), geometry=round(a_g, 4), coverage_views=round(n0, 4), view_reliability=rel)
+    return (w, {"vertices": int(len(GT)), "loss": loss, "logloss_uncalibrated": round(before, 4),
+                "logloss": round(float(res.fun), 4), "reliability_prior": reliability_prior,
+                "views_weight_at_10_views": round(float(w.views_at(10.0)), 4)})
 
 
 def run_sample(run: Path, geometry: str, params=None) -> dict:
@@ -294,10 +316,13 @@ def main(argv=None) -> int:
     c.add_argument("--reliability-prior", type=float, default=None,
                    help="also count the views' reliability matrix (docs/segmentation.md \"Fusion\"), with this "
                         "many vertices of the identity per row; omitted: no matrix (the views' word as it is)")
+    c.add_argument("--loss", choices=LOSSES, default="balanced",
+                   help="balanced: every true class weighs alike in the log-loss, as in mIoU (default); plain: "
+                        "every vertex alike, which lets the frequent classes (road, building) decide the weights")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     samples = [run_sample(Path(r), a.geometry) for r in a.runs]
-    w, info = calibrate(samples, reliability_prior=a.reliability_prior)
+    w, info = calibrate(samples, reliability_prior=a.reliability_prior, loss=a.loss)
     cur = load_weights(a.out) if Path(a.out).is_file() else FusionWeights(kinds={})
     cur.kinds[a.kind] = w
     cur.recipe[a.kind] = {"runs": [str(Path(r)) for r in a.runs], "note": a.note, "geometry": a.geometry,
