@@ -70,10 +70,63 @@ def test_aerial_capture_raises_the_cameras(tmp_path):
     for name, pts in (("aerial", ground), ("street", street)):
         write_ply(tmp_path / f"{name}.ply", Mesh(pts))
         ctx = make_context(tmp_path / name, config=cfg)
-        out = S.sample_views(S.SampleViewsParams(), ctx, in_textured_mesh_ply=tmp_path / "m.ply",
+        out = S.sample_views(S.SampleViewsParams(colourless_views=True), ctx, in_textured_mesh_ply=tmp_path / "m.ply",
                              in_points_ply=tmp_path / f"{name}.ply", out_views_json=tmp_path / f"{name}.json")
         views = json.loads((tmp_path / f"{name}.json").read_text())["views"]
         heights[name] = (out["capture"], sorted({round(x["position"][2], 1) for x in views}),
                          {x["pitch_deg"] for x in views})
     assert heights["aerial"] == ("aerial", [3.0, 6.0, 10.0], {-20.0})
     assert heights["street"] == ("mobile", [1.5, 3.0, 4.5], {-8.0})
+
+
+def test_a_colourless_capture_gets_no_views_unless_asked_and_the_geometry_labels_it(tmp_path):
+    """Beside the 3D classifier the grey views of a colourless capture added nothing (docs/segmentation.md "The
+    grey views' worth"): none are sampled, rendered or segmented, and backproject labels from the geometry."""
+    import pytest
+    from twinkit.cityscapes import BUILDING, ROAD
+    from twinkit.errors import InputError
+
+    v, f, n, _ = street_scene(step=1.0)
+    write_ply(tmp_path / "m.ply", Mesh(v, f, attrs={"normals": n.astype(np.float32)}))
+    rng = np.random.default_rng(0)
+    pts = v + rng.normal(0, 0.01, v.shape)
+    write_ply(tmp_path / "grey.ply", Mesh(pts))
+    write_ply(tmp_path / "coloured.ply", Mesh(pts, attrs={"colors": rng.integers(0, 255, (len(pts), 3)).astype(np.uint8)}))
+    cfg = {"view_sampler": {"plugin": "uniform", "spacing_m": 5.0, "heights_m": [2.0], "headings": 8},
+           "image_model": {"plugin": "oracle"}}
+    ctx = make_context(tmp_path / "w", config=cfg)
+    out = {}
+    for name in ("grey", "coloured"):
+        out[name] = S.sample_views(S.SampleViewsParams(auto_max_views=40), ctx, in_textured_mesh_ply=tmp_path / "m.ply",
+                                   in_points_ply=tmp_path / f"{name}.ply", out_views_json=tmp_path / f"{name}.json")
+    assert out["coloured"]["views"] == 40 and "skipped" not in out["coloured"]
+    assert out["grey"]["views"] == 0 and "no colours" in out["grey"]["skipped"]
+    assert "colourless_views=true" in out["grey"]["skipped"]
+    asked = S.sample_views(S.SampleViewsParams(auto_max_views=40, colourless_views=True), ctx,
+                           in_textured_mesh_ply=tmp_path / "m.ply", in_points_ply=tmp_path / "grey.ply",
+                           out_views_json=tmp_path / "asked.json")
+    assert asked["views"] == 40
+    # render and predict pass the skip on without a model: every vertex gets no vote
+    r = S.render_views(S.RenderParams(), ctx, in_textured_mesh_ply=tmp_path / "m.ply", in_views_json=tmp_path / "grey.json",
+                       out_renders_dir=tmp_path / "renders")
+    assert r["kept"] == 0 and r["skipped"] == out["grey"]["skipped"]
+    p = S.predict_views(S.PredictParams(), ctx, in_renders_dir=tmp_path / "renders", out_predictions_dir=tmp_path / "pred",
+                        out_vertex_votes_npy=tmp_path / "votes.npy")
+    votes = np.load(tmp_path / "votes.npy")
+    assert p["views"] == 0 and votes.shape == (len(v), 19) and not votes.any()
+    # backproject: the geometry's word alone; without geometry a clear error
+    seg = np.arange(len(v))
+    np.save(tmp_path / "seg.npy", seg)
+    geom = np.zeros((len(v), 19), np.float32)
+    geom[:, ROAD] = 1.0
+    geom[v[:, 2] > 1.0, ROAD], geom[v[:, 2] > 1.0, BUILDING] = 0.0, 1.0
+    np.save(tmp_path / "geom.npy", geom)
+    kw = dict(in_textured_mesh_ply=tmp_path / "m.ply", in_segments_npy=tmp_path / "seg.npy",
+              in_vertex_votes_npy=tmp_path / "votes.npy", out_labels_npy=tmp_path / "labels.npy",
+              out_confidence_npy=tmp_path / "conf.npy", out_labels_ply=tmp_path / "labels.ply",
+              out_confidence_png=tmp_path / "conf.png", in_points_ply=tmp_path / "grey.ply")
+    S.backproject(S.BackprojectParams(context=False), ctx, in_geometry_votes_npy=tmp_path / "geom.npy", **kw)
+    labels = np.load(tmp_path / "labels.npy")
+    assert (labels == np.where(v[:, 2] > 1.0, BUILDING, ROAD)).mean() > 0.99
+    with pytest.raises(InputError, match="classify_geometry"):
+        S.backproject(S.BackprojectParams(context=False), ctx, **kw)

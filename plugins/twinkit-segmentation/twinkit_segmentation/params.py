@@ -35,6 +35,12 @@ class SampleViewsParams:
     auto_max_views: int = param(480, ge=1,
                                 help="The view budget of max_views=-1 (rendering and the 2D model take about 0.25 s "
                                      "a view on 2 cores: 480 views are about 2 minutes).")
+    colourless_views: bool = param(False,
+                                   help="Sample, render and segment views of a colourless capture too. Off (the "
+                                        "default): a cloud without colours gets no views and its labels come from "
+                                        "the 3D classifier (classify_geometry); its grey renders added nothing beside "
+                                        "it on generated or real captures (docs/segmentation.md \"The grey views' "
+                                        "worth\").")
 
 
 @dataclass

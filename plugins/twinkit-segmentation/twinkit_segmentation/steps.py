@@ -82,7 +82,15 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
     t0 = time.perf_counter()
     budget = params.auto_max_views if params.max_views < 0 else params.max_views
-    capture = _capture(in_points_ply, ctx)
+    capture, colourless = _capture(in_points_ply, ctx)
+    if colourless and not params.colourless_views:
+        why = (f"{Path(in_points_ply).name} has no colours: no views (the 3D classifier labels a colourless capture; "
+               f"steps.sample_views.colourless_views=true renders its grey views too)")
+        ctx.log.info("sample_views: %s", why)
+        out_views_json.write_text(json.dumps({"sampler": None, "counts": {}, "views": [], "sampled": 0,
+                                              "max_views": budget, "skipped": why}, indent=1))
+        return {"views": 0, "sampled_views": 0, "max_views": budget, "capture": capture, "skipped": why,
+                "seconds": round(time.perf_counter() - t0, 3)}
     roads_osm = A.read_osm(in_roads_osm) if in_roads_osm is not None else None
     views, sampled = _sample_views(mesh, ctx, roads_osm, in_street_points_txt, budget, with_total=True,
                                    capture=capture)
@@ -100,15 +108,18 @@ def sample_views(params: SampleViewsParams, ctx: StepContext, *, in_textured_mes
             "seconds": round(time.perf_counter() - t0, 3)}
 
 
-def _capture(points_ply: Path | None, ctx) -> str | None:
-    """The capture type of the cloud (twinkit.surface.density), when the run has one."""
+def _capture(points_ply: Path | None, ctx) -> tuple[str | None, bool]:
+    """(the capture type of the cloud (twinkit.surface.density), whether it is colourless
+    (:func:`fusion.capture_kind`)), when the run has one; (None, False) without."""
     if points_ply is None or not Path(points_ply).is_file():
-        return None
+        return None, False
     from twinkit.surface import density
+    from twinkit_segmentation.fusion import capture_kind
 
-    m = density.measure(A.read_points(points_ply).vertices)
+    cloud = A.read_points(points_ply)
+    m = density.measure(cloud.vertices)
     ctx.log.info("sample_views: %s", density.describe(m))
-    return m["capture"]
+    return m["capture"], capture_kind(cloud.colors) == "colourless"
 
 
 def _sample_views(mesh, ctx, roads_osm, street_points, max_views: int, with_total: bool = False,
@@ -137,10 +148,16 @@ def render_views(params: RenderParams, ctx: StepContext, *, in_textured_mesh_ply
 
     with ctx.substep("read"):
         try:
-            views = json.loads(Path(in_views_json).read_text())["views"]
+            vj = json.loads(Path(in_views_json).read_text())
+            views = vj["views"]
         except (OSError, ValueError, KeyError) as exc:
             raise InputError(f"{in_views_json}: not a views file ({exc}); re-run sample_views") from None
         mesh = A.read_textured_mesh(in_textured_mesh_ply)
+        if not views and vj.get("skipped"):
+            out_renders_dir.mkdir(parents=True, exist_ok=True)
+            (out_renders_dir / "index.json").write_text(json.dumps(
+                {"n_vertices": int(len(mesh.vertices)), "kept": [], "dropped": [], "skipped": vj["skipped"]}, indent=1))
+            return {"views": 0, "kept": 0, "skipped": vj["skipped"]}
         tex = load_texture(mesh.texture) if mesh.texture is not None else None
         if tex is None:
             ctx.log.warning("%s has no texture; rendering flat grey", in_textured_mesh_ply.name)
@@ -285,6 +302,11 @@ def predict_views(params: PredictParams, ctx: StepContext, *, in_renders_dir: Pa
     except (OSError, ValueError) as exc:
         raise InputError(f"{index_path}: missing or unreadable ({exc}); re-run render_views") from None
     n = int(index["n_vertices"])
+    if not index["kept"] and index.get("skipped"):
+        out_predictions_dir.mkdir(parents=True, exist_ok=True)
+        np.save(out_vertex_votes_npy, np.zeros((n, N_CLASSES), np.float32))
+        (out_predictions_dir / "index.json").write_text(json.dumps({"views": [], "skipped": index["skipped"]}, indent=1))
+        return {"views": 0, "skipped": index["skipped"], "vertices_seen": 0.0}
     with ctx.substep("load_model"):
         model = ctx.component("image_model")
     if getattr(model, "needs_ground_truth", False):
@@ -390,6 +412,10 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     p_views, s_total = vote_distribution(params, seg, votes)
     cloud = A.read_points(in_points_ply) if in_points_ply is not None and Path(in_points_ply).is_file() else None
     geom = _geometry_votes(in_geometry_votes_npy, len(mesh.vertices))
+    if geom is None and not votes.any():
+        raise InputError(f"{in_vertex_votes_npy}: no view voted (a colourless capture gets no views unless "
+                         f"steps.sample_views.colourless_views=true) and there is no geometry_votes.npy: add the "
+                         f"classify_geometry step before backproject, or render the views")
     p, fsum = _fuse_sources(params, ctx, p_views, votes, geom, cloud)
     unseen = (s_total < params.min_votes) if geom is None else (s_total < params.min_votes) & (geom.sum(axis=1) <= 0)
     fprior, fvoting, fcodes, finfo = vertex_file_classes(params, ctx, in_points_ply, mesh.vertices)
