@@ -20,7 +20,7 @@ counted on generated truth), ``p_views`` is first read through it (``p_views @ R
 a sparse tree crown that the 2D model calls building then speaks for building *or* vegetation, as
 often as each was the truth. A vertex no view saw takes
 the geometry alone; a vertex the geometry does not reach keeps the views alone, with the weight 1 the
-cues and the file's prior were tuned with. The weights are fitted by :func:`calibrate` (log-loss
+cues and the file's prior were tuned with. The weights are fitted by :func:`calibrate` (class-balanced log-loss
 against generated ground truth, ``python -m twinkit_segmentation.fusion calibrate``) and shipped as
 ``fusion_weights.json`` with the recipe that made them.
 """
@@ -233,13 +233,13 @@ def view_reliability(pv: np.ndarray, gt: np.ndarray, prior: float) -> np.ndarray
 
 
 def calibrate(samples: list[dict], max_vertices: int = 60000, seed: int = 0,
-              reliability_prior: float | None = None, loss: str = "plain") -> tuple[SourceWeights, dict]:
-    """Fit ``views``, ``geometry`` and ``coverage_views`` of one capture kind by minimising the mean
+              reliability_prior: float | None = None, loss: str = "balanced") -> tuple[SourceWeights, dict]:
+    """Fit ``views``, ``geometry`` and ``coverage_views`` of one capture kind by minimising the
     log-loss of the fused distribution against the ground truth, over vertices both sources speak on.
     ``samples``: dicts with ``p_views`` (n, 19), ``n_views`` (n,), ``p_geom`` (n, 19) and ``gt`` (n,)
     uint8 (255 ignored). ``reliability_prior`` (vertices of identity per row): also count the views'
-    reliability (:func:`view_reliability`) on the same vertices, first. ``loss``: ``plain`` (the mean
-    over the vertices) or ``balanced`` (each true class weighs alike: :func:`class_balance`). Returns
+    reliability (:func:`view_reliability`) on the same vertices, first. ``loss``: ``balanced`` (each
+    true class weighs alike: :func:`class_balance`) or ``plain`` (the mean over the vertices). Returns
     (weights, fit info: vertices, log-loss before (all 1) and after, the views' weight at 10 views)."""
     from scipy.optimize import minimize
 
