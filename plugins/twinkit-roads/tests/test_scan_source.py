@@ -97,6 +97,41 @@ def test_curbs_keep_the_edge_where_the_labels_spill_onto_the_sidewalk(tmp_path):
     assert max(a.width_m for a in labels_only.arms) > 18.0  # the labels alone take the spill as road
 
 
+def test_a_sweep_whose_ground_is_single_scan_lines_takes_the_carriageway_from_the_labels(tmp_path):
+    """A single spinning sweep samples its ground in rings: most 16-point neighbourhoods are one line, and no
+    kerb step can be measured across them (points_meta.json density.ground_two_way_share 0.3, as the real
+    sweeps' 0.26-0.33). The road labels then draw the carriageway alone (use_curbs off); a street scan
+    (0.99) keeps the curbs. Seen here by the labels spilling 1.2 m onto a sidewalk: the curbs hold the edge,
+    the labels alone take the spill."""
+    import json
+
+    from twinkit import artefacts as A
+    from twinkit.mesh import Mesh, write_ply
+    from twinkit.testing import run_plugin
+
+    v, f, lab, _ = cross_mesh(step_m=1.0)
+    spill = (lab == SIDEWALK) & (v[:, 1] > 8.7) & (v[:, 1] < 9.95) & (np.abs(v[:, 0]) > 10)
+    lab = lab.copy()
+    lab[spill] = ROAD
+    write_ply(tmp_path / "textured_mesh.ply", Mesh(v, f))
+    np.save(tmp_path / "labels.npy", lab)
+    site = {"name": "cross", "crs": "EPSG:3067", "base_point": {"lat": 60.16945, "lon": 24.93365, "alt": 0.0}}
+    widths = {}
+    for name, share in (("sweep", 0.3), ("street", 0.99)):
+        meta = tmp_path / f"{name}_meta.json"
+        A.write_points_meta(meta, {"source": {"reader": "test"}, "counts": {}, "fields": {}, "frame": {},
+                                   "bounds_m": [], "density": {"points": 0, "spacing_m": 0.03, "capture": "mobile",
+                                                               "ground_two_way_share": share}})
+        out = run_plugin("road_source", "scan", tmp_path / name,
+                         {"in_textured_mesh_ply": tmp_path / "textured_mesh.ply", "in_labels_npy": tmp_path / "labels.npy",
+                          "in_points_meta_json": meta}, site=site)
+        doc = json.loads(out["scan_roads.json"].read_text())
+        assert doc["ground_two_way_share"] == share and doc["curbs"] is True
+        widths[name] = (doc["params"]["use_curbs"], max(r["carriageway_m"] for r in doc["roads"]))
+    assert widths["street"][0] is True and widths["street"][1] == pytest.approx(17.4, abs=0.25)
+    assert widths["sweep"][0] is False and widths["sweep"][1] > 18.0
+
+
 def test_curbs_alone_without_labels(tmp_path):
     v, f, lab, truth = cross_mesh(step_m=1.0)
     net, text = derive_xodr(tmp_path, v, f, None)

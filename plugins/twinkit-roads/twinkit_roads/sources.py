@@ -224,7 +224,8 @@ def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: 
     from twinkit import artefacts as A
 
     from .scan import (NoRoads, ScanSourceParams, build_network, choose_curbs, cloud_xy, draw_scan_roads,
-                       mark_source, point_spacing, read_labels, read_truth, scan_metrics, scan_report)
+                       ground_two_way_share, level_params, mark_source, point_spacing, read_labels, read_truth,
+                       scan_metrics, scan_report)
 
     params = params or ScanSourceParams()
     t0 = time.perf_counter()
@@ -233,6 +234,8 @@ def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: 
                                      in_gt_labels_npy, ctx.log)
     spacing = point_spacing(in_points_meta_json, in_points_ply)
     labels_for_mask, curbs = choose_curbs(labels, spacing, params, src, ctx.log)
+    two_way = ground_two_way_share(in_points_meta_json, in_points_ply)
+    params = level_params(params, labels_for_mask, curbs, two_way, ctx.log)
     use_cloud = not curbs and in_points_ply is not None and params.min_point_density > 0
     points_xy = cloud_xy(in_points_ply) if use_cloud else None
     frame = SiteFrame.from_site(ctx.site)
@@ -246,6 +249,7 @@ def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: 
     out_opendrive_xodr.write_text(text, encoding="utf-8")
     truth = read_truth(in_roads_truth_json)
     doc = scan_report(net, text, mesh, labels, which, src, info, params, truth)
+    doc["ground_two_way_share"] = two_way
     draw_scan_roads(mesh.vertices, mesh.faces, labels, net, text, out_scan_roads_png, truth=truth)
     doc["total_s"] = round(time.perf_counter() - t0, 3)
     out_scan_roads_json.write_text(json.dumps(doc, indent=1))

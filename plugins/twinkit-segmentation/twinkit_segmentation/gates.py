@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twinkit.ranges import param
+from twinkit.surface.density import TWO_WAY_SPREAD
 
 GATED = ("curb", "column", "mounted", "low", "narrow", "slender")
 #: the cues that favour pole, light and sign, gated by the 3D classifier's word (:func:`geometry_gate`)
@@ -51,7 +52,7 @@ FURNITURE_CUES = ("column", "mounted")
 @dataclass
 class GateOptions:
     k: int = param(16, ge=4, help="Points per vertex for the local noise (plane fit).")
-    spread: float = param(0.25, gt=0,
+    spread: float = param(TWO_WAY_SPREAD, gt=0,
                           help="The k points measure a plane when their second spread (sqrt of the middle "
                                "eigenvalue) is at least this share of their radius (a uniform disc: 0.5; one scan "
                                "line: ~0); else the noise there is unmeasured (inf).")

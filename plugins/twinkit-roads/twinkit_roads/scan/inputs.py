@@ -41,6 +41,34 @@ def point_spacing(in_points_meta_json: Path | None, in_points_ply: Path | None =
     return A.read_points_meta(in_points_meta_json, points=in_points_ply).spacing_m
 
 
+def ground_two_way_share(in_points_meta_json: Path | None, in_points_ply: Path | None = None) -> float | None:
+    """The share of the cloud's ground whose neighbourhoods are patches, not single scan lines
+    (:func:`twinkit.surface.density.measure` ``ground_two_way_share``), from points_meta.json, measured from
+    points.ply when an older file lacks it; None when neither says."""
+    density = A.read_points_meta(in_points_meta_json, points=in_points_ply).density if in_points_meta_json else {}
+    share = density.get("ground_two_way_share")
+    if share is None and in_points_ply is not None and Path(in_points_ply).is_file():
+        from twinkit.surface.density import measure
+
+        share = measure(A.read_points(in_points_ply).vertices)["ground_two_way_share"]
+    return None if share is None or not np.isfinite(share) else float(share)
+
+
+def level_params(p: ScanSourceParams, labels_for_mask: np.ndarray | None, curbs: bool, two_way: float | None,
+                 log) -> ScanSourceParams:
+    """``p``, with ``use_curbs`` off where the capture cannot show a kerb step (its ground mostly single scan
+    lines: ``two_way`` under ``level_min_two_way_share``) and road labels can draw the carriageway instead."""
+    import dataclasses
+
+    if (labels_for_mask is None or not curbs or not p.use_curbs or two_way is None
+            or two_way >= p.level_min_two_way_share):
+        return p
+    log.info("road_source=scan: %.0f %% of the cloud's ground is sampled in patches (the rest single scan lines, "
+             "under level_min_two_way_share=%g): no kerb step to measure; the road labels alone draw the "
+             "carriageway (as use_curbs=false)", 100 * two_way, p.level_min_two_way_share)
+    return dataclasses.replace(p, use_curbs=False)
+
+
 def choose_curbs(labels: np.ndarray | None, spacing: float | None, p: ScanSourceParams, src: Path | None,
                  log) -> tuple[np.ndarray | None, bool]:
     """The labels the carriageway mask uses and whether the curbs draw it. A cloud coarser than

@@ -34,6 +34,12 @@ class ScanSourceParams:
                                       help="a cloud with a coarser median point spacing (points_meta.json) shows no "
                                            "curbs: the carriageway is the grey, up-facing, paved-labelled ground and "
                                            "no sidewalk lanes are made (0: always the curbs)")
+    level_min_two_way_share: float = param(0.5, ge=0, le=1,
+                                           help="a cloud whose ground is mostly single scan lines (points_meta.json "
+                                                "density.ground_two_way_share under this: a single spinning sweep, "
+                                                "0.26-0.33 on real ones; street scans 0.99+) shows no kerb step: with "
+                                                "labels, the road labels alone draw the carriageway, as "
+                                                "use_curbs=false (0: never)")
     grey_max_saturation: float = param(0.10, gt=0, le=1,
                                        help="without curbs: faces with a more saturated colour ((max - min) / max of "
                                             "the vertices' RGB) are not carriageway (1: colour not used)")
