@@ -94,8 +94,9 @@ def scan_report(net: Network, text: str, mesh, labels, which: str, src: Path | N
     road (with labels) and the centre lines' RMSE to the truth (when known)."""
     doc = describe(net)
     doc.update({"labels": which, "labels_file": str(src) if src else None, **info,
-                "definition": "roads derived from the scan: carriageway = road-labelled surface on the level below "
-                              "the curbs; axes = its skeleton, centred between the edges; lanes of lane_width_m per "
+                "definition": "roads derived from the scan: carriageway = road-labelled surface"
+                              + (" on the level below the curbs" if p.use_curbs and net.stats.get("curbs", True)
+                                 else "") + "; axes = its skeleton, centred between the edges; lanes of lane_width_m per "
                               "direction, a remainder >= min_strip_m a parking strip at the curb; sidewalk lanes "
                               "where sidewalk surface lies beyond the curb; junctions by netconvert",
                 "params": {k: getattr(p, k) for k in p.__dataclass_fields__}})

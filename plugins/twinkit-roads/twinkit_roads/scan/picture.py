@@ -63,7 +63,8 @@ def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_pe
     from ..qa import legend
 
     legend(d, [("roads from the scan (road_source=scan)", (255, 255, 255)),
-               ("yellow: carriageway edges (labels + curbs)", (255, 230, 0)),
+               (f"yellow: carriageway edges ({net.stats.get('carriageway_from') or 'labels + curbs'})"[:60],
+                (255, 230, 0)),
                ("white / red: lane borders / centre lines", (230, 20, 20)),
                ("orange: sidewalk lanes; magenta: nodes", (255, 150, 40))]
            + ([("cyan: true lane centre lines", (0, 220, 255))] if truth else []), res, width=360, slots=5)
