@@ -28,4 +28,4 @@ def test_the_ground_of_a_single_sweep_is_told_from_a_patch_sampled_both_ways():
     # the median spacing alone would call the sweep the denser of the two
     assert s["spacing_m"] < p["spacing_m"]
     wall = np.column_stack([rng.uniform(-20, 20, 5000), np.zeros(5000), rng.uniform(0, 10, 5000)])
-    assert np.isnan(density.measure(wall)["ground_two_way_share"])  # no ground: not measured
+    assert density.measure(wall)["ground_two_way_share"] is None  # no ground: not measured

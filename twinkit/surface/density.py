@@ -14,6 +14,7 @@ same cloud always gives the same numbers (a fixed random subsample, a fixed seed
   scan line. A single spinning sweep samples its ground in rings a few centimetres apart along the ring and
   decimetres across: 0.26-0.33 on the real SemanticKITTI sweeps, 0.997 and more on mobile and terrestrial
   street scans. A kerb step is measured across, so a capture whose ground is mostly single lines shows none.
+  None when no point lies on a near-horizontal surface.
 * ``capture``: ``aerial`` when under ``AERIAL_VERTICAL_SHARE`` of the points lie on vertical surfaces
   (an airborne scanner sees roofs and ground, few walls: Autzen 6 %, IGN LiDAR HD 9 %, against
   19-45 % for street scans), else ``terrestrial`` when the file has several scanner positions (static
@@ -42,7 +43,8 @@ def measure(points: np.ndarray, *, scanner_positions=None, sample: int = SAMPLE,
     n = len(pts)
     if n < 20:
         return {"points": int(n), "spacing_m": float("nan"), "spacing_p90_m": float("nan"),
-                "vertical_share": float("nan"), "capture": "unknown", "extent_m": [0.0, 0.0, 0.0]}
+                "vertical_share": float("nan"), "ground_two_way_share": None, "capture": "unknown",
+                "extent_m": [0.0, 0.0, 0.0]}
     pts = pts - pts.mean(axis=0)
     tree = cKDTree(pts)
     rng = np.random.default_rng(seed)
@@ -59,7 +61,7 @@ def measure(points: np.ndarray, *, scanner_positions=None, sample: int = SAMPLE,
     flat = nz > 0.9
     horizontal = float(flat.mean())
     two_way = np.sqrt(np.maximum(ev[:, 1], 0.0)) >= TWO_WAY_SPREAD * d[:, -1]
-    two_way_share = float(two_way[flat].mean()) if flat.any() else float("nan")
+    two_way_share = round(float(two_way[flat].mean()), 4) if flat.any() else None
     n_scanners = 0
     if scanner_positions is not None:
         sp = np.asarray(scanner_positions, dtype=float).reshape(-1, 3)
@@ -73,7 +75,7 @@ def measure(points: np.ndarray, *, scanner_positions=None, sample: int = SAMPLE,
     ext = np.ptp(pts, axis=0)
     return {"points": int(n), "spacing_m": float(np.median(nn)), "spacing_p90_m": float(np.quantile(nn, 0.9)),
             "vertical_share": round(vertical, 4), "horizontal_share": round(horizontal, 4),
-            "ground_two_way_share": round(two_way_share, 4),
+            "ground_two_way_share": two_way_share,
             "capture": capture, "scanners": n_scanners, "extent_m": [round(float(e), 3) for e in ext]}
 
 
