@@ -223,18 +223,16 @@ def scan_source(params, ctx, *, in_textured_mesh_ply: Path, out_opendrive_xodr: 
 
     from twinkit import artefacts as A
 
-    from .scan import (NoRoads, ScanSourceParams, build_network, choose_curbs, cloud_xy, draw_scan_roads,
-                       ground_two_way_share, level_params, mark_source, point_spacing, read_labels, read_truth,
-                       scan_metrics, scan_report)
+    from .scan import (NoRoads, ScanSourceParams, build_network, choose_curbs, cloud_sampling, cloud_xy,
+                       draw_scan_roads, level_params, mark_source, read_labels, read_truth, scan_metrics, scan_report)
 
     params = params or ScanSourceParams()
     t0 = time.perf_counter()
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
     which, src, labels = read_labels(params.labels, len(mesh.vertices), in_textured_mesh_ply.name, in_labels_npy,
                                      in_gt_labels_npy, ctx.log)
-    spacing = point_spacing(in_points_meta_json, in_points_ply)
+    spacing, two_way = cloud_sampling(in_points_meta_json, in_points_ply)
     labels_for_mask, curbs = choose_curbs(labels, spacing, params, src, ctx.log)
-    two_way = ground_two_way_share(in_points_meta_json, in_points_ply)
     params = level_params(params, labels_for_mask, curbs, two_way, ctx.log)
     use_cloud = not curbs and in_points_ply is not None and params.min_point_density > 0
     points_xy = cloud_xy(in_points_ply) if use_cloud else None

@@ -32,7 +32,7 @@ from .build import build_network, check_round, no_roads_report, scan_metrics, sc
 from .checks import (check_lanes, cut_arms, detach_junctions, lane_heights, narrow_arms, nudge_arms, parked_faces,
                      steps_across, trim_unsupported)
 from .geometry import lane_layout
-from .inputs import choose_curbs, cloud_xy, ground_two_way_share, level_params, point_spacing, read_labels, read_truth
+from .inputs import choose_curbs, cloud_sampling, cloud_xy, level_params, read_labels, read_truth
 from .masks import carriageway_mask, measured
 from .measures import covered, describe, lanes_on_road, network_length, record_stage, street_axis
 from .model import Arm, Network, NoRoads, ScanSourceParams, empty_network
@@ -42,10 +42,10 @@ from .picture import draw_scan_roads
 from .skeleton import skeleton_graph, thin
 
 __all__ = ["Arm", "Network", "NoRoads", "ScanSourceParams", "WALK_MAX_M", "add_heights_and_signals", "add_sidewalks",
-           "build_network", "carriageway_mask", "check_lanes", "check_round", "choose_curbs", "cloud_xy", "covered",
-           "ground_two_way_share", "level_params",
+           "build_network", "carriageway_mask", "check_lanes", "check_round", "choose_curbs", "cloud_sampling", "cloud_xy",
+           "covered", "level_params",
            "cut_arms", "derive_network", "describe", "detach_junctions", "draw_scan_roads", "empty_map",
            "empty_network", "is_empty_map", "lane_heights", "lane_layout", "lanes_on_road", "mark_source",
            "measured", "narrow_arms", "netconvert_plain", "network_length", "no_roads_report", "nudge_arms", "parked_faces",
-           "point_spacing", "read_labels", "read_truth", "record_stage", "scan_metrics", "scan_report", "skeleton_graph",
+           "read_labels", "read_truth", "record_stage", "scan_metrics", "scan_report", "skeleton_graph",
            "steps_across", "street_axis", "thin", "trim_unsupported", "write_plain"]

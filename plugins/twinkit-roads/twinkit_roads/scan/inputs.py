@@ -1,4 +1,4 @@
-"""The scan road source's inputs: which labels, the cloud's point spacing (curbs or not), the cloud's points,
+"""The scan road source's inputs: which labels, the cloud's sampling (curbs or not), the cloud's points,
 the true lane centre lines."""
 from __future__ import annotations
 
@@ -33,25 +33,22 @@ def read_labels(which: str, n_vertices: int, mesh_name: str, in_labels_npy: Path
     return which, src, A.read_labels(src, n_vertices, mesh_name).astype(np.int64)
 
 
-def point_spacing(in_points_meta_json: Path | None, in_points_ply: Path | None = None) -> float | None:
-    """The cloud's median point spacing (m) from points_meta.json's density block (measured from points.ply when
-    an older file lacks it); None without points_meta.json."""
+def cloud_sampling(in_points_meta_json: Path | None, in_points_ply: Path | None = None) -> tuple[float | None,
+                                                                                              float | None]:
+    """(the cloud's median point spacing (m), the share of its ground sampled in patches rather than single scan
+    lines (:func:`twinkit.surface.density.measure` ``ground_two_way_share``)) from points_meta.json's density
+    block, one read; what an older file lacks is measured from points.ply when given. (None, None) without
+    points_meta.json."""
     if in_points_meta_json is None:
-        return None
-    return A.read_points_meta(in_points_meta_json, points=in_points_ply).spacing_m
-
-
-def ground_two_way_share(in_points_meta_json: Path | None, in_points_ply: Path | None = None) -> float | None:
-    """The share of the cloud's ground whose neighbourhoods are patches, not single scan lines
-    (:func:`twinkit.surface.density.measure` ``ground_two_way_share``), from points_meta.json, measured from
-    points.ply when an older file lacks it; None when neither says."""
-    density = A.read_points_meta(in_points_meta_json, points=in_points_ply).density if in_points_meta_json else {}
-    share = density.get("ground_two_way_share")
-    if share is None and in_points_ply is not None and Path(in_points_ply).is_file():
+        return None, None
+    meta = A.read_points_meta(in_points_meta_json, points=in_points_ply)
+    density = meta.density
+    if "ground_two_way_share" not in density and in_points_ply is not None and Path(in_points_ply).is_file():
         from twinkit.surface.density import measure
 
-        share = measure(A.read_points(in_points_ply).vertices)["ground_two_way_share"]
-    return None if share is None or not np.isfinite(share) else float(share)
+        density = measure(A.read_points(in_points_ply).vertices)
+    share = density.get("ground_two_way_share")
+    return meta.spacing_m, None if share is None else float(share)
 
 
 def level_params(p: ScanSourceParams, labels_for_mask: np.ndarray | None, curbs: bool, two_way: float | None,
