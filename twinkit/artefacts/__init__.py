@@ -69,7 +69,8 @@ def read_points_meta(path: str | Path, points: str | Path | np.ndarray | None = 
     A file without the ``density`` block (schema version 1, the photo branch before twinkit 43) gets it
     measured from ``points`` ((n, 3) float array, metres, or the path of ``points.ply``) when given, with
     ``density["filled_from_points"] = True``; without ``points`` it is an :class:`ArtefactError` that says so.
-    Other missing fields are always an error."""
+    A block without ``ground_two_way_share`` (written before 30 Nov 2026) gets that one measured from ``points``
+    when given (else it stays absent). Other missing fields are always an error."""
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -80,6 +81,9 @@ def read_points_meta(path: str | Path, points: str | Path | np.ndarray | None = 
             raise ArtefactError(f"{path}: no 'density' block: written by an older twinkit (points_meta.json schema "
                                 f"v1), so the point spacing is unknown; {PointsMeta.FIX}")
         data = dict(data, density=dict(_measure(points), filled_from_points=True))
+    elif (isinstance(data, dict) and isinstance(data.get("density"), dict) and points is not None
+          and "ground_two_way_share" not in data["density"]):
+        data = dict(data, density=dict(data["density"], ground_two_way_share=_measure(points)["ground_two_way_share"]))
     return PointsMeta.from_json(data, path)
 
 
@@ -419,7 +423,7 @@ CATALOGUE: dict[str, Artefact] = dict([
                    "tiles:plan_tiles"),
     _entry("points_meta.json", "JSON", PointsMeta, read_points_meta, write_points_meta,
            writers="photo:dense pointcloud:read_cloud",
-           readers="roads:road_source/scan"),
+           readers="roads:road_source/scan segmentation:backproject"),
     _entry("textured_mesh.ply", "PLY mesh", F.TexturedMeshPly, read_textured_mesh, write_textured_mesh,
            writers="photo:photo_texture pointcloud:bake_texture",
            readers="photo:photo_texture pointcloud:evaluate_reconstruction roads:align_roads roads:apply_alignment "

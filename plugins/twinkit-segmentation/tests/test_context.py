@@ -303,6 +303,12 @@ def test_mounted_cue_a_free_plate_is_a_sign_a_box_on_a_post_is_a_light():
     assert (lab[mch] == BUILDING).all() and (lab[mf] == BUILDING).all()  # a facade fragment is no sign
     off, _, _ = fuse_with_context(p, v, n, e, cues=SHAPE_OFF["mounted"])
     assert (off[mpl] == BUILDING).all() and (off[mh] == BUILDING).all()
+    # gated off (a capture that cannot show the post), the item keeps no sign-or-signal-head reading either
+    q = p.copy()
+    q[mpl] = votes(1, traffic_light=0.4, traffic_sign=0.35, building=0.25)
+    ref, _, _ = fuse_with_context(q, v, n, e, cues=SHAPE_OFF["mounted"])
+    gated, _, _ = fuse_with_context(q, v, n, e, gates={"mounted": np.zeros(len(v), bool)})
+    assert (ref[mpl] == TRAFFIC_LIGHT).mean() > 0.9 and np.array_equal(gated[mpl], ref[mpl])
 
 
 def test_low_cue_a_two_metre_wall_is_no_building_a_facade_is():

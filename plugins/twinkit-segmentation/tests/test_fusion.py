@@ -272,6 +272,36 @@ def test_the_furniture_cues_need_the_classifier_to_leave_furniture_open(tmp_path
     assert all(off[c].all() for c in FURNITURE_CUES)
 
 
+def test_the_furniture_cues_stay_off_on_a_capture_whose_ground_is_single_scan_lines(tmp_path):
+    from twinkit import artefacts as A
+    from twinkit_segmentation.backproject_parts import _cue_gates, capture_two_way_share
+    from twinkit_segmentation.gates import FURNITURE_CUES
+    from twinkit_segmentation.params import BackprojectParams
+
+    class Ctx:
+        threads = 1
+        log = __import__("logging").getLogger("test")
+
+    v, f, _ = grid(0, 4, 0, 4, 0.0, 0.1)
+    mesh = Mesh(vertices=v, faces=f)
+    cloud = Mesh(vertices=v + np.random.default_rng(0).normal(0, 0.002, v.shape))
+    dense, info = _cue_gates(BackprojectParams(), Ctx(), mesh, cloud, two_way_share=0.99)
+    rings, rinfo = _cue_gates(BackprojectParams(), Ctx(), mesh, cloud, two_way_share=0.3)  # a spinning sweep
+    assert all(dense[c].all() for c in FURNITURE_CUES) and not any(rings[c].any() for c in FURNITURE_CUES)
+    assert all(np.array_equal(dense[c], rings[c]) for c in dense if c not in FURNITURE_CUES)
+    assert rinfo["ground_two_way_share"] == 0.3
+    unknown, _ = _cue_gates(BackprojectParams(), Ctx(), mesh, cloud, two_way_share=None)
+    off, _ = _cue_gates(BackprojectParams(furniture_min_two_way_share=0.0), Ctx(), mesh, cloud, two_way_share=0.3)
+    assert all(unknown[c].all() and off[c].all() for c in FURNITURE_CUES)
+    # the share comes from points_meta.json; a file written before the key gets it measured from the cloud
+    meta = tmp_path / "points_meta.json"
+    A.write_points_meta(meta, {"source": {"reader": "test"}, "counts": {}, "fields": {}, "frame": {}, "bounds_m": [],
+                               "density": {"points": len(v), "spacing_m": 0.1, "capture": "mobile"}})
+    grid_share = capture_two_way_share(meta, cloud)
+    assert grid_share is not None and grid_share > 0.9  # a grid spreads both ways
+    assert capture_two_way_share(None, cloud) is None and capture_two_way_share(tmp_path / "missing.json") is None
+
+
 def test_the_low_cue_needs_a_capture_that_sees_higher():
     from twinkit_segmentation.context import ContextOptions
     from twinkit_segmentation.gates import reach_gate

@@ -56,9 +56,22 @@ def _fuse_sources(params: BackprojectParams, ctx: StepContext, p_views, votes, g
     return p, info
 
 
-def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=None):
+def capture_two_way_share(in_points_meta_json: Path | None, cloud=None) -> float | None:
+    """The share of the capture's ground sampled in patches rather than single scan lines (points_meta.json's
+    density block, :func:`twinkit.surface.density.measure`; an older file's is measured from ``cloud``'s
+    vertices when given); None without points_meta.json or ground."""
+    if in_points_meta_json is None or not Path(in_points_meta_json).is_file():
+        return None
+    meta = A.read_points_meta(in_points_meta_json, points=None if cloud is None else cloud.vertices)
+    share = meta.density.get("ground_two_way_share")
+    return None if share is None else float(share)
+
+
+def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=None, two_way_share=None):
     """(cue -> (n,) bool gate, or None; the gates' metrics). ``geom`` (n, 19) or None: the 3D classifier's
-    votes, which gate the furniture cues (``furniture_geometry_share``)."""
+    votes, which gate the furniture cues (``furniture_geometry_share``); ``two_way_share``: the share of the
+    capture's ground sampled in patches (points_meta.json), under ``furniture_min_two_way_share`` the
+    furniture cues are off everywhere (None: unknown, no such gate)."""
     if not params.cue_gates or cloud is None or not params.context:
         return None, {"used": False}
     import numpy as np
@@ -71,7 +84,14 @@ def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=No
     q = capture_quality(cloud.vertices, mesh.vertices, unit_normals(mesh)[:, 2] >= opt.up_normal_z,
                         threads=max(1, int(getattr(ctx, "threads", 1) or 1)))
     gates = cue_gates(q, opt)
-    info = {"used": True}
+    info = {"used": True, "ground_two_way_share": two_way_share}
+    if two_way_share is not None and two_way_share < params.furniture_min_two_way_share:
+        ctx.log.info("cue gates: %.0f %% of the capture's ground is sampled in patches (under "
+                     "furniture_min_two_way_share=%g: single scan lines, a spinning sweep): the furniture cues (%s) "
+                     "stay off, a ring fragment of a crown floats free as a sign would", 100 * two_way_share,
+                     params.furniture_min_two_way_share, "/".join(FURNITURE_CUES))
+        for c in FURNITURE_CUES:
+            gates[c] = np.zeros(len(mesh.vertices), bool)
     if geom is not None and params.furniture_geometry_share > 0:
         said = geometry_gate(geom, params.furniture_geometry_share)
         info["furniture_by_geometry_share"] = round(float(said.mean()), 4)

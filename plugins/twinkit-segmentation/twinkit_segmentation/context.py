@@ -338,6 +338,9 @@ def gated_context(vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray, 
     for c, g in gates.items():
         if c in ctx:
             ctx[c] = ctx[c] & np.asarray(g, bool)
+    for part in ("plate", "box"):  # the mounted item's reading as a sign or a signal head goes with it
+        if part in ctx:
+            ctx[part] = ctx[part] & ctx["mounted"]
     return ctx, ungated, step_gate
 
 

@@ -24,7 +24,9 @@ The gates (each a mechanism, thresholds from the cue's own lengths):
   the scan resolves one), not on the band beside them, which may lie in a parked car's scan shadow;
 - ``column`` and ``mounted``: the scan samples finer than a post is wide (spacing <= ``column_width_m``,
   i.e. ``support <= column_width_m / 2``, support being about half the spacing): where it samples
-  coarser, any sparse facade breaks into fragments as narrow as a post and a thin slice says nothing;
+  coarser, any sparse facade breaks into fragments as narrow as a post and a thin slice says nothing
+  (backproject also keeps both off on a capture whose ground is sampled in rings, not patches:
+  ``furniture_min_two_way_share``);
 - ``low``, ``narrow`` and ``slender``: an object's top and width are measured where its surface is
   sampled at spacing ``slice_m`` or finer (``support <= slice_m / 2``); ``low`` also needs the
   capture to reach twice ``low_top_m`` up within 10 m (:func:`reach_gate`): a top under 2.5 m is the

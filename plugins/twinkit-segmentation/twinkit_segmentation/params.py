@@ -174,6 +174,13 @@ class BackprojectParams:
                                                  "least this share: a crown's fragment floating free in a sparse "
                                                  "scan is foliage to its multi-scale features (docs/segmentation.md "
                                                  '"Cue gates"); 0 = off.')
+    furniture_min_two_way_share: float = param(0.5, ge=0, le=1,
+                                               help="The furniture cues (column, mounted) act only on a capture whose "
+                                                    "ground is sampled in patches on at least this share "
+                                                    "(points_meta.json density.ground_two_way_share): a single "
+                                                    "spinning sweep cuts crowns and hedges into ring fragments that "
+                                                    "float free and thin as a post would (docs/segmentation.md \"Cue "
+                                                    "gates\"); 0 = off.")
     fusion_weights: str = param("", free=True, path=True,
                                 help="The views' and the geometry's weights per capture kind (a JSON file written by "
                                      "python -m twinkit_segmentation.fusion calibrate); empty = the plugin's "

@@ -24,7 +24,7 @@ from pathlib import Path
 from twinkit import InputError, StepContext
 from twinkit import artefacts as A
 
-from .backproject_parts import _cue_gates, _fuse, _fuse_sources, _geometry_votes, vote_distribution
+from .backproject_parts import _cue_gates, _fuse, _fuse_sources, _geometry_votes, capture_two_way_share, vote_distribution
 from .params import (BackprojectParams, EvaluateParams, FelzenszwalbParams, ImportLabelsParams, NoSegmentsParams,
                      PhotoViewsParams, PredictParams, RenderParams, SampleViewsParams, TransferGtParams)
 
@@ -383,7 +383,7 @@ def _size_batches(kept: list, step: int, folder: Path) -> list:
 def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh_ply: Path, in_segments_npy: Path,
                 in_vertex_votes_npy: Path, out_labels_npy: Path, out_confidence_npy: Path,
                 out_labels_ply: Path, out_confidence_png: Path, in_points_ply: Path | None = None,
-                in_geometry_votes_npy: Path | None = None) -> dict:
+                in_geometry_votes_npy: Path | None = None, in_points_meta_json: Path | None = None) -> dict:
     """Votes per segment and class, fused with the geometry's class probabilities where a 3D classifier
     wrote them (geometry_votes.npy, weights per capture kind: :mod:`twinkit_segmentation.fusion`), the
     cloud's own classes (points.ply ``classification``) and the gated geometric cues as priors; argmax ->
@@ -421,7 +421,7 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     fprior, fvoting, fcodes, finfo = vertex_file_classes(params, ctx, in_points_ply, mesh.vertices)
     labels, conf = decide_distribution(p, unseen)
     base_labels = labels.copy()  # the sources alone
-    gates, ginfo = _cue_gates(params, ctx, mesh, cloud, geom)
+    gates, ginfo = _cue_gates(params, ctx, mesh, cloud, geom, capture_two_way_share(in_points_meta_json, cloud))
     # the views' near-unanimous floor holds where they lead: not where a colourless capture has geometry
     unshield = None if geom is None or fsum.get("kind") == "coloured" else geom.sum(axis=1) > 0
     cues = list(params.context_cues) if geom is None else [c for c in params.context_cues

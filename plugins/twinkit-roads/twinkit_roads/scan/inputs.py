@@ -37,17 +37,13 @@ def cloud_sampling(in_points_meta_json: Path | None, in_points_ply: Path | None 
                                                                                               float | None]:
     """(the cloud's median point spacing (m), the share of its ground sampled in patches rather than single scan
     lines (:func:`twinkit.surface.density.measure` ``ground_two_way_share``)) from points_meta.json's density
-    block, one read; what an older file lacks is measured from points.ply when given. (None, None) without
-    points_meta.json."""
+    block, one read; what an older file lacks is measured from points.ply when given
+    (:func:`twinkit.artefacts.read_points_meta`). (None, None) without points_meta.json."""
     if in_points_meta_json is None:
         return None, None
-    meta = A.read_points_meta(in_points_meta_json, points=in_points_ply)
-    density = meta.density
-    if "ground_two_way_share" not in density and in_points_ply is not None and Path(in_points_ply).is_file():
-        from twinkit.surface.density import measure
-
-        density = measure(A.read_points(in_points_ply).vertices)
-    share = density.get("ground_two_way_share")
+    ply = in_points_ply if in_points_ply is not None and Path(in_points_ply).is_file() else None
+    meta = A.read_points_meta(in_points_meta_json, points=ply)
+    share = meta.density.get("ground_two_way_share")
     return meta.spacing_m, None if share is None else float(share)
 
 

@@ -103,6 +103,22 @@ def _drop_intensity(values: np.ndarray, rows: np.ndarray) -> None:
     values[rows, names.index("has_intensity")] = 0.0
 
 
+def roughen(values: np.ndarray, delta: float, scales_m: tuple[float, ...]) -> None:
+    """Make ``values`` (m, k) read as if the surfaces were rougher, in place: at each scale of ``scales_m`` the
+    roughness ``sqrt(l3)`` times ``10 ** delta``, the scattering ``l3 / l1`` times ``10 ** (2 delta)`` (at most
+    ``l2 / l1``, which stays) and the planarity what is left of ``l2 / l1``. Real facades and crowns carry
+    detail under a metre that the generated ones lack (docs/segmentation.md "Rough real surfaces")."""
+    names = feature_names()
+    for s in scales_m:
+        r, sc, pl = (names.index(f"{n}_{s:g}") for n in ("rough", "scattering", "planarity"))
+        sq = np.maximum(10.0 ** values[:, r].astype(np.float64) - 1e-3, 0.0)
+        values[:, r] = np.log10(sq * 10.0 ** delta + 1e-3)
+        l2 = values[:, pl] + values[:, sc]
+        new = np.minimum(values[:, sc] * 10.0 ** (2 * delta), l2)
+        values[:, sc] = new
+        values[:, pl] = l2 - new
+
+
 def score(model: GeometryModel, captures: list[tuple[str, np.ndarray, np.ndarray]]) -> dict:
     """IoU per class (percent), mIoU over the classes present, accuracy and coarse accuracy, pooled over
     ``captures`` [(name, values, labels)], and the mIoU / coarse accuracy of each."""
@@ -135,15 +151,22 @@ def check_scene_scores(model: GeometryModel, seed: int = 0) -> dict:
 
 
 def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048, lr=2e-3, weight_decay=1e-4,
-          intensity_dropout=0.5, min_points=200, seed=0, log=print):
-    """Fit the MLP on [(name, values, labels)]; returns (layers, mean, std, classes, recipe dict)."""
+          intensity_dropout=0.5, min_points=200, seed=0, rough_shift_max=0.0, rough_scales_m=(0.1, 0.25, 0.6),
+          log=print):
+    """Fit the MLP on [(name, values, labels)]; returns (layers, mean, std, classes, recipe dict).
+    ``rough_shift_max`` > 0: each capture's surfaces at ``rough_scales_m`` read rougher by a factor
+    ``10 ** delta``, ``delta`` drawn per capture from U(0, rough_shift_max) (:func:`roughen`)."""
     import torch
 
     torch.manual_seed(seed)
     torch.set_num_threads(1)
     rng = np.random.default_rng(seed)
     xs, ys = [], []
+    rough_rng = np.random.default_rng([seed, 7])
     for _, values, lab in train_caps:
+        if rough_shift_max > 0:
+            values = values.copy()
+            roughen(values, float(rough_rng.uniform(0.0, rough_shift_max)), tuple(rough_scales_m))
         for c in np.unique(lab):
             if c >= N_CLASSES:
                 continue
@@ -201,7 +224,9 @@ def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048
     recipe = {"hidden": list(hidden), "epochs": epochs, "per_class_per_capture": per_class, "lr": lr,
               "weight_decay": weight_decay, "intensity_dropout": intensity_dropout, "min_points": min_points,
               "seed": seed, "batch": batch, "optimizer": "Adam + cosine schedule, class weights count^-0.5",
-              "training_points": int(len(x)), "trained_prior": (np.sqrt(cnt) / np.sqrt(cnt).sum()).round(6).tolist()}
+              "training_points": int(len(x)),
+              **({"rough_shift_max": rough_shift_max, "rough_scales_m": list(rough_scales_m)} if rough_shift_max > 0 else {}),
+              "trained_prior": (np.sqrt(cnt) / np.sqrt(cnt).sum()).round(6).tolist()}
     return layers, mean, std, classes, recipe
 
 
@@ -259,6 +284,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--turn", action="store_true",
                     help="turn each capture about the vertical by an angle drawn from its name before its features "
                          "(the generated streets run along the axes; capture_features)")
+    ap.add_argument("--rough-shift", type=float, default=0.0,
+                    help="each training capture's surfaces read rougher by 10**delta, delta ~ U(0, this) per capture "
+                         "(log10 units; 0 = off; train.roughen)")
+    ap.add_argument("--rough-scales", default="0.1,0.25,0.6", help="the shape scales --rough-shift roughens")
     ap.add_argument("--ablate", default="", help="comma-separated feature names held at 0 in training and "
                                                    "validation (an ablation: the model cannot use them)")
     a = ap.parse_args(argv)
@@ -283,7 +312,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     layers, mean, std, classes, recipe = train(tr, hidden=tuple(int(h) for h in a.hidden.split(",")),
                                                epochs=a.epochs, per_class=a.per_class, batch=a.batch,
-                                               intensity_dropout=a.intensity_dropout, seed=a.seed)
+                                               intensity_dropout=a.intensity_dropout, seed=a.seed,
+                                               rough_shift_max=a.rough_shift,
+                                               rough_scales_m=tuple(float(x) for x in a.rough_scales.split(",")))
+    for name in filter(None, a.ablate.split(",")):  # the model ignores an ablated feature whatever a capture gives
+        i = feature_names().index(name)
+        layers[0][0][i, :] = 0.0
+        mean[i], std[i] = 0.0, 1.0
     model = GeometryModel(layers=layers, mean=mean, std=std, classes=classes, feature_names=feature_names())
     prior = prior_shift(model, tr, recipe.pop("trained_prior"), va,
                         alphas=tuple(float(x) for x in a.prior_alphas.split(",")))
