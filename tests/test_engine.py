@@ -173,6 +173,8 @@ def test_fan_out_runs_items_in_parallel_and_caches_each(project):
                     env=project.env(TWINKIT_TEST_TILE_SLEEP="1"))
     assert r.rc == 0, r.text
     assert (project.ws / "04_gather" / "merged.txt").read_text() == f"{4 * 1 + 0 + 1 + 2 + 3}\n"
+    # without a terminal to draw a bar on, the log says how far the items are
+    assert "03_per_tile: 1 of 4 items done" in r.err and "03_per_tile: 4 of 4 items done" in r.err, r.err
     pids = {(project.ws / "03_per_tile" / f"{i:03d}" / "tile.txt").read_text().split()[1] for i in range(4)}
     assert len(pids) == 2, "items should run in two worker processes"
     per_item = json.loads((project.ws / "03_per_tile" / "step.json").read_text())["metrics"]["per_item"]

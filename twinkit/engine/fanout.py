@@ -154,10 +154,17 @@ class FanoutMixin(EngineBase):
         log.debug("  %s: running %s on %d of %d items ...", ps.folder, ps.label, len(tasks), len(items))
         ex = self._executor()
         results = ex.map(_run_item_task, tasks)
+        from twinkit.progress import is_interactive
+
+        lines = not is_interactive() and len(tasks) > 1  # no bar to draw: say how far the items are in the log
         try:
-            for i, res in zip(todo, _track(results, len(tasks), ps.id)):
+            for n, (i, res) in enumerate(zip(todo, _track(results, len(tasks), ps.id)), 1):
                 if isinstance(res, dict) and res.get("key"):
                     keys[i] = res["key"]  # an item that read a new site field is stored under the key with it
+                if lines:
+                    el = time.perf_counter() - t0
+                    log.info("  %s: %d of %d items done (%.0f s, about %.0f s left)", ps.folder, n, len(tasks), el,
+                             el / n * (len(tasks) - n))
         except BrokenProcessPool as exc:
             from twinkit.engine.isolate import NativeCrash
 
