@@ -146,6 +146,14 @@ class PointsMeta(JsonSchema):
         """Median nearest-neighbour point spacing, metres."""
         return float(self.density["spacing_m"])
 
+    @property
+    def ground_two_way_share(self) -> float | None:
+        """Share of the ground's points sampled in patches rather than single scan lines (a spinning sweep's
+        rings: about 0.3; :func:`twinkit.surface.density.measure`); None where unknown (no ground, or a file
+        written before the key and read without its points)."""
+        share = self.density.get("ground_two_way_share")
+        return None if share is None else float(share)
+
 
 @dataclass
 class CamerasSite(JsonSchema):

@@ -62,9 +62,7 @@ def capture_two_way_share(in_points_meta_json: Path | None, cloud=None) -> float
     vertices when given); None without points_meta.json or ground."""
     if in_points_meta_json is None or not Path(in_points_meta_json).is_file():
         return None
-    meta = A.read_points_meta(in_points_meta_json, points=None if cloud is None else cloud.vertices)
-    share = meta.density.get("ground_two_way_share")
-    return None if share is None else float(share)
+    return A.read_points_meta(in_points_meta_json, points=None if cloud is None else cloud.vertices).ground_two_way_share
 
 
 def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=None, two_way_share=None):

@@ -43,8 +43,7 @@ def cloud_sampling(in_points_meta_json: Path | None, in_points_ply: Path | None 
         return None, None
     ply = in_points_ply if in_points_ply is not None and Path(in_points_ply).is_file() else None
     meta = A.read_points_meta(in_points_meta_json, points=ply)
-    share = meta.density.get("ground_two_way_share")
-    return meta.spacing_m, None if share is None else float(share)
+    return meta.spacing_m, meta.ground_two_way_share
 
 
 def level_params(p: ScanSourceParams, labels_for_mask: np.ndarray | None, curbs: bool, two_way: float | None,
