@@ -221,9 +221,13 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
             raise _input_error(f"plan_tiles: target_faces must be >= 0 (got {params.target_faces})")
         items = []
         inf = float("inf")
-        for t in ctx.progress(tiles, total=len(tiles), desc="plan_tiles"):
-            sel = in_box(xy, t["padded"])
-            n = int(sel.sum())
+        column: tuple = (None, None)  # (its padded x range, the indices of the points in it): one pass per column
+        for t in ctx.progress(sorted(tiles, key=lambda t: (t["ix"], t["iy"])), total=len(tiles), desc="plan_tiles"):
+            box = t["padded"]
+            if column[0] != (box[0], box[2]):
+                column = ((box[0], box[2]), np.flatnonzero((xy[:, 0] >= box[0]) & (xy[:, 0] <= box[2])))
+            sel = column[1][in_box(xy[column[1]], box)]
+            n = len(sel)
             name = f"tile_{t['index']:03d}.ply"
             if n < 10:
                 ctx.log.info("tile %d has %d points: skipped", t["index"], n)
@@ -235,8 +239,9 @@ def plan_tiles(params: PlanTilesParams, ctx, *, in_points_ply: Path, out_tiles_j
             core = [-inf if c is None else c for c in t["core"][:2]] + [inf if c is None else c for c in t["core"][2:]]
             predicted = round(estimate_tile_mb(n, float(ext[0] * ext[1]), params.voxel_m), 1)
             # "cost" makes the engine start the biggest tiles first (better balance between workers)
-            items.append(t | {"chunk": name, "points": n, "core_points": int(in_box(xy, core).sum()),
+            items.append(t | {"chunk": name, "points": n, "core_points": int(in_box(xy[sel], core).sum()),
                               "voxel_m": params.voxel_m, "predicted_mb": predicted, "cost": predicted})
+        items.sort(key=lambda i: i["index"])
         if params.target_faces > 0:
             total = max(1, sum(i["core_points"] for i in items))
             for i in items:
