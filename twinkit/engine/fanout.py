@@ -159,13 +159,15 @@ class FanoutMixin(EngineBase):
         lines = not is_interactive() and len(tasks) > 1  # no bar to draw: say how far the items are in the log
         costs = [_item_cost(items[i]) for i in todo]
         by_cost = all(c > 0 for c in costs)  # the time left by the items' declared cost (costliest run first)
+        total_cost, done_cost = sum(costs), 0.0
         try:
             for n, (i, res) in enumerate(zip(todo, _track(results, len(tasks), ps.id)), 1):
                 if isinstance(res, dict) and res.get("key"):
                     keys[i] = res["key"]  # an item that read a new site field is stored under the key with it
                 if lines:
                     el = time.perf_counter() - t0
-                    done = sum(costs[:n]) / sum(costs) if by_cost else n / len(tasks)
+                    done_cost += costs[n - 1]
+                    done = done_cost / total_cost if by_cost else n / len(tasks)
                     log.info("  %s: %d of %d items done (%.0f s, about %.0f s left)", ps.folder, n, len(tasks), el,
                              el * (1 - done) / done)
         except BrokenProcessPool as exc:
