@@ -129,3 +129,63 @@ def test_new_faces_that_break_the_surface_are_found():
     bad = _bad_new_faces(np.vstack([old, new]), len(old))
     assert bad.tolist() == [False, True, True]
     assert not _bad_new_faces(old, len(old)).any() and len(_bad_new_faces(old, len(old))) == 0
+
+
+# border edges that pythoncdt cannot resolve, found by fuzzing ``stitch``: ends a hair apart and crossings at
+# near-zero angles, where the crossing the library computes lies outside both edges ("computed split vertex is
+# invalid"); a seventh edge, (10, 11), crosses nothing and is no Delaunay edge (grid point (1000.75, 1002.65)
+# stands just above its middle)
+_TANGLE_XY = np.array([[1000.5827912714722, 1000.2453599910612], [1000.6151315098433, 1000.3458865496199],
+                       [1000.5795607682278, 1000.2107618596859], [1000.1081174241292, 1000.8169534114862],
+                       [1000.4438893490255, 1000.0809471107964], [1000.4438893490245, 1000.0809471107971],
+                       [1000.3918369091892, 1000.1129509991226], [1000.1225646792968, 1000.4656597562621],
+                       [1000.3617859561015, 1000.466715223888], [1000.4625837718919, 1000.0988345319219],
+                       [999.0, 1002.5], [1002.5, 1002.6]])
+_TANGLE_EDGES = np.array([[0, 6], [1, 4], [2, 5], [3, 9], [5, 7], [8, 9], [10, 11]])
+
+
+def test_stitch_leaves_unresolvable_crossing_border_edges_free_instead_of_failing(caplog):
+    import pythoncdt as cdt
+    import pytest
+
+    v = np.c_[_TANGLE_XY, np.zeros(len(_TANGLE_XY))]
+    gxy = np.array([[998.0, 998.0], [998.0, 1003.0], [1003.0, 998.0], [1003.0, 1003.0], [1000.75, 1002.65]])
+    rep_id, e = holes._border_from_above(v, _TANGLE_EDGES)
+    raw = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
+    raw.insert_vertices(np.ascontiguousarray(np.vstack([_TANGLE_XY[rep_id], gxy])))
+    with pytest.raises(RuntimeError, match="can not be resolved"):
+        raw.insert_edges(e.astype(np.uintc))  # the library alone fails on what stitch gives it
+    rep: dict = {}
+    with caplog.at_level("WARNING", logger="twinkit.street.holes"):
+        newv, nf = holes.stitch(v, np.zeros((0, 3), np.int64), _TANGLE_EDGES, gxy, np.zeros(len(gxy)),
+                                lambda cen, edge: np.ones(len(cen), bool), 1e-9, report=rep)
+    assert rep["border_edges_freed"] == 6
+    assert "6 of 7 border edges left free" in caplog.text
+    assert len(newv) == 5 and nf.max() < len(v) + len(newv)
+    # the edge in no conflict stays fixed
+    edges = np.sort(np.vstack([nf[:, [0, 1]], nf[:, [1, 2]], nf[:, [2, 0]]]), axis=1)
+    assert (edges == [10, 11]).all(axis=1).any()
+    # a proper triangulation: every face counter-clockwise seen from above, together covering the 5 m x 5 m
+    # square once (no overlap, no gap)
+    p = np.vstack([v, newv])[:, :2]
+    a, b, c = p[nf[:, 0]], p[nf[:, 1]], p[nf[:, 2]]
+    area2 = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]
+    assert (area2 > 0).all()
+    assert abs(0.5 * area2.sum() - 25.0) < 1e-6
+
+
+def test_edges_in_conflict_are_crossings_and_ends_on_another_edge_not_shared_ends():
+    p = np.array([[0, 0], [2, 0], [1, -1], [1, 1], [3, 0], [2, 1], [4, -1], [5, 0], [4.5, 0.0]], float)
+    e = np.array([[0, 1],   # crossed by (2, 3)
+                  [2, 3],
+                  [1, 4],   # shares an end with (0, 1) and (1, 5): not in conflict by that
+                  [1, 5],
+                  [6, 7],   # near (4, 8) but apart from it
+                  [4, 8],   # collinear with (1, 4), beyond it: they meet only at the shared end 4
+                  ])
+    bad = holes._edges_in_conflict(p, e)
+    assert bad.tolist() == [True, True, False, False, False, False]
+    # an end within the tolerance of another edge's interior (a T) is a conflict
+    p2 = np.array([[0, 0], [2, 0], [1, 1e-9], [1, 1]], float)
+    assert holes._edges_in_conflict(p2, np.array([[0, 1], [2, 3]])).tolist() == [True, True]
+    assert not holes._edges_in_conflict(p2, np.array([[0, 1]])).any()

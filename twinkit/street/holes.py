@@ -34,11 +34,14 @@ counter-clockwise seen from above (their normals face up).
 """
 from __future__ import annotations
 
+import logging
 from typing import Callable
 
 import numpy as np
 
 from twinkit.mesh.core import Mesh
+
+log = logging.getLogger(__name__)
 
 #: ground_z: (k, 2) float64 xy in metres -> (k,) float64 ground height in metres
 GroundZ = Callable[[np.ndarray], np.ndarray]
@@ -267,7 +270,7 @@ def patch(vertices: np.ndarray, border: np.ndarray, xy: np.ndarray, z: np.ndarra
 
 def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.ndarray, z: np.ndarray,
            keep: Callable[[np.ndarray, np.ndarray], np.ndarray], min_gap_m: float,
-           workers: int = -1) -> tuple[np.ndarray, np.ndarray]:
+           workers: int = -1, report: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Cover ground cells joined to a mesh (``vertices`` (m, 3), ``faces`` (f, 3)): the constrained Delaunay
     triangulation, seen from above, of the open ``border`` (e, 2) (vertex-id pairs, fixed edges; one 2D
     vertex per position within 1 mm, so a vertical border edge counts once; border edges that cross seen
@@ -276,8 +279,13 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     triangles, those ``keep`` selects (a function of their centres (t, 3) and longest edge seen from above
     (t,) -> (t,) bool), counter-clockwise seen from above, less the faces that would break the surface (a
     directed edge used twice, an edge of three faces). Returns (new vertices (u, 3), faces (n, 3) indexing
-    ``vertices`` then the new vertices)."""
-    import pythoncdt as cdt
+    ``vertices`` then the new vertices).
+
+    Where the CDT cannot resolve a crossing of border edges (it computes the crossing outside both edges in
+    floating point: edges crossing at a near-zero angle, or close to a third edge's end), the border edges
+    that cross or touch another's interior are left free and the triangulation is made again; should that
+    fail too, with no fixed edge at all (the surface filter above still drops faces that break the mesh).
+    A warning and ``report["border_edges_freed"]`` say how many edges were left free."""
     from scipy.spatial import cKDTree
 
     v, f = vertices, np.asarray(faces)
@@ -297,11 +305,19 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     nb = len(bxy)
     if len(pts) < 3:
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
-    tri.insert_vertices(np.ascontiguousarray(pts))
-    if len(e):
-        tri.insert_edges(np.ascontiguousarray(e.astype(np.uintc)))
-    tri.erase_super_triangle()
+    try:
+        tri = _cdt(pts, e)
+    except RuntimeError as err:
+        bad = _edges_in_conflict(pts, e)
+        try:
+            tri = _cdt(pts, e[~bad])
+        except RuntimeError:
+            bad[:] = True
+            tri = _cdt(pts, e[:0])
+        log.warning("ground fill: the triangulation could not resolve crossing border edges (%s); %d of %d border "
+                    "edges left free", str(err).splitlines()[0], int(bad.sum()), len(e))
+        if report is not None:
+            report["border_edges_freed"] = int(bad.sum())
     va = tri.vertices_array()
     allxy = np.c_[va["x"], va["y"]] if va.dtype.names else np.asarray(va, np.float64).reshape(-1, 2)
     if len(allxy) > len(pts):  # crossings of border edges seen from above: height of the nearest input vertex
@@ -337,6 +353,74 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     nf = np.where(nf >= m, m + remap[np.maximum(nf - m, 0)], nf)
     newv = p3[nb:][used]
     return newv, nf
+
+
+def _cdt(pts: np.ndarray, e: np.ndarray):
+    """The CDT of ``pts`` (n, 2) with the edges ``e`` (k, 2) fixed, crossings resolved, super triangle erased."""
+    import pythoncdt as cdt
+
+    tri = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
+    tri.insert_vertices(np.ascontiguousarray(pts))
+    if len(e):
+        tri.insert_edges(np.ascontiguousarray(e.astype(np.uintc)))
+    tri.erase_super_triangle()
+    return tri
+
+
+def _edges_in_conflict(p: np.ndarray, e: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
+    """Which edges ``e`` (k, 2) (ids into ``p`` (n, 2)) cross another edge's interior or have an end within
+    ``tol_m`` of it: (k,) bool. Edges that only share an end are not in conflict."""
+    bad = np.zeros(len(e), bool)
+    if len(e) < 2:
+        return bad
+    a, b = p[e[:, 0]], p[e[:, 1]]
+    # candidate pairs: edges whose boxes (grown by tol_m) share a cell of a grid about twice the median length
+    cell = max(2.0 * float(np.median(np.linalg.norm(b - a, axis=1))), 10 * tol_m)
+    lo = np.floor((np.minimum(a, b) - tol_m) / cell).astype(np.int64)
+    hi = np.floor((np.maximum(a, b) + tol_m) / cell).astype(np.int64)
+    span = hi - lo + 1
+    n = span[:, 0] * span[:, 1]
+    eid = np.repeat(np.arange(len(e)), n)
+    k = np.arange(len(eid)) - np.repeat(np.cumsum(n) - n, n)
+    cx = lo[eid, 0] + k % span[eid, 0]
+    cy = lo[eid, 1] + k // span[eid, 0]
+    order = np.lexsort((cy, cx))
+    eid, key = eid[order], np.c_[cx[order], cy[order]]
+    starts = np.r_[0, np.nonzero((np.diff(key, axis=0) != 0).any(axis=1))[0] + 1, len(eid)]
+    out = []
+    for s0, s1 in zip(starts[:-1], starts[1:]):
+        if s1 - s0 > 1:
+            g = eid[s0:s1]
+            u, w = np.triu_indices(len(g), 1)
+            out.append(np.c_[g[u], g[w]])
+    if not out:
+        return bad
+    pairs = np.unique(np.sort(np.vstack(out), axis=1), axis=0)
+    i, j = pairs[:, 0], pairs[:, 1]
+
+    def orient(o, u, w):
+        return (u[:, 0] - o[:, 0]) * (w[:, 1] - o[:, 1]) - (u[:, 1] - o[:, 1]) * (w[:, 0] - o[:, 0])
+
+    def end_on(q, qid, s, t, sid, tid):
+        # q lies within tol of the segment s-t's interior and is neither of its ends
+        d = t - s
+        ln2 = np.maximum((d * d).sum(axis=1), 1e-300)
+        u = ((q - s) * d).sum(axis=1) / ln2
+        dist = np.abs(orient(s, t, q)) / np.sqrt(ln2)
+        return (qid != sid) & (qid != tid) & (u > 0) & (u < 1) & (dist <= tol_m)
+
+    ai, bi, aj, bj = a[i], b[i], a[j], b[j]
+    ei, ej = e[i], e[j]
+    distinct = (ei[:, :, None] != ej[:, None, :]).all(axis=(1, 2))
+    o1, o2 = orient(ai, bi, aj), orient(ai, bi, bj)
+    o3, o4 = orient(aj, bj, ai), orient(aj, bj, bi)
+    cross = distinct & (o1 * o2 < 0) & (o3 * o4 < 0)
+    touch = (end_on(aj, ej[:, 0], ai, bi, ei[:, 0], ei[:, 1]) | end_on(bj, ej[:, 1], ai, bi, ei[:, 0], ei[:, 1])
+             | end_on(ai, ei[:, 0], aj, bj, ej[:, 0], ej[:, 1]) | end_on(bi, ei[:, 1], aj, bj, ej[:, 0], ej[:, 1]))
+    hit = cross | touch
+    bad[i[hit]] = True
+    bad[j[hit]] = True
+    return bad
 
 
 def _border_from_above(v: np.ndarray, border: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -217,7 +217,7 @@ def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.nd
         sel[sel] = ~_cover(scene, cen[sel, :2], cen[sel, 2], opt.cover_band_m)
         return sel
 
-    newv, nf = stitch(v, f, border, gxy, gz, keep, 0.4 * c, opt.threads)
+    newv, nf = stitch(v, f, border, gxy, gz, keep, 0.4 * c, opt.threads, rep)
     rep["border_vertices_joined"] = int(len(np.unique(nf[nf < m])))
     return newv, nf
 
