@@ -347,7 +347,7 @@ def test_a_junction_whose_lanes_leave_the_ground_is_taken_apart(four_way, tmp_pa
     net2 = copy.deepcopy(net)
     assert scan.detach_junctions(net2, [jid], p) == 0
     assert len(net2.arms) == 4 and all(nd["kind"] == "end" for nd in net2.nodes.values())
-    reach = max(a.width_m for a in net.arms) + 2.0
+    reach = 0.5 * max(a.width_m for a in net.arms) + 2.0
     assert min(np.hypot(*a.xy.T).min() for a in net2.arms) > reach - 1e-6
     nod, edg = scan.write_plain(net2, p, PROJ, tmp_path / "plain")
     scan.netconvert_plain(nod, edg, tmp_path / "apart.xodr", p)
@@ -484,8 +484,9 @@ def test_a_scan_without_roads_gives_a_map_without_roads_and_the_road_steps_pass_
 
 
 def test_taking_a_junction_apart_drops_the_roads_that_lie_inside_it():
-    """detach_junctions on a T: the two long roads are cut back to outside the junction's reach (widest
-    road + 2 m) and end there; the 6 m stub lies inside it and goes, with its end node."""
+    """detach_junctions on a T: the two long roads are cut back to outside the junction's reach (half the widest
+    road + 2 m: 4 m) and end there, keeping what lies beyond (6 m on); the 6 m stub keeps one shape point beyond
+    the reach, too short to stay a road, and goes with its end node."""
     xs = np.linspace(0.0, 20.0, 11)[:, None]
     east = np.c_[xs, np.zeros_like(xs)]
     west = -east
@@ -498,7 +499,7 @@ def test_taking_a_junction_apart_drops_the_roads_that_lie_inside_it():
     assert scan.detach_junctions(net, [0], scan.ScanSourceParams()) == 1
     assert len(net.arms) == 2 and 0 not in net.nodes and 2 not in net.nodes
     for arm in net.arms:
-        assert np.hypot(*arm.xy.T).min() > 6.0 and len(arm.z) == len(arm.xy)
+        assert np.isclose(np.hypot(*arm.xy.T).min(), 6.0) and len(arm.xy) == 8 and len(arm.z) == len(arm.xy)
         assert all(net.nodes[n]["kind"] == "end" for n in (arm.a, arm.b))
 
 

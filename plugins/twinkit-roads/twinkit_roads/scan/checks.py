@@ -340,14 +340,15 @@ def narrow_arms(net: Network, narrow: dict[int, list[int]], p: ScanSourceParams)
 
 def detach_junctions(net: Network, nodes: list[int], p: ScanSourceParams) -> int:
     """Take junctions out of the network: each road that met one is cut back to outside it (the junction's
-    reach: its widest road's width plus 2 m from its point) and ends there. Returns the roads dropped."""
+    reach: half its widest road's width plus 2 m from its point, about where netconvert's junction shape ends)
+    and ends there. Returns the roads dropped."""
     dropped = 0
     for nid in nodes:
         nd = net.nodes.get(nid)
         if nd is None:
             continue
         mine = [a for a in net.arms if nid in (a.a, a.b)]
-        reach = max((a.width_m for a in mine), default=0.0) + 2.0
+        reach = 0.5 * max((a.width_m for a in mine), default=0.0) + 2.0
         out = []
         for arm in net.arms:  # (arms compared by identity: a dataclass of arrays has no usable ==)
             if nid not in (arm.a, arm.b):
