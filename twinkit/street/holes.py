@@ -308,12 +308,7 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     try:
         tri = _cdt(pts, e)
     except RuntimeError as err:
-        bad = _edges_in_conflict(pts, e)
-        try:
-            tri = _cdt(pts, e[~bad])
-        except RuntimeError:
-            bad[:] = True
-            tri = _cdt(pts, e[:0])
+        tri, bad = _cdt_freeing(pts, e)
         log.warning("ground fill: the triangulation could not resolve crossing border edges (%s); %d of %d border "
                     "edges left free", str(err).splitlines()[0], int(bad.sum()), len(e))
         if report is not None:
@@ -365,6 +360,27 @@ def _cdt(pts: np.ndarray, e: np.ndarray):
         tri.insert_edges(np.ascontiguousarray(e.astype(np.uintc)))
     tri.erase_super_triangle()
     return tri
+
+
+def _cdt_freeing(pts: np.ndarray, e: np.ndarray, max_tries: int = 20):
+    """:func:`_cdt` for edges it could not resolve: (triangulation, (k,) bool the edges left free). First the
+    edges that cross or touch another (:func:`_edges_in_conflict`); then, while it still fails, the two edges
+    its error names (``... constraint edges (a, b) and (c, d) ...``), up to ``max_tries`` times; then all."""
+    import re
+
+    free = _edges_in_conflict(pts, e)
+    key = {(int(a), int(b)): k for k, (a, b) in enumerate(np.sort(e, axis=1))}
+    for _ in range(max_tries):
+        try:
+            return _cdt(pts, e[~free]), free
+        except RuntimeError as err:
+            named = [key.get(tuple(sorted(map(int, m)))) for m in re.findall(r"\((\d+), (\d+)\)", str(err))]
+            named = [k for k in named if k is not None and not free[k]]
+            if not named:
+                break
+            free[named] = True
+    free[:] = True
+    return _cdt(pts, e[:0]), free
 
 
 def _edges_in_conflict(p: np.ndarray, e: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
