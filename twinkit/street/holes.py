@@ -374,11 +374,12 @@ def _cdt_freeing(pts: np.ndarray, e: np.ndarray, max_tries: int = 20):
         try:
             return _cdt(pts, e[~free]), free
         except RuntimeError as err:
-            named = [key.get(tuple(sorted(map(int, m)))) for m in re.findall(r"\((\d+), (\d+)\)", str(err))]
-            named = [k for k in named if k is not None and not free[k]]
+            named = [key.get((min(int(a), int(b)), max(int(a), int(b))), -1)
+                     for a, b in re.findall(r"\((\d+), (\d+)\)", str(err))]
+            named = [k for k in named if k >= 0 and not free[k]]
             if not named:
                 break
-            free[named] = True
+            free[np.asarray(named, np.int64)] = True
     free[:] = True
     return _cdt(pts, e[:0]), free
 
