@@ -189,3 +189,21 @@ def test_edges_in_conflict_are_crossings_and_ends_on_another_edge_not_shared_end
     p2 = np.array([[0, 0], [2, 0], [1, 1e-9], [1, 1]], float)
     assert holes._edges_in_conflict(p2, np.array([[0, 1], [2, 3]])).tolist() == [True, True]
     assert not holes._edges_in_conflict(p2, np.array([[0, 1]])).any()
+
+
+def test_stitch_frees_the_edges_the_library_names_when_no_crossing_is_found(monkeypatch):
+    """Should the geometric test miss the edges in conflict, the edges pythoncdt's error names are freed one pair
+    at a time until it succeeds; the edge in no conflict stays fixed."""
+    monkeypatch.setattr(holes, "_edges_in_conflict", lambda p, e, tol_m=1e-6: np.zeros(len(e), bool))
+    v = np.c_[_TANGLE_XY, np.zeros(len(_TANGLE_XY))]
+    gxy = np.array([[998.0, 998.0], [998.0, 1003.0], [1003.0, 998.0], [1003.0, 1003.0], [1000.75, 1002.65]])
+    rep: dict = {}
+    newv, nf = holes.stitch(v, np.zeros((0, 3), np.int64), _TANGLE_EDGES, gxy, np.zeros(len(gxy)),
+                            lambda cen, edge: np.ones(len(cen), bool), 1e-9, report=rep)
+    assert 2 <= rep["border_edges_freed"] < 7
+    edges = np.sort(np.vstack([nf[:, [0, 1]], nf[:, [1, 2]], nf[:, [2, 0]]]), axis=1)
+    assert (edges == [10, 11]).all(axis=1).any()
+    p = np.vstack([v, newv])[:, :2]
+    a, b, c = p[nf[:, 0]], p[nf[:, 1]], p[nf[:, 2]]
+    area2 = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]
+    assert (area2 > 0).all() and abs(0.5 * area2.sum() - 25.0) < 1e-6
