@@ -282,9 +282,10 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     ``vertices`` then the new vertices).
 
     Where the CDT cannot resolve a crossing of border edges (it computes the crossing outside both edges in
-    floating point: edges crossing at a near-zero angle, or close to a third edge's end), the border edges
-    that cross or touch another's interior are left free and the triangulation is made again; should that
-    fail too, with no fixed edge at all (the surface filter above still drops faces that break the mesh).
+    floating point: edges crossing at a near-zero angle, or close to a third edge's end), the two edges the
+    library names are left free and the triangulation is made again, a pair at a time; should that not do,
+    every border edge that crosses or touches another's interior, and at last all (the surface filter above
+    still drops faces that break the mesh).
     A warning and ``report["border_edges_freed"]`` say how many edges were left free."""
     from scipy.spatial import cKDTree
 
@@ -364,11 +365,12 @@ def _cdt(pts: np.ndarray, e: np.ndarray):
 
 def _cdt_freeing(pts: np.ndarray, e: np.ndarray, max_tries: int = 20):
     """:func:`_cdt` for edges it could not resolve: (triangulation, (k,) bool the edges left free). First the
-    edges that cross or touch another (:func:`_edges_in_conflict`); then, while it still fails, the two edges
-    its error names (``... constraint edges (a, b) and (c, d) ...``), up to ``max_tries`` times; then all."""
+    two edges its error names (``... constraint edges (a, b) and (c, d) ...``), a pair at a time, up to
+    ``max_tries`` times (the crossings it can resolve stay resolved); then every edge that crosses or touches
+    another (:func:`_edges_in_conflict`); then all."""
     import re
 
-    free = _edges_in_conflict(pts, e)
+    free = np.zeros(len(e), bool)
     key = {(int(a), int(b)): k for k, (a, b) in enumerate(np.sort(e, axis=1))}
     for _ in range(max_tries):
         try:
@@ -380,8 +382,12 @@ def _cdt_freeing(pts: np.ndarray, e: np.ndarray, max_tries: int = 20):
             if not named:
                 break
             free[np.asarray(named, np.int64)] = True
-    free[:] = True
-    return _cdt(pts, e[:0]), free
+    free |= _edges_in_conflict(pts, e)
+    try:
+        return _cdt(pts, e[~free]), free
+    except RuntimeError:
+        free[:] = True
+        return _cdt(pts, e[:0]), free
 
 
 def _edges_in_conflict(p: np.ndarray, e: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
