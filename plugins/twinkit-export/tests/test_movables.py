@@ -555,3 +555,27 @@ def test_a_pole_beside_a_car_stays_whole_and_out_of_the_cars_box():
     at_pole = np.linalg.norm(out[:, :2] - v[i0 + 1, :2], axis=1) < 0.15
     for z in (0.5, 1.0, 1.5, 3.0, 6.0):  # every band of the pole is still there, from the road up
         assert (np.abs(out[at_pole, 2] - z) < 1e-6).sum() == 3, z
+
+
+def test_a_fill_whose_ring_has_no_ground_takes_the_nearest_ground_class_not_the_rings():
+    """The full-density `large` site: a car parked against a street light's foot left a hole whose ring was all
+    pole; its fill took the ring's majority (pole), so `split` put ground under the car into the static Pole
+    mesh and CARLA's actor check found 10,836 points of Pole inside the car's box. A ring without a ground
+    class now takes the class of the mesh's ground vertex nearest the loop."""
+    from twinkit_export.movables.fill import Additions, _add_fill
+
+    from twinkit.cityscapes import POLE, ROAD, SIDEWALK
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [3, 0.5, 0], [9, 0.5, 0]], float)
+    labels = np.array([POLE, POLE, POLE, POLE, SIDEWALK, ROAD], np.uint8)
+    kept = np.array([[1, 4, 2]])
+    sm = Additions(v, kept, labels, None)
+    n = len(v)
+    _add_fill(sm, np.arange(4), np.array([0]), v[kept].mean(axis=1),
+              np.array([[0, 1, n], [1, 2, n], [2, 3, n], [3, 0, n]]), np.array([[0.5, 0.5, 0.0]]))
+    assert sm.add_lab == [SIDEWALK]
+    # a ring with a ground class keeps its majority ground class, as before
+    sm2 = Additions(v, kept, np.array([ROAD, ROAD, POLE, POLE, SIDEWALK, ROAD], np.uint8), None)
+    _add_fill(sm2, np.arange(4), np.array([0]), v[kept].mean(axis=1),
+              np.array([[0, 1, n], [1, 2, n], [2, 3, n], [3, 0, n]]), np.array([[0.5, 0.5, 0.0]]))
+    assert sm2.add_lab == [ROAD]

@@ -122,14 +122,20 @@ def _flatten_feet(v: np.ndarray, lp: np.ndarray, hits: list, grid: LocalGround, 
 
 def _add_fill(sm: Additions, lp: np.ndarray, ring: np.ndarray, kcen: np.ndarray, faces_new: np.ndarray,
               new_pts: np.ndarray) -> None:
-    """Append one loop's fill: its new vertices take the ring's majority ground class, its faces the UVs of
-    the nearest ground face of the ``ring`` (kept faces at the loop; ``kcen`` their centres)."""
+    """Append one loop's fill: its new vertices take the ring's majority ground class (a ring without one: the
+    class of the mesh's ground vertex nearest the loop, road without any; never the class of what stood
+    there, which would put the fill in that class's static mesh under the lifted object), its faces the UVs
+    of the nearest ground face of the ``ring`` (kept faces at the loop; ``kcen`` their centres)."""
     from scipy.spatial import cKDTree
 
     v, nv = sm.v, len(sm.v)
     lab_ring = sm.labels[lp]
     gl = lab_ring[np.isin(lab_ring, GROUND)]
-    ground_class = int(np.bincount(gl).argmax()) if len(gl) else int(np.bincount(lab_ring).argmax())
+    if len(gl):
+        ground_class = int(np.bincount(gl).argmax())
+    else:
+        gv = np.nonzero(np.isin(sm.labels, GROUND))[0]
+        ground_class = int(sm.labels[gv[cKDTree(v[gv]).query(v[lp].mean(axis=0))[1]]]) if len(gv) else int(GROUND[0])
     if len(new_pts):
         base = nv + len(sm.add_v)
         faces_new = np.where(faces_new >= nv, faces_new - nv + base, faces_new)
