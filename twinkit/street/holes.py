@@ -306,12 +306,10 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     nb = len(bxy)
     if len(pts) < 3:
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    try:
-        tri = _cdt(pts, e)
-    except RuntimeError as err:
-        tri, bad = _cdt_freeing(pts, e)
+    tri, bad, first_error = _cdt_freeing(pts, e)
+    if first_error is not None:
         log.warning("ground fill: the triangulation could not resolve crossing border edges (%s); %d of %d border "
-                    "edges left free", str(err).splitlines()[0], int(bad.sum()), len(e))
+                    "edges left free", first_error, int(bad.sum()), len(e))
         if report is not None:
             report["border_edges_freed"] = int(bad.sum())
     va = tri.vertices_array()
@@ -364,18 +362,21 @@ def _cdt(pts: np.ndarray, e: np.ndarray):
 
 
 def _cdt_freeing(pts: np.ndarray, e: np.ndarray, max_tries: int = 20):
-    """:func:`_cdt` for edges it could not resolve: (triangulation, (k,) bool the edges left free). First the
-    two edges its error names (``... constraint edges (a, b) and (c, d) ...``), a pair at a time, up to
-    ``max_tries`` times (the crossings it can resolve stay resolved); then every edge that crosses or touches
-    another (:func:`_edges_in_conflict`); then all."""
+    """:func:`_cdt`, freeing the edges it cannot resolve: (triangulation, (k,) bool the edges left free, the
+    first error's first line or None when all edges went in). First the two edges its error names (``...
+    constraint edges (a, b) and (c, d) ...``), a pair at a time, up to ``max_tries`` retries (the crossings it
+    can resolve stay resolved); then every edge that crosses or touches another (:func:`_edges_in_conflict`);
+    then all."""
     import re
 
     free = np.zeros(len(e), bool)
     key = {(int(a), int(b)): k for k, (a, b) in enumerate(np.sort(e, axis=1))}
-    for _ in range(max_tries):
+    first: str | None = None
+    for _ in range(max_tries + 1):
         try:
-            return _cdt(pts, e[~free]), free
+            return _cdt(pts, e[~free]), free, first
         except RuntimeError as err:
+            first = first or str(err).splitlines()[0]
             named = [key.get((min(int(a), int(b)), max(int(a), int(b))), -1)
                      for a, b in re.findall(r"\((\d+), (\d+)\)", str(err))]
             named = [k for k in named if k >= 0 and not free[k]]
@@ -384,10 +385,10 @@ def _cdt_freeing(pts: np.ndarray, e: np.ndarray, max_tries: int = 20):
             free[np.asarray(named, np.int64)] = True
     free |= _edges_in_conflict(pts, e)
     try:
-        return _cdt(pts, e[~free]), free
+        return _cdt(pts, e[~free]), free, first
     except RuntimeError:
         free[:] = True
-        return _cdt(pts, e[:0]), free
+        return _cdt(pts, e[:0]), free, first
 
 
 def _edges_in_conflict(p: np.ndarray, e: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
