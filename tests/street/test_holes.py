@@ -6,7 +6,7 @@ import numpy as np
 from tests.mesh.meshes import grid_mesh
 from twinkit.mesh import compact, face_normals
 from twinkit.mesh.topology import boundary_loops
-from twinkit.street import holes
+from twinkit.street import cdt, holes
 from twinkit.surface.watertight import drop_test, open_edges
 
 
@@ -145,13 +145,14 @@ _TANGLE_EDGES = np.array([[0, 6], [1, 4], [2, 5], [3, 9], [5, 7], [8, 9], [10, 1
 
 
 def test_stitch_leaves_unresolvable_crossing_border_edges_free_instead_of_failing(caplog):
-    import pythoncdt as cdt
+    import pythoncdt
     import pytest
 
     v = np.c_[_TANGLE_XY, np.zeros(len(_TANGLE_XY))]
     gxy = np.array([[998.0, 998.0], [998.0, 1003.0], [1003.0, 998.0], [1003.0, 1003.0], [1000.75, 1002.65]])
     rep_id, e = holes._border_from_above(v, _TANGLE_EDGES)
-    raw = cdt.Triangulation(cdt.VertexInsertionOrder.AUTO, cdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
+    raw = pythoncdt.Triangulation(pythoncdt.VertexInsertionOrder.AUTO,
+                                 pythoncdt.IntersectingConstraintEdges.TRY_RESOLVE, 0.0)
     raw.insert_vertices(np.ascontiguousarray(np.vstack([_TANGLE_XY[rep_id], gxy])))
     with pytest.raises(RuntimeError, match="can not be resolved"):
         raw.insert_edges(e.astype(np.uintc))  # the library alone fails on what stitch gives it
@@ -184,12 +185,12 @@ def test_edges_in_conflict_are_crossings_and_ends_on_another_edge_not_shared_end
                   [6, 7],   # near (4, 8) but apart from it
                   [4, 8],   # collinear with (1, 4), beyond it: they meet only at the shared end 4
                   ])
-    bad = holes._edges_in_conflict(p, e)
+    bad = cdt.edges_in_conflict(p, e)
     assert bad.tolist() == [True, True, False, False, False, False]
     # an end within the tolerance of another edge's interior (a T) is a conflict
     p2 = np.array([[0, 0], [2, 0], [1, 1e-9], [1, 1]], float)
-    assert holes._edges_in_conflict(p2, np.array([[0, 1], [2, 3]])).tolist() == [True, True]
-    assert not holes._edges_in_conflict(p2, np.array([[0, 1]])).any()
+    assert cdt.edges_in_conflict(p2, np.array([[0, 1], [2, 3]])).tolist() == [True, True]
+    assert not cdt.edges_in_conflict(p2, np.array([[0, 1]])).any()
 
 
 def test_when_freeing_the_named_edges_does_not_do_every_edge_in_conflict_is_freed():
@@ -199,7 +200,7 @@ def test_when_freeing_the_named_edges_does_not_do_every_edge_in_conflict_is_free
     rep_id, e = holes._border_from_above(v, _TANGLE_EDGES)
     pts = np.vstack([_TANGLE_XY[rep_id], [[998.0, 998.0], [998.0, 1003.0], [1003.0, 998.0], [1003.0, 1003.0],
                                            [1000.75, 1002.65]]])
-    tri, free, first = holes._cdt_freeing(pts, e, max_tries=0)
+    tri, free, first = cdt.cdt_freeing(pts, e, max_tries=0)
     assert free.sum() == 6 and "can not be resolved" in first
     kept = e[~free][0]
     t = np.asarray(tri.triangles_array()["vertices"], np.int64).reshape(-1, 3)
