@@ -18,10 +18,11 @@ cleanly enough. Per mesh vertex, from the cloud (points.ply):
 
 The gates (each a mechanism, thresholds from the cue's own lengths):
 
-- ``curb``: a step of ``min_curb_m`` stands out of the noise at 3 sigma (``3 * noise <= min_curb_m``),
-  the ground around it is sampled both ways (``flat_share >= 0.5``) and at least twice within the
-  step's reach (``support <= step_radius_m / 4``). The gate acts on the step cells (a curb found where
-  the scan resolves one), not on the band beside them, which may lie in a parked car's scan shadow;
+- ``curb``: a step of ``min_curb_m`` stands out of the noise at 3 sigma (``3 * noise <= min_curb_m``)
+  and the ground around it is sampled both ways (``flat_share >= 0.5``). (A support test,
+  ``support <= step_radius_m / 4``, changed nothing on the real sweeps and is not applied.) The gate acts
+  on the step cells (a curb found where the scan resolves one), not on the band beside them, which may lie
+  in a parked car's scan shadow;
 - ``column`` and ``mounted``: the scan samples finer than a post is wide (spacing <= ``column_width_m``,
   i.e. ``support <= column_width_m / 2``, support being about half the spacing): where it samples
   coarser, any sparse facade breaks into fragments as narrow as a post and a thin slice says nothing
