@@ -130,6 +130,12 @@ def score_run(run_dir: Path, scan: Path) -> tuple[dict, np.ndarray]:
     res = score_points(mesh.vertices, labels, pts, truth, faces=mesh.faces)
     res.update(scan=scan.stem, run=str(run_dir), labels_from=files["labels"].parent.name,
                vertices=int(len(mesh.vertices)), steps_s=step_times(run_dir))
+    votes = _one(run_dir, "*_classify_geometry/geometry_votes.npy")
+    if votes is not None:  # the 3D classifier alone through the same mesh: what the fusion and the cues add
+        gv = np.load(votes)
+        alone = np.where(gv.sum(axis=1) > 0, gv.argmax(axis=1), 255).astype(np.uint8)
+        g = score_points(mesh.vertices, alone, pts, truth, upper_bound=False)
+        res["geometry_alone"] = {k: g[k] for k in ("miou", "accuracy", "coarse_accuracy", "per_class")}
     point_labels, _ = transfer_nearest(mesh.vertices, labels, pts)
     return res, point_labels
 
@@ -147,14 +153,18 @@ def _row(r: dict) -> dict[str, float]:
     row = {"coarse acc": r["coarse_accuracy"], "acc": r["accuracy"], "mIoU": r["miou"]}
     for c in COLUMNS:
         row[c] = per[c]["iou"] if c in per else float("nan")
-    row["far>0.5 m %"] = 100.0 * r["far_share"]["0.5"]
-    row["far>0.2 m %"] = 100.0 * r["far_share"]["0.2"]
-    row["bound mIoU"] = r["upper_bound"]["miou"] if "upper_bound" in r else float("nan")
+    if "far_share" in r:
+        row["far>0.5 m %"] = 100.0 * r["far_share"]["0.5"]
+        row["far>0.2 m %"] = 100.0 * r["far_share"]["0.2"]
+        row["bound mIoU"] = r["upper_bound"]["miou"] if "upper_bound" in r else float("nan")
     return row
 
 
-def rows(results: list[dict]) -> dict[str, dict[str, float]]:
-    """Table rows by scan name, and ``mean`` (of each column over the scans that have it)."""
+def rows(results: list[dict], part: str | None = None) -> dict[str, dict[str, float]]:
+    """Table rows by scan name, and ``mean`` (of each column over the scans that have it). ``part``: score
+    the results' ``part`` (e.g. ``geometry_alone``) instead of the results themselves, where they have it."""
+    if part is not None:
+        results = [{**r[part], "scan": r["scan"]} for r in results if part in r]
     out = {r["scan"]: _row(r) for r in results}
     if out:
         keys = next(iter(out.values())).keys()
@@ -256,13 +266,18 @@ def main(argv: list[str] | None = None) -> int:
     before = json.loads(compare.read_text()).get("table", {}) if compare.is_file() else {}
     text = "## Labels on the hand-labelled SemanticKITTI scans (percent; far: share of labelled points)\n\n"
     text += markdown(table)
+    alone = rows(results, "geometry_alone")
+    if alone:
+        text += ("\n### The 3D classifier alone (`geometry_votes.npy`'s most probable class), through the same mesh\n\n"
+                 + markdown(alone) + "\nWhat the fusion, the cues and the smoothing add: the table above less this "
+                 "one.\n")
     if before:
         text += f"\n### Previous run ({compare})\n\n" + markdown(before)
         text += "\n### Difference (this run - previous)\n\n" + markdown(difference(table, before))
     print(text)
     if prev_path.is_file():
         (out / "labelled_previous.json").write_text(prev_path.read_text())
-    prev_path.write_text(json.dumps({"table": table, "scans": results}, indent=1))
+    prev_path.write_text(json.dumps({"table": table, "geometry_alone": alone, "scans": results}, indent=1))
     (out / "labelled.md").write_text(text)
     return 0
 
