@@ -317,3 +317,42 @@ def test_the_low_cue_needs_a_capture_that_sees_higher():
     ok = reach_gate(both, both[:, 2], opt)
     d = np.hypot(both[:, 0] - 8.0, both[:, 1] - 3.0)
     assert ok[d < 8.0].all() and (d > 13.0).sum() > 100 and not ok[d > 13.0].any()  # (10 m on a 2 m grid)
+
+
+def test_on_a_capture_in_rings_a_sure_classifier_holds_against_the_ground_cue(tmp_path):
+    """Low plants the classifier is sure of stay vegetation on a sweep; on a dense capture the ground cue
+    still makes ground-level vertices ground (docs/segmentation.md "The classifier's floor on a sweep")."""
+    from twinkit import artefacts as A
+
+    v, f, _ = grid(0, 8, 0, 8, 0.0, 0.25)
+    write_ply(tmp_path / "mesh.ply", Mesh(vertices=v, faces=f))
+    write_ply(tmp_path / "points.ply", Mesh(vertices=v + np.random.default_rng(0).normal(0, 0.003, v.shape)))
+    np.save(tmp_path / "votes.npy", np.zeros((len(v), 19), np.float32))  # a colourless capture: no views
+    np.save(tmp_path / "segments.npy", np.arange(len(v), dtype=np.int32))
+    plants = (np.abs(v[:, 0] - 4) < 1.0) & (np.abs(v[:, 1] - 4) < 1.0)
+    geom = np.zeros((len(v), 19), np.float32)
+    geom[:, SIDEWALK] = 1.0
+    geom[plants, SIDEWALK], geom[plants, VEGETATION] = 0.1, 0.9
+    np.save(tmp_path / "geometry.npy", geom)
+    inputs = {"in_textured_mesh_ply": tmp_path / "mesh.ply", "in_segments_npy": tmp_path / "segments.npy",
+              "in_vertex_votes_npy": tmp_path / "votes.npy", "in_points_ply": tmp_path / "points.ply",
+              "in_geometry_votes_npy": tmp_path / "geometry.npy"}
+
+    def run(name, share, **params):
+        meta = tmp_path / f"{name}_meta" / "points_meta.json"
+        meta.parent.mkdir()
+        density = {"points": len(v), "spacing_m": 0.25, "capture": "spinning", "ground_two_way_share": share}
+        A.write_points_meta(meta, {"source": {"reader": "test"}, "counts": {}, "fields": {}, "frame": {},
+                                   "bounds_m": [], "density": density})
+        out = _backproject(tmp_path, name, {**inputs, "in_points_meta_json": meta}, **params)
+        metrics = json.loads((out["labels.npy"].parent / "step.json").read_text())["metrics"]
+        return np.load(out["labels.npy"]), metrics
+
+    rings, m_rings = run("rings", 0.3)
+    dense, m_dense = run("dense", 0.99)
+    off, m_off = run("off", 0.3, geometry_floor_share=0.0)
+    assert (rings[plants] == VEGETATION).mean() > 0.9
+    assert (dense[plants] == VEGETATION).mean() < 0.1 and (off[plants] == VEGETATION).mean() < 0.1
+    assert (rings[~plants] == SIDEWALK).all() and (dense[~plants] == SIDEWALK).all()
+    assert m_rings["geometry_floor"] == 1.0  # every vertex: the classifier gives one class 0.7 or more
+    assert m_dense["geometry_floor"] is None and m_off["geometry_floor"] is None

@@ -110,6 +110,23 @@ def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=No
     return gates, info
 
 
+def geometry_floor(params: BackprojectParams, ctx: StepContext, geom, kind: str | None, two_way_share):
+    """(n,) bool, or None where it does not act: the vertices whose 3D-classifier votes (``geom`` (n, 19) or
+    None) give one class at least ``geometry_floor_share`` of their total, on a colourless capture (``kind``) whose
+    ground is sampled in rings (``two_way_share`` under ``geometry_floor_max_two_way_share``; None: unknown, no
+    floor). There the classifier leads, and the mesh's shape cues read the rings' fragments: a sure vertex keeps
+    its class as near-unanimous views keep theirs where they lead."""
+    if (geom is None or kind != "colourless" or params.geometry_floor_share <= 0 or two_way_share is None
+            or two_way_share >= params.geometry_floor_max_two_way_share):
+        return None
+    tot = geom.sum(axis=1)
+    sure = (tot > 0) & (geom.max(axis=1) >= params.geometry_floor_share * tot)
+    ctx.log.info("geometry floor: %.0f %% of the capture's ground is sampled in patches (a capture in rings): %d "
+                 "vertices (%.1f %%) whose 3D classifier gives one class %.0f %% or more keep it against the cues",
+                 100 * two_way_share, int(sure.sum()), 100 * float(sure.mean()), 100 * params.geometry_floor_share)
+    return sure
+
+
 def vote_distribution(params: BackprojectParams, seg, votes):
     """(p (n, 19) float64 class distribution per vertex, its total votes (n,)): the vertex's own weighted
     votes, blended with its segment's (``seg`` (n,) int) when ``params.use_segments``. ``votes``: (n, 19)
@@ -124,9 +141,11 @@ def vote_distribution(params: BackprojectParams, seg, votes):
 
 
 def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, conf, fprior, gates=None,
-          unshield=None, cues=None):
+          unshield=None, cues=None, floor=None):
     """The vote scaled by the mesh's geometric cues and the file's classes (``fprior`` (n, 19) or None), or
-    Potts smoothing alone: (labels, confidence, mesh edges or None, the fusion's metrics, seconds)."""
+    Potts smoothing alone: (labels, confidence, mesh edges or None, the fusion's metrics, seconds). ``unshield``
+    (n,) bool: vertices the views' near-unanimous floor does not hold; ``floor`` (n,) bool: vertices held
+    against the cues whatever the views (:func:`geometry_floor`)."""
     from twinkit.cityscapes import IGNORE
     from twinkit.mesh import edges as mesh_edges
     from twinkit_segmentation.context import fuse_with_context, near_unanimous, potts_smooth
@@ -147,6 +166,8 @@ def _fuse(params: BackprojectParams, ctx: StepContext, mesh, p, votes, labels, c
                               params.keep_share, params.keep_votes)
         if unshield is not None:
             sure &= ~unshield
+        if floor is not None:
+            sure |= floor
         labels, conf, cmet = fuse_with_context(p, mesh.vertices, unit_normals(mesh), edges, context_options(params),
                                                cues, min_retained=params.min_retained,
                                                smooth_beta=params.smooth_beta, smooth_iters=params.smooth_iters,

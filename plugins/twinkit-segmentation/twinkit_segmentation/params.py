@@ -181,6 +181,18 @@ class BackprojectParams:
                                                     "spinning sweep cuts crowns and hedges into ring fragments that "
                                                     "float free and thin as a post would (docs/segmentation.md \"Cue "
                                                     "gates\"); 0 = off.")
+    geometry_floor_share: float = param(0.7, ge=0, le=1,
+                                        help="On a colourless capture sampled in rings (ground two-way share under "
+                                             "geometry_floor_max_two_way_share: a single spinning sweep), a vertex "
+                                             "whose 3D-classifier votes give one class at least this share keeps it "
+                                             "against the cues and the smoothing, as near-unanimous views do where "
+                                             "they lead (docs/segmentation.md \"The classifier's floor on a "
+                                             "sweep\"); 0 = off.")
+    geometry_floor_max_two_way_share: float = param(0.5, ge=0, le=1,
+                                                    help="The geometry floor acts on captures whose ground is sampled "
+                                                         "in patches on less than this share (points_meta.json "
+                                                         "density.ground_two_way_share); a dense capture's mesh "
+                                                         "resolves what the cues read.")
     fusion_weights: str = param("", free=True, path=True,
                                 help="The views' and the geometry's weights per capture kind (a JSON file written by "
                                      "python -m twinkit_segmentation.fusion calibrate); empty = the plugin's "

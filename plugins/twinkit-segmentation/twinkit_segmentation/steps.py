@@ -24,7 +24,8 @@ from pathlib import Path
 from twinkit import InputError, StepContext
 from twinkit import artefacts as A
 
-from .backproject_parts import _cue_gates, _fuse, _fuse_sources, _geometry_votes, capture_two_way_share, vote_distribution
+from .backproject_parts import (_cue_gates, _fuse, _fuse_sources, _geometry_votes, capture_two_way_share,
+                                 geometry_floor, vote_distribution)
 from .params import (BackprojectParams, EvaluateParams, FelzenszwalbParams, ImportLabelsParams, NoSegmentsParams,
                      PhotoViewsParams, PredictParams, RenderParams, SampleViewsParams, TransferGtParams)
 
@@ -421,13 +422,15 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     fprior, fvoting, fcodes, finfo = vertex_file_classes(params, ctx, in_points_ply, mesh.vertices)
     labels, conf = decide_distribution(p, unseen)
     base_labels = labels.copy()  # the sources alone
-    gates, ginfo = _cue_gates(params, ctx, mesh, cloud, geom, capture_two_way_share(in_points_meta_json, cloud))
+    two_way = capture_two_way_share(in_points_meta_json, cloud)
+    gates, ginfo = _cue_gates(params, ctx, mesh, cloud, geom, two_way)
+    floor = geometry_floor(params, ctx, geom, fsum.get("kind"), two_way)
     # the views' near-unanimous floor holds where they lead: not where a colourless capture has geometry
     unshield = None if geom is None or fsum.get("kind") == "coloured" else geom.sum(axis=1) > 0
     cues = list(params.context_cues) if geom is None else [c for c in params.context_cues
                                                            if c in params.cues_with_geometry]
     labels, conf, edges, cmet, t_ctx = _fuse(params, ctx, mesh, p, votes, labels, conf, fprior, gates,
-                                            unshield=unshield, cues=cues)
+                                            unshield=unshield, cues=cues, floor=floor)
     unlabelled_before = int((labels == IGNORE).sum())
     if params.fill_unlabelled and unlabelled_before and unlabelled_before < len(labels):
         labels = propagate(labels, edges if edges is not None else mesh_edges(mesh.faces, len(mesh.vertices)))
@@ -451,7 +454,9 @@ def backproject(params: BackprojectParams, ctx: StepContext, *, in_textured_mesh
     return {"unlabelled_before_fill": unlabelled_before, "unlabelled": int((labels == IGNORE).sum()),
             "mean_confidence": float(conf[conf > 0].mean()) if (conf > 0).any() else 0.0,
             "context": cmet, "context_seconds": round(t_ctx, 3), "file_classes": finfo, "fusion": fsum,
-            "confidence": csum, "cue_gates": ginfo, "seconds": round(time.perf_counter() - t0, 3)}
+            "confidence": csum, "cue_gates": ginfo,
+            "geometry_floor": None if floor is None else round(float(floor.mean()), 4),
+            "seconds": round(time.perf_counter() - t0, 3)}
 
 
 # ----------------------------------------------------------------------------- ground truth and evaluation
