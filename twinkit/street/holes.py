@@ -332,14 +332,21 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     area = (b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0])
     t = np.where((area < 0)[:, None], t[:, [0, 2, 1]], t)
     t = t[np.abs(area) > 1e-12]
-    # to mesh ids: border vertices are the mesh's own, the others new
-    n_new = len(allxy) - nb
-    gid = np.r_[rep_id, m + np.arange(n_new)]
-    nf = gid[t]
+    return _join(f, m, rep_id, t, p3[nb:])
+
+
+def _join(faces: np.ndarray, m: int, rep_id: np.ndarray, t: np.ndarray, new_points: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles ``t`` (n, 3) over the border representatives (``rep_id`` (b,) mesh ids, the first b
+    triangulation vertices) and ``new_points`` (k, 3) as faces of the mesh (``faces``, ``m`` vertices), less
+    those that would break the surface (:func:`_bad_new_faces`, up to four rounds); returns (the new
+    vertices the kept faces use (u, 3), the faces indexing the mesh's vertices then those)."""
+    n_new = len(new_points)
+    nf = np.r_[rep_id, m + np.arange(n_new)][t]  # border vertices are the mesh's own, the others new
     for _ in range(4):
         if not len(nf):
             break
-        bad = _bad_new_faces(np.vstack([f, nf]), len(f))
+        bad = _bad_new_faces(np.vstack([faces, nf]), len(faces))
         if not bad.any():
             break
         nf = nf[~bad]
@@ -347,8 +354,7 @@ def stitch(vertices: np.ndarray, faces: np.ndarray, border: np.ndarray, xy: np.n
     remap = np.full(n_new, -1, np.int64)
     remap[used] = np.arange(len(used))
     nf = np.where(nf >= m, m + remap[np.maximum(nf - m, 0)], nf)
-    newv = p3[nb:][used]
-    return newv, nf
+    return new_points[used], nf
 
 
 def _border_from_above(v: np.ndarray, border: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -33,6 +33,10 @@ SAMPLE = 20_000
 #: k neighbours spread both ways when their middle spread (sqrt of the middle eigenvalue) is at least this share
 #: of their radius (one scan line: about 0); the segmentation's cue gates use the same test
 TWO_WAY_SPREAD = 0.25
+#: under this ``ground_two_way_share`` a capture's ground is sampled in rings, not patches (a single spinning
+#: sweep: 0.26-0.33 on real ones; street and aerial scans 0.99+): the cues, the kerb level and the classifier's
+#: floor that depend on it share this default
+RING_CAPTURE_SHARE = 0.5
 
 
 def measure(points: np.ndarray, *, scanner_positions=None, sample: int = SAMPLE, seed: int = 0) -> dict:

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 from typing import List
 
 from twinkit.ranges import param
+from twinkit.surface.density import RING_CAPTURE_SHARE
 
 
 @dataclass
@@ -174,7 +175,7 @@ class BackprojectParams:
                                                  "least this share: a crown's fragment floating free in a sparse "
                                                  "scan is foliage to its multi-scale features (docs/segmentation.md "
                                                  '"Cue gates"); 0 = off.')
-    furniture_min_two_way_share: float = param(0.5, ge=0, le=1,
+    furniture_min_two_way_share: float = param(RING_CAPTURE_SHARE, ge=0, le=1,
                                                help="The furniture cues (column, mounted) act only on a capture whose "
                                                     "ground is sampled in patches on at least this share "
                                                     "(points_meta.json density.ground_two_way_share): a single "
@@ -188,7 +189,7 @@ class BackprojectParams:
                                              "against the cues and the smoothing, as near-unanimous views do where "
                                              "they lead (docs/segmentation.md \"The classifier's floor on a "
                                              "sweep\"); 0 = off.")
-    geometry_floor_max_two_way_share: float = param(0.5, ge=0, le=1,
+    geometry_floor_max_two_way_share: float = param(RING_CAPTURE_SHARE, ge=0, le=1,
                                                     help="The geometry floor acts on captures whose ground is sampled "
                                                          "in patches on less than this share (points_meta.json "
                                                          "density.ground_two_way_share); a dense capture's mesh "

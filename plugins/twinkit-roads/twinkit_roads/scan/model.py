@@ -7,6 +7,7 @@ import numpy as np
 
 from twinkit import InputError
 from twinkit.ranges import param
+from twinkit.surface.density import RING_CAPTURE_SHARE
 
 
 class NoRoads(InputError):
@@ -34,7 +35,7 @@ class ScanSourceParams:
                                       help="a cloud with a coarser median point spacing (points_meta.json) shows no "
                                            "curbs: the carriageway is the grey, up-facing, paved-labelled ground and "
                                            "no sidewalk lanes are made (0: always the curbs)")
-    level_min_two_way_share: float = param(0.5, ge=0, le=1,
+    level_min_two_way_share: float = param(RING_CAPTURE_SHARE, ge=0, le=1,
                                            help="a cloud whose ground is mostly single scan lines (points_meta.json "
                                                 "density.ground_two_way_share under this: a single spinning sweep, "
                                                 "0.26-0.33 on real ones; street scans 0.99+) shows no kerb step: with "
