@@ -261,6 +261,37 @@ def test_a_signalled_sweep_stops_its_jobs_like_single_runs(project, sig, code):
     assert not list(store_tmp.iterdir())
 
 
+def test_a_run_stopped_while_it_waits_for_the_store_says_interrupted(project):
+    # twinkit gc holds the store: the run has taken its workspace and waits; SIGTERM then must still end in
+    # an "interrupted" manifest with the workspace given back (a sweep's job once stayed "running" so)
+    import fcntl
+
+    from twinkit.engine.locks import store_lock_path
+
+    path = store_lock_path(project.ws)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        p = project.popen("site=t", "recipe=chain")
+        owner = project.ws / ".twinkit.owner"
+        try:
+            _wait_for(lambda: owner.exists() and f"pid {p.pid} " in owner.read_text(), what="the run to take the workspace")
+            _wait_for(lambda: [m for m in _manifests(project) if m["status"] == "running"], what="the running manifest")
+            os.kill(p.pid, signal.SIGTERM)
+            out, err = p.communicate(timeout=60)
+        finally:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+        assert p.returncode == 143, err
+        m = _manifests(project)[-1]
+        assert m["status"] == "interrupted" and "Terminated" in m["error"], m
+    finally:
+        os.close(fd)
+    r = project.run("site=t", "recipe=chain")
+    assert r.rc == 0, r.text
+
+
 def test_a_native_crash_in_a_fan_out_worker_is_the_steps_failure(project):
     project.recipe("fancrash", ["{id: make, uses: step/make}", "{id: tiles, uses: step/tiles}",
                                 "{id: crash, uses: step/crash, foreach: tiles.json}"])

@@ -1,6 +1,7 @@
 """One run of a composed config: the engine built, its progress lines, the manifest, the report, the exit status."""
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import logging
 import sys
@@ -159,8 +160,10 @@ def _run_engine(run: _Run) -> int:
             saved_handlers = ignore_interrupts()
         raise
     finally:
-        if engine._lock is None and engine.outcomes is not None:
-            status = _finish(run, status, error)
+        if engine._lock is not None:  # stopped while giving the workspace back: the final manifest still follows
+            with contextlib.suppress(Exception):
+                engine._release()
+        status = _finish(run, status, error)
         if saved_handlers:
             from twinkit.signals import restore_handlers
 

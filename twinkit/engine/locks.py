@@ -145,8 +145,8 @@ class LockMixin(EngineBase):
                 f"another twinkit run is using {self.workspace} ({holder}); wait for it to finish, "
                 f"or use another engine.outputs_dir"
             ) from None
+        self._lock = lock  # held from here on: _release gives it back whatever happens next
         write_text(self.workspace / ".twinkit.owner", f"pid {os.getpid()} since {_now()}\n")  # a link replaced, not followed
-        self._lock = lock
         self._store_lock = StoreLock(self.site_root)
         try:
             self._store_lock.acquire_shared()

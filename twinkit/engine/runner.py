@@ -110,8 +110,8 @@ class Engine(LockMixin, KeysMixin, EditsMixin, StoreMixin, WorkspaceMixin, Fanou
             return self._run(on_step)
 
     def _run(self, on_step: Callable[[StepOutcome, int, int], None] | None = None) -> list[StepOutcome]:
-        self._prepare()
-        try:
+        try:  # a Ctrl-C or SIGTERM while the workspace is being taken gives it back too
+            self._prepare()
             self._switch_recipe()
         except BaseException:
             self._release()
