@@ -23,6 +23,7 @@ same cloud always gives the same numbers (a fixed random subsample, a fixed seed
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -41,8 +42,6 @@ RING_CAPTURE_SHARE = 0.5
 
 def measure(points: np.ndarray, *, scanner_positions=None, sample: int = SAMPLE, seed: int = 0) -> dict:
     """Spacing and capture type of ``points`` (N x 3, metres). See the module's docstring."""
-    from scipy.spatial import cKDTree
-
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < 20:
@@ -50,22 +49,13 @@ def measure(points: np.ndarray, *, scanner_positions=None, sample: int = SAMPLE,
                 "vertical_share": float("nan"), "ground_two_way_share": None, "capture": "unknown",
                 "extent_m": [0.0, 0.0, 0.0]}
     pts = pts - pts.mean(axis=0)
-    tree = cKDTree(pts)
-    rng = np.random.default_rng(seed)
-    idx = rng.choice(n, min(sample, n), replace=False) if n > sample else np.arange(n)
-    k = min(16, n)
-    d, nb = tree.query(pts[idx], k=k)
-    nn = d[:, 1]
+    nbh = neighbourhoods(pts, sample=sample, seed=seed)
+    nn = nbh.radius_1
     nn = nn[nn > 0] if (nn > 0).any() else nn  # duplicates (a file with repeated points) say nothing
-    q = pts[nb] - pts[nb].mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", q, q) / k
-    ev, vec = np.linalg.eigh(cov)
-    nz = np.abs(vec[:, 2, 0])
-    vertical = float((nz < 0.3).mean())
-    flat = nz > 0.9
+    vertical = float((nbh.nz < 0.3).mean())
+    flat = nbh.flat
     horizontal = float(flat.mean())
-    two_way = np.sqrt(np.maximum(ev[:, 1], 0.0)) >= TWO_WAY_SPREAD * d[:, -1]
-    two_way_share = round(float(two_way[flat].mean()), 4) if flat.any() else None
+    two_way_share = round(float(nbh.two_way[flat].mean()), 4) if flat.any() else None
     n_scanners = 0
     if scanner_positions is not None:
         sp = np.asarray(scanner_positions, dtype=float).reshape(-1, 3)
@@ -81,6 +71,45 @@ def measure(points: np.ndarray, *, scanner_positions=None, sample: int = SAMPLE,
             "vertical_share": round(vertical, 4), "horizontal_share": round(horizontal, 4),
             "ground_two_way_share": two_way_share,
             "capture": capture, "scanners": n_scanners, "extent_m": [round(float(e), 3) for e in ext]}
+
+
+@dataclass
+class Neighbourhoods:
+    """The 16-neighbour PCA of a sample of a cloud's points (:func:`neighbourhoods`): ``idx`` the sampled
+    points, ``radius_1`` / ``radius_k`` the distance to the nearest / the 16th neighbour, ``nz`` |z| of the
+    normal, ``major`` (m, 3) the main direction, ``two_way`` whether the neighbours spread both ways
+    (``TWO_WAY_SPREAD``: not one scan line)."""
+
+    idx: np.ndarray
+    radius_1: np.ndarray
+    radius_k: np.ndarray
+    nz: np.ndarray
+    major: np.ndarray
+    two_way: np.ndarray
+
+    @property
+    def flat(self) -> np.ndarray:
+        """Points on near-horizontal surfaces."""
+        return self.nz > 0.9
+
+
+def neighbourhoods(pts: np.ndarray, *, sample: int = SAMPLE, seed: int = 0) -> Neighbourhoods:
+    """The local shape around a fixed random sample of ``pts`` (n, 3), n >= 2: what :func:`measure` and
+    :func:`twinkit.surface.rings.ring_sensor` read."""
+    from scipy.spatial import cKDTree
+
+    n = len(pts)
+    tree = cKDTree(pts)
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(n, min(sample, n), replace=False) if n > sample else np.arange(n)
+    k = min(16, n)
+    d, nb = tree.query(pts[idx], k=k)
+    q = pts[nb] - pts[nb].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", q, q) / k
+    ev, vec = np.linalg.eigh(cov)
+    two_way = np.sqrt(np.maximum(ev[:, 1], 0.0)) >= TWO_WAY_SPREAD * d[:, -1]
+    return Neighbourhoods(idx=idx, radius_1=d[:, 1], radius_k=d[:, -1], nz=np.abs(vec[:, 2, 0]),
+                          major=vec[:, :, 2], two_way=two_way)
 
 
 def describe(m: dict) -> str:

@@ -359,3 +359,24 @@ def test_ground_diffusion_leaves_a_capture_without_ground_pairs_alone():
     proba[:, ROAD] = 0.5
     out, info = diffuse_ground(pts, proba)
     assert info["noise_m"] is None and out is proba
+
+
+def test_a_wall_cut_by_a_sweeps_top_beam_counts_as_building_and_a_wall_seen_whole_stays_wall():
+    from twinkit.cityscapes import WALL
+    from twinkit_segmentation.geometry.classify import cut_walls
+
+    sensor = {"xy": [0.0, 0.0], "z0_m": 1.8, "top_deg": 2.0}  # an HDL-64E-like top beam, 1.8 m up
+    yy, zz = np.meshgrid(np.arange(-3.0, 3.0, 0.1), np.arange(0.0, 2.3, 0.1))
+    # a facade 15 m away, sampled up to where the top beam cut it (1.8 + 15 tan 2 deg = 2.32 m)
+    facade = np.column_stack([np.full(yy.size, 15.0), yy.ravel(), zz.ravel()])
+    xx, zw = np.meshgrid(np.arange(2.0, 6.0, 0.1), np.arange(0.0, 1.25, 0.1))
+    wall = np.column_stack([xx.ravel(), np.full(xx.size, -8.0), zw.ravel()])  # 1.2 m high, its top seen
+    pts = np.vstack([facade, wall])
+    proba = np.zeros((len(pts), 19), np.float32)
+    proba[:, WALL], proba[:, BUILDING] = 0.7, 0.3
+    out, cut = cut_walls(pts, proba, sensor, 0.3)
+    nf = len(facade)
+    assert cut[:nf].all() and not cut[nf:].any()
+    assert (out[:nf].argmax(axis=1) == BUILDING).all() and (out[nf:].argmax(axis=1) == WALL).all()
+    assert np.allclose(out.sum(axis=1), 1.0) and np.array_equal(proba[:, WALL], np.full(len(pts), 0.7, np.float32))
+    assert np.array_equal(cut_walls(pts, proba, sensor, 0.0)[0], proba)  # off

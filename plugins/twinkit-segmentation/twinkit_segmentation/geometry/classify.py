@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twinkit.cityscapes import ROAD, SIDEWALK, TERRAIN
+from twinkit.cityscapes import BUILDING, ROAD, SIDEWALK, TERRAIN, WALL
 
-from .features import block_mean, feature_names, point_features
+from .features import _columns, block_mean, feature_names, point_features
 from .model import GeometryModel, load_model
 
 
@@ -143,6 +143,28 @@ def diffuse_ground(points: np.ndarray, proba: np.ndarray, *, radius_m: float = 0
         out[np.ix_(gi, m)] = (q[:, j:j + 1] * split).astype(np.float32)
     info.update(pairs=int(len(pairs)), noise_m=round(noise, 4))
     return out, info
+
+
+def cut_walls(points: np.ndarray, proba: np.ndarray, sensor: dict, tolerance_m: float,
+              cell_m: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """(proba, cut): on a single spinning sweep whose sensor :func:`twinkit.surface.rings.ring_sensor` found,
+    the points (m, 3) whose ``cell_m`` column (with its 8 neighbours) reaches within ``tolerance_m`` of the
+    top beam's cone were cut by the scan, and their height is not known; the classifier tells a
+    free-standing wall from a building by its height, so there its wall probability counts as building
+    (docs/segmentation.md "Cut by the top beam"). ``proba`` (m, c) is not changed; ``cut`` (m,) bool."""
+    from twinkit.surface.rings import under_ceiling
+
+    pts = np.asarray(points, np.float64)
+    if len(pts) == 0 or tolerance_m <= 0:
+        return proba, np.zeros(len(pts), bool)
+    z0 = float(pts[:, 2].min())
+    top, _ = _columns(pts, pts[:, 2] - z0, cell_m)
+    tops = np.column_stack([pts[:, :2], top + z0])
+    cut = under_ceiling(tops, sensor) < tolerance_m
+    out = proba.copy()
+    out[cut, BUILDING] += out[cut, WALL]
+    out[cut, WALL] = 0.0
+    return out, cut
 
 
 def turned(xyz: np.ndarray, degrees: float) -> np.ndarray:

@@ -65,6 +65,12 @@ class ClassifyGeometryParams:
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
     vote_neighbours: int = param(8, ge=1, le=64, help="At most this many nearest classified points vote per vertex.")
+    cut_tolerance_m: float = param(
+        0.3, ge=0, le=2.0,
+        help="On a single spinning sweep (ground sampled in rings: twinkit.surface.rings finds the sensor and its "
+             "top beam), a point whose 0.5 m column reaches within this of the top beam's cone was cut by the scan, "
+             "so its height is unknown: the classifier's 'wall', told from a building by its height, counts as "
+             "building there. 0 = off.")
     model: str = param("", path=(".npz", ".json"), help="Model stem (path without .npz/.json); empty = the model shipped with the plugin.")
 
 
@@ -76,7 +82,9 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
 
     from twinkit.cityscapes import N_CLASSES, PALETTE
     from twinkit.mesh import write_colored_ply
-    from twinkit_segmentation.geometry.classify import classify_cloud, votes_at
+    from twinkit.cityscapes import WALL
+    from twinkit.surface.rings import ring_sensor
+    from twinkit_segmentation.geometry.classify import classify_cloud, cut_walls, votes_at
     from twinkit_segmentation.geometry.model import load_model
 
     t0 = time.perf_counter()
@@ -101,6 +109,15 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
                          ground_window_m=params.ground_window_m, smooth_m=smooth_m, prior=prior,
                          turns=turns, ground_alpha=ground_alpha)
+    sensor = ring_sensor(cloud.vertices) if params.cut_tolerance_m > 0 else None
+    walls_cut = 0
+    if sensor is not None:
+        proba, cut = cut_walls(cloud.vertices[res.base], res.proba, sensor, params.cut_tolerance_m)
+        walls_cut = int((cut & (res.proba.argmax(axis=1) == WALL)).sum())
+        res.proba = proba
+        ctx.log.info("3D classifier: a single spinning sweep (sensor at %.1f, %.1f, top beam %.1f deg); %d of %d "
+                     "points in columns the top beam cut (height unknown), %d of them walls counted as buildings", *sensor["xy"],
+                     sensor["top_deg"], int(cut.sum()), len(cut), walls_cut)
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
                      neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
@@ -121,7 +138,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
             "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
             "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "prior": prior, "turns": turns,
-            "ground_alpha": ground_alpha, "ground_diffusion": res.ground, "model": model.meta.get("name", params.model or "shipped"),
+            "ground_alpha": ground_alpha, "ground_diffusion": res.ground, "sensor": sensor, "walls_cut": walls_cut, "model": model.meta.get("name", params.model or "shipped"),
             "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
             "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
                         "total": round(time.perf_counter() - t0, 3)}}
