@@ -22,6 +22,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from twinkit.context import StepContext
@@ -166,3 +167,40 @@ def bench_check() -> pytest.MarkDecorator:
 def twinkit_context(tmp_path) -> StepContext:
     """A StepContext writing into a temporary folder."""
     return make_context(tmp_path / "step")
+
+
+# --------------------------------------------------------------------------- a single spinning sweep, ray-cast
+
+SWEEP_SENSOR = np.array([3.0, -2.0, 1.8])
+SWEEP_TOP_DEG = 2.0
+#: the sweep's scene: flat ground, a building front at x = 18 m taller than the top beam reaches, and a low wall
+#: along y = -8 m between x = 4 and 12 m, 1.2 m high (its top seen)
+SWEEP_FACADE_X, SWEEP_FACADE_TOP = 18.0, 12.0
+SWEEP_WALL_Y, SWEEP_WALL_TOP, SWEEP_WALL_X = -8.0, 1.2, (4.0, 12.0)
+
+
+def spinning_sweep(sensor=SWEEP_SENSOR, top_deg: float = SWEEP_TOP_DEG, beams: int = 64, az_step_deg: float = 0.12,
+                   seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n, 3), part (n,)) of one sweep of a spinning multi-beam sensor (beams from -24.8 degrees up to
+    ``top_deg``, 1 cm range noise) over the scene above; part: 0 ground, 1 facade, 2 wall."""
+    sensor = np.asarray(sensor, float)
+    rng = np.random.default_rng(seed)
+    el = np.radians(np.linspace(-24.8, top_deg, beams))
+    az = np.radians(np.arange(0.0, 360.0, az_step_deg))
+    e, a = np.meshgrid(el, az, indexing="ij")
+    d = np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1).reshape(-1, 3)
+    t = np.full(len(d), np.inf)
+    part = np.full(len(d), -1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        hits = [(-sensor[2] / d[:, 2], 0, lambda p: np.ones(len(p), bool)),
+                ((SWEEP_FACADE_X - sensor[0]) / d[:, 0], 1,
+                 lambda p: (p[:, 2] <= SWEEP_FACADE_TOP) & (np.abs(p[:, 1]) < 40)),
+                ((SWEEP_WALL_Y - sensor[1]) / d[:, 1], 2,
+                 lambda p: (p[:, 2] <= SWEEP_WALL_TOP) & (p[:, 0] > SWEEP_WALL_X[0]) & (p[:, 0] < SWEEP_WALL_X[1]))]
+        for tt, k, inside in hits:
+            p = sensor + tt[:, None] * d
+            ok = np.isfinite(tt) & (tt > 0.5) & (tt < 80.0) & (tt < t) & inside(p) & (p[:, 2] >= -1e-6)
+            t[ok], part[ok] = tt[ok], k
+    keep = np.isfinite(t)
+    pts = sensor + (t[keep] + rng.normal(0, 0.01, keep.sum()))[:, None] * d[keep]
+    return pts, part[keep]

@@ -5,34 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from twinkit.surface.rings import ring_sensor, under_ceiling
-
-SENSOR = np.array([3.0, -2.0, 1.8])
-TOP_DEG = 2.0
-FACADE_X, FACADE_TOP = 18.0, 12.0  # a building front, taller than the beam reaches
-WALL_Y, WALL_TOP, WALL_X = -8.0, 1.2, (4.0, 12.0)  # a low wall along the street
-
-
-def sweep(sensor=SENSOR, top_deg=TOP_DEG, beams=64, az_step_deg=0.12, seed=0):
-    """(points, part) of one sweep of a spinning sensor over the scene; part: 0 ground, 1 facade, 2 wall."""
-    rng = np.random.default_rng(seed)
-    el = np.radians(np.linspace(-24.8, top_deg, beams))
-    az = np.radians(np.arange(0.0, 360.0, az_step_deg))
-    e, a = np.meshgrid(el, az, indexing="ij")
-    d = np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1).reshape(-1, 3)
-    t = np.full(len(d), np.inf)
-    part = np.full(len(d), -1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        hits = [(-sensor[2] / d[:, 2], 0, lambda p: np.ones(len(p), bool)),
-                ((FACADE_X - sensor[0]) / d[:, 0], 1, lambda p: (p[:, 2] <= FACADE_TOP) & (np.abs(p[:, 1]) < 40)),
-                ((WALL_Y - sensor[1]) / d[:, 1], 2,
-                 lambda p: (p[:, 2] <= WALL_TOP) & (p[:, 0] > WALL_X[0]) & (p[:, 0] < WALL_X[1]))]
-        for tt, k, inside in hits:
-            p = sensor + tt[:, None] * d
-            ok = np.isfinite(tt) & (tt > 0.5) & (tt < 80.0) & (tt < t) & inside(p) & (p[:, 2] >= -1e-6)
-            t[ok], part[ok] = tt[ok], k
-    keep = np.isfinite(t)
-    pts = sensor + (t[keep] + rng.normal(0, 0.01, keep.sum()))[:, None] * d[keep]
-    return pts, part[keep]
+from twinkit.testing import SWEEP_SENSOR as SENSOR
+from twinkit.testing import SWEEP_TOP_DEG as TOP_DEG
+from twinkit.testing import spinning_sweep as sweep
 
 
 def on_top_beam(pts, part, top_deg=TOP_DEG):

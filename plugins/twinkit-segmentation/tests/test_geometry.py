@@ -380,3 +380,33 @@ def test_a_wall_cut_by_a_sweeps_top_beam_counts_as_building_and_a_wall_seen_whol
     assert (out[:nf].argmax(axis=1) == BUILDING).all() and (out[nf:].argmax(axis=1) == WALL).all()
     assert np.allclose(out.sum(axis=1), 1.0) and np.array_equal(proba[:, WALL], np.full(len(pts), 0.7, np.float32))
     assert np.array_equal(cut_walls(pts, proba, sensor, 0.0)[0], proba)  # off
+
+
+def test_the_step_finds_a_sweeps_sensor_unless_its_points_meta_says_the_ground_is_sampled_both_ways(tmp_path):
+    import json
+
+    from twinkit import artefacts as A
+    from twinkit.mesh import Mesh
+    from twinkit.testing import SWEEP_SENSOR, run_plugin, spinning_sweep
+    from twinkit_segmentation.synthetic import write_scene
+
+    mesh_ply, _, _ = write_scene(tmp_path / "scene", step=0.5)
+    pts, _ = spinning_sweep()
+    A.write_points(tmp_path / "points.ply", Mesh(vertices=pts))
+
+    def metrics(tag, share=None, **params):
+        inputs = {"in_points_ply": tmp_path / "points.ply", "in_textured_mesh_ply": mesh_ply}
+        if share is not None:
+            inputs["in_points_meta_json"] = meta = tmp_path / f"{tag}_meta" / "points_meta.json"
+            meta.parent.mkdir()
+            A.write_points_meta(meta, {"source": {"reader": "test"}, "counts": {}, "fields": {}, "frame": {}, "bounds_m": [],
+                                       "density": {"points": len(pts), "spacing_m": 0.05, "capture": "mobile",
+                                                   "ground_two_way_share": share}})
+        out = run_plugin("step", "classify_geometry", tmp_path / tag, inputs, turns=1, **params)
+        return json.loads((out["geometry_votes.npy"].parent / "step.json").read_text())["metrics"]
+
+    for m in (metrics("found"), metrics("rings", share=0.3)):
+        assert m["sensor"] is not None and m["walls_cut"] >= 0
+        assert np.hypot(m["sensor"]["xy"][0] - SWEEP_SENSOR[0], m["sensor"]["xy"][1] - SWEEP_SENSOR[1]) < 0.6
+    assert metrics("patches", share=0.99)["sensor"] is None  # a dense capture: the rings are not looked for
+    assert metrics("off", cut_tolerance_m=0.0)["sensor"] is None

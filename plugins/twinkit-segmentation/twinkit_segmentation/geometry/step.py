@@ -75,15 +75,17 @@ class ClassifyGeometryParams:
 
 
 def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_points_ply: Path,
-                      in_textured_mesh_ply: Path, out_geometry_votes_npy: Path, out_geometry_labels_ply: Path) -> dict:
+                      in_textured_mesh_ply: Path, out_geometry_votes_npy: Path, out_geometry_labels_ply: Path,
+                      in_points_meta_json: Path | None = None) -> dict:
     """Classify the cloud's points from their geometry (and intensity) and carry the probabilities to the
     mesh's vertices (docs/segmentation.md "3D classifier")."""
     import numpy as np
 
-    from twinkit.cityscapes import N_CLASSES, PALETTE
+    from twinkit.cityscapes import N_CLASSES, PALETTE, WALL
     from twinkit.mesh import write_colored_ply
-    from twinkit.cityscapes import WALL
+    from twinkit.surface.density import RING_CAPTURE_SHARE
     from twinkit.surface.rings import ring_sensor
+    from twinkit_segmentation.backproject_parts import capture_two_way_share
     from twinkit_segmentation.geometry.classify import classify_cloud, cut_walls, votes_at
     from twinkit_segmentation.geometry.model import load_model
 
@@ -109,7 +111,10 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
                          ground_window_m=params.ground_window_m, smooth_m=smooth_m, prior=prior,
                          turns=turns, ground_alpha=ground_alpha)
-    sensor = ring_sensor(cloud.vertices) if params.cut_tolerance_m > 0 else None
+    sensor = None
+    if params.cut_tolerance_m > 0:
+        two_way = capture_two_way_share(in_points_meta_json, cloud)  # known: no need to look for rings
+        sensor = ring_sensor(cloud.vertices) if two_way is None or two_way < RING_CAPTURE_SHARE else None
     walls_cut = 0
     if sensor is not None:
         proba, cut = cut_walls(cloud.vertices[res.base], res.proba, sensor, params.cut_tolerance_m)
