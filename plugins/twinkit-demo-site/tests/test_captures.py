@@ -172,3 +172,21 @@ def test_surfaces_are_opt_in_and_keep_the_pose(world):
     assert a["meta"]["foliage_m"] == 0 and a["meta"]["glass"] == 0  # the shipped model's data: clean skins
     assert b["meta"]["foliage_m"] >= 0.1 and np.array_equal(a["origin"], b["origin"])
     assert len(a["xyz"]) != len(b["xyz"]) or not np.array_equal(a["xyz"], b["xyz"])
+
+
+def test_a_variety_with_tall_hedges_grows_its_front_garden_hedges_and_the_demo_keeps_its_bushes():
+    # real trimmed hedges stand 1-3 m, above a single sweep's top beam near them; the demo's bushes 0.6-1.1 m
+    from twinkit_demo_site.layout import Variety, build_scene
+    from twinkit_demo_site.textures import build_atlas
+
+    atlas = build_atlas(0)
+
+    def hedge_band(hedge_m):
+        v = Variety(setback_m=5.0, hedges=1.0, hedge_m=hedge_m)
+        m = build_scene(30.0, 0, atlas, v).mesh
+        veg = m.attrs["label"] == cs.VEGETATION
+        z = m.vertices[:, 2] - np.median(m.vertices[m.attrs["label"] == cs.ROAD, 2])
+        return int((veg & (z > 1.4) & (z < 2.6)).sum())
+
+    short, tall = hedge_band(0.0), hedge_band(2.5)
+    assert tall > 5 * short + 1000, (short, tall)

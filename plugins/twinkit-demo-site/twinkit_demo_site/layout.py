@@ -303,7 +303,8 @@ def _road_marks(d: Dims, R) -> Marks:
 @dataclass
 class Blocks:
     """What stands in the four blocks: building solids (as objects.building returns them), walls
-    (xa, xb, ya, yb, height), fences ((x, y), (x, y)), trees (x, y, scale) and bushes (x, y)."""
+    (xa, xb, ya, yb, height), fences ((x, y), (x, y)), trees (x, y, scale) and bushes (x, y) or, in a hedge of a
+    given height, (x, y, height)."""
     buildings: list[dict] = field(default_factory=list)
     walls: list[tuple] = field(default_factory=list)
     fences: list[tuple] = field(default_factory=list)
@@ -440,9 +441,10 @@ def _street_trees(rng, d: Dims, m: Marks, R, bl: Blocks, p: float) -> None:
             bl.trees.append((x, y, float(rng.uniform(0.7, 1.0))))
 
 
-def _gardens(rng, d: Dims, bl: Blocks, setback: float, p: float) -> None:
-    """Hedges (rows of bushes) along the front gardens of the buildings set ``setback`` metres back from the sidewalk,
-    each with chance ``p``, and a tree in a garden deeper than 4 m with chance ``p`` / 2."""
+def _gardens(rng, d: Dims, bl: Blocks, setback: float, p: float, hedge_m: float = 0.0) -> None:
+    """Hedges (rows of bushes; ``hedge_m`` high, 0 = bushes of their own size) along the front gardens of the
+    buildings set ``setback`` metres back from the sidewalk, each with chance ``p``, and a tree in a garden deeper
+    than 4 m with chance ``p`` / 2."""
     for b in bl.buildings:
         (x0, y0, _), (x1, y1, _) = b["min"], b["max"]
         for lo_edge, hi_edge, back, along_x in ((y0, y1, d.bm, True), (x0, x1, d.bs, False)):
@@ -453,7 +455,8 @@ def _gardens(rng, d: Dims, bl: Blocks, setback: float, p: float) -> None:
                 c = sgn * (back + 0.6)
                 if rng.random() < p:
                     for u in np.arange(a0 + 0.8, a1 - 0.5, 1.3):
-                        bl.bushes.append((u, c) if along_x else (c, u))
+                        xy = (u, c) if along_x else (c, u)
+                        bl.bushes.append((*xy, hedge_m) if hedge_m > 0 else xy)
                 if setback > 4.0 and rng.random() < p / 2:
                     m = sgn * (back + setback / 2)
                     u = float(rng.uniform(a0 + 2, a1 - 2))
@@ -470,8 +473,8 @@ def _build_block_things(mb: MeshBuilder, rng, d: Dims, R, bl: Blocks, tree_scale
         ob.fence(mb, a, b, cz)
     for x, y, sc in bl.trees:
         ob.tree(mb, rng, x, y, cz, sc * tree_scale)
-    for x, y in bl.bushes:
-        ob.bush(mb, rng, x, y, cz)
+    for bush in bl.bushes:
+        ob.bush(mb, rng, bush[0], bush[1], cz, height=bush[2] if len(bush) > 2 else None)
 
 
 # ---------------------------------------------------------------- street furniture and vehicles
@@ -581,7 +584,7 @@ def build_scene(half_m: float, seed: int, atlas: Atlas, variety: Variety | None 
     if v.street_trees > 0:
         _street_trees(np.random.default_rng([seed, 9]), d, marks, R, blocks, v.street_trees)
     if v.setback_m > 0 and v.hedges > 0:
-        _gardens(np.random.default_rng([seed, 12]), d, blocks, v.setback_m, v.hedges)
+        _gardens(np.random.default_rng([seed, 12]), d, blocks, v.setback_m, v.hedges, v.hedge_m)
     _build_block_things(mb, rng, d, R, blocks, v.tree_scale)
     _street_furniture(mb, d, marks)
     cars = _vehicles(mb, rng, d, marks, v.park_p)

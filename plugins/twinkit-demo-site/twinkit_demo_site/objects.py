@@ -79,9 +79,13 @@ def tree(mb: MeshBuilder, rng, x, y, z0, scale=1.0) -> None:
     mb.blob([x, y, cz], [r, r * rng.uniform(0.85, 1.1), r * 0.85], rng, L["vegetation"], "foliage", subdiv=3, roughness=0.15)
 
 
-def bush(mb: MeshBuilder, rng, x, y, z0) -> None:
+def bush(mb: MeshBuilder, rng, x, y, z0, height: float | None = None) -> None:
+    """A bush about 0.6-1.1 m high, or one of a trimmed hedge's ``height`` (m, to its top)."""
     r = rng.uniform(0.55, 0.95)
-    mb.blob([x, y, z0 + r * 0.45], [r * 1.3, r, r * 0.7], rng, L["vegetation"], "hedge", subdiv=2, roughness=0.12, tex_size_m=1.2)
+    centre, axes = [x, y, z0 + r * 0.45], [r * 1.3, r, r * 0.7]
+    if height:
+        centre, axes = [x, y, z0 + 0.5 * height - 0.1], [r * 1.3, r, 0.5 * height + 0.1]
+    mb.blob(centre, axes, rng, L["vegetation"], "hedge", subdiv=2, roughness=0.12, tex_size_m=1.2)
 
 
 def lamp(mb: MeshBuilder, x, y, z0, towards) -> None:

@@ -16,7 +16,8 @@ class Variety:
     ~11 m of the main road's north and south-west sidewalks and the side streets' sidewalks; ``verge_m``: width (m) of
     a grass verge between the curb and the sidewalk outside the junction (0 = none); ``setback_m``: front gardens (grass)
     this deep between the sidewalk and the buildings; ``hedges``: chance of a hedge along each front garden, and of
-    a tree in a deep one; ``lane_m``, ``park_m``,
+    a tree in a deep one; ``hedge_m``: the height of those hedges (0 = the demo's bushes, 0.6-1.1 m; a trimmed
+    hedge stands 1-3 m, taller than a single spinning sweep's top beam reaches near it); ``lane_m``, ``park_m``,
     ``sidewalk_m``: the street's widths (None = :class:`Dims`' defaults)."""
 
     floors: tuple[int, int] = (3, 7)
@@ -26,6 +27,7 @@ class Variety:
     verge_m: float = 0.0
     setback_m: float = 0.0
     hedges: float = 0.0
+    hedge_m: float = 0.0
     lane_m: float | None = None
     park_m: float | None = None
     sidewalk_m: float | None = None
@@ -36,8 +38,10 @@ def random_variety(rng: np.random.Generator) -> Variety:
     lo = int(rng.integers(1, 4))
     sidewalk = float(rng.uniform(2.5, 5.0))
     verge = float(rng.uniform(0.8, 0.5 * sidewalk)) if rng.random() < 0.35 else 0.0
-    return Variety(floors=(lo, lo + int(rng.integers(2, 8))), park_p=float(rng.uniform(0.2, 0.95)),
-                   tree_scale=float(rng.uniform(0.7, 1.4)), street_trees=float(rng.uniform(0.0, 1.0)), verge_m=verge,
-                   setback_m=float(rng.uniform(1.5, 7.0)) if rng.random() < 0.6 else 0.0,
-                   hedges=float(rng.uniform(0.3, 1.0)),
-                   lane_m=float(rng.uniform(2.9, 3.6)), park_m=float(rng.uniform(1.9, 2.6)), sidewalk_m=sidewalk)
+    v = Variety(floors=(lo, lo + int(rng.integers(2, 8))), park_p=float(rng.uniform(0.2, 0.95)),
+                tree_scale=float(rng.uniform(0.7, 1.4)), street_trees=float(rng.uniform(0.0, 1.0)), verge_m=verge,
+                setback_m=float(rng.uniform(1.5, 7.0)) if rng.random() < 0.6 else 0.0,
+                hedges=float(rng.uniform(0.3, 1.0)),
+                lane_m=float(rng.uniform(2.9, 3.6)), park_m=float(rng.uniform(1.9, 2.6)), sidewalk_m=sidewalk)
+    v.hedge_m = float(rng.uniform(0.6, 3.0))  # drawn last: the knobs above stay what they were for every seed
+    return v
