@@ -190,3 +190,8 @@ def test_a_variety_with_tall_hedges_grows_its_front_garden_hedges_and_the_demo_k
 
     short, tall = hedge_band(0.0), hedge_band(2.5)
     assert tall > 5 * short + 1000, (short, tall)
+    from twinkit_demo_site.layout import random_variety
+
+    plain, tall_v = (random_variety(np.random.default_rng([104, 10]), t) for t in (False, True))
+    assert plain.hedge_m == 0.0 and 0.6 <= tall_v.hedge_m <= 3.0  # opt-in: the shipped model's captures stay as they were
+    assert (plain.setback_m, plain.floors, plain.sidewalk_m) == (tall_v.setback_m, tall_v.floors, tall_v.sidewalk_m)

@@ -60,18 +60,19 @@ class World:
 
 
 def build_world(seed: int, size: str = "small", variety: bool = True, apron_m: float = 130.0,
-                apron_objects: bool = True, threads: int | None = None) -> World:
+                apron_objects: bool = True, threads: int | None = None, tall_hedges: bool = False) -> World:
     """Build the demo site of ``seed`` and ``size`` (a plugin.PRESETS name) with the ground continued ``apron_m``
     metres beyond its edge, and its tracer. ``apron_objects``: the streets beyond the edge are lined (for 70 m)
     with buildings, tree groups, street trees and parked cars (:func:`_apron_objects`), so that far ranges see
     a street, not an empty plain. ``variety``: the layout's knobs drawn at random from the seed
-    (layout.random_variety: building heights, parked cars, trees, verges, street widths); off = the demo's own site."""
+    (layout.random_variety: building heights, parked cars, trees, verges, street widths; ``tall_hedges``: and the
+    hedges' height); off = the demo's own site."""
     from twinkit_demo_site.layout import build_scene, random_variety  # noqa: I001
     from twinkit_demo_site.plugin import _preset
     from twinkit_demo_site.textures import build_atlas
 
     atlas = build_atlas(seed)
-    knobs = random_variety(np.random.default_rng([seed, 10])) if variety else None
+    knobs = random_variety(np.random.default_rng([seed, 10]), tall_hedges) if variety else None
     scene = build_scene(_preset(size)["half_m"], seed, atlas, knobs)
     site = scene.mesh
     if apron_objects:
@@ -420,14 +421,14 @@ def _take(out: dict, idx: np.ndarray) -> dict:
 
 
 # ----------------------------------------------------------------------------- the API
-_WORLDS: dict[tuple[int, str, bool], World] = {}
+_WORLDS: dict[tuple[int, str, bool, bool], World] = {}
 
 
 def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, size: str = "small",
                      max_points: int = MAX_POINTS, world: World | None = None, variety: bool = True,
-                     surfaces: bool = False) -> dict:
-    """Simulate one capture of the demo site ``seed`` (``size`` a plugin.PRESETS name; ``variety``: see
-    :func:`build_world`; ``world``: a prebuilt one, which then replaces these three) of ``kind`` (one of
+                     surfaces: bool = False, tall_hedges: bool = False) -> dict:
+    """Simulate one capture of the demo site ``seed`` (``size`` a plugin.PRESETS name; ``variety``, ``tall_hedges``:
+    see :func:`build_world`; ``world``: a prebuilt one, which then replaces these four) of ``kind`` (one of
     :data:`KINDS`), every random draw (pose, sensor, noise) from ``rng_seed``; the same arguments give the same
     capture. ``density`` scales the point count (about linearly, 0.1-10); at most ``max_points`` points are kept
     (a uniform random subsample).
@@ -440,10 +441,10 @@ def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, 
     if kind not in KINDS:
         raise ValueError(f"unknown capture kind {kind!r}; choose one of {', '.join(KINDS)}")
     if world is None:
-        key = (int(seed), size, bool(variety))
+        key = (int(seed), size, bool(variety), bool(tall_hedges))
         if key not in _WORLDS:
             _WORLDS.clear()
-            _WORLDS[key] = build_world(seed, size, variety)
+            _WORLDS[key] = build_world(seed, size, variety, tall_hedges=tall_hedges)
         world = _WORLDS[key]
     rng = np.random.default_rng([int(seed), int(rng_seed), KINDS.index(kind), 44])
     if kind == "spinning":
@@ -499,6 +500,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--no-variety", action="store_true", help="the demo's own layout (no random layout knobs)")
     ap.add_argument("--surfaces", action="store_true", help="move returns into foliage, behind window panes and over "
                                                             "facade relief (surface_depth; off: the shipped model's data)")
+    ap.add_argument("--tall-hedges", action="store_true", help="front-garden hedges 0.6-3 m high (off: the shipped "
+                                                               "model's data; measured and not adopted)")
     a = ap.parse_args(argv)
     kinds = [k for k in a.kinds.split(",") if k]
     a.out.mkdir(parents=True, exist_ok=True)
@@ -515,12 +518,12 @@ def main(argv: list[str] | None = None) -> None:
         dens = round(float(np.exp(np.random.default_rng([s, v, KINDS.index(k), 7]).uniform(
             np.log(a.density_min), np.log(a.density_max)))), 4)  # as the manifest records it, so that it reproduces
         c = simulate_capture(s, k, rs, density=dens, size=a.size, max_points=a.max_points, variety=not a.no_variety,
-                                 surfaces=a.surfaces)
+                                 surfaces=a.surfaces, tall_hedges=a.tall_hedges)
         np.savez_compressed(a.out / name, xyz=c["xyz"], label=c["label"], intensity=c["intensity"], origin=c["origin"],
                             sensor=c["sensor"].astype(np.uint32), ring=c["ring"])
         dt = time.perf_counter() - t0
         manifest["captures"].append({"file": name, "seed": s, "kind": k, "variant": v, "rng_seed": rs, "size": a.size,
-                                     "variety": not a.no_variety,
+                                     "variety": not a.no_variety, "tall_hedges": a.tall_hedges,
                                      "density": round(dens, 4), "points": int(len(c["label"])), "raw_points": c["raw_points"],
                                      "seconds": round(dt, 2), "counts": class_counts(c["label"]),
                                      "meta": {kk: (round(vv, 5) if isinstance(vv, float) else vv) for kk, vv in c["meta"].items()}})
