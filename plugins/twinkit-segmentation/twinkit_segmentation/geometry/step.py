@@ -81,12 +81,9 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     mesh's vertices (docs/segmentation.md "3D classifier")."""
     import numpy as np
 
-    from twinkit.cityscapes import N_CLASSES, PALETTE, WALL
+    from twinkit.cityscapes import N_CLASSES, PALETTE
     from twinkit.mesh import write_colored_ply
-    from twinkit.surface.density import RING_CAPTURE_SHARE
-    from twinkit.surface.rings import ring_sensor
-    from twinkit_segmentation.backproject_parts import capture_two_way_share
-    from twinkit_segmentation.geometry.classify import classify_cloud, cut_walls, votes_at
+    from twinkit_segmentation.geometry.classify import classify_cloud, votes_at
     from twinkit_segmentation.geometry.model import load_model
 
     t0 = time.perf_counter()
@@ -111,18 +108,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
                          ground_window_m=params.ground_window_m, smooth_m=smooth_m, prior=prior,
                          turns=turns, ground_alpha=ground_alpha)
-    sensor = None
-    if params.cut_tolerance_m > 0:
-        two_way = capture_two_way_share(in_points_meta_json, cloud)  # known: no need to look for rings
-        sensor = ring_sensor(cloud.vertices) if two_way is None or two_way < RING_CAPTURE_SHARE else None
-    walls_cut = 0
-    if sensor is not None:
-        proba, cut = cut_walls(cloud.vertices[res.base], res.proba, sensor, params.cut_tolerance_m)
-        walls_cut = int((cut & (res.proba.argmax(axis=1) == WALL)).sum())
-        res.proba = proba
-        ctx.log.info("3D classifier: a single spinning sweep (sensor at %.1f, %.1f, top beam %.1f deg); %d of %d "
-                     "points in columns the top beam cut (height unknown), %d of them walls counted as buildings", *sensor["xy"],
-                     sensor["top_deg"], int(cut.sum()), len(cut), walls_cut)
+    sensor, walls_cut = _cut_by_top_beam(params, ctx, cloud, res, in_points_meta_json)
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
                      neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
@@ -147,3 +133,28 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
             "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
             "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
                         "total": round(time.perf_counter() - t0, 3)}}
+
+
+def _cut_by_top_beam(params: ClassifyGeometryParams, ctx: StepContext, cloud, res,
+                     in_points_meta_json: Path | None) -> tuple[dict | None, int]:
+    """On a single spinning sweep, the classifier's walls in columns the top beam cut count as building
+    (``res.proba`` replaced); (the sweep's sensor or None, how many base points that moved)."""
+    from twinkit.cityscapes import WALL
+    from twinkit.surface.density import RING_CAPTURE_SHARE
+    from twinkit.surface.rings import ring_sensor
+    from twinkit_segmentation.backproject_parts import capture_two_way_share
+    from twinkit_segmentation.geometry.classify import cut_walls
+
+    if params.cut_tolerance_m <= 0:
+        return None, 0
+    two_way = capture_two_way_share(in_points_meta_json, cloud)  # known: no need to look for rings
+    sensor = ring_sensor(cloud.vertices) if two_way is None or two_way < RING_CAPTURE_SHARE else None
+    if sensor is None:
+        return None, 0
+    proba, cut = cut_walls(cloud.vertices[res.base], res.proba, sensor, params.cut_tolerance_m)
+    walls_cut = int((cut & (res.proba.argmax(axis=1) == WALL)).sum())
+    res.proba = proba
+    ctx.log.info("3D classifier: a single spinning sweep (sensor at %.1f, %.1f, top beam %.1f deg); %d of %d points "
+                 "in columns the top beam cut (height unknown), %d of them walls counted as buildings",
+                 *sensor["xy"], sensor["top_deg"], int(cut.sum()), len(cut), walls_cut)
+    return sensor, walls_cut
