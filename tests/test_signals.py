@@ -33,6 +33,16 @@ def _alive(pid: int) -> bool:
     return pid_alive(pid)
 
 
+def _stop(p: subprocess.Popen, sig: int) -> tuple[str, str]:
+    """Send ``sig`` to the run ``p`` and wait for it to end (its process group is killed if it does not)."""
+    try:
+        os.kill(p.pid, sig)
+        return p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+
+
 def _manifests(project) -> list[dict]:
     return [json.loads(p.read_text()) for p in sorted((project.ws / "runs").glob("*/manifest.json"))]
 
@@ -278,11 +288,8 @@ def test_a_run_stopped_while_it_waits_for_the_store_says_interrupted(project):
         try:
             _wait_for(lambda: owner.exists() and f"pid {p.pid} " in owner.read_text(), what="the run to take the workspace")
             _wait_for(lambda: [m for m in _manifests(project) if m["status"] == "running"], what="the running manifest")
-            os.kill(p.pid, signal.SIGTERM)
-            out, err = p.communicate(timeout=60)
         finally:
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGKILL)
+            _, err = _stop(p, signal.SIGTERM)
         assert p.returncode == 143, err
         m = _manifests(project)[-1]
         assert m["status"] == "interrupted" and "Terminated" in m["error"], m
