@@ -4,7 +4,8 @@
     python bench/bench_geometry.py --score-only [--turns 1,2,4,6] [--ground 0,0.995]   # the shipped model on the real scans only
 
 1. Makes the training captures where ``DIR`` lacks them (the shipped recipe: scansim's captures of the
-   ``large`` demo site, seeds 100-139 training and 140-147 validation, spinning sweeps in three variants, the other three kinds in one; the
+   ``large`` demo site, seeds 100-139 training and 140-147 validation, spinning sweeps in three variants with
+   rough surfaces and tall hedges (``--surfaces --tall-hedges``), the other three kinds in one; the
    demo-made mobile scans and sweeps of ``bench/geometry_data.py``). About 45 minutes on 2 cores the first
    time; a later run reuses them (each generator skips what it already wrote).
 2. Trains with the shipped model's recipe (its JSON) into ``bench/results/geometry_model.{npz,json}``.
@@ -36,13 +37,31 @@ def _run(args: list[str]) -> None:
     subprocess.run([sys.executable, *args], cwd=ROOT, check=True)
 
 
+#: the scansim captures of the shipped model: (kinds, variants, extra flags of ``twinkit_demo_site.captures``)
+CAPTURES = (("spinning", "3", ("--surfaces", "--tall-hedges")), ("tls,mobile,aerial", "1", ()))
+
+
+def check_manifest(folder: Path) -> None:
+    """Refuse a capture folder whose spinning sweeps an older recipe made (clean skins, the demo's bushes): the
+    generator skips the files its manifest has, so they would be trained on as they are."""
+    man = folder / "manifest.json"
+    if not man.is_file():
+        return
+    old = [c["file"] for c in json.loads(man.read_text())["captures"] if c["kind"] == "spinning"
+           and not (c.get("surfaces", c["meta"].get("foliage_m", 0) > 0) and c.get("tall_hedges"))]
+    if old:
+        raise SystemExit(f"{folder}: {len(old)} spinning sweeps ({old[0]} ...) were made without --surfaces "
+                         "--tall-hedges (an older recipe); remove them, or give --data a new folder")
+
+
 def make_data(data: Path) -> list[Path]:
     """The captures the shipped model trains on, generated where missing; the --data folders in order."""
     sc = data / "scansim"
     for part, seeds in (("train", "100-139"), ("val", "140-147")):
-        for kinds, variants in (("spinning", "3"), ("tls,mobile,aerial", "1")):
+        check_manifest(sc / part)
+        for kinds, variants, flags in CAPTURES:
             _run(["-m", "twinkit_demo_site.captures", "--out", str(sc / part), "--seeds", seeds,
-                  "--kinds", kinds, "--variants", variants, "--size", "large"])
+                  "--kinds", kinds, "--variants", variants, "--size", "large", *flags])
     if not (data / "demo" / "velo").is_dir():
         _run(["bench/geometry_data.py", "--out", str(data / "demo")])
     return [sc / "train", sc / "val", data / "demo" / "demo_mobile", data / "demo" / "velo"]

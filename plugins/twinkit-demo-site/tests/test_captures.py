@@ -169,7 +169,7 @@ def test_surfaces_are_opt_in_and_keep_the_pose(world):
 
     a = simulate_capture(SEED, "spinning", 2, density=0.3, world=world)
     b = simulate_capture(SEED, "spinning", 2, density=0.3, world=world, surfaces=True)
-    assert a["meta"]["foliage_m"] == 0 and a["meta"]["glass"] == 0  # the shipped model's data: clean skins
+    assert a["meta"]["foliage_m"] == 0 and a["meta"]["glass"] == 0  # off by default: clean skins
     assert b["meta"]["foliage_m"] >= 0.1 and np.array_equal(a["origin"], b["origin"])
     assert len(a["xyz"]) != len(b["xyz"]) or not np.array_equal(a["xyz"], b["xyz"])
 
@@ -193,5 +193,5 @@ def test_a_variety_with_tall_hedges_grows_its_front_garden_hedges_and_the_demo_k
     from twinkit_demo_site.layout import random_variety
 
     plain, tall_v = (random_variety(np.random.default_rng([104, 10]), t) for t in (False, True))
-    assert plain.hedge_m == 0.0 and 0.6 <= tall_v.hedge_m <= 3.0  # opt-in: the shipped model's captures stay as they were
+    assert plain.hedge_m == 0.0 and 0.6 <= tall_v.hedge_m <= 3.0  # opt-in: a seed's other knobs stay as they were
     assert (plain.setback_m, plain.floors, plain.sidewalk_m) == (tall_v.setback_m, tall_v.floors, tall_v.sidewalk_m)

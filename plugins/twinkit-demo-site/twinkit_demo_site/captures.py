@@ -12,8 +12,8 @@ the face its ray hit. Kinds:
 
 Realism, drawn per capture from ``rng_seed``: range noise (1-3 cm sigma), random dropout, returns lost at
 grazing incidence and on dark or far surfaces, no colour, an intensity, the sensor pose within the site, and a
-density factor. With ``surfaces`` (``--surfaces``; off by default, measured and not adopted: docs/segmentation.md
-"Real surfaces and real class shares") returns are also moved along their ray where a real surface is not where
+density factor. With ``surfaces`` (``--surfaces``; off by default; the shipped 3D classifier's spinning sweeps are
+made with it and with ``--tall-hedges``: docs/segmentation.md "Rough hedges and rough facades: m16") returns are also moved along their ray where a real surface is not where
 the mesh is (:func:`twinkit_demo_site.sensor.surface_depth`): into foliage, behind window panes, into window recesses and over facade
 relief. Beyond the site's edge the ground continues (an "apron": the roads, sidewalks and grass go on
 for the sensor's range) so that far rings land on ground as they do on a real street.
@@ -499,9 +499,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--max-points", type=int, default=MAX_POINTS)
     ap.add_argument("--no-variety", action="store_true", help="the demo's own layout (no random layout knobs)")
     ap.add_argument("--surfaces", action="store_true", help="move returns into foliage, behind window panes and over "
-                                                            "facade relief (surface_depth; off: the shipped model's data)")
-    ap.add_argument("--tall-hedges", action="store_true", help="front-garden hedges 0.6-3 m high (off: the shipped "
-                                                               "model's data; measured and not adopted)")
+                                                            "facade relief (surface_depth; the shipped model's spinning "
+                                                            "sweeps have it, its other captures not)")
+    ap.add_argument("--tall-hedges", action="store_true", help="front-garden hedges 0.6-3 m high (the shipped model's "
+                                                               "spinning sweeps have them, its other captures not)")
     a = ap.parse_args(argv)
     kinds = [k for k in a.kinds.split(",") if k]
     a.out.mkdir(parents=True, exist_ok=True)
@@ -523,7 +524,8 @@ def main(argv: list[str] | None = None) -> None:
                             sensor=c["sensor"].astype(np.uint32), ring=c["ring"])
         dt = time.perf_counter() - t0
         manifest["captures"].append({"file": name, "seed": s, "kind": k, "variant": v, "rng_seed": rs, "size": a.size,
-                                     "variety": not a.no_variety, "tall_hedges": a.tall_hedges,
+                                     "variety": not a.no_variety, "surfaces": a.surfaces,
+                                     "tall_hedges": a.tall_hedges,
                                      "density": round(dens, 4), "points": int(len(c["label"])), "raw_points": c["raw_points"],
                                      "seconds": round(dt, 2), "counts": class_counts(c["label"]),
                                      "meta": {kk: (round(vv, 5) if isinstance(vv, float) else vv) for kk, vv in c["meta"].items()}})

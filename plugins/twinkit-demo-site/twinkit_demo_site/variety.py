@@ -35,8 +35,8 @@ class Variety:
 
 def random_variety(rng: np.random.Generator, tall_hedges: bool = False) -> Variety:
     """A random :class:`Variety`: low and high-rise streets, few or many parked cars and trees, verges, widths;
-    ``tall_hedges``: the hedges' height too (0.6-3 m; off for the shipped model's captures: measured and not
-    adopted, docs/segmentation.md "Cut by the top beam")."""
+    ``tall_hedges``: the hedges' height too (0.6-3 m; the shipped 3D classifier's spinning sweeps have them, with
+    rough surfaces: docs/segmentation.md "Rough hedges and rough facades: m16")."""
     lo = int(rng.integers(1, 4))
     sidewalk = float(rng.uniform(2.5, 5.0))
     verge = float(rng.uniform(0.8, 0.5 * sidewalk)) if rng.random() < 0.35 else 0.0
