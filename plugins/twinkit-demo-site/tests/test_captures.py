@@ -195,3 +195,20 @@ def test_a_variety_with_tall_hedges_grows_its_front_garden_hedges_and_the_demo_k
     plain, tall_v = (random_variety(np.random.default_rng([104, 10]), t) for t in (False, True))
     assert plain.hedge_m == 0.0 and 0.6 <= tall_v.hedge_m <= 3.0  # opt-in: a seed's other knobs stay as they were
     assert (plain.setback_m, plain.floors, plain.sidewalk_m) == (tall_v.setback_m, tall_v.floors, tall_v.sidewalk_m)
+
+
+def test_materials_order_the_intensities_and_change_nothing_else(world):
+    """With ``materials`` the road's asphalt comes back darker than the grass in every capture and darker than
+    the pavement's paving in most (a quarter of the sites pave with asphalt); the pose and the other draws are
+    those of the capture without it (its draws come from a child stream)."""
+    from twinkit_demo_site.captures import simulate_capture
+
+    darker_than_paving = 0
+    for rs in range(1, 9):
+        plain = simulate_capture(SEED, "tls", rs, density=0.3, world=world)
+        mat = simulate_capture(SEED, "tls", rs, density=0.3, world=world, materials=True)
+        assert np.array_equal(plain["origin"], mat["origin"]) and plain["meta"]["noise_m"] == mat["meta"]["noise_m"]
+        med = {c: np.median(mat["intensity"][mat["label"] == c]) for c in (cs.ROAD, cs.SIDEWALK, cs.TERRAIN)}
+        assert med[cs.ROAD] < med[cs.TERRAIN], (rs, med)
+        darker_than_paving += med[cs.ROAD] < 0.85 * med[cs.SIDEWALK]
+    assert darker_than_paving >= 5, darker_than_paving

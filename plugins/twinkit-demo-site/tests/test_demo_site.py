@@ -142,6 +142,20 @@ def test_every_point_label_is_its_nearest_face_label(cloud, gt):
     assert bad == 0, f"{bad} points carry a label other than their nearest face's"
 
 
+def test_intensity_is_the_materials_reflectance_not_the_colour(demo, cloud):
+    # a lidar sees asphalt darker than paving and grass brighter than both, whatever their colours (the demo's
+    # grass is the darkest of the three in the photos)
+    import laspy
+
+    from twinkit.cityscapes import ROAD, SIDEWALK, TERRAIN
+
+    inten = np.asarray(laspy.read(demo[0] / "cloud.las").intensity)  # the LAS has the PLY's points in order
+    med = {c: np.median(inten[cloud["label"] == c]) for c in (ROAD, SIDEWALK, TERRAIN)}
+    assert med[ROAD] < 0.8 * med[SIDEWALK] < 0.8 * med[TERRAIN], med
+    lum = {c: cloud["rgb"][cloud["label"] == c].mean() for c in (SIDEWALK, TERRAIN)}
+    assert lum[TERRAIN] < lum[SIDEWALK], lum
+
+
 def test_range_noise_is_a_few_millimetres(cloud, gt):
     import open3d as o3d
 

@@ -18,9 +18,13 @@ the mesh is (:func:`twinkit_demo_site.sensor.surface_depth`): into foliage, behi
 relief. Beyond the site's edge the ground continues (an "apron": the roads, sidewalks and grass go on
 for the sensor's range) so that far rings land on ground as they do on a real street.
 
-Intensity is a rough model, not a radiometric one: a reflectance per class (near-infrared-like: vegetation,
-grass and signs bright, asphalt darker) varied per capture, modulated by the texture's brightness (markings brighter
-than asphalt), times a cosine-of-incidence term and a range fall-off, times a per-capture gain, plus noise.
+Intensity is a rough model, not a radiometric one: a reflectance per class varied per capture, modulated by the
+texture's brightness (markings brighter than asphalt), times a cosine-of-incidence term and a range fall-off, times
+a per-capture gain, plus noise. By default each class's reflectance is drawn on its own (the classes' order changes
+from capture to capture); with ``materials`` (``--materials``; opt-in, docs/segmentation.md "Intensity from
+materials: m18") it is drawn around its material's near-infrared reflectance (asphalt dark, concrete paving
+lighter, grass and foliage bright, metal mirror-like, signs retroreflective), a quarter of the sites paving their
+pavements with the road's asphalt (:func:`twinkit_demo_site.sensor.draw_sensor`).
 """
 from __future__ import annotations
 
@@ -37,7 +41,7 @@ from twinkit import cityscapes as cs
 from twinkit.mesh import Mesh
 from twinkit_demo_site.layout import Scene
 from twinkit_demo_site.raycast import Tracer
-from twinkit_demo_site.sensor import draw_sensor, sensor_meta, trace
+from twinkit_demo_site.sensor import draw_sensor, sensor_meta, texture_modulation, trace
 
 KINDS = ("spinning", "tls", "mobile", "aerial")
 MAX_POINTS = 300_000
@@ -82,19 +86,7 @@ def build_world(seed: int, size: str = "small", variety: bool = True, apron_m: f
     assert mesh.faces is not None and site.faces is not None
     tracer = Tracer(mesh, atlas, threads=threads)
     n_site = int(len(site.faces))
-    # texture brightness at each face's centre, for the intensity model
-    bary = np.tile(np.array([[1 / 3, 1 / 3]], np.float32), (len(mesh.faces), 1))
-    prim = np.arange(len(mesh.faces))
-    lum = tracer.albedo(prim, bary).mean(1).astype(np.float32)
-    lab = tracer.face_labels
-    v = mesh.vertices[mesh.faces]
-    area = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)[:n_site]
-    mean = np.full(256, 0.5)
-    sums = np.bincount(lab[:n_site], weights=area * lum[:n_site], minlength=256)
-    wts = np.bincount(lab[:n_site], weights=area, minlength=256)
-    mean[wts > 0] = sums[wts > 0] / wts[wts > 0]
-    mod = np.clip((0.2 + lum) / (0.2 + mean[lab]), 0.4, 2.5).astype(np.float32)
-    mod[n_site:] = 1.0
+    mod = texture_modulation(tracer, n_site)
     return World(scene=scene, tracer=tracer, n_site_faces=n_site, mod=mod)
 
 
@@ -220,7 +212,8 @@ def _clear(world: World, p: np.ndarray, radius: float) -> bool:
 
 
 # ----------------------------------------------------------------------------- the kinds
-def spinning(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
+def spinning(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False,
+             materials: bool = False) -> dict:
     """One 360-degree sweep of an HDL-64E-like sensor on a car standing in a lane at a random place.
 
     ``density`` scales the ray count: the beam count follows ``64 * sqrt(density)`` (16 to 128 beams over the
@@ -245,7 +238,7 @@ def spinning(world: World, rng: np.random.Generator, density: float = 1.0, surfa
         if _clear(world, np.array([xy[0], xy[1], zg[0] + 0.8]), 2.6) and _clear(world, o, 1.5):
             break
     R = _rot(yaw + rng.normal(0, 0.05), math.radians(rng.normal(0, 0.7)), math.radians(rng.normal(0, 0.7)))
-    sensor = draw_sensor(rng, rng.uniform(80.0, 120.0), surfaces)
+    sensor = draw_sensor(rng, rng.uniform(80.0, 120.0), surfaces, materials)
     step0 = float(rng.uniform(0.08, 0.17))
     n_beams = int(np.clip(round(64 * math.sqrt(density)), 16, 128))
     elev = np.interp(np.linspace(0, 63, n_beams), np.arange(64), HDL64_ELEVATIONS)
@@ -269,7 +262,8 @@ def spinning(world: World, rng: np.random.Generator, density: float = 1.0, surfa
     return out
 
 
-def tls(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
+def tls(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False,
+        materials: bool = False) -> dict:
     """Two to five terrestrial tripod stations (1.5-1.8 m) on sidewalks and corners, each a panorama from -60 to +90
     degrees elevation; the angular step gives ``0.12 m / sqrt(density)`` point spacing at 10 m."""
     d = world.scene.dims
@@ -296,7 +290,7 @@ def tls(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: 
         if not _clear(world, np.array([o[0], o[1], zg[0] + 0.5]), 0.5):
             continue
         stations.append(o)
-    sensor = draw_sensor(rng, rng.uniform(120.0, 250.0), surfaces)
+    sensor = draw_sensor(rng, rng.uniform(120.0, 250.0), surfaces, materials)
     yaws = rng.uniform(0, 2 * math.pi, len(stations))
     step = math.atan(0.12 / math.sqrt(density) / 10.0)
     az = np.arange(0, 2 * math.pi, step)
@@ -315,7 +309,8 @@ def tls(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: 
     return out
 
 
-def mobile(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
+def mobile(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False,
+           materials: bool = False) -> dict:
     """The demo's push-broom van (:mod:`twinkit_demo_site.scanner`) over its first pass and a random subset of the
     others, at the small preset's sampling times ``density`` (profile spacing / sqrt, rays per profile x sqrt);
     the van's own points, re-noised and re-detected with this capture's sensor model, intensity recomputed.
@@ -327,7 +322,7 @@ def mobile(world: World, rng: np.random.Generator, density: float = 1.0, surface
 
     pre = PRESETS["small"]  # the small preset's sampling on every size (the large one's is ~100x the rays)
     f = math.sqrt(max(density, 1e-3))
-    sensor = draw_sensor(rng, rng.uniform(60.0, 100.0), surfaces)
+    sensor = draw_sensor(rng, rng.uniform(60.0, 100.0), surfaces, materials)
     st = ScanSettings(profile_spacing_m=pre["profile_spacing_m"] / f, rays_per_profile=int(round(pre["rays_per_profile"] * f)),
                       scanner_height_m=float(rng.uniform(1.9, 2.6)), noise_mm=0.0, max_range_m=sensor.max_range_m,
                       shadows=False)
@@ -354,7 +349,8 @@ def mobile(world: World, rng: np.random.Generator, density: float = 1.0, surface
     return out
 
 
-def aerial(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False) -> dict:
+def aerial(world: World, rng: np.random.Generator, density: float = 1.0, surfaces: bool = False,
+           materials: bool = False) -> dict:
     """Airborne laser strips over the site: altitude 300-900 m, zigzag mirror swath +-20 degrees, 5-50 points/m^2
     on the ground times ``density`` (as many as 500 on a dense draw), a random heading; a share of the rays that
     hit vegetation also gives a return from below the canopy; returns at incidence cosines below 0.12-0.3 are lost
@@ -368,7 +364,7 @@ def aerial(world: World, rng: np.random.Generator, density: float = 1.0, surface
     sp = 1.0 / math.sqrt(rho)
     heading = rng.uniform(0, 2 * math.pi)
     R = _rot(heading)
-    sensor = draw_sensor(rng, alt * 1.3, surfaces)
+    sensor = draw_sensor(rng, alt * 1.3, surfaces, materials)
     sensor.cos_min = float(rng.uniform(0.12, 0.3))  # facades seen edge-on from above give few returns
     under = float(rng.uniform(0.2, 0.5))
     L = math.sqrt(2) * H + 5.0
@@ -426,11 +422,12 @@ _WORLDS: dict[tuple[int, str, bool, bool], World] = {}
 
 def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, size: str = "small",
                      max_points: int = MAX_POINTS, world: World | None = None, variety: bool = True,
-                     surfaces: bool = False, tall_hedges: bool = False) -> dict:
+                     surfaces: bool = False, tall_hedges: bool = False, materials: bool = False) -> dict:
     """Simulate one capture of the demo site ``seed`` (``size`` a plugin.PRESETS name; ``variety``, ``tall_hedges``:
     see :func:`build_world`; ``world``: a prebuilt one, which then replaces these four) of ``kind`` (one of
     :data:`KINDS`), every random draw (pose, sensor, noise) from ``rng_seed``; the same arguments give the same
-    capture. ``density`` scales the point count (about linearly, 0.1-10); at most ``max_points`` points are kept
+    capture. ``surfaces``, ``materials``: see :func:`twinkit_demo_site.sensor.draw_sensor`. ``density`` scales
+    the point count (about linearly, 0.1-10); at most ``max_points`` points are kept
     (a uniform random subsample).
 
     Returns ``xyz`` (n, 3) float32 site frame (metres, z up), ``label`` (n,) uint8 CityScapes trainId (255 =
@@ -448,13 +445,13 @@ def simulate_capture(seed: int, kind: str, rng_seed: int, density: float = 1.0, 
         world = _WORLDS[key]
     rng = np.random.default_rng([int(seed), int(rng_seed), KINDS.index(kind), 44])
     if kind == "spinning":
-        out = spinning(world, rng, density, surfaces)
+        out = spinning(world, rng, density, surfaces, materials)
     elif kind == "tls":
-        out = tls(world, rng, density, surfaces)
+        out = tls(world, rng, density, surfaces, materials)
     elif kind == "mobile":
-        out = mobile(world, rng, density, surfaces)
+        out = mobile(world, rng, density, surfaces, materials)
     else:
-        out = aerial(world, rng, density, surfaces)
+        out = aerial(world, rng, density, surfaces, materials)
     n = len(out["label"])
     idx = np.arange(n)
     if n > max_points:
@@ -503,6 +500,10 @@ def main(argv: list[str] | None = None) -> None:
                                                             "sweeps have it, its other captures not)")
     ap.add_argument("--tall-hedges", action="store_true", help="front-garden hedges 0.6-3 m high (the shipped model's "
                                                                "spinning sweeps have them, its other captures not)")
+    ap.add_argument("--materials", action="store_true", help="intensity from a reflectance per material (asphalt dark, "
+                                                             "concrete paving lighter, grass and foliage bright; a "
+                                                             "quarter of the sites with asphalt pavements; "
+                                                             "sensor.draw_sensor; opt-in: docs/segmentation.md, m18)")
     a = ap.parse_args(argv)
     kinds = [k for k in a.kinds.split(",") if k]
     a.out.mkdir(parents=True, exist_ok=True)
@@ -519,13 +520,13 @@ def main(argv: list[str] | None = None) -> None:
         dens = round(float(np.exp(np.random.default_rng([s, v, KINDS.index(k), 7]).uniform(
             np.log(a.density_min), np.log(a.density_max)))), 4)  # as the manifest records it, so that it reproduces
         c = simulate_capture(s, k, rs, density=dens, size=a.size, max_points=a.max_points, variety=not a.no_variety,
-                                 surfaces=a.surfaces, tall_hedges=a.tall_hedges)
+                                 surfaces=a.surfaces, tall_hedges=a.tall_hedges, materials=a.materials)
         np.savez_compressed(a.out / name, xyz=c["xyz"], label=c["label"], intensity=c["intensity"], origin=c["origin"],
                             sensor=c["sensor"].astype(np.uint32), ring=c["ring"])
         dt = time.perf_counter() - t0
         manifest["captures"].append({"file": name, "seed": s, "kind": k, "variant": v, "rng_seed": rs, "size": a.size,
                                      "variety": not a.no_variety, "surfaces": a.surfaces,
-                                     "tall_hedges": a.tall_hedges,
+                                     "tall_hedges": a.tall_hedges, "materials": a.materials,
                                      "density": round(dens, 4), "points": int(len(c["label"])), "raw_points": c["raw_points"],
                                      "seconds": round(dt, 2), "counts": class_counts(c["label"]),
                                      "meta": {kk: (round(vv, 5) if isinstance(vv, float) else vv) for kk, vv in c["meta"].items()}})

@@ -5,7 +5,8 @@ heads' scan planes contain the vertical and are turned +-45 degrees from the
 driving direction (the "butterfly" layout of survey vans), so facades along and
 across the street are both seen. Rays steeper than ~60 degrees downwards are
 blocked by the van's roof. Hits give the label (hit face), colour (texture x
-sun light x shadow) and normal (hit face, turned towards the scanner); ranges
+sun light x shadow), normal (hit face, turned towards the scanner) and intensity (the hit material's
+near-infrared reflectance, not its colour: sensor.material_intensity); ranges
 get Gaussian noise (clipped at 3 sigma) and returns thin out with range.
 A pedestrian walking over the west crossing while the first pass goes by adds
 "ghost" points (label 11, person) that exist in no other pass.
@@ -23,6 +24,7 @@ import numpy as np
 
 from twinkit_demo_site.layout import LABELS, Scene
 from twinkit_demo_site.raycast import Tracer
+from twinkit_demo_site.sensor import material_intensity, texture_modulation
 
 PERSON_COLOURS = np.array([[0.15, 0.18, 0.35], [0.55, 0.12, 0.1], [0.2, 0.2, 0.2]], np.float32)
 
@@ -106,6 +108,7 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
     xs0 = traj["xyz"][m0, 0]
     t_cross = traj["time_s"][m0][np.argmin(np.abs(xs0 - (ped["x"] - 12.0)))]
     starts = list(range(0, P, chunk_profiles))
+    mod = texture_modulation(tracer)
     it = progress(starts, total=len(starts), desc="scanning") if progress else starts
     for c0 in it:
         idx = np.arange(c0, min(P, c0 + chunk_profiles))
@@ -140,7 +143,11 @@ def scan(scene: Scene, tracer: Tracer, s: ScanSettings, traj: dict, rng: np.rand
         if ps.any():
             near = tracer.closest_faces(pts[ps])
             keep[np.nonzero(ps)[0]] = tracer.face_labels[near] == lab[ps]
-        intensity = np.clip((0.25 + 0.75 * col.mean(1)) * (1 - 0.5 * np.clip(tr / s.max_range_m, 0, 1)) * 65535, 0, 65535)
+        # a lidar's intensity is its surfaces' near-infrared reflectance, not their visible colour
+        cos = np.abs(np.einsum("ij,ij->i", nrm, dirs[sel]))
+        tex = np.ones(len(sel), np.float32)
+        tex[ps] = mod[prim_s]
+        intensity = material_intensity(lab, cos, tex, tr, s.max_range_m) * 65535
         col8 = np.clip(col * 255 + rng.uniform(-4, 4, col.shape) + 0.5, 0, 255).astype(np.uint8)
         k = keep
         yield ScanChunk(xyz=pts[k], normals=nrm[k], rgb=col8[k], label=lab[k], scanner=sid[sel][k].astype(np.uint32),

@@ -19,12 +19,74 @@ REFLECTANCE = {cs.ROAD: 0.28, cs.SIDEWALK: 0.32, cs.BUILDING: 0.32, cs.WALL: 0.3
                cs.TRAFFIC_LIGHT: 0.22, cs.TRAFFIC_SIGN: 0.85, cs.VEGETATION: 0.45, cs.TERRAIN: 0.45, cs.PERSON: 0.3,
                cs.CAR: 0.25, cs.MOTORCYCLE: 0.25, cs.BICYCLE: 0.2}
 
+#: near-infrared (~905 nm) reflectance per trainId of the material a street is commonly made of, the centre of
+#: each capture's draw with ``materials``: asphalt 0.1-0.25, concrete and stone paving 0.25-0.45, brick and render
+#: 0.3-0.5, leaves and grass bright past the red edge (0.4-0.6), painted or galvanised steel (poles, signal
+#: housings) and car paint dark and mirror-like (:data:`SPECULAR`), retroreflective sheeting far brighter than
+#: anything else
+MATERIAL_REFLECTANCE = {cs.ROAD: 0.16, cs.SIDEWALK: 0.3, cs.BUILDING: 0.4, cs.WALL: 0.35, cs.FENCE: 0.3,
+                        cs.POLE: 0.15, cs.TRAFFIC_LIGHT: 0.12, cs.TRAFFIC_SIGN: 0.85, cs.VEGETATION: 0.45,
+                        cs.TERRAIN: 0.42, cs.PERSON: 0.3, cs.CAR: 0.14, cs.MOTORCYCLE: 0.2, cs.BICYCLE: 0.2}
+#: share of the ``materials`` captures whose pavements are asphalt like the road (the reflectance then tells
+#: them apart no more), and whose verges are bare soil or gravel rather than grass
+ASPHALT_PAVEMENT_SHARE = 0.25
+BARE_VERGE_SHARE = 0.25
+#: metal, paint and glass: a mirror-like surface sends most of a beam back only near its normal, so with
+#: ``materials`` their incidence term is ``SPECULAR_SHARE`` of the cosine's :data:`SPECULAR_POWER` and the rest
+#: the diffuse term (a pole, a cylinder, comes back dark but for the strip facing the sensor; a car's sloped
+#: panels and windows darker than a facade)
+SPECULAR = (cs.POLE, cs.TRAFFIC_LIGHT, cs.CAR, cs.TRUCK, cs.BUS, cs.MOTORCYCLE, cs.BICYCLE)
+SPECULAR_POWER = 4.0
+SPECULAR_SHARE = 0.7
+#: with ``materials``, a return off foliage is a leaf's edge or part of the beam's footprint as often as a
+#: whole leaf: its intensity is the leaf's times a uniform draw in this range (a crown comes back darker and
+#: more varied than a wall of the same reflectance)
+FOLIAGE_FILL = (0.3, 1.0)
+
+
+def texture_modulation(tracer, n_site_faces: int | None = None) -> np.ndarray:
+    """(faces,) float32 per face of ``tracer``'s mesh: its texture's brightness at the centre against its class's
+    area-weighted mean (0.4-2.5; markings brighter than asphalt, a dark stain darker), the intensity's texture
+    term. Faces from ``n_site_faces`` on (an apron with flat textures) get 1."""
+    n = len(tracer.face_labels) if n_site_faces is None else int(n_site_faces)
+    faces = tracer.mesh.faces
+    bary = np.tile(np.array([[1 / 3, 1 / 3]], np.float32), (len(faces), 1))
+    lum = tracer.albedo(np.arange(len(faces)), bary).mean(1).astype(np.float32)
+    lab = tracer.face_labels
+    v = tracer.mesh.vertices[faces]
+    area = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)[:n]
+    mean = np.full(256, 0.5)
+    sums = np.bincount(lab[:n], weights=area * lum[:n], minlength=256)
+    wts = np.bincount(lab[:n], weights=area, minlength=256)
+    mean[wts > 0] = sums[wts > 0] / wts[wts > 0]
+    mod = np.clip((0.2 + lum) / (0.2 + mean[lab]), 0.4, 2.5).astype(np.float32)
+    mod[n:] = 1.0
+    return mod
+
+
+def material_intensity(label: np.ndarray, cos: np.ndarray, mod: np.ndarray, range_m: np.ndarray,
+                       range_half_m: float) -> np.ndarray:
+    """(n,) float64 0..1: the intensity of returns off ``label`` (n,) trainIds at incidence cosines ``cos`` with
+    texture terms ``mod`` (:func:`texture_modulation`) and ranges ``range_m``, for a sensor without per-capture
+    draws (the demo's own scanner): :data:`MATERIAL_REFLECTANCE` (0.3 for other classes), the metal's mirror-like
+    and the diffuse incidence terms as with ``materials``, and a range fall-off of half at ``range_half_m``."""
+    refl = np.full(256, 0.3)
+    for c, r in MATERIAL_REFLECTANCE.items():
+        refl[c] = r
+    diffuse = 0.7 + 0.3 * np.asarray(cos, np.float64)
+    mirror = SPECULAR_SHARE * np.asarray(cos, np.float64) ** SPECULAR_POWER + (1 - SPECULAR_SHARE) * diffuse
+    incidence = np.where(np.isin(label, SPECULAR), mirror, diffuse)
+    out = refl[label] * mod * incidence / (1.0 + (np.asarray(range_m) / range_half_m) ** 2)
+    return np.clip(out, 0.0, 1.0)
+
+
 @dataclass
 class Sensor:
     """Per-capture realism draws. ``noise_m`` range noise sigma (m); ``dropout`` share of returns lost at random;
     ``cos_min`` incidence cosine below which a return is lost; ``snr_thr`` detection threshold of the return
     strength; ``gain``, ``range_half_m`` intensity gain and range fall-off; ``refl`` (256,) float32 reflectance per
-    trainId; ``max_range_m``."""
+    trainId; ``max_range_m``; ``materials``: the intensity's incidence term per material (draw_sensor).
+    ``surfaces`` and the four after it: :func:`surface_depth`."""
 
     noise_m: float
     dropout: float
@@ -39,11 +101,19 @@ class Sensor:
     glass: float = 0.0
     relief_m: float = 0.0
     window_period_m: float = 3.0
+    materials: bool = False
 
 
-def draw_sensor(rng: np.random.Generator, max_range_m: float, surfaces: bool = False) -> Sensor:
+def draw_sensor(rng: np.random.Generator, max_range_m: float, surfaces: bool = False,
+                materials: bool = False) -> Sensor:
     """Random realism settings for one capture (see :class:`Sensor`); ``surfaces`` draws those of
-    :func:`surface_depth` too (after the others: without it the random stream is what it always was)."""
+    :func:`surface_depth` too; ``materials`` redraws the reflectances around :data:`MATERIAL_REFLECTANCE` (a
+    spread of 20 % per class and capture, against 35 % around :data:`REFLECTANCE` without it, where the classes'
+    order is drawn anew each capture), with pavements of the road's asphalt in :data:`ASPHALT_PAVEMENT_SHARE` of
+    the captures and bare verges (0.3) in :data:`BARE_VERGE_SHARE`, and gives metal, paint and glass
+    (:data:`SPECULAR`) a mostly mirror-like incidence term and foliage partial returns (:data:`FOLIAGE_FILL`). ``surfaces`` draws after the others (without
+    it the random stream is what it always was), ``materials`` from a child stream (the pose and the other draws
+    stay those made without it; which far returns a dark surface loses follows its reflectance)."""
     refl = np.full(256, 0.3, np.float32)
     for c, r in REFLECTANCE.items():
         refl[c] = r * float(np.exp(rng.normal(0.0, 0.35)))
@@ -54,6 +124,16 @@ def draw_sensor(rng: np.random.Generator, max_range_m: float, surfaces: bool = F
     if surfaces:
         s.surfaces, s.foliage_m, s.glass = True, float(rng.uniform(0.1, 0.6)), float(rng.uniform(0.0, 0.3))
         s.relief_m, s.window_period_m = float(rng.uniform(0.0, 0.03)), float(rng.uniform(2.4, 3.6))
+    if materials:
+        mat = rng.spawn(1)[0]
+        refl = np.full(256, 0.3, np.float32)
+        for c, r in MATERIAL_REFLECTANCE.items():
+            refl[c] = r * float(np.exp(mat.normal(0.0, 0.2)))
+        if mat.random() < ASPHALT_PAVEMENT_SHARE:
+            refl[cs.SIDEWALK] = refl[cs.ROAD] * float(np.exp(mat.normal(0.0, 0.1)))
+        if mat.random() < BARE_VERGE_SHARE:
+            refl[cs.TERRAIN] = 0.3 * float(np.exp(mat.normal(0.0, 0.2)))
+        s.refl, s.materials = np.clip(refl, 0.02, 1.0), True
     return s
 
 
@@ -124,7 +204,13 @@ def trace(world: World, sensor: Sensor, org: np.ndarray, dirs: np.ndarray, rng: 
     if sensor.surfaces:
         noise += surface_depth(sensor, org[idx] + d * t[:, None], tr.face_normals[prim], lab, cos, rng)
     xyz = org[idx] + d * (t + noise)[:, None]
-    inten = sensor.gain * refl * (0.7 + 0.3 * cos) / (1.0 + (t / sensor.range_half_m) ** 2)
+    incidence = 0.7 + 0.3 * cos
+    if sensor.materials:
+        mirror = SPECULAR_SHARE * cos.astype(np.float64) ** SPECULAR_POWER + (1 - SPECULAR_SHARE) * incidence
+        incidence = np.where(np.isin(lab, SPECULAR), mirror, incidence)
+        leaf = lab == cs.VEGETATION
+        incidence[leaf] *= rng.uniform(*FOLIAGE_FILL, int(leaf.sum()))
+    inten = sensor.gain * refl * incidence / (1.0 + (t / sensor.range_half_m) ** 2)
     inten = np.clip(inten + rng.normal(0.0, 0.02, len(t)), 0.0, 1.0)
     inten = np.round(inten * 100) / 100  # stored in 0.01 steps, as the SemanticKITTI scans are
     return {"keep": idx, "xyz": xyz, "label": lab.astype(np.uint8), "intensity": inten.astype(np.float32),
@@ -134,4 +220,5 @@ def trace(world: World, sensor: Sensor, org: np.ndarray, dirs: np.ndarray, rng: 
 def sensor_meta(s: Sensor) -> dict:
     return {"noise_m": s.noise_m, "dropout": s.dropout, "cos_min": s.cos_min, "snr_thr": s.snr_thr, "gain": s.gain,
             "max_range_m": s.max_range_m, "foliage_m": s.foliage_m, "glass": s.glass, "relief_m": s.relief_m,
-            "window_period_m": s.window_period_m}
+            "window_period_m": s.window_period_m,
+            "reflectance": {cs.name_of(c): round(float(s.refl[c]), 4) for c in MATERIAL_REFLECTANCE}}

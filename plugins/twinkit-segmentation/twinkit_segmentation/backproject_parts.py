@@ -69,7 +69,8 @@ def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=No
     """(cue -> (n,) bool gate, or None; the gates' metrics). ``geom`` (n, 19) or None: the 3D classifier's
     votes, which gate the furniture cues (``furniture_geometry_share``); ``two_way_share``: the share of the
     capture's ground sampled in patches (points_meta.json), under ``furniture_min_two_way_share`` the
-    furniture cues are off everywhere (None: unknown, no such gate)."""
+    furniture cues are off everywhere, under ``curb_min_two_way_share`` the curb cue where ``geom`` is given
+    (None: unknown, no such gate)."""
     if not params.cue_gates or cloud is None or not params.context:
         return None, {"used": False}
     import numpy as np
@@ -90,6 +91,11 @@ def _cue_gates(params: BackprojectParams, ctx: StepContext, mesh, cloud, geom=No
                      params.furniture_min_two_way_share, "/".join(FURNITURE_CUES))
         for c in FURNITURE_CUES:
             gates[c] = np.zeros(len(mesh.vertices), bool)
+    if geom is not None and two_way_share is not None and two_way_share < params.curb_min_two_way_share:
+        ctx.log.info("cue gates: %.0f %% of the capture's ground is sampled in patches (under "
+                     "curb_min_two_way_share=%g): the curb cue stays off beside the 3D classifier, a sweep's near "
+                     "rings stand off each other as kerbs would", 100 * two_way_share, params.curb_min_two_way_share)
+        gates["curb"] = np.zeros(len(mesh.vertices), bool)
     if geom is not None and params.furniture_geometry_share > 0:
         said = geometry_gate(geom, params.furniture_geometry_share)
         info["furniture_by_geometry_share"] = round(float(said.mean()), 4)

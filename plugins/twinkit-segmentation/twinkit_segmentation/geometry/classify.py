@@ -8,7 +8,7 @@ import numpy as np
 
 from twinkit.cityscapes import BUILDING, ROAD, SIDEWALK, TERRAIN, WALL
 
-from .features import _columns, block_mean, feature_names, point_features
+from .features import _columns, block_mean, point_features
 from .model import GeometryModel, load_model
 
 
@@ -44,9 +44,7 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
     ``ground_alpha``: > 0 spreads the ground classes' probabilities along the smooth ground
     (:func:`diffuse_ground` with this ``alpha``); 0 = not."""
     model = model or load_model()
-    if list(model.feature_names) != feature_names():
-        raise ValueError("the 3D classifier's model was trained on other features than this code computes; "
-                         "retrain it (python -m twinkit_segmentation.geometry.train)")
+    model.columns()  # a model reading a feature this code no longer computes: a clear error before any work
     xyz = np.asarray(xyz, np.float64)
     n_turns = max(1, int(turns))
     first, logp, sec = None, None, {}

@@ -22,8 +22,9 @@ features measure the surface, not how densely one scanner happened to sample it.
   share of it (a facade's foot sits under 10 m of wall, a car's under 1.5 m).
 - **object**: the raised points (> 0.3 m above the ground) joined into connected objects over 0.4 m voxels;
   each raised point gets its object's longer and shorter horizontal extent, top height and size.
-- **intensity**: the per-capture percentile rank of the return intensity and a flag that the capture had
-  one (0.5 and 0 without).
+- **intensity**: the per-capture percentile rank of the return intensity, its mean over the 3 x 3 x 3 blocks
+  of :data:`INTENSITY_SCALES_M` (one return's intensity is noisy; a surface's mean tells asphalt from paving
+  and grass), and a flag that the capture had one (0.5 and 0 without).
 
 No feature uses absolute x or y or a sensor position (a real file does not give one).
 """
@@ -39,7 +40,9 @@ SHAPE_NAMES = ("linearity", "planarity", "scattering", "normal_z", "line_z", "sp
 GROUND_NAMES = ("height", "above_low_1m5", "above_low_5m", "ground_rise_1m5", "step_dist", "above_step")
 COLUMN_NAMES = ("col_top_0m5", "col_share_0m5", "col_top_2m", "col_share_2m")
 OBJECT_NAMES = ("obj_long", "obj_short", "obj_top", "obj_size", "raised")
-INTENSITY_NAMES = ("intensity_rank", "has_intensity")
+#: voxel sides (m) of the intensity's block means
+INTENSITY_SCALES_M: tuple[float, ...] = (0.25, 0.6)
+INTENSITY_NAMES = ("intensity_rank", *(f"intensity_{s:g}" for s in INTENSITY_SCALES_M), "has_intensity")
 #: metres: farther from a curb step than this, the curb features read "no curb near"
 CURB_REACH_M = 3.0
 
@@ -337,7 +340,8 @@ def point_features(xyz: np.ndarray, intensity: np.ndarray | None = None, *, base
     sec["objects"] = time.perf_counter() - t
     has = intensity is not None and np.ptp(np.asarray(intensity, np.float64)) > 0
     rank = intensity_rank(None if intensity is None else np.asarray(intensity)[base], len(base))
+    inten = [rank] + [block_mean(p, rank[:, None], s)[:, 0] for s in INTENSITY_SCALES_M]
     values = np.column_stack(shape + [np.column_stack(feats_g), np.column_stack(cols), obj,
-                                      rank[:, None], np.full((len(base), 1), float(has))]).astype(np.float32)
+                                      np.column_stack(inten), np.full((len(base), 1), float(has))]).astype(np.float32)
     values[~np.isfinite(values)] = 0.0
     return Features(base=base, inverse=inverse, values=values, height=h, seconds={k: round(v, 3) for k, v in sec.items()})

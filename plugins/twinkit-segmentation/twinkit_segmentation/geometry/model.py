@@ -35,9 +35,28 @@ class GeometryModel:
     meta: dict = field(default_factory=dict)
     logit_shift: np.ndarray | None = None
 
+    def columns(self) -> np.ndarray | None:
+        """Indices into :func:`.features.feature_names`' columns of the features this model reads, in its order;
+        None when it reads them all as they are. A model trained before features were added reads its own
+        columns of the newer matrix. Raises ValueError naming the first feature the code no longer computes."""
+        from .features import feature_names
+
+        names = feature_names()
+        if list(self.feature_names) == names:
+            return None
+        missing = [n for n in self.feature_names if n not in names]
+        if missing:
+            raise ValueError(f"the 3D classifier's model reads features this code does not compute ({missing[0]}, "
+                             f"{len(missing)} in all); retrain it (python -m twinkit_segmentation.geometry.train)")
+        return np.array([names.index(n) for n in self.feature_names])
+
     def proba(self, values: np.ndarray, chunk: int = 200_000, prior: bool = True) -> np.ndarray:
-        """(m, k) features -> (m, 19) float32 class probabilities (columns of classes it never predicts: 0);
-        ``prior`` False leaves out :attr:`logit_shift` (the class balance the network was trained with)."""
+        """(m, k) features (all of :func:`.features.feature_names`, or the model's own) -> (m, 19) float32 class
+        probabilities (columns of classes it never predicts: 0); ``prior`` False leaves out :attr:`logit_shift`
+        (the class balance the network was trained with)."""
+        if np.ndim(values) == 2 and np.shape(values)[1] != len(self.mean):
+            cols = self.columns()
+            values = np.asarray(values)[:, cols] if cols is not None else values
         out = np.zeros((len(values), N_CLASSES), np.float32)
         for a in range(0, len(values), chunk):
             x = (np.asarray(values[a:a + chunk], np.float32) - self.mean) / self.std

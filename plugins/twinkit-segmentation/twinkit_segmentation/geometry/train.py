@@ -21,10 +21,10 @@ import numpy as np
 
 from twinkit.cityscapes import N_CLASSES, NAMES, TERRAIN
 
-from .features import feature_names, point_features
+from .features import INTENSITY_NAMES, feature_names, point_features
 from .model import GeometryModel, save_model
 
-FEATURE_VERSION = 7
+FEATURE_VERSION = 8
 
 
 def _waves(xy: np.ndarray, rng: np.random.Generator, n: int, wavelength_m: tuple[float, float],
@@ -99,7 +99,8 @@ def capture_features(path: Path, cache: Path | None, turn: bool = False) -> tupl
 
 def _drop_intensity(values: np.ndarray, rows: np.ndarray) -> None:
     names = feature_names()
-    values[rows, names.index("intensity_rank")] = 0.5
+    for n in INTENSITY_NAMES[:-1]:
+        values[rows, names.index(n)] = 0.5
     values[rows, names.index("has_intensity")] = 0.0
 
 
