@@ -272,19 +272,23 @@ def test_the_furniture_cues_need_the_classifier_to_leave_furniture_open(tmp_path
     assert all(off[c].all() for c in FURNITURE_CUES)
 
 
+def _flat_capture():
+    """(a step context class, vertices, mesh, cloud): a 4 m square of flat ground and its scan, 2 mm noise."""
+    class Ctx:
+        threads = 1
+        log = __import__("logging").getLogger("test")
+
+    v, f, _ = grid(0, 4, 0, 4, 0.0, 0.1)
+    return Ctx, v, Mesh(vertices=v, faces=f), Mesh(vertices=v + np.random.default_rng(0).normal(0, 0.002, v.shape))
+
+
 def test_the_furniture_cues_stay_off_on_a_capture_whose_ground_is_single_scan_lines(tmp_path):
     from twinkit import artefacts as A
     from twinkit_segmentation.backproject_parts import _cue_gates, capture_two_way_share
     from twinkit_segmentation.gates import FURNITURE_CUES
     from twinkit_segmentation.params import BackprojectParams
 
-    class Ctx:
-        threads = 1
-        log = __import__("logging").getLogger("test")
-
-    v, f, _ = grid(0, 4, 0, 4, 0.0, 0.1)
-    mesh = Mesh(vertices=v, faces=f)
-    cloud = Mesh(vertices=v + np.random.default_rng(0).normal(0, 0.002, v.shape))
+    Ctx, v, mesh, cloud = _flat_capture()
     dense, info = _cue_gates(BackprojectParams(), Ctx(), mesh, cloud, two_way_share=0.99)
     rings, rinfo = _cue_gates(BackprojectParams(), Ctx(), mesh, cloud, two_way_share=0.3)  # a spinning sweep
     assert all(dense[c].all() for c in FURNITURE_CUES) and not any(rings[c].any() for c in FURNITURE_CUES)
@@ -307,13 +311,7 @@ def test_the_curb_cue_can_stay_off_beside_the_classifier_on_a_capture_whose_grou
     from twinkit_segmentation.backproject_parts import _cue_gates
     from twinkit_segmentation.params import BackprojectParams
 
-    class Ctx:
-        threads = 1
-        log = __import__("logging").getLogger("test")
-
-    v, f, _ = grid(0, 4, 0, 4, 0.0, 0.1)
-    mesh = Mesh(vertices=v, faces=f)
-    cloud = Mesh(vertices=v + np.random.default_rng(0).normal(0, 0.002, v.shape))
+    Ctx, v, mesh, cloud = _flat_capture()
     geom = np.zeros((len(v), 19), np.float32)
     geom[:, 0] = 1.0
     gate = BackprojectParams(curb_min_two_way_share=RING_CAPTURE_SHARE)
