@@ -73,11 +73,16 @@ def material_intensity(label: np.ndarray, cos: np.ndarray, mod: np.ndarray, rang
     refl = np.full(256, 0.3)
     for c, r in MATERIAL_REFLECTANCE.items():
         refl[c] = r
+    out = refl[label] * mod * incidence_term(label, cos) / (1.0 + (np.asarray(range_m) / range_half_m) ** 2)
+    return np.clip(out, 0.0, 1.0)
+
+
+def incidence_term(label: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    """(n,) float64: the intensity's incidence term of returns off ``label`` at incidence cosines ``cos``: the
+    diffuse ``0.7 + 0.3 cos``, and for :data:`SPECULAR` materials mostly ``cos ** SPECULAR_POWER``."""
     diffuse = 0.7 + 0.3 * np.asarray(cos, np.float64)
     mirror = SPECULAR_SHARE * np.asarray(cos, np.float64) ** SPECULAR_POWER + (1 - SPECULAR_SHARE) * diffuse
-    incidence = np.where(np.isin(label, SPECULAR), mirror, diffuse)
-    out = refl[label] * mod * incidence / (1.0 + (np.asarray(range_m) / range_half_m) ** 2)
-    return np.clip(out, 0.0, 1.0)
+    return np.where(np.isin(label, SPECULAR), mirror, diffuse)
 
 
 @dataclass
@@ -111,9 +116,10 @@ def draw_sensor(rng: np.random.Generator, max_range_m: float, surfaces: bool = F
     spread of 20 % per class and capture, against 35 % around :data:`REFLECTANCE` without it, where the classes'
     order is drawn anew each capture), with pavements of the road's asphalt in :data:`ASPHALT_PAVEMENT_SHARE` of
     the captures and bare verges (0.3) in :data:`BARE_VERGE_SHARE`, and gives metal, paint and glass
-    (:data:`SPECULAR`) a mostly mirror-like incidence term and foliage partial returns (:data:`FOLIAGE_FILL`). ``surfaces`` draws after the others (without
-    it the random stream is what it always was), ``materials`` from a child stream (the pose and the other draws
-    stay those made without it; which far returns a dark surface loses follows its reflectance)."""
+    (:data:`SPECULAR`) a mostly mirror-like incidence term (:func:`incidence_term`) and foliage partial returns
+    (:data:`FOLIAGE_FILL`). ``surfaces`` draws after the others (without it the random stream is what it always
+    was), ``materials`` from a child stream (the pose and the other draws stay those made without it; which far
+    returns a dark surface loses follows its reflectance)."""
     refl = np.full(256, 0.3, np.float32)
     for c, r in REFLECTANCE.items():
         refl[c] = r * float(np.exp(rng.normal(0.0, 0.35)))
@@ -206,8 +212,7 @@ def trace(world: World, sensor: Sensor, org: np.ndarray, dirs: np.ndarray, rng: 
     xyz = org[idx] + d * (t + noise)[:, None]
     incidence = 0.7 + 0.3 * cos
     if sensor.materials:
-        mirror = SPECULAR_SHARE * cos.astype(np.float64) ** SPECULAR_POWER + (1 - SPECULAR_SHARE) * incidence
-        incidence = np.where(np.isin(lab, SPECULAR), mirror, incidence)
+        incidence = incidence_term(lab, cos)
         leaf = lab == cs.VEGETATION
         incidence[leaf] *= rng.uniform(*FOLIAGE_FILL, int(leaf.sum()))
     inten = sensor.gain * refl * incidence / (1.0 + (t / sensor.range_half_m) ** 2)
