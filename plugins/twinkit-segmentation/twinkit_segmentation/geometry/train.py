@@ -99,9 +99,8 @@ def capture_features(path: Path, cache: Path | None, turn: bool = False) -> tupl
 
 def _drop_intensity(values: np.ndarray, rows: np.ndarray) -> None:
     names = feature_names()
-    for n in INTENSITY_NAMES[:-1]:
-        values[rows, names.index(n)] = 0.5
-    values[rows, names.index("has_intensity")] = 0.0
+    for n in INTENSITY_NAMES:
+        values[rows, names.index(n)] = 0.0 if n == "has_intensity" else 0.5
 
 
 def roughen(values: np.ndarray, delta: float, scales_m: tuple[float, ...]) -> None:
