@@ -66,10 +66,11 @@ def label_free_copy(src: Path, dst: Path) -> Path:
     return dst
 
 
-def run_scan(name: str, cloud: Path, runs_dir: Path) -> tuple[Path, float]:
-    """Run the labels' steps of the default recipe on ``cloud`` as site ``name``: (site folder, seconds)."""
+def run_scan(name: str, cloud: Path, runs_dir: Path, overrides: tuple[str, ...] = ()) -> tuple[Path, float]:
+    """Run the labels' steps of the default recipe on ``cloud`` as site ``name`` (with Hydra ``overrides``, a
+    variant to measure): (site folder, seconds)."""
     cmd = [sys.executable, "-m", "twinkit", f"recipe={RECIPE}", "site=lille", f"site.name={name}",
-           f"site.inputs.cloud={cloud}", f"engine.outputs_dir={runs_dir}"]
+           f"site.inputs.cloud={cloud}", f"engine.outputs_dir={runs_dir}", *overrides]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     if p.returncode not in (0, 4):  # 4: a degraded result (a sweep's mesh is mostly ground fill): still scored
@@ -230,6 +231,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", type=Path, default=None, help="where the runs go (default: OUT/runs)")
     ap.add_argument("--only-score", nargs="+", type=Path, metavar="RUN_DIR",
                     help="score these existing runs instead of running the pipeline")
+    ap.add_argument("--override", action="append", default=[], metavar="KEY=VALUE",
+                    help="a Hydra override for every run (repeatable), e.g. steps.classify_geometry.model=STEM: "
+                         "a variant measured against the defaults")
     ap.add_argument("--compare", type=Path, default=None,
                     help="labelled.json of an earlier run to compare with (default: the output folder's own)")
     args = ap.parse_args(argv)
@@ -250,7 +254,8 @@ def main(argv: list[str] | None = None) -> int:
         jobs = []
         for scan in scans:
             cloud = label_free_copy(scan, out / "clouds" / scan.name)
-            run_dir, wall[scan.stem] = run_scan(scan.stem, cloud, (args.runs or out / "runs").resolve())
+            run_dir, wall[scan.stem] = run_scan(scan.stem, cloud, (args.runs or out / "runs").resolve(),
+                                                 tuple(args.override))
             jobs.append((scan, run_dir))
     for scan, run_dir in jobs:
         res, point_labels = score_run(run_dir, scan)

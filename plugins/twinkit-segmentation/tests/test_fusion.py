@@ -306,7 +306,7 @@ def test_the_furniture_cues_stay_off_on_a_capture_whose_ground_is_single_scan_li
     assert capture_two_way_share(None, cloud) is None and capture_two_way_share(tmp_path / "missing.json") is None
 
 
-def test_the_curb_cue_can_stay_off_beside_the_classifier_on_a_capture_whose_ground_is_single_scan_lines():
+def test_the_curb_cue_stays_off_beside_the_classifier_on_a_capture_whose_ground_is_single_scan_lines():
     from twinkit.surface.density import RING_CAPTURE_SHARE
     from twinkit_segmentation.backproject_parts import _cue_gates
     from twinkit_segmentation.params import BackprojectParams
@@ -314,13 +314,14 @@ def test_the_curb_cue_can_stay_off_beside_the_classifier_on_a_capture_whose_grou
     Ctx, v, mesh, cloud = _flat_capture()
     geom = np.zeros((len(v), 19), np.float32)
     geom[:, 0] = 1.0
-    gate = BackprojectParams(curb_min_two_way_share=RING_CAPTURE_SHARE)
+    gate = BackprojectParams()  # the default gate: a capture in rings, the ground model reads the surfaces
+    assert gate.curb_min_two_way_share == RING_CAPTURE_SHARE
     dense, _ = _cue_gates(gate, Ctx(), mesh, cloud, geom, two_way_share=0.99)
     rings, _ = _cue_gates(gate, Ctx(), mesh, cloud, geom, two_way_share=0.3)  # a spinning sweep
     views_only, _ = _cue_gates(gate, Ctx(), mesh, cloud, None, two_way_share=0.3)
-    on, _ = _cue_gates(BackprojectParams(), Ctx(), mesh, cloud, geom, two_way_share=0.3)  # the default: no gate
+    on, _ = _cue_gates(BackprojectParams(curb_min_two_way_share=0.0), Ctx(), mesh, cloud, geom, two_way_share=0.3)
     assert dense["curb"].mean() > 0.9 and not rings["curb"].any()
-    # without the classifier the curb is the views' only help on the ground
+    # without the classifier the curb is the views' only help on the ground; 0 turns the gate off
     assert np.array_equal(views_only["curb"], dense["curb"]) and np.array_equal(on["curb"], dense["curb"])
     assert all(np.array_equal(dense[c], rings[c]) for c in dense if c not in ("curb", "column", "mounted"))
 

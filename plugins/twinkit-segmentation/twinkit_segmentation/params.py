@@ -182,15 +182,14 @@ class BackprojectParams:
                                                     "spinning sweep cuts crowns and hedges into ring fragments that "
                                                     "float free and thin as a post would (docs/segmentation.md \"Cue "
                                                     "gates\"); 0 = off.")
-    curb_min_two_way_share: float = param(0.0, ge=0, le=1,
+    curb_min_two_way_share: float = param(RING_CAPTURE_SHARE, ge=0, le=1,
                                           help="Where the 3D classifier speaks, the curb cue acts only on a capture "
                                                "whose ground is sampled in patches on at least this share "
                                                "(points_meta.json density.ground_two_way_share): on a single "
-                                               "spinning sweep it reads the rings near the sensor as kerbs. 0 = "
-                                               "no such gate (the default: it pays with the shipped model; with a "
-                                               "classifier that reads asphalt from paving by their intensity, "
-                                               f"{RING_CAPTURE_SHARE:g} does, docs/segmentation.md \"Intensity "
-                                               'from materials: m18").')
+                                               "spinning sweep it reads the rings near the sensor as kerbs, and the "
+                                               "classifier's ground model already tells asphalt from paving by "
+                                               "their intensity and the kerbs it sees (docs/segmentation.md \"A "
+                                               'ground model"). 0 = no such gate.')
     geometry_floor_share: float = param(0.7, ge=0, le=1,
                                         help="On a colourless capture sampled in rings (ground two-way share under "
                                              "geometry_floor_max_two_way_share: a single spinning sweep), a vertex "

@@ -32,7 +32,8 @@ class CloudLabels:
 
 def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: GeometryModel | None = None,
                    *, base_voxel_m: float = 0.1, ground_window_m: float = 8.0, smooth_m: float = 0.25,
-                   prior: bool = True, turns: int = 4, ground_alpha: float = 0.0) -> CloudLabels:
+                   prior: bool = True, turns: int = 4, ground_alpha: float = 0.0,
+                   ground_model: GeometryModel | None = None, ground_weight: float = 1.0) -> CloudLabels:
     """Features (:func:`.features.point_features`) and the MLP's probabilities for ``xyz`` (n, 3) float, site
     frame, z up, metres; ``intensity`` (n,) or None. ``model``: None = the shipped one. ``smooth_m``: each
     base point's probabilities become the normalised geometric mean of those of the base points in the
@@ -42,9 +43,13 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
     grids of the features are square to the axes, and how a grid cuts a surface is noise), and each base
     point of the first pass takes the normalised geometric mean of its point's probabilities in every pass.
     ``ground_alpha``: > 0 spreads the ground classes' probabilities along the smooth ground
-    (:func:`diffuse_ground` with this ``alpha``); 0 = not."""
+    (:func:`diffuse_ground` with this ``alpha``); 0 = not. ``ground_model``: a model of the ground classes
+    alone that splits each point's ground probability between them (:func:`split_ground`, ``ground_weight``);
+    None = ``model``'s own split."""
     model = model or load_model()
     model.columns()  # a model reading a feature this code no longer computes: a clear error before any work
+    if ground_model is not None:
+        ground_model.columns()
     xyz = np.asarray(xyz, np.float64)
     n_turns = max(1, int(turns))
     first, logp, sec = None, None, {}
@@ -53,6 +58,9 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
         f = point_features(pts, intensity, base_voxel_m=base_voxel_m, ground_window_m=ground_window_m)
         t = time.perf_counter()
         proba = model.proba(f.values, prior=prior)
+        if ground_model is not None:
+            proba = split_ground(proba, ground_model.proba(f.values, prior=False), ground_model.classes,
+                                 ground_weight)
         part = dict(f.seconds, model=round(time.perf_counter() - t, 3))
         if smooth_m > 0:
             t = time.perf_counter()
@@ -77,6 +85,24 @@ def classify_cloud(xyz: np.ndarray, intensity: np.ndarray | None = None, model: 
     else:
         ground = None
     return CloudLabels(base=first.base, inverse=first.inverse, proba=proba, seconds=sec, ground=ground)
+
+
+def split_ground(proba: np.ndarray, ground_proba: np.ndarray, classes: np.ndarray, weight: float = 1.0
+                 ) -> np.ndarray:
+    """(m, c) float32: ``proba`` (m, c) with each point's probability of the ground ``classes`` (trainIds)
+    shared out between them as ``ground_proba`` (m, c), a model of those classes alone, says, weighted
+    geometrically with ``proba``'s own split (``weight`` 1: the ground model's split alone, 0: unchanged).
+    Each point keeps its total ground probability: which points are ground stays the whole model's answer,
+    what the ground is made of becomes the specialist's (docs/segmentation.md "A ground model")."""
+    cls = np.asarray(classes, np.int64)
+    own = np.maximum(proba[:, cls].astype(np.float64), 1e-6)
+    mass = proba[:, cls].sum(axis=1, keepdims=True)
+    logq = (1.0 - weight) * np.log(own / own.sum(axis=1, keepdims=True)) + \
+        weight * np.log(np.maximum(ground_proba[:, cls].astype(np.float64), 1e-6))
+    q = np.exp(logq - logq.max(axis=1, keepdims=True))
+    out = np.array(proba, np.float32, copy=True)
+    out[:, cls] = (mass * q / q.sum(axis=1, keepdims=True)).astype(np.float32)
+    return out
 
 
 def diffuse_ground(points: np.ndarray, proba: np.ndarray, *, radius_m: float = 0.35, noise_k: float = 2.0,

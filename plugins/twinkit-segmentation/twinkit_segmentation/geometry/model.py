@@ -18,6 +18,9 @@ from twinkit.cityscapes import N_CLASSES
 
 MODEL_DIR = Path(__file__).parent
 MODEL_NAME = "geometry_model"
+#: the ground model shipped beside it: road, sidewalk and terrain alone, trained on captures whose intensity
+#: follows each surface's material (:func:`.classify.split_ground`)
+GROUND_MODEL_NAME = "ground_model"
 
 @dataclass
 class GeometryModel:
@@ -89,9 +92,9 @@ def save_model(path_stem: Path, layers, mean, std, classes, feature_names, meta:
     return npz, js
 
 
-def load_model(path_stem: str | Path | None = None) -> GeometryModel:
-    """Load ``<stem>.npz`` + ``<stem>.json`` (default: the model shipped beside this module)."""
-    stem = Path(path_stem) if path_stem else MODEL_DIR / MODEL_NAME
+def load_model(path_stem: str | Path | None = None, default: str = MODEL_NAME) -> GeometryModel:
+    """Load ``<stem>.npz`` + ``<stem>.json`` (default: the model ``default`` shipped beside this module)."""
+    stem = Path(path_stem) if path_stem else MODEL_DIR / default
     stem = stem.with_suffix("")
     meta = json.loads(stem.with_suffix(".json").read_text())
     with np.load(stem.with_suffix(".npz")) as z:

@@ -72,6 +72,20 @@ class ClassifyGeometryParams:
              "so its height is unknown: the classifier's 'wall', told from a building by its height, counts as "
              "building there. 0 = off.")
     model: str = param("", path=(".npz", ".json"), help="Model stem (path without .npz/.json); empty = the model shipped with the plugin.")
+    ground_split: bool = param(True,
+                               help="Share each point's ground probability between road, sidewalk and terrain as the "
+                                    "ground model says (a model of those three alone, trained on captures whose "
+                                    "intensity follows each surface's material: asphalt dark, paving and grass "
+                                    "brighter); which points are ground stays the main model's answer. Measured on "
+                                    "the real labelled sweeps in docs/segmentation.md (\"A ground model\"). "
+                                    "Colourless captures only, unless ground_split_coloured.")
+    ground_split_coloured: bool = param(False, help="Split a coloured capture's ground by the ground model too.")
+    ground_weight: float = param(1.0, ge=0, le=1,
+                                 help="How much of the ground split is the ground model's (geometric weight; 1 = its "
+                                      "split alone, 0 = the main model's).")
+    ground_model: str = param("", path=(".npz", ".json"),
+                              help="Ground model stem (path without .npz/.json); empty = the one shipped with the "
+                                   "plugin.")
 
 
 def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_points_ply: Path,
@@ -84,7 +98,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     from twinkit.cityscapes import N_CLASSES, PALETTE
     from twinkit.mesh import write_colored_ply
     from twinkit_segmentation.geometry.classify import classify_cloud, votes_at
-    from twinkit_segmentation.geometry.model import load_model
+    from twinkit_segmentation.geometry.model import GROUND_MODEL_NAME, load_model
 
     t0 = time.perf_counter()
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
@@ -104,10 +118,13 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     turns = params.turns if (kind == "colourless" or params.turns_coloured) else 1
     ground_alpha = params.ground_alpha if (kind == "colourless" or params.ground_coloured) else 0.0
     model = load_model(params.model or None)
+    split = params.ground_split and (kind == "colourless" or params.ground_split_coloured)
+    ground_model = load_model(params.ground_model or None, GROUND_MODEL_NAME) if split else None
     t_read = time.perf_counter() - t0
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
                          ground_window_m=params.ground_window_m, smooth_m=smooth_m, prior=prior,
-                         turns=turns, ground_alpha=ground_alpha)
+                         turns=turns, ground_alpha=ground_alpha, ground_model=ground_model,
+                         ground_weight=params.ground_weight)
     sensor, walls_cut = _cut_by_top_beam(params, ctx, cloud, res, in_points_meta_json)
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
@@ -129,7 +146,8 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
             "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
             "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "prior": prior, "turns": turns,
-            "ground_alpha": ground_alpha, "ground_diffusion": res.ground, "sensor": sensor, "walls_cut": walls_cut, "model": model.meta.get("name", params.model or "shipped"),
+            "ground_alpha": ground_alpha, "ground_diffusion": res.ground,
+            "ground_model": ground_model.meta.get("name", params.ground_model or "shipped") if ground_model else None, "sensor": sensor, "walls_cut": walls_cut, "model": model.meta.get("name", params.model or "shipped"),
             "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
             "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
                         "total": round(time.perf_counter() - t0, 3)}}

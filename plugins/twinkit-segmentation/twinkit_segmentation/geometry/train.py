@@ -119,13 +119,17 @@ def roughen(values: np.ndarray, delta: float, scales_m: tuple[float, ...]) -> No
         values[:, pl] = l2 - new
 
 
-def score(model: GeometryModel, captures: list[tuple[str, np.ndarray, np.ndarray]]) -> dict:
+def score(model: GeometryModel, captures: list[tuple[str, np.ndarray, np.ndarray]], only_classes=None) -> dict:
     """IoU per class (percent), mIoU over the classes present, accuracy and coarse accuracy, pooled over
-    ``captures`` [(name, values, labels)], and the mIoU / coarse accuracy of each."""
+    ``captures`` [(name, values, labels)], and the mIoU / coarse accuracy of each; ``only_classes`` (trainIds):
+    scored on the points of these classes only (a model fitted on them, ``--classes``)."""
     from twinkit_segmentation.metrics import coarse_accuracy, scores
 
     preds, gts, each = [], [], {}
     for name, values, lab in captures:
+        if only_classes is not None:
+            mine = np.isin(lab, only_classes)
+            values, lab = values[mine], lab[mine]
         pred = model.proba(values).argmax(axis=1).astype(np.uint8)
         s = scores(pred, lab)
         each[name] = {"miou": round(s["miou"], 2), "coarse_accuracy": round(coarse_accuracy(pred, lab)["coarse_accuracy"], 2)}
@@ -138,24 +142,26 @@ def score(model: GeometryModel, captures: list[tuple[str, np.ndarray, np.ndarray
             "iou": {k: round(v["iou"], 2) for k, v in s["per_class"].items()}, "captures": each}
 
 
-def check_scene_scores(model: GeometryModel, seed: int = 0) -> dict:
+def check_scene_scores(model: GeometryModel, seed: int = 0, only_classes=None) -> dict:
     """The model's scores on :func:`.scene.street_capture` (``seed``): recorded in the model's JSON, so that a
     test can check that the shipped file still gives them."""
     from .scene import street_capture
 
     cap = street_capture(seed)
     f = point_features(cap["xyz"])
-    s = score(model, [("street_capture", f.values, cap["label"][f.base])])
+    s = score(model, [("street_capture", f.values, cap["label"][f.base])], only_classes)
     return {"seed": seed, "miou": s["miou"], "accuracy": s["accuracy"], "coarse_accuracy": s["coarse_accuracy"],
             "iou": s["iou"]}
 
 
 def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048, lr=2e-3, weight_decay=1e-4,
           intensity_dropout=0.5, min_points=200, seed=0, rough_shift_max=0.0, rough_scales_m=(0.1, 0.25, 0.6),
-          log=print):
+          only_classes=None, log=print):
     """Fit the MLP on [(name, values, labels)]; returns (layers, mean, std, classes, recipe dict).
     ``rough_shift_max`` > 0: each capture's surfaces at ``rough_scales_m`` read rougher by a factor
-    ``10 ** delta``, ``delta`` drawn per capture from U(0, rough_shift_max) (:func:`roughen`)."""
+    ``10 ** delta``, ``delta`` drawn per capture from U(0, rough_shift_max) (:func:`roughen`).
+    ``only_classes``: trainIds; fit on the points of these classes only (a model that splits a group, such as
+    the ground model of :func:`.classify.split_ground`); None = every class."""
     import torch
 
     torch.manual_seed(seed)
@@ -168,7 +174,7 @@ def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048
             values = values.copy()
             roughen(values, float(rough_rng.uniform(0.0, rough_shift_max)), tuple(rough_scales_m))
         for c in np.unique(lab):
-            if c >= N_CLASSES:
+            if c >= N_CLASSES or (only_classes is not None and c not in only_classes):
                 continue
             idx = np.flatnonzero(lab == c)
             if len(idx) > per_class:
@@ -225,6 +231,7 @@ def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048
               "weight_decay": weight_decay, "intensity_dropout": intensity_dropout, "min_points": min_points,
               "seed": seed, "batch": batch, "optimizer": "Adam + cosine schedule, class weights count^-0.5",
               "training_points": int(len(x)),
+              **({"only_classes": [int(c) for c in only_classes]} if only_classes is not None else {}),
               **({"rough_shift_max": rough_shift_max, "rough_scales_m": list(rough_scales_m)} if rough_shift_max > 0 else {}),
               "trained_prior": (np.sqrt(cnt) / np.sqrt(cnt).sum()).round(6).tolist()}
     return layers, mean, std, classes, recipe
@@ -288,6 +295,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="each training capture's surfaces read rougher by 10**delta, delta ~ U(0, this) per capture "
                          "(log10 units; 0 = off; train.roughen)")
     ap.add_argument("--rough-scales", default="0.1,0.25,0.6", help="the shape scales --rough-shift roughens")
+    ap.add_argument("--classes", default="",
+                    help="comma-separated trainIds: fit and score on the points of these classes only (e.g. 0,1,9 "
+                         "for the ground model that splits the ground between road, sidewalk and terrain); "
+                         "empty = every class")
     ap.add_argument("--ablate", default="", help="comma-separated feature names held at 0 in training and "
                                                    "validation (an ablation: the model cannot use them)")
     a = ap.parse_args(argv)
@@ -314,19 +325,21 @@ def main(argv: list[str] | None = None) -> int:
                                                epochs=a.epochs, per_class=a.per_class, batch=a.batch,
                                                intensity_dropout=a.intensity_dropout, seed=a.seed,
                                                rough_shift_max=a.rough_shift,
+                                               only_classes=[int(c) for c in a.classes.split(",")] if a.classes else None,
                                                rough_scales_m=tuple(float(x) for x in a.rough_scales.split(",")))
     for name in filter(None, a.ablate.split(",")):  # the model ignores an ablated feature whatever a capture gives
         i = feature_names().index(name)
         layers[0][0][i, :] = 0.0
         mean[i], std[i] = 0.0, 1.0
     model = GeometryModel(layers=layers, mean=mean, std=std, classes=classes, feature_names=feature_names())
+    only = recipe.get("only_classes")
     prior = prior_shift(model, tr, recipe.pop("trained_prior"), va,
                         alphas=tuple(float(x) for x in a.prior_alphas.split(",")))
     meta = {"recipe": {**recipe, "train_captures": [n for n, _, _ in tr], "val_regex": a.val, "ablated": a.ablate,
                        "turned": bool(a.turn),
                        "feature_version": FEATURE_VERSION}, "prior": prior,
-            "validation": score(model, va) if va else {}, "training": score(model, tr),
-            "check_scene": check_scene_scores(model)}
+            "validation": score(model, va, only) if va else {}, "training": score(model, tr, only),
+            "check_scene": check_scene_scores(model, only_classes=only)}
     npz, js = save_model(Path(a.out), layers, mean, std, classes, feature_names(), meta)
     print(json.dumps({"validation": {k: v for k, v in meta["validation"].items() if k != "captures"}}, indent=1))
     print(f"wrote {npz} ({npz.stat().st_size} B), {js}")
