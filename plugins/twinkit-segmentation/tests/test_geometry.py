@@ -252,8 +252,10 @@ def test_the_step_smooths_turns_spreads_and_corrects_the_prior_on_a_colourless_c
         return np.load(out["geometry_votes.npy"])
 
     votes = {}
+    inten = (np.where(cap["label"] == ROAD, 0.15, 0.4) + rng.normal(0, 0.05, len(cap["xyz"]))).astype(np.float32)
     for kind, colors in (("colourless", None), ("coloured", rng.integers(0, 255, (len(cap["xyz"]), 3), np.uint8))):
-        A.write_points(tmp_path / f"{kind}.ply", Mesh(vertices=cap["xyz"], attrs={} if colors is None else {"colors": colors}))
+        attrs = {"intensity": inten} | ({} if colors is None else {"colors": colors})
+        A.write_points(tmp_path / f"{kind}.ply", Mesh(vertices=cap["xyz"], attrs=attrs))
         for smooth in (0.25, 0.0):
             votes[kind, smooth] = run(kind, smooth, smooth_m=smooth, turns=1, ground_alpha=0.0)
     assert not np.allclose(votes["colourless", 0.25], votes["colourless", 0.0])
@@ -293,6 +295,10 @@ def test_the_step_smooths_turns_spreads_and_corrects_the_prior_on_a_colourless_c
     assert np.array_equal(split["coloured", 1], split["colourless", 0])
     ground = np.isin(np.arange(split["colourless", 0].shape[1]), GROUND)
     np.testing.assert_allclose(split["colourless", 0][:, ~ground], votes["colourless", 0.0][:, ~ground], atol=1e-5)
+    # a capture without an intensity keeps the main model's split: the ground model would read what it reads
+    A.write_points(tmp_path / "bare.ply", Mesh(vertices=cap["xyz"]))
+    bare = {on: run("bare", f"split_{on}", smooth_m=0.0, turns=1, ground_alpha=0.0, ground_split=on) for on in (0, 1)}
+    assert np.array_equal(bare[0], bare[1])
 
 
 def test_the_prior_correction_gives_an_ambiguous_shape_to_the_common_class():

@@ -256,6 +256,11 @@ def _objects(p: np.ndarray, raised: np.ndarray, voxel_m: float = 0.4) -> np.ndar
     return out
 
 
+def has_intensity(intensity: np.ndarray | None) -> bool:
+    """The capture has an intensity the features can read: one given, and not the same value everywhere."""
+    return intensity is not None and len(intensity) > 0 and bool(np.ptp(np.asarray(intensity, np.float64)) > 0)
+
+
 def intensity_rank(intensity: np.ndarray | None, n: int) -> np.ndarray:
     """(n,) float32 percentile rank (0..1) of each return's intensity within the capture; 0.5 without one
     (``None``, or a constant column, which carries nothing)."""
@@ -338,7 +343,7 @@ def point_features(xyz: np.ndarray, intensity: np.ndarray | None = None, *, base
     obj = np.column_stack([np.log10(obj[:, 0] + 0.1), np.log10(obj[:, 1] + 0.1), np.clip(obj[:, 2], 0, 40), obj[:, 3],
                            raised.astype(np.float64)])
     sec["objects"] = time.perf_counter() - t
-    has = intensity is not None and np.ptp(np.asarray(intensity, np.float64)) > 0
+    has = has_intensity(intensity)
     rank = intensity_rank(None if intensity is None else np.asarray(intensity)[base], len(base))
     inten = [rank] + [block_mean(p, rank[:, None], s)[:, 0] for s in INTENSITY_SCALES_M]
     values = np.column_stack(shape + [np.column_stack(feats_g), np.column_stack(cols), obj,

@@ -78,7 +78,8 @@ class ClassifyGeometryParams:
                                     "intensity follows each surface's material: asphalt dark, paving and grass "
                                     "brighter); which points are ground stays the main model's answer. Measured on "
                                     "the real labelled sweeps in docs/segmentation.md (\"A ground model\"). "
-                                    "Colourless captures only, unless ground_split_coloured.")
+                                    "Colourless captures with an intensity only (without one the ground model "
+                                    "reads what the main model reads), unless ground_split_coloured.")
     ground_split_coloured: bool = param(False, help="Split a coloured capture's ground by the ground model too.")
     ground_weight: float = param(1.0, ge=0, le=1,
                                  help="How much of the ground split is the ground model's (geometric weight; 1 = its "
@@ -98,6 +99,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     from twinkit.cityscapes import N_CLASSES, PALETTE
     from twinkit.mesh import write_colored_ply
     from twinkit_segmentation.geometry.classify import classify_cloud, votes_at
+    from twinkit_segmentation.geometry.features import has_intensity
     from twinkit_segmentation.geometry.model import GROUND_MODEL_NAME, load_model
 
     t0 = time.perf_counter()
@@ -118,7 +120,7 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     turns = params.turns if (kind == "colourless" or params.turns_coloured) else 1
     ground_alpha = params.ground_alpha if (kind == "colourless" or params.ground_coloured) else 0.0
     model = load_model(params.model or None)
-    split = params.ground_split and (kind == "colourless" or params.ground_split_coloured)
+    split = params.ground_split and (kind == "colourless" or params.ground_split_coloured) and has_intensity(inten)
     ground_model = load_model(params.ground_model or None, GROUND_MODEL_NAME) if split else None
     t_read = time.perf_counter() - t0
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
