@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tests.mesh.meshes import grid_mesh
 
@@ -116,8 +117,11 @@ def test_write_png_reads_back(tmp_path):
     rng = np.random.default_rng(3)
     img = rng.integers(0, 256, (37, 53, 3)).astype(np.uint8)
     for threads in (1, 4):
-        write_png(tmp_path / "a.png", img, threads=threads)
-        assert np.array_equal(np.asarray(Image.open(tmp_path / "a.png")), img)
+        for row_filter in ("up", "sub"):  # an atlas's filter, a rendered view's
+            write_png(tmp_path / "a.png", img, threads=threads, row_filter=row_filter)
+            assert np.array_equal(np.asarray(Image.open(tmp_path / "a.png")), img)
+    with pytest.raises(ValueError, match="row_filter"):
+        write_png(tmp_path / "b.png", img, row_filter="paeth")
     grey = img[..., 0]
     write_png(tmp_path / "g.png", grey)  # not RGB: through Pillow
     assert np.array_equal(np.asarray(Image.open(tmp_path / "g.png")), grey)

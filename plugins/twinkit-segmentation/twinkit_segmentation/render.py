@@ -234,12 +234,13 @@ def write_vertex_map(path, vertex: np.ndarray) -> None:
 
 
 def write_view(out_dir, view_id: str, rgb: np.ndarray, vertex: np.ndarray) -> None:
-    """A view's two files in ``out_dir``: ``<id>.png`` (zlib level 1) and ``<id>_vertex.npz``."""
+    """A view's two files in ``out_dir``: ``<id>.png`` (zlib level 1, PNG filter Sub:
+    :func:`twinkit.surface.texture.write_png`) and ``<id>_vertex.npz``."""
     from pathlib import Path
 
-    from PIL import Image
+    from twinkit.surface.texture import write_png
 
-    Image.fromarray(rgb).save(Path(out_dir) / f"{view_id}.png", compress_level=1)
+    write_png(Path(out_dir) / f"{view_id}.png", rgb, row_filter="sub")
     write_vertex_map(Path(out_dir) / f"{view_id}_vertex.npz", vertex)
 
 
