@@ -459,6 +459,15 @@ def test_the_step_finds_a_sweeps_sensor_unless_its_points_meta_says_the_ground_i
     assert metrics("off", cut_tolerance_m=0.0)["sensor"] is None
 
 
+def test_a_model_stem_without_its_files_is_a_clear_error(tmp_path):
+    from twinkit.errors import InputError
+
+    (tmp_path / "half.json").write_text("{}")
+    for stem, missing in ((tmp_path / "nothere", "nothere.json"), (tmp_path / "half", "half.npz")):
+        with pytest.raises(InputError, match=missing):
+            load_model(stem)
+
+
 def test_the_ground_split_keeps_each_points_ground_total_and_takes_the_ground_models_share():
     from twinkit_segmentation.geometry.classify import split_ground
 
