@@ -622,3 +622,43 @@ def test_the_lane_check_without_edge_bands_still_says_nothing_to_nudge(four_way)
     v, f, lab, truth, net, text = four_way
     chk = scan.check_lanes(net, text, v, f, scan.ScanSourceParams(edge_band_m=0.0))
     assert chk["narrow"] == {} and chk["nudge"] == {}
+
+
+def test_a_road_beside_lower_ground_takes_its_own_height_where_no_level_face_is_near():
+    """A 60 m road at z 0 between a verge 0.5 m lower (south, its east half only) and a kerbed pavement (north):
+    the level test keeps the verge's faces and none of the east half's carriageway (lower ground lies within its
+    window), so the level raster nearest-filled from the verge put that road half a metre under its surface and
+    trim_unsupported cut it away (a real sweep's far street, issue 46). With the carriageway mask the road's own
+    faces give its height there; the west half, where the level faces are the road's, is as before."""
+    from twinkit_roads.mesh2d import Grid
+    from twinkit_roads.scan.masks import level_raster, rasterize_faces
+
+    xs = np.arange(-30.0, 30.0 + 1e-9, 0.5)
+    ys = np.arange(-10.0, 8.0 + 1e-9, 0.5)
+    X, Y = np.meshgrid(xs, ys)
+    x, y = X.ravel(), Y.ravel()
+    road, verge = np.abs(y) <= 4.0, (y < -4.0) & (x > 0)
+    v = np.stack([x, y, np.where(road, 0.0, np.where(verge, -0.5, 0.15))], 1)
+    nx = len(xs)
+    i, j = np.meshgrid(np.arange(len(ys) - 1), np.arange(nx - 1), indexing="ij")
+    a = (i * nx + j).ravel()
+    f = np.concatenate([np.stack([a, a + 1, a + nx + 1], 1), np.stack([a, a + nx + 1, a + nx], 1)]).astype(np.int64)
+    c = v[f].mean(1)
+    level = np.flatnonzero((c[:, 2] < -0.49) | ((c[:, 2] == 0.0) & (c[:, 0] < -9.0)))  # as level_faces finds them
+    grid = Grid.around(v[:, :2], 0.25)
+    mask = rasterize_faces(v, f, np.flatnonzero(np.all(np.abs(v[f][:, :, 1]) <= 4.0, axis=1)), grid)
+    mid_east, mid_west = np.array([[15.0, 0.0], [25.0, 1.0]]), np.array([[-20.0, 0.0]])
+    before = level_raster(v, f, level, grid)
+    after = level_raster(v, f, level, grid, mask)
+    assert np.allclose(grid.sample(before, mid_east), -0.5)  # nearest-filled from the verge
+    assert np.allclose(grid.sample(after, mid_east), 0.0, atol=1e-6)
+    assert np.allclose(grid.sample(after, mid_west), grid.sample(before, mid_west))
+    # the road's shape points then lie on its surface, and the trim keeps the whole road
+    xy = np.stack([np.arange(-28.0, 28.0 + 1e-9, 2.0), np.zeros(29)], 1)
+    arm = scan.Arm(0, 1, xy, 8.0)
+    net = scan.Network({0: {"xy": xy[0], "z": 0.0, "kind": "end"}, 1: {"xy": xy[-1], "z": 0.0, "kind": "end"}},
+                       [arm], mask, grid, None, {}, level_faces=level)
+    scan.add_heights_and_signals(net, v, f, None, scan.ScanSourceParams())
+    assert np.abs(arm.z).max() < 0.05
+    out = scan.trim_unsupported(net, v, f, scan.ScanSourceParams())
+    assert out["cut_m"] == 0.0 and len(net.arms) == 1

@@ -124,15 +124,32 @@ def clean_mask(m, grid, p: ScanSourceParams, level, v, f, by_level: bool) -> np.
     return m
 
 
-def level_raster(v, f, fidx, grid) -> np.ndarray:
-    """Height of the carriageway level per pixel (nan where none); nearest filled."""
-    from scipy import ndimage
-
+def _face_heights(v, f, fidx, grid) -> np.ndarray:
+    """(h, w) float: the height of a face of ``fidx`` whose centre lies in each pixel; nan where none."""
     c = v[f[fidx]].mean(1)
     px = np.floor(grid.to_px(c[:, :2])).astype(int)
     ok = (px[:, 0] >= 0) & (px[:, 0] < grid.w) & (px[:, 1] >= 0) & (px[:, 1] < grid.h)
     z = np.full((grid.h, grid.w), np.nan)
     z[px[ok, 1], px[ok, 0]] = c[ok, 2]
+    return z
+
+
+def level_raster(v, f, fidx, grid, mask: np.ndarray | None = None, reach_m: float = 1.0) -> np.ndarray:
+    """Height of the carriageway level per pixel, from the level faces ``fidx``; nearest filled. With the
+    carriageway ``mask`` (grid pixels), a pixel of it farther than ``reach_m`` from every level face takes the
+    height of the up-facing faces there instead: the carriageway's own surface, where the level test found
+    lower ground nearby and none on the road (a sweep's far street beside a lower verge: nearest-filled from the
+    verge, the road's height came out half a metre under its surface)."""
+    from scipy import ndimage
+
+    z = _face_heights(v, f, fidx, grid)
+    if mask is not None and mask.any() and not np.isnan(z).all():
+        from ..mesh2d import face_normals_z
+
+        far = ndimage.distance_transform_edt(np.isnan(z)) * grid.res > reach_m
+        own = _face_heights(v, f, np.flatnonzero(face_normals_z(v, f) > 0.9), grid)
+        take = far & mask.astype(bool) & ~np.isnan(own)
+        z[take] = own[take]
     if np.isnan(z).all():
         return np.zeros_like(z)
     idx = ndimage.distance_transform_edt(np.isnan(z), return_distances=False, return_indices=True)

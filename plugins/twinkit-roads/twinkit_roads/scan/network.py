@@ -303,7 +303,7 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
         sw_f = np.flatnonzero((lv == SIDEWALK).sum(1) >= 2)
         # a sidewalk one can step onto from the road: within WALK_MAX_M of the carriageway level beside it
         # (an aerial scan's flat roofs and walls can take the sidewalk label too)
-        zr = level_raster(v, f, net.level_faces, grid)
+        zr = level_raster(v, f, net.level_faces, grid, net.mask)
         cz = v[f[sw_f], 2].mean(1)
         dz = cz - grid.sample(zr, v[f[sw_f], :2].mean(1))
         sw_f = sw_f[(dz > -0.1) & (dz < WALK_MAX_M)]
@@ -315,7 +315,7 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
 
         nz = face_normals_z(v, f)
         up = np.flatnonzero(nz > 0.9)
-        zr = level_raster(v, f, net.level_faces, grid)
+        zr = level_raster(v, f, net.level_faces, grid, net.mask)
         cz = v[f[up], 2].mean(1)
         lvl = grid.sample(zr, v[f[up], :2].mean(1))
         raised = up[(cz - lvl > 0.06) & (cz - lvl < 0.35) & np.isfinite(lvl)]
@@ -342,7 +342,7 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
 
 
 def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> None:
-    zr = level_raster(v, f, net.level_faces, net.grid)
+    zr = level_raster(v, f, net.level_faces, net.grid, net.mask)
     for arm in net.arms:
         # the carriageway's height at each shape point: the median of its level across the road (a lane
         # off the axis of a cambered or sloping street is as far above as the other is below), lightly
