@@ -122,6 +122,9 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     model = load_model(params.model or None)
     split = params.ground_split and (kind == "colourless" or params.ground_split_coloured) and has_intensity(inten)
     ground_model = load_model(params.ground_model or None, GROUND_MODEL_NAME) if split else None
+    if params.ground_split and kind == "colourless" and not split:
+        ctx.log.info("3D classifier: the cloud has no intensity, so the ground model (which reads road, pavement "
+                     "and grass apart by it) stays off; the main model splits the ground")
     t_read = time.perf_counter() - t0
     res = classify_cloud(cloud.vertices, inten, model, base_voxel_m=params.base_voxel_m,
                          ground_window_m=params.ground_window_m, smooth_m=smooth_m, prior=prior,
@@ -148,8 +151,9 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
             "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
             "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "prior": prior, "turns": turns,
-            "ground_alpha": ground_alpha, "ground_diffusion": res.ground,
-            "ground_model": ground_model.meta.get("name", params.ground_model or "shipped") if ground_model else None, "sensor": sensor, "walls_cut": walls_cut, "model": model.meta.get("name", params.model or "shipped"),
+            "ground_alpha": ground_alpha, "ground_diffusion": res.ground, "sensor": sensor, "walls_cut": walls_cut,
+            "model": model.meta.get("name", params.model or "shipped"),
+            "ground_model": ground_model.meta.get("name", params.ground_model or "shipped") if ground_model else None,
             "vertex_classes": {str(c): int(k) for c, k in enumerate(hist) if k},
             "seconds": {**res.seconds, "read": round(t_read, 3), "votes": round(t_votes, 3),
                         "total": round(time.perf_counter() - t0, 3)}}
