@@ -245,8 +245,9 @@ def test_the_step_smooths_turns_spreads_and_corrects_the_prior_on_a_colourless_c
 
     def run(kind, tag, **params):
         """The step's votes on the colourless or coloured copy of the capture, with these parameters (the
-        ground model's split off unless given)."""
+        ground model's split and the far vertices' votes off unless given)."""
         params.setdefault("ground_split", False)
+        params.setdefault("vote_fill_radius_m", 0.0)
         out = run_plugin("step", "classify_geometry", tmp_path / f"{kind}_{tag}",
                          {"in_points_ply": tmp_path / f"{kind}.ply", "in_textured_mesh_ply": mesh_ply}, **params)
         return np.load(out["geometry_votes.npy"])
@@ -295,6 +296,17 @@ def test_the_step_smooths_turns_spreads_and_corrects_the_prior_on_a_colourless_c
     assert np.array_equal(split["coloured", 1], split["colourless", 0])
     ground = np.isin(np.arange(split["colourless", 0].shape[1]), GROUND)
     np.testing.assert_allclose(split["colourless", 0][:, ~ground], votes["colourless", 0.0][:, ~ground], atol=1e-5)
+    # vertices with no point within vote_radius_m take the farther points' votes (default 1.5 m), on a colourless
+    # capture only unless asked; the vertices that had votes keep them
+    fill = {}
+    for kind, extra in (("colourless", {}), ("coloured", {}), ("coloured", {"vote_fill_coloured": True})):
+        fill[kind, len(extra)] = run(kind, f"fill_{len(extra)}", smooth_m=0.0, turns=1, ground_alpha=0.0,
+                                     vote_fill_radius_m=1.5, **extra)
+    near = votes["colourless", 0.0].sum(axis=1) > 0
+    gained = (fill["colourless", 0].sum(axis=1) > 0) & ~near
+    assert gained.any() and np.array_equal(fill["colourless", 0][near], votes["colourless", 0.0][near])
+    assert np.array_equal(fill["coloured", 0], votes["coloured", 0.0])
+    assert np.array_equal(fill["coloured", 1], fill["colourless", 0])
     # a capture without an intensity keeps the main model's split: the ground model would read what it reads
     A.write_points(tmp_path / "bare.ply", Mesh(vertices=cap["xyz"]))
     bare = {on: run("bare", f"split_{on}", smooth_m=0.0, turns=1, ground_alpha=0.0, ground_split=on) for on in (0, 1)}

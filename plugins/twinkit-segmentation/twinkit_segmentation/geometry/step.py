@@ -65,6 +65,17 @@ class ClassifyGeometryParams:
                                  help="A vertex takes the probabilities of the classified points within this "
                                       "distance (m); farther vertices get a zero row.")
     vote_neighbours: int = param(8, ge=1, le=64, help="At most this many nearest classified points vote per vertex.")
+    vote_fill_radius_m: float = param(1.5, ge=0,
+                                      help="A vertex with no classified point within vote_radius_m (a sparse capture's "
+                                           "ground fill between scan lines) takes the probabilities of those within "
+                                           "this distance (m) instead; 0 or at most vote_radius_m = off (such vertices "
+                                           "then take their mesh neighbours' labels in backproject). Colourless "
+                                           "captures only, unless vote_fill_coloured. Measured in "
+                                           "docs/segmentation.md (\"Votes for the fill between rings\").")
+    vote_fill_coloured: bool = param(False,
+                                     help="Give a coloured capture's far vertices the farther points' votes too. Off: "
+                                          "there the views vote on them, and the farther votes cost demo seed 0 "
+                                          "0.3 mIoU.")
     cut_tolerance_m: float = param(
         0.3, ge=0, le=2.0,
         help="On a single spinning sweep (ground sampled in rings: twinkit.surface.rings finds the sensor and its "
@@ -134,6 +145,14 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     t1 = time.perf_counter()
     votes = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices, radius_m=params.vote_radius_m,
                      neighbours=params.vote_neighbours, workers=max(1, int(ctx.threads)))
+    far = np.flatnonzero(votes.sum(axis=1) <= 0)
+    filled = 0
+    fill_m = params.vote_fill_radius_m if (kind == "colourless" or params.vote_fill_coloured) else 0.0
+    if fill_m > params.vote_radius_m and len(far):
+        votes[far] = votes_at(cloud.vertices[res.base], res.proba, mesh.vertices[far],
+                              radius_m=fill_m, neighbours=params.vote_neighbours,
+                              workers=max(1, int(ctx.threads)))
+        filled = int((votes[far].sum(axis=1) > 0).sum())
     A.write_class_votes(out_geometry_votes_npy, votes)
     has = votes.sum(axis=1) > 0
     lab = np.where(has, votes.argmax(axis=1), 255).astype(np.uint8)
@@ -145,11 +164,13 @@ def classify_geometry(params: ClassifyGeometryParams, ctx: StepContext, *, in_po
     if res.ground is not None and res.ground["noise_m"] is None:
         ctx.log.warning("3D classifier: ground diffusion skipped: %d ground points, too few near pairs to measure "
                         "the ground's noise", res.ground["points"])
-    ctx.log.info("3D classifier: %d points -> %d base points; %.1f%% of %d vertices without a point within %.2f m; "
-                 "timings %s", len(cloud.vertices), len(res.base), 100 * (1 - has.mean()), n, params.vote_radius_m,
-                 res.seconds)
+    ctx.log.info("3D classifier: %d points -> %d base points; %.1f%% of %d vertices without a point within %.2f m "
+                 "(%d of them given the points' within %.2f m), %.1f%% without any; timings %s", len(cloud.vertices),
+                 len(res.base), 100 * len(far) / max(n, 1), n, params.vote_radius_m, filled, fill_m,
+                 100 * (1 - has.mean()), res.seconds)
     return {"points": int(len(cloud.vertices)), "base_points": int(len(res.base)), "vertices": n,
             "vertices_without_votes": int((~has).sum()), "share_without_votes": round(float(1 - has.mean()), 4),
+            "vertices_voted_from_farther": filled,
             "intensity": inten is not None, "capture": kind, "smooth_m": smooth_m, "prior": prior, "turns": turns,
             "ground_alpha": ground_alpha, "ground_diffusion": res.ground, "sensor": sensor, "walls_cut": walls_cut,
             "model": model.meta.get("name", params.model or "shipped"),
