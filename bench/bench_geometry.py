@@ -10,7 +10,8 @@ docs/segmentation.md "3D classifier", "A ground model").
    with intensities from each surface's material (``--materials``) for the ground model; the demo-made mobile
    scans and sweeps of ``bench/geometry_data.py``). On 2 cores the first time about 10-12 minutes of captures
    and 20 minutes of features (cached under ``DIR/cache``) per set of 328 captures, then about 6 minutes of
-   training for the main model and 1.5 for the ground model; a later run reuses the captures and features (each generator skips what it already wrote).
+   training for the main model and 1.5 for the ground model; a later run reuses the captures and features
+   (each generator skips what it already wrote).
 2. Trains with the shipped models' recipes (their JSON) into ``bench/results/geometry_model.{npz,json}`` and
    ``bench/results/ground_model.{npz,json}`` (road, sidewalk and terrain only, ``--classes``).
 3. Says whether the retrained arrays equal the shipped ones, and scores both pairs on the generated validation
