@@ -471,13 +471,22 @@ def test_the_step_finds_a_sweeps_sensor_unless_its_points_meta_says_the_ground_i
     assert metrics("off", cut_tolerance_m=0.0)["sensor"] is None
 
 
-def test_a_model_stem_without_its_files_is_a_clear_error(tmp_path):
+def test_a_model_stem_without_its_files_is_a_clear_error_before_the_first_step(tmp_path):
+    import dataclasses
+
     from twinkit.errors import InputError
+    from twinkit.testing import installed_plugin
 
     (tmp_path / "half.json").write_text("{}")
     for stem, missing in ((tmp_path / "nothere", "nothere.json"), (tmp_path / "half", "half.npz")):
         with pytest.raises(InputError, match=missing):
             load_model(stem)
+    # the step's preflight (run for the whole plan before any step) names the parameter and the missing file
+    plugin = installed_plugin("step", "classify_geometry")
+    params = dataclasses.replace(plugin.default_params(), ground_model=str(tmp_path / "half"))
+    problems = plugin.preflight({}, params, {})
+    assert len(problems) == 1 and "steps.classify_geometry.ground_model=" in problems[0] and "half.npz" in problems[0]
+    assert plugin.preflight({}, plugin.default_params(), {}) == []  # the shipped models are there
 
 
 def test_the_ground_split_keeps_each_points_ground_total_and_takes_the_ground_models_share():

@@ -10,6 +10,7 @@ from twinkit_segmentation import steps as S
 from twinkit_segmentation import views as V
 from twinkit_segmentation.geometry import step as G
 from twinkit_segmentation.oracle import OracleParams, build_oracle
+from twinkit_segmentation.preflight import classify_geometry_preflight
 from twinkit_segmentation.report import twinkit_register_report_sections  # noqa: F401 (this plugin's sections of the run report)
 
 
@@ -42,7 +43,8 @@ def twinkit_register_steps(register):
     register("render_views", S.render_views, params=S.RenderParams)
     register("photo_views", S.photo_views, params=S.PhotoViewsParams, uses=("view_sampler",))
     register("predict_views", S.predict_views, params=S.PredictParams, uses=("image_model",))
-    register("classify_geometry", G.classify_geometry, params=G.ClassifyGeometryParams)
+    register("classify_geometry", G.classify_geometry, params=G.ClassifyGeometryParams,
+             preflight=classify_geometry_preflight)
     register("backproject", S.backproject, params=S.BackprojectParams)
     register("transfer_gt_labels", S.transfer_gt_labels, params=S.TransferGtParams)
     register("evaluate_segmentation", S.evaluate_segmentation, params=S.EvaluateParams)

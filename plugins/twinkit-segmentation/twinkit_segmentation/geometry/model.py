@@ -92,18 +92,28 @@ def save_model(path_stem: Path, layers, mean, std, classes, feature_names, meta:
     return npz, js
 
 
+def model_problem(path_stem: str | Path) -> str | None:
+    """One line saying what is missing of the model ``<stem>.json`` + ``<stem>.npz`` and how to fix it; None when
+    both are there."""
+    stem = Path(path_stem).expanduser().with_suffix("")
+    missing = [str(stem.with_suffix(s)) for s in (".json", ".npz") if not stem.with_suffix(s).is_file()]
+    if not missing:
+        return None
+    return (f"no 3D classifier model at {stem}: {' and '.join(missing)} missing; give the stem (the path without "
+            ".npz/.json) of a model python -m twinkit_segmentation.geometry.train wrote, or leave the parameter "
+            "empty for the shipped one")
+
+
 def load_model(path_stem: str | Path | None = None, default: str = MODEL_NAME) -> GeometryModel:
     """Load ``<stem>.npz`` + ``<stem>.json`` (default: the model ``default`` shipped beside this module).
-    Raises :class:`twinkit.errors.InputError` naming the files when either is missing."""
+    Raises :class:`twinkit.errors.InputError` naming the files when either is missing (:func:`model_problem`)."""
     from twinkit.errors import InputError
 
     stem = Path(path_stem) if path_stem else MODEL_DIR / default
     stem = stem.with_suffix("")
-    missing = [str(stem.with_suffix(s)) for s in (".json", ".npz") if not stem.with_suffix(s).is_file()]
-    if missing:
-        raise InputError(f"no 3D classifier model at {stem}: {' and '.join(missing)} missing; give the stem (the "
-                         "path without .npz/.json) of a model python -m twinkit_segmentation.geometry.train wrote, "
-                         "or leave the parameter empty for the shipped one")
+    problem = model_problem(stem)
+    if problem:
+        raise InputError(problem)
     meta = json.loads(stem.with_suffix(".json").read_text())
     with np.load(stem.with_suffix(".npz")) as z:
         n = sum(1 for k in z.files if k.startswith("W"))
