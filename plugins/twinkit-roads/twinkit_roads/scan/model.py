@@ -129,6 +129,7 @@ class Network:
     sidewalk_mask: np.ndarray | None
     stats: dict
     level_faces: np.ndarray | None = None  # faces on the carriageway level (below the curbs)
+    level_z: np.ndarray | None = None  # the carriageway level's height per grid pixel (network.carriageway_level)
 
 
 def empty_network() -> Network:

@@ -293,6 +293,14 @@ def _nodes_and_arms(raw_arms: list, jpos: dict, mask, grid, p: ScanSourceParams)
 WALK_MAX_M = 0.5
 
 
+def carriageway_level(net: Network, v, f) -> np.ndarray:
+    """The carriageway level's height per pixel of ``net.grid`` (:func:`.masks.level_raster` of its level faces and
+    carriageway mask), made once per network: the sidewalks and the heights both read it."""
+    if net.level_z is None:
+        net.level_z = level_raster(v, f, net.level_faces, net.grid, net.mask)
+    return net.level_z
+
+
 def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
     """Sidewalk width beyond each curb: the run of sidewalk-labelled surface (else the raised level)."""
     from scipy import ndimage
@@ -303,7 +311,7 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
         sw_f = np.flatnonzero((lv == SIDEWALK).sum(1) >= 2)
         # a sidewalk one can step onto from the road: within WALK_MAX_M of the carriageway level beside it
         # (an aerial scan's flat roofs and walls can take the sidewalk label too)
-        zr = level_raster(v, f, net.level_faces, grid, net.mask)
+        zr = carriageway_level(net, v, f)
         cz = v[f[sw_f], 2].mean(1)
         dz = cz - grid.sample(zr, v[f[sw_f], :2].mean(1))
         sw_f = sw_f[(dz > -0.1) & (dz < WALK_MAX_M)]
@@ -315,7 +323,7 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
 
         nz = face_normals_z(v, f)
         up = np.flatnonzero(nz > 0.9)
-        zr = level_raster(v, f, net.level_faces, grid, net.mask)
+        zr = carriageway_level(net, v, f)
         cz = v[f[up], 2].mean(1)
         lvl = grid.sample(zr, v[f[up], :2].mean(1))
         raised = up[(cz - lvl > 0.06) & (cz - lvl < 0.35) & np.isfinite(lvl)]
@@ -342,7 +350,7 @@ def add_sidewalks(net: Network, v, f, labels, p: ScanSourceParams) -> None:
 
 
 def add_heights_and_signals(net: Network, v, f, labels, p: ScanSourceParams) -> None:
-    zr = level_raster(v, f, net.level_faces, net.grid, net.mask)
+    zr = carriageway_level(net, v, f)
     for arm in net.arms:
         # the carriageway's height at each shape point: the median of its level across the road (a lane
         # off the axis of a cambered or sloping street is as far above as the other is below), lightly

@@ -154,6 +154,27 @@ def check_scene_scores(model: GeometryModel, seed: int = 0, only_classes=None) -
             "iou": s["iou"]}
 
 
+def _draw_points(train_caps, per_class: int, rng, rough_rng, rough_shift_max: float, rough_scales_m,
+                 only_classes) -> tuple[np.ndarray, np.ndarray]:
+    """The training points: per capture and class (of ``only_classes`` when given) at most ``per_class`` drawn by
+    ``rng``, each capture roughened first when ``rough_shift_max`` > 0 (:func:`roughen`, deltas from
+    ``rough_rng``); (values (n, k) float32, labels (n,) int64)."""
+    xs, ys = [], []
+    for _, values, lab in train_caps:
+        if rough_shift_max > 0:
+            values = values.copy()
+            roughen(values, float(rough_rng.uniform(0.0, rough_shift_max)), tuple(rough_scales_m))
+        for c in np.unique(lab):
+            if c >= N_CLASSES or (only_classes is not None and c not in only_classes):
+                continue
+            idx = np.flatnonzero(lab == c)
+            if len(idx) > per_class:
+                idx = rng.choice(idx, per_class, replace=False)
+            xs.append(values[idx])
+            ys.append(lab[idx])
+    return np.concatenate(xs).astype(np.float32), np.concatenate(ys).astype(np.int64)
+
+
 def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048, lr=2e-3, weight_decay=1e-4,
           intensity_dropout=0.5, min_points=200, seed=0, rough_shift_max=0.0, rough_scales_m=(0.1, 0.25, 0.6),
           only_classes=None, log=print):
@@ -167,22 +188,8 @@ def train(train_caps, *, hidden=(128, 64), epochs=20, per_class=2500, batch=2048
     torch.manual_seed(seed)
     torch.set_num_threads(1)
     rng = np.random.default_rng(seed)
-    xs, ys = [], []
-    rough_rng = np.random.default_rng([seed, 7])
-    for _, values, lab in train_caps:
-        if rough_shift_max > 0:
-            values = values.copy()
-            roughen(values, float(rough_rng.uniform(0.0, rough_shift_max)), tuple(rough_scales_m))
-        for c in np.unique(lab):
-            if c >= N_CLASSES or (only_classes is not None and c not in only_classes):
-                continue
-            idx = np.flatnonzero(lab == c)
-            if len(idx) > per_class:
-                idx = rng.choice(idx, per_class, replace=False)
-            xs.append(values[idx])
-            ys.append(lab[idx])
-    x = np.concatenate(xs).astype(np.float32)
-    y = np.concatenate(ys).astype(np.int64)
+    x, y = _draw_points(train_caps, per_class, rng, np.random.default_rng([seed, 7]), rough_shift_max,
+                        rough_scales_m, only_classes)
     counts = np.bincount(y, minlength=N_CLASSES)
     classes = np.flatnonzero(counts >= min_points)
     keep = np.isin(y, classes)
