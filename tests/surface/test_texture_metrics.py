@@ -118,8 +118,13 @@ def test_write_png_reads_back(tmp_path):
     img = rng.integers(0, 256, (37, 53, 3)).astype(np.uint8)
     for threads in (1, 4):
         for row_filter in ("up", "sub"):  # an atlas's filter, a rendered view's
-            write_png(tmp_path / "a.png", img, threads=threads, row_filter=row_filter)
-            assert np.array_equal(np.asarray(Image.open(tmp_path / "a.png")), img)
+            for rle in (False, True):
+                write_png(tmp_path / "a.png", img, threads=threads, row_filter=row_filter, rle=rle)
+                assert np.array_equal(np.asarray(Image.open(tmp_path / "a.png")), img)
+    bands = np.repeat(rng.integers(0, 256, (64, 1, 3)), 256, axis=1).astype(np.uint8)  # a view's flat rows
+    write_png(tmp_path / "r.png", bands, row_filter="sub", rle=True)
+    assert np.array_equal(np.asarray(Image.open(tmp_path / "r.png")), bands)
+    assert (tmp_path / "r.png").stat().st_size < 2000  # runs of zeros: 48 kB of pixels
     with pytest.raises(ValueError, match="row_filter"):
         write_png(tmp_path / "b.png", img, row_filter="paeth")
     grey = img[..., 0]

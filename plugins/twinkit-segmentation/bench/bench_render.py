@@ -6,7 +6,7 @@
 
 Renders ``--n`` views with ``render_view_set`` (draw, drop, hole mask and fill, files written) and prints
 wall and CPU seconds per view with the load average, then each part against the way it was done before
-(every face drawn, scipy's distance transforms, ``np.savez_compressed``). CPU seconds count every thread
+(every face drawn in the mesh's order, scipy's distance transforms, ``np.savez_compressed``, Pillow's PNG). CPU seconds count every thread
 of the process (the renderer's rasteriser threads and the file writer). Timing only: the equality of the
 pixels is tested in tests/test_view_render.py.
 """
@@ -67,6 +67,8 @@ def _parts(mesh, tex, views, tmp: Path) -> list:
     maps = [r.render(*m) for m in mats]
     cull = R.visible_cells
     culled = _timed(lambda i: r.render(*mats[i]), n)
+    r.front_to_back = False
+    mesh_order = _timed(lambda i: r.render(*mats[i]), n)
     R.visible_cells = lambda lo, hi, mvp: np.ones(len(lo), bool)
     every = _timed(lambda i: r.render(*mats[i]), n)
     R.visible_cells = cull
@@ -78,12 +80,16 @@ def _parts(mesh, tex, views, tmp: Path) -> list:
         hit = maps[i][1] >= 0
         fill_from_nearest(maps[i][0].copy(), ground_holes(hit, below[i], 16.0, method), hit, method)
 
-    rows = [("draw and read back", culled, every),
+    rows = [("draw and read back (culled, nearest cells first)", culled, every),
+            ("draw and read back (culled, the mesh's face order)", mesh_order, every),
             ("hole mask and fill", _timed(lambda i: holes(i, "auto"), n), _timed(lambda i: holes(i, "scipy"), n))]
     rows.append(("vertex map file", _timed(lambda i: R.write_vertex_map(tmp / "a.npz", maps[i][1]), n),
                  _timed(lambda i: np.savez_compressed(tmp / "b.npz", vertex=maps[i][1]), n)))
-    png = _timed(lambda i: Image.fromarray(maps[i][0]).save(tmp / "a.png", compress_level=1), n)
-    rows.append(("PNG (zlib level 1, on the writer thread)", png, png))
+    from twinkit.surface.texture import write_png
+
+    rows.append(("PNG (zlib level 1, Sub, run-length; on the writer thread)",
+                 _timed(lambda i: write_png(tmp / "a.png", maps[i][0], row_filter="sub", rle=True), n),
+                 _timed(lambda i: Image.fromarray(maps[i][0]).save(tmp / "b.png", compress_level=1), n)))
     return rows
 
 

@@ -120,3 +120,39 @@ def test_culled_draw_equals_drawing_every_face(monkeypatch):
         assert np.array_equal(vid, vid_all) and np.array_equal(rgb, rgb_all)
     r.release()
     assert any((vid >= 0).mean() > 0.3 for _, vid in culled)
+
+
+@needs_egl
+def test_nearest_cells_first_gives_the_mesh_orders_pixels():
+    """Drawing the visible cells nearest first (fewer hidden fragments shaded) gives the pixels of drawing the
+    faces in the mesh's order, on a scene without faces at equal depth; its draw starts at the camera."""
+    import twinkit_segmentation.render as R
+    from twinkit_segmentation.views import view_matrices
+
+    v, f, _, _ = street_scene(step=1.0)
+    near, plain = R.Renderer(v, f, None, None, 96, 48), R.Renderer(v, f, None, None, 96, 48, front_to_back=False)
+    for h in (0.0, 90.0, 200.0):
+        view = {"position": [-15, 0, 1.5], "heading_deg": h, "pitch_deg": -5.0, "hfov_deg": 75.0, "width": 96,
+                "height": 48}
+        (rgb_a, vid_a), (rgb_b, vid_b) = near.render(*view_matrices(view)), plain.render(*view_matrices(view))
+        assert near.drawn_faces == plain.drawn_faces
+        assert np.array_equal(vid_a, vid_b) and np.array_equal(rgb_a, rgb_b) and (vid_a >= 0).mean() > 0.2
+        vm, pm = view_matrices(view)
+        idx = near._draw_order(R.visible_cells(near._lo, near._hi, pm @ vm), vm)
+        first = v[f[idx[0, 0] // 3]].mean(axis=0)
+        last = v[f[idx[-1, 0] // 3]].mean(axis=0)
+        assert np.linalg.norm(first[:2] - [-15, 0]) < np.linalg.norm(last[:2] - [-15, 0])
+    near.release()
+    plain.release()
+
+
+def test_compiled_vertex_lookup_is_numpys():
+    from twinkit.surface.compiled import compiled
+    from twinkit_segmentation.render import _ids_to_vertices
+
+    rng = np.random.default_rng(0)
+    lut = np.concatenate([[-1], rng.integers(0, 10_000, 300)]).astype(np.int32)
+    ids = rng.integers(0, len(lut), (17, 23)).astype(np.uint32)
+    out = np.empty(ids.shape, np.int32)
+    (compiled(_ids_to_vertices) or _ids_to_vertices)(lut, ids, out)
+    assert np.array_equal(out, np.take(lut, ids[::-1]))
