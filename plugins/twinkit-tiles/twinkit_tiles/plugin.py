@@ -47,7 +47,7 @@ class PlanTilesParams:
     target_faces: int = param(6_000_000, ge=0,
                               help="> 0: simplify each tile after its cut to its share (by the points in its core) "
                                    "of this many faces, keeping seam borders; this bounds the memory of the merge "
-                                   "and of the steps after it (full-density large site: 8.2 GB at 6 M, 20.5 GB "
+                                   "and of the steps after it (full-density large site: 6.7 GB at 6 M, 20.5 GB "
                                    "for its 33 M faces unsimplified). 0 = full resolution.")
 
 
