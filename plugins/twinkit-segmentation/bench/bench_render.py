@@ -6,9 +6,9 @@
 
 Renders ``--n`` views with ``render_view_set`` (draw, drop, hole mask and fill, files written) and prints
 wall and CPU seconds per view with the load average, then each part against the way it was done before
-(every face drawn in the mesh's order, scipy's distance transforms, ``np.savez_compressed``, Pillow's PNG). CPU seconds count every thread
-of the process (the renderer's rasteriser threads and the file writer). Timing only: the equality of the
-pixels is tested in tests/test_view_render.py.
+(every face drawn in the mesh's order, scipy's distance transforms, ``np.savez_compressed``, Pillow's PNG).
+CPU seconds count every thread of the process (the renderer's rasteriser threads and the file writer).
+Timing only: the equality of the pixels is tested in tests/test_view_render.py.
 """
 from __future__ import annotations
 
