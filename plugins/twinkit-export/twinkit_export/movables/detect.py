@@ -262,8 +262,8 @@ def _instance(k: int, v, f, h, vid, mine, grid: LocalGround, cid: int, cls_count
 
 def claim_debris(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.ndarray, instances: list[Instance],
                  opt: LiftOptions, rep: dict) -> None:
-    """Debris: what remains inside a footprint (+ ``margin_m`` + ``debris_margin_m``) that does not reach the
-    ground outside it (the reconstructed underside, slivers at the cut; at most ``debris_max_faces``), then
+    """Debris: what remains inside a footprint (+ ``margin_m`` + ``debris_margin_m``), no higher than the object
+    (+ ``margin_m``: not a lamp head over a parked car), that does not reach the ground outside it (the reconstructed underside, slivers at the cut; at most ``debris_max_faces``), then
     the fins (:func:`peel_fins`), go with the object. ``face_owner`` and the instances' faces are updated in
     place; ``fin_faces_peeled`` goes to ``rep``."""
     removed = face_owner >= 0
@@ -273,7 +273,7 @@ def claim_debris(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.nda
     total = np.bincount(comp, minlength=ncomp)
     for inst in instances:
         inside = in_box(v[:, :2], inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg,
-                        opt.margin_m + opt.debris_margin_m)
+                        opt.margin_m + opt.debris_margin_m) & (h <= inst.size[2] + opt.margin_m)
         fin = inside[f[rest]].all(axis=1)
         within = np.bincount(comp[fin], minlength=ncomp)
         debris = np.nonzero((within == total) & (total > 0) & (total <= opt.debris_max_faces))[0]

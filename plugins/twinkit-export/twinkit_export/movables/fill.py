@@ -52,8 +52,9 @@ class Additions:
 
 def close_object_holes(sm: Additions, touched: np.ndarray, grid: LocalGround, instances: list[Instance],
                        opt: LiftOptions, rep: dict) -> None:
-    """Close the loops of open border the cut opened (a loop near a footprint or through a vertex of a lifted
-    face, ``touched`` (n,) bool) that reach no farther than ``max_fill_extent_m`` beyond the footprint: the
+    """Close the loops of open border the cut opened (a loop near a footprint, below the object's top, or through
+    a vertex of a lifted face, ``touched`` (n,) bool: a street light's open lamp head over a parked car is no hole
+    the car left) that reach no farther than ``max_fill_extent_m`` beyond the footprint: the
     object's cut-off feet up to ``flatten_feet_m`` are lowered onto the ground, then the hole is closed on
     the ground (:func:`close_hole` on a ``fill_cell_m`` grid at ``grid``'s height; at the ring's heights,
     :func:`span`, where the outline is no simple polygon seen from above or ``fill_cell_m`` is 0). A loop of at most ``small_loop_m`` at an object's foot
@@ -61,19 +62,23 @@ def close_object_holes(sm: Additions, touched: np.ndarray, grid: LocalGround, in
     from twinkit.mesh.topology import boundary_loops
 
     v, kept = sm.v, sm.kept
+    rep["remnant_vertices_lowered"] = lower_remnants(v, kept, grid, instances, opt) if opt.flatten_feet_m > 0 else 0
     loops = boundary_loops(kept) if len(kept) else []
     cnt = dict(filled=0, unfilled=0, flattened=0, small=0)
     open_why: dict[str, float] = {}
     open_after_m = 0.0
     if instances and loops:
         boxes = [(i.center[:2], i.size[0], i.size[1], i.yaw_deg) for i in instances]
+        tops = [float(i.size[2]) for i in instances]
         # kept faces per vertex (the ring of a loop: its texture and class come from there)
         korder = np.argsort(kept.ravel(), kind="stable")
         kstarts = np.searchsorted(kept.ravel()[korder], np.arange(len(v) + 1))
         kcen = v[kept].mean(axis=1)
         for lp in loops:
             pts = v[lp, :2]
-            hits = [b for b in boxes if in_box(pts, b[0], b[1], b[2], b[3], opt.margin_m).any()]
+            hl = v[lp, 2] - grid.at(pts)
+            hits = [b for b, top in zip(boxes, tops)
+                    if (in_box(pts, b[0], b[1], b[2], b[3], opt.margin_m) & (hl <= top + opt.margin_m)).any()]
             if not hits and not touched[lp].any():
                 continue  # an open border elsewhere: not ours
             ok_box = any(in_box(pts, c_, l_, w_, y_, opt.margin_m + opt.max_fill_extent_m).all()
@@ -102,6 +107,42 @@ def close_object_holes(sm: Additions, touched: np.ndarray, grid: LocalGround, in
     rep.update(loops_filled=cnt["filled"], loops_left_open=cnt["unfilled"], open_border_left_m=round(open_after_m, 3),
                small_loops_closed=cnt["small"], feet_vertices_flattened=cnt["flattened"],
                open_border_left_by_reason_m=open_why)
+
+
+def lower_remnants(v: np.ndarray, kept: np.ndarray, grid: LocalGround, instances: list[Instance],
+                   opt: LiftOptions) -> int:
+    """What stays of an object's skin inside its footprint where its faces reach the ground (a sill's sliver
+    under a car's side, joined to the road, so neither cut nor peeled: on the full-density `large` site spikes
+    0.3-0.46 m high put 65-153 points of road inside two cars' boxes): a connected piece of the static mesh's
+    raised vertices (more than ``min_height_m`` above the object's ground: higher than a kerb) that lies inside
+    the footprints and no higher than ``flatten_feet_m`` goes down to the ground (in place in ``v``); a wall's
+    lower band runs on beyond the footprint and stays. Returns how many vertices."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if not instances or not len(kept):
+        return 0
+    idx = np.unique(kept)
+    g = grid.at(v[idx, :2])
+    base, inside = g.copy(), np.zeros(len(idx), bool)
+    for i in instances[::-1]:
+        b = in_box(v[idx, :2], i.center[:2], i.size[0], i.size[1], i.yaw_deg, 0.0)
+        base[b], inside[b] = i.ground_z, True
+    raised = (v[idx, 2] - g > 0.02) & (v[idx, 2] - base > opt.min_height_m)
+    if not (raised & inside).any():
+        return 0
+    sub = np.full(len(v), -1)
+    sub[idx[raised]] = np.arange(int(raised.sum()))
+    e = np.vstack([kept[:, [0, 1]], kept[:, [1, 2]], kept[:, [2, 0]]])
+    e = sub[e]
+    e = e[(e >= 0).all(axis=1)]
+    n = int(raised.sum())
+    _, comp = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
+    ok = np.bincount(comp, weights=~inside[raised] | (v[idx[raised], 2] - g[raised] > opt.flatten_feet_m),
+                     minlength=comp.max() + 1) == 0
+    low = np.nonzero(raised)[0][ok[comp]]
+    v[idx[low], 2] = g[low]
+    return int(len(low))
 
 
 def _flatten_feet(v: np.ndarray, lp: np.ndarray, hits: list, grid: LocalGround, opt: LiftOptions) -> int:
@@ -270,9 +311,13 @@ def ground_gaps(v: np.ndarray, f: np.ndarray, grid: LocalGround, cell_m: float, 
     return out
 
 
+#: a patch joins the surfaces and open border at most this high above the ground
+PATCH_LEVEL_M = 0.5
+
+
 def patch_footprints(v, f, lab, tc, grid: LocalGround, instances, opt: LiftOptions, max_edge_m: float | None = None):
     """Ground patches where a footprint is still uncovered (:func:`twinkit.street.holes.patch` of the static
-    mesh's border vertices there and of ``patch_cell_m`` grid points at the ground height, keeping the
+    mesh's border vertices there, up to ``PATCH_LEVEL_M`` above the ground, and of ``patch_cell_m`` grid points at the ground height, keeping the
     triangles over uncovered ground inside the footprint). ``v`` (n, 3), ``f`` (m, 3), ``lab`` (n,), ``tc``
     (m, 6) or None. Returns (new vertices, faces, their labels, face UVs)."""
     from scipy.spatial import cKDTree
@@ -282,11 +327,12 @@ def patch_footprints(v, f, lab, tc, grid: LocalGround, instances, opt: LiftOptio
     out_v, out_f, out_lab, out_tc = [], [], [], []
     fxy = v[f][:, :, :2]
     fcen = fxy.mean(axis=1)
-    low = np.nonzero(v[f][:, :, 2].mean(axis=1) - grid.at(fcen) < 0.5)[0]  # ground-level surfaces only
+    low = np.nonzero(v[f][:, :, 2].mean(axis=1) - grid.at(fcen) < PATCH_LEVEL_M)[0]  # ground-level surfaces only
     # faces near a box are looked up around its centre: a face's vertices lie within `reach` of its centre
     reach = float(np.linalg.norm(fxy[low] - fcen[low, None], axis=2).max()) if len(low) else 0.0
     low_tree = cKDTree(fcen[low]) if len(low) else None
     bv = np.unique(border_edges(f))
+    bv = bv[v[bv, 2] - grid.at(v[bv, :2]) < PATCH_LEVEL_M]  # not the open border of a lamp head above the spot
     for inst in instances:
         cen, length, width, yaw = inst.center[:2], inst.size[0], inst.size[1], inst.yaw_deg
         m = opt.margin_m
