@@ -36,9 +36,10 @@ class SplitParams:
                                                      "cannot be joined; smaller fragments are dissolved into the "
                                                      "class around them.")
     sidewalk_max_slope: float = param(0.35, gt=0, help="Steepest mesh edge (rise over run) a joining path may follow.")
-    sidewalk_max_rise_m: float = param(0.05, ge=0, help="A joining path rises and falls at most this much (m), and the "
-                                                        "fragment lies within this of the pavement it joins: a kerb "
-                                                        "(6 cm and more) is never crossed.")
+    sidewalk_max_rise_m: float = param(0.05, ge=0, help="A joining path rises and falls at most this much (m) off the "
+                                                        "fragment's height (deeper only in a sag less than half the "
+                                                        "kerb beside it), and the fragment lies within this of the "
+                                                        "pavement it joins: a kerb (6 cm and more) is never crossed.")
 
 
 @dataclass

@@ -14,9 +14,10 @@ The clean-up works on the faces' classes as the split gives them (same rule), pe
 2. the components of at least ``keep_m2`` are the surfaces; every other component (and every surface
    but the largest) is **joined** to a larger surface when a walkable path over the ground joins them
    within ``join_gap_m``: the shortest path over mesh edges whose ends are both ground classes (road,
-   sidewalk, unlabelled) and whose slope stays under ``max_slope``, rising and falling at most
-   ``max_rise_m`` in all (a kerb is higher, so a fragment on the carriageway is never joined over the
-   kerb); the path's vertices become sidewalk, and the faces along it join the two;
+   sidewalk, unlabelled) and whose slope stays under ``max_slope``, rising at most ``max_rise_m`` above
+   the fragment's height and falling at most that or, in a sag, less than half the kerb (a kerb is higher,
+   so a fragment on the carriageway is never joined over the kerb nor along its foot); the path's vertices
+   become sidewalk, and the faces along it join the two;
 3. a component that cannot be joined and is smaller than ``keep_m2`` is **dissolved**: its sidewalk
    vertices take the class most of their non-sidewalk neighbours have (road on the carriageway,
    terrain on a verge);
@@ -133,16 +134,29 @@ def _dissolve_to(labels: np.ndarray, faces: np.ndarray, verts: np.ndarray, seams
     return int(np.bincount(around).argmax()) if len(around) else ROAD
 
 
+#: the carriageway beside a pavement lies within this of any point of it (the kerb's height is read there)
+KERB_REACH_M = 8.0
+
+
 def _same_level(vertices: np.ndarray, path: np.ndarray, fragment: np.ndarray, surface: np.ndarray,
-                max_rise_m: float, radius_m: float = 1.0) -> bool:
-    """Whether a joining path keeps to one level: it rises and falls at most ``max_rise_m``, its inner vertices
-    lie within that of the fragment's median height (not along a kerb's foot), and the
-    fragment's median height and the upper quartile of the heights of the ``surface`` vertices within
-    ``radius_m`` of where the path arrives (the pavement's top) differ by at most that: a surface whose edge
-    runs down a kerb face reaches the carriageway at its foot, the pavement beside it is a kerb higher."""
+                max_rise_m: float, radius_m: float = 1.0, road_tree=None, road_z: np.ndarray | None = None) -> bool:
+    """Whether a joining path keeps to one level: no vertex of it more than ``max_rise_m`` above the fragment's
+    median height, nor further below it than a sag (``max_rise_m``, or less than half the kerb: the fragment's
+    height over the lowest tenth of the road's within ``KERB_REACH_M`` of the path; ``road_tree`` a cKDTree of
+    the road vertices' xy, ``road_z`` their heights): Poisson's sag over a scan shadow across the pavement is the
+    pavement's, the road at a kerb's foot is not. And the fragment's median height and the upper quartile of
+    the heights of the ``surface`` vertices within ``radius_m`` of where the path arrives (the pavement's top)
+    differ by at most ``max_rise_m``: a surface whose edge runs down a kerb face reaches the carriageway at its
+    foot, the pavement beside it is a kerb higher."""
     z = vertices[:, 2]
     level = float(np.median(z[fragment]))
-    if np.ptp(z[path]) > max_rise_m or np.abs(z[path[1:-1]] - level).max(initial=0.0) > max_rise_m:
+    sag = max_rise_m
+    if road_tree is not None and (level - z[path]).max() > max_rise_m:
+        near = np.unique(np.concatenate(road_tree.query_ball_point(vertices[path, :2], KERB_REACH_M)).astype(int))
+        below = road_z[near][road_z[near] < level - max_rise_m] if len(near) else np.zeros(0)
+        if len(below):
+            sag = max(sag, (level - float(np.percentile(below, 10))) / 2)
+    if (z[path] - level).max() > max_rise_m or (level - z[path]).max() > sag:
         return False
     end = vertices[path[0], :2]
     near = surface[np.hypot(*(vertices[surface, :2] - end).T) <= radius_m]
@@ -176,6 +190,8 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
     surface at least this large (m^2) that cannot be joined stays, and only such surfaces are joined to;
     max_slope: steepest mesh edge (rise over run) a joining path may follow; max_rise_m: the most a joining
     path may rise and fall in all (m; a kerb is 0.06 m and more)."""
+    from scipy.spatial import cKDTree
+
     from .split import face_classes
 
     vertices = np.asarray(vertices, np.float64)
@@ -192,13 +208,16 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
         if len(area) <= 1:
             break
         graph = _walk_graph(vertices, faces, lab, max_slope, walk, seams)
+        road = np.flatnonzero(lab == ROAD)
+        road_tree = cKDTree(vertices[road, :2]) if len(road) else None
         verts = _component_vertices(faces, fi, comp, len(vertices))
         anchors = max(1, int(np.count_nonzero(area >= keep_m2)))  # the surfaces a fragment may join
         changed = 0
         for c in range(len(area) - 1, 0, -1):
             targets = np.concatenate(verts[:min(c, anchors)])
             path = _join(graph, verts[c], targets, join_gap_m)
-            if path is not None and not _same_level(vertices, path, verts[c], targets, max_rise_m):
+            if path is not None and not _same_level(vertices, path, verts[c], targets, max_rise_m,
+                                                    road_tree=road_tree, road_z=vertices[road, 2]):
                 path = None  # the path climbs a kerb: the fragment lies on another level
             if path is not None:
                 new = path[lab[path] != SIDEWALK]
