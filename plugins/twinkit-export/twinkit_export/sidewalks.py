@@ -140,8 +140,9 @@ KERB_REACH_M = 8.0
 
 def _same_level(vertices: np.ndarray, path: np.ndarray, fragment: np.ndarray, surface: np.ndarray,
                 max_rise_m: float, radius_m: float = 1.0, road_tree=None, road_z: np.ndarray | None = None) -> bool:
-    """Whether a joining path keeps to one level: no vertex of it more than ``max_rise_m`` above the fragment's
-    median height, nor further below it than a sag (``max_rise_m``, or less than half the kerb: the fragment's
+    """Whether a joining path keeps to one level: it rises and falls at most ``max_rise_m`` (or a sag's depth), no
+    inner vertex more than ``max_rise_m`` above the fragment's median height, nor further below it than a sag
+    (``max_rise_m``, or less than half the kerb: the fragment's
     height over the lowest tenth of the road's within ``KERB_REACH_M`` of the path; ``road_tree`` a cKDTree of
     the road vertices' xy, ``road_z`` their heights): Poisson's sag over a scan shadow across the pavement is the
     pavement's, the road at a kerb's foot is not. And the fragment's median height and the upper quartile of
@@ -150,13 +151,14 @@ def _same_level(vertices: np.ndarray, path: np.ndarray, fragment: np.ndarray, su
     foot, the pavement beside it is a kerb higher."""
     z = vertices[:, 2]
     level = float(np.median(z[fragment]))
+    inner = z[path[1:-1]] - level
     sag = max_rise_m
-    if road_tree is not None and (level - z[path]).max() > max_rise_m:
+    if road_tree is not None and level - z[path].min() > max_rise_m:
         near = np.unique(np.concatenate(road_tree.query_ball_point(vertices[path, :2], KERB_REACH_M)).astype(int))
         below = road_z[near][road_z[near] < level - max_rise_m] if len(near) else np.zeros(0)
         if len(below):
             sag = max(sag, (level - float(np.percentile(below, 10))) / 2)
-    if (z[path] - level).max() > max_rise_m or (level - z[path]).max() > sag:
+    if np.ptp(z[path]) > sag or inner.max(initial=0.0) > max_rise_m or -inner.min(initial=0.0) > sag:
         return False
     end = vertices[path[0], :2]
     near = surface[np.hypot(*(vertices[surface, :2] - end).T) <= radius_m]
