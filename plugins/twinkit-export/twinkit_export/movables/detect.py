@@ -263,9 +263,10 @@ def _instance(k: int, v, f, h, vid, mine, grid: LocalGround, cid: int, cls_count
 def claim_debris(v: np.ndarray, f: np.ndarray, h: np.ndarray, face_owner: np.ndarray, instances: list[Instance],
                  opt: LiftOptions, rep: dict) -> None:
     """Debris: what remains inside a footprint (+ ``margin_m`` + ``debris_margin_m``), no higher than the object
-    (+ ``margin_m``: not a lamp head over a parked car), that does not reach the ground outside it (the reconstructed underside, slivers at the cut; at most ``debris_max_faces``), then
-    the fins (:func:`peel_fins`), go with the object. ``face_owner`` and the instances' faces are updated in
-    place; ``fin_faces_peeled`` goes to ``rep``."""
+    (+ ``margin_m``: not a lamp head over a parked car), that does not reach the ground outside it (the
+    reconstructed underside, slivers at the cut; at most ``debris_max_faces``), then the fins
+    (:func:`peel_fins`), go with the object. ``face_owner`` and the instances' faces are updated in place;
+    ``fin_faces_peeled`` goes to ``rep``."""
     removed = face_owner >= 0
     rest = np.nonzero(~removed)[0]
     comp = edge_components(f[rest])

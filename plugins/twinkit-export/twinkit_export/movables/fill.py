@@ -54,11 +54,12 @@ def close_object_holes(sm: Additions, touched: np.ndarray, grid: LocalGround, in
                        opt: LiftOptions, rep: dict) -> None:
     """Close the loops of open border the cut opened (a loop near a footprint, below the object's top, or through
     a vertex of a lifted face, ``touched`` (n,) bool: a street light's open lamp head over a parked car is no hole
-    the car left) that reach no farther than ``max_fill_extent_m`` beyond the footprint: the
-    object's cut-off feet up to ``flatten_feet_m`` are lowered onto the ground, then the hole is closed on
-    the ground (:func:`close_hole` on a ``fill_cell_m`` grid at ``grid``'s height; at the ring's heights,
-    :func:`span`, where the outline is no simple polygon seen from above or ``fill_cell_m`` is 0). A loop of at most ``small_loop_m`` at an object's foot
-    that is no hole seen from above (a fold of the cut-off feet) is closed by a fan. Counts go to ``rep``."""
+    the car left) that reach no farther than ``max_fill_extent_m`` beyond the footprint: the object's
+    remnants inside it (:func:`lower_remnants`) and its cut-off feet up to ``flatten_feet_m`` are lowered onto
+    the ground, then the hole is closed on the ground (:func:`close_hole` on a ``fill_cell_m`` grid at
+    ``grid``'s height; at the ring's heights, :func:`span`, where the outline is no simple polygon seen from
+    above or ``fill_cell_m`` is 0). A loop of at most ``small_loop_m`` at an object's foot that is no hole seen
+    from above (a fold of the cut-off feet) is closed by a fan. Counts go to ``rep``."""
     from twinkit.mesh.topology import boundary_loops
 
     v, kept = sm.v, sm.kept
@@ -317,9 +318,9 @@ PATCH_LEVEL_M = 0.5
 
 def patch_footprints(v, f, lab, tc, grid: LocalGround, instances, opt: LiftOptions, max_edge_m: float | None = None):
     """Ground patches where a footprint is still uncovered (:func:`twinkit.street.holes.patch` of the static
-    mesh's border vertices there, up to ``PATCH_LEVEL_M`` above the ground, and of ``patch_cell_m`` grid points at the ground height, keeping the
-    triangles over uncovered ground inside the footprint). ``v`` (n, 3), ``f`` (m, 3), ``lab`` (n,), ``tc``
-    (m, 6) or None. Returns (new vertices, faces, their labels, face UVs)."""
+    mesh's border vertices there, up to ``PATCH_LEVEL_M`` above the ground, and of ``patch_cell_m`` grid points
+    at the ground height, keeping the triangles over uncovered ground inside the footprint). ``v`` (n, 3),
+    ``f`` (m, 3), ``lab`` (n,), ``tc`` (m, 6) or None. Returns (new vertices, faces, their labels, face UVs)."""
     from scipy.spatial import cKDTree
 
     c = float(opt.patch_cell_m)
