@@ -211,7 +211,7 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
             break
         graph = _walk_graph(vertices, faces, lab, max_slope, walk, seams)
         road = np.flatnonzero(lab == ROAD)
-        road_tree = cKDTree(vertices[road, :2]) if len(road) else None
+        road_tree, road_z = (cKDTree(vertices[road, :2]), vertices[road, 2]) if len(road) else (None, None)
         verts = _component_vertices(faces, fi, comp, len(vertices))
         anchors = max(1, int(np.count_nonzero(area >= keep_m2)))  # the surfaces a fragment may join
         changed = 0
@@ -219,7 +219,7 @@ def connect_sidewalks(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
             targets = np.concatenate(verts[:min(c, anchors)])
             path = _join(graph, verts[c], targets, join_gap_m)
             if path is not None and not _same_level(vertices, path, verts[c], targets, max_rise_m,
-                                                    road_tree=road_tree, road_z=vertices[road, 2]):
+                                                    road_tree=road_tree, road_z=road_z):
                 path = None  # the path climbs a kerb: the fragment lies on another level
             if path is not None:
                 new = path[lab[path] != SIDEWALK]

@@ -121,6 +121,8 @@ def lower_remnants(v: np.ndarray, kept: np.ndarray, grid: LocalGround, instances
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
+    from twinkit.mesh.core import edges
+
     if not instances or not len(kept):
         return 0
     idx = np.unique(kept)
@@ -134,8 +136,7 @@ def lower_remnants(v: np.ndarray, kept: np.ndarray, grid: LocalGround, instances
         return 0
     sub = np.full(len(v), -1)
     sub[idx[raised]] = np.arange(int(raised.sum()))
-    e = np.vstack([kept[:, [0, 1]], kept[:, [1, 2]], kept[:, [2, 0]]])
-    e = sub[e]
+    e = sub[edges(kept, len(v))]
     e = e[(e >= 0).all(axis=1)]
     n = int(raised.sum())
     _, comp = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
