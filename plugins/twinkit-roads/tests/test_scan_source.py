@@ -662,3 +662,26 @@ def test_a_road_beside_lower_ground_takes_its_own_height_where_no_level_face_is_
     assert np.abs(arm.z).max() < 0.05
     out = scan.trim_unsupported(net, v, f, scan.ScanSourceParams())
     assert out["cut_m"] == 0.0 and len(net.arms) == 1
+
+
+def test_a_side_street_cut_off_by_a_mislabelled_mouth_is_bridged_to_its_junction():
+    """A real sweep's 2D labels call 3 m of a side street's mouth sidewalk (SemanticKITTI seq00 000002): the road
+    labels alone (a sweep's carriageway) leave the side street a stub apart from the main road. Its free end
+    points at the main road across level scanned ground: bridged, one junction of three roads. The same gap
+    raised 0.3 m (a planted island, a wall's foot) stays a gap."""
+    v, f, lab, _ = cross_mesh(step_m=0.5, side_arms="n")
+    mouth = (np.abs(v[:, 0]) < 3.3) & (v[:, 1] > 9.2) & (v[:, 1] < 12.8)
+    lab = lab.copy()
+    lab[mouth] = SIDEWALK
+
+    def junctions(vv, **kw):
+        net = scan.derive_network(vv, f, lab, scan.ScanSourceParams(use_curbs=False, **kw))
+        return sum(nd["kind"] == "junction" for nd in net.nodes.values()), len(net.arms), net.stats["bridges"]
+
+    assert junctions(v, bridge_m=0.0)[:2] == (0, 2)  # the main road, and the side street apart from it
+    n_j, n_arms, bridges = junctions(v)
+    assert (n_j, n_arms) == (1, 3) and len(bridges) == 1
+    assert 1.0 < bridges[0]["gap_m"] < 4.0 and abs(bridges[0]["from"][0]) < 1.0
+    raised = v.copy()
+    raised[mouth, 2] = 0.3
+    assert junctions(raised)[:2] == (0, 2)

@@ -54,6 +54,13 @@ class ScanSourceParams:
     label_margin_m: float = param(1.5, ge=0, le=10,
                                   help="carriageway-level surface this far beyond the road labels is still road (m)")
     min_road_width_m: float = param(3.0, gt=0, help="narrower carriageway (driveways, gaps) is not a road (m)")
+    bridge_m: float = param(6.0, ge=0, le=30,
+                            help="a road's free end that points across a gap at most this long at more carriageway, "
+                                 "over scanned level ground, is joined to it (a junction's mouth the 2D model called "
+                                 "sidewalk or terrain cuts an arm off its junction; m; 0: no bridges)")
+    bridge_max_step_m: float = param(0.2, ge=0, le=2,
+                                     help="a bridge's ground lies within this of the straight line between the "
+                                          "carriageway's heights at both its ends (m)")
     min_road_length_m: float = param(8.0, gt=0, help="shorter arms (spurs of the mask's corners) are pruned (m)")
     edge_percentile: float = param(75.0, ge=50, le=100,
                                    help="per side, this percentile of the edge distance along edge_window_m is the "

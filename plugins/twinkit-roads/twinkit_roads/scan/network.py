@@ -25,6 +25,14 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
     grid, mask, how, level = _carriageway(v, f, labels, p, curbs, rgb, points_xy)
     node_xy, edges, n_skeleton_nodes = _skeleton_edges(mask, grid)
     edges = _prune_spurs(edges, len(node_xy), p)
+    mask, bridges = bridge_gaps(mask, edges, len(node_xy), grid, v, f, p)
+    if bridges:
+        if log is not None:
+            log.info("road_source=scan: %d gap(s) in the carriageway bridged where a road points at more of it "
+                     "over level scanned ground (%s m; scan_roads.json bridges, green in scan_roads.png)",
+                     len(bridges), ", ".join(f"{b['gap_m']:.1f}" for b in bridges))
+        node_xy, edges, n_skeleton_nodes = _skeleton_edges(mask, grid)
+        edges = _prune_spurs(edges, len(node_xy), p)
     if not edges:
         raise NoRoads(f"the carriageway ({how}, {mask.sum() * grid.res ** 2:.0f} m^2) has no road axis")
     edges, half, junctions = _merge_junctions(edges, node_xy)
@@ -34,7 +42,7 @@ def derive_network(v: np.ndarray, f: np.ndarray, labels: np.ndarray | None, p: S
                       f"{p.min_road_length_m} m long")
     nodes, arms = _nodes_and_arms(raw_arms, _junction_points(raw_arms, junctions), mask, grid, p)
     stats = {"carriageway_from": how, "carriageway_m2": round(float(mask.sum() * grid.res ** 2), 1),
-             "skeleton_nodes": n_skeleton_nodes, "derive_s": round(time.perf_counter() - t0, 3)}
+             "skeleton_nodes": n_skeleton_nodes, "bridges": bridges, "derive_s": round(time.perf_counter() - t0, 3)}
     net = Network(nodes, arms, mask, grid, None, stats)
     net.level_faces = level
     return net
@@ -75,6 +83,68 @@ def _skeleton_edges(mask: np.ndarray, grid):
 
     node_xy = [px_to_xy(pix).mean(0) for pix in node_pix]
     return node_xy, [(a, b, px_to_xy(pth), dt[pth[:, 0], pth[:, 1]]) for a, b, pth in edges], len(node_pix)
+
+
+def bridge_gaps(mask: np.ndarray, edges: list, n_nodes: int, grid, v, f, p: ScanSourceParams) -> tuple[np.ndarray, list]:
+    """The carriageway mask with its gaps bridged: where a road (an edge at least ``min_road_length_m`` long) ends
+    freely and, straight on, more carriageway begins within ``bridge_m``, the gap is painted in as wide as the road
+    when the mesh has up-facing ground all along it, no farther than ``bridge_max_step_m`` from the straight line
+    between the carriageway's heights at both ends (a kerb, a wall or a hole is no bridge). Returns the mask and
+    the bridges (``{"from": [x, y], "to": [x, y], "gap_m": m}``)."""
+    from scipy import ndimage
+
+    from ..mesh2d import face_normals_z
+    from .masks import _face_heights
+
+    if p.bridge_m <= 0 or not edges:
+        return mask, []
+    up = np.flatnonzero(face_normals_z(v, f) > 0.9)
+    ground = rasterize_faces(v, f, up, grid)
+    z = _face_heights(v, f, up, grid)
+    if np.isnan(z).all():
+        return mask, []
+    idx = ndimage.distance_transform_edt(np.isnan(z), return_distances=False, return_indices=True)
+    z = z[idx[0], idx[1]]
+    deg = _degrees(edges, n_nodes)
+    out, bridges = mask.copy(), []
+    step = grid.res / 2
+    for a, b, xy, hw in edges:
+        if len(xy) < 4 or float(np.hypot(*np.diff(xy, axis=0).T).sum()) < p.min_road_length_m:
+            continue
+        half = max(float(np.median(hw)), p.min_road_width_m / 2)
+        k = min(len(xy) - 1, max(2, int(round(5.0 / grid.res))))
+        for node, end, back in ((a, xy[0], xy[k]), (b, xy[-1], xy[-1 - k])):
+            if deg[node] != 1:
+                continue
+            d = unit(end - back)
+            t_out = float(ray_lengths(mask, grid, end[None], d[None], 60.0, step)[0])
+            gap = float(ray_lengths(~mask, grid, (end + d * t_out)[None], d[None], p.bridge_m, step)[0])
+            if gap >= p.bridge_m:
+                continue  # no carriageway ahead: the road ends here
+            t1 = t_out + gap + 1.0
+            ts = np.arange(0.0, t1 + step, step)
+            ss = np.arange(-half, half + step, step)
+            nrm = np.array([-d[1], d[0]])
+            pts = end[None, None, :] + ts[:, None, None] * d + ss[None, :, None] * nrm
+            off = ~(grid.sample(mask.astype(np.uint8), pts) > 0)
+            on_ground = grid.sample(ground.astype(np.uint8), pts) > 0
+            if not off.any() or on_ground[off].mean() < 0.9:
+                continue
+            zz = grid.sample(z, pts)
+            z0 = float(np.median(zz[0])) if np.isfinite(zz[0]).all() else float(np.nanmedian(zz[0]))
+            z1 = float(np.nanmedian(zz[-1]))
+            line = z0 + (z1 - z0) * (ts / t1)[:, None]
+            if np.nanmax(np.abs(zz - line)[off]) > p.bridge_max_step_m:
+                continue
+            px = np.floor(grid.to_px(pts.reshape(-1, 2))).astype(int)
+            ok = (px[:, 0] >= 0) & (px[:, 0] < grid.w) & (px[:, 1] >= 0) & (px[:, 1] < grid.h)
+            out[px[ok, 1], px[ok, 0]] = True
+            bridges.append({"from": [round(float(c), 2) for c in end + d * t_out],
+                            "to": [round(float(c), 2) for c in end + d * (t_out + gap)], "gap_m": round(gap, 2)})
+    if bridges:
+        r = max(1, int(round(0.5 / grid.res)))
+        out = ndimage.binary_fill_holes(ndimage.binary_closing(out, np.ones((2 * r + 1, 2 * r + 1), bool)) | out)
+    return out, bridges
 
 
 def _degrees(edges, n: int) -> np.ndarray:

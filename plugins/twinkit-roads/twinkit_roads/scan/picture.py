@@ -56,6 +56,9 @@ def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_pe
         nrm = normals(arm.xy)
         for sgn in (1, -1):
             line(arm.xy + sgn * nrm * arm.width_m / 2, (255, 230, 0), max(1, w // 2))
+    bridges = net.stats.get("bridges") or []
+    for b in bridges:
+        line(np.array([b["from"], b["to"]]), (60, 255, 60), 3 * w)
     for nd in net.nodes.values():
         x, y = grid.to_px(np.asarray(nd["xy"]))
         r = 4
@@ -67,7 +70,9 @@ def draw_scan_roads(v, f, labels, net: Network, xodr_text: str, out: Path, px_pe
                 (255, 230, 0)),
                ("white / red: lane borders / centre lines", (230, 20, 20)),
                ("orange: sidewalk lanes; magenta: nodes", (255, 150, 40))]
-           + ([("cyan: true lane centre lines", (0, 220, 255))] if truth else []), res, width=360, slots=5)
+           + ([("cyan: true lane centre lines", (0, 220, 255))] if truth else [])
+           + ([(f"green: {len(bridges)} gap(s) in the carriageway bridged", (60, 255, 60))] if bridges else []),
+           res, width=360, slots=6)
     if note:  # why there is nothing to draw
         d.rectangle([8, img.size[1] - 30, min(img.size[0] - 8, 16 + 6 * len(note)), img.size[1] - 8], fill=(0, 0, 0))
         d.text((16, img.size[1] - 24), note, fill=(255, 80, 80))
