@@ -685,3 +685,26 @@ def test_a_side_street_cut_off_by_a_mislabelled_mouth_is_bridged_to_its_junction
     raised = v.copy()
     raised[mouth, 2] = 0.3
     assert junctions(raised)[:2] == (0, 2)
+
+
+def test_a_street_sloping_away_from_its_junction_keeps_its_lanes_on_its_surface(tmp_path):
+    """netconvert keeps a junction flat at its node's height and gives a road, at the junction's border, the
+    junction's height, then smooths the jump along the road: a side street falling 8 % from the junction had its
+    lanes up to 0.34 m over its surface past the border (a real sweep's north-west street, 0.33 m, was cut by the
+    lane check for it). The map takes the heights the plain edges were given."""
+    from twinkit.street.lanes import LaneMap
+
+    v, f, lab, _ = cross_mesh(step_m=1.0, side_arms="n")
+    v = v.copy()
+    north = v[:, 1] > 8.7
+    v[north, 2] -= 0.08 * (v[north, 1] - 8.7)
+    net, text = derive_xodr(tmp_path, v, f, lab, use_curbs=False)
+    assert sum(nd["kind"] == "junction" for nd in net.nodes.values()) == 1
+    wp = LaneMap(text, "slope").waypoints(0.5)
+    wp = wp.take(wp.is_type("driving") & ~wp.in_junction)
+    side = (wp.xyz[:, 1] > 10) & (wp.xyz[:, 1] < 30) & (np.abs(wp.xyz[:, 0]) < 4)
+    assert side.sum() > 40
+    surface = -0.08 * (wp.xyz[side, 1] - 8.7)
+    assert np.abs(wp.xyz[side, 2] - surface).max() < 0.05
+    main = np.abs(wp.xyz[:, 1]) < 8.7
+    assert np.abs(wp.xyz[main, 2]).max() < 0.05  # the flat main road stays on its surface

@@ -83,8 +83,97 @@ def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=
         raise InputError(f"netconvert did not finish in {p.timeout_s:g} s on the scan's road network "
                          f"({edg}); raise road_source.timeout_s") from None
     lines, errors = netconvert_output(r)
-    return finish_netconvert(r, lines, errors, xodr, args, f"the scan's road network {edg}",
+    info = finish_netconvert(r, lines, errors, xodr, args, f"the scan's road network {edg}",
                              time.perf_counter() - t0, log)
+    text, heights = scan_elevations(xodr.read_text(encoding="utf-8"), edg)
+    xodr.write_text(text, encoding="utf-8")
+    return {**info, **heights}
+
+
+def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0) -> tuple[str, dict]:
+    """netconvert's map with the heights the plain edges were given. netconvert keeps a junction flat at its
+    node's height and cuts each road at the junction's border, gives the road there the junction's height and
+    smooths the jump along the road (its max-grade fix); on a street that slopes away from a junction whose
+    shape reaches far along it (an acute corner, wide roads) the first lanes past the border then float or
+    sink. Each road's elevation is rewritten, every ``step_m`` and piecewise linear, from its edge's shape
+    (the nearest point of the edge running its way: the edge's z, linear between its points); each connecting
+    road in a junction runs linearly from its predecessor's height at their contact to its successor's.
+    Returns the map and ``{"elevations_rewritten": roads, "elevation_moved_max_m": largest change}``."""
+    import xml.etree.ElementTree as ET
+
+    from ..reflines import reference_lines
+
+    shapes = {}
+    for e in ET.parse(edg).getroot().iter("edge"):
+        pts = np.array([[float(c) for c in pt.split(",")] for pt in (e.get("shape") or "").split()])
+        if len(pts) >= 2 and pts.shape[1] == 3:
+            shapes[e.get("id")] = pts
+    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    root = ET.fromstring(xodr_text, parser=parser)
+    refs = reference_lines(root, 0.1)
+    roads = {r.get("id"): r for r in root.iter("road")}
+    profiles: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    moved = 0.0
+    for rid, ref in refs.items():
+        if ref.junction != "-1" or ref.length <= 0 or not shapes:
+            continue
+        s = np.unique(np.r_[np.arange(0.0, ref.length, step_m), ref.length])
+        xy = np.array([ref.point(si, 0.0) for si in s])
+        hdg = np.interp(s, ref.s, np.unwrap(ref.hdg))
+        fit = [(_along(xy, hdg, sh), sh) for sh in shapes.values()]
+        (dist, along, agree), sh = min(fit, key=lambda t: t[0][0].mean() if t[0][2] else np.inf)
+        if not agree or dist.mean() > 5.0:
+            continue  # no edge runs here (a road netconvert added): its elevation stays
+        cum = np.r_[0.0, np.cumsum(np.hypot(*np.diff(sh[:, :2], axis=0).T))]
+        z = np.interp(along, cum, sh[:, 2])
+        moved = max(moved, float(np.abs(z - np.array([ref.z(si) for si in s])).max()))
+        profiles[rid] = (s, z)
+    for rid, ref in refs.items():
+        if ref.junction == "-1" or ref.length <= 0:
+            continue
+        link = roads[rid].find("link")
+        ends = []
+        for tag in ("predecessor", "successor"):
+            el = link.find(tag) if link is not None else None
+            if el is None or el.get("elementType") != "road" or el.get("elementId") not in profiles:
+                break
+            ps, pz = profiles[el.get("elementId")]
+            ends.append(float(pz[0] if el.get("contactPoint") == "start" else pz[-1]))
+        if len(ends) == 2:
+            s = np.array([0.0, ref.length])
+            z = np.array(ends)
+            moved = max(moved, float(np.abs(z - np.array([ref.z(si) for si in s])).max()))
+            profiles[rid] = (s, z)
+    for rid, (s, z) in profiles.items():
+        road = roads[rid]
+        prof = road.find("elevationProfile")
+        if prof is None:
+            prof = ET.Element("elevationProfile")
+            road.insert(list(road).index(road.find("planView")) + 1, prof)
+        for e in list(prof):
+            prof.remove(e)
+        slope = np.diff(z) / np.maximum(np.diff(s), 1e-9)
+        for si, zi, bi in zip(s[:-1], z[:-1], slope):
+            ET.SubElement(prof, "elevation", {"s": f"{si:.8f}", "a": f"{zi:.6f}", "b": f"{bi:.8f}", "c": "0", "d": "0"})
+    text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return text, {"elevations_rewritten": len(profiles), "elevation_moved_max_m": round(moved, 3)}
+
+
+def _along(xy: np.ndarray, hdg: np.ndarray, shape: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Points ``xy`` (headings ``hdg``) against a polyline ``shape`` (k, >= 2): the distance to it, the arclength
+    position of the nearest point on it, and whether the points run its way (mean cosine over 0.7)."""
+    a, b = shape[:-1, :2], shape[1:, :2]
+    ab = b - a
+    L2 = np.maximum((ab ** 2).sum(1), 1e-12)
+    u = np.clip(((xy[:, None, :] - a[None]) * ab[None]).sum(-1) / L2[None], 0.0, 1.0)
+    q = a[None] + u[..., None] * ab[None]
+    d = np.hypot(*(xy[:, None, :] - q).transpose(2, 0, 1))
+    i = d.argmin(1)
+    seg = np.sqrt(L2)
+    cum = np.r_[0.0, np.cumsum(seg)]
+    along = cum[i] + u[np.arange(len(xy)), i] * seg[i]
+    cosv = (np.cos(hdg) * ab[i, 0] + np.sin(hdg) * ab[i, 1]) / seg[i]
+    return d[np.arange(len(xy)), i], along, bool(cosv.mean() > 0.7)
 
 
 def mark_source(xodr_text: str) -> str:
