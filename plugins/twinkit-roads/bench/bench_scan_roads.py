@@ -19,7 +19,8 @@ Coverage mode, any finished run (a real cloud's too): how much of the street ins
 from the scan covers, and which check dropped how much. The street: the true lane centre lines
 (roads_truth.json, the demo) or the middle of the road-labelled ground (the skeleton of the run's own labels'
 road faces where the road is at least 3 m wide; ``scan.street_axis``). Covered: a street point within half the
-carriageway plus ``--tol`` of a road's axis. The run's scan_roads.json (road_source=scan) gives the final
+carriageway plus ``--tol`` of a road's axis, running its way; with the map at hand (the final network), a second
+figure also counts the street points on the driving lanes of the map's junctions. The run's scan_roads.json (road_source=scan) gives the final
 network and, per stage (derived, trim_unsupported, each lane_check round), the roads kept; a run without it
 gets the scan source run here (predicted labels, default parameters).
 
@@ -145,7 +146,7 @@ def coverage_rows(run: Path, tmp: Path, tol: float, truth_labels: np.ndarray | N
     street covered (m, share) and what the stage dropped (m of street). ``truth_labels`` (per vertex): the street
     from these hand labels; ``mask_labels`` (per vertex): the scan source runs here with these as its labels."""
     from twinkit.artefacts import read_textured_mesh
-    from twinkit_roads.scan import covered, read_truth, street_axis
+    from twinkit_roads.scan import covered, in_junctions, read_truth, street_axis
     from twinkit_roads.scan.geometry import resample
     from twinkit_roads.scan.measures import directions
 
@@ -191,11 +192,15 @@ def coverage_rows(run: Path, tmp: Path, tol: float, truth_labels: np.ndarray | N
                    "length_m": round(sum(r["length_m"] for r in doc["roads"]), 1),
                    "arms": [{"axis": r["axis"], "width_m": r["carriageway_m"]} for r in doc["roads"]]})
     rows, prev = [], None
+    xodr = doc_p.parent / "opendrive.xodr"
     for st in stages:
         cov = covered(ref, dirs, st["arms"], tol)
         m = float(cov.sum() * step)
         rows.append({"stage": st["stage"], "roads": st["roads"], "length_m": st["length_m"], "covered_m": m,
                      "share": m / street_m if street_m else 0.0, "dropped_m": (prev - m) if prev is not None else None})
+        if st["stage"] == "final" and xodr.is_file():  # the map's junction lanes serve the street through them
+            both = cov | in_junctions(ref, xodr.read_text(encoding="utf-8"))
+            rows[-1]["share_with_junctions"] = float(both.sum() * step) / street_m if street_m else 0.0
         prev = m
     if doc.get("no_roads"):
         rows.append({"stage": f"no roads: {doc['no_roads']}", "roads": 0, "length_m": 0.0, "covered_m": 0.0,
@@ -262,16 +267,19 @@ def labelled_coverage(out: Path, base: Path, tol: float, truth_max_m: float = 0.
             for r in rows:
                 print(f"| {run.name} | {street_m:.1f} | {given} | {_stage_cells(r)} |")
             final = next(r for r in rows if r["stage"] == "final")
-            row.update({"street_m": street_m, given: final["share"]})
+            row.update({"street_m": street_m, given: final["share"],
+                        given + " with junctions": final.get("share_with_junctions", final["share"])})
         summary.append(row)
     if summary:
-        print("\n| scan | street m | covered, predicted labels | covered, hand labels (what-if) |")
-        print("|---|---:|---:|---:|")
+        print("\n| scan | street m | covered, predicted labels | with the junctions' lanes | covered, hand labels "
+              "(what-if) | with the junctions' lanes |")
+        print("|---|---:|---:|---:|---:|---:|")
+        keys = ("predicted", "predicted with junctions", "hand labels (what-if)",
+                "hand labels (what-if) with junctions")
         for r in summary:
-            print(f"| {r['scan']} | {r['street_m']:.1f} | {100 * r['predicted']:.0f} % | "
-                  f"{100 * r['hand labels (what-if)']:.0f} % |")
-        print(f"| **mean** | | **{100 * np.mean([r['predicted'] for r in summary]):.0f} %** | "
-              f"{100 * np.mean([r['hand labels (what-if)'] for r in summary]):.0f} % |")
+            print(f"| {r['scan']} | {r['street_m']:.1f} | " + " | ".join(f"{100 * r[k]:.0f} %" for k in keys) + " |")
+        means = [f"{100 * np.mean([r[k] for r in summary]):.0f} %" for k in keys]
+        print(f"| **mean** | | **{means[0]}** | {means[1]} | {means[2]} | {means[3]} |")
     return summary
 
 

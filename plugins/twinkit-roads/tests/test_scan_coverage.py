@@ -88,3 +88,17 @@ def test_hand_labels_reach_the_mesh_in_the_runs_frame_and_only_near_a_labelled_p
     assert len(street_axis(v, f, pred)[0]) == 0
     meta.write_text(json.dumps({"frame": {"shift_m": shift.tolist()}}))
     assert 0.25 * len(street_axis(v, f, B.truth_vertex_labels(v, ply, meta, 0.5))[0]) > 0.85 * (60 + 42.6)
+
+
+def test_in_junctions_finds_the_street_on_the_junctions_connecting_lanes(tmp_path):
+    """A street point in the middle of a four-way crossing lies on the junction's connecting lanes, whichever way
+    the street's reference runs there; points along the arms, away from it, do not."""
+    from test_scan_source import derive_xodr
+
+    from twinkit_roads.scan import in_junctions
+
+    v, f, lab, _ = cross_mesh(step_m=1.0)
+    _, text = derive_xodr(tmp_path, v, f, lab)
+    pts = np.array([[0.0, 0.0], [2.0, 1.0], [-25.0, 0.0], [0.0, 30.0], [60.0, 60.0]])
+    assert in_junctions(pts, text).tolist() == [True, True, False, False, False]
+    assert not in_junctions(np.zeros((0, 2)), text).any()

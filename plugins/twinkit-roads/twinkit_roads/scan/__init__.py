@@ -34,7 +34,7 @@ from .checks import (check_lanes, cut_arms, detach_junctions, lane_heights, narr
 from .geometry import lane_layout
 from .inputs import choose_curbs, cloud_sampling, cloud_xy, level_params, read_labels, read_truth
 from .masks import carriageway_mask, measured
-from .measures import covered, describe, lanes_on_road, network_length, record_stage, street_axis
+from .measures import covered, describe, in_junctions, lanes_on_road, network_length, record_stage, street_axis
 from .model import Arm, Network, NoRoads, ScanSourceParams, empty_network
 from .netconvert import empty_map, is_empty_map, mark_source, netconvert_plain, write_plain
 from .network import WALK_MAX_M, add_heights_and_signals, add_sidewalks, derive_network
@@ -43,7 +43,7 @@ from .skeleton import skeleton_graph, thin
 
 __all__ = ["Arm", "Network", "NoRoads", "ScanSourceParams", "WALK_MAX_M", "add_heights_and_signals", "add_sidewalks",
            "build_network", "carriageway_mask", "check_lanes", "check_round", "choose_curbs", "cloud_sampling", "cloud_xy",
-           "covered", "level_params",
+           "covered", "in_junctions", "level_params",
            "cut_arms", "derive_network", "describe", "detach_junctions", "draw_scan_roads", "empty_map",
            "empty_network", "is_empty_map", "lane_heights", "lane_layout", "lanes_on_road", "mark_source",
            "measured", "narrow_arms", "netconvert_plain", "network_length", "no_roads_report", "nudge_arms", "parked_faces",

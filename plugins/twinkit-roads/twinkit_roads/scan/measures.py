@@ -137,3 +137,19 @@ def covered(points: np.ndarray, dirs: np.ndarray, arms: list[dict], tol_m: float
         along = np.abs((d[j] / np.sqrt(dd[j])[:, None] * dirs).sum(1)) >= cos
         out |= (dist[np.arange(len(points)), j] <= a["width_m"] / 2 + tol_m) & along
     return out
+
+
+def in_junctions(points: np.ndarray, xodr_text: str, raster_m: float = 0.25) -> np.ndarray:
+    """Which of ``points`` ((k, 2), site frame) lie on a driving lane of one of the map's junctions (carla.Map): a
+    street point there is served by the junction's connecting lanes whichever way the street runs through it."""
+    from ..evidence import lane_polygons, lane_raster
+    from ..mesh2d import Grid
+
+    lanes = [ln for ln in lane_polygons(xodr_text, 0.5) if ln.type == "driving" and ln.junction]
+    if not lanes or not len(points):
+        return np.zeros(len(points), bool)
+    for ln in lanes:
+        ln.vote = 1
+    grid = Grid.around(np.concatenate([np.concatenate([ln.left, ln.right]) for ln in lanes] + [points]), raster_m)
+    vote, _ = lane_raster(lanes, grid)
+    return grid.sample(vote, points) > 0
