@@ -116,6 +116,20 @@ def unit(d) -> np.ndarray:
     return d / n if n > 1e-9 else np.array([1.0, 0.0])
 
 
+def on_polyline(points: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (k, 2) against a polyline (n >= 2, first two columns x, y): each point's distance to it, the
+    arclength position of its nearest point on it, and the index of the segment that holds it."""
+    a, b = line[:-1, :2], line[1:, :2]
+    ab = b - a
+    L2 = np.maximum((ab ** 2).sum(1), 1e-12)
+    u = np.clip(((points[:, None, :] - a[None]) * ab[None]).sum(-1) / L2[None], 0.0, 1.0)
+    dist = np.hypot(*(a[None] + u[..., None] * ab[None] - points[:, None, :]).transpose(2, 0, 1))
+    j = dist.argmin(1)
+    k = np.arange(len(points))
+    seg = np.sqrt(L2)
+    return dist[k, j], np.r_[0.0, np.cumsum(seg)][j] + u[k, j] * seg[j], j
+
+
 def true_runs(b: np.ndarray) -> list[tuple[int, int]]:
     """``(start, stop)`` of each run of True in a 1-D bool array."""
     d = np.diff(np.r_[0, b.astype(np.int8), 0])

@@ -123,19 +123,18 @@ def covered(points: np.ndarray, dirs: np.ndarray, arms: list[dict], tol_m: float
     "width_m": w}``, as in scan_roads.json ``stages``): within half the carriageway plus ``tol_m`` of its axis,
     running the same way (within ``max_angle_deg``: a road across the street, or one wider than the street,
     does not cover it)."""
+    from .geometry import on_polyline
+
     out = np.zeros(len(points), bool)
     cos = np.cos(np.radians(max_angle_deg))
     for a in arms:
         xy = np.asarray(a["axis"], float)
         if len(xy) < 2 or not len(points):
             continue
-        p0, d = xy[:-1], np.diff(xy, axis=0)
-        dd = np.maximum((d ** 2).sum(1), 1e-12)
-        t = np.clip(((points[:, None, :] - p0[None]) * d[None]).sum(-1) / dd[None], 0.0, 1.0)
-        dist = np.hypot(*(p0[None] + t[..., None] * d[None] - points[:, None, :]).transpose(2, 0, 1))
-        j = dist.argmin(1)
-        along = np.abs((d[j] / np.sqrt(dd[j])[:, None] * dirs).sum(1)) >= cos
-        out |= (dist[np.arange(len(points)), j] <= a["width_m"] / 2 + tol_m) & along
+        dist, _, j = on_polyline(points, xy)
+        d = np.diff(xy, axis=0)[j]
+        along = np.abs((d / np.maximum(np.hypot(*d.T), 1e-12)[:, None] * dirs).sum(1)) >= cos
+        out |= (dist <= a["width_m"] / 2 + tol_m) & along
     return out
 
 

@@ -102,6 +102,7 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0) -> tuple[str
     import xml.etree.ElementTree as ET
 
     from ..reflines import reference_lines
+    from .geometry import on_polyline
 
     shapes = {}
     for e in ET.parse(edg).getroot().iter("edge"):
@@ -120,10 +121,13 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0) -> tuple[str
         s = np.unique(np.r_[np.arange(0.0, ref.length, step_m), ref.length])
         xy = np.array([ref.point(si, 0.0) for si in s])
         hdg = np.interp(s, ref.s, np.unwrap(ref.hdg))
-        fit = [(_along(xy, hdg, sh), sh) for sh in shapes.values()]
-        (dist, along, agree), sh = min(fit, key=lambda t: t[0][0].mean() if t[0][2] else np.inf)
-        if not agree or dist.mean() > 5.0:
+        fit = [(on_polyline(xy, sh), sh) for sh in shapes.values()]
+        fit = [(d, al, sh) for (d, al, j), sh in fit if _runs_along(hdg, sh, j)]
+        if not fit:
             continue  # no edge runs here (a road netconvert added): its elevation stays
+        dist, along, sh = min(fit, key=lambda t: t[0].mean())
+        if dist.mean() > 5.0:
+            continue
         cum = np.r_[0.0, np.cumsum(np.hypot(*np.diff(sh[:, :2], axis=0).T))]
         z = np.interp(along, cum, sh[:, 2])
         moved = max(moved, float(np.abs(z - np.array([ref.z(si) for si in s])).max()))
@@ -159,23 +163,6 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0) -> tuple[str
     return text, {"elevations_rewritten": len(profiles), "elevation_moved_max_m": round(moved, 3)}
 
 
-def _along(xy: np.ndarray, hdg: np.ndarray, shape: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Points ``xy`` (headings ``hdg``) against a polyline ``shape`` (k, >= 2): the distance to it, the arclength
-    position of the nearest point on it, and whether the points run its way (mean cosine over 0.7)."""
-    a, b = shape[:-1, :2], shape[1:, :2]
-    ab = b - a
-    L2 = np.maximum((ab ** 2).sum(1), 1e-12)
-    u = np.clip(((xy[:, None, :] - a[None]) * ab[None]).sum(-1) / L2[None], 0.0, 1.0)
-    q = a[None] + u[..., None] * ab[None]
-    d = np.hypot(*(xy[:, None, :] - q).transpose(2, 0, 1))
-    i = d.argmin(1)
-    seg = np.sqrt(L2)
-    cum = np.r_[0.0, np.cumsum(seg)]
-    along = cum[i] + u[np.arange(len(xy)), i] * seg[i]
-    cosv = (np.cos(hdg) * ab[i, 0] + np.sin(hdg) * ab[i, 1]) / seg[i]
-    return d[np.arange(len(xy)), i], along, bool(cosv.mean() > 0.7)
-
-
 def mark_source(xodr_text: str) -> str:
     """Tag the header so later steps (and people) know the map came from the scan."""
     from twinkit.geo.xodr import SCAN_TAG, from_scan, tag_source
@@ -200,3 +187,10 @@ def is_empty_map(xodr_text: str) -> bool:
     from twinkit.geo.xodr import has_no_roads
 
     return has_no_roads(xodr_text)
+
+
+def _runs_along(hdg: np.ndarray, shape: np.ndarray, seg: np.ndarray) -> bool:
+    """Do points with headings ``hdg`` run the way of the polyline ``shape`` at its segments ``seg`` (mean cosine
+    over 0.7)?"""
+    d = np.diff(shape[:, :2], axis=0)[seg]
+    return bool(((np.cos(hdg) * d[:, 0] + np.sin(hdg) * d[:, 1]) / np.maximum(np.hypot(*d.T), 1e-12)).mean() > 0.7)

@@ -119,8 +119,9 @@ def bridge_gaps(mask: np.ndarray, edges: list, n_nodes: int, grid, v, f, p: Scan
             d = unit(end - back)
             t_out = float(ray_lengths(mask, grid, end[None], d[None], 60.0, step)[0])
             gap = float(ray_lengths(~mask, grid, (end + d * t_out)[None], d[None], p.bridge_m, step)[0])
-            if gap >= p.bridge_m:
-                continue  # no carriageway ahead: the road ends here
+            ahead = (end + d * (t_out + gap + step))[None]
+            if gap >= p.bridge_m or not grid.sample(mask.astype(np.uint8), ahead)[0]:
+                continue  # no carriageway ahead (the mask's or the grid's end): the road ends here
             t1 = t_out + gap + 1.0
             ts = np.arange(0.0, t1 + step, step)
             ss = np.arange(-half, half + step, step)
