@@ -709,6 +709,22 @@ def test_a_street_sloping_away_from_its_junction_keeps_its_lanes_on_its_surface(
     main = np.abs(wp.xyz[:, 1]) < 8.7
     assert np.abs(wp.xyz[main, 2]).max() < 0.05  # the flat main road stays on its surface
 
+    # the junction's connecting lanes: straight between their roads' heights they miss the junction's surface
+    # (flat, then falling) by up to 0.3 m; over the surface the scan source passes, tilted to meet their roads,
+    # by less than 0.1 m
+    def surface(xy):
+        return np.where(xy[:, 1] > 8.7, -0.08 * (xy[:, 1] - 8.7), 0.0)
+
+    plain = tmp_path / "plain"
+    off = {}
+    for name, surf in (("straight", None), ("surface", surface)):
+        out = tmp_path / f"{name}.xodr"
+        scan.netconvert_plain(plain / "scan.nod.xml", plain / "scan.edg.xml", out, scan.ScanSourceParams(), surface=surf)
+        jw = LaneMap(out.read_text(encoding="utf-8"), name).waypoints(0.5)
+        jw = jw.take(jw.is_type("driving") & jw.in_junction)
+        off[name] = float(np.abs(jw.xyz[:, 2] - surface(jw.xyz[:, :2])).max())
+    assert off["straight"] > 0.2 and off["surface"] < 0.1
+
 
 def test_the_scans_own_network_keeps_its_heights_through_the_alignment(tmp_path):
     """align_roads measures a height offset between the road surface and the map; the scan's own network carries

@@ -10,7 +10,7 @@ from .checks import check_lanes, cut_arms, detach_junctions, narrow_arms, nudge_
 from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
 from .netconvert import netconvert_plain, write_plain
-from .network import add_heights_and_signals, add_sidewalks, derive_network
+from .network import add_heights_and_signals, add_sidewalks, carriageway_level, derive_network
 
 
 def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str, out_xodr: Path, log, *,
@@ -39,7 +39,8 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     parked = parked_faces(np.asarray(mesh.faces), labels, curbs)
     for rnd in range(p.lane_check_rounds + 1):
         nod, edg = write_plain(net, p, proj, work)
-        info = netconvert_plain(nod, edg, out_xodr, p, log)
+        zr = carriageway_level(net, mesh.vertices, mesh.faces)
+        info = netconvert_plain(nod, edg, out_xodr, p, log, surface=lambda xy: net.grid.sample(zr, xy))
         if rnd == p.lane_check_rounds:
             break
         row = check_round(net, out_xodr.read_text(encoding="utf-8"), mesh, p, scene, rnd, log, parked)

@@ -69,8 +69,10 @@ def write_plain(net: Network, p: ScanSourceParams, proj: str, folder: Path) -> t
     return nod, edg
 
 
-def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=None) -> dict:
-    """netconvert on the plain network -> OpenDRIVE (the junctions' connecting roads are netconvert's)."""
+def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=None, surface=None) -> dict:
+    """netconvert on the plain network -> OpenDRIVE (the junctions' connecting roads are netconvert's), with the
+    edges' heights (``scan_elevations``; ``surface``: the carriageway's height at (k, 2) points, for the
+    junctions' connecting roads)."""
     from ..convert import _env, finish_netconvert, netconvert_output, netconvert_path
 
     args = [str(netconvert_path()), "--node-files", str(nod), "--edge-files", str(edg),
@@ -85,19 +87,21 @@ def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=
     lines, errors = netconvert_output(r)
     info = finish_netconvert(r, lines, errors, xodr, args, f"the scan's road network {edg}",
                              time.perf_counter() - t0, log)
-    text, heights = scan_elevations(xodr.read_text(encoding="utf-8"), edg)
+    text, heights = scan_elevations(xodr.read_text(encoding="utf-8"), edg, surface=surface)
     xodr.write_text(text, encoding="utf-8")
     return {**info, **heights}
 
 
-def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0) -> tuple[str, dict]:
+def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0, surface=None) -> tuple[str, dict]:
     """netconvert's map with the heights the plain edges were given. netconvert keeps a junction flat at its
     node's height and cuts each road at the junction's border, gives the road there the junction's height and
     smooths the jump along the road (its max-grade fix); on a street that slopes away from a junction whose
     shape reaches far along it (an acute corner, wide roads) the first lanes past the border then float or
     sink. Each road's elevation is rewritten, every ``step_m`` and piecewise linear, from its edge's shape
     (the nearest point of the edge running its way: the edge's z, linear between its points); each connecting
-    road in a junction runs linearly from its predecessor's height at their contact to its successor's.
+    road in a junction runs from its predecessor's height at their contact to its successor's: over the
+    carriageway's surface under its lane's middle (``surface``, a function of (k, 2) points), tilted linearly to
+    meet both ends, or straight without it.
     Returns the map and ``{"elevations_rewritten": roads, "elevation_moved_max_m": largest change}``."""
     import xml.etree.ElementTree as ET
 
@@ -146,6 +150,14 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0) -> tuple[str
         if len(ends) == 2:
             s = np.array([0.0, ref.length])
             z = np.array(ends)
+            if surface is not None and ref.length > 2 * step_m:
+                s = np.unique(np.r_[np.arange(0.0, ref.length, step_m), ref.length])
+                lane = roads[rid].find("lanes/laneSection/right/lane/width")
+                half = float(lane.get("a", 3.2)) / 2 if lane is not None else 1.6
+                zs = np.asarray(surface(np.array([ref.point(si, -half) for si in s])), float)
+                zs = np.convolve(np.pad(zs, 1, mode="edge"), np.ones(3) / 3, mode="valid")
+                w = s / ref.length
+                z = zs + (ends[0] - zs[0]) * (1 - w) + (ends[1] - zs[-1]) * w
             moved = max(moved, float(np.abs(z - np.array([ref.z(si) for si in s])).max()))
             profiles[rid] = (s, z)
     for rid, (s, z) in profiles.items():
