@@ -145,7 +145,7 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0, surface=None
             el = link.find(tag) if link is not None else None
             if el is None or el.get("elementType") != "road" or el.get("elementId") not in profiles:
                 break
-            ps, pz = profiles[el.get("elementId")]
+            _, pz = profiles[el.get("elementId")]
             ends.append(float(pz[0] if el.get("contactPoint") == "start" else pz[-1]))
         if len(ends) == 2:
             s = np.array([0.0, ref.length])

@@ -89,22 +89,18 @@ def bridge_gaps(mask: np.ndarray, edges: list, n_nodes: int, grid, v, f, p: Scan
     """The carriageway mask with its gaps bridged: where a road (an edge at least ``min_road_length_m`` long) ends
     freely and, straight on, more carriageway begins within ``bridge_m``, the gap is painted in as wide as the road
     when the mesh has up-facing ground all along it, no farther than ``bridge_max_step_m`` from the straight line
-    between the carriageway's heights at both ends (a kerb, a wall or a hole is no bridge). Returns the mask and
-    the bridges (``{"from": [x, y], "to": [x, y], "gap_m": m}``)."""
+    between the carriageway's heights at both ends (a wall, a planted island or a hole is no bridge; a sweep's
+    mesh is too rough to tell a kerb). Returns the mask and the bridges (``{"from": [x, y], "to": [x, y],
+    "gap_m": m}``)."""
     from scipy import ndimage
 
     from ..mesh2d import face_normals_z
-    from .masks import _face_heights
 
-    if p.bridge_m <= 0 or not edges:
-        return mask, []
     up = np.flatnonzero(face_normals_z(v, f) > 0.9)
-    ground = rasterize_faces(v, f, up, grid)
-    z = _face_heights(v, f, up, grid)
-    if np.isnan(z).all():
+    if p.bridge_m <= 0 or not edges or not len(up):
         return mask, []
-    idx = ndimage.distance_transform_edt(np.isnan(z), return_distances=False, return_indices=True)
-    z = z[idx[0], idx[1]]
+    ground = rasterize_faces(v, f, up, grid)
+    z = level_raster(v, f, up, grid)  # the up-facing surface's height, nearest-filled
     deg = _degrees(edges, n_nodes)
     out, bridges = mask.copy(), []
     step = grid.res / 2
@@ -132,8 +128,7 @@ def bridge_gaps(mask: np.ndarray, edges: list, n_nodes: int, grid, v, f, p: Scan
             if not off.any() or on_ground[off].mean() < 0.9:
                 continue
             zz = grid.sample(z, pts)
-            z0 = float(np.median(zz[0])) if np.isfinite(zz[0]).all() else float(np.nanmedian(zz[0]))
-            z1 = float(np.nanmedian(zz[-1]))
+            z0, z1 = float(np.nanmedian(zz[0])), float(np.nanmedian(zz[-1]))
             line = z0 + (z1 - z0) * (ts / t1)[:, None]
             if np.nanmax(np.abs(zz - line)[off]) > p.bridge_max_step_m:
                 continue
