@@ -176,3 +176,27 @@ def test_bad_input_names_the_file(tmp_path, bad):
         match = "textured_mesh.ply"
     with pytest.raises(InputError, match=match):
         run(tmp_path, inputs)
+
+
+def test_a_capture_sampled_in_rings_passes_its_labels_through_and_says_why(tmp_path):
+    """A single spinning sweep samples its ground in rings: no kerb step can be measured across them, so the level
+    that decides which lanes may vote cannot be told (on the real sweeps every network, the scan's own too, came out
+    'disagreeing with the scan's ground over 96 %', blaming the labels). Its labels pass through with that reason;
+    the same scene read as a street scan (two-way share 0.99) still votes."""
+    from twinkit import artefacts as A
+
+    _, _, L, _ = scene()
+    relabelled = {}
+    for name, share in (("sweep", 0.3), ("street", 0.99)):
+        (tmp_path / name).mkdir()
+        inputs = write_inputs(tmp_path / name)
+        meta = tmp_path / name / "points_meta.json"
+        A.write_points_meta(meta, {"source": {"reader": "test"}, "counts": {}, "fields": {}, "frame": {},
+                                   "bounds_m": [], "density": {"points": 0, "spacing_m": 0.03, "capture": "mobile",
+                                                               "ground_two_way_share": share}})
+        new, doc, out = run(tmp_path / name, {**inputs, "in_points_meta_json": meta})
+        relabelled[name] = int((new != L).sum())
+        if name == "sweep":
+            assert doc["rings"] is True and doc["ground_two_way_share"] == 0.3 and "rings" in doc["note"]
+            assert out["road_evidence.png"].is_file()
+    assert relabelled["sweep"] == 0 and relabelled["street"] > 100

@@ -346,10 +346,15 @@ def lanes_of(xodr_text: str, where, step_m: float, road_types, sidewalk_types) -
 
 def draw_passthrough(out, why: str) -> None:
     """The evidence picture when no lane voted at all (switched off, no roads): one line that says ``why``."""
+    import textwrap
+
     from PIL import Image, ImageDraw
 
-    img = Image.new("RGB", (420, 40), (0, 0, 0))
-    ImageDraw.Draw(img).text((10, 14), f"road network evidence: {why[:44]}; labels unchanged", fill=(255, 255, 255))
+    lines = textwrap.wrap(f"road network evidence: {why}; labels unchanged", 70)
+    img = Image.new("RGB", (460, 20 + 14 * len(lines)), (0, 0, 0))
+    d = ImageDraw.Draw(img)
+    for i, line in enumerate(lines):
+        d.text((10, 10 + 14 * i), line, fill=(255, 255, 255))
     img.save(out)
 
 

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 from typing import Dict, List
 
 from twinkit.ranges import param
+from twinkit.surface.density import RING_CAPTURE_SHARE
 
 
 @dataclass
@@ -101,6 +102,7 @@ class RoadEvidenceParams:
                                           "0.5 m cells' 5th percentiles of up-facing vertices (street.ground.LocalGround)")
     max_disagreement: float = param(0.5, ge=0, le=1, help="a lane, or a road, whose surface disagrees with the scan over more than this share casts no vote")
     max_network_disagreement: float = param(0.10, ge=0, le=1, help="share: when the driving-like lanes of the whole network disagree over more than this, no lane votes (a misaligned or outdated map; see docs/roads.md)")
+    min_two_way_share: float = param(RING_CAPTURE_SHARE, ge=0, le=1, help="a capture whose ground has a smaller share sampled both ways (points_meta.json density.ground_two_way_share: a single spinning sweep's rings) shows no kerb step, so no level to judge the lanes by: labels pass through unchanged")
     plateau: bool = param(True, help="a raised plateau that an agreeing sidewalk lane lies on becomes sidewalk (its road votes)")
     raster_m: float = param(0.1, gt=0, help="metres: pixel size of the lane raster")
     step_m: float = param(0.5, gt=0, help="metres: lanes are sampled this far apart along s")

@@ -485,27 +485,35 @@ def place_crosswalks(params: CrosswalkParams, ctx, *, in_aligned_xodr: Path, in_
 
 def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_textured_mesh_ply: Path,
                   in_labels_npy: Path, out_labels_npy: Path, out_road_evidence_json: Path,
-                  out_road_evidence_png: Path, in_gt_labels_npy: Path | None = None) -> dict:
+                  out_road_evidence_png: Path, in_gt_labels_npy: Path | None = None,
+                  in_points_meta_json: Path | None = None) -> dict:
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
     from .evidence import (add_evaluation, draw_evidence, draw_passthrough, evidence_report, lanes_of,
                            road_evidence as vote, unchanged)
     from .mesh2d import Grid
-    from .scan import is_empty_map
+    from .scan import cloud_sampling, is_empty_map
 
     params = params or RoadEvidenceParams()
     labels = A.read_labels(in_labels_npy)
     text = A.read_opendrive(in_aligned_xodr)
     no_roads = is_empty_map(text)
-    if not params.enabled or no_roads:
+    _, two_way = cloud_sampling(in_points_meta_json)
+    rings = two_way is not None and two_way < params.min_two_way_share
+    if not params.enabled or no_roads or rings:
         A.write_labels(out_labels_npy, labels)
         why = ("no roads in the map (the scan holds none)" if no_roads else
-               "switched off (steps.road_evidence.enabled=false or site road_evidence: false)")
+               "switched off (steps.road_evidence.enabled=false or site road_evidence: false)" if not params.enabled
+               else f"the capture's ground is sampled in rings ({100 * two_way:.0f} % of it sampled both ways, under "
+                    f"min_two_way_share {100 * params.min_two_way_share:.0f} %: a single spinning sweep): no kerb step "
+                    "can be measured across it, so which lanes lie on the carriageway level cannot be told")
         doc = {"enabled": bool(params.enabled), "no_roads": no_roads,
+               **({"rings": True, "ground_two_way_share": round(two_way, 3)} if rings else {}),
                "note": f"{why}: labels.npy passed through unchanged"}
         out_road_evidence_json.write_text(json.dumps(doc, indent=1))
         draw_passthrough(out_road_evidence_png, why)
         ctx.log.info("road evidence: %s; labels unchanged", why)
-        return {"enabled": bool(params.enabled), "changed_vertices": 0, **({"no_roads": True} if no_roads else {})}
+        return {"enabled": bool(params.enabled), "changed_vertices": 0, **({"no_roads": True} if no_roads else {}),
+                **({"rings": True} if rings else {})}
     mesh = A.read_textured_mesh(in_textured_mesh_ply)
     if labels.ndim != 1 or len(labels) != len(mesh.vertices):
         raise InputError(f"{in_labels_npy}: {labels.shape} labels for the {len(mesh.vertices)} vertices of "
