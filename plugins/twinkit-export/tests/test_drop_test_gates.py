@@ -35,3 +35,8 @@ def test_a_hole_fails_its_gate_with_the_figure(tmp_path):
     assert g["ground driving"]["ok"] is True  # the share holds; the hole alone fails the ground
     (entry,) = _metrics(out)["degraded"]
     assert "(gate widest hole driving 0.29 m (<= 0.25 m) FAILED)" in entry["reason"], entry
+    # the sentence gives both shares, and the target beside the one it is on (a sweep's "77.92 % of the rays find
+    # the ground (target 99.9 %)" beside "gate ground driving 99.72 %" read as two different figures for one thing)
+    ground = g["ground driving"]["value"]
+    assert f"{ground:.2f} % off the kerb line or on a continuous surface (target 99.9 %)" in entry["reason"], entry
+    assert "rays find the ground within 0.05 m of the lane's height" in entry["reason"], entry

@@ -263,6 +263,12 @@ def log_lane(log, kind: str, lane: dict, holes: list, params: DropTestParams, pn
         log.warning("drop test: no %s lane of the map lies inside the scanned site", kind)
 
 
+def ground_share(lane: dict) -> float | None:
+    """The figure a lane type's target is on (its gate): the share of rays that find the ground off the kerb line,
+    or over a continuous surface, whichever holds more; None without rays."""
+    return max((x for x in (lane["hit_pct_off_kerb_line"], lane["continuous_pct"]) if x is not None), default=None)
+
+
 def degraded_lanes(res: dict, params: DropTestParams, png_name: str, from_scan: bool) -> list[tuple[str, str]]:
     """(what, hint) for each lane type whose ground fails: a wheel or a foot drops in, not fit to drive on.
 
@@ -283,8 +289,11 @@ def degraded_lanes(res: dict, params: DropTestParams, png_name: str, from_scan: 
             if from_scan:
                 hint += ("; the lanes were derived from the scan (road_source=scan): see scan_roads.png, or give an "
                          "OSM extract (site.inputs.osm) for the map")
+            best = ground_share(lane)
+            best = lane["hit_pct"] if best is None else best
             out.append((f"drop test over {kind} lanes: {lane['hit_pct']:.2f} % of {lane['rays']} rays find the "
-                        f"ground (target {lane['target_pct']} %)"
+                        f"ground within {params.tol_m:g} m of the lane's height, {best:.2f} % off the kerb line or on "
+                        f"a continuous surface (target {lane['target_pct']} %)"
                         + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
                            if hole else ""), hint))
     return out
@@ -357,10 +366,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
         if not lane["rays"]:
             continue
         what, hint = next(((w, h) for w, h in failed if f" over {kind} lanes:" in w), (None, None))
-        # the figure that decides: the share off the kerb line or the surface's continuity, whichever holds more
-        ground = max((x for x in (lane["hit_pct_off_kerb_line"], lane["continuous_pct"]) if x is not None),
-                     default=None)
-        ctx.gate(f"ground {kind}", ground, lane["target_pct"], ">=", "%", why="rays that find the ground (off the "
+        ctx.gate(f"ground {kind}", ground_share(lane), lane["target_pct"], ">=", "%", why="rays that find the ground (off the "
                  "kerb line) or a continuous surface: a car or a walker stands there", hint=hint, reason=what)
         ctx.gate(f"widest hole {kind}", lane["widest_hole_m"], params.max_hole_m, "<=", "m",
                  why="a wider hole swallows a tyre's contact patch or a shoe", hint=hint, reason=what)
