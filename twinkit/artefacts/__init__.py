@@ -423,7 +423,7 @@ CATALOGUE: dict[str, Artefact] = dict([
                    "tiles:plan_tiles"),
     _entry("points_meta.json", "JSON", PointsMeta, read_points_meta, write_points_meta,
            writers="photo:dense pointcloud:read_cloud",
-           readers="roads:road_source/scan segmentation:backproject segmentation:classify_geometry"),
+           readers="roads:road_evidence roads:road_source/scan segmentation:backproject segmentation:classify_geometry"),
     _entry("textured_mesh.ply", "PLY mesh", F.TexturedMeshPly, read_textured_mesh, write_textured_mesh,
            writers="photo:photo_texture pointcloud:bake_texture",
            readers="photo:photo_texture pointcloud:evaluate_reconstruction roads:align_roads roads:apply_alignment "
