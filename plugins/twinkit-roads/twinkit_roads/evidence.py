@@ -344,6 +344,20 @@ def lanes_of(xodr_text: str, where, step_m: float, road_types, sidewalk_types) -
     return lanes
 
 
+def passthrough_reason(enabled: bool, no_roads: bool, rings_share: float | None, min_share: float) -> str | None:
+    """Why no lane may vote, in words, or None when they may: switched off, a map without roads, or a capture
+    sampled in rings (``rings_share``: its ground's two-way share, under ``min_share``: no kerb step, no level)."""
+    if no_roads:
+        return "no roads in the map (the scan holds none)"
+    if not enabled:
+        return "switched off (steps.road_evidence.enabled=false or site road_evidence: false)"
+    if rings_share is not None:
+        return (f"the capture's ground is sampled in rings ({100 * rings_share:.0f} % of it sampled both ways, under "
+                f"min_two_way_share {100 * min_share:.0f} %: a single spinning sweep): no kerb step can be measured "
+                "across it, so which lanes lie on the carriageway level cannot be told")
+    return None
+
+
 def draw_passthrough(out, why: str) -> None:
     """The evidence picture when no lane voted at all (switched off, no roads): one line that says ``why``."""
     import textwrap

@@ -489,7 +489,7 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
                   in_points_meta_json: Path | None = None) -> dict:
     """The aligned lanes vote for road / sidewalk on ground-level surface where the scan agrees (evidence.py)."""
     from .evidence import (add_evaluation, draw_evidence, draw_passthrough, evidence_report, lanes_of,
-                           road_evidence as vote, unchanged)
+                           passthrough_reason, road_evidence as vote, unchanged)
     from .mesh2d import Grid
     from .scan import cloud_sampling, is_empty_map
 
@@ -499,13 +499,9 @@ def road_evidence(params: RoadEvidenceParams, ctx, *, in_aligned_xodr: Path, in_
     no_roads = is_empty_map(text)
     _, two_way = cloud_sampling(in_points_meta_json)
     rings = two_way is not None and two_way < params.min_two_way_share
-    if not params.enabled or no_roads or rings:
+    why = passthrough_reason(params.enabled, no_roads, two_way if rings else None, params.min_two_way_share)
+    if why:
         A.write_labels(out_labels_npy, labels)
-        why = ("no roads in the map (the scan holds none)" if no_roads else
-               "switched off (steps.road_evidence.enabled=false or site road_evidence: false)" if not params.enabled
-               else f"the capture's ground is sampled in rings ({100 * two_way:.0f} % of it sampled both ways, under "
-                    f"min_two_way_share {100 * params.min_two_way_share:.0f} %: a single spinning sweep): no kerb step "
-                    "can be measured across it, so which lanes lie on the carriageway level cannot be told")
         doc = {"enabled": bool(params.enabled), "no_roads": no_roads,
                **({"rings": True, "ground_two_way_share": round(two_way, 3)} if rings else {}),
                "note": f"{why}: labels.npy passed through unchanged"}

@@ -37,9 +37,9 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     work = out_xodr.parent / "scan_plain"
     rounds = []
     parked = parked_faces(np.asarray(mesh.faces), labels, curbs)
+    zr = carriageway_level(net, mesh.vertices, mesh.faces)  # the junctions' connecting roads follow it
     for rnd in range(p.lane_check_rounds + 1):
         nod, edg = write_plain(net, p, proj, work)
-        zr = carriageway_level(net, mesh.vertices, mesh.faces)
         info = netconvert_plain(nod, edg, out_xodr, p, log, surface=lambda xy: net.grid.sample(zr, xy))
         if rnd == p.lane_check_rounds:
             break

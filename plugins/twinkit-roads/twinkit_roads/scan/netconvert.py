@@ -106,71 +106,26 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0, surface=None
     import xml.etree.ElementTree as ET
 
     from ..reflines import reference_lines
-    from .geometry import on_polyline
 
-    shapes = {}
-    for e in ET.parse(edg).getroot().iter("edge"):
-        pts = np.array([[float(c) for c in pt.split(",")] for pt in (e.get("shape") or "").split()])
-        if len(pts) >= 2 and pts.shape[1] == 3:
-            shapes[e.get("id")] = pts
-    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
-    root = ET.fromstring(xodr_text, parser=parser)
+    shapes = _edge_shapes(edg)
+    root = ET.fromstring(xodr_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
     refs = reference_lines(root, 0.1)
     roads = {r.get("id"): r for r in root.iter("road")}
     profiles: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for rid, ref in refs.items():
+        if ref.junction == "-1" and ref.length > 0 and shapes:
+            prof = _road_profile(ref, shapes, _stations(ref.length, step_m))
+            if prof is not None:
+                profiles[rid] = prof
+    for rid, ref in refs.items():
+        if ref.junction != "-1" and ref.length > 0:
+            prof = _connecting_profile(roads[rid], ref, profiles, surface, step_m)
+            if prof is not None:
+                profiles[rid] = prof
     moved = 0.0
-    for rid, ref in refs.items():
-        if ref.junction != "-1" or ref.length <= 0 or not shapes:
-            continue
-        s = np.unique(np.r_[np.arange(0.0, ref.length, step_m), ref.length])
-        xy = np.array([ref.point(si, 0.0) for si in s])
-        hdg = np.interp(s, ref.s, np.unwrap(ref.hdg))
-        fit = [(on_polyline(xy, sh), sh) for sh in shapes.values()]
-        fit = [(d, al, sh) for (d, al, j), sh in fit if _runs_along(hdg, sh, j)]
-        if not fit:
-            continue  # no edge runs here (a road netconvert added): its elevation stays
-        dist, along, sh = min(fit, key=lambda t: t[0].mean())
-        if dist.mean() > 5.0:
-            continue
-        cum = np.r_[0.0, np.cumsum(np.hypot(*np.diff(sh[:, :2], axis=0).T))]
-        z = np.interp(along, cum, sh[:, 2])
-        moved = max(moved, float(np.abs(z - np.array([ref.z(si) for si in s])).max()))
-        profiles[rid] = (s, z)
-    for rid, ref in refs.items():
-        if ref.junction == "-1" or ref.length <= 0:
-            continue
-        link = roads[rid].find("link")
-        ends = []
-        for tag in ("predecessor", "successor"):
-            el = link.find(tag) if link is not None else None
-            if el is None or el.get("elementType") != "road" or el.get("elementId") not in profiles:
-                break
-            _, pz = profiles[el.get("elementId")]
-            ends.append(float(pz[0] if el.get("contactPoint") == "start" else pz[-1]))
-        if len(ends) == 2:
-            s = np.array([0.0, ref.length])
-            z = np.array(ends)
-            if surface is not None and ref.length > 2 * step_m:
-                s = np.unique(np.r_[np.arange(0.0, ref.length, step_m), ref.length])
-                lane = roads[rid].find("lanes/laneSection/right/lane/width")
-                half = float(lane.get("a", 3.2)) / 2 if lane is not None else 1.6
-                zs = np.asarray(surface(np.array([ref.point(si, -half) for si in s])), float)
-                zs = np.convolve(np.pad(zs, 1, mode="edge"), np.ones(3) / 3, mode="valid")
-                w = s / ref.length
-                z = zs + (ends[0] - zs[0]) * (1 - w) + (ends[1] - zs[-1]) * w
-            moved = max(moved, float(np.abs(z - np.array([ref.z(si) for si in s])).max()))
-            profiles[rid] = (s, z)
     for rid, (s, z) in profiles.items():
-        road = roads[rid]
-        prof = road.find("elevationProfile")
-        if prof is None:
-            prof = ET.Element("elevationProfile")
-            road.insert(list(road).index(road.find("planView")) + 1, prof)
-        for e in list(prof):
-            prof.remove(e)
-        slope = np.diff(z) / np.maximum(np.diff(s), 1e-9)
-        for si, zi, bi in zip(s[:-1], z[:-1], slope):
-            ET.SubElement(prof, "elevation", {"s": f"{si:.8f}", "a": f"{zi:.6f}", "b": f"{bi:.8f}", "c": "0", "d": "0"})
+        moved = max(moved, float(np.abs(z - np.array([refs[rid].z(si) for si in s])).max()))
+        _write_profile(roads[rid], s, z)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     return text, {"elevations_rewritten": len(profiles), "elevation_moved_max_m": round(moved, 3)}
 
@@ -206,3 +161,75 @@ def _runs_along(hdg: np.ndarray, shape: np.ndarray, seg: np.ndarray) -> bool:
     over 0.7)?"""
     d = np.diff(shape[:, :2], axis=0)[seg]
     return bool(((np.cos(hdg) * d[:, 0] + np.sin(hdg) * d[:, 1]) / np.maximum(np.hypot(*d.T), 1e-12)).mean() > 0.7)
+
+
+def _stations(length: float, step_m: float) -> np.ndarray:
+    return np.unique(np.r_[np.arange(0.0, length, step_m), length])
+
+
+def _edge_shapes(edg: Path) -> dict[str, np.ndarray]:
+    """Edge id -> its shape (k, 3: x, y, z) in a SUMO plain edge file; edges without a 3D shape left out."""
+    import xml.etree.ElementTree as ET
+
+    shapes = {}
+    for e in ET.parse(edg).getroot().iter("edge"):
+        pts = np.array([[float(c) for c in pt.split(",")] for pt in (e.get("shape") or "").split()])
+        if len(pts) >= 2 and pts.shape[1] == 3:
+            shapes[e.get("id")] = pts
+    return shapes
+
+
+def _road_profile(ref, shapes: dict, s: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(s, z) of a road from the edge it was built from (the nearest shape running its way: its z, linear between
+    its points); None when no edge runs there (a road netconvert added)."""
+    from .geometry import on_polyline
+
+    xy = np.array([ref.point(si, 0.0) for si in s])
+    hdg = np.interp(s, ref.s, np.unwrap(ref.hdg))
+    fit = [(on_polyline(xy, sh), sh) for sh in shapes.values()]
+    fit = [(d, al, sh) for (d, al, j), sh in fit if _runs_along(hdg, sh, j)]
+    if not fit:
+        return None
+    dist, along, sh = min(fit, key=lambda t: t[0].mean())
+    if dist.mean() > 5.0:
+        return None
+    cum = np.r_[0.0, np.cumsum(np.hypot(*np.diff(sh[:, :2], axis=0).T))]
+    return s, np.interp(along, cum, sh[:, 2])
+
+
+def _connecting_profile(road, ref, profiles: dict, surface, step_m: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(s, z) of a junction's connecting road: from its predecessor's height at their contact to its successor's,
+    over ``surface`` under its lane's middle (tilted linearly to meet both) or straight; None when either road has
+    no profile."""
+    link = road.find("link")
+    ends = []
+    for tag in ("predecessor", "successor"):
+        el = link.find(tag) if link is not None else None
+        if el is None or el.get("elementType") != "road" or el.get("elementId") not in profiles:
+            return None
+        _, pz = profiles[el.get("elementId")]
+        ends.append(float(pz[0] if el.get("contactPoint") == "start" else pz[-1]))
+    if surface is None or ref.length <= 2 * step_m:
+        return np.array([0.0, ref.length]), np.array(ends)
+    s = _stations(ref.length, step_m)
+    lane = road.find("lanes/laneSection/right/lane/width")
+    half = float(lane.get("a", 3.2)) / 2 if lane is not None else 1.6
+    zs = np.asarray(surface(np.array([ref.point(si, -half) for si in s])), float)
+    zs = np.convolve(np.pad(zs, 1, mode="edge"), np.ones(3) / 3, mode="valid")
+    w = s / ref.length
+    return s, zs + (ends[0] - zs[0]) * (1 - w) + (ends[1] - zs[-1]) * w
+
+
+def _write_profile(road, s: np.ndarray, z: np.ndarray) -> None:
+    """Replace a road's elevation profile by the piecewise linear one through (s, z)."""
+    import xml.etree.ElementTree as ET
+
+    prof = road.find("elevationProfile")
+    if prof is None:
+        prof = ET.Element("elevationProfile")
+        road.insert(list(road).index(road.find("planView")) + 1, prof)
+    for e in list(prof):
+        prof.remove(e)
+    slope = np.diff(z) / np.maximum(np.diff(s), 1e-9)
+    for si, zi, bi in zip(s[:-1], z[:-1], slope):
+        ET.SubElement(prof, "elevation", {"s": f"{si:.8f}", "a": f"{zi:.6f}", "b": f"{bi:.8f}", "c": "0", "d": "0"})
