@@ -83,14 +83,23 @@ def start_driver():
         return "no Chromium / chromedriver (apt-get install chromium chromium-driver)"
     opts = webdriver.ChromeOptions()
     opts.binary_location = chrome
-    for a in FLAGS + [f"--user-data-dir={tempfile.mkdtemp(prefix='twinkit-glb-')}"]:
+    profile = tempfile.mkdtemp(prefix="twinkit-glb-")
+    for a in FLAGS + [f"--user-data-dir={profile}"]:
         opts.add_argument(a)
     try:
         d = webdriver.Chrome(service=Service(driver), options=opts)
     except Exception as exc:
+        shutil.rmtree(profile, ignore_errors=True)
         return f"Chromium did not start ({type(exc).__name__})"
     d.set_page_load_timeout(120)
+    d.twinkit_profile = profile
     return d
+
+
+def stop_driver(d) -> None:
+    """Quit the browser and remove its profile folder (a few MB per start, left in /tmp otherwise)."""
+    d.quit()
+    shutil.rmtree(getattr(d, "twinkit_profile", ""), ignore_errors=True)
 
 
 def render(driver, glb: Path, workdir: Path, texture_only: bool = False, px: int = PX) -> tuple[np.ndarray, dict]:
@@ -153,4 +162,4 @@ if __name__ == "__main__":  # python glb_render.py a.glb [b.glb ...]: brightness
             Image.fromarray(ref).save(wd / "texture_only.png")
             print(json.dumps({"glb": arg, **r, "pictures": str(wd)}))
     finally:
-        drv.quit()
+        stop_driver(drv)

@@ -380,13 +380,13 @@ def artifacts_dir() -> Path:
 
 @pytest.fixture(scope="module")
 def glb_driver():
-    from glb_render import start_driver
+    from glb_render import start_driver, stop_driver
 
     d = start_driver()
     if isinstance(d, str):
         pytest.skip(d)
     yield d
-    d.quit()
+    stop_driver(d)
 
 
 def test_glb_renders_as_bright_as_its_texture(glb_out, class_dir, glb_driver, tmp_path, artifacts_dir):
