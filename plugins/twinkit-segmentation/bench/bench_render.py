@@ -83,13 +83,28 @@ def _parts(mesh, tex, views, tmp: Path) -> list:
     rows = [("draw and read back (culled, nearest cells first)", culled, every),
             ("draw and read back (culled, the mesh's face order)", mesh_order, every),
             ("hole mask and fill", _timed(lambda i: holes(i, "auto"), n), _timed(lambda i: holes(i, "scipy"), n))]
-    rows.append(("vertex map file", _timed(lambda i: R.write_vertex_map(tmp / "a.npz", maps[i][1]), n),
-                 _timed(lambda i: np.savez_compressed(tmp / "b.npz", vertex=maps[i][1]), n)))
+    from twinkit.deflate import backend
     from twinkit.surface.texture import write_png
 
-    rows.append(("PNG (zlib level 1, Sub, run-length; on the writer thread)",
-                 _timed(lambda i: write_png(tmp / "a.png", maps[i][0], row_filter="sub", rle=True), n),
+    def on_zlib(fn):  # the same writer with Python's zlib deflating (TWINKIT_DEFLATE=zlib)
+        def run(i):
+            old = os.environ.get("TWINKIT_DEFLATE")
+            os.environ["TWINKIT_DEFLATE"] = "zlib"
+            try:
+                fn(i)
+            finally:
+                os.environ.pop("TWINKIT_DEFLATE") if old is None else os.environ.__setitem__("TWINKIT_DEFLATE", old)
+        return run
+
+    vmap = lambda i: R.write_vertex_map(tmp / "a.npz", maps[i][1])  # noqa: E731
+    png = lambda i: write_png(tmp / "a.png", maps[i][0], row_filter="sub", rle=True)  # noqa: E731
+    rows.append((f"vertex map file ({backend()}; before: np.savez_compressed)", _timed(vmap, n),
+                 _timed(lambda i: np.savez_compressed(tmp / "b.npz", vertex=maps[i][1]), n)))
+    rows.append((f"vertex map file ({backend()}; before: the same on zlib)", _timed(vmap, n), _timed(on_zlib(vmap), n)))
+    rows.append((f"PNG (level 1, Sub, {backend()}; on the writer thread; before: Pillow)", _timed(png, n),
                  _timed(lambda i: Image.fromarray(maps[i][0]).save(tmp / "b.png", compress_level=1), n)))
+    rows.append((f"PNG (level 1, Sub, {backend()}; before: the same on zlib, run-length)", _timed(png, n),
+                 _timed(on_zlib(png), n)))
     return rows
 
 

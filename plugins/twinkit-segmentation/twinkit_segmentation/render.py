@@ -261,13 +261,11 @@ def load_texture(path) -> np.ndarray:
 
 def write_vertex_map(path, vertex: np.ndarray) -> None:
     """``<view>_vertex.npz``: the (h, w) int32 vertex map as the array ``vertex`` of an npz file
-    (``np.load(path)["vertex"]``), deflated at level 1: a sixth of the raw size in a third of the time
-    ``np.savez_compressed`` (level 6) takes."""
-    import zipfile
+    (``np.load(path)["vertex"]``), deflated at level 1 by :func:`twinkit.deflate.write_npz` (with ISA-L 2 ms a
+    view against 6 ms with zipfile's zlib and 19 ms with ``np.savez_compressed``; a sixth of the raw size)."""
+    from twinkit.deflate import write_npz
 
-    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
-        with z.open("vertex.npy", "w", force_zip64=True) as f:
-            np.lib.format.write_array(f, np.asarray(vertex, dtype=np.int32), allow_pickle=False)
+    write_npz(path, 1, vertex=np.asarray(vertex, dtype=np.int32))
 
 
 def write_view(out_dir, view_id: str, rgb: np.ndarray, vertex: np.ndarray) -> None:
