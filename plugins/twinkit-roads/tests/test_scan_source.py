@@ -755,3 +755,41 @@ def test_the_scans_own_network_keeps_its_heights_through_the_alignment(tmp_path)
         dz[name] = json.loads(al["alignment.json"].read_text())
     assert dz["scan"]["dz_m"] == 0.0 and dz["scan"]["dz_measured_m"] == pytest.approx(-0.04, abs=0.01)
     assert dz["other"]["dz_m"] == pytest.approx(-0.04, abs=0.01) and "dz_measured_m" not in dz["other"]
+
+
+def test_sidewalk_lanes_are_kept_only_where_the_scanned_pavement_holds_them(four_way):
+    """A sidewalk lane over no scanned ground is a fall for CARLA's walkers (the Lille corner's: its pavement
+    scanned along three quarters of the road, the lane along all of it). On the intact cross no sidewalk
+    changes; with the pavement north of the east arm gone past x = 14 m that sidewalk is dropped, with the
+    outer 2 m of the pavement south of the west arm gone past x = -10 m that one is narrowed to the 1.5 m left."""
+    from twinkit.surface.closest import Surface
+
+    v, f, lab, truth, net0, text = four_way
+    p = scan.ScanSourceParams()
+    net = dataclasses.replace(net0, arms=[dataclasses.replace(a) for a in net0.arms])
+    before = [(a.sidewalk_left_m, a.sidewalk_right_m) for a in net.arms]
+    assert scan.check_sidewalks(net, text, p, Surface(v, f).scene) == []
+    assert [(a.sidewalk_left_m, a.sidewalk_right_m) for a in net.arms] == before
+
+    c = v[f].mean(axis=1)
+    east_north = (c[:, 0] > 14) & (c[:, 1] > 8.7)
+    west_south_outer = (c[:, 0] < -10) & (c[:, 1] < -8.7 - 1.5)
+    cut = Surface(v, f[~(east_north | west_south_outer)]).scene
+    rows = scan.check_sidewalks(net, text, p, cut)
+
+    def side_towards(arm, y_sign):  # the arm's side whose normal points to +y (1) or -y (-1)
+        from twinkit_roads.scan.geometry import normals
+
+        return "left" if np.sign(normals(arm.xy)[:, 1].mean()) == y_sign else "right"
+
+    east = next(k for k, a in enumerate(net.arms) if a.xy[:, 0].mean() > 10)
+    west = next(k for k, a in enumerate(net.arms) if a.xy[:, 0].mean() < -10)
+    got = {(r["road"], r["side"]): r for r in rows}
+    assert set(got) == {(east, side_towards(net.arms[east], 1)), (west, side_towards(net.arms[west], -1))}
+    assert got[(east, side_towards(net.arms[east], 1))]["to_m"] == 0.0
+    assert getattr(net.arms[east], f"sidewalk_{side_towards(net.arms[east], 1)}_m") == 0.0
+    narrowed = got[(west, side_towards(net.arms[west], -1))]
+    assert 1.0 <= narrowed["to_m"] <= 2.0 and narrowed["from_m"] > 3.0
+    # the other sides keep theirs
+    assert getattr(net.arms[east], f"sidewalk_{side_towards(net.arms[east], -1)}_m") == before[east][
+        0 if side_towards(net.arms[east], -1) == "left" else 1]

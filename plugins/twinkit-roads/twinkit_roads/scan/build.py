@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import check_lanes, cut_arms, detach_junctions, narrow_arms, nudge_arms, parked_faces, trim_unsupported
+from .checks import check_lanes, check_sidewalks, cut_arms, detach_junctions, narrow_arms, nudge_arms, parked_faces, trim_unsupported
 from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
 from .netconvert import netconvert_plain, write_plain
@@ -65,7 +65,16 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
     row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
            "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
            "roads_off": len(chk["bad_points"])}
-    if not chk["bad_points"] and not chk["bad_junctions"] and not chk["narrow"] and not chk["nudge"]:
+    walks = check_sidewalks(net, xodr_text, p, scene)
+    if walks:
+        row["sidewalks_changed"] = walks
+        log.info("road_source=scan: check %d: %s (the scanned pavement does not hold them: CARLA's walkers would "
+                 "fall through)", rnd + 1, "; ".join(
+                     f"road {w['road']}'s {w['side']} sidewalk "
+                     + (f"narrowed {w['from_m']:.2f} -> {w['to_m']:.2f} m" if w["to_m"] > 0 else
+                        f"dropped ({w['from_m']:.2f} m wide, its kerb band on the scan over "
+                        f"{100 * w['kerb_band_on']:.0f} % of it)") for w in walks))
+    if not chk["bad_points"] and not chk["bad_junctions"] and not chk["narrow"] and not chk["nudge"] and not walks:
         return {**row, "settled": True}
     before = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
     row["roads_narrowed"] = narrow_arms(net, chk["narrow"], p)  # in place: the indices stay
@@ -74,7 +83,7 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
     gone = detach_junctions(net, [k for k in chk["bad_junctions"] if k in net.nodes], p)
     row.update({"cut_m": cut2["cut_m"], "dropped_roads": cut2["dropped_roads"] + gone})
     after = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
-    if not row["roads_narrowed"] and not row["roads_moved"] and after == before:
+    if not row["roads_narrowed"] and not row["roads_moved"] and after == before and not walks:
         return {**row, "settled": True}  # what is off cannot be cut (single shape points): the drop test reports it
     log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface; %d "
              "road(s) off it in places (%.1f m cut), %d narrowed, %d junction(s) taken apart (%s), %d road(s) "

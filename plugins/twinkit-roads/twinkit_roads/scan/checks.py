@@ -9,6 +9,9 @@ import numpy as np
 from .geometry import lanes_reach, normals, true_runs
 from .model import Network, NoRoads, ScanSourceParams
 
+#: sidewalk lanes are checked in this many bands from the kerb outwards (``check_sidewalks``)
+SIDEWALK_COLUMNS = 7
+
 
 def trim_unsupported(net: Network, v, f, p: ScanSourceParams, tol_m: float = 0.3, min_support: float = 0.8,
                      scene=None) -> dict:
@@ -320,6 +323,64 @@ def nudge_arms(net: Network, nudge: dict[int, np.ndarray], p: ScanSourceParams) 
         arm.xy = arm.xy + 0.5 * p.edge_band_m * m[:, None] * normals(arm.xy)
         moved += 1
     return moved
+
+
+def check_sidewalks(net: Network, xodr_text: str, p: ScanSourceParams, scene) -> list[dict]:
+    """The sidewalk lanes of netconvert's map (outside junctions) against the scan: each lane is cut into
+    ``SIDEWALK_COLUMNS`` bands from the kerb outwards, sampled every metre; a sample is on when a surface lies
+    from ``WALK_MAX_M`` over the lane's height (the pavement a kerb above the road) down to ``lane_tol_m`` under
+    it. The bands from the kerb out that are on over at least ``min_lane_support`` of their samples are kept:
+    a sidewalk whose outer part runs past the scan's edge is narrowed to them, one whose kerb band is not on
+    (the pavement scanned along part of the road only) or that would be narrower than ``min_sidewalk_m`` is
+    dropped (CARLA's walkers would fall through where there is no ground). Returns one row per changed side:
+    ``{"road", "side", "from_m", "to_m", "kerb_band_on"}``."""
+    import open3d as o3d
+    from scipy.spatial import cKDTree
+
+    from twinkit.street.lanes import LaneMap
+
+    from .network import WALK_MAX_M
+
+    if not net.arms or not any(a.sidewalk_left_m > 0 or a.sidewalk_right_m > 0 for a in net.arms):
+        return []
+    sw = LaneMap(xodr_text, "scan_sidewalks").lanes(1.0)
+    sw = sw.take(sw.is_type("sidewalk") & (sw.junction < 0))
+    if not len(sw):
+        return []
+    k = SIDEWALK_COLUMNS
+    across = (np.arange(k) + 0.5) / k - 0.5  # band centres, border to border
+    pts = (sw.xyz[:, None, :2] + (across[None, :] * sw.width[:, None])[..., None] * sw.normal[:, None, :]).reshape(-1, 2)
+    z = np.repeat(sw.xyz[:, 2], k)
+    q = np.zeros((len(pts), 6), np.float32)
+    q[:, :2], q[:, 2], q[:, 5] = pts, z + WALK_MAX_M, -1.0
+    on = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy() <= WALK_MAX_M + p.lane_tol_m
+    axis = np.concatenate([a.xy for a in net.arms])
+    owner = np.concatenate([np.full(len(a.xy), j) for j, a in enumerate(net.arms)])
+    nrm = np.concatenate([normals(a.xy) for a in net.arms])
+    _, i = cKDTree(axis).query(pts)
+    lateral = ((pts - axis[i]) * nrm[i]).sum(axis=1)  # + left of the road's direction
+    rows = []
+    for j, arm in enumerate(net.arms):
+        for sgn, name in ((1, "left"), (-1, "right")):
+            width = arm.sidewalk_left_m if sgn > 0 else arm.sidewalk_right_m
+            if width <= 0:
+                continue
+            beyond = sgn * lateral - arm.width_m / 2  # m past the carriageway's edge
+            mine = (owner[i] == j) & (beyond > -0.5) & (beyond < width + 0.5)
+            if mine.sum() < 3 * k:
+                continue
+            band = np.clip((beyond[mine] / width * k).astype(int), 0, k - 1)
+            share = np.bincount(band, weights=on[mine], minlength=k) / np.maximum(np.bincount(band, minlength=k), 1)
+            kept = int(np.argmin(np.r_[share >= p.min_lane_support, False]))  # bands on, from the kerb out
+            new = round(width * kept / k, 2)
+            if kept == k:
+                continue
+            if new < p.min_sidewalk_m:
+                new = 0.0
+            setattr(arm, f"sidewalk_{name}_m", new)
+            rows.append({"road": j, "side": name, "from_m": round(width, 2), "to_m": new,
+                         "kerb_band_on": round(float(share[0]), 3)})
+    return rows
 
 
 def narrow_arms(net: Network, narrow: dict[int, list[int]], p: ScanSourceParams) -> int:
