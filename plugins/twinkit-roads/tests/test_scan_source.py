@@ -726,6 +726,40 @@ def test_a_street_sloping_away_from_its_junction_keeps_its_lanes_on_its_surface(
     assert off["straight"] > 0.2 and off["surface"] < 0.1
 
 
+def test_roads_follow_the_carriageway_under_their_lanes_not_the_edges_lean_into_the_junction(tmp_path):
+    """A plain edge's heights are the carriageway sampled every 2 m, smoothed over three shape points, ending at
+    the junction point's height: on a sweep the junction's middle is the blind circle under the sensor, and the
+    roads' last metres leaned into it; the connecting lanes that start there lay 7-9 cm under the scanned
+    ground. Here the edges dip 0.15 m towards the junction point over a flat surface: with the surface the
+    roads' and the junction's lanes stay on it, with the edges' heights alone they lean."""
+    import re
+
+    from twinkit.street.lanes import LaneMap
+
+    v, f, lab, _ = cross_mesh(step_m=1.0)
+    net, text = derive_xodr(tmp_path, v, f, lab)
+    plain = tmp_path / "plain"
+    edg = (plain / "scan.edg.xml").read_text(encoding="utf-8")
+
+    def dip(m):
+        pts = []
+        for pt in m.group(1).split():
+            x, y, z = (float(c) for c in pt.split(","))
+            pts.append(f"{x:.3f},{y:.3f},{z - 0.15 * max(0.0, 1 - np.hypot(x, y) / 14):.3f}")
+        return f'shape="{" ".join(pts)}"'
+
+    (plain / "scan.edg.xml").write_text(re.sub(r'shape="([^"]*)"', dip, edg), encoding="utf-8")
+    off = {}
+    for name, surf in (("edges", None), ("surface", lambda xy: np.zeros(len(xy)))):
+        out = tmp_path / f"{name}.xodr"
+        scan.netconvert_plain(plain / "scan.nod.xml", plain / "scan.edg.xml", out, scan.ScanSourceParams(), surface=surf)
+        wp = LaneMap(out.read_text(encoding="utf-8"), name).waypoints(0.5)
+        wp = wp.take(wp.is_type("driving") & (np.hypot(*wp.xyz[:, :2].T) < 16))
+        off[name] = (float(np.abs(wp.xyz[~wp.in_junction, 2]).max()), float(np.abs(wp.xyz[wp.in_junction, 2]).max()))
+    assert off["edges"][0] > 0.05 and off["edges"][1] > 0.05
+    assert off["surface"][0] < 0.01 and off["surface"][1] < 0.01
+
+
 def test_the_scans_own_network_keeps_its_heights_through_the_alignment(tmp_path):
     """align_roads measures a height offset between the road surface and the map; the scan's own network carries
     the scan's heights already (each direction's from its own lanes' surface), so the offset is reported, not

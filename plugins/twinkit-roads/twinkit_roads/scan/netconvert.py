@@ -97,11 +97,12 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0, surface=None
     node's height and cuts each road at the junction's border, gives the road there the junction's height and
     smooths the jump along the road (its max-grade fix); on a street that slopes away from a junction whose
     shape reaches far along it (an acute corner, wide roads) the first lanes past the border then float or
-    sink. Each road's elevation is rewritten, every ``step_m`` and piecewise linear, from its edge's shape
-    (the nearest point of the edge running its way: the edge's z, linear between its points); each connecting
-    road in a junction runs from its predecessor's height at their contact to its successor's: over the
-    carriageway's surface under its lane's middle (``surface``, a function of (k, 2) points), tilted linearly to
-    meet both ends, or straight without it.
+    sink. Each road's elevation is rewritten, every ``step_m`` and piecewise linear: the carriageway's surface
+    under its driving lanes (``surface``, a function of (k, 2) points; :func:`_surface_under_lanes`) where it
+    is known, else its edge's shape (the nearest point of the edge running its way: the edge's z, linear
+    between its points); each connecting road in a junction runs from its predecessor's height at their contact
+    to its successor's: over the surface under its lanes, tilted linearly to meet both ends, or straight
+    without it.
     Returns the map and ``{"elevations_rewritten": roads, "elevation_moved_max_m": largest change}``."""
     import xml.etree.ElementTree as ET
 
@@ -116,7 +117,7 @@ def scan_elevations(xodr_text: str, edg: Path, step_m: float = 1.0, surface=None
         if ref.junction == "-1" and ref.length > 0 and shapes:
             prof = _road_profile(ref, shapes, _stations(ref.length, step_m))
             if prof is not None:
-                profiles[rid] = prof
+                profiles[rid] = _on_surface(roads[rid], ref, prof, surface)
     for rid, ref in refs.items():
         if ref.junction != "-1" and ref.length > 0:
             prof = _connecting_profile(roads[rid], ref, profiles, surface, step_m)
@@ -212,12 +213,57 @@ def _connecting_profile(road, ref, profiles: dict, surface, step_m: float) -> tu
     if surface is None or ref.length <= 2 * step_m:
         return np.array([0.0, ref.length]), np.array(ends)
     s = _stations(ref.length, step_m)
-    lane = road.find("lanes/laneSection/right/lane/width")
-    half = float(lane.get("a", 3.2)) / 2 if lane is not None else 1.6
-    zs = np.asarray(surface(np.array([ref.point(si, -half) for si in s])), float)
-    zs = np.convolve(np.pad(zs, 1, mode="edge"), np.ones(3) / 3, mode="valid")
+    under = _surface_under_lanes(road, ref, s, surface)
+    if under is None:
+        return np.array([0.0, ref.length]), np.array(ends)
+    zs = under[0]
     w = s / ref.length
     return s, zs + (ends[0] - zs[0]) * (1 - w) + (ends[1] - zs[-1]) * w
+
+
+def _driving_offsets(road) -> list[float]:
+    """Lateral offsets (m, + left of the reference line) across a road's right driving lanes, five per lane from
+    border to border (the first lane section's widths; netconvert's roads carry their lanes on the right), or
+    the middle of its first right lane when none is driving."""
+    sec = road.find("lanes/laneSection/right")
+    out, first, edge = [], None, 0.0
+    lanes = sorted(sec.findall("lane"), key=lambda ln: -int(ln.get("id"))) if sec is not None else []
+    for ln in lanes:  # -1, -2, ...: outwards from the reference line
+        wd = ln.find("width")
+        w = float(wd.get("a", 0.0)) if wd is not None else 0.0
+        if first is None:
+            first = -(edge + w / 2)
+        if ln.get("type") == "driving":
+            out.extend(-(edge + w * f) for f in (0.1, 0.3, 0.5, 0.7, 0.9))
+        edge += w
+    return out or ([first] if first is not None else [-1.6])
+
+
+def _surface_under_lanes(road, ref, s: np.ndarray, surface) -> tuple[np.ndarray, np.ndarray] | None:
+    """The carriageway's height under a road's driving lanes at stations ``s``: per station the median of
+    ``surface`` across them (:func:`_driving_offsets`), filled linearly where it has none and smoothed over three
+    stations; with the stations where it had some. None when the surface is unknown under the whole road."""
+    offs = _driving_offsets(road)
+    z = np.asarray(surface(np.array([ref.point(si, t) for si in s for t in offs])), float).reshape(len(s), len(offs))
+    known = np.isfinite(z).any(axis=1)
+    if not known.any():
+        return None
+    with np.errstate(all="ignore"):
+        zs = np.nanmedian(z[known], axis=1)
+    zs = np.interp(s, s[known], zs)
+    return np.convolve(np.pad(zs, 1, mode="edge"), np.ones(3) / 3, mode="valid"), known
+
+
+def _on_surface(road, ref, prof: tuple[np.ndarray, np.ndarray], surface) -> tuple[np.ndarray, np.ndarray]:
+    """A road's profile from its edge's shape, moved onto the carriageway under its driving lanes where the surface
+    is known (``surface`` None: unchanged). The edge's heights are that surface too, but sampled every
+    ``sample_m``, smoothed over three shape points and ending at the junction point's height, so a road's last
+    metres lean towards the junction's middle, and so do the connecting roads that start there (docs/roads.md)."""
+    under = _surface_under_lanes(road, ref, prof[0], surface) if surface is not None else None
+    if under is None:
+        return prof
+    zs, known = under
+    return prof[0], np.where(known, zs, prof[1])
 
 
 def _write_profile(road, s: np.ndarray, z: np.ndarray) -> None:
