@@ -370,8 +370,10 @@ def check_sidewalks(net: Network, xodr_text: str, p: ScanSourceParams, scene) ->
             if mine.sum() < 3 * k:
                 continue
             band = np.clip((beyond[mine] / width * k).astype(int), 0, k - 1)
-            share = np.bincount(band, weights=on[mine], minlength=k) / np.maximum(np.bincount(band, minlength=k), 1)
-            kept = int(np.argmin(np.r_[share >= p.min_lane_support, False]))  # bands on, from the kerb out
+            count = np.bincount(band, minlength=k)
+            share = np.bincount(band, weights=on[mine], minlength=k) / np.maximum(count, 1)
+            held = (share >= p.min_lane_support) | (count == 0)  # a band without samples is not judged
+            kept = int(np.argmin(np.r_[held, False]))  # the bands that hold, from the kerb out
             new = round(width * kept / k, 2)
             if kept == k:
                 continue
