@@ -827,3 +827,29 @@ def test_sidewalk_lanes_are_kept_only_where_the_scanned_pavement_holds_them(four
     # the other sides keep theirs
     assert getattr(net.arms[east], f"sidewalk_{side_towards(net.arms[east], -1)}_m") == before[east][
         0 if side_towards(net.arms[east], -1) == "left" else 1]
+
+
+def test_the_lane_checks_outer_band_holds_the_driving_lanes_samples_beside_a_parking_strip(four_way):
+    """The lane check narrows or moves a road where the outermost band of its driving lanes is off the scan; its
+    samples are the driving lanes'. The band was taken at the parking strip's edge (the main road's 2.2 m strip
+    at the kerb): it held no sample, and on a road with a strip neither narrowing nor moving could act."""
+    from scipy.spatial import cKDTree
+
+    from twinkit.surface.closest import Surface
+    from twinkit_roads.scan.checks import lane_heights
+    from twinkit_roads.scan.geometry import lanes_reach, normals
+
+    v, f, lab, truth, net, text = four_way
+    p = scan.ScanSourceParams()
+    lh = lane_heights(text, v, f, scene=Surface(v, f).scene)
+    main = [a for a in net.arms if a.lanes["strip_m"] > 1.0]
+    assert main
+    for arm in main:
+        reach = lanes_reach(arm, p)
+        assert reach == pytest.approx(arm.lanes["lanes"] * arm.lanes["lane_m"])
+        d, i = cKDTree(arm.xy).query(lh["xy"])
+        lateral = ((lh["xy"] - arm.xy[i]) * normals(arm.xy)[i]).sum(axis=1)
+        mine = (d < reach + 1.0) & ~np.isin(lh["junction"], [j for j in set(lh["junction"]) if j])
+        for sgn in (1, -1):
+            band = mine & (sgn * lateral > reach - p.edge_band_m) & (sgn * lateral <= reach + 0.01)
+            assert band.sum() >= 10

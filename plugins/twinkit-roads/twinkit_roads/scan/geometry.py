@@ -137,6 +137,7 @@ def true_runs(b: np.ndarray) -> list[tuple[int, int]]:
 
 
 def lanes_reach(arm: Arm, p: ScanSourceParams) -> float:
-    """How far from the axis a road's outermost lane edge lies (lane_layout; a one-way road's lane is centred)."""
+    """How far from the axis a road's outermost driving lane's edge lies (lane_layout; a one-way road's lane is
+    centred; a parking strip at the kerb lies beyond it)."""
     lay = lane_layout(arm.width_m, p)
-    return lay["lanes"] * lay["lane_m"] + lay["strip_m"] if lay["two_way"] else lay["lane_m"] / 2 + lay["strip_m"]
+    return lay["lanes"] * lay["lane_m"] if lay["two_way"] else lay["lane_m"] / 2
