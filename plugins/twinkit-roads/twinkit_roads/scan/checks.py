@@ -215,7 +215,6 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     samples; per junction, the same share over its connecting lanes. Returns ``{"bad_points": {arm index:
     bool array}, "bad_junctions": {node id: share on}, "on_share": share of all samples on}``. ``parked``: the
     faces of parked vehicles (``parked_faces``), judged by the ground under them."""
-    from scipy.spatial import cKDTree
 
     lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene, step_m=p.lane_step_m, clear_m=p.lane_clear_m,
                       parked=parked)
@@ -232,16 +231,15 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     road = (jn == "") & judged
     if not road.any() or not net.arms:
         return res
-    axis = np.concatenate([a.xy for a in net.arms])
     owner = np.concatenate([np.full(len(a.xy), k) for k, a in enumerate(net.arms)])
     index = np.concatenate([np.arange(len(a.xy)) for a in net.arms])
     half = np.concatenate([np.full(len(a.xy), a.width_m / 2 + 1.0) for a in net.arms])
-    d, i = cKDTree(axis).query(xy[road])
+    d, i, arm_of, lateral = nearest_axis(net, xy[road])
     near = d <= half[i]
     src = np.flatnonzero(road)[near]
-    i = i[near]
-    n_on = np.bincount(i, weights=on[src].astype(float), minlength=len(axis))
-    n_all = np.bincount(i, minlength=len(axis)).astype(float)
+    i, arm_of, lateral = i[near], arm_of[near], lateral[near]
+    n_on = np.bincount(i, weights=on[src].astype(float), minlength=len(owner))
+    n_all = np.bincount(i, minlength=len(owner)).astype(float)
     bad_pt = (n_all >= 5) & (n_on < p.min_lane_support * n_all)
     for k in range(len(net.arms)):
         b = bad_pt[owner == k][np.argsort(index[owner == k])]
@@ -251,11 +249,21 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     # lanes wider than the paved band: a path between grass, a lane edge on a wall's foot) -> narrower
     if p.edge_band_m <= 0:
         return res
-    nrm = np.concatenate([normals(a.xy) for a in net.arms])
-    lateral = ((xy[src] - axis[i]) * nrm[i]).sum(axis=1)  # + left of the road's direction
-    res["narrow"] = _narrow_sides(net, p, lateral, off[src], owner[i])
-    res["nudge"] = _nudge_stretches(net, p, lateral, off[src], owner[i], i, res["narrow"])
+    res["narrow"] = _narrow_sides(net, p, lateral, off[src], arm_of)
+    res["nudge"] = _nudge_stretches(net, p, lateral, off[src], arm_of, i, res["narrow"])
     return res
+
+
+def nearest_axis(net: Network, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Points (k, 2) against the network's axes: the distance to the nearest axis point, its index over all the
+    arms' points in order, the arm it belongs to, and the point's offset to the left of that road's direction."""
+    from scipy.spatial import cKDTree
+
+    axis = np.concatenate([a.xy for a in net.arms])
+    owner = np.concatenate([np.full(len(a.xy), k) for k, a in enumerate(net.arms)])
+    nrm = np.concatenate([normals(a.xy) for a in net.arms])
+    d, i = cKDTree(axis).query(xy)
+    return d, i, owner[i], ((xy - axis[i]) * nrm[i]).sum(axis=1)
 
 
 def _narrow_sides(net: Network, p: ScanSourceParams, lateral, off_s, arm_s) -> dict[int, list[int]]:
@@ -335,7 +343,6 @@ def check_sidewalks(net: Network, xodr_text: str, p: ScanSourceParams, scene) ->
     dropped (CARLA's walkers would fall through where there is no ground). Returns one row per changed side:
     ``{"road", "side", "from_m", "to_m", "kerb_band_on"}``."""
     import open3d as o3d
-    from scipy.spatial import cKDTree
 
     from twinkit.street.lanes import LaneMap
 
@@ -354,11 +361,7 @@ def check_sidewalks(net: Network, xodr_text: str, p: ScanSourceParams, scene) ->
     q = np.zeros((len(pts), 6), np.float32)
     q[:, :2], q[:, 2], q[:, 5] = pts, z + WALK_MAX_M, -1.0
     on = scene.cast_rays(o3d.core.Tensor(q))["t_hit"].numpy() <= WALK_MAX_M + p.lane_tol_m
-    axis = np.concatenate([a.xy for a in net.arms])
-    owner = np.concatenate([np.full(len(a.xy), j) for j, a in enumerate(net.arms)])
-    nrm = np.concatenate([normals(a.xy) for a in net.arms])
-    _, i = cKDTree(axis).query(pts)
-    lateral = ((pts - axis[i]) * nrm[i]).sum(axis=1)  # + left of the road's direction
+    _, _, arm_of, lateral = nearest_axis(net, pts)
     rows = []
     for j, arm in enumerate(net.arms):
         for sgn, name in ((1, "left"), (-1, "right")):
@@ -366,7 +369,7 @@ def check_sidewalks(net: Network, xodr_text: str, p: ScanSourceParams, scene) ->
             if width <= 0:
                 continue
             beyond = sgn * lateral - arm.width_m / 2  # m past the carriageway's edge
-            mine = (owner[i] == j) & (beyond > -0.5) & (beyond < width + 0.5)
+            mine = (arm_of == j) & (beyond > -0.5) & (beyond < width + 0.5)
             if mine.sum() < 3 * k:
                 continue
             band = np.clip((beyond[mine] / width * k).astype(int), 0, k - 1)
