@@ -43,12 +43,17 @@ def test_orient_normals_methods():
     from twinkit_pointcloud.normals import estimate_normals, orient_normals
 
     rng = np.random.default_rng(0)
-    # a sphere: outward
+    # a sphere: the propagation turns it outward; as a street capture, its underside (at the local ground)
+    # faces up
+    from twinkit_pointcloud.normals import _orient_mst
+
     p = rng.normal(size=(4000, 3))
     p /= np.linalg.norm(p, axis=1, keepdims=True)
     n = estimate_normals(p, k=16)
+    assert (np.einsum("ij,ij->i", _orient_mst(p, n, 16), p) > 0).mean() > 0.99
     o, used = orient_normals(p, n, "mst")
-    assert used == "mst" and (np.einsum("ij,ij->i", o, p) > 0).mean() > 0.99
+    out = np.einsum("ij,ij->i", o, p) > 0
+    assert used == "mst" and out[p[:, 2] > -0.5].mean() > 0.99 and (o[p[:, 2] < -0.95, 2] > 0).all()
     # towards a scanner
     q = np.c_[rng.uniform(-3, 3, 3000), rng.uniform(-3, 3, 3000), np.zeros(3000)]
     nq = -np.tile([0, 0, 1.0], (3000, 1)).astype(np.float32)

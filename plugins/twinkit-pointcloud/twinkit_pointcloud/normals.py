@@ -7,7 +7,9 @@ Orientation methods:
 - ``mst``: consistent propagation over a minimum spanning tree of the k-nearest-neighbour
   graph weighted by 1 - |n_i . n_j| (Hoppe 1992; our own, open3d's version needs a Delaunay
   triangulation that fails on planar scenes), then one sign per connected part so that its
-  near-horizontal surfaces face up (or, with none, its vertical ones face the street viewpoint).
+  near-horizontal surfaces face up (or, with none, its vertical ones face the street viewpoint);
+  near-horizontal surfaces less than 1.5 m above the local ground face up whatever their part
+  (:func:`face_up_near_ground`: seen from above by any street capture).
 - ``up``: z-up for surfaces that are not vertical; vertical ones face a viewpoint at the
   cloud's centre 1.8 m above its lowest decile (a street's axis), as a scanner driving the
   street would see them. Cheap, for huge clouds.
@@ -50,7 +52,7 @@ def orient_normals(points: np.ndarray, normals: np.ndarray, method: str = "auto"
         normals[flip] *= -1
         return normals, method
     if method == "mst":
-        return _orient_mst(points, normals, k), method
+        return face_up_near_ground(points, _orient_mst(points, normals, k)), method
     if method == "up":
         z = points[:, 2]
         view = np.array([points[:, 0].mean(), points[:, 1].mean(), np.quantile(z, 0.1) + 1.8])
@@ -105,6 +107,32 @@ def _orient_mst(points: np.ndarray, normals: np.ndarray, k: int = 12) -> np.ndar
     flip_c = np.where(has_h, up_score < 0, view_score < 0)
     out[flip_c[comp]] *= -1
     return out.astype(np.float32)
+
+
+def face_up_near_ground(points: np.ndarray, normals: np.ndarray, *, horizontal_z: float = 0.85,
+                        seen_from_above_m: float = 1.5) -> np.ndarray:
+    """``normals`` (n, 3) with every near-horizontal one (|z| >= ``horizontal_z``) on a point less than
+    ``seen_from_above_m`` above the local ground turned to face up; a copy, float32.
+
+    A street is captured from the ground, a car's roof or the air: a road, a pavement, a car's bonnet or a
+    table below a scanner's height is seen from above. The propagation over the neighbour graph carries one
+    sign along each connected part, and on a sparse capture (a lidar sweep's rings, one line of points
+    each, whose normals are ill-posed) it turns whole ring segments of road upside down inside a part
+    that faces up overall: the ground cells that the ground fill and Poisson need. The local ground is the
+    lowest near-horizontal point within 4 m (:class:`twinkit.street.ground.LocalGround`'s window minimum),
+    whatever its sign."""
+    from twinkit.street.ground import LocalGround
+
+    out = np.asarray(normals, np.float32).copy()
+    horiz = np.abs(out[:, 2]) >= horizontal_z
+    if not horiz.any():
+        return out
+    g = LocalGround(points[horiz], cell_m=0.5, window="min", window_m=4.0, min_window_cells=3)
+    above = g.height(points[horiz])
+    flip = np.zeros(len(out), bool)
+    flip[np.flatnonzero(horiz)] = (out[horiz, 2] < 0) & (above < seen_from_above_m)
+    out[flip] *= -1
+    return out
 
 
 def check_file_normals(points: np.ndarray, normals: np.ndarray, method: str = "auto", *,

@@ -853,3 +853,19 @@ def test_the_lane_checks_outer_band_holds_the_driving_lanes_samples_beside_a_par
         for sgn in (1, -1):
             band = mine & (sgn * lateral > reach - p.edge_band_m) & (sgn * lateral <= reach + 0.01)
             assert band.sum() >= 10
+
+
+def test_a_small_recess_a_step_below_does_not_lift_the_street_off_the_carriageway_level():
+    """The step test (``step_pieces``): a street's ground 20 x 20 m with a 3 m^2 entrance 15 cm lower beside
+    it stays low; a pavement next to a carriageway a kerb lower is not low."""
+    from twinkit_roads.mesh2d import step_pieces
+
+    res = 0.2
+    z = np.full((150, 100), np.inf)
+    z[:100, :] = 0.0  # the street's ground, 20 x 20 m
+    z[100:110, 40:55] = -0.15  # an entrance 2 x 3 m a step down, at its edge
+    piece, low = step_pieces(z, res, 0.035)
+    assert low[piece[50, 50]] and low[piece[105, 45]]
+    z[110:150, :] = -0.15  # a carriageway 8 m wide, a kerb below the street's ground
+    piece, low = step_pieces(z, res, 0.035)
+    assert not low[piece[50, 50]] and low[piece[130, 50]]

@@ -146,13 +146,17 @@ def _step_level(v, f, up, curb_tol_m: float) -> np.ndarray:
     return up[low[piece[px[:, 1], px[:, 0]]]]
 
 
-def step_pieces(z: np.ndarray, res: float, step_m: float, min_area_m2: float = 1.0):
+def step_pieces(z: np.ndarray, res: float, step_m: float, min_area_m2: float = 1.0, veto_area_m2: float = 10.0,
+                veto_share: float = 0.25):
     """Pieces of a height raster ``z`` (inf where empty) between its steps, and which lie low.
 
     Returns ``(piece, low)``: ``piece`` (h, w) int, 0 for empty cells and the cells of a step, 1..n the
     pieces; ``low`` (n + 1,) bool by piece id: no neighbouring piece lies more than ``step_m`` below it
     where they meet (the heights compared on both sides of the step, within 3 cells of it, so a slope does
-    not count). Pieces under ``min_area_m2`` are not low (bits of objects, noise)."""
+    not count). Pieces under ``min_area_m2`` are not low (bits of objects, noise). Only a neighbour of at
+    least ``veto_area_m2`` or ``veto_share`` of the piece's own area counts: a recessed doorstep, a drain or a
+    light well a step below a street does not lift the street off the carriageway level (Lille: a 3.5 m^2
+    entrance 15 cm under the pavement had turned its whole 384 m^2 of ground "above the carriageway")."""
     from scipy import ndimage
 
     fin = np.isfinite(z)
@@ -187,7 +191,7 @@ def step_pieces(z: np.ndarray, res: float, step_m: float, min_area_m2: float = 1
         zc = zz[r0:r1, c0:c1]
         ring = ndimage.binary_dilation(me, st) & ~me & (pc > 0)
         for other in np.unique(pc[ring]):
-            if area[other] < min_area_m2:
+            if area[other] < max(min_area_m2, min(veto_area_m2, veto_share * area[k])):
                 continue
             theirs = ring & (pc == other)
             mine = me & ndimage.binary_dilation(theirs, st)
