@@ -154,9 +154,9 @@ def step_pieces(z: np.ndarray, res: float, step_m: float, min_area_m2: float = 1
     pieces; ``low`` (n + 1,) bool by piece id: no neighbouring piece lies more than ``step_m`` below it
     where they meet (the heights compared on both sides of the step, within 3 cells of it, so a slope does
     not count). Pieces under ``min_area_m2`` are not low (bits of objects, noise). Only a neighbour of at
-    least ``veto_area_m2`` or ``veto_share`` of the piece's own area counts: a recessed doorstep, a drain or a
-    light well a step below a street does not lift the street off the carriageway level (Lille: a 3.5 m^2
-    entrance 15 cm under the pavement had turned its whole 384 m^2 of ground "above the carriageway")."""
+    least ``veto_area_m2``, or ``veto_share`` of the piece's own area when that is less, counts: a recessed
+    doorstep, a drain or a light well a step below a street does not lift the street off the carriageway
+    level (docs/roads.md, the step test)."""
     from scipy import ndimage
 
     fin = np.isfinite(z)
