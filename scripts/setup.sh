@@ -60,7 +60,11 @@ done
 # the TFLite CityScapes model, and the readers used by the exporters' round-trip tests
 "${PIP[@]}" "transformers>=4.40" "ai-edge-litert" "ufbx>=0.0.5" "pygltflib>=1.16"
 
-# 6. three.js for the report's 3D view (registry only), bundled once by esbuild into
+# 6. The numba loops compiled into their on-disk cache for the argument types a run uses (twinkit.surface.compiled
+#    `ahead` marks), so the first run after set-up does not spend its first ~10 s compiling them
+.venv/bin/python -m twinkit.surface.compiled
+
+# 7. three.js for the report's 3D view (registry only), bundled once by esbuild into
 #    twinkit/report_assets/three-bundle.js, which each report copies (never fetched at view time)
 npm ci --no-audit --no-fund --loglevel=error
 npm run --silent bundle

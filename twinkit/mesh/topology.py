@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .core import Mesh, compact
+from twinkit.surface.compiled import ahead
 
 
 def remove_vertices(mesh: Mesh, drop: np.ndarray) -> Mesh:
@@ -62,6 +63,7 @@ def edge_face_incidence(faces: np.ndarray):
     return edges, inv.reshape(-1, 3), counts
 
 
+@ahead("(int64[:, ::1], int64)")
 def _edge_buckets(faces, n_vertices):
     """:func:`edge_face_incidence` as loops: the face-edges counted into buckets by their smaller vertex, each
     bucket sorted by the larger one (insertion sort), then numbered in that order."""

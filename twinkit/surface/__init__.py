@@ -16,7 +16,8 @@ Modules (import the one you need; each imports its heavy library only inside its
 - :mod:`twinkit.surface.texture`: texture-atlas rasterising (``rasterize``), texel writes
   (``put_texels``), gap filling (``fill_empty_texels``) and ``write_png``;
 - :mod:`twinkit.surface.compiled`: loops compiled by numba when it is installed (``compiled``), each
-  with numpy code that gives the same numbers;
+  with numpy code that gives the same numbers; the argument types a run uses compiled at set-up (``ahead``,
+  ``compile_ahead``);
 - :mod:`twinkit.surface.measure`: wall time and peak memory of a block (``Measure``; a step times its parts with ``ctx.substep``).
 
 Meshes are :class:`twinkit.mesh.Mesh` (metres, site frame). Heavy dependencies come with the

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .compiled import ahead
+
 
 class Surface:
     """A triangle mesh for closest-point queries. vertices (n, 3) float64, faces (m, 3) int."""
@@ -78,6 +80,7 @@ class Surface:
         return out
 
 
+@ahead("(uint32[::1], float32[:, ::1], float32[:, ::1], float32[:, ::1], int64[::1], float32[:, ::1], float32[::1])")
 def _closest_loop(ids, uv, pts, part, fid, bary, dist):
     """:meth:`Surface.closest`'s unpacking of open3d's answer, one point at a time (compiled): the same
     float32 arithmetic as its numpy lines (the distance's squares summed x, y, z in order)."""
@@ -113,6 +116,8 @@ def barycentric_mix(values: np.ndarray, faces: np.ndarray, fid: np.ndarray, bary
     return out
 
 
+@ahead("(float64[:, ::1], int64[:, ::1], int64[::1], float32[:, ::1], float64[:, ::1])",
+       "(float32[:, ::1], int64[:, ::1], int64[::1], float32[:, ::1], float32[:, ::1])")
 def _mix_loop(vals, faces, fid, bary, out):
     """``out[k] += bary[k, i] * vals[faces[fid[k], i]]`` for i = 0, 1, 2 (compiled)."""
     for k in range(len(fid)):

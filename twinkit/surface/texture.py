@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .compiled import ahead
+
 #: colour of texels no triangle reaches and of atlases without colour source
 NEUTRAL_GREY = 128
 
@@ -54,6 +56,10 @@ def rasterize(uv: np.ndarray, size_px: int, max_candidates: int = 4_000_000):
         start = end
 
 
+@ahead("(float64[:, :, ::1], int64[::1], int64[::1], int64[::1], int64[::1], int64, int64, int64[::1], "
+        "float32[:, ::1], int64[::1], int64[::1])",
+       "(float32[:, :, ::1], int64[::1], int64[::1], int64[::1], int64[::1], int64, int64, int64[::1], "
+        "float32[:, ::1], int64[::1], int64[::1])")
 def _raster_loop(px, x0, y0, bw, bh, start, end, fid, bary, row, col):
     """The covered texel centres of faces ``start:end`` written into ``fid``, ``bary``, ``row``, ``col``;
     returns their count. The arithmetic of :func:`_raster_rounds`, one texel at a time (compiled)."""
@@ -129,6 +135,7 @@ def put_texels(img: np.ndarray, filled: np.ndarray, row: np.ndarray, col: np.nda
         loop(img, filled, row, col, colours)
 
 
+@ahead("(uint8[:, :, ::1], boolean[:, ::1], int64[::1], int64[::1], float32[:, ::1])")
 def _put_loop(img, filled, row, col, colours):
     """:func:`put_texels`, one texel at a time (compiled)."""
     for k in range(len(row)):

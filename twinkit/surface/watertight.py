@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .compiled import ahead
+
 
 @dataclass
 class Footprint:
@@ -216,6 +218,8 @@ def draw_border(path: Path, vertices: np.ndarray, faces: np.ndarray, edges: dict
     img.save(path)
 
 
+@ahead("(uint8[:, :, ::1], int64[:, ::1], float64[:], boolean[::1], uint8[::1], uint8[::1])",
+       "(uint8[:, :, ::1], int64[:, ::1], float64[::1], boolean[::1], uint8[::1], uint8[::1])")
 def _splat_highest(arr, q, z, ground, light, dark):
     """Each point (pixel ``q`` (n, 2) x, y; height ``z``) painted over the 3 x 3 pixels around it, the highest point
     over a pixel winning (``draw_border``'s splats, in one pass instead of a sort by height): ``light`` where it is

@@ -27,6 +27,7 @@ def main() -> None:
     a = ap.parse_args()
 
     from twinkit_segmentation import oversegment as o
+    from twinkit.surface.compiled import compiled
     from twinkit.mesh import edges as mesh_edges, read_mesh
     from twinkit_segmentation.segmesh import unit_normals
     from twinkit_segmentation.synthetic import grid
@@ -61,7 +62,7 @@ def main() -> None:
         o._union(parent, size, e[order, 0], e[order, 1], w[order].astype(np.float64), thresh, a.k,
                  a.max_vertices, method=a.method)
         return o._find(parent, parent)
-    if a.method in ("auto", "numba") and o._union_compiled is not None:  # JIT compile (cached on disk) first
+    if a.method in ("auto", "numba") and compiled(o._union_sequential) is not None:  # JIT compile (cached on disk) first
         timed("numba compile / cache load", lambda: o.felzenszwalb_mesh(v[:3], np.array([[0, 1, 2]]), n[:3], None))
     labels = timed(f"union-find ({a.method})", fh)
     timed("merge small segments", lambda: o._merge_small(labels, e, order, a.min_vertices, a.max_vertices,

@@ -4,6 +4,7 @@ import pytest
 
 from twinkit_segmentation.synthetic import grid, street_scene
 from twinkit.mesh import edges as mesh_edges
+from twinkit.surface.compiled import compiled
 from twinkit_segmentation.oversegment import edge_weights, felzenszwalb_mesh
 
 
@@ -83,7 +84,7 @@ def test_union_find_methods_give_the_same_segments(k, min_v, max_v):
     ref = felzenszwalb_mesh(v, f, n, col, k, min_v, max_v, 1.0, 1.0, method="python")
     assert 10 < ref.max() < len(v) - 10
     assert np.array_equal(felzenszwalb_mesh(v, f, n, col, k, min_v, max_v, 1.0, 1.0, method="rounds"), ref)
-    if oversegment._union_compiled is not None:
+    if compiled(oversegment._union_sequential) is not None:
         assert np.array_equal(felzenszwalb_mesh(v, f, n, col, k, min_v, max_v, 1.0, 1.0, method="numba"), ref)
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit.surface.compiled import compiled
+from twinkit.surface.compiled import ahead, compiled
 
 from .viewholes import fill_from_nearest, ground_holes
 
@@ -136,6 +136,8 @@ def visible_cells(lo: np.ndarray, hi: np.ndarray, mvp: np.ndarray) -> np.ndarray
     return ~out
 
 
+@ahead("(int32[::1], Array(uint32, 2, 'C', readonly=True), int32[:, ::1])",
+       "(int32[::1], uint32[:, ::1], int32[:, ::1])")
 def _ids_to_vertices(lut, ids, out):
     """``out`` = ``lut[ids]`` upside down (GL's row 0 is the image's bottom): ``np.take(lut, ids[::-1])``
     in one pass, without the index array numpy makes of the uint32 ids."""

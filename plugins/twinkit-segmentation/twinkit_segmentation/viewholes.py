@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from twinkit.surface.compiled import compiled
+from twinkit.surface.compiled import ahead, compiled
 
 
+@ahead("(boolean[:, ::1],)")
 def _sq_dist_to(mask):
     """(h, w) int32: squared Euclidean distance from each pixel to the nearest True pixel of ``mask``;
     ``h * h + w * w + 1`` where ``mask`` has none. A vertical pass (distance to the nearest True pixel in
@@ -69,6 +70,8 @@ def _sq_dist_to(mask):
     return out
 
 
+@ahead("(uint8[:, :, ::1], int64[:], int64[:], boolean[:, ::1])",
+       "(uint8[:, :, ::1], int64[::1], int64[::1], boolean[:, ::1])")
 def _fill_nearest(rgb, holes_y, holes_x, hit):
     """Paint each hole pixel with the colour of its nearest ``hit`` pixel (ties: the smallest column, then
     the smallest row), searching squares that double in size until one holds a hit within its half-side."""
