@@ -668,7 +668,7 @@ def test_a_side_street_cut_off_by_a_mislabelled_mouth_is_bridged_to_its_junction
     """A real sweep's 2D labels call 3 m of a side street's mouth sidewalk (SemanticKITTI seq00 000002): the road
     labels alone (a sweep's carriageway) leave the side street a stub apart from the main road. Its free end
     points at the main road across level scanned ground: bridged, one junction of three roads. The same gap
-    raised 0.3 m (a planted island, a wall's foot) stays a gap."""
+    raised 0.3 m (a planted island, a wall's foot) stays a gap; a small bump in it does not stop the bridge."""
     v, f, lab, _ = cross_mesh(step_m=0.5, side_arms="n")
     mouth = (np.abs(v[:, 0]) < 3.3) & (v[:, 1] > 9.2) & (v[:, 1] < 12.8)
     lab = lab.copy()
@@ -685,6 +685,12 @@ def test_a_side_street_cut_off_by_a_mislabelled_mouth_is_bridged_to_its_junction
     raised = v.copy()
     raised[mouth, 2] = 0.3
     assert junctions(raised)[:2] == (0, 2)
+    # a small flat-topped bump 0.25 m up in the gap (a sweep's rough mesh: seq00_000002's mouth after its normals
+    # faced up): a few per cent of the bridge's ground, not a wall across it
+    bump = v.copy()
+    bump[(np.abs(v[:, 0] - 1.25) < 0.3) & (np.abs(v[:, 1] - 10.75) < 0.55), 2] = 0.25
+    assert junctions(bump)[:2] == (1, 3)
+    assert junctions(bump, bridge_step_share=0.0)[:2] == (0, 2)  # as the rule was: no ground at all off the line
 
 
 def test_a_street_sloping_away_from_its_junction_keeps_its_lanes_on_its_surface(tmp_path):

@@ -61,6 +61,10 @@ class ScanSourceParams:
     bridge_max_step_m: float = param(0.2, ge=0, le=2,
                                      help="a bridge's ground lies within this of the straight line between the "
                                           "carriageway's heights at both its ends (m)")
+    bridge_step_share: float = param(0.05, ge=0, le=1,
+                                     help="the share of a bridge's ground that may lie farther than bridge_max_step_m "
+                                          "off that line (a sweep's rough mesh, a verge rising at the swath's edge; "
+                                          "a wall or planted island across the gap covers far more)")
     min_road_length_m: float = param(8.0, gt=0, help="shorter arms (spurs of the mask's corners) are pruned (m)")
     edge_percentile: float = param(75.0, ge=50, le=100,
                                    help="per side, this percentile of the edge distance along edge_window_m is the "

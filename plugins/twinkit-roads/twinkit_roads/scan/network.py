@@ -88,9 +88,9 @@ def _skeleton_edges(mask: np.ndarray, grid):
 def bridge_gaps(mask: np.ndarray, edges: list, n_nodes: int, grid, v, f, p: ScanSourceParams) -> tuple[np.ndarray, list]:
     """The carriageway mask with its gaps bridged: where a road (an edge at least ``min_road_length_m`` long) ends
     freely and, straight on, more carriageway begins within ``bridge_m``, the gap is painted in as wide as the road
-    when the mesh has up-facing ground all along it, no farther than ``bridge_max_step_m`` from the straight line
-    between the carriageway's heights at both ends (a wall, a planted island or a hole is no bridge; a sweep's
-    mesh is too rough to tell a kerb). Returns the mask and the bridges (``{"from": [x, y], "to": [x, y],
+    when the mesh has up-facing ground all along it, all but ``bridge_step_share`` of it no farther than
+    ``bridge_max_step_m`` from the straight line between the carriageway's heights at both ends (a wall, a planted
+    island or a hole is no bridge; a sweep's mesh is too rough to tell a kerb). Returns the mask and the bridges (``{"from": [x, y], "to": [x, y],
     "gap_m": m}``)."""
     from scipy import ndimage
 
@@ -130,7 +130,8 @@ def bridge_gaps(mask: np.ndarray, edges: list, n_nodes: int, grid, v, f, p: Scan
             zz = grid.sample(z, pts)
             z0, z1 = float(np.nanmedian(zz[0])), float(np.nanmedian(zz[-1]))
             line = z0 + (z1 - z0) * (ts / t1)[:, None]
-            if np.nanmax(np.abs(zz - line)[off]) > p.bridge_max_step_m:
+            dev = np.abs(zz - line)[off]
+            if np.mean(~(dev <= p.bridge_max_step_m)) > p.bridge_step_share:
                 continue
             px = np.floor(grid.to_px(pts.reshape(-1, 2))).astype(int)
             ok = (px[:, 0] >= 0) & (px[:, 0] < grid.w) & (px[:, 1] >= 0) & (px[:, 1] < grid.h)
