@@ -1,13 +1,14 @@
 """Issue 28's targets on the real clouds of ../shared/data/pointclouds, with the defaults.
 
-    .venv/bin/python plugins/twinkit-pointcloud/bench/bench_real_scans.py [--only lille autzen ign] [--report-only]
-        [--mesh-only]
+    .venv/bin/python plugins/twinkit-pointcloud/bench/bench_real_scans.py [--only lille autzen ign seq00_000000 ...]
+        [--report-only] [--mesh-only]
 
 Each cloud runs the whole main job with the defaults (``recipe=pointcloud_site``: mesh, labels, roads from the
 scan since no OSM is given, FBX/USD/GLB, CARLA package) with nothing but the cloud, its CRS and a base point
 (the cloud's centre, computed here from the file's header, as a user would read it off a map), one run at a
 time, into outputs/bench_real_scans/. The indoor pump scan is expected to be refused at once (exit 2, "not a
-street"). Then it prints one table:
+street"). The hand-labelled sweeps of ../shared/data/labelled/semantickitti run too, each from a copy without its
+labels (bench_scan_roads.py --scorecard scores the roads of all these runs, issue 46). Then it prints one table:
 
 - the measured point spacing and capture type and the settings chosen from them (trim, depth, texture, views);
 - the run's time and exit code;
@@ -42,6 +43,10 @@ CLOUDS = {
     # an indoor scan of a pump (4.6 x 4.5 m): not a street, to be refused before any step runs (exit 2)
     "pump": {"file": "pump_colored_scan.e57", "args": ["site=mex", "site.name=pump"]},
 }
+#: the hand-labelled single sweeps (../shared/data/labelled/semantickitti), run from a copy without their labels
+LABELLED = REPO.parent / "shared" / "data" / "labelled" / "semantickitti"
+for _scan in ("seq00_000000", "seq00_000001", "seq00_000002", "spvnas_sample_000000"):
+    CLOUDS[_scan] = {"file": f"{_scan}.ply", "labelled": True, "args": ["site=lille", f"site.name={_scan}"]}
 BUILDING_WALL = (cityscapes.BUILDING, cityscapes.WALL)
 FACADE_OK = (cityscapes.BUILDING, cityscapes.WALL, cityscapes.POLE, cityscapes.VEGETATION)
 
@@ -62,13 +67,25 @@ def centre_latlon(path: Path) -> tuple[float, float, float]:
     return float(lat), float(lon), 0.0
 
 
+def label_free(src: Path) -> Path:
+    """A copy of a hand-labelled scan with x, y, z and intensity only (bench/bench_labelled.py's), under OUT."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_labelled", REPO / "bench" / "bench_labelled.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.label_free_copy(src, OUT / "clouds" / src.name)
+
+
 def run_one(name: str, cfg: dict, mesh_only: bool = False) -> dict:
-    src = DATA / cfg["file"]
+    src = (LABELLED if cfg.get("labelled") else DATA) / cfg["file"]
     if not src.is_file():
         return {"name": name, "skipped": f"{src} not present"}
     args = list(cfg.get("args", []))
     if cfg["file"].endswith(".e57"):
         args.append(f"site.inputs.cloud={src}")
+    if cfg.get("labelled"):  # the truth never reaches the pipeline
+        args.append(f"site.inputs.cloud={label_free(src)}")
     if not args:
         lat, lon, alt = centre_latlon(src)
         args = ["site=mex", f"site.name={name}", f"site.crs={cfg['crs']}", f"site.base_point.lat={lat:.6f}",
@@ -134,7 +151,8 @@ def measure(name: str, cfg: dict) -> dict:
         if fr.get("kept_share") is not None:  # of the road length first derived, what the checks kept
             res["roads"] += f" ({100 * fr['kept_share']:.0f} % kept)"
     dt = _metrics(name, "drop_test")
-    res.update(drop_driving=dt.get("driving_hit_pct"), drop_fall=dt.get("driving_fall_through_pct"))
+    res.update(drop_driving=dt.get("driving_hit_pct"), drop_fall=dt.get("driving_fall_through_pct"),
+               drop_gate=gate_driving(dt), drop_hole=dt.get("driving_widest_hole_m"))
     pts_dir = _step(name, "read_cloud")
     if pts_dir is None:
         return res
@@ -188,6 +206,13 @@ def measure(name: str, cfg: dict) -> dict:
     return res
 
 
+def gate_driving(dt: dict) -> float | None:
+    """The drop test's gate figure over the driving lanes (drop_test step metrics): the better of the share found
+    off the kerb line and the surface's continuity, as the step's gate reads it."""
+    vals = [dt.get(k) for k in ("driving_hit_pct_off_kerb_line", "driving_continuous_pct") if dt.get(k) is not None]
+    return max(vals) if vals else None
+
+
 def _f(x, fmt="{:.3f}"):
     return "-" if x is None else fmt.format(x)
 
@@ -195,7 +220,8 @@ def _f(x, fmt="{:.3f}"):
 def table(rows: list[dict]) -> str:
     head = ("| cloud | capture | spacing m | trim m | trim removed | depth | texture px | views (sampled) | blank views "
             "| c2m median m | <= 0.5 x spacing | buildings kept | facades ok (>= 80 %) | facades building (>= 50 %) "
-            "| low ground ok (>= 90 %) | roads from the scan | drop test driving % (fall through %) | time s | exit "
+            "| low ground ok (>= 90 %) | roads from the scan | drop test driving % (fall through %) "
+            "| drop test gate driving (>= 99.9 %), widest hole m (<= 0.25) | time s | exit "
             "| why not 0 |")
     out = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
     for r in rows:
@@ -210,6 +236,7 @@ def table(rows: list[dict]) -> str:
                    f"| {pct('blank_share')} | {_f(c2m)} | {ok} | {pct('building_kept')} | {pct('facade_ok')} "
                    f"| {pct('facade_building')} | {pct('ground_ok')} | {r.get('roads', '-')} "
                    f"| {_f(r.get('drop_driving'), '{:.1f}')} ({_f(r.get('drop_fall'), '{:.1f}')}) "
+                   f"| {_f(r.get('drop_gate'), '{:.2f}')}, {_f(r.get('drop_hole'), '{:.2f}')} "
                    f"| {r.get('seconds', '-')} | {r.get('rc', '-')} | {r.get('why') or '-'} |")
     return "\n".join(out)
 

@@ -35,6 +35,13 @@ labels, which on colourless and aerial clouds are what is being judged. ``--labe
 scan source runs here on its mesh and predicted labels), and adds a what-if row per scan: the hand labels
 given to the scan source as its labels (what the derivation does with perfect labels). Without arguments
 (``make bench``) the demo table is followed by this one when bench_labelled's runs and ../shared exist.
+
+    .venv/bin/python plugins/twinkit-roads/bench/bench_scan_roads.py --scorecard [outputs/bench_real_scans]
+
+Issue 46's item 1 on every real capture ``bench_real_scans.py`` ran through the main job (the shared clouds and
+the hand-labelled sweeps, roads from the scan): the street covered by the final map, with and without its
+junctions' lanes (the hand-labelled road as the reference where there is one), and the drop test's gate and widest
+hole over the driving lanes; ``make bench`` prints it last when those runs exist.
 """
 from __future__ import annotations
 
@@ -52,6 +59,7 @@ from twinkit.testing import run_plugin
 ROOT = Path(__file__).resolve().parents[3]
 LABELLED = ROOT.parent / "shared" / "data" / "labelled" / "semantickitti"
 LABELLED_RUNS = ROOT / "bench" / "results" / "labelled"
+REAL_RUNS = ROOT / "outputs" / "bench_real_scans"  # plugins/twinkit-pointcloud/bench/bench_real_scans.py's runs
 
 
 def one(folder: Path, pattern: str) -> Path | None:
@@ -240,8 +248,10 @@ def _print_rows(name: str, what: str, street_m: float, rows: list[dict]) -> None
 def _stage_cells(r: dict) -> str:
     """A stage row's cells: stage, roads, axis length, street covered, share, dropped."""
     drop = f"{r['dropped_m']:.1f}" if r["dropped_m"] is not None else "-"
-    return (f"{r['stage']} | {r['roads']} | {r['length_m']:.1f} | {r['covered_m']:.1f} | {100 * r['share']:.0f} % | "
-            f"{drop}")
+    share = f"{100 * r['share']:.0f} %"
+    if "share_with_junctions" in r:  # the final map's junction lanes serve the street through them
+        share += f" ({100 * r['share_with_junctions']:.0f} % with the junctions' lanes)"
+    return f"{r['stage']} | {r['roads']} | {r['length_m']:.1f} | {r['covered_m']:.1f} | {share} | {drop}"
 
 
 def labelled_coverage(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> list[dict]:
@@ -283,6 +293,48 @@ def labelled_coverage(out: Path, base: Path, tol: float, truth_max_m: float = 0.
     return summary
 
 
+def scorecard(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> list[dict]:
+    """Issue 46's item 1 on every real capture that ``bench_real_scans.py`` ran through the main job (``out/<name>``,
+    roads from the scan): the street covered by the final map (its roads, and with its junctions' lanes), against
+    the hand-labelled road where the capture has hand labels (``../shared/data/labelled``) or else its own
+    road-labelled ground, beside the drop test's gate over the driving lanes and its widest hole. Met: 90 % of the
+    street with the junctions' lanes, the gate at 99.9 %, no hole over 0.25 m. Prints the table; returns the rows."""
+    from twinkit.artefacts import read_textured_mesh
+
+    rows = []
+    for run in sorted(p for p in out.glob("*") if p.is_dir() and one(p, "*_fetch_roads/scan_roads.json")):
+        mesh_p, dt_p = one(run, "*_texture/textured_mesh.ply"), one(run, "*_drop_test/step.json")
+        if mesh_p is None:
+            continue
+        scan = LABELLED / f"{run.name}.ply"
+        truth = None
+        if scan.is_file():
+            truth = truth_vertex_labels(read_textured_mesh(mesh_p).vertices, scan,
+                                        one(run, "*_read_cloud/points_meta.json"), truth_max_m)
+        what, street_m, stages = coverage_rows(run, base / run.name, tol, truth_labels=truth)
+        final = next((r for r in stages if r["stage"] == "final"), None)
+        dt = json.loads(dt_p.read_text()).get("metrics", {}) if dt_p else {}
+        gate = max((dt[k] for k in ("driving_hit_pct_off_kerb_line", "driving_continuous_pct") if dt.get(k) is not None),
+                   default=None)
+        row = {"capture": run.name, "reference": what, "street_m": street_m,
+               "covered": final["share"] if final else 0.0,
+               "with_junctions": final.get("share_with_junctions", final["share"]) if final else 0.0,
+               "gate_pct": gate, "widest_hole_m": dt.get("driving_widest_hole_m")}
+        row["met"] = (row["with_junctions"] >= 0.9 and gate is not None and gate >= 99.9
+                      and (row["widest_hole_m"] or 0.0) <= 0.25)
+        rows.append(row)
+    if rows:
+        print("| capture | street m (reference) | covered by its roads | with the junctions' lanes (>= 90 %) | "
+              "drop test gate, driving (>= 99.9 %) | widest hole m (<= 0.25) | item 1 met |")
+        print("|---|---|---:|---:|---:|---:|---|")
+        for r in rows:
+            gate = "-" if r["gate_pct"] is None else f"{r['gate_pct']:.2f} %"
+            hole = "-" if r["widest_hole_m"] is None else f"{r['widest_hole_m']:.2f}"
+            print(f"| {r['capture']} | {r['street_m']:.1f} ({r['reference']}) | {100 * r['covered']:.0f} % | "
+                  f"{100 * r['with_junctions']:.0f} % | {gate} | {hole} | {'yes' if r['met'] else 'no'} |")
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--run", action="append", type=Path, help="a finished demo run folder (default outputs/demo)")
@@ -296,8 +348,15 @@ def main() -> None:
                     help="hand labels reach the vertices within this distance of a labelled point (m)")
     ap.add_argument("--labelled", nargs="?", const=LABELLED_RUNS, type=Path,
                     help="coverage against the hand labels on bench_labelled's runs in this folder")
+    ap.add_argument("--scorecard", nargs="?", const=REAL_RUNS, type=Path,
+                    help="issue 46 item 1 on bench_real_scans.py's runs in this folder (coverage and drop test)")
     a = ap.parse_args()
     runs = a.run or [ROOT / "outputs" / "demo"]
+    if a.scorecard is not None:
+        with tempfile.TemporaryDirectory() as d:
+            if not scorecard(a.scorecard, a.keep or Path(d), a.tol, a.truth_max_m):
+                sys.exit(f"no runs with roads from the scan in {a.scorecard} (run bench_real_scans.py)")
+        return
     if a.labelled is not None:
         with tempfile.TemporaryDirectory() as d:
             if not labelled_coverage(a.labelled, a.keep or Path(d), a.tol, a.truth_max_m):
@@ -331,6 +390,11 @@ def main() -> None:
         print("\n### Coverage of the hand-labelled street on the real SemanticKITTI sweeps (bench_labelled's runs)\n")
         with tempfile.TemporaryDirectory() as d:
             labelled_coverage(LABELLED_RUNS, a.keep or Path(d), a.tol, a.truth_max_m)
+    if a.run is None and REAL_RUNS.is_dir():
+        print("\n### Issue 46 item 1 on the real captures (bench_real_scans.py's runs: the main job, roads from the "
+              "scan)\n")
+        with tempfile.TemporaryDirectory() as d:
+            scorecard(REAL_RUNS, a.keep or Path(d), a.tol, a.truth_max_m)
 
 
 if __name__ == "__main__":
