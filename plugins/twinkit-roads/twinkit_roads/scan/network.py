@@ -90,8 +90,8 @@ def bridge_gaps(mask: np.ndarray, edges: list, n_nodes: int, grid, v, f, p: Scan
     freely and, straight on, more carriageway begins within ``bridge_m``, the gap is painted in as wide as the road
     when the mesh has up-facing ground all along it, all but ``bridge_step_share`` of it no farther than
     ``bridge_max_step_m`` from the straight line between the carriageway's heights at both ends (a wall, a planted
-    island or a hole is no bridge; a sweep's mesh is too rough to tell a kerb). Returns the mask and the bridges (``{"from": [x, y], "to": [x, y],
-    "gap_m": m}``)."""
+    island or a hole is no bridge; a sweep's mesh is too rough to tell a kerb). Returns the mask and the bridges
+    (``{"from": [x, y], "to": [x, y], "gap_m": m}``)."""
     from scipy import ndimage
 
     from ..mesh2d import face_normals_z
