@@ -61,7 +61,7 @@ done
 "${PIP[@]}" "transformers>=4.40" "ai-edge-litert" "ufbx>=0.0.5" "pygltflib>=1.16"
 
 # 6. The numba loops compiled into their on-disk cache for the argument types a run uses (twinkit.surface.compiled
-#    `ahead` marks), so the first run after set-up does not spend its first ~10 s compiling them
+#    `ahead` marks), so the first run after set-up loads them instead of compiling them (4-5 s on the demo)
 .venv/bin/python -m twinkit.surface.compiled
 
 # 7. three.js for the report's 3D view (registry only), bundled once by esbuild into
