@@ -27,6 +27,18 @@ def _wait_for(pred, timeout=60.0, what="condition"):
     raise AssertionError(f"timed out waiting for {what}")
 
 
+def _pid_in(files) -> int | None:
+    """The pid written in the first of ``files`` that holds one (None while it is still being written)."""
+    for f in files:
+        try:
+            text = f.read_text().strip()
+        except OSError:
+            continue
+        if text:
+            return int(text)
+    return None
+
+
 def _alive(pid: int) -> bool:
     from twinkit.signals import pid_alive
 
@@ -129,8 +141,8 @@ def test_ctrl_c_stops_a_step_stuck_in_a_native_call_within_seconds(project):
     p = project.popen("site=t", "recipe=stuck")
     try:
         store_tmp = project.ws / ".cache" / "steps" / ".tmp"
-        started = _wait_for(lambda: list(store_tmp.glob("*/started")), what="the step to start")
-        step_pid = int(started[0].read_text())
+        # the stand-in creates the file, then writes its pid: wait for the pid, not only the file
+        step_pid = _wait_for(lambda: _pid_in(store_tmp.glob("*/started")), what="the step to start")
         os.kill(p.pid, signal.SIGINT)
         out, err = p.communicate(timeout=30)  # the step itself would sleep 120 s
     finally:
