@@ -163,6 +163,13 @@ def drop_test(vertices: np.ndarray, faces: np.ndarray, samples: np.ndarray, tol_
     return out
 
 
+def ground_share(lane: dict) -> float | None:
+    """The figure a lane type's drop-test target is on (its gate), from that lane type's record in
+    ``drop_test.json`` (``lanes.<kind>``): the share of rays that find the ground off the kerb line, or over a
+    continuous surface, whichever holds more; None without rays."""
+    return max((x for x in (lane["hit_pct_off_kerb_line"], lane["continuous_pct"]) if x is not None), default=None)
+
+
 def draw_border(path: Path, vertices: np.ndarray, faces: np.ndarray, edges: dict, *, ground_face: np.ndarray | None,
                 px_per_m: float = 10.0, max_px: int = 3000, title: str = "", misses: np.ndarray | None = None) -> None:
     """Top-down picture: ground faces light grey, other faces darker, open border inside the site red (drawn

@@ -30,6 +30,7 @@ import numpy as np
 
 from twinkit import InputError, StepContext
 from twinkit.ranges import param
+from twinkit.surface.watertight import ground_share
 
 
 @dataclass
@@ -261,12 +262,6 @@ def log_lane(log, kind: str, lane: dict, holes: list, params: DropTestParams, pn
         log.info("drop test: no parking lane of the map lies inside the scanned site")
     else:
         log.warning("drop test: no %s lane of the map lies inside the scanned site", kind)
-
-
-def ground_share(lane: dict) -> float | None:
-    """The figure a lane type's target is on (its gate): the share of rays that find the ground off the kerb line,
-    or over a continuous surface, whichever holds more; None without rays."""
-    return max((x for x in (lane["hit_pct_off_kerb_line"], lane["continuous_pct"]) if x is not None), default=None)
 
 
 def degraded_lanes(res: dict, params: DropTestParams, png_name: str, from_scan: bool) -> list[tuple[str, str]]:

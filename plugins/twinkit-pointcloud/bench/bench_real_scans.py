@@ -152,7 +152,7 @@ def measure(name: str, cfg: dict) -> dict:
             res["roads"] += f" ({100 * fr['kept_share']:.0f} % kept)"
     dt = _metrics(name, "drop_test")
     res.update(drop_driving=dt.get("driving_hit_pct"), drop_fall=dt.get("driving_fall_through_pct"),
-               drop_gate=gate_driving(dt), drop_hole=dt.get("driving_widest_hole_m"))
+               drop_gate=gate_driving(_step(name, "drop_test")), drop_hole=dt.get("driving_widest_hole_m"))
     pts_dir = _step(name, "read_cloud")
     if pts_dir is None:
         return res
@@ -206,11 +206,14 @@ def measure(name: str, cfg: dict) -> dict:
     return res
 
 
-def gate_driving(dt: dict) -> float | None:
-    """The drop test's gate figure over the driving lanes (drop_test step metrics): the better of the share found
-    off the kerb line and the surface's continuity, as the step's gate reads it."""
-    vals = [dt.get(k) for k in ("driving_hit_pct_off_kerb_line", "driving_continuous_pct") if dt.get(k) is not None]
-    return max(vals) if vals else None
+def gate_driving(step_dir: Path | None) -> float | None:
+    """The drop test's gate figure over the driving lanes, from its drop_test.json (``ground_share``, as the step
+    reads it); None without it."""
+    from twinkit.surface.watertight import ground_share
+
+    f = step_dir / "drop_test.json" if step_dir is not None else None
+    lane = json.loads(f.read_text())["lanes"].get("driving") if f is not None and f.is_file() else None
+    return ground_share(lane) if lane else None
 
 
 def _f(x, fmt="{:.3f}"):

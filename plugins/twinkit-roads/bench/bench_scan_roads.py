@@ -300,10 +300,11 @@ def scorecard(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> li
     road-labelled ground, beside the drop test's gate over the driving lanes and its widest hole. Met: 90 % of the
     street with the junctions' lanes, the gate at 99.9 %, no hole over 0.25 m. Prints the table; returns the rows."""
     from twinkit.artefacts import read_textured_mesh
+    from twinkit.surface.watertight import ground_share
 
     rows = []
     for run in sorted(p for p in out.glob("*") if p.is_dir() and one(p, "*_fetch_roads/scan_roads.json")):
-        mesh_p, dt_p = one(run, "*_texture/textured_mesh.ply"), one(run, "*_drop_test/step.json")
+        mesh_p, dt_p = one(run, "*_texture/textured_mesh.ply"), one(run, "*_drop_test/drop_test.json")
         if mesh_p is None:
             continue
         scan = LABELLED / f"{run.name}.ply"
@@ -313,13 +314,12 @@ def scorecard(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> li
                                         one(run, "*_read_cloud/points_meta.json"), truth_max_m)
         what, street_m, stages = coverage_rows(run, base / run.name, tol, truth_labels=truth)
         final = next((r for r in stages if r["stage"] == "final"), None)
-        dt = json.loads(dt_p.read_text()).get("metrics", {}) if dt_p else {}
-        gate = max((dt[k] for k in ("driving_hit_pct_off_kerb_line", "driving_continuous_pct") if dt.get(k) is not None),
-                   default=None)
+        lane = json.loads(dt_p.read_text())["lanes"].get("driving") if dt_p else None
+        gate = ground_share(lane) if lane else None
         row = {"capture": run.name, "reference": what, "street_m": street_m,
                "covered": final["share"] if final else 0.0,
                "with_junctions": final.get("share_with_junctions", final["share"]) if final else 0.0,
-               "gate_pct": gate, "widest_hole_m": dt.get("driving_widest_hole_m")}
+               "gate_pct": gate, "widest_hole_m": lane.get("widest_hole_m") if lane else None}
         row["met"] = (row["with_junctions"] >= 0.9 and gate is not None and gate >= 99.9
                       and (row["widest_hole_m"] or 0.0) <= 0.25)
         rows.append(row)
