@@ -172,6 +172,31 @@ def test_ground_fill_fills_shadow_not_building():
     assert filled.n_faces > plain.n_faces
 
 
+def test_ground_fill_heights_carry_no_streak_from_one_high_ground_cell():
+    """Each filled cell's height is interpolated along its row and its column: one ground cell at the shadow's
+    edge 8 cm high (its points a noise layer) raised its whole row across the shadow, a streak one cell wide
+    that fails the drop test's continuity (sweeps: 27-49 % of the discontinuous rays on the clean mesh). The
+    fill's heights are the median of the cells around; a kerb's step would stay."""
+    from twinkit.mesh import compact
+    from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
+
+    pts, nrm = _ground_scene()
+    high = (pts[:, 0] > 1.93) & (pts[:, 0] < 2.01) & (pts[:, 1] > 2.93) & (pts[:, 1] < 3.09) & (pts[:, 2] < 0.01)
+    pts = pts.copy()
+    pts[high, 2] = 0.08
+    mesh = grid_mesh(121, size=12.0)
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    mesh = compact(mesh, ~((c[:, 0] > 2) & (c[:, 0] < 4) & (c[:, 1] > 2) & (c[:, 1] < 4)))
+    tops = {}
+    for size in (0, 5):
+        out, _ = fill_ground_holes(mesh, pts, nrm, None, GroundFillOptions(cell_m=0.1, smooth_cells=size))
+        new = out.vertices[mesh.n_vertices:]
+        inner = (new[:, 0] > 2.3) & (new[:, 0] < 3.7) & (new[:, 1] > 2.3) & (new[:, 1] < 3.7)
+        tops[size] = float(new[inner, 2].max())
+    assert tops[0] > 0.02, tops  # the streak: the row through the high cell, across the shadow
+    assert tops[5] < 0.005, tops
+
+
 def _two_levels(rise_m: float):
     """Up-facing points on 14 x 6 m: z = 0 for x <= 4, z = ``rise_m`` for x >= 9, nothing in between (5 m);
     the mesh the same without faces over the gap."""

@@ -51,6 +51,7 @@ class CleanOptions:
     fill_ground_cell_m: float = 0.0
     fill_ground_max_gap_m: float = 8.0
     fill_ground_stitch: bool = True
+    fill_ground_smooth_cells: int = 0  # the shadows' heights smoothed by a median this many cells square (groundfill)
     threads: int = -1
     loose_dist_m: float = 0.0  # vertices flagged by clean_mesh's ``loose`` mask are trimmed at this distance instead
 
@@ -317,7 +318,8 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
         mesh, frep = fill_ground_holes(mesh, points, normals, colors,
                                        GroundFillOptions(cell_m=opt.fill_ground_cell_m,
                                                          max_gap_m=opt.fill_ground_max_gap_m, threads=opt.threads,
-                                                         stitch=opt.fill_ground_stitch),
+                                                         stitch=opt.fill_ground_stitch,
+                                                         smooth_cells=opt.fill_ground_smooth_cells),
                                        tree=tree)
         frep.update(vertices=mesh.n_vertices, faces=mesh.n_faces)
         rep["ground_fill"] = frep

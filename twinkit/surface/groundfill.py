@@ -60,6 +60,12 @@ class GroundFillOptions:
     under_clearance_m: float = 1.5  # ... or hanging at least this high (canopies, awnings)
     kerb_step_m: float = 0.3  # ... the two sides may differ by a kerb step
     max_slope: float = 0.15  # ... plus this slope over the gap (steeper than any street)
+    smooth_cells: int = 0  # the shadows' heights: the median over this many cells square of the filled and
+    #                        ground cells around (0: off; the clean step turns it on for ground sampled in rings).
+    #                        Each shadow cell's height is interpolated along its row and its column; where the
+    #                        ground is rings of single points, neighbouring rows end on different rings or on a
+    #                        noise point and one row or column stands a few cm proud, a streak one cell wide that a
+    #                        wheel feels. Measured ground cells, and the ground beneath objects, keep their heights
 
 
 def _first_nonempty(cls: np.ndarray, axis: int, reverse: bool):
@@ -146,6 +152,26 @@ def _holes(cls: np.ndarray, gz: np.ndarray, max_cells: int, max_rise: tuple[floa
         est_n += ok
     hole = est_n > 0
     return hole, np.where(hole, est_sum / np.maximum(est_n, 1), np.nan)
+
+
+def smooth_heights(height: np.ndarray, fill: np.ndarray, ground_z: np.ndarray, ground: np.ndarray, size: int,
+                   chunk: int = 400_000) -> np.ndarray:
+    """``height`` (ny, nx) with each ``fill`` cell's value replaced by the median over the ``size`` x ``size``
+    cells around it of the fill's heights and the ``ground`` cells' own heights (``ground_z``); other cells as
+    they are. ``size`` below 2: unchanged."""
+    if size < 2 or not fill.any():
+        return height
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    k = int(size) // 2
+    vals = np.where(fill, height, np.where(ground, ground_z, np.nan))
+    win = sliding_window_view(np.pad(vals, k, constant_values=np.nan), (2 * k + 1, 2 * k + 1))
+    jj, ii = np.nonzero(fill)
+    out = height.copy()
+    for s in range(0, len(jj), chunk):
+        j, i = jj[s:s + chunk], ii[s:s + chunk]
+        out[j, i] = np.nanmedian(win[j, i].reshape(len(j), -1), axis=1)
+    return out
 
 
 def _cover(scene, xy: np.ndarray, z: np.ndarray, band: float) -> np.ndarray:
@@ -269,6 +295,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
             rep["under_object_cells"] = int(under.sum())
             cand = cand | under
             height = np.where(under, uz, height)
+        height = smooth_heights(height, hole, gz0, cls0 == 1, opt.smooth_cells)
         pv, pf = _stitched_fill(mesh, cand, height, zloc, lo, opt, rep)
         if len(pf) == 0:
             rep.update(filled_cells=0, faces_added=0)
@@ -277,6 +304,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
     if not hole.any():
         rep.update(filled_cells=0, faces_added=0)
         return mesh, rep
+    hz = smooth_heights(hz, hole, gz0, cls0 == 1, opt.smooth_cells)
     jj, ii = np.nonzero(hole)
     centres = np.c_[lo[0] + (ii + 0.5) * c, lo[1] + (jj + 0.5) * c, hz[jj, ii]]
     if mesh.n_faces:

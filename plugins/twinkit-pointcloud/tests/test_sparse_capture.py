@@ -57,3 +57,22 @@ def test_a_dense_capture_is_not(tmp_path):
     ctx, out, rep = _clean(tmp_path, sparse=False)
     assert out["fill_share"] is None or out["fill_share"] < P.CleanParams().max_fill_share
     assert ctx.degraded_reasons == [], ctx.degraded_reasons
+
+
+def test_the_shadows_heights_are_smoothed_where_the_ground_is_rings_only():
+    """The clean step's auto setting: the ground fill's median over the shadows' heights (the streaks of the
+    row and column interpolation between rings) is on for a sweep's rings and off for ground sampled in
+    patches, whose fill the demo's kerb alignment reads (docs/pointcloud.md "The fill without streaks")."""
+    import logging
+
+    class Cloud:
+        def __init__(self, pts):
+            self.vertices = pts
+
+    log = logging.getLogger("test")
+    rings = P._clean_auto(P.CleanParams(), Cloud(street(sparse=True)[0]), log)
+    patches = P._clean_auto(P.CleanParams(), Cloud(street(sparse=False)[0]), log)
+    assert rings["ground_two_way_share"] < 0.5 < patches["ground_two_way_share"]
+    assert rings["fill_ground_smooth_cells"] == 5 and patches["fill_ground_smooth_cells"] == 0
+    fixed = P._clean_auto(P.CleanParams(fill_ground_smooth_cells=3), Cloud(street(sparse=False)[0]), log)
+    assert fixed["fill_ground_smooth_cells"] == 3

@@ -122,6 +122,13 @@ class CleanParams:
     fill_ground_stitch: bool = param(True,
                                      help="Join the ground fill to the mesh's own open border (one surface, no "
                                           "seam); false: add the fill as separate grid patches.")
+    fill_ground_smooth_cells: int = param(-1, ge=0, le=15, also=(-1,),
+                                          help="The shadows' heights are the median over this many cells square "
+                                               "of the fill and the measured ground around (a streak one cell wide "
+                                               "where rows of the interpolation end on different rings goes); 0 = "
+                                               "off; -1 = auto: 5 where the cloud's ground is sampled in rings "
+                                               "(density ground_two_way_share under 0.5: a spinning sweep), else "
+                                               'off (docs/pointcloud.md "The fill without streaks").')
     colormap_max_m: float = param(0.0, ge=0,
                                   help="The distance colour map of the report saturates at this distance (m); 0 = "
                                        "max_dist_m (or the p99 distance).")

@@ -194,7 +194,8 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                                local_trim_factor=params.local_trim_factor, local_trim_max_m=params.local_trim_max_m,
                                repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
                                fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
-                               fill_ground_stitch=params.fill_ground_stitch, threads=_threads(ctx))
+                               fill_ground_stitch=params.fill_ground_stitch,
+                               fill_ground_smooth_cells=auto["fill_ground_smooth_cells"], threads=_threads(ctx))
             mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         with ctx.substep("write"):
             mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
@@ -230,18 +231,25 @@ def _clean_auto(params: CleanParams, cloud, log) -> dict:
     """The clean step's automatic settings (-1) from the cloud's measured spacing (twinkit.surface.density)."""
     from twinkit.surface import density
 
-    out: dict = {"max_dist_m": params.max_dist_m, "fill_ground_cell_m": params.fill_ground_cell_m}
-    if params.max_dist_m >= 0 and params.fill_ground_cell_m >= 0:
+    out: dict = {"max_dist_m": params.max_dist_m, "fill_ground_cell_m": params.fill_ground_cell_m,
+                 "fill_ground_smooth_cells": params.fill_ground_smooth_cells}
+    if params.max_dist_m >= 0 and params.fill_ground_cell_m >= 0 and params.fill_ground_smooth_cells >= 0:
         return out
     m = density.measure(cloud.vertices)
-    out.update(spacing_m=m["spacing_m"], spacing_p90_m=m["spacing_p90_m"], capture=m["capture"])
+    out.update(spacing_m=m["spacing_m"], spacing_p90_m=m["spacing_p90_m"], capture=m["capture"],
+               ground_two_way_share=m["ground_two_way_share"])
+    if params.fill_ground_smooth_cells < 0:
+        rings = m["ground_two_way_share"] is not None and m["ground_two_way_share"] < density.RING_CAPTURE_SHARE
+        out["fill_ground_smooth_cells"] = 5 if rings else 0
     if params.max_dist_m < 0:
         out["max_dist_m"] = density.trim_distance(m)
     if params.fill_ground_cell_m < 0:
         s = m["spacing_m"]
         out["fill_ground_cell_m"] = round(max(0.10, s if s == s else 0.10), 3)
-    log.info("clean: %s; trim distance %.3g m, ground-fill cell %.3g m (auto)", density.describe(m),
-             out["max_dist_m"], out["fill_ground_cell_m"])
+    log.info("clean: %s; trim distance %.3g m, ground-fill cell %.3g m%s (auto)", density.describe(m),
+             out["max_dist_m"], out["fill_ground_cell_m"],
+             f", the shadows' heights smoothed over {out['fill_ground_smooth_cells']} cells (ground in rings)"
+             if out["fill_ground_smooth_cells"] else "")
     return out
 
 

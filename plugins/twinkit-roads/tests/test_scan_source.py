@@ -609,6 +609,52 @@ def test_a_lane_under_a_low_overhang_is_off_the_scan_though_its_ground_is_there(
     assert not (chk0["nudge"] or chk0["narrow"] or chk0["bad_points"])
 
 
+def test_a_lane_over_ground_the_scan_never_measured_is_off_an_enclosed_hole_is_left_to_the_drop_test(tmp_path):
+    """A band 3 m wide across the whole tile with no surface (x from 20 to 23: a sweep's far range between two
+    rings, open to the scan's edge) and a 1 m hole in the lane (x, y about -10, 1: a parked car's shadow, which
+    lift_movables closes). Without the unscanned raster both are holes left to the drop test (neither on nor
+    off; the seventeenth sweep's junction ran over such ground and the drop test lost 0.6 % of its rays there);
+    with it the band's samples are off (and the road there is cut) while the enclosed hole stays neither. A car
+    parked at the tile's edge covers nothing: lift_movables takes it out and no scan saw the ground beneath."""
+    p = scan.ScanSourceParams()
+    v, f, net, text = _aerial_net_and_map(tmp_path, p)
+    c = v[f].mean(axis=1)
+    band = (c[:, 0] > 20.0) & (c[:, 0] < 23.0)
+    hole = (np.abs(c[:, 0] + 10.0) < 0.5) & (np.abs(c[:, 1] - 1.0) < 0.5)
+    f2 = f[~band & ~hole]
+    bare = scan.unscanned(v, f2, p.open_gap_m)
+    assert bare is not None and scan.unscanned(v, f2, 0.0) is None
+    grid, raster = bare
+    assert grid.sample(raster, np.array([[21.5, 0.0], [21.5, -30.0]])).all()  # the band: never measured
+    assert not grid.sample(raster, np.array([[-10.0, 1.0], [0.0, 0.0]])).any()  # the hole, the lane: no
+    lh0 = scan.lane_heights(text, v, f2, tol_m=p.lane_tol_m)
+    lh = scan.lane_heights(text, v, f2, tol_m=p.lane_tol_m, unscanned=bare)
+    xy = lh["xy"]
+    in_band = (xy[:, 0] > 20.3) & (xy[:, 0] < 22.7)
+    in_hole = (np.abs(xy[:, 0] + 10.0) < 0.4) & (np.abs(xy[:, 1] - 1.0) < 0.4)
+    assert in_band.sum() >= 7 and in_hole.any()
+    assert not (lh0["on"] | lh0["off"])[in_band].any()  # without the raster: left to the drop test
+    assert lh["off"][in_band].all() and lh["bare"][in_band].all()
+    near_band = (xy[:, 0] > 19.5) & (xy[:, 0] < 23.5)
+    assert not (lh["on"] | lh["off"])[in_hole].any() and not lh["bare"][~near_band].any()
+    chk = scan.check_lanes(net, text, v, f2, p, unscanned=bare)
+    assert chk["bare_samples"] == int(lh["bare"].sum()) and chk["bad_points"]
+    assert not scan.check_lanes(net, text, v, f2, p)["bad_points"]
+    # a car parked at the tile's edge (lift_movables takes it out): the ground under it was never measured
+    c2 = v[f2].mean(axis=1)
+    car = (c2[:, 0] > 37.0) & (np.abs(c2[:, 1]) < 1.0)
+    at_car = np.array([[38.5, 0.0]])
+    assert not grid.sample(raster, at_car).any()
+    g2, r2 = scan.unscanned(v, f2, p.open_gap_m, parked=car)
+    assert g2.sample(r2, at_car).all()
+    # the mesh's open border along the lane's south edge (a strip 1.5 m wide the scan never measured, the length of
+    # the tile): its samples are off, yet no side is narrowed or moved (an open border is no obstacle)
+    strip = f[~((c[:, 1] > -3.9) & (c[:, 1] < -1.9))]
+    bare3 = scan.unscanned(v, strip, p.open_gap_m)
+    chk3 = scan.check_lanes(net, text, v, strip, p, unscanned=bare3)
+    assert chk3["bare_samples"] > 20 and not chk3["narrow"] and not chk3["nudge"]
+
+
 def test_every_scan_parameter_says_what_it_does():
     """Each road_source=scan parameter carries its one line of help (param(help=...)), not a # comment."""
     from twinkit.ranges import help_of

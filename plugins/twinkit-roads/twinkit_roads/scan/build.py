@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .checks import check_lanes, check_sidewalks, cut_arms, detach_junctions, narrow_arms, nudge_arms, parked_faces, trim_unsupported
+from .masks import unscanned
 from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
 from .netconvert import netconvert_plain, write_plain
@@ -38,12 +39,13 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     rounds = []
     parked = parked_faces(np.asarray(mesh.faces), labels, curbs)
     zr = carriageway_level(net, mesh.vertices, mesh.faces)  # the junctions' connecting roads follow it
+    bare = unscanned(mesh.vertices, mesh.faces, p.open_gap_m, parked=parked)
     for rnd in range(p.lane_check_rounds + 1):
         nod, edg = write_plain(net, p, proj, work)
         info = netconvert_plain(nod, edg, out_xodr, p, log, surface=lambda xy: net.grid.sample(zr, xy))
         if rnd == p.lane_check_rounds:
             break
-        row = check_round(net, out_xodr.read_text(encoding="utf-8"), mesh, p, scene, rnd, log, parked)
+        row = check_round(net, out_xodr.read_text(encoding="utf-8"), mesh, p, scene, rnd, log, parked, bare)
         rounds.append(row)
         record_stage(net, f"lane_check {rnd + 1}")
         if row.get("settled"):
@@ -57,12 +59,13 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
 
 
 def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, rnd: int, log,
-                parked: np.ndarray | None = None) -> dict:
+                parked: np.ndarray | None = None, bare=None) -> dict:
     """One lane check of netconvert's map (junctions included) against the scan, and the network's repair:
-    narrowed, moved, cut, junctions taken apart (``parked``: faces of parked vehicles, ``check_lanes``).
-    Returns the round's row (``settled``: nothing more to do)."""
-    chk = check_lanes(net, xodr_text, mesh.vertices, mesh.faces, p, scene, parked=parked)
+    narrowed, moved, cut, junctions taken apart (``parked``: faces of parked vehicles, ``bare``: the ground the
+    scan never measured, ``check_lanes``). Returns the round's row (``settled``: nothing more to do)."""
+    chk = check_lanes(net, xodr_text, mesh.vertices, mesh.faces, p, scene, parked=parked, unscanned=bare)
     row = {"round": rnd + 1, "samples": chk["samples"], "on_share": chk["on_share"],
+           "unscanned_samples": chk["bare_samples"],
            "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
            "roads_off": len(chk["bad_points"])}
     walks = check_sidewalks(net, xodr_text, p, scene)
@@ -85,9 +88,11 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
     after = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
     if not row["roads_narrowed"] and not row["roads_moved"] and after == before and not walks:
         return {**row, "settled": True}  # what is off cannot be cut (single shape points): the drop test reports it
-    log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface; %d "
+    log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface%s; %d "
              "road(s) off it in places (%.1f m cut), %d narrowed, %d junction(s) taken apart (%s), %d road(s) "
-             "dropped; netconvert again", rnd + 1, 100 * chk["on_share"], len(chk["bad_points"]), cut2["cut_m"],
+             "dropped; netconvert again", rnd + 1, 100 * chk["on_share"],
+             f" ({chk['bare_samples']} over ground the scan never measured: its sparse far range or beyond its edge)"
+             if chk["bare_samples"] else "", len(chk["bad_points"]), cut2["cut_m"],
              row["roads_narrowed"],
              len(chk["bad_junctions"]), ", ".join(f"n{k}: {100 * v:.0f} % on" for k, v in
                                                  chk["bad_junctions"].items()) or "-",

@@ -109,21 +109,24 @@ def cut_arms(net: Network, bad: dict[int, np.ndarray], p: ScanSourceParams, keep
 
 def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.0, above_m: float = 1.0,
                  below_m: float = 3.0, covered_m: float = 15.0, scene=None, step_m: float = 0.0,
-                 edge_in_m: float = 0.05, clear_m: float = 0.0, parked: np.ndarray | None = None) -> dict:
+                 edge_in_m: float = 0.05, clear_m: float = 0.0, parked: np.ndarray | None = None,
+                 unscanned=None) -> dict:
     """Do the driving lanes carla.Map reads from the OpenDRIVE lie on the scanned surface at their heights?
     Samples every ``spacing_m`` along each driving lane, 7 across it (the outermost ``edge_in_m`` inside its
     borders). A sample is **on** when the surface
     lies within ``tol_m`` of the lane's height; **off** when it lies elsewhere: up to ``below_m`` under the
     lane (the lane floats over a bank or a yard), up to ``above_m`` over it (the lane is buried in a
-    slope), or not at all under a roof up to ``covered_m`` over the lane (it runs into a house); an open
-    hole in the mesh is left to the drop test. With ``step_m`` > 0, a sample is also off when the surface
+    slope), or not at all under a roof up to ``covered_m`` over the lane (it runs into a house); a hole in the
+    mesh is left to the drop test, unless ``unscanned`` (``masks.unscanned``'s (grid, raster)) marks it as
+    ground the scan never measured (a sweep's far range, beyond the scan's edge): then it is off. With ``step_m`` > 0, a sample is also off when the surface
     between it and the lane's middle steps by more than ``step_m`` from one sample to the next (the lane's
     edge over a low wall or a yard above the street: within ``tol_m``, yet no road). With ``clear_m`` > 0, a
     sample with any surface over it less than ``clear_m`` above the lane is off too, ground or not (a hedge,
     a wall's top, a low roof: a car drives into it). ``parked`` (per face, bool): faces of parked vehicles;
     a sample whose top or overhead surface is one is judged by the ground alone (no step, clearance or
     buried test: the car is taken out later, not a wall). Returns the samples' x, y, whether on and
-    off, and the junction (its OpenDRIVE name, netconvert's node id) of those inside one ('' elsewhere)."""
+    off, whether off for want of any scanned surface (``bare``), and the junction (its OpenDRIVE name,
+    netconvert's node id) of those inside one ('' elsewhere)."""
     import open3d as o3d
 
     from twinkit.street.lanes import LaneMap
@@ -132,7 +135,8 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     wp = LaneMap(xodr_text, "scan_lane_heights").waypoints(spacing_m)
     wp = wp.take(wp.is_type("driving"))
     if not len(wp):
-        return {"xy": np.zeros((0, 2)), "on": np.zeros(0, bool), "off": np.zeros(0, bool), "junction": np.zeros(0, str)}
+        return {"xy": np.zeros((0, 2)), "on": np.zeros(0, bool), "off": np.zeros(0, bool), "bare": np.zeros(0, bool),
+                "junction": np.zeros(0, str)}
     across = np.linspace(-0.5, 0.5, 7)  # border to border, the outermost edge_in_m in (where a tyre's edge runs)
     off = across[None, :] * np.maximum(wp.width - 2 * edge_in_m, 0.0)[:, None]  # (waypoints, 7)
     r = np.stack([wp.xyz[:, :1] + off * wp.right[:, :1], wp.xyz[:, 1:2] + off * wp.right[:, 1:2],
@@ -169,7 +173,11 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
         stepped = steps_across(top, len(across), step_m)
         off |= stepped
         on &= ~stepped
-    return {"xy": r[:, :2], "on": on, "off": off, "junction": junc}
+    bare = np.zeros(len(r), bool)
+    if unscanned is not None:
+        bare = ~on & ~off & unscanned[0].sample(unscanned[1], r[:, :2])
+        off |= bare
+    return {"xy": r[:, :2], "on": on, "off": off, "bare": bare, "junction": junc}
 
 
 def _junction_names(xodr_text: str) -> dict[int, str]:
@@ -209,17 +217,19 @@ def steps_across(top: np.ndarray, k: int, step_m: float) -> np.ndarray:
 
 
 def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=None,
-                parked: np.ndarray | None = None) -> dict:
+                parked: np.ndarray | None = None, unscanned=None) -> dict:
     """The map netconvert built from the derived network, against the scan (``lane_heights``): per road,
     the shape points whose driving lanes are off the surface on more than ``1 - min_lane_support`` of their
     samples; per junction, the same share over its connecting lanes. Returns ``{"bad_points": {arm index:
     bool array}, "bad_junctions": {node id: share on}, "on_share": share of all samples on}``. ``parked``: the
-    faces of parked vehicles (``parked_faces``), judged by the ground under them."""
+    faces of parked vehicles (``parked_faces``), judged by the ground under them; ``unscanned``: the ground the
+    scan never measured (``masks.unscanned``), off the scan (``bare_samples`` counts those samples)."""
 
     lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene, step_m=p.lane_step_m, clear_m=p.lane_clear_m,
-                      parked=parked)
+                      parked=parked, unscanned=unscanned)
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
     res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "nudge": {}, "samples": int(len(on)),
+           "bare_samples": int(lh["bare"].sum()),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
     judged = on | off
     for nid in net.nodes:
@@ -249,8 +259,11 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     # lanes wider than the paved band: a path between grass, a lane edge on a wall's foot) -> narrower
     if p.edge_band_m <= 0:
         return res
-    res["narrow"] = _narrow_sides(net, p, lateral, off[src], arm_of)
-    res["nudge"] = _nudge_stretches(net, p, lateral, off[src], arm_of, i, res["narrow"])
+    # ground the scan never measured cuts a road (above) but moves no edge: a mesh's open border beside a lane is
+    # no obstacle to move away from, and a narrowed road moves its lanes towards the other side's kerb
+    edge_off = (off & ~lh["bare"])[src]
+    res["narrow"] = _narrow_sides(net, p, lateral, edge_off, arm_of)
+    res["nudge"] = _nudge_stretches(net, p, lateral, edge_off, arm_of, i, res["narrow"])
     return res
 
 
