@@ -177,3 +177,23 @@ def test_border_picture_splats_the_highest_surface_over_each_pixel():
     assert (arr[2, 1] == light).all()  # only the ground point reaches here
     assert (arr[5, 7] == light).all() and (arr[4, 6] == light).all()  # a corner point's splat, clipped
     assert (arr[0, 0] == 255).all() and (arr[5, 0] == 255).all()  # nothing there
+
+
+def test_open_ground_is_what_reaches_the_scans_edge_or_no_hole_fill_spans():
+    """On a 30 x 30 m ground: a 1 m hole (a car's shadow: the lift closes it), a 12 m hole (wider than the
+    8 m a hole fill spans), a 2 m band from the west edge (a sweep's far range between rings) and a slit 0.2 m
+    wide joining the 1 m hole to the band (a crack along a ring: it must not open the hole to the outside).
+    Only the band and the wide hole are ground the scan never measured."""
+    from twinkit.surface.watertight import OpenGround
+
+    m = grid_mesh(121, size=30.0)
+    c = m.vertices[m.faces].mean(axis=1)
+    small = (np.abs(c[:, 0] - 20.0) < 0.5) & (np.abs(c[:, 1] - 20.0) < 0.5)
+    wide = (np.abs(c[:, 0] - 15.0) < 6.0) & (np.abs(c[:, 1] - 7.0) < 2.5)
+    band = (c[:, 0] < 10.0) & (np.abs(c[:, 1] - 20.0) < 1.0)
+    slit = (c[:, 0] >= 10.0) & (c[:, 0] < 20.0) & (np.abs(c[:, 1] - 20.0) < 0.1)
+    kept = m.faces[~(small | wide | band | slit)]
+    og = OpenGround.of_mesh(m.vertices, kept, open_gap_m=8.0)
+    pts = np.array([[20.0, 20.0], [15.0, 7.0], [4.0, 20.0], [25.0, 25.0], [5.0, 5.0], [-5.0, 0.0], [15.0, 20.0]])
+    assert og.at(pts).tolist() == [False, True, True, False, False, True, False]
+    assert not OpenGround.of_mesh(m.vertices, kept, open_gap_m=15.0).at(pts[1:2]).any()  # a fill spans 15 m

@@ -9,6 +9,8 @@
   sizes and the edges themselves for a picture (:func:`draw_border`).
 - :func:`drop_test`: vertical rays at given sample points (x, y, expected height); a ray passes when
   the mesh crosses its vertical line within ``tol_m`` of the expected height.
+- :class:`OpenGround`: ground the scan never measured, seen from above (uncovered and open to the mesh's
+  border, or wider than a hole later steps close): a lane there has nothing under it by the capture's nature.
 
 Units: metres, site frame (z up).
 """
@@ -61,6 +63,66 @@ class Footprint:
 
     def area_m2(self) -> float:
         return float(self.mask.sum() * self.cell_m ** 2)
+
+
+#: seen from above, a channel of uncovered ground narrower than this (a slit along a sweep's ring, a crack at a
+#: kerb's foot) does not join an enclosed hole to the land outside the scan (:class:`OpenGround`), m
+OPEN_CHANNEL_M = 0.5
+
+
+@dataclass
+class OpenGround:
+    """Ground the scan never measured, seen from above, that no later step will cover: the pixels no face
+    covers whose uncovered patch reaches the mesh's outer border or spans more than ``open_gap_m`` (the far
+    range between a sweep's rings, land beyond the scan's edge, a shadow open to it). An enclosed patch up to
+    ``open_gap_m`` (a parked car's shadow, a slit along a ring) is a hole of the mesh, which ``lift_movables``
+    closes. Patches are told apart with their channels narrower than :data:`OPEN_CHANNEL_M` shut. Grid:
+    :mod:`twinkit.mesh.raster`'s (``x0, y0`` the top-left corner, ``res`` metres per pixel)."""
+
+    mask: np.ndarray  # (h, w) bool, True where the ground was never measured
+    x0: float
+    y0: float
+    res: float
+
+    @classmethod
+    def of_mesh(cls, vertices: np.ndarray, faces: np.ndarray, open_gap_m: float = 8.0, cell_m: float = 0.1,
+                max_px: int = 4000) -> "OpenGround":
+        """Of a mesh's ``faces`` (those that stay: leave out what a later step removes) on a ``cell_m`` grid,
+        coarser where the mesh is more than ``max_px`` cells across."""
+        from scipy import ndimage
+
+        from twinkit.mesh.raster import face_mask
+
+        xy = np.asarray(vertices, np.float64)[:, :2]
+        faces = np.asarray(faces, np.int64).reshape(-1, 3)
+        if len(xy) == 0:
+            return cls(np.zeros((1, 1), bool), 0.0, 0.0, cell_m)
+        lo, hi = xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0
+        res = max(cell_m, float(np.max(hi - lo)) / max_px)
+        shape = (int(np.ceil((hi[1] - lo[1]) / res)), int(np.ceil((hi[0] - lo[0]) / res)))
+        bare = ~face_mask(xy, faces, float(lo[0]), float(hi[1]), res, shape, rule="scanline")
+        k = max(1, int(round(OPEN_CHANNEL_M / res / 2)))
+        box = np.ones((2 * k + 1, 2 * k + 1), bool)
+        lab, n = ndimage.label(ndimage.binary_opening(bare, box))
+        wide = np.zeros(n + 1, bool)
+        for i, sl in enumerate(ndimage.find_objects(lab), start=1):
+            if sl is None:
+                continue
+            span_m = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) * res
+            wide[i] = (span_m > open_gap_m or sl[0].start == 0 or sl[1].start == 0 or sl[0].stop == shape[0]
+                       or sl[1].stop == shape[1])
+        return cls(bare & ndimage.binary_dilation(wide[lab], box), float(lo[0]), float(hi[1]), res)
+
+    def at(self, xy: np.ndarray) -> np.ndarray:
+        """(k,) bool: the points (k, 2+) lie on ground the scan never measured (outside the grid: True)."""
+        xy = np.atleast_2d(np.asarray(xy, np.float64))
+        col = np.floor((xy[:, 0] - self.x0) / self.res).astype(np.int64)
+        row = np.floor((self.y0 - xy[:, 1]) / self.res).astype(np.int64)
+        h, w = self.mask.shape
+        ok = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        out = np.ones(len(xy), bool)
+        out[ok] = self.mask[row[ok], col[ok]]
+        return out
 
 
 def open_edges(faces: np.ndarray) -> np.ndarray:

@@ -89,3 +89,33 @@ def test_parking_lane_edge_over_the_kerb_is_judged_off_the_kerb_line():
     assert lane["ok"] is True and lane["ground_ok"] is True and not holes
     drv, _, _ = check_lane("driving", rays, 99.9, mesh, Surface(v, f).scene, DropTestParams())
     assert drv["ok"] is False and drv["target_on"] == "hit_pct"
+
+
+def test_the_failing_rays_say_why_they_fail():
+    """The driving lanes over a ground that ends at x = 36 m (the road runs on to 40 m: the capture ends), with
+    a 0.4 m hole in the mesh at (10, 3) and a 15 cm bump along the lane's outer edge (y 4.8-5.0 m, x 20-30 m): the
+    failing rays are told apart as falling through ground the scan never measured, through a hole of the mesh,
+    or meeting a step or a bump, and those at a lane's edge are counted; the degraded message says so."""
+    from twinkit.surface.closest import Surface
+    from twinkit.surface.watertight import OpenGround
+    from twinkit_export.ground_check import DropTestParams, _causes, check_lane, lane_rays
+
+    v, f = _ground()
+    bump = (v[:, 1] > 4.75) & (v[:, 1] < 5.05) & (v[:, 0] >= 20.0) & (v[:, 0] <= 30.0)
+    v[bump, 2] += 0.15
+    c = v[f].mean(axis=1)
+    f = f[(c[:, 0] < 36.0) & ~((np.abs(c[:, 0] - 10.0) < 0.2) & (np.abs(c[:, 1] - 3.0) < 0.2))]
+    rays, edges = lane_rays(_map(), 0.1, edges=True)
+    r, e = rays["driving"], edges["driving"]
+    assert len(e) == len(r) and e.min() >= 0 and e.max() <= 1.76
+    lane, _, _ = check_lane("driving", r, 99.9, Mesh(v, f), Surface(v, f).scene, DropTestParams(), e,
+                            OpenGround.of_mesh(v, f, 8.0))
+    why = lane["failing"]
+    off_end = int((r[:, 0] > 36.2).sum())
+    assert why["fall_unscanned"] >= off_end and why["fall_unscanned"] <= off_end + 300
+    in_hole = int(((np.abs(r[:, 0] - 10.0) < 0.25) & (np.abs(r[:, 1] - 3.0) < 0.25)).sum())
+    seam = int(((r[:, 0] > 35.8) & (r[:, 0] < 36.3)).sum())  # the mesh's last column: a raster pixel's width
+    assert 4 <= why["fall_hole"] <= in_hole + seam
+    assert why["step_or_bump"] >= 100 and why["at_lane_edge"] >= 0.8 * why["step_or_bump"]
+    assert why["rays"] == why["fall_unscanned"] + why["fall_hole"] + why["step_or_bump"]
+    assert f"{why['fall_unscanned']} fall through ground the scan never measured" in _causes(why)

@@ -67,8 +67,9 @@ SIDEWALK = ("sidewalk",)
 KINDS = {"driving": DRIVING, "parking": PARKING, "sidewalk": SIDEWALK}
 
 
-def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
-    """Ray positions over the lanes, site frame: {kind: (k, 3)} (x, y, lane z) for each kind of :data:`KINDS`.
+def lane_rays(xodr_text: str, spacing_m: float = 0.1, edges: bool = False):
+    """Ray positions over the lanes, site frame: {kind: (k, 3)} (x, y, lane z) for each kind of :data:`KINDS`;
+    with ``edges`` also {kind: (k,)} each ray's distance to its lane's nearer border (m).
 
     Every lane every ``spacing_m`` (:meth:`LaneMap.lanes`: the driving lanes and the lanes reached sideways
     from them); across a lane, rays every ``spacing_m`` from border to border (half a step in from each); a
@@ -77,6 +78,7 @@ def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
 
     lanes = LaneMap(xodr_text, "drop_test").lanes(spacing_m)
     out: dict[str, list] = {k: [] for k in KINDS}
+    edge: dict[str, list] = {k: [] for k in KINDS}
     kinds = np.full(len(lanes), "", dtype=object)
     for k, types in KINDS.items():
         kinds[lanes.is_type(*types) & (lanes.width > 1e-6)] = k
@@ -87,7 +89,11 @@ def lane_rays(xodr_text: str, spacing_m: float = 0.1) -> dict[str, np.ndarray]:
         off = (np.arange(k) + 0.5) * (2 * h / k) - h
         x, y, z = lanes.xyz[i]
         out[str(kinds[i])].append(np.c_[x + off * nrm[i, 0], y + off * nrm[i, 1], np.full(k, z)])
-    return {k: (np.vstack(v) if v else np.zeros((0, 3))) for k, v in out.items()}
+        edge[str(kinds[i])].append(h - np.abs(off))
+    rays = {k: (np.vstack(v) if v else np.zeros((0, 3))) for k, v in out.items()}
+    if not edges:
+        return rays
+    return rays, {k: (np.concatenate(v) if v else np.zeros(0)) for k, v in edge.items()}
 
 
 def _clusters(xy: np.ndarray, gap_m: float) -> list[dict]:
@@ -158,15 +164,37 @@ def continuous(rays: np.ndarray, surf: np.ndarray, spacing_m: float, window_m: f
     return ok & (np.abs(surf - mean) <= tol_m)
 
 
-def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene,
-               params: DropTestParams) -> tuple[dict, list, np.ndarray]:
+#: a failing ray this close to its lane's border counts as at the lane's edge (``failing`` in drop_test.json), m
+LANE_EDGE_M = 0.4
+
+
+def failing_causes(fail: np.ndarray, falls: np.ndarray, r: np.ndarray, edge: np.ndarray | None,
+                   open_ground=None) -> dict:
+    """Why the rays that fail the gate fail (``fail``, ``falls`` (n,) bool over the rays ``r`` (n, 3)): they fall
+    through ground the scan never measured (``open_ground``, a :class:`twinkit.surface.watertight.OpenGround`:
+    the lane leaves the capture), through a hole of the mesh, or meet a step or a bump; and how many of them lie
+    within :data:`LANE_EDGE_M` of their lane's border (``edge``, m: a lane wider than the surface it is on)."""
+    fall = fail & falls
+    never = np.zeros(len(r), bool)
+    if open_ground is not None and fall.any():
+        never[fall] = open_ground.at(r[fall, :2])
+    out = {"rays": int(fail.sum()), "fall_unscanned": int(never.sum()), "fall_hole": int((fall & ~never).sum()),
+           "step_or_bump": int((fail & ~falls).sum())}
+    if edge is not None:
+        out["at_lane_edge"] = int((fail & (edge < LANE_EDGE_M)).sum())
+    return out
+
+
+def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene, params: DropTestParams,
+               edge: np.ndarray | None = None, open_ground=None) -> tuple[dict, list, np.ndarray]:
     """One lane type's rays against the mesh: the ``drop_test.json`` record of that lane type, its holes, its misses.
 
     ``r``: (n, 3) float rays inside the site (x, y, the lane's height; site frame, m); ``need``: the target
     share, %; ``mesh``: the static mesh (``vertices``, ``faces``) and ``scene`` its BVH. The record holds the
-    hits, the share, the falls through, the kerb-line misses, the continuity share and the miss clusters;
-    the holes are the clusters of rays that fall through (``_clusters`` records); the misses the (m, 3) rays
-    that miss.
+    hits, the share, the falls through, the kerb-line misses, the continuity share, the miss clusters and
+    why the rays that fail the gate fail (``failing``: :func:`failing_causes`, with ``edge`` each ray's
+    distance to its lane's border and ``open_ground`` the ground the scan never measured); the holes are the
+    clusters of rays that fall through (``_clusters`` records); the misses the (m, 3) rays that miss.
     """
     from twinkit.surface.watertight import drop_test
 
@@ -198,10 +226,13 @@ def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene,
     ok = (share is None or share >= need) and widest <= params.max_hole_m
     # the surface's continuity (the ground a wheel rolls on, whatever the lane's one height says)
     pct_cont = None
+    held = hit | kerb  # the rays the gate's figure counts as holding: found off the kerb line...
     if n and params.local_window_m > 0:
         cont = continuous(r, surface_under(scene, r, params.fall_m), params.spacing_m, params.local_window_m,
                           params.tol_m)
         pct_cont = round(100.0 * float((cont | hit).mean()), 3)
+        if pct_ground is None or pct_cont >= pct_ground:
+            held = cont | hit  # ...or on a continuous surface, whichever figure is the gate's
     best = max([x for x in (pct_ground, pct_cont) if x is not None], default=None)
     lane = {"rays": n, "hits": int(hit.sum()), "hit_pct": pct, "target_pct": need, "target_on": measured, "ok": ok,
             "kerb_line": int(kerb.sum()),
@@ -212,7 +243,8 @@ def check_lane(kind: str, r: np.ndarray, need: float, mesh, scene,
             "fall_through": int(falls.sum()),
             "fall_through_pct": round(100.0 * float(falls.mean()), 3) if n else None,
             "miss_clusters": _clusters(r[~hit, :2], 3 * params.spacing_m)[:50],
-            "fall_through_clusters": holes[:50], "widest_hole_m": round(widest, 3)}
+            "fall_through_clusters": holes[:50], "widest_hole_m": round(widest, 3),
+            "failing": failing_causes(~held, falls, r, edge, open_ground)}
     return lane, holes, r[~hit]
 
 
@@ -281,6 +313,11 @@ def degraded_lanes(res: dict, params: DropTestParams, png_name: str, from_scan: 
             if misses_n and at_height > 0.5 * misses_n:
                 hint += (f"; {100 * at_height / misses_n:.0f} % of the misses find the ground at another height than "
                          "the lane (a cambered or rough road, a lane over a kerb or an object)")
+            why = lane.get("failing") or {}
+            if why.get("rays") and why["fall_unscanned"] > 0.5 * why["rays"]:
+                hint += "; most of them run off the captured ground: crop the map to the capture, or capture further"
+            elif why.get("rays") and why.get("at_lane_edge", 0) > 0.5 * why["rays"]:
+                hint += "; most of them lie at a lane's edge: the lanes are wider than the surface they lie on there"
             if from_scan:
                 hint += ("; the lanes were derived from the scan (road_source=scan): see scan_roads.png, or give an "
                          "OSM extract (site.inputs.osm) for the map")
@@ -290,8 +327,18 @@ def degraded_lanes(res: dict, params: DropTestParams, png_name: str, from_scan: 
                         f"ground within {params.tol_m:g} m of the lane's height, {best:.2f} % off the kerb line or on "
                         f"a continuous surface (target {lane['target_pct']} %)"
                         + (f", and a hole {lane['widest_hole_m']:.2f} m wide (more than {params.max_hole_m} m)"
-                           if hole else ""), hint))
+                           if hole else "") + _causes(why), hint))
     return out
+
+
+def _causes(why: dict) -> str:
+    """The message's account of the failing rays (``failing_causes``), or nothing without any."""
+    if not why.get("rays"):
+        return ""
+    edge = f"; {why['at_lane_edge']} of them within {LANE_EDGE_M} m of a lane's edge" if "at_lane_edge" in why else ""
+    return (f" (of the {why['rays']} rays that fail: {why['fall_unscanned']} fall through ground the scan never "
+            f"measured, {why['fall_hole']} through holes in the mesh, {why['step_or_bump']} meet a step or a bump"
+            f"{edge})")
 
 
 def border_over_lanes(vertices: np.ndarray, ein: np.ndarray, drv: np.ndarray, spacing_m: float) -> dict:
@@ -333,7 +380,7 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     from twinkit.geo.xodr import from_scan
     from twinkit.jsonio import write_json
     from twinkit.surface.closest import Surface
-    from twinkit.surface.watertight import Footprint, at_ground_level, draw_border, ground_border
+    from twinkit.surface.watertight import Footprint, OpenGround, at_ground_level, draw_border, ground_border
 
     params = params or DropTestParams()
     t0 = time.perf_counter()
@@ -342,17 +389,19 @@ def drop_test_step(params: DropTestParams, ctx: StepContext, *, in_textured_mesh
     text = A.read_opendrive(in_aligned_xodr)
     scan_lanes = from_scan(text)
     try:
-        rays = lane_rays(text, params.spacing_m)
+        rays, edges = lane_rays(text, params.spacing_m, edges=True)
     except Exception as exc:
         raise InputError(f"{in_aligned_xodr}: carla.Map could not read it ({exc}); re-run the road steps") from None
     fp = Footprint.from_points(cloud.vertices, fill_limit_m=params.fill_limit_m, margin_m=params.footprint_margin_m)
     scene = Surface(mesh.vertices, mesh.faces).scene  # one BVH for every set of rays below
+    never = OpenGround.of_mesh(mesh.vertices, mesh.faces, params.fill_limit_m)  # where the capture ends
     res: dict = {"spacing_m": params.spacing_m, "tol_m": params.tol_m, "lanes": {}}
     png, misses = Path(out_drop_test_png).name, []
     for kind, need in (("driving", params.min_driving_pct), ("parking", params.min_parking_pct),
                        ("sidewalk", params.min_sidewalk_pct)):
-        r = rays[kind][fp.inside(rays[kind])] if len(rays[kind]) else rays[kind]
-        res["lanes"][kind], holes, miss = check_lane(kind, r, need, mesh, scene, params)
+        keep = fp.inside(rays[kind]) if len(rays[kind]) else np.zeros(0, bool)
+        res["lanes"][kind], holes, miss = check_lane(kind, rays[kind][keep], need, mesh, scene, params,
+                                                     edges[kind][keep], never)
         misses.append(miss)
         log_lane(ctx.log, kind, res["lanes"][kind], holes, params, png)
     res["ok"] = bool(all(lane["ok"] for lane in res["lanes"].values()))

@@ -41,7 +41,9 @@ given to the scan source as its labels (what the derivation does with perfect la
 Issue 46's item 1 on every real capture ``bench_real_scans.py`` ran through the main job (the shared clouds and
 the hand-labelled sweeps, roads from the scan): the street covered by the final map, with and without its
 junctions' lanes (the hand-labelled road as the reference where there is one), and the drop test's gate and widest
-hole over the driving lanes; ``make bench`` prints it last when those runs exist.
+hole over the driving lanes, and why its failing rays fail (drop_test.json ``failing``: through ground the scan never
+measured, through holes in the mesh, on a step or a bump; how many at a lane's edge); ``make bench`` prints it last
+when those runs exist.
 """
 from __future__ import annotations
 
@@ -319,19 +321,24 @@ def scorecard(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> li
         row = {"capture": run.name, "reference": what, "street_m": street_m,
                "covered": final["share"] if final else 0.0,
                "with_junctions": final.get("share_with_junctions", final["share"]) if final else 0.0,
-               "gate_pct": gate, "widest_hole_m": lane.get("widest_hole_m") if lane else None}
+               "gate_pct": gate, "widest_hole_m": lane.get("widest_hole_m") if lane else None,
+               "failing": (lane or {}).get("failing")}
         row["met"] = (row["with_junctions"] >= 0.9 and gate is not None and gate >= 99.9
                       and (row["widest_hole_m"] or 0.0) <= 0.25)
         rows.append(row)
     if rows:
         print("| capture | street m (reference) | covered by its roads | with the junctions' lanes (>= 90 %) | "
-              "drop test gate, driving (>= 99.9 %) | widest hole m (<= 0.25) | item 1 met |")
-        print("|---|---|---:|---:|---:|---:|---|")
+              "drop test gate, driving (>= 99.9 %) | widest hole m (<= 0.25) | failing rays: never measured / holes "
+              "/ steps (at a lane's edge) | item 1 met |")
+        print("|---|---|---:|---:|---:|---:|---|---|")
         for r in rows:
             gate = "-" if r["gate_pct"] is None else f"{r['gate_pct']:.2f} %"
             hole = "-" if r["widest_hole_m"] is None else f"{r['widest_hole_m']:.2f}"
+            why = r["failing"]
+            causes = "-" if not why else (f"{why['fall_unscanned']} / {why['fall_hole']} / {why['step_or_bump']} "
+                                          f"({why.get('at_lane_edge', '-')})")
             print(f"| {r['capture']} | {r['street_m']:.1f} ({r['reference']}) | {100 * r['covered']:.0f} % | "
-                  f"{100 * r['with_junctions']:.0f} % | {gate} | {hole} | {'yes' if r['met'] else 'no'} |")
+                  f"{100 * r['with_junctions']:.0f} % | {gate} | {hole} | {causes} | {'yes' if r['met'] else 'no'} |")
     return rows
 
 

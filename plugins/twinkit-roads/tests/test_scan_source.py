@@ -616,17 +616,17 @@ def test_a_lane_over_ground_the_scan_never_measured_is_off_an_enclosed_hole_is_l
     off; the seventeenth sweep's junction ran over such ground and the drop test lost 0.6 % of its rays there);
     with it the band's samples are off (and the road there is cut) while the enclosed hole stays neither. A car
     parked at the tile's edge covers nothing: lift_movables takes it out and no scan saw the ground beneath."""
+    from twinkit.surface.watertight import OpenGround
+
     p = scan.ScanSourceParams()
     v, f, net, text = _aerial_net_and_map(tmp_path, p)
     c = v[f].mean(axis=1)
     band = (c[:, 0] > 20.0) & (c[:, 0] < 23.0)
     hole = (np.abs(c[:, 0] + 10.0) < 0.5) & (np.abs(c[:, 1] - 1.0) < 0.5)
     f2 = f[~band & ~hole]
-    bare = scan.unscanned(v, f2, p.open_gap_m)
-    assert bare is not None and scan.unscanned(v, f2, 0.0) is None
-    grid, raster = bare
-    assert grid.sample(raster, np.array([[21.5, 0.0], [21.5, -30.0]])).all()  # the band: never measured
-    assert not grid.sample(raster, np.array([[-10.0, 1.0], [0.0, 0.0]])).any()  # the hole, the lane: no
+    bare = OpenGround.of_mesh(v, f2, p.open_gap_m)
+    assert bare.at(np.array([[21.5, 0.0], [21.5, -30.0]])).all()  # the band: never measured
+    assert not bare.at(np.array([[-10.0, 1.0], [0.0, 0.0]])).any()  # the hole, the lane: no
     lh0 = scan.lane_heights(text, v, f2, tol_m=p.lane_tol_m)
     lh = scan.lane_heights(text, v, f2, tol_m=p.lane_tol_m, unscanned=bare)
     xy = lh["xy"]
@@ -644,13 +644,12 @@ def test_a_lane_over_ground_the_scan_never_measured_is_off_an_enclosed_hole_is_l
     c2 = v[f2].mean(axis=1)
     car = (c2[:, 0] > 37.0) & (np.abs(c2[:, 1]) < 1.0)
     at_car = np.array([[38.5, 0.0]])
-    assert not grid.sample(raster, at_car).any()
-    g2, r2 = scan.unscanned(v, f2, p.open_gap_m, parked=car)
-    assert g2.sample(r2, at_car).all()
+    assert not bare.at(at_car).any()
+    assert OpenGround.of_mesh(v, f2[~car], p.open_gap_m).at(at_car).all()
     # the mesh's open border along the lane's south edge (a strip 1.5 m wide the scan never measured, the length of
     # the tile): its samples are off, yet no side is narrowed or moved (an open border is no obstacle)
     strip = f[~((c[:, 1] > -3.9) & (c[:, 1] < -1.9))]
-    bare3 = scan.unscanned(v, strip, p.open_gap_m)
+    bare3 = OpenGround.of_mesh(v, strip, p.open_gap_m)
     chk3 = scan.check_lanes(net, text, v, strip, p, unscanned=bare3)
     assert chk3["bare_samples"] > 20 and not chk3["narrow"] and not chk3["nudge"]
 

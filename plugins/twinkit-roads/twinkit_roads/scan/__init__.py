@@ -33,7 +33,7 @@ from .checks import (check_lanes, check_sidewalks, cut_arms, detach_junctions, l
                      steps_across, trim_unsupported)
 from .geometry import lane_layout
 from .inputs import choose_curbs, cloud_sampling, cloud_xy, level_params, read_labels, read_truth
-from .masks import carriageway_mask, measured, unscanned
+from .masks import carriageway_mask, measured
 from .measures import covered, describe, in_junctions, lanes_on_road, network_length, record_stage, street_axis
 from .model import Arm, Network, NoRoads, ScanSourceParams, empty_network
 from .netconvert import empty_map, is_empty_map, mark_source, netconvert_plain, write_plain
@@ -47,5 +47,5 @@ __all__ = ["Arm", "Network", "NoRoads", "ScanSourceParams", "WALK_MAX_M", "add_h
            "cut_arms", "derive_network", "describe", "detach_junctions", "draw_scan_roads", "empty_map",
            "empty_network", "is_empty_map", "lane_heights", "lane_layout", "lanes_on_road", "mark_source",
            "measured", "narrow_arms", "netconvert_plain", "network_length", "no_roads_report", "nudge_arms", "parked_faces",
-           "read_labels", "read_truth", "record_stage", "scan_metrics", "scan_report", "skeleton_graph", "unscanned",
+           "read_labels", "read_truth", "record_stage", "scan_metrics", "scan_report", "skeleton_graph",
            "steps_across", "street_axis", "thin", "trim_unsupported", "write_plain"]

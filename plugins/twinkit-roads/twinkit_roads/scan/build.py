@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 
 from .checks import check_lanes, check_sidewalks, cut_arms, detach_junctions, narrow_arms, nudge_arms, parked_faces, trim_unsupported
-from .masks import unscanned
 from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
 from .netconvert import netconvert_plain, write_plain
@@ -39,7 +38,12 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
     rounds = []
     parked = parked_faces(np.asarray(mesh.faces), labels, curbs)
     zr = carriageway_level(net, mesh.vertices, mesh.faces)  # the junctions' connecting roads follow it
-    bare = unscanned(mesh.vertices, mesh.faces, p.open_gap_m, parked=parked)
+    bare = None
+    if p.open_gap_m > 0:  # the ground the scan never measured (parked cars cover nothing: lift_movables takes them)
+        from twinkit.surface.watertight import OpenGround
+
+        kept = np.asarray(mesh.faces) if parked is None else np.asarray(mesh.faces)[~parked]
+        bare = OpenGround.of_mesh(mesh.vertices, kept, p.open_gap_m)
     for rnd in range(p.lane_check_rounds + 1):
         nod, edg = write_plain(net, p, proj, work)
         info = netconvert_plain(nod, edg, out_xodr, p, log, surface=lambda xy: net.grid.sample(zr, xy))

@@ -117,8 +117,8 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     lies within ``tol_m`` of the lane's height; **off** when it lies elsewhere: up to ``below_m`` under the
     lane (the lane floats over a bank or a yard), up to ``above_m`` over it (the lane is buried in a
     slope), or not at all under a roof up to ``covered_m`` over the lane (it runs into a house); a hole in the
-    mesh is left to the drop test, unless ``unscanned`` (``masks.unscanned``'s (grid, raster)) marks it as
-    ground the scan never measured (a sweep's far range, beyond the scan's edge): then it is off. With ``step_m`` > 0, a sample is also off when the surface
+    mesh is left to the drop test, unless ``unscanned`` (a :class:`twinkit.surface.watertight.OpenGround`)
+    marks it as ground the scan never measured (a sweep's far range, beyond the scan's edge): then it is off. With ``step_m`` > 0, a sample is also off when the surface
     between it and the lane's middle steps by more than ``step_m`` from one sample to the next (the lane's
     edge over a low wall or a yard above the street: within ``tol_m``, yet no road). With ``clear_m`` > 0, a
     sample with any surface over it less than ``clear_m`` above the lane is off too, ground or not (a hedge,
@@ -175,7 +175,7 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
         on &= ~stepped
     bare = np.zeros(len(r), bool)
     if unscanned is not None:
-        bare = ~on & ~off & unscanned[0].sample(unscanned[1], r[:, :2])
+        bare = ~on & ~off & unscanned.at(r[:, :2])
         off |= bare
     return {"xy": r[:, :2], "on": on, "off": off, "bare": bare, "junction": junc}
 
@@ -223,7 +223,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     samples; per junction, the same share over its connecting lanes. Returns ``{"bad_points": {arm index:
     bool array}, "bad_junctions": {node id: share on}, "on_share": share of all samples on}``. ``parked``: the
     faces of parked vehicles (``parked_faces``), judged by the ground under them; ``unscanned``: the ground the
-    scan never measured (``masks.unscanned``), off the scan (``bare_samples`` counts those samples)."""
+    scan never measured (``OpenGround``), off the scan (``bare_samples`` counts those samples)."""
 
     lh = lane_heights(xodr_text, v, f, tol_m=p.lane_tol_m, scene=scene, step_m=p.lane_step_m, clear_m=p.lane_clear_m,
                       parked=parked, unscanned=unscanned)

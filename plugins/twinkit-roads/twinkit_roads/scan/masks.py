@@ -155,39 +155,3 @@ def level_raster(v, f, fidx, grid, mask: np.ndarray | None = None, reach_m: floa
     idx = ndimage.distance_transform_edt(np.isnan(z), return_distances=False, return_indices=True)
     return z[idx[0], idx[1]]
 
-
-#: seen from above, a channel of uncovered ground narrower than this (a slit along a sweep's ring, a crack at a
-#: kerb's foot) does not join an enclosed hole to the land outside the scan (``unscanned``), m
-OPEN_CHANNEL_M = 0.5
-
-
-def unscanned(v, f, open_gap_m: float, max_px: int = 4000, parked: np.ndarray | None = None):
-    """Where the scan has no surface, seen from above, and no later step will make one: the pixels no face
-    covers whose uncovered patch reaches the mesh's outer border or spans more than ``open_gap_m`` (the far
-    range between a sweep's rings, land beyond the scan's edge). Enclosed patches up to ``open_gap_m``
-    (a parked car's shadow, a slit along a ring) are holes ``lift_movables`` closes. ``parked`` (per face,
-    bool, ``checks.parked_faces``): faces that ``lift_movables`` takes out cover nothing (a car parked at the
-    scan's edge leaves unscanned ground open to the outside). Patches are told apart with their channels
-    narrower than ``OPEN_CHANNEL_M`` shut. On a 0.1 m grid (coarser where the site is more than ``max_px``
-    pixels across). Returns (the grid, (h, w) bool) or None when ``open_gap_m`` is 0."""
-    from scipy import ndimage
-
-    from ..mesh2d import Grid, rasterize
-
-    if open_gap_m <= 0 or len(f) == 0:
-        return None
-    xy = np.asarray(v)[:, :2]
-    span = float(np.max(xy.max(0) - xy.min(0))) + 2.0
-    grid = Grid.around(xy, max(0.1, span / max_px), pad=1.0)
-    bare = rasterize(v, f, grid, None if parked is None else np.flatnonzero(~np.asarray(parked, bool))) == 0
-    k = max(1, int(round(OPEN_CHANNEL_M / grid.res / 2)))
-    box = np.ones((2 * k + 1, 2 * k + 1), bool)
-    lab, n = ndimage.label(ndimage.binary_opening(bare, box))
-    wide = np.zeros(n + 1, bool)
-    for i, sl in enumerate(ndimage.find_objects(lab), start=1):
-        if sl is None:
-            continue
-        span_m = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) * grid.res
-        wide[i] = (span_m > open_gap_m or sl[0].start == 0 or sl[1].start == 0 or sl[0].stop == grid.h
-                   or sl[1].stop == grid.w)
-    return grid, bare & ndimage.binary_dilation(wide[lab], box)

@@ -107,9 +107,10 @@ class ScanSourceParams:
     open_gap_m: float = param(8.0, ge=0, le=100,
                               help="lane check: a lane sample over no surface at all is off the scan when that "
                                    "unscanned patch (seen from above) reaches the mesh's outer border or is wider "
-                                   "than this: the sparse far range between a sweep's rings, land beyond the scan's "
-                                   "edge; a smaller enclosed patch is a hole lift_movables closes (its "
-                                   "ground_hole_max_m) and is left to the drop test (m; 0: every hole is left)")
+                                   "than this (the sparse far range between a sweep's rings, land beyond the "
+                                   "scan's edge: twinkit.surface.watertight.OpenGround); a smaller enclosed patch "
+                                   "is a hole lift_movables closes (its ground_hole_max_m) and is left to the drop "
+                                   "test (m; 0: every hole is left)")
     lane_clear_m: float = param(2.0, ge=0, le=10,
                                 help="lane check: a sample with anything over it lower than this above the lane is "
                                      "off the scan (a hedge, a low roof; 0: no test; m)")
