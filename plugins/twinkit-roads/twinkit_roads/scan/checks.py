@@ -118,7 +118,8 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     lane (the lane floats over a bank or a yard), up to ``above_m`` over it (the lane is buried in a
     slope), or not at all under a roof up to ``covered_m`` over the lane (it runs into a house); a hole in the
     mesh is left to the drop test, unless ``unscanned`` (a :class:`twinkit.surface.watertight.OpenGround`)
-    marks it as ground the scan never measured (a sweep's far range, beyond the scan's edge): then it is off. With ``step_m`` > 0, a sample is also off when the surface
+    marks it as ground the scan never measured (a sweep's far range, beyond the scan's edge): then it is off.
+    With ``step_m`` > 0, a sample is also off when the surface
     between it and the lane's middle steps by more than ``step_m`` from one sample to the next (the lane's
     edge over a low wall or a yard above the street: within ``tol_m``, yet no road). With ``clear_m`` > 0, a
     sample with any surface over it less than ``clear_m`` above the lane is off too, ground or not (a hedge,

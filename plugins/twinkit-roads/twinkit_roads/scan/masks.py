@@ -154,4 +154,3 @@ def level_raster(v, f, fidx, grid, mask: np.ndarray | None = None, reach_m: floa
         return np.zeros_like(z)
     idx = ndimage.distance_transform_edt(np.isnan(z), return_distances=False, return_indices=True)
     return z[idx[0], idx[1]]
-
