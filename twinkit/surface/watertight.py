@@ -106,8 +106,6 @@ class OpenGround:
         lab, n = ndimage.label(ndimage.binary_opening(bare, box))
         wide = np.zeros(n + 1, bool)
         for i, sl in enumerate(ndimage.find_objects(lab), start=1):
-            if sl is None:
-                continue
             span_m = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) * res
             wide[i] = (span_m > open_gap_m or sl[0].start == 0 or sl[1].start == 0 or sl[0].stop == shape[0]
                        or sl[1].stop == shape[1])

@@ -109,7 +109,7 @@ def test_the_failing_rays_say_why_they_fail():
     r, e = rays["driving"], edges["driving"]
     assert len(e) == len(r) and e.min() >= 0 and e.max() <= 1.76
     lane, _, _ = check_lane("driving", r, 99.9, Mesh(v, f), Surface(v, f).scene, DropTestParams(), e,
-                            OpenGround.of_mesh(v, f, 8.0))
+                            lambda: OpenGround.of_mesh(v, f, 8.0))
     why = lane["failing"]
     off_end = int((r[:, 0] > 36.2).sum())
     assert why["fall_unscanned"] >= off_end and why["fall_unscanned"] <= off_end + 300
