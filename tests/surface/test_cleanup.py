@@ -246,3 +246,88 @@ def test_pin_holes_after_simplification_are_closed():
     assert closed == 2
     left = sorted(len(lp) for lp in boundary_loops(out.faces))
     assert left == sorted(n for n in loops if n > 12)  # the outer border and the big hole stay open
+
+
+def _box(lo, hi):
+    """A closed box (8 vertices, 12 faces facing out) from corner ``lo`` to ``hi``."""
+    v = np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for k in (0, 1) for j in (0, 1) for i in (0, 1)],
+                 float)
+    f = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 5], [0, 5, 4], [2, 6, 7], [2, 7, 3],
+                  [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]], np.int64)
+    return v, f
+
+
+def test_ground_fill_runs_over_a_thin_shell_on_the_ground_instead_of_stopping_short_of_it():
+    """A lone scan line on ground the trim removed around it keeps Poisson's closed skin (2-3 cm thick, a few cm
+    wide): the fill saw its top as surface and its outline as no open border to join, stopped short of it on
+    every side, and left a slit along it that a wheel falls through (the sweeps: 531 such shells on
+    seq00_000000; 844 -> 277 driving-lane rays failing on its clean mesh once they go). A thin shell on the
+    ground is taken out and the fill runs over it; a kerb stone's block (0.25 m) and a thin panel 1.5 m up
+    stay."""
+    from twinkit.mesh import compact
+    from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
+    from twinkit.surface.watertight import drop_test
+
+    pts, nrm = _ground_scene()  # ground points everywhere outside the shadow and the building
+    mesh = grid_mesh(121, size=12.0)
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    mesh = compact(mesh, ~((c[:, 0] > 1) & (c[:, 0] < 6) & (c[:, 1] > 5) & (c[:, 1] < 6)))  # a 5 x 1 m cut
+    parts = [(mesh.vertices, mesh.faces)]
+    for lo, hi in (((1.5, 5.47, -0.01), (3.0, 5.53, 0.02)),  # the skin around a scan line: 3 cm thick
+                   ((3.5, 5.4, 0.0), (4.2, 5.6, 0.25)),  # a kerb stone
+                   ((4.6, 5.3, 1.5), (5.6, 5.7, 1.53))):  # a panel overhead
+        parts.append(_box(np.array(lo), np.array(hi)))
+    v = np.vstack([p[0] for p in parts])
+    f = np.vstack([p[1] + sum(len(q[0]) for q in parts[:i]) for i, p in enumerate(parts)])
+    shelled = Mesh(v, f)
+    xs, ys = np.meshgrid(np.arange(1.52, 2.98, 0.02), np.arange(5.41, 5.6, 0.02))  # along the skin and beside it
+    rays = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    hit = {}
+    for thick in (0.0, 0.1):
+        out, rep = fill_ground_holes(shelled, pts, nrm, None, GroundFillOptions(cell_m=0.1, sliver_max_m=thick))
+        hit[thick] = drop_test(out.vertices, out.faces, rays, 0.05)
+        if thick:
+            assert rep["slivers_removed"] == {"components": 1, "faces": 12}
+            kept = out.vertices[out.faces].mean(axis=1)
+            assert ((kept[:, 2] > 0.2) & (kept[:, 2] < 0.26)).sum() >= 2  # the kerb stone's top
+            assert (kept[:, 2] > 1.49).sum() == 12  # the panel
+    assert hit[0.0].mean() < 0.9, hit[0.0].mean()  # the slit beside the skin
+    assert hit[0.1].all(), hit[0.1].mean()
+
+
+def test_ground_beneath_objects_is_filled_in_passes_like_the_shadows():
+    """The ground beneath objects is filled row by row and column by column between ground cells, like the
+    shadows; it took one pass where the shadows take three. A band whose rows end at the scan's edge on one side
+    (a sweep's far range: seq00_000001, 2 x 6 m under a road, 532 of its failing driving-lane rays) lies between
+    ground filled beneath objects north and south of it, which counted as ground only for the shadows: the band
+    stayed open. Now the cells filled beneath objects count as ground in the next pass too."""
+    from twinkit.mesh import compact
+    from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
+    from twinkit.surface.watertight import drop_test
+
+    g = np.arange(0, 10.0001, 0.05)
+    X, Y = np.meshgrid(g, g)
+    p = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
+    band = (p[:, 1] > 3.9) & (p[:, 1] < 6.1)
+    ground = p[((p[:, 0] <= 1) & ~band) | (p[:, 0] >= 8)]  # no ground west of the band: the scan's edge
+    fy = np.arange(0, 10.0001, 0.05)
+    fence = np.vstack([np.c_[np.full_like(fy, x), fy, np.full_like(fy, z)]  # a low fence across every row
+                       for x in (3.0, 3.1) for z in np.arange(0.3, 0.9, 0.1)])
+    wx = np.arange(0, 1.0001, 0.05)  # a house's wall closes the band's west end on its north side
+    wall = np.vstack([np.c_[wx, np.full_like(wx, 3.95), np.full_like(wx, z)] for z in np.arange(0.3, 3.6, 0.1)])
+    pts = np.vstack([ground, fence, wall])
+    nrm = np.vstack([np.tile([0.0, 0.0, 1.0], (len(ground), 1)), np.tile([1.0, 0.0, 0.0], (len(fence), 1)),
+                     np.tile([0.0, 1.0, 0.0], (len(wall), 1))])
+    mesh = grid_mesh(101, size=10.0)
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    mesh = compact(mesh, ((c[:, 0] < 1) & ((c[:, 1] < 3.9) | (c[:, 1] > 6.1))) | (c[:, 0] > 8))
+    xs, ys = np.meshgrid(np.arange(4.0, 7.0, 0.1), np.arange(4.3, 5.8, 0.1))
+    rays = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    hit = {}
+    for passes in (1, 3):
+        out, rep = fill_ground_holes(mesh, pts, nrm, None, GroundFillOptions(cell_m=0.1, passes=passes))
+        hit[passes] = drop_test(out.vertices, out.faces, rays, 0.05)
+        north = drop_test(out.vertices, out.faces, rays + [0.0, 3.0, 0.0], 0.05)
+        assert north.all(), (passes, rep)  # beneath the fence where ground lies on both sides: either way
+    assert not hit[1].any(), hit[1].mean()
+    assert hit[3].all(), hit[3].mean()

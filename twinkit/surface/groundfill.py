@@ -60,6 +60,11 @@ class GroundFillOptions:
     under_clearance_m: float = 1.5  # ... or hanging at least this high (canopies, awnings)
     kerb_step_m: float = 0.3  # ... the two sides may differ by a kerb step
     max_slope: float = 0.15  # ... plus this slope over the gap (steeper than any street)
+    sliver_max_m: float = 0.10  # (with stitch) closed shells this thin (volume / area seen from above) lying on the
+    #                             ground the fill covers are taken out before it: Poisson's skin around a lone scan
+    #                             line whose surroundings the trim removed. Left in, the fill stops short of it on
+    #                             every side (its top is surface, its outline no open border to join) and leaves
+    #                             a slit along it that a wheel falls through. 0: kept
     smooth_cells: int = 0  # the shadows' heights: the median over this many cells square of the filled and
     #                        ground cells around (0: off; the clean step turns it on for ground sampled in rings).
     #                        Each shadow cell's height is interpolated along its row and its column; where the
@@ -188,6 +193,51 @@ def _cover(scene, xy: np.ndarray, z: np.ndarray, band: float) -> np.ndarray:
     return t <= 2 * band
 
 
+def ground_slivers(vertices: np.ndarray, faces: np.ndarray, cover: np.ndarray, height: np.ndarray, lo: np.ndarray,
+                   cell_m: float, max_thick_m: float, band_m: float) -> tuple[np.ndarray, int]:
+    """(faces (f,) bool, how many components): the mesh's connected components that are thin closed shells on
+    the ground: their faces seen from above at least half as much facing down as up (a shell, not a sheet),
+    their volume over their area seen from above at most ``max_thick_m``, and every vertex over a ``cover``
+    cell (ny, nx) within ``band_m`` of its ``height``."""
+    from twinkit.mesh.topology import components
+
+    if len(faces) == 0:
+        return np.zeros(0, bool), 0
+    k, comp = components(len(vertices), faces)
+    t = vertices[faces]
+    o = t[:, 0]
+    e1, e2 = t[:, 1] - o, t[:, 2] - o
+    seen = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])  # area seen from above, signed: > 0 faces up
+    up = np.bincount(comp, np.clip(seen, 0, None), k)
+    down = np.bincount(comp, np.clip(-seen, 0, None), k)
+    base = np.full((k, 3), np.inf)
+    np.minimum.at(base, comp, t.min(axis=1))  # each component's volume about its own corner (less round-off)
+    a, b, c = (t[:, i] - base[comp] for i in range(3))
+    vol = np.abs(np.bincount(comp, np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0, k))
+    thin = (up > 0) & (down >= 0.5 * up) & (vol <= max_thick_m * np.maximum(up, 1e-12))
+    if not thin.any():
+        return np.zeros(len(faces), bool), 0
+    ny, nx = cover.shape
+    ij = np.floor((vertices[:, :2] - lo) / cell_m).astype(np.int64)
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)
+    ij[~inside] = 0
+    on = inside & cover[ij[:, 1], ij[:, 0]] & (np.abs(vertices[:, 2] - height[ij[:, 1], ij[:, 0]]) <= band_m)
+    thin &= np.bincount(comp, ~on[faces].all(axis=1), k) == 0
+    return thin[comp], int(thin.sum())
+
+
+def _without_slivers(mesh: Mesh, cover: np.ndarray, height: np.ndarray, lo: np.ndarray, opt: GroundFillOptions,
+                     rep: dict) -> Mesh:
+    """The mesh less its :func:`ground_slivers` over the cells the fill covers (the fill runs over them)."""
+    from twinkit.mesh import compact
+
+    assert mesh.faces is not None  # a mesh, not a cloud
+    drop, n = ground_slivers(mesh.vertices, mesh.faces, cover, height, lo, float(opt.cell_m), opt.sliver_max_m,
+                             opt.cover_band_m)
+    rep["slivers_removed"] = {"components": n, "faces": int(drop.sum())}
+    return compact(mesh, ~drop) if n else mesh
+
+
 def _stitched_fill(mesh: Mesh, cand: np.ndarray, height: np.ndarray, zloc: np.ndarray, lo: np.ndarray,
                    opt: GroundFillOptions, rep: dict):
     """The fill joined to the mesh: (new vertices (k, 3), new faces (f, 3) indexing ``mesh.vertices`` then the
@@ -290,12 +340,28 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
             low = (bmax <= opt.under_max_top_m) | (bmin >= opt.under_clearance_m)
             see = np.where((cls == 2) & low, 0, cls).astype(np.int8)
             see[(cls == 1) & ~(gz <= zwide + opt.under_rise_m)] = 0
-            under, uz = _holes(see, gz, max_cells, max_rise=(opt.kerb_step_m, opt.max_slope * c))
-            under &= ~cand
+            under = np.zeros((ny, nx), bool)
+            uz = np.full((ny, nx), np.nan)
+            sz = gz
+            for _ in range(max(1, int(opt.passes))):  # as above: the cells filled so far count as ground
+                new, z = _holes(see, sz, max_cells, max_rise=(opt.kerb_step_m, opt.max_slope * c))
+                new &= ~cand & ~under
+                if not new.any():
+                    break
+                under |= new
+                uz[new] = z[new]
+                see, sz = see.copy(), sz.copy()
+                see[new] = 1
+                sz[new] = z[new]
             rep["under_object_cells"] = int(under.sum())
             cand = cand | under
             height = np.where(under, uz, height)
         height = smooth_heights(height, hole, gz0, cls0 == 1, opt.smooth_cells)
+        if opt.sliver_max_m > 0:
+            # over the measured ground, the shadows and beneath canopies; not where a low object stands (a
+            # bicycle's wheels leave a shell as thin on the ground)
+            on = hole | (cls0 == 1) | (cand & (bmin >= opt.under_clearance_m))
+            mesh = _without_slivers(mesh, on, height, lo, opt, rep)
         pv, pf = _stitched_fill(mesh, cand, height, zloc, lo, opt, rep)
         if len(pf) == 0:
             rep.update(filled_cells=0, faces_added=0)

@@ -129,6 +129,12 @@ class CleanParams:
                                                "off; -1 = auto: 5 where the cloud's ground is sampled in rings "
                                                "(density ground_two_way_share under 0.5: a spinning sweep), else "
                                                'off (docs/pointcloud.md "The fill without streaks").')
+    fill_ground_sliver_max_m: float = param(0.10, ge=0,
+                                            help="Before the fill, take out the closed shells on the ground it "
+                                                 "covers that are at most this thick (m, volume over area seen from "
+                                                 "above): Poisson's skin around a lone scan line, which the fill "
+                                                 "would stop short of, leaving a slit along it; 0 = keep them "
+                                                 '(docs/pointcloud.md "Slivers under the fill").')
     colormap_max_m: float = param(0.0, ge=0,
                                   help="The distance colour map of the report saturates at this distance (m); 0 = "
                                        "max_dist_m (or the p99 distance).")

@@ -195,7 +195,8 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                                repair_non_manifold=params.repair_non_manifold, max_hole_edges=params.max_hole_edges,
                                fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
                                fill_ground_stitch=params.fill_ground_stitch,
-                               fill_ground_smooth_cells=auto["fill_ground_smooth_cells"], threads=_threads(ctx))
+                               fill_ground_smooth_cells=auto["fill_ground_smooth_cells"],
+                               fill_ground_sliver_max_m=params.fill_ground_sliver_max_m, threads=_threads(ctx))
             mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         with ctx.substep("write"):
             mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]
