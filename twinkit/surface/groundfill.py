@@ -376,6 +376,7 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
     if mesh.n_faces:
         from .closest import Surface
 
+        assert mesh.faces is not None  # a mesh, not a cloud
         d = Surface(mesh.vertices, mesh.faces, opt.threads).distance(centres)
         fill = d > opt.keep_if_mesh_within_m
     else:
