@@ -325,9 +325,43 @@ def test_ground_beneath_objects_is_filled_in_passes_like_the_shadows():
     rays = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
     hit = {}
     for passes in (1, 3):
-        out, rep = fill_ground_holes(mesh, pts, nrm, None, GroundFillOptions(cell_m=0.1, passes=passes))
+        out, rep = fill_ground_holes(mesh, pts, nrm, None, GroundFillOptions(cell_m=0.1, passes=passes,
+                                                                             diagonal_gap_m=0.0))
         hit[passes] = drop_test(out.vertices, out.faces, rays, 0.05)
         north = drop_test(out.vertices, out.faces, rays + [0.0, 3.0, 0.0], 0.05)
         assert north.all(), (passes, rep)  # beneath the fence where ground lies on both sides: either way
     assert not hit[1].any(), hit[1].mean()
     assert hit[3].all(), hit[3].mean()
+
+
+def test_ground_fill_reaches_past_a_staircase_along_the_diagonals():
+    """Where the ground's edge runs askew to the grid (a sweep's far range), a fill along rows and columns only
+    stops at a staircase: a cell in a step's notch has ground on one side of its row and of its column, nothing on
+    the other. A lane along that edge fell through the notches (spvnas_sample_000000: 206 of its 300 failing
+    driving-lane rays). Along the diagonals the notch lies between two steps: filled, up to the line through the
+    steps' corners and never beyond it."""
+    from twinkit.mesh import compact
+    from twinkit.surface.groundfill import GroundFillOptions, fill_ground_holes
+    from twinkit.surface.watertight import drop_test
+
+    g = np.arange(0, 12.0001, 0.05)
+    X, Y = np.meshgrid(g, g)
+    step = 1.6  # the staircase: ground where (x // step + y // step) * step < 8 m, its edge running at -45 deg
+    inside = (np.floor(X / step) + np.floor(Y / step)) * step < 8.0 - 1e-9
+    p = np.c_[X[inside], Y[inside], np.zeros(inside.sum())]
+    nrm = np.tile([0.0, 0.0, 1.0], (len(p), 1))
+    mesh = grid_mesh(121, size=12.0)
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    mesh = compact(mesh, (np.floor(c[:, 0] / step) + np.floor(c[:, 1] / step)) * step < 8.0 - 1e-9)
+    # rays in the notches: just outside each step's corner, inside the line through the outer corners
+    corners = [(i * step, (5 - i) * step) for i in range(1, 5)]
+    notch = np.array([[x + 0.3, y + 0.3, 0.0] for x, y in corners] + [[x + 0.5, y + 0.2, 0.0] for x, y in corners])
+    beyond = np.array([[x + 1.2, y + 1.2, 0.0] for x, y in corners])  # past the line through the corners
+    hit = {}
+    for gap in (0.0, GroundFillOptions().diagonal_gap_m):  # off, the default
+        out, rep = fill_ground_holes(mesh, p, nrm, None, GroundFillOptions(cell_m=0.1, diagonal_gap_m=gap))
+        hit[gap] = drop_test(out.vertices, out.faces, notch, 0.05)
+        assert not drop_test(out.vertices, out.faces, beyond, 0.05).any(), (gap, rep)
+        assert (rep["diagonal_cells"] > 0) == (gap > 0), rep
+    assert not hit[0.0].any(), hit[0.0]
+    assert hit[GroundFillOptions().diagonal_gap_m].all(), hit

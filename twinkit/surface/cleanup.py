@@ -53,6 +53,7 @@ class CleanOptions:
     fill_ground_stitch: bool = True
     fill_ground_smooth_cells: int = 0  # the shadows' heights smoothed by a median this many cells square (groundfill)
     fill_ground_sliver_max_m: float = 0.10  # thin closed shells on the filled ground taken out first (groundfill)
+    fill_ground_diagonal_gap_m: float = 3.0  # a last round of shadows along the diagonals, this short (groundfill)
     threads: int = -1
     loose_dist_m: float = 0.0  # vertices flagged by clean_mesh's ``loose`` mask are trimmed at this distance instead
 
@@ -321,15 +322,18 @@ def clean_mesh(mesh: Mesh, points: np.ndarray, opt: CleanOptions, log=None,
                                                          max_gap_m=opt.fill_ground_max_gap_m, threads=opt.threads,
                                                          stitch=opt.fill_ground_stitch,
                                                          smooth_cells=opt.fill_ground_smooth_cells,
-                                                         sliver_max_m=opt.fill_ground_sliver_max_m),
+                                                         sliver_max_m=opt.fill_ground_sliver_max_m,
+                                                         diagonal_gap_m=opt.fill_ground_diagonal_gap_m),
                                        tree=tree)
         frep.update(vertices=mesh.n_vertices, faces=mesh.n_faces)
         rep["ground_fill"] = frep
         if log is not None:
             sl = (frep.get("slivers_removed") or {}).get("components", 0)
-            log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled%s", frep.get("filled_cells", 0),
+            dg = frep.get("diagonal_cells", 0)
+            log.info("ground fill: %d cells (%.1f m^2) of occlusion shadow filled%s%s", frep.get("filled_cells", 0),
                      frep.get("area_m2", 0.0),
-                     f", over {sl} thin shells around lone scan lines taken out first" if sl else "")
+                     f", over {sl} thin shells around lone scan lines taken out first" if sl else "",
+                     f"; {dg} cells found along the diagonals (the notches of a staircase edge)" if dg else "")
     d = vertex_cloud_distance(mesh.vertices, points, opt.threads, tree)
     mesh.attrs["dist_to_cloud_m"] = d
     rep["output"] = {"vertices": mesh.n_vertices, "faces": mesh.n_faces, "dist_to_cloud_m": _dist_stats(d)}

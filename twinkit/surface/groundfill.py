@@ -42,6 +42,13 @@ class GroundFillOptions:
     local_window_m: float = 4.0
     keep_if_mesh_within_m: float = 0.05
     passes: int = 3  # later passes treat the cells filled before as ground (shadows seen along one axis)
+    diagonal_gap_m: float = 3.0  # after the passes, one more: an empty cell between ground cells at most this far
+    #                              apart along either diagonal is a shadow too. Where the ground's edge runs askew to
+    #                              the grid (a sweep's far range) rows and columns fill up to a staircase, and a
+    #                              lane's edge falls through its notches; the notches lie between two steps along
+    #                              the diagonal. Short, and once, so it closes notches and grows nothing (along 8 m
+    #                              diagonals in every pass the fill reached 41 % further into a sweep's far range).
+    #                              0: off
     threads: int = -1
     # joining the fill to the reconstructed surface (``stitch``): the fill is one constrained Delaunay
     # triangulation (2D, seen from above) of the cells' centres and the mesh's open border near them,
@@ -127,36 +134,95 @@ def cell_classes(points: np.ndarray, normals: np.ndarray, opt: GroundFillOptions
     return cls.reshape(ny, nx), g.z, lo
 
 
-def _holes(cls: np.ndarray, gz: np.ndarray, max_cells: int, max_rise: tuple[float, float] | None = None):
-    """Empty cells with ground on both sides along x or along y (at most ``max_cells`` apart) and
-    their height interpolated linearly between those ground cells: (mask, height). ``max_rise``
-    (step, slope per cell): the two sides may differ in height by at most step + slope * cells."""
+def _skew(a: np.ndarray, anti: bool, pad) -> np.ndarray:
+    """``a`` (ny, nx) sheared so that its diagonals become columns: cell (i, j) goes to column j - i + ny - 1
+    (``anti``: i + j); the cells that fall outside the grid are ``pad``."""
+    ny, nx = a.shape
+    out = np.full((ny, nx + ny - 1), pad, dtype=a.dtype)
+    i, j = np.indices((ny, nx))
+    out[i, i + j if anti else j - i + ny - 1] = a
+    return out
+
+
+def _unskew(b: np.ndarray, shape: tuple[int, int], anti: bool) -> np.ndarray:
+    """The grid (``shape``) back from a sheared ``b`` (``_skew``)."""
+    ny, nx = shape
+    i, j = np.indices((ny, nx))
+    return b[i, i + j if anti else j - i + ny - 1]
+
+
+def _between(cls: np.ndarray, gz: np.ndarray, max_cells: int, max_rise: tuple[float, float] | None,
+             step: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Along axis 0: the empty cells with ground on both sides at most ``max_cells`` apart, and their heights
+    interpolated between those two ground cells ((mask, estimate)); ``step``: the length of one step along
+    axis 0 in cell sides (sqrt 2 on a sheared diagonal), for the rise allowed over the distance."""
     ny, nx = cls.shape
-    est_sum = np.zeros((ny, nx))
-    est_n = np.zeros((ny, nx))
-    for axis in (0, 1):
-        a = _first_nonempty(cls, axis, reverse=False)
-        b = _first_nonempty(cls, axis, reverse=True)
-        pos = np.indices((ny, nx))[axis]
-        ok = (cls == 0) & (a >= 0) & (b >= 0) & ((b - a) <= max_cells)
-        ia, ib = np.where(ok, a, 0), np.where(ok, b, 0)
-        if axis == 0:
-            ca, cb = cls[ia, np.arange(nx)[None, :]], cls[ib, np.arange(nx)[None, :]]
-            za, zb = gz[ia, np.arange(nx)[None, :]], gz[ib, np.arange(nx)[None, :]]
-        else:
-            ca, cb = cls[np.arange(ny)[:, None], ia], cls[np.arange(ny)[:, None], ib]
-            za, zb = gz[np.arange(ny)[:, None], ia], gz[np.arange(ny)[:, None], ib]
-        ok &= (ca == 1) & (cb == 1)
-        if max_rise is not None:
-            with np.errstate(invalid="ignore"):
-                rise = np.abs(np.where(ok, zb - za, 0.0))
-            ok &= rise <= max_rise[0] + max_rise[1] * np.abs(ib - ia)
-        t = np.where(ok, (pos - ia) / np.maximum(ib - ia, 1), 0.0)
-        za, zb = np.where(ok, za, 0.0), np.where(ok, zb, 0.0)
-        est_sum += np.where(ok, za * (1 - t) + zb * t, 0.0)
-        est_n += ok
+    a = _first_nonempty(cls, 0, reverse=False)
+    b = _first_nonempty(cls, 0, reverse=True)
+    pos = np.indices((ny, nx))[0]
+    ok = (cls == 0) & (a >= 0) & (b >= 0) & ((b - a) <= max_cells)
+    ia, ib = np.where(ok, a, 0), np.where(ok, b, 0)
+    cols = np.arange(nx)[None, :]
+    ok &= (cls[ia, cols] == 1) & (cls[ib, cols] == 1)
+    za, zb = gz[ia, cols], gz[ib, cols]
+    if max_rise is not None:
+        with np.errstate(invalid="ignore"):
+            rise = np.abs(np.where(ok, zb - za, 0.0))
+        ok &= rise <= max_rise[0] + max_rise[1] * step * np.abs(ib - ia)
+    t = np.where(ok, (pos - ia) / np.maximum(ib - ia, 1), 0.0)
+    est = np.where(ok, np.where(ok, za, 0.0) * (1 - t) + np.where(ok, zb, 0.0) * t, 0.0)
+    return ok, est
+
+
+def _holes(cls: np.ndarray, gz: np.ndarray, max_cells: int, max_rise: tuple[float, float] | None = None,
+           diagonal: bool = False):
+    """Empty cells with ground on both sides along x or along y (``diagonal``: along either diagonal instead), at
+    most ``max_cells`` (cell lengths) apart, and their height interpolated linearly between those ground cells
+    (the mean over the directions that find both): (mask, height). ``max_rise`` (step, slope per cell): the two
+    sides may differ in height by at most step + slope * distance."""
+    shape = cls.shape
+    est_sum = np.zeros(shape)
+    est_n = np.zeros(shape)
+    if diagonal:
+        n = int(max_cells / np.sqrt(2.0))
+        for anti in (False, True):
+            ok, est = _between(_skew(cls, anti, 0), _skew(gz, anti, np.nan), n, max_rise, np.sqrt(2.0))
+            est_sum += _unskew(est, shape, anti)
+            est_n += _unskew(ok, shape, anti)
+    else:
+        for t in (False, True):
+            ok, est = _between(cls.T if t else cls, gz.T if t else gz, max_cells, max_rise)
+            est_sum += est.T if t else est
+            est_n += ok.T if t else ok
     hole = est_n > 0
     return hole, np.where(hole, est_sum / np.maximum(est_n, 1), np.nan)
+
+
+def _fill_passes(cls: np.ndarray, gz: np.ndarray, max_cells: int, diagonal_cells: int, max_rise, passes: int,
+                 skip: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """The shadows (``_holes``) in ``passes`` rounds, the cells filled so far counting as ground in the next, then
+    one round along the diagonals up to ``diagonal_cells`` (0: none); ``skip`` cells are never filled. Returns
+    (filled, height, how many cells the diagonal round filled)."""
+    filled = np.zeros(cls.shape, bool)
+    height = np.full(cls.shape, np.nan)
+    rounds = [(max_cells, False)] * max(1, int(passes)) + ([(diagonal_cells, True)] if diagonal_cells > 0 else [])
+    settled = False  # nothing more along rows and columns: on to the diagonal round
+    n_diagonal = 0
+    for cells, diagonal in rounds:
+        if settled and not diagonal:
+            continue
+        new, z = _holes(cls, gz, cells, max_rise=max_rise, diagonal=diagonal)
+        new &= ~filled if skip is None else ~(filled | skip)
+        if not new.any():
+            settled = True
+            continue
+        filled |= new
+        height[new] = z[new]
+        n_diagonal += int(new.sum()) if diagonal else 0
+        cls, gz = cls.copy(), gz.copy()
+        cls[new] = 1
+        gz[new] = z[new]
+    return filled, height, n_diagonal
 
 
 def smooth_heights(height: np.ndarray, fill: np.ndarray, ground_z: np.ndarray, ground: np.ndarray, size: int,
@@ -308,19 +374,13 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
     cls0, gz0 = cls, gz
     ny, nx = cls.shape
     max_cells = int(opt.max_gap_m / c)
-    hole = np.zeros((ny, nx), bool)
-    hz = np.full((ny, nx), np.nan)
+    diag_cells = int(opt.diagonal_gap_m / c)
+    rise = (opt.kerb_step_m, opt.max_slope * c)
     n_ground = int((cls == 1).sum())
-    for _ in range(max(1, int(opt.passes))):
-        new, z = _holes(cls, gz, max_cells, max_rise=(opt.kerb_step_m, opt.max_slope * c))
-        if not new.any():
-            break
-        hole |= new
-        hz[new] = z[new]
-        cls, gz = cls.copy(), gz.copy()
-        cls[new] = 1  # the next pass sees the cells filled so far as ground
-        gz[new] = z[new]
-    rep = {"cell_m": c, "ground_cells": n_ground, "hole_cells": int(hole.sum())}
+    hole, hz, n_diag = _fill_passes(cls, gz, max_cells, diag_cells, rise, opt.passes)
+    cls = np.where(hole, 1, cls).astype(np.int8)  # the cells filled count as ground beneath objects too
+    gz = np.where(hole, hz, gz)
+    rep = {"cell_m": c, "ground_cells": n_ground, "hole_cells": int(hole.sum()), "diagonal_cells": n_diag}
     if opt.stitch and mesh.n_faces:
         # cells to cover: the shadows, and ground cells the trimmed mesh no longer covers
         cand = hole | (cls0 == 1)
@@ -340,19 +400,8 @@ def fill_ground_holes(mesh: Mesh, points: np.ndarray, normals: np.ndarray, color
             low = (bmax <= opt.under_max_top_m) | (bmin >= opt.under_clearance_m)
             see = np.where((cls == 2) & low, 0, cls).astype(np.int8)
             see[(cls == 1) & ~(gz <= zwide + opt.under_rise_m)] = 0
-            under = np.zeros((ny, nx), bool)
-            uz = np.full((ny, nx), np.nan)
-            sz = gz
-            for _ in range(max(1, int(opt.passes))):  # as above: the cells filled so far count as ground
-                new, z = _holes(see, sz, max_cells, max_rise=(opt.kerb_step_m, opt.max_slope * c))
-                new &= ~cand & ~under
-                if not new.any():
-                    break
-                under |= new
-                uz[new] = z[new]
-                see, sz = see.copy(), sz.copy()
-                see[new] = 1
-                sz[new] = z[new]
+            under, uz, n_diag_under = _fill_passes(see, gz, max_cells, diag_cells, rise, opt.passes, skip=cand)
+            rep["diagonal_cells"] += n_diag_under
             rep["under_object_cells"] = int(under.sum())
             cand = cand | under
             height = np.where(under, uz, height)

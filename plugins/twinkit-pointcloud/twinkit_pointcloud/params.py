@@ -135,6 +135,14 @@ class CleanParams:
                                                  "above): Poisson's skin around a lone scan line, which the fill "
                                                  "would stop short of, leaving a slit along it; 0 = keep them "
                                                  '(docs/pointcloud.md "Slivers under the fill").')
+    fill_ground_diagonal_gap_m: float = param(3.0, ge=0,
+                                              help="After the passes along rows and columns, one along the "
+                                                   "diagonals: an empty cell between ground cells at most this far "
+                                                   "apart diagonally is a shadow too (m). It closes the notches of "
+                                                   "the staircase that rows and columns leave where the ground's edge "
+                                                   "runs askew to the grid (a sweep's far range), which a lane's edge "
+                                                   "falls through; 0 = off (docs/pointcloud.md \"The fill's "
+                                                   "staircase\").")
     colormap_max_m: float = param(0.0, ge=0,
                                   help="The distance colour map of the report saturates at this distance (m); 0 = "
                                        "max_dist_m (or the p99 distance).")

@@ -196,7 +196,8 @@ def clean_mesh(params: CleanParams, ctx, *, in_dense_mesh_ply: Path, in_points_p
                                fill_ground_cell_m=auto["fill_ground_cell_m"], fill_ground_max_gap_m=params.fill_ground_max_gap_m,
                                fill_ground_stitch=params.fill_ground_stitch,
                                fill_ground_smooth_cells=auto["fill_ground_smooth_cells"],
-                               fill_ground_sliver_max_m=params.fill_ground_sliver_max_m, threads=_threads(ctx))
+                               fill_ground_sliver_max_m=params.fill_ground_sliver_max_m,
+                               fill_ground_diagonal_gap_m=params.fill_ground_diagonal_gap_m, threads=_threads(ctx))
             mesh, rep = _clean(dense, cloud.vertices, opt, log=ctx.log, normals=cloud.normals, colors=cloud.colors)
         with ctx.substep("write"):
             mesh.comments = ["twinkit-pointcloud clean_mesh; dist_to_cloud_m = distance to the nearest input point"]

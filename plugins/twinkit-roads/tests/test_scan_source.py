@@ -654,6 +654,35 @@ def test_a_lane_over_ground_the_scan_never_measured_is_off_an_enclosed_hole_is_l
     assert chk3["bare_samples"] > 20 and not chk3["narrow"] and not chk3["nudge"]
 
 
+def test_a_road_end_over_ground_the_scan_never_measured_is_cut_back_until_its_lanes_are_whole(tmp_path):
+    """A sweep's far range ends in a staircase of filled ground: the last metres of a road that runs out there
+    have the outer edge of a lane over nothing (seq00_000000: 61 of its 179 failing drop-test rays, all within 5 m
+    of a road's free end). Too few samples for the lane check's share (2 of 14 across the road), so the road was
+    kept, and the drop test lost them. From a free end the road is now cut back to the last shape point with a
+    sample over never-measured ground; inside the road the same notch cuts nothing (the road would be split)."""
+    from twinkit.surface.watertight import OpenGround
+
+    p = scan.ScanSourceParams()
+    v, f, net, text = _aerial_net_and_map(tmp_path, p)
+    ends = [k for k, arm in enumerate(net.arms) if net.nodes[arm.b]["kind"] == "end" or net.nodes[arm.a]["kind"] == "end"]
+    assert ends
+    c = v[f].mean(axis=1)
+    end_notch = (c[:, 0] > 33.0) & (c[:, 1] < -2.3)  # the south lane's outer edge, the last 7 m, open to the south
+    mid_notch = (c[:, 0] > -5.0) & (c[:, 0] < -1.0) & (c[:, 1] < -2.3)  # the same 4 m inside the road
+    f2 = f[~end_notch & ~mid_notch]
+    bare = OpenGround.of_mesh(v, f2, p.open_gap_m)
+    assert bare.at(np.array([[36.0, -2.7], [-3.0, -2.7]])).all()
+    chk = scan.check_lanes(net, text, v, f2, p, unscanned=bare)
+    assert chk["bad_points"], chk
+    for k, b in chk["bad_points"].items():
+        xy = net.arms[k].xy[b]
+        assert (xy[:, 0] > 30.0).all(), xy  # only the end, back to where the lanes are whole
+    cut_x = [net.arms[k].xy[b][:, 0].min() for k, b in chk["bad_points"].items()]
+    assert min(cut_x) < 34.5
+    old = scan.check_lanes(net, text, v, f2, dataclasses.replace(p, end_unscanned_share=1.0), unscanned=bare)
+    assert not old["bad_points"], old["bad_points"]  # the share rule alone keeps the whole road
+
+
 def test_every_scan_parameter_says_what_it_does():
     """Each road_source=scan parameter carries its one line of help (param(help=...)), not a # comment."""
     from twinkit.ranges import help_of

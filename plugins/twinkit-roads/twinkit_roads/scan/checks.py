@@ -252,8 +252,14 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     n_on = np.bincount(i, weights=on[src].astype(float), minlength=len(owner))
     n_all = np.bincount(i, minlength=len(owner)).astype(float)
     bad_pt = (n_all >= 5) & (n_on < p.min_lane_support * n_all)
-    for k in range(len(net.arms)):
-        b = bad_pt[owner == k][np.argsort(index[owner == k])]
+    n_bare = np.bincount(i, weights=lh["bare"][src].astype(float), minlength=len(owner))
+    bare_pt = (n_all >= 5) & (n_bare > p.end_unscanned_share * n_all)
+    sparse_pt = n_all < 5
+    for k, arm in enumerate(net.arms):
+        order = np.argsort(index[owner == k])
+        b = bad_pt[owner == k][order]
+        _cut_bare_ends(b, bare_pt[owner == k][order], sparse_pt[owner == k][order],
+                       [net.nodes.get(arm.a, {}).get("kind") == "end", net.nodes.get(arm.b, {}).get("kind") == "end"])
         if b.any():
             res["bad_points"][k] = b
     # each side's outermost edge_band_m: off the scan along the road while the rest of that side is on (the
@@ -266,6 +272,29 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     res["narrow"] = _narrow_sides(net, p, lateral, edge_off, arm_of)
     res["nudge"] = _nudge_stretches(net, p, lateral, edge_off, arm_of, i, res["narrow"])
     return res
+
+
+def _cut_bare_ends(bad: np.ndarray, bare: np.ndarray, sparse: np.ndarray, free: list[bool]) -> None:
+    """Mark in ``bad`` (per shape point, in place) the shape points from each ``free`` end (start, end) up to the
+    last one whose lanes lie over ground the scan never measured (``bare``), walking on over points with too few
+    samples to judge (``sparse``): a road's free end lies where the capture or its carriageway ends, and a lane
+    there is either whole on the scanned ground or it is cut back to where it is."""
+    n = len(bad)
+    for at_start, is_free in zip((True, False), free):
+        if not is_free:
+            continue
+        seq = range(n) if at_start else range(n - 1, -1, -1)
+        last = None
+        for j in seq:
+            if bare[j]:
+                last = j
+            elif not sparse[j]:
+                break
+        if last is not None:
+            if at_start:
+                bad[:last + 1] = True
+            else:
+                bad[last:] = True
 
 
 def nearest_axis(net: Network, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

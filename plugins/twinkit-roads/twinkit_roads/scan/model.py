@@ -111,6 +111,12 @@ class ScanSourceParams:
                                    "scan's edge: twinkit.surface.watertight.OpenGround); a smaller enclosed patch "
                                    "is a hole lift_movables closes (its ground_hole_max_m) and is left to the drop "
                                    "test (m; 0: every hole is left)")
+    end_unscanned_share: float = param(0.0, ge=0, le=1,
+                                       help="lane check: from a road's free end (where the capture or the "
+                                            "carriageway ends), a shape point with more than this share of its "
+                                            "driving-lane samples over ground the scan never measured (open_gap_m) "
+                                            "is cut back, up to the last such point: the road ends where its lanes "
+                                            "lie whole on scanned ground (1: as inside a road, min_lane_support)")
     lane_clear_m: float = param(2.0, ge=0, le=10,
                                 help="lane check: a sample with anything over it lower than this above the lane is "
                                      "off the scan (a hedge, a low roof; 0: no test; m)")
