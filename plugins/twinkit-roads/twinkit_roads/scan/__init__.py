@@ -29,23 +29,23 @@ What a person does by hand in RoadRunner from lidar, as a road source (``road_so
 from __future__ import annotations
 
 from .build import build_network, check_round, no_roads_report, scan_metrics, scan_report
-from .checks import (check_lanes, check_sidewalks, cut_arms, detach_junctions, lane_heights, narrow_arms, nudge_arms, parked_faces,
+from .checks import (bare_turns, check_lanes, check_sidewalks, cut_arms, detach_junctions, lane_heights, narrow_arms, nudge_arms, parked_faces,
                      steps_across, trim_unsupported)
 from .geometry import lane_layout
 from .inputs import choose_curbs, cloud_sampling, cloud_xy, level_params, read_labels, read_truth
 from .masks import carriageway_mask, measured
 from .measures import covered, describe, in_junctions, lanes_on_road, network_length, record_stage, street_axis
 from .model import Arm, Network, NoRoads, ScanSourceParams, empty_network
-from .netconvert import empty_map, is_empty_map, mark_source, netconvert_plain, write_plain
+from .netconvert import empty_map, is_empty_map, mark_source, netconvert_plain, write_plain, write_turns
 from .network import WALK_MAX_M, add_heights_and_signals, add_sidewalks, derive_network
 from .picture import draw_scan_roads
 from .skeleton import skeleton_graph, thin
 
 __all__ = ["Arm", "Network", "NoRoads", "ScanSourceParams", "WALK_MAX_M", "add_heights_and_signals", "add_sidewalks",
-           "build_network", "carriageway_mask", "check_lanes", "check_round", "check_sidewalks", "choose_curbs", "cloud_sampling", "cloud_xy",
+           "bare_turns", "build_network", "carriageway_mask", "check_lanes", "check_round", "check_sidewalks", "choose_curbs", "cloud_sampling", "cloud_xy",
            "covered", "in_junctions", "level_params",
            "cut_arms", "derive_network", "describe", "detach_junctions", "draw_scan_roads", "empty_map",
            "empty_network", "is_empty_map", "lane_heights", "lane_layout", "lanes_on_road", "mark_source",
            "measured", "narrow_arms", "netconvert_plain", "network_length", "no_roads_report", "nudge_arms", "parked_faces",
            "read_labels", "read_truth", "record_stage", "scan_metrics", "scan_report", "skeleton_graph",
-           "steps_across", "street_axis", "thin", "trim_unsupported", "write_plain"]
+           "steps_across", "street_axis", "thin", "trim_unsupported", "write_plain", "write_turns"]

@@ -9,7 +9,7 @@ import numpy as np
 from .checks import check_lanes, check_sidewalks, cut_arms, detach_junctions, narrow_arms, nudge_arms, parked_faces, trim_unsupported
 from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
-from .netconvert import netconvert_plain, write_plain
+from .netconvert import netconvert_plain, write_plain, write_turns
 from .network import add_heights_and_signals, add_sidewalks, carriageway_level, derive_network
 
 
@@ -46,7 +46,8 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
         bare = OpenGround.of_mesh(mesh.vertices, kept, p.open_gap_m)
     for rnd in range(p.lane_check_rounds + 1):
         nod, edg = write_plain(net, p, proj, work)
-        info = netconvert_plain(nod, edg, out_xodr, p, log, surface=lambda xy: net.grid.sample(zr, xy))
+        info = netconvert_plain(nod, edg, out_xodr, p, log, surface=lambda xy: net.grid.sample(zr, xy),
+                                con=write_turns(net, edg, work))
         if rnd == p.lane_check_rounds:
             break
         row = check_round(net, out_xodr.read_text(encoding="utf-8"), mesh, p, scene, rnd, log, parked, bare)
@@ -72,6 +73,11 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
            "unscanned_samples": chk["bare_samples"],
            "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
            "roads_off": len(chk["bad_points"])}
+    turns = [t for t in chk["bad_turns"]
+             if not any(t[0] == u[0] and np.hypot(*(t[1] - u[1])) < 1.0 and np.hypot(*(t[2] - u[2])) < 1.0
+                        for u in net.no_turns)]
+    net.no_turns.extend(turns)
+    row["turns_dropped"] = len(turns)
     walks = check_sidewalks(net, xodr_text, p, scene)
     if walks:
         row["sidewalks_changed"] = walks
@@ -81,7 +87,8 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
                      + (f"narrowed {w['from_m']:.2f} -> {w['to_m']:.2f} m" if w["to_m"] > 0 else
                         f"dropped ({w['from_m']:.2f} m wide, its kerb band on the scan over "
                         f"{100 * w['kerb_band_on']:.0f} % of it)") for w in walks))
-    if not chk["bad_points"] and not chk["bad_junctions"] and not chk["narrow"] and not chk["nudge"] and not walks:
+    if (not chk["bad_points"] and not chk["bad_junctions"] and not chk["narrow"] and not chk["nudge"] and not walks
+            and not turns):
         return {**row, "settled": True}
     before = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
     row["roads_narrowed"] = narrow_arms(net, chk["narrow"], p)  # in place: the indices stay
@@ -90,17 +97,18 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
     gone = detach_junctions(net, [k for k in chk["bad_junctions"] if k in net.nodes], p)
     row.update({"cut_m": cut2["cut_m"], "dropped_roads": cut2["dropped_roads"] + gone})
     after = (len(net.arms), sum(len(a.xy) for a in net.arms), len(net.nodes))
-    if not row["roads_narrowed"] and not row["roads_moved"] and after == before and not walks:
+    if not row["roads_narrowed"] and not row["roads_moved"] and after == before and not walks and not turns:
         return {**row, "settled": True}  # what is off cannot be cut (single shape points): the drop test reports it
     log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface%s; %d "
              "road(s) off it in places (%.1f m cut), %d narrowed, %d junction(s) taken apart (%s), %d road(s) "
-             "dropped; netconvert again", rnd + 1, 100 * chk["on_share"],
+             "dropped, %d turn(s) over ground the scan never measured dropped; netconvert again", rnd + 1,
+             100 * chk["on_share"],
              f" ({chk['bare_samples']} over ground the scan never measured: its sparse far range or beyond its edge)"
              if chk["bare_samples"] else "", len(chk["bad_points"]), cut2["cut_m"],
              row["roads_narrowed"],
              len(chk["bad_junctions"]), ", ".join(f"n{k}: {100 * v:.0f} % on" for k, v in
                                                  chk["bad_junctions"].items()) or "-",
-             row["dropped_roads"])
+             row["dropped_roads"], len(turns))
     if not net.arms:
         raise NoRoads("none of the roads derived from the scan keeps its lanes on the scanned surface (they "
                       "float over banks or sink into slopes)", derived=True)

@@ -126,8 +126,9 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     a wall's top, a low roof: a car drives into it). ``parked`` (per face, bool): faces of parked vehicles;
     a sample whose top or overhead surface is one is judged by the ground alone (no step, clearance or
     buried test: the car is taken out later, not a wall). Returns the samples' x, y, whether on and
-    off, whether off for want of any scanned surface (``bare``), and the junction (its OpenDRIVE name,
-    netconvert's node id) of those inside one ('' elsewhere)."""
+    off, whether off for want of any scanned surface (``bare``), the junction (its OpenDRIVE name,
+    netconvert's node id) of those inside one ('' elsewhere), and each sample's OpenDRIVE road, its s along it
+    and its lane's centre (x, y)."""
     import open3d as o3d
 
     from twinkit.street.lanes import LaneMap
@@ -137,7 +138,7 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     wp = wp.take(wp.is_type("driving"))
     if not len(wp):
         return {"xy": np.zeros((0, 2)), "on": np.zeros(0, bool), "off": np.zeros(0, bool), "bare": np.zeros(0, bool),
-                "junction": np.zeros(0, str)}
+                "junction": np.zeros(0, str), "road": np.zeros(0, int), "s": np.zeros(0), "centre": np.zeros((0, 2))}
     across = np.linspace(-0.5, 0.5, 7)  # border to border, the outermost edge_in_m in (where a tyre's edge runs)
     off = across[None, :] * np.maximum(wp.width - 2 * edge_in_m, 0.0)[:, None]  # (waypoints, 7)
     r = np.stack([wp.xyz[:, :1] + off * wp.right[:, :1], wp.xyz[:, 1:2] + off * wp.right[:, 1:2],
@@ -178,7 +179,32 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
     if unscanned is not None:
         bare = ~on & ~off & unscanned.at(r[:, :2])
         off |= bare
-    return {"xy": r[:, :2], "on": on, "off": off, "bare": bare, "junction": junc}
+    k = len(across)
+    return {"xy": r[:, :2], "on": on, "off": off, "bare": bare, "junction": junc, "road": np.repeat(wp.road, k),
+            "s": np.repeat(wp.s, k), "centre": np.repeat(wp.xyz[:, :2], k, axis=0)}
+
+
+def bare_turns(lh: dict, min_samples: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The junctions' turns (connecting roads, in ``lane_heights``' samples ``lh``) with at least ``min_samples``
+    samples over ground the scan never measured, when another turn of the same junction starts where it does (the
+    lane keeps a way on): (node id, where the turn starts, where it ends), the lane centres at its first and last
+    sample. None with ``min_samples`` 0."""
+    jn, bare, road = lh["junction"], lh["bare"], lh["road"]
+    inside = jn != ""
+    if min_samples <= 0 or not (inside & bare).any():
+        return []
+    turns = {}
+    for rid in np.unique(road[inside]):
+        m = inside & (road == rid)
+        s, c = lh["s"][m], lh["centre"][m]
+        turns[int(rid)] = (str(jn[m][0]), int(bare[m].sum()), c[np.argmin(s)], c[np.argmax(s)])
+    out = []
+    for rid, (name, n_bare, a, b) in turns.items():
+        if n_bare < min_samples or not name[1:].isdigit():
+            continue
+        if any(r != rid and nm == name and np.hypot(*(a2 - a)) < 1.0 for r, (nm, _, a2, _) in turns.items()):
+            out.append((int(name[1:]), a, b))
+    return out
 
 
 def _junction_names(xodr_text: str) -> dict[int, str]:
@@ -230,7 +256,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
                       parked=parked, unscanned=unscanned)
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
     res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "nudge": {}, "samples": int(len(on)),
-           "bare_samples": int(lh["bare"].sum()),
+           "bare_samples": int(lh["bare"].sum()), "bad_turns": bare_turns(lh, p.turn_unscanned_samples),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
     judged = on | off
     for nid in net.nodes:

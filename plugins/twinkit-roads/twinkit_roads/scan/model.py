@@ -117,6 +117,13 @@ class ScanSourceParams:
                                             "driving-lane samples over ground the scan never measured (open_gap_m) "
                                             "is cut back, up to the last such point: the road ends where its lanes "
                                             "lie whole on scanned ground (1: as inside a road, min_lane_support)")
+    turn_unscanned_samples: int = param(3, ge=0,
+                                        help="lane check: a junction's turn (a connecting road) with at least this "
+                                             "many driving-lane samples over ground the scan never measured "
+                                             "(open_gap_m) is not made (netconvert's connection deleted), when "
+                                             "another turn leaves the same lane; the junction's share "
+                                             "(min_lane_support) judges all its turns together and keeps one that "
+                                             "cuts a corner the scan never saw (0: never)")
     lane_clear_m: float = param(2.0, ge=0, le=10,
                                 help="lane check: a sample with anything over it lower than this above the lane is "
                                      "off the scan (a hedge, a low roof; 0: no test; m)")
@@ -154,6 +161,9 @@ class Network:
     stats: dict
     level_faces: np.ndarray | None = None  # faces on the carriageway level (below the curbs)
     level_z: np.ndarray | None = None  # the carriageway level's height per grid pixel (network.carriageway_level)
+    # turns the lane check dropped: (node id, where the turn starts, where it ends), resolved to netconvert's edges
+    # by netconvert.write_turns each round (the arms' indices change as they are cut)
+    no_turns: list = field(default_factory=list)
 
 
 def empty_network() -> Network:

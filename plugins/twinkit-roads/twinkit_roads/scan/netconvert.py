@@ -11,7 +11,7 @@ import numpy as np
 
 from twinkit import InputError
 
-from .geometry import lane_layout
+from .geometry import lane_layout, on_polyline
 from .model import Network, ScanSourceParams
 
 
@@ -69,15 +69,47 @@ def write_plain(net: Network, p: ScanSourceParams, proj: str, folder: Path) -> t
     return nod, edg
 
 
-def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=None, surface=None) -> dict:
-    """netconvert on the plain network -> OpenDRIVE (the junctions' connecting roads are netconvert's), with the
-    edges' heights (``scan_elevations``; ``surface``: the carriageway's height at (k, 2) points, for the
-    junctions' connecting roads)."""
+def write_turns(net: Network, edg: Path, folder: Path) -> Path | None:
+    """A SUMO plain connection file deleting the turns the lane check dropped (``net.no_turns``: node id, where
+    the turn starts, where it ends): at that node, the incoming edge of ``edg`` nearest the start to the outgoing
+    edge nearest the end. None (and no file) when there are none."""
+    import xml.etree.ElementTree as ET
+
+    con = folder / "scan.con.xml"
+    con.unlink(missing_ok=True)
+    if not net.no_turns:
+        return None
+    edges = []
+    for e in ET.parse(edg).getroot().iter("edge"):
+        pts = np.array([[float(c) for c in pt.split(",")[:2]] for pt in (e.get("shape") or "").split()])
+        if len(pts) >= 2:
+            edges.append((e.get("id"), e.get("from"), e.get("to"), pts))
+    pairs: list[tuple[str, str]] = []
+    for nid, a, b in net.no_turns:
+        inc = [(float(on_polyline(np.asarray([a]), sh)[0][0]), eid) for eid, _, to, sh in edges if to == f"n{nid}"]
+        out = [(float(on_polyline(np.asarray([b]), sh)[0][0]), eid) for eid, fr, _, sh in edges if fr == f"n{nid}"]
+        if inc and out and (min(inc)[1], min(out)[1]) not in pairs:
+            pairs.append((min(inc)[1], min(out)[1]))
+    if not pairs:
+        return None
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', "<connections>"]
+    lines += [f'  <delete from="{a}" to="{b}"/>' for a, b in pairs]
+    con.write_text("\n".join(lines + ["</connections>"]) + "\n", encoding="utf-8")
+    return con
+
+
+def netconvert_plain(nod: Path, edg: Path, xodr: Path, p: ScanSourceParams, log=None, surface=None,
+                     con: Path | None = None) -> dict:
+    """netconvert on the plain network -> OpenDRIVE (the junctions' connecting roads are netconvert's, less the
+    connections ``con`` deletes), with the edges' heights (``scan_elevations``; ``surface``: the carriageway's
+    height at (k, 2) points, for the junctions' connecting roads)."""
     from ..convert import _env, finish_netconvert, netconvert_output, netconvert_path
 
     args = [str(netconvert_path()), "--node-files", str(nod), "--edge-files", str(edg),
             "--opendrive-output", str(xodr), "--offset.disable-normalization", "--no-turnarounds",
             "--junctions.corner-detail", "5", "--tls.discard-simple", "--no-warnings", "false", "--verbose", "false"]
+    if con is not None:
+        args += ["--connection-files", str(con)]
     t0 = time.perf_counter()
     try:
         r = subprocess.run(args, capture_output=True, text=True, timeout=p.timeout_s, env=_env())
