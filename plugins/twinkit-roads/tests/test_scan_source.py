@@ -683,27 +683,18 @@ def test_a_road_end_over_ground_the_scan_never_measured_is_cut_back_until_its_la
     assert not old["bad_points"], old["bad_points"]  # the share rule alone keeps the whole road
 
 
-def _turns(text: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """The driving connecting roads of a map: (junction name, first lane centre, last lane centre)."""
-    lh = scan.lane_heights(text, *_flat_tile(), tol_m=0.3)
-    inside = lh["junction"] != ""
+def _turns(text: str) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The driving connecting roads of a map, as carla.Map reads them: (junction id, first lane centre, last)."""
+    from twinkit.street.lanes import LaneMap
+
+    wp = LaneMap(text, "turns").waypoints(1.0)
+    wp = wp.take(wp.is_type("driving") & (wp.junction >= 0))
     out = []
-    for rid in np.unique(lh["road"][inside]):
-        m = inside & (lh["road"] == rid)
-        s, c = lh["s"][m], lh["centre"][m]
-        out.append((str(lh["junction"][m][0]), c[np.argmin(s)], c[np.argmax(s)]))
+    for rid in np.unique(wp.road):
+        m = wp.road == rid
+        xy, s = wp.xyz[m, :2], wp.s[m]
+        out.append((int(wp.junction[m][0]), xy[np.argmin(s)], xy[np.argmax(s)]))
     return out
-
-
-def _flat_tile():
-    g = np.arange(-45.0, 45.01, 5.0)
-    X, Y = np.meshgrid(g, g)
-    v = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
-    n = len(g)
-    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
-    a = (j * n + i).ravel()
-    f = np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
-    return v, f
 
 
 def test_a_turn_over_ground_the_scan_never_measured_is_not_made_the_others_stay(four_way, tmp_path):
