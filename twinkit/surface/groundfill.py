@@ -170,7 +170,8 @@ def _between(cls: np.ndarray, gz: np.ndarray, max_cells: int, max_rise: tuple[fl
             rise = np.abs(np.where(ok, zb - za, 0.0))
         ok &= rise <= max_rise[0] + max_rise[1] * step * np.abs(ib - ia)
     t = np.where(ok, (pos - ia) / np.maximum(ib - ia, 1), 0.0)
-    est = np.where(ok, np.where(ok, za, 0.0) * (1 - t) + np.where(ok, zb, 0.0) * t, 0.0)
+    with np.errstate(invalid="ignore"):
+        est = np.where(ok, za * (1 - t) + zb * t, 0.0)
     return ok, est
 
 

@@ -73,17 +73,11 @@ def write_turns(net: Network, edg: Path, folder: Path) -> Path | None:
     """A SUMO plain connection file deleting the turns the lane check dropped (``net.no_turns``: node id, where
     the turn starts, where it ends): at that node, the incoming edge of ``edg`` nearest the start to the outgoing
     edge nearest the end. None (and no file) when there are none."""
-    import xml.etree.ElementTree as ET
-
     con = folder / "scan.con.xml"
     con.unlink(missing_ok=True)
     if not net.no_turns:
         return None
-    edges = []
-    for e in ET.parse(edg).getroot().iter("edge"):
-        pts = np.array([[float(c) for c in pt.split(",")[:2]] for pt in (e.get("shape") or "").split()])
-        if len(pts) >= 2:
-            edges.append((e.get("id"), e.get("from"), e.get("to"), pts))
+    edges = [e for e in _plain_edges(edg) if len(e[3]) >= 2]
     pairs: list[tuple[str, str]] = []
     for nid, a, b in net.no_turns:
         inc = [(float(on_polyline(np.asarray([a]), sh)[0][0]), eid) for eid, _, to, sh in edges if to == f"n{nid}"]
@@ -200,16 +194,20 @@ def _stations(length: float, step_m: float) -> np.ndarray:
     return np.unique(np.r_[np.arange(0.0, length, step_m), length])
 
 
-def _edge_shapes(edg: Path) -> dict[str, np.ndarray]:
-    """Edge id -> its shape (k, 3: x, y, z) in a SUMO plain edge file; edges without a 3D shape left out."""
+def _plain_edges(edg: Path) -> list[tuple[str, str, str, np.ndarray]]:
+    """The edges of a SUMO plain edge file: (id, from node, to node, shape (k, 2 or 3))."""
     import xml.etree.ElementTree as ET
 
-    shapes = {}
+    out = []
     for e in ET.parse(edg).getroot().iter("edge"):
         pts = np.array([[float(c) for c in pt.split(",")] for pt in (e.get("shape") or "").split()])
-        if len(pts) >= 2 and pts.shape[1] == 3:
-            shapes[e.get("id")] = pts
-    return shapes
+        out.append((e.get("id"), e.get("from"), e.get("to"), pts))
+    return out
+
+
+def _edge_shapes(edg: Path) -> dict[str, np.ndarray]:
+    """Edge id -> its shape (k, 3: x, y, z) in a SUMO plain edge file; edges without a 3D shape left out."""
+    return {eid: pts for eid, _, _, pts in _plain_edges(edg) if len(pts) >= 2 and pts.shape[1] == 3}
 
 
 def _road_profile(ref, shapes: dict, s: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
