@@ -180,9 +180,11 @@ SWEEP_WALL_Y, SWEEP_WALL_TOP, SWEEP_WALL_X = -8.0, 1.2, (4.0, 12.0)
 
 
 def spinning_sweep(sensor=SWEEP_SENSOR, top_deg: float = SWEEP_TOP_DEG, beams: int = 64, az_step_deg: float = 0.12,
-                   seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                   seed: int = 0, platform: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(points (n, 3), part (n,)) of one sweep of a spinning multi-beam sensor (beams from -24.8 degrees up to
-    ``top_deg``, 1 cm range noise) over the scene above; part: 0 ground, 1 facade, 2 wall."""
+    ``top_deg``, 1 cm range noise) over the scene above; part: 0 ground, 1 facade, 2 wall. With ``platform``
+    also the returns of the car carrying the sensor (part 3): its bonnet's front edge 2.3 m ahead and its
+    mirrors 1.1 m to either side, 1 m above the road, 32 points (a real sweep has 30-45 such)."""
     sensor = np.asarray(sensor, float)
     rng = np.random.default_rng(seed)
     el = np.radians(np.linspace(-24.8, top_deg, beams))
@@ -203,4 +205,9 @@ def spinning_sweep(sensor=SWEEP_SENSOR, top_deg: float = SWEEP_TOP_DEG, beams: i
             t[ok], part[ok] = tt[ok], k
     keep = np.isfinite(t)
     pts = sensor + (t[keep] + rng.normal(0, 0.01, keep.sum()))[:, None] * d[keep]
-    return pts, part[keep]
+    if not platform:
+        return pts, part[keep]
+    car = np.vstack([sensor + [2.3, 0.0, -0.8] + rng.normal(0, [0.05, 0.4, 0.03], (12, 3)),
+                     sensor + [0.4, 1.1, -0.7] + rng.normal(0, 0.04, (10, 3)),
+                     sensor + [0.4, -1.1, -0.7] + rng.normal(0, 0.04, (10, 3))])
+    return np.vstack([pts, car]), np.r_[part[keep], np.full(len(car), 3)]

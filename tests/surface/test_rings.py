@@ -41,3 +41,43 @@ def test_a_capture_whose_ground_is_sampled_both_ways_has_no_ring_sensor():
     facade = np.column_stack([np.full(20_000, 18.0), rng.uniform(-30, 30, 20_000), rng.uniform(0, 12, 20_000)])
     assert ring_sensor(np.vstack([g, facade])) is None
     assert ring_sensor(np.zeros((5, 3))) is None
+
+
+def test_the_vehicle_carrying_the_sensor_is_found_inside_the_blind_circle():
+    from twinkit.surface.rings import blind_circle, platform_returns
+
+    pts, part = sweep(platform=True)
+    truth = part == 3
+    s = ring_sensor(pts)
+    circle = blind_circle(pts, s)
+    # the lowest beam (-24.8 degrees from 1.8 m) meets the ground 3.9 m from the sensor
+    assert circle is not None and abs(circle["radius_m"] - 1.8 / np.tan(np.radians(24.8))) < 0.4, circle
+    assert np.hypot(*(np.array(circle["xy"]) - SENSOR[:2])) < 0.3, circle
+    gone, _ = platform_returns(pts, s)
+    assert (gone == truth).all(), (gone & ~truth).sum()
+
+
+def test_what_stands_near_the_sensor_is_the_streets_when_it_reaches_the_ring_or_is_large():
+    from twinkit.surface.rings import platform_returns
+
+    pts, part = sweep(platform=True)
+    truth = part == 3
+    rng = np.random.default_rng(3)
+    # a car parked alongside (its side 2.2 m from the sensor, reaching past the ring at 3.9 m) and a pole 3 m
+    # away, inside the ring, from the ground up to 1.5 m (hundreds of returns: more than a car's bonnet gives)
+    beside = SENSOR + np.column_stack([rng.uniform(-2.0, 2.0, 800), rng.uniform(-4.4, -2.2, 800),
+                                       rng.uniform(-1.5, -0.3, 800)])
+    pole = np.column_stack([np.full(300, SENSOR[0] - 3.0), np.full(300, SENSOR[1]), np.linspace(0.0, 1.5, 300)])
+    pts = np.vstack([pts, beside, pole])
+    gone, circle = platform_returns(pts, ring_sensor(pts))
+    assert circle is not None
+    assert gone[:len(truth)].sum() == truth.sum() and not gone[len(truth):].any()
+
+
+def test_a_capture_without_a_blind_circle_loses_nothing():
+    from twinkit.surface.rings import platform_returns
+
+    pts, _ = sweep()
+    s = ring_sensor(pts)
+    gone, circle = platform_returns(pts, s)
+    assert circle is not None and not gone.any()  # a sweep whose sensor stood on nothing: the circle is empty

@@ -17,6 +17,12 @@ or georeferenced sweep is not), and both follow from the points:
   distance, would otherwise win), and of those the one whose band holds the most points. 1.9-2.1 degrees on the SemanticKITTI sweeps (a
   Velodyne HDL-64E: +2 degrees).
 
+* **The blind circle** round the sensor: the lowest beam meets the ground at a few metres, and nothing of
+  the street is sampled nearer. What returns come from inside it are the vehicle carrying the sensor (its
+  bonnet, its mirrors: a few dozen points a metre above the road, "unlabeled" and "outlier" in
+  SemanticKITTI's hand labels), and a mesh over them is a lump in the middle of the road
+  (:func:`platform_returns`).
+
 What it is for: a facade or a hedge that reaches the cone was cut by the scan, so its height is not
 known. On an HDL-64E sweep that is everything higher than about 2.1 m at 10 m and 2.8 m at 30 m, and the
 3D classifier, which tells a free-standing wall from a building by its height, calls most cut facades
@@ -37,6 +43,18 @@ TOP_BAND_M = 0.25
 TOP_SPREAD_M = 0.5
 #: fewer ring-line patches than this and no sensor is estimated
 MIN_RING_LINES = 200
+#: the blind circle's edge is looked for in this many sectors round the sensor, out to BLIND_MAX_R_M
+BLIND_SECTORS = 36
+BLIND_MAX_R_M = 10.0
+#: a sector's edge of the blind circle is its this-many-th nearest point: a ring's sector holds dozens, the
+#: platform's few returns in a sector do not reach it
+BLIND_RANK = 20
+#: the capture platform: clusters of points (linked within PLATFORM_LINK_M) of at most PLATFORM_MAX_POINTS, all
+#: more than PLATFORM_MARGIN_M inside the blind circle; a cluster reaching the ring is the street's (a car
+#: parked beside, a wall)
+PLATFORM_LINK_M = 0.5
+PLATFORM_MARGIN_M = 0.3
+PLATFORM_MAX_POINTS = 200
 
 
 def ring_sensor(points: np.ndarray, *, sample: int = SAMPLE, seed: int = 0) -> dict | None:
@@ -107,6 +125,79 @@ def _top_beam(pts: np.ndarray, xy: np.ndarray, sample: int = 200_000) -> tuple[f
         if score > best[:2]:
             best = (*score, z0, float(deg))
     return best[2], best[3]
+
+
+def _circle(xy: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least-squares circle through points ``xy`` (m, 2): (centre, radius)."""
+    a = np.c_[2 * xy, np.ones(len(xy))]
+    (cx, cy, c), *_ = np.linalg.lstsq(a, (xy ** 2).sum(axis=1), rcond=None)
+    return np.array([cx, cy]), float(np.sqrt(max(c + cx * cx + cy * cy, 0.0)))
+
+
+def blind_circle(points: np.ndarray, sensor: dict) -> dict | None:
+    """The circle round :func:`ring_sensor`'s ``sensor`` inside which the sweep sampled no ground (the lowest
+    beam's ring): in each of ``BLIND_SECTORS`` sectors the ``BLIND_RANK``-th nearest point, a circle fitted
+    to those (sectors whose point lies off it, where something stands nearer than the ring, left out), the
+    sectors taken again round the new centre until it stays. ``{"xy": centre, "radius_m", "sectors": used}``,
+    or None when fewer than half the sectors hold a ring."""
+    pts = np.asarray(points, dtype=np.float64)
+    centre = np.asarray(sensor["xy"], dtype=np.float64)
+    found = None
+    for _ in range(4):
+        d = pts[:, :2] - centre
+        r = np.hypot(d[:, 0], d[:, 1])
+        near = np.flatnonzero(r < BLIND_MAX_R_M)
+        sector = ((np.arctan2(d[near, 1], d[near, 0]) + np.pi) / (2 * np.pi) * BLIND_SECTORS).astype(np.int64)
+        sector %= BLIND_SECTORS
+        order = np.lexsort((r[near], sector))
+        first = np.searchsorted(sector[order], np.arange(BLIND_SECTORS))
+        full = np.bincount(sector, minlength=BLIND_SECTORS) >= BLIND_RANK
+        if full.sum() < BLIND_SECTORS // 2:
+            return None
+        edge = pts[near[order[first[full] + BLIND_RANK - 1]], :2]
+        keep = np.ones(len(edge), bool)
+        for _ in range(3):
+            c, radius = _circle(edge[keep])
+            res = np.abs(np.hypot(*(edge - c).T) - radius)
+            keep = res < max(0.3, 3.0 * float(np.median(res[keep])))
+            if keep.sum() < BLIND_SECTORS // 2:
+                return None
+        moved = float(np.hypot(*(c - centre)))
+        centre, found = c, {"xy": [round(float(c[0]), 3), round(float(c[1]), 3)], "radius_m": round(radius, 3),
+                            "sectors": int(keep.sum())}
+        if moved < 0.05:
+            break
+    return found
+
+
+def platform_returns(points: np.ndarray, sensor: dict) -> tuple[np.ndarray, dict | None]:
+    """(n,) bool: the returns of the vehicle carrying a sweep's sensor (``sensor``: :func:`ring_sensor`), and
+    the :func:`blind_circle` they lie in (None: not found, nothing flagged). A platform return lies in a small
+    cluster (points linked within ``PLATFORM_LINK_M``, at most ``PLATFORM_MAX_POINTS``) wholly more than
+    ``PLATFORM_MARGIN_M`` inside the blind circle; anything that reaches the ring (a car parked alongside, a
+    wall, a pole's column of returns) belongs to the street."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, dtype=np.float64)
+    out = np.zeros(len(pts), bool)
+    circle = blind_circle(pts, sensor)
+    if circle is None:
+        return out, None
+    r = np.hypot(pts[:, 0] - circle["xy"][0], pts[:, 1] - circle["xy"][1])
+    inner = circle["radius_m"] - PLATFORM_MARGIN_M
+    near = np.flatnonzero(r < circle["radius_m"] + 2 * PLATFORM_LINK_M)
+    if not (r[near] < inner).any():
+        return out, circle
+    pairs = cKDTree(pts[near]).query_pairs(PLATFORM_LINK_M, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(near), len(near)))
+    _, label = connected_components(graph, directed=False)
+    reach = np.zeros(label.max() + 1)
+    np.maximum.at(reach, label, r[near])
+    small = np.bincount(label) <= PLATFORM_MAX_POINTS
+    out[near[(reach[label] < inner) & small[label]]] = True
+    return out, circle
 
 
 def under_ceiling(points: np.ndarray, sensor: dict) -> np.ndarray:

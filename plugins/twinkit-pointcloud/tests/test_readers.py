@@ -325,3 +325,20 @@ def test_unsupported_and_missing(tmp_path, ctx):
     (tmp_path / "link.ply").symlink_to(tmp_path / "moved.ply")
     with pytest.raises(InputError, match="link.ply: a broken link"):
         _read(ctx, tmp_path / "link.ply")
+
+
+def test_a_sweep_is_read_without_the_vehicle_that_carried_its_sensor(ctx, tmp_path):
+    from twinkit.testing import spinning_sweep
+
+    pts, part = spinning_sweep(platform=True)
+    truth = part == 3
+    src = tmp_path / "sweep.ply"
+    write_ply(src, Mesh(pts), xyz_dtype="f8")
+    res, m, meta = _read(ctx, src)
+    assert meta["counts"]["dropped_platform"] == truth.sum() and m.n_vertices == len(pts) - truth.sum()
+    assert meta["blind_circle"]["radius_m"] > 3.0
+    kept = np.asarray(m.vertices)
+    assert np.hypot(kept[:, 0] - 3.0, kept[:, 1] + 2.0).min() > 3.0  # nothing left inside the blind circle
+    ctx2 = make_context(tmp_path / "w2", site={"name": "test"})
+    _, m2, meta2 = _read(ctx2, src, P.ReadCloudParams(drop_platform=False))
+    assert m2.n_vertices == len(pts) and meta2["counts"]["dropped_platform"] == 0

@@ -43,6 +43,7 @@ def cloud_meta(in_cloud: Path, raw, cloud, n_read: int, pts: np.ndarray, normals
         "source": {"file": in_cloud.name, "format": raw.format, "fields": raw.source_fields},
         "counts": {"read": n_read, "dropped_invalid": cloud.dropped_invalid,
                    "duplicates_removed": cloud.dropped_duplicates, "dropped_far": cloud.dropped_far,
+                   "dropped_platform": cloud.dropped_platform,
                    "written": int(len(pts))},
         "fields": {"normals": normals_source, "normals_orientation": orientation, "normals_check": normals_check,
                    "colors": raw.colors is not None, "intensity": raw.intensity is not None,
@@ -54,6 +55,7 @@ def cloud_meta(in_cloud: Path, raw, cloud, n_read: int, pts: np.ndarray, normals
                                  for row in raw.scanner_positions]),
         "bounds_m": [lo.tolist(), hi.tolist()],
         "density": dens,
+        "blind_circle": cloud.blind_circle,
         "notes": raw.notes,
     }
 

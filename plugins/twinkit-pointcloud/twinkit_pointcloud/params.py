@@ -42,6 +42,12 @@ class ReadCloudParams:
                                        help="A cloud shorter than this (m) along its longer horizontal side is "
                                             "refused as not a street (an object or an indoor scan); checked in the "
                                             "preflight from the header's box and again from the points. 0 = off.")
+    drop_platform: bool = param(True,
+                                help="On a single spinning sweep, leave out the returns of the vehicle carrying the "
+                                     "sensor: small clusters wholly inside the blind circle round the sensor, where "
+                                     "the lowest beam has not yet reached the ground (twinkit.surface.rings."
+                                     "platform_returns). False: keep them (the mesh gets a lump where the car "
+                                     "stood).")
 
 
 @dataclass

@@ -69,7 +69,7 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
     from .cloudfile import cloud_meta, ply_comments, point_attrs, read_metrics
     from .localframe import apply_cloud_frame
     from .normals import cloud_normals
-    from .readers import read_any, validate_and_frame
+    from .readers import drop_platform, read_any, validate_and_frame
     from .street import flat_capture, not_a_street
 
     params = params or ReadCloudParams()
@@ -82,6 +82,8 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
                                    drop_invalid=params.drop_invalid_points, log=ctx.log,
                                    max_offset_m=params.max_offset_km * 1000.0,
                                    bounds_margin_m=params.bounds_margin_m)
+        if params.drop_platform:
+            cloud = drop_platform(cloud, ctx.log)
         raw = cloud.raw
         if not params.use_colors and raw.colors is not None:
             ctx.log.info("%s: colours dropped (use_colors=false)", in_cloud.name)

@@ -455,6 +455,8 @@ class Cloud:
     dropped_invalid: int = 0
     dropped_duplicates: int = 0
     dropped_far: int = 0  # outliers more than max_offset_km from the base point
+    dropped_platform: int = 0  # returns of the vehicle carrying a sweep's sensor (drop_platform)
+    blind_circle: dict | None = None  # the sweep's blind circle (twinkit.surface.rings.blind_circle)
 
 
 def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: int = 10,
@@ -510,6 +512,28 @@ def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: in
         raw.scanner_positions = apply_frame(raw.scanner_positions, raw.crs, site, info)
     return Cloud(raw=raw, points=local, frame=info, dropped_invalid=n_bad, dropped_duplicates=n_dup,
                  dropped_far=n_far)
+
+
+def drop_platform(cloud: Cloud, log=None) -> Cloud:
+    """``cloud`` without the returns of the vehicle that carried a single sweep's sensor
+    (:func:`twinkit.surface.rings.platform_returns`); the same cloud when it is not a sweep or none is found."""
+    import dataclasses
+
+    from twinkit.surface.rings import platform_returns, ring_sensor
+
+    sensor = ring_sensor(cloud.points)
+    if sensor is None:
+        return cloud
+    gone, circle = platform_returns(cloud.points, sensor)
+    n = int(gone.sum())
+    if log is not None and circle is not None:
+        log.info("%s: a single sweep: %d points of the vehicle carrying the sensor left out (small clusters inside "
+                 "the blind circle of %.1f m round the sensor at %.1f, %.1f; read_cloud.drop_platform)",
+                 cloud.raw.path.name, n, circle["radius_m"], *circle["xy"])
+    if not n:
+        return dataclasses.replace(cloud, blind_circle=circle)
+    return dataclasses.replace(cloud, raw=cloud.raw.take(~gone), points=cloud.points[~gone], dropped_platform=n,
+                               blind_circle=circle)
 
 
 def _far_points(local: np.ndarray, info, max_offset_m: float) -> np.ndarray | None:
