@@ -659,7 +659,10 @@ def test_a_road_end_over_ground_the_scan_never_measured_is_cut_back_until_its_la
     have the outer edge of a lane over nothing (seq00_000000: 61 of its 179 failing drop-test rays, all within 5 m
     of a road's free end). Too few samples for the lane check's share (2 of 14 across the road), so the road was
     kept, and the drop test lost them. From a free end the road is now cut back to the last shape point with a
-    sample over never-measured ground; inside the road the same notch cuts nothing (the road would be split)."""
+    sample over never-measured ground. Inside the road the same notch (1 of a shape point's 14 samples) cuts
+    nothing; a deeper one, over more than a tenth of them (inner_unscanned_share), is off, and over 2 shape
+    points it splits the road (spvnas_sample_000000: a road brushing the capture's border with its outer lane for
+    5 m, 455 failing rays)."""
     from twinkit.surface.watertight import OpenGround
 
     p = scan.ScanSourceParams()
@@ -669,17 +672,21 @@ def test_a_road_end_over_ground_the_scan_never_measured_is_cut_back_until_its_la
     c = v[f].mean(axis=1)
     end_notch = (c[:, 0] > 33.0) & (c[:, 1] < -2.3)  # the south lane's outer edge, the last 7 m, open to the south
     mid_notch = (c[:, 0] > -5.0) & (c[:, 0] < -1.0) & (c[:, 1] < -2.3)  # the same 4 m inside the road
-    f2 = f[~end_notch & ~mid_notch]
+    deep_notch = (c[:, 0] > 10.0) & (c[:, 0] < 16.0) & (c[:, 1] < -1.7)  # 6 m, 0.6 m further into the lane
+    f2 = f[~end_notch & ~mid_notch & ~deep_notch]
     bare = OpenGround.of_mesh(v, f2, p.open_gap_m)
     assert bare.at(np.array([[36.0, -2.7], [-3.0, -2.7]])).all()
     chk = scan.check_lanes(net, text, v, f2, p, unscanned=bare)
     assert chk["bad_points"], chk
-    for k, b in chk["bad_points"].items():
-        xy = net.arms[k].xy[b]
-        assert (xy[:, 0] > 30.0).all(), xy  # only the end, back to where the lanes are whole
-    cut_x = [net.arms[k].xy[b][:, 0].min() for k, b in chk["bad_points"].items()]
-    assert min(cut_x) < 34.5
-    old = scan.check_lanes(net, text, v, f2, dataclasses.replace(p, end_unscanned_share=1.0), unscanned=bare)
+    bad_x = np.concatenate([net.arms[k].xy[b][:, 0] for k, b in chk["bad_points"].items()])
+    assert min(x for x in bad_x if x > 30.0) < 34.5  # the end, back to where the lanes are whole
+    inside = bad_x[bad_x < 30.0]
+    assert len(inside) >= 2 and (inside > 8.0).all() and (inside < 18.0).all(), bad_x  # the deep notch, no more
+    ends_only = scan.check_lanes(net, text, v, f2, dataclasses.replace(p, inner_unscanned_share=1.0), unscanned=bare)
+    for k, b in ends_only["bad_points"].items():
+        assert (net.arms[k].xy[b][:, 0] > 30.0).all()  # the share rule alone keeps the road's inside
+    old = scan.check_lanes(net, text, v, f2, dataclasses.replace(p, end_unscanned_share=1.0, inner_unscanned_share=1.0),
+                           unscanned=bare)
     assert not old["bad_points"], old["bad_points"]  # the share rule alone keeps the whole road
 
 

@@ -280,6 +280,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     bad_pt = (n_all >= 5) & (n_on < p.min_lane_support * n_all)
     n_bare = np.bincount(i, weights=lh["bare"][src].astype(float), minlength=len(owner))
     bare_pt = (n_all >= 5) & (n_bare > p.end_unscanned_share * n_all)
+    bad_pt |= (n_all >= 5) & (n_bare > p.inner_unscanned_share * n_all)
     sparse_pt = n_all < 5
     for k, arm in enumerate(net.arms):
         order = np.argsort(index[owner == k])

@@ -117,6 +117,11 @@ class ScanSourceParams:
                                             "driving-lane samples over ground the scan never measured (open_gap_m) "
                                             "is cut back, up to the last such point: the road ends where its lanes "
                                             "lie whole on scanned ground (1: as inside a road, min_lane_support)")
+    inner_unscanned_share: float = param(0.1, ge=0, le=1,
+                                         help="lane check: inside a road, a shape point with more than this share "
+                                              "of its driving-lane samples over ground the scan never measured "
+                                              "(open_gap_m) is off the scan, whatever the rest (min_lane_support): "
+                                              "two or more in a row split the road (1: the share rule alone)")
     turn_unscanned_samples: int = param(3, ge=0,
                                         help="lane check: a junction's turn (a connecting road) with at least this "
                                              "many driving-lane samples over ground the scan never measured "
