@@ -176,9 +176,7 @@ def platform_returns(points: np.ndarray, sensor: dict) -> tuple[np.ndarray, dict
     cluster (points linked within ``PLATFORM_LINK_M``, at most ``PLATFORM_MAX_POINTS``) wholly more than
     ``PLATFORM_MARGIN_M`` inside the blind circle; anything that reaches the ring (a car parked alongside, a
     wall, a pole's column of returns) belongs to the street."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from twinkit.surface.linked import linked_groups
 
     pts = np.asarray(points, dtype=np.float64)
     out = np.zeros(len(pts), bool)
@@ -190,12 +188,10 @@ def platform_returns(points: np.ndarray, sensor: dict) -> tuple[np.ndarray, dict
     near = np.flatnonzero(r < circle["radius_m"] + 2 * PLATFORM_LINK_M)
     if not (r[near] < inner).any():
         return out, circle
-    pairs = cKDTree(pts[near]).query_pairs(PLATFORM_LINK_M, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(near), len(near)))
-    _, label = connected_components(graph, directed=False)
-    reach = np.zeros(label.max() + 1)
+    count, label = linked_groups(pts[near], PLATFORM_LINK_M)
+    reach = np.zeros(count)
     np.maximum.at(reach, label, r[near])
-    small = np.bincount(label) <= PLATFORM_MAX_POINTS
+    small = np.bincount(label, minlength=count) <= PLATFORM_MAX_POINTS
     out[near[(reach[label] < inner) & small[label]]] = True
     return out, circle
 

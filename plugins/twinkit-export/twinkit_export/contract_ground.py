@@ -61,9 +61,9 @@ def past_the_edge(res, vertices: np.ndarray, edge_m: float = EDGE_M) -> np.ndarr
     (horizontally, to its nearest vertex). A group: waypoints off the ground joined when closer than twice the
     waypoint step (one lane's run, and the lanes beside it). Such a group is a lane running a little past the scan
     (a turnaround's bulge, a road end); a group reaching farther belongs to a map larger than the scan."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
+
+    from twinkit.surface.linked import linked_groups
 
     off = np.flatnonzero(res.off)
     out = np.zeros(len(res.off), bool)
@@ -71,10 +71,7 @@ def past_the_edge(res, vertices: np.ndarray, edge_m: float = EDGE_M) -> np.ndarr
         return out
     xy = res.xyz[off, :2]
     dist, _ = cKDTree(vertices[:, :2]).query(xy, workers=-1)
-    pairs = cKDTree(xy).query_pairs(2.0 * res.step_m, output_type="ndarray")
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])) if len(pairs) else
-                   (np.zeros(0), (np.zeros(0, int), np.zeros(0, int))), shape=(len(off), len(off)))
-    n, lab = connected_components(g, directed=False)
+    n, lab = linked_groups(xy, 2.0 * res.step_m)
     far = np.zeros(n, bool)
     np.logical_or.at(far, lab, dist > edge_m)
     out[off[~far[lab]]] = True

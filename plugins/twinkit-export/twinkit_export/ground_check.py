@@ -103,14 +103,9 @@ def _clusters(xy: np.ndarray, gap_m: float) -> list[dict]:
     wide as itself, not as long)."""
     if len(xy) == 0:
         return []
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from twinkit.surface.linked import linked_groups
 
-    pairs = cKDTree(xy).query_pairs(gap_m, output_type="ndarray")
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(xy), len(xy))) if len(pairs) else \
-        coo_matrix((len(xy), len(xy)))
-    n, lab = connected_components(g, directed=False)
+    n, lab = linked_groups(xy, gap_m)
     out = []
     for c in range(n):
         p = xy[lab == c]

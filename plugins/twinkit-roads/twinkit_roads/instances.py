@@ -43,15 +43,9 @@ class Instance:
 
 
 def _clusters(P: np.ndarray, link_m: float) -> list[np.ndarray]:
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from twinkit.surface.linked import linked_groups
 
-    if len(P) == 0:
-        return []
-    pairs = cKDTree(P).query_pairs(link_m, output_type="ndarray")
-    A = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(P), len(P)))
-    n, cc = connected_components(A, directed=False)
+    n, cc = linked_groups(P, link_m)
     return [np.flatnonzero(cc == k) for k in range(n)]
 
 

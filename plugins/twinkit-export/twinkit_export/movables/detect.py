@@ -126,9 +126,7 @@ def find_instances(v: np.ndarray, f: np.ndarray, h: np.ndarray, normals: np.ndar
     agree (:mod:`.cues`: ground contact, the geometry ``votes`` (n, 19) or None). ``v`` (n, 3), ``f`` (m, 3),
     ``normals`` (n, 3), ``labels`` (n,) uint8. Returns (instances, per face the id of its instance or -1);
     adds ``candidate_vertices``, ``clusters_rejected`` and ``clusters_rejected_at`` to ``rep``."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from twinkit.surface.linked import linked_groups
 
     cand = np.nonzero(np.isin(labels, MOVABLE) & (h > opt.min_height_m))[0]
     rep["candidate_vertices"] = int(len(cand))
@@ -137,9 +135,7 @@ def find_instances(v: np.ndarray, f: np.ndarray, h: np.ndarray, normals: np.ndar
     rejected_at: list[dict] = []  # the largest rejected clusters, where and why (the report's table)
     face_owner = np.full(len(f), -1, np.int64)
     if len(cand):
-        pairs = cKDTree(v[cand]).query_pairs(opt.cluster_gap_m, output_type="ndarray")
-        g = coo_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), shape=(len(cand), len(cand)))
-        ncl, cl = connected_components(g, directed=False)
+        ncl, cl = linked_groups(v[cand], opt.cluster_gap_m)
         # vertex -> faces (CSR) for the growth
         order = np.argsort(f.ravel(), kind="stable")
         starts = np.searchsorted(f.ravel()[order], np.arange(len(v) + 1))
