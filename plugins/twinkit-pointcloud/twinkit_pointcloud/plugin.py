@@ -82,8 +82,9 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
                                    drop_invalid=params.drop_invalid_points, log=ctx.log,
                                    max_offset_m=params.max_offset_km * 1000.0,
                                    bounds_margin_m=params.bounds_margin_m)
+        dens = density.measure(cloud.points, scanner_positions=cloud.raw.scanner_positions)
         if params.drop_platform:
-            cloud = drop_platform(cloud, ctx.log)
+            cloud, dens = drop_platform(cloud, dens, ctx.log)
         raw = cloud.raw
         if not params.use_colors and raw.colors is not None:
             ctx.log.info("%s: colours dropped (use_colors=false)", in_cloud.name)
@@ -98,7 +99,6 @@ def read_cloud(params: ReadCloudParams, ctx, *, in_cloud: Path, out_points_ply: 
         if raw.colors is None:
             ctx.log.warning("%s: the cloud has no colours; the texture will show %s (bake_texture colourless)",
                             in_cloud.name, "its intensity" if raw.intensity is not None else "a shaded grey")
-        dens = density.measure(pts, scanner_positions=raw.scanner_positions)
         ctx.log.info("%s: %s", in_cloud.name, density.describe(dens))
         meta = cloud_meta(in_cloud, raw, cloud, n_read, pts, (n_source, orientation, n_check), cloud_frame, dens)
         for note in cloud.frame.notes:

@@ -514,16 +514,22 @@ def validate_and_frame(raw: RawCloud, site: Mapping[str, Any], *, min_points: in
                  dropped_far=n_far)
 
 
-def drop_platform(cloud: Cloud, log=None) -> Cloud:
+def drop_platform(cloud: Cloud, dens: dict, log=None) -> tuple[Cloud, dict]:
     """``cloud`` without the returns of the vehicle that carried a single sweep's sensor
-    (:func:`twinkit.surface.rings.platform_returns`); the same cloud when it is not a sweep or none is found."""
+    (:func:`twinkit.surface.rings.platform_returns`), and its density (``dens``: :func:`twinkit.surface.density
+    .measure` of ``cloud``, measured again when points went); the same when it is not a sweep (by ``dens``'s
+    ground: no sensor is looked for) or none is found."""
     import dataclasses
 
+    from twinkit.surface import density
     from twinkit.surface.rings import platform_returns, ring_sensor
 
+    share = dens.get("ground_two_way_share")
+    if share is None or share >= density.RING_CAPTURE_SHARE:
+        return cloud, dens
     sensor = ring_sensor(cloud.points)
     if sensor is None:
-        return cloud
+        return cloud, dens
     gone, circle = platform_returns(cloud.points, sensor)
     n = int(gone.sum())
     if log is not None and circle is not None:
@@ -531,9 +537,10 @@ def drop_platform(cloud: Cloud, log=None) -> Cloud:
                  "the blind circle of %.1f m round the sensor at %.1f, %.1f; read_cloud.drop_platform)",
                  cloud.raw.path.name, n, circle["radius_m"], *circle["xy"])
     if not n:
-        return dataclasses.replace(cloud, blind_circle=circle)
-    return dataclasses.replace(cloud, raw=cloud.raw.take(~gone), points=cloud.points[~gone], dropped_platform=n,
+        return dataclasses.replace(cloud, blind_circle=circle), dens
+    kept = dataclasses.replace(cloud, raw=cloud.raw.take(~gone), points=cloud.points[~gone], dropped_platform=n,
                                blind_circle=circle)
+    return kept, density.measure(kept.points, scanner_positions=kept.raw.scanner_positions)
 
 
 def _far_points(local: np.ndarray, info, max_offset_m: float) -> np.ndarray | None:
