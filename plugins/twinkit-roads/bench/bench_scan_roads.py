@@ -40,8 +40,9 @@ given to the scan source as its labels (what the derivation does with perfect la
 
 Issue 46's item 1 on every real capture ``bench_real_scans.py`` ran through the main job (the shared clouds and
 the hand-labelled sweeps, roads from the scan): the street covered by the final map, with and without its
-junctions' lanes (the hand-labelled road as the reference where there is one), and the drop test's gate and widest
-hole over the driving lanes, and why its failing rays fail (drop_test.json ``failing``: through ground the scan never
+junctions' lanes (the hand-labelled road as the reference where there is one, else the street centre lines drawn by
+hand in drawn_streets.json, else the road-labelled ground), the median distance from the street to the roads' axes,
+and the drop test's gate and widest hole over the driving lanes, and why its failing rays fail (drop_test.json ``failing``: through ground the scan never
 measured, through holes in the mesh, on a step or a bump; how many at a lane's edge); ``make bench`` prints it last
 when those runs exist.
 """
@@ -62,6 +63,7 @@ ROOT = Path(__file__).resolve().parents[3]
 LABELLED = ROOT.parent / "shared" / "data" / "labelled" / "semantickitti"
 LABELLED_RUNS = ROOT / "bench" / "results" / "labelled"
 REAL_RUNS = ROOT / "outputs" / "bench_real_scans"  # plugins/twinkit-pointcloud/bench/bench_real_scans.py's runs
+DRAWN = Path(__file__).with_name("drawn_streets.json")  # street centre lines drawn by hand on unlabelled real clouds
 
 
 def one(folder: Path, pattern: str) -> Path | None:
@@ -151,10 +153,13 @@ def truth_vertex_labels(vertices: np.ndarray, cloud_ply: Path, points_meta: Path
 
 
 def coverage_rows(run: Path, tmp: Path, tol: float, truth_labels: np.ndarray | None = None,
-                  mask_labels: np.ndarray | None = None) -> tuple[str, float, list[dict]]:
+                  mask_labels: np.ndarray | None = None,
+                  drawn: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[str, float, list[dict]]:
     """The street's reference, its length (m) and one row per stage of the scan network: roads, axis length,
-    street covered (m, share) and what the stage dropped (m of street). ``truth_labels`` (per vertex): the street
-    from these hand labels; ``mask_labels`` (per vertex): the scan source runs here with these as its labels."""
+    street covered (m, share) and what the stage dropped (m of street); the final row also has ``offset_m``, the
+    median distance from the covered street points to the nearest road axis. ``truth_labels`` (per vertex): the
+    street from these hand labels; ``drawn``: the street's points every 0.25 m and their directions (site frame,
+    ``drawn_reference``); ``mask_labels`` (per vertex): the scan source runs here with these as its labels."""
     from twinkit.artefacts import read_textured_mesh
     from twinkit_roads.scan import covered, in_junctions, read_truth, street_axis
     from twinkit_roads.scan.geometry import resample
@@ -182,7 +187,9 @@ def coverage_rows(run: Path, tmp: Path, tol: float, truth_labels: np.ndarray | N
         doc_p = out["scan_roads.json"]
     doc = json.loads(doc_p.read_text())
     mesh = read_textured_mesh(mesh_p)
-    if truth_labels is not None:
+    if drawn is not None:
+        (ref, dirs), step, what = drawn, 0.25, "drawn street centre lines"
+    elif truth_labels is not None:
         (ref, dirs), step = street_axis(mesh.vertices, mesh.faces, truth_labels), 0.25
         what = "hand-labelled road"
     elif truth_p is not None:
@@ -211,11 +218,46 @@ def coverage_rows(run: Path, tmp: Path, tol: float, truth_labels: np.ndarray | N
         if st["stage"] == "final" and xodr.is_file():  # the map's junction lanes serve the street through them
             both = cov | in_junctions(ref, xodr.read_text(encoding="utf-8"))
             rows[-1]["share_with_junctions"] = float(both.sum() * step) / street_m if street_m else 0.0
+        if st["stage"] == "final":
+            rows[-1]["offset_m"] = _axis_offset(ref[cov], st["arms"])
         prev = m
     if doc.get("no_roads"):
         rows.append({"stage": f"no roads: {doc['no_roads']}", "roads": 0, "length_m": 0.0, "covered_m": 0.0,
                      "share": 0.0, "dropped_m": prev})
     return what, street_m, rows
+
+
+def _axis_offset(pts: np.ndarray, arms: list[dict]) -> float | None:
+    """The median distance (m) from street points to the nearest road axis of ``arms`` (None without both)."""
+    from twinkit_roads.scan.geometry import on_polyline
+
+    lines = [np.asarray(a["axis"], float)[:, :2] for a in arms if len(a["axis"]) >= 2]
+    if not len(pts) or not lines:
+        return None
+    return float(np.median(np.min([on_polyline(pts, ln)[0] for ln in lines], axis=0)))
+
+
+def drawn_reference(run: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """The street drawn by hand for a real cloud without hand labels (``drawn_streets.json``, keyed by the run's
+    name), moved into the run's site frame by the shift read_cloud recorded (``points_meta.json`` ``frame``):
+    points every 0.25 m and their directions, none when the capture holds no street; None when nothing is drawn
+    for it. Exits when the run's frame is not the drawing's CRS shifted."""
+    from twinkit_roads.scan.geometry import resample
+    from twinkit_roads.scan.measures import directions
+
+    entry = json.loads(DRAWN.read_text()).get(run.name)
+    if not isinstance(entry, dict):
+        return None
+    meta = one(run, "*_read_cloud/points_meta.json")
+    frame = json.loads(meta.read_text()).get("frame", {}) if meta else {}
+    if not entry["lines"]:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    if frame.get("target_crs") != entry["crs"] or frame.get("shift_m") is None:
+        sys.exit(f"{run}: its site frame ({frame.get('target_crs')}) is not {entry['crs']} shifted, as "
+                 f"{DRAWN.name} draws {run.name}'s streets: run it with bench_real_scans.py")
+    shift = np.asarray(frame["shift_m"][:2], float)
+    lines = [resample(np.asarray(ln, float) - shift, 0.25) for ln in entry["lines"]]
+    return np.concatenate(lines), np.concatenate([directions(ln, 1.0) for ln in lines])
 
 
 def _inside(pts: np.ndarray, xy: np.ndarray, cell: float = 2.0) -> np.ndarray:
@@ -298,9 +340,11 @@ def labelled_coverage(out: Path, base: Path, tol: float, truth_max_m: float = 0.
 def scorecard(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> list[dict]:
     """Issue 46's item 1 on every real capture that ``bench_real_scans.py`` ran through the main job (``out/<name>``,
     roads from the scan): the street covered by the final map (its roads, and with its junctions' lanes), against
-    the hand-labelled road where the capture has hand labels (``../shared/data/labelled``) or else its own
-    road-labelled ground, beside the drop test's gate over the driving lanes and its widest hole. Met: 90 % of the
-    street with the junctions' lanes, the gate at 99.9 %, no hole over 0.25 m. Prints the table; returns the rows."""
+    the hand-labelled road where the capture has hand labels (``../shared/data/labelled``), else the street centre
+    lines drawn by hand (``drawn_streets.json``), else its own road-labelled ground; how far the roads' axes lie
+    from the street; the drop test's gate over the driving lanes and its widest hole. Met: 90 % of the street with
+    the junctions' lanes, the gate at 99.9 %, no hole over 0.25 m; on a capture drawn without a street (a park),
+    no road. Prints the table; returns the rows."""
     from twinkit.artefacts import read_textured_mesh
     from twinkit.surface.watertight import ground_share
 
@@ -314,31 +358,43 @@ def scorecard(out: Path, base: Path, tol: float, truth_max_m: float = 0.5) -> li
         if scan.is_file():
             truth = truth_vertex_labels(read_textured_mesh(mesh_p).vertices, scan,
                                         one(run, "*_read_cloud/points_meta.json"), truth_max_m)
-        what, street_m, stages = coverage_rows(run, base / run.name, tol, truth_labels=truth)
+        drawn = None if truth is not None else drawn_reference(run)
+        what, street_m, stages = coverage_rows(run, base / run.name, tol, truth_labels=truth, drawn=drawn)
         final = next((r for r in stages if r["stage"] == "final"), None)
         lane = json.loads(dt_p.read_text())["lanes"].get("driving") if dt_p else None
         gate = ground_share(lane) if lane else None
         row = {"capture": run.name, "reference": what, "street_m": street_m,
                "covered": final["share"] if final else 0.0,
                "with_junctions": final.get("share_with_junctions", final["share"]) if final else 0.0,
+               "offset_m": final.get("offset_m") if final else None,
+               "roads": final["roads"] if final else 0, "roads_m": final["length_m"] if final else 0.0,
                "gate_pct": gate, "widest_hole_m": lane.get("widest_hole_m") if lane else None,
                "failing": (lane or {}).get("failing")}
-        row["met"] = (row["with_junctions"] >= 0.9 and gate is not None and gate >= 99.9
-                      and (row["widest_hole_m"] or 0.0) <= 0.25)
+        if street_m == 0:  # a capture with no street (drawn so): met when its map has no road
+            row["met"] = row["roads"] == 0
+        else:
+            row["met"] = (row["with_junctions"] >= 0.9 and gate is not None and gate >= 99.9
+                          and (row["widest_hole_m"] or 0.0) <= 0.25)
         rows.append(row)
     if rows:
         print("| capture | street m (reference) | covered by its roads | with the junctions' lanes (>= 90 %) | "
-              "drop test gate, driving (>= 99.9 %) | widest hole m (<= 0.25) | failing rays: never measured / holes "
-              "/ steps (at a lane's edge) | item 1 met |")
-        print("|---|---|---:|---:|---:|---:|---|---|")
+              "road axis to the street m (median) | drop test gate, driving (>= 99.9 %) | widest hole m (<= 0.25) | "
+              "failing rays: never measured / holes / steps (at a lane's edge) | item 1 met |")
+        print("|---|---|---:|---:|---:|---:|---:|---|---|")
         for r in rows:
             gate = "-" if r["gate_pct"] is None else f"{r['gate_pct']:.2f} %"
             hole = "-" if r["widest_hole_m"] is None else f"{r['widest_hole_m']:.2f}"
             why = r["failing"]
             causes = "-" if not why else (f"{why['fall_unscanned']} / {why['fall_hole']} / {why['step_or_bump']} "
                                           f"({why.get('at_lane_edge', '-')})")
-            print(f"| {r['capture']} | {r['street_m']:.1f} ({r['reference']}) | {100 * r['covered']:.0f} % | "
-                  f"{100 * r['with_junctions']:.0f} % | {gate} | {hole} | {causes} | {'yes' if r['met'] else 'no'} |")
+            offset = "-" if r["offset_m"] is None else f"{r['offset_m']:.2f}"
+            if r["street_m"] == 0:
+                cov = f"no street: {r['roads']} roads ({r['roads_m']:.0f} m)"
+                cov = f"{cov} | {cov}"
+            else:
+                cov = f"{100 * r['covered']:.0f} % | {100 * r['with_junctions']:.0f} %"
+            print(f"| {r['capture']} | {r['street_m']:.1f} ({r['reference']}) | {cov} | {offset} | {gate} | {hole} | "
+                  f"{causes} | {'yes' if r['met'] else 'no'} |")
     return rows
 
 

@@ -33,6 +33,17 @@ def test_covered_counts_the_street_within_half_the_carriageway_of_an_axis():
     assert covered(pts, dirs, across, tol_m=1.0)[np.abs(pts[:, 1]) < 1.0].mean() < 0.1
 
 
+def test_a_wide_roads_end_does_not_cover_the_street_beyond_it():
+    """A road that stops short covers the street up to its end (plus the tolerance), not half its width on."""
+    x = np.arange(0.0, 40.0, 0.25)
+    pts, dirs = np.c_[x, np.zeros_like(x)], np.tile([1.0, 0.0], (len(x), 1))
+    stub = [{"axis": [[10.0, 0.5], [20.0, 0.5]], "width_m": 12.0}]
+    cov = covered(pts, dirs, stub, tol_m=1.0)
+    assert cov[(x >= 10.0) & (x <= 20.0)].all()
+    assert not cov[(x < 8.9) | (x > 21.1)].any()  # within 7 m of the axis's ends, yet past them
+    assert 0.25 * cov.sum() <= 10.0 + 2 * 1.0 + 0.5
+
+
 def test_record_stage_keeps_each_checks_roads():
     net = Network({0: {"xy": (0, 0), "kind": "end"}, 1: {"xy": (20, 0), "kind": "end"}},
                   [Arm(0, 1, np.array([[0.0, 0.0], [20.0, 0.0]]), 7.0)], np.zeros((1, 1), bool), None, None, {})

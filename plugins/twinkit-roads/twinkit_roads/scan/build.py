@@ -44,6 +44,7 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
 
         kept = np.asarray(mesh.faces) if parked is None else np.asarray(mesh.faces)[~parked]
         bare = OpenGround.of_mesh(mesh.vertices, kept, p.open_gap_m)
+    settled: bool | None = None if p.lane_check_rounds == 0 else False
     for rnd in range(p.lane_check_rounds + 1):
         nod, edg = write_plain(net, p, proj, work)
         info = netconvert_plain(nod, edg, out_xodr, p, log, surface=lambda xy: net.grid.sample(zr, xy),
@@ -55,8 +56,14 @@ def build_network(mesh, labels_for_mask, labels, p: ScanSourceParams, proj: str,
         record_stage(net, f"lane_check {rnd + 1}")
         if row.get("settled"):
             row.pop("settled")
+            settled = True
             break
     net.stats["lane_check"] = rounds
+    net.stats["lane_check_settled"] = settled
+    if settled is False:
+        log.warning("road_source=scan: the lane check still changed the network in its last round "
+                    "(lane_check_rounds=%d): the map netconvert built after it was not checked again; the drop "
+                    "test judges it", p.lane_check_rounds)
     kept_m = network_length(net)
     net.stats.update({"derived_m": round(derived_m, 1), "kept_m": round(kept_m, 1),
                       "kept_share": round(kept_m / derived_m, 3) if derived_m else None})
@@ -101,7 +108,8 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
         return {**row, "settled": True}  # what is off cannot be cut (single shape points): the drop test reports it
     log.info("road_source=scan: check %d: %.1f %% of the driving-lane samples on the scanned surface%s; %d "
              "road(s) off it in places (%.1f m cut), %d narrowed, %d junction(s) taken apart (%s), %d road(s) "
-             "dropped, %d turn(s) over ground the scan never measured dropped; netconvert again", rnd + 1,
+             "dropped, %d turn(s) off the scanned surface or over ground it never measured dropped; netconvert "
+             "again", rnd + 1,
              100 * chk["on_share"],
              f" ({chk['bare_samples']} over ground the scan never measured: its sparse far range or beyond its edge)"
              if chk["bare_samples"] else "", len(chk["bad_points"]), cut2["cut_m"],

@@ -184,12 +184,13 @@ def lane_heights(xodr_text: str, v, f, tol_m: float = 0.3, spacing_m: float = 1.
             "s": np.repeat(wp.s, k), "centre": np.repeat(wp.xyz[:, :2], k, axis=0)}
 
 
-def bare_turns(lh: dict, min_samples: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
+def bare_turns(lh: dict, min_samples: int, which: str = "bare") -> list[tuple[int, np.ndarray, np.ndarray]]:
     """The junctions' turns (connecting roads, in ``lane_heights``' samples ``lh``) with at least ``min_samples``
-    samples over ground the scan never measured, when another turn of the same junction starts where it does (the
-    lane keeps a way on): (node id, where the turn starts, where it ends), the lane centres at its first and last
-    sample. None with ``min_samples`` 0."""
-    jn, bare, road = lh["junction"], lh["bare"], lh["road"]
+    samples over ground the scan never measured (``which`` "bare"; "off": off the scanned surface for any reason,
+    a raised verge or a kerb at a corner included), when another turn of the same junction starts where it does
+    (the lane keeps a way on): (node id, where the turn starts, where it ends), the lane centres at its first and
+    last sample. None with ``min_samples`` 0."""
+    jn, bare, road = lh["junction"], lh[which], lh["road"]
     inside = jn != ""
     if min_samples <= 0 or not (inside & bare).any():
         return []
@@ -256,7 +257,8 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
                       parked=parked, unscanned=unscanned)
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
     res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "nudge": {}, "samples": int(len(on)),
-           "bare_samples": int(lh["bare"].sum()), "bad_turns": bare_turns(lh, p.turn_unscanned_samples),
+           "bare_samples": int(lh["bare"].sum()),
+           "bad_turns": bare_turns(lh, p.turn_unscanned_samples) + bare_turns(lh, p.turn_off_samples, "off"),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
     judged = on | off
     for nid in net.nodes:

@@ -120,21 +120,25 @@ def directions(pts: np.ndarray, radius_m: float) -> np.ndarray:
 def covered(points: np.ndarray, dirs: np.ndarray, arms: list[dict], tol_m: float,
             max_angle_deg: float = 30.0) -> np.ndarray:
     """Which of ``points`` ((k, 2), running along ``dirs``) lie on a road of ``arms`` (``{"axis": [[x, y], ...],
-    "width_m": w}``, as in scan_roads.json ``stages``): within half the carriageway plus ``tol_m`` of its axis,
-    running the same way (within ``max_angle_deg``: a road across the street, or one wider than the street,
-    does not cover it)."""
-    from .geometry import on_polyline
+    "width_m": w}``, as in scan_roads.json ``stages``): within half the carriageway plus ``tol_m`` of its axis and
+    no more than ``tol_m`` past either end of it, running the same way (within ``max_angle_deg``: a road across
+    the street, or one wider than the street, does not cover it; nor does a wide road's end the street beyond it)."""
+    from .geometry import on_polyline, unit
 
     out = np.zeros(len(points), bool)
     cos = np.cos(np.radians(max_angle_deg))
     for a in arms:
-        xy = np.asarray(a["axis"], float)
+        xy = np.asarray(a["axis"], float)[:, :2]
         if len(xy) < 2 or not len(points):
             continue
-        dist, _, j = on_polyline(points, xy)
+        dist, s, j = on_polyline(points, xy)
         d = np.diff(xy, axis=0)[j]
         along = np.abs((d / np.maximum(np.hypot(*d.T), 1e-12)[:, None] * dirs).sum(1)) >= cos
-        out |= (dist <= a["width_m"] / 2 + tol_m) & along
+        length = float(np.hypot(*np.diff(xy, axis=0).T).sum())
+        before = (points - xy[0]) @ unit(xy[1] - xy[0])  # < 0: before the axis's start
+        after = (points - xy[-1]) @ unit(xy[-1] - xy[-2])  # > 0: past its end
+        past = ((s <= 1e-9) & (before < -tol_m)) | ((s >= length - 1e-9) & (after > tol_m))
+        out |= (dist <= a["width_m"] / 2 + tol_m) & along & ~past
     return out
 
 

@@ -97,7 +97,10 @@ class ScanSourceParams:
     min_lane_support: float = param(0.8, ge=0, le=1,
                                     help="lane check: a road stretch or junction with a smaller share of its samples "
                                          "on the scan is cut out or taken apart, and netconvert runs again")
-    lane_check_rounds: int = param(3, ge=0, le=10, help="at most this many lane checks and netconvert reruns")
+    lane_check_rounds: int = param(8, ge=0, le=20,
+                                   help="at most this many lane checks and netconvert reruns; the loop ends sooner "
+                                        "when a check finds nothing to change (the map that ships is then the map "
+                                        "last checked)")
     edge_band_m: float = param(0.5, ge=0, le=3,
                                help="lane check: a side whose outermost band this wide is off the scan while the "
                                     "rest is on is narrowed by it per round (0: no narrowing; m)")
@@ -122,6 +125,10 @@ class ScanSourceParams:
                                               "of its driving-lane samples over ground the scan never measured "
                                               "(open_gap_m) is off the scan, whatever the rest (min_lane_support): "
                                               "two or more in a row split the road (1: the share rule alone)")
+    turn_off_samples: int = param(6, ge=0,
+                                  help="lane check: a junction's turn with at least this many driving-lane samples off "
+                                       "the scanned surface for any reason (a raised verge or a kerb at the corner it "
+                                       "cuts) is not made, when another turn leaves the same lane (0: never)")
     turn_unscanned_samples: int = param(3, ge=0,
                                         help="lane check: a junction's turn (a connecting road) with at least this "
                                              "many driving-lane samples over ground the scan never measured "
