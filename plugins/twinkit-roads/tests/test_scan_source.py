@@ -728,6 +728,8 @@ def test_a_turn_over_ground_the_scan_never_measured_is_not_made_the_others_stay(
     bare = OpenGround.of_mesh(v, f2, p.open_gap_m)
     chk = scan.check_lanes(net, text, v, f2, p, unscanned=bare)
     assert chk["bad_turns"] and not chk["bad_junctions"], chk["bad_junctions"]
+    assert len(chk["bad_turns"]) == len(scan.check_lanes(net, text, v, f2, dataclasses.replace(p, turn_off_samples=0),
+                                                         unscanned=bare)["bad_turns"])  # each turn once, both rules
     assert not scan.check_lanes(net, text, v, f2, dataclasses.replace(p, turn_unscanned_samples=0, turn_off_samples=0),
                                 unscanned=bare)["bad_turns"]
     before = _turns(text)

@@ -208,6 +208,15 @@ def bare_turns(lh: dict, min_samples: int, which: str = "bare") -> list[tuple[in
     return out
 
 
+def _unique_turns(turns: list[tuple[int, np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Each turn once (a turn over ground never measured is off the surface too: both rules can find it)."""
+    out: list[tuple[int, np.ndarray, np.ndarray]] = []
+    for t in turns:
+        if not any(t[0] == u[0] and np.hypot(*(t[1] - u[1])) < 1.0 and np.hypot(*(t[2] - u[2])) < 1.0 for u in out):
+            out.append(t)
+    return out
+
+
 def _junction_names(xodr_text: str) -> dict[int, str]:
     """OpenDRIVE junction id -> its name (netconvert's node id), either attribute order."""
     import re
@@ -258,7 +267,7 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
     res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "nudge": {}, "samples": int(len(on)),
            "bare_samples": int(lh["bare"].sum()),
-           "bad_turns": bare_turns(lh, p.turn_unscanned_samples) + bare_turns(lh, p.turn_off_samples, "off"),
+           "bad_turns": _unique_turns(bare_turns(lh, p.turn_unscanned_samples) + bare_turns(lh, p.turn_off_samples, "off")),
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
     judged = on | off
     for nid in net.nodes:
