@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import check_lanes, check_sidewalks, cut_arms, detach_junctions, narrow_arms, nudge_arms, parked_faces, trim_unsupported
+from .checks import (check_lanes, check_sidewalks, cut_arms, detach_junctions, narrow_arms, new_turns, nudge_arms,
+                     parked_faces, trim_unsupported)
 from .measures import describe, lanes_on_road, network_length, record_stage
 from .model import Network, NoRoads, ScanSourceParams
 from .netconvert import netconvert_plain, write_plain, write_turns
@@ -80,9 +81,7 @@ def check_round(net: Network, xodr_text: str, mesh, p: ScanSourceParams, scene, 
            "unscanned_samples": chk["bare_samples"],
            "junctions_off": {f"n{k}": v for k, v in chk["bad_junctions"].items()},
            "roads_off": len(chk["bad_points"])}
-    turns = [t for t in chk["bad_turns"]
-             if not any(t[0] == u[0] and np.hypot(*(t[1] - u[1])) < 1.0 and np.hypot(*(t[2] - u[2])) < 1.0
-                        for u in net.no_turns)]
+    turns = new_turns(chk["bad_turns"], net.no_turns)
     net.no_turns.extend(turns)
     row["turns_dropped"] = len(turns)
     walks = check_sidewalks(net, xodr_text, p, scene)

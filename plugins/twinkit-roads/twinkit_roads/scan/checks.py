@@ -208,11 +208,13 @@ def bare_turns(lh: dict, min_samples: int, which: str = "bare") -> list[tuple[in
     return out
 
 
-def _unique_turns(turns: list[tuple[int, np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray, np.ndarray]]:
-    """Each turn once (a turn over ground never measured is off the surface too: both rules can find it)."""
-    out: list[tuple[int, np.ndarray, np.ndarray]] = []
+def new_turns(turns: list, known: list) -> list:
+    """The turns ((node id, start, end), as ``bare_turns`` gives them) not in ``known`` nor earlier in ``turns``:
+    the same junction's node, starting and ending within a metre of one there."""
+    out: list = []
     for t in turns:
-        if not any(t[0] == u[0] and np.hypot(*(t[1] - u[1])) < 1.0 and np.hypot(*(t[2] - u[2])) < 1.0 for u in out):
+        if not any(t[0] == u[0] and np.hypot(*(t[1] - u[1])) < 1.0 and np.hypot(*(t[2] - u[2])) < 1.0
+                   for u in [*known, *out]):
             out.append(t)
     return out
 
@@ -267,7 +269,8 @@ def check_lanes(net: Network, xodr_text: str, v, f, p: ScanSourceParams, scene=N
     on, off, jn, xy = lh["on"], lh["off"], lh["junction"], lh["xy"]
     res = {"bad_points": {}, "bad_junctions": {}, "narrow": {}, "nudge": {}, "samples": int(len(on)),
            "bare_samples": int(lh["bare"].sum()),
-           "bad_turns": _unique_turns(bare_turns(lh, p.turn_unscanned_samples) + bare_turns(lh, p.turn_off_samples, "off")),
+           "bad_turns": new_turns(bare_turns(lh, p.turn_unscanned_samples) + bare_turns(lh, p.turn_off_samples, "off"),
+                                  []),  # a turn over ground never measured is off the surface too: listed once
            "on_share": round(float(on.sum() / max((on | off).sum(), 1)), 4)}
     judged = on | off
     for nid in net.nodes:
